@@ -1,0 +1,8 @@
+//! # Linear Bellman combination (da Silva, Durand, Popović 2009)
+//!
+//! Combining optimal controllers through their rewards z = exp(−v): since the Bellman equation
+//! is linear in z for control-affine dynamics with quadratic control cost, Σ w_i z_i solves the
+//! problem with terminal reward Σ w_i h_i. This module holds the pieces of that combination;
+//! [`projection`] computes the fixed weights w for a desired terminal cost.
+
+pub mod projection;

@@ -1,0 +1,165 @@
+//! # Experiments as data
+//!
+//! An experiment file (`experiments/<id>.toml`, see [`spec`]) names a *family* — the code that
+//! knows how to run that kind of experiment — and gives its parameters. The pipeline is
+//!
+//! 1. [`spec::SpecFile::load`]: TOML → raw serde types, with source positions;
+//! 2. [`resolve::resolve`]: `[quick]` and `--set` overrides, sweep expansion, and each family's
+//!    typed, validated parameters (errors name file, line and key; nothing has run yet);
+//! 3. [`runner::run`]: each sweep point's [`Job`] produces [`output::Tables`]; the runner
+//!    prefixes sweep values, writes CSV + Parquet atomically, asks the family for figures and
+//!    writes `run.json`;
+//! 4. [`report`]: `REPORT.md`, each family's section read back from its CSVs.
+//!
+//! Families never write files themselves: jobs return tables, figure functions receive them.
+//! To add an experiment family, implement [`Experiment`] (and [`Job`] for its parameters) in a
+//! new file and list it in [`registry`].
+
+pub mod lbc_projection;
+pub mod output;
+pub mod physics_validation;
+pub mod plot;
+pub mod registry;
+pub mod report;
+pub mod resolve;
+pub mod runner;
+pub mod spec;
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use output::Tables;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use resolve::ParamError;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// Errors of running experiments.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A bad experiment file or override.
+    #[error(transparent)]
+    Spec(#[from] spec::SpecError),
+    /// Reading or writing a file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// polars failed to build, write or read a table.
+    #[error("table: {0}")]
+    Polars(String),
+    /// plotters failed to draw.
+    #[error("figure {path}: {message}")]
+    Plot {
+        /// The figure.
+        path: String,
+        /// The cause.
+        message: String,
+    },
+    /// A simulation blew up.
+    #[error(transparent)]
+    BlowUp(#[from] crate::physics::BlowUp),
+    /// Anything else a family reports.
+    #[error("{0}")]
+    Other(String),
+}
+
+/// An experiment family: parses its parameters into a [`Job`], draws its figures and writes its
+/// report section.
+pub trait Experiment: Sync {
+    /// Family name, the `experiment = "…"` of a spec.
+    fn kind(&self) -> &'static str;
+    /// Checks raw `[params]` (after overrides) and returns the typed job.
+    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError>;
+    /// Draws figures from the tables of a run; returns the files written.
+    fn figures(&self, fig: &plot::FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error>;
+    /// The report section, computed from the CSVs in `dir` (the experiment's result folder).
+    fn report(&self, dir: &Path) -> Result<report::Findings, Error>;
+}
+
+/// A typed, validated experiment point that can run.
+pub trait Job: Send + Sync {
+    /// The parameters as JSON (for `run.json`).
+    fn params_json(&self) -> serde_json::Value;
+    /// Runs and returns the named tables. Uses `ctx` for randomness, progress and timing.
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error>;
+}
+
+/// What a running job may use: its seed, quick flag, progress bars and stage timer.
+pub struct RunContext {
+    /// Root seed.
+    pub seed: u64,
+    /// Whether budgets are scaled down.
+    pub quick: bool,
+    show_progress: bool,
+    stages: Mutex<Vec<(String, f64)>>,
+}
+
+/// SplitMix64 finalizer: decorrelates nearby seeds.
+pub fn mix_seed(seed: u64, stream: u64) -> u64 {
+    let mut z = seed ^ stream.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+impl RunContext {
+    /// A context; progress bars are drawn only when `show_progress` and stderr is a terminal.
+    pub fn new(seed: u64, quick: bool, show_progress: bool) -> Self {
+        Self {
+            seed,
+            quick,
+            show_progress,
+            stages: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// An independent random stream: same `(seed, stream)`, same numbers, on any thread.
+    pub fn rng(&self, stream: u64) -> ChaCha8Rng {
+        ChaCha8Rng::seed_from_u64(mix_seed(self.seed, stream))
+    }
+
+    /// A progress bar of `len` steps (hidden when not on a terminal).
+    pub fn progress(&self, len: u64, message: &str) -> ProgressBar {
+        use std::io::IsTerminal;
+        let pb = ProgressBar::new(len);
+        if !(self.show_progress && std::io::stderr().is_terminal()) {
+            pb.set_draw_target(ProgressDrawTarget::hidden());
+        }
+        pb.set_style(
+            ProgressStyle::with_template(
+                "{msg:>28} [{bar:30}] {pos}/{len} {elapsed_precise} eta {eta}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        pb.set_message(message.to_string());
+        pb
+    }
+
+    /// Runs `f` as a named stage and records its wall time.
+    pub fn stage<T>(&self, name: &str, f: impl FnOnce() -> T) -> T {
+        let t0 = Instant::now();
+        let out = f();
+        let dt = t0.elapsed().as_secs_f64();
+        self.stages
+            .lock()
+            .expect("stage timer poisoned")
+            .push((name.to_string(), dt));
+        out
+    }
+
+    /// Seconds per stage so far.
+    pub fn stages(&self) -> Vec<(String, f64)> {
+        self.stages.lock().expect("stage timer poisoned").clone()
+    }
+}
+
+/// Maps a parameter error into the job's error type (for family code).
+pub fn other(e: impl std::fmt::Display) -> Error {
+    Error::Other(e.to_string())
+}

@@ -1,0 +1,363 @@
+//! Result tables and how they reach disk: every table is written as CSV and Parquet through
+//! polars, atomically (temporary file in the same folder, then rename), so an interrupted run
+//! never leaves a half-written file.
+
+use super::Error;
+use polars::prelude::*;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// One cell of a row.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Cell {
+    /// A float.
+    F(f64),
+    /// An integer.
+    I(i64),
+    /// A string.
+    S(String),
+}
+
+impl From<f64> for Cell {
+    fn from(v: f64) -> Self {
+        Cell::F(v)
+    }
+}
+impl From<i64> for Cell {
+    fn from(v: i64) -> Self {
+        Cell::I(v)
+    }
+}
+impl From<usize> for Cell {
+    fn from(v: usize) -> Self {
+        Cell::I(v as i64)
+    }
+}
+impl From<u32> for Cell {
+    fn from(v: u32) -> Self {
+        Cell::I(v as i64)
+    }
+}
+impl From<&str> for Cell {
+    fn from(v: &str) -> Self {
+        Cell::S(v.to_string())
+    }
+}
+impl From<String> for Cell {
+    fn from(v: String) -> Self {
+        Cell::S(v)
+    }
+}
+impl From<&String> for Cell {
+    fn from(v: &String) -> Self {
+        Cell::S(v.clone())
+    }
+}
+
+impl From<&toml::Value> for Cell {
+    fn from(v: &toml::Value) -> Self {
+        match v {
+            toml::Value::Integer(i) => Cell::I(*i),
+            toml::Value::Float(f) => Cell::F(*f),
+            toml::Value::String(s) => Cell::S(s.clone()),
+            other => Cell::S(other.to_string()),
+        }
+    }
+}
+
+/// Builds a row of cells: `row![a, b, c]`.
+#[macro_export]
+macro_rules! row {
+    ($($x:expr),* $(,)?) => { vec![$($crate::experiment::output::Cell::from($x)),*] };
+}
+
+/// A typed column.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ColumnData {
+    /// Floats.
+    F(Vec<f64>),
+    /// Integers.
+    I(Vec<i64>),
+    /// Strings.
+    S(Vec<String>),
+}
+
+impl ColumnData {
+    fn len(&self) -> usize {
+        match self {
+            ColumnData::F(v) => v.len(),
+            ColumnData::I(v) => v.len(),
+            ColumnData::S(v) => v.len(),
+        }
+    }
+    fn push(&mut self, c: Cell) -> Result<(), String> {
+        match (self, c) {
+            (ColumnData::F(v), Cell::F(x)) => v.push(x),
+            (ColumnData::F(v), Cell::I(x)) => v.push(x as f64),
+            (ColumnData::I(v), Cell::I(x)) => v.push(x),
+            (ColumnData::S(v), Cell::S(x)) => v.push(x),
+            (col, c) => return Err(format!("cell {c:?} does not fit a {} column", col.kind())),
+        }
+        Ok(())
+    }
+    fn kind(&self) -> &'static str {
+        match self {
+            ColumnData::F(_) => "float",
+            ColumnData::I(_) => "integer",
+            ColumnData::S(_) => "string",
+        }
+    }
+    fn repeat(c: &Cell, n: usize) -> Self {
+        match c {
+            Cell::F(x) => ColumnData::F(vec![*x; n]),
+            Cell::I(x) => ColumnData::I(vec![*x; n]),
+            Cell::S(x) => ColumnData::S(vec![x.clone(); n]),
+        }
+    }
+    fn extend(&mut self, other: &ColumnData) -> Result<(), String> {
+        match (self, other) {
+            (ColumnData::F(a), ColumnData::F(b)) => a.extend_from_slice(b),
+            (ColumnData::I(a), ColumnData::I(b)) => a.extend_from_slice(b),
+            (ColumnData::S(a), ColumnData::S(b)) => a.extend_from_slice(b),
+            (a, b) => return Err(format!("cannot append {} to {}", b.kind(), a.kind())),
+        }
+        Ok(())
+    }
+}
+
+/// A named-column table built row by row. The column types are fixed by the first row.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Table {
+    names: Vec<String>,
+    columns: Vec<ColumnData>,
+}
+
+impl Table {
+    /// An empty table with these column names.
+    pub fn new(names: &[&str]) -> Self {
+        Self {
+            names: names.iter().map(|s| s.to_string()).collect(),
+            columns: Vec::new(),
+        }
+    }
+
+    /// Column names.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.columns.first().map_or(0, |c| c.len())
+    }
+
+    /// Whether it has no rows.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Appends a row; panics when the row's length or types do not fit (a programming error).
+    pub fn push(&mut self, row: Vec<Cell>) {
+        assert_eq!(
+            row.len(),
+            self.names.len(),
+            "row length for columns {:?}",
+            self.names
+        );
+        if self.columns.is_empty() {
+            self.columns = row
+                .iter()
+                .map(|c| match c {
+                    Cell::F(_) => ColumnData::F(Vec::new()),
+                    Cell::I(_) => ColumnData::I(Vec::new()),
+                    Cell::S(_) => ColumnData::S(Vec::new()),
+                })
+                .collect();
+        }
+        for (i, c) in row.into_iter().enumerate() {
+            if let Err(e) = self.columns[i].push(c) {
+                panic!("column `{}`: {e}", self.names[i]);
+            }
+        }
+    }
+
+    /// A column's data by name.
+    pub fn column(&self, name: &str) -> Option<&ColumnData> {
+        let i = self.names.iter().position(|n| n == name)?;
+        self.columns.get(i)
+    }
+
+    /// Float values of a column (integers converted).
+    pub fn f64s(&self, name: &str) -> Vec<f64> {
+        match self.column(name) {
+            Some(ColumnData::F(v)) => v.clone(),
+            Some(ColumnData::I(v)) => v.iter().map(|&x| x as f64).collect(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// String values of a column.
+    pub fn strs(&self, name: &str) -> Vec<String> {
+        match self.column(name) {
+            Some(ColumnData::S(v)) => v.clone(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// This table with constant columns prepended (the sweep values of its point).
+    pub fn with_prefix(&self, prefix: &[(String, Cell)]) -> Table {
+        let n = self.len();
+        let mut names: Vec<String> = prefix.iter().map(|(k, _)| k.clone()).collect();
+        names.extend(self.names.iter().cloned());
+        let mut columns: Vec<ColumnData> = prefix
+            .iter()
+            .map(|(_, c)| ColumnData::repeat(c, n))
+            .collect();
+        columns.extend(self.columns.iter().cloned());
+        Table { names, columns }
+    }
+
+    /// Appends the rows of a table with the same columns.
+    pub fn append(&mut self, other: &Table) -> Result<(), String> {
+        if self.columns.is_empty() {
+            *self = other.clone();
+            return Ok(());
+        }
+        if other.columns.is_empty() {
+            return Ok(());
+        }
+        if self.names != other.names {
+            return Err(format!("columns {:?} vs {:?}", self.names, other.names));
+        }
+        for (a, b) in self.columns.iter_mut().zip(&other.columns) {
+            a.extend(b)?;
+        }
+        Ok(())
+    }
+
+    /// As a polars data frame.
+    pub fn to_polars(&self) -> PolarsResult<DataFrame> {
+        let cols: Vec<Column> = self
+            .names
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let name = PlSmallStr::from(name.as_str());
+                match self.columns.get(i) {
+                    Some(ColumnData::F(v)) => Column::new(name, v),
+                    Some(ColumnData::I(v)) => Column::new(name, v),
+                    Some(ColumnData::S(v)) => Column::new(name, v),
+                    None => Column::new(name, Vec::<f64>::new()),
+                }
+            })
+            .collect();
+        DataFrame::new(self.len(), cols)
+    }
+}
+
+/// The named tables an experiment produced; names are file stems (`energy_drift` →
+/// `energy_drift.csv`).
+#[derive(Debug, Clone, Default)]
+pub struct Tables(pub Vec<(String, Table)>);
+
+impl Tables {
+    /// Adds a table.
+    pub fn insert(&mut self, name: &str, t: Table) {
+        self.0.push((name.to_string(), t));
+    }
+    /// A table by name.
+    pub fn get(&self, name: &str) -> Option<&Table> {
+        self.0.iter().find(|(n, _)| n == name).map(|(_, t)| t)
+    }
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file beside it, then a rename.
+pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), Error> {
+    let io = |e: std::io::Error| Error::Io {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(io)?;
+    }
+    let tmp = temp_path(path);
+    let mut f = std::fs::File::create(&tmp).map_err(io)?;
+    f.write_all(bytes).map_err(io)?;
+    f.sync_all().map_err(io)?;
+    drop(f);
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+/// A temporary sibling of `path` that keeps its extension (`a.png` → `.a.tmp-PID.png`).
+pub fn temp_path(path: &Path) -> PathBuf {
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("out");
+    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("tmp");
+    path.with_file_name(format!(".{stem}.tmp-{}.{ext}", std::process::id()))
+}
+
+/// Writes `<dir>/<name>.csv` and `<dir>/<name>.parquet`; returns both paths.
+pub fn write_table(dir: &Path, name: &str, table: &Table) -> Result<Vec<PathBuf>, Error> {
+    let pl = |e: PolarsError| Error::Polars(format!("{name}: {e}"));
+    let mut df = table.to_polars().map_err(pl)?;
+    let mut csv = Vec::new();
+    CsvWriter::new(&mut csv).finish(&mut df).map_err(pl)?;
+    let mut pq = Vec::new();
+    ParquetWriter::new(&mut pq).finish(&mut df).map_err(pl)?;
+    let csv_path = dir.join(format!("{name}.csv"));
+    let pq_path = dir.join(format!("{name}.parquet"));
+    atomic_write(&csv_path, &csv)?;
+    atomic_write(&pq_path, &pq)?;
+    Ok(vec![csv_path, pq_path])
+}
+
+/// Reads a CSV written by [`write_table`] into a polars data frame.
+pub fn read_csv(path: &Path) -> Result<DataFrame, Error> {
+    CsvReadOptions::default()
+        .with_has_header(true)
+        .try_into_reader_with_file_path(Some(path.to_path_buf()))
+        .and_then(|r| r.finish())
+        .map_err(|e| Error::Polars(format!("{}: {e}", path.display())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tables_round_trip_through_csv() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut t = Table::new(&["name", "n", "x"]);
+        t.push(row!["a", 1usize, 0.5]);
+        t.push(row!["b", 2usize, 1e-12]);
+        write_table(dir.path(), "t", &t).unwrap();
+        let text = std::fs::read_to_string(dir.path().join("t.csv")).unwrap();
+        assert!(text.starts_with("name,n,x\n"), "{text}");
+        let df = read_csv(&dir.path().join("t.csv")).unwrap();
+        assert_eq!(df.height(), 2);
+        assert!(dir.path().join("t.parquet").exists());
+        // No temporary files are left behind.
+        let leftovers = std::fs::read_dir(dir.path())
+            .unwrap()
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .contains(".tmp-")
+            })
+            .count();
+        assert_eq!(leftovers, 0);
+    }
+
+    #[test]
+    fn prefix_and_append() {
+        let mut a = Table::new(&["x"]);
+        a.push(row![1.0]);
+        let p = a.with_prefix(&[("dt".into(), Cell::F(0.1))]);
+        let mut all = Table::default();
+        all.append(&p).unwrap();
+        all.append(&p).unwrap();
+        assert_eq!(all.len(), 2);
+        assert_eq!(all.f64s("dt"), vec![0.1, 0.1]);
+    }
+}

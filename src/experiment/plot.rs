@@ -1,0 +1,370 @@
+//! Figures: multi-panel line and scatter charts written as PNG and SVG.
+//!
+//! Log axes use plotters' logarithmic coordinates (points ≤ 0 are skipped there). The y-axis description is written horizontally above
+//! the plotting area: plotters draws it unrotated in PNG output (plotters issue 655), which
+//! would overlap the tick labels.
+//!
+//! Fonts come from the `dejavu` crate (no system fontconfig needed).
+
+use super::output::temp_path;
+use super::Error;
+use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+
+/// How a series is drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Mark {
+    /// A polyline.
+    Line,
+    /// A dashed polyline.
+    Dashed,
+    /// Dots.
+    Points,
+    /// A polyline with dots at the data.
+    LinePoints,
+}
+
+/// One data series.
+#[derive(Debug, Clone)]
+pub struct Series {
+    /// Legend label (empty: not in the legend).
+    pub label: String,
+    /// Data points (non-finite ones are skipped).
+    pub points: Vec<(f64, f64)>,
+    /// How to draw it.
+    pub mark: Mark,
+    /// Index into the palette.
+    pub color: usize,
+}
+
+impl Series {
+    /// A line series.
+    pub fn line(label: impl Into<String>, points: Vec<(f64, f64)>, color: usize) -> Self {
+        Self {
+            label: label.into(),
+            points,
+            mark: Mark::Line,
+            color,
+        }
+    }
+    /// The same series drawn with another mark.
+    pub fn mark(mut self, mark: Mark) -> Self {
+        self.mark = mark;
+        self
+    }
+}
+
+/// One chart panel.
+#[derive(Debug, Clone, Default)]
+pub struct Panel {
+    /// Title above the panel.
+    pub title: String,
+    /// x-axis description with unit.
+    pub x_label: String,
+    /// y-axis description with unit.
+    pub y_label: String,
+    /// Logarithmic x axis.
+    pub log_x: bool,
+    /// Logarithmic y axis.
+    pub log_y: bool,
+    /// The series.
+    pub series: Vec<Series>,
+    /// Fixed y range (in data units), else fitted.
+    pub y_range: Option<(f64, f64)>,
+    /// Where the legend goes.
+    pub legend: Legend,
+}
+
+/// Corner of the legend box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Legend {
+    /// Upper right (default).
+    #[default]
+    UpperRight,
+    /// Upper left.
+    UpperLeft,
+    /// Lower right.
+    LowerRight,
+    /// Lower left.
+    LowerLeft,
+}
+
+/// A figure: panels laid out in a grid.
+#[derive(Debug, Clone)]
+pub struct Figure {
+    /// Panels, row-major.
+    pub panels: Vec<Panel>,
+    /// Panels per row.
+    pub columns: usize,
+    /// Size of one panel in pixels.
+    pub panel_size: (u32, u32),
+}
+
+impl Figure {
+    /// A figure of the given panels, `columns` per row, 640×440 each.
+    pub fn grid(panels: Vec<Panel>, columns: usize) -> Self {
+        Self {
+            panels,
+            columns: columns.max(1),
+            panel_size: (640, 440),
+        }
+    }
+}
+
+/// Colour palette (colour-blind-friendly Tableau 10).
+pub const PALETTE: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+];
+
+fn register_fonts() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            dejavu::sans::regular(),
+        );
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Bold, dejavu::sans::bold());
+    });
+}
+
+/// Where an experiment's figures go: `<dir>/<id>_<name>.png` and `.svg`.
+#[derive(Debug, Clone)]
+pub struct FigureSink {
+    /// The figures folder.
+    pub dir: PathBuf,
+    /// The experiment id (file name prefix).
+    pub id: String,
+}
+
+impl FigureSink {
+    /// Draws `fig` as `<id>_<name>.png` and `.svg`, atomically; returns both paths.
+    pub fn draw(&self, name: &str, fig: &Figure) -> Result<Vec<PathBuf>, Error> {
+        register_fonts();
+        std::fs::create_dir_all(&self.dir).map_err(|e| Error::Io {
+            path: self.dir.clone(),
+            source: e,
+        })?;
+        let stem = format!("{}_{name}", self.id);
+        let rows = fig.panels.len().div_ceil(fig.columns) as u32;
+        let cols = fig.columns.min(fig.panels.len()).max(1) as u32;
+        let size = (fig.panel_size.0 * cols, fig.panel_size.1 * rows.max(1));
+        let png = self.dir.join(format!("{stem}.png"));
+        let svg = self.dir.join(format!("{stem}.svg"));
+        let perr = |p: &Path, e: String| Error::Plot {
+            path: p.display().to_string(),
+            message: e,
+        };
+        {
+            let tmp = temp_path(&png);
+            let root = BitMapBackend::new(&tmp, size).into_drawing_area();
+            render(&root, fig).map_err(|e| perr(&png, e))?;
+            root.present().map_err(|e| perr(&png, e.to_string()))?;
+            drop(root);
+            std::fs::rename(&tmp, &png).map_err(|e| Error::Io {
+                path: png.clone(),
+                source: e,
+            })?;
+        }
+        {
+            let mut text = String::new();
+            {
+                let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
+                render(&root, fig).map_err(|e| perr(&svg, e))?;
+                root.present().map_err(|e| perr(&svg, e.to_string()))?;
+            }
+            super::output::atomic_write(&svg, text.as_bytes())?;
+        }
+        Ok(vec![png, svg])
+    }
+}
+
+fn tr(v: f64, log: bool) -> Option<f64> {
+    let t = if log {
+        if v > 0.0 {
+            v.log10()
+        } else {
+            return None;
+        }
+    } else {
+        v
+    };
+    t.is_finite().then_some(t)
+}
+
+fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in vals {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    if hi - lo < 1e-12 * (1.0 + lo.abs()) {
+        return (lo - 0.5, hi + 0.5);
+    }
+    let pad = 0.05 * (hi - lo);
+    (lo - pad, hi + pad)
+}
+
+fn tick(v: f64) -> String {
+    if v == 0.0 {
+        "0".into()
+    } else if v.abs() >= 1e4 || v.abs() < 1e-3 {
+        format!("{v:.1e}")
+    } else {
+        let s = format!("{v:.3}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    }
+}
+
+fn render<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let rows = fig.panels.len().div_ceil(fig.columns);
+    let areas = root.split_evenly((rows.max(1), fig.columns.min(fig.panels.len()).max(1)));
+    for (panel, area) in fig.panels.iter().zip(areas.iter()) {
+        draw_panel(area, panel).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    p: &Panel,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    // Data in plot coordinates (log10 where the axis is logarithmic) for the ranges.
+    let data: Vec<Vec<(f64, f64)>> = p
+        .series
+        .iter()
+        .map(|s| {
+            s.points
+                .iter()
+                .filter(|&&(x, y)| tr(x, p.log_x).is_some() && tr(y, p.log_y).is_some())
+                .copied()
+                .collect()
+        })
+        .collect();
+    let span = |vals: Vec<f64>, log: bool| -> (f64, f64) {
+        let t: Vec<f64> = vals.into_iter().filter_map(|v| tr(v, log)).collect();
+        let (a, b) = range(t.into_iter());
+        if log {
+            (10f64.powf(a), 10f64.powf(b))
+        } else {
+            (a, b)
+        }
+    };
+    let xr = span(data.iter().flatten().map(|q| q.0).collect(), p.log_x);
+    let yr = match p.y_range {
+        Some(r) => r,
+        None => span(data.iter().flatten().map(|q| q.1).collect(), p.log_y),
+    };
+    let area = area.titled(
+        &p.title,
+        ("sans-serif", 20).into_font().style(FontStyle::Bold),
+    )?;
+    let (label_strip, plot_area) = area.split_vertically(22);
+    label_strip.draw(&Text::new(
+        format!("↑ {}", p.y_label),
+        (12, 4),
+        ("sans-serif", 15).into_font().color(&BLACK),
+    ))?;
+    let builder = || {
+        let mut b = ChartBuilder::on(&plot_area);
+        b.margin(10).x_label_area_size(42).y_label_area_size(62);
+        b
+    };
+    match (p.log_x, p.log_y) {
+        (false, false) => finish(
+            builder().build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)?,
+            p,
+            data,
+        ),
+        (true, false) => finish(
+            builder().build_cartesian_2d((xr.0..xr.1).log_scale(), yr.0..yr.1)?,
+            p,
+            data,
+        ),
+        (false, true) => finish(
+            builder().build_cartesian_2d(xr.0..xr.1, (yr.0..yr.1).log_scale())?,
+            p,
+            data,
+        ),
+        (true, true) => finish(
+            builder().build_cartesian_2d((xr.0..xr.1).log_scale(), (yr.0..yr.1).log_scale())?,
+            p,
+            data,
+        ),
+    }
+}
+
+fn finish<'a, DB, X, Y>(
+    mut chart: ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    p: &Panel,
+    data: Vec<Vec<(f64, f64)>>,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend + 'a,
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    chart
+        .configure_mesh()
+        .x_desc(p.x_label.as_str())
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .x_labels(8)
+        .y_labels(8)
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 15))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    let mut any_label = false;
+    for (s, pts) in p.series.iter().zip(data) {
+        let color = PALETTE[s.color % PALETTE.len()];
+        let style = ShapeStyle::from(&color).stroke_width(2);
+        if s.mark == Mark::LinePoints {
+            chart.draw_series(pts.iter().map(|&q| Circle::new(q, 3, color.filled())))?;
+        }
+        let anno = match s.mark {
+            Mark::Line | Mark::LinePoints => chart.draw_series(LineSeries::new(pts, style))?,
+            Mark::Dashed => chart.draw_series(DashedLineSeries::new(pts, 8, 5, style))?,
+            Mark::Points => {
+                chart.draw_series(pts.iter().map(|&q| Circle::new(q, 2, color.filled())))?
+            }
+        };
+        if !s.label.is_empty() {
+            any_label = true;
+            anno.label(s.label.clone()).legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(3))
+            });
+        }
+    }
+    if any_label {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(180, 180, 180))
+            .label_font(("sans-serif", 13))
+            .position(match p.legend {
+                Legend::UpperRight => SeriesLabelPosition::UpperRight,
+                Legend::UpperLeft => SeriesLabelPosition::UpperLeft,
+                Legend::LowerRight => SeriesLabelPosition::LowerRight,
+                Legend::LowerLeft => SeriesLabelPosition::LowerLeft,
+            })
+            .draw()?;
+    }
+    Ok(())
+}

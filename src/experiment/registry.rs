@@ -1,0 +1,18 @@
+//! Every experiment family, by the name experiment files use in `experiment = "…"`.
+
+use super::{lbc_projection, physics_validation, Experiment};
+
+static FAMILIES: &[&dyn Experiment] = &[
+    &physics_validation::PhysicsValidation,
+    &lbc_projection::LbcProjection,
+];
+
+/// All families.
+pub fn families() -> &'static [&'static dyn Experiment] {
+    FAMILIES
+}
+
+/// The family called `kind`.
+pub fn family(kind: &str) -> Option<&'static dyn Experiment> {
+    FAMILIES.iter().copied().find(|f| f.kind() == kind)
+}

@@ -1,0 +1,295 @@
+//! Validated, typed experiments: `[quick]` and `--set` overrides applied, sweep axes expanded,
+//! every point's parameters checked by its family before any work is done.
+
+use super::spec::{backticked, SpecError, SpecFile};
+use super::{registry, Experiment, Job};
+use serde::de::DeserializeOwned;
+use std::fmt::Display;
+use std::path::PathBuf;
+
+/// A parameter problem found by a family, at a dotted key inside `[params]`.
+#[derive(Debug, Clone, thiserror::Error, PartialEq)]
+#[error("`{key}`: {message}")]
+pub struct ParamError {
+    /// Dotted key inside `[params]`, e.g. `dts[2]`.
+    pub key: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl ParamError {
+    /// A new error at `key`.
+    pub fn new(key: impl Into<String>, message: impl Display) -> Self {
+        Self {
+            key: key.into(),
+            message: message.to_string(),
+        }
+    }
+}
+
+/// Fails with `message` at `key` unless `ok`.
+pub fn ensure(ok: bool, key: &str, message: impl Display) -> Result<(), ParamError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ParamError::new(key, message))
+    }
+}
+
+/// A finite value > 0.
+pub fn positive(key: &str, v: f64) -> Result<(), ParamError> {
+    ensure(
+        v.is_finite() && v > 0.0,
+        key,
+        format!("must be > 0, got {v}"),
+    )
+}
+
+/// Every element finite and > 0, and at least one.
+pub fn all_positive(key: &str, vs: &[f64]) -> Result<(), ParamError> {
+    ensure(!vs.is_empty(), key, "must not be empty")?;
+    for (i, &v) in vs.iter().enumerate() {
+        positive(&format!("{key}[{i}]"), v)?;
+    }
+    Ok(())
+}
+
+/// Deserializes a family's parameters, naming the key of any unknown field, missing field or
+/// wrong type.
+pub fn parse_params<P: DeserializeOwned>(value: &toml::Value) -> Result<P, ParamError> {
+    serde_path_to_error::deserialize(value.clone()).map_err(|e| {
+        let path = e.path().to_string();
+        let path = if path == "." { String::new() } else { path };
+        let msg = e.inner().to_string();
+        let key = match backticked(&msg) {
+            Some(field) if msg.starts_with("unknown field") || msg.starts_with("missing field") => {
+                if path.is_empty() {
+                    field
+                } else {
+                    format!("{path}.{field}")
+                }
+            }
+            _ => path,
+        };
+        ParamError::new(key, msg)
+    })
+}
+
+/// How to resolve a spec: quick mode, seed override, `--set KEY=VALUE` overrides.
+#[derive(Debug, Clone, Default)]
+pub struct ResolveOptions {
+    /// Apply the `[quick]` table.
+    pub quick: bool,
+    /// Replace the file's seed.
+    pub seed: Option<u64>,
+    /// `KEY=VALUE` overrides of `[params]` keys (or `seed`); VALUE is a TOML value, or a bare
+    /// string.
+    pub sets: Vec<String>,
+}
+
+/// One point of the sweep: the axis values that define it and its validated job.
+pub struct SweepPoint {
+    /// `(params key, value)` of each sweep axis, in axis order.
+    pub values: Vec<(String, toml::Value)>,
+    /// The job with typed parameters.
+    pub job: Box<dyn Job>,
+}
+
+/// A fully validated experiment, ready to run.
+pub struct Resolved {
+    /// Experiment id.
+    pub id: String,
+    /// Title.
+    pub title: String,
+    /// Paper item.
+    pub paper_item: String,
+    /// The paper's claim.
+    pub paper_claim: String,
+    /// The family that runs it.
+    pub family: &'static dyn Experiment,
+    /// Root seed.
+    pub seed: u64,
+    /// Whether `[quick]` was applied.
+    pub quick: bool,
+    /// Every sweep point (one when there is no sweep).
+    pub points: Vec<SweepPoint>,
+    /// The file it came from.
+    pub path: PathBuf,
+}
+
+impl Resolved {
+    /// The resolved spec as JSON (written into `run.json`).
+    pub fn to_json(&self) -> serde_json::Value {
+        let points: Vec<serde_json::Value> = self
+            .points
+            .iter()
+            .map(|p| {
+                serde_json::json!({
+                    "sweep": p.values.iter().map(|(k, v)| (k.clone(), toml_to_json(v))).collect::<serde_json::Map<_, _>>(),
+                    "params": p.job.params_json(),
+                })
+            })
+            .collect();
+        serde_json::json!({
+            "id": self.id,
+            "experiment": self.family.kind(),
+            "title": self.title,
+            "paper_item": self.paper_item,
+            "seed": self.seed,
+            "quick": self.quick,
+            "spec_file": self.path.display().to_string(),
+            "points": points,
+        })
+    }
+}
+
+/// Converts a TOML value to JSON.
+pub fn toml_to_json(v: &toml::Value) -> serde_json::Value {
+    serde_json::to_value(v).unwrap_or(serde_json::Value::Null)
+}
+
+fn set_path(table: &mut toml::Table, key: &str, value: toml::Value) -> Result<(), String> {
+    let mut parts: Vec<&str> = key.split('.').collect();
+    let last = parts.pop().ok_or("empty key")?;
+    let mut t = table;
+    for p in parts {
+        let entry = t
+            .entry(p.to_string())
+            .or_insert_with(|| toml::Value::Table(Default::default()));
+        t = entry
+            .as_table_mut()
+            .ok_or_else(|| format!("`{p}` is not a table"))?;
+    }
+    t.insert(last.to_string(), value);
+    Ok(())
+}
+
+fn merge(into: &mut toml::Table, from: &toml::Table) {
+    for (k, v) in from {
+        match (into.get_mut(k), v) {
+            (Some(toml::Value::Table(a)), toml::Value::Table(b)) => merge(a, b),
+            _ => {
+                into.insert(k.clone(), v.clone());
+            }
+        }
+    }
+}
+
+fn parse_value(text: &str) -> toml::Value {
+    toml::from_str::<toml::Table>(&format!("v = {text}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(text.to_string()))
+}
+
+/// Resolves a parsed experiment file: the family exists, overrides apply, every sweep point's
+/// parameters are valid. Nothing is run or written.
+pub fn resolve(file: &SpecFile, opts: &ResolveOptions) -> Result<Resolved, SpecError> {
+    let raw = &file.raw;
+    let family = registry::family(&raw.experiment).ok_or_else(|| {
+        let known: Vec<&str> = registry::families().iter().map(|f| f.kind()).collect();
+        file.error_at(
+            "experiment",
+            format!(
+                "unknown experiment family `{}` (known: {})",
+                raw.experiment,
+                known.join(", ")
+            ),
+        )
+    })?;
+    let mut params = raw.params.clone();
+    if opts.quick {
+        merge(&mut params, &raw.quick);
+    }
+    let mut seed = raw.seed;
+    if let Some(s) = opts.seed {
+        seed = s;
+    }
+    let mut sweep = raw.sweep.clone();
+    let mut set_keys = Vec::new();
+    let set_err = |key: &str, message: String| SpecError {
+        path: PathBuf::from("--set"),
+        line: None,
+        key: key.to_string(),
+        message,
+    };
+    for s in &opts.sets {
+        let (k, v) = s
+            .split_once('=')
+            .ok_or_else(|| set_err(s, "expected KEY=VALUE".into()))?;
+        let k = k.trim();
+        if k == "seed" {
+            seed = v
+                .trim()
+                .parse()
+                .map_err(|e| set_err(k, format!("seed must be a non-negative integer: {e}")))?;
+            continue;
+        }
+        let key = k.strip_prefix("params.").unwrap_or(k);
+        set_path(&mut params, key, parse_value(v.trim())).map_err(|m| set_err(k, m))?;
+        sweep.remove(key);
+        set_keys.push(key.to_string());
+    }
+    // Sweep axes.
+    let mut axes: Vec<(String, Vec<toml::Value>)> = Vec::new();
+    for (k, v) in &sweep {
+        match v {
+            toml::Value::Array(a) if !a.is_empty() => axes.push((k.clone(), a.clone())),
+            _ => {
+                return Err(file.error_at(
+                    &format!("sweep.{k}"),
+                    "a sweep axis must be a non-empty array of values",
+                ))
+            }
+        }
+    }
+    let locate = |pe: ParamError, axis_index: &[usize]| -> SpecError {
+        let root = pe.key.split(['.', '[']).next().unwrap_or("").to_string();
+        if let Some(pos) = axes.iter().position(|(k, _)| *k == pe.key || *k == root) {
+            return file.error_at(
+                &format!("sweep.{}[{}]", axes[pos].0, axis_index[pos]),
+                pe.message,
+            );
+        }
+        if set_keys.iter().any(|k| *k == pe.key || *k == root) {
+            return set_err(&pe.key, pe.message);
+        }
+        if opts.quick && raw.quick.contains_key(&root) {
+            return file.error_at(&format!("quick.{}", pe.key), pe.message);
+        }
+        file.error_at(&format!("params.{}", pe.key), pe.message)
+    };
+    let total: usize = axes.iter().map(|(_, v)| v.len()).product();
+    let mut points = Vec::with_capacity(total);
+    for flat in 0..total {
+        // Row-major: the last axis varies fastest.
+        let mut idx = vec![0; axes.len()];
+        let mut rem = flat;
+        for (a, (_, vals)) in axes.iter().enumerate().rev() {
+            idx[a] = rem % vals.len();
+            rem /= vals.len();
+        }
+        let mut p = params.clone();
+        let mut values = Vec::new();
+        for (a, (k, vals)) in axes.iter().enumerate() {
+            let v = vals[idx[a]].clone();
+            set_path(&mut p, k, v.clone()).map_err(|m| file.error_at(&format!("sweep.{k}"), m))?;
+            values.push((k.clone(), v));
+        }
+        let job = family
+            .resolve(&toml::Value::Table(p))
+            .map_err(|e| locate(e, &idx))?;
+        points.push(SweepPoint { values, job });
+    }
+    Ok(Resolved {
+        id: raw.id.clone(),
+        title: raw.title.clone(),
+        paper_item: raw.paper_item.clone(),
+        paper_claim: raw.paper_claim.clone(),
+        family,
+        seed,
+        quick: opts.quick,
+        points,
+        path: file.path.clone(),
+    })
+}

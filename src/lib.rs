@@ -1,0 +1,35 @@
+//! # motionlab
+//!
+//! A research harness that reproduces, from scratch, the tables and figures of three papers on
+//! physics-based animation control — NeuroAnimator (Grzeszczuk, Terzopoulos, Hinton 1998),
+//! mass-spring motion synthesis (Christensen, Marks, Ngo 1995) and linear Bellman combination
+//! (da Silva, Durand, Popović 2009) — and goes beyond them.
+//!
+//! ## Crate map
+//!
+//! - [`physics`]: the [`physics::Dynamics`] / [`physics::Ode`] traits, integrators (explicit
+//!   and semi-implicit Euler, RK4, fixed-step Dormand–Prince, adaptive RK45) and one file per
+//!   model: [`physics::pendulum::Pendulum3`] (3-link pendulum: passive, active, ext. force),
+//!   [`physics::acrobot::Acrobot`] (two-link gymnast).
+//! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
+//!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products).
+//! - [`experiment`]: experiments as data — TOML specs, validation with file/line/key errors,
+//!   sweeps, the runner (CSV + Parquet, atomic writes, `run.json`), figures and `REPORT.md`.
+//! - [`bench`]: throughput of the hot loops (`motionlab bench`).
+//! - [`linalg`]: the one conversion point between ndarray and nalgebra types.
+//!
+//! ## Models and algorithms
+//!
+//! | name | where | what |
+//! | --- | --- | --- |
+//! | `pendulum3`, `pendulum3_passive`, `pendulum3_ext` | [`physics::pendulum`] | planar 3-link pendulum, full articulated dynamics |
+//! | `acrobot` | [`physics::acrobot`] | point-mass acrobot, torque at the hip |
+//! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
+//! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
+#![warn(missing_docs)]
+
+pub mod bellman;
+pub mod bench;
+pub mod experiment;
+pub mod linalg;
+pub mod physics;

@@ -1,0 +1,454 @@
+//! The `motionlab` command line.
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+use motionlab::experiment::report::write_report;
+use motionlab::experiment::resolve::{resolve, ResolveOptions, Resolved};
+use motionlab::experiment::runner::{run, RunOptions};
+use motionlab::experiment::spec::SpecFile;
+use motionlab::physics::{self, IntegratorKind, Model, Ode};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+/// Reproduces NeuroAnimator, mass-spring motion synthesis and linear Bellman combination.
+///
+/// Experiments are TOML files in `experiments/` (one per experiment id). `run` runs one,
+/// `reproduce` runs them all and writes `results/REPORT.md` with the papers' numbers beside
+/// ours. Tables go to `results/<id>/` as CSV and Parquet, figures to `paper_figures/`.
+#[derive(Parser)]
+#[command(name = "motionlab", version, about, long_about)]
+struct Cli {
+    /// Folder of experiment files (default: ./experiments, else the one shipped with the crate).
+    #[arg(long, global = true, value_name = "DIR")]
+    experiments: Option<PathBuf>,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Args, Clone)]
+struct Outputs {
+    /// Results root: tables go to <OUT>/<id>/.
+    #[arg(long, default_value = "results", value_name = "DIR")]
+    out: PathBuf,
+    /// Figures folder.
+    #[arg(long, default_value = "paper_figures", value_name = "DIR")]
+    figures: PathBuf,
+    /// Worker threads (results are identical for any value). Default: all cores.
+    #[arg(long, value_name = "N")]
+    jobs: Option<usize>,
+    /// Scale budgets down so each experiment finishes in seconds (applies each file's [quick]).
+    #[arg(long)]
+    quick: bool,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// One line per experiment: id, paper item, title.
+    List,
+    /// Run one experiment by id or path to its TOML file.
+    Run {
+        /// Experiment id (e.g. physics_validation) or path to a .toml file.
+        target: String,
+        #[command(flatten)]
+        outputs: Outputs,
+        /// Replace the file's seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Override a [params] key (dotted for nested keys; VALUE is TOML, e.g. 0.5, [1,2], "rk4").
+        /// Repeatable. `seed=N` sets the seed. Overriding a swept key removes that sweep axis.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+    },
+    /// Run every experiment (or --only some), then write <OUT>/REPORT.md.
+    Reproduce {
+        #[command(flatten)]
+        outputs: Outputs,
+        /// Comma-separated experiment ids to run (the report still covers every experiment).
+        #[arg(long, value_delimiter = ',', value_name = "ID,...")]
+        only: Vec<String>,
+    },
+    /// Print a model as JSON: state and control names, parameters with units, dt.
+    Describe {
+        /// Model name (see `motionlab describe --help` for the list).
+        #[arg(value_parser = clap::builder::PossibleValuesParser::new(physics::MODEL_NAMES))]
+        model: String,
+    },
+    /// Simulate a model from a start state and write the trajectory as CSV (t, state...).
+    Simulate {
+        /// Model name.
+        #[arg(value_parser = clap::builder::PossibleValuesParser::new(physics::MODEL_NAMES))]
+        model: String,
+        /// Start state, comma-separated, in `describe`'s order and units.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            allow_hyphen_values = true,
+            required = true
+        )]
+        state: Vec<f64>,
+        /// Controls: CSV with column `t` and one column per control, held piecewise-constant
+        /// (each row from its t until the next row's t; the first row also before its t).
+        #[arg(long, value_name = "FILE.csv")]
+        controls: Option<PathBuf>,
+        /// Simulated time in seconds.
+        #[arg(long)]
+        duration: f64,
+        /// Time step in seconds (default: the model's dt).
+        #[arg(long)]
+        dt: Option<f64>,
+        /// Integrator: euler, semi_implicit_euler, rk4, dopri5, rk45.
+        #[arg(long, default_value = "rk4")]
+        integrator: String,
+        /// Output CSV (default: standard output).
+        #[arg(long, value_name = "FILE.csv")]
+        out: Option<PathBuf>,
+    },
+    /// Throughput of the hot loops.
+    Bench {
+        /// Print one JSON object of named numbers.
+        #[arg(long)]
+        json: bool,
+        /// Seconds to spend on each metric.
+        #[arg(long, default_value_t = 0.5)]
+        seconds: f64,
+    },
+}
+
+fn experiments_dir(cli: &Option<PathBuf>) -> PathBuf {
+    if let Some(d) = cli {
+        return d.clone();
+    }
+    let local = PathBuf::from("experiments");
+    if local.is_dir() {
+        local
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("experiments")
+    }
+}
+
+fn spec_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading experiments folder {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+fn default_jobs() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+fn run_options(o: &Outputs) -> RunOptions {
+    RunOptions {
+        out: o.out.clone(),
+        figures: o.figures.clone(),
+        jobs: o.jobs.unwrap_or_else(default_jobs),
+        progress: true,
+    }
+}
+
+fn check_jobs(o: &Outputs) -> Result<()> {
+    if o.jobs == Some(0) {
+        bail!("--jobs must be at least 1");
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match dispatch(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn dispatch(cli: Cli) -> Result<()> {
+    let exp_dir = experiments_dir(&cli.experiments);
+    match cli.command {
+        Command::List => {
+            for f in spec_files(&exp_dir)? {
+                let s = SpecFile::load(&f)?;
+                println!("{:<26} {:<28} {}", s.raw.id, s.raw.paper_item, s.raw.title);
+            }
+            Ok(())
+        }
+        Command::Run {
+            target,
+            outputs,
+            seed,
+            sets,
+        } => {
+            check_jobs(&outputs)?;
+            let path = if target.ends_with(".toml") || Path::new(&target).is_file() {
+                PathBuf::from(&target)
+            } else {
+                let p = exp_dir.join(format!("{target}.toml"));
+                if !p.is_file() {
+                    bail!(
+                        "no experiment `{target}` (no file {}); `motionlab list` shows them",
+                        p.display()
+                    );
+                }
+                p
+            };
+            let file = SpecFile::load(&path)?;
+            let res = resolve(
+                &file,
+                &ResolveOptions {
+                    quick: outputs.quick,
+                    seed,
+                    sets,
+                },
+            )?;
+            let s = run(&res, &run_options(&outputs))?;
+            eprintln!(
+                "{}: {} files in {:.2} s -> {}",
+                s.id,
+                s.files.len(),
+                s.seconds,
+                s.dir.display()
+            );
+            Ok(())
+        }
+        Command::Reproduce { outputs, only } => {
+            check_jobs(&outputs)?;
+            let t0 = Instant::now();
+            // Resolve every file first: a bad file stops everything before any work.
+            let mut all: Vec<Resolved> = Vec::new();
+            for f in spec_files(&exp_dir)? {
+                let file = SpecFile::load(&f)?;
+                all.push(resolve(
+                    &file,
+                    &ResolveOptions {
+                        quick: outputs.quick,
+                        ..Default::default()
+                    },
+                )?);
+            }
+            for id in &only {
+                if !all.iter().any(|r| r.id == *id) {
+                    bail!("--only: no experiment `{id}`");
+                }
+            }
+            let opts = run_options(&outputs);
+            for r in all
+                .iter()
+                .filter(|r| only.is_empty() || only.contains(&r.id))
+            {
+                let s = run(r, &opts).with_context(|| format!("experiment {}", r.id))?;
+                eprintln!("{:<26} {:>8.2} s  {} files", s.id, s.seconds, s.files.len());
+            }
+            let report = write_report(&outputs.out, &outputs.figures, &all)?;
+            eprintln!(
+                "report: {} (total {:.1} s)",
+                report.display(),
+                t0.elapsed().as_secs_f64()
+            );
+            Ok(())
+        }
+        Command::Describe { model } => {
+            let m =
+                physics::model_by_name(&model).ok_or_else(|| anyhow!("unknown model {model}"))?;
+            println!("{}", serde_json::to_string_pretty(&physics::describe(&*m))?);
+            Ok(())
+        }
+        Command::Simulate {
+            model,
+            state,
+            controls,
+            duration,
+            dt,
+            integrator,
+            out,
+        } => simulate(
+            &model,
+            &state,
+            controls.as_deref(),
+            duration,
+            dt,
+            &integrator,
+            out.as_deref(),
+        ),
+        Command::Bench { json, seconds } => {
+            if !(seconds > 0.0) {
+                bail!("--seconds must be > 0");
+            }
+            let m = motionlab::bench::metrics(seconds);
+            if json {
+                println!("{}", motionlab::bench::to_json(&m));
+            } else {
+                for x in &m {
+                    println!("{:<45} {:>14.1}", x.name, x.value);
+                }
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Control schedule from a CSV: rows (t, u), held piecewise-constant.
+struct Schedule {
+    times: Vec<f64>,
+    values: Vec<Vec<f64>>,
+}
+
+impl Schedule {
+    fn load(path: &Path, names: &[String]) -> Result<Self> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty());
+        let (_, header) = lines
+            .next()
+            .ok_or_else(|| anyhow!("{}: empty file", path.display()))?;
+        let cols: Vec<&str> = header.split(',').map(|s| s.trim()).collect();
+        let t_col = cols
+            .iter()
+            .position(|c| *c == "t")
+            .ok_or_else(|| anyhow!("{}:1: no column `t`", path.display()))?;
+        for c in &cols {
+            if *c != "t" && !names.iter().any(|n| n == c) {
+                bail!(
+                    "{}:1: unknown control column `{c}` (controls: {})",
+                    path.display(),
+                    names.join(", ")
+                );
+            }
+        }
+        let idx: Vec<Option<usize>> = names
+            .iter()
+            .map(|n| cols.iter().position(|c| c == n))
+            .collect();
+        let (mut times, mut values) = (Vec::new(), Vec::new());
+        for (ln, line) in lines {
+            let cells: Vec<&str> = line.split(',').map(|s| s.trim()).collect();
+            if cells.len() != cols.len() {
+                bail!(
+                    "{}:{}: expected {} values, got {}",
+                    path.display(),
+                    ln + 1,
+                    cols.len(),
+                    cells.len()
+                );
+            }
+            let num = |i: usize| -> Result<f64> {
+                let v: f64 = cells[i].parse().map_err(|_| {
+                    anyhow!(
+                        "{}:{}: column `{}`: not a number: {}",
+                        path.display(),
+                        ln + 1,
+                        cols[i],
+                        cells[i]
+                    )
+                })?;
+                if !v.is_finite() {
+                    bail!(
+                        "{}:{}: column `{}`: not finite",
+                        path.display(),
+                        ln + 1,
+                        cols[i]
+                    );
+                }
+                Ok(v)
+            };
+            let t = num(t_col)?;
+            if let Some(&last) = times.last() {
+                if t <= last {
+                    bail!("{}:{}: times must increase", path.display(), ln + 1);
+                }
+            }
+            times.push(t);
+            values.push(
+                idx.iter()
+                    .map(|i| i.map_or(Ok(0.0), num))
+                    .collect::<Result<Vec<f64>>>()?,
+            );
+        }
+        if times.is_empty() {
+            bail!("{}: no rows", path.display());
+        }
+        Ok(Self { times, values })
+    }
+
+    fn at(&self, t: f64) -> &[f64] {
+        let k = self.times.partition_point(|&s| s <= t + 1e-12);
+        &self.values[k.saturating_sub(1)]
+    }
+}
+
+fn simulate(
+    model: &str,
+    state: &[f64],
+    controls: Option<&Path>,
+    duration: f64,
+    dt: Option<f64>,
+    integrator: &str,
+    out: Option<&Path>,
+) -> Result<()> {
+    let m: Box<dyn Ode> =
+        physics::model_by_name(model).ok_or_else(|| anyhow!("unknown model {model}"))?;
+    let names = m.state_names();
+    if state.len() != names.len() {
+        bail!(
+            "--state: {model} has {} state variables ({}), got {}",
+            names.len(),
+            names.join(", "),
+            state.len()
+        );
+    }
+    if !(duration.is_finite() && duration > 0.0) {
+        bail!("--duration must be > 0");
+    }
+    let dt = dt.unwrap_or_else(|| m.default_dt());
+    if !(dt.is_finite() && dt > 0.0) {
+        bail!("--dt must be > 0");
+    }
+    let kind = IntegratorKind::from_name(integrator).ok_or_else(|| {
+        anyhow!(
+            "--integrator: unknown `{integrator}` (euler, semi_implicit_euler, rk4, dopri5, rk45)"
+        )
+    })?;
+    let schedule = match controls {
+        Some(p) => Some(Schedule::load(p, &m.control_names())?),
+        None => None,
+    };
+    let steps = (duration / dt).round() as usize;
+    let mut csv = String::from("t");
+    for n in &names {
+        csv.push(',');
+        csv.push_str(n);
+    }
+    csv.push('\n');
+    let mut sim = physics::Simulator::new(m, kind);
+    sim.rollout(
+        state,
+        dt,
+        steps,
+        |_, t, _, u| {
+            if let Some(s) = &schedule {
+                u.copy_from_slice(s.at(t));
+            }
+        },
+        |_, t, x| {
+            csv.push_str(&format!("{t}"));
+            for v in x {
+                csv.push_str(&format!(",{v}"));
+            }
+            csv.push('\n');
+        },
+    )?;
+    match out {
+        Some(p) => motionlab::experiment::output::atomic_write(p, csv.as_bytes())?,
+        None => std::io::stdout().write_all(csv.as_bytes())?,
+    }
+    Ok(())
+}

@@ -1,0 +1,202 @@
+//! # Acrobot: the two-link gymnast (linear Bellman combination, Fig. 7)
+//!
+//! Point masses m1, m2 at the ends of massless links of lengths l1, l2; the shoulder is a
+//! passive pivot, the hip (joint 2) has a torque τ. State `[θ1, θ2, ω1, ω2]` in radians:
+//! θ1 is link 1's angle from the +x axis, counter-clockwise (−π/2 hangs straight down, +π/2 is
+//! the handstand), θ2 is link 2's angle relative to link 1.
+//!
+//! With h = m2 l1 l2 sin θ2, the equations are M(θ) θ̈ + c(θ, ω) + G(θ) = [0, τ] with
+//!
+//! - M11 = (m1 + m2) l1² + m2 l2² + 2 m2 l1 l2 cos θ2, M12 = m2 l2² + m2 l1 l2 cos θ2,
+//!   M22 = m2 l2²;
+//! - c1 = −h (2 ω1 ω2 + ω2²), c2 = h ω1²;
+//! - G1 = (m1 + m2) g l1 cos θ1 + m2 g l2 cos(θ1 + θ2), G2 = m2 g l2 cos(θ1 + θ2).
+
+use super::{Model, Ode, Parameter};
+use serde::{Deserialize, Serialize};
+
+/// The acrobot with the paper's unit masses and lengths by default.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Acrobot {
+    /// Mass at the end of link 1 (kg).
+    pub m1: f64,
+    /// Mass at the end of link 2 (kg).
+    pub m2: f64,
+    /// Length of link 1 (m).
+    pub l1: f64,
+    /// Length of link 2 (m).
+    pub l2: f64,
+    /// Gravitational acceleration (m/s²).
+    pub gravity: f64,
+}
+
+impl Default for Acrobot {
+    fn default() -> Self {
+        Self {
+            m1: 1.0,
+            m2: 1.0,
+            l1: 1.0,
+            l2: 1.0,
+            gravity: 9.81,
+        }
+    }
+}
+
+impl Acrobot {
+    /// Joint-space mass matrix as `[[M11, M12], [M12, M22]]`.
+    pub fn mass_matrix(&self, theta2: f64) -> [[f64; 2]; 2] {
+        let Self { m1, m2, l1, l2, .. } = *self;
+        let c2 = theta2.cos();
+        let m11 = (m1 + m2) * l1 * l1 + m2 * l2 * l2 + 2.0 * m2 * l1 * l2 * c2;
+        let m12 = m2 * l2 * l2 + m2 * l1 * l2 * c2;
+        let m22 = m2 * l2 * l2;
+        [[m11, m12], [m12, m22]]
+    }
+
+    /// Positions of the two masses (m).
+    pub fn positions(&self, x: &[f64]) -> [[f64; 2]; 2] {
+        let p1 = [self.l1 * x[0].cos(), self.l1 * x[0].sin()];
+        let a = x[0] + x[1];
+        [p1, [p1[0] + self.l2 * a.cos(), p1[1] + self.l2 * a.sin()]]
+    }
+}
+
+impl Model for Acrobot {
+    fn name(&self) -> &str {
+        "acrobot"
+    }
+    fn state_names(&self) -> Vec<String> {
+        ["theta1", "theta2", "omega1", "omega2"]
+            .map(String::from)
+            .to_vec()
+    }
+    fn control_names(&self) -> Vec<String> {
+        vec!["tau".into()]
+    }
+    fn parameters(&self) -> Vec<Parameter> {
+        vec![
+            Parameter::new("m1", self.m1, "kg", "point mass at the end of link 1"),
+            Parameter::new("m2", self.m2, "kg", "point mass at the end of link 2"),
+            Parameter::new("l1", self.l1, "m", "length of link 1 (massless)"),
+            Parameter::new("l2", self.l2, "m", "length of link 2 (massless)"),
+            Parameter::new(
+                "gravity",
+                self.gravity,
+                "m/s^2",
+                "gravitational acceleration",
+            ),
+        ]
+    }
+    fn default_dt(&self) -> f64 {
+        0.01
+    }
+}
+
+impl Ode for Acrobot {
+    fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        let Self {
+            m1,
+            m2,
+            l1,
+            l2,
+            gravity: g,
+        } = *self;
+        let (t1, t2, w1, w2) = (x[0], x[1], x[2], x[3]);
+        let [[a, b], [_, d]] = self.mass_matrix(t2);
+        let h = m2 * l1 * l2 * t2.sin();
+        let c12 = (t1 + t2).cos();
+        let g1 = (m1 + m2) * g * l1 * t1.cos() + m2 * g * l2 * c12;
+        let g2 = m2 * g * l2 * c12;
+        let r1 = h * (2.0 * w1 * w2 + w2 * w2) - g1;
+        let r2 = -h * w1 * w1 - g2 + u[0];
+        let det = a * d - b * b;
+        dx[0] = w1;
+        dx[1] = w2;
+        dx[2] = (d * r1 - b * r2) / det;
+        dx[3] = (a * r2 - b * r1) / det;
+    }
+
+    fn position_dim(&self) -> Option<usize> {
+        Some(2)
+    }
+
+    fn energy(&self, x: &[f64]) -> Option<f64> {
+        let [[a, b], [_, d]] = self.mass_matrix(x[1]);
+        let (w1, w2) = (x[2], x[3]);
+        let ke = 0.5 * (a * w1 * w1 + 2.0 * b * w1 * w2 + d * w2 * w2);
+        let [p1, p2] = self.positions(x);
+        let pe = self.gravity * (self.m1 * p1[1] + self.m2 * p2[1]);
+        Some(ke + pe)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::{IntegratorKind, Simulator};
+    use std::f64::consts::FRAC_PI_2;
+
+    #[test]
+    fn hanging_down_at_rest_stays_there() {
+        let a = Acrobot::default();
+        let mut sim = Simulator::new(a, IntegratorKind::Rk4);
+        let x = sim
+            .rollout(
+                &[-FRAC_PI_2, 0.0, 0.0, 0.0],
+                0.01,
+                1000,
+                |_, _, _, _| {},
+                |_, _, _| {},
+            )
+            .unwrap();
+        assert!((x[0] + FRAC_PI_2).abs() < 1e-12 && x[1].abs() < 1e-12);
+        assert!(x[2].abs() < 1e-12 && x[3].abs() < 1e-12);
+    }
+
+    #[test]
+    fn conserves_energy_without_torque() {
+        let a = Acrobot::default();
+        let x0 = [-1.0, 0.8, 0.5, -1.0];
+        let e0 = a.energy(&x0).unwrap();
+        let mut sim = Simulator::new(a.clone(), IntegratorKind::Rk4);
+        let mut dev: f64 = 0.0;
+        sim.rollout(
+            &x0,
+            0.001,
+            5000,
+            |_, _, _, _| {},
+            |_, _, x| {
+                dev = dev.max((a.energy(x).unwrap() - e0).abs());
+            },
+        )
+        .unwrap();
+        assert!(dev < 1e-8, "energy drift {dev}");
+    }
+
+    #[test]
+    fn hip_torque_power_balance() {
+        let a = Acrobot::default();
+        let x = [0.3, -0.4, 1.2, -0.8];
+        let u = [2.5];
+        let mut dx = [0.0; 4];
+        a.derivative(&x, &u, &mut dx);
+        let h = 1e-6;
+        let e = |s: f64| {
+            let y: Vec<f64> = x.iter().zip(&dx).map(|(p, q)| p + s * q).collect();
+            a.energy(&y).unwrap()
+        };
+        let de = (e(h) - e(-h)) / (2.0 * h);
+        assert!((de - u[0] * x[3]).abs() < 1e-6, "{de} vs {}", u[0] * x[3]);
+    }
+
+    #[test]
+    fn mass_matrix_is_symmetric_positive_definite() {
+        let a = Acrobot::default();
+        for t2 in [-3.0, -1.0, 0.0, 0.5, 3.1] {
+            let [[m11, m12], [m21, m22]] = a.mass_matrix(t2);
+            assert_eq!(m12, m21);
+            assert!(m11 > 0.0 && m11 * m22 - m12 * m12 > 0.0);
+        }
+    }
+}

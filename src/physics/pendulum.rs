@@ -1,0 +1,376 @@
+//! # Planar three-link pendulum (NeuroAnimator, Fig. 5a)
+//!
+//! Three rigid rods hang in gravity from a fixed pivot, joined by revolute joints with viscous
+//! friction τ_f = −b_i q̇_i. The state is `[q1, q2, q3, q̇1, q̇2, q̇3]` with q1 measured from
+//! straight down and q2, q3 relative to the previous link. The *active* variant has a motor
+//! torque at each joint, the *ext. force* variant adds a force on each link, applied at the
+//! link's centre of mass perpendicular to it (positive towards increasing absolute angle).
+//!
+//! Full articulated dynamics. With absolute angles φ = S q (S lower-triangular ones), link i's
+//! mass beyond it μ_i = Σ_{k>i} m_k, and coefficients
+//!
+//! - D_i = I_i + m_i c_i² + μ_i l_i²,
+//! - A_ij = l_i (m_j c_j + μ_j l_j) for i < j (symmetric),
+//! - G_i = g (m_i c_i + μ_i l_i),
+//!
+//! the absolute-angle equations are M(φ) φ̈ + b(φ, φ̇) + G sin φ = Q_ext with
+//! M_ij = A_ij cos(φ_i − φ_j), M_ii = D_i, b_i = Σ_j A_ij sin(φ_i − φ_j) φ̇_j². In joint
+//! coordinates: Sᵀ M S q̈ = Sᵀ(Q_ext − b − G sin φ) + u − B q̇.
+
+use super::{Model, Ode, Parameter};
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// One rigid link.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Link {
+    /// Mass (kg).
+    pub mass: f64,
+    /// Length from its joint to the next joint (m).
+    pub length: f64,
+    /// Distance of the centre of mass from its joint (m).
+    pub com: f64,
+    /// Moment of inertia about the centre of mass (kg·m²).
+    pub inertia: f64,
+    /// Viscous friction at the joint that drives this link (N·m·s/rad).
+    pub damping: f64,
+}
+
+impl Link {
+    /// A uniform rod of the given mass and length with joint damping `damping`.
+    pub fn rod(mass: f64, length: f64, damping: f64) -> Self {
+        Self {
+            mass,
+            length,
+            com: 0.5 * length,
+            inertia: mass * length * length / 12.0,
+            damping,
+        }
+    }
+}
+
+/// Which inputs the pendulum takes (Table 1 of NeuroAnimator).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PendulumVariant {
+    /// No inputs.
+    Passive,
+    /// A motor torque at each joint (3 controls).
+    Active,
+    /// Motor torques and a perpendicular force on each link (6 controls).
+    ExtForce,
+}
+
+/// The planar three-link pendulum.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Pendulum3 {
+    /// The links, from the pivot outwards.
+    pub links: [Link; 3],
+    /// Gravitational acceleration (m/s²).
+    pub gravity: f64,
+    /// Which inputs it takes.
+    pub variant: PendulumVariant,
+}
+
+impl Pendulum3 {
+    /// Default pendulum: three uniform 1 kg, 0.5 m rods with 0.05 N·m·s/rad joint friction.
+    pub fn new(variant: PendulumVariant) -> Self {
+        Self {
+            links: [Link::rod(1.0, 0.5, 0.05); 3],
+            gravity: 9.81,
+            variant,
+        }
+    }
+
+    /// The same pendulum without joint friction.
+    pub fn frictionless(mut self) -> Self {
+        for l in &mut self.links {
+            l.damping = 0.0;
+        }
+        self
+    }
+
+    /// (D, A, G) coefficients of the absolute-angle equations.
+    fn coefficients(&self) -> ([f64; 3], [[f64; 3]; 3], [f64; 3]) {
+        let m = |i: usize| self.links[i].mass;
+        let beyond = |i: usize| -> f64 { (i + 1..3).map(m).sum() };
+        let mut d = [0.0; 3];
+        let mut a = [[0.0; 3]; 3];
+        let mut g = [0.0; 3];
+        for i in 0..3 {
+            let li = &self.links[i];
+            d[i] = li.inertia + li.mass * li.com * li.com + beyond(i) * li.length * li.length;
+            g[i] = self.gravity * (li.mass * li.com + beyond(i) * li.length);
+            for j in i + 1..3 {
+                let lj = &self.links[j];
+                let v = li.length * (lj.mass * lj.com + beyond(j) * lj.length);
+                a[i][j] = v;
+                a[j][i] = v;
+            }
+        }
+        (d, a, g)
+    }
+
+    fn absolute(q: &[f64]) -> [f64; 3] {
+        [q[0], q[0] + q[1], q[0] + q[1] + q[2]]
+    }
+
+    fn absolute_mass_matrix(&self, phi: &[f64; 3]) -> Matrix3<f64> {
+        let (d, a, _) = self.coefficients();
+        Matrix3::from_fn(|i, j| {
+            if i == j {
+                d[i]
+            } else {
+                a[i][j] * (phi[i] - phi[j]).cos()
+            }
+        })
+    }
+
+    /// Joint-space mass matrix Sᵀ M(φ) S at joint angles `q` (symmetric positive definite).
+    pub fn mass_matrix(&self, q: &[f64]) -> Matrix3<f64> {
+        let s = Matrix3::new(1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0);
+        s.transpose() * self.absolute_mass_matrix(&Self::absolute(q)) * s
+    }
+
+    /// Planar positions of the joints and the tip: pivot, joint 2, joint 3, tip (m).
+    pub fn joint_positions(&self, q: &[f64]) -> [[f64; 2]; 4] {
+        let phi = Self::absolute(q);
+        let mut p = [[0.0; 2]; 4];
+        for i in 0..3 {
+            p[i + 1] = [
+                p[i][0] + self.links[i].length * phi[i].sin(),
+                p[i][1] - self.links[i].length * phi[i].cos(),
+            ];
+        }
+        p
+    }
+
+    /// Velocity of link `i`'s centre of mass along its perpendicular n_i (m/s).
+    pub fn com_normal_velocity(&self, x: &[f64], i: usize) -> f64 {
+        let phi = Self::absolute(x);
+        let w = Self::absolute(&x[3..6]);
+        let mut v = self.links[i].com * w[i];
+        for k in 0..i {
+            v += self.links[k].length * (phi[i] - phi[k]).cos() * w[k];
+        }
+        v
+    }
+}
+
+impl Model for Pendulum3 {
+    fn name(&self) -> &str {
+        match self.variant {
+            PendulumVariant::Passive => "pendulum3_passive",
+            PendulumVariant::Active => "pendulum3",
+            PendulumVariant::ExtForce => "pendulum3_ext",
+        }
+    }
+    fn state_names(&self) -> Vec<String> {
+        ["q1", "q2", "q3", "q1_dot", "q2_dot", "q3_dot"]
+            .map(String::from)
+            .to_vec()
+    }
+    fn control_names(&self) -> Vec<String> {
+        let torques = ["torque1", "torque2", "torque3"];
+        let forces = ["force1", "force2", "force3"];
+        match self.variant {
+            PendulumVariant::Passive => vec![],
+            PendulumVariant::Active => torques.map(String::from).to_vec(),
+            PendulumVariant::ExtForce => torques
+                .iter()
+                .chain(&forces)
+                .map(|s| s.to_string())
+                .collect(),
+        }
+    }
+    fn parameters(&self) -> Vec<Parameter> {
+        let mut p = Vec::new();
+        for (i, l) in self.links.iter().enumerate() {
+            let k = i + 1;
+            p.push(Parameter::new(
+                format!("link{k}.mass"),
+                l.mass,
+                "kg",
+                "link mass",
+            ));
+            p.push(Parameter::new(
+                format!("link{k}.length"),
+                l.length,
+                "m",
+                "joint-to-joint length",
+            ));
+            p.push(Parameter::new(
+                format!("link{k}.com"),
+                l.com,
+                "m",
+                "centre of mass distance from the link's joint",
+            ));
+            p.push(Parameter::new(
+                format!("link{k}.inertia"),
+                l.inertia,
+                "kg*m^2",
+                "moment of inertia about the centre of mass",
+            ));
+            p.push(Parameter::new(
+                format!("link{k}.damping"),
+                l.damping,
+                "N*m*s/rad",
+                "viscous friction at the link's joint",
+            ));
+        }
+        p.push(Parameter::new(
+            "gravity",
+            self.gravity,
+            "m/s^2",
+            "gravitational acceleration",
+        ));
+        p
+    }
+    fn default_dt(&self) -> f64 {
+        0.01
+    }
+}
+
+impl Ode for Pendulum3 {
+    fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        let (_, a, g) = self.coefficients();
+        let phi = Self::absolute(x);
+        let w = Self::absolute(&x[3..6]);
+        let m = self.absolute_mass_matrix(&phi);
+        // Q_abs − b − G sin φ in absolute coordinates.
+        let mut rhs = Vector3::zeros();
+        for i in 0..3 {
+            let mut b = 0.0;
+            for j in 0..3 {
+                if j != i {
+                    b += a[i][j] * (phi[i] - phi[j]).sin() * w[j] * w[j];
+                }
+            }
+            rhs[i] = -b - g[i] * phi[i].sin();
+        }
+        if self.variant == PendulumVariant::ExtForce {
+            for i in 0..3 {
+                let f = u[3 + i];
+                rhs[i] += f * self.links[i].com;
+                for k in 0..i {
+                    rhs[k] += f * self.links[k].length * (phi[i] - phi[k]).cos();
+                }
+            }
+        }
+        let s = Matrix3::new(1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0);
+        let mut tau = s.transpose() * rhs;
+        for j in 0..3 {
+            tau[j] -= self.links[j].damping * x[3 + j];
+            if self.variant != PendulumVariant::Passive {
+                tau[j] += u[j];
+            }
+        }
+        let mq = s.transpose() * m * s;
+        let qdd = mq
+            .cholesky()
+            .expect("pendulum mass matrix is positive definite")
+            .solve(&tau);
+        dx[..3].copy_from_slice(&x[3..6]);
+        dx[3] = qdd[0];
+        dx[4] = qdd[1];
+        dx[5] = qdd[2];
+    }
+
+    fn position_dim(&self) -> Option<usize> {
+        Some(3)
+    }
+
+    fn energy(&self, x: &[f64]) -> Option<f64> {
+        let (_, _, g) = self.coefficients();
+        let phi = Self::absolute(x);
+        let w = Vector3::from(Self::absolute(&x[3..6]));
+        let ke = 0.5 * (w.transpose() * self.absolute_mass_matrix(&phi) * w)[0];
+        let pe: f64 = (0..3).map(|i| -g[i] * phi[i].cos()).sum();
+        Some(ke + pe)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::{IntegratorKind, Simulator};
+
+    #[test]
+    fn mass_matrix_is_symmetric_positive_definite() {
+        let p = Pendulum3::new(PendulumVariant::Active);
+        for q in [[0.0, 0.0, 0.0], [1.0, -2.0, 0.5], [3.0, 3.0, -3.0]] {
+            let m = p.mass_matrix(&q);
+            assert!((m - m.transpose()).abs().max() < 1e-14);
+            let eig = m.symmetric_eigenvalues();
+            assert!(eig.iter().all(|&e| e > 0.0), "{eig:?}");
+        }
+    }
+
+    #[test]
+    fn frictionless_pendulum_conserves_energy() {
+        let p = Pendulum3::new(PendulumVariant::Passive).frictionless();
+        let x0 = [1.2, -0.7, 0.9, 0.0, 1.0, -0.5];
+        let e0 = p.energy(&x0).unwrap();
+        let mut sim = Simulator::new(p.clone(), IntegratorKind::Rk4);
+        let mut max_dev: f64 = 0.0;
+        sim.rollout(
+            &x0,
+            0.001,
+            5000,
+            |_, _, _, _| {},
+            |_, _, x| {
+                max_dev = max_dev.max((p.energy(x).unwrap() - e0).abs());
+            },
+        )
+        .unwrap();
+        assert!(max_dev < 1e-8 * e0.abs().max(1.0), "energy drift {max_dev}");
+    }
+
+    #[test]
+    fn power_balance_with_torques_friction_and_forces() {
+        // dE/dt = Σ (u_j − b_j q̇_j) q̇_j + Σ f_i v⊥_i, checked by central differences.
+        let p = Pendulum3::new(PendulumVariant::ExtForce);
+        let x = [0.4, -0.3, 0.8, 0.7, -1.1, 0.5];
+        let u = [0.3, -0.2, 0.5, 1.0, -0.7, 0.4];
+        let mut dx = [0.0; 6];
+        p.derivative(&x, &u, &mut dx);
+        let h = 1e-6;
+        let shifted = |s: f64| -> f64 {
+            let y: Vec<f64> = x.iter().zip(&dx).map(|(a, b)| a + s * b).collect();
+            p.energy(&y).unwrap()
+        };
+        let de = (shifted(h) - shifted(-h)) / (2.0 * h);
+        let mut power = 0.0;
+        for j in 0..3 {
+            power += (u[j] - p.links[j].damping * x[3 + j]) * x[3 + j];
+            power += u[3 + j] * p.com_normal_velocity(&x, j);
+        }
+        assert!((de - power).abs() < 1e-6, "dE/dt {de} vs power {power}");
+    }
+
+    #[test]
+    fn hanging_at_rest_stays_at_rest() {
+        let p = Pendulum3::new(PendulumVariant::Passive);
+        let mut dx = [1.0; 6];
+        p.derivative(&[0.0; 6], &[], &mut dx);
+        assert!(dx.iter().all(|v| v.abs() < 1e-15));
+    }
+
+    #[test]
+    fn mirror_symmetry() {
+        // Reflecting the pendulum about the vertical negates every angle and rate.
+        let p = Pendulum3::new(PendulumVariant::Active);
+        let x = [0.3, -0.9, 1.4, 0.2, 0.6, -0.4];
+        let u = [0.1, 0.2, -0.3];
+        let (mut a, mut b) = ([0.0; 6], [0.0; 6]);
+        p.derivative(&x, &u, &mut a);
+        let xm: Vec<f64> = x.iter().map(|v| -v).collect();
+        let um: Vec<f64> = u.iter().map(|v| -v).collect();
+        p.derivative(&xm, &um, &mut b);
+        for i in 0..6 {
+            assert!((a[i] + b[i]).abs() < 1e-12);
+        }
+    }
+}

@@ -1,0 +1,356 @@
+//! The CLI end to end: every experiment in quick mode, determinism across --jobs, sweeps,
+//! describe, simulate, reproduce.
+
+use crate::util::*;
+
+fn run_quick(id: &str, jobs: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "--experiments",
+            exp.to_str().unwrap(),
+            "run",
+            id,
+            "--quick",
+            "--jobs",
+            jobs,
+            "--out",
+            "out",
+            "--figures",
+            "figs",
+        ],
+    ));
+    dir
+}
+
+#[test]
+fn physics_validation_quick_writes_promised_outputs() {
+    let d = run_quick("physics_validation", "2");
+    let out = d.path().join("out/physics_validation");
+    assert_eq!(
+        header(&out.join("energy_drift.csv")),
+        "model,integrator,dt,drift"
+    );
+    assert!(out.join("energy_drift.parquet").exists());
+    assert!(header(&out.join("orders.csv"))
+        .starts_with("model,integrator,theoretical_order,measured_order"));
+    assert!(out.join("passive_pendulum3.csv").exists() && out.join("passive_acrobot.csv").exists());
+    for f in [
+        "energy_drift",
+        "adaptive",
+        "passive_pendulum3",
+        "passive_acrobot",
+    ] {
+        for ext in ["png", "svg"] {
+            let p = d.path().join(format!("figs/physics_validation_{f}.{ext}"));
+            assert!(
+                p.metadata().map(|m| m.len() > 1000).unwrap_or(false),
+                "{}",
+                p.display()
+            );
+        }
+    }
+    let run: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+    for key in [
+        "id",
+        "seed",
+        "spec",
+        "crate_version",
+        "git_revision",
+        "threads",
+        "seconds_per_stage",
+    ] {
+        assert!(run.get(key).is_some(), "run.json lacks {key}");
+    }
+    assert_eq!(run["threads"], 2);
+    // The measured orders of RK4 and Dormand-Prince are close to theory even in quick mode.
+    let orders = std::fs::read_to_string(out.join("orders.csv")).unwrap();
+    for line in orders.lines().skip(1) {
+        let c: Vec<&str> = line.split(',').collect();
+        let (theory, measured): (f64, f64) = (c[2].parse().unwrap(), c[3].parse().unwrap());
+        if c[1] == "rk4" {
+            assert!((measured - theory).abs() < 0.6, "{line}");
+        }
+    }
+}
+
+#[test]
+fn lbc_projection_quick_writes_promised_outputs_and_two_minima_when_far() {
+    let d = run_quick("lbc_projection", "1");
+    let out = d.path().join("out/lbc_projection");
+    assert!(header(&out.join("weights.csv")).starts_with("spacing,component,weight"));
+    let minima = std::fs::read_to_string(out.join("minima.csv")).unwrap();
+    // Quick spacings are 0.5, 2 and 6 with the midpoint target: 1 minimum, then 2.
+    let counts: Vec<i64> = minima
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(counts.first(), Some(&1), "{minima}");
+    assert_eq!(counts.last(), Some(&2), "{minima}");
+    for ext in ["png", "svg"] {
+        assert!(d
+            .path()
+            .join(format!("figs/lbc_projection_cost.{ext}"))
+            .exists());
+        assert!(d
+            .path()
+            .join(format!("figs/lbc_projection_weights.{ext}"))
+            .exists());
+    }
+}
+
+#[test]
+fn csvs_are_identical_for_any_thread_count() {
+    for id in ["physics_validation", "lbc_projection"] {
+        let a = run_quick(id, "1");
+        let b = run_quick(id, "2");
+        let fa = files_with_ext(&a.path().join("out"), "csv");
+        let fb = files_with_ext(&b.path().join("out"), "csv");
+        assert!(!fa.is_empty());
+        assert_eq!(fa.len(), fb.len());
+        for ((na, ba), (nb, bb)) in fa.iter().zip(&fb) {
+            assert_eq!(na, nb);
+            assert!(ba == bb, "{id}: {na} differs between --jobs 1 and --jobs 2");
+        }
+    }
+}
+
+#[test]
+fn sweep_rows_carry_their_parameter_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = format!("{}\n[sweep]\nscale = [1.0, 4.0]\n", spec("lbc_projection"));
+    std::fs::write(dir.path().join("s.toml"), text).unwrap();
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "run",
+            "s.toml",
+            "--quick",
+            "--out",
+            "out",
+            "--figures",
+            "figs",
+        ],
+    ));
+    let w = std::fs::read_to_string(dir.path().join("out/lbc_projection/weights.csv")).unwrap();
+    assert!(w.starts_with("scale,spacing,component,weight"), "{w}");
+    let scales: std::collections::BTreeSet<&str> = w
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    assert_eq!(scales.len(), 2, "{w}");
+    // --set on the swept key removes the axis.
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "run",
+            "s.toml",
+            "--quick",
+            "--set",
+            "scale=2.0",
+            "--out",
+            "out2",
+            "--figures",
+            "figs",
+        ],
+    ));
+    let w = std::fs::read_to_string(dir.path().join("out2/lbc_projection/weights.csv")).unwrap();
+    assert!(w.starts_with("spacing,component,weight"), "{w}");
+}
+
+#[test]
+fn reproduce_quick_writes_report_with_every_experiment() {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "--experiments",
+            exp.to_str().unwrap(),
+            "reproduce",
+            "--quick",
+            "--out",
+            "out",
+            "--figures",
+            "figs",
+        ],
+    ));
+    let report = std::fs::read_to_string(dir.path().join("out/REPORT.md")).unwrap();
+    for id in ["physics_validation", "lbc_projection"] {
+        assert!(report.contains(&format!("## {id}")), "{report}");
+    }
+    assert!(report.contains("**Paper:**") && report.contains("**Verdict:"));
+    assert!(
+        report.contains("../figs/lbc_projection_cost.png"),
+        "{report}"
+    );
+}
+
+#[test]
+fn list_shows_every_experiment() {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    let out = ok(&motionlab(
+        dir.path(),
+        &["--experiments", exp.to_str().unwrap(), "list"],
+    ));
+    assert!(
+        out.contains("physics_validation") && out.contains("lbc_projection"),
+        "{out}"
+    );
+}
+
+#[test]
+fn describe_prints_parameters_with_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = ok(&motionlab(dir.path(), &["describe", "pendulum3"]));
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["model"], "pendulum3");
+    assert_eq!(v["state"].as_array().unwrap().len(), 6);
+    assert_eq!(v["controls"].as_array().unwrap().len(), 3);
+    let params = v["parameters"].as_array().unwrap();
+    for name in [
+        "link1.mass",
+        "link2.length",
+        "link3.com",
+        "link1.inertia",
+        "link2.damping",
+        "gravity",
+    ] {
+        let p = params
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap_or_else(|| panic!("no {name}"));
+        assert!(!p["unit"].as_str().unwrap().is_empty());
+    }
+    assert_eq!(v["dt"], 0.01);
+    let out = ok(&motionlab(dir.path(), &["describe", "acrobot"]));
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(
+        v["state"],
+        serde_json::json!(["theta1", "theta2", "omega1", "omega2"])
+    );
+}
+
+#[test]
+fn simulate_writes_named_columns_and_applies_controls() {
+    let dir = tempfile::tempdir().unwrap();
+    // Hanging acrobot at rest stays at rest.
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "simulate",
+            "acrobot",
+            "--state",
+            "-1.5707963267948966,0,0,0",
+            "--duration",
+            "1",
+            "--out",
+            "rest.csv",
+        ],
+    ));
+    let text = std::fs::read_to_string(dir.path().join("rest.csv")).unwrap();
+    assert_eq!(
+        text.lines().next().unwrap(),
+        "t,theta1,theta2,omega1,omega2"
+    );
+    assert_eq!(text.lines().count(), 102);
+    let last: Vec<f64> = text
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|s| s.parse().unwrap())
+        .collect();
+    assert!((last[1] + std::f64::consts::FRAC_PI_2).abs() < 1e-9 && last[4].abs() < 1e-9);
+    // A hip torque from t = 0.5 s moves the hip only after 0.5 s.
+    std::fs::write(dir.path().join("u.csv"), "t,tau\n0,0\n0.5,2.0\n").unwrap();
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "simulate",
+            "acrobot",
+            "--state=-1.5707963267948966,0,0,0",
+            "--controls",
+            "u.csv",
+            "--duration",
+            "1",
+            "--out",
+            "push.csv",
+        ],
+    ));
+    let text = std::fs::read_to_string(dir.path().join("push.csv")).unwrap();
+    let theta2 = |t: f64| -> f64 {
+        text.lines()
+            .skip(1)
+            .map(|l| {
+                l.split(',')
+                    .map(|s| s.parse::<f64>().unwrap())
+                    .collect::<Vec<_>>()
+            })
+            .find(|r| (r[0] - t).abs() < 1e-9)
+            .unwrap()[2]
+    };
+    assert!(theta2(0.5).abs() < 1e-12);
+    assert!(theta2(1.0).abs() > 1e-3);
+    // Bad control columns are rejected.
+    std::fs::write(dir.path().join("bad.csv"), "t,torque\n0,1\n").unwrap();
+    let out = motionlab(
+        dir.path(),
+        &[
+            "simulate",
+            "acrobot",
+            "--state=0,0,0,0",
+            "--controls",
+            "bad.csv",
+            "--duration",
+            "1",
+        ],
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("torque"));
+}
+
+#[test]
+fn simulate_blow_up_reports_model_step_and_state() {
+    let dir = tempfile::tempdir().unwrap();
+    // Explicit Euler with a huge step on a fast-spinning acrobot diverges.
+    let out = motionlab(
+        dir.path(),
+        &[
+            "simulate",
+            "acrobot",
+            "--state=0,3,40,-60",
+            "--duration",
+            "200",
+            "--dt",
+            "0.5",
+            "--integrator",
+            "euler",
+        ],
+    );
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("acrobot") && err.contains("blew up at step") && err.contains("state"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bench_json_is_one_object_of_named_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = ok(&motionlab(
+        dir.path(),
+        &["bench", "--json", "--seconds", "0.01"],
+    ));
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let obj = v.as_object().unwrap();
+    assert!(obj.contains_key("sim.pendulum3.steps_per_s"));
+    assert!(obj.values().all(|x| x.as_f64().is_some_and(|f| f > 0.0)));
+}

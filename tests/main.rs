@@ -1,0 +1,6 @@
+//! Integration tests: the CLI on tiny specs in temporary folders, and the papers' claims at
+//! small scale. One test binary (polars makes each binary large).
+
+mod cli;
+mod spec_errors;
+mod util;

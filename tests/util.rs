@@ -1,0 +1,57 @@
+//! Helpers: run the binary, read files.
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Runs `motionlab` with `args` in `cwd`.
+pub fn motionlab(cwd: &Path, args: &[&str]) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_motionlab"))
+        .args(args)
+        .current_dir(cwd)
+        .env("MOTIONLAB_TEST", "1")
+        .output()
+        .expect("run motionlab")
+}
+
+pub fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "motionlab failed:\nstdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+pub fn header(path: &Path) -> String {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    text.lines().next().unwrap_or("").to_string()
+}
+
+/// The shipped experiment file `id`.
+pub fn spec(id: &str) -> String {
+    std::fs::read_to_string(root().join("experiments").join(format!("{id}.toml"))).unwrap()
+}
+
+/// Every file below `dir` with its bytes, sorted by relative path.
+pub fn files_with_ext(dir: &Path, ext: &str) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == ext) {
+                let rel = p.strip_prefix(dir).unwrap().display().to_string();
+                out.push((rel, std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
