@@ -338,12 +338,17 @@ impl Experiment for LbcProjection {
             .find(|&r| n.get(r) != n.get(r - 1))
             .map(|r| {
                 format!(
-                    " The number of minima changes between spacing {} and {}.",
+                    "\nThe number of minima changes between spacing {} and {} (the components' width 1/sqrt(scale) is the unit).",
                     sig(s.get(r - 1).unwrap_or(f64::NAN)),
                     sig(s.get(r).unwrap_or(f64::NAN))
                 )
             });
         md.push_str(&transition.unwrap_or_default());
+        let far_sum = ws.get(mid.height() - 1).unwrap_or(f64::NAN);
+        md.push_str(&format!(
+            " At the farthest spacing the weights sum to {} (paper: weights far from summing to one signal a poor basis).",
+            sig(far_sum)
+        ));
         let verdict = if first == 1 && last == 2 {
             Verdict::Held
         } else {
