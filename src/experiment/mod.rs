@@ -123,11 +123,13 @@ impl RunContext {
         ChaCha8Rng::seed_from_u64(mix_seed(self.seed, stream))
     }
 
-    /// A progress bar of `len` steps (hidden when not on a terminal).
+    /// A progress bar of `len` steps, drawn on stderr; hidden when stdout or stderr is not a
+    /// terminal.
     pub fn progress(&self, len: u64, message: &str) -> ProgressBar {
         use std::io::IsTerminal;
         let pb = ProgressBar::new(len);
-        if !(self.show_progress && std::io::stderr().is_terminal()) {
+        let tty = std::io::stdout().is_terminal() && std::io::stderr().is_terminal();
+        if !(self.show_progress && tty) {
             pb.set_draw_target(ProgressDrawTarget::hidden());
         }
         pb.set_style(

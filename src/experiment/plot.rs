@@ -220,8 +220,9 @@ fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-fn tick(v: f64) -> String {
-    if v == 0.0 {
+/// Tick label; `snap` > 0 (a linear axis's span) turns round-off around zero into `0`.
+fn tick(v: f64, snap: f64) -> String {
+    if v == 0.0 || v.abs() < 1e-9 * snap {
         "0".into()
     } else if v.abs() >= 1e4 || v.abs() < 1e-3 {
         format!("{v:.1e}")
@@ -286,26 +287,34 @@ fn draw_panel<DB: DrawingBackend>(
         b.margin(10).x_label_area_size(42).y_label_area_size(62);
         b
     };
+    let snap = (
+        if p.log_x { 0.0 } else { xr.1 - xr.0 },
+        if p.log_y { 0.0 } else { yr.1 - yr.0 },
+    );
     match (p.log_x, p.log_y) {
         (false, false) => finish(
             builder().build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)?,
             p,
             data,
+            snap,
         ),
         (true, false) => finish(
             builder().build_cartesian_2d((xr.0..xr.1).log_scale(), yr.0..yr.1)?,
             p,
             data,
+            snap,
         ),
         (false, true) => finish(
             builder().build_cartesian_2d(xr.0..xr.1, (yr.0..yr.1).log_scale())?,
             p,
             data,
+            snap,
         ),
         (true, true) => finish(
             builder().build_cartesian_2d((xr.0..xr.1).log_scale(), (yr.0..yr.1).log_scale())?,
             p,
             data,
+            snap,
         ),
     }
 }
@@ -314,6 +323,7 @@ fn finish<'a, DB, X, Y>(
     mut chart: ChartContext<'a, DB, Cartesian2d<X, Y>>,
     p: &Panel,
     data: Vec<Vec<(f64, f64)>>,
+    snap: (f64, f64),
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
 where
     DB: DrawingBackend + 'a,
@@ -323,8 +333,8 @@ where
     chart
         .configure_mesh()
         .x_desc(p.x_label.as_str())
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
+        .x_label_formatter(&|v| tick(*v, snap.0))
+        .y_label_formatter(&|v| tick(*v, snap.1))
         .x_labels(8)
         .y_labels(8)
         .label_style(("sans-serif", 13))
