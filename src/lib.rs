@@ -12,7 +12,9 @@
 //!   model: [`physics::pendulum::Pendulum3`] (3-link pendulum: passive, active, ext. force),
 //!   [`physics::acrobot::Acrobot`] (two-link gymnast).
 //! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
-//!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products).
+//!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
+//!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
+//!   solves 2-D problems on a grid (linearly-solvable and ordinary Bellman backups).
 //! - [`experiment`]: experiments as data — TOML specs, validation with file/line/key errors,
 //!   sweeps, the runner (CSV + Parquet, atomic writes, `run.json`), figures and `REPORT.md`.
 //! - [`bench`]: throughput of the hot loops (`motionlab bench`).
@@ -26,6 +28,8 @@
 //! | `acrobot` | [`physics::acrobot`] | point-mass acrobot, torque at the hip |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
 //! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
+//! | z-weights, log-sum-exp | [`bellman::combine`] | LBC eq. 1, 11 |
+//! | grid DP (linear / ordinary backup) | [`bellman::grid_dp`] | LBC §5.2, Todorov 2009 |
 #![warn(missing_docs)]
 
 pub mod bellman;

@@ -104,8 +104,40 @@ fn lbc_projection_quick_writes_promised_outputs_and_two_minima_when_far() {
 }
 
 #[test]
+fn lbc_grid_quick_combination_is_exact_and_naive_is_worse() {
+    let d = run_quick("lbc_grid_optimality", "2");
+    let out = d.path().join("out/lbc_grid_optimality");
+    let text = std::fs::read_to_string(out.join("optimality.csv")).unwrap();
+    assert!(text.starts_with("comparison,max_abs_diff"), "{text}");
+    let get = |name: &str| -> f64 {
+        text.lines()
+            .find(|l| l.starts_with(&format!("{name},")))
+            .unwrap_or_else(|| panic!("no row {name}"))
+            .split(',')
+            .nth(1)
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert!(get("lbc_vs_direct") < 1e-9, "{text}");
+    assert!(get("lbc_policy_vs_direct") < 1e-6, "{text}");
+    assert!(get("naive_vs_direct") > 1e-2, "{text}");
+    assert!(get("naive_policy_vs_direct") > 1e-2, "{text}");
+    for f in ["value", "policy"] {
+        assert!(d
+            .path()
+            .join(format!("figs/lbc_grid_optimality_{f}.png"))
+            .exists());
+    }
+}
+
+#[test]
 fn csvs_are_identical_for_any_thread_count() {
-    for id in ["physics_validation", "lbc_projection"] {
+    for id in [
+        "physics_validation",
+        "lbc_projection",
+        "lbc_grid_optimality",
+    ] {
         let a = run_quick(id, "1");
         let b = run_quick(id, "2");
         let fa = files_with_ext(&a.path().join("out"), "csv");
@@ -181,7 +213,11 @@ fn reproduce_quick_writes_report_with_every_experiment() {
         ],
     ));
     let report = std::fs::read_to_string(dir.path().join("out/REPORT.md")).unwrap();
-    for id in ["physics_validation", "lbc_projection"] {
+    for id in [
+        "physics_validation",
+        "lbc_projection",
+        "lbc_grid_optimality",
+    ] {
         assert!(report.contains(&format!("## {id}")), "{report}");
     }
     assert!(report.contains("**Paper:**") && report.contains("**Verdict:"));

@@ -92,9 +92,36 @@ pub enum Legend {
     LowerLeft,
 }
 
+/// A heat map of values on a regular grid, with a colour bar.
+#[derive(Debug, Clone, Default)]
+pub struct Heatmap {
+    /// Title above the panel.
+    pub title: String,
+    /// x-axis description with unit.
+    pub x_label: String,
+    /// y-axis description with unit.
+    pub y_label: String,
+    /// Centre of the first and last column.
+    pub x_range: (f64, f64),
+    /// Centre of the first and last row.
+    pub y_range: (f64, f64),
+    /// Columns.
+    pub nx: usize,
+    /// Rows.
+    pub ny: usize,
+    /// Values, row-major with x fastest (`values[j * nx + i]`); non-finite cells are grey.
+    pub values: Vec<f64>,
+    /// What the colour means, with unit.
+    pub value_label: String,
+    /// Diverging colours centred on zero (for signed differences).
+    pub diverging: bool,
+}
+
 /// A figure: panels laid out in a grid.
 #[derive(Debug, Clone)]
 pub struct Figure {
+    /// Heat-map panels, drawn after the line panels.
+    pub heatmaps: Vec<Heatmap>,
     /// Panels, row-major.
     pub panels: Vec<Panel>,
     /// Panels per row.
@@ -107,11 +134,62 @@ impl Figure {
     /// A figure of the given panels, `columns` per row, 640×440 each.
     pub fn grid(panels: Vec<Panel>, columns: usize) -> Self {
         Self {
+            heatmaps: Vec::new(),
             panels,
             columns: columns.max(1),
             panel_size: (640, 440),
         }
     }
+
+    /// A figure of heat maps, `columns` per row.
+    pub fn heatmaps(maps: Vec<Heatmap>, columns: usize) -> Self {
+        Self {
+            heatmaps: maps,
+            panels: Vec::new(),
+            columns: columns.max(1),
+            panel_size: (560, 440),
+        }
+    }
+
+    fn count(&self) -> usize {
+        self.panels.len() + self.heatmaps.len()
+    }
+}
+
+/// Viridis colour at t in [0, 1].
+pub fn viridis(t: f64) -> RGBColor {
+    const A: [(f64, f64, f64); 5] = [
+        (68.0, 1.0, 84.0),
+        (59.0, 82.0, 139.0),
+        (33.0, 145.0, 140.0),
+        (94.0, 201.0, 98.0),
+        (253.0, 231.0, 37.0),
+    ];
+    lerp(&A, t)
+}
+
+/// Blue–white–red colour at t in [0, 1] (0.5 is white).
+pub fn diverging(t: f64) -> RGBColor {
+    const A: [(f64, f64, f64); 3] = [
+        (59.0, 76.0, 192.0),
+        (235.0, 235.0, 235.0),
+        (180.0, 4.0, 38.0),
+    ];
+    lerp(&A, t)
+}
+
+fn lerp(anchors: &[(f64, f64, f64)], t: f64) -> RGBColor {
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let x = t * (anchors.len() - 1) as f64;
+    let i = (x.floor() as usize).min(anchors.len() - 2);
+    let f = x - i as f64;
+    let (a, b) = (anchors[i], anchors[i + 1]);
+    let c = |p: f64, q: f64| (p + f * (q - p)).round() as u8;
+    RGBColor(c(a.0, b.0), c(a.1, b.1), c(a.2, b.2))
 }
 
 /// Colour palette (colour-blind-friendly Tableau 10).
@@ -158,8 +236,8 @@ impl FigureSink {
             source: e,
         })?;
         let stem = format!("{}_{name}", self.id);
-        let rows = fig.panels.len().div_ceil(fig.columns) as u32;
-        let cols = fig.columns.min(fig.panels.len()).max(1) as u32;
+        let rows = fig.count().div_ceil(fig.columns) as u32;
+        let cols = fig.columns.min(fig.count()).max(1) as u32;
         let size = (fig.panel_size.0 * cols, fig.panel_size.1 * rows.max(1));
         let png = self.dir.join(format!("{stem}.png"));
         let svg = self.dir.join(format!("{stem}.svg"));
@@ -234,11 +312,118 @@ fn tick(v: f64, snap: f64) -> String {
 
 fn render<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
-    let rows = fig.panels.len().div_ceil(fig.columns);
-    let areas = root.split_evenly((rows.max(1), fig.columns.min(fig.panels.len()).max(1)));
+    let rows = fig.count().div_ceil(fig.columns);
+    let areas = root.split_evenly((rows.max(1), fig.columns.min(fig.count()).max(1)));
     for (panel, area) in fig.panels.iter().zip(areas.iter()) {
         draw_panel(area, panel).map_err(|e| e.to_string())?;
     }
+    for (map, area) in fig.heatmaps.iter().zip(areas.iter().skip(fig.panels.len())) {
+        draw_heatmap(area, map).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn draw_heatmap<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    h: &Heatmap,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let area = area.titled(
+        &h.title,
+        ("sans-serif", 18).into_font().style(FontStyle::Bold),
+    )?;
+    let (label_strip, rest) = area.split_vertically(22);
+    label_strip.draw(&Text::new(
+        format!("↑ {}", h.y_label),
+        (12, 4),
+        ("sans-serif", 15).into_font().color(&BLACK),
+    ))?;
+    let (w, _) = rest.dim_in_pixel();
+    let (plot_area, bar_area) = rest.split_horizontally(w.saturating_sub(110));
+    let finite = h.values.iter().copied().filter(|v| v.is_finite());
+    let (mut lo, mut hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    if !lo.is_finite() {
+        (lo, hi) = (0.0, 1.0);
+    }
+    if h.diverging {
+        let m = lo.abs().max(hi.abs()).max(1e-300);
+        (lo, hi) = (-m, m);
+    }
+    if hi - lo <= 0.0 {
+        hi = lo + 1.0;
+    }
+    let color = |v: f64| -> RGBColor {
+        if !v.is_finite() {
+            return RGBColor(160, 160, 160);
+        }
+        let t = (v - lo) / (hi - lo);
+        if h.diverging {
+            diverging(t)
+        } else {
+            viridis(t)
+        }
+    };
+    let dx = if h.nx > 1 {
+        (h.x_range.1 - h.x_range.0) / (h.nx - 1) as f64
+    } else {
+        1.0
+    };
+    let dy = if h.ny > 1 {
+        (h.y_range.1 - h.y_range.0) / (h.ny - 1) as f64
+    } else {
+        1.0
+    };
+    let mut chart = ChartBuilder::on(&plot_area)
+        .margin(10)
+        .x_label_area_size(42)
+        .y_label_area_size(56)
+        .build_cartesian_2d(
+            h.x_range.0 - dx / 2.0..h.x_range.1 + dx / 2.0,
+            h.y_range.0 - dy / 2.0..h.y_range.1 + dy / 2.0,
+        )?;
+    let (sx, sy) = (h.x_range.1 - h.x_range.0, h.y_range.1 - h.y_range.0);
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(h.x_label.as_str())
+        .x_label_formatter(&|v| tick(*v, sx))
+        .y_label_formatter(&|v| tick(*v, sy))
+        .label_style(("sans-serif", 13))
+        .axis_desc_style(("sans-serif", 15))
+        .draw()?;
+    chart.draw_series((0..h.ny).flat_map(|j| {
+        (0..h.nx).map(move |i| {
+            let (x, y) = (h.x_range.0 + i as f64 * dx, h.y_range.0 + j as f64 * dy);
+            let v = h.values.get(j * h.nx + i).copied().unwrap_or(f64::NAN);
+            Rectangle::new(
+                [(x - dx / 2.0, y - dy / 2.0), (x + dx / 2.0, y + dy / 2.0)],
+                color(v).filled(),
+            )
+        })
+    }))?;
+    // Colour bar.
+    let (_, bh) = bar_area.dim_in_pixel();
+    let (top, bottom) = (20i32, bh as i32 - 52);
+    let steps = 64;
+    for k in 0..steps {
+        let t0 = k as f64 / steps as f64;
+        let y1 = bottom - ((bottom - top) as f64 * t0) as i32;
+        let y0 = bottom - ((bottom - top) as f64 * (t0 + 1.0 / steps as f64)) as i32;
+        let c = color(lo + (t0 + 0.5 / steps as f64) * (hi - lo));
+        bar_area.draw(&Rectangle::new([(8, y0), (28, y1)], c.filled()))?;
+    }
+    let font = ("sans-serif", 12).into_font().color(&BLACK);
+    for k in 0..=4 {
+        let t = k as f64 / 4.0;
+        let y = bottom - ((bottom - top) as f64 * t) as i32;
+        bar_area.draw(&Text::new(
+            tick(lo + t * (hi - lo), hi - lo),
+            (32, y - 6),
+            font.clone(),
+        ))?;
+    }
+    bar_area.draw(&Text::new(h.value_label.clone(), (2, 2), font))?;
     Ok(())
 }
 

@@ -1,0 +1,165 @@
+//! # Blend weights of linear Bellman combination (LBC eq. 1, 11; §5.2)
+//!
+//! With component value functions v_i and fixed weights w_i, the combined reward is
+//! z = Σ w_i exp(−v_i/λ) and the combined policy is π = Σ α_i π_i with
+//!
+//! α_i(x, t) = w_i exp(−v_i(x, t)/λ) / Σ_j w_j exp(−v_j(x, t)/λ).
+//!
+//! Costs of a few hundred underflow exp(−v) in double precision, so everything here runs in log
+//! space: with m = max_i(−v_i/λ), α_i = w_i e^{−v_i/λ − m} / Σ_j w_j e^{−v_j/λ − m}, and the
+//! combined value is v = −λ (m + log Σ_j w_j e^{−v_j/λ − m}). Weights may be negative
+//! (projection can produce them) as long as the combined reward stays positive.
+//!
+//! A *naive blend* for comparison uses the fixed normalized weights w_i / Σ w_j, ignoring
+//! the z_i.
+//!
+//! ## References
+//! - M. da Silva, F. Durand, J. Popović, *Linear Bellman Combination for Control of Character
+//!   Animation*, SIGGRAPH 2009, eq. 1, 11 and §5.2.
+
+/// Errors of the combination.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum CombineError {
+    /// The weighted reward Σ w_i z_i is not positive (negative weights dominate).
+    #[error("combined reward is not positive (sum of w_i z_i = {0:e} in scaled units)")]
+    NonPositiveReward(f64),
+    /// A value or weight is NaN or infinite.
+    #[error("non-finite value or weight")]
+    NonFinite,
+    /// Lengths of the inputs differ, or there are no components.
+    #[error("expected {expected} components, got {got}")]
+    Length {
+        /// Number of weights.
+        expected: usize,
+        /// Number of values or outputs.
+        got: usize,
+    },
+}
+
+/// Writes α_i = w_i e^{−v_i/λ} / Σ_j w_j e^{−v_j/λ} into `alpha`; returns the combined value
+/// −λ log Σ_j w_j e^{−v_j/λ}. Stable for costs of any magnitude.
+pub fn blend_weights(
+    weights: &[f64],
+    values: &[f64],
+    lambda: f64,
+    alpha: &mut [f64],
+) -> Result<f64, CombineError> {
+    let n = weights.len();
+    if n == 0 || values.len() != n || alpha.len() != n {
+        return Err(CombineError::Length {
+            expected: n,
+            got: values.len().min(alpha.len()),
+        });
+    }
+    if !lambda.is_finite() || lambda <= 0.0 {
+        return Err(CombineError::NonFinite);
+    }
+    let mut m = f64::NEG_INFINITY;
+    for (&w, &v) in weights.iter().zip(values) {
+        if !w.is_finite() || !v.is_finite() {
+            return Err(CombineError::NonFinite);
+        }
+        if w != 0.0 {
+            m = m.max(-v / lambda);
+        }
+    }
+    if !m.is_finite() {
+        return Err(CombineError::NonPositiveReward(0.0));
+    }
+    let mut s = 0.0;
+    for i in 0..n {
+        alpha[i] = weights[i] * (-values[i] / lambda - m).exp();
+        s += alpha[i];
+    }
+    if s <= 0.0 || !s.is_finite() {
+        return Err(CombineError::NonPositiveReward(s));
+    }
+    for a in alpha.iter_mut() {
+        *a /= s;
+    }
+    Ok(-lambda * (m + s.ln()))
+}
+
+/// The combined value −λ log Σ_i w_i e^{−v_i/λ}.
+pub fn combined_value(weights: &[f64], values: &[f64], lambda: f64) -> Result<f64, CombineError> {
+    let mut scratch = vec![0.0; weights.len()];
+    blend_weights(weights, values, lambda, &mut scratch)
+}
+
+/// Fixed normalized weights w_i / Σ w_j of the naive blend.
+pub fn naive_weights(weights: &[f64]) -> Vec<f64> {
+    let s: f64 = weights.iter().sum();
+    weights.iter().map(|w| w / s).collect()
+}
+
+/// Σ_i α_i u_i: the blend of component controls `controls[i]` (each of length m) into `out`.
+pub fn blend_controls(alpha: &[f64], controls: &[&[f64]], out: &mut [f64]) {
+    out.iter_mut().for_each(|o| *o = 0.0);
+    for (a, u) in alpha.iter().zip(controls) {
+        for (o, &ui) in out.iter_mut().zip(u.iter()) {
+            *o += a * ui;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weights_stay_finite_for_large_costs() {
+        let mut a = [0.0; 3];
+        let v = blend_weights(&[1.0, 1.0, 1.0], &[1e4, 1e4 + 1.0, 2e4], 1.0, &mut a).unwrap();
+        assert!(a.iter().all(|x| x.is_finite()));
+        let e = (1.0f64).exp();
+        assert!((a[0] - e / (e + 1.0)).abs() < 1e-12, "{a:?}");
+        assert!(a[2] == 0.0 || a[2] < 1e-300);
+        // v = 1e4 - log(1 + e^-1)
+        assert!(
+            (v - (1e4 - (1.0 + (-1.0f64).exp()).ln())).abs() < 1e-9,
+            "{v}"
+        );
+    }
+
+    #[test]
+    fn matches_direct_formula_for_moderate_costs() {
+        let w = [0.3, 1.2, 0.5];
+        let v = [2.0, 3.5, 0.7];
+        let lambda = 0.8;
+        let mut a = [0.0; 3];
+        let cv = blend_weights(&w, &v, lambda, &mut a).unwrap();
+        let z: Vec<f64> = w
+            .iter()
+            .zip(&v)
+            .map(|(w, v)| w * (-v / lambda).exp())
+            .collect();
+        let s: f64 = z.iter().sum();
+        for i in 0..3 {
+            assert!((a[i] - z[i] / s).abs() < 1e-14);
+        }
+        assert!((cv + lambda * s.ln()).abs() < 1e-12);
+        assert!((a.iter().sum::<f64>() - 1.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn negative_weights_allowed_while_reward_positive() {
+        let mut a = [0.0; 2];
+        assert!(blend_weights(&[1.5, -0.2], &[0.0, 0.0], 1.0, &mut a).is_ok());
+        assert!(matches!(
+            blend_weights(&[0.1, -0.2], &[0.0, 0.0], 1.0, &mut a),
+            Err(CombineError::NonPositiveReward(_))
+        ));
+        assert!(matches!(
+            blend_weights(&[1.0], &[f64::NAN], 1.0, &mut a[..1]),
+            Err(CombineError::NonFinite)
+        ));
+    }
+
+    #[test]
+    fn blend_controls_is_a_weighted_sum() {
+        let mut out = [0.0; 2];
+        blend_controls(&[0.25, 0.75], &[&[4.0, 0.0], &[0.0, 8.0]], &mut out);
+        assert_eq!(out, [1.0, 6.0]);
+    }
+}

@@ -1,0 +1,524 @@
+//! `lbc_grid_optimality` (LBC §3, §5.2): a damped pendulum (θ, θ̇) solved on a grid for two
+//! quadratic terminal costs g_i. For the linearly-solvable discretization, combining the
+//! rewards z_i with weights w gives the solution for terminal cost −λ log Σ w_i e^{−g_i/λ} to
+//! floating-point precision, and the LBC policy Σ α_i π_i equals the directly solved one; a
+//! naive blend of the policies with fixed weights does measurably worse. The ordinary
+//! (deterministic, min over controls) Bellman backup is solved too: its value functions do not
+//! superpose.
+//!
+//! Tables: `optimality` (comparison, max_abs_diff, mean_abs_diff, quantity) with rows
+//! `lbc_vs_direct`, `naive_vs_direct`, `lbc_policy_vs_direct`, `naive_policy_vs_direct`,
+//! `nonlinear_lbc_vs_direct`; `grid` (angle, rate, and the t = 0 fields per grid point).
+
+use super::output::{Table, Tables};
+use super::plot::{Figure, Heatmap};
+use super::report::{sig, Findings, Verdict};
+use super::resolve::{ensure, parse_params, positive, ParamError};
+use super::{Error, Experiment, Job, RunContext};
+use crate::bellman::combine::{blend_weights, naive_weights};
+use crate::bellman::grid_dp::{
+    evaluate_mixture, mean_control, passive_transitions, solve_linear, solve_nonlinear, Grid2,
+    GridSystem,
+};
+use crate::row;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+/// The family.
+pub struct LbcGrid;
+
+/// Parameters of `lbc_grid_optimality`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// g/l of the pendulum θ̈ = −(g/l) sin θ − b θ̇ + u (1/s²).
+    pub gravity_over_length: f64,
+    /// Viscous damping b (1/s).
+    pub damping: f64,
+    /// Velocity noise σ of the passive dynamics (rad/s per √s).
+    pub noise: f64,
+    /// Temperature λ of z = exp(−v/λ).
+    pub lambda: f64,
+    /// Grid points in angle (periodic over [−π, π)).
+    pub angle_points: usize,
+    /// Grid points in angular rate over [−rate_max, rate_max].
+    pub rate_points: usize,
+    /// Largest angular rate on the grid (rad/s).
+    pub rate_max: f64,
+    /// Time step (s).
+    pub dt: f64,
+    /// Horizon (s).
+    pub horizon: f64,
+    /// Minima (θ, θ̇) of the component terminal costs.
+    pub targets: Vec<[f64; 2]>,
+    /// Fixed weights w_i (1 for coordination).
+    pub weights: Vec<f64>,
+    /// Diagonal of Q in g_i = (x − x̄_i)ᵀ Q (x − x̄_i) (angle difference wrapped to [−π, π)).
+    pub terminal_scale: [f64; 2],
+    /// State cost rate q(x) = state_cost · θ̇².
+    pub state_cost: f64,
+    /// Number of controls in [−control_max, control_max] for the ordinary Bellman backup.
+    pub controls: usize,
+    /// Largest control of the ordinary backup (rad/s²).
+    pub control_max: f64,
+}
+
+impl Params {
+    fn validate(&self) -> Result<(), ParamError> {
+        positive("gravity_over_length", self.gravity_over_length)?;
+        ensure(
+            self.damping >= 0.0 && self.damping.is_finite(),
+            "damping",
+            "must be >= 0",
+        )?;
+        positive("noise", self.noise)?;
+        positive("lambda", self.lambda)?;
+        ensure(self.angle_points >= 4, "angle_points", "must be at least 4")?;
+        ensure(self.rate_points >= 3, "rate_points", "must be at least 3")?;
+        positive("rate_max", self.rate_max)?;
+        positive("dt", self.dt)?;
+        positive("horizon", self.horizon)?;
+        ensure(
+            self.horizon >= self.dt,
+            "horizon",
+            "must be at least one time step",
+        )?;
+        ensure(
+            self.targets.len() >= 2,
+            "targets",
+            "need at least two components",
+        )?;
+        ensure(
+            self.weights.len() == self.targets.len(),
+            "weights",
+            format!("need one weight per target ({})", self.targets.len()),
+        )?;
+        for (i, w) in self.weights.iter().enumerate() {
+            positive(&format!("weights[{i}]"), *w)?;
+        }
+        positive("terminal_scale[0]", self.terminal_scale[0])?;
+        positive("terminal_scale[1]", self.terminal_scale[1])?;
+        ensure(
+            self.state_cost >= 0.0 && self.state_cost.is_finite(),
+            "state_cost",
+            "must be >= 0",
+        )?;
+        ensure(self.controls >= 2, "controls", "must be at least 2")?;
+        positive("control_max", self.control_max)
+    }
+
+    fn grid(&self) -> Grid2 {
+        Grid2 {
+            lo: [-PI, -self.rate_max],
+            hi: [PI, self.rate_max],
+            n: [self.angle_points, self.rate_points],
+            periodic0: true,
+        }
+    }
+
+    fn terminal(&self, grid: &Grid2, target: [f64; 2]) -> Vec<f64> {
+        (0..grid.len())
+            .map(|s| {
+                let x = grid.point(s);
+                let d = (x[0] - target[0] + PI).rem_euclid(2.0 * PI) - PI;
+                let r = x[1] - target[1];
+                self.terminal_scale[0] * d * d + self.terminal_scale[1] * r * r
+            })
+            .collect()
+    }
+}
+
+impl GridSystem for Params {
+    fn accel(&self, x: [f64; 2]) -> f64 {
+        -self.gravity_over_length * x[0].sin() - self.damping * x[1]
+    }
+    fn state_cost(&self, x: [f64; 2]) -> f64 {
+        self.state_cost * x[1] * x[1]
+    }
+}
+
+fn diff_stats(a: impl Iterator<Item = (f64, f64)>) -> (f64, f64) {
+    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
+    for (x, y) in a {
+        let d = (x - y).abs();
+        max = max.max(d);
+        sum += d;
+        n += 1;
+    }
+    (max, sum / n.max(1) as f64)
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let grid = self.grid();
+        let n = grid.len();
+        let steps = (self.horizon / self.dt).round() as usize;
+        let lam = self.lambda;
+        let k = self.targets.len();
+        let q: Vec<f64> = (0..n)
+            .map(|s| GridSystem::state_cost(self, grid.point(s)))
+            .collect();
+        let p = ctx.stage("passive transitions", || {
+            passive_transitions(&grid, self, self.dt, self.noise)
+        });
+        let g: Vec<Vec<f64>> = self
+            .targets
+            .iter()
+            .map(|&t| self.terminal(&grid, t))
+            .collect();
+        // Combined terminal cost −λ log Σ w_i e^{−g_i/λ}.
+        let mut alpha = vec![0.0; k];
+        let mut vals = vec![0.0; k];
+        let mut g_comb = vec![0.0; n];
+        for s in 0..n {
+            for i in 0..k {
+                vals[i] = g[i][s];
+            }
+            g_comb[s] =
+                blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(super::other)?;
+        }
+        // Linearly-solvable problems: components, and the combined terminal solved directly.
+        let pb = ctx.progress((k + 1) as u64 * 2, "grid dynamic programming");
+        let (z, z_direct) = ctx.stage("linear backups", || {
+            let z: Vec<Vec<Vec<f64>>> = g
+                .iter()
+                .map(|gi| {
+                    let h: Vec<f64> = gi.iter().map(|v| (-v / lam).exp()).collect();
+                    let out = solve_linear(&p, &q, &h, self.dt, lam, steps);
+                    pb.inc(1);
+                    out
+                })
+                .collect();
+            let h: Vec<f64> = g_comb.iter().map(|v| (-v / lam).exp()).collect();
+            let zd = solve_linear(&p, &q, &h, self.dt, lam, steps);
+            pb.inc(1);
+            (z, zd)
+        });
+        let v = |zz: f64| -lam * zz.ln();
+        // LBC value: −λ log Σ w_i z_i, every time step.
+        let (lbc_max, lbc_mean) = diff_stats((0..=steps).flat_map(|t| {
+            let z = &z;
+            let zd = &z_direct;
+            (0..n).map(move |s| {
+                let comb: f64 = (0..k).map(|i| self.weights[i] * z[i][t][s]).sum();
+                (v(comb), v(zd[t][s]))
+            })
+        }));
+        // Policies (mean control) at every step: direct, LBC (eq. 11), naive.
+        let beta = naive_weights(&self.weights);
+        let mut u_direct0 = vec![0.0; n];
+        let mut u_lbc0 = vec![0.0; n];
+        let mut u_naive0 = vec![0.0; n];
+        let (mut lp_max, mut lp_sum, mut np_max, mut np_sum) = (0.0f64, 0.0, 0.0f64, 0.0);
+        ctx.stage("policies", || -> Result<(), Error> {
+            let mut ui = vec![0.0; k];
+            for t in 0..steps {
+                for s in 0..n {
+                    let ud = mean_control(&grid, &p, &z_direct[t + 1], self.dt, s);
+                    for i in 0..k {
+                        ui[i] = mean_control(&grid, &p, &z[i][t + 1], self.dt, s);
+                        vals[i] = v(z[i][t][s]);
+                    }
+                    blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(super::other)?;
+                    let ul: f64 = (0..k).map(|i| alpha[i] * ui[i]).sum();
+                    let un: f64 = (0..k).map(|i| beta[i] * ui[i]).sum();
+                    lp_max = lp_max.max((ul - ud).abs());
+                    np_max = np_max.max((un - ud).abs());
+                    lp_sum += (ul - ud).abs();
+                    np_sum += (un - ud).abs();
+                    if t == 0 {
+                        u_direct0[s] = ud;
+                        u_lbc0[s] = ul;
+                        u_naive0[s] = un;
+                    }
+                }
+            }
+            Ok(())
+        })?;
+        let cnt = (steps * n) as f64;
+        // Value of the naive blend (fixed weights) by policy evaluation.
+        let comps: Vec<&[Vec<f64>]> = z.iter().map(|zi| zi.as_slice()).collect();
+        let v_naive = ctx.stage("naive policy evaluation", || {
+            evaluate_mixture(&p, &q, &g_comb, &comps, &beta, self.dt, lam, steps)
+        });
+        let (nv_max, nv_mean) = diff_stats((0..n).map(|s| (v_naive[0][s], v(z_direct[0][s]))));
+        // Ordinary Bellman backup: components vs direct.
+        let controls: Vec<f64> = (0..self.controls)
+            .map(|j| {
+                -self.control_max + 2.0 * self.control_max * j as f64 / (self.controls - 1) as f64
+            })
+            .collect();
+        let (nl, nl_direct) = ctx.stage("ordinary backups", || {
+            let nl: Vec<Vec<f64>> = g
+                .iter()
+                .map(|gi| {
+                    let out = solve_nonlinear(&grid, self, gi, &controls, self.dt, steps)
+                        .0
+                        .swap_remove(0);
+                    pb.inc(1);
+                    out
+                })
+                .collect();
+            let d = solve_nonlinear(&grid, self, &g_comb, &controls, self.dt, steps)
+                .0
+                .swap_remove(0);
+            pb.inc(1);
+            (nl, d)
+        });
+        pb.finish_and_clear();
+        let mut nl_comb = vec![0.0; n];
+        for s in 0..n {
+            for i in 0..k {
+                vals[i] = nl[i][s];
+            }
+            nl_comb[s] =
+                blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(super::other)?;
+        }
+        let (nn_max, nn_mean) = diff_stats((0..n).map(|s| (nl_comb[s], nl_direct[s])));
+        let mut opt = Table::new(&["comparison", "max_abs_diff", "mean_abs_diff", "quantity"]);
+        opt.push(row![
+            "lbc_vs_direct",
+            lbc_max,
+            lbc_mean,
+            "value v = -lambda log z, every grid point and step"
+        ]);
+        opt.push(row![
+            "naive_vs_direct",
+            nv_max,
+            nv_mean,
+            "value of the naive fixed-weight policy blend vs the optimal value, t = 0"
+        ]);
+        opt.push(row![
+            "lbc_policy_vs_direct",
+            lp_max,
+            lp_sum / cnt,
+            "mean control (rad/s^2), every grid point and step"
+        ]);
+        opt.push(row![
+            "naive_policy_vs_direct",
+            np_max,
+            np_sum / cnt,
+            "mean control (rad/s^2), every grid point and step"
+        ]);
+        opt.push(row![
+            "nonlinear_lbc_vs_direct",
+            nn_max,
+            nn_mean,
+            "ordinary Bellman backup: -lambda log sum w exp(-v_i/lambda) vs direct, t = 0"
+        ]);
+        let mut fields = Table::new(&[
+            "angle",
+            "rate",
+            "v_direct",
+            "v_lbc",
+            "v_naive",
+            "z_direct",
+            "u_direct",
+            "u_lbc",
+            "u_naive",
+            "v_nonlinear_direct",
+            "v_nonlinear_lbc",
+        ]);
+        for s in 0..n {
+            let x = grid.point(s);
+            let comb: f64 = (0..k).map(|i| self.weights[i] * z[i][0][s]).sum();
+            fields.push(row![
+                x[0],
+                x[1],
+                v(z_direct[0][s]),
+                v(comb),
+                v_naive[0][s],
+                z_direct[0][s],
+                u_direct0[s],
+                u_lbc0[s],
+                u_naive0[s],
+                nl_direct[s],
+                nl_comb[s]
+            ]);
+        }
+        let mut t = Tables::default();
+        t.insert("optimality", opt);
+        t.insert("grid", fields);
+        Ok(t)
+    }
+}
+
+impl Experiment for LbcGrid {
+    fn kind(&self) -> &'static str {
+        "lbc_grid_optimality"
+    }
+
+    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
+        let p: Params = parse_params(params)?;
+        p.validate()?;
+        Ok(Box::new(p))
+    }
+
+    fn figures(
+        &self,
+        fig: &super::plot::FigureSink,
+        tables: &Tables,
+    ) -> Result<Vec<PathBuf>, Error> {
+        let g = tables
+            .get("grid")
+            .ok_or_else(|| super::other("no grid table"))?;
+        let (a, r) = (g.f64s("angle"), g.f64s("rate"));
+        let nx = r.iter().take_while(|&&v| v == r[0]).count();
+        if nx == 0 || a.len() % nx != 0 {
+            return Err(super::other("grid table is not a regular grid"));
+        }
+        let ny = a.len() / nx;
+        let map = |title: &str, values: Vec<f64>, label: &str, diverging: bool| Heatmap {
+            title: title.into(),
+            x_label: "angle theta (rad)".into(),
+            y_label: "rate theta-dot (rad/s)".into(),
+            x_range: (a[0], a[nx - 1]),
+            y_range: (r[0], r[a.len() - 1]),
+            nx,
+            ny,
+            values,
+            value_label: label.into(),
+            diverging,
+        };
+        let col = |n: &str| g.f64s(n);
+        let sub = |x: &str, y: &str| -> Vec<f64> {
+            col(x).iter().zip(col(y)).map(|(p, q)| p - q).collect()
+        };
+        let mut files = fig.draw(
+            "value",
+            &Figure::heatmaps(
+                vec![
+                    map(
+                        "optimal value v (direct), t = 0",
+                        col("v_direct"),
+                        "v",
+                        false,
+                    ),
+                    map(
+                        "LBC value minus direct",
+                        sub("v_lbc", "v_direct"),
+                        "diff",
+                        true,
+                    ),
+                    map(
+                        "naive blend value minus optimal",
+                        sub("v_naive", "v_direct"),
+                        "diff",
+                        true,
+                    ),
+                    map(
+                        "reward z = exp(-v/lambda), t = 0",
+                        col("z_direct"),
+                        "z",
+                        false,
+                    ),
+                    map(
+                        "ordinary backup: optimal value",
+                        col("v_nonlinear_direct"),
+                        "v",
+                        false,
+                    ),
+                    map(
+                        "ordinary backup: LBC minus direct",
+                        sub("v_nonlinear_lbc", "v_nonlinear_direct"),
+                        "diff",
+                        true,
+                    ),
+                ],
+                3,
+            ),
+        )?;
+        files.extend(fig.draw(
+            "policy",
+            &Figure::heatmaps(
+                vec![
+                    map(
+                        "optimal mean control, t = 0",
+                        col("u_direct"),
+                        "rad/s^2",
+                        true,
+                    ),
+                    map(
+                        "LBC control minus optimal",
+                        sub("u_lbc", "u_direct"),
+                        "rad/s^2",
+                        true,
+                    ),
+                    map(
+                        "naive blend control minus optimal",
+                        sub("u_naive", "u_direct"),
+                        "rad/s^2",
+                        true,
+                    ),
+                ],
+                3,
+            ),
+        )?);
+        Ok(files)
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        use polars::prelude::*;
+        let pe = |e: PolarsError| Error::Polars(e.to_string());
+        let df = super::output::read_csv(&dir.join("optimality.csv"))?;
+        let c = df
+            .column("comparison")
+            .map_err(pe)?
+            .str()
+            .map_err(pe)?
+            .clone();
+        let mx = df
+            .column("max_abs_diff")
+            .map_err(pe)?
+            .f64()
+            .map_err(pe)?
+            .clone();
+        let mn = df
+            .column("mean_abs_diff")
+            .map_err(pe)?
+            .f64()
+            .map_err(pe)?
+            .clone();
+        let mut md =
+            String::from("| comparison | max abs diff | mean abs diff |\n| --- | --- | --- |\n");
+        let mut get = std::collections::BTreeMap::new();
+        for r in 0..df.height() {
+            let name = c.get(r).unwrap_or("").to_string();
+            let (a, b) = (mx.get(r).unwrap_or(f64::NAN), mn.get(r).unwrap_or(f64::NAN));
+            md.push_str(&format!("| {name} | {} | {} |\n", sig(a), sig(b)));
+            get.insert(name, a);
+        }
+        let lbc = get.get("lbc_vs_direct").copied().unwrap_or(f64::NAN);
+        let lbcp = get.get("lbc_policy_vs_direct").copied().unwrap_or(f64::NAN);
+        let naive = get.get("naive_vs_direct").copied().unwrap_or(f64::NAN);
+        let naivep = get
+            .get("naive_policy_vs_direct")
+            .copied()
+            .unwrap_or(f64::NAN);
+        let exact = lbc < 1e-9 && lbcp < 1e-6;
+        let worse = naive > 1e3 * lbc.max(1e-12) && naivep > 1e3 * lbcp.max(1e-12);
+        let verdict = match (exact, worse) {
+            (true, true) => Verdict::Held,
+            (true, false) | (false, true) => Verdict::Partly,
+            _ => Verdict::NotHeld,
+        };
+        Ok(Findings {
+            ours: md,
+            verdict,
+            why: format!(
+                "LBC matches the directly solved problem to {} in value and {} in control (floating-point precision: {}); the naive blend is off by {} in value and {} in control ({}).",
+                sig(lbc),
+                sig(lbcp),
+                if exact { "yes" } else { "no" },
+                sig(naive),
+                sig(naivep),
+                if worse { "measurably worse" } else { "not measurably worse" }
+            ),
+        })
+    }
+}
