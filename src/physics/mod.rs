@@ -8,12 +8,17 @@
 //!
 //! Physics knows nothing of learning, control or files.
 //!
-//! Models: [`pendulum::Pendulum3`] (NeuroAnimator's 3-link pendulum) and [`acrobot::Acrobot`]
-//! (the two-link gymnast of linear Bellman combination).
+//! Models: [`pendulum::Pendulum3`] (NeuroAnimator's 3-link pendulum), [`acrobot::Acrobot`]
+//! (the two-link gymnast of linear Bellman combination), and general planar articulated trees
+//! ([`planar::PlanarTree`]) with two instances: the seven-link [`diver::diver`] and the
+//! [`push::push_figure`] of the push-recovery experiment.
 
 pub mod acrobot;
+pub mod diver;
 pub mod integrate;
 pub mod pendulum;
+pub mod planar;
+pub mod push;
 
 pub use integrate::{Integrator, IntegratorKind, Rk45Stats};
 
@@ -200,6 +205,8 @@ pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
         "pendulum3_passive" => Box::new(Pendulum3::new(PendulumVariant::Passive)),
         "pendulum3_ext" => Box::new(Pendulum3::new(PendulumVariant::ExtForce)),
         "acrobot" => Box::new(acrobot::Acrobot::default()),
+        "diver" => Box::new(diver::diver()),
+        "push_recovery" => Box::new(push::push_figure()),
         _ => return None,
     })
 }
