@@ -13,7 +13,7 @@
 use super::output::{Table, Tables};
 use super::plot::{Figure, Heatmap};
 use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, parse_params, positive, ParamError};
+use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
 use super::{Error, Experiment, Job, RunContext};
 use crate::bellman::combine::{blend_weights, naive_weights};
 use crate::bellman::grid_dp::{
@@ -64,7 +64,7 @@ pub struct Params {
     pub control_max: f64,
 }
 
-impl Params {
+impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         positive("gravity_over_length", self.gravity_over_length)?;
         ensure(
@@ -107,7 +107,9 @@ impl Params {
         ensure(self.controls >= 2, "controls", "must be at least 2")?;
         positive("control_max", self.control_max)
     }
+}
 
+impl Params {
     fn grid(&self) -> Grid2 {
         Grid2 {
             lo: [-PI, -self.rate_max],
@@ -354,9 +356,7 @@ impl Experiment for LbcGrid {
     }
 
     fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        let p: Params = parse_params(params)?;
-        p.validate()?;
-        Ok(Box::new(p))
+        typed_job::<Params>(params)
     }
 
     fn figures(
@@ -364,9 +364,7 @@ impl Experiment for LbcGrid {
         fig: &super::plot::FigureSink,
         tables: &Tables,
     ) -> Result<Vec<PathBuf>, Error> {
-        let g = tables
-            .get("grid")
-            .ok_or_else(|| super::other("no grid table"))?;
+        let g = tables.require("grid")?;
         let (a, r) = (g.f64s("angle"), g.f64s("rate"));
         let nx = r.iter().take_while(|&&v| v == r[0]).count();
         if nx == 0 || a.len() % nx != 0 {

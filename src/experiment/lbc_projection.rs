@@ -12,7 +12,7 @@
 use super::output::{Table, Tables};
 use super::plot::{Figure, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
-use super::resolve::{all_positive, ensure, parse_params, positive, ParamError};
+use super::resolve::{all_positive, ensure, positive, typed_job, ParamError, Validate};
 use super::{Error, Experiment, Job, RunContext};
 use crate::bellman::projection::{combined_reward, project, GaussianReward};
 use crate::row;
@@ -46,7 +46,7 @@ fn default_margin() -> f64 {
     3.0
 }
 
-impl Params {
+impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         ensure(self.dimension >= 1, "dimension", "must be at least 1")?;
         ensure(self.dimension <= 64, "dimension", "must be at most 64")?;
@@ -59,7 +59,9 @@ impl Params {
         ensure(self.samples >= 3, "samples", "must be at least 3")?;
         positive("margin", self.margin)
     }
+}
 
+impl Params {
     fn point(&self, x0: f64) -> DVector<f64> {
         let mut v = DVector::zeros(self.dimension);
         v[0] = x0;
@@ -168,9 +170,7 @@ impl Experiment for LbcProjection {
     }
 
     fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        let p: Params = parse_params(params)?;
-        p.validate()?;
-        Ok(Box::new(p))
+        typed_job::<Params>(params)
     }
 
     fn figures(
@@ -178,9 +178,7 @@ impl Experiment for LbcProjection {
         fig: &super::plot::FigureSink,
         tables: &Tables,
     ) -> Result<Vec<PathBuf>, Error> {
-        let cost = tables
-            .get("cost")
-            .ok_or_else(|| super::other("no cost table"))?;
+        let cost = tables.require("cost")?;
         let (cs, ct, cx, cd, cr) = (
             cost.f64s("spacing"),
             cost.f64s("target"),
@@ -243,9 +241,7 @@ impl Experiment for LbcProjection {
         let cols = spacings.len().min(3);
         let mut files = fig.draw("cost", &Figure::grid(panels, cols))?;
         // Weights vs spacing for each target.
-        let w = tables
-            .get("weights")
-            .ok_or_else(|| super::other("no weights table"))?;
+        let w = tables.require("weights")?;
         let (ws, wc, ww, wt) = (
             w.f64s("spacing"),
             w.f64s("component"),

@@ -269,6 +269,12 @@ impl Tables {
     pub fn get(&self, name: &str) -> Option<&Table> {
         self.0.iter().find(|(n, _)| n == name).map(|(_, t)| t)
     }
+
+    /// A table by name, or an error naming it.
+    pub fn require(&self, name: &str) -> Result<&Table, Error> {
+        self.get(name)
+            .ok_or_else(|| Error::Other(format!("no `{name}` table")))
+    }
 }
 
 /// Writes `bytes` to `path` atomically: a temporary file beside it, then a rename.
@@ -308,6 +314,36 @@ pub fn write_table(dir: &Path, name: &str, table: &Table) -> Result<Vec<PathBuf>
     atomic_write(&csv_path, &csv)?;
     atomic_write(&pq_path, &pq)?;
     Ok(vec![csv_path, pq_path])
+}
+
+/// Float values of a polars column (integers cast), nulls as NaN.
+pub fn df_f64(df: &DataFrame, name: &str) -> Result<Vec<f64>, Error> {
+    let pe = |e: PolarsError| Error::Polars(format!("column {name}: {e}"));
+    let c = df
+        .column(name)
+        .map_err(pe)?
+        .cast(&DataType::Float64)
+        .map_err(pe)?;
+    Ok(c.f64()
+        .map_err(pe)?
+        .iter()
+        .map(|v| v.unwrap_or(f64::NAN))
+        .collect())
+}
+
+/// String values of a polars column, nulls as empty strings.
+pub fn df_str(df: &DataFrame, name: &str) -> Result<Vec<String>, Error> {
+    let pe = |e: PolarsError| Error::Polars(format!("column {name}: {e}"));
+    let c = df
+        .column(name)
+        .map_err(pe)?
+        .cast(&DataType::String)
+        .map_err(pe)?;
+    Ok(c.str()
+        .map_err(pe)?
+        .iter()
+        .map(|v| v.unwrap_or("").to_string())
+        .collect())
 }
 
 /// Reads a CSV written by [`write_table`] into a polars data frame.

@@ -10,7 +10,7 @@
 use super::output::{Table, Tables};
 use super::plot::{Figure, Legend, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
-use super::resolve::{all_positive, ensure, parse_params, positive, ParamError};
+use super::resolve::{all_positive, ensure, positive, typed_job, ParamError, Validate};
 use super::{Error, Experiment, Job, RunContext};
 use crate::physics::acrobot::Acrobot;
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
@@ -78,7 +78,7 @@ pub fn conservative_model(name: &str) -> Option<Box<dyn Ode>> {
     }
 }
 
-impl Params {
+impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         ensure(!self.models.is_empty(), "models", "must not be empty")?;
         for (i, m) in self.models.iter().enumerate() {
@@ -347,9 +347,7 @@ impl Experiment for PhysicsValidation {
     }
 
     fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        let p: Params = parse_params(params)?;
-        p.validate()?;
-        Ok(Box::new(p))
+        typed_job::<Params>(params)
     }
 
     fn figures(
@@ -358,12 +356,8 @@ impl Experiment for PhysicsValidation {
         tables: &Tables,
     ) -> Result<Vec<PathBuf>, Error> {
         let mut files = Vec::new();
-        let drift = tables
-            .get("energy_drift")
-            .ok_or_else(|| super::other("no energy_drift table"))?;
-        let orders = tables
-            .get("orders")
-            .ok_or_else(|| super::other("no orders table"))?;
+        let drift = tables.require("energy_drift")?;
+        let orders = tables.require("orders")?;
         let models = unique(&drift.strs("model"));
         let (dm, di, dd, dv) = (
             drift.strs("model"),

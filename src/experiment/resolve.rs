@@ -75,6 +75,22 @@ pub fn parse_params<P: DeserializeOwned>(value: &toml::Value) -> Result<P, Param
     })
 }
 
+/// Range checks of a family's typed parameters, naming the bad key.
+pub trait Validate {
+    /// Checks every value; the error names the key inside `[params]`.
+    fn validate(&self) -> Result<(), ParamError>;
+}
+
+/// The usual `Experiment::resolve`: deserialize `P`, validate it, box it as the job.
+pub fn typed_job<P>(value: &toml::Value) -> Result<Box<dyn Job>, ParamError>
+where
+    P: DeserializeOwned + Validate + Job + 'static,
+{
+    let p: P = parse_params(value)?;
+    p.validate()?;
+    Ok(Box::new(p))
+}
+
 /// How to resolve a spec: quick mode, seed override, `--set KEY=VALUE` overrides.
 #[derive(Debug, Clone, Default)]
 pub struct ResolveOptions {
