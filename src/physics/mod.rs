@@ -8,12 +8,14 @@
 //!
 //! Physics knows nothing of learning, control or files.
 //!
-//! Models: [`pendulum::Pendulum3`] (NeuroAnimator's 3-link pendulum) and [`acrobot::Acrobot`]
+//! Models: [`pendulum::Pendulum3`] (NeuroAnimator's 3-link pendulum), [`truck::Truck`] (its
+//! rear-wheel-drive truck, a planar bicycle-model rigid body) and [`acrobot::Acrobot`]
 //! (the two-link gymnast of linear Bellman combination).
 
 pub mod acrobot;
 pub mod integrate;
 pub mod pendulum;
+pub mod truck;
 
 pub use integrate::{Integrator, IntegratorKind, Rk45Stats};
 
@@ -190,7 +192,13 @@ pub fn check_finite(model: &str, step: usize, t: f64, x: &[f64]) -> Result<(), B
 }
 
 /// Names of every model `motionlab describe` and `simulate` know.
-pub const MODEL_NAMES: &[&str] = &["pendulum3", "pendulum3_passive", "pendulum3_ext", "acrobot"];
+pub const MODEL_NAMES: &[&str] = &[
+    "pendulum3",
+    "pendulum3_passive",
+    "pendulum3_ext",
+    "acrobot",
+    "truck",
+];
 
 /// Builds a model by registry name.
 pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
@@ -200,6 +208,7 @@ pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
         "pendulum3_passive" => Box::new(Pendulum3::new(PendulumVariant::Passive)),
         "pendulum3_ext" => Box::new(Pendulum3::new(PendulumVariant::ExtForce)),
         "acrobot" => Box::new(acrobot::Acrobot::default()),
+        "truck" => Box::new(truck::Truck::default()),
         _ => return None,
     })
 }
