@@ -9,11 +9,13 @@
 //! Physics knows nothing of learning, control or files.
 //!
 //! Models: [`pendulum::Pendulum3`] (NeuroAnimator's 3-link pendulum), [`truck::Truck`] (its
-//! rear-wheel-drive truck, a planar bicycle-model rigid body) and [`acrobot::Acrobot`]
+//! rear-wheel-drive truck, a planar bicycle-model rigid body), [`lander::Lander`] (its lunar
+//! lander, a 3-D rigid body with a main thruster and attitude jets) and [`acrobot::Acrobot`]
 //! (the two-link gymnast of linear Bellman combination).
 
 pub mod acrobot;
 pub mod integrate;
+pub mod lander;
 pub mod pendulum;
 pub mod truck;
 
@@ -198,6 +200,7 @@ pub const MODEL_NAMES: &[&str] = &[
     "pendulum3_ext",
     "acrobot",
     "truck",
+    "lander",
 ];
 
 /// Builds a model by registry name.
@@ -209,6 +212,7 @@ pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
         "pendulum3_ext" => Box::new(Pendulum3::new(PendulumVariant::ExtForce)),
         "acrobot" => Box::new(acrobot::Acrobot::default()),
         "truck" => Box::new(truck::Truck::default()),
+        "lander" => Box::new(lander::Lander::default()),
         _ => return None,
     })
 }
