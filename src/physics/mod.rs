@@ -8,17 +8,21 @@
 //!
 //! Physics knows nothing of learning, control or files.
 //!
-//! Models: [`pendulum::Pendulum3`] (NeuroAnimator's 3-link pendulum), [`acrobot::Acrobot`]
-//! (the two-link gymnast of linear Bellman combination), and general planar articulated trees
+//! Models: [`pendulum::Pendulum3`] (NeuroAnimator's 3-link pendulum), [`truck::Truck`] (its
+//! rear-wheel-drive truck, a planar bicycle-model rigid body), [`lander::Lander`] (its lunar
+//! lander, a 3-D rigid body with a main thruster and attitude jets), [`acrobot::Acrobot`] (the
+//! two-link gymnast of linear Bellman combination), and general planar articulated trees
 //! ([`planar::PlanarTree`]) with two instances: the seven-link [`diver::diver`] and the
 //! [`push::push_figure`] of the push-recovery experiment.
 
 pub mod acrobot;
 pub mod diver;
 pub mod integrate;
+pub mod lander;
 pub mod pendulum;
 pub mod planar;
 pub mod push;
+pub mod truck;
 
 pub use integrate::{Integrator, IntegratorKind, Rk45Stats};
 
@@ -195,7 +199,16 @@ pub fn check_finite(model: &str, step: usize, t: f64, x: &[f64]) -> Result<(), B
 }
 
 /// Names of every model `motionlab describe` and `simulate` know.
-pub const MODEL_NAMES: &[&str] = &["pendulum3", "pendulum3_passive", "pendulum3_ext", "acrobot"];
+pub const MODEL_NAMES: &[&str] = &[
+    "pendulum3",
+    "pendulum3_passive",
+    "pendulum3_ext",
+    "acrobot",
+    "diver",
+    "push_recovery",
+    "truck",
+    "lander",
+];
 
 /// Builds a model by registry name.
 pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
@@ -207,6 +220,8 @@ pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
         "acrobot" => Box::new(acrobot::Acrobot::default()),
         "diver" => Box::new(diver::diver()),
         "push_recovery" => Box::new(push::push_figure()),
+        "truck" => Box::new(truck::Truck::default()),
+        "lander" => Box::new(lander::Lander::default()),
         _ => return None,
     })
 }
