@@ -10,7 +10,9 @@
 //! - [`physics`]: the [`physics::Dynamics`] / [`physics::Ode`] traits, integrators (explicit
 //!   and semi-implicit Euler, RK4, fixed-step Dormand–Prince, adaptive RK45) and one file per
 //!   model: [`physics::pendulum::Pendulum3`] (3-link pendulum: passive, active, ext. force),
-//!   [`physics::acrobot::Acrobot`] (two-link gymnast).
+//!   [`physics::truck::Truck`], [`physics::lander::Lander`], [`physics::acrobot::Acrobot`]
+//!   (two-link gymnast), and planar articulated trees ([`physics::planar::PlanarTree`]) for the
+//!   diver and the push-recovery figure.
 //! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
 //!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
@@ -26,6 +28,9 @@
 //! | --- | --- | --- |
 //! | `pendulum3`, `pendulum3_passive`, `pendulum3_ext` | [`physics::pendulum`] | planar 3-link pendulum, full articulated dynamics |
 //! | `acrobot` | [`physics::acrobot`] | point-mass acrobot, torque at the hip |
+//! | `truck` | [`physics::truck`] | bicycle-model truck with saturating tyre forces |
+//! | `lander` | [`physics::lander`] | 3-D rigid-body lunar lander, quaternion attitude |
+//! | `diver`, `push_recovery` | [`physics::diver`], [`physics::push`] | planar articulated trees ([`physics::planar`]) |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
 //! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
 //! | z-weights, log-sum-exp | [`bellman::combine`] | LBC eq. 1, 11 |
