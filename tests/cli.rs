@@ -390,3 +390,51 @@ fn bench_json_is_one_object_of_named_numbers() {
     assert!(obj.contains_key("sim.pendulum3.steps_per_s"));
     assert!(obj.values().all(|x| x.as_f64().is_some_and(|f| f > 0.0)));
 }
+
+#[test]
+fn describe_and_simulate_every_model() {
+    let dir = tempfile::tempdir().unwrap();
+    for &name in motionlab::physics::MODEL_NAMES {
+        let out = ok(&motionlab(dir.path(), &["describe", name]));
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!(v["model"], name);
+        let params = v["parameters"].as_array().unwrap();
+        assert!(
+            !params.is_empty()
+                && params
+                    .iter()
+                    .all(|p| !p["unit"].as_str().unwrap().is_empty()),
+            "{name}"
+        );
+        // Simulate from the model's rest-like state for a short while: finite and named.
+        let n = v["state"].as_array().unwrap().len();
+        let mut state = vec![0.0; n];
+        if name == "lander" {
+            state[3] = 1.0; // unit quaternion
+            state[2] = 10.0;
+        }
+        let csv = ok(&motionlab(
+            dir.path(),
+            &[
+                "simulate",
+                name,
+                &format!(
+                    "--state={}",
+                    state
+                        .iter()
+                        .map(|v| v.to_string())
+                        .collect::<Vec<_>>()
+                        .join(",")
+                ),
+                "--duration",
+                "0.2",
+            ],
+        ));
+        let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+        assert_eq!(header.len(), n + 1, "{name}");
+        assert!(csv
+            .lines()
+            .skip(1)
+            .all(|l| l.split(',').all(|c| c.parse::<f64>().unwrap().is_finite())));
+    }
+}
