@@ -958,6 +958,46 @@ mod tests {
     }
 
     #[test]
+    fn training_stops_early_and_keeps_the_best_weights() {
+        // Held-out targets are noise unrelated to the inputs: the held-out error cannot keep
+        // improving, so both methods must stop on patience well before their limits.
+        let (e, train, held, _) = linear_setup();
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        let noise = Dataset::new(
+            held.inputs.clone(),
+            Array2::from_shape_fn(held.targets.dim(), |_| rng.random_range(-3.0..3.0)),
+        )
+        .unwrap();
+        let mut m1 = e.mlp().clone();
+        let config = MomentumConfig {
+            max_epochs: 1000,
+            patience: 5,
+            ..MomentumConfig::default()
+        };
+        let r1 = train_momentum(&mut m1, &train, &noise, &config).unwrap();
+        assert_eq!(r1.stop, StopReason::NoImprovement);
+        assert!(r1.trace.len() < 1000);
+        assert!(r1.trace.len() <= r1.best_iteration + 1 + 5);
+        assert_eq!(mse(&m1, &noise), r1.best_held_out_error);
+        let mut m2 = e.mlp().clone();
+        let config = FullBatchConfig {
+            max_iters: 1000,
+            patience: 5,
+            ..FullBatchConfig::default()
+        };
+        let r2 = train_full_batch(&mut m2, &train, &noise, &config).unwrap();
+        assert_eq!(r2.stop, StopReason::NoImprovement);
+        assert!(r2.trace.len() < 1000);
+        assert_eq!(mse(&m2, &noise), r2.best_held_out_error);
+        let best = r2
+            .trace
+            .iter()
+            .map(|p| p.held_out_error)
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(best, r2.best_held_out_error);
+    }
+
+    #[test]
     fn split_is_deterministic_and_disjoint() {
         let (e, ..) = linear_setup();
         let ds = e.transforms().encode(&linear_system(50, 1));
