@@ -27,7 +27,7 @@ use crate::physics::Dynamics;
 use mlp::{Mlp, MlpScratch};
 use ndarray::{Array2, ArrayView2};
 use train::Dataset;
-use transform::{FrameMap, Normalizer, PlanarFrame, Pose2};
+use transform::{FrameMap, LocalFrame, Normalizer};
 
 /// Errors of emulator construction and training.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -135,7 +135,7 @@ pub struct TransformConfig {
     /// Predict the state change Δs instead of the next state (T_y^Δ).
     pub delta: bool,
     /// Map inputs to the model's local frame and outputs back (T_x', T_y').
-    pub frame: Option<PlanarFrame>,
+    pub frame: Option<LocalFrame>,
     /// Normalize inputs and outputs to zero mean, unit variance (T_x^σ, T_y^σ).
     pub normalize: bool,
     /// Group id per network input ([local state, control]); `None`: one group per variable.
@@ -157,7 +157,7 @@ impl TransformConfig {
     }
 
     /// State change and per-variable normalization, with an optional local frame.
-    pub fn standard(frame: Option<PlanarFrame>) -> Self {
+    pub fn standard(frame: Option<LocalFrame>) -> Self {
         Self {
             delta: true,
             frame,
@@ -184,7 +184,7 @@ pub struct Transforms {
     /// Whether the network predicts the state change.
     pub delta: bool,
     /// The local frame, if any.
-    pub frame: Option<PlanarFrame>,
+    pub frame: Option<LocalFrame>,
     /// Input normalization (identity when normalization is off).
     pub input_norm: Normalizer,
     /// Output normalization (identity when normalization is off).
@@ -242,16 +242,11 @@ impl Transforms {
         self.control_dim
     }
 
-    /// The local frame's pose at state `s` (the default pose when there is no frame).
-    pub fn pose(&self, s: &[f64]) -> Pose2 {
-        self.frame.as_ref().map_or(Pose2::default(), |f| f.pose(s))
-    }
-
     /// Network input z = T_x^σ(T_x'(s), u). Does not allocate.
     pub fn encode_input(&self, s: &[f64], u: &[f64], z: &mut [f64]) {
         let n = self.state_dim;
         match &self.frame {
-            Some(f) => f.apply(FrameMap::ToLocal, f.pose(s), s, &mut z[..n]),
+            Some(f) => f.apply_at(FrameMap::ToLocal, s, s, &mut z[..n]),
             None => z[..n].copy_from_slice(s),
         }
         z[n..].copy_from_slice(u);
@@ -264,14 +259,14 @@ impl Transforms {
         }
     }
 
-    /// Inverse of [`Transforms::encode_input`] given the pose the state was encoded at (the
-    /// local frame forgets the pose itself).
-    pub fn decode_input(&self, pose: Pose2, z: &[f64], s: &mut [f64], u: &mut [f64]) {
+    /// Inverse of [`Transforms::encode_input`] given a state `pose_source` with the pose the
+    /// state was encoded at (the local frame forgets the pose itself).
+    pub fn decode_input(&self, pose_source: &[f64], z: &[f64], s: &mut [f64], u: &mut [f64]) {
         let n = self.state_dim;
         let mut a = vec![0.0; z.len()];
         self.input_norm.denormalize(z, &mut a);
         match &self.frame {
-            Some(f) => f.apply(FrameMap::ToWorld, pose, &a[..n], s),
+            Some(f) => f.apply_at(FrameMap::ToWorld, pose_source, &a[..n], s),
             None => s.copy_from_slice(&a[..n]),
         }
         u.copy_from_slice(&a[n..]);
@@ -292,7 +287,7 @@ impl Transforms {
             } else {
                 FrameMap::ToLocal
             };
-            f.apply(map, f.pose(s), &raw, &mut local);
+            f.apply_at(map, s, &raw, &mut local);
         }
         self.output_norm.normalize(&local, y);
     }
@@ -308,7 +303,7 @@ impl Transforms {
                 FrameMap::ToWorld
             };
             tmp.copy_from_slice(s_next);
-            f.apply(map, f.pose(s), tmp, s_next);
+            f.apply_at(map, s, tmp, s_next);
         }
         if self.delta {
             for (o, a) in s_next.iter_mut().zip(s) {
@@ -336,9 +331,7 @@ impl Transforms {
         }
         match &self.frame {
             Some(f) => {
-                let mut pose_bar = Pose2::default();
-                f.apply_vjp(FrameMap::ToLocal, f.pose(s), s, tmp, s_bar, &mut pose_bar);
-                f.pose_vjp(pose_bar, s_bar);
+                f.apply_vjp_self(FrameMap::ToLocal, s, tmp, s_bar);
             }
             None => {
                 for (o, a) in s_bar.iter_mut().zip(tmp.iter()) {
@@ -375,9 +368,7 @@ impl Transforms {
                 };
                 self.output_norm.denormalize(y, tmp1);
                 tmp2.fill(0.0);
-                let mut pose_bar = Pose2::default();
-                f.apply_vjp(map, f.pose(s), tmp1, s_next_bar, tmp2, &mut pose_bar);
-                f.pose_vjp(pose_bar, s_bar);
+                f.apply_vjp_at(map, s, tmp1, s_next_bar, tmp2, s_bar);
                 self.output_norm.denormalize_tangent(tmp2, y_bar);
             }
             None => self.output_norm.denormalize_tangent(s_next_bar, y_bar),
@@ -656,6 +647,7 @@ mod tests {
     use ndarray::Array1;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+    use transform::PlanarFrame;
 
     const N: usize = 6;
     const M: usize = 2;
@@ -694,53 +686,96 @@ mod tests {
     fn config(delta: bool) -> TransformConfig {
         TransformConfig {
             delta,
-            frame: Some(PlanarFrame::rigid_body(0, 1, 2, 3, 4)),
+            frame: Some(PlanarFrame::rigid_body(0, 1, 2, 3, 4).into()),
             normalize: true,
             input_groups: Some(vec![0, 0, 1, 2, 2, 3, 4, 5]),
             output_groups: None,
         }
     }
 
+    fn random_mlp(n_in: usize, n_out: usize) -> Mlp {
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let init = WeightInit::Uniform {
+            low: -1.0,
+            high: 1.0,
+        };
+        Mlp::new(n_in, 7, n_out, init, &mut rng)
+    }
+
     fn emulator(delta: bool) -> (Emulator, Transitions) {
         let data = body_transitions(200, 1);
         let t = Transforms::fit(&config(delta), &data).unwrap();
-        let mut rng = ChaCha8Rng::seed_from_u64(2);
-        let mlp = Mlp::new(
-            N + M,
-            7,
-            N,
-            WeightInit::Uniform {
-                low: -1.0,
-                high: 1.0,
-            },
-            &mut rng,
-        );
-        (Emulator::new(t, mlp, 0.1).unwrap(), data)
+        (Emulator::new(t, random_mlp(N + M, N), 0.1).unwrap(), data)
+    }
+
+    /// A 3D rigid body (position, quaternion, velocity, angular velocity; 2 controls) with
+    /// made-up transitions; the quaternions are deliberately not exactly unit.
+    fn spatial_emulator(delta: bool) -> (Emulator, Transitions) {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let rows = 100;
+        let states = Array2::from_shape_fn((rows, 13), |(_, c)| match c {
+            0..=2 => rng.random_range(-10.0..10.0),
+            3..=6 => rng.random_range(-1.0..1.0),
+            _ => rng.random_range(-2.0..2.0),
+        });
+        let controls = Array2::from_shape_fn((rows, 2), |_| rng.random_range(-1.0..1.0));
+        let next = &states + &Array2::from_shape_fn((rows, 13), |_| rng.random_range(-0.1..0.1));
+        let data = Transitions::new(states, controls, next).unwrap();
+        let config = TransformConfig {
+            delta,
+            frame: Some(transform::SpatialFrame::rigid_body(0, 3, 7, 10).into()),
+            normalize: true,
+            input_groups: None,
+            output_groups: Some(vec![0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 3, 3, 3]),
+        };
+        let t = Transforms::fit(&config, &data).unwrap();
+        (Emulator::new(t, random_mlp(15, 13), 0.1).unwrap(), data)
+    }
+
+    fn all_emulators() -> Vec<(&'static str, Emulator, Transitions)> {
+        let mut out = Vec::new();
+        for delta in [true, false] {
+            let (e, d) = emulator(delta);
+            out.push((if delta { "planar delta" } else { "planar" }, e, d));
+            let (e, d) = spatial_emulator(delta);
+            out.push((if delta { "spatial delta" } else { "spatial" }, e, d));
+        }
+        let data = body_transitions(100, 3);
+        let t = Transforms::fit(&TransformConfig::none(), &data).unwrap();
+        let e = Emulator::new(t, random_mlp(N + M, N), 0.1).unwrap();
+        out.push(("none", e, data));
+        out
     }
 
     #[test]
     fn transforms_round_trip_exactly() {
-        for delta in [true, false] {
-            let (e, data) = emulator(delta);
+        for (name, e, data) in all_emulators() {
+            let (n, m) = (e.state_dim(), e.control_dim());
             let t = e.transforms();
-            let mut z = vec![0.0; N + M];
-            let mut y = vec![0.0; N];
-            let mut tmp = vec![0.0; N];
-            let (mut s_back, mut u_back, mut s1_back) = (vec![0.0; N], vec![0.0; M], vec![0.0; N]);
+            let mut z = vec![0.0; n + m];
+            let mut y = vec![0.0; n];
+            let mut tmp = vec![0.0; n];
+            let (mut s_back, mut u_back, mut s1_back) = (vec![0.0; n], vec![0.0; m], vec![0.0; n]);
             for r in 0..data.len() {
                 let s = data.states.row(r).to_vec();
                 let u = data.controls.row(r).to_vec();
                 let s1 = data.next_states.row(r).to_vec();
                 t.encode_input(&s, &u, &mut z);
-                t.decode_input(t.pose(&s), &z, &mut s_back, &mut u_back);
+                t.decode_input(&s, &z, &mut s_back, &mut u_back);
                 t.encode_target(&s, &s1, &mut y);
                 t.decode_output(&s, &y, &mut tmp, &mut s1_back);
-                for k in 0..N {
-                    assert!((s_back[k] - s[k]).abs() < 1e-12 * (1.0 + s[k].abs()));
-                    assert!((s1_back[k] - s1[k]).abs() < 1e-12 * (1.0 + s1[k].abs()));
+                for k in 0..n {
+                    assert!(
+                        (s_back[k] - s[k]).abs() < 1e-12 * (1.0 + s[k].abs()),
+                        "{name}"
+                    );
+                    assert!(
+                        (s1_back[k] - s1[k]).abs() < 1e-12 * (1.0 + s1[k].abs()),
+                        "{name}"
+                    );
                 }
-                for k in 0..M {
-                    assert!((u_back[k] - u[k]).abs() < 1e-12);
+                for k in 0..m {
+                    assert!((u_back[k] - u[k]).abs() < 1e-12, "{name}");
                 }
             }
         }
@@ -748,41 +783,44 @@ mod tests {
 
     #[test]
     fn step_vjp_and_jacobians_match_finite_differences() {
-        for delta in [true, false] {
-            let (e, _) = emulator(delta);
+        for (name, e, data) in all_emulators() {
+            let (n, m) = (e.state_dim(), e.control_dim());
             let mut sc = e.scratch();
-            let s = [3.0, -4.0, 0.8, 1.1, -0.6, 0.4];
-            let u = [0.5, -0.3];
-            let lam = [0.7, -1.0, 0.4, 2.0, -0.3, 1.5];
-            let (mut sb, mut ub) = ([0.0; N], [0.0; M]);
+            let s = data.states.row(3).to_vec();
+            let u = data.controls.row(3).to_vec();
+            let lam: Vec<f64> = (0..n).map(|i| ((i * 7 % 5) as f64 - 2.0) * 0.6).collect();
+            let (mut sb, mut ub) = (vec![0.0; n], vec![0.0; m]);
             e.vjp(&s, &u, &lam, &mut sc, &mut sb, &mut ub);
             let (a, b) = e.jacobians(&s, &u);
             let f = |s: &[f64], u: &[f64]| {
-                let mut out = vec![0.0; N];
+                let mut out = vec![0.0; n];
                 e.predict(s, u, &mut e.scratch(), &mut out);
                 out
             };
             let h = 1e-6;
-            for k in 0..N + M {
-                let (mut sp, mut sm, mut up, mut um) = (s, s, u, u);
-                if k < N {
+            for k in 0..n + m {
+                let (mut sp, mut sm, mut up, mut um) = (s.clone(), s.clone(), u.clone(), u.clone());
+                if k < n {
                     sp[k] += h;
                     sm[k] -= h;
                 } else {
-                    up[k - N] += h;
-                    um[k - N] -= h;
+                    up[k - n] += h;
+                    um[k - n] -= h;
                 }
                 let (fp, fm) = (f(&sp, &up), f(&sm, &um));
-                let col: Vec<f64> = (0..N).map(|i| (fp[i] - fm[i]) / (2.0 * h)).collect();
+                let col: Vec<f64> = (0..n).map(|i| (fp[i] - fm[i]) / (2.0 * h)).collect();
                 let vjp_fd: f64 = col.iter().zip(&lam).map(|(a, b)| a * b).sum();
-                let got = if k < N { sb[k] } else { ub[k - N] };
+                let got = if k < n { sb[k] } else { ub[k - n] };
                 assert!(
                     (vjp_fd - got).abs() < 1e-6 * (1.0 + got.abs()),
-                    "delta {delta} k {k}: {vjp_fd} vs {got}"
+                    "{name} k {k}: {vjp_fd} vs {got}"
                 );
-                for i in 0..N {
-                    let j = if k < N { a[[i, k]] } else { b[[i, k - N]] };
-                    assert!((col[i] - j).abs() < 1e-6 * (1.0 + j.abs()), "J[{i},{k}]");
+                for i in 0..n {
+                    let j = if k < n { a[[i, k]] } else { b[[i, k - n]] };
+                    assert!(
+                        (col[i] - j).abs() < 1e-6 * (1.0 + j.abs()),
+                        "{name} J[{i},{k}]"
+                    );
                 }
             }
         }
@@ -811,7 +849,8 @@ mod tests {
         let s = [3.0, -4.0, 0.8, 1.1, -0.6, 0.4];
         let u = [0.5, -0.3];
         let t = e.transforms().clone();
-        let frame = t.frame.clone().unwrap();
+        let frame = PlanarFrame::rigid_body(0, 1, 2, 3, 4);
+        assert_eq!(t.frame, Some(frame.clone().into()));
         let pose = frame.pose(&s);
         let mut a = vec![0.0; N + M];
         frame.apply(FrameMap::ToLocal, pose, &s, &mut a[..N]);
