@@ -71,8 +71,7 @@ pub struct Mlp {
     n_in: usize,
     n_hidden: usize,
     n_out: usize,
-    /// Flattened weights, layout `[W₁ (q×p), b₁ (q), W₂ (r×q), b₂ (r)]`.
-    pub weights: Vec<f64>,
+    weights: Vec<f64>,
 }
 
 /// Scratch for one example: hidden activations and the hidden cotangent.
@@ -146,6 +145,16 @@ impl Mlp {
     pub fn n_out(&self) -> usize {
         self.n_out
     }
+    /// The flattened weights, layout `[W₁ (q×p), b₁ (q), W₂ (r×q), b₂ (r)]`.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// The flattened weights, mutably (the length is fixed by the network shape).
+    pub fn weights_mut(&mut self) -> &mut [f64] {
+        &mut self.weights
+    }
+
     /// Number of weights.
     pub fn n_weights(&self) -> usize {
         self.weights.len()
@@ -452,7 +461,7 @@ mod tests {
         assert_eq!(a, b);
         let mut rng = ChaCha8Rng::seed_from_u64(8);
         let c = Mlp::new(4, 6, 3, WeightInit::FanIn, &mut rng);
-        assert_ne!(a.weights, c.weights);
+        assert_ne!(a.weights(), c.weights());
         assert_eq!(a.n_weights(), 6 * 5 + 3 * 7);
     }
 
@@ -491,9 +500,9 @@ mod tests {
         let h = 1e-6;
         for k in 0..m.n_weights() {
             let mut mp = m.clone();
-            mp.weights[k] += h;
+            mp.weights_mut()[k] += h;
             let mut mm = m.clone();
-            mm.weights[k] -= h;
+            mm.weights_mut()[k] -= h;
             let fd = (mp.loss(x.view(), t.view()) - mm.loss(x.view(), t.view())) / (2.0 * h);
             assert!(
                 (fd - g[k]).abs() < 1e-6 * (1.0 + fd.abs()),

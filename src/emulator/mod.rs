@@ -831,7 +831,7 @@ mod tests {
         let (e, data) = emulator(true);
         let ds = e.transforms().encode(&data);
         let problem = TrainingProblem::new(e.mlp(), &ds);
-        let w = Array1::from(e.mlp().weights.clone());
+        let w = Array1::from(e.mlp().weights().to_vec());
         let g = problem.gradient(&w).unwrap();
         let h = 1e-6;
         for k in 0..w.len() {

@@ -314,7 +314,7 @@ impl<S> EarlyStopping<'_, S> {
             train_error: state.get_cost(),
             held_out_error: held,
         });
-        if self.stopper.observe(iteration, held, &net.weights) {
+        if self.stopper.observe(iteration, held, net.weights()) {
             self.stopped = true;
         }
     }
@@ -379,9 +379,9 @@ pub fn train_full_batch(
 ) -> Result<TrainReport, EmulatorError> {
     check_common(train, held_out, config.patience, config.min_improvement)?;
     let problem = TrainingProblem::new(mlp, train);
-    let w0 = Array1::from(mlp.weights.clone());
+    let w0 = Array1::from(mlp.weights().to_vec());
     let shape = (mlp.n_in(), mlp.n_hidden(), mlp.n_out());
-    let stopper = EarlyStopper::new(config.patience, config.min_improvement, &mlp.weights);
+    let stopper = EarlyStopper::new(config.patience, config.min_improvement, mlp.weights());
     let opt = |e: argmin::core::Error| EmulatorError::Optimizer(e.to_string());
     let (stopper, trace, failed, stopped, reason) = match config.method {
         FullBatchMethod::ConjugateGradient { restart_iters } => {
@@ -439,7 +439,7 @@ pub fn train_full_batch(
     } else {
         StopReason::Converged
     };
-    mlp.weights.copy_from_slice(&stopper.best_weights);
+    mlp.weights_mut().copy_from_slice(&stopper.best_weights);
     Ok(TrainReport {
         trace,
         best_iteration: stopper.best_iteration,
@@ -534,13 +534,13 @@ pub fn train_momentum(
     }
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut state = MomentumState::new(mlp.n_weights());
-    let mut stopper = EarlyStopper::new(config.patience, config.min_improvement, &mlp.weights);
+    let mut stopper = EarlyStopper::new(config.patience, config.min_improvement, mlp.weights());
     let mut trace = vec![TracePoint {
         iteration: 0,
         train_error: mse(mlp, train),
         held_out_error: mse(mlp, held_out),
     }];
-    stopper.observe(0, trace[0].held_out_error, &mlp.weights);
+    stopper.observe(0, trace[0].held_out_error, mlp.weights());
     let mut order: Vec<usize> = (0..train.len()).collect();
     let mut grad = vec![0.0; mlp.n_weights()];
     let mut stop = StopReason::MaxIterations;
@@ -553,7 +553,7 @@ pub fn train_momentum(
             let scale = 2.0 / (batch.len() * mlp.n_out()) as f64;
             grad.iter_mut().for_each(|g| *g *= scale);
             state.step(
-                &mut mlp.weights,
+                mlp.weights_mut(),
                 &grad,
                 config.learning_rate,
                 config.momentum,
@@ -569,12 +569,12 @@ pub fn train_momentum(
             stop = StopReason::OptimizerFailed(format!("training error diverged at epoch {epoch}"));
             break;
         }
-        if stopper.observe(epoch, point.held_out_error, &mlp.weights) {
+        if stopper.observe(epoch, point.held_out_error, mlp.weights()) {
             stop = StopReason::NoImprovement;
             break;
         }
     }
-    mlp.weights.copy_from_slice(&stopper.best_weights);
+    mlp.weights_mut().copy_from_slice(&stopper.best_weights);
     Ok(TrainReport {
         trace,
         best_iteration: stopper.best_iteration,
