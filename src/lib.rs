@@ -39,6 +39,7 @@
 
 pub mod bellman;
 pub mod bench;
+pub mod emulator;
 pub mod experiment;
 pub mod linalg;
 pub mod physics;

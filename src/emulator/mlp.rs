@@ -1,0 +1,574 @@
+//! # Three-layer perceptron
+//!
+//! The network N(x, w) of NeuroAnimator §2.1–2.2: p linear inputs, q logistic-sigmoid hidden
+//! units, r linear outputs, each layer with a bias (Fig. 1b, eq. 2):
+//!
+//! ```text
+//! h = σ(W₁ x + b₁),   σ(z) = 1 / (1 + e^{−z})
+//! y = W₂ h + b₂
+//! ```
+//!
+//! Backpropagation (§2.3) of an output cotangent ȳ = ∂E/∂y:
+//!
+//! ```text
+//! ∂E/∂W₂ = ȳ hᵀ,   ∂E/∂b₂ = ȳ
+//! h̄ = (W₂ᵀ ȳ) ⊙ h ⊙ (1 − h)
+//! ∂E/∂W₁ = h̄ xᵀ,   ∂E/∂b₁ = h̄
+//! x̄ = W₁ᵀ h̄          (vector–Jacobian product to the inputs, used by BPTT, §4.3)
+//! ∂y/∂x = W₂ diag(h ⊙ (1 − h)) W₁
+//! ```
+//!
+//! All weights live in one flat vector so that optimizers see a single parameter vector. The
+//! layout is `[W₁ (q×p, row-major), b₁ (q), W₂ (r×q, row-major), b₂ (r)]`; gradients use the same
+//! layout. The single-example forward pass (Appendix C) writes into caller-provided scratch and
+//! never allocates; the batch pass works on fixed chunks of [`BATCH_CHUNK`] rows with ordered
+//! reduction, so its result is bit-identical for any number of rayon threads.
+
+use ndarray::linalg::general_mat_mul;
+use ndarray::{s, Array2, ArrayView1, ArrayView2, ArrayViewMut2, Axis};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+/// Rows per chunk in the batch passes; fixed so results do not depend on the thread count.
+pub const BATCH_CHUNK: usize = 128;
+
+fn chunk_count(n: usize) -> usize {
+    n.div_ceil(BATCH_CHUNK)
+}
+
+fn chunk(
+    c: usize,
+    n: usize,
+) -> ndarray::SliceInfo<[ndarray::SliceInfoElem; 2], ndarray::Ix2, ndarray::Ix2> {
+    s![c * BATCH_CHUNK..n.min((c + 1) * BATCH_CHUNK), ..]
+}
+
+/// The logistic sigmoid σ(z) = 1 / (1 + e^{−z}).
+#[inline]
+pub fn sigmoid(z: f64) -> f64 {
+    1.0 / (1.0 + (-z).exp())
+}
+
+/// How the weights are drawn at construction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WeightInit {
+    /// Uniform in `[low, high]`, biases included. The paper (§3.5) uses `[0, 1]`.
+    Uniform {
+        /// Lower bound.
+        low: f64,
+        /// Upper bound.
+        high: f64,
+    },
+    /// Uniform in `±1/√(fan_in + 1)` per layer, biases included (a common default that keeps the
+    /// sigmoids in their linear region for unit-variance inputs).
+    FanIn,
+}
+
+/// A fully connected p → q (sigmoid) → r (linear) network with flattened weights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mlp {
+    n_in: usize,
+    n_hidden: usize,
+    n_out: usize,
+    weights: Vec<f64>,
+}
+
+/// Scratch for one example: hidden activations and the hidden cotangent.
+#[derive(Debug, Clone)]
+pub struct MlpScratch {
+    /// Hidden activations h of the last forward pass.
+    pub hidden: Vec<f64>,
+    /// Hidden-layer cotangent h̄ of the last backward pass.
+    pub hidden_bar: Vec<f64>,
+}
+
+impl Mlp {
+    /// Number of weights of a p → q → r network: q(p + 1) + r(q + 1).
+    pub fn weight_count(n_in: usize, n_hidden: usize, n_out: usize) -> usize {
+        n_hidden * (n_in + 1) + n_out * (n_hidden + 1)
+    }
+
+    /// A network with weights drawn from `rng` according to `init` (deterministic per seed).
+    pub fn new(
+        n_in: usize,
+        n_hidden: usize,
+        n_out: usize,
+        init: WeightInit,
+        rng: &mut ChaCha8Rng,
+    ) -> Self {
+        let mut weights = vec![0.0; Self::weight_count(n_in, n_hidden, n_out)];
+        let first = n_hidden * (n_in + 1);
+        for (k, w) in weights.iter_mut().enumerate() {
+            let (low, high) = match init {
+                WeightInit::Uniform { low, high } => (low, high),
+                WeightInit::FanIn => {
+                    let fan = if k < first { n_in } else { n_hidden };
+                    let a = 1.0 / ((fan + 1) as f64).sqrt();
+                    (-a, a)
+                }
+            };
+            *w = low + (high - low) * rng.random::<f64>();
+        }
+        Self {
+            n_in,
+            n_hidden,
+            n_out,
+            weights,
+        }
+    }
+
+    /// A network with the given flattened weights. Panics when the length is wrong.
+    pub fn from_weights(n_in: usize, n_hidden: usize, n_out: usize, weights: Vec<f64>) -> Self {
+        assert_eq!(
+            weights.len(),
+            Self::weight_count(n_in, n_hidden, n_out),
+            "weight vector length does not match a {n_in}-{n_hidden}-{n_out} network"
+        );
+        Self {
+            n_in,
+            n_hidden,
+            n_out,
+            weights,
+        }
+    }
+
+    /// Number of inputs p.
+    pub fn n_in(&self) -> usize {
+        self.n_in
+    }
+    /// Number of hidden units q.
+    pub fn n_hidden(&self) -> usize {
+        self.n_hidden
+    }
+    /// Number of outputs r.
+    pub fn n_out(&self) -> usize {
+        self.n_out
+    }
+    /// The flattened weights, layout `[W₁ (q×p), b₁ (q), W₂ (r×q), b₂ (r)]`.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// The flattened weights, mutably (the length is fixed by the network shape).
+    pub fn weights_mut(&mut self) -> &mut [f64] {
+        &mut self.weights
+    }
+
+    /// Number of weights.
+    pub fn n_weights(&self) -> usize {
+        self.weights.len()
+    }
+
+    /// Scratch sized for this network.
+    pub fn scratch(&self) -> MlpScratch {
+        MlpScratch {
+            hidden: vec![0.0; self.n_hidden],
+            hidden_bar: vec![0.0; self.n_hidden],
+        }
+    }
+
+    /// Splits a flat weight (or gradient) slice into `(W₁, b₁, W₂, b₂)`.
+    fn split<'a>(&self, w: &'a [f64]) -> (&'a [f64], &'a [f64], &'a [f64], &'a [f64]) {
+        let (p, q) = (self.n_in, self.n_hidden);
+        let (w1, rest) = w.split_at(q * p);
+        let (b1, rest) = rest.split_at(q);
+        let (w2, b2) = rest.split_at(self.n_out * q);
+        (w1, b1, w2, b2)
+    }
+
+    fn split_mut<'a>(
+        &self,
+        w: &'a mut [f64],
+    ) -> (&'a mut [f64], &'a mut [f64], &'a mut [f64], &'a mut [f64]) {
+        let (p, q) = (self.n_in, self.n_hidden);
+        let (w1, rest) = w.split_at_mut(q * p);
+        let (b1, rest) = rest.split_at_mut(q);
+        let (w2, b2) = rest.split_at_mut(self.n_out * q);
+        (w1, b1, w2, b2)
+    }
+
+    /// Forward pass for one example (Appendix C): `y = N(x, w)`. Hidden activations are left in
+    /// `scratch.hidden` for a following backward pass. Does not allocate.
+    pub fn forward(&self, x: &[f64], scratch: &mut MlpScratch, y: &mut [f64]) {
+        debug_assert_eq!(x.len(), self.n_in);
+        debug_assert_eq!(y.len(), self.n_out);
+        let (w1, b1, w2, b2) = self.split(&self.weights);
+        let p = self.n_in;
+        for (j, h) in scratch.hidden.iter_mut().enumerate() {
+            let row = &w1[j * p..(j + 1) * p];
+            let z = b1[j] + row.iter().zip(x).map(|(a, b)| a * b).sum::<f64>();
+            *h = sigmoid(z);
+        }
+        let q = self.n_hidden;
+        for (i, yi) in y.iter_mut().enumerate() {
+            let row = &w2[i * q..(i + 1) * q];
+            *yi = b2[i]
+                + row
+                    .iter()
+                    .zip(&scratch.hidden)
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>();
+        }
+    }
+
+    /// Backward pass for one example after [`Mlp::forward`] on the same `x` and `scratch`: adds
+    /// ∂E/∂w to `grad_w` (when given) and writes the input cotangent x̄ = (∂y/∂x)ᵀ ȳ into
+    /// `x_bar` (when given). Does not allocate.
+    pub fn backward(
+        &self,
+        x: &[f64],
+        scratch: &mut MlpScratch,
+        y_bar: &[f64],
+        grad_w: Option<&mut [f64]>,
+        x_bar: Option<&mut [f64]>,
+    ) {
+        let (p, q) = (self.n_in, self.n_hidden);
+        let (w1, _, w2, _) = self.split(&self.weights);
+        for j in 0..q {
+            let mut s = 0.0;
+            for (i, yb) in y_bar.iter().enumerate() {
+                s += w2[i * q + j] * yb;
+            }
+            let h = scratch.hidden[j];
+            scratch.hidden_bar[j] = s * h * (1.0 - h);
+        }
+        if let Some(g) = grad_w {
+            let (g1, gb1, g2, gb2) = self.split_mut(g);
+            for (i, yb) in y_bar.iter().enumerate() {
+                gb2[i] += yb;
+                for (g, h) in g2[i * q..(i + 1) * q].iter_mut().zip(&scratch.hidden) {
+                    *g += yb * h;
+                }
+            }
+            for j in 0..q {
+                let hb = scratch.hidden_bar[j];
+                gb1[j] += hb;
+                for (g, xi) in g1[j * p..(j + 1) * p].iter_mut().zip(x) {
+                    *g += hb * xi;
+                }
+            }
+        }
+        if let Some(xb) = x_bar {
+            xb.fill(0.0);
+            for j in 0..q {
+                let hb = scratch.hidden_bar[j];
+                for (o, w) in xb.iter_mut().zip(&w1[j * p..(j + 1) * p]) {
+                    *o += w * hb;
+                }
+            }
+        }
+    }
+
+    /// Vector–Jacobian product to the inputs, x̄ = (∂N/∂x)ᵀ ȳ at `x` (runs its own forward pass).
+    pub fn vjp_input(&self, x: &[f64], y_bar: &[f64], scratch: &mut MlpScratch, x_bar: &mut [f64]) {
+        self.hidden_only(x, scratch);
+        self.backward(x, scratch, y_bar, None, Some(x_bar));
+    }
+
+    fn hidden_only(&self, x: &[f64], scratch: &mut MlpScratch) {
+        let (w1, b1, _, _) = self.split(&self.weights);
+        let p = self.n_in;
+        for (j, h) in scratch.hidden.iter_mut().enumerate() {
+            let row = &w1[j * p..(j + 1) * p];
+            *h = sigmoid(b1[j] + row.iter().zip(x).map(|(a, b)| a * b).sum::<f64>());
+        }
+    }
+
+    /// Full input Jacobian ∂N/∂x at `x`, row-major r × p into `jac`.
+    pub fn input_jacobian(&self, x: &[f64], scratch: &mut MlpScratch, jac: &mut [f64]) {
+        let (p, q) = (self.n_in, self.n_hidden);
+        let (w1, _, w2, _) = self.split(&self.weights);
+        self.hidden_only(x, scratch);
+        jac.fill(0.0);
+        for j in 0..q {
+            let h = scratch.hidden[j];
+            let d = h * (1.0 - h);
+            for i in 0..self.n_out {
+                let c = w2[i * q + j] * d;
+                for (o, w) in jac[i * p..(i + 1) * p]
+                    .iter_mut()
+                    .zip(&w1[j * p..(j + 1) * p])
+                {
+                    *o += c * w;
+                }
+            }
+        }
+    }
+
+    /// Batch forward pass: row τ of `outputs` (N × r) is N(row τ of `inputs` (N × p)).
+    pub fn forward_batch(&self, inputs: ArrayView2<'_, f64>, mut outputs: ArrayViewMut2<'_, f64>) {
+        assert_eq!(inputs.ncols(), self.n_in);
+        assert_eq!(outputs.ncols(), self.n_out);
+        assert_eq!(inputs.nrows(), outputs.nrows());
+        let parts: Vec<Array2<f64>> = (0..chunk_count(inputs.nrows()))
+            .into_par_iter()
+            .map(|c| {
+                let x = inputs.slice(chunk(c, inputs.nrows()));
+                let h = self.hidden_batch(x);
+                let mut y = Array2::zeros((x.nrows(), self.n_out));
+                self.output_batch(h.view(), y.view_mut());
+                y
+            })
+            .collect();
+        for (c, y) in parts.into_iter().enumerate() {
+            let n = outputs.nrows();
+            outputs.slice_mut(chunk(c, n)).assign(&y);
+        }
+    }
+
+    fn views(
+        &self,
+    ) -> (
+        ArrayView2<'_, f64>,
+        ArrayView1<'_, f64>,
+        ArrayView2<'_, f64>,
+        ArrayView1<'_, f64>,
+    ) {
+        let (p, q, r) = (self.n_in, self.n_hidden, self.n_out);
+        let (w1, b1, w2, b2) = self.split(&self.weights);
+        (
+            ArrayView2::from_shape((q, p), w1).expect("shape"),
+            ArrayView1::from(b1),
+            ArrayView2::from_shape((r, q), w2).expect("shape"),
+            ArrayView1::from(b2),
+        )
+    }
+
+    fn hidden_batch(&self, x: ArrayView2<'_, f64>) -> Array2<f64> {
+        let (w1, b1, _, _) = self.views();
+        let mut h = Array2::zeros((x.nrows(), self.n_hidden));
+        h.rows_mut().into_iter().for_each(|mut row| row.assign(&b1));
+        general_mat_mul(1.0, &x, &w1.t(), 1.0, &mut h);
+        h.mapv_inplace(sigmoid);
+        h
+    }
+
+    fn output_batch(&self, h: ArrayView2<'_, f64>, mut y: ArrayViewMut2<'_, f64>) {
+        let (_, _, w2, b2) = self.views();
+        y.rows_mut().into_iter().for_each(|mut row| row.assign(&b2));
+        general_mat_mul(1.0, &h, &w2.t(), 1.0, &mut y);
+    }
+
+    /// Sum of squared errors ½ Σ_τ ‖N(x^τ) − y^τ‖² over a batch and its gradient with respect
+    /// to the weights (written to `grad`, overwriting it). Rows are processed in chunks of
+    /// [`BATCH_CHUNK`] in parallel and summed in chunk order, so the result is bit-identical for
+    /// any rayon thread count.
+    pub fn loss_grad(
+        &self,
+        inputs: ArrayView2<'_, f64>,
+        targets: ArrayView2<'_, f64>,
+        grad: &mut [f64],
+    ) -> f64 {
+        assert_eq!(inputs.ncols(), self.n_in);
+        assert_eq!(targets.ncols(), self.n_out);
+        assert_eq!(inputs.nrows(), targets.nrows());
+        assert_eq!(grad.len(), self.n_weights());
+        let n = inputs.nrows();
+        let parts: Vec<(f64, Vec<f64>)> = (0..chunk_count(n))
+            .into_par_iter()
+            .map(|c| self.chunk_loss_grad(inputs.slice(chunk(c, n)), targets.slice(chunk(c, n))))
+            .collect();
+        grad.fill(0.0);
+        let mut loss = 0.0;
+        for (l, g) in parts {
+            loss += l;
+            for (a, b) in grad.iter_mut().zip(&g) {
+                *a += b;
+            }
+        }
+        loss
+    }
+
+    /// Sum of squared errors ½ Σ_τ ‖N(x^τ) − y^τ‖² over a batch (no gradient); deterministic
+    /// like [`Mlp::loss_grad`].
+    pub fn loss(&self, inputs: ArrayView2<'_, f64>, targets: ArrayView2<'_, f64>) -> f64 {
+        assert_eq!(inputs.nrows(), targets.nrows());
+        let n = inputs.nrows();
+        let parts: Vec<f64> = (0..chunk_count(n))
+            .into_par_iter()
+            .map(|c| {
+                let (x, t) = (inputs.slice(chunk(c, n)), targets.slice(chunk(c, n)));
+                let h = self.hidden_batch(x);
+                let mut y = Array2::zeros((x.nrows(), self.n_out));
+                self.output_batch(h.view(), y.view_mut());
+                y -= &t;
+                0.5 * y.iter().map(|e| e * e).sum::<f64>()
+            })
+            .collect();
+        parts.iter().sum()
+    }
+
+    fn chunk_loss_grad(&self, x: ArrayView2<'_, f64>, t: ArrayView2<'_, f64>) -> (f64, Vec<f64>) {
+        let (q, r) = (self.n_hidden, self.n_out);
+        let (_, _, w2, _) = self.views();
+        let h = self.hidden_batch(x);
+        let mut e = Array2::zeros((x.nrows(), r));
+        self.output_batch(h.view(), e.view_mut());
+        e -= &t;
+        let loss = 0.5 * e.iter().map(|v| v * v).sum::<f64>();
+        // Hidden cotangent: (E W₂) ⊙ h ⊙ (1 − h).
+        let mut hb = e.dot(&w2);
+        hb.zip_mut_with(&h, |a, &h| *a *= h * (1.0 - h));
+        let mut grad = vec![0.0; self.n_weights()];
+        {
+            let (g1, gb1, g2, gb2) = self.split_mut(&mut grad);
+            let mut g1 = ArrayViewMut2::from_shape((q, self.n_in), g1).expect("shape");
+            general_mat_mul(1.0, &hb.t(), &x, 0.0, &mut g1);
+            let mut g2 = ArrayViewMut2::from_shape((r, q), g2).expect("shape");
+            general_mat_mul(1.0, &e.t(), &h, 0.0, &mut g2);
+            for (g, s) in gb1.iter_mut().zip(hb.sum_axis(Axis(0))) {
+                *g = s;
+            }
+            for (g, s) in gb2.iter_mut().zip(e.sum_axis(Axis(0))) {
+                *g = s;
+            }
+        }
+        (loss, grad)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn net() -> Mlp {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        Mlp::new(
+            4,
+            6,
+            3,
+            WeightInit::Uniform {
+                low: -1.0,
+                high: 1.0,
+            },
+            &mut rng,
+        )
+    }
+
+    fn random_batch(n: usize, p: usize, r: usize, seed: u64) -> (Array2<f64>, Array2<f64>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let x = Array2::from_shape_fn((n, p), |_| rng.random_range(-2.0..2.0));
+        let t = Array2::from_shape_fn((n, r), |_| rng.random_range(-1.0..1.0));
+        (x, t)
+    }
+
+    #[test]
+    fn init_is_deterministic_per_seed() {
+        let a = net();
+        let b = net();
+        assert_eq!(a, b);
+        let mut rng = ChaCha8Rng::seed_from_u64(8);
+        let c = Mlp::new(4, 6, 3, WeightInit::FanIn, &mut rng);
+        assert_ne!(a.weights(), c.weights());
+        assert_eq!(a.n_weights(), 6 * 5 + 3 * 7);
+    }
+
+    #[test]
+    fn single_and_batch_forward_agree() {
+        let m = net();
+        let (x, _) = random_batch(300, 4, 3, 1);
+        let mut out = Array2::zeros((300, 3));
+        m.forward_batch(x.view(), out.view_mut());
+        let mut s = m.scratch();
+        let mut y = [0.0; 3];
+        for (row, o) in x.rows().into_iter().zip(out.rows()) {
+            m.forward(row.as_slice().unwrap(), &mut s, &mut y);
+            for k in 0..3 {
+                assert!((y[k] - o[k]).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn weight_gradient_matches_finite_differences() {
+        let m = net();
+        let (x, t) = random_batch(200, 4, 3, 2);
+        let mut g = vec![0.0; m.n_weights()];
+        m.loss_grad(x.view(), t.view(), &mut g);
+        // Per-example backward agrees with the batch gradient.
+        let mut g_single = vec![0.0; m.n_weights()];
+        let mut s = m.scratch();
+        let mut y = [0.0; 3];
+        for (xr, tr) in x.rows().into_iter().zip(t.rows()) {
+            let xs = xr.as_slice().unwrap();
+            m.forward(xs, &mut s, &mut y);
+            let yb: Vec<f64> = y.iter().zip(tr).map(|(a, b)| a - b).collect();
+            m.backward(xs, &mut s, &yb, Some(&mut g_single), None);
+        }
+        let h = 1e-6;
+        for k in 0..m.n_weights() {
+            let mut mp = m.clone();
+            mp.weights_mut()[k] += h;
+            let mut mm = m.clone();
+            mm.weights_mut()[k] -= h;
+            let fd = (mp.loss(x.view(), t.view()) - mm.loss(x.view(), t.view())) / (2.0 * h);
+            assert!(
+                (fd - g[k]).abs() < 1e-6 * (1.0 + fd.abs()),
+                "w{k}: {fd} vs {}",
+                g[k]
+            );
+            assert!((g_single[k] - g[k]).abs() < 1e-9 * (1.0 + g[k].abs()));
+        }
+    }
+
+    #[test]
+    fn input_vjp_and_jacobian_match_finite_differences() {
+        let m = net();
+        let x = [0.3, -1.2, 0.7, 2.0];
+        let yb = [0.5, -1.0, 2.0];
+        let mut s = m.scratch();
+        let mut xb = [0.0; 4];
+        m.vjp_input(&x, &yb, &mut s, &mut xb);
+        let mut jac = [0.0; 12];
+        m.input_jacobian(&x, &mut s, &mut jac);
+        let h = 1e-6;
+        let mut yp = [0.0; 3];
+        let mut ym = [0.0; 3];
+        for k in 0..4 {
+            let mut xp = x;
+            xp[k] += h;
+            let mut xm = x;
+            xm[k] -= h;
+            m.forward(&xp, &mut s, &mut yp);
+            m.forward(&xm, &mut s, &mut ym);
+            let mut vjp_fd = 0.0;
+            for i in 0..3 {
+                let d = (yp[i] - ym[i]) / (2.0 * h);
+                assert!((d - jac[i * 4 + k]).abs() < 1e-8, "J[{i},{k}]");
+                vjp_fd += yb[i] * d;
+            }
+            assert!((vjp_fd - xb[k]).abs() < 1e-8);
+        }
+    }
+
+    #[test]
+    fn batch_is_bit_identical_across_thread_counts() {
+        let m = net();
+        let (x, t) = random_batch(1000, 4, 3, 3);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut g = vec![0.0; m.n_weights()];
+                let l = m.loss_grad(x.view(), t.view(), &mut g);
+                let mut out = Array2::zeros((1000, 3));
+                m.forward_batch(x.view(), out.view_mut());
+                (l, g, out, m.loss(x.view(), t.view()))
+            })
+        };
+        let a = run(1);
+        let b = run(2);
+        assert_eq!(a.0.to_bits(), b.0.to_bits());
+        assert!(a
+            .1
+            .iter()
+            .zip(&b.1)
+            .all(|(p, q)| p.to_bits() == q.to_bits()));
+        assert_eq!(a.2, b.2);
+        assert_eq!(a.3.to_bits(), b.3.to_bits());
+    }
+}

@@ -1,0 +1,1052 @@
+//! # Neural-network emulators (NeuroAnimator)
+//!
+//! An emulator replaces n steps δt of a physical simulator by one "super timestep"
+//! Δt = n·δt of a trained network (Grzeszczuk, Terzopoulos, Hinton 1998, §3, eq. 9):
+//!
+//! ```text
+//! s_{t+Δt} = N_Φ[s_t, u_t]
+//! ```
+//!
+//! [`Emulator`] composes the fixed transforms of Fig. 6(c) ([`Transforms`]: local frame,
+//! normalization, state change; see [`transform`]) around a three-layer perceptron
+//! ([`mlp::Mlp`]). It implements [`crate::physics::Dynamics`], so controllers run unchanged on an
+//! emulator or on the simulator, and exposes the vector–Jacobian product of one step with respect
+//! to state and control ([`Emulator::vjp`]) that backpropagation through time needs (§4.3).
+//!
+//! Training data are simulated transitions ([`Transitions`]) mapped through the inverse output
+//! transforms into network space (Fig. 9, [`Transforms::encode`]); [`train`] fits the weights
+//! by conjugate gradient / L-BFGS (small nets) or momentum mini-batches (large nets), §3.5.
+//!
+//! External forces f_t (§3.1) are treated as extra control inputs: put them after the controls.
+
+pub mod mlp;
+pub mod train;
+pub mod transform;
+
+use crate::physics::Dynamics;
+use mlp::{Mlp, MlpScratch};
+use ndarray::{Array2, ArrayView2};
+use train::Dataset;
+use transform::{FrameMap, LocalFrame, Normalizer};
+
+/// Errors of emulator construction and training.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EmulatorError {
+    /// A vector or matrix has the wrong size.
+    #[error("{what}: expected size {expected}, got {got}")]
+    Dimension {
+        /// What was measured.
+        what: &'static str,
+        /// Expected size.
+        expected: usize,
+        /// Actual size.
+        got: usize,
+    },
+    /// A state index of a local frame is out of range.
+    #[error("state index {index} out of range for state dimension {dim}")]
+    Index {
+        /// The bad index.
+        index: usize,
+        /// The state dimension.
+        dim: usize,
+    },
+    /// A state index appears twice in a local frame.
+    #[error("state index {0} is listed twice in the local frame")]
+    DuplicateIndex(usize),
+    /// Too few examples to fit statistics or to train.
+    #[error("need at least 2 examples, got {0}")]
+    TooFewExamples(usize),
+    /// The super timestep is not positive and finite.
+    #[error("super timestep must be positive and finite, got {0}")]
+    TimeStep(f64),
+    /// A training setting is out of range.
+    #[error("invalid training setting `{name}` = {value}")]
+    Setting {
+        /// Setting name.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The optimizer reported an error.
+    #[error("optimizer failed: {0}")]
+    Optimizer(String),
+}
+
+/// Simulated state transitions (s, u) → s' over one super timestep, one per row (§3.4).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transitions {
+    /// States s_t, N × state_dim.
+    pub states: Array2<f64>,
+    /// Controls (and external forces) u_t, N × control_dim.
+    pub controls: Array2<f64>,
+    /// Next states s_{t+Δt}, N × state_dim.
+    pub next_states: Array2<f64>,
+}
+
+impl Transitions {
+    /// Checks that the three tables agree in rows and state columns.
+    pub fn new(
+        states: Array2<f64>,
+        controls: Array2<f64>,
+        next_states: Array2<f64>,
+    ) -> Result<Self, EmulatorError> {
+        let n = states.nrows();
+        for (what, got) in [
+            ("control rows", controls.nrows()),
+            ("next-state rows", next_states.nrows()),
+        ] {
+            if got != n {
+                return Err(EmulatorError::Dimension {
+                    what,
+                    expected: n,
+                    got,
+                });
+            }
+        }
+        if next_states.ncols() != states.ncols() {
+            return Err(EmulatorError::Dimension {
+                what: "next-state columns",
+                expected: states.ncols(),
+                got: next_states.ncols(),
+            });
+        }
+        Ok(Self {
+            states,
+            controls,
+            next_states,
+        })
+    }
+
+    /// Number of transitions.
+    pub fn len(&self) -> usize {
+        self.states.nrows()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Which transforms of Fig. 6 to use; each is optional.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TransformConfig {
+    /// Predict the state change Δs instead of the next state (T_y^Δ).
+    pub delta: bool,
+    /// Map inputs to the model's local frame and outputs back (T_x', T_y').
+    pub frame: Option<LocalFrame>,
+    /// Normalize inputs and outputs to zero mean, unit variance (T_x^σ, T_y^σ).
+    pub normalize: bool,
+    /// Group id per network input ([local state, control]); `None`: one group per variable.
+    pub input_groups: Option<Vec<usize>>,
+    /// Group id per network output (state); `None`: one group per variable.
+    pub output_groups: Option<Vec<usize>>,
+}
+
+impl TransformConfig {
+    /// No transforms: the bare network maps [s, u] to s'.
+    pub fn none() -> Self {
+        Self {
+            delta: false,
+            frame: None,
+            normalize: false,
+            input_groups: None,
+            output_groups: None,
+        }
+    }
+
+    /// State change and per-variable normalization, with an optional local frame.
+    pub fn standard(frame: Option<LocalFrame>) -> Self {
+        Self {
+            delta: true,
+            frame,
+            normalize: true,
+            input_groups: None,
+            output_groups: None,
+        }
+    }
+
+    /// Appendix A's grouping of the inputs: all state variables share one group, all controls
+    /// another.
+    pub fn state_control_groups(state_dim: usize, control_dim: usize) -> Vec<usize> {
+        (0..state_dim + control_dim)
+            .map(|k| usize::from(k >= state_dim))
+            .collect()
+    }
+}
+
+/// The fixed operators around the network (Fig. 6c), fitted to data.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transforms {
+    state_dim: usize,
+    control_dim: usize,
+    /// Whether the network predicts the state change.
+    pub delta: bool,
+    /// The local frame, if any.
+    pub frame: Option<LocalFrame>,
+    /// Input normalization (identity when normalization is off).
+    pub input_norm: Normalizer,
+    /// Output normalization (identity when normalization is off).
+    pub output_norm: Normalizer,
+}
+
+impl Transforms {
+    /// Transforms without normalization (identity statistics).
+    pub fn unfitted(
+        config: &TransformConfig,
+        state_dim: usize,
+        control_dim: usize,
+    ) -> Result<Self, EmulatorError> {
+        if let Some(f) = &config.frame {
+            f.validate(state_dim)?;
+        }
+        Ok(Self {
+            state_dim,
+            control_dim,
+            delta: config.delta,
+            frame: config.frame.clone(),
+            input_norm: Normalizer::identity(state_dim + control_dim),
+            output_norm: Normalizer::identity(state_dim),
+        })
+    }
+
+    /// Builds the transforms of `config` and fits normalization statistics to `data` (after the
+    /// frame and delta transforms, as the network will see them).
+    pub fn fit(config: &TransformConfig, data: &Transitions) -> Result<Self, EmulatorError> {
+        let (n, m) = (data.states.ncols(), data.controls.ncols());
+        let mut t = Self::unfitted(config, n, m)?;
+        if config.normalize {
+            let raw = t.encode(data);
+            let in_groups = config
+                .input_groups
+                .clone()
+                .unwrap_or_else(|| (0..n + m).collect());
+            let out_groups = config
+                .output_groups
+                .clone()
+                .unwrap_or_else(|| (0..n).collect());
+            t.input_norm = Normalizer::fit(raw.inputs.view(), &in_groups)?;
+            t.output_norm = Normalizer::fit(raw.targets.view(), &out_groups)?;
+        }
+        Ok(t)
+    }
+
+    /// Number of state variables.
+    pub fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+
+    /// Number of control variables.
+    pub fn control_dim(&self) -> usize {
+        self.control_dim
+    }
+
+    /// Network input z = T_x^σ(T_x'(s), u). Does not allocate.
+    pub fn encode_input(&self, s: &[f64], u: &[f64], z: &mut [f64]) {
+        let n = self.state_dim;
+        match &self.frame {
+            Some(f) => f.apply_at(FrameMap::ToLocal, s, s, &mut z[..n]),
+            None => z[..n].copy_from_slice(s),
+        }
+        z[n..].copy_from_slice(u);
+        for ((z, m), sd) in z
+            .iter_mut()
+            .zip(&self.input_norm.mean)
+            .zip(&self.input_norm.std)
+        {
+            *z = (*z - m) / sd;
+        }
+    }
+
+    /// Inverse of [`Transforms::encode_input`] given a state `pose_source` with the pose the
+    /// state was encoded at (the local frame forgets the pose itself).
+    pub fn decode_input(&self, pose_source: &[f64], z: &[f64], s: &mut [f64], u: &mut [f64]) {
+        let n = self.state_dim;
+        let mut a = vec![0.0; z.len()];
+        self.input_norm.denormalize(z, &mut a);
+        match &self.frame {
+            Some(f) => f.apply_at(FrameMap::ToWorld, pose_source, &a[..n], s),
+            None => s.copy_from_slice(&a[..n]),
+        }
+        u.copy_from_slice(&a[n..]);
+    }
+
+    /// Network target for the transition s → s' (the inverse output transforms, Fig. 9).
+    pub fn encode_target(&self, s: &[f64], s_next: &[f64], y: &mut [f64]) {
+        let mut raw = vec![0.0; self.state_dim];
+        if self.delta {
+            transform::delta_inverse(s, s_next, &mut raw);
+        } else {
+            raw.copy_from_slice(s_next);
+        }
+        let mut local = raw.clone();
+        if let Some(f) = &self.frame {
+            let map = if self.delta {
+                FrameMap::DeltaToLocal
+            } else {
+                FrameMap::ToLocal
+            };
+            f.apply_at(map, s, &raw, &mut local);
+        }
+        self.output_norm.normalize(&local, y);
+    }
+
+    /// Next state s' from the network output y at state s (the output transforms). `tmp` is
+    /// scratch of length state_dim. Does not allocate.
+    pub fn decode_output(&self, s: &[f64], y: &[f64], tmp: &mut [f64], s_next: &mut [f64]) {
+        self.output_norm.denormalize(y, s_next);
+        if let Some(f) = &self.frame {
+            let map = if self.delta {
+                FrameMap::DeltaToWorld
+            } else {
+                FrameMap::ToWorld
+            };
+            tmp.copy_from_slice(s_next);
+            f.apply_at(map, s, tmp, s_next);
+        }
+        if self.delta {
+            for (o, a) in s_next.iter_mut().zip(s) {
+                *o += a;
+            }
+        }
+    }
+
+    /// VJP of [`Transforms::encode_input`]: adds (∂z/∂s)ᵀ z̄ to `s_bar` and writes (∂z/∂u)ᵀ z̄
+    /// to `u_bar`. `tmp` is scratch of length state_dim. Does not allocate.
+    pub fn encode_input_vjp(
+        &self,
+        s: &[f64],
+        z_bar: &[f64],
+        tmp: &mut [f64],
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        let n = self.state_dim;
+        for (k, o) in tmp.iter_mut().enumerate() {
+            *o = z_bar[k] / self.input_norm.std[k];
+        }
+        for (k, o) in u_bar.iter_mut().enumerate() {
+            *o = z_bar[n + k] / self.input_norm.std[n + k];
+        }
+        match &self.frame {
+            Some(f) => {
+                f.apply_vjp_self(FrameMap::ToLocal, s, tmp, s_bar);
+            }
+            None => {
+                for (o, a) in s_bar.iter_mut().zip(tmp.iter()) {
+                    *o += a;
+                }
+            }
+        }
+    }
+
+    /// VJP of [`Transforms::decode_output`]: writes (∂s'/∂y)ᵀ s̄' to `y_bar` and adds
+    /// (∂s'/∂s)ᵀ s̄' to `s_bar`. `tmp1`, `tmp2` are scratch of length state_dim.
+    #[allow(clippy::too_many_arguments)]
+    pub fn decode_output_vjp(
+        &self,
+        s: &[f64],
+        y: &[f64],
+        s_next_bar: &[f64],
+        tmp1: &mut [f64],
+        tmp2: &mut [f64],
+        y_bar: &mut [f64],
+        s_bar: &mut [f64],
+    ) {
+        if self.delta {
+            for (o, a) in s_bar.iter_mut().zip(s_next_bar) {
+                *o += a;
+            }
+        }
+        match &self.frame {
+            Some(f) => {
+                let map = if self.delta {
+                    FrameMap::DeltaToWorld
+                } else {
+                    FrameMap::ToWorld
+                };
+                self.output_norm.denormalize(y, tmp1);
+                tmp2.fill(0.0);
+                f.apply_vjp_at(map, s, tmp1, s_next_bar, tmp2, s_bar);
+                self.output_norm.denormalize_tangent(tmp2, y_bar);
+            }
+            None => self.output_norm.denormalize_tangent(s_next_bar, y_bar),
+        }
+    }
+
+    /// Maps transitions to (network input, network target) pairs (Fig. 9).
+    pub fn encode(&self, data: &Transitions) -> Dataset {
+        let (n, m) = (self.state_dim, self.control_dim);
+        let rows = data.len();
+        let mut inputs = Array2::zeros((rows, n + m));
+        let mut targets = Array2::zeros((rows, n));
+        for r in 0..rows {
+            let s = data.states.row(r).to_vec();
+            let u = data.controls.row(r).to_vec();
+            let s1 = data.next_states.row(r).to_vec();
+            let mut z = vec![0.0; n + m];
+            let mut y = vec![0.0; n];
+            self.encode_input(&s, &u, &mut z);
+            self.encode_target(&s, &s1, &mut y);
+            inputs.row_mut(r).assign(&ndarray::ArrayView1::from(&z));
+            targets.row_mut(r).assign(&ndarray::ArrayView1::from(&y));
+        }
+        Dataset::new(inputs, targets).expect("rows agree by construction")
+    }
+}
+
+/// Scratch for one emulator step and its VJP, so the hot loop does not allocate.
+#[derive(Debug, Clone)]
+pub struct EmulatorScratch {
+    z: Vec<f64>,
+    y: Vec<f64>,
+    z_bar: Vec<f64>,
+    y_bar: Vec<f64>,
+    t1: Vec<f64>,
+    t2: Vec<f64>,
+    s_next: Vec<f64>,
+    mlp: MlpScratch,
+}
+
+fn predict_with(
+    t: &Transforms,
+    mlp: &Mlp,
+    s: &[f64],
+    u: &[f64],
+    scratch: &mut EmulatorScratch,
+    s_next: &mut [f64],
+) {
+    t.encode_input(s, u, &mut scratch.z);
+    mlp.forward(&scratch.z, &mut scratch.mlp, &mut scratch.y);
+    t.decode_output(s, &scratch.y, &mut scratch.t1, s_next);
+}
+
+/// A NeuroAnimator: transforms + network, one call = one super timestep Δt.
+#[derive(Debug, Clone)]
+pub struct Emulator {
+    transforms: Transforms,
+    mlp: Mlp,
+    dt: f64,
+    scratch: EmulatorScratch,
+}
+
+impl Emulator {
+    /// Composes `transforms` and `mlp` into an emulator with super timestep `dt` seconds.
+    pub fn new(transforms: Transforms, mlp: Mlp, dt: f64) -> Result<Self, EmulatorError> {
+        let (n, m) = (transforms.state_dim, transforms.control_dim);
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(EmulatorError::TimeStep(dt));
+        }
+        if mlp.n_in() != n + m {
+            return Err(EmulatorError::Dimension {
+                what: "network inputs",
+                expected: n + m,
+                got: mlp.n_in(),
+            });
+        }
+        if mlp.n_out() != n {
+            return Err(EmulatorError::Dimension {
+                what: "network outputs",
+                expected: n,
+                got: mlp.n_out(),
+            });
+        }
+        let scratch = Self::make_scratch(&mlp, n, m);
+        Ok(Self {
+            transforms,
+            mlp,
+            dt,
+            scratch,
+        })
+    }
+
+    fn make_scratch(mlp: &Mlp, n: usize, m: usize) -> EmulatorScratch {
+        EmulatorScratch {
+            z: vec![0.0; n + m],
+            y: vec![0.0; n],
+            z_bar: vec![0.0; n + m],
+            y_bar: vec![0.0; n],
+            t1: vec![0.0; n],
+            t2: vec![0.0; n],
+            s_next: vec![0.0; n],
+            mlp: mlp.scratch(),
+        }
+    }
+
+    /// Scratch for [`Emulator::predict`] and [`Emulator::vjp`] (one per thread).
+    pub fn scratch(&self) -> EmulatorScratch {
+        Self::make_scratch(
+            &self.mlp,
+            self.transforms.state_dim,
+            self.transforms.control_dim,
+        )
+    }
+
+    /// The super timestep Δt in seconds.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// The transforms.
+    pub fn transforms(&self) -> &Transforms {
+        &self.transforms
+    }
+
+    /// The network.
+    pub fn mlp(&self) -> &Mlp {
+        &self.mlp
+    }
+
+    /// The network, mutably (e.g. to load trained weights; the shape must not change).
+    pub fn mlp_mut(&mut self) -> &mut Mlp {
+        &mut self.mlp
+    }
+
+    /// One super timestep: writes s_{t+Δt} for state `s` and control `u` into `s_next`.
+    pub fn predict(&self, s: &[f64], u: &[f64], scratch: &mut EmulatorScratch, s_next: &mut [f64]) {
+        predict_with(&self.transforms, &self.mlp, s, u, scratch, s_next);
+    }
+
+    /// Vector–Jacobian product of one step: given s̄' = ∂J/∂s_{t+Δt}, writes
+    /// `s_bar` = (∂s'/∂s)ᵀ s̄' and `u_bar` = (∂s'/∂u)ᵀ s̄' (both overwritten). Recomputes the
+    /// forward pass at (s, u). Does not allocate.
+    pub fn vjp(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        s_next_bar: &[f64],
+        scratch: &mut EmulatorScratch,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        let t = &self.transforms;
+        t.encode_input(s, u, &mut scratch.z);
+        self.mlp
+            .forward(&scratch.z, &mut scratch.mlp, &mut scratch.y);
+        s_bar.fill(0.0);
+        t.decode_output_vjp(
+            s,
+            &scratch.y,
+            s_next_bar,
+            &mut scratch.t1,
+            &mut scratch.t2,
+            &mut scratch.y_bar,
+            s_bar,
+        );
+        self.mlp.backward(
+            &scratch.z,
+            &mut scratch.mlp,
+            &scratch.y_bar,
+            None,
+            Some(&mut scratch.z_bar),
+        );
+        t.encode_input_vjp(s, &scratch.z_bar, &mut scratch.t1, s_bar, u_bar);
+    }
+
+    /// Jacobians A = ∂s'/∂s (n × n) and B = ∂s'/∂u (n × m) at (s, u), one VJP per row.
+    pub fn jacobians(&self, s: &[f64], u: &[f64]) -> (Array2<f64>, Array2<f64>) {
+        let (n, m) = (self.transforms.state_dim, self.transforms.control_dim);
+        let mut a = Array2::zeros((n, n));
+        let mut b = Array2::zeros((n, m));
+        let mut scratch = self.scratch();
+        let mut e = vec![0.0; n];
+        let mut sb = vec![0.0; n];
+        let mut ub = vec![0.0; m];
+        for i in 0..n {
+            e.fill(0.0);
+            e[i] = 1.0;
+            self.vjp(s, u, &e, &mut scratch, &mut sb, &mut ub);
+            a.row_mut(i).assign(&ndarray::ArrayView1::from(&sb));
+            b.row_mut(i).assign(&ndarray::ArrayView1::from(&ub));
+        }
+        (a, b)
+    }
+
+    /// Mean squared error per state variable of one-step predictions on `data`, in world units.
+    pub fn one_step_error(&self, data: &Transitions) -> f64 {
+        let n = self.transforms.state_dim;
+        let mut scratch = self.scratch();
+        let mut s1 = vec![0.0; n];
+        let mut total = 0.0;
+        for r in 0..data.len() {
+            let s = data.states.row(r).to_vec();
+            let u = data.controls.row(r).to_vec();
+            self.predict(&s, &u, &mut scratch, &mut s1);
+            total += s1
+                .iter()
+                .zip(data.next_states.row(r))
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>();
+        }
+        total / (data.len() * n).max(1) as f64
+    }
+
+    /// Batch of network inputs for `states`/`controls` rows (for inspection and tests).
+    pub fn encode_inputs(
+        &self,
+        states: ArrayView2<'_, f64>,
+        controls: ArrayView2<'_, f64>,
+    ) -> Array2<f64> {
+        let (n, m) = (self.transforms.state_dim, self.transforms.control_dim);
+        let mut out = Array2::zeros((states.nrows(), n + m));
+        let mut z = vec![0.0; n + m];
+        for r in 0..states.nrows() {
+            let s = states.row(r).to_vec();
+            let u = controls.row(r).to_vec();
+            self.transforms.encode_input(&s, &u, &mut z);
+            out.row_mut(r).assign(&ndarray::ArrayView1::from(&z));
+        }
+        out
+    }
+}
+
+impl Dynamics for Emulator {
+    fn state_dim(&self) -> usize {
+        self.transforms.state_dim
+    }
+
+    fn control_dim(&self) -> usize {
+        self.transforms.control_dim
+    }
+
+    /// One super timestep.
+    ///
+    /// # Panics
+    ///
+    /// When `dt` differs from the emulator's Δt by more than 1e-9 relative: an emulator can
+    /// only take the step it was trained for.
+    fn step(&mut self, x: &mut [f64], u: &[f64], dt: f64) {
+        assert!(
+            (dt - self.dt).abs() <= 1e-9 * self.dt.abs().max(1.0),
+            "emulator trained for Δt = {} s was stepped with dt = {dt} s",
+            self.dt
+        );
+        let Self {
+            transforms,
+            mlp,
+            scratch,
+            ..
+        } = self;
+        let mut s_next = std::mem::take(&mut scratch.s_next);
+        predict_with(transforms, mlp, x, u, scratch, &mut s_next);
+        x.copy_from_slice(&s_next);
+        scratch.s_next = s_next;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::mlp::WeightInit;
+    use super::train::{
+        mse, train_full_batch, train_momentum, FullBatchConfig, FullBatchMethod, MomentumConfig,
+        StopReason, TrainingProblem,
+    };
+    use super::*;
+    use argmin::core::{CostFunction, Gradient};
+    use ndarray::Array1;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use transform::PlanarFrame;
+
+    const N: usize = 6;
+    const M: usize = 2;
+
+    /// A made-up planar rigid body: x, y, θ, vx, vy, ω; controls: thrust, torque.
+    fn fake_body(s: &[f64], u: &[f64]) -> Vec<f64> {
+        let dt = 0.1;
+        let (sn, c) = s[2].sin_cos();
+        vec![
+            s[0] + dt * s[3],
+            s[1] + dt * s[4],
+            s[2] + dt * s[5],
+            s[3] + dt * (u[0] * c - 0.3 * s[3]),
+            s[4] + dt * (u[0] * sn - 0.3 * s[4]),
+            s[5] + dt * (u[1] - 0.5 * s[5]),
+        ]
+    }
+
+    fn body_transitions(rows: usize, seed: u64) -> Transitions {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let states = Array2::from_shape_fn((rows, N), |(_, c)| {
+            rng.random_range(-1.0..1.0) * [20.0, 20.0, 3.0, 2.0, 2.0, 1.0][c]
+        });
+        let controls = Array2::from_shape_fn((rows, M), |_| rng.random_range(-1.0..1.0));
+        let mut next = Array2::zeros((rows, N));
+        for r in 0..rows {
+            let s1 = fake_body(
+                states.row(r).as_slice().unwrap(),
+                controls.row(r).as_slice().unwrap(),
+            );
+            next.row_mut(r).assign(&Array1::from(s1));
+        }
+        Transitions::new(states, controls, next).unwrap()
+    }
+
+    fn config(delta: bool) -> TransformConfig {
+        TransformConfig {
+            delta,
+            frame: Some(PlanarFrame::rigid_body(0, 1, 2, 3, 4).into()),
+            normalize: true,
+            input_groups: Some(vec![0, 0, 1, 2, 2, 3, 4, 5]),
+            output_groups: None,
+        }
+    }
+
+    fn random_mlp(n_in: usize, n_out: usize) -> Mlp {
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let init = WeightInit::Uniform {
+            low: -1.0,
+            high: 1.0,
+        };
+        Mlp::new(n_in, 7, n_out, init, &mut rng)
+    }
+
+    fn emulator(delta: bool) -> (Emulator, Transitions) {
+        let data = body_transitions(200, 1);
+        let t = Transforms::fit(&config(delta), &data).unwrap();
+        (Emulator::new(t, random_mlp(N + M, N), 0.1).unwrap(), data)
+    }
+
+    /// A 3D rigid body (position, quaternion, velocity, angular velocity; 2 controls) with
+    /// made-up transitions; the quaternions are deliberately not exactly unit.
+    fn spatial_emulator(delta: bool) -> (Emulator, Transitions) {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let rows = 100;
+        let states = Array2::from_shape_fn((rows, 13), |(_, c)| match c {
+            0..=2 => rng.random_range(-10.0..10.0),
+            3..=6 => rng.random_range(-1.0..1.0),
+            _ => rng.random_range(-2.0..2.0),
+        });
+        let controls = Array2::from_shape_fn((rows, 2), |_| rng.random_range(-1.0..1.0));
+        let next = &states + &Array2::from_shape_fn((rows, 13), |_| rng.random_range(-0.1..0.1));
+        let data = Transitions::new(states, controls, next).unwrap();
+        let config = TransformConfig {
+            delta,
+            frame: Some(transform::SpatialFrame::rigid_body(0, 3, 7, 10).into()),
+            normalize: true,
+            input_groups: None,
+            output_groups: Some(vec![0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 3, 3, 3]),
+        };
+        let t = Transforms::fit(&config, &data).unwrap();
+        (Emulator::new(t, random_mlp(15, 13), 0.1).unwrap(), data)
+    }
+
+    fn all_emulators() -> Vec<(&'static str, Emulator, Transitions)> {
+        let mut out = Vec::new();
+        for delta in [true, false] {
+            let (e, d) = emulator(delta);
+            out.push((if delta { "planar delta" } else { "planar" }, e, d));
+            let (e, d) = spatial_emulator(delta);
+            out.push((if delta { "spatial delta" } else { "spatial" }, e, d));
+        }
+        let data = body_transitions(100, 3);
+        let t = Transforms::fit(&TransformConfig::none(), &data).unwrap();
+        let e = Emulator::new(t, random_mlp(N + M, N), 0.1).unwrap();
+        out.push(("none", e, data));
+        out
+    }
+
+    #[test]
+    fn transforms_round_trip_exactly() {
+        for (name, e, data) in all_emulators() {
+            let (n, m) = (e.state_dim(), e.control_dim());
+            let t = e.transforms();
+            let mut z = vec![0.0; n + m];
+            let mut y = vec![0.0; n];
+            let mut tmp = vec![0.0; n];
+            let (mut s_back, mut u_back, mut s1_back) = (vec![0.0; n], vec![0.0; m], vec![0.0; n]);
+            for r in 0..data.len() {
+                let s = data.states.row(r).to_vec();
+                let u = data.controls.row(r).to_vec();
+                let s1 = data.next_states.row(r).to_vec();
+                t.encode_input(&s, &u, &mut z);
+                t.decode_input(&s, &z, &mut s_back, &mut u_back);
+                t.encode_target(&s, &s1, &mut y);
+                t.decode_output(&s, &y, &mut tmp, &mut s1_back);
+                for k in 0..n {
+                    assert!(
+                        (s_back[k] - s[k]).abs() < 1e-12 * (1.0 + s[k].abs()),
+                        "{name}"
+                    );
+                    assert!(
+                        (s1_back[k] - s1[k]).abs() < 1e-12 * (1.0 + s1[k].abs()),
+                        "{name}"
+                    );
+                }
+                for k in 0..m {
+                    assert!((u_back[k] - u[k]).abs() < 1e-12, "{name}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn step_vjp_and_jacobians_match_finite_differences() {
+        for (name, e, data) in all_emulators() {
+            let (n, m) = (e.state_dim(), e.control_dim());
+            let mut sc = e.scratch();
+            let s = data.states.row(3).to_vec();
+            let u = data.controls.row(3).to_vec();
+            let lam: Vec<f64> = (0..n).map(|i| ((i * 7 % 5) as f64 - 2.0) * 0.6).collect();
+            let (mut sb, mut ub) = (vec![0.0; n], vec![0.0; m]);
+            e.vjp(&s, &u, &lam, &mut sc, &mut sb, &mut ub);
+            let (a, b) = e.jacobians(&s, &u);
+            let f = |s: &[f64], u: &[f64]| {
+                let mut out = vec![0.0; n];
+                e.predict(s, u, &mut e.scratch(), &mut out);
+                out
+            };
+            let h = 1e-6;
+            for k in 0..n + m {
+                let (mut sp, mut sm, mut up, mut um) = (s.clone(), s.clone(), u.clone(), u.clone());
+                if k < n {
+                    sp[k] += h;
+                    sm[k] -= h;
+                } else {
+                    up[k - n] += h;
+                    um[k - n] -= h;
+                }
+                let (fp, fm) = (f(&sp, &up), f(&sm, &um));
+                let col: Vec<f64> = (0..n).map(|i| (fp[i] - fm[i]) / (2.0 * h)).collect();
+                let vjp_fd: f64 = col.iter().zip(&lam).map(|(a, b)| a * b).sum();
+                let got = if k < n { sb[k] } else { ub[k - n] };
+                assert!(
+                    (vjp_fd - got).abs() < 1e-6 * (1.0 + got.abs()),
+                    "{name} k {k}: {vjp_fd} vs {got}"
+                );
+                for i in 0..n {
+                    let j = if k < n { a[[i, k]] } else { b[[i, k - n]] };
+                    assert!(
+                        (col[i] - j).abs() < 1e-6 * (1.0 + j.abs()),
+                        "{name} J[{i},{k}]"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn weight_gradient_through_transformed_data_matches_finite_differences() {
+        let (e, data) = emulator(true);
+        let ds = e.transforms().encode(&data);
+        let problem = TrainingProblem::new(e.mlp(), &ds);
+        let w = Array1::from(e.mlp().weights().to_vec());
+        let g = problem.gradient(&w).unwrap();
+        let h = 1e-6;
+        for k in 0..w.len() {
+            let (mut wp, mut wm) = (w.clone(), w.clone());
+            wp[k] += h;
+            wm[k] -= h;
+            let fd = (problem.cost(&wp).unwrap() - problem.cost(&wm).unwrap()) / (2.0 * h);
+            assert!((fd - g[k]).abs() < 1e-6 * (1.0 + fd.abs()), "w{k}");
+        }
+    }
+
+    #[test]
+    fn dynamics_step_equals_transforms_and_mlp_by_hand() {
+        let (mut e, _) = emulator(true);
+        let s = [3.0, -4.0, 0.8, 1.1, -0.6, 0.4];
+        let u = [0.5, -0.3];
+        let t = e.transforms().clone();
+        let frame = PlanarFrame::rigid_body(0, 1, 2, 3, 4);
+        assert_eq!(t.frame, Some(frame.clone().into()));
+        let pose = frame.pose(&s);
+        let mut a = vec![0.0; N + M];
+        frame.apply(FrameMap::ToLocal, pose, &s, &mut a[..N]);
+        a[N..].copy_from_slice(&u);
+        let mut z = vec![0.0; N + M];
+        t.input_norm.normalize(&a, &mut z);
+        let mut y = vec![0.0; N];
+        e.mlp().forward(&z, &mut e.mlp().scratch(), &mut y);
+        let mut dl = vec![0.0; N];
+        t.output_norm.denormalize(&y, &mut dl);
+        let mut dw = vec![0.0; N];
+        frame.apply(FrameMap::DeltaToWorld, pose, &dl, &mut dw);
+        let mut by_hand = vec![0.0; N];
+        transform::delta_forward(&s, &dw, &mut by_hand);
+        let mut x = s.to_vec();
+        e.step(&mut x, &u, 0.1);
+        assert_eq!(x, by_hand);
+        assert_eq!(e.state_dim(), N);
+        assert_eq!(e.control_dim(), M);
+    }
+
+    #[test]
+    #[should_panic(expected = "trained for")]
+    fn step_rejects_a_different_dt() {
+        let (mut e, _) = emulator(true);
+        let mut x = vec![0.0; N];
+        e.step(&mut x, &[0.0; M], 0.01);
+    }
+
+    #[test]
+    fn construction_checks_shapes() {
+        let data = body_transitions(10, 1);
+        let t = Transforms::fit(&config(true), &data).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let bad = Mlp::new(N, 4, N, WeightInit::FanIn, &mut rng);
+        assert!(matches!(
+            Emulator::new(t.clone(), bad, 0.1),
+            Err(EmulatorError::Dimension { .. })
+        ));
+        let ok = Mlp::new(N + M, 4, N, WeightInit::FanIn, &mut rng);
+        assert_eq!(
+            Emulator::new(t, ok, -1.0).unwrap_err(),
+            EmulatorError::TimeStep(-1.0)
+        );
+    }
+
+    /// x_{k+1} = A x_k + B u_k sampled at random states and controls.
+    fn linear_system(rows: usize, seed: u64) -> Transitions {
+        let a = [[0.9, 0.2], [-0.2, 0.9]];
+        let b = [0.0, 0.5];
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let states = Array2::from_shape_fn((rows, 2), |_| rng.random_range(-2.0..2.0));
+        let controls = Array2::from_shape_fn((rows, 1), |_| rng.random_range(-1.0..1.0));
+        let next = Array2::from_shape_fn((rows, 2), |(r, i)| {
+            a[i][0] * states[[r, 0]] + a[i][1] * states[[r, 1]] + b[i] * controls[[r, 0]]
+        });
+        Transitions::new(states, controls, next).unwrap()
+    }
+
+    fn linear_setup() -> (Emulator, Dataset, Dataset, Transitions) {
+        let data = linear_system(400, 5);
+        let t = Transforms::fit(&TransformConfig::standard(None), &data).unwrap();
+        let ds = t.encode(&data);
+        let (train, held) = ds.split(0.25, 9).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mlp = Mlp::new(3, 8, 2, WeightInit::FanIn, &mut rng);
+        (
+            Emulator::new(t, mlp, 0.1).unwrap(),
+            train,
+            held,
+            linear_system(200, 6),
+        )
+    }
+
+    #[test]
+    fn full_batch_training_learns_a_linear_system() {
+        for method in [
+            FullBatchMethod::ConjugateGradient { restart_iters: 20 },
+            FullBatchMethod::Lbfgs { memory: 10 },
+        ] {
+            let (mut e, train, held, test) = linear_setup();
+            let before = mse(e.mlp(), &held);
+            let config = FullBatchConfig {
+                method,
+                max_iters: 300,
+                patience: 20,
+                min_improvement: 1e-3,
+            };
+            let report = train_full_batch(e.mlp_mut(), &train, &held, &config).unwrap();
+            let after = mse(e.mlp(), &held);
+            assert_eq!(after, report.best_held_out_error, "{method:?}");
+            assert!(
+                after < 1e-3 && after < 1e-2 * before,
+                "{method:?}: {before} -> {after} ({:?})",
+                report.stop
+            );
+            assert!(report.trace.len() > 2);
+            assert_eq!(report.trace[0].iteration, 0);
+            assert!(
+                !matches!(report.stop, StopReason::OptimizerFailed(_)),
+                "{:?}",
+                report.stop
+            );
+            // Held-out physical error is small compared with the state spread (~1.3).
+            assert!(
+                e.one_step_error(&test) < 1e-2,
+                "{}",
+                e.one_step_error(&test)
+            );
+        }
+    }
+
+    #[test]
+    fn momentum_training_learns_a_linear_system() {
+        let (mut e, train, held, test) = linear_setup();
+        let before = mse(e.mlp(), &held);
+        let config = MomentumConfig {
+            learning_rate: 0.1,
+            momentum: 0.9,
+            batch_size: 30,
+            max_epochs: 150,
+            patience: 15,
+            min_improvement: 1e-3,
+            seed: 3,
+        };
+        let report = train_momentum(e.mlp_mut(), &train, &held, &config).unwrap();
+        let after = mse(e.mlp(), &held);
+        assert!(
+            after < 5e-3 && after < 1e-2 * before,
+            "{before} -> {after} ({:?})",
+            report.stop
+        );
+        assert_eq!(report.best_held_out_error, after);
+        assert!(
+            e.one_step_error(&test) < 5e-2,
+            "{}",
+            e.one_step_error(&test)
+        );
+        // Same seed, same result.
+        let (mut e2, ..) = linear_setup();
+        let report2 = train_momentum(e2.mlp_mut(), &train, &held, &config).unwrap();
+        assert_eq!(report, report2);
+        assert_eq!(e.mlp(), e2.mlp());
+    }
+
+    #[test]
+    fn training_stops_early_and_keeps_the_best_weights() {
+        // Held-out targets are noise unrelated to the inputs: the held-out error cannot keep
+        // improving, so both methods must stop on patience well before their limits.
+        let (e, train, held, _) = linear_setup();
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        let noise = Dataset::new(
+            held.inputs.clone(),
+            Array2::from_shape_fn(held.targets.dim(), |_| rng.random_range(-3.0..3.0)),
+        )
+        .unwrap();
+        let mut m1 = e.mlp().clone();
+        let config = MomentumConfig {
+            max_epochs: 1000,
+            patience: 5,
+            ..MomentumConfig::default()
+        };
+        let r1 = train_momentum(&mut m1, &train, &noise, &config).unwrap();
+        assert_eq!(r1.stop, StopReason::NoImprovement);
+        assert!(r1.trace.len() < 1000);
+        assert!(r1.trace.len() <= r1.best_iteration + 1 + 5);
+        assert_eq!(mse(&m1, &noise), r1.best_held_out_error);
+        let mut m2 = e.mlp().clone();
+        let config = FullBatchConfig {
+            max_iters: 1000,
+            patience: 5,
+            ..FullBatchConfig::default()
+        };
+        let r2 = train_full_batch(&mut m2, &train, &noise, &config).unwrap();
+        assert_eq!(r2.stop, StopReason::NoImprovement);
+        assert!(r2.trace.len() < 1000);
+        assert_eq!(mse(&m2, &noise), r2.best_held_out_error);
+        let best = r2
+            .trace
+            .iter()
+            .map(|p| p.held_out_error)
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(best, r2.best_held_out_error);
+    }
+
+    #[test]
+    fn split_is_deterministic_and_disjoint() {
+        let (e, ..) = linear_setup();
+        let ds = e.transforms().encode(&linear_system(50, 1));
+        let (a, b) = ds.split(0.2, 4).unwrap();
+        let (a2, b2) = ds.split(0.2, 4).unwrap();
+        assert_eq!((&a, &b), (&a2, &b2));
+        assert_eq!((a.len(), b.len()), (40, 10));
+        for r in b.inputs.rows() {
+            assert!(a.inputs.rows().into_iter().all(|q| q != r));
+        }
+        assert!(ds.split(1.0, 4).is_err());
+    }
+}

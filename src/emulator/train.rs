@@ -1,0 +1,584 @@
+//! # Training the emulator network (NeuroAnimator §2.3, §3.5)
+//!
+//! The network is fitted to (input, target) pairs in network space by minimizing the mean
+//! squared error per output
+//!
+//! ```text
+//! E(w) = 1/(N r) Σ_τ ‖N(x^τ, w) − y^τ‖²                 (eq. 5, scaled)
+//! ```
+//!
+//! Two methods, as in §3.5:
+//!
+//! - **Full batch** ([`train_full_batch`]) for small and moderate nets: nonlinear conjugate
+//!   gradient (Polak–Ribière, restarts) or L-BFGS from argmin over the flattened weights, with a
+//!   Moré–Thuente line search.
+//! - **Momentum mini-batches** ([`train_momentum`]) for large nets: shuffled mini-batches of
+//!   about 30 examples, one update per batch (eqs. 7–8):
+//!   `δw ← −η_w ∇E_batch(w) + α_w δw`,  `w ← w + δw`.
+//!
+//! Both stop when the held-out error has not improved (relatively, by `min_improvement`) for
+//! `patience` consecutive checks — Xerion "terminates when it can no longer reduce the error
+//! significantly" — or at an iteration limit, and leave the network at the weights with the best
+//! held-out error. They return a [`TrainReport`] trace and never print or write files.
+
+use super::mlp::Mlp;
+use super::EmulatorError;
+use argmin::core::{
+    CostFunction, Executor, Gradient, IterState, Problem, Solver, State, TerminationReason,
+    TerminationStatus, KV,
+};
+use argmin::solver::conjugategradient::{beta::PolakRibiere, NonlinearConjugateGradient};
+use argmin::solver::linesearch::MoreThuenteLineSearch;
+use argmin::solver::quasinewton::LBFGS;
+use ndarray::{Array1, Array2, Axis};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// Network-space examples: row τ of `inputs` maps to row τ of `targets` (eq. 4).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    /// Inputs, N × p.
+    pub inputs: Array2<f64>,
+    /// Targets, N × r.
+    pub targets: Array2<f64>,
+}
+
+impl Dataset {
+    /// Pairs inputs and targets (same number of rows).
+    pub fn new(inputs: Array2<f64>, targets: Array2<f64>) -> Result<Self, EmulatorError> {
+        if inputs.nrows() != targets.nrows() {
+            return Err(EmulatorError::Dimension {
+                what: "target rows",
+                expected: inputs.nrows(),
+                got: targets.nrows(),
+            });
+        }
+        Ok(Self { inputs, targets })
+    }
+
+    /// Number of examples.
+    pub fn len(&self) -> usize {
+        self.inputs.nrows()
+    }
+
+    /// Whether there are no examples.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The examples at `rows`, in that order.
+    pub fn select(&self, rows: &[usize]) -> Self {
+        Self {
+            inputs: self.inputs.select(Axis(0), rows),
+            targets: self.targets.select(Axis(0), rows),
+        }
+    }
+
+    /// Deterministic split into (train, held-out): a permutation seeded by `seed`; the first
+    /// `round(fraction · N)` examples of it (at least one, and at least one left to train) are
+    /// held out. Each part keeps the permuted order.
+    pub fn split(&self, held_out_fraction: f64, seed: u64) -> Result<(Self, Self), EmulatorError> {
+        if !(held_out_fraction > 0.0 && held_out_fraction < 1.0) {
+            return Err(EmulatorError::Setting {
+                name: "held_out_fraction",
+                value: held_out_fraction,
+            });
+        }
+        let n = self.len();
+        if n < 2 {
+            return Err(EmulatorError::TooFewExamples(n));
+        }
+        let mut idx: Vec<usize> = (0..n).collect();
+        idx.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
+        let k = ((held_out_fraction * n as f64).round() as usize).clamp(1, n - 1);
+        Ok((self.select(&idx[k..]), self.select(&idx[..k])))
+    }
+}
+
+/// Mean squared error per output, 1/(N r) Σ ‖N(x) − y‖², of `mlp` on `data`.
+pub fn mse(mlp: &Mlp, data: &Dataset) -> f64 {
+    let denom = (data.len() * mlp.n_out()).max(1) as f64;
+    2.0 * mlp.loss(data.inputs.view(), data.targets.view()) / denom
+}
+
+/// The full-batch training problem over the flattened weights, for argmin.
+#[derive(Debug, Clone)]
+pub struct TrainingProblem<'a> {
+    shape: (usize, usize, usize),
+    data: &'a Dataset,
+}
+
+impl<'a> TrainingProblem<'a> {
+    /// The problem of fitting a network shaped like `mlp` to `data`.
+    pub fn new(mlp: &Mlp, data: &'a Dataset) -> Self {
+        Self {
+            shape: (mlp.n_in(), mlp.n_hidden(), mlp.n_out()),
+            data,
+        }
+    }
+
+    fn net(&self, w: &Array1<f64>) -> Mlp {
+        let (p, q, r) = self.shape;
+        Mlp::from_weights(p, q, r, w.to_vec())
+    }
+}
+
+impl CostFunction for TrainingProblem<'_> {
+    type Param = Array1<f64>;
+    type Output = f64;
+    fn cost(&self, w: &Self::Param) -> Result<f64, argmin::core::Error> {
+        Ok(mse(&self.net(w), self.data))
+    }
+}
+
+impl Gradient for TrainingProblem<'_> {
+    type Param = Array1<f64>;
+    type Gradient = Array1<f64>;
+    fn gradient(&self, w: &Self::Param) -> Result<Self::Gradient, argmin::core::Error> {
+        let net = self.net(w);
+        let mut g = vec![0.0; net.n_weights()];
+        net.loss_grad(self.data.inputs.view(), self.data.targets.view(), &mut g);
+        let scale = 2.0 / (self.data.len() * net.n_out()).max(1) as f64;
+        Ok(Array1::from_iter(g.into_iter().map(|v| v * scale)))
+    }
+}
+
+/// One row of a training trace.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TracePoint {
+    /// Iteration (full batch) or epoch (mini-batches); 0 is the initial network.
+    pub iteration: usize,
+    /// Mean squared error per output on the training set.
+    pub train_error: f64,
+    /// Mean squared error per output on the held-out set.
+    pub held_out_error: f64,
+}
+
+/// Why training stopped.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StopReason {
+    /// The held-out error stopped improving for `patience` checks.
+    NoImprovement,
+    /// The iteration (or epoch) limit was reached.
+    MaxIterations,
+    /// The optimizer declared convergence.
+    Converged,
+    /// The optimizer failed (e.g. the line search); the best weights so far are kept.
+    OptimizerFailed(String),
+}
+
+/// Result of a training run. The network is left at the best held-out weights.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainReport {
+    /// Errors after every iteration (or epoch).
+    pub trace: Vec<TracePoint>,
+    /// Iteration of the best held-out error.
+    pub best_iteration: usize,
+    /// The best held-out error.
+    pub best_held_out_error: f64,
+    /// Why it stopped.
+    pub stop: StopReason,
+}
+
+/// Early stopping on the held-out error.
+#[derive(Debug, Clone)]
+struct EarlyStopper {
+    patience: usize,
+    min_improvement: f64,
+    best: f64,
+    best_iteration: usize,
+    best_weights: Vec<f64>,
+    reference: f64,
+    since: usize,
+}
+
+impl EarlyStopper {
+    fn new(patience: usize, min_improvement: f64, weights: &[f64]) -> Self {
+        Self {
+            patience,
+            min_improvement,
+            best: f64::INFINITY,
+            best_iteration: 0,
+            best_weights: weights.to_vec(),
+            reference: f64::INFINITY,
+            since: 0,
+        }
+    }
+
+    /// Records a held-out error; returns true when training should stop.
+    fn observe(&mut self, iteration: usize, held_out: f64, weights: &[f64]) -> bool {
+        if held_out < self.best {
+            self.best = held_out;
+            self.best_iteration = iteration;
+            self.best_weights.copy_from_slice(weights);
+        }
+        if held_out < self.reference * (1.0 - self.min_improvement) {
+            self.reference = held_out;
+            self.since = 0;
+        } else {
+            self.since += 1;
+        }
+        self.since >= self.patience
+    }
+}
+
+fn check_common(
+    train: &Dataset,
+    held_out: &Dataset,
+    patience: usize,
+    min_improvement: f64,
+) -> Result<(), EmulatorError> {
+    if train.len() < 2 {
+        return Err(EmulatorError::TooFewExamples(train.len()));
+    }
+    if held_out.is_empty() {
+        return Err(EmulatorError::TooFewExamples(0));
+    }
+    if patience == 0 {
+        return Err(EmulatorError::Setting {
+            name: "patience",
+            value: 0.0,
+        });
+    }
+    if !(0.0..1.0).contains(&min_improvement) {
+        return Err(EmulatorError::Setting {
+            name: "min_improvement",
+            value: min_improvement,
+        });
+    }
+    Ok(())
+}
+
+/// Full-batch optimizer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FullBatchMethod {
+    /// Nonlinear conjugate gradient (Polak–Ribière, restarted every `restart_iters` iterations).
+    ConjugateGradient {
+        /// Restart period.
+        restart_iters: u64,
+    },
+    /// L-BFGS with `memory` correction pairs.
+    Lbfgs {
+        /// Number of stored correction pairs.
+        memory: usize,
+    },
+}
+
+/// Settings of [`train_full_batch`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FullBatchConfig {
+    /// The optimizer.
+    pub method: FullBatchMethod,
+    /// Iteration limit.
+    pub max_iters: u64,
+    /// Stop after this many iterations without a significant held-out improvement.
+    pub patience: usize,
+    /// Relative decrease of the held-out error that counts as significant.
+    pub min_improvement: f64,
+}
+
+impl Default for FullBatchConfig {
+    fn default() -> Self {
+        Self {
+            method: FullBatchMethod::ConjugateGradient { restart_iters: 20 },
+            max_iters: 1000,
+            patience: 30,
+            min_improvement: 1e-3,
+        }
+    }
+}
+
+type WState = IterState<Array1<f64>, Array1<f64>, (), (), (), f64>;
+
+/// Wraps an argmin solver to evaluate the held-out error after every iteration and stop early.
+struct EarlyStopping<'a, S> {
+    inner: S,
+    held_out: &'a Dataset,
+    shape: (usize, usize, usize),
+    stopper: EarlyStopper,
+    trace: Vec<TracePoint>,
+    stopped: bool,
+    failed: Option<String>,
+}
+
+impl<S> EarlyStopping<'_, S> {
+    fn record(&mut self, state: &WState) {
+        let Some(w) = state.get_param() else { return };
+        let (p, q, r) = self.shape;
+        let net = Mlp::from_weights(p, q, r, w.to_vec());
+        let held = mse(&net, self.held_out);
+        let iteration = self.trace.len();
+        self.trace.push(TracePoint {
+            iteration,
+            train_error: state.get_cost(),
+            held_out_error: held,
+        });
+        if self.stopper.observe(iteration, held, net.weights()) {
+            self.stopped = true;
+        }
+    }
+}
+
+impl<'p, S> Solver<TrainingProblem<'p>, WState> for EarlyStopping<'_, S>
+where
+    S: Solver<TrainingProblem<'p>, WState>,
+{
+    fn name(&self) -> &str {
+        "early stopping"
+    }
+
+    fn init(
+        &mut self,
+        problem: &mut Problem<TrainingProblem<'p>>,
+        state: WState,
+    ) -> Result<(WState, Option<KV>), argmin::core::Error> {
+        let (state, kv) = self.inner.init(problem, state)?;
+        self.record(&state);
+        Ok((state, kv))
+    }
+
+    fn next_iter(
+        &mut self,
+        problem: &mut Problem<TrainingProblem<'p>>,
+        state: WState,
+    ) -> Result<(WState, Option<KV>), argmin::core::Error> {
+        let backup = state.clone();
+        match self.inner.next_iter(problem, state) {
+            Ok((state, kv)) => {
+                self.record(&state);
+                Ok((state, kv))
+            }
+            Err(e) => {
+                self.failed = Some(e.to_string());
+                Ok((backup, None))
+            }
+        }
+    }
+
+    fn terminate(&mut self, state: &WState) -> TerminationStatus {
+        if let Some(e) = &self.failed {
+            return TerminationStatus::Terminated(TerminationReason::SolverExit(e.clone()));
+        }
+        if self.stopped {
+            return TerminationStatus::Terminated(TerminationReason::SolverExit(
+                "held-out error stopped improving".into(),
+            ));
+        }
+        self.inner.terminate(state)
+    }
+}
+
+/// Trains `mlp` on `train` with conjugate gradient or L-BFGS over all examples at once
+/// (§3.5, small nets), stopping early on `held_out`. Leaves `mlp` at the best held-out weights.
+pub fn train_full_batch(
+    mlp: &mut Mlp,
+    train: &Dataset,
+    held_out: &Dataset,
+    config: &FullBatchConfig,
+) -> Result<TrainReport, EmulatorError> {
+    check_common(train, held_out, config.patience, config.min_improvement)?;
+    let problem = TrainingProblem::new(mlp, train);
+    let w0 = Array1::from(mlp.weights().to_vec());
+    let shape = (mlp.n_in(), mlp.n_hidden(), mlp.n_out());
+    let stopper = EarlyStopper::new(config.patience, config.min_improvement, mlp.weights());
+    let opt = |e: argmin::core::Error| EmulatorError::Optimizer(e.to_string());
+    let (stopper, trace, failed, stopped, reason) = match config.method {
+        FullBatchMethod::ConjugateGradient { restart_iters } => {
+            let solver =
+                NonlinearConjugateGradient::new(MoreThuenteLineSearch::new(), PolakRibiere::new())
+                    .restart_iters(restart_iters)
+                    .restart_orthogonality(0.1);
+            let wrapped = EarlyStopping {
+                inner: solver,
+                held_out,
+                shape,
+                stopper,
+                trace: Vec::new(),
+                stopped: false,
+                failed: None,
+            };
+            let res = Executor::new(problem, wrapped)
+                .configure(|s| s.param(w0).max_iters(config.max_iters))
+                .run()
+                .map_err(opt)?;
+            let reason = res.state.get_termination_reason().cloned();
+            let s = res.solver;
+            (s.stopper, s.trace, s.failed, s.stopped, reason)
+        }
+        FullBatchMethod::Lbfgs { memory } => {
+            let solver = LBFGS::new(MoreThuenteLineSearch::new(), memory.max(1))
+                .with_tolerance_grad(1e-12)
+                .map_err(opt)?
+                .with_tolerance_cost(0.0)
+                .map_err(opt)?;
+            let wrapped = EarlyStopping {
+                inner: solver,
+                held_out,
+                shape,
+                stopper,
+                trace: Vec::new(),
+                stopped: false,
+                failed: None,
+            };
+            let res = Executor::new(problem, wrapped)
+                .configure(|s| s.param(w0).max_iters(config.max_iters))
+                .run()
+                .map_err(opt)?;
+            let reason = res.state.get_termination_reason().cloned();
+            let s = res.solver;
+            (s.stopper, s.trace, s.failed, s.stopped, reason)
+        }
+    };
+    let stop = if let Some(e) = failed {
+        StopReason::OptimizerFailed(e)
+    } else if stopped {
+        StopReason::NoImprovement
+    } else if reason == Some(TerminationReason::MaxItersReached) {
+        StopReason::MaxIterations
+    } else {
+        StopReason::Converged
+    };
+    mlp.weights_mut().copy_from_slice(&stopper.best_weights);
+    Ok(TrainReport {
+        trace,
+        best_iteration: stopper.best_iteration,
+        best_held_out_error: stopper.best,
+        stop,
+    })
+}
+
+/// Settings of [`train_momentum`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MomentumConfig {
+    /// Learning rate η_w (eq. 7).
+    pub learning_rate: f64,
+    /// Momentum α_w in [0, 1) (eq. 7).
+    pub momentum: f64,
+    /// Examples per mini-batch (the paper: about 30).
+    pub batch_size: usize,
+    /// Epoch limit.
+    pub max_epochs: usize,
+    /// Stop after this many epochs without a significant held-out improvement.
+    pub patience: usize,
+    /// Relative decrease of the held-out error that counts as significant.
+    pub min_improvement: f64,
+    /// Seed of the per-epoch shuffles.
+    pub seed: u64,
+}
+
+impl Default for MomentumConfig {
+    fn default() -> Self {
+        Self {
+            learning_rate: 0.1,
+            momentum: 0.9,
+            batch_size: 30,
+            max_epochs: 500,
+            patience: 20,
+            min_improvement: 1e-3,
+            seed: 0,
+        }
+    }
+}
+
+/// Momentum optimizer state: the last update δw (eqs. 7–8).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MomentumState {
+    /// The last weight update δw.
+    pub velocity: Vec<f64>,
+}
+
+impl MomentumState {
+    /// Zero velocity for `n` weights.
+    pub fn new(n: usize) -> Self {
+        Self {
+            velocity: vec![0.0; n],
+        }
+    }
+
+    /// δw ← −η ∇E + α δw; w ← w + δw.
+    pub fn step(&mut self, weights: &mut [f64], grad: &[f64], learning_rate: f64, momentum: f64) {
+        for ((w, v), g) in weights.iter_mut().zip(&mut self.velocity).zip(grad) {
+            *v = -learning_rate * g + momentum * *v;
+            *w += *v;
+        }
+    }
+}
+
+/// Trains `mlp` by gradient descent with momentum over shuffled mini-batches (§3.5, large nets),
+/// checking `held_out` after every epoch. Leaves `mlp` at the best held-out weights.
+pub fn train_momentum(
+    mlp: &mut Mlp,
+    train: &Dataset,
+    held_out: &Dataset,
+    config: &MomentumConfig,
+) -> Result<TrainReport, EmulatorError> {
+    check_common(train, held_out, config.patience, config.min_improvement)?;
+    if !(config.learning_rate > 0.0 && config.learning_rate.is_finite()) {
+        return Err(EmulatorError::Setting {
+            name: "learning_rate",
+            value: config.learning_rate,
+        });
+    }
+    if !(0.0..1.0).contains(&config.momentum) {
+        return Err(EmulatorError::Setting {
+            name: "momentum",
+            value: config.momentum,
+        });
+    }
+    if config.batch_size == 0 {
+        return Err(EmulatorError::Setting {
+            name: "batch_size",
+            value: 0.0,
+        });
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let mut state = MomentumState::new(mlp.n_weights());
+    let mut stopper = EarlyStopper::new(config.patience, config.min_improvement, mlp.weights());
+    let mut trace = vec![TracePoint {
+        iteration: 0,
+        train_error: mse(mlp, train),
+        held_out_error: mse(mlp, held_out),
+    }];
+    stopper.observe(0, trace[0].held_out_error, mlp.weights());
+    let mut order: Vec<usize> = (0..train.len()).collect();
+    let mut grad = vec![0.0; mlp.n_weights()];
+    let mut stop = StopReason::MaxIterations;
+    for epoch in 1..=config.max_epochs {
+        order.shuffle(&mut rng);
+        for batch in order.chunks(config.batch_size) {
+            let x = train.inputs.select(Axis(0), batch);
+            let t = train.targets.select(Axis(0), batch);
+            mlp.loss_grad(x.view(), t.view(), &mut grad);
+            let scale = 2.0 / (batch.len() * mlp.n_out()) as f64;
+            grad.iter_mut().for_each(|g| *g *= scale);
+            state.step(
+                mlp.weights_mut(),
+                &grad,
+                config.learning_rate,
+                config.momentum,
+            );
+        }
+        let point = TracePoint {
+            iteration: epoch,
+            train_error: mse(mlp, train),
+            held_out_error: mse(mlp, held_out),
+        };
+        trace.push(point);
+        if !point.train_error.is_finite() {
+            stop = StopReason::OptimizerFailed(format!("training error diverged at epoch {epoch}"));
+            break;
+        }
+        if stopper.observe(epoch, point.held_out_error, mlp.weights()) {
+            stop = StopReason::NoImprovement;
+            break;
+        }
+    }
+    mlp.weights_mut().copy_from_slice(&stopper.best_weights);
+    Ok(TrainReport {
+        trace,
+        best_iteration: stopper.best_iteration,
+        best_held_out_error: stopper.best,
+        stop,
+    })
+}
