@@ -13,7 +13,9 @@
 
 pub mod acrobot;
 pub mod integrate;
+pub mod lattice;
 pub mod pendulum;
+pub mod reflex;
 
 pub use integrate::{Integrator, IntegratorKind, Rk45Stats};
 
