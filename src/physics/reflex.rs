@@ -18,6 +18,9 @@
 //!
 //! κ, γ, σ, τ are the [`ReflexGains`]. The paper gives no magnitudes; the defaults (0.5, 0.5,
 //! 0.5, π/6) make α = ±1 an exaggerated but non-degenerate deformation.
+//!
+//! A reflex can be rigid for a particular lattice, and then changes no rest length: e.g. the
+//! pyramid's `twist_z`, whose base is a single layer and whose apex lies on the axis.
 
 use super::lattice::{lengths, Lattice, LatticeError};
 use serde::{Deserialize, Serialize};
@@ -171,4 +174,141 @@ pub fn deform(
         positions,
         rest_lengths,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GAINS: ReflexGains = ReflexGains {
+        scale: 0.5,
+        shear: 0.5,
+        splay: 0.5,
+        twist: std::f64::consts::FRAC_PI_6,
+    };
+
+    /// Index of the cube's spring between masses `a` and `b` (index = x + 2y + 4z).
+    fn spring(cube: &Lattice, a: usize, b: usize) -> usize {
+        cube.springs
+            .iter()
+            .position(|s| (s.a, s.b) == (a.min(b), a.max(b)))
+            .expect("cube has all pairs")
+    }
+
+    fn assert_length(cube: &Lattice, d: &Deformation, a: usize, b: usize, want: f64) {
+        let got = d.rest_lengths[spring(cube, a, b)];
+        assert!((got - want).abs() < 1e-12, "{a}-{b}: {got} vs {want}");
+    }
+
+    #[test]
+    fn numbers_round_trip_and_are_validated() {
+        for r in 0..Reflex::COUNT {
+            assert_eq!(Reflex::from_number(r).unwrap().number(), r);
+        }
+        assert_eq!(Reflex::from_number(11).unwrap().name(), "twist_z");
+        assert_eq!(
+            Reflex::from_number(12),
+            Err(LatticeError::InvalidReflex(12))
+        );
+        let cube = Lattice::cube();
+        assert_eq!(
+            deform(&cube, 0, 1.5, &GAINS),
+            Err(LatticeError::InvalidCoefficient(1.5))
+        );
+        assert!(deform(&cube, 0, f64::NAN, &GAINS).is_err());
+    }
+
+    #[test]
+    fn zero_coefficient_leaves_rest_lengths_unchanged() {
+        for lattice in [Lattice::cube(), Lattice::pyramid(), Lattice::chair()] {
+            let rest = lattice.rest_lengths();
+            for r in 0..Reflex::COUNT {
+                let d = deform(&lattice, r, 0.0, &GAINS).unwrap();
+                for (j, (a, b)) in d.rest_lengths.iter().zip(&rest).enumerate() {
+                    assert!(
+                        (a - b).abs() < 1e-12,
+                        "{} reflex {r} spring {j}",
+                        lattice.name
+                    );
+                }
+                // A non-zero coefficient changes some of them, except the pyramid's twist
+                // about its vertical axis: its base is one layer and its apex is on the axis,
+                // so that twist is a rigid rotation.
+                if lattice.name == "lattice_pyramid" && r == 11 {
+                    continue;
+                }
+                let d = deform(&lattice, r, 0.7, &GAINS).unwrap();
+                let change = d
+                    .rest_lengths
+                    .iter()
+                    .zip(&rest)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max);
+                assert!(change > 1e-3, "{} reflex {r} changes nothing", lattice.name);
+            }
+        }
+    }
+
+    #[test]
+    fn scale_on_unit_cube() {
+        let cube = Lattice::cube();
+        let s: f64 = 1.0 + 0.5 * 0.6;
+        let d = deform(&cube, 2, 0.6, &GAINS).unwrap(); // scale_z
+        assert_length(&cube, &d, 0, 4, s); // vertical edge
+        assert_length(&cube, &d, 0, 1, 1.0); // x edge
+        assert_length(&cube, &d, 0, 3, 2f64.sqrt()); // bottom face diagonal
+        assert_length(&cube, &d, 0, 5, (1.0 + s * s).sqrt()); // xz face diagonal
+        assert_length(&cube, &d, 0, 7, (2.0 + s * s).sqrt()); // body diagonal
+        let d = deform(&cube, 0, -1.0, &GAINS).unwrap(); // scale_x squash
+        assert_length(&cube, &d, 0, 1, 0.5);
+        assert_length(&cube, &d, 0, 4, 1.0);
+        // The centre of mass does not move.
+        let c = cube.center_of_mass(&d.positions);
+        assert!(c.iter().all(|v| (v - 0.5).abs() < 1e-12), "{c:?}");
+    }
+
+    #[test]
+    fn shear_on_unit_cube() {
+        let cube = Lattice::cube();
+        let g: f64 = 0.5 * 0.6; // top moves +g/2 along x, bottom −g/2
+        let d = deform(&cube, 5, 0.6, &GAINS).unwrap(); // shear_z: x += γα r_z
+        assert_length(&cube, &d, 0, 4, (1.0 + g * g).sqrt()); // tilted vertical edge
+        assert_length(&cube, &d, 0, 5, (1.0 + (1.0 + g).powi(2)).sqrt()); // long diagonal
+        assert_length(&cube, &d, 1, 4, (1.0 + (1.0 - g).powi(2)).sqrt()); // short diagonal
+        assert_length(&cube, &d, 0, 1, 1.0); // horizontal edges unchanged
+        assert_length(&cube, &d, 0, 2, 1.0);
+        assert_length(&cube, &d, 0, 6, (2.0 + g * g).sqrt()); // yz face diagonal
+        let top = d.positions[4];
+        assert!((top[0] - g / 2.0).abs() < 1e-12 && (top[2] - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn twist_on_unit_cube() {
+        let cube = Lattice::cube();
+        let theta: f64 = 0.6 * std::f64::consts::FRAC_PI_6; // top +θ, bottom −θ about z
+        let d = deform(&cube, 11, 0.6, &GAINS).unwrap(); // twist_z
+        let s = theta.sin();
+        let c = theta.cos();
+        // A vertical edge spans a chord 2·(1/√2)·sin θ horizontally.
+        assert_length(&cube, &d, 0, 4, (1.0 + 2.0 * s * s).sqrt());
+        // Body diagonals span a chord 2·(1/√2)·cos θ.
+        assert_length(&cube, &d, 0, 7, (1.0 + 2.0 * c * c).sqrt());
+        // Top and bottom faces turn rigidly.
+        assert_length(&cube, &d, 4, 5, 1.0);
+        assert_length(&cube, &d, 4, 7, 2f64.sqrt());
+        assert_length(&cube, &d, 0, 1, 1.0);
+        // Heights are unchanged.
+        for (p, q) in d.positions.iter().zip(cube.rest_positions()) {
+            assert!((p[2] - q[2]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn splay_on_unit_cube() {
+        let cube = Lattice::cube();
+        let d = deform(&cube, 8, 0.6, &GAINS).unwrap(); // splay_z: top ×1.3, bottom ×0.7
+        assert_length(&cube, &d, 4, 5, 1.3);
+        assert_length(&cube, &d, 0, 1, 0.7);
+        assert_length(&cube, &d, 0, 4, (1.0 + 2.0 * 0.3f64.powi(2)).sqrt());
+    }
 }
