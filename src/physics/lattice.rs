@@ -219,8 +219,9 @@ impl Lattice {
     }
 
     /// A chair: a 0.6 m × 0.6 m leg box 0.5 m high (4 feet, 4 seat corners) and a back of
-    /// two masses 0.6 m above the rear seat corners; 10 masses of 1 kg and 35 springs. Front
-    /// is −x, the back stands at x = 0.6.
+    /// two masses 0.6 m above the rear seat corners; 10 masses of 1 kg and 35 springs of
+    /// twice the default stiffness and damping (its back sways otherwise). Front is −x, the
+    /// back stands at x = 0.6.
     pub fn chair() -> Self {
         let (w, h, hb) = (0.6, 0.5, 0.6);
         let mut positions = Vec::new();
@@ -247,8 +248,8 @@ impl Lattice {
             &positions,
             &[1.0; 10],
             &pairs,
-            DEFAULT_STIFFNESS,
-            DEFAULT_DAMPING,
+            2.0 * DEFAULT_STIFFNESS,
+            2.0 * DEFAULT_DAMPING,
         )
     }
 
@@ -717,7 +718,7 @@ impl Ode for LatticeModel {
 }
 
 /// Counters of the contact events of a [`LatticeSim`].
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ContactStats {
     /// Masses whose normal velocity was removed by an impact.
     pub impacts: u64,
@@ -725,6 +726,9 @@ pub struct ContactStats {
     pub events: u64,
     /// Re-integrations while localizing impact times.
     pub retries: u64,
+    /// Deepest penetration below the floor at the end of an integration interval, before the
+    /// impact projection (m, ≥ 0).
+    pub deepest: f64,
 }
 
 /// Adaptive RK45 integration of a [`LatticeModel`] with impacts handled as events.
@@ -888,8 +892,325 @@ impl Dynamics for LatticeSim {
             if h < left {
                 self.stats.events += 1;
             }
+            self.stats.deepest = self.stats.deepest.max(-self.lowest(x));
             self.stats.impacts += self.impacts(x);
             left = if h < left { left - h } else { 0.0 };
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn free_cube(damping: bool) -> LatticeModel {
+        let mut lattice = Lattice::cube();
+        if !damping {
+            for s in &mut lattice.springs {
+                s.damping = 0.0;
+            }
+        }
+        LatticeModel::new(lattice).unwrap().with_gravity(0.0)
+    }
+
+    /// A perturbed cube far above the floor with random velocities.
+    fn tumbling_state(model: &LatticeModel, seed: u64) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut x = model.lattice.placed_state([0.3, -0.2, 0.5], 5.0, [0.0; 3]);
+        for v in x.iter_mut() {
+            *v += rng.random_range(-0.1..0.1);
+        }
+        x
+    }
+
+    fn max_speed(model: &LatticeModel, x: &[f64]) -> f64 {
+        let n = model.lattice.n_masses();
+        x[3 * n..]
+            .chunks(3)
+            .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn shipped_lattices_are_valid_and_round_trip() {
+        for (lattice, n, ns) in [
+            (Lattice::cube(), 8, 28),
+            (Lattice::pyramid(), 5, 10),
+            (Lattice::chair(), 10, 35),
+        ] {
+            lattice.validate().unwrap();
+            assert_eq!((lattice.n_masses(), lattice.springs.len()), (n, ns));
+            let json = serde_json::to_string(&lattice).unwrap();
+            let back: Lattice = serde_json::from_str(&json).unwrap();
+            assert_eq!(back, lattice);
+            let model = LatticeModel::new(lattice).unwrap();
+            assert_eq!(model.state_dim(), 6 * n);
+            assert_eq!(model.control_dim(), ns);
+            assert!(model.parameters().iter().all(|p| !p.unit.is_empty()));
+        }
+        // The cube: 12 edges, 12 face diagonals, 4 body diagonals.
+        let rest = Lattice::cube().rest_lengths();
+        for (len, count) in [(1.0, 12), (2f64.sqrt(), 12), (3f64.sqrt(), 4)] {
+            let c = rest.iter().filter(|l| (*l - len).abs() < 1e-12).count();
+            assert_eq!(c, count, "springs of length {len}");
+        }
+        let mut bad = Lattice::cube();
+        bad.springs[3].b = 8;
+        assert_eq!(bad.validate(), Err(LatticeError::InvalidEnds(3, 0, 8)));
+        let mut model = LatticeModel::new(Lattice::pyramid()).unwrap();
+        assert_eq!(
+            model.set_rest_lengths(&[1.0; 3]),
+            Err(LatticeError::RestLengthCount(3, 10))
+        );
+    }
+
+    #[test]
+    fn spring_forces_conserve_momentum() {
+        // Damped springs, no gravity, no floor contact: Σ m a = 0 and Σ r × m a = 0.
+        let model = free_cube(true);
+        let n = model.lattice.n_masses();
+        for seed in 0..5 {
+            let x = tumbling_state(&model, seed);
+            let u: Vec<f64> = model.rest_lengths.iter().map(|l| 0.9 * l).collect();
+            let mut dx = vec![0.0; 6 * n];
+            model.derivative(&x, &u, &mut dx);
+            let (mut p, mut l) = (Vector3::zeros(), Vector3::zeros());
+            let mut scale: f64 = 0.0;
+            for (i, m) in model.lattice.masses.iter().enumerate() {
+                let f = m.mass * Vector3::from_column_slice(&dx[3 * n + 3 * i..3 * n + 3 * i + 3]);
+                let r = Vector3::from_column_slice(&x[3 * i..3 * i + 3]);
+                p += f;
+                l += r.cross(&f);
+                scale = scale.max(f.norm());
+            }
+            assert!(scale > 1.0, "forces should be non-trivial: {scale}");
+            assert!(p.norm() < 1e-12 * scale, "net force {p}");
+            assert!(l.norm() < 1e-11 * scale, "net torque {l}");
+        }
+    }
+
+    #[test]
+    fn undamped_free_lattice_conserves_energy() {
+        let model = free_cube(false);
+        let x0 = tumbling_state(&model, 7);
+        let e0 = model.energy(&x0).unwrap();
+        let mut sim = LatticeSim::new(model.clone()).with_tolerances(1e-10, 1e-12);
+        let mut x = x0.clone();
+        let mut worst: f64 = 0.0;
+        for _ in 0..100 {
+            sim.step(&mut x, &[], 0.02);
+            worst = worst.max((model.energy(&x).unwrap() - e0).abs());
+        }
+        assert!(e0 > 0.01, "{e0}");
+        assert!(worst < 1e-7 * e0, "energy drift {worst} of {e0}");
+        // And damping dissipates it.
+        let damped = free_cube(true);
+        let mut sim = LatticeSim::new(damped.clone());
+        let mut y = x0.clone();
+        for _ in 0..100 {
+            sim.step(&mut y, &[], 0.02);
+        }
+        assert!(damped.energy(&y).unwrap() < 0.5 * damped.energy(&x0).unwrap());
+    }
+
+    /// Settles `lattice` from its rest shape standing on the floor for `settle` seconds, then
+    /// returns the largest displacement and speed seen over the next `watch` seconds.
+    fn rest_drift(lattice: Lattice, settle: f64, watch: f64) -> (f64, f64, LatticeSim) {
+        let model = LatticeModel::new(lattice).unwrap();
+        let mut sim = LatticeSim::new(model.clone());
+        let mut x = model.lattice.resting_state();
+        let dt = 0.01;
+        for _ in 0..(settle / dt) as usize {
+            sim.step(&mut x, &[], dt);
+        }
+        let x1 = x.clone();
+        let n = model.lattice.n_masses();
+        let (mut drift, mut speed): (f64, f64) = (0.0, 0.0);
+        for _ in 0..(watch / dt) as usize {
+            sim.step(&mut x, &[], dt);
+            for k in 0..3 * n {
+                drift = drift.max((x[k] - x1[k]).abs());
+            }
+            speed = speed.max(max_speed(&model, &x));
+            let low = (0..n).map(|i| x[3 * i + 2]).fold(f64::INFINITY, f64::min);
+            assert!(low >= -model.floor.contact_tolerance, "penetration {low}");
+        }
+        (drift, speed, sim)
+    }
+
+    #[test]
+    fn lattices_at_rest_on_the_floor_stay_at_rest() {
+        for lattice in [Lattice::cube(), Lattice::pyramid(), Lattice::chair()] {
+            let name = lattice.name.clone();
+            // Standing up from the undeformed rest shape, the lattice sags under gravity and
+            // its slowest modes take a few seconds to die out; then it must stay put.
+            let (drift, speed, sim) = rest_drift(lattice, 10.0, 5.0);
+            eprintln!(
+                "{name}: drift {drift:.3e} m, speed {speed:.3e} m/s, {:?}, {:?}",
+                sim.integrator_stats(),
+                sim.contact_stats()
+            );
+            assert!(drift < 1e-6, "{name}: drift {drift} m");
+            assert!(speed < 1e-5, "{name}: speed {speed} m/s");
+        }
+    }
+
+    #[test]
+    fn dropped_cube_comes_to_rest_on_the_floor() {
+        let model = LatticeModel::new(Lattice::cube()).unwrap();
+        let mut sim = LatticeSim::new(model.clone());
+        // Tilted, 0.5 m up, moving sideways: corners land one after another.
+        let mut x = model
+            .lattice
+            .placed_state([0.3, 0.2, 0.1], 0.5, [0.5, 0.0, 0.0]);
+        let n = model.lattice.n_masses();
+        let mut lowest = f64::INFINITY;
+        for _ in 0..600 {
+            sim.step(&mut x, &[], 0.01);
+            lowest = (0..n).map(|i| x[3 * i + 2]).fold(lowest, f64::min);
+            check_all_finite(&x);
+        }
+        let stats = sim.integrator_stats();
+        let contact = sim.contact_stats();
+        eprintln!("dropped cube: {stats:?}, {contact:?}, lowest {lowest:e}");
+        assert!(
+            lowest >= -model.floor.contact_tolerance,
+            "penetration {lowest}"
+        );
+        assert!(
+            contact.deepest <= model.floor.contact_tolerance,
+            "{contact:?}"
+        );
+        assert!(contact.impacts >= 4, "{contact:?}");
+        assert!(model.contacts(&x) >= 4, "ends standing on a face");
+        assert!(
+            max_speed(&model, &x) < 1e-4,
+            "speed {}",
+            max_speed(&model, &x)
+        );
+        // No stall: a bounded number of RK45 steps for 6 s.
+        assert!(stats.accepted + stats.rejected < 20_000, "{stats:?}");
+    }
+
+    fn check_all_finite(x: &[f64]) {
+        assert!(x.iter().all(|v| v.is_finite()));
+    }
+
+    /// Distance the cube's centre of mass slides along `dir` (±x) from rest on the floor when
+    /// launched with 1 m/s along it, with preferred direction +x.
+    fn slide(dir: f64) -> f64 {
+        let floor = Floor {
+            friction: 0.2,
+            preferred_friction: 0.6,
+            preferred_direction: [1.0, 0.0],
+            ..Floor::default()
+        };
+        let model = LatticeModel::new(Lattice::cube())
+            .unwrap()
+            .with_floor(floor);
+        let mut sim = LatticeSim::new(model.clone());
+        let mut x = model.lattice.resting_state();
+        for _ in 0..100 {
+            sim.step(&mut x, &[], 0.01);
+        }
+        let n = model.lattice.n_masses();
+        for i in 0..n {
+            x[3 * n + 3 * i] += dir;
+        }
+        let c0 = model.center_of_mass(&x);
+        for _ in 0..300 {
+            sim.step(&mut x, &[], 0.01);
+        }
+        assert!(max_speed(&model, &x) < 1e-3, "still moving");
+        (model.center_of_mass(&x)[0] - c0[0]) * dir
+    }
+
+    #[test]
+    fn directional_friction_resists_the_preferred_direction() {
+        let along = slide(1.0);
+        let against = slide(-1.0);
+        eprintln!("slide along {along:.4} m, against {against:.4} m");
+        // Coulomb: d = v²/(2 μ g) = 0.255 m for μ = 0.2 and 0.085 m for μ = 0.6 when all the
+        // kinetic energy goes into sliding friction; rocking and spring damping take a bit more.
+        assert!(along > 0.0 && against > 0.0);
+        assert!(along < 0.5 * against, "along {along}, against {against}");
+        assert!(
+            against < 0.255 * 1.02 && against > 0.255 * 0.85,
+            "against {against}"
+        );
+        assert!(along < 0.085 * 1.02 && along > 0.085 * 0.5, "along {along}");
+    }
+
+    #[test]
+    fn reflex_rest_lengths_are_reached_in_free_space() {
+        // Zero gravity, no floor contact: the lattice relaxes to the deformed rest shape.
+        let mut model = LatticeModel::new(Lattice::cube())
+            .unwrap()
+            .with_gravity(0.0);
+        model.apply_reflex(11, 0.8).unwrap(); // twist_z
+        let target = model.rest_lengths.clone();
+        let mut sim = LatticeSim::new(model.clone());
+        let mut x = model.lattice.placed_state([0.0; 3], 3.0, [0.0; 3]);
+        for _ in 0..300 {
+            sim.step(&mut x, &[], 0.01);
+        }
+        let now = lengths(&model.positions(&x), &model.lattice.springs);
+        for (a, b) in now.iter().zip(&target) {
+            assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+        }
+        // Explicit controls override the active rest lengths.
+        let mut dx = vec![0.0; x.len()];
+        let mut dy = vec![0.0; x.len()];
+        model.derivative(&x, &[], &mut dx);
+        model.derivative(&x, &Lattice::cube().rest_lengths(), &mut dy);
+        assert!(dx.iter().zip(&dy).any(|(a, b)| (a - b).abs() > 1e-3));
+    }
+
+    #[test]
+    fn resting_contact_cancels_gravity_and_friction_holds() {
+        // A single mass on the floor: the normal force cancels gravity exactly; a sliding
+        // mass decelerates by μ g.
+        let lattice = Lattice {
+            name: "one".into(),
+            masses: vec![PointMass {
+                position: [0.0; 3],
+                mass: 2.0,
+            }],
+            springs: vec![],
+        };
+        let model = LatticeModel::new(lattice).unwrap();
+        let mut dx = [0.0; 6];
+        model.derivative(&[0.0; 6], &[], &mut dx);
+        assert_eq!(dx, [0.0; 6]);
+        model.derivative(&[0.0, 0.0, 0.0, 3.0, 0.0, 0.0], &[], &mut dx);
+        assert!((dx[3] + model.floor.friction * EARTH_GRAVITY).abs() < 1e-12);
+        // Sliding along / against the preferred direction stops after v²/(2 μ g).
+        let floor = Floor {
+            friction: 0.2,
+            preferred_friction: 0.6,
+            preferred_direction: [0.0, 1.0],
+            ..Floor::default()
+        };
+        let model = model.with_floor(floor);
+        for (dir, mu) in [(1.0, 0.6), (-1.0, 0.2)] {
+            let mut sim = LatticeSim::new(model.clone());
+            let mut x = [0.0, 0.0, 0.0, 0.0, 2.0 * dir, 0.0];
+            for _ in 0..300 {
+                sim.step(&mut x, &[], 0.01);
+            }
+            let want = 4.0 / (2.0 * mu * EARTH_GRAVITY);
+            assert!(x[4].abs() < 1e-9, "still sliding at {}", x[4]);
+            assert!(
+                (x[1] * dir - want).abs() < 1e-3 * want,
+                "{} vs {want}",
+                x[1]
+            );
+            assert_eq!((x[0], x[2]), (0.0, 0.0));
+        }
+        // In flight, gravity only.
+        model.derivative(&[0.0, 0.0, 1.0, 3.0, 0.0, 0.0], &[], &mut dx);
+        assert_eq!(&dx[3..], &[0.0, 0.0, -EARTH_GRAVITY]);
     }
 }
