@@ -992,6 +992,41 @@ mod tests {
     }
 
     #[test]
+    fn power_balance_of_damped_springs_and_gravity() {
+        // Away from the floor, dE/dt = −Σ D ℓ̇² (springs' damping only), checked by central
+        // differences along the flow.
+        let model = LatticeModel::new(Lattice::chair()).unwrap();
+        let x = tumbling_state(&model, 3);
+        let mut dx = vec![0.0; x.len()];
+        model.derivative(&x, &[], &mut dx);
+        let h = 1e-6;
+        let energy_at = |s: f64| {
+            let y: Vec<f64> = x.iter().zip(&dx).map(|(a, b)| a + s * b).collect();
+            model.energy(&y).unwrap()
+        };
+        let de = (energy_at(h) - energy_at(-h)) / (2.0 * h);
+        let n = model.lattice.n_masses();
+        let power: f64 = model
+            .lattice
+            .springs
+            .iter()
+            .map(|s| {
+                let d = Vector3::from_column_slice(&x[3 * s.a..3 * s.a + 3])
+                    - Vector3::from_column_slice(&x[3 * s.b..3 * s.b + 3]);
+                let dv = Vector3::from_column_slice(&x[3 * n + 3 * s.a..3 * n + 3 * s.a + 3])
+                    - Vector3::from_column_slice(&x[3 * n + 3 * s.b..3 * n + 3 * s.b + 3]);
+                let rate = d.dot(&dv) / d.norm();
+                -s.damping * rate * rate
+            })
+            .sum();
+        assert!(power < -1e-3, "{power}");
+        assert!(
+            (de - power).abs() < 1e-6 * power.abs().max(1.0),
+            "{de} vs {power}"
+        );
+    }
+
+    #[test]
     fn undamped_free_lattice_conserves_energy() {
         let model = free_cube(false);
         let x0 = tumbling_state(&model, 7);
@@ -1092,6 +1127,41 @@ mod tests {
         );
         // No stall: a bounded number of RK45 steps for 6 s.
         assert!(stats.accepted + stats.rejected < 20_000, "{stats:?}");
+    }
+
+    #[test]
+    fn hopping_cube_in_low_gravity_does_not_stall() {
+        // Alternating squash and stretch along z every 0.4 s: repeated take-offs and landings.
+        let model = LatticeModel::new(Lattice::cube())
+            .unwrap()
+            .with_gravity(LOW_GRAVITY);
+        let squash = reflex::deform(&model.lattice, 2, -0.3, &model.reflex_gains).unwrap();
+        let stretch = reflex::deform(&model.lattice, 2, 0.3, &model.reflex_gains).unwrap();
+        let mut sim = LatticeSim::new(model.clone());
+        let mut x = model.lattice.resting_state();
+        let (mut top, mut airborne) = (0.0f64, 0);
+        for k in 0..800 {
+            let u = if (k / 40) % 2 == 0 {
+                &squash.rest_lengths
+            } else {
+                &stretch.rest_lengths
+            };
+            sim.step(&mut x, u, 0.01);
+            check_all_finite(&x);
+            top = top.max(model.center_of_mass(&x)[2]);
+            if model.contacts(&x) == 0 {
+                airborne += 1;
+            }
+        }
+        let (stats, contact) = (sim.integrator_stats(), sim.contact_stats());
+        eprintln!("hopping cube: {stats:?}, {contact:?}, top {top:.3} m, airborne {airborne}");
+        assert!(airborne > 20, "it should leave the floor: {airborne}");
+        assert!(contact.impacts >= 8, "{contact:?}");
+        assert!(
+            contact.deepest <= model.floor.contact_tolerance,
+            "{contact:?}"
+        );
+        assert!(stats.accepted + stats.rejected < 50_000, "{stats:?}");
     }
 
     fn check_all_finite(x: &[f64]) {
