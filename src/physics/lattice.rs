@@ -82,6 +82,9 @@ pub enum LatticeError {
     /// A reflex number outside 0–11.
     #[error("reflex number {0} is not in 0..=11")]
     InvalidReflex(usize),
+    /// A floor parameter out of range (name, value).
+    #[error("floor parameter `{0}` has invalid value {1}")]
+    InvalidFloor(&'static str, f64),
     /// A reflex coefficient outside [−1, 1] or not finite.
     #[error("reflex coefficient {0} is not in [-1, 1]")]
     InvalidCoefficient(f64),
@@ -390,6 +393,37 @@ impl Default for Floor {
 }
 
 impl Floor {
+    /// Checks that coefficients are ≥ 0, the direction is non-zero and the time constant and
+    /// tolerances are positive.
+    pub fn validate(&self) -> Result<(), LatticeError> {
+        let [dx, dy] = self.preferred_direction;
+        for (name, value, ok) in [
+            ("friction", self.friction, self.friction >= 0.0),
+            (
+                "preferred_friction",
+                self.preferred_friction,
+                self.preferred_friction >= 0.0,
+            ),
+            ("preferred_direction", dx.hypot(dy), dx.hypot(dy) > 0.0),
+            ("stick_time", self.stick_time, self.stick_time > 0.0),
+            (
+                "contact_tolerance",
+                self.contact_tolerance,
+                self.contact_tolerance > 0.0,
+            ),
+            (
+                "velocity_tolerance",
+                self.velocity_tolerance,
+                self.velocity_tolerance > 0.0,
+            ),
+        ] {
+            if !(ok && value.is_finite()) {
+                return Err(LatticeError::InvalidFloor(name, value));
+            }
+        }
+        Ok(())
+    }
+
     /// Friction coefficient for sliding in horizontal direction `s` (any length).
     pub fn coefficient(&self, s: [f64; 2]) -> f64 {
         let [dx, dy] = self.preferred_direction;
@@ -444,10 +478,11 @@ impl LatticeModel {
         self
     }
 
-    /// The same model with floor `floor`.
-    pub fn with_floor(mut self, floor: Floor) -> Self {
+    /// The same model with floor `floor`, validated.
+    pub fn with_floor(mut self, floor: Floor) -> Result<Self, LatticeError> {
+        floor.validate()?;
         self.floor = floor;
-        self
+        Ok(self)
     }
 
     /// Sets the active rest lengths (m), validated.
@@ -1179,7 +1214,8 @@ mod tests {
         };
         let model = LatticeModel::new(Lattice::cube())
             .unwrap()
-            .with_floor(floor);
+            .with_floor(floor)
+            .unwrap();
         let mut sim = LatticeSim::new(model.clone());
         let mut x = model.lattice.resting_state();
         for _ in 0..100 {
@@ -1263,7 +1299,15 @@ mod tests {
             preferred_direction: [0.0, 1.0],
             ..Floor::default()
         };
-        let model = model.with_floor(floor);
+        let model = model.with_floor(floor).unwrap();
+        let bad = Floor {
+            stick_time: 0.0,
+            ..floor
+        };
+        assert_eq!(
+            bad.validate(),
+            Err(LatticeError::InvalidFloor("stick_time", 0.0))
+        );
         for (dir, mu) in [(1.0, 0.6), (-1.0, 0.2)] {
             let mut sim = LatticeSim::new(model.clone());
             let mut x = [0.0, 0.0, 0.0, 0.0, 2.0 * dir, 0.0];
