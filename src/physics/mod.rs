@@ -19,9 +19,11 @@ pub mod acrobot;
 pub mod diver;
 pub mod integrate;
 pub mod lander;
+pub mod lattice;
 pub mod pendulum;
 pub mod planar;
 pub mod push;
+pub mod reflex;
 pub mod truck;
 
 pub use integrate::{Integrator, IntegratorKind, Rk45Stats};
