@@ -13,6 +13,12 @@
 //!   [`physics::truck::Truck`], [`physics::lander::Lander`], [`physics::acrobot::Acrobot`]
 //!   (two-link gymnast), and planar articulated trees ([`physics::planar::PlanarTree`]) for the
 //!   diver and the push-recovery figure.
+//! - [`physics::lattice`] and [`physics::reflex`]: 3-D mass-spring lattices (cube, pyramid,
+//!   chair) with floor contact and directional friction, and the 12 deformation reflexes of
+//!   mass-spring motion synthesis.
+//! - [`emulator`]: NeuroAnimator emulators — a sigmoid MLP with backprop to weights and inputs,
+//!   the delta / local-frame / normalization transforms, and training (argmin CG or L-BFGS,
+//!   momentum mini-batches) with early stopping.
 //! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
 //!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
