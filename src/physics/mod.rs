@@ -13,6 +13,7 @@
 
 pub mod acrobot;
 pub mod integrate;
+pub mod linearize;
 pub mod pendulum;
 
 pub use integrate::{Integrator, IntegratorKind, Rk45Stats};
