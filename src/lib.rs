@@ -11,6 +11,10 @@
 //!   and semi-implicit Euler, RK4, fixed-step Dormand–Prince, adaptive RK45) and one file per
 //!   model: [`physics::pendulum::Pendulum3`] (3-link pendulum: passive, active, ext. force),
 //!   [`physics::acrobot::Acrobot`] (two-link gymnast).
+//! - [`control`]: optimal control on the RK4-discretized dynamics of any
+//!   [`physics::linearize::Linearize`] model — [`control::ddp`] (iLQR and full second-order
+//!   DDP with regularization, line search and box bounds) and [`control::lqr`] (time-varying
+//!   LQR tracking with the quadratic value function of linear Bellman combination, eq. 12).
 //! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products).
 //! - [`experiment`]: experiments as data — TOML specs, validation with file/line/key errors,
@@ -25,11 +29,13 @@
 //! | `pendulum3`, `pendulum3_passive`, `pendulum3_ext` | [`physics::pendulum`] | planar 3-link pendulum, full articulated dynamics |
 //! | `acrobot` | [`physics::acrobot`] | point-mass acrobot, torque at the hip |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
+//! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
 //! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
 #![warn(missing_docs)]
 
 pub mod bellman;
 pub mod bench;
+pub mod control;
 pub mod experiment;
 pub mod linalg;
 pub mod physics;

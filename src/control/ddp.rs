@@ -1,0 +1,819 @@
+//! # Differential dynamic programming (DDP) and iLQR
+//!
+//! Minimizes J = g(x_N) + Σ_k l(x_k, u_k) subject to x_{k+1} = F(x_k, u_k) (the problem of
+//! [`super`]) by alternating a backward pass that builds a local quadratic model of the
+//! cost-to-go along the current trajectory (x̄, ū) and a forward pass that rolls out an improved
+//! one. Backward, from V_x = g_x, V_xx = g_xx:
+//!
+//! ```text
+//! Q_x  = l_x + F_xᵀ V_x'                  Q_u  = l_u + F_uᵀ V_x'
+//! Q_xx = l_xx + F_xᵀ V_xx' F_x (+ V_x'·F_xx)    Q_ux = F_uᵀ V_xx' F_x (+ V_x'·F_ux)
+//! Q_uu = l_uu + F_uᵀ V_xx' F_u (+ V_x'·F_uu)
+//! k = −(Q_uu + μI)⁻¹ Q_u,  K = −(Q_uu + μI)⁻¹ Q_ux
+//! V_x  = Q_x + Kᵀ Q_uu k + Kᵀ Q_u + Q_uxᵀ k
+//! V_xx = Q_xx + Kᵀ Q_uu K + Kᵀ Q_ux + Q_uxᵀ K
+//! ```
+//!
+//! The terms in parentheses (second derivatives of the dynamics contracted with V_x') make
+//! full second-order DDP ([`DdpVariant::Full`]); dropping them gives iLQR, a Gauss–Newton
+//! method ([`DdpVariant::Ilqr`]). Forward, with step α:
+//! u_k = ū_k + α k_k + K_k (x_k − x̄_k), x_{k+1} = F(x_k, u_k); the step is accepted when the
+//! actual reduction is a fraction of the expected one, ΔJ(α) = −(α Σ kᵀQ_u + ½ α² Σ kᵀQ_uu k);
+//! otherwise α shrinks (backtracking).
+//!
+//! μ is a Levenberg–Marquardt regularization of Q_uu with the adaptive schedule of Tassa et al.:
+//! it grows (μ ← max(μ_min, μ·Δ), Δ ← max(Δ_0, Δ·Δ_0)) when Q_uu + μI is not positive definite
+//! or the line search fails, and shrinks (Δ ← min(1/Δ_0, Δ/Δ_0), μ ← μ·Δ, or 0 below μ_min)
+//! after an accepted step. With box bounds on u, k solves the box QP
+//! min_δu ½ δuᵀ(Q_uu + μI)δu + Q_uᵀ δu, ū + δu ∈ [lower, upper] by projected Newton
+//! ([`box_qp`]), and the rows of K for clamped controls are zero.
+//!
+//! Iterations stop when the relative cost reduction of an accepted step falls below
+//! `tol_cost`, when the (projected) gradient ‖∂J/∂u‖ — computed exactly by the adjoint
+//! recursion λ_N = g_x, λ_k = l_x + F_xᵀ λ_{k+1}, ∂J/∂u_k = l_u + F_uᵀ λ_{k+1} — falls below
+//! `tol_grad`, after `max_iterations` forward passes, or when μ exceeds `mu_max`.
+//! The returned gains always come from a backward pass at the returned trajectory.
+//!
+//! ## References
+//! - D. H. Jacobson, D. Q. Mayne, *Differential Dynamic Programming*, Elsevier, 1970.
+//! - W. Li, E. Todorov, *Iterative linear quadratic regulator design for nonlinear biological
+//!   movement systems*, ICINCO 2004 (iLQR).
+//! - Y. Tassa, T. Erez, E. Todorov, *Synthesis and stabilization of complex behaviors through
+//!   online trajectory optimization*, IROS 2012 (regularization schedule, line search).
+//! - Y. Tassa, N. Mansard, E. Todorov, *Control-limited differential dynamic programming*,
+//!   ICRA 2014 (projected-Newton box QP).
+
+use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
+use super::{ControlError, QuadraticCost, Rk4Map, Rk4Workspace};
+use crate::physics::linearize::Linearize;
+use nalgebra::{DMatrix, DVector};
+
+/// Which DDP variant to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DdpVariant {
+    /// iLQR: first-order dynamics (Gauss–Newton Hessian).
+    Ilqr,
+    /// Full second-order DDP: adds V_x·F_zz, with F_zz by differences of the exact Jacobians.
+    Full,
+}
+
+/// Box bounds lower ≤ u ≤ upper on every control.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlBounds {
+    /// Lower bounds (m).
+    pub lower: DVector<f64>,
+    /// Upper bounds (m).
+    pub upper: DVector<f64>,
+}
+
+/// Settings of [`solve`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct DdpOptions {
+    /// iLQR or full DDP.
+    pub variant: DdpVariant,
+    /// Maximum number of forward passes.
+    pub max_iterations: usize,
+    /// Stop when an accepted step reduces the cost by less than `tol_cost`·|J|.
+    pub tol_cost: f64,
+    /// Stop when the projected gradient norm ‖∂J/∂u‖₂ is below this.
+    pub tol_grad: f64,
+    /// Initial regularization μ (0: start with pure Newton steps).
+    pub mu_init: f64,
+    /// Smallest nonzero μ; smaller values snap to 0.
+    pub mu_min: f64,
+    /// Give up when μ exceeds this.
+    pub mu_max: f64,
+    /// Base factor Δ_0 > 1 of the regularization schedule.
+    pub mu_factor: f64,
+    /// Backtracking factor for α, in (0, 1).
+    pub backtrack: f64,
+    /// Smallest α tried before the line search counts as failed.
+    pub min_step: f64,
+    /// Accept a step when actual reduction ≥ `armijo` × expected reduction.
+    pub armijo: f64,
+    /// Optional box bounds on u.
+    pub bounds: Option<ControlBounds>,
+    /// Relative difference step for the second derivatives of full DDP.
+    pub fd_step: f64,
+}
+
+impl Default for DdpOptions {
+    fn default() -> Self {
+        Self {
+            variant: DdpVariant::Ilqr,
+            max_iterations: 200,
+            tol_cost: 1e-8,
+            tol_grad: 1e-7,
+            mu_init: 0.0,
+            mu_min: 1e-6,
+            mu_max: 1e10,
+            mu_factor: 1.6,
+            backtrack: 0.5,
+            min_step: 1e-4,
+            armijo: 1e-4,
+            bounds: None,
+            fd_step: 1e-5,
+        }
+    }
+}
+
+/// One forward pass of [`solve`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IterationRecord {
+    /// Iteration number, from 1.
+    pub iteration: usize,
+    /// Cost after this iteration (unchanged when the step was rejected).
+    pub cost: f64,
+    /// Regularization μ used by this iteration's backward pass.
+    pub regularization: f64,
+    /// Accepted step size α, or 0 when the line search failed.
+    pub step: f64,
+    /// Projected gradient norm ‖∂J/∂u‖₂ at the start of the iteration.
+    pub gradient_norm: f64,
+    /// Reduction the quadratic model predicted for the accepted α (for α = 1 when rejected).
+    pub expected_reduction: f64,
+    /// Backward passes that failed (Q_uu + μI not positive definite) before this one worked.
+    pub backward_failures: usize,
+    /// Whether the step was accepted.
+    pub accepted: bool,
+}
+
+/// Why [`solve`] stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Termination {
+    /// Relative cost reduction below `tol_cost`.
+    CostChange,
+    /// Projected gradient norm below `tol_grad`.
+    Gradient,
+    /// `max_iterations` forward passes done.
+    MaxIterations,
+    /// μ exceeded `mu_max` (no descent found; the gains may be stale).
+    RegularizationLimit,
+}
+
+/// The result of [`solve`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct DdpSolution {
+    /// Optimized states x̄_0..x̄_N.
+    pub x: Vec<DVector<f64>>,
+    /// Optimized controls ū_0..ū_{N−1}.
+    pub u: Vec<DVector<f64>>,
+    /// Feedback gains K_0..K_{N−1} (m × n) of the last backward pass, at (x̄, ū).
+    pub gains: Vec<DMatrix<f64>>,
+    /// Feedforward steps k_0..k_{N−1} of the last backward pass (≈ 0 at convergence).
+    pub feedforward: Vec<DVector<f64>>,
+    /// Final cost J(x̄, ū).
+    pub cost: f64,
+    /// Projected gradient norm at the returned trajectory.
+    pub gradient_norm: f64,
+    /// Regularization μ at the end.
+    pub regularization: f64,
+    /// One record per forward pass.
+    pub trace: Vec<IterationRecord>,
+    /// Why the solver stopped.
+    pub termination: Termination,
+}
+
+impl DdpSolution {
+    /// Number of accepted steps.
+    pub fn accepted_steps(&self) -> usize {
+        self.trace.iter().filter(|r| r.accepted).count()
+    }
+}
+
+/// Scratch of [`box_qp`], sized for m controls.
+#[derive(Debug, Clone)]
+pub struct BoxQpWorkspace {
+    /// Solution δu after a successful call.
+    pub x: DVector<f64>,
+    /// `free[i]`: control i is not at an active bound.
+    pub free: Vec<bool>,
+    /// Indices of the free controls (its length is the factor's dimension).
+    pub free_index: Vec<usize>,
+    /// Cholesky factor (lower triangle of the leading block) of H restricted to the free set.
+    pub factor: DMatrix<f64>,
+    grad: DVector<f64>,
+    trial: DVector<f64>,
+    search: DVector<f64>,
+    rhs: Vec<f64>,
+}
+
+impl BoxQpWorkspace {
+    /// Buffers for an m-dimensional box QP.
+    pub fn new(m: usize) -> Self {
+        Self {
+            x: DVector::zeros(m),
+            free: vec![true; m],
+            free_index: Vec::with_capacity(m),
+            factor: DMatrix::zeros(m, m),
+            grad: DVector::zeros(m),
+            trial: DVector::zeros(m),
+            search: DVector::zeros(m),
+            rhs: Vec::with_capacity(m),
+        }
+    }
+}
+
+fn qp_value(h: &DMatrix<f64>, g: &DVector<f64>, x: &DVector<f64>) -> f64 {
+    let n = x.len();
+    let mut v = 0.0;
+    for j in 0..n {
+        v += g[j] * x[j];
+        for i in 0..n {
+            v += 0.5 * x[i] * h[(i, j)] * x[j];
+        }
+    }
+    v
+}
+
+/// Projected-Newton solution of min ½ xᵀHx + gᵀx subject to lower ≤ x ≤ upper (Tassa, Mansard,
+/// Todorov 2014), warm-started at clamp(`x0`). On success the solution, the free set and the
+/// Cholesky factor of H on the free set are in `ws`; returns false when H restricted to the
+/// free set is not positive definite. Does not allocate.
+pub fn box_qp(
+    h: &DMatrix<f64>,
+    g: &DVector<f64>,
+    lower: &DVector<f64>,
+    upper: &DVector<f64>,
+    x0: &DVector<f64>,
+    ws: &mut BoxQpWorkspace,
+) -> bool {
+    let m = g.len();
+    for i in 0..m {
+        ws.x[i] = x0[i].clamp(lower[i], upper[i]);
+    }
+    let mut value = qp_value(h, g, &ws.x);
+    let mut factored_free: Option<usize> = None; // number of free controls of the current factor
+    for iter in 0..100 {
+        // gradient and active set
+        ws.grad.copy_from(g);
+        ws.grad.gemv(1.0, h, &ws.x, 1.0);
+        let mut changed = false;
+        for i in 0..m {
+            let clamped = (ws.x[i] <= lower[i] && ws.grad[i] > 0.0)
+                || (ws.x[i] >= upper[i] && ws.grad[i] < 0.0);
+            if ws.free[i] == clamped || iter == 0 {
+                changed = true;
+            }
+            ws.free[i] = !clamped;
+        }
+        ws.free_index.clear();
+        ws.free_index.extend((0..m).filter(|&i| ws.free[i]));
+        let nf = ws.free_index.len();
+        if changed || factored_free.is_none() {
+            for (a, &i) in ws.free_index.iter().enumerate() {
+                for (b, &j) in ws.free_index.iter().enumerate() {
+                    ws.factor[(a, b)] = h[(i, j)];
+                }
+            }
+            if !cholesky_in_place(&mut ws.factor, nf) {
+                return false;
+            }
+            factored_free = Some(nf);
+        }
+        if nf == 0 {
+            return true; // every control at an active bound
+        }
+        let gnorm: f64 = ws
+            .free_index
+            .iter()
+            .map(|&i| ws.grad[i].powi(2))
+            .sum::<f64>();
+        if gnorm.sqrt() < 1e-12 * (1.0 + g.amax()) {
+            return true;
+        }
+        // Newton step on the free set with the clamped controls fixed:
+        // x_f* = −H_ff⁻¹ (g_f + H_fc x_c); search = x* − x on the free set, 0 elsewhere.
+        ws.rhs.clear();
+        for &i in &ws.free_index {
+            let mut s = g[i];
+            for j in 0..m {
+                if !ws.free[j] {
+                    s += h[(i, j)] * ws.x[j];
+                }
+            }
+            ws.rhs.push(-s);
+        }
+        cholesky_solve_in_place(&ws.factor, nf, &mut ws.rhs);
+        ws.search.fill(0.0);
+        for (a, &i) in ws.free_index.iter().enumerate() {
+            ws.search[i] = ws.rhs[a] - ws.x[i];
+        }
+        let slope = ws.search.dot(&ws.grad);
+        if slope >= 0.0 {
+            return true; // no descent direction left: converged
+        }
+        // Armijo backtracking along the projected path.
+        let mut step = 1.0;
+        let new_value = loop {
+            for i in 0..m {
+                ws.trial[i] = (ws.x[i] + step * ws.search[i]).clamp(lower[i], upper[i]);
+            }
+            let v = qp_value(h, g, &ws.trial);
+            if (v - value) / (step * slope) >= 0.1 {
+                break Some(v);
+            }
+            step *= 0.6;
+            if step < 1e-20 {
+                break None;
+            }
+        };
+        let Some(new_value) = new_value else {
+            return true;
+        };
+        std::mem::swap(&mut ws.x, &mut ws.trial);
+        let improvement = value - new_value;
+        value = new_value;
+        if improvement < 1e-14 * (1.0 + value.abs()) {
+            // Recompute the free set and factor at the final point on the next pass.
+            factored_free = None;
+        }
+    }
+    true
+}
+
+/// Exact gradient ∂J/∂u_k of the total cost for the controls `us` from `x0` (adjoint method).
+pub fn cost_gradient<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    x0: &DVector<f64>,
+    us: &[DVector<f64>],
+) -> Result<Vec<DVector<f64>>, ControlError> {
+    let (n, m) = (map.state_dim(), map.control_dim());
+    let xs = map.rollout(x0, us)?;
+    let mut ws = map.workspace();
+    let (mut fx, mut fu) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
+    let (mut lx, mut lu) = (DVector::zeros(n), DVector::zeros(m));
+    let (mut lxx, mut luu) = (DMatrix::zeros(n, n), DMatrix::zeros(m, m));
+    let mut lam = DVector::zeros(n);
+    cost.terminal_derivatives(&xs[us.len()], &mut lam, &mut lxx);
+    let mut grads = vec![DVector::zeros(m); us.len()];
+    for k in (0..us.len()).rev() {
+        map.jacobians(&xs[k], &us[k], &mut fx, &mut fu, &mut ws);
+        cost.running_derivatives(k, &xs[k], &us[k], &mut lx, &mut lu, &mut lxx, &mut luu);
+        grads[k] = &lu + fu.transpose() * &lam;
+        lam = &lx + fx.transpose() * &lam;
+    }
+    Ok(grads)
+}
+
+/// Per-trajectory buffers of the solver, allocated once per [`solve`] call.
+struct Buffers {
+    fx: Vec<DMatrix<f64>>,
+    fu: Vec<DMatrix<f64>>,
+    fzz: Vec<Vec<DMatrix<f64>>>,
+    kff: Vec<DVector<f64>>,
+    gains: Vec<DMatrix<f64>>,
+    x_new: Vec<DVector<f64>>,
+    u_new: Vec<DVector<f64>>,
+    vx: DVector<f64>,
+    vxx: DMatrix<f64>,
+    lam: DVector<f64>,
+    lam_tmp: DVector<f64>,
+    lx: DVector<f64>,
+    lu: DVector<f64>,
+    lxx: DMatrix<f64>,
+    luu: DMatrix<f64>,
+    qx: DVector<f64>,
+    qu: DVector<f64>,
+    qxx: DMatrix<f64>,
+    quu: DMatrix<f64>,
+    qux: DMatrix<f64>,
+    quu_reg: DMatrix<f64>,
+    vxx_fx: DMatrix<f64>,
+    vxx_fu: DMatrix<f64>,
+    gu: DVector<f64>,
+    tm: DVector<f64>,
+    tmn: DMatrix<f64>,
+    dx: DVector<f64>,
+    lo: DVector<f64>,
+    hi: DVector<f64>,
+    qp: BoxQpWorkspace,
+    rk4: Rk4Workspace,
+}
+
+impl Buffers {
+    fn new(n: usize, m: usize, horizon: usize, full: bool, rk4: Rk4Workspace) -> Self {
+        let vn = || DVector::zeros(n);
+        let vm = || DVector::zeros(m);
+        Self {
+            fx: vec![DMatrix::zeros(n, n); horizon],
+            fu: vec![DMatrix::zeros(n, m); horizon],
+            fzz: if full {
+                vec![vec![DMatrix::zeros(n + m, n + m); n]; horizon]
+            } else {
+                Vec::new()
+            },
+            kff: vec![vm(); horizon],
+            gains: vec![DMatrix::zeros(m, n); horizon],
+            x_new: vec![vn(); horizon + 1],
+            u_new: vec![vm(); horizon],
+            vx: vn(),
+            vxx: DMatrix::zeros(n, n),
+            lam: vn(),
+            lam_tmp: vn(),
+            lx: vn(),
+            lu: vm(),
+            lxx: DMatrix::zeros(n, n),
+            luu: DMatrix::zeros(m, m),
+            qx: vn(),
+            qu: vm(),
+            qxx: DMatrix::zeros(n, n),
+            quu: DMatrix::zeros(m, m),
+            qux: DMatrix::zeros(m, n),
+            quu_reg: DMatrix::zeros(m, m),
+            vxx_fx: DMatrix::zeros(n, n),
+            vxx_fu: DMatrix::zeros(n, m),
+            gu: vm(),
+            tm: vm(),
+            tmn: DMatrix::zeros(m, n),
+            dx: vn(),
+            lo: vm(),
+            hi: vm(),
+            qp: BoxQpWorkspace::new(m),
+            rk4,
+        }
+    }
+}
+
+/// Result of a successful backward pass: Σ kᵀQ_u, Σ ½ kᵀQ_uu k, projected gradient norm.
+struct BackwardResult {
+    dv1: f64,
+    dv2: f64,
+    gradient_norm: f64,
+}
+
+/// Backward pass at (xs, us) with regularization μ; `None` when Q_uu + μI is not positive
+/// definite at some step. Does not allocate.
+fn backward(
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    mu: f64,
+    options: &DdpOptions,
+    b: &mut Buffers,
+) -> Option<BackwardResult> {
+    let horizon = us.len();
+    let n = xs[0].len();
+    let m = us[0].len();
+    let full = options.variant == DdpVariant::Full;
+    cost.terminal_derivatives(&xs[horizon], &mut b.vx, &mut b.vxx);
+    b.lam.copy_from(&b.vx);
+    let (mut dv1, mut dv2, mut g2) = (0.0, 0.0, 0.0);
+    for k in (0..horizon).rev() {
+        let (fx, fu) = (&b.fx[k], &b.fu[k]);
+        cost.running_derivatives(
+            k, &xs[k], &us[k], &mut b.lx, &mut b.lu, &mut b.lxx, &mut b.luu,
+        );
+        // Exact (adjoint) gradient, projected on the bounds.
+        b.gu.copy_from(&b.lu);
+        b.gu.gemv_tr(1.0, fu, &b.lam, 1.0);
+        if let Some(bounds) = &options.bounds {
+            for i in 0..m {
+                let (u, g) = (us[k][i], b.gu[i]);
+                if (u <= bounds.lower[i] && g > 0.0) || (u >= bounds.upper[i] && g < 0.0) {
+                    b.gu[i] = 0.0;
+                }
+            }
+        }
+        g2 += b.gu.norm_squared();
+        b.lam_tmp.copy_from(&b.lx);
+        b.lam_tmp.gemv_tr(1.0, fx, &b.lam, 1.0);
+        std::mem::swap(&mut b.lam, &mut b.lam_tmp);
+
+        // Q function.
+        b.qx.copy_from(&b.lx);
+        b.qx.gemv_tr(1.0, fx, &b.vx, 1.0);
+        b.qu.copy_from(&b.lu);
+        b.qu.gemv_tr(1.0, fu, &b.vx, 1.0);
+        b.vxx.mul_to(fx, &mut b.vxx_fx);
+        b.vxx.mul_to(fu, &mut b.vxx_fu);
+        b.qxx.copy_from(&b.lxx);
+        b.qxx.gemm_tr(1.0, fx, &b.vxx_fx, 1.0);
+        b.quu.copy_from(&b.luu);
+        b.quu.gemm_tr(1.0, fu, &b.vxx_fu, 1.0);
+        b.qux.gemm_tr(1.0, fu, &b.vxx_fx, 0.0);
+        if full {
+            for (a, hess) in b.fzz[k].iter().enumerate() {
+                let w = b.vx[a];
+                for j in 0..n {
+                    for i in 0..n {
+                        b.qxx[(i, j)] += w * hess[(i, j)];
+                    }
+                    for i in 0..m {
+                        b.qux[(i, j)] += w * hess[(n + i, j)];
+                    }
+                }
+                for j in 0..m {
+                    for i in 0..m {
+                        b.quu[(i, j)] += w * hess[(n + i, n + j)];
+                    }
+                }
+            }
+        }
+        b.quu_reg.copy_from(&b.quu);
+        for i in 0..m {
+            b.quu_reg[(i, i)] += mu;
+        }
+
+        // Gains.
+        let (kff, gain) = (&mut b.kff[k], &mut b.gains[k]);
+        match &options.bounds {
+            None => {
+                if !cholesky_in_place(&mut b.quu_reg, m) {
+                    return None;
+                }
+                for i in 0..m {
+                    kff[i] = -b.qu[i];
+                }
+                cholesky_solve_in_place(&b.quu_reg, m, kff.as_mut_slice());
+                gain.copy_from(&b.qux);
+                gain.neg_mut();
+                for j in 0..n {
+                    cholesky_solve_in_place(&b.quu_reg, m, gain.column_mut(j).as_mut_slice());
+                }
+            }
+            Some(bounds) => {
+                b.lo.copy_from(&bounds.lower);
+                b.lo -= &us[k];
+                b.hi.copy_from(&bounds.upper);
+                b.hi -= &us[k];
+                // Warm start from the previous iteration's feedforward step.
+                if !box_qp(&b.quu_reg, &b.qu, &b.lo, &b.hi, kff, &mut b.qp) {
+                    return None;
+                }
+                kff.copy_from(&b.qp.x);
+                gain.fill(0.0);
+                let nf = b.qp.free_index.len();
+                for j in 0..n {
+                    b.qp.rhs.clear();
+                    for &i in &b.qp.free_index {
+                        b.qp.rhs.push(-b.qux[(i, j)]);
+                    }
+                    cholesky_solve_in_place(&b.qp.factor, nf, &mut b.qp.rhs);
+                    for (a, &i) in b.qp.free_index.iter().enumerate() {
+                        gain[(i, j)] = b.qp.rhs[a];
+                    }
+                }
+            }
+        }
+
+        // Expected reduction and value update.
+        b.tm.gemv(1.0, &b.quu, kff, 0.0);
+        dv1 += kff.dot(&b.qu);
+        dv2 += 0.5 * kff.dot(&b.tm);
+        b.vx.copy_from(&b.qx);
+        b.vx.gemv_tr(1.0, gain, &b.tm, 1.0);
+        b.vx.gemv_tr(1.0, gain, &b.qu, 1.0);
+        b.vx.gemv_tr(1.0, &b.qux, kff, 1.0);
+        b.tmn.gemm(1.0, &b.quu, gain, 0.0);
+        b.vxx.copy_from(&b.qxx);
+        b.vxx.gemm_tr(1.0, gain, &b.tmn, 1.0);
+        b.vxx.gemm_tr(1.0, gain, &b.qux, 1.0);
+        b.vxx.gemm_tr(1.0, &b.qux, gain, 1.0);
+        symmetrize(&mut b.vxx);
+    }
+    Some(BackwardResult {
+        dv1,
+        dv2,
+        gradient_norm: g2.sqrt(),
+    })
+}
+
+/// Forward pass with step α into `b.x_new`, `b.u_new`; returns the new cost, or `None` when
+/// the rollout is not finite. Does not allocate.
+fn forward<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    alpha: f64,
+    options: &DdpOptions,
+    b: &mut Buffers,
+) -> Option<f64> {
+    let horizon = us.len();
+    b.x_new[0].copy_from(&xs[0]);
+    let mut total = 0.0;
+    for k in 0..horizon {
+        b.dx.copy_from(&b.x_new[k]);
+        b.dx -= &xs[k];
+        let u = &mut b.u_new[k];
+        u.copy_from(&us[k]);
+        u.axpy(alpha, &b.kff[k], 1.0);
+        u.gemv(1.0, &b.gains[k], &b.dx, 1.0);
+        if let Some(bounds) = &options.bounds {
+            for i in 0..u.len() {
+                u[i] = u[i].clamp(bounds.lower[i], bounds.upper[i]);
+            }
+        }
+        total += cost.running(k, &b.x_new[k], u);
+        let (done, rest) = b.x_new.split_at_mut(k + 1);
+        map.step(&done[k], u, &mut rest[0], &mut b.rk4);
+        if !rest[0].iter().all(|v| v.is_finite()) {
+            return None;
+        }
+    }
+    total += cost.terminal(&b.x_new[horizon]);
+    total.is_finite().then_some(total)
+}
+
+fn compute_derivatives<M: Linearize>(
+    map: &Rk4Map<M>,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    options: &DdpOptions,
+    b: &mut Buffers,
+) {
+    for k in 0..us.len() {
+        map.jacobians(&xs[k], &us[k], &mut b.fx[k], &mut b.fu[k], &mut b.rk4);
+        if options.variant == DdpVariant::Full {
+            map.second_derivatives(&xs[k], &us[k], options.fd_step, &mut b.fzz[k], &mut b.rk4);
+        }
+    }
+}
+
+fn validate<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    x0: &DVector<f64>,
+    u_init: &[DVector<f64>],
+    options: &DdpOptions,
+) -> Result<(), ControlError> {
+    let (n, m) = (map.state_dim(), map.control_dim());
+    if u_init.is_empty() {
+        return Err(ControlError::EmptyHorizon);
+    }
+    let dim = |what, expected, found| {
+        if expected == found {
+            Ok(())
+        } else {
+            Err(ControlError::DimensionMismatch {
+                what,
+                expected,
+                found,
+            })
+        }
+    };
+    dim("initial state", n, x0.len())?;
+    for u in u_init {
+        dim("initial control", m, u.len())?;
+    }
+    if let Some(bounds) = &options.bounds {
+        dim("lower bounds", m, bounds.lower.len())?;
+        dim("upper bounds", m, bounds.upper.len())?;
+        for i in 0..m {
+            let (lower, upper) = (bounds.lower[i], bounds.upper[i]);
+            if lower.is_nan() || upper.is_nan() || lower > upper {
+                return Err(ControlError::InvalidBounds {
+                    index: i,
+                    lower,
+                    upper,
+                });
+            }
+        }
+    }
+    cost.validate(n, m, u_init.len())
+}
+
+/// Optimizes the controls from `x0`, starting from `u_init` (N controls; clamped to the bounds),
+/// for `cost` under the RK4 dynamics `map` (needs [`Linearize`]). Returns the trajectory, the
+/// feedback gains and the per-iteration trace.
+pub fn solve<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    x0: &DVector<f64>,
+    u_init: &[DVector<f64>],
+    options: &DdpOptions,
+) -> Result<DdpSolution, ControlError> {
+    validate(map, cost, x0, u_init, options)?;
+    let (n, m, horizon) = (map.state_dim(), map.control_dim(), u_init.len());
+    let mut us = u_init.to_vec();
+    if let Some(bounds) = &options.bounds {
+        for u in &mut us {
+            for i in 0..m {
+                u[i] = u[i].clamp(bounds.lower[i], bounds.upper[i]);
+            }
+        }
+    }
+    let mut xs = map.rollout(x0, &us)?;
+    let mut j = cost.total(&xs, &us);
+    let full = options.variant == DdpVariant::Full;
+    let mut b = Buffers::new(n, m, horizon, full, map.workspace());
+    let mut mu = options.mu_init;
+    let mut delta = 1.0_f64;
+    let increase = |mu: &mut f64, delta: &mut f64| {
+        *delta = options.mu_factor.max(*delta * options.mu_factor);
+        *mu = options.mu_min.max(*mu * *delta);
+    };
+    let mut trace = Vec::new();
+    let mut pending: Option<Termination> = None;
+    let mut need_derivatives = true;
+    let mut iteration = 0;
+    let (termination, gradient_norm) = loop {
+        if need_derivatives {
+            compute_derivatives(map, &xs, &us, options, &mut b);
+            need_derivatives = false;
+        }
+        let mut failures = 0;
+        let result = loop {
+            match backward(cost, &xs, &us, mu, options, &mut b) {
+                Some(r) => break Some(r),
+                None => {
+                    failures += 1;
+                    increase(&mut mu, &mut delta);
+                    if mu > options.mu_max {
+                        break None;
+                    }
+                }
+            }
+        };
+        let Some(result) = result else {
+            break (Termination::RegularizationLimit, f64::NAN);
+        };
+        if let Some(t) = pending {
+            break (t, result.gradient_norm);
+        }
+        if result.gradient_norm < options.tol_grad {
+            break (Termination::Gradient, result.gradient_norm);
+        }
+        if iteration >= options.max_iterations {
+            break (Termination::MaxIterations, result.gradient_norm);
+        }
+        iteration += 1;
+        // Backtracking line search.
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        while alpha >= options.min_step {
+            let expected = -(alpha * result.dv1 + alpha * alpha * result.dv2);
+            if let Some(j_new) = forward(map, cost, &xs, &us, alpha, options, &mut b) {
+                let actual = j - j_new;
+                let ok = if expected > 0.0 {
+                    actual >= options.armijo * expected
+                } else {
+                    actual > 0.0
+                };
+                if ok {
+                    accepted = Some((alpha, j_new, expected));
+                    break;
+                }
+            }
+            alpha *= options.backtrack;
+        }
+        let mu_used = mu;
+        match accepted {
+            Some((alpha, j_new, expected)) => {
+                std::mem::swap(&mut xs, &mut b.x_new);
+                std::mem::swap(&mut us, &mut b.u_new);
+                let reduction = j - j_new;
+                if reduction < options.tol_cost * j.abs() {
+                    pending = Some(Termination::CostChange);
+                }
+                j = j_new;
+                need_derivatives = true;
+                delta = (1.0 / options.mu_factor).min(delta / options.mu_factor);
+                mu = if mu * delta > options.mu_min {
+                    mu * delta
+                } else {
+                    0.0
+                };
+                trace.push(IterationRecord {
+                    iteration,
+                    cost: j,
+                    regularization: mu_used,
+                    step: alpha,
+                    gradient_norm: result.gradient_norm,
+                    expected_reduction: expected,
+                    backward_failures: failures,
+                    accepted: true,
+                });
+            }
+            None => {
+                trace.push(IterationRecord {
+                    iteration,
+                    cost: j,
+                    regularization: mu_used,
+                    step: 0.0,
+                    gradient_norm: result.gradient_norm,
+                    expected_reduction: -(result.dv1 + result.dv2),
+                    backward_failures: failures,
+                    accepted: false,
+                });
+                increase(&mut mu, &mut delta);
+                if mu > options.mu_max {
+                    break (Termination::RegularizationLimit, result.gradient_norm);
+                }
+            }
+        }
+    };
+    Ok(DdpSolution {
+        x: xs,
+        u: us,
+        gains: b.gains,
+        feedforward: b.kff,
+        cost: j,
+        gradient_norm,
+        regularization: mu,
+        trace,
+        termination,
+    })
+}
