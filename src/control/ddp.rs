@@ -817,3 +817,285 @@ pub fn solve<M: Linearize>(
         termination,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::lqr;
+    use crate::control::test_models::LinearOde;
+    use crate::control::StateCost;
+    use crate::physics::acrobot::Acrobot;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use std::f64::consts::FRAC_PI_2;
+
+    fn linear_problem() -> (Rk4Map<LinearOde>, QuadraticCost) {
+        // A damped oscillator and an unstable mode, two inputs.
+        let a = DMatrix::from_row_slice(3, 3, &[0.0, 1.0, 0.0, -2.0, -0.3, 0.5, 0.0, 0.2, 0.4]);
+        let b = DMatrix::from_row_slice(3, 2, &[0.0, 0.0, 1.0, 0.0, 0.3, 1.0]);
+        let map = Rk4Map::new(LinearOde { a, b }, 0.05).unwrap();
+        let cost = QuadraticCost {
+            dt: 0.05,
+            r: DMatrix::from_row_slice(2, 2, &[1.0, 0.2, 0.2, 0.5]),
+            state: Some(StateCost {
+                weight: DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1, 2.0])),
+                reference: vec![DVector::zeros(3)],
+            }),
+            q_final: DMatrix::from_diagonal(&DVector::from_vec(vec![50.0, 5.0, 20.0])),
+            x_final: DVector::zeros(3),
+        };
+        (map, cost)
+    }
+
+    #[test]
+    fn linear_quadratic_problem_is_solved_in_one_step_and_equals_lqr() {
+        let (map, cost) = linear_problem();
+        let horizon = 60;
+        let x0 = DVector::from_vec(vec![1.0, -0.5, 0.8]);
+        // Independent reference: LQR around the zero trajectory (feasible for a linear system),
+        // rolled out in closed loop from x0.
+        let zeros_x = vec![DVector::zeros(3); horizon + 1];
+        let zeros_u = vec![DVector::zeros(2); horizon];
+        let ctl = lqr::track(&map, &cost, &zeros_x, &zeros_u).unwrap();
+        let mut x_lqr = vec![x0.clone()];
+        let mut u_lqr = Vec::new();
+        let mut ws = map.workspace();
+        for k in 0..horizon {
+            let u = ctl.policy(x_lqr[k].as_slice(), k);
+            let mut next = DVector::zeros(3);
+            map.step(&x_lqr[k], &u, &mut next, &mut ws);
+            u_lqr.push(u);
+            x_lqr.push(next);
+        }
+        let j_lqr = cost.total(&x_lqr, &u_lqr);
+        assert!((ctl.value(x0.as_slice(), 0) - j_lqr).abs() < 1e-9 * j_lqr);
+        for variant in [DdpVariant::Ilqr, DdpVariant::Full] {
+            let options = DdpOptions {
+                variant,
+                ..DdpOptions::default()
+            };
+            let sol = solve(&map, &cost, &x0, &zeros_u, &options).unwrap();
+            assert_eq!(sol.accepted_steps(), 1, "{variant:?}: {:?}", sol.trace);
+            assert_eq!(sol.trace[0].step, 1.0);
+            assert_eq!(sol.termination, Termination::Gradient);
+            assert!((sol.cost - j_lqr).abs() < 1e-9 * j_lqr);
+            // The model's predicted reduction was exact.
+            let first = &sol.trace[0];
+            let initial = cost.total(&map.rollout(&x0, &zeros_u).unwrap(), &zeros_u);
+            assert!((initial - first.cost - first.expected_reduction).abs() < 1e-9 * initial);
+            for k in 0..horizon {
+                assert!((&sol.u[k] - &u_lqr[k]).amax() < 1e-9, "u[{k}]");
+                assert!((&sol.x[k + 1] - &x_lqr[k + 1]).amax() < 1e-9, "x[{k}]");
+                assert!((&sol.gains[k] - &ctl.gains[k]).amax() < 1e-9, "K[{k}]");
+                assert!(sol.feedforward[k].amax() < 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn adjoint_gradient_matches_finite_differences_of_the_cost() {
+        let map = Rk4Map::new(Acrobot::default(), 0.02).unwrap();
+        let mut cost = swing_up_cost(0.02);
+        cost.state = Some(StateCost {
+            weight: DMatrix::identity(4, 4) * 0.5,
+            reference: vec![DVector::from_vec(vec![0.0, 0.5, 0.0, 0.0])],
+        });
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let us: Vec<DVector<f64>> = (0..40)
+            .map(|_| DVector::from_element(1, rng.random_range(-3.0..3.0)))
+            .collect();
+        let x0 = DVector::from_vec(vec![-FRAC_PI_2 + 0.2, 0.1, 0.0, 0.3]);
+        let grads = cost_gradient(&map, &cost, &x0, &us).unwrap();
+        let total = |us: &[DVector<f64>]| cost.total(&map.rollout(&x0, us).unwrap(), us);
+        let h = 1e-6;
+        for k in [0, 7, 20, 39] {
+            let (mut up, mut um) = (us.clone(), us.clone());
+            up[k][0] += h;
+            um[k][0] -= h;
+            let fd = (total(&up) - total(&um)) / (2.0 * h);
+            assert!(
+                (fd - grads[k][0]).abs() < 1e-6 * fd.abs().max(1.0),
+                "k = {k}: {fd} vs {}",
+                grads[k][0]
+            );
+        }
+    }
+
+    #[test]
+    fn box_qp_satisfies_the_kkt_conditions() {
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        let mut ws = BoxQpWorkspace::new(3);
+        let mut clamped_seen = 0;
+        for _ in 0..50 {
+            let a = DMatrix::from_fn(3, 3, |_, _| rng.random_range(-1.0..1.0));
+            let h = &a * a.transpose() + DMatrix::identity(3, 3) * 0.1;
+            let g = DVector::from_fn(3, |_, _| rng.random_range(-3.0..3.0));
+            let lower = DVector::from_fn(3, |_, _| rng.random_range(-1.0..0.0));
+            let upper = DVector::from_fn(3, |_, _| rng.random_range(0.0..1.0));
+            let x0 = DVector::from_fn(3, |_, _| rng.random_range(-2.0..2.0));
+            assert!(box_qp(&h, &g, &lower, &upper, &x0, &mut ws));
+            let grad = &g + &h * &ws.x;
+            for i in 0..3 {
+                let x = ws.x[i];
+                assert!(x >= lower[i] && x <= upper[i]);
+                if x <= lower[i] {
+                    assert!(grad[i] >= -1e-9, "{grad} at {}", ws.x);
+                    clamped_seen += 1;
+                } else if x >= upper[i] {
+                    assert!(grad[i] <= 1e-9, "{grad} at {}", ws.x);
+                    clamped_seen += 1;
+                } else {
+                    assert!(grad[i].abs() < 1e-9, "{grad} at {}", ws.x);
+                }
+            }
+        }
+        assert!(clamped_seen > 10, "the test must exercise active bounds");
+        // An indefinite Hessian with an interior free set is reported.
+        let h = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, -1.0]);
+        let mut ws = BoxQpWorkspace::new(2);
+        let b = DVector::from_element(2, 1.0);
+        assert!(!box_qp(
+            &h,
+            &DVector::zeros(2),
+            &(-&b),
+            &b,
+            &DVector::zeros(2),
+            &mut ws
+        ));
+    }
+
+    /// ½∫u² + (x − handstand)ᵀ Q_f (x − handstand).
+    fn swing_up_cost(dt: f64) -> QuadraticCost {
+        QuadraticCost::effort(
+            dt,
+            1,
+            DMatrix::from_diagonal(&DVector::from_vec(vec![100.0, 100.0, 10.0, 10.0])),
+            DVector::from_vec(vec![FRAC_PI_2, 0.0, 0.0, 0.0]),
+        )
+    }
+
+    /// Swing-up from hanging down, (−90°, 0, 0, 0), over `seconds` at step `dt`.
+    fn swing_up(
+        variant: DdpVariant,
+        bounds: Option<f64>,
+        seconds: f64,
+        dt: f64,
+        max_iterations: usize,
+    ) -> (Rk4Map<Acrobot>, QuadraticCost, f64, DdpSolution) {
+        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
+        let cost = swing_up_cost(dt);
+        let horizon = (seconds / dt).round() as usize;
+        let x0 = DVector::from_vec(vec![-FRAC_PI_2, 0.0, 0.0, 0.0]);
+        // A small hip pumping at the hanging pendulum's frequency breaks the symmetry.
+        let u_init: Vec<DVector<f64>> = (0..horizon)
+            .map(|k| DVector::from_element(1, (k as f64 * dt * 3.0).sin()))
+            .collect();
+        let initial = cost.total(&map.rollout(&x0, &u_init).unwrap(), &u_init);
+        let options = DdpOptions {
+            variant,
+            max_iterations,
+            bounds: bounds.map(|b| ControlBounds {
+                lower: DVector::from_element(1, -b),
+                upper: DVector::from_element(1, b),
+            }),
+            ..DdpOptions::default()
+        };
+        let sol = solve(&map, &cost, &x0, &u_init, &options).unwrap();
+        (map, cost, initial, sol)
+    }
+
+    fn check_swing_up(
+        map: &Rk4Map<Acrobot>,
+        cost: &QuadraticCost,
+        initial: f64,
+        sol: &DdpSolution,
+    ) {
+        // Monotone decrease, and the trace's costs are the costs of true rollouts.
+        let mut previous = initial;
+        for r in &sol.trace {
+            assert!(
+                r.cost <= previous,
+                "cost rose at iteration {}: {:?}",
+                r.iteration,
+                sol.trace
+            );
+            assert_eq!(r.cost < previous, r.accepted);
+            previous = r.cost;
+        }
+        let xs = map.rollout(&sol.x[0], &sol.u).unwrap();
+        for (a, b) in xs.iter().zip(&sol.x) {
+            assert!((a - b).amax() < 1e-12);
+        }
+        assert!((cost.total(&xs, &sol.u) - sol.cost).abs() < 1e-9 * sol.cost);
+        assert!(
+            sol.cost < 0.2 * initial,
+            "{} vs initial {initial}",
+            sol.cost
+        );
+    }
+
+    #[test]
+    fn ilqr_and_full_ddp_swing_the_acrobot_up_with_monotone_cost() {
+        for variant in [DdpVariant::Ilqr, DdpVariant::Full] {
+            let (map, cost, initial, sol) = swing_up(variant, None, 3.0, 0.02, 100);
+            check_swing_up(&map, &cost, initial, &sol);
+            let dist = (&sol.x[sol.u.len()] - &cost.x_final).norm();
+            assert!(
+                dist < 0.3,
+                "{variant:?}: final distance to the handstand {dist}"
+            );
+        }
+    }
+
+    #[test]
+    fn box_bounds_are_respected_and_active() {
+        let bound = 6.0;
+        for variant in [DdpVariant::Ilqr, DdpVariant::Full] {
+            let (map, cost, initial, sol) = swing_up(variant, Some(bound), 3.0, 0.02, 100);
+            check_swing_up(&map, &cost, initial, &sol);
+            assert!(sol.u.iter().all(|u| u[0].abs() <= bound));
+            // The unbounded optimum needs |u| ≈ 12.7, so the bound must bind somewhere, and
+            // where the box QP clamps the control its feedback row is zero.
+            let at_bound: Vec<usize> = (0..sol.u.len())
+                .filter(|&k| sol.u[k][0].abs() == bound)
+                .collect();
+            assert!(!at_bound.is_empty(), "{variant:?}: the bound should bind");
+            assert!(at_bound.iter().any(|&k| sol.gains[k].amax() == 0.0));
+            for k in 0..sol.u.len() {
+                if sol.u[k][0].abs() < bound {
+                    assert!(
+                        sol.gains[k].amax() > 0.0,
+                        "{variant:?}: free step {k} has no feedback"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Prints the swing-up numbers quoted in reports:
+    /// `cargo test --lib control::ddp::tests::swing_up_report -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn swing_up_report() {
+        for (variant, bounds) in [
+            (DdpVariant::Ilqr, None),
+            (DdpVariant::Full, None),
+            (DdpVariant::Ilqr, Some(6.0)),
+            (DdpVariant::Full, Some(6.0)),
+        ] {
+            let (_, cost, initial, sol) = swing_up(variant, bounds, 3.0, 0.02, 300);
+            let x_n = &sol.x[sol.u.len()];
+            println!(
+                "{variant:?} bounds {bounds:?}: {} iterations ({} accepted), {:?}, cost {initial:.4} -> {:.6}, |grad| {:.2e}, final state {:.4?}, distance to handstand {:.2e}, max |u| {:.3}",
+                sol.trace.len(),
+                sol.accepted_steps(),
+                sol.termination,
+                sol.cost,
+                sol.gradient_norm,
+                x_n.as_slice(),
+                (x_n - &cost.x_final).norm(),
+                sol.u.iter().map(|u| u[0].abs()).fold(0.0, f64::max),
+            );
+        }
+    }
+}
