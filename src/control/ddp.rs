@@ -964,6 +964,53 @@ mod tests {
         ));
     }
 
+    /// |J(α) − J(0) + expected(α)| / α² for the step α of one backward pass at μ = 0.
+    fn model_error_ratios(variant: DdpVariant) -> Vec<f64> {
+        let dt = 0.02;
+        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
+        // A heavier control weight keeps Q_uu positive definite at μ = 0 for full DDP too.
+        let mut cost = swing_up_cost(dt);
+        cost.r *= 20.0;
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let us: Vec<DVector<f64>> = (0..60)
+            .map(|_| DVector::from_element(1, rng.random_range(-2.0..2.0)))
+            .collect();
+        let xs = map
+            .rollout(&DVector::from_vec(vec![-1.2, 0.3, 0.5, -0.4]), &us)
+            .unwrap();
+        let j0 = cost.total(&xs, &us);
+        let options = DdpOptions {
+            variant,
+            ..DdpOptions::default()
+        };
+        let mut b = Buffers::new(4, 1, us.len(), variant == DdpVariant::Full, map.workspace());
+        compute_derivatives(&map, &xs, &us, &options, &mut b);
+        let r = backward(&cost, &xs, &us, 0.0, &options, &mut b).expect("Q_uu positive definite");
+        [0.02, 0.01, 0.005]
+            .into_iter()
+            .map(|alpha| {
+                let j = forward(&map, &cost, &xs, &us, alpha, &options, &mut b).unwrap();
+                let expected = -(alpha * r.dv1 + alpha * alpha * r.dv2);
+                ((j0 - j) - expected).abs() / (alpha * alpha)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn full_ddp_predicts_the_cost_change_to_second_order_and_ilqr_does_not() {
+        // Full DDP's second-order dynamics terms make its quadratic model the exact Taylor
+        // expansion of J along the step, so error/α² → 0 linearly in α; iLQR's stays O(1).
+        let full = model_error_ratios(DdpVariant::Full);
+        let ilqr = model_error_ratios(DdpVariant::Ilqr);
+        for w in full.windows(2) {
+            assert!((w[1] / w[0] - 0.5).abs() < 0.1, "full DDP: {full:?}");
+        }
+        for w in ilqr.windows(2) {
+            assert!((w[1] / w[0] - 1.0).abs() < 0.1, "iLQR: {ilqr:?}");
+        }
+        assert!(full[2] < 0.1 * ilqr[2], "full {full:?} vs iLQR {ilqr:?}");
+    }
+
     /// ½∫u² + (x − handstand)ᵀ Q_f (x − handstand).
     fn swing_up_cost(dt: f64) -> QuadraticCost {
         QuadraticCost::effort(
