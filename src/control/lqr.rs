@@ -291,6 +291,118 @@ mod tests {
     }
 
     #[test]
+    fn tracking_the_optimized_swing_up_rejects_a_perturbation() {
+        use crate::control::ddp::{self, DdpOptions, DdpVariant};
+        use crate::physics::acrobot::Acrobot;
+        use std::f64::consts::FRAC_PI_2;
+        let dt = 0.02;
+        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
+        let cost = QuadraticCost::effort(
+            dt,
+            1,
+            DMatrix::from_diagonal(&DVector::from_vec(vec![100.0, 100.0, 10.0, 10.0])),
+            DVector::from_vec(vec![FRAC_PI_2, 0.0, 0.0, 0.0]),
+        );
+        let x0 = DVector::from_vec(vec![-FRAC_PI_2, 0.0, 0.0, 0.0]);
+        let u_init: Vec<DVector<f64>> = (0..150)
+            .map(|k| DVector::from_element(1, (k as f64 * dt * 3.0).sin()))
+            .collect();
+        let options = DdpOptions {
+            variant: DdpVariant::Full,
+            ..DdpOptions::default()
+        };
+        let sol = ddp::solve(&map, &cost, &x0, &u_init, &options).unwrap();
+        assert!(
+            sol.gradient_norm < 1e-6,
+            "DDP did not converge: {:?}",
+            sol.termination
+        );
+        let ctl = track(&map, &cost, &sol.x, &sol.u).unwrap();
+        // eq. 12 along the trajectory: the remaining cost.
+        assert!((ctl.value_ref[0] - sol.cost).abs() < 1e-9 * sol.cost);
+        assert_eq!(ctl.value(sol.x[0].as_slice(), 0), ctl.value_ref[0]);
+        // At an optimum p_k is the costate: p_0 = ∂J/∂x_0 = λ_0 of the adjoint recursion
+        // λ_N = g_x, λ_k = F_xᵀ λ_{k+1} (no running state cost here).
+        let mut lam = DVector::zeros(4);
+        let mut s1 = DMatrix::zeros(4, 4);
+        cost.terminal_derivatives(&sol.x[150], &mut lam, &mut s1);
+        let mut ws = map.workspace();
+        let (mut fx, mut fu) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
+        for k in (0..150).rev() {
+            map.jacobians(&sol.x[k], &sol.u[k], &mut fx, &mut fu, &mut ws);
+            lam = fx.transpose() * &lam;
+        }
+        // The open-loop cost is very curved in x_0 (∂²J/∂x² ~ 1e5 here), so the differences
+        // need a tiny step; the adjoint λ_0 is the sharp check.
+        let h = 1e-7;
+        for i in 0..4 {
+            let (mut xp, mut xm) = (x0.clone(), x0.clone());
+            xp[i] += h;
+            xm[i] -= h;
+            let jp = cost.total(&map.rollout(&xp, &sol.u).unwrap(), &sol.u);
+            let jm = cost.total(&map.rollout(&xm, &sol.u).unwrap(), &sol.u);
+            let fd = (jp - jm) / (2.0 * h);
+            let p = ctl.value_gradient[0][i];
+            assert!(
+                (lam[i] - p).abs() < 1e-6 * p.abs().max(1.0),
+                "p_0[{i}] {p} vs λ {}",
+                lam[i]
+            );
+            assert!(
+                (fd - p).abs() < 1e-4 * fd.abs().max(1.0),
+                "p_0[{i}] {p} vs {fd}"
+            );
+        }
+        // From a start 3° off, feedback lands near the handstand; the open-loop tape does not.
+        let start = &x0 + DVector::from_vec(vec![0.05, -0.05, 0.0, 0.0]);
+        let closed = closed_loop(&map, &cost, &ctl, &start, true);
+        let open = closed_loop(&map, &cost, &ctl, &start, false);
+        let target = &sol.x[150];
+        let (d_closed, d_open) = ((&closed.0 - target).norm(), (&open.0 - target).norm());
+        assert!(
+            d_closed < 0.2 * d_open,
+            "closed loop {d_closed} vs open loop {d_open}"
+        );
+        // The quadratic value function predicts the closed-loop cost of nearby starts; the
+        // first-order part is exact at an optimum, so the relative error of the predicted
+        // increase shrinks linearly with the offset.
+        let rel_err = |d: f64| {
+            let start = &x0 + DVector::from_vec(vec![d, -d, 0.0, 0.0]);
+            let actual = closed_loop(&map, &cost, &ctl, &start, true).1;
+            let predicted = ctl.value(start.as_slice(), 0);
+            ((predicted - actual) / (actual - sol.cost)).abs()
+        };
+        let (e1, e2) = (rel_err(0.01), rel_err(0.005));
+        assert!(e1 < 0.05 && e2 < 0.65 * e1, "relative errors {e1}, {e2}");
+    }
+
+    /// Final state and cost of following the controller (or only its tape) from `start`.
+    fn closed_loop<M: Linearize>(
+        map: &Rk4Map<M>,
+        cost: &QuadraticCost,
+        ctl: &TrackingController,
+        start: &DVector<f64>,
+        feedback: bool,
+    ) -> (DVector<f64>, f64) {
+        let mut ws = map.workspace();
+        let mut x = start.clone();
+        let mut next = x.clone();
+        let mut total = 0.0;
+        for k in 0..ctl.horizon() {
+            let u = if feedback {
+                ctl.policy(x.as_slice(), k)
+            } else {
+                ctl.u_ref[k].clone()
+            };
+            total += cost.running(k, &x, &u);
+            map.step(&x, &u, &mut next, &mut ws);
+            std::mem::swap(&mut x, &mut next);
+        }
+        total += cost.terminal(&x);
+        (x, total)
+    }
+
+    #[test]
     fn rejects_mismatched_trajectories() {
         let (map, cost, _, _) = scalar_problem(0.1, 1.0, 0.1, 1.0, 1.0, 1.0);
         let us = vec![DVector::zeros(1); 3];
