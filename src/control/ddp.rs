@@ -44,7 +44,7 @@
 //!   ICRA 2014 (projected-Newton box QP).
 
 use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
-use super::{ControlError, QuadraticCost, Rk4Map, Rk4Workspace};
+use super::{ControlError, QuadraticCost, Rk4Map, Rk4Workspace, StageDerivatives};
 use crate::physics::linearize::Linearize;
 use nalgebra::{DMatrix, DVector};
 
@@ -343,16 +343,16 @@ pub fn cost_gradient<M: Linearize>(
     let xs = map.rollout(x0, us)?;
     let mut ws = map.workspace();
     let (mut fx, mut fu) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
-    let (mut lx, mut lu) = (DVector::zeros(n), DVector::zeros(m));
-    let (mut lxx, mut luu) = (DMatrix::zeros(n, n), DMatrix::zeros(m, m));
+    let mut l = StageDerivatives::new(n, m);
     let mut lam = DVector::zeros(n);
-    cost.terminal_derivatives(&xs[us.len()], &mut lam, &mut lxx);
+    let mut gxx = DMatrix::zeros(n, n);
+    cost.terminal_derivatives(&xs[us.len()], &mut lam, &mut gxx);
     let mut grads = vec![DVector::zeros(m); us.len()];
     for k in (0..us.len()).rev() {
         map.jacobians(&xs[k], &us[k], &mut fx, &mut fu, &mut ws);
-        cost.running_derivatives(k, &xs[k], &us[k], &mut lx, &mut lu, &mut lxx, &mut luu);
-        grads[k] = &lu + fu.transpose() * &lam;
-        lam = &lx + fx.transpose() * &lam;
+        cost.running_derivatives(k, &xs[k], &us[k], &mut l);
+        grads[k] = &l.lu + fu.transpose() * &lam;
+        lam = &l.lx + fx.transpose() * &lam;
     }
     Ok(grads)
 }
@@ -370,10 +370,7 @@ struct Buffers {
     vxx: DMatrix<f64>,
     lam: DVector<f64>,
     lam_tmp: DVector<f64>,
-    lx: DVector<f64>,
-    lu: DVector<f64>,
-    lxx: DMatrix<f64>,
-    luu: DMatrix<f64>,
+    l: StageDerivatives,
     qx: DVector<f64>,
     qu: DVector<f64>,
     qxx: DMatrix<f64>,
@@ -412,10 +409,7 @@ impl Buffers {
             vxx: DMatrix::zeros(n, n),
             lam: vn(),
             lam_tmp: vn(),
-            lx: vn(),
-            lu: vm(),
-            lxx: DMatrix::zeros(n, n),
-            luu: DMatrix::zeros(m, m),
+            l: StageDerivatives::new(n, m),
             qx: vn(),
             qu: vm(),
             qxx: DMatrix::zeros(n, n),
@@ -462,35 +456,33 @@ fn backward(
     let (mut dv1, mut dv2, mut g2) = (0.0, 0.0, 0.0);
     for k in (0..horizon).rev() {
         let (fx, fu) = (&b.fx[k], &b.fu[k]);
-        cost.running_derivatives(
-            k, &xs[k], &us[k], &mut b.lx, &mut b.lu, &mut b.lxx, &mut b.luu,
-        );
+        cost.running_derivatives(k, &xs[k], &us[k], &mut b.l);
         // Exact (adjoint) gradient, projected on the bounds.
-        b.gu.copy_from(&b.lu);
+        b.gu.copy_from(&b.l.lu);
         b.gu.gemv_tr(1.0, fu, &b.lam, 1.0);
         if let Some(bounds) = &options.bounds {
-            for i in 0..m {
-                let (u, g) = (us[k][i], b.gu[i]);
-                if (u <= bounds.lower[i] && g > 0.0) || (u >= bounds.upper[i] && g < 0.0) {
-                    b.gu[i] = 0.0;
+            for (i, g) in b.gu.iter_mut().enumerate() {
+                let u = us[k][i];
+                if (u <= bounds.lower[i] && *g > 0.0) || (u >= bounds.upper[i] && *g < 0.0) {
+                    *g = 0.0;
                 }
             }
         }
         g2 += b.gu.norm_squared();
-        b.lam_tmp.copy_from(&b.lx);
+        b.lam_tmp.copy_from(&b.l.lx);
         b.lam_tmp.gemv_tr(1.0, fx, &b.lam, 1.0);
         std::mem::swap(&mut b.lam, &mut b.lam_tmp);
 
         // Q function.
-        b.qx.copy_from(&b.lx);
+        b.qx.copy_from(&b.l.lx);
         b.qx.gemv_tr(1.0, fx, &b.vx, 1.0);
-        b.qu.copy_from(&b.lu);
+        b.qu.copy_from(&b.l.lu);
         b.qu.gemv_tr(1.0, fu, &b.vx, 1.0);
         b.vxx.mul_to(fx, &mut b.vxx_fx);
         b.vxx.mul_to(fu, &mut b.vxx_fu);
-        b.qxx.copy_from(&b.lxx);
+        b.qxx.copy_from(&b.l.lxx);
         b.qxx.gemm_tr(1.0, fx, &b.vxx_fx, 1.0);
-        b.quu.copy_from(&b.luu);
+        b.quu.copy_from(&b.l.luu);
         b.quu.gemm_tr(1.0, fu, &b.vxx_fu, 1.0);
         b.qux.gemm_tr(1.0, fu, &b.vxx_fx, 0.0);
         if full {

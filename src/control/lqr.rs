@@ -27,7 +27,7 @@
 //!   Animation*, SIGGRAPH 2009, §5.2 (eq. 12).
 
 use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
-use super::{ControlError, QuadraticCost, Rk4Map};
+use super::{ControlError, QuadraticCost, Rk4Map, StageDerivatives};
 use crate::physics::linearize::Linearize;
 use nalgebra::{DMatrix, DVector};
 
@@ -133,8 +133,7 @@ pub fn track<M: Linearize>(
 
     let mut ws = map.workspace();
     let (mut a, mut b) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
-    let (mut lx, mut lu) = (DVector::zeros(n), DVector::zeros(m));
-    let (mut lxx, mut luu) = (DMatrix::zeros(n, n), DMatrix::zeros(m, m));
+    let mut l = StageDerivatives::new(n, m);
     let mut gains = vec![DMatrix::zeros(m, n); horizon];
     let mut value_ref = vec![0.0; horizon + 1];
     let mut pv = vec![DVector::zeros(n); horizon + 1];
@@ -146,13 +145,13 @@ pub fn track<M: Linearize>(
     }
     for k in (0..horizon).rev() {
         map.jacobians(&xs[k], &us[k], &mut a, &mut b, &mut ws);
-        cost.running_derivatives(k, &xs[k], &us[k], &mut lx, &mut lu, &mut lxx, &mut luu);
+        cost.running_derivatives(k, &xs[k], &us[k], &mut l);
         let (p1, hess1) = (&pv[k + 1], &pm[k + 1]);
-        let qx = &lx + a.transpose() * p1;
-        let qu = &lu + b.transpose() * p1;
+        let qx = &l.lx + a.transpose() * p1;
+        let qu = &l.lu + b.transpose() * p1;
         let pa = hess1 * &a;
-        let qxx = &lxx + a.transpose() * &pa;
-        let quu = &luu + b.transpose() * hess1 * &b;
+        let qxx = &l.lxx + a.transpose() * &pa;
+        let quu = &l.luu + b.transpose() * hess1 * &b;
         let qux = b.transpose() * &pa;
         let mut chol = quu.clone();
         if !cholesky_in_place(&mut chol, m) {

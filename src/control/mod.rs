@@ -326,6 +326,31 @@ impl StateCost {
     }
 }
 
+/// First and second derivatives of one step's running cost l(x, u).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StageDerivatives {
+    /// ∂l/∂x (n).
+    pub lx: DVector<f64>,
+    /// ∂l/∂u (m).
+    pub lu: DVector<f64>,
+    /// ∂²l/∂x² (n × n).
+    pub lxx: DMatrix<f64>,
+    /// ∂²l/∂u² (m × m).
+    pub luu: DMatrix<f64>,
+}
+
+impl StageDerivatives {
+    /// Zeroed buffers for n states and m controls.
+    pub fn new(n: usize, m: usize) -> Self {
+        Self {
+            lx: DVector::zeros(n),
+            lu: DVector::zeros(m),
+            lxx: DMatrix::zeros(n, n),
+            luu: DMatrix::zeros(m, m),
+        }
+    }
+}
+
 /// The cost J = g(x_N) + Σ_k dt·(q(x_k) + ½ u_kᵀ R u_k) with g(x) = (x − x̄)ᵀ Q_f (x − x̄).
 #[derive(Debug, Clone, PartialEq)]
 pub struct QuadraticCost {
@@ -417,33 +442,36 @@ impl QuadraticCost {
         run + self.terminal(&xs[us.len()])
     }
 
-    /// Derivatives of the running cost of step k: l_x, l_u, l_xx, l_uu (l_ux = 0).
-    /// Does not allocate.
+    /// Derivatives of the running cost of step k into `out` (l_ux = 0). Does not allocate.
     pub fn running_derivatives(
         &self,
         k: usize,
         x: &DVector<f64>,
         u: &DVector<f64>,
-        lx: &mut DVector<f64>,
-        lu: &mut DVector<f64>,
-        lxx: &mut DMatrix<f64>,
-        luu: &mut DMatrix<f64>,
+        out: &mut StageDerivatives,
     ) {
         let dt = self.dt;
         // ½ uᵀRu: gradient ½(R + Rᵀ)u, Hessian ½(R + Rᵀ).
-        sym_grad_hess(&self.r, u.as_slice(), None, 0.5 * dt, lu, luu);
+        sym_grad_hess(
+            &self.r,
+            u.as_slice(),
+            None,
+            0.5 * dt,
+            &mut out.lu,
+            &mut out.luu,
+        );
         match &self.state {
             Some(s) => sym_grad_hess(
                 &s.weight,
                 x.as_slice(),
                 Some(s.reference(k).as_slice()),
                 dt,
-                lx,
-                lxx,
+                &mut out.lx,
+                &mut out.lxx,
             ),
             None => {
-                lx.fill(0.0);
-                lxx.fill(0.0);
+                out.lx.fill(0.0);
+                out.lxx.fill(0.0);
             }
         }
     }
@@ -736,9 +764,9 @@ mod tests {
         cost.validate(n, m, 2).unwrap();
         let x = random_vec(&mut rng, n, 2.0);
         let u = random_vec(&mut rng, m, 2.0);
-        let (mut lx, mut lu) = (DVector::zeros(n), DVector::zeros(m));
-        let (mut lxx, mut luu) = (DMatrix::zeros(n, n), DMatrix::zeros(m, m));
-        cost.running_derivatives(1, &x, &u, &mut lx, &mut lu, &mut lxx, &mut luu);
+        let mut l = StageDerivatives::new(n, m);
+        cost.running_derivatives(1, &x, &u, &mut l);
+        let StageDerivatives { lx, lu, lxx, luu } = l;
         let (mut gx, mut gxx) = (DVector::zeros(n), DMatrix::zeros(n, n));
         cost.terminal_derivatives(&x, &mut gx, &mut gxx);
         let h = 1e-5;
@@ -757,15 +785,10 @@ mod tests {
             cost.terminal_derivatives(&xm, &mut gm, &mut scratch);
             let col = (gp - gm) / (2.0 * h);
             assert!((col - gxx.column(i)).amax() < 1e-7);
-            let (mut lp, mut lm, mut s1, mut s2) = (
-                DVector::zeros(n),
-                DVector::zeros(n),
-                DVector::zeros(m),
-                DMatrix::zeros(m, m),
-            );
-            cost.running_derivatives(1, &xp, &u, &mut lp, &mut s1, &mut scratch, &mut s2);
-            cost.running_derivatives(1, &xm, &u, &mut lm, &mut s1, &mut scratch, &mut s2);
-            assert!(((lp - lm) / (2.0 * h) - lxx.column(i)).amax() < 1e-7);
+            let (mut lp, mut lm) = (StageDerivatives::new(n, m), StageDerivatives::new(n, m));
+            cost.running_derivatives(1, &xp, &u, &mut lp);
+            cost.running_derivatives(1, &xm, &u, &mut lm);
+            assert!(((lp.lx - lm.lx) / (2.0 * h) - lxx.column(i)).amax() < 1e-7);
         }
         for i in 0..m {
             let (mut up, mut um) = (u.clone(), u.clone());
@@ -773,16 +796,10 @@ mod tests {
             um[i] -= h;
             let d = (cost.running(1, &x, &up) - cost.running(1, &x, &um)) / (2.0 * h);
             assert!((d - lu[i]).abs() < 1e-8, "l_u[{i}] {d} vs {}", lu[i]);
-            let (mut s0, mut lp, mut lm, mut s1, mut s2) = (
-                DVector::zeros(n),
-                DVector::zeros(m),
-                DVector::zeros(m),
-                DMatrix::zeros(n, n),
-                DMatrix::zeros(m, m),
-            );
-            cost.running_derivatives(1, &x, &up, &mut s0, &mut lp, &mut s1, &mut s2);
-            cost.running_derivatives(1, &x, &um, &mut s0, &mut lm, &mut s1, &mut s2);
-            assert!(((lp - lm) / (2.0 * h) - luu.column(i)).amax() < 1e-7);
+            let (mut lp, mut lm) = (StageDerivatives::new(n, m), StageDerivatives::new(n, m));
+            cost.running_derivatives(1, &x, &up, &mut lp);
+            cost.running_derivatives(1, &x, &um, &mut lm);
+            assert!(((lp.lu - lm.lu) / (2.0 * h) - luu.column(i)).amax() < 1e-7);
         }
     }
 
