@@ -1021,8 +1021,21 @@ mod tests {
         dt: f64,
         max_iterations: usize,
     ) -> (Rk4Map<Acrobot>, QuadraticCost, f64, DdpSolution) {
+        swing_up_weighted(variant, bounds, seconds, dt, max_iterations, 1.0)
+    }
+
+    /// [`swing_up`] with the terminal weight scaled by `qf_scale`.
+    fn swing_up_weighted(
+        variant: DdpVariant,
+        bounds: Option<f64>,
+        seconds: f64,
+        dt: f64,
+        max_iterations: usize,
+        qf_scale: f64,
+    ) -> (Rk4Map<Acrobot>, QuadraticCost, f64, DdpSolution) {
         let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
-        let cost = swing_up_cost(dt);
+        let mut cost = swing_up_cost(dt);
+        cost.q_final *= qf_scale;
         let horizon = (seconds / dt).round() as usize;
         let x0 = DVector::from_vec(vec![-FRAC_PI_2, 0.0, 0.0, 0.0]);
         // A small hip pumping at the hanging pendulum's frequency breaks the symmetry.
@@ -1116,16 +1129,21 @@ mod tests {
     #[test]
     #[ignore]
     fn swing_up_report() {
-        for (variant, bounds) in [
-            (DdpVariant::Ilqr, None),
-            (DdpVariant::Full, None),
-            (DdpVariant::Ilqr, Some(6.0)),
-            (DdpVariant::Full, Some(6.0)),
+        for (variant, bounds, seconds, dt, qf_scale) in [
+            (DdpVariant::Ilqr, None, 3.0, 0.02, 1.0),
+            (DdpVariant::Full, None, 3.0, 0.02, 1.0),
+            (DdpVariant::Ilqr, Some(6.0), 3.0, 0.02, 1.0),
+            (DdpVariant::Full, Some(6.0), 3.0, 0.02, 1.0),
+            (DdpVariant::Ilqr, None, 4.0, 0.01, 1.0),
+            (DdpVariant::Full, None, 4.0, 0.01, 1.0),
+            (DdpVariant::Ilqr, None, 4.0, 0.01, 100.0),
+            (DdpVariant::Full, None, 4.0, 0.01, 100.0),
         ] {
-            let (_, cost, initial, sol) = swing_up(variant, bounds, 3.0, 0.02, 300);
+            let (_, cost, initial, sol) =
+                swing_up_weighted(variant, bounds, seconds, dt, 500, qf_scale);
             let x_n = &sol.x[sol.u.len()];
             println!(
-                "{variant:?} bounds {bounds:?}: {} iterations ({} accepted), {:?}, cost {initial:.4} -> {:.6}, |grad| {:.2e}, final state {:.4?}, distance to handstand {:.2e}, max |u| {:.3}",
+                "{variant:?} T={seconds} dt={dt} Qf x{qf_scale} bounds {bounds:?}: {} iterations ({} accepted), {:?}, cost {initial:.4} -> {:.6}, |grad| {:.2e}, final state {:.4?}, distance to handstand {:.2e}, max |u| {:.3}",
                 sol.trace.len(),
                 sol.accepted_steps(),
                 sol.termination,
