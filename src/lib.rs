@@ -19,6 +19,10 @@
 //! - [`emulator`]: NeuroAnimator emulators — a sigmoid MLP with backprop to weights and inputs,
 //!   the delta / local-frame / normalization transforms, and training (argmin CG or L-BFGS,
 //!   momentum mini-batches) with early stopping.
+//! - [`control`]: optimal control on the RK4-discretized dynamics of any
+//!   [`physics::linearize::Linearize`] model — [`control::ddp`] (iLQR and full second-order
+//!   DDP with regularization, line search and box bounds) and [`control::lqr`] (time-varying
+//!   LQR tracking with the quadratic value function of linear Bellman combination, eq. 12).
 //! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
 //!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
@@ -38,6 +42,7 @@
 //! | `lander` | [`physics::lander`] | 3-D rigid-body lunar lander, quaternion attitude |
 //! | `diver`, `push_recovery` | [`physics::diver`], [`physics::push`] | planar articulated trees ([`physics::planar`]) |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
+//! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
 //! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
 //! | z-weights, log-sum-exp | [`bellman::combine`] | LBC eq. 1, 11 |
 //! | grid DP (linear / ordinary backup) | [`bellman::grid_dp`] | LBC §5.2, Todorov 2009 |
@@ -45,6 +50,7 @@
 
 pub mod bellman;
 pub mod bench;
+pub mod control;
 pub mod emulator;
 pub mod experiment;
 pub mod linalg;

@@ -11,8 +11,13 @@
 //!   M22 = m2 l2²;
 //! - c1 = −h (2 ω1 ω2 + ω2²), c2 = h ω1²;
 //! - G1 = (m1 + m2) g l1 cos θ1 + m2 g l2 cos(θ1 + θ2), G2 = m2 g l2 cos(θ1 + θ2).
+//!
+//! Analytic Jacobians ([`Linearize`]): writing r = [0, τ] − c − G so that θ̈ = M⁻¹ r, each
+//! column of ∂θ̈/∂z is M⁻¹ (∂r/∂z − (∂M/∂z) θ̈); only M11 and M12 depend on θ2.
 
+use super::linearize::Linearize;
 use super::{Model, Ode, Parameter};
+use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 /// The acrobot with the paper's unit masses and lengths by default.
@@ -128,6 +133,55 @@ impl Ode for Acrobot {
         let [p1, p2] = self.positions(x);
         let pe = self.gravity * (self.m1 * p1[1] + self.m2 * p2[1]);
         Some(ke + pe)
+    }
+}
+
+impl Linearize for Acrobot {
+    fn jacobians(&self, x: &[f64], u: &[f64], a: &mut DMatrix<f64>, b: &mut DMatrix<f64>) {
+        let Self {
+            m1,
+            m2,
+            l1,
+            l2,
+            gravity: g,
+        } = *self;
+        let (t1, t2, w1, w2) = (x[0], x[1], x[2], x[3]);
+        let [[m11, m12], [_, m22]] = self.mass_matrix(t2);
+        let (s2, c2) = t2.sin_cos();
+        let s12 = (t1 + t2).sin();
+        let c12 = (t1 + t2).cos();
+        let h = m2 * l1 * l2 * s2;
+        let dh = m2 * l1 * l2 * c2; // ∂h/∂θ2
+        let g1 = (m1 + m2) * g * l1 * t1.cos() + m2 * g * l2 * c12;
+        let g2 = m2 * g * l2 * c12;
+        let r1 = h * (2.0 * w1 * w2 + w2 * w2) - g1;
+        let r2 = -h * w1 * w1 - g2 + u[0];
+        let det = m11 * m22 - m12 * m12;
+        // θ̈ = M⁻¹ r with M⁻¹ = [[m22, −m12], [−m12, m11]] / det.
+        let solve = |v1: f64, v2: f64| ((m22 * v1 - m12 * v2) / det, (m11 * v2 - m12 * v1) / det);
+        let (a1, a2) = solve(r1, r2);
+        // ∂r/∂z for z = θ1, θ2, ω1, ω2.
+        let gs12 = m2 * g * l2 * s12;
+        let dr_t1 = ((m1 + m2) * g * l1 * t1.sin() + gs12, gs12);
+        let dr_t2 = (dh * (2.0 * w1 * w2 + w2 * w2) + gs12, -dh * w1 * w1 + gs12);
+        let dr_w1 = (2.0 * h * w2, -2.0 * h * w1);
+        let dr_w2 = (2.0 * h * (w1 + w2), 0.0);
+        // ∂M/∂θ2 θ̈ with ∂M11/∂θ2 = −2 m2 l1 l2 sin θ2 = −2h, ∂M12/∂θ2 = −h, ∂M22/∂θ2 = 0.
+        let dm_a = (-2.0 * h * a1 - h * a2, -h * a1);
+        a.fill(0.0);
+        a[(0, 2)] = 1.0;
+        a[(1, 3)] = 1.0;
+        let cols = [dr_t1, (dr_t2.0 - dm_a.0, dr_t2.1 - dm_a.1), dr_w1, dr_w2];
+        for (j, &(v1, v2)) in cols.iter().enumerate() {
+            let (d1, d2) = solve(v1, v2);
+            a[(2, j)] = d1;
+            a[(3, j)] = d2;
+        }
+        let (b1, b2) = solve(0.0, 1.0);
+        b[(0, 0)] = 0.0;
+        b[(1, 0)] = 0.0;
+        b[(2, 0)] = b1;
+        b[(3, 0)] = b2;
     }
 }
 

@@ -20,6 +20,7 @@ pub mod diver;
 pub mod integrate;
 pub mod lander;
 pub mod lattice;
+pub mod linearize;
 pub mod pendulum;
 pub mod planar;
 pub mod push;

@@ -1,0 +1,1158 @@
+//! # Differential dynamic programming (DDP) and iLQR
+//!
+//! Minimizes J = g(x_N) + Σ_k l(x_k, u_k) subject to x_{k+1} = F(x_k, u_k) (the problem of
+//! [`super`]) by alternating a backward pass that builds a local quadratic model of the
+//! cost-to-go along the current trajectory (x̄, ū) and a forward pass that rolls out an improved
+//! one. Backward, from V_x = g_x, V_xx = g_xx:
+//!
+//! ```text
+//! Q_x  = l_x + F_xᵀ V_x'                  Q_u  = l_u + F_uᵀ V_x'
+//! Q_xx = l_xx + F_xᵀ V_xx' F_x (+ V_x'·F_xx)    Q_ux = F_uᵀ V_xx' F_x (+ V_x'·F_ux)
+//! Q_uu = l_uu + F_uᵀ V_xx' F_u (+ V_x'·F_uu)
+//! k = −(Q_uu + μI)⁻¹ Q_u,  K = −(Q_uu + μI)⁻¹ Q_ux
+//! V_x  = Q_x + Kᵀ Q_uu k + Kᵀ Q_u + Q_uxᵀ k
+//! V_xx = Q_xx + Kᵀ Q_uu K + Kᵀ Q_ux + Q_uxᵀ K
+//! ```
+//!
+//! The terms in parentheses (second derivatives of the dynamics contracted with V_x') make
+//! full second-order DDP ([`DdpVariant::Full`]); dropping them gives iLQR, a Gauss–Newton
+//! method ([`DdpVariant::Ilqr`]). Forward, with step α:
+//! u_k = ū_k + α k_k + K_k (x_k − x̄_k), x_{k+1} = F(x_k, u_k); the step is accepted when the
+//! actual reduction is a fraction of the expected one, ΔJ(α) = −(α Σ kᵀQ_u + ½ α² Σ kᵀQ_uu k);
+//! otherwise α shrinks (backtracking).
+//!
+//! μ is a Levenberg–Marquardt regularization of Q_uu with the adaptive schedule of Tassa et al.:
+//! it grows (μ ← max(μ_min, μ·Δ), Δ ← max(Δ_0, Δ·Δ_0)) when Q_uu + μI is not positive definite
+//! or the line search fails, and shrinks (Δ ← min(1/Δ_0, Δ/Δ_0), μ ← μ·Δ, or 0 below μ_min)
+//! after an accepted step. With box bounds on u, k solves the box QP
+//! min_δu ½ δuᵀ(Q_uu + μI)δu + Q_uᵀ δu, ū + δu ∈ [lower, upper] by projected Newton
+//! ([`box_qp`]), and the rows of K for clamped controls are zero.
+//!
+//! Iterations stop when the relative cost reduction of an accepted step falls below
+//! `tol_cost`, when the (projected) gradient ‖∂J/∂u‖ — computed exactly by the adjoint
+//! recursion λ_N = g_x, λ_k = l_x + F_xᵀ λ_{k+1}, ∂J/∂u_k = l_u + F_uᵀ λ_{k+1} — falls below
+//! `tol_grad`, after `max_iterations` forward passes, or when μ exceeds `mu_max`.
+//! The returned gains always come from a backward pass at the returned trajectory.
+//!
+//! ## References
+//! - D. H. Jacobson, D. Q. Mayne, *Differential Dynamic Programming*, Elsevier, 1970.
+//! - W. Li, E. Todorov, *Iterative linear quadratic regulator design for nonlinear biological
+//!   movement systems*, ICINCO 2004 (iLQR).
+//! - Y. Tassa, T. Erez, E. Todorov, *Synthesis and stabilization of complex behaviors through
+//!   online trajectory optimization*, IROS 2012 (regularization schedule, line search).
+//! - Y. Tassa, N. Mansard, E. Todorov, *Control-limited differential dynamic programming*,
+//!   ICRA 2014 (projected-Newton box QP).
+
+use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
+use super::{ControlError, QuadraticCost, Rk4Map, Rk4Workspace, StageDerivatives};
+use crate::physics::linearize::Linearize;
+use nalgebra::{DMatrix, DVector};
+
+/// Which DDP variant to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DdpVariant {
+    /// iLQR: first-order dynamics (Gauss–Newton Hessian).
+    Ilqr,
+    /// Full second-order DDP: adds V_x·F_zz, with F_zz by differences of the exact Jacobians.
+    Full,
+}
+
+/// Box bounds lower ≤ u ≤ upper on every control.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlBounds {
+    /// Lower bounds (m).
+    pub lower: DVector<f64>,
+    /// Upper bounds (m).
+    pub upper: DVector<f64>,
+}
+
+/// Settings of [`solve`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct DdpOptions {
+    /// iLQR or full DDP.
+    pub variant: DdpVariant,
+    /// Maximum number of forward passes.
+    pub max_iterations: usize,
+    /// Stop when an accepted step reduces the cost by less than `tol_cost`·|J|.
+    pub tol_cost: f64,
+    /// Stop when the projected gradient norm ‖∂J/∂u‖₂ is below this.
+    pub tol_grad: f64,
+    /// Initial regularization μ (0: start with pure Newton steps).
+    pub mu_init: f64,
+    /// Smallest nonzero μ; smaller values snap to 0.
+    pub mu_min: f64,
+    /// Give up when μ exceeds this.
+    pub mu_max: f64,
+    /// Base factor Δ_0 > 1 of the regularization schedule.
+    pub mu_factor: f64,
+    /// Backtracking factor for α, in (0, 1).
+    pub backtrack: f64,
+    /// Smallest α tried before the line search counts as failed.
+    pub min_step: f64,
+    /// Accept a step when actual reduction ≥ `armijo` × expected reduction.
+    pub armijo: f64,
+    /// Optional box bounds on u.
+    pub bounds: Option<ControlBounds>,
+    /// Relative difference step for the second derivatives of full DDP.
+    pub fd_step: f64,
+}
+
+impl Default for DdpOptions {
+    fn default() -> Self {
+        Self {
+            variant: DdpVariant::Ilqr,
+            max_iterations: 200,
+            tol_cost: 1e-8,
+            tol_grad: 1e-7,
+            mu_init: 0.0,
+            mu_min: 1e-6,
+            mu_max: 1e10,
+            mu_factor: 1.6,
+            backtrack: 0.5,
+            min_step: 1e-4,
+            armijo: 1e-4,
+            bounds: None,
+            fd_step: 1e-5,
+        }
+    }
+}
+
+/// One forward pass of [`solve`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IterationRecord {
+    /// Iteration number, from 1.
+    pub iteration: usize,
+    /// Cost after this iteration (unchanged when the step was rejected).
+    pub cost: f64,
+    /// Regularization μ used by this iteration's backward pass.
+    pub regularization: f64,
+    /// Accepted step size α, or 0 when the line search failed.
+    pub step: f64,
+    /// Projected gradient norm ‖∂J/∂u‖₂ at the start of the iteration.
+    pub gradient_norm: f64,
+    /// Reduction the quadratic model predicted for the accepted α (for α = 1 when rejected).
+    pub expected_reduction: f64,
+    /// Backward passes that failed (Q_uu + μI not positive definite) before this one worked.
+    pub backward_failures: usize,
+    /// Whether the step was accepted.
+    pub accepted: bool,
+}
+
+/// Why [`solve`] stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Termination {
+    /// Relative cost reduction below `tol_cost`.
+    CostChange,
+    /// Projected gradient norm below `tol_grad`.
+    Gradient,
+    /// `max_iterations` forward passes done.
+    MaxIterations,
+    /// μ exceeded `mu_max` (no descent found; the gains may be stale).
+    RegularizationLimit,
+}
+
+/// The result of [`solve`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct DdpSolution {
+    /// Optimized states x̄_0..x̄_N.
+    pub x: Vec<DVector<f64>>,
+    /// Optimized controls ū_0..ū_{N−1}.
+    pub u: Vec<DVector<f64>>,
+    /// Feedback gains K_0..K_{N−1} (m × n) of the last backward pass, at (x̄, ū).
+    pub gains: Vec<DMatrix<f64>>,
+    /// Feedforward steps k_0..k_{N−1} of the last backward pass (≈ 0 at convergence).
+    pub feedforward: Vec<DVector<f64>>,
+    /// Final cost J(x̄, ū).
+    pub cost: f64,
+    /// Projected gradient norm at the returned trajectory.
+    pub gradient_norm: f64,
+    /// Regularization μ at the end.
+    pub regularization: f64,
+    /// One record per forward pass.
+    pub trace: Vec<IterationRecord>,
+    /// Why the solver stopped.
+    pub termination: Termination,
+}
+
+impl DdpSolution {
+    /// Number of accepted steps.
+    pub fn accepted_steps(&self) -> usize {
+        self.trace.iter().filter(|r| r.accepted).count()
+    }
+}
+
+/// Scratch of [`box_qp`], sized for m controls.
+#[derive(Debug, Clone)]
+pub struct BoxQpWorkspace {
+    /// Solution δu after a successful call.
+    pub x: DVector<f64>,
+    /// `free[i]`: control i is not at an active bound.
+    pub free: Vec<bool>,
+    /// Indices of the free controls (its length is the factor's dimension).
+    pub free_index: Vec<usize>,
+    /// Cholesky factor (lower triangle of the leading block) of H restricted to the free set.
+    pub factor: DMatrix<f64>,
+    grad: DVector<f64>,
+    trial: DVector<f64>,
+    search: DVector<f64>,
+    rhs: Vec<f64>,
+}
+
+impl BoxQpWorkspace {
+    /// Buffers for an m-dimensional box QP.
+    pub fn new(m: usize) -> Self {
+        Self {
+            x: DVector::zeros(m),
+            free: vec![true; m],
+            free_index: Vec::with_capacity(m),
+            factor: DMatrix::zeros(m, m),
+            grad: DVector::zeros(m),
+            trial: DVector::zeros(m),
+            search: DVector::zeros(m),
+            rhs: Vec::with_capacity(m),
+        }
+    }
+}
+
+fn qp_value(h: &DMatrix<f64>, g: &DVector<f64>, x: &DVector<f64>) -> f64 {
+    let n = x.len();
+    let mut v = 0.0;
+    for j in 0..n {
+        v += g[j] * x[j];
+        for i in 0..n {
+            v += 0.5 * x[i] * h[(i, j)] * x[j];
+        }
+    }
+    v
+}
+
+/// Projected-Newton solution of min ½ xᵀHx + gᵀx subject to lower ≤ x ≤ upper (Tassa, Mansard,
+/// Todorov 2014), warm-started at clamp(`x0`). On success the solution, the free set and the
+/// Cholesky factor of H on the free set are in `ws`; returns false when H restricted to the
+/// free set is not positive definite. Does not allocate.
+pub fn box_qp(
+    h: &DMatrix<f64>,
+    g: &DVector<f64>,
+    lower: &DVector<f64>,
+    upper: &DVector<f64>,
+    x0: &DVector<f64>,
+    ws: &mut BoxQpWorkspace,
+) -> bool {
+    let m = g.len();
+    for i in 0..m {
+        ws.x[i] = x0[i].clamp(lower[i], upper[i]);
+    }
+    let mut value = qp_value(h, g, &ws.x);
+    let mut factored_free: Option<usize> = None; // number of free controls of the current factor
+    for iter in 0..100 {
+        // gradient and active set
+        ws.grad.copy_from(g);
+        ws.grad.gemv(1.0, h, &ws.x, 1.0);
+        let mut changed = false;
+        for i in 0..m {
+            let clamped = (ws.x[i] <= lower[i] && ws.grad[i] > 0.0)
+                || (ws.x[i] >= upper[i] && ws.grad[i] < 0.0);
+            if ws.free[i] == clamped || iter == 0 {
+                changed = true;
+            }
+            ws.free[i] = !clamped;
+        }
+        ws.free_index.clear();
+        ws.free_index.extend((0..m).filter(|&i| ws.free[i]));
+        let nf = ws.free_index.len();
+        if changed || factored_free.is_none() {
+            for (a, &i) in ws.free_index.iter().enumerate() {
+                for (b, &j) in ws.free_index.iter().enumerate() {
+                    ws.factor[(a, b)] = h[(i, j)];
+                }
+            }
+            if !cholesky_in_place(&mut ws.factor, nf) {
+                return false;
+            }
+            factored_free = Some(nf);
+        }
+        if nf == 0 {
+            return true; // every control at an active bound
+        }
+        let gnorm: f64 = ws
+            .free_index
+            .iter()
+            .map(|&i| ws.grad[i].powi(2))
+            .sum::<f64>();
+        if gnorm.sqrt() < 1e-12 * (1.0 + g.amax()) {
+            return true;
+        }
+        // Newton step on the free set with the clamped controls fixed:
+        // x_f* = −H_ff⁻¹ (g_f + H_fc x_c); search = x* − x on the free set, 0 elsewhere.
+        ws.rhs.clear();
+        for &i in &ws.free_index {
+            let mut s = g[i];
+            for j in 0..m {
+                if !ws.free[j] {
+                    s += h[(i, j)] * ws.x[j];
+                }
+            }
+            ws.rhs.push(-s);
+        }
+        cholesky_solve_in_place(&ws.factor, nf, &mut ws.rhs);
+        ws.search.fill(0.0);
+        for (a, &i) in ws.free_index.iter().enumerate() {
+            ws.search[i] = ws.rhs[a] - ws.x[i];
+        }
+        let slope = ws.search.dot(&ws.grad);
+        if slope >= 0.0 {
+            return true; // no descent direction left: converged
+        }
+        // Armijo backtracking along the projected path.
+        let mut step = 1.0;
+        let new_value = loop {
+            for i in 0..m {
+                ws.trial[i] = (ws.x[i] + step * ws.search[i]).clamp(lower[i], upper[i]);
+            }
+            let v = qp_value(h, g, &ws.trial);
+            if (v - value) / (step * slope) >= 0.1 {
+                break Some(v);
+            }
+            step *= 0.6;
+            if step < 1e-20 {
+                break None;
+            }
+        };
+        let Some(new_value) = new_value else {
+            return true;
+        };
+        std::mem::swap(&mut ws.x, &mut ws.trial);
+        let improvement = value - new_value;
+        value = new_value;
+        if improvement < 1e-14 * (1.0 + value.abs()) {
+            // Recompute the free set and factor at the final point on the next pass.
+            factored_free = None;
+        }
+    }
+    true
+}
+
+/// Exact gradient ∂J/∂u_k of the total cost for the controls `us` from `x0` (adjoint method).
+pub fn cost_gradient<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    x0: &DVector<f64>,
+    us: &[DVector<f64>],
+) -> Result<Vec<DVector<f64>>, ControlError> {
+    let (n, m) = (map.state_dim(), map.control_dim());
+    let xs = map.rollout(x0, us)?;
+    let mut ws = map.workspace();
+    let (mut fx, mut fu) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
+    let mut l = StageDerivatives::new(n, m);
+    let mut lam = DVector::zeros(n);
+    let mut gxx = DMatrix::zeros(n, n);
+    cost.terminal_derivatives(&xs[us.len()], &mut lam, &mut gxx);
+    let mut grads = vec![DVector::zeros(m); us.len()];
+    for k in (0..us.len()).rev() {
+        map.jacobians(&xs[k], &us[k], &mut fx, &mut fu, &mut ws);
+        cost.running_derivatives(k, &xs[k], &us[k], &mut l);
+        grads[k] = &l.lu + fu.transpose() * &lam;
+        lam = &l.lx + fx.transpose() * &lam;
+    }
+    Ok(grads)
+}
+
+/// Per-trajectory buffers of the solver, allocated once per [`solve`] call.
+struct Buffers {
+    fx: Vec<DMatrix<f64>>,
+    fu: Vec<DMatrix<f64>>,
+    fzz: Vec<Vec<DMatrix<f64>>>,
+    kff: Vec<DVector<f64>>,
+    gains: Vec<DMatrix<f64>>,
+    x_new: Vec<DVector<f64>>,
+    u_new: Vec<DVector<f64>>,
+    vx: DVector<f64>,
+    vxx: DMatrix<f64>,
+    lam: DVector<f64>,
+    lam_tmp: DVector<f64>,
+    l: StageDerivatives,
+    qx: DVector<f64>,
+    qu: DVector<f64>,
+    qxx: DMatrix<f64>,
+    quu: DMatrix<f64>,
+    qux: DMatrix<f64>,
+    quu_reg: DMatrix<f64>,
+    vxx_fx: DMatrix<f64>,
+    vxx_fu: DMatrix<f64>,
+    gu: DVector<f64>,
+    tm: DVector<f64>,
+    tmn: DMatrix<f64>,
+    dx: DVector<f64>,
+    lo: DVector<f64>,
+    hi: DVector<f64>,
+    qp: BoxQpWorkspace,
+    rk4: Rk4Workspace,
+}
+
+impl Buffers {
+    fn new(n: usize, m: usize, horizon: usize, full: bool, rk4: Rk4Workspace) -> Self {
+        let vn = || DVector::zeros(n);
+        let vm = || DVector::zeros(m);
+        Self {
+            fx: vec![DMatrix::zeros(n, n); horizon],
+            fu: vec![DMatrix::zeros(n, m); horizon],
+            fzz: if full {
+                vec![vec![DMatrix::zeros(n + m, n + m); n]; horizon]
+            } else {
+                Vec::new()
+            },
+            kff: vec![vm(); horizon],
+            gains: vec![DMatrix::zeros(m, n); horizon],
+            x_new: vec![vn(); horizon + 1],
+            u_new: vec![vm(); horizon],
+            vx: vn(),
+            vxx: DMatrix::zeros(n, n),
+            lam: vn(),
+            lam_tmp: vn(),
+            l: StageDerivatives::new(n, m),
+            qx: vn(),
+            qu: vm(),
+            qxx: DMatrix::zeros(n, n),
+            quu: DMatrix::zeros(m, m),
+            qux: DMatrix::zeros(m, n),
+            quu_reg: DMatrix::zeros(m, m),
+            vxx_fx: DMatrix::zeros(n, n),
+            vxx_fu: DMatrix::zeros(n, m),
+            gu: vm(),
+            tm: vm(),
+            tmn: DMatrix::zeros(m, n),
+            dx: vn(),
+            lo: vm(),
+            hi: vm(),
+            qp: BoxQpWorkspace::new(m),
+            rk4,
+        }
+    }
+}
+
+/// Result of a successful backward pass: Σ kᵀQ_u, Σ ½ kᵀQ_uu k, projected gradient norm.
+struct BackwardResult {
+    dv1: f64,
+    dv2: f64,
+    gradient_norm: f64,
+}
+
+/// Backward pass at (xs, us) with regularization μ; `None` when Q_uu + μI is not positive
+/// definite at some step. Does not allocate.
+fn backward(
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    mu: f64,
+    options: &DdpOptions,
+    b: &mut Buffers,
+) -> Option<BackwardResult> {
+    let horizon = us.len();
+    let n = xs[0].len();
+    let m = us[0].len();
+    let full = options.variant == DdpVariant::Full;
+    cost.terminal_derivatives(&xs[horizon], &mut b.vx, &mut b.vxx);
+    b.lam.copy_from(&b.vx);
+    let (mut dv1, mut dv2, mut g2) = (0.0, 0.0, 0.0);
+    for k in (0..horizon).rev() {
+        let (fx, fu) = (&b.fx[k], &b.fu[k]);
+        cost.running_derivatives(k, &xs[k], &us[k], &mut b.l);
+        // Exact (adjoint) gradient, projected on the bounds.
+        b.gu.copy_from(&b.l.lu);
+        b.gu.gemv_tr(1.0, fu, &b.lam, 1.0);
+        if let Some(bounds) = &options.bounds {
+            for (i, g) in b.gu.iter_mut().enumerate() {
+                let u = us[k][i];
+                if (u <= bounds.lower[i] && *g > 0.0) || (u >= bounds.upper[i] && *g < 0.0) {
+                    *g = 0.0;
+                }
+            }
+        }
+        g2 += b.gu.norm_squared();
+        b.lam_tmp.copy_from(&b.l.lx);
+        b.lam_tmp.gemv_tr(1.0, fx, &b.lam, 1.0);
+        std::mem::swap(&mut b.lam, &mut b.lam_tmp);
+
+        // Q function.
+        b.qx.copy_from(&b.l.lx);
+        b.qx.gemv_tr(1.0, fx, &b.vx, 1.0);
+        b.qu.copy_from(&b.l.lu);
+        b.qu.gemv_tr(1.0, fu, &b.vx, 1.0);
+        b.vxx.mul_to(fx, &mut b.vxx_fx);
+        b.vxx.mul_to(fu, &mut b.vxx_fu);
+        b.qxx.copy_from(&b.l.lxx);
+        b.qxx.gemm_tr(1.0, fx, &b.vxx_fx, 1.0);
+        b.quu.copy_from(&b.l.luu);
+        b.quu.gemm_tr(1.0, fu, &b.vxx_fu, 1.0);
+        b.qux.gemm_tr(1.0, fu, &b.vxx_fx, 0.0);
+        if full {
+            for (a, hess) in b.fzz[k].iter().enumerate() {
+                let w = b.vx[a];
+                for j in 0..n {
+                    for i in 0..n {
+                        b.qxx[(i, j)] += w * hess[(i, j)];
+                    }
+                    for i in 0..m {
+                        b.qux[(i, j)] += w * hess[(n + i, j)];
+                    }
+                }
+                for j in 0..m {
+                    for i in 0..m {
+                        b.quu[(i, j)] += w * hess[(n + i, n + j)];
+                    }
+                }
+            }
+        }
+        b.quu_reg.copy_from(&b.quu);
+        for i in 0..m {
+            b.quu_reg[(i, i)] += mu;
+        }
+
+        // Gains.
+        let (kff, gain) = (&mut b.kff[k], &mut b.gains[k]);
+        match &options.bounds {
+            None => {
+                if !cholesky_in_place(&mut b.quu_reg, m) {
+                    return None;
+                }
+                for i in 0..m {
+                    kff[i] = -b.qu[i];
+                }
+                cholesky_solve_in_place(&b.quu_reg, m, kff.as_mut_slice());
+                gain.copy_from(&b.qux);
+                gain.neg_mut();
+                for j in 0..n {
+                    cholesky_solve_in_place(&b.quu_reg, m, gain.column_mut(j).as_mut_slice());
+                }
+            }
+            Some(bounds) => {
+                b.lo.copy_from(&bounds.lower);
+                b.lo -= &us[k];
+                b.hi.copy_from(&bounds.upper);
+                b.hi -= &us[k];
+                // Warm start from the previous iteration's feedforward step.
+                if !box_qp(&b.quu_reg, &b.qu, &b.lo, &b.hi, kff, &mut b.qp) {
+                    return None;
+                }
+                kff.copy_from(&b.qp.x);
+                gain.fill(0.0);
+                let nf = b.qp.free_index.len();
+                for j in 0..n {
+                    b.qp.rhs.clear();
+                    for &i in &b.qp.free_index {
+                        b.qp.rhs.push(-b.qux[(i, j)]);
+                    }
+                    cholesky_solve_in_place(&b.qp.factor, nf, &mut b.qp.rhs);
+                    for (a, &i) in b.qp.free_index.iter().enumerate() {
+                        gain[(i, j)] = b.qp.rhs[a];
+                    }
+                }
+            }
+        }
+
+        // Expected reduction and value update.
+        b.tm.gemv(1.0, &b.quu, kff, 0.0);
+        dv1 += kff.dot(&b.qu);
+        dv2 += 0.5 * kff.dot(&b.tm);
+        b.vx.copy_from(&b.qx);
+        b.vx.gemv_tr(1.0, gain, &b.tm, 1.0);
+        b.vx.gemv_tr(1.0, gain, &b.qu, 1.0);
+        b.vx.gemv_tr(1.0, &b.qux, kff, 1.0);
+        b.tmn.gemm(1.0, &b.quu, gain, 0.0);
+        b.vxx.copy_from(&b.qxx);
+        b.vxx.gemm_tr(1.0, gain, &b.tmn, 1.0);
+        b.vxx.gemm_tr(1.0, gain, &b.qux, 1.0);
+        b.vxx.gemm_tr(1.0, &b.qux, gain, 1.0);
+        symmetrize(&mut b.vxx);
+    }
+    Some(BackwardResult {
+        dv1,
+        dv2,
+        gradient_norm: g2.sqrt(),
+    })
+}
+
+/// Forward pass with step α into `b.x_new`, `b.u_new`; returns the new cost, or `None` when
+/// the rollout is not finite. Does not allocate.
+fn forward<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    alpha: f64,
+    options: &DdpOptions,
+    b: &mut Buffers,
+) -> Option<f64> {
+    let horizon = us.len();
+    b.x_new[0].copy_from(&xs[0]);
+    let mut total = 0.0;
+    for k in 0..horizon {
+        b.dx.copy_from(&b.x_new[k]);
+        b.dx -= &xs[k];
+        let u = &mut b.u_new[k];
+        u.copy_from(&us[k]);
+        u.axpy(alpha, &b.kff[k], 1.0);
+        u.gemv(1.0, &b.gains[k], &b.dx, 1.0);
+        if let Some(bounds) = &options.bounds {
+            for i in 0..u.len() {
+                u[i] = u[i].clamp(bounds.lower[i], bounds.upper[i]);
+            }
+        }
+        total += cost.running(k, &b.x_new[k], u);
+        let (done, rest) = b.x_new.split_at_mut(k + 1);
+        map.step(&done[k], u, &mut rest[0], &mut b.rk4);
+        if !rest[0].iter().all(|v| v.is_finite()) {
+            return None;
+        }
+    }
+    total += cost.terminal(&b.x_new[horizon]);
+    total.is_finite().then_some(total)
+}
+
+fn compute_derivatives<M: Linearize>(
+    map: &Rk4Map<M>,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    options: &DdpOptions,
+    b: &mut Buffers,
+) {
+    for k in 0..us.len() {
+        map.jacobians(&xs[k], &us[k], &mut b.fx[k], &mut b.fu[k], &mut b.rk4);
+        if options.variant == DdpVariant::Full {
+            map.second_derivatives(&xs[k], &us[k], options.fd_step, &mut b.fzz[k], &mut b.rk4);
+        }
+    }
+}
+
+fn validate<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    x0: &DVector<f64>,
+    u_init: &[DVector<f64>],
+    options: &DdpOptions,
+) -> Result<(), ControlError> {
+    let (n, m) = (map.state_dim(), map.control_dim());
+    if u_init.is_empty() {
+        return Err(ControlError::EmptyHorizon);
+    }
+    let dim = |what, expected, found| {
+        if expected == found {
+            Ok(())
+        } else {
+            Err(ControlError::DimensionMismatch {
+                what,
+                expected,
+                found,
+            })
+        }
+    };
+    dim("initial state", n, x0.len())?;
+    for u in u_init {
+        dim("initial control", m, u.len())?;
+    }
+    if let Some(bounds) = &options.bounds {
+        dim("lower bounds", m, bounds.lower.len())?;
+        dim("upper bounds", m, bounds.upper.len())?;
+        for i in 0..m {
+            let (lower, upper) = (bounds.lower[i], bounds.upper[i]);
+            if lower.is_nan() || upper.is_nan() || lower > upper {
+                return Err(ControlError::InvalidBounds {
+                    index: i,
+                    lower,
+                    upper,
+                });
+            }
+        }
+    }
+    cost.validate(n, m, u_init.len())
+}
+
+/// Optimizes the controls from `x0`, starting from `u_init` (N controls; clamped to the bounds),
+/// for `cost` under the RK4 dynamics `map` (needs [`Linearize`]). Returns the trajectory, the
+/// feedback gains and the per-iteration trace.
+pub fn solve<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    x0: &DVector<f64>,
+    u_init: &[DVector<f64>],
+    options: &DdpOptions,
+) -> Result<DdpSolution, ControlError> {
+    validate(map, cost, x0, u_init, options)?;
+    let (n, m, horizon) = (map.state_dim(), map.control_dim(), u_init.len());
+    let mut us = u_init.to_vec();
+    if let Some(bounds) = &options.bounds {
+        for u in &mut us {
+            for i in 0..m {
+                u[i] = u[i].clamp(bounds.lower[i], bounds.upper[i]);
+            }
+        }
+    }
+    let mut xs = map.rollout(x0, &us)?;
+    let mut j = cost.total(&xs, &us);
+    let full = options.variant == DdpVariant::Full;
+    let mut b = Buffers::new(n, m, horizon, full, map.workspace());
+    let mut mu = options.mu_init;
+    let mut delta = 1.0_f64;
+    let increase = |mu: &mut f64, delta: &mut f64| {
+        *delta = options.mu_factor.max(*delta * options.mu_factor);
+        *mu = options.mu_min.max(*mu * *delta);
+    };
+    let mut trace = Vec::new();
+    let mut pending: Option<Termination> = None;
+    let mut need_derivatives = true;
+    let mut iteration = 0;
+    let (termination, gradient_norm) = loop {
+        if need_derivatives {
+            compute_derivatives(map, &xs, &us, options, &mut b);
+            need_derivatives = false;
+        }
+        let mut failures = 0;
+        let result = loop {
+            match backward(cost, &xs, &us, mu, options, &mut b) {
+                Some(r) => break Some(r),
+                None => {
+                    failures += 1;
+                    increase(&mut mu, &mut delta);
+                    if mu > options.mu_max {
+                        break None;
+                    }
+                }
+            }
+        };
+        let Some(result) = result else {
+            break (Termination::RegularizationLimit, f64::NAN);
+        };
+        if let Some(t) = pending {
+            break (t, result.gradient_norm);
+        }
+        if result.gradient_norm < options.tol_grad {
+            break (Termination::Gradient, result.gradient_norm);
+        }
+        if iteration >= options.max_iterations {
+            break (Termination::MaxIterations, result.gradient_norm);
+        }
+        iteration += 1;
+        // Backtracking line search.
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        while alpha >= options.min_step {
+            let expected = -(alpha * result.dv1 + alpha * alpha * result.dv2);
+            if let Some(j_new) = forward(map, cost, &xs, &us, alpha, options, &mut b) {
+                let actual = j - j_new;
+                let ok = if expected > 0.0 {
+                    actual >= options.armijo * expected
+                } else {
+                    actual > 0.0
+                };
+                if ok {
+                    accepted = Some((alpha, j_new, expected));
+                    break;
+                }
+            }
+            alpha *= options.backtrack;
+        }
+        let mu_used = mu;
+        match accepted {
+            Some((alpha, j_new, expected)) => {
+                std::mem::swap(&mut xs, &mut b.x_new);
+                std::mem::swap(&mut us, &mut b.u_new);
+                let reduction = j - j_new;
+                if reduction < options.tol_cost * j.abs() {
+                    pending = Some(Termination::CostChange);
+                }
+                j = j_new;
+                need_derivatives = true;
+                delta = (1.0 / options.mu_factor).min(delta / options.mu_factor);
+                mu = if mu * delta > options.mu_min {
+                    mu * delta
+                } else {
+                    0.0
+                };
+                trace.push(IterationRecord {
+                    iteration,
+                    cost: j,
+                    regularization: mu_used,
+                    step: alpha,
+                    gradient_norm: result.gradient_norm,
+                    expected_reduction: expected,
+                    backward_failures: failures,
+                    accepted: true,
+                });
+            }
+            None => {
+                trace.push(IterationRecord {
+                    iteration,
+                    cost: j,
+                    regularization: mu_used,
+                    step: 0.0,
+                    gradient_norm: result.gradient_norm,
+                    expected_reduction: -(result.dv1 + result.dv2),
+                    backward_failures: failures,
+                    accepted: false,
+                });
+                increase(&mut mu, &mut delta);
+                if mu > options.mu_max {
+                    break (Termination::RegularizationLimit, result.gradient_norm);
+                }
+            }
+        }
+    };
+    Ok(DdpSolution {
+        x: xs,
+        u: us,
+        gains: b.gains,
+        feedforward: b.kff,
+        cost: j,
+        gradient_norm,
+        regularization: mu,
+        trace,
+        termination,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::lqr;
+    use crate::control::test_models::LinearOde;
+    use crate::control::StateCost;
+    use crate::physics::acrobot::Acrobot;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use std::f64::consts::FRAC_PI_2;
+
+    fn linear_problem() -> (Rk4Map<LinearOde>, QuadraticCost) {
+        // A damped oscillator and an unstable mode, two inputs.
+        let a = DMatrix::from_row_slice(3, 3, &[0.0, 1.0, 0.0, -2.0, -0.3, 0.5, 0.0, 0.2, 0.4]);
+        let b = DMatrix::from_row_slice(3, 2, &[0.0, 0.0, 1.0, 0.0, 0.3, 1.0]);
+        let map = Rk4Map::new(LinearOde { a, b }, 0.05).unwrap();
+        let cost = QuadraticCost {
+            dt: 0.05,
+            r: DMatrix::from_row_slice(2, 2, &[1.0, 0.2, 0.2, 0.5]),
+            state: Some(StateCost {
+                weight: DMatrix::from_diagonal(&DVector::from_vec(vec![1.0, 0.1, 2.0])),
+                reference: vec![DVector::zeros(3)],
+            }),
+            q_final: DMatrix::from_diagonal(&DVector::from_vec(vec![50.0, 5.0, 20.0])),
+            x_final: DVector::zeros(3),
+        };
+        (map, cost)
+    }
+
+    #[test]
+    fn linear_quadratic_problem_is_solved_in_one_step_and_equals_lqr() {
+        let (map, cost) = linear_problem();
+        let horizon = 60;
+        let x0 = DVector::from_vec(vec![1.0, -0.5, 0.8]);
+        // Independent reference: LQR around the zero trajectory (feasible for a linear system),
+        // rolled out in closed loop from x0.
+        let zeros_x = vec![DVector::zeros(3); horizon + 1];
+        let zeros_u = vec![DVector::zeros(2); horizon];
+        let ctl = lqr::track(&map, &cost, &zeros_x, &zeros_u).unwrap();
+        let mut x_lqr = vec![x0.clone()];
+        let mut u_lqr = Vec::new();
+        let mut ws = map.workspace();
+        for k in 0..horizon {
+            let u = ctl.policy(x_lqr[k].as_slice(), k);
+            let mut next = DVector::zeros(3);
+            map.step(&x_lqr[k], &u, &mut next, &mut ws);
+            u_lqr.push(u);
+            x_lqr.push(next);
+        }
+        let j_lqr = cost.total(&x_lqr, &u_lqr);
+        assert!((ctl.value(x0.as_slice(), 0) - j_lqr).abs() < 1e-9 * j_lqr);
+        for variant in [DdpVariant::Ilqr, DdpVariant::Full] {
+            let options = DdpOptions {
+                variant,
+                ..DdpOptions::default()
+            };
+            let sol = solve(&map, &cost, &x0, &zeros_u, &options).unwrap();
+            assert_eq!(sol.accepted_steps(), 1, "{variant:?}: {:?}", sol.trace);
+            assert_eq!(sol.trace[0].step, 1.0);
+            assert_eq!(sol.termination, Termination::Gradient);
+            assert!((sol.cost - j_lqr).abs() < 1e-9 * j_lqr);
+            // The model's predicted reduction was exact.
+            let first = &sol.trace[0];
+            let initial = cost.total(&map.rollout(&x0, &zeros_u).unwrap(), &zeros_u);
+            assert!((initial - first.cost - first.expected_reduction).abs() < 1e-9 * initial);
+            for k in 0..horizon {
+                assert!((&sol.u[k] - &u_lqr[k]).amax() < 1e-9, "u[{k}]");
+                assert!((&sol.x[k + 1] - &x_lqr[k + 1]).amax() < 1e-9, "x[{k}]");
+                assert!((&sol.gains[k] - &ctl.gains[k]).amax() < 1e-9, "K[{k}]");
+                assert!(sol.feedforward[k].amax() < 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn adjoint_gradient_matches_finite_differences_of_the_cost() {
+        let map = Rk4Map::new(Acrobot::default(), 0.02).unwrap();
+        let mut cost = swing_up_cost(0.02);
+        cost.state = Some(StateCost {
+            weight: DMatrix::identity(4, 4) * 0.5,
+            reference: vec![DVector::from_vec(vec![0.0, 0.5, 0.0, 0.0])],
+        });
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let us: Vec<DVector<f64>> = (0..40)
+            .map(|_| DVector::from_element(1, rng.random_range(-3.0..3.0)))
+            .collect();
+        let x0 = DVector::from_vec(vec![-FRAC_PI_2 + 0.2, 0.1, 0.0, 0.3]);
+        let grads = cost_gradient(&map, &cost, &x0, &us).unwrap();
+        let total = |us: &[DVector<f64>]| cost.total(&map.rollout(&x0, us).unwrap(), us);
+        let h = 1e-6;
+        for k in [0, 7, 20, 39] {
+            let (mut up, mut um) = (us.clone(), us.clone());
+            up[k][0] += h;
+            um[k][0] -= h;
+            let fd = (total(&up) - total(&um)) / (2.0 * h);
+            assert!(
+                (fd - grads[k][0]).abs() < 1e-6 * fd.abs().max(1.0),
+                "k = {k}: {fd} vs {}",
+                grads[k][0]
+            );
+        }
+    }
+
+    #[test]
+    fn box_qp_satisfies_the_kkt_conditions() {
+        let mut rng = ChaCha8Rng::seed_from_u64(21);
+        let mut ws = BoxQpWorkspace::new(3);
+        let mut clamped_seen = 0;
+        for _ in 0..50 {
+            let a = DMatrix::from_fn(3, 3, |_, _| rng.random_range(-1.0..1.0));
+            let h = &a * a.transpose() + DMatrix::identity(3, 3) * 0.1;
+            let g = DVector::from_fn(3, |_, _| rng.random_range(-3.0..3.0));
+            let lower = DVector::from_fn(3, |_, _| rng.random_range(-1.0..0.0));
+            let upper = DVector::from_fn(3, |_, _| rng.random_range(0.0..1.0));
+            let x0 = DVector::from_fn(3, |_, _| rng.random_range(-2.0..2.0));
+            assert!(box_qp(&h, &g, &lower, &upper, &x0, &mut ws));
+            let grad = &g + &h * &ws.x;
+            for i in 0..3 {
+                let x = ws.x[i];
+                assert!(x >= lower[i] && x <= upper[i]);
+                if x <= lower[i] {
+                    assert!(grad[i] >= -1e-9, "{grad} at {}", ws.x);
+                    clamped_seen += 1;
+                } else if x >= upper[i] {
+                    assert!(grad[i] <= 1e-9, "{grad} at {}", ws.x);
+                    clamped_seen += 1;
+                } else {
+                    assert!(grad[i].abs() < 1e-9, "{grad} at {}", ws.x);
+                }
+            }
+        }
+        assert!(clamped_seen > 10, "the test must exercise active bounds");
+        // An indefinite Hessian with an interior free set is reported.
+        let h = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, -1.0]);
+        let mut ws = BoxQpWorkspace::new(2);
+        let b = DVector::from_element(2, 1.0);
+        assert!(!box_qp(
+            &h,
+            &DVector::zeros(2),
+            &(-&b),
+            &b,
+            &DVector::zeros(2),
+            &mut ws
+        ));
+    }
+
+    /// |J(α) − J(0) + expected(α)| / α² for the step α of one backward pass at μ = 0.
+    fn model_error_ratios(variant: DdpVariant) -> Vec<f64> {
+        let dt = 0.02;
+        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
+        // A heavier control weight keeps Q_uu positive definite at μ = 0 for full DDP too.
+        let mut cost = swing_up_cost(dt);
+        cost.r *= 20.0;
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let us: Vec<DVector<f64>> = (0..60)
+            .map(|_| DVector::from_element(1, rng.random_range(-2.0..2.0)))
+            .collect();
+        let xs = map
+            .rollout(&DVector::from_vec(vec![-1.2, 0.3, 0.5, -0.4]), &us)
+            .unwrap();
+        let j0 = cost.total(&xs, &us);
+        let options = DdpOptions {
+            variant,
+            ..DdpOptions::default()
+        };
+        let mut b = Buffers::new(4, 1, us.len(), variant == DdpVariant::Full, map.workspace());
+        compute_derivatives(&map, &xs, &us, &options, &mut b);
+        let r = backward(&cost, &xs, &us, 0.0, &options, &mut b).expect("Q_uu positive definite");
+        [0.02, 0.01, 0.005]
+            .into_iter()
+            .map(|alpha| {
+                let j = forward(&map, &cost, &xs, &us, alpha, &options, &mut b).unwrap();
+                let expected = -(alpha * r.dv1 + alpha * alpha * r.dv2);
+                ((j0 - j) - expected).abs() / (alpha * alpha)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn full_ddp_predicts_the_cost_change_to_second_order_and_ilqr_does_not() {
+        // Full DDP's second-order dynamics terms make its quadratic model the exact Taylor
+        // expansion of J along the step, so error/α² → 0 linearly in α; iLQR's stays O(1).
+        let full = model_error_ratios(DdpVariant::Full);
+        let ilqr = model_error_ratios(DdpVariant::Ilqr);
+        for w in full.windows(2) {
+            assert!((w[1] / w[0] - 0.5).abs() < 0.1, "full DDP: {full:?}");
+        }
+        for w in ilqr.windows(2) {
+            assert!((w[1] / w[0] - 1.0).abs() < 0.1, "iLQR: {ilqr:?}");
+        }
+        assert!(full[2] < 0.1 * ilqr[2], "full {full:?} vs iLQR {ilqr:?}");
+    }
+
+    /// ½∫u² + (x − handstand)ᵀ Q_f (x − handstand).
+    fn swing_up_cost(dt: f64) -> QuadraticCost {
+        QuadraticCost::effort(
+            dt,
+            1,
+            DMatrix::from_diagonal(&DVector::from_vec(vec![100.0, 100.0, 10.0, 10.0])),
+            DVector::from_vec(vec![FRAC_PI_2, 0.0, 0.0, 0.0]),
+        )
+    }
+
+    /// Swing-up from hanging down, (−90°, 0, 0, 0), over `seconds` at step `dt`.
+    fn swing_up(
+        variant: DdpVariant,
+        bounds: Option<f64>,
+        seconds: f64,
+        dt: f64,
+        max_iterations: usize,
+    ) -> (Rk4Map<Acrobot>, QuadraticCost, f64, DdpSolution) {
+        swing_up_weighted(variant, bounds, seconds, dt, max_iterations, 1.0)
+    }
+
+    /// [`swing_up`] with the terminal weight scaled by `qf_scale`.
+    fn swing_up_weighted(
+        variant: DdpVariant,
+        bounds: Option<f64>,
+        seconds: f64,
+        dt: f64,
+        max_iterations: usize,
+        qf_scale: f64,
+    ) -> (Rk4Map<Acrobot>, QuadraticCost, f64, DdpSolution) {
+        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
+        let mut cost = swing_up_cost(dt);
+        cost.q_final *= qf_scale;
+        let horizon = (seconds / dt).round() as usize;
+        let x0 = DVector::from_vec(vec![-FRAC_PI_2, 0.0, 0.0, 0.0]);
+        // A small hip pumping at the hanging pendulum's frequency breaks the symmetry.
+        let u_init: Vec<DVector<f64>> = (0..horizon)
+            .map(|k| DVector::from_element(1, (k as f64 * dt * 3.0).sin()))
+            .collect();
+        let initial = cost.total(&map.rollout(&x0, &u_init).unwrap(), &u_init);
+        let options = DdpOptions {
+            variant,
+            max_iterations,
+            bounds: bounds.map(|b| ControlBounds {
+                lower: DVector::from_element(1, -b),
+                upper: DVector::from_element(1, b),
+            }),
+            ..DdpOptions::default()
+        };
+        let sol = solve(&map, &cost, &x0, &u_init, &options).unwrap();
+        (map, cost, initial, sol)
+    }
+
+    fn check_swing_up(
+        map: &Rk4Map<Acrobot>,
+        cost: &QuadraticCost,
+        initial: f64,
+        sol: &DdpSolution,
+    ) {
+        // Monotone decrease, and the trace's costs are the costs of true rollouts.
+        let mut previous = initial;
+        for r in &sol.trace {
+            assert!(
+                r.cost <= previous,
+                "cost rose at iteration {}: {:?}",
+                r.iteration,
+                sol.trace
+            );
+            assert_eq!(r.cost < previous, r.accepted);
+            previous = r.cost;
+        }
+        let xs = map.rollout(&sol.x[0], &sol.u).unwrap();
+        for (a, b) in xs.iter().zip(&sol.x) {
+            assert!((a - b).amax() < 1e-12);
+        }
+        assert!((cost.total(&xs, &sol.u) - sol.cost).abs() < 1e-9 * sol.cost);
+        assert!(
+            sol.cost < 0.2 * initial,
+            "{} vs initial {initial}",
+            sol.cost
+        );
+    }
+
+    #[test]
+    fn ilqr_and_full_ddp_swing_the_acrobot_up_with_monotone_cost() {
+        for variant in [DdpVariant::Ilqr, DdpVariant::Full] {
+            let (map, cost, initial, sol) = swing_up(variant, None, 3.0, 0.02, 100);
+            check_swing_up(&map, &cost, initial, &sol);
+            let dist = (&sol.x[sol.u.len()] - &cost.x_final).norm();
+            assert!(
+                dist < 0.3,
+                "{variant:?}: final distance to the handstand {dist}"
+            );
+        }
+    }
+
+    #[test]
+    fn box_bounds_are_respected_and_active() {
+        let bound = 6.0;
+        for variant in [DdpVariant::Ilqr, DdpVariant::Full] {
+            let (map, cost, initial, sol) = swing_up(variant, Some(bound), 3.0, 0.02, 100);
+            check_swing_up(&map, &cost, initial, &sol);
+            assert!(sol.u.iter().all(|u| u[0].abs() <= bound));
+            // The unbounded optimum needs |u| ≈ 12.7, so the bound must bind somewhere, and
+            // where the box QP clamps the control its feedback row is zero.
+            let at_bound: Vec<usize> = (0..sol.u.len())
+                .filter(|&k| sol.u[k][0].abs() == bound)
+                .collect();
+            assert!(!at_bound.is_empty(), "{variant:?}: the bound should bind");
+            assert!(at_bound.iter().any(|&k| sol.gains[k].amax() == 0.0));
+            for k in 0..sol.u.len() {
+                if sol.u[k][0].abs() < bound {
+                    assert!(
+                        sol.gains[k].amax() > 0.0,
+                        "{variant:?}: free step {k} has no feedback"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Prints the swing-up numbers quoted in reports:
+    /// `cargo test --lib control::ddp::tests::swing_up_report -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn swing_up_report() {
+        for (variant, bounds, seconds, dt, qf_scale) in [
+            (DdpVariant::Ilqr, None, 3.0, 0.02, 1.0),
+            (DdpVariant::Full, None, 3.0, 0.02, 1.0),
+            (DdpVariant::Ilqr, Some(6.0), 3.0, 0.02, 1.0),
+            (DdpVariant::Full, Some(6.0), 3.0, 0.02, 1.0),
+            (DdpVariant::Ilqr, None, 4.0, 0.01, 1.0),
+            (DdpVariant::Full, None, 4.0, 0.01, 1.0),
+            (DdpVariant::Ilqr, None, 4.0, 0.01, 100.0),
+            (DdpVariant::Full, None, 4.0, 0.01, 100.0),
+        ] {
+            let (_, cost, initial, sol) =
+                swing_up_weighted(variant, bounds, seconds, dt, 500, qf_scale);
+            let x_n = &sol.x[sol.u.len()];
+            println!(
+                "{variant:?} T={seconds} dt={dt} Qf x{qf_scale} bounds {bounds:?}: {} iterations ({} accepted), {:?}, cost {initial:.4} -> {:.6}, |grad| {:.2e}, final state {:.4?}, distance to handstand {:.2e}, max |u| {:.3}",
+                sol.trace.len(),
+                sol.accepted_steps(),
+                sol.termination,
+                sol.cost,
+                sol.gradient_norm,
+                x_n.as_slice(),
+                (x_n - &cost.x_final).norm(),
+                sol.u.iter().map(|u| u[0].abs()).fold(0.0, f64::max),
+            );
+        }
+    }
+}

@@ -1,0 +1,422 @@
+//! # Time-varying LQR tracking and quadratic value functions
+//!
+//! Given a trajectory (x̄_k, ū_k) of the discrete problem of [`super`], linearize the dynamics
+//! along it (A_k = F_x, B_k = F_u) and expand the cost to second order (l_x, l_u, l_xx, l_uu).
+//! The backward Riccati recursion, from P_N = g_xx, p_N = g_x, v_N = g(x̄_N), is
+//!
+//! ```text
+//! Q_x  = l_x + A_kᵀ p_{k+1}          Q_u  = l_u + B_kᵀ p_{k+1}
+//! Q_xx = l_xx + A_kᵀ P_{k+1} A_k     Q_uu = l_uu + B_kᵀ P_{k+1} B_k     Q_ux = B_kᵀ P_{k+1} A_k
+//! K_k  = −Q_uu⁻¹ Q_ux
+//! p_k  = Q_x + K_kᵀ Q_u
+//! P_k  = Q_xx + K_kᵀ Q_uu K_k + K_kᵀ Q_ux + Q_uxᵀ K_k
+//! v_k  = l(x̄_k, ū_k) + v_{k+1}
+//! ```
+//!
+//! and gives the tracking policy u = ū_k + K_k Δx with Δx = x − x̄_k, and the quadratic value
+//! function of linear Bellman combination, eq. (12):
+//! v̂(x, k) = v(x̄_k) + p_kᵀ Δx + ½ Δxᵀ P_k Δx, where v(x̄_k) is the cost remaining along the
+//! trajectory. p and P are those of *this* policy (no feedforward correction), so that
+//! v̂(x̄_k, k) is exactly the remaining cost; when the trajectory is optimal (Q_u = 0, e.g. after
+//! [`super::ddp`] converges), they are the optimal value function's gradient and Hessian.
+//! Second-order dynamics terms are not included (the classical LQR approximation).
+//!
+//! ## References
+//! - D. H. Jacobson, D. Q. Mayne, *Differential Dynamic Programming*, Elsevier, 1970.
+//! - M. da Silva, F. Durand, J. Popović, *Linear Bellman Combination for Control of Character
+//!   Animation*, SIGGRAPH 2009, §5.2 (eq. 12).
+
+use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
+use super::{ControlError, QuadraticCost, Rk4Map, StageDerivatives};
+use crate::physics::linearize::Linearize;
+use nalgebra::{DMatrix, DVector};
+
+/// A time-varying LQR tracking controller with its quadratic value function (eq. 12).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackingController {
+    /// Reference states x̄_0..x̄_N.
+    pub x_ref: Vec<DVector<f64>>,
+    /// Reference controls ū_0..ū_{N−1}.
+    pub u_ref: Vec<DVector<f64>>,
+    /// Feedback gains K_0..K_{N−1} (m × n).
+    pub gains: Vec<DMatrix<f64>>,
+    /// Remaining cost along the reference, v(x̄_k) for k = 0..N.
+    pub value_ref: Vec<f64>,
+    /// Value gradients p_0..p_N.
+    pub value_gradient: Vec<DVector<f64>>,
+    /// Value Hessians P_0..P_N.
+    pub value_hessian: Vec<DMatrix<f64>>,
+}
+
+impl TrackingController {
+    /// Horizon N (number of control steps).
+    pub fn horizon(&self) -> usize {
+        self.u_ref.len()
+    }
+
+    /// u = ū_k + K_k (x − x̄_k) for k < N, written into `u`. Does not allocate.
+    pub fn policy_into(&self, x: &[f64], k: usize, u: &mut [f64]) {
+        assert!(
+            k < self.horizon(),
+            "policy step {k} beyond horizon {}",
+            self.horizon()
+        );
+        let (xr, ur, gain) = (&self.x_ref[k], &self.u_ref[k], &self.gains[k]);
+        for (i, ui) in u.iter_mut().enumerate() {
+            let mut v = ur[i];
+            for j in 0..x.len() {
+                v += gain[(i, j)] * (x[j] - xr[j]);
+            }
+            *ui = v;
+        }
+    }
+
+    /// u = ū_k + K_k (x − x̄_k) for k < N.
+    pub fn policy(&self, x: &[f64], k: usize) -> DVector<f64> {
+        let mut u = DVector::zeros(self.u_ref[0].len());
+        self.policy_into(x, k, u.as_mut_slice());
+        u
+    }
+
+    /// v̂(x, k) = v(x̄_k) + p_kᵀ Δx + ½ Δxᵀ P_k Δx for k ≤ N. Does not allocate.
+    pub fn value(&self, x: &[f64], k: usize) -> f64 {
+        let (xr, p, hess) = (
+            &self.x_ref[k],
+            &self.value_gradient[k],
+            &self.value_hessian[k],
+        );
+        let mut v = self.value_ref[k];
+        for j in 0..x.len() {
+            let dj = x[j] - xr[j];
+            v += p[j] * dj;
+            for i in 0..x.len() {
+                v += 0.5 * (x[i] - xr[i]) * hess[(i, j)] * dj;
+            }
+        }
+        v
+    }
+}
+
+/// Builds the LQR tracking controller of the trajectory (`xs`: N + 1 states, `us`: N controls)
+/// for `cost` under the RK4 dynamics `map` (needs [`Linearize`]).
+pub fn track<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+) -> Result<TrackingController, ControlError> {
+    let (n, m, horizon) = (map.state_dim(), map.control_dim(), us.len());
+    if horizon == 0 {
+        return Err(ControlError::EmptyHorizon);
+    }
+    if xs.len() != horizon + 1 {
+        return Err(ControlError::DimensionMismatch {
+            what: "reference states (N + 1)",
+            expected: horizon + 1,
+            found: xs.len(),
+        });
+    }
+    for (what, v, d) in xs
+        .iter()
+        .map(|x| ("reference state", x, n))
+        .chain(us.iter().map(|u| ("reference control", u, m)))
+    {
+        if v.len() != d {
+            return Err(ControlError::DimensionMismatch {
+                what,
+                expected: d,
+                found: v.len(),
+            });
+        }
+    }
+    cost.validate(n, m, horizon)?;
+
+    let mut ws = map.workspace();
+    let (mut a, mut b) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
+    let mut l = StageDerivatives::new(n, m);
+    let mut gains = vec![DMatrix::zeros(m, n); horizon];
+    let mut value_ref = vec![0.0; horizon + 1];
+    let mut pv = vec![DVector::zeros(n); horizon + 1];
+    let mut pm = vec![DMatrix::zeros(n, n); horizon + 1];
+    {
+        let (p_n, hess_n) = (&mut pv[horizon], &mut pm[horizon]);
+        cost.terminal_derivatives(&xs[horizon], p_n, hess_n);
+        value_ref[horizon] = cost.terminal(&xs[horizon]);
+    }
+    for k in (0..horizon).rev() {
+        map.jacobians(&xs[k], &us[k], &mut a, &mut b, &mut ws);
+        cost.running_derivatives(k, &xs[k], &us[k], &mut l);
+        let (p1, hess1) = (&pv[k + 1], &pm[k + 1]);
+        let qx = &l.lx + a.transpose() * p1;
+        let qu = &l.lu + b.transpose() * p1;
+        let pa = hess1 * &a;
+        let qxx = &l.lxx + a.transpose() * &pa;
+        let quu = &l.luu + b.transpose() * hess1 * &b;
+        let qux = b.transpose() * &pa;
+        let mut chol = quu.clone();
+        if !cholesky_in_place(&mut chol, m) {
+            return Err(ControlError::NotPositiveDefinite { step: k });
+        }
+        let mut gain = -qux.clone();
+        for j in 0..n {
+            cholesky_solve_in_place(&chol, m, gain.column_mut(j).as_mut_slice());
+        }
+        pv[k] = &qx + gain.transpose() * &qu;
+        let mut hess = &qxx
+            + gain.transpose() * &quu * &gain
+            + gain.transpose() * &qux
+            + qux.transpose() * &gain;
+        symmetrize(&mut hess);
+        pm[k] = hess;
+        value_ref[k] = cost.running(k, &xs[k], &us[k]) + value_ref[k + 1];
+        gains[k] = gain;
+    }
+    Ok(TrackingController {
+        x_ref: xs.to_vec(),
+        u_ref: us.to_vec(),
+        gains,
+        value_ref,
+        value_gradient: pv,
+        value_hessian: pm,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::test_models::LinearOde;
+    use crate::control::StateCost;
+
+    /// Scalar ẋ = a x + b u: RK4 of a linear ODE is exactly x' = φ x + γ u with the degree-4
+    /// Taylor polynomials of e^{ah} and (e^{ah} − 1)/a · b.
+    fn scalar_problem(
+        a: f64,
+        b: f64,
+        h: f64,
+        q: f64,
+        r: f64,
+        qf: f64,
+    ) -> (Rk4Map<LinearOde>, QuadraticCost, f64, f64) {
+        let map = Rk4Map::new(
+            LinearOde {
+                a: DMatrix::from_element(1, 1, a),
+                b: DMatrix::from_element(1, 1, b),
+            },
+            h,
+        )
+        .unwrap();
+        let ah = a * h;
+        let phi = 1.0 + ah + ah * ah / 2.0 + ah.powi(3) / 6.0 + ah.powi(4) / 24.0;
+        let gamma = h * b * (1.0 + ah / 2.0 + ah * ah / 6.0 + ah.powi(3) / 24.0);
+        let cost = QuadraticCost {
+            dt: h,
+            r: DMatrix::from_element(1, 1, r),
+            state: Some(StateCost {
+                weight: DMatrix::from_element(1, 1, q),
+                reference: vec![DVector::zeros(1)],
+            }),
+            q_final: DMatrix::from_element(1, 1, qf),
+            x_final: DVector::zeros(1),
+        };
+        (map, cost, phi, gamma)
+    }
+
+    #[test]
+    fn scalar_riccati_matches_the_hand_recursion_and_the_algebraic_riccati_root() {
+        let (a, b, h, q, r, qf) = (0.7, 1.3, 0.05, 2.0, 0.5, 3.0);
+        let (map, cost, phi, gamma) = scalar_problem(a, b, h, q, r, qf);
+        let horizon = 400;
+        // The zero trajectory is feasible for a linear system.
+        let xs = vec![DVector::zeros(1); horizon + 1];
+        let us = vec![DVector::zeros(1); horizon];
+        let ctl = track(&map, &cost, &xs, &us).unwrap();
+        // Hand recursion of the discrete scalar Riccati equation, V = ½ P x²:
+        // P_N = 2 q_f; P = 2 q h + φ² P' − (φ γ P')² / (r h + γ² P'); K = −φ γ P' / (r h + γ² P').
+        let (qd, rd) = (2.0 * q * h, r * h);
+        let mut p = 2.0 * qf;
+        assert!((ctl.value_hessian[horizon][(0, 0)] - p).abs() < 1e-12);
+        for k in (0..horizon).rev() {
+            let s = rd + gamma * gamma * p;
+            let gain = -phi * gamma * p / s;
+            p = qd + phi * phi * p - (phi * gamma * p).powi(2) / s;
+            assert!((ctl.gains[k][(0, 0)] - gain).abs() < 1e-9 * gain.abs().max(1.0));
+            assert!((ctl.value_hessian[k][(0, 0)] - p).abs() < 1e-9 * p.max(1.0));
+            assert_eq!(ctl.value_gradient[k][0], 0.0);
+        }
+        // Far from the end, P_k solves γ² P² + ((1 − φ²) r_d − q_d γ²) P − q_d r_d = 0.
+        let bq = (1.0 - phi * phi) * rd - qd * gamma * gamma;
+        let root = (-bq + (bq * bq + 4.0 * gamma * gamma * qd * rd).sqrt()) / (2.0 * gamma * gamma);
+        assert!(
+            (ctl.value_hessian[0][(0, 0)] - root).abs() < 1e-8 * root,
+            "{} vs {root}",
+            ctl.value_hessian[0][(0, 0)]
+        );
+        // The value at x is ½ P_0 x², and the policy is K_0 x.
+        assert!((ctl.value(&[0.3], 0) - 0.5 * root * 0.09).abs() < 1e-8);
+        assert!((ctl.policy(&[0.3], 0)[0] - 0.3 * ctl.gains[0][(0, 0)]).abs() < 1e-15);
+    }
+
+    #[test]
+    fn value_equals_the_cost_of_following_the_policy_on_a_linear_system() {
+        // On a linear system with quadratic cost the quadratic value function of the tracking
+        // policy is exact, also around a non-optimal reference trajectory.
+        let (map, cost, _, _) = scalar_problem(-0.4, 1.0, 0.1, 1.0, 0.2, 5.0);
+        let horizon = 30;
+        let us: Vec<DVector<f64>> = (0..horizon)
+            .map(|k| DVector::from_element(1, (k as f64 * 0.3).sin()))
+            .collect();
+        let xs = map.rollout(&DVector::from_element(1, 1.0), &us).unwrap();
+        let ctl = track(&map, &cost, &xs, &us).unwrap();
+        assert!((ctl.value_ref[0] - cost.total(&xs, &us)).abs() < 1e-12);
+        for k0 in [0, 10, 29] {
+            let start = xs[k0][0] + 0.37;
+            let mut x = DVector::from_element(1, start);
+            let mut total = 0.0;
+            let mut ws = map.workspace();
+            let mut next = DVector::zeros(1);
+            for k in k0..horizon {
+                let u = ctl.policy(x.as_slice(), k);
+                total += cost.running(k, &x, &u);
+                map.step(&x, &u, &mut next, &mut ws);
+                std::mem::swap(&mut x, &mut next);
+            }
+            total += cost.terminal(&x);
+            let v = ctl.value(&[start], k0);
+            assert!(
+                (v - total).abs() < 1e-10 * total.abs().max(1.0),
+                "k0 = {k0}: {v} vs {total}"
+            );
+        }
+    }
+
+    #[test]
+    fn tracking_the_optimized_swing_up_rejects_a_perturbation() {
+        use crate::control::ddp::{self, DdpOptions, DdpVariant};
+        use crate::physics::acrobot::Acrobot;
+        use std::f64::consts::FRAC_PI_2;
+        let dt = 0.02;
+        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
+        let cost = QuadraticCost::effort(
+            dt,
+            1,
+            DMatrix::from_diagonal(&DVector::from_vec(vec![100.0, 100.0, 10.0, 10.0])),
+            DVector::from_vec(vec![FRAC_PI_2, 0.0, 0.0, 0.0]),
+        );
+        let x0 = DVector::from_vec(vec![-FRAC_PI_2, 0.0, 0.0, 0.0]);
+        let u_init: Vec<DVector<f64>> = (0..150)
+            .map(|k| DVector::from_element(1, (k as f64 * dt * 3.0).sin()))
+            .collect();
+        let options = DdpOptions {
+            variant: DdpVariant::Full,
+            ..DdpOptions::default()
+        };
+        let sol = ddp::solve(&map, &cost, &x0, &u_init, &options).unwrap();
+        assert!(
+            sol.gradient_norm < 1e-6,
+            "DDP did not converge: {:?}",
+            sol.termination
+        );
+        let ctl = track(&map, &cost, &sol.x, &sol.u).unwrap();
+        // eq. 12 along the trajectory: the remaining cost.
+        assert!((ctl.value_ref[0] - sol.cost).abs() < 1e-9 * sol.cost);
+        assert_eq!(ctl.value(sol.x[0].as_slice(), 0), ctl.value_ref[0]);
+        // At an optimum p_k is the costate: p_0 = ∂J/∂x_0 = λ_0 of the adjoint recursion
+        // λ_N = g_x, λ_k = F_xᵀ λ_{k+1} (no running state cost here).
+        let mut lam = DVector::zeros(4);
+        let mut s1 = DMatrix::zeros(4, 4);
+        cost.terminal_derivatives(&sol.x[150], &mut lam, &mut s1);
+        let mut ws = map.workspace();
+        let (mut fx, mut fu) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
+        for k in (0..150).rev() {
+            map.jacobians(&sol.x[k], &sol.u[k], &mut fx, &mut fu, &mut ws);
+            lam = fx.transpose() * &lam;
+        }
+        // The open-loop cost is very curved in x_0 (∂²J/∂x² ~ 1e5 here), so the differences
+        // need a tiny step; the adjoint λ_0 is the sharp check.
+        let h = 1e-7;
+        for i in 0..4 {
+            let (mut xp, mut xm) = (x0.clone(), x0.clone());
+            xp[i] += h;
+            xm[i] -= h;
+            let jp = cost.total(&map.rollout(&xp, &sol.u).unwrap(), &sol.u);
+            let jm = cost.total(&map.rollout(&xm, &sol.u).unwrap(), &sol.u);
+            let fd = (jp - jm) / (2.0 * h);
+            let p = ctl.value_gradient[0][i];
+            assert!(
+                (lam[i] - p).abs() < 1e-6 * p.abs().max(1.0),
+                "p_0[{i}] {p} vs λ {}",
+                lam[i]
+            );
+            assert!(
+                (fd - p).abs() < 1e-4 * fd.abs().max(1.0),
+                "p_0[{i}] {p} vs {fd}"
+            );
+        }
+        // From a start 3° off, feedback lands near the handstand; the open-loop tape does not.
+        let start = &x0 + DVector::from_vec(vec![0.05, -0.05, 0.0, 0.0]);
+        let closed = closed_loop(&map, &cost, &ctl, &start, true);
+        let open = closed_loop(&map, &cost, &ctl, &start, false);
+        let target = &sol.x[150];
+        let (d_closed, d_open) = ((&closed.0 - target).norm(), (&open.0 - target).norm());
+        assert!(
+            d_closed < 0.2 * d_open,
+            "closed loop {d_closed} vs open loop {d_open}"
+        );
+        // The quadratic value function predicts the closed-loop cost of nearby starts; the
+        // first-order part is exact at an optimum, so the relative error of the predicted
+        // increase shrinks linearly with the offset.
+        let rel_err = |d: f64| {
+            let start = &x0 + DVector::from_vec(vec![d, -d, 0.0, 0.0]);
+            let actual = closed_loop(&map, &cost, &ctl, &start, true).1;
+            let predicted = ctl.value(start.as_slice(), 0);
+            ((predicted - actual) / (actual - sol.cost)).abs()
+        };
+        let (e1, e2) = (rel_err(0.01), rel_err(0.005));
+        assert!(e1 < 0.05 && e2 < 0.65 * e1, "relative errors {e1}, {e2}");
+    }
+
+    /// Final state and cost of following the controller (or only its tape) from `start`.
+    fn closed_loop<M: Linearize>(
+        map: &Rk4Map<M>,
+        cost: &QuadraticCost,
+        ctl: &TrackingController,
+        start: &DVector<f64>,
+        feedback: bool,
+    ) -> (DVector<f64>, f64) {
+        let mut ws = map.workspace();
+        let mut x = start.clone();
+        let mut next = x.clone();
+        let mut total = 0.0;
+        for k in 0..ctl.horizon() {
+            let u = if feedback {
+                ctl.policy(x.as_slice(), k)
+            } else {
+                ctl.u_ref[k].clone()
+            };
+            total += cost.running(k, &x, &u);
+            map.step(&x, &u, &mut next, &mut ws);
+            std::mem::swap(&mut x, &mut next);
+        }
+        total += cost.terminal(&x);
+        (x, total)
+    }
+
+    #[test]
+    fn rejects_mismatched_trajectories() {
+        let (map, cost, _, _) = scalar_problem(0.1, 1.0, 0.1, 1.0, 1.0, 1.0);
+        let us = vec![DVector::zeros(1); 3];
+        let xs = vec![DVector::zeros(1); 3];
+        assert!(matches!(
+            track(&map, &cost, &xs, &us),
+            Err(ControlError::DimensionMismatch {
+                expected: 4,
+                found: 3,
+                ..
+            })
+        ));
+        assert_eq!(
+            track(&map, &cost, &xs[..1], &[]),
+            Err(ControlError::EmptyHorizon)
+        );
+    }
+}
