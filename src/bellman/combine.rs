@@ -163,3 +163,73 @@ mod tests {
         assert_eq!(out, [1.0, 6.0]);
     }
 }
+
+/// How the component controllers of a [`TrackerBlend`] are combined.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlendMode {
+    /// One component alone.
+    Single(usize),
+    /// Fixed normalized weights w_i / Σ w_j (the naive blend).
+    Naive,
+    /// Linear Bellman combination: α_i ∝ w_i exp(−v̂_i(x, t)/λ).
+    Lbc,
+}
+
+/// A policy combining LQR tracking controllers (LBC §5.2):
+/// π(x, t) = Σ α_i(x, t) (ū_i(t) + K_i(t) Δx_i).
+#[derive(Debug, Clone)]
+pub struct TrackerBlend<'a> {
+    /// The component trackers (same state and control dimensions and horizon).
+    pub trackers: &'a [crate::control::lqr::TrackingController],
+    /// Fixed weights w.
+    pub weights: Vec<f64>,
+    /// Temperature λ of z = exp(−v/λ).
+    pub lambda: f64,
+    /// How to combine.
+    pub mode: BlendMode,
+}
+
+impl TrackerBlend<'_> {
+    /// Writes the control at state `x`, step `k` into `u` and the blend weights into `alpha`
+    /// (scratch `ui` of the control's length). Does not allocate.
+    pub fn control(
+        &self,
+        x: &[f64],
+        k: usize,
+        u: &mut [f64],
+        alpha: &mut [f64],
+        ui: &mut [f64],
+    ) -> Result<(), CombineError> {
+        let n = self.trackers.len();
+        match self.mode {
+            BlendMode::Single(i) => {
+                alpha.iter_mut().enumerate().for_each(|(j, a)| *a = (j == i) as u8 as f64);
+            }
+            BlendMode::Naive => {
+                let s: f64 = self.weights.iter().sum();
+                for (a, w) in alpha.iter_mut().zip(&self.weights) {
+                    *a = w / s;
+                }
+            }
+            BlendMode::Lbc => {
+                let mut values = [0.0f64; 16];
+                assert!(n <= values.len(), "at most 16 components");
+                for (v, t) in values.iter_mut().zip(self.trackers) {
+                    *v = t.value(x, k);
+                }
+                blend_weights(&self.weights, &values[..n], self.lambda, alpha)?;
+            }
+        }
+        u.iter_mut().for_each(|v| *v = 0.0);
+        for (t, &a) in self.trackers.iter().zip(alpha.iter()) {
+            if a == 0.0 {
+                continue;
+            }
+            t.policy_into(x, k, ui);
+            for (o, &c) in u.iter_mut().zip(ui.iter()) {
+                *o += a * c;
+            }
+        }
+        Ok(())
+    }
+}

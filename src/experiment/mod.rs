@@ -15,6 +15,7 @@
 //! To add an experiment family, implement [`Experiment`] (and [`Job`] for its parameters) in a
 //! new file and list it in [`registry`].
 
+pub mod lbc_acrobot;
 pub mod lbc_grid;
 pub mod lbc_projection;
 pub mod output;

@@ -402,6 +402,7 @@ impl Experiment for PhysicsValidation {
                 log_y: true,
                 series,
                 y_range: None,
+                x_range: None,
                 legend: Legend::LowerRight,
             });
         }
@@ -439,6 +440,7 @@ impl Experiment for PhysicsValidation {
                     log_y: true,
                     series: drift_series,
                     y_range: None,
+                x_range: None,
                     legend: Legend::UpperLeft,
                 },
                 Panel {
@@ -449,6 +451,7 @@ impl Experiment for PhysicsValidation {
                     log_y: true,
                     series: step_series,
                     y_range: None,
+                x_range: None,
                     legend: Legend::UpperRight,
                 },
             ];

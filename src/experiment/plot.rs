@@ -74,6 +74,8 @@ pub struct Panel {
     pub series: Vec<Series>,
     /// Fixed y range (in data units), else fitted.
     pub y_range: Option<(f64, f64)>,
+    /// Fixed x range (in data units), else fitted.
+    pub x_range: Option<(f64, f64)>,
     /// Where the legend goes.
     pub legend: Legend,
 }
@@ -452,7 +454,10 @@ fn draw_panel<DB: DrawingBackend>(
             (a, b)
         }
     };
-    let xr = span(data.iter().flatten().map(|q| q.0).collect(), p.log_x);
+    let xr = match p.x_range {
+        Some(r) => r,
+        None => span(data.iter().flatten().map(|q| q.0).collect(), p.log_x),
+    };
     let yr = match p.y_range {
         Some(r) => r,
         None => span(data.iter().flatten().map(|q| q.1).collect(), p.log_y),
