@@ -10,13 +10,15 @@
 //!
 //! Models: [`pendulum::Pendulum3`] (NeuroAnimator's 3-link pendulum), [`truck::Truck`] (its
 //! rear-wheel-drive truck, a planar bicycle-model rigid body), [`lander::Lander`] (its lunar
-//! lander, a 3-D rigid body with a main thruster and attitude jets), [`acrobot::Acrobot`] (the
+//! lander, a 3-D rigid body with a main thruster and attitude jets), [`dolphin::Dolphin`] (its
+//! muscle-driven mass-spring-damper dolphin), [`acrobot::Acrobot`] (the
 //! two-link gymnast of linear Bellman combination), and general planar articulated trees
 //! ([`planar::PlanarTree`]) with two instances: the seven-link [`diver::diver`] and the
 //! [`push::push_figure`] of the push-recovery experiment.
 
 pub mod acrobot;
 pub mod diver;
+pub mod dolphin;
 pub mod integrate;
 pub mod lander;
 pub mod lattice;
@@ -211,6 +213,7 @@ pub const MODEL_NAMES: &[&str] = &[
     "push_recovery",
     "truck",
     "lander",
+    "dolphin",
 ];
 
 /// Builds a model by registry name.
@@ -225,6 +228,7 @@ pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
         "push_recovery" => Box::new(push::push_figure()),
         "truck" => Box::new(truck::Truck::default()),
         "lander" => Box::new(lander::Lander::default()),
+        "dolphin" => Box::new(dolphin::Dolphin::default()),
         _ => return None,
     })
 }
