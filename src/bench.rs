@@ -96,6 +96,63 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             black_box(project(black_box(&comps), black_box(&desired)).ok());
         }),
     );
+    // LBC: DDP iteration, LQR backward pass and blended-policy evaluation on the acrobot
+    // swing-up horizon (4 s at 0.01 s).
+    {
+        use crate::bellman::combine::{BlendMode, TrackerBlend};
+        use crate::control::ddp::{solve, DdpOptions};
+        use crate::control::lqr::track;
+        use crate::control::{QuadraticCost, Rk4Map};
+        use nalgebra::{DMatrix, DVector};
+        let dt = 0.01;
+        let steps = 400;
+        let map = Rk4Map::new(Acrobot::default(), dt).expect("valid dt");
+        let cost = QuadraticCost::effort(
+            dt,
+            1,
+            DMatrix::from_diagonal(&DVector::from_vec(vec![1e3, 1e3, 1e2, 1e2])),
+            DVector::from_vec(vec![std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0]),
+        );
+        let x0 = DVector::from_vec(vec![-std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0]);
+        let u0: Vec<DVector<f64>> = (0..steps)
+            .map(|k| DVector::from_element(1, (k as f64 * dt * 3.0).sin()))
+            .collect();
+        let one_iter = DdpOptions {
+            max_iterations: 1,
+            ..DdpOptions::default()
+        };
+        push(
+            "ddp.acrobot.iters_per_s",
+            throughput(min_seconds, 1, || {
+                black_box(solve(&map, &cost, &x0, &u0, &one_iter).ok());
+            }),
+        );
+        let xs = map.rollout(&x0, &u0).expect("finite rollout");
+        push(
+            "lqr.acrobot.backward_passes_per_s",
+            throughput(min_seconds, 1, || {
+                black_box(track(&map, &cost, &xs, &u0).ok());
+            }),
+        );
+        let t = track(&map, &cost, &xs, &u0).expect("tracker");
+        let trackers = vec![t.clone(), t];
+        let blend = TrackerBlend {
+            trackers: &trackers,
+            weights: vec![1.0, 1.0],
+            lambda: 1.0,
+            mode: BlendMode::Lbc,
+        };
+        let (mut u, mut a, mut ui) = ([0.0], [0.0; 2], [0.0]);
+        let xq = [-1.4, 0.1, 0.2, -0.1];
+        push(
+            "lbc.acrobot.policy_evals_per_s",
+            throughput(min_seconds, steps as u64, || {
+                for k in 0..steps {
+                    black_box(blend.control(&xq, k, &mut u, &mut a, &mut ui).ok());
+                }
+            }),
+        );
+    }
     out
 }
 

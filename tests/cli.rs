@@ -132,6 +132,37 @@ fn lbc_grid_quick_combination_is_exact_and_naive_is_worse() {
 }
 
 #[test]
+fn lbc_acrobot_quick_lbc_beats_the_naive_blend() {
+    let d = run_quick("lbc_acrobot_swingup", "2");
+    let out = d.path().join("out/lbc_acrobot_swingup");
+    let text = std::fs::read_to_string(out.join("final.csv")).unwrap();
+    assert!(
+        text.starts_with("policy,final_distance,control_cost"),
+        "{text}"
+    );
+    let dist = |name: &str| -> f64 {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("{name},")))
+            .unwrap_or_else(|| panic!("no {name}"));
+        line.split(',').nth(1).unwrap().parse().unwrap()
+    };
+    for p in ["tracker1", "tracker2", "naive", "lbc"] {
+        assert!(!dist(p).is_nan(), "{p}");
+    }
+    assert!(dist("lbc") < dist("naive"), "{text}");
+    assert!(
+        header(&out.join("sweep.csv")).starts_with("theta1_deg,theta2_deg,policy,final_distance")
+    );
+    for f in ["final_pose", "sweep"] {
+        assert!(d
+            .path()
+            .join(format!("figs/lbc_acrobot_swingup_{f}.png"))
+            .exists());
+    }
+}
+
+#[test]
 fn csvs_are_identical_for_any_thread_count() {
     for id in [
         "physics_validation",
@@ -412,6 +443,9 @@ fn describe_and_simulate_every_model() {
         if name == "lander" {
             state[3] = 1.0; // unit quaternion
             state[2] = 10.0;
+        }
+        if name == "dolphin" {
+            state = motionlab::physics::dolphin::Dolphin::default().rest_state();
         }
         let csv = ok(&motionlab(
             dir.path(),

@@ -203,7 +203,10 @@ impl TrackerBlend<'_> {
         let n = self.trackers.len();
         match self.mode {
             BlendMode::Single(i) => {
-                alpha.iter_mut().enumerate().for_each(|(j, a)| *a = (j == i) as u8 as f64);
+                alpha
+                    .iter_mut()
+                    .enumerate()
+                    .for_each(|(j, a)| *a = (j == i) as u8 as f64);
             }
             BlendMode::Naive => {
                 let s: f64 = self.weights.iter().sum();

@@ -69,8 +69,16 @@ impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         positive("horizon", self.horizon)?;
         positive("dt", self.dt)?;
-        ensure(self.horizon >= 2.0 * self.dt, "horizon", "must cover at least two steps")?;
-        ensure(self.starts.len() >= 2, "starts", "need at least two swing-ups")?;
+        ensure(
+            self.horizon >= 2.0 * self.dt,
+            "horizon",
+            "must cover at least two steps",
+        )?;
+        ensure(
+            self.starts.len() >= 2,
+            "starts",
+            "need at least two swing-ups",
+        )?;
         ensure(
             self.weights.len() == self.starts.len(),
             "weights",
@@ -87,7 +95,11 @@ impl Validate for Params {
             "variant",
             format!("unknown DDP variant `{}` (ilqr, full)", self.variant),
         )?;
-        ensure(self.max_iterations >= 1, "max_iterations", "must be at least 1")?;
+        ensure(
+            self.max_iterations >= 1,
+            "max_iterations",
+            "must be at least 1",
+        )?;
         positive("lambda", self.lambda)?;
         positive("success_distance", self.success_distance)?;
         ensure(self.sweep_points >= 1, "sweep_points", "must be at least 1")?;
@@ -117,12 +129,24 @@ pub fn distance_to_handstand(x: &[f64]) -> f64 {
     d.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
-/// Result of running one policy from one start.
+/// Result of running one policy from one start (stops where the closed loop diverges).
 struct Rollout {
     xs: Vec<DVector<f64>>,
     us: Vec<f64>,
     alpha1: Vec<f64>,
     control_cost: f64,
+    /// Step at which the closed loop diverged (non-finite state), if it did.
+    diverged: Option<usize>,
+}
+
+impl Rollout {
+    /// Distance of the final state to the handstand; infinite when the closed loop diverged.
+    fn final_distance(&self) -> f64 {
+        match self.diverged {
+            Some(_) => f64::INFINITY,
+            None => distance_to_handstand(self.xs[self.xs.len() - 1].as_slice()),
+        }
+    }
 }
 
 impl Params {
@@ -141,7 +165,11 @@ impl Params {
 
     fn options(&self) -> DdpOptions {
         DdpOptions {
-            variant: if self.variant == "full" { DdpVariant::Full } else { DdpVariant::Ilqr },
+            variant: if self.variant == "full" {
+                DdpVariant::Full
+            } else {
+                DdpVariant::Ilqr
+            },
             max_iterations: self.max_iterations,
             ..DdpOptions::default()
         }
@@ -149,12 +177,22 @@ impl Params {
 
     fn swing_up(&self, map: &Rk4Map<Acrobot>, start: &[f64; 4]) -> Result<DdpSolution, Error> {
         let u0: Vec<DVector<f64>> = (0..self.steps())
-            .map(|k| DVector::from_element(1, self.init_amplitude * (k as f64 * self.dt * self.init_frequency).sin()))
+            .map(|k| {
+                DVector::from_element(
+                    1,
+                    self.init_amplitude * (k as f64 * self.dt * self.init_frequency).sin(),
+                )
+            })
             .collect();
         solve(map, &self.cost(), &radians(start), &u0, &self.options()).map_err(super::other)
     }
 
-    fn run_policy(&self, map: &Rk4Map<Acrobot>, blend: &TrackerBlend, x0: &DVector<f64>) -> Result<Rollout, Error> {
+    fn run_policy(
+        &self,
+        map: &Rk4Map<Acrobot>,
+        blend: &TrackerBlend,
+        x0: &DVector<f64>,
+    ) -> Result<Rollout, Error> {
         let steps = self.steps();
         let mut ws = map.workspace();
         let mut x = x0.clone();
@@ -165,12 +203,23 @@ impl Params {
             us: Vec::with_capacity(steps),
             alpha1: Vec::with_capacity(steps),
             control_cost: 0.0,
+            diverged: None,
         };
         for k in 0..steps {
-            blend.control(x.as_slice(), k, &mut u, &mut alpha, &mut ui).map_err(super::other)?;
+            if blend
+                .control(x.as_slice(), k, &mut u, &mut alpha, &mut ui)
+                .is_err()
+            {
+                out.diverged = Some(k);
+                break;
+            }
             let uu = DVector::from_row_slice(&u);
             map.step(&x, &uu, &mut next, &mut ws);
-            crate::physics::check_finite("acrobot", k, (k + 1) as f64 * self.dt, next.as_slice())?;
+            if !u[0].is_finite() || next.iter().any(|v| !(v.abs() < DIVERGED)) {
+                // A policy that drives the closed loop unstable fails; that is a result here.
+                out.diverged = Some(k);
+                break;
+            }
             std::mem::swap(&mut x, &mut next);
             out.control_cost += 0.5 * u[0] * u[0] * self.dt;
             out.us.push(u[0]);
@@ -180,6 +229,9 @@ impl Params {
         Ok(out)
     }
 }
+
+/// A state component beyond this magnitude (rad or rad/s) counts as a diverged closed loop.
+const DIVERGED: f64 = 1e4;
 
 const POLICIES: [&str; 4] = ["tracker1", "tracker2", "naive", "lbc"];
 
@@ -218,8 +270,24 @@ impl Job for Params {
                 .map(|s| track(&map, &cost, &s.x, &s.u).map_err(super::other))
                 .collect::<Result<_, _>>()
         })?;
-        let mut swingups = Table::new(&["start", "theta1_deg", "theta2_deg", "iterations", "cost", "final_distance", "termination"]);
-        let mut trace = Table::new(&["start", "iteration", "cost", "regularization", "step", "gradient_norm", "accepted"]);
+        let mut swingups = Table::new(&[
+            "start",
+            "theta1_deg",
+            "theta2_deg",
+            "iterations",
+            "cost",
+            "final_distance",
+            "termination",
+        ]);
+        let mut trace = Table::new(&[
+            "start",
+            "iteration",
+            "cost",
+            "regularization",
+            "step",
+            "gradient_norm",
+            "accepted",
+        ]);
         for (i, (s, sol)) in self.starts.iter().zip(&sols).enumerate() {
             swingups.push(row![
                 i + 1,
@@ -231,7 +299,15 @@ impl Job for Params {
                 format!("{:?}", sol.termination)
             ]);
             for r in &sol.trace {
-                trace.push(row![i + 1, r.iteration, r.cost, r.regularization, r.step, r.gradient_norm, r.accepted as i64]);
+                trace.push(row![
+                    i + 1,
+                    r.iteration,
+                    r.cost,
+                    r.regularization,
+                    r.step,
+                    r.gradient_norm,
+                    r.accepted as i64
+                ]);
             }
         }
         let blend = |m: BlendMode| TrackerBlend {
@@ -242,24 +318,61 @@ impl Job for Params {
         };
         // The test start.
         let x0 = radians(&self.test_start);
-        let mut fin = Table::new(&["policy", "final_distance", "control_cost", "final_theta1", "final_theta2"]);
-        let mut traj = Table::new(&["policy", "t", "theta1", "theta2", "omega1", "omega2", "u", "alpha1"]);
+        let mut fin = Table::new(&[
+            "policy",
+            "final_distance",
+            "control_cost",
+            "final_theta1",
+            "final_theta2",
+        ]);
+        let mut traj = Table::new(&[
+            "policy", "t", "theta1", "theta2", "omega1", "omega2", "u", "alpha1",
+        ]);
         ctx.stage("test start", || -> Result<(), Error> {
             for (i, name) in POLICIES.iter().enumerate() {
                 let r = self.run_policy(&map, &blend(mode(i)), &x0)?;
                 let xn = &r.xs[r.xs.len() - 1];
-                fin.push(row![*name, distance_to_handstand(xn.as_slice()), r.control_cost, xn[0], xn[1]]);
+                fin.push(row![
+                    *name,
+                    r.final_distance(),
+                    r.control_cost,
+                    xn[0],
+                    xn[1]
+                ]);
                 for (k, x) in r.xs.iter().enumerate() {
-                    let (u, a) = if k < r.us.len() { (r.us[k], r.alpha1[k]) } else { (f64::NAN, f64::NAN) };
-                    traj.push(row![*name, k as f64 * self.dt, x[0], x[1], x[2], x[3], u, a]);
+                    let (u, a) = if k < r.us.len() {
+                        (r.us[k], r.alpha1[k])
+                    } else {
+                        (f64::NAN, f64::NAN)
+                    };
+                    traj.push(row![
+                        *name,
+                        k as f64 * self.dt,
+                        x[0],
+                        x[1],
+                        x[2],
+                        x[3],
+                        u,
+                        a
+                    ]);
                 }
             }
             Ok(())
         })?;
         // Sweep over start states.
         let n = self.sweep_points;
-        let lin = |r: [f64; 2], i: usize| if n == 1 { 0.5 * (r[0] + r[1]) } else { r[0] + (r[1] - r[0]) * i as f64 / (n - 1) as f64 };
-        let grid: Vec<(f64, f64)> = (0..n).flat_map(|j| (0..n).map(move |i| (lin(self.sweep_theta1, i), lin(self.sweep_theta2, j)))).collect();
+        let lin = |r: [f64; 2], i: usize| {
+            if n == 1 {
+                0.5 * (r[0] + r[1])
+            } else {
+                r[0] + (r[1] - r[0]) * i as f64 / (n - 1) as f64
+            }
+        };
+        let grid: Vec<(f64, f64)> = (0..n)
+            .flat_map(|j| {
+                (0..n).map(move |i| (lin(self.sweep_theta1, i), lin(self.sweep_theta2, j)))
+            })
+            .collect();
         let pb = ctx.progress(grid.len() as u64, "start-state sweep");
         let rows: Vec<Result<Vec<(f64, f64)>, Error>> = ctx.stage("sweep", || {
             grid.par_iter()
@@ -268,7 +381,7 @@ impl Job for Params {
                     let out = (0..POLICIES.len())
                         .map(|i| {
                             let r = self.run_policy(&map, &blend(mode(i)), &x0)?;
-                            Ok((distance_to_handstand(r.xs[r.xs.len() - 1].as_slice()), r.control_cost))
+                            Ok((r.final_distance(), r.control_cost))
                         })
                         .collect();
                     pb.inc(1);
@@ -277,7 +390,14 @@ impl Job for Params {
                 .collect()
         });
         pb.finish_and_clear();
-        let mut sweep = Table::new(&["theta1_deg", "theta2_deg", "policy", "final_distance", "control_cost", "success"]);
+        let mut sweep = Table::new(&[
+            "theta1_deg",
+            "theta2_deg",
+            "policy",
+            "final_distance",
+            "control_cost",
+            "success",
+        ]);
         for (&(a, b), r) in grid.iter().zip(rows) {
             for (name, (d, c)) in POLICIES.iter().zip(r?) {
                 sweep.push(row![a, b, *name, d, c, (d < self.success_distance) as i64]);
@@ -302,19 +422,40 @@ impl Experiment for LbcAcrobot {
         typed_job::<Params>(params)
     }
 
-    fn figures(&self, fig: &super::plot::FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    fn figures(
+        &self,
+        fig: &super::plot::FigureSink,
+        tables: &Tables,
+    ) -> Result<Vec<PathBuf>, Error> {
         let traj = tables.require("trajectories")?;
-        let (p, t, a1, a2, al) = (traj.strs("policy"), traj.f64s("t"), traj.f64s("theta1"), traj.f64s("theta2"), traj.f64s("alpha1"));
+        let (p, t, a1, a2, al) = (
+            traj.strs("policy"),
+            traj.f64s("t"),
+            traj.f64s("theta1"),
+            traj.f64s("theta2"),
+            traj.f64s("alpha1"),
+        );
         let acro = Acrobot::default();
         // Final poses.
-        let mut series = vec![Series::line("handstand", vec![(0.0, 0.0), (0.0, 1.0), (0.0, 2.0)], 7).mark(Mark::Dashed)];
+        let mut series =
+            vec![
+                Series::line("handstand", vec![(0.0, 0.0), (0.0, 1.0), (0.0, 2.0)], 7)
+                    .mark(Mark::Dashed),
+            ];
         let mut angle_series = Vec::new();
         for (c, name) in POLICIES.iter().enumerate() {
             let rows: Vec<usize> = (0..p.len()).filter(|&r| p[r] == *name).collect();
             let Some(&last) = rows.last() else { continue };
             let [p1, p2] = acro.positions(&[a1[last], a2[last], 0.0, 0.0]);
-            series.push(Series::line(*name, vec![(0.0, 0.0), (p1[0], p1[1]), (p2[0], p2[1])], c).mark(Mark::LinePoints));
-            angle_series.push(Series::line(*name, rows.iter().map(|&r| (t[r], a1[r])).collect(), c));
+            series.push(
+                Series::line(*name, vec![(0.0, 0.0), (p1[0], p1[1]), (p2[0], p2[1])], c)
+                    .mark(Mark::LinePoints),
+            );
+            angle_series.push(Series::line(
+                *name,
+                rows.iter().map(|&r| (t[r], a1[r])).collect(),
+                c,
+            ));
         }
         let pose = Panel {
             title: "final poses from (-105, -15, 0, 0) deg".into(),
@@ -326,7 +467,9 @@ impl Experiment for LbcAcrobot {
             legend: Legend::LowerRight,
             ..Default::default()
         };
-        let lbc_rows: Vec<usize> = (0..p.len()).filter(|&r| p[r] == "lbc" && al[r].is_finite()).collect();
+        let lbc_rows: Vec<usize> = (0..p.len())
+            .filter(|&r| p[r] == "lbc" && al[r].is_finite())
+            .collect();
         let angles = Panel {
             title: "shoulder angle theta1 (handstand: pi/2)".into(),
             x_label: "time (s)".into(),
@@ -339,33 +482,48 @@ impl Experiment for LbcAcrobot {
             title: "LBC blend weight of tracker 1".into(),
             x_label: "time (s)".into(),
             y_label: "alpha_1".into(),
-            series: vec![Series::line("alpha_1", lbc_rows.iter().map(|&r| (t[r], al[r])).collect(), 3)],
+            series: vec![Series::line(
+                "alpha_1",
+                lbc_rows.iter().map(|&r| (t[r], al[r])).collect(),
+                3,
+            )],
             y_range: Some((-0.05, 1.05)),
             ..Default::default()
         };
         let mut files = fig.draw("final_pose", &Figure::grid(vec![pose, angles, weights], 3))?;
         // Sweep heat maps.
+        const CLAMP: f64 = 3.0;
         let sw = tables.require("sweep")?;
-        let (s1, s2, sp, sd) = (sw.f64s("theta1_deg"), sw.f64s("theta2_deg"), sw.strs("policy"), sw.f64s("final_distance"));
+        let (s1, s2, sp, sd) = (
+            sw.f64s("theta1_deg"),
+            sw.f64s("theta2_deg"),
+            sw.strs("policy"),
+            sw.f64s("final_distance"),
+        );
         let mut maps = Vec::new();
         for name in POLICIES {
             let rows: Vec<usize> = (0..sp.len()).filter(|&r| sp[r] == name).collect();
             if rows.is_empty() {
                 continue;
             }
-            let nx = rows.iter().take_while(|&&r| s2[r] == s2[rows[0]]).count().max(1);
+            let nx = rows
+                .iter()
+                .take_while(|&&r| s2[r] == s2[rows[0]])
+                .count()
+                .max(1);
             let ny = rows.len() / nx;
             maps.push(Heatmap {
-                title: format!("{name}: final distance to handstand"),
+                title: format!("{name}: final distance to handstand (capped at {CLAMP})"),
                 x_label: "start theta1 (deg)".into(),
                 y_label: "start theta2 (deg)".into(),
                 x_range: (s1[rows[0]], s1[rows[nx - 1]]),
                 y_range: (s2[rows[0]], s2[rows[rows.len() - 1]]),
                 nx,
                 ny,
-                values: rows.iter().map(|&r| sd[r].min(5.0)).collect(),
+                values: rows.iter().map(|&r| sd[r].min(CLAMP)).collect(),
                 value_label: "distance".into(),
                 diverging: false,
+                range: Some((0.0, CLAMP)),
             });
         }
         files.extend(fig.draw("sweep", &Figure::heatmaps(maps, 2))?);
@@ -375,7 +533,11 @@ impl Experiment for LbcAcrobot {
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
         use polars::prelude::*;
         let df = read_csv(&dir.join("final.csv"))?;
-        let (p, d, c) = (df_str(&df, "policy")?, df_f64(&df, "final_distance")?, df_f64(&df, "control_cost")?);
+        let (p, d, c) = (
+            df_str(&df, "policy")?,
+            df_f64(&df, "final_distance")?,
+            df_f64(&df, "control_cost")?,
+        );
         let mut md = String::from("From (-105, -15, 0, 0) degrees:\n\n| policy | final distance to handstand | control cost ½∫u² |\n| --- | --- | --- |\n");
         let mut dist = std::collections::BTreeMap::new();
         for i in 0..p.len() {
@@ -385,23 +547,40 @@ impl Experiment for LbcAcrobot {
         let sweep = read_csv(&dir.join("sweep.csv"))?
             .lazy()
             .group_by([col("policy")])
-            .agg([col("success").sum().alias("successes"), col("success").count().alias("starts"), col("final_distance").median().alias("median_distance")])
+            .agg([
+                col("success").sum().alias("successes"),
+                col("success").count().alias("starts"),
+                col("final_distance").median().alias("median_distance"),
+            ])
             .sort(["policy"], Default::default())
             .collect()
             .map_err(|e| Error::Polars(e.to_string()))?;
-        let (sp, ss, sn, sm) = (df_str(&sweep, "policy")?, df_f64(&sweep, "successes")?, df_f64(&sweep, "starts")?, df_f64(&sweep, "median_distance")?);
+        let (sp, ss, sn, sm) = (
+            df_str(&sweep, "policy")?,
+            df_f64(&sweep, "successes")?,
+            df_f64(&sweep, "starts")?,
+            df_f64(&sweep, "median_distance")?,
+        );
         md.push_str("\nStart-state sweep:\n\n| policy | successes | median final distance |\n| --- | --- | --- |\n");
         for i in 0..sp.len() {
-            md.push_str(&format!("| {} | {} of {} | {} |\n", sp[i], ss[i], sn[i], sig(sm[i])));
+            md.push_str(&format!(
+                "| {} | {} of {} | {} |\n",
+                sp[i],
+                ss[i],
+                sn[i],
+                sig(sm[i])
+            ));
         }
         let g = |k: &str| dist.get(k).copied().unwrap_or(f64::NAN);
         let (t1, t2, nv, lbc) = (g("tracker1"), g("tracker2"), g("naive"), g("lbc"));
         let lbc_best = lbc < nv && lbc < t1 && lbc < t2;
         let naive_mid = nv < t1.min(t2);
-        let verdict = match (lbc_best, naive_mid) {
-            (true, true) => Verdict::Held,
-            (true, false) => Verdict::Partly,
-            _ => Verdict::NotHeld,
+        let verdict = if lbc_best && naive_mid {
+            Verdict::Held
+        } else if lbc < nv && lbc < t1.max(t2) {
+            Verdict::Partly
+        } else {
+            Verdict::NotHeld
         };
         Ok(Findings {
             ours: md,

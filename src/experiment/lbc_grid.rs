@@ -382,6 +382,7 @@ impl Experiment for LbcGrid {
             values,
             value_label: label.into(),
             diverging,
+            range: None,
         };
         let col = |n: &str| g.f64s(n);
         let sub = |x: &str, y: &str| -> Vec<f64> {

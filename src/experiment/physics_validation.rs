@@ -440,7 +440,7 @@ impl Experiment for PhysicsValidation {
                     log_y: true,
                     series: drift_series,
                     y_range: None,
-                x_range: None,
+                    x_range: None,
                     legend: Legend::UpperLeft,
                 },
                 Panel {
@@ -451,7 +451,7 @@ impl Experiment for PhysicsValidation {
                     log_y: true,
                     series: step_series,
                     y_range: None,
-                x_range: None,
+                    x_range: None,
                     legend: Legend::UpperRight,
                 },
             ];

@@ -117,6 +117,8 @@ pub struct Heatmap {
     pub value_label: String,
     /// Diverging colours centred on zero (for signed differences).
     pub diverging: bool,
+    /// Fixed colour range (values outside are clamped), else fitted to the data.
+    pub range: Option<(f64, f64)>,
 }
 
 /// A figure: panels laid out in a grid.
@@ -351,6 +353,9 @@ fn draw_heatmap<DB: DrawingBackend>(
     if h.diverging {
         let m = lo.abs().max(hi.abs()).max(1e-300);
         (lo, hi) = (-m, m);
+    }
+    if let Some(r) = h.range {
+        (lo, hi) = r;
     }
     if hi - lo <= 0.0 {
         hi = lo + 1.0;
