@@ -16,6 +16,7 @@
 //! new file and list it in [`registry`].
 
 pub mod lbc_acrobot;
+pub mod lbc_diver;
 pub mod lbc_grid;
 pub mod lbc_projection;
 pub mod output;

@@ -1,12 +1,14 @@
 //! Every experiment family, by the name experiment files use in `experiment = "…"`.
 
-use super::{lbc_acrobot, lbc_grid, lbc_projection, physics_validation, Experiment};
+use super::{lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, physics_validation, Experiment};
 
 static FAMILIES: &[&dyn Experiment] = &[
     &physics_validation::PhysicsValidation,
     &lbc_projection::LbcProjection,
     &lbc_grid::LbcGrid,
     &lbc_acrobot::LbcAcrobot,
+    &lbc_diver::LbcDiverInterpolation,
+    &lbc_diver::LbcDiverCoordination,
 ];
 
 /// All families.
