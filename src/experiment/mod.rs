@@ -19,6 +19,7 @@ pub mod lbc_acrobot;
 pub mod lbc_diver;
 pub mod lbc_grid;
 pub mod lbc_projection;
+pub mod lbc_push;
 pub mod output;
 pub mod physics_validation;
 pub mod plot;

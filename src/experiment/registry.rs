@@ -1,6 +1,8 @@
 //! Every experiment family, by the name experiment files use in `experiment = "…"`.
 
-use super::{lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, physics_validation, Experiment};
+use super::{
+    lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, physics_validation, Experiment,
+};
 
 static FAMILIES: &[&dyn Experiment] = &[
     &physics_validation::PhysicsValidation,
@@ -9,6 +11,7 @@ static FAMILIES: &[&dyn Experiment] = &[
     &lbc_acrobot::LbcAcrobot,
     &lbc_diver::LbcDiverInterpolation,
     &lbc_diver::LbcDiverCoordination,
+    &lbc_push::LbcPush,
 ];
 
 /// All families.
