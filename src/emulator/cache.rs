@@ -5,7 +5,8 @@
 //! JSON file, `<dir>/<model>-n<steps>-<hash>.json`, where the hash (64-bit FNV-1a, hex) is taken
 //! over a canonical JSON *key* holding everything that determines the result: the cache format
 //! version, the [`BuildSpec`] (model, n, δt, hidden units, examples, training method and
-//! settings, seed) and the physical model's parameters. The file repeats the key, and a load
+//! settings, seed), the physical model's parameters and a fingerprint of its sampling recipe
+//! (control limits, start states drawn with a fixed seed, transforms). The file repeats the key, and a load
 //! checks it, so a hash collision cannot return a wrong network.
 //!
 //! Weights, normalization statistics and errors are stored as the bit patterns of their f64
@@ -89,6 +90,7 @@ impl EmulatorCache {
             "format": CACHE_FORMAT,
             "spec": spec,
             "physics": spec.net.model.physics_json(),
+            "recipe": spec.net.model.recipe_json(),
         })
     }
 
@@ -215,9 +217,9 @@ mod tests {
                 hidden: 6,
                 examples: 120,
                 method: TrainMethod::Cg,
+                physical_dt: 0.01,
             },
             steps: 10,
-            physical_dt: 0.01,
             settings: TrainSettings {
                 held_out_fraction: 0.25,
                 cg_max_iters: 20,

@@ -12,10 +12,11 @@
 //! control limits and transforms; experiments then list it in their `nets` tables.
 //!
 //! ## Start states and typical controls (documented per model)
-//! - **Pendulum** (all variants): joint angles q_i ~ U[−1.2, 1.2] rad, joint rates
-//!   q̇_i ~ U[−2, 2] rad/s; episodes of 20 s. Active: motor torques within ±6 N·m (about half
-//!   the gravity torque on the first joint, 12.3 N·m); ext. force: also link forces within ±5 N.
-//!   Controls are smooth random functions with knots every 0.3–1.5 s.
+//! - **Pendulum** (all variants): joint angles q_i ~ U[−0.7, 0.7] rad, joint rates
+//!   q̇_i ~ U[−1, 1] rad/s; episodes of 20 s. Active: motor torques within ±(2.5, 1.5, 0.5) N·m
+//!   (about a fifth of the gravity torque each joint holds horizontal: 12.3, 7.4, 2.5 N·m);
+//!   ext. force: also link forces within ±2 N. Controls are smooth random functions with knots
+//!   every 0.3–1.5 s.
 //! - **Truck**: centre of mass uniform in a 100 m square, heading uniform, forward speed
 //!   U[−3, 8] m/s, no sideways or yaw rate; drive acceleration within ±3 m/s² and steering within
 //!   ±0.5 rad, piecewise constant for 0.5–2 s; episodes of 10 s.
@@ -118,6 +119,21 @@ impl NetModel {
         .unwrap_or_default()
     }
 
+    /// A fingerprint of the sampling recipe (control limits and process, episode length,
+    /// transforms, and three start states drawn with a fixed seed), part of the emulator cache
+    /// key so that a change to any of them retrains.
+    pub fn recipe_json(self) -> serde_json::Value {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let starts: Vec<Vec<f64>> = (0..3).map(|_| self.start_state(&mut rng)).collect();
+        serde_json::json!({
+            "limits": self.control_limits(),
+            "process": self.control_process(),
+            "episode": self.episode_duration(),
+            "transforms": format!("{:?}", self.transform_config()),
+            "starts": starts,
+        })
+    }
+
     /// The physical simulator: RK4 at the caller's δt (the lander renormalizes its quaternion).
     pub fn simulator(self) -> Box<dyn Dynamics> {
         match self {
@@ -164,8 +180,8 @@ impl NetModel {
                 s
             }
             _ => {
-                let mut s: Vec<f64> = (0..3).map(|_| rng.random_range(-1.2..1.2)).collect();
-                s.extend((0..3).map(|_| rng.random_range(-2.0..2.0)));
+                let mut s: Vec<f64> = (0..3).map(|_| rng.random_range(-0.7..0.7)).collect();
+                s.extend((0..3).map(|_| rng.random_range(-1.0..1.0)));
                 s
             }
         }
@@ -175,8 +191,8 @@ impl NetModel {
     pub fn control_limits(self) -> ControlLimits {
         match self {
             Self::PendulumPassive => ControlLimits::none(),
-            Self::PendulumActive => ControlLimits::symmetric(&[6.0; 3]),
-            Self::PendulumExt => ControlLimits::symmetric(&[6.0, 6.0, 6.0, 5.0, 5.0, 5.0]),
+            Self::PendulumActive => ControlLimits::symmetric(&[2.5, 1.5, 0.5]),
+            Self::PendulumExt => ControlLimits::symmetric(&[2.5, 1.5, 0.5, 2.0, 2.0, 2.0]),
             Self::Truck => ControlLimits::symmetric(&[3.0, 0.5]),
             Self::Lander => {
                 let l = Lander::default();
@@ -235,6 +251,8 @@ impl NetModel {
 pub enum TrainMethod {
     /// Full-batch nonlinear conjugate gradient (argmin), for small nets.
     Cg,
+    /// Full-batch L-BFGS (argmin), an alternative for small nets.
+    Lbfgs,
     /// Gradient descent with momentum on mini-batches, for large nets.
     Momentum,
 }
@@ -251,6 +269,8 @@ pub struct NetSpec {
     pub examples: usize,
     /// How to train.
     pub method: TrainMethod,
+    /// Physical time step δt of the simulator it emulates (s); Δt = n δt.
+    pub physical_dt: f64,
 }
 
 /// Training settings shared by the nets of an experiment.
@@ -280,10 +300,8 @@ pub struct TrainSettings {
 pub struct BuildSpec {
     /// The network.
     pub net: NetSpec,
-    /// Physical steps per emulator step, n.
+    /// Physical steps per emulator step, n (δt is the net's `physical_dt`).
     pub steps: usize,
-    /// Physical time step δt (s).
-    pub physical_dt: f64,
     /// Training settings.
     pub settings: TrainSettings,
     /// Seed of the data sampling, weight initialization and shuffles.
@@ -293,7 +311,7 @@ pub struct BuildSpec {
 impl BuildSpec {
     /// The emulator's super timestep Δt = n δt (s).
     pub fn super_dt(&self) -> f64 {
-        self.steps as f64 * self.physical_dt
+        self.steps as f64 * self.net.physical_dt
     }
 
     /// Number of held-out examples.
@@ -305,7 +323,7 @@ impl BuildSpec {
     pub fn sampling(&self, examples: usize) -> SamplingConfig {
         let m = self.net.model;
         SamplingConfig {
-            dt: self.physical_dt,
+            dt: self.net.physical_dt,
             steps_per_sample: self.steps,
             examples,
             episode_duration: m.episode_duration().max(6.0 * self.super_dt()),
@@ -385,12 +403,16 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
     let mut mlp = Mlp::new(n + m, spec.net.hidden, n, WeightInit::FanIn, &mut stream(3));
     let s = &spec.settings;
     let report = match spec.net.method {
-        TrainMethod::Cg => train_full_batch(
+        TrainMethod::Cg | TrainMethod::Lbfgs => train_full_batch(
             &mut mlp,
             &train_ds,
             &held_ds,
             &FullBatchConfig {
-                method: FullBatchMethod::ConjugateGradient { restart_iters: 50 },
+                method: if spec.net.method == TrainMethod::Cg {
+                    FullBatchMethod::ConjugateGradient { restart_iters: 50 }
+                } else {
+                    FullBatchMethod::Lbfgs { memory: 20 }
+                },
                 max_iters: s.cg_max_iters,
                 patience: s.patience,
                 min_improvement: s.min_improvement,

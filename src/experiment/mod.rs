@@ -17,6 +17,9 @@
 
 pub mod lbc_grid;
 pub mod lbc_projection;
+pub mod na_error;
+pub mod na_speedup;
+pub mod na_structure;
 pub mod output;
 pub mod physics_validation;
 pub mod plot;

@@ -1,11 +1,16 @@
 //! Every experiment family, by the name experiment files use in `experiment = "…"`.
 
-use super::{lbc_grid, lbc_projection, physics_validation, Experiment};
+use super::{
+    lbc_grid, lbc_projection, na_error, na_speedup, na_structure, physics_validation, Experiment,
+};
 
 static FAMILIES: &[&dyn Experiment] = &[
     &physics_validation::PhysicsValidation,
     &lbc_projection::LbcProjection,
     &lbc_grid::LbcGrid,
+    &na_structure::NaStructure,
+    &na_speedup::NaSpeedup,
+    &na_error::NaError,
 ];
 
 /// All families.
