@@ -47,7 +47,8 @@ fn floats(v: &[u64]) -> Vec<f64> {
 
 #[derive(Debug, Serialize, Deserialize)]
 struct Stored {
-    key: serde_json::Value,
+    /// The key as canonical JSON text (compared as text: parsing floats back is not exact).
+    key: String,
     shape: [usize; 3],
     dt: u64,
     weights: Vec<u64>,
@@ -108,7 +109,7 @@ impl EmulatorCache {
     pub fn load(&self, spec: &BuildSpec) -> Option<Trained> {
         let text = std::fs::read_to_string(self.path(spec)).ok()?;
         let s: Stored = serde_json::from_str(&text).ok()?;
-        if s.key != Self::key(spec) {
+        if s.key != Self::key(spec).to_string() {
             return None;
         }
         let model = spec.net.model;
@@ -157,7 +158,7 @@ impl EmulatorCache {
         let t = e.transforms();
         let mlp = e.mlp();
         let stored = Stored {
-            key: Self::key(spec),
+            key: Self::key(spec).to_string(),
             shape: [mlp.n_in(), mlp.n_hidden(), mlp.n_out()],
             dt: e.dt().to_bits(),
             weights: bits(mlp.weights()),
