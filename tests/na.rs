@@ -163,3 +163,36 @@ fn na_fig12_quick_writes_error_curves() {
     }
     figure_exists(&d, "na_fig12_error_error");
 }
+
+#[test]
+fn na_tables_other_than_timings_are_identical_for_any_thread_count() {
+    for (id, csv) in [
+        ("na_fig12_error", "error.csv"),
+        ("na_table1_structure", "training.csv"),
+    ] {
+        let run = |jobs: &str| {
+            let dir = tempfile::tempdir().unwrap();
+            ok(&motionlab(
+                dir.path(),
+                &[
+                    "--experiments",
+                    root().join("experiments").to_str().unwrap(),
+                    "run",
+                    id,
+                    "--quick",
+                    "--jobs",
+                    jobs,
+                    "--out",
+                    "out",
+                    "--figures",
+                    "figs",
+                ],
+            ));
+            std::fs::read(dir.path().join("out").join(id).join(csv)).unwrap()
+        };
+        assert!(
+            run("1") == run("2"),
+            "{id}: {csv} depends on the thread count"
+        );
+    }
+}
