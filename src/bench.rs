@@ -5,6 +5,10 @@
 //! algorithms add their loops to [`metrics`].
 
 use crate::bellman::projection::{project, GaussianReward};
+use crate::emulator::catalog::NetModel;
+use crate::emulator::mlp::{Mlp, WeightInit};
+use crate::emulator::train::MomentumState;
+use crate::emulator::{Emulator, Transforms};
 use crate::physics::acrobot::Acrobot;
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
 use crate::physics::{Dynamics, IntegratorKind, Simulator};
@@ -153,7 +157,87 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             }),
         );
     }
+    let mut t = Simulator::new(crate::physics::truck::Truck::default(), IntegratorKind::Rk4);
+    let t0 = [0.0, 0.0, 0.3, 4.0, 1.0, 0.1];
+    push(
+        "sim.truck.steps_per_s",
+        throughput(min_seconds, steps as u64, || {
+            sim_steps(&mut t, &t0, &[1.0, 0.2], 0.01, steps)
+        }),
+    );
+    let lander = crate::physics::lander::Lander::default();
+    let mut l = crate::physics::lander::NormalizedLander::new(lander, IntegratorKind::Rk4);
+    let mut l0 = crate::physics::lander::Lander::upright_at_rest([0.0, 0.0, 100.0]).to_vec();
+    l0[4] = 0.1;
+    l0[crate::physics::lander::VEL] = 1.0;
+    push(
+        "sim.lander.steps_per_s",
+        throughput(min_seconds, steps as u64, || {
+            sim_steps(&mut l, &l0, &[4000.0, 10.0, -20.0, 5.0], 0.01, steps)
+        }),
+    );
+    for (model, hidden, examples) in [
+        (NetModel::PendulumPassive, 20, 2400),
+        (NetModel::PendulumActive, 20, 3000),
+        (NetModel::PendulumExt, 20, 3000),
+        (NetModel::Lander, 50, 13500),
+        (NetModel::Truck, 40, 5200),
+    ] {
+        for (name, value) in emulator_metrics(model, hidden, examples, min_seconds) {
+            push(&name, value);
+        }
+    }
     out
+}
+
+/// Training and stepping throughput of the Table 1 network of `model` (random weights and data
+/// of the real shapes; the emulator uses the model's transforms).
+fn emulator_metrics(
+    model: NetModel,
+    hidden: usize,
+    examples: usize,
+    min_seconds: f64,
+) -> Vec<(String, f64)> {
+    use rand::{Rng, SeedableRng};
+    let (n, m) = (model.state_dim(), model.control_dim());
+    let shape = format!("{}-{hidden}-{n}", n + m);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let mut mlp = Mlp::new(n + m, hidden, n, WeightInit::FanIn, &mut rng);
+    let x = ndarray::Array2::from_shape_fn((examples, n + m), |_| rng.random_range(-1.0..1.0));
+    let y = ndarray::Array2::from_shape_fn((examples, n), |_| rng.random_range(-1.0..1.0));
+    let mut grad = vec![0.0; mlp.n_weights()];
+    let mut state = MomentumState::new(mlp.n_weights());
+    let batch = 30;
+    let per_call = 600.min(examples / batch * batch);
+    let train = throughput(min_seconds, per_call as u64, || {
+        for b in 0..per_call / batch {
+            let rows = ndarray::s![b * batch..(b + 1) * batch, ..];
+            mlp.loss_grad(x.slice(rows), y.slice(rows), &mut grad);
+            state.step(mlp.weights_mut(), &grad, 1e-4, 0.9);
+        }
+    });
+    let full = throughput(min_seconds, 1, || {
+        black_box(mlp.loss_grad(x.view(), y.view(), &mut grad));
+    });
+    let transforms =
+        Transforms::unfitted(&model.transform_config(), n, m).expect("catalog transforms fit");
+    let e = Emulator::new(transforms, mlp, 0.5).expect("shapes agree");
+    let s0 = model.start_state(&mut rng);
+    let u: Vec<f64> = (0..m).map(|_| 0.1).collect();
+    let mut scratch = e.scratch();
+    let mut s1 = vec![0.0; n];
+    let k = 1000;
+    let steps = throughput(min_seconds, k, || {
+        for _ in 0..k {
+            e.predict(black_box(&s0), &u, &mut scratch, &mut s1);
+            black_box(&s1);
+        }
+    });
+    vec![
+        (format!("mlp.{shape}.train_examples_per_s"), train),
+        (format!("mlp.{shape}.full_grad_per_s"), full),
+        (format!("emulator.{shape}.steps_per_s"), steps),
+    ]
 }
 
 /// The metrics as one JSON object of named numbers.

@@ -19,6 +19,9 @@
 //!
 //! External forces f_t (§3.1) are treated as extra control inputs: put them after the controls.
 
+pub mod cache;
+pub mod catalog;
+pub mod dataset;
 pub mod mlp;
 pub mod train;
 pub mod transform;

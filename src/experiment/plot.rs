@@ -25,6 +25,12 @@ pub enum Mark {
     Points,
     /// A polyline with dots at the data.
     LinePoints,
+    /// A filled bar per point, from the bottom of the y axis up to y, `half_width` x units to
+    /// either side of x (bar charts; works on log axes).
+    Bars {
+        /// Half the bar width in x units.
+        half_width: f64,
+    },
 }
 
 /// One data series.
@@ -459,9 +465,23 @@ fn draw_panel<DB: DrawingBackend>(
             (a, b)
         }
     };
+    // Bars extend half a width to either side of their x.
     let xr = match p.x_range {
         Some(r) => r,
-        None => span(data.iter().flatten().map(|q| q.0).collect(), p.log_x),
+        None => span(
+            p.series
+                .iter()
+                .zip(&data)
+                .flat_map(|(s, pts)| {
+                    let hw = match s.mark {
+                        Mark::Bars { half_width } => half_width,
+                        _ => 0.0,
+                    };
+                    pts.iter().flat_map(move |q| [q.0 - hw, q.0 + hw])
+                })
+                .collect(),
+            p.log_x,
+        ),
     };
     let yr = match p.y_range {
         Some(r) => r,
@@ -548,6 +568,15 @@ where
             Mark::Dashed => chart.draw_series(DashedLineSeries::new(pts, 8, 5, style))?,
             Mark::Points => {
                 chart.draw_series(pts.iter().map(|&q| Circle::new(q, 2, color.filled())))?
+            }
+            Mark::Bars { half_width } => {
+                let bottom = chart.y_range().start;
+                chart.draw_series(pts.iter().map(|&(x, y)| {
+                    Rectangle::new(
+                        [(x - half_width, bottom), (x + half_width, y)],
+                        color.filled(),
+                    )
+                }))?
             }
         };
         if !s.label.is_empty() {

@@ -1,7 +1,8 @@
 //! Every experiment family, by the name experiment files use in `experiment = "…"`.
 
 use super::{
-    lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, physics_validation, Experiment,
+    lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, na_error, na_speedup, na_structure,
+    physics_validation, Experiment,
 };
 
 static FAMILIES: &[&dyn Experiment] = &[
@@ -12,6 +13,9 @@ static FAMILIES: &[&dyn Experiment] = &[
     &lbc_diver::LbcDiverInterpolation,
     &lbc_diver::LbcDiverCoordination,
     &lbc_push::LbcPush,
+    &na_structure::NaStructure,
+    &na_speedup::NaSpeedup,
+    &na_error::NaError,
 ];
 
 /// All families.

@@ -1,0 +1,306 @@
+//! # Trained-emulator cache
+//!
+//! Training a NeuroAnimator takes seconds to minutes; experiments that need the same network
+//! (Table 1 trains the N50 nets that Table 2 times) reuse it. A trained emulator is stored as one
+//! JSON file, `<dir>/<model>-n<steps>-<hash>.json`, where the hash (64-bit FNV-1a, hex) is taken
+//! over a canonical JSON *key* holding everything that determines the result: the cache format
+//! version, the [`BuildSpec`] (model, n, δt, hidden units, examples, training method and
+//! settings, seed), the physical model's parameters and a fingerprint of its sampling recipe
+//! (control limits, start states drawn with a fixed seed, transforms). The file repeats the key, and a load
+//! checks it, so a hash collision cannot return a wrong network.
+//!
+//! Weights, normalization statistics and errors are stored as the bit patterns of their f64
+//! values (`u64`), so a reloaded emulator is bit-identical to the trained one. Files are written
+//! atomically (temporary file, then rename).
+//!
+//! The folder is `$MOTIONLAB_CACHE` when set, else `target/motionlab-cache` below the working
+//! directory ([`EmulatorCache::from_env`]). Delete it to force retraining.
+
+use super::catalog::{train_emulator, BuildError, BuildSpec, Trained};
+use super::mlp::Mlp;
+use super::train::TracePoint;
+use super::transform::Normalizer;
+use super::{Emulator, Transforms};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Bumped whenever the meaning of a stored file changes (transforms, sampling, training code).
+pub const CACHE_FORMAT: u32 = 1;
+
+/// 64-bit FNV-1a hash.
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in bytes {
+        h ^= u64::from(*b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+fn floats(v: &[u64]) -> Vec<f64> {
+    v.iter().map(|&b| f64::from_bits(b)).collect()
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct Stored {
+    /// The key as canonical JSON text (compared as text: parsing floats back is not exact).
+    key: String,
+    shape: [usize; 3],
+    dt: u64,
+    weights: Vec<u64>,
+    input_mean: Vec<u64>,
+    input_std: Vec<u64>,
+    output_mean: Vec<u64>,
+    output_std: Vec<u64>,
+    train_error: u64,
+    heldout_error: u64,
+    train_s: f64,
+    stop: String,
+    /// (iteration, train error bits, held-out error bits).
+    trace: Vec<(usize, u64, u64)>,
+}
+
+/// A folder of trained emulators.
+#[derive(Debug, Clone)]
+pub struct EmulatorCache {
+    /// The folder.
+    pub dir: PathBuf,
+}
+
+impl EmulatorCache {
+    /// A cache in `dir` (created on the first store).
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self { dir: dir.into() }
+    }
+
+    /// `$MOTIONLAB_CACHE`, else `target/motionlab-cache` below the working directory.
+    pub fn from_env() -> Self {
+        match std::env::var_os("MOTIONLAB_CACHE") {
+            Some(d) if !d.is_empty() => Self::new(PathBuf::from(d)),
+            _ => Self::new(Path::new("target").join("motionlab-cache")),
+        }
+    }
+
+    /// The canonical key of `spec`.
+    pub fn key(spec: &BuildSpec) -> serde_json::Value {
+        serde_json::json!({
+            "format": CACHE_FORMAT,
+            "spec": spec,
+            "physics": spec.net.model.physics_json(),
+            "recipe": spec.net.model.recipe_json(),
+        })
+    }
+
+    /// The file that holds (or would hold) the emulator of `spec`.
+    pub fn path(&self, spec: &BuildSpec) -> PathBuf {
+        let h = fnv1a(Self::key(spec).to_string().as_bytes());
+        self.dir.join(format!(
+            "{}-n{}-{h:016x}.json",
+            spec.net.model.name(),
+            spec.steps
+        ))
+    }
+
+    /// The cached emulator of `spec`, if a file with the same key exists and reads back.
+    pub fn load(&self, spec: &BuildSpec) -> Option<Trained> {
+        let text = std::fs::read_to_string(self.path(spec)).ok()?;
+        let s: Stored = serde_json::from_str(&text).ok()?;
+        if s.key != Self::key(spec).to_string() {
+            return None;
+        }
+        let model = spec.net.model;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        if s.shape != [n + m, spec.net.hidden, n]
+            || s.weights.len() != Mlp::weight_count(n + m, spec.net.hidden, n)
+        {
+            return None;
+        }
+        let mut t = Transforms::unfitted(&model.transform_config(), n, m).ok()?;
+        t.input_norm = Normalizer {
+            mean: floats(&s.input_mean),
+            std: floats(&s.input_std),
+        };
+        t.output_norm = Normalizer {
+            mean: floats(&s.output_mean),
+            std: floats(&s.output_std),
+        };
+        if t.input_norm.len() != n + m || t.output_norm.len() != n {
+            return None;
+        }
+        let mlp = Mlp::from_weights(n + m, spec.net.hidden, n, floats(&s.weights));
+        let emulator = Emulator::new(t, mlp, f64::from_bits(s.dt)).ok()?;
+        Some(Trained {
+            emulator,
+            trace: s
+                .trace
+                .iter()
+                .map(|&(iteration, a, b)| TracePoint {
+                    iteration,
+                    train_error: f64::from_bits(a),
+                    held_out_error: f64::from_bits(b),
+                })
+                .collect(),
+            train_error: f64::from_bits(s.train_error),
+            heldout_error: f64::from_bits(s.heldout_error),
+            train_s: s.train_s,
+            stop: s.stop,
+            from_cache: true,
+        })
+    }
+
+    /// Writes `trained` as the emulator of `spec` (atomically).
+    pub fn store(&self, spec: &BuildSpec, trained: &Trained) -> Result<PathBuf, BuildError> {
+        let e = &trained.emulator;
+        let t = e.transforms();
+        let mlp = e.mlp();
+        let stored = Stored {
+            key: Self::key(spec).to_string(),
+            shape: [mlp.n_in(), mlp.n_hidden(), mlp.n_out()],
+            dt: e.dt().to_bits(),
+            weights: bits(mlp.weights()),
+            input_mean: bits(&t.input_norm.mean),
+            input_std: bits(&t.input_norm.std),
+            output_mean: bits(&t.output_norm.mean),
+            output_std: bits(&t.output_norm.std),
+            train_error: trained.train_error.to_bits(),
+            heldout_error: trained.heldout_error.to_bits(),
+            train_s: trained.train_s,
+            stop: trained.stop.clone(),
+            trace: trained
+                .trace
+                .iter()
+                .map(|p| {
+                    (
+                        p.iteration,
+                        p.train_error.to_bits(),
+                        p.held_out_error.to_bits(),
+                    )
+                })
+                .collect(),
+        };
+        let path = self.path(spec);
+        let fail = |message: String| BuildError::Cache {
+            path: path.display().to_string(),
+            message,
+        };
+        let text = serde_json::to_string(&stored).map_err(|e| fail(e.to_string()))?;
+        std::fs::create_dir_all(&self.dir).map_err(|e| fail(e.to_string()))?;
+        let tmp = path.with_extension(format!("json.tmp{}", std::process::id()));
+        std::fs::write(&tmp, text).map_err(|e| fail(e.to_string()))?;
+        std::fs::rename(&tmp, &path).map_err(|e| fail(e.to_string()))?;
+        Ok(path)
+    }
+
+    /// The cached emulator of `spec`, or a freshly trained one (then stored).
+    pub fn get_or_train(&self, spec: &BuildSpec) -> Result<Trained, BuildError> {
+        if let Some(t) = self.load(spec) {
+            return Ok(t);
+        }
+        let t = train_emulator(spec)?;
+        self.store(spec, &t)?;
+        Ok(t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::catalog::{NetModel, NetSpec, TrainMethod, TrainSettings};
+    use super::*;
+
+    fn spec() -> BuildSpec {
+        BuildSpec {
+            net: NetSpec {
+                model: NetModel::PendulumPassive,
+                hidden: 6,
+                examples: 120,
+                method: TrainMethod::Cg,
+                physical_dt: 0.01,
+            },
+            steps: 10,
+            settings: TrainSettings {
+                held_out_fraction: 0.25,
+                cg_max_iters: 20,
+                max_epochs: 10,
+                patience: 5,
+                min_improvement: 1e-3,
+                learning_rate: 0.05,
+                momentum: 0.9,
+                batch_size: 30,
+            },
+            seed: 7,
+        }
+    }
+
+    #[test]
+    fn a_rerun_reuses_the_file_and_a_changed_parameter_retrains() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = EmulatorCache::new(dir.path().join("c"));
+        let s = spec();
+        let a = cache.get_or_train(&s).unwrap();
+        assert!(!a.from_cache);
+        assert!(cache.path(&s).exists());
+        let b = cache.get_or_train(&s).unwrap();
+        assert!(b.from_cache);
+        // Bit-identical network, statistics and record.
+        assert_eq!(a.emulator.mlp(), b.emulator.mlp());
+        assert_eq!(a.emulator.transforms(), b.emulator.transforms());
+        assert_eq!(a.emulator.dt(), b.emulator.dt());
+        assert_eq!(a.trace, b.trace);
+        assert_eq!(a.heldout_error.to_bits(), b.heldout_error.to_bits());
+        // A retrain from scratch gives the same network (determinism), so reuse is exact.
+        let c = train_emulator(&s).unwrap();
+        assert_eq!(a.emulator.mlp(), c.emulator.mlp());
+        // Any determining parameter changes the file: retrained, not loaded.
+        for changed in [
+            BuildSpec {
+                seed: 8,
+                ..s.clone()
+            },
+            BuildSpec {
+                steps: 11,
+                ..s.clone()
+            },
+            BuildSpec {
+                net: NetSpec {
+                    hidden: 7,
+                    ..s.net.clone()
+                },
+                ..s.clone()
+            },
+            BuildSpec {
+                settings: TrainSettings {
+                    patience: 6,
+                    ..s.settings
+                },
+                ..s.clone()
+            },
+        ] {
+            assert_ne!(cache.path(&changed), cache.path(&s));
+            assert!(cache.load(&changed).is_none());
+            let t = cache.get_or_train(&changed).unwrap();
+            assert!(!t.from_cache);
+        }
+        assert_eq!(std::fs::read_dir(cache.dir).unwrap().count(), 5);
+    }
+
+    #[test]
+    fn a_file_with_another_key_is_not_loaded() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = EmulatorCache::new(dir.path());
+        let s = spec();
+        let a = cache.get_or_train(&s).unwrap();
+        // Write s's network under the file name of another spec: the key check refuses it.
+        let other = BuildSpec {
+            seed: 99,
+            ..s.clone()
+        };
+        let text = std::fs::read_to_string(cache.path(&s)).unwrap();
+        std::fs::write(cache.path(&other), text).unwrap();
+        assert!(cache.load(&other).is_none());
+        assert!(cache.load(&s).unwrap().emulator.mlp() == a.emulator.mlp());
+    }
+}

@@ -1,0 +1,454 @@
+//! # The emulated models of NeuroAnimator's Table 1, and how each is built
+//!
+//! [`NetModel`] names a physical model together with everything needed to emulate it: its
+//! physical simulator (RK4 at δt), the distribution of episode start states and the typical
+//! controls used to sample training data (§3.4, [`super::dataset`]), and the transforms the paper
+//! recommends (§3.2–3.3: the state change and normalization for all, the local frame for the
+//! rigid bodies that move freely, the truck and the lander). [`NetSpec`] adds the network size,
+//! the super timestep n and the number of examples; [`train_emulator`] samples, fits the
+//! transforms, trains with early stopping on a held-out set and returns the emulator.
+//!
+//! Adding a model (e.g. the dolphin) means adding a variant here: its simulator, start states,
+//! control limits and transforms; experiments then list it in their `nets` tables.
+//!
+//! ## Start states and typical controls (documented per model)
+//! - **Pendulum** (all variants): joint angles q_i ~ U[−0.7, 0.7] rad, joint rates
+//!   q̇_i ~ U[−1, 1] rad/s; episodes of 20 s. Active: motor torques within ±(2.5, 1.5, 0.5) N·m
+//!   (about a fifth of the gravity torque each joint holds horizontal: 12.3, 7.4, 2.5 N·m);
+//!   ext. force: also link forces within ±2 N. Controls are smooth random functions with knots
+//!   every 0.3–1.5 s.
+//! - **Truck**: centre of mass uniform in a 100 m square, heading uniform, forward speed
+//!   U[−3, 8] m/s, no sideways or yaw rate; drive acceleration within ±3 m/s² and steering within
+//!   ±0.5 rad, piecewise constant for 0.5–2 s; episodes of 10 s.
+//! - **Lander**: centre of mass uniform in a 100 m square at 20–200 m height, yaw uniform, tilt up
+//!   to 0.4 rad about a random horizontal axis, velocity U[−5, 5] m/s per axis, body rates
+//!   U[−0.2, 0.2] rad/s; thrust within [0, 2 m g] (twice hover), attitude torques within
+//!   ±400 N·m (a fifth of the jets' limit), piecewise constant for 0.5–2 s; episodes of 10 s.
+
+use super::dataset::{sample_transitions, ControlLimits, ControlProcess, SamplingConfig};
+use super::mlp::{Mlp, WeightInit};
+use super::train::{
+    mse, train_full_batch, train_momentum, FullBatchConfig, FullBatchMethod, MomentumConfig,
+    StopReason, TracePoint,
+};
+use super::transform::{PlanarFrame, SpatialFrame};
+use super::{Emulator, EmulatorError, TransformConfig, Transforms};
+use crate::physics::lander::{Lander, NormalizedLander};
+use crate::physics::pendulum::{Pendulum3, PendulumVariant};
+use crate::physics::truck::Truck;
+use crate::physics::{BlowUp, Dynamics, IntegratorKind, Simulator};
+use nalgebra::{UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+use std::time::Instant;
+
+/// A physical model that NeuroAnimator emulates (Table 1; the dolphin is not yet here).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NetModel {
+    /// Passive three-link pendulum (6 states, no inputs).
+    PendulumPassive,
+    /// Active pendulum: 3 joint torques.
+    PendulumActive,
+    /// Active pendulum with a force on each link: 3 torques + 3 forces.
+    PendulumExt,
+    /// The truck: 6 states, 2 controls.
+    Truck,
+    /// The lunar lander: 13 states, 4 controls.
+    Lander,
+}
+
+impl NetModel {
+    /// Every model, in Table 1 order.
+    pub const ALL: [NetModel; 5] = [
+        Self::PendulumPassive,
+        Self::PendulumActive,
+        Self::PendulumExt,
+        Self::Lander,
+        Self::Truck,
+    ];
+
+    /// Its name in experiment files and tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::PendulumPassive => "pendulum_passive",
+            Self::PendulumActive => "pendulum_active",
+            Self::PendulumExt => "pendulum_ext",
+            Self::Truck => "truck",
+            Self::Lander => "lander",
+        }
+    }
+
+    /// Number of state variables.
+    pub fn state_dim(self) -> usize {
+        match self {
+            Self::Lander => 13,
+            _ => 6,
+        }
+    }
+
+    /// Number of control (and external force) inputs.
+    pub fn control_dim(self) -> usize {
+        match self {
+            Self::PendulumPassive => 0,
+            Self::PendulumActive => 3,
+            Self::PendulumExt => 6,
+            Self::Truck => 2,
+            Self::Lander => 4,
+        }
+    }
+
+    fn pendulum(self) -> Option<Pendulum3> {
+        match self {
+            Self::PendulumPassive => Some(Pendulum3::new(PendulumVariant::Passive)),
+            Self::PendulumActive => Some(Pendulum3::new(PendulumVariant::Active)),
+            Self::PendulumExt => Some(Pendulum3::new(PendulumVariant::ExtForce)),
+            _ => None,
+        }
+    }
+
+    /// The physical model's parameters as JSON (part of the emulator cache key).
+    pub fn physics_json(self) -> serde_json::Value {
+        match self {
+            Self::Truck => serde_json::to_value(Truck::default()),
+            Self::Lander => serde_json::to_value(Lander::default()),
+            _ => serde_json::to_value(self.pendulum().expect("a pendulum")),
+        }
+        .unwrap_or_default()
+    }
+
+    /// A fingerprint of the sampling recipe (control limits and process, episode length,
+    /// transforms, and three start states drawn with a fixed seed), part of the emulator cache
+    /// key so that a change to any of them retrains.
+    pub fn recipe_json(self) -> serde_json::Value {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let starts: Vec<Vec<f64>> = (0..3).map(|_| self.start_state(&mut rng)).collect();
+        serde_json::json!({
+            "limits": self.control_limits(),
+            "process": self.control_process(),
+            "episode": self.episode_duration(),
+            "transforms": format!("{:?}", self.transform_config()),
+            "starts": starts,
+        })
+    }
+
+    /// The physical simulator: RK4 at the caller's δt (the lander renormalizes its quaternion).
+    pub fn simulator(self) -> Box<dyn Dynamics> {
+        match self {
+            Self::Truck => Box::new(Simulator::new(Truck::default(), IntegratorKind::Rk4)),
+            Self::Lander => Box::new(NormalizedLander::new(
+                Lander::default(),
+                IntegratorKind::Rk4,
+            )),
+            _ => Box::new(Simulator::new(
+                self.pendulum().expect("a pendulum"),
+                IntegratorKind::Rk4,
+            )),
+        }
+    }
+
+    /// Draws an episode start state (see the module docs).
+    pub fn start_state(self, rng: &mut ChaCha8Rng) -> Vec<f64> {
+        match self {
+            Self::Truck => {
+                let (x, y) = (rng.random_range(-50.0..50.0), rng.random_range(-50.0..50.0));
+                let th: f64 = rng.random_range(-PI..PI);
+                let v = rng.random_range(-3.0..8.0);
+                vec![x, y, th, v * th.cos(), v * th.sin(), 0.0]
+            }
+            Self::Lander => {
+                let yaw = rng.random_range(-PI..PI);
+                let axis_angle: f64 = rng.random_range(-PI..PI);
+                let tilt = rng.random_range(0.0..0.4);
+                let axis = Vector3::new(axis_angle.cos(), axis_angle.sin(), 0.0);
+                let q = UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), tilt)
+                    * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw);
+                let q = q.quaternion();
+                let mut s = vec![
+                    rng.random_range(-50.0..50.0),
+                    rng.random_range(-50.0..50.0),
+                    rng.random_range(20.0..200.0),
+                    q.w,
+                    q.i,
+                    q.j,
+                    q.k,
+                ];
+                s.extend((0..3).map(|_| rng.random_range(-5.0..5.0)));
+                s.extend((0..3).map(|_| rng.random_range(-0.2..0.2)));
+                s
+            }
+            _ => {
+                let mut s: Vec<f64> = (0..3).map(|_| rng.random_range(-0.7..0.7)).collect();
+                s.extend((0..3).map(|_| rng.random_range(-1.0..1.0)));
+                s
+            }
+        }
+    }
+
+    /// Limits of the typical controls used for sampling (see the module docs).
+    pub fn control_limits(self) -> ControlLimits {
+        match self {
+            Self::PendulumPassive => ControlLimits::none(),
+            Self::PendulumActive => ControlLimits::symmetric(&[2.5, 1.5, 0.5]),
+            Self::PendulumExt => ControlLimits::symmetric(&[2.5, 1.5, 0.5, 2.0, 2.0, 2.0]),
+            Self::Truck => ControlLimits::symmetric(&[3.0, 0.5]),
+            Self::Lander => {
+                let l = Lander::default();
+                ControlLimits {
+                    low: vec![0.0, -400.0, -400.0, -400.0],
+                    high: vec![2.0 * l.mass * l.gravity, 400.0, 400.0, 400.0],
+                }
+            }
+        }
+    }
+
+    /// How the typical controls vary in time.
+    pub fn control_process(self) -> ControlProcess {
+        match self {
+            Self::Truck | Self::Lander => ControlProcess::PiecewiseConstant {
+                hold_min: 0.5,
+                hold_max: 2.0,
+            },
+            _ => ControlProcess::Smooth {
+                hold_min: 0.3,
+                hold_max: 1.5,
+            },
+        }
+    }
+
+    /// Episode length of the sampling runs (s).
+    pub fn episode_duration(self) -> f64 {
+        match self {
+            Self::Truck | Self::Lander => 10.0,
+            _ => 20.0,
+        }
+    }
+
+    /// The transforms of §3.2–3.3: state change and per-variable normalization for all; the
+    /// local frame for the truck (planar) and the lander (spatial).
+    pub fn transform_config(self) -> TransformConfig {
+        match self {
+            Self::Truck => {
+                TransformConfig::standard(Some(PlanarFrame::rigid_body(0, 1, 2, 3, 4).into()))
+            }
+            Self::Lander => {
+                // Angular velocity is already in the body frame: only position, attitude and
+                // linear velocity go to the local frame.
+                let mut f = SpatialFrame::rigid_body(0, 3, 7, 10);
+                f.vectors.truncate(1);
+                TransformConfig::standard(Some(f.into()))
+            }
+            _ => TransformConfig::standard(None),
+        }
+    }
+}
+
+/// How a network is trained (§3.5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainMethod {
+    /// Full-batch nonlinear conjugate gradient (argmin), for small nets.
+    Cg,
+    /// Full-batch L-BFGS (argmin), an alternative for small nets.
+    Lbfgs,
+    /// Gradient descent with momentum on mini-batches, for large nets.
+    Momentum,
+}
+
+/// One emulator network to build: model, super timestep, size, data.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetSpec {
+    /// The emulated model.
+    pub model: NetModel,
+    /// Hidden units.
+    pub hidden: usize,
+    /// Training examples (Table 1).
+    pub examples: usize,
+    /// How to train.
+    pub method: TrainMethod,
+    /// Physical time step δt of the simulator it emulates (s); Δt = n δt.
+    pub physical_dt: f64,
+}
+
+/// Training settings shared by the nets of an experiment.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainSettings {
+    /// Held-out examples as a fraction of the training examples (sampled separately).
+    pub held_out_fraction: f64,
+    /// Conjugate-gradient iteration limit.
+    pub cg_max_iters: u64,
+    /// Mini-batch epoch limit.
+    pub max_epochs: usize,
+    /// Stop after this many checks without a significant held-out improvement.
+    pub patience: usize,
+    /// Relative held-out improvement that counts as significant.
+    pub min_improvement: f64,
+    /// Momentum learning rate η_w.
+    pub learning_rate: f64,
+    /// Momentum α_w.
+    pub momentum: f64,
+    /// Mini-batch size (the paper: about 30).
+    pub batch_size: usize,
+}
+
+/// Everything that determines a trained emulator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BuildSpec {
+    /// The network.
+    pub net: NetSpec,
+    /// Physical steps per emulator step, n (δt is the net's `physical_dt`).
+    pub steps: usize,
+    /// Training settings.
+    pub settings: TrainSettings,
+    /// Seed of the data sampling, weight initialization and shuffles.
+    pub seed: u64,
+}
+
+impl BuildSpec {
+    /// The emulator's super timestep Δt = n δt (s).
+    pub fn super_dt(&self) -> f64 {
+        self.steps as f64 * self.net.physical_dt
+    }
+
+    /// Number of held-out examples.
+    pub fn held_out(&self) -> usize {
+        ((self.net.examples as f64 * self.settings.held_out_fraction).round() as usize).max(2)
+    }
+
+    /// Sampling settings for `examples` examples.
+    pub fn sampling(&self, examples: usize) -> SamplingConfig {
+        let m = self.net.model;
+        SamplingConfig {
+            dt: self.net.physical_dt,
+            steps_per_sample: self.steps,
+            examples,
+            episode_duration: m.episode_duration().max(6.0 * self.super_dt()),
+            control: m.control_process(),
+        }
+    }
+}
+
+/// A trained emulator with its training record.
+#[derive(Debug, Clone)]
+pub struct Trained {
+    /// The emulator.
+    pub emulator: Emulator,
+    /// Training trace (iteration or epoch, errors in normalized network space).
+    pub trace: Vec<TracePoint>,
+    /// Mean squared error per output on the training set at the kept weights.
+    pub train_error: f64,
+    /// Mean squared error per output on the held-out set at the kept weights.
+    pub heldout_error: f64,
+    /// Wall time of data sampling and training when it was built (s).
+    pub train_s: f64,
+    /// Why training stopped.
+    pub stop: String,
+    /// Whether it came from the cache.
+    pub from_cache: bool,
+}
+
+/// Errors of building an emulator.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum BuildError {
+    /// Training or construction failed.
+    #[error(transparent)]
+    Emulator(#[from] EmulatorError),
+    /// The physical simulation blew up while sampling.
+    #[error(transparent)]
+    BlowUp(#[from] BlowUp),
+    /// The cache could not be written or read.
+    #[error("emulator cache {path}: {message}")]
+    Cache {
+        /// The file.
+        path: String,
+        /// The cause.
+        message: String,
+    },
+}
+
+/// Samples training and held-out data, fits the transforms and trains the network of `spec`.
+/// Deterministic for a given spec (the wall time aside).
+pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
+    let t0 = Instant::now();
+    let model = spec.net.model;
+    let mut sim = model.simulator();
+    let limits = model.control_limits();
+    let start = move |r: &mut ChaCha8Rng| model.start_state(r);
+    let stream = |k: u64| ChaCha8Rng::seed_from_u64(crate::experiment::mix_seed(spec.seed, k));
+    let train = sample_transitions(
+        sim.as_mut(),
+        &start,
+        &limits,
+        &spec.sampling(spec.net.examples),
+        &mut stream(1),
+    )?;
+    let held = sample_transitions(
+        sim.as_mut(),
+        &start,
+        &limits,
+        &spec.sampling(spec.held_out()),
+        &mut stream(2),
+    )?;
+    let transforms = Transforms::fit(&model.transform_config(), &train.transitions)?;
+    let (train_ds, held_ds) = (
+        transforms.encode(&train.transitions),
+        transforms.encode(&held.transitions),
+    );
+    let (n, m) = (model.state_dim(), model.control_dim());
+    let mut mlp = Mlp::new(n + m, spec.net.hidden, n, WeightInit::FanIn, &mut stream(3));
+    let s = &spec.settings;
+    let report = match spec.net.method {
+        TrainMethod::Cg | TrainMethod::Lbfgs => train_full_batch(
+            &mut mlp,
+            &train_ds,
+            &held_ds,
+            &FullBatchConfig {
+                method: if spec.net.method == TrainMethod::Cg {
+                    FullBatchMethod::ConjugateGradient { restart_iters: 50 }
+                } else {
+                    FullBatchMethod::Lbfgs { memory: 20 }
+                },
+                max_iters: s.cg_max_iters,
+                patience: s.patience,
+                min_improvement: s.min_improvement,
+            },
+        )?,
+        TrainMethod::Momentum => train_momentum(
+            &mut mlp,
+            &train_ds,
+            &held_ds,
+            &MomentumConfig {
+                learning_rate: s.learning_rate,
+                momentum: s.momentum,
+                batch_size: s.batch_size,
+                max_epochs: s.max_epochs,
+                patience: s.patience,
+                min_improvement: s.min_improvement,
+                seed: crate::experiment::mix_seed(spec.seed, 4),
+            },
+        )?,
+    };
+    let train_error = mse(&mlp, &train_ds);
+    let heldout_error = mse(&mlp, &held_ds);
+    let stop = match &report.stop {
+        StopReason::NoImprovement => "no_improvement".to_string(),
+        StopReason::MaxIterations => "max_iterations".to_string(),
+        StopReason::Converged => "converged".to_string(),
+        StopReason::OptimizerFailed(e) => format!("optimizer_failed: {e}"),
+    };
+    let emulator = Emulator::new(transforms, mlp, spec.super_dt())?;
+    Ok(Trained {
+        emulator,
+        trace: report.trace,
+        train_error,
+        heldout_error,
+        train_s: t0.elapsed().as_secs_f64(),
+        stop,
+        from_cache: false,
+    })
+}

@@ -1,0 +1,401 @@
+//! # Training data by simulation (NeuroAnimator §3.4, Fig. 8)
+//!
+//! The physical model is simulated over long episodes with a fixed step δt under *typical*
+//! controls ([`ControlSignal`]: random piecewise-constant or smooth functions within the
+//! model's limits). At well-separated times t_k of each episode the current state s_{t_k} and
+//! control u_{t_k} are recorded, a copy of the simulation is run n steps with that control held
+//! (Δt = n δt, the emulator's super timestep), and the example
+//!
+//! ```text
+//! x = [s_{t_k}, u_{t_k}],   y = s_{t_k + Δt}
+//! ```
+//!
+//! is kept. The lag between successive sample times is drawn uniformly,
+//! Δt ≤ t_{k+1} − t_k ≤ 5Δt (in whole physical steps: n … 5n), so the examples are only weakly
+//! correlated; the examples are then shuffled. Each episode starts from a state drawn by the
+//! caller's start-state distribution, and the first sample of an episode is one random lag after
+//! its start. Every random choice comes from the one [`ChaCha8Rng`] passed in.
+//!
+//! The control is held constant over each sampled window because that is how an emulator is
+//! used: one network evaluation per super timestep with the control of that step (eq. 9).
+
+use super::{EmulatorError, Transitions};
+use crate::physics::{check_finite, BlowUp, Dynamics};
+use ndarray::Array2;
+use rand::seq::SliceRandom;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+/// Box limits of the controls (and external forces), per channel.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ControlLimits {
+    /// Lower bound per channel.
+    pub low: Vec<f64>,
+    /// Upper bound per channel.
+    pub high: Vec<f64>,
+}
+
+impl ControlLimits {
+    /// No controls (a passive model).
+    pub fn none() -> Self {
+        Self {
+            low: vec![],
+            high: vec![],
+        }
+    }
+
+    /// Symmetric limits ±`bound[i]`.
+    pub fn symmetric(bound: &[f64]) -> Self {
+        Self {
+            low: bound.iter().map(|b| -b).collect(),
+            high: bound.to_vec(),
+        }
+    }
+
+    /// Number of channels.
+    pub fn len(&self) -> usize {
+        self.low.len()
+    }
+
+    /// Whether there are no channels.
+    pub fn is_empty(&self) -> bool {
+        self.low.is_empty()
+    }
+}
+
+/// How typical controls vary in time.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum ControlProcess {
+    /// Values drawn uniformly within the limits, held for durations drawn from
+    /// U[`hold_min`, `hold_max`] seconds.
+    PiecewiseConstant {
+        /// Shortest hold (s).
+        hold_min: f64,
+        /// Longest hold (s).
+        hold_max: f64,
+    },
+    /// Knots as for `PiecewiseConstant`, joined by half-cosine blends (continuous, with zero
+    /// slope at the knots).
+    Smooth {
+        /// Shortest knot spacing (s).
+        hold_min: f64,
+        /// Longest knot spacing (s).
+        hold_max: f64,
+    },
+}
+
+/// One realisation of a [`ControlProcess`] over `[0, duration]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlSignal {
+    smooth: bool,
+    /// Knot times (s), increasing, starting at 0.
+    times: Vec<f64>,
+    /// Knot values, `times.len()` × channels, row-major.
+    values: Vec<f64>,
+    channels: usize,
+}
+
+impl ControlSignal {
+    /// Draws a signal covering `[0, duration]` from `rng`.
+    pub fn sample(
+        process: ControlProcess,
+        limits: &ControlLimits,
+        duration: f64,
+        rng: &mut ChaCha8Rng,
+    ) -> Self {
+        let (smooth, lo, hi) = match process {
+            ControlProcess::PiecewiseConstant { hold_min, hold_max } => (false, hold_min, hold_max),
+            ControlProcess::Smooth { hold_min, hold_max } => (true, hold_min, hold_max),
+        };
+        let channels = limits.len();
+        let mut times = vec![];
+        let mut values = vec![];
+        let mut t = 0.0;
+        loop {
+            times.push(t);
+            for c in 0..channels {
+                values.push(rng.random_range(limits.low[c]..=limits.high[c]));
+            }
+            if t > duration {
+                break;
+            }
+            t += if hi > lo {
+                rng.random_range(lo..hi)
+            } else {
+                lo.max(1e-9)
+            };
+        }
+        Self {
+            smooth,
+            times,
+            values,
+            channels,
+        }
+    }
+
+    /// Writes the control at time `t` (s) into `u`; beyond the last knot the last value holds.
+    pub fn at(&self, t: f64, u: &mut [f64]) {
+        if self.channels == 0 {
+            return;
+        }
+        let k = self.times.partition_point(|&s| s <= t).max(1) - 1;
+        let a = &self.values[k * self.channels..(k + 1) * self.channels];
+        if !self.smooth || k + 1 >= self.times.len() {
+            u.copy_from_slice(a);
+            return;
+        }
+        let b = &self.values[(k + 1) * self.channels..(k + 2) * self.channels];
+        let (t0, t1) = (self.times[k], self.times[k + 1]);
+        let w = 0.5 - 0.5 * (std::f64::consts::PI * ((t - t0) / (t1 - t0)).clamp(0.0, 1.0)).cos();
+        for ((o, a), b) in u.iter_mut().zip(a).zip(b) {
+            *o = a + w * (b - a);
+        }
+    }
+}
+
+/// How to sample transitions.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SamplingConfig {
+    /// Physical time step δt (s).
+    pub dt: f64,
+    /// Physical steps per super timestep, n (Δt = n δt).
+    pub steps_per_sample: usize,
+    /// Number of examples to produce.
+    pub examples: usize,
+    /// Length of one simulated episode before a fresh start state is drawn (s).
+    pub episode_duration: f64,
+    /// How the typical controls vary.
+    pub control: ControlProcess,
+}
+
+impl SamplingConfig {
+    /// Checks the settings.
+    pub fn validate(&self) -> Result<(), EmulatorError> {
+        let bad = |name, value| Err(EmulatorError::Setting { name, value });
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return bad("dt", self.dt);
+        }
+        if self.steps_per_sample == 0 {
+            return bad("steps_per_sample", 0.0);
+        }
+        let window = 6.0 * self.steps_per_sample as f64 * self.dt;
+        if !(self.episode_duration >= window) {
+            // An episode must hold at least one lag (≤ 5Δt) plus one window (Δt).
+            return bad("episode_duration", self.episode_duration);
+        }
+        Ok(())
+    }
+}
+
+/// Sampled transitions with where each came from (rows in the same shuffled order).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sampled {
+    /// The examples (s_t, u_t, s_{t+Δt}), shuffled.
+    pub transitions: Transitions,
+    /// Episode index of each example.
+    pub episode: Vec<usize>,
+    /// Physical step within its episode at which each example starts (t_k = step · δt).
+    pub start_step: Vec<usize>,
+}
+
+/// Simulates `sim` as described in the module docs and returns `cfg.examples` shuffled
+/// examples. `start` draws an episode's initial state; `limits` and `cfg.control` define the
+/// typical controls. Fails with [`BlowUp`] when a simulated state is not finite.
+pub fn sample_transitions<D: Dynamics + ?Sized>(
+    sim: &mut D,
+    start: &dyn Fn(&mut ChaCha8Rng) -> Vec<f64>,
+    limits: &ControlLimits,
+    cfg: &SamplingConfig,
+    rng: &mut ChaCha8Rng,
+) -> Result<Sampled, BlowUp> {
+    let n_state = sim.state_dim();
+    let m = sim.control_dim();
+    assert_eq!(
+        limits.len(),
+        m,
+        "control limits must match the control dimension"
+    );
+    let n = cfg.steps_per_sample;
+    let rows = cfg.examples;
+    let mut states = Vec::with_capacity(rows * n_state);
+    let mut controls = Vec::with_capacity(rows * m);
+    let mut next = Vec::with_capacity(rows * n_state);
+    let mut episode = Vec::with_capacity(rows);
+    let mut start_step = Vec::with_capacity(rows);
+    let episode_steps = (cfg.episode_duration / cfg.dt).floor() as usize;
+    let mut u = vec![0.0; m];
+    let mut y = vec![0.0; n_state];
+    let mut e = 0;
+    while episode.len() < rows {
+        let mut x = start(rng);
+        assert_eq!(x.len(), n_state, "start state has the wrong size");
+        let signal = ControlSignal::sample(cfg.control, limits, cfg.episode_duration, rng);
+        let mut step = 0usize;
+        while episode.len() < rows {
+            let lag = rng.random_range(n..=5 * n);
+            if step + lag + n > episode_steps {
+                break;
+            }
+            for k in step..step + lag {
+                signal.at(k as f64 * cfg.dt, &mut u);
+                sim.step(&mut x, &u, cfg.dt);
+            }
+            step += lag;
+            check_finite("sampling", step, step as f64 * cfg.dt, &x)?;
+            signal.at(step as f64 * cfg.dt, &mut u);
+            y.copy_from_slice(&x);
+            for _ in 0..n {
+                sim.step(&mut y, &u, cfg.dt);
+            }
+            check_finite("sampling", step + n, (step + n) as f64 * cfg.dt, &y)?;
+            states.extend_from_slice(&x);
+            controls.extend_from_slice(&u);
+            next.extend_from_slice(&y);
+            episode.push(e);
+            start_step.push(step);
+        }
+        e += 1;
+    }
+    let mut order: Vec<usize> = (0..rows).collect();
+    order.shuffle(rng);
+    let pick = |src: &[f64], w: usize| -> Array2<f64> {
+        Array2::from_shape_fn((rows, w), |(r, c)| src[order[r] * w + c])
+    };
+    let transitions = Transitions::new(
+        pick(&states, n_state),
+        pick(&controls, m),
+        pick(&next, n_state),
+    )
+    .expect("rows agree by construction");
+    Ok(Sampled {
+        transitions,
+        episode: order.iter().map(|&r| episode[r]).collect(),
+        start_step: order.iter().map(|&r| start_step[r]).collect(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::pendulum::{Pendulum3, PendulumVariant};
+    use crate::physics::{IntegratorKind, Simulator};
+    use rand::SeedableRng;
+
+    fn run(seed: u64, n: usize, rows: usize) -> Sampled {
+        let mut sim = Simulator::new(Pendulum3::new(PendulumVariant::Active), IntegratorKind::Rk4);
+        let cfg = SamplingConfig {
+            dt: 0.01,
+            steps_per_sample: n,
+            examples: rows,
+            episode_duration: 5.0,
+            control: ControlProcess::PiecewiseConstant {
+                hold_min: 0.2,
+                hold_max: 1.0,
+            },
+        };
+        cfg.validate().unwrap();
+        let start = |r: &mut ChaCha8Rng| -> Vec<f64> {
+            (0..6)
+                .map(|i| {
+                    if i < 3 {
+                        r.random_range(-1.0..1.0)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        sample_transitions(
+            &mut sim,
+            &start,
+            &ControlLimits::symmetric(&[2.0; 3]),
+            &cfg,
+            &mut rng,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn lags_are_within_one_to_five_super_steps_and_rows_are_shuffled() {
+        let n = 10;
+        let s = run(1, n, 200);
+        assert_eq!(s.transitions.states.dim(), (200, 6));
+        assert_eq!(s.transitions.controls.dim(), (200, 3));
+        assert_eq!(s.transitions.next_states.dim(), (200, 6));
+        let mut keys: Vec<(usize, usize)> = s
+            .episode
+            .iter()
+            .copied()
+            .zip(s.start_step.iter().copied())
+            .collect();
+        assert_ne!(keys, {
+            let mut k = keys.clone();
+            k.sort();
+            k
+        });
+        keys.sort();
+        let mut lags = vec![];
+        let mut prev: Option<(usize, usize)> = None;
+        for &(e, t) in &keys {
+            match prev {
+                Some((pe, pt)) if pe == e => lags.push(t - pt),
+                _ => assert!((n..=5 * n).contains(&t), "first lag {t}"),
+            }
+            prev = Some((e, t));
+        }
+        assert!(lags.iter().all(|l| (n..=5 * n).contains(l)), "{lags:?}");
+        // Uniform over [n, 5n]: the mean is near 3n and both ends occur.
+        let mean = lags.iter().sum::<usize>() as f64 / lags.len() as f64;
+        assert!((mean - 3.0 * n as f64).abs() < 0.4 * n as f64, "{mean}");
+        assert!(lags.iter().any(|&l| l < 2 * n) && lags.iter().any(|&l| l > 4 * n));
+        // Controls respect their limits.
+        assert!(s.transitions.controls.iter().all(|u| u.abs() <= 2.0));
+    }
+
+    #[test]
+    fn each_example_is_n_steps_with_the_control_held() {
+        let n = 7;
+        let s = run(2, n, 20);
+        let mut sim = Simulator::new(Pendulum3::new(PendulumVariant::Active), IntegratorKind::Rk4);
+        for r in 0..20 {
+            let mut x = s.transitions.states.row(r).to_vec();
+            let u = s.transitions.controls.row(r).to_vec();
+            for _ in 0..n {
+                sim.step(&mut x, &u, 0.01);
+            }
+            assert_eq!(x, s.transitions.next_states.row(r).to_vec());
+        }
+    }
+
+    #[test]
+    fn same_seed_same_data_other_seed_other_data() {
+        assert_eq!(run(3, 5, 50), run(3, 5, 50));
+        assert_ne!(run(3, 5, 50), run(4, 5, 50));
+    }
+
+    #[test]
+    fn smooth_signal_is_continuous_and_hits_its_knots() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let lim = ControlLimits::symmetric(&[1.0, 3.0]);
+        let p = ControlProcess::Smooth {
+            hold_min: 0.5,
+            hold_max: 1.5,
+        };
+        let s = ControlSignal::sample(p, &lim, 10.0, &mut rng);
+        let (mut a, mut b) = ([0.0; 2], [0.0; 2]);
+        let mut t = 0.0;
+        while t < 10.0 {
+            s.at(t, &mut a);
+            s.at(t + 1e-4, &mut b);
+            assert!((a[0] - b[0]).abs() < 1e-2 && (a[1] - b[1]).abs() < 1e-2);
+            assert!(a[0].abs() <= 1.0 && a[1].abs() <= 3.0);
+            t += 0.01;
+        }
+        s.at(s.times[1], &mut a);
+        assert_eq!(a.to_vec(), s.values[2..4].to_vec());
+    }
+}

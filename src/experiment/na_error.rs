@@ -1,0 +1,332 @@
+//! `na_fig12_error` (NeuroAnimator §5.2, Fig. 12): how far emulated trajectories drift from
+//! the physical simulation, for emulators with super timesteps N25, N50 and N100, on the passive
+//! and the active pendulum.
+//!
+//! Each trial draws a state as the training data do — a start state from the training
+//! distribution, then `warmup` seconds of physical simulation (for the active pendulum under a
+//! random smooth torque signal within the training limits) — and from there simulates
+//! `physical_steps` RK4 steps and rolls out every emulator from the same state, under the
+//! continuing torque signal. The emulator
+//! holds the torque over each super step at the signal's value at the middle of that step (the
+//! best constant approximation of a smooth signal). Emulated states are resampled at the frame
+//! times by linear interpolation (§3), and the error is the absolute difference to the
+//! physical state, averaged over all state variables and over the trials:
+//!
+//! ```text
+//! e(t) = 1/(T·N) Σ_trials Σ_i |s_i^emu(t) − s_i^phys(t)|
+//! ```
+//!
+//! Table: `error` (variant, emulator, t, error); errors are in the state's units (rad and
+//! rad/s mixed, as in the paper's average over all state variables).
+
+use super::na_structure::{build_emulator, build_spec, validate_nets, validate_training};
+use super::output::{df_f64, df_str, read_csv, Table, Tables};
+use super::plot::{Figure, Legend, Mark, Panel, Series};
+use super::report::{sig, Findings, Verdict};
+use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use super::{Error, Experiment, Job, RunContext};
+use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
+use crate::emulator::dataset::ControlSignal;
+use crate::row;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The family.
+pub struct NaError;
+
+/// Parameters of `na_fig12_error`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// Physical steps per trial (the paper: 6,000), of each net's δt.
+    pub physical_steps: usize,
+    /// Trials per variant (the paper: 30).
+    pub trials: usize,
+    /// Frame interval at which trajectories are compared (s).
+    pub frame_dt: f64,
+    /// Physical simulation before a trial starts, so that trials start from states like those
+    /// of the training data (s).
+    pub warmup: f64,
+    /// Emulators: physical steps per emulator step.
+    pub emulators: Vec<usize>,
+    /// Multiplies every net's example count.
+    pub example_scale: f64,
+    /// The pendulum nets (one per variant: passive and/or active).
+    pub nets: Vec<NetSpec>,
+    /// Training settings.
+    pub training: TrainSettings,
+}
+
+impl Validate for Params {
+    fn validate(&self) -> Result<(), ParamError> {
+        ensure(self.physical_steps >= 1, "physical_steps", "must be >= 1")?;
+        ensure(self.trials >= 1, "trials", "must be >= 1")?;
+        positive("frame_dt", self.frame_dt)?;
+        ensure(
+            self.warmup >= 0.0 && self.warmup.is_finite(),
+            "warmup",
+            "must be >= 0",
+        )?;
+        ensure(
+            !self.emulators.is_empty() && self.emulators.iter().all(|&n| n >= 1),
+            "emulators",
+            "need at least one n >= 1",
+        )?;
+        validate_nets(&self.nets, self.example_scale)?;
+        for (i, n) in self.nets.iter().enumerate() {
+            ensure(
+                matches!(
+                    n.model,
+                    NetModel::PendulumPassive | NetModel::PendulumActive
+                ),
+                &format!("nets[{i}].model"),
+                "Fig. 12 covers pendulum_passive and pendulum_active",
+            )?;
+        }
+        validate_training(&self.training)
+    }
+}
+
+fn variant(m: NetModel) -> &'static str {
+    match m {
+        NetModel::PendulumActive => "active",
+        _ => "passive",
+    }
+}
+
+/// Linear interpolation of a trajectory sampled every `h` seconds (rows of `states`, width
+/// `w`) at time `t`; beyond the last sample, the last state.
+fn interp(states: &[f64], w: usize, h: f64, t: f64, out: &mut [f64]) {
+    let last = states.len() / w - 1;
+    let f = t / h;
+    let k = (f.floor() as usize).min(last);
+    if k >= last {
+        out.copy_from_slice(&states[last * w..]);
+        return;
+    }
+    let a = f - k as f64;
+    for i in 0..w {
+        out[i] = (1.0 - a) * states[k * w + i] + a * states[(k + 1) * w + i];
+    }
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let mut table = Table::new(&["variant", "emulator", "t", "error"]);
+        let steps = self.physical_steps;
+        for (vi, net) in self.nets.iter().enumerate() {
+            let dt = net.physical_dt;
+            let duration = steps as f64 * dt;
+            let frames = (duration / self.frame_dt + 1e-9).floor() as usize;
+            let frame_step = |j: usize| ((j as f64 * self.frame_dt) / dt).round() as usize;
+            let model = net.model;
+            let (n, m) = (model.state_dim(), model.control_dim());
+            let emulators = self
+                .emulators
+                .iter()
+                .map(|&k| {
+                    let spec = build_spec(ctx.seed, net, k, self.example_scale, &self.training);
+                    ctx.stage(&format!("train {} N{k}", model.name()), || {
+                        build_emulator(&spec)
+                    })
+                    .map(|t| (k, t.emulator))
+                })
+                .collect::<Result<Vec<_>, Error>>()?;
+            // Sum of |error| per emulator and frame over trials and variables.
+            let mut sums = vec![vec![0.0; frames + 1]; emulators.len()];
+            let mut sim = model.simulator();
+            let mut phys = vec![0.0; (steps + 1) * n];
+            let mut u = vec![0.0; m];
+            let mut x = vec![0.0; n];
+            let mut y = vec![0.0; n];
+            let mut s_int = vec![0.0; n];
+            ctx.stage(&format!("trials {}", variant(model)), || {
+                for trial in 0..self.trials {
+                    let mut rng = ctx.rng(1000 * (vi as u64 + 1) + trial as u64);
+                    let mut x0 = model.start_state(&mut rng);
+                    let warm = (self.warmup / dt).round() as usize;
+                    let signal = ControlSignal::sample(
+                        model.control_process(),
+                        &model.control_limits(),
+                        duration + warm as f64 * dt,
+                        &mut rng,
+                    );
+                    for k in 0..warm {
+                        signal.at(k as f64 * dt, &mut u);
+                        sim.step(&mut x0, &u, dt);
+                    }
+                    let t0 = warm as f64 * dt;
+                    x.copy_from_slice(&x0);
+                    phys[..n].copy_from_slice(&x);
+                    for k in 0..steps {
+                        signal.at(t0 + k as f64 * dt, &mut u);
+                        sim.step(&mut x, &u, dt);
+                        phys[(k + 1) * n..(k + 2) * n].copy_from_slice(&x);
+                    }
+                    for (ei, (k, e)) in emulators.iter().enumerate() {
+                        let h = *k as f64 * dt;
+                        let count = steps.div_ceil(*k);
+                        let mut traj = Vec::with_capacity((count + 1) * n);
+                        traj.extend_from_slice(&x0);
+                        let mut scratch = e.scratch();
+                        x.copy_from_slice(&x0);
+                        for j in 0..count {
+                            signal.at(t0 + (j as f64 + 0.5) * h, &mut u);
+                            e.predict(&x, &u, &mut scratch, &mut y);
+                            std::mem::swap(&mut x, &mut y);
+                            traj.extend_from_slice(&x);
+                        }
+                        for (f, sum) in sums[ei].iter_mut().enumerate() {
+                            let ps = frame_step(f).min(steps);
+                            interp(&traj, n, h, ps as f64 * dt, &mut s_int);
+                            *sum += s_int
+                                .iter()
+                                .zip(&phys[ps * n..(ps + 1) * n])
+                                .map(|(a, b)| (a - b).abs())
+                                .sum::<f64>();
+                        }
+                    }
+                }
+            });
+            for (ei, (k, _)) in emulators.iter().enumerate() {
+                for (f, s) in sums[ei].iter().enumerate() {
+                    table.push(row![
+                        variant(model),
+                        format!("N{k}"),
+                        frame_step(f).min(steps) as f64 * dt,
+                        s / (self.trials * n) as f64
+                    ]);
+                }
+            }
+        }
+        let mut out = Tables::default();
+        out.insert("error", table);
+        Ok(out)
+    }
+}
+
+/// Time-averaged error per (variant, emulator), in first-seen order.
+fn mean_errors(variant: &[String], emu: &[String], err: &[f64]) -> Vec<(String, String, f64)> {
+    let mut out: Vec<(String, String, f64, usize)> = vec![];
+    for r in 0..variant.len() {
+        match out.iter_mut().find(|o| o.0 == variant[r] && o.1 == emu[r]) {
+            Some(o) => {
+                o.2 += err[r];
+                o.3 += 1;
+            }
+            None => out.push((variant[r].clone(), emu[r].clone(), err[r], 1)),
+        }
+    }
+    out.into_iter()
+        .map(|(v, e, s, c)| (v, e, s / c as f64))
+        .collect()
+}
+
+impl Experiment for NaError {
+    fn kind(&self) -> &'static str {
+        "na_fig12_error"
+    }
+
+    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
+        typed_job::<Params>(params)
+    }
+
+    fn figures(
+        &self,
+        fig: &super::plot::FigureSink,
+        tables: &Tables,
+    ) -> Result<Vec<PathBuf>, Error> {
+        let tb = tables.require("error")?;
+        let (var, emu, t, err) = (
+            tb.strs("variant"),
+            tb.strs("emulator"),
+            tb.f64s("t"),
+            tb.f64s("error"),
+        );
+        let mut panels = vec![];
+        for v in ["passive", "active"] {
+            let mut kinds: Vec<String> = vec![];
+            for r in 0..var.len() {
+                if var[r] == v && !kinds.contains(&emu[r]) {
+                    kinds.push(emu[r].clone());
+                }
+            }
+            if kinds.is_empty() {
+                continue;
+            }
+            let marks = [Mark::Line, Mark::Dashed, Mark::Line];
+            let series = kinds
+                .iter()
+                .enumerate()
+                .map(|(i, k)| {
+                    let pts = (0..var.len())
+                        .filter(|&r| var[r] == v && &emu[r] == k)
+                        .map(|r| (t[r], err[r]))
+                        .collect();
+                    Series::line(k.clone(), pts, i).mark(marks[i % 3])
+                })
+                .collect();
+            panels.push(Panel {
+                title: format!("{v} pendulum"),
+                x_label: "time (s)".into(),
+                y_label: "mean |emulated - simulated| state".into(),
+                series,
+                legend: Legend::LowerRight,
+                ..Panel::default()
+            });
+        }
+        fig.draw("error", &Figure::grid(panels, 2))
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        let df = read_csv(&dir.join("error.csv"))?;
+        let (var, emu, err) = (
+            df_str(&df, "variant")?,
+            df_str(&df, "emulator")?,
+            df_f64(&df, "error")?,
+        );
+        let means = mean_errors(&var, &emu, &err);
+        let mut md =
+            String::from("| variant | emulator | time-averaged error |\n| --- | --- | --- |\n");
+        for (v, e, s) in &means {
+            md.push_str(&format!("| {v} | {e} | {} |\n", sig(*s)));
+        }
+        // "Nearly the same": per variant, the largest time-averaged error within 1.5x of the
+        // smallest (within 3x: partly).
+        let mut ratios = vec![];
+        for v in ["passive", "active"] {
+            let vals: Vec<f64> = means.iter().filter(|m| m.0 == v).map(|m| m.2).collect();
+            if vals.len() >= 2 {
+                let lo = vals.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = vals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                ratios.push((v, hi / lo));
+            }
+        }
+        let finite = ratios.iter().all(|r| r.1.is_finite());
+        let verdict = if ratios.is_empty() || !finite {
+            Verdict::NotHeld
+        } else if ratios.iter().all(|r| r.1 <= 1.5) {
+            Verdict::Held
+        } else if ratios.iter().all(|r| r.1 <= 3.0) {
+            Verdict::Partly
+        } else {
+            Verdict::NotHeld
+        };
+        Ok(Findings {
+            ours: md,
+            verdict,
+            why: format!(
+                "Largest / smallest time-averaged error across the emulators: {} (held if <= 1.5 for every variant, partly if <= 3).",
+                ratios
+                    .iter()
+                    .map(|(v, r)| format!("{v} {}", sig(*r)))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        })
+    }
+}

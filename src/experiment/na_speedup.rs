@@ -1,0 +1,334 @@
+//! `na_table2_speedup` (NeuroAnimator §5.1, Table 2): wall time of 20,000 physical simulation
+//! steps against the emulators that cover the same simulated time, N25, N50, N100 for the
+//! passive and active pendulum and N50 for the truck and the lander.
+//!
+//! Both competitors run here, in one process, on one thread, one after the other: the physical
+//! simulator is the same RK4 at δt that generated the training data (the lander's quaternion
+//! renormalized after each step), stepping in place without allocation; an emulator takes
+//! 20,000 / n steps of [`crate::emulator::Emulator::predict`] (transforms + network, no
+//! allocation). Controls (typical random controls of the model, [`ControlSignal`]) are
+//! precomputed for both, the physical one per step and the emulator one per super step. Each
+//! loop is timed `repeats` times and the fastest is kept. Emulators come from the cache when
+//! `na_table1_structure` (same seed and settings) trained them already.
+//!
+//! Table: `speedup` (model, emulator, physical_s, emulator_s, speedup, physical_steps,
+//! emulator_steps). Timings vary run to run; that table is the one output that is not
+//! bit-reproducible.
+
+use super::na_structure::{build_emulator, build_spec, validate_nets, validate_training};
+use super::output::{df_f64, df_str, read_csv, Table, Tables};
+use super::plot::{Figure, Legend, Mark, Panel, Series};
+use super::report::{sig, Findings, Verdict};
+use super::resolve::{ensure, typed_job, ParamError, Validate};
+use super::{Error, Experiment, Job, RunContext};
+use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
+use crate::emulator::dataset::ControlSignal;
+use crate::emulator::Emulator;
+use crate::physics::Dynamics;
+use crate::row;
+use serde::{Deserialize, Serialize};
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The family.
+pub struct NaSpeedup;
+
+/// One model to time and the emulators (n values) to time it against.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimedNet {
+    /// The network (model, size, data, training method).
+    pub net: NetSpec,
+    /// Physical steps per emulator step, one emulator each (e.g. [25, 50, 100]).
+    pub emulators: Vec<usize>,
+}
+
+/// Parameters of `na_table2_speedup`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// Physical steps per timing run (the paper: 20,000).
+    pub physical_steps: usize,
+    /// Timing repetitions; the fastest is kept.
+    pub repeats: usize,
+    /// Multiplies every net's example count.
+    pub example_scale: f64,
+    /// Models and their emulators.
+    pub models: Vec<TimedNet>,
+    /// Training settings.
+    pub training: TrainSettings,
+}
+
+impl Validate for Params {
+    fn validate(&self) -> Result<(), ParamError> {
+        ensure(self.physical_steps >= 1, "physical_steps", "must be >= 1")?;
+        ensure(self.repeats >= 1, "repeats", "must be >= 1")?;
+        let nets: Vec<NetSpec> = self.models.iter().map(|m| m.net.clone()).collect();
+        validate_nets(&nets, self.example_scale)?;
+        for (i, m) in self.models.iter().enumerate() {
+            ensure(
+                !m.emulators.is_empty() && m.emulators.iter().all(|&n| n >= 1),
+                &format!("models[{i}].emulators"),
+                "need at least one n >= 1",
+            )?;
+            for &n in &m.emulators {
+                ensure(
+                    self.physical_steps % n == 0,
+                    &format!("models[{i}].emulators"),
+                    format!("n = {n} must divide physical_steps"),
+                )?;
+            }
+        }
+        validate_training(&self.training)
+    }
+}
+
+/// Fastest of `repeats` runs of `f`, in seconds.
+fn best_time(repeats: usize, mut f: impl FnMut()) -> f64 {
+    (0..repeats)
+        .map(|_| {
+            let t0 = Instant::now();
+            f();
+            t0.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Seconds for `steps` physical steps of `sim` from `x0` under per-step controls `u` (row-major).
+fn time_physical(
+    sim: &mut dyn Dynamics,
+    x0: &[f64],
+    u: &[f64],
+    dt: f64,
+    steps: usize,
+    repeats: usize,
+) -> f64 {
+    let m = sim.control_dim();
+    let mut x = x0.to_vec();
+    best_time(repeats, || {
+        x.copy_from_slice(x0);
+        for k in 0..steps {
+            sim.step(&mut x, &u[k * m..(k + 1) * m], dt);
+        }
+        black_box(&x);
+    })
+}
+
+/// Seconds for `steps` emulator steps from `x0` under per-step controls `u` (row-major).
+fn time_emulator(e: &Emulator, x0: &[f64], u: &[f64], steps: usize, repeats: usize) -> f64 {
+    let m = e.control_dim();
+    let mut scratch = e.scratch();
+    let mut x = x0.to_vec();
+    let mut y = x0.to_vec();
+    best_time(repeats, || {
+        x.copy_from_slice(x0);
+        for k in 0..steps {
+            e.predict(&x, &u[k * m..(k + 1) * m], &mut scratch, &mut y);
+            std::mem::swap(&mut x, &mut y);
+        }
+        black_box(&x);
+    })
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let mut table = Table::new(&[
+            "model",
+            "emulator",
+            "physical_s",
+            "emulator_s",
+            "speedup",
+            "physical_steps",
+            "emulator_steps",
+        ]);
+        let steps = self.physical_steps;
+        for (i, tm) in self.models.iter().enumerate() {
+            let model: NetModel = tm.net.model;
+            let dt = tm.net.physical_dt;
+            let mut rng = ctx.rng(100 + i as u64);
+            let x0 = model.start_state(&mut rng);
+            let m = model.control_dim();
+            let signal = ControlSignal::sample(
+                model.control_process(),
+                &model.control_limits(),
+                steps as f64 * dt,
+                &mut rng,
+            );
+            let mut u = vec![0.0; steps * m];
+            for k in 0..steps {
+                signal.at(k as f64 * dt, &mut u[k * m..(k + 1) * m]);
+            }
+            let mut sim = model.simulator();
+            let physical_s = ctx.stage(&format!("time {} physical", model.name()), || {
+                time_physical(sim.as_mut(), &x0, &u, dt, steps, self.repeats)
+            });
+            for &n in &tm.emulators {
+                let spec = build_spec(ctx.seed, &tm.net, n, self.example_scale, &self.training);
+                let trained = ctx.stage(&format!("train {} N{n}", model.name()), || {
+                    build_emulator(&spec)
+                })?;
+                let k_steps = steps / n;
+                let mut ue = vec![0.0; k_steps * m];
+                for k in 0..k_steps {
+                    ue[k * m..(k + 1) * m].copy_from_slice(&u[k * n * m..(k * n + 1) * m]);
+                }
+                let emulator_s = ctx.stage(&format!("time {} N{n}", model.name()), || {
+                    time_emulator(&trained.emulator, &x0, &ue, k_steps, self.repeats)
+                });
+                table.push(row![
+                    model.name(),
+                    format!("N{n}"),
+                    physical_s,
+                    emulator_s,
+                    physical_s / emulator_s,
+                    steps as i64,
+                    k_steps as i64
+                ]);
+            }
+        }
+        let mut out = Tables::default();
+        out.insert("speedup", table);
+        Ok(out)
+    }
+}
+
+impl Experiment for NaSpeedup {
+    fn kind(&self) -> &'static str {
+        "na_table2_speedup"
+    }
+
+    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
+        typed_job::<Params>(params)
+    }
+
+    fn figures(
+        &self,
+        fig: &super::plot::FigureSink,
+        tables: &Tables,
+    ) -> Result<Vec<PathBuf>, Error> {
+        let t = tables.require("speedup")?;
+        let (model, emu, phys, es) = (
+            t.strs("model"),
+            t.strs("emulator"),
+            t.f64s("physical_s"),
+            t.f64s("emulator_s"),
+        );
+        let mut models: Vec<String> = vec![];
+        for m in &model {
+            if !models.contains(m) {
+                models.push(m.clone());
+            }
+        }
+        let mut kinds: Vec<String> = vec![];
+        for e in &emu {
+            if !kinds.contains(e) {
+                kinds.push(e.clone());
+            }
+        }
+        // Groups of bars per model: physical, then each emulator kind.
+        let slots = kinds.len() + 1;
+        let w = 0.8 / slots as f64;
+        let pos = |mi: usize, slot: usize| mi as f64 + (slot as f64 + 0.5) * w - 0.4;
+        let mut series = vec![Series::line(
+            "physical (RK4)",
+            models
+                .iter()
+                .enumerate()
+                .filter_map(|(mi, mname)| {
+                    let r = model.iter().position(|x| x == mname)?;
+                    Some((pos(mi, 0), phys[r]))
+                })
+                .collect(),
+            0,
+        )
+        .mark(Mark::Bars {
+            half_width: 0.45 * w,
+        })];
+        for (ki, k) in kinds.iter().enumerate() {
+            let pts = models
+                .iter()
+                .enumerate()
+                .filter_map(|(mi, mname)| {
+                    let r = (0..model.len()).find(|&r| &model[r] == mname && &emu[r] == k)?;
+                    Some((pos(mi, ki + 1), es[r]))
+                })
+                .collect();
+            series.push(Series::line(k.clone(), pts, ki + 1).mark(Mark::Bars {
+                half_width: 0.45 * w,
+            }));
+        }
+        let names: Vec<String> = models
+            .iter()
+            .enumerate()
+            .map(|(i, m)| format!("{i} = {m}"))
+            .collect();
+        let panel = Panel {
+            title: format!(
+                "Seconds for {} physical steps (log scale)",
+                t.f64s("physical_steps").first().copied().unwrap_or(0.0)
+            ),
+            x_label: format!("model: {}", names.join(", ")),
+            y_label: "wall time (s)".into(),
+            log_y: true,
+            series,
+            legend: Legend::UpperRight,
+            ..Panel::default()
+        };
+        let mut fig_ = Figure::grid(vec![panel], 1);
+        fig_.panel_size = (1000, 560);
+        fig.draw("speedup", &fig_)
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        let df = read_csv(&dir.join("speedup.csv"))?;
+        let (model, emu) = (df_str(&df, "model")?, df_str(&df, "emulator")?);
+        let (phys, es, sp) = (
+            df_f64(&df, "physical_s")?,
+            df_f64(&df, "emulator_s")?,
+            df_f64(&df, "speedup")?,
+        );
+        let mut md = String::from(
+            "| model | emulator | physical s | emulator s | speedup |\n| --- | --- | --- | --- | --- |\n",
+        );
+        for r in 0..model.len() {
+            md.push_str(&format!(
+                "| {} | {} | {} | {} | {} |\n",
+                model[r],
+                emu[r],
+                sig(phys[r]),
+                sig(es[r]),
+                sig(sp[r])
+            ));
+        }
+        let n100: Vec<f64> = (0..model.len())
+            .filter(|&r| emu[r] == "N100")
+            .map(|r| sp[r])
+            .collect();
+        let n50_min = (0..model.len())
+            .filter(|&r| emu[r] == "N50")
+            .map(|r| sp[r])
+            .fold(f64::INFINITY, f64::min);
+        // Paper: N100 50-100x "and more"; every emulator an order of magnitude or more.
+        let n100_ok = !n100.is_empty() && n100.iter().all(|&s| s >= 50.0);
+        let n50_ok = n50_min >= 10.0;
+        let verdict = match (n100_ok, n50_ok) {
+            (true, true) => Verdict::Held,
+            (false, true) | (true, false) => Verdict::Partly,
+            _ => Verdict::NotHeld,
+        };
+        Ok(Findings {
+            ours: md,
+            verdict,
+            why: format!(
+                "N100 speedups {} (paper: 50-100x and more); the slowest N50 speedup is {} (paper: one to two orders of magnitude). Dolphin rows not built.",
+                n100.iter().map(|s| sig(*s)).collect::<Vec<_>>().join(", "),
+                sig(n50_min)
+            ),
+        })
+    }
+}

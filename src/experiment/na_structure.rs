@@ -1,0 +1,291 @@
+//! `na_table1_structure` (NeuroAnimator §3.5–3.6, Table 1): train every emulator network of
+//! Table 1 (the dolphin nets are not built yet) on data sampled as in §3.4 — small nets by
+//! full-batch conjugate gradient, large ones by momentum mini-batches, both stopping early on a
+//! held-out set — and report the shapes, the example counts and the errors reached.
+//!
+//! Errors are mean squared errors per output in the normalized network space (Fig. 6c), where
+//! 1.0 is the error of always predicting the mean state change; so they compare across models.
+//! Networks come from the trained-emulator cache ([`crate::emulator::cache`]) when an identical
+//! one was trained before (`train_s` then repeats the original training time).
+//!
+//! Tables: `structure` (net, inputs, hidden, outputs, examples, train_error, heldout_error,
+//! train_s, weights, examples_per_weight, stop, cached) and `training` (net, iteration,
+//! train_error, heldout_error).
+
+use super::output::{df_f64, df_str, read_csv, Table, Tables};
+use super::plot::{Figure, Mark, Panel, Series};
+use super::report::{sig, Findings, Verdict};
+use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use super::{mix_seed, Error, Experiment, Job, RunContext};
+use crate::emulator::cache::{fnv1a, EmulatorCache};
+use crate::emulator::catalog::{BuildSpec, NetSpec, TrainSettings, Trained};
+use crate::emulator::mlp::Mlp;
+use crate::row;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The family.
+pub struct NaStructure;
+
+/// Parameters of `na_table1_structure`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// Physical steps per emulator step n (the paper's N50: 50).
+    pub steps: usize,
+    /// Multiplies every net's example count (1 = Table 1; quick runs use less).
+    pub example_scale: f64,
+    /// The networks.
+    pub nets: Vec<NetSpec>,
+    /// Training settings.
+    pub training: TrainSettings,
+}
+
+/// Checks the shared training settings.
+pub fn validate_training(t: &TrainSettings) -> Result<(), ParamError> {
+    ensure(
+        t.held_out_fraction > 0.0 && t.held_out_fraction <= 1.0,
+        "training.held_out_fraction",
+        "must be in (0, 1]",
+    )?;
+    ensure(t.cg_max_iters >= 1, "training.cg_max_iters", "must be >= 1")?;
+    ensure(t.max_epochs >= 1, "training.max_epochs", "must be >= 1")?;
+    ensure(t.patience >= 1, "training.patience", "must be >= 1")?;
+    ensure(
+        (0.0..1.0).contains(&t.min_improvement),
+        "training.min_improvement",
+        "must be in [0, 1)",
+    )?;
+    positive("training.learning_rate", t.learning_rate)?;
+    ensure(
+        (0.0..1.0).contains(&t.momentum),
+        "training.momentum",
+        "must be in [0, 1)",
+    )?;
+    ensure(t.batch_size >= 1, "training.batch_size", "must be >= 1")
+}
+
+/// Checks a list of nets.
+pub fn validate_nets(nets: &[NetSpec], scale: f64) -> Result<(), ParamError> {
+    ensure(!nets.is_empty(), "nets", "need at least one net")?;
+    positive("example_scale", scale)?;
+    for (i, n) in nets.iter().enumerate() {
+        ensure(n.hidden >= 1, &format!("nets[{i}].hidden"), "must be >= 1")?;
+        positive(&format!("nets[{i}].physical_dt"), n.physical_dt)?;
+        ensure(
+            (n.examples as f64 * scale).round() >= 10.0,
+            &format!("nets[{i}].examples"),
+            "need at least 10 examples after example_scale",
+        )?;
+    }
+    Ok(())
+}
+
+impl Validate for Params {
+    fn validate(&self) -> Result<(), ParamError> {
+        ensure(self.steps >= 1, "steps", "must be >= 1")?;
+        validate_nets(&self.nets, self.example_scale)?;
+        validate_training(&self.training)
+    }
+}
+
+/// The build spec of `net` at `steps` physical steps per emulator step. The seed depends only on
+/// the run seed, the model and n, so experiments that need the same network share it through
+/// the cache.
+pub fn build_spec(
+    seed: u64,
+    net: &NetSpec,
+    steps: usize,
+    example_scale: f64,
+    settings: &TrainSettings,
+) -> BuildSpec {
+    let mut net = net.clone();
+    net.examples = (net.examples as f64 * example_scale).round() as usize;
+    let stream = fnv1a(format!("{}-n{steps}", net.model.name()).as_bytes());
+    BuildSpec {
+        net,
+        steps,
+        settings: *settings,
+        seed: mix_seed(seed, stream),
+    }
+}
+
+/// The emulator of `spec`, from the cache ([`EmulatorCache::from_env`]) or trained now.
+pub fn build_emulator(spec: &BuildSpec) -> Result<Trained, Error> {
+    EmulatorCache::from_env()
+        .get_or_train(spec)
+        .map_err(super::other)
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let mut structure = Table::new(&[
+            "net",
+            "inputs",
+            "hidden",
+            "outputs",
+            "examples",
+            "train_error",
+            "heldout_error",
+            "train_s",
+            "weights",
+            "examples_per_weight",
+            "stop",
+            "cached",
+        ]);
+        let mut training = Table::new(&["net", "iteration", "train_error", "heldout_error"]);
+        let pb = ctx.progress(self.nets.len() as u64, "training emulators");
+        for net in &self.nets {
+            let spec = build_spec(
+                ctx.seed,
+                net,
+                self.steps,
+                self.example_scale,
+                &self.training,
+            );
+            let name = net.model.name();
+            let t = ctx.stage(&format!("train {name}"), || build_emulator(&spec))?;
+            let m = net.model;
+            let (n_in, n_out) = (m.state_dim() + m.control_dim(), m.state_dim());
+            let w = Mlp::weight_count(n_in, net.hidden, n_out);
+            structure.push(row![
+                name,
+                n_in as i64,
+                net.hidden as i64,
+                n_out as i64,
+                spec.net.examples as i64,
+                t.train_error,
+                t.heldout_error,
+                t.train_s,
+                w as i64,
+                spec.net.examples as f64 / w as f64,
+                t.stop.as_str(),
+                i64::from(t.from_cache)
+            ]);
+            for p in &t.trace {
+                training.push(row![
+                    name,
+                    p.iteration as i64,
+                    p.train_error,
+                    p.held_out_error
+                ]);
+            }
+            pb.inc(1);
+        }
+        pb.finish_and_clear();
+        let mut out = Tables::default();
+        out.insert("structure", structure);
+        out.insert("training", training);
+        Ok(out)
+    }
+}
+
+impl Experiment for NaStructure {
+    fn kind(&self) -> &'static str {
+        "na_table1_structure"
+    }
+
+    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
+        typed_job::<Params>(params)
+    }
+
+    fn figures(
+        &self,
+        fig: &super::plot::FigureSink,
+        tables: &Tables,
+    ) -> Result<Vec<PathBuf>, Error> {
+        let t = tables.require("training")?;
+        let (net, it, tr, ho) = (
+            t.strs("net"),
+            t.f64s("iteration"),
+            t.f64s("train_error"),
+            t.f64s("heldout_error"),
+        );
+        let mut names: Vec<String> = vec![];
+        for n in &net {
+            if !names.contains(n) {
+                names.push(n.clone());
+            }
+        }
+        let panels = names
+            .iter()
+            .map(|name| {
+                let pick = |v: &[f64]| -> Vec<(f64, f64)> {
+                    (0..net.len())
+                        .filter(|&r| &net[r] == name)
+                        .map(|r| (it[r], v[r]))
+                        .collect()
+                };
+                Panel {
+                    title: name.clone(),
+                    x_label: "iteration (CG) or epoch (momentum)".into(),
+                    y_label: "MSE per output (normalized)".into(),
+                    log_y: true,
+                    series: vec![
+                        Series::line("train", pick(&tr), 0),
+                        Series::line("held-out", pick(&ho), 1).mark(Mark::Dashed),
+                    ],
+                    ..Panel::default()
+                }
+            })
+            .collect();
+        fig.draw("training", &Figure::grid(panels, 3))
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        let df = read_csv(&dir.join("structure.csv"))?;
+        let net = df_str(&df, "net")?;
+        let (inp, hid, out, ex) = (
+            df_f64(&df, "inputs")?,
+            df_f64(&df, "hidden")?,
+            df_f64(&df, "outputs")?,
+            df_f64(&df, "examples")?,
+        );
+        let (tr, ho, secs) = (
+            df_f64(&df, "train_error")?,
+            df_f64(&df, "heldout_error")?,
+            df_f64(&df, "train_s")?,
+        );
+        let mut md = String::from(
+            "| net | inputs | hidden | outputs | examples | train MSE | held-out MSE | train s |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        );
+        let mut good = 0;
+        for r in 0..net.len() {
+            md.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                net[r],
+                inp[r],
+                hid[r],
+                out[r],
+                ex[r],
+                sig(tr[r]),
+                sig(ho[r]),
+                sig(secs[r])
+            ));
+            // Learned (held-out error far below the 1.0 of predicting the mean) and not
+            // overfitted (held-out within 2x of training).
+            if ho[r] < 0.05 && ho[r] < 2.0 * tr[r].max(1e-12) {
+                good += 1;
+            }
+        }
+        let verdict = if good == net.len() {
+            Verdict::Held
+        } else if good > 0 {
+            Verdict::Partly
+        } else {
+            Verdict::NotHeld
+        };
+        Ok(Findings {
+            ours: md,
+            verdict,
+            why: format!(
+                "{good} of {} Table 1 nets (dolphin not built) reach a held-out MSE below 0.05 of the normalized state-change variance without overfitting (held-out < 2x train) at about 8-10 examples per weight.",
+                net.len()
+            ),
+        })
+    }
+}

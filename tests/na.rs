@@ -1,0 +1,198 @@
+//! NeuroAnimator experiments (Table 1, Table 2, Fig. 12) end to end in quick mode: promised CSV
+//! columns, figures, and the speed claim at small scale.
+
+use crate::util::*;
+
+fn run_quick(id: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "--experiments",
+            exp.to_str().unwrap(),
+            "run",
+            id,
+            "--quick",
+            "--jobs",
+            "2",
+            "--out",
+            "out",
+            "--figures",
+            "figs",
+        ],
+    ));
+    dir
+}
+
+fn figure_exists(d: &tempfile::TempDir, stem: &str) {
+    for ext in ["png", "svg"] {
+        let p = d.path().join(format!("figs/{stem}.{ext}"));
+        assert!(
+            p.metadata().map(|m| m.len() > 1000).unwrap_or(false),
+            "{}",
+            p.display()
+        );
+    }
+}
+
+fn rows(path: &std::path::Path) -> Vec<Vec<String>> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect()
+}
+
+#[test]
+fn na_table1_quick_trains_every_net_and_caches_it() {
+    let d = run_quick("na_table1_structure");
+    let out = d.path().join("out/na_table1_structure");
+    assert!(header(&out.join("structure.csv"))
+        .starts_with("net,inputs,hidden,outputs,examples,train_error,heldout_error,train_s"));
+    assert_eq!(
+        header(&out.join("training.csv")),
+        "net,iteration,train_error,heldout_error"
+    );
+    let r = rows(&out.join("structure.csv"));
+    let nets: Vec<&str> = r.iter().map(|c| c[0].as_str()).collect();
+    assert_eq!(
+        nets,
+        [
+            "pendulum_passive",
+            "pendulum_active",
+            "pendulum_ext",
+            "lander",
+            "truck"
+        ]
+    );
+    let shapes: Vec<(&str, &str, &str)> = r
+        .iter()
+        .map(|c| (c[1].as_str(), c[2].as_str(), c[3].as_str()))
+        .collect();
+    assert_eq!(
+        shapes,
+        [
+            ("6", "20", "6"),
+            ("9", "20", "6"),
+            ("12", "20", "6"),
+            ("17", "50", "13"),
+            ("8", "40", "6")
+        ]
+    );
+    // Training reduced the held-out error below that of predicting the mean (1.0).
+    for c in &r {
+        let ho: f64 = c[6].parse().unwrap();
+        assert!(ho < 1.0, "{c:?}");
+    }
+    figure_exists(&d, "na_table1_structure_training");
+    // The networks were cached in the working directory; a rerun loads them.
+    let cache = d.path().join("target/motionlab-cache");
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 5);
+    ok(&motionlab(
+        d.path(),
+        &[
+            "--experiments",
+            root().join("experiments").to_str().unwrap(),
+            "run",
+            "na_table1_structure",
+            "--quick",
+            "--out",
+            "out2",
+            "--figures",
+            "figs2",
+        ],
+    ));
+    let again = rows(&d.path().join("out2/na_table1_structure/structure.csv"));
+    for (a, b) in r.iter().zip(&again) {
+        assert_eq!(a[..7], b[..7], "cached nets give the same errors");
+        assert_eq!(b[11], "1", "{b:?} was retrained");
+    }
+}
+
+#[test]
+fn na_table2_quick_emulators_are_faster_than_simulation() {
+    let d = run_quick("na_table2_speedup");
+    let out = d.path().join("out/na_table2_speedup");
+    assert!(header(&out.join("speedup.csv"))
+        .starts_with("model,emulator,physical_s,emulator_s,speedup"));
+    let r = rows(&out.join("speedup.csv"));
+    let keys: Vec<(String, String)> = r.iter().map(|c| (c[0].clone(), c[1].clone())).collect();
+    let want: Vec<(String, String)> = [
+        ("pendulum_passive", "N25"),
+        ("pendulum_passive", "N50"),
+        ("pendulum_passive", "N100"),
+        ("pendulum_active", "N25"),
+        ("pendulum_active", "N50"),
+        ("pendulum_active", "N100"),
+        ("truck", "N50"),
+        ("lander", "N50"),
+    ]
+    .iter()
+    .map(|(a, b)| (a.to_string(), b.to_string()))
+    .collect();
+    assert_eq!(keys, want);
+    for c in &r {
+        let speedup: f64 = c[4].parse().unwrap();
+        if c[1] == "N50" {
+            assert!(speedup > 1.0, "N50 emulator slower than simulation: {c:?}");
+        }
+    }
+    figure_exists(&d, "na_table2_speedup_speedup");
+}
+
+#[test]
+fn na_fig12_quick_writes_error_curves() {
+    let d = run_quick("na_fig12_error");
+    let out = d.path().join("out/na_fig12_error");
+    assert_eq!(header(&out.join("error.csv")), "variant,emulator,t,error");
+    let r = rows(&out.join("error.csv"));
+    for v in ["passive", "active"] {
+        for e in ["N25", "N50", "N100"] {
+            let curve: Vec<f64> = r
+                .iter()
+                .filter(|c| c[0] == v && c[1] == e)
+                .map(|c| c[3].parse().unwrap())
+                .collect();
+            // 1000 steps of 0.01 s at 0.5 s frames: 21 frames, starting from zero error.
+            assert_eq!(curve.len(), 21, "{v} {e}");
+            assert_eq!(curve[0], 0.0);
+            assert!(curve.iter().all(|x| x.is_finite() && *x >= 0.0));
+        }
+    }
+    figure_exists(&d, "na_fig12_error_error");
+}
+
+#[test]
+fn na_tables_other_than_timings_are_identical_for_any_thread_count() {
+    for (id, csv) in [
+        ("na_fig12_error", "error.csv"),
+        ("na_table1_structure", "training.csv"),
+    ] {
+        let run = |jobs: &str| {
+            let dir = tempfile::tempdir().unwrap();
+            ok(&motionlab(
+                dir.path(),
+                &[
+                    "--experiments",
+                    root().join("experiments").to_str().unwrap(),
+                    "run",
+                    id,
+                    "--quick",
+                    "--jobs",
+                    jobs,
+                    "--out",
+                    "out",
+                    "--figures",
+                    "figs",
+                ],
+            ));
+            std::fs::read(dir.path().join("out").join(id).join(csv)).unwrap()
+        };
+        assert!(
+            run("1") == run("2"),
+            "{id}: {csv} depends on the thread count"
+        );
+    }
+}
