@@ -163,6 +163,48 @@ fn lbc_acrobot_quick_lbc_beats_the_naive_blend() {
 }
 
 #[test]
+fn lbc_diver_and_push_quick_runs_write_promised_outputs() {
+    let d = run_quick("lbc_diver_interpolation", "2");
+    let out = d.path().join("out/lbc_diver_interpolation");
+    assert!(
+        header(&out.join("interpolation.csv")).starts_with("desired_angle,method,reached_angle")
+    );
+    let text = std::fs::read_to_string(out.join("interpolation.csv")).unwrap();
+    // Both methods reach finite entry angles between the two example dives.
+    for line in text.lines().skip(1) {
+        let reached: f64 = line.split(',').nth(2).unwrap().parse().unwrap();
+        assert!(reached.abs() < 0.6, "{line}");
+    }
+    assert!(d
+        .path()
+        .join("figs/lbc_diver_interpolation_entry.png")
+        .exists());
+    let d = run_quick("lbc_diver_coordination", "2");
+    let out = d.path().join("out/lbc_diver_coordination");
+    assert!(header(&out.join("coordination.csv"))
+        .starts_with("initial_omega,method,entry_error,objective"));
+    assert!(d
+        .path()
+        .join("figs/lbc_diver_coordination_entry.png")
+        .exists());
+    let d = run_quick("lbc_push_recovery", "2");
+    let out = d.path().join("out/lbc_push_recovery");
+    assert!(header(&out.join("weights.csv")).starts_with("t,alpha_forward,alpha_backward"));
+    let text = std::fs::read_to_string(out.join("weights.csv")).unwrap();
+    let alphas: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+        .collect();
+    // The forward tug makes the forward reach dominate, the backward tug the backward one.
+    assert!(
+        alphas.iter().any(|&a| a > 0.75) && alphas.iter().any(|&a| a < 0.25),
+        "{alphas:?}"
+    );
+    assert!(d.path().join("figs/lbc_push_recovery_weights.png").exists());
+}
+
+#[test]
 fn csvs_are_identical_for_any_thread_count() {
     for id in [
         "physics_validation",
