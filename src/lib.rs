@@ -46,6 +46,24 @@
 //! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
 //! | z-weights, log-sum-exp | [`bellman::combine`] | LBC eq. 1, 11 |
 //! | grid DP (linear / ordinary backup) | [`bellman::grid_dp`] | LBC §5.2, Todorov 2009 |
+//!
+//! ## Example
+//!
+//! Simulate the acrobot hanging at rest, and blend two controllers' values the LBC way:
+//!
+//! ```
+//! use motionlab::physics::{acrobot::Acrobot, IntegratorKind, Simulator};
+//! use motionlab::bellman::combine::blend_weights;
+//!
+//! let mut sim = Simulator::new(Acrobot::default(), IntegratorKind::Rk4);
+//! let hanging = [-std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0];
+//! let x = sim.rollout(&hanging, 0.01, 100, |_, _, _, _| {}, |_, _, _| {}).unwrap();
+//! assert!((x[0] - hanging[0]).abs() < 1e-12);
+//!
+//! let mut alpha = [0.0; 2];
+//! let v = blend_weights(&[1.0, 1.0], &[1e4, 1e4 + 1.0], 1.0, &mut alpha).unwrap();
+//! assert!(alpha[0] > alpha[1] && v < 1e4);
+//! ```
 #![warn(missing_docs)]
 
 pub mod bellman;
