@@ -17,6 +17,9 @@
 
 pub mod lbc_grid;
 pub mod lbc_projection;
+pub mod ms_draw;
+pub mod ms_lattices;
+pub mod ms_motion;
 pub mod output;
 pub mod physics_validation;
 pub mod plot;
