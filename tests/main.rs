@@ -2,5 +2,6 @@
 //! small scale. One test binary (polars makes each binary large).
 
 mod cli;
+mod ms;
 mod spec_errors;
 mod util;

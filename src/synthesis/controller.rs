@@ -161,6 +161,12 @@ pub struct SimSetup {
     pub rtol: f64,
     /// Absolute tolerance of the RK45 integrator.
     pub atol: f64,
+    /// Smallest internal RK45 step (s), accepted whatever its error: contact chattering
+    /// cannot stall an evaluation.
+    pub min_step: f64,
+    /// Most internal RK45 steps (accepted + rejected) an evaluation may take; beyond it the
+    /// evaluation fails with [`SynthesisError::Budget`].
+    pub max_steps: u64,
 }
 
 impl SimSetup {
@@ -174,6 +180,8 @@ impl SimSetup {
             sample_dt,
             rtol: 1e-6,
             atol: 1e-8,
+            min_step: 1e-6,
+            max_steps: 200_000,
         }
     }
 
@@ -253,7 +261,9 @@ pub fn simulate(setup: &SimSetup, c: &Controller) -> Result<Trajectory, Synthesi
     c.validate()?;
     let rest = regime_rest_lengths(&setup.model, c)?;
     let schedule = c.schedule(setup.horizon);
-    let mut sim = LatticeSim::new(setup.model.clone()).with_tolerances(setup.rtol, setup.atol);
+    let mut sim = LatticeSim::new(setup.model.clone())
+        .with_tolerances(setup.rtol, setup.atol)
+        .with_min_step(setup.min_step);
     let n = setup.model.lattice.n_masses();
     let mut x = setup.initial.clone();
     let positions = |x: &[f64]| -> Vec<[f64; 3]> {
@@ -285,6 +295,10 @@ pub fn simulate(setup: &SimSetup, c: &Controller) -> Result<Trajectory, Synthesi
                 last_used = active;
                 steps += 1;
                 check_finite(&setup.model.lattice.name, steps, stop, &x).map_err(Box::new)?;
+                let st = sim.integrator_stats();
+                if st.accepted + st.rejected > setup.max_steps {
+                    return Err(SynthesisError::Budget(st.accepted + st.rejected));
+                }
             }
             t = stop;
             if let Some(&(ts, i)) = schedule.get(next_switch) {

@@ -35,12 +35,16 @@ pub enum SynthesisError {
     /// The lattice rejected a reflex or rest lengths.
     #[error(transparent)]
     Lattice(#[from] LatticeError),
+    /// The simulation needed more internal RK45 steps than its budget (steps taken).
+    #[error("simulation exceeded its budget of RK45 steps ({0} taken)")]
+    Budget(u64),
     /// The simulation produced a non-finite state.
     #[error(transparent)]
     BlowUp(Box<BlowUp>),
 }
 
-/// Value given to a controller whose simulation blew up (worse than any real motion).
+/// Value given to a controller whose simulation blew up or exceeded its step budget (worse
+/// than any real motion).
 pub const BLOWUP_OBJECTIVE: f64 = -1.0e6;
 
 /// A synthesis problem: simulate the lattice under a controller, score the trajectory.
