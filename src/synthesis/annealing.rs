@@ -7,7 +7,8 @@
 //!
 //! T_k = σ · τ_0 · (τ_1 / τ_0)^((k − 1) / (I − 1)),
 //!
-//! where σ is the standard deviation of the objective over the initial random controllers
+//! where σ is a robust standard deviation (1.4826 × median absolute deviation) of the
+//! objective over the initial random controllers
 //! (so τ_0, τ_1 are dimensionless) — the same N random controllers hill climbing starts from,
 //! evaluated with the same streams, so both methods spend the same number of evaluations.
 //! Annealing starts from the best of them. Iteration k draws from its own stream (as in
@@ -39,6 +40,31 @@ pub struct AnnealConfig {
     pub period: f64,
 }
 
+/// A robust standard deviation of `v`: 1.4826 × the median absolute deviation (a few failed
+/// simulations scored [`super::BLOWUP_OBJECTIVE`] must not set the temperature scale); 1
+/// when that is zero.
+pub fn robust_scale(v: &[f64]) -> f64 {
+    let median = |mut x: Vec<f64>| -> f64 {
+        x.sort_by(f64::total_cmp);
+        let n = x.len();
+        if n == 0 {
+            0.0
+        } else if n % 2 == 1 {
+            x[n / 2]
+        } else {
+            0.5 * (x[n / 2 - 1] + x[n / 2])
+        }
+    };
+    let m = median(v.to_vec());
+    let mad = median(v.iter().map(|x| (x - m).abs()).collect());
+    let s = 1.4826 * mad;
+    if s.is_finite() && s > 0.0 {
+        s
+    } else {
+        1.0
+    }
+}
+
 /// Runs simulated annealing maximizing `evaluate`; `progress(done)` is called every 100
 /// iterations.
 pub fn anneal<F>(
@@ -65,10 +91,7 @@ where
             best: best_v,
         });
     }
-    let n = init.len() as f64;
-    let mean = init.iter().map(|p| p.1).sum::<f64>() / n;
-    let var = init.iter().map(|p| (p.1 - mean).powi(2)).sum::<f64>() / n;
-    let sigma = if var.sqrt() > 0.0 { var.sqrt() } else { 1.0 };
+    let sigma = robust_scale(&init.iter().map(|p| p.1).collect::<Vec<_>>());
     let (mut cur, mut cur_v) = (best_c.clone(), best_v);
     let span = (cfg.iterations.max(2) - 1) as f64;
     for k in 1..=cfg.iterations {
@@ -113,6 +136,14 @@ mod tests {
             .iter()
             .map(|r| (if r.reflex == 5 { 1.0 } else { 0.0 }) + r.alpha)
             .sum()
+    }
+
+    #[test]
+    fn robust_scale_ignores_outliers() {
+        let v = [1.0, 2.0, 3.0, 4.0, 5.0, -1.0e6];
+        let s = robust_scale(&v);
+        assert!(s > 1.0 && s < 4.0, "{s}");
+        assert_eq!(robust_scale(&[2.0, 2.0]), 1.0);
     }
 
     #[test]
