@@ -10,8 +10,14 @@ use crate::emulator::mlp::{Mlp, WeightInit};
 use crate::emulator::train::MomentumState;
 use crate::emulator::{Emulator, Transforms};
 use crate::physics::acrobot::Acrobot;
+use crate::physics::lattice::{Lattice, LatticeModel, LatticeSim, LOW_GRAVITY};
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
 use crate::physics::{Dynamics, IntegratorKind, Simulator};
+use crate::synthesis::controller::SimSetup;
+use crate::synthesis::hill_climb::init_rng;
+use crate::synthesis::objective::{Objective, Term, Weighted};
+use crate::synthesis::perturb::random_controller;
+use crate::synthesis::Problem;
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -187,6 +193,60 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             push(&name, value);
         }
     }
+    // The cube lattice under alternating scale_z reflexes (a squash-and-stretch hop): 1000
+    // steps of 10 ms, switching every 0.25 s.
+    let model = LatticeModel::new(Lattice::cube())
+        .expect("cube is valid")
+        .with_gravity(LOW_GRAVITY);
+    let up = crate::physics::reflex::deform(&model.lattice, 2, 1.0, &model.reflex_gains)
+        .expect("valid reflex")
+        .rest_lengths;
+    let down = crate::physics::reflex::deform(&model.lattice, 2, -1.0, &model.reflex_gains)
+        .expect("valid reflex")
+        .rest_lengths;
+    let x0 = model.lattice.resting_state();
+    let mut sim = LatticeSim::new(model.clone());
+    push(
+        "sim.lattice_cube.steps_per_s",
+        throughput(min_seconds, steps as u64, || {
+            let mut x = x0.clone();
+            for k in 0..steps {
+                let u = if (k / 25) % 2 == 0 { &up } else { &down };
+                sim.step(&mut x, u, 0.01);
+            }
+            black_box(&x);
+        }),
+    );
+    // One hill-climbing evaluation: a random 8-regime controller simulated on the cube in
+    // low gravity over T = 5 s (sampled at 30 Hz) and scored, as in `ms_poodle_somersault`.
+    let problem = Problem {
+        setup: SimSetup::new(model, 5.0, 1.0 / 30.0).with_tolerances(1e-4, 1e-6),
+        objective: Objective {
+            terms: vec![
+                Weighted {
+                    weight: 1.0,
+                    term: Term::MaxHeight,
+                },
+                Weighted {
+                    weight: -0.1,
+                    term: Term::ContactTime,
+                },
+            ],
+            contact_height: 0.01,
+            frame_masses: [0, 1, 2],
+        },
+    };
+    let controllers: Vec<_> = (0..16)
+        .map(|j| random_controller(&mut init_rng(1, j), 8, 5.0))
+        .collect();
+    let mut j = 0;
+    push(
+        "hill_climb.cube.evals_per_s",
+        throughput(min_seconds, 1, || {
+            black_box(problem.evaluate(&controllers[j % controllers.len()]));
+            j += 1;
+        }),
+    );
     out
 }
 

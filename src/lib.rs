@@ -73,3 +73,4 @@ pub mod emulator;
 pub mod experiment;
 pub mod linalg;
 pub mod physics;
+pub mod synthesis;

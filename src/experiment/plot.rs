@@ -216,6 +216,12 @@ pub const PALETTE: [RGBColor; 10] = [
     RGBColor(23, 190, 207),
 ];
 
+/// Registers the `dejavu` fonts as plotters' "sans-serif" family (once per process); needed
+/// before drawing text outside [`FigureSink::draw`].
+pub fn ensure_fonts() {
+    register_fonts();
+}
+
 fn register_fonts() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {

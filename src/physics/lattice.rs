@@ -807,6 +807,13 @@ impl LatticeSim {
         self
     }
 
+    /// Sets the smallest internal RK45 step (s), below which a step is accepted whatever its
+    /// error estimate: bounds the work when contact making and breaking chatters.
+    pub fn with_min_step(mut self, min_step: f64) -> Self {
+        self.integrator.min_step = min_step;
+        self
+    }
+
     /// The integrator's counters (accepted and rejected RK45 steps, evaluations).
     pub fn integrator_stats(&self) -> Rk45Stats {
         self.integrator.stats()
@@ -917,8 +924,10 @@ impl Dynamics for LatticeSim {
             let mut tries = 0;
             while self.lowest(x) < -tol && tries < MAX_LOCALIZE {
                 let s = self.first_crossing(x, h);
-                // Always shrink, so the loop makes progress even on a poor estimate.
-                h = s.min(0.9 * h).max(f64::MIN_POSITIVE);
+                // Always shrink, so the loop makes progress even on a poor estimate, but never
+                // below the integrator's smallest step: a step of f64::MIN_POSITIVE would leave
+                // `left` unchanged and loop forever (seen when contact chatters).
+                h = s.min(0.9 * h).max(self.integrator.min_step.min(left));
                 x.copy_from_slice(&self.start);
                 self.integrator.step(&self.model, x, u, h);
                 self.stats.retries += 1;

@@ -1,0 +1,366 @@
+//! Drawing 3-D mass-spring lattices with plotters: an orthographic camera (azimuth about the
+//! vertical, then elevation) projects world points to pixels; springs are lines, masses dots,
+//! the floor a light grid with the masses' shadows. Used by the mass-spring experiments for
+//! lattice figures, filmstrips and animated GIFs.
+
+use super::output::temp_path;
+use super::Error;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// An orthographic view: world point p ↦ pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct View {
+    /// Camera azimuth about the vertical (rad).
+    pub azimuth: f64,
+    /// Camera elevation above the floor (rad).
+    pub elevation: f64,
+    /// Pixels per metre.
+    pub scale: f64,
+    /// Screen coordinates (u, v) mapped to `offset`.
+    pub center: (f64, f64),
+    /// Pixel position of `center`.
+    pub offset: (f64, f64),
+}
+
+/// Screen coordinates (u right, v up, in metres) of a world point seen from the camera.
+pub fn screen(azimuth: f64, elevation: f64, p: [f64; 3]) -> (f64, f64) {
+    let (sa, ca) = azimuth.sin_cos();
+    let (se, ce) = elevation.sin_cos();
+    let x1 = p[0] * ca + p[1] * sa;
+    let y1 = -p[0] * sa + p[1] * ca;
+    (x1, p[2] * ce + y1 * se)
+}
+
+impl View {
+    /// The view that fits `points` (world, m) into a `size` pixel area with a margin.
+    pub fn fit(
+        points: impl Iterator<Item = [f64; 3]>,
+        size: (u32, u32),
+        azimuth: f64,
+        elevation: f64,
+        margin: u32,
+    ) -> Self {
+        let (mut lo, mut hi) = (
+            (f64::INFINITY, f64::INFINITY),
+            (f64::NEG_INFINITY, f64::NEG_INFINITY),
+        );
+        for p in points {
+            let (u, v) = screen(azimuth, elevation, p);
+            lo = (lo.0.min(u), lo.1.min(v));
+            hi = (hi.0.max(u), hi.1.max(v));
+        }
+        if !lo.0.is_finite() {
+            lo = (-1.0, -1.0);
+            hi = (1.0, 1.0);
+        }
+        let w = (size.0.saturating_sub(2 * margin)).max(1) as f64;
+        let h = (size.1.saturating_sub(2 * margin)).max(1) as f64;
+        let scale = (w / (hi.0 - lo.0).max(1e-3)).min(h / (hi.1 - lo.1).max(1e-3));
+        Self {
+            azimuth,
+            elevation,
+            scale,
+            center: (0.5 * (lo.0 + hi.0), 0.5 * (lo.1 + hi.1)),
+            offset: (0.5 * size.0 as f64, 0.5 * size.1 as f64),
+        }
+    }
+
+    /// Pixel of world point `p`.
+    pub fn pixel(&self, p: [f64; 3]) -> (i32, i32) {
+        let (u, v) = screen(self.azimuth, self.elevation, p);
+        (
+            (self.offset.0 + (u - self.center.0) * self.scale).round() as i32,
+            (self.offset.1 - (v - self.center.1) * self.scale).round() as i32,
+        )
+    }
+}
+
+/// Colour of a drawn lattice.
+pub const LATTICE: RGBColor = RGBColor(31, 119, 180);
+/// Colour of a faint reference lattice.
+pub const GHOST: RGBColor = RGBColor(200, 200, 200);
+
+/// The floor extent (x and y ranges, m) around `points`, padded.
+pub fn floor_extent(points: impl Iterator<Item = [f64; 3]>) -> ([f64; 2], [f64; 2]) {
+    let mut x = [f64::INFINITY, f64::NEG_INFINITY];
+    let mut y = [f64::INFINITY, f64::NEG_INFINITY];
+    for p in points {
+        x = [x[0].min(p[0]), x[1].max(p[0])];
+        y = [y[0].min(p[1]), y[1].max(p[1])];
+    }
+    if !x[0].is_finite() {
+        return ([-1.0, 1.0], [-1.0, 1.0]);
+    }
+    (
+        [(x[0] - 0.3).floor(), (x[1] + 0.3).ceil()],
+        [(y[0] - 0.3).floor(), (y[1] + 0.3).ceil()],
+    )
+}
+
+/// Draws the floor grid (0.5 m spacing) over `extent`.
+pub fn draw_floor<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    view: &View,
+    extent: ([f64; 2], [f64; 2]),
+) -> Result<(), String> {
+    let style = ShapeStyle::from(&RGBColor(225, 225, 225)).stroke_width(1);
+    let (xr, yr) = extent;
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let mut x = xr[0];
+    while x <= xr[1] + 1e-9 {
+        area.draw(&PathElement::new(
+            vec![view.pixel([x, yr[0], 0.0]), view.pixel([x, yr[1], 0.0])],
+            style,
+        ))
+        .map_err(e)?;
+        x += 0.5;
+    }
+    let mut y = yr[0];
+    while y <= yr[1] + 1e-9 {
+        area.draw(&PathElement::new(
+            vec![view.pixel([xr[0], y, 0.0]), view.pixel([xr[1], y, 0.0])],
+            style,
+        ))
+        .map_err(e)?;
+        y += 0.5;
+    }
+    Ok(())
+}
+
+/// Draws one lattice: shadows on the floor, springs, masses.
+pub fn draw_lattice<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    view: &View,
+    positions: &[[f64; 3]],
+    springs: &[(usize, usize)],
+    color: RGBColor,
+    shadow: bool,
+) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    if shadow {
+        for p in positions {
+            area.draw(&Circle::new(
+                view.pixel([p[0], p[1], 0.0]),
+                2,
+                RGBColor(170, 170, 170).filled(),
+            ))
+            .map_err(e)?;
+        }
+    }
+    let style = ShapeStyle::from(&color).stroke_width(2);
+    for &(a, b) in springs {
+        if a < positions.len() && b < positions.len() {
+            area.draw(&PathElement::new(
+                vec![view.pixel(positions[a]), view.pixel(positions[b])],
+                style,
+            ))
+            .map_err(e)?;
+        }
+    }
+    for p in positions {
+        area.draw(&Circle::new(
+            view.pixel(*p),
+            4,
+            RGBColor(20, 20, 20).filled(),
+        ))
+        .map_err(e)?;
+    }
+    Ok(())
+}
+
+/// One panel of a lattice picture.
+#[derive(Debug, Clone)]
+pub struct LatticePanel {
+    /// Title above the panel.
+    pub title: String,
+    /// Lattice positions (m).
+    pub positions: Vec<[f64; 3]>,
+    /// A faint reference shape drawn behind (e.g. the rest shape).
+    pub ghost: Option<Vec<[f64; 3]>>,
+    /// A polyline drawn on top (e.g. the centre-of-mass path).
+    pub trail: Vec<[f64; 3]>,
+}
+
+fn render_panels<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    panels: &[LatticePanel],
+    springs: &[(usize, usize)],
+    columns: usize,
+    shared_view: bool,
+) -> Result<(), String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let rows = panels.len().div_ceil(columns.max(1)).max(1);
+    let areas = root.split_evenly((rows, columns.max(1)));
+    let all = |p: &LatticePanel| {
+        let mut v = p.positions.clone();
+        v.extend(p.ghost.iter().flatten().copied());
+        v.extend(p.trail.iter().copied());
+        v
+    };
+    let every: Vec<[f64; 3]> = panels.iter().flat_map(all).collect();
+    let extent = floor_extent(every.iter().copied());
+    for (p, area) in panels.iter().zip(areas.iter()) {
+        register();
+        let area = area
+            .titled(&p.title, ("sans-serif", 16).into_font())
+            .map_err(|e| e.to_string())?;
+        let size = area.dim_in_pixel();
+        let pts: Vec<[f64; 3]> = if shared_view { every.clone() } else { all(p) };
+        let (az, el) = (-0.45, 0.35);
+        let view = View::fit(pts.iter().copied(), size, az, el, 18);
+        let ext = if shared_view {
+            extent
+        } else {
+            floor_extent(pts.iter().copied())
+        };
+        draw_floor(&area, &view, ext)?;
+        if let Some(g) = &p.ghost {
+            draw_lattice(&area, &view, g, springs, GHOST, false)?;
+        }
+        draw_lattice(&area, &view, &p.positions, springs, LATTICE, true)?;
+        if p.trail.len() > 1 {
+            area.draw(&PathElement::new(
+                p.trail.iter().map(|q| view.pixel(*q)).collect::<Vec<_>>(),
+                ShapeStyle::from(&RGBColor(214, 39, 40)).stroke_width(1),
+            ))
+            .map_err(|e| e.to_string())?;
+        }
+    }
+    Ok(())
+}
+
+fn register() {
+    // FigureSink registers the fonts; drawing a tiny figure through it is not needed here
+    // because `titled` falls back on the registered "sans-serif" family.
+    super::plot::ensure_fonts();
+}
+
+fn perr(p: &Path, e: String) -> Error {
+    Error::Plot {
+        path: p.display().to_string(),
+        message: e,
+    }
+}
+
+/// Draws `panels` (`columns` per row, `panel` pixels each) as `<dir>/<stem>.png` and `.svg`;
+/// with `shared_view` every panel uses one camera fitted to all of them.
+pub fn draw_panels(
+    dir: &Path,
+    stem: &str,
+    panels: &[LatticePanel],
+    springs: &[(usize, usize)],
+    columns: usize,
+    panel: (u32, u32),
+    shared_view: bool,
+) -> Result<Vec<PathBuf>, Error> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::Io {
+        path: dir.to_path_buf(),
+        source: e,
+    })?;
+    register();
+    let rows = panels.len().div_ceil(columns.max(1)).max(1) as u32;
+    let size = (
+        panel.0 * columns.min(panels.len()).max(1) as u32,
+        panel.1 * rows,
+    );
+    let png = dir.join(format!("{stem}.png"));
+    let svg = dir.join(format!("{stem}.svg"));
+    {
+        let tmp = temp_path(&png);
+        let root = BitMapBackend::new(&tmp, size).into_drawing_area();
+        render_panels(&root, panels, springs, columns, shared_view).map_err(|e| perr(&png, e))?;
+        root.present().map_err(|e| perr(&png, e.to_string()))?;
+        drop(root);
+        std::fs::rename(&tmp, &png).map_err(|e| Error::Io {
+            path: png.clone(),
+            source: e,
+        })?;
+    }
+    let mut text = String::new();
+    {
+        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
+        render_panels(&root, panels, springs, columns, shared_view).map_err(|e| perr(&svg, e))?;
+        root.present().map_err(|e| perr(&svg, e.to_string()))?;
+    }
+    super::output::atomic_write(&svg, text.as_bytes())?;
+    Ok(vec![png, svg])
+}
+
+/// Writes an animated GIF `<dir>/<stem>.gif` of `frames` (title, positions), one camera for
+/// all frames, `delay_ms` between frames; the centre-of-mass path `trail` is drawn up to
+/// each frame's time.
+#[allow(clippy::too_many_arguments)]
+pub fn write_gif(
+    dir: &Path,
+    stem: &str,
+    frames: &[(String, Vec<[f64; 3]>)],
+    trail: &[[f64; 3]],
+    springs: &[(usize, usize)],
+    size: (u32, u32),
+    delay_ms: u32,
+) -> Result<PathBuf, Error> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::Io {
+        path: dir.to_path_buf(),
+        source: e,
+    })?;
+    register();
+    let gif = dir.join(format!("{stem}.gif"));
+    let tmp = temp_path(&gif);
+    let every: Vec<[f64; 3]> = frames.iter().flat_map(|f| f.1.iter().copied()).collect();
+    let extent = floor_extent(every.iter().copied());
+    {
+        let root = BitMapBackend::gif(&tmp, size, delay_ms)
+            .map_err(|e| perr(&gif, e.to_string()))?
+            .into_drawing_area();
+        let (_, body) = root.split_vertically(24);
+        let view = View::fit(every.iter().copied(), body.dim_in_pixel(), -0.45, 0.35, 16);
+        let n = frames.len().max(1);
+        for (k, (title, pos)) in frames.iter().enumerate() {
+            root.fill(&WHITE).map_err(|e| perr(&gif, e.to_string()))?;
+            root.draw(&Text::new(
+                title.clone(),
+                (10, 4),
+                ("sans-serif", 16).into_font().color(&BLACK),
+            ))
+            .map_err(|e| perr(&gif, e.to_string()))?;
+            draw_floor(&body, &view, extent).map_err(|e| perr(&gif, e))?;
+            let upto = ((k + 1) * trail.len()) / n;
+            if upto > 1 {
+                body.draw(&PathElement::new(
+                    trail[..upto]
+                        .iter()
+                        .map(|q| view.pixel(*q))
+                        .collect::<Vec<_>>(),
+                    ShapeStyle::from(&RGBColor(214, 39, 40)).stroke_width(1),
+                ))
+                .map_err(|e| perr(&gif, e.to_string()))?;
+            }
+            draw_lattice(&body, &view, pos, springs, LATTICE, true).map_err(|e| perr(&gif, e))?;
+            root.present().map_err(|e| perr(&gif, e.to_string()))?;
+        }
+    }
+    std::fs::rename(&tmp, &gif).map_err(|e| Error::Io {
+        path: gif.clone(),
+        source: e,
+    })?;
+    Ok(gif)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn view_fits_points_inside_the_area() {
+        let pts = [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [3.0, -1.0, 0.5]];
+        let v = View::fit(pts.iter().copied(), (200, 100), -0.45, 0.35, 10);
+        for p in pts {
+            let (x, y) = v.pixel(p);
+            assert!((9..=191).contains(&x) && (9..=91).contains(&y), "{x},{y}");
+        }
+        // Higher points are higher on screen (smaller pixel row).
+        assert!(v.pixel([0.0, 0.0, 1.0]).1 < v.pixel([0.0, 0.0, 0.0]).1);
+    }
+}

@@ -1,0 +1,284 @@
+//! `ms_lattices` (MS §2.1–2.2, Fig. 1–3): the three lattices (cube, pyramid "spider", chair)
+//! and the 12 reflex deformations (scale, shear, splay, twist × 3 axes) applied to them.
+//!
+//! Tables: `lattices` (lattice, masses, springs, rigid_reflexes); `rest_lengths` (lattice,
+//! reflex, reflex_name, alpha, spring, a, b, rest_length, rest_length_change) for α = ±`alpha`;
+//! `positions` (lattice, reflex, alpha, mass, x, y, z; reflex −1 is the rest shape);
+//! `springs` (lattice, spring, a, b).
+
+use super::ms_draw::{draw_panels, LatticePanel};
+use super::output::{df_f64, df_str, read_csv, Table, Tables};
+use super::report::{Findings, Verdict};
+use super::resolve::{ensure, typed_job, ParamError, Validate};
+use super::{Error, Experiment, Job, RunContext};
+use crate::physics::lattice::Lattice;
+use crate::physics::reflex::{deform, Reflex, ReflexGains};
+use crate::row;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The family.
+pub struct MsLattices;
+
+/// Parameters of `ms_lattices`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// Lattices to show: any of `cube`, `pyramid`, `chair`.
+    pub lattices: Vec<String>,
+    /// Reflex coefficient magnitude |α| shown (α = ±alpha are tabulated, +alpha drawn).
+    pub alpha: f64,
+    /// Reflex gains (κ, γ, σ, τ).
+    pub gains: ReflexGains,
+}
+
+/// The shipped lattice called `name` (`cube`, `pyramid`, `chair`).
+pub fn lattice_by_name(name: &str) -> Option<Lattice> {
+    match name {
+        "cube" => Some(Lattice::cube()),
+        "pyramid" => Some(Lattice::pyramid()),
+        "chair" => Some(Lattice::chair()),
+        _ => None,
+    }
+}
+
+impl Validate for Params {
+    fn validate(&self) -> Result<(), ParamError> {
+        ensure(!self.lattices.is_empty(), "lattices", "need at least one")?;
+        for (i, l) in self.lattices.iter().enumerate() {
+            ensure(
+                lattice_by_name(l).is_some(),
+                &format!("lattices[{i}]"),
+                format!("unknown lattice `{l}` (cube, pyramid, chair)"),
+            )?;
+        }
+        ensure(
+            self.alpha > 0.0 && self.alpha <= 1.0,
+            "alpha",
+            "must be in (0, 1]",
+        )?;
+        for (k, v) in [
+            ("gains.scale", self.gains.scale),
+            ("gains.shear", self.gains.shear),
+            ("gains.splay", self.gains.splay),
+            ("gains.twist", self.gains.twist),
+        ] {
+            ensure(v.is_finite() && v >= 0.0, k, "must be finite and >= 0")?;
+        }
+        ensure(
+            self.gains.scale < 1.0 && self.gains.splay < 1.0,
+            "gains",
+            "scale and splay gains must be < 1 (else a rest length reaches 0)",
+        )
+    }
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, _ctx: &RunContext) -> Result<Tables, Error> {
+        let mut lat = Table::new(&["lattice", "masses", "springs", "rigid_reflexes"]);
+        let mut rl = Table::new(&[
+            "lattice",
+            "reflex",
+            "reflex_name",
+            "alpha",
+            "spring",
+            "a",
+            "b",
+            "rest_length",
+            "rest_length_change",
+        ]);
+        let mut pos = Table::new(&["lattice", "reflex", "alpha", "mass", "x", "y", "z"]);
+        let mut spr = Table::new(&["lattice", "spring", "a", "b"]);
+        for name in &self.lattices {
+            let l = lattice_by_name(name).ok_or_else(|| super::other("unknown lattice"))?;
+            let rest = l.rest_lengths();
+            for (j, s) in l.springs.iter().enumerate() {
+                spr.push(row![name.as_str(), j, s.a, s.b]);
+            }
+            for (i, p) in l.rest_positions().iter().enumerate() {
+                pos.push(row![name.as_str(), -1i64, 0.0, i, p[0], p[1], p[2]]);
+            }
+            let mut rigid = 0usize;
+            for r in 0..Reflex::COUNT {
+                let rname = Reflex::from_number(r).map_err(super::other)?.name();
+                for alpha in [self.alpha, -self.alpha] {
+                    let d = deform(&l, r, alpha, &self.gains).map_err(super::other)?;
+                    let mut change = 0.0f64;
+                    for (j, s) in l.springs.iter().enumerate() {
+                        let dl = d.rest_lengths[j] - rest[j];
+                        change = change.max(dl.abs());
+                        rl.push(row![
+                            name.as_str(),
+                            r,
+                            rname.as_str(),
+                            alpha,
+                            j,
+                            s.a,
+                            s.b,
+                            d.rest_lengths[j],
+                            dl
+                        ]);
+                    }
+                    if alpha > 0.0 {
+                        if change < 1e-9 {
+                            rigid += 1;
+                        }
+                        for (i, p) in d.positions.iter().enumerate() {
+                            pos.push(row![name.as_str(), r, alpha, i, p[0], p[1], p[2]]);
+                        }
+                    }
+                }
+            }
+            lat.push(row![name.as_str(), l.n_masses(), l.springs.len(), rigid]);
+        }
+        let mut t = Tables::default();
+        t.insert("lattices", lat);
+        t.insert("rest_lengths", rl);
+        t.insert("positions", pos);
+        t.insert("springs", spr);
+        Ok(t)
+    }
+}
+
+/// Springs `(a, b)` of `lattice` from a `springs` table.
+pub fn springs_of(t: &Table, lattice: Option<&str>) -> Vec<(usize, usize)> {
+    let names = t.strs("lattice");
+    let (a, b) = (t.f64s("a"), t.f64s("b"));
+    (0..a.len())
+        .filter(|&i| lattice.is_none_or(|l| names.get(i).is_some_and(|n| n == l)))
+        .map(|i| (a[i] as usize, b[i] as usize))
+        .collect()
+}
+
+impl Experiment for MsLattices {
+    fn kind(&self) -> &'static str {
+        "ms_lattices"
+    }
+
+    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
+        typed_job::<Params>(params)
+    }
+
+    fn figures(
+        &self,
+        fig: &super::plot::FigureSink,
+        tables: &Tables,
+    ) -> Result<Vec<PathBuf>, Error> {
+        let pos = tables.require("positions")?;
+        let spr = tables.require("springs")?;
+        let (names, reflex, alpha) = (pos.strs("lattice"), pos.f64s("reflex"), pos.f64s("alpha"));
+        let (x, y, z) = (pos.f64s("x"), pos.f64s("y"), pos.f64s("z"));
+        let shape = |l: &str, r: i64| -> Vec<[f64; 3]> {
+            (0..x.len())
+                .filter(|&i| names[i] == l && reflex[i] as i64 == r)
+                .map(|i| [x[i], y[i], z[i]])
+                .collect()
+        };
+        let mut lattices: Vec<String> = Vec::new();
+        for n in &names {
+            if !lattices.contains(n) {
+                lattices.push(n.clone());
+            }
+        }
+        let mut files = Vec::new();
+        for l in &lattices {
+            let springs = springs_of(spr, Some(l));
+            let nm = shape(l, -1).len();
+            files.extend(draw_panels(
+                &fig.dir,
+                &format!("{}_{l}", fig.id),
+                &[LatticePanel {
+                    title: format!("{l}: {nm} masses, {} springs", springs.len()),
+                    positions: shape(l, -1),
+                    ghost: None,
+                    trail: Vec::new(),
+                }],
+                &springs,
+                1,
+                (420, 380),
+                false,
+            )?);
+            let a = alpha
+                .iter()
+                .zip(&names)
+                .find(|(a, n)| **a > 0.0 && *n == l)
+                .map(|(a, _)| *a)
+                .unwrap_or(1.0);
+            let panels: Vec<LatticePanel> = (0..Reflex::COUNT as i64)
+                .map(|r| LatticePanel {
+                    title: format!(
+                        "{r}: {} (alpha = {a})",
+                        Reflex::from_number(r as usize)
+                            .map(|x| x.name())
+                            .unwrap_or_default()
+                    ),
+                    positions: shape(l, r),
+                    ghost: Some(shape(l, -1)),
+                    trail: Vec::new(),
+                })
+                .collect();
+            files.extend(draw_panels(
+                &fig.dir,
+                &format!("{}_{l}_reflexes", fig.id),
+                &panels,
+                &springs,
+                3,
+                (340, 300),
+                true,
+            )?);
+        }
+        Ok(files)
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        let df = read_csv(&dir.join("lattices.csv"))?;
+        let names = df_str(&df, "lattice")?;
+        let (m, s, rigid) = (
+            df_f64(&df, "masses")?,
+            df_f64(&df, "springs")?,
+            df_f64(&df, "rigid_reflexes")?,
+        );
+        let rl = read_csv(&dir.join("rest_lengths.csv"))?;
+        let change = df_f64(&rl, "rest_length_change")?;
+        let minlen = df_f64(&rl, "rest_length")?
+            .into_iter()
+            .fold(f64::INFINITY, f64::min);
+        let mut md = String::from(
+            "| lattice | masses | springs | reflexes that change no rest length |\n| --- | --- | --- | --- |\n",
+        );
+        let mut in_range = true;
+        let mut cube_ok = false;
+        for i in 0..names.len() {
+            md.push_str(&format!(
+                "| {} | {} | {} | {} |\n",
+                names[i], m[i], s[i], rigid[i]
+            ));
+            in_range &= (5.0..=10.0).contains(&m[i]) && (10.0..=35.0).contains(&s[i]);
+            if names[i] == "cube" {
+                cube_ok = m[i] == 8.0 && s[i] == 28.0 && rigid[i] == 0.0;
+            }
+        }
+        let largest = change.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        md.push_str(&format!(
+            "\nLargest rest-length change of a reflex: {largest:.3} m; shortest deformed rest length: {minlen:.3} m.\n"
+        ));
+        let verdict = if in_range && cube_ok {
+            Verdict::Held
+        } else {
+            Verdict::Partly
+        };
+        Ok(Findings {
+            ours: md,
+            verdict,
+            why: format!(
+                "The cube has 8 masses and 28 springs and all 12 reflexes deform it: {}; every lattice has 5-10 masses and 10-35 springs: {}.",
+                if cube_ok { "yes" } else { "no" },
+                if in_range { "yes" } else { "no" }
+            ),
+        })
+    }
+}

@@ -1,0 +1,151 @@
+//! Mass-spring motion synthesis experiments end to end (quick runs): promised CSV columns,
+//! figures, GIFs, and the report sections.
+
+use crate::util::*;
+
+fn run_quick(id: &str, jobs: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "--experiments",
+            exp.to_str().unwrap(),
+            "run",
+            id,
+            "--quick",
+            "--jobs",
+            jobs,
+            "--out",
+            "out",
+            "--figures",
+            "figs",
+        ],
+    ));
+    dir
+}
+
+fn nonempty(p: &std::path::Path) {
+    assert!(
+        p.metadata().map(|m| m.len() > 1000).unwrap_or(false),
+        "{} missing or tiny",
+        p.display()
+    );
+}
+
+#[test]
+fn ms_lattices_quick_writes_rest_lengths_and_figures() {
+    let d = run_quick("ms_lattices", "1");
+    let out = d.path().join("out/ms_lattices");
+    assert!(header(&out.join("rest_lengths.csv"))
+        .starts_with("lattice,reflex,reflex_name,alpha,spring,a,b,rest_length"));
+    let lat = std::fs::read_to_string(out.join("lattices.csv")).unwrap();
+    assert!(lat.contains("cube,8,28,0"), "{lat}");
+    assert!(lat.contains("pyramid,5,10,"), "{lat}");
+    // 12 reflexes x 2 signs x 28 springs for the cube.
+    let rows = std::fs::read_to_string(out.join("rest_lengths.csv"))
+        .unwrap()
+        .lines()
+        .filter(|l| l.starts_with("cube,"))
+        .count();
+    assert_eq!(rows, 12 * 2 * 28);
+    for f in ["cube", "cube_reflexes", "pyramid", "pyramid_reflexes"] {
+        for ext in ["png", "svg"] {
+            nonempty(&d.path().join(format!("figs/ms_lattices_{f}.{ext}")));
+        }
+    }
+}
+
+fn check_motion(id: &str, first_term: &str) {
+    let d = run_quick(id, "2");
+    let out = d.path().join(format!("out/{id}"));
+    assert_eq!(
+        header(&out.join("controller.csv")),
+        "regime,time,reflex,reflex_name,alpha,period"
+    );
+    assert!(header(&out.join("best.csv")).starts_with("term,value"));
+    let best = std::fs::read_to_string(out.join("best.csv")).unwrap();
+    assert!(
+        best.lines().nth(1).unwrap().starts_with(first_term),
+        "{best}"
+    );
+    assert!(best.lines().last().unwrap().starts_with("total,"), "{best}");
+    assert_eq!(header(&out.join("measures.csv")), "measure,value");
+    assert!(header(&out.join("search.csv")).starts_with("iteration,objective,best"));
+    assert!(header(&out.join("trajectory.csv")).starts_with("t,regime,mass,x,y,z"));
+    for f in ["filmstrip.png", "filmstrip.svg", "motion.gif", "search.png"] {
+        nonempty(&d.path().join(format!("figs/{id}_{f}")));
+    }
+    let gif = std::fs::read(d.path().join(format!("figs/{id}_motion.gif"))).unwrap();
+    assert_eq!(&gif[..3], b"GIF");
+    // The search never loses its best: the best-so-far column is non-decreasing and the
+    // final best is at least the best random controller.
+    let search = std::fs::read_to_string(out.join("search.csv")).unwrap();
+    let best_col: Vec<f64> = search
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    assert!(best_col.windows(2).all(|w| w[1] >= w[0]));
+    // The report section is computed from the CSVs.
+    let f = motionlab::experiment::registry::family("ms_motion")
+        .unwrap()
+        .report(&out)
+        .unwrap();
+    assert!(f.ours.contains("| total |"), "{}", f.ours);
+    assert!(!f.why.is_empty());
+}
+
+#[test]
+fn ms_spider_leap_quick_writes_promised_outputs() {
+    check_motion("ms_spider_leap", "displacement,");
+}
+
+#[test]
+fn ms_poodle_somersault_quick_writes_promised_outputs() {
+    check_motion("ms_poodle_somersault", "displacement,");
+}
+
+#[test]
+fn ms_table_pirouette_quick_writes_promised_outputs() {
+    check_motion("ms_table_pirouette", "max_height,");
+}
+
+#[test]
+fn ms_fig6_learning_plot_quick_writes_both_methods() {
+    let d = run_quick("ms_fig6_learning_plot", "2");
+    let out = d.path().join("out/ms_fig6_learning_plot");
+    assert_eq!(
+        header(&out.join("learning.csv")),
+        "method,iteration,objective,best"
+    );
+    let text = std::fs::read_to_string(out.join("learning.csv")).unwrap();
+    let count = |m: &str| text.lines().filter(|l| l.starts_with(m)).count();
+    // Same budget: 6 initial controllers + 30 iterations each.
+    assert_eq!(count("hill_climbing,"), 36);
+    assert_eq!(count("simulated_annealing,"), 36);
+    assert!(header(&out.join("summary.csv")).starts_with("method,evaluations,seconds"));
+    for ext in ["png", "svg"] {
+        nonempty(
+            &d.path()
+                .join(format!("figs/ms_fig6_learning_plot_learning.{ext}")),
+        );
+    }
+    let f = motionlab::experiment::registry::family("ms_learning")
+        .unwrap()
+        .report(&out)
+        .unwrap();
+    assert!(f.ours.contains("simulated_annealing"), "{}", f.ours);
+}
+
+#[test]
+fn ms_motion_results_do_not_depend_on_thread_count() {
+    let a = run_quick("ms_spider_leap", "1");
+    let b = run_quick("ms_spider_leap", "2");
+    for f in ["controller.csv", "best.csv", "search.csv", "trajectory.csv"] {
+        let read = |d: &tempfile::TempDir| {
+            std::fs::read_to_string(d.path().join("out/ms_spider_leap").join(f)).unwrap()
+        };
+        assert_eq!(read(&a), read(&b), "{f} differs between --jobs 1 and 2");
+    }
+}
