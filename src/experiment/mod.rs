@@ -21,6 +21,7 @@ pub mod lbc_grid;
 pub mod lbc_projection;
 pub mod lbc_push;
 pub mod na_error;
+pub mod na_momentum;
 pub mod na_speedup;
 pub mod na_structure;
 pub mod output;
