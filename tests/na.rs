@@ -222,3 +222,32 @@ fn na_fig14_quick_momentum_beats_plain_descent() {
     assert!(r.iter().any(|c| c[0] == "plain" && c[1] == "3.0"));
     figure_exists(&d, "na_fig14_momentum_objective");
 }
+
+#[test]
+fn na_fig13_quick_learns_controls_for_every_task() {
+    let d = run_quick("na_fig13_control");
+    let out = d.path().join("out/na_fig13_control");
+    assert_eq!(
+        header(&out.join("objective.csv")),
+        "task,iteration,objective"
+    );
+    assert_eq!(
+        header(&out.join("final.csv")),
+        "task,emulator_error,simulator_error"
+    );
+    let r = rows(&out.join("objective.csv"));
+    for (task, iters) in [("pendulum", 20), ("truck", 15), ("lander", 15)] {
+        let js: Vec<f64> = r
+            .iter()
+            .filter(|c| c[0] == task)
+            .map(|c| c[2].parse().unwrap())
+            .collect();
+        assert_eq!(js.len(), iters + 1, "{task}");
+        assert!(js.iter().all(|j| j.is_finite()), "{task}: {js:?}");
+        let best = js.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(best < js[0], "{task}: no descent {js:?}");
+    }
+    let f = rows(&out.join("final.csv"));
+    assert_eq!(f.len(), 3);
+    figure_exists(&d, "na_fig13_control_control");
+}

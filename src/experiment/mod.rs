@@ -20,6 +20,7 @@ pub mod lbc_diver;
 pub mod lbc_grid;
 pub mod lbc_projection;
 pub mod lbc_push;
+pub mod na_control;
 pub mod na_error;
 pub mod na_momentum;
 pub mod na_speedup;

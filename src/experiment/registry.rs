@@ -1,8 +1,8 @@
 //! Every experiment family, by the name experiment files use in `experiment = "…"`.
 
 use super::{
-    lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, na_error, na_momentum, na_speedup,
-    na_structure, physics_validation, Experiment,
+    lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, na_control, na_error, na_momentum,
+    na_speedup, na_structure, physics_validation, Experiment,
 };
 
 static FAMILIES: &[&dyn Experiment] = &[
@@ -17,6 +17,7 @@ static FAMILIES: &[&dyn Experiment] = &[
     &na_speedup::NaSpeedup,
     &na_error::NaError,
     &na_momentum::NaMomentum,
+    &na_control::NaControl,
 ];
 
 /// All families.
