@@ -247,7 +247,49 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             j += 1;
         }),
     );
+    push("bptt.lander.iters_per_s", bptt_lander(min_seconds));
     out
+}
+
+/// BPTT iterations per second on the lander's Table 1 network shape (17-50-13, random weights,
+/// its transforms): a 40-step emulated rollout and the full gradient with respect to the 80
+/// control knots, under a soft-landing objective.
+fn bptt_lander(min_seconds: f64) -> f64 {
+    use crate::control::bptt::{Bounds, Bptt, Knots};
+    use crate::control::objective::{ControlEffort, FinalState, Objective};
+    use rand::SeedableRng;
+    let model = NetModel::Lander;
+    let (n, m) = (model.state_dim(), model.control_dim());
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+    let mlp = Mlp::new(n + m, 50, n, WeightInit::FanIn, &mut rng);
+    let transforms =
+        Transforms::unfitted(&model.transform_config(), n, m).expect("catalog transforms fit");
+    let e = Emulator::new(transforms, mlp, 0.5).expect("shapes agree");
+    let x0 = crate::physics::lander::Lander::upright_at_rest([10.0, -5.0, 60.0]);
+    let target = crate::physics::lander::Lander::upright_at_rest([0.0, 0.0, 1.5]);
+    let obj = Objective::default()
+        .with(ControlEffort::plain(0.01, m))
+        .with(FinalState {
+            mu: 1.0,
+            target: target.to_vec(),
+            weights: vec![1.0; n],
+        });
+    let limits = model.control_limits();
+    let bounds = Bounds {
+        low: limits.low,
+        high: limits.high,
+    };
+    let knots = Knots {
+        steps: 40,
+        per_actuator: 20,
+        m,
+    };
+    let mut b = Bptt::new(&e, &obj, knots, bounds, &x0).expect("dimensions agree");
+    let v = vec![0.0; b.dim()];
+    let mut g = vec![0.0; b.dim()];
+    throughput(min_seconds, 1, || {
+        black_box(b.gradient(black_box(&v), &mut g));
+    })
 }
 
 /// Training and stepping throughput of the Table 1 network of `model` (random weights and data

@@ -22,7 +22,10 @@
 //! - [`control`]: optimal control on the RK4-discretized dynamics of any
 //!   [`physics::linearize::Linearize`] model — [`control::ddp`] (iLQR and full second-order
 //!   DDP with regularization, line search and box bounds) and [`control::lqr`] (time-varying
-//!   LQR tracking with the quadratic value function of linear Bellman combination, eq. 12).
+//!   LQR tracking with the quadratic value function of linear Bellman combination, eq. 12);
+//!   NeuroAnimator control learning: [`control::objective`] (composable objective terms with
+//!   gradients) and [`control::bptt`] (backpropagation through time through any differentiable
+//!   step, e.g. an emulator; plain and momentum descent on bounded piecewise-constant controls).
 //! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
 //!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
@@ -43,6 +46,7 @@
 //! | `diver`, `push_recovery` | [`physics::diver`], [`physics::push`] | planar articulated trees ([`physics::planar`]) |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
 //! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
+//! | BPTT control learning, plain / momentum descent | [`control::bptt`], [`control::objective`] | NeuroAnimator §4, eq. 11–15 |
 //! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
 //! | z-weights, log-sum-exp | [`bellman::combine`] | LBC eq. 1, 11 |
 //! | grid DP (linear / ordinary backup) | [`bellman::grid_dp`] | LBC §5.2, Todorov 2009 |

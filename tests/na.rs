@@ -1,5 +1,5 @@
-//! NeuroAnimator experiments (Table 1, Table 2, Fig. 12) end to end in quick mode: promised CSV
-//! columns, figures, and the speed claim at small scale.
+//! NeuroAnimator experiments (Table 1, Table 2, Fig. 12, Fig. 14) end to end in quick mode: promised
+//! CSV columns, figures, the speed claim and momentum beating plain descent at small scale.
 
 use crate::util::*;
 
@@ -195,4 +195,59 @@ fn na_tables_other_than_timings_are_identical_for_any_thread_count() {
             "{id}: {csv} depends on the thread count"
         );
     }
+}
+
+#[test]
+fn na_fig14_quick_momentum_beats_plain_descent() {
+    let d = run_quick("na_fig14_momentum");
+    let out = d.path().join("out/na_fig14_momentum");
+    assert_eq!(
+        header(&out.join("objective.csv")),
+        "method,eta,alpha,iteration,objective"
+    );
+    assert!(header(&out.join("runs.csv")).starts_with("method,eta,alpha,scale"));
+    let r = rows(&out.join("objective.csv"));
+    let last = |method: &str, eta: &str| -> (usize, f64) {
+        let sel: Vec<&Vec<String>> = r.iter().filter(|c| c[0] == method && c[1] == eta).collect();
+        let c = sel.last().unwrap();
+        (c[3].parse().unwrap(), c[4].parse().unwrap())
+    };
+    let (km, jm) = last("momentum", "1.5");
+    let (kp, jp) = last("plain", "1.0");
+    assert_eq!((km, kp), (40, 40), "quick mode runs 40 iterations");
+    let j0: f64 = r[0][4].parse().unwrap();
+    assert!(jm < jp, "momentum {jm} vs plain {jp}");
+    assert!(jp < j0, "plain descent did not descend: {jp} vs {j0}");
+    // The sweep's rates are there too.
+    assert!(r.iter().any(|c| c[0] == "plain" && c[1] == "3.0"));
+    figure_exists(&d, "na_fig14_momentum_objective");
+}
+
+#[test]
+fn na_fig13_quick_learns_controls_for_every_task() {
+    let d = run_quick("na_fig13_control");
+    let out = d.path().join("out/na_fig13_control");
+    assert_eq!(
+        header(&out.join("objective.csv")),
+        "task,iteration,objective"
+    );
+    assert_eq!(
+        header(&out.join("final.csv")),
+        "task,emulator_error,simulator_error"
+    );
+    let r = rows(&out.join("objective.csv"));
+    for (task, iters) in [("pendulum", 20), ("truck", 15), ("lander", 15)] {
+        let js: Vec<f64> = r
+            .iter()
+            .filter(|c| c[0] == task)
+            .map(|c| c[2].parse().unwrap())
+            .collect();
+        assert_eq!(js.len(), iters + 1, "{task}");
+        assert!(js.iter().all(|j| j.is_finite()), "{task}: {js:?}");
+        let best = js.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(best < js[0], "{task}: no descent {js:?}");
+    }
+    let f = rows(&out.join("final.csv"));
+    assert_eq!(f.len(), 3);
+    figure_exists(&d, "na_fig13_control_control");
 }

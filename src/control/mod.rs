@@ -24,10 +24,16 @@
 //! - [`lqr`]: time-varying LQR tracking of a given trajectory and its quadratic value function
 //!   (linear Bellman combination, eq. 12).
 //!
+//! - [`objective`]: NeuroAnimator control-learning objectives (§4.2) as composable terms with
+//!   gradients; [`bptt`]: backpropagation through time through any differentiable step (an
+//!   emulator), plain and momentum descent on piecewise-constant controls (§4.3).
+//!
 //! Solvers return data; they never print or write files.
 
+pub mod bptt;
 pub mod ddp;
 pub mod lqr;
+pub mod objective;
 
 use crate::physics::linearize::Linearize;
 use crate::physics::Ode;

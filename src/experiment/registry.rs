@@ -1,8 +1,8 @@
 //! Every experiment family, by the name experiment files use in `experiment = "…"`.
 
 use super::{
-    lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, ms_lattices, ms_motion, na_error,
-    na_speedup, na_structure, physics_validation, Experiment,
+    lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, ms_lattices, ms_motion, na_control,
+    na_error, na_momentum, na_speedup, na_structure, physics_validation, Experiment,
 };
 
 static FAMILIES: &[&dyn Experiment] = &[
@@ -19,6 +19,8 @@ static FAMILIES: &[&dyn Experiment] = &[
     &ms_lattices::MsLattices,
     &ms_motion::MsMotion,
     &ms_motion::MsLearning,
+    &na_momentum::NaMomentum,
+    &na_control::NaControl,
 ];
 
 /// All families.

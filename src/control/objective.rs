@@ -1,0 +1,311 @@
+//! # Control-learning objectives (NeuroAnimator §4.2)
+//!
+//! A controller u = [u_1 … u_M] drives an emulator through the motion s = [s_1 … s_{M+1}]
+//! (eq. 10). The objective (eq. 11) is a weighted sum of a controller term and trajectory terms;
+//! the typical one (eq. 12) is
+//!
+//! ```text
+//! J(u) = μ_u/2 Σ_i |u_i|² + μ_s/2 (s_{M+1} − s_d)²
+//! ```
+//!
+//! Here every term is a [`Term`] that returns its value and adds its gradient with respect to
+//! every state and every control of the trajectory; an [`Objective`] sums terms. Terms:
+//!
+//! - [`ControlEffort`]: μ_u/2 Σ_i Σ_j ((u_ij − o_j)/c_j)², effort about an offset o (e.g. the
+//!   hover thrust) in units c per actuator;
+//! - [`FinalState`]: μ_s/2 Σ_k w_k (s_{M+1,k} − s_{d,k})², the final-state term with a weight
+//!   per state variable;
+//! - [`StateWindow`]: μ/2 Σ_{i ∈ window} Σ_k w_k (s_{i,k} − r_k)², a trajectory term over a
+//!   range of states (e.g. the descent velocity in the last seconds before touchdown).
+//!
+//! Layout: `states` holds the M + 1 states s_0 … s_M row after row (n each; s_0 is the given
+//! start state, the paper's s_1), `controls` the M per-step controls (m each).
+//!
+//! Objectives are minimized here (the paper writes J as a cost but the update with a plus sign).
+//!
+//! ## References
+//! - R. Grzeszczuk, D. Terzopoulos, G. Hinton, *NeuroAnimator: Fast neural network emulation
+//!   and control of physics-based models*, SIGGRAPH 1998, §4.2.
+
+use std::fmt::Debug;
+
+/// One term of an objective over a trajectory of `steps` emulator steps.
+pub trait Term: Debug + Send + Sync {
+    /// Its value for the states (s_0 … s_M, n each) and controls (u_0 … u_{M−1}, m each).
+    fn value(&self, states: &[f64], controls: &[f64], n: usize, m: usize) -> f64;
+    /// Adds ∂term/∂states to `s_bar` and ∂term/∂controls to `u_bar` (same layouts); returns
+    /// the value.
+    fn gradient(
+        &self,
+        states: &[f64],
+        controls: &[f64],
+        n: usize,
+        m: usize,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) -> f64;
+}
+
+/// Controller efficiency: μ/2 Σ_i Σ_j ((u_ij − offset_j)/scale_j)².
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlEffort {
+    /// Weight μ_u.
+    pub mu: f64,
+    /// Control about which effort is measured, per actuator (e.g. zero torque, hover thrust).
+    pub offset: Vec<f64>,
+    /// Unit of each actuator (e.g. its limit), so actuators of different units compare.
+    pub scale: Vec<f64>,
+}
+
+impl ControlEffort {
+    /// μ/2 Σ |u_i|²: the plain effort term of eq. 12 for `m` actuators.
+    pub fn plain(mu: f64, m: usize) -> Self {
+        Self {
+            mu,
+            offset: vec![0.0; m],
+            scale: vec![1.0; m],
+        }
+    }
+}
+
+impl Term for ControlEffort {
+    fn value(&self, _states: &[f64], controls: &[f64], _n: usize, m: usize) -> f64 {
+        let mut sum = 0.0;
+        for u in controls.chunks_exact(m) {
+            for j in 0..m {
+                let d = (u[j] - self.offset[j]) / self.scale[j];
+                sum += d * d;
+            }
+        }
+        0.5 * self.mu * sum
+    }
+
+    fn gradient(
+        &self,
+        states: &[f64],
+        controls: &[f64],
+        n: usize,
+        m: usize,
+        _s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) -> f64 {
+        for (u, g) in controls.chunks_exact(m).zip(u_bar.chunks_exact_mut(m)) {
+            for j in 0..m {
+                let c = self.scale[j];
+                g[j] += self.mu * (u[j] - self.offset[j]) / (c * c);
+            }
+        }
+        self.value(states, controls, n, m)
+    }
+}
+
+/// Weighted squared distance of a state to a reference: Σ_k w_k (s_k − r_k)².
+fn weighted_sq(s: &[f64], r: &[f64], w: &[f64]) -> f64 {
+    s.iter()
+        .zip(r)
+        .zip(w)
+        .map(|((a, b), w)| w * (a - b) * (a - b))
+        .sum()
+}
+
+/// The final-state term: μ/2 Σ_k w_k (s_{M,k} − target_k)².
+#[derive(Debug, Clone, PartialEq)]
+pub struct FinalState {
+    /// Weight μ_s.
+    pub mu: f64,
+    /// Desired final state s_d.
+    pub target: Vec<f64>,
+    /// Weight per state variable (0 ignores it).
+    pub weights: Vec<f64>,
+}
+
+impl Term for FinalState {
+    fn value(&self, states: &[f64], _controls: &[f64], n: usize, _m: usize) -> f64 {
+        let last = &states[states.len() - n..];
+        0.5 * self.mu * weighted_sq(last, &self.target, &self.weights)
+    }
+
+    fn gradient(
+        &self,
+        states: &[f64],
+        controls: &[f64],
+        n: usize,
+        m: usize,
+        s_bar: &mut [f64],
+        _u_bar: &mut [f64],
+    ) -> f64 {
+        let k0 = states.len() - n;
+        for k in 0..n {
+            s_bar[k0 + k] += self.mu * self.weights[k] * (states[k0 + k] - self.target[k]);
+        }
+        self.value(states, controls, n, m)
+    }
+}
+
+/// A trajectory term over the states s_i with `from <= i <= to` (clamped to the trajectory):
+/// μ/2 Σ_i Σ_k w_k (s_{i,k} − reference_k)².
+#[derive(Debug, Clone, PartialEq)]
+pub struct StateWindow {
+    /// Weight μ.
+    pub mu: f64,
+    /// First state index in the window (0 = the start state).
+    pub from: usize,
+    /// Last state index in the window (M = the final state).
+    pub to: usize,
+    /// Reference state.
+    pub reference: Vec<f64>,
+    /// Weight per state variable (0 ignores it).
+    pub weights: Vec<f64>,
+}
+
+impl StateWindow {
+    fn range(&self, states: &[f64], n: usize) -> std::ops::RangeInclusive<usize> {
+        let last = states.len() / n - 1;
+        self.from.min(last)..=self.to.min(last)
+    }
+}
+
+impl Term for StateWindow {
+    fn value(&self, states: &[f64], _controls: &[f64], n: usize, _m: usize) -> f64 {
+        let sum: f64 = self
+            .range(states, n)
+            .map(|i| weighted_sq(&states[i * n..(i + 1) * n], &self.reference, &self.weights))
+            .sum();
+        0.5 * self.mu * sum
+    }
+
+    fn gradient(
+        &self,
+        states: &[f64],
+        controls: &[f64],
+        n: usize,
+        m: usize,
+        s_bar: &mut [f64],
+        _u_bar: &mut [f64],
+    ) -> f64 {
+        for i in self.range(states, n) {
+            for k in 0..n {
+                s_bar[i * n + k] +=
+                    self.mu * self.weights[k] * (states[i * n + k] - self.reference[k]);
+            }
+        }
+        self.value(states, controls, n, m)
+    }
+}
+
+/// A sum of terms.
+#[derive(Debug, Default)]
+pub struct Objective {
+    /// The terms.
+    pub terms: Vec<Box<dyn Term>>,
+}
+
+impl Objective {
+    /// An objective of the given terms.
+    pub fn new(terms: Vec<Box<dyn Term>>) -> Self {
+        Self { terms }
+    }
+
+    /// Adds a term.
+    pub fn with(mut self, term: impl Term + 'static) -> Self {
+        self.terms.push(Box::new(term));
+        self
+    }
+
+    /// J for a trajectory.
+    pub fn value(&self, states: &[f64], controls: &[f64], n: usize, m: usize) -> f64 {
+        self.terms
+            .iter()
+            .map(|t| t.value(states, controls, n, m))
+            .sum()
+    }
+
+    /// J and its partial derivatives with respect to every state and control (`s_bar` and
+    /// `u_bar` are overwritten).
+    pub fn gradient(
+        &self,
+        states: &[f64],
+        controls: &[f64],
+        n: usize,
+        m: usize,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) -> f64 {
+        s_bar.fill(0.0);
+        u_bar.fill(0.0);
+        self.terms
+            .iter()
+            .map(|t| t.gradient(states, controls, n, m, s_bar, u_bar))
+            .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check_fd(term: &dyn Term) {
+        let (n, m, steps) = (3, 2, 5);
+        let states: Vec<f64> = (0..(steps + 1) * n)
+            .map(|i| (i as f64 * 0.37).sin())
+            .collect();
+        let controls: Vec<f64> = (0..steps * m).map(|i| (i as f64 * 0.71).cos()).collect();
+        let mut sb = vec![0.0; states.len()];
+        let mut ub = vec![0.0; controls.len()];
+        let v = term.gradient(&states, &controls, n, m, &mut sb, &mut ub);
+        assert!((v - term.value(&states, &controls, n, m)).abs() < 1e-12);
+        let h = 1e-6;
+        for i in 0..states.len() {
+            let (mut p, mut q) = (states.clone(), states.clone());
+            p[i] += h;
+            q[i] -= h;
+            let fd =
+                (term.value(&p, &controls, n, m) - term.value(&q, &controls, n, m)) / (2.0 * h);
+            assert!((fd - sb[i]).abs() < 1e-6, "state {i}: {fd} vs {}", sb[i]);
+        }
+        for i in 0..controls.len() {
+            let (mut p, mut q) = (controls.clone(), controls.clone());
+            p[i] += h;
+            q[i] -= h;
+            let fd = (term.value(&states, &p, n, m) - term.value(&states, &q, n, m)) / (2.0 * h);
+            assert!((fd - ub[i]).abs() < 1e-6, "control {i}: {fd} vs {}", ub[i]);
+        }
+    }
+
+    #[test]
+    fn every_term_gradient_matches_finite_differences() {
+        check_fd(&ControlEffort {
+            mu: 0.7,
+            offset: vec![0.2, -0.1],
+            scale: vec![2.0, 0.5],
+        });
+        check_fd(&FinalState {
+            mu: 1.3,
+            target: vec![0.1, 0.2, -0.3],
+            weights: vec![1.0, 0.0, 4.0],
+        });
+        check_fd(&StateWindow {
+            mu: 0.9,
+            from: 3,
+            to: 99,
+            reference: vec![0.0, 1.0, 0.0],
+            weights: vec![0.5, 2.0, 1.0],
+        });
+        let all = Objective::default()
+            .with(ControlEffort::plain(0.1, 2))
+            .with(FinalState {
+                mu: 1.0,
+                target: vec![0.0; 3],
+                weights: vec![1.0; 3],
+            });
+        let (n, m) = (3, 2);
+        let states = vec![0.5; 4 * n];
+        let controls = vec![1.0; 3 * m];
+        let mut sb = vec![9.0; states.len()];
+        let mut ub = vec![9.0; controls.len()];
+        let v = all.gradient(&states, &controls, n, m, &mut sb, &mut ub);
+        assert!((v - (0.05 * 6.0 + 0.5 * 0.75)).abs() < 1e-12);
+        assert!(sb[..9].iter().all(|&g| g == 0.0));
+        assert!(ub.iter().all(|&g| (g - 0.1).abs() < 1e-12));
+    }
+}
