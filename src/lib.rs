@@ -15,7 +15,10 @@
 //!   diver and the push-recovery figure.
 //! - [`physics::lattice`] and [`physics::reflex`]: 3-D mass-spring lattices (cube, pyramid,
 //!   chair) with floor contact and directional friction, and the 12 deformation reflexes of
-//!   mass-spring motion synthesis.
+//!   mass-spring motion synthesis; [`physics::dolphin::Dolphin`], the muscle-driven
+//!   mass-spring-damper swimmer of NeuroAnimator.
+//! - [`synthesis`]: mass-spring motion synthesis — time-based reflex controllers, the Table 1
+//!   objective terms, the Table 2 perturbations, parallel hill climbing and simulated annealing.
 //! - [`emulator`]: NeuroAnimator emulators — a sigmoid MLP with backprop to weights and inputs,
 //!   the delta / local-frame / normalization transforms, and training (argmin CG or L-BFGS,
 //!   momentum mini-batches) with early stopping.
@@ -43,6 +46,7 @@
 //! | `acrobot` | [`physics::acrobot`] | point-mass acrobot, torque at the hip |
 //! | `truck` | [`physics::truck`] | bicycle-model truck with saturating tyre forces |
 //! | `lander` | [`physics::lander`] | 3-D rigid-body lunar lander, quaternion attitude |
+//! | `dolphin` | [`physics::dolphin`] | 23-mass dolphin, 6 muscles, hydrodynamic drag |
 //! | `diver`, `push_recovery` | [`physics::diver`], [`physics::push`] | planar articulated trees ([`physics::planar`]) |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
 //! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
