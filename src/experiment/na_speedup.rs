@@ -262,17 +262,13 @@ impl Experiment for NaSpeedup {
                 half_width: 0.45 * w,
             }));
         }
-        let names: Vec<String> = models
-            .iter()
-            .enumerate()
-            .map(|(i, m)| format!("{i} = {m}"))
-            .collect();
         let panel = Panel {
             title: format!(
                 "Seconds for {} physical steps (log scale)",
                 t.f64s("physical_steps").first().copied().unwrap_or(0.0)
             ),
-            x_label: format!("model: {}", names.join(", ")),
+            x_label: "model".into(),
+            x_categories: models.iter().map(|m| m.to_string()).collect(),
             y_label: "wall time (s)".into(),
             log_y: true,
             series,

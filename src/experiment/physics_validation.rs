@@ -403,6 +403,7 @@ impl Experiment for PhysicsValidation {
                 series,
                 y_range: None,
                 x_range: None,
+                x_categories: Vec::new(),
                 legend: Legend::LowerRight,
             });
         }
@@ -441,6 +442,7 @@ impl Experiment for PhysicsValidation {
                     series: drift_series,
                     y_range: None,
                     x_range: None,
+                    x_categories: Vec::new(),
                     legend: Legend::UpperLeft,
                 },
                 Panel {
@@ -452,6 +454,7 @@ impl Experiment for PhysicsValidation {
                     series: step_series,
                     y_range: None,
                     x_range: None,
+                    x_categories: Vec::new(),
                     legend: Legend::UpperRight,
                 },
             ];

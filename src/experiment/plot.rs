@@ -84,6 +84,8 @@ pub struct Panel {
     pub x_range: Option<(f64, f64)>,
     /// Where the legend goes.
     pub legend: Legend,
+    /// Category names for integer x positions 0, 1, … (a categorical x axis); empty: numeric.
+    pub x_categories: Vec<String>,
 }
 
 /// Corner of the legend box.
@@ -554,7 +556,17 @@ where
     chart
         .configure_mesh()
         .x_desc(p.x_label.as_str())
-        .x_label_formatter(&|v| tick(*v, snap.0))
+        .x_label_formatter(&|v| {
+            if p.x_categories.is_empty() {
+                tick(*v, snap.0)
+            } else {
+                let i = v.round();
+                match p.x_categories.get(i as usize) {
+                    Some(name) if (v - i).abs() < 1e-6 && i >= 0.0 => name.clone(),
+                    _ => String::new(),
+                }
+            }
+        })
         .y_label_formatter(&|v| tick(*v, snap.1))
         .x_labels(8)
         .y_labels(8)
