@@ -3,28 +3,6 @@
 
 use crate::util::*;
 
-fn run_quick(id: &str, jobs: &str) -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
-    let exp = root().join("experiments");
-    ok(&motionlab(
-        dir.path(),
-        &[
-            "--experiments",
-            exp.to_str().unwrap(),
-            "run",
-            id,
-            "--quick",
-            "--jobs",
-            jobs,
-            "--out",
-            "out",
-            "--figures",
-            "figs",
-        ],
-    ));
-    dir
-}
-
 #[test]
 fn physics_validation_quick_writes_promised_outputs() {
     let d = run_quick("physics_validation", "2");

@@ -3,28 +3,6 @@
 
 use crate::util::*;
 
-fn run_quick(id: &str) -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
-    let exp = root().join("experiments");
-    ok(&motionlab(
-        dir.path(),
-        &[
-            "--experiments",
-            exp.to_str().unwrap(),
-            "run",
-            id,
-            "--quick",
-            "--jobs",
-            "2",
-            "--out",
-            "out",
-            "--figures",
-            "figs",
-        ],
-    ));
-    dir
-}
-
 fn figure_exists(d: &tempfile::TempDir, stem: &str) {
     for ext in ["png", "svg"] {
         let p = d.path().join(format!("figs/{stem}.{ext}"));
@@ -47,7 +25,7 @@ fn rows(path: &std::path::Path) -> Vec<Vec<String>> {
 
 #[test]
 fn na_table1_quick_trains_every_net_and_caches_it() {
-    let d = run_quick("na_table1_structure");
+    let d = run_quick("na_table1_structure", "2");
     let out = d.path().join("out/na_table1_structure");
     assert!(header(&out.join("structure.csv"))
         .starts_with("net,inputs,hidden,outputs,examples,train_error,heldout_error,train_s"));
@@ -113,7 +91,7 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
 
 #[test]
 fn na_table2_quick_emulators_are_faster_than_simulation() {
-    let d = run_quick("na_table2_speedup");
+    let d = run_quick("na_table2_speedup", "2");
     let out = d.path().join("out/na_table2_speedup");
     assert!(header(&out.join("speedup.csv"))
         .starts_with("model,emulator,physical_s,emulator_s,speedup"));
@@ -144,7 +122,7 @@ fn na_table2_quick_emulators_are_faster_than_simulation() {
 
 #[test]
 fn na_fig12_quick_writes_error_curves() {
-    let d = run_quick("na_fig12_error");
+    let d = run_quick("na_fig12_error", "2");
     let out = d.path().join("out/na_fig12_error");
     assert_eq!(header(&out.join("error.csv")), "variant,emulator,t,error");
     let r = rows(&out.join("error.csv"));
@@ -199,7 +177,7 @@ fn na_tables_other_than_timings_are_identical_for_any_thread_count() {
 
 #[test]
 fn na_fig14_quick_momentum_beats_plain_descent() {
-    let d = run_quick("na_fig14_momentum");
+    let d = run_quick("na_fig14_momentum", "2");
     let out = d.path().join("out/na_fig14_momentum");
     assert_eq!(
         header(&out.join("objective.csv")),
@@ -225,7 +203,7 @@ fn na_fig14_quick_momentum_beats_plain_descent() {
 
 #[test]
 fn na_fig13_quick_learns_controls_for_every_task() {
-    let d = run_quick("na_fig13_control");
+    let d = run_quick("na_fig13_control", "2");
     let out = d.path().join("out/na_fig13_control");
     assert_eq!(
         header(&out.join("objective.csv")),

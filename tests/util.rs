@@ -55,3 +55,27 @@ pub fn files_with_ext(dir: &Path, ext: &str) -> Vec<(String, Vec<u8>)> {
     out.sort();
     out
 }
+
+/// Runs the shipped experiment `id` in quick mode in a fresh temp dir (outputs in `out/` and
+/// `figs/` there) with `--jobs jobs`.
+pub fn run_quick(id: &str, jobs: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "--experiments",
+            exp.to_str().unwrap(),
+            "run",
+            id,
+            "--quick",
+            "--jobs",
+            jobs,
+            "--out",
+            "out",
+            "--figures",
+            "figs",
+        ],
+    ));
+    dir
+}

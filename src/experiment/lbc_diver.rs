@@ -149,6 +149,50 @@ impl DiveSettings {
         Ok((sol, tracker))
     }
 
+    /// DDP dives (in parallel) for each `(omega, offset)`, their LQR trackers, and the `dives`
+    /// table describing them.
+    fn optimize_all(
+        &self,
+        ctx: &RunContext,
+        cases: &[(f64, f64)],
+    ) -> Result<(Vec<TrackingController>, Table), Error> {
+        let pb = ctx.progress(cases.len() as u64, "DDP dives");
+        let dives: Vec<Result<(DdpSolution, TrackingController), Error>> = ctx.stage("ddp", || {
+            cases
+                .par_iter()
+                .map(|&(omega, offset)| {
+                    let r = self.dive(omega, offset);
+                    pb.inc(1);
+                    r
+                })
+                .collect()
+        });
+        pb.finish_and_clear();
+        let mut table = Table::new(&[
+            "dive",
+            "initial_omega",
+            "target_offset",
+            "iterations",
+            "cost",
+            "entry_angle",
+        ]);
+        let mut trackers = Vec::with_capacity(cases.len());
+        for (i, (r, &(omega, offset))) in dives.into_iter().zip(cases).enumerate() {
+            let (sol, tracker) = r?;
+            let xn = Some(sol.x[sol.u.len()].clone());
+            table.push(row![
+                i + 1,
+                omega,
+                offset,
+                sol.trace.len(),
+                sol.cost,
+                entry(&xn)
+            ]);
+            trackers.push(tracker);
+        }
+        Ok((trackers, table))
+    }
+
     /// Closed-loop dive under a blended policy: final state (None if it diverged) and the
     /// objective of `cost` along the executed trajectory.
     fn execute(
@@ -231,33 +275,8 @@ impl Job for InterpolationParams {
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let d = &self.dive;
         let offsets = [-self.offset, self.offset];
-        let pb = ctx.progress(2, "DDP dives");
-        let dives: Vec<Result<(DdpSolution, TrackingController), Error>> = ctx.stage("ddp", || {
-            offsets
-                .par_iter()
-                .map(|&o| {
-                    let r = d.dive(self.omega, o);
-                    pb.inc(1);
-                    r
-                })
-                .collect()
-        });
-        pb.finish_and_clear();
-        let dives: Vec<(DdpSolution, TrackingController)> =
-            dives.into_iter().collect::<Result<_, _>>()?;
-        let trackers: Vec<TrackingController> = dives.iter().map(|(_, t)| t.clone()).collect();
-        let mut examples =
-            Table::new(&["dive", "target_offset", "iterations", "cost", "entry_angle"]);
-        for (i, (sol, _)) in dives.iter().enumerate() {
-            let xn = Some(sol.x[sol.u.len()].clone());
-            examples.push(row![
-                i + 1,
-                offsets[i],
-                sol.trace.len(),
-                sol.cost,
-                entry(&xn)
-            ]);
-        }
+        let cases: Vec<(f64, f64)> = offsets.iter().map(|&o| (self.omega, o)).collect();
+        let (trackers, examples) = d.optimize_all(ctx, &cases)?;
         let x0 = d.takeoff(self.omega);
         let comps: Vec<GaussianReward> = offsets
             .iter()
@@ -441,33 +460,8 @@ impl Job for CoordinationParams {
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let d = &self.dive;
-        let pb = ctx.progress(self.omegas.len() as u64, "DDP dives");
-        let dives: Vec<Result<(DdpSolution, TrackingController), Error>> = ctx.stage("ddp", || {
-            self.omegas
-                .par_iter()
-                .map(|&w| {
-                    let r = d.dive(w, 0.0);
-                    pb.inc(1);
-                    r
-                })
-                .collect()
-        });
-        pb.finish_and_clear();
-        let dives: Vec<(DdpSolution, TrackingController)> =
-            dives.into_iter().collect::<Result<_, _>>()?;
-        let trackers: Vec<TrackingController> = dives.iter().map(|(_, t)| t.clone()).collect();
-        let mut examples =
-            Table::new(&["dive", "initial_omega", "iterations", "cost", "entry_angle"]);
-        for (i, (sol, _)) in dives.iter().enumerate() {
-            let xn = Some(sol.x[sol.u.len()].clone());
-            examples.push(row![
-                i + 1,
-                self.omegas[i],
-                sol.trace.len(),
-                sol.cost,
-                entry(&xn)
-            ]);
-        }
+        let cases: Vec<(f64, f64)> = self.omegas.iter().map(|&w| (w, 0.0)).collect();
+        let (trackers, examples) = d.optimize_all(ctx, &cases)?;
         let cost = d.cost(0.0);
         let ones = vec![1.0; trackers.len()];
         let rows: Vec<Result<Vec<(String, f64, f64)>, Error>> = ctx.stage("coordinate", || {
