@@ -128,13 +128,23 @@ fn experiments_dir(cli: &Option<PathBuf>) -> PathBuf {
     }
 }
 
+/// Experiment files in the order of `TARGETS.md`: NeuroAnimator, mass-spring synthesis, linear
+/// Bellman combination, then the rest; alphabetical within each.
 fn spec_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("reading experiments folder {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .collect();
-    files.sort();
+    let rank = |p: &PathBuf| {
+        let stem = p.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+        let group = ["na_", "ms_", "lbc_"]
+            .iter()
+            .position(|g| stem.starts_with(g))
+            .unwrap_or(3);
+        (group, stem.to_string())
+    };
+    files.sort_by_key(rank);
     Ok(files)
 }
 
