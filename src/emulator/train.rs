@@ -369,6 +369,46 @@ where
     }
 }
 
+/// What an early-stopped full-batch run leaves: the stopper (best weights), the trace, a
+/// line-search failure if any, whether held-out error stopped it, and argmin's reason.
+type EarlyStopOutcome = (
+    EarlyStopper,
+    Vec<TracePoint>,
+    Option<String>,
+    bool,
+    Option<TerminationReason>,
+);
+
+/// Runs `solver` from `w0` for at most `max_iters` iterations inside [`EarlyStopping`].
+fn run_early_stopping<'p, S>(
+    problem: TrainingProblem<'p>,
+    solver: S,
+    held_out: &Dataset,
+    shape: (usize, usize, usize),
+    stopper: EarlyStopper,
+    w0: Array1<f64>,
+    max_iters: u64,
+) -> Result<EarlyStopOutcome, argmin::core::Error>
+where
+    S: Solver<TrainingProblem<'p>, WState>,
+{
+    let wrapped = EarlyStopping {
+        inner: solver,
+        held_out,
+        shape,
+        stopper,
+        trace: Vec::new(),
+        stopped: false,
+        failed: None,
+    };
+    let res = Executor::new(problem, wrapped)
+        .configure(|s| s.param(w0).max_iters(max_iters))
+        .run()?;
+    let reason = res.state.get_termination_reason().cloned();
+    let s = res.solver;
+    Ok((s.stopper, s.trace, s.failed, s.stopped, reason))
+}
+
 /// Trains `mlp` on `train` with conjugate gradient or L-BFGS over all examples at once
 /// (§3.5, small nets), stopping early on `held_out`. Leaves `mlp` at the best held-out weights.
 pub fn train_full_batch(
@@ -389,22 +429,16 @@ pub fn train_full_batch(
                 NonlinearConjugateGradient::new(MoreThuenteLineSearch::new(), PolakRibiere::new())
                     .restart_iters(restart_iters)
                     .restart_orthogonality(0.1);
-            let wrapped = EarlyStopping {
-                inner: solver,
+            run_early_stopping(
+                problem,
+                solver,
                 held_out,
                 shape,
                 stopper,
-                trace: Vec::new(),
-                stopped: false,
-                failed: None,
-            };
-            let res = Executor::new(problem, wrapped)
-                .configure(|s| s.param(w0).max_iters(config.max_iters))
-                .run()
-                .map_err(opt)?;
-            let reason = res.state.get_termination_reason().cloned();
-            let s = res.solver;
-            (s.stopper, s.trace, s.failed, s.stopped, reason)
+                w0,
+                config.max_iters,
+            )
+            .map_err(opt)?
         }
         FullBatchMethod::Lbfgs { memory } => {
             let solver = LBFGS::new(MoreThuenteLineSearch::new(), memory.max(1))
@@ -412,22 +446,16 @@ pub fn train_full_batch(
                 .map_err(opt)?
                 .with_tolerance_cost(0.0)
                 .map_err(opt)?;
-            let wrapped = EarlyStopping {
-                inner: solver,
+            run_early_stopping(
+                problem,
+                solver,
                 held_out,
                 shape,
                 stopper,
-                trace: Vec::new(),
-                stopped: false,
-                failed: None,
-            };
-            let res = Executor::new(problem, wrapped)
-                .configure(|s| s.param(w0).max_iters(config.max_iters))
-                .run()
-                .map_err(opt)?;
-            let reason = res.state.get_termination_reason().cloned();
-            let s = res.solver;
-            (s.stopper, s.trace, s.failed, s.stopped, reason)
+                w0,
+                config.max_iters,
+            )
+            .map_err(opt)?
         }
     };
     let stop = if let Some(e) = failed {
