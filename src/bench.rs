@@ -182,6 +182,15 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             sim_steps(&mut l, &l0, &[4000.0, 10.0, -20.0, 5.0], 0.01, steps)
         }),
     );
+    let dolphin = crate::physics::dolphin::Dolphin::default();
+    let d0 = dolphin.rest_state();
+    let mut d = Simulator::new(dolphin, IntegratorKind::SemiImplicitEuler);
+    push(
+        "sim.dolphin.steps_per_s",
+        throughput(min_seconds, steps as u64, || {
+            sim_steps(&mut d, &d0, &[0.5, -0.3, 0.2, 0.8, -0.6, 0.1], 0.002, steps)
+        }),
+    );
     for (model, hidden, examples) in [
         (NetModel::PendulumPassive, 20, 2400),
         (NetModel::PendulumActive, 20, 3000),
