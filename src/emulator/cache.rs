@@ -64,6 +64,115 @@ struct Stored {
     trace: Vec<(usize, u64, u64)>,
 }
 
+/// One trained network with its normalization and training record, as a cache file holds it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetRecord {
+    /// The network.
+    pub mlp: Mlp,
+    /// Input normalization.
+    pub input_norm: Normalizer,
+    /// Output normalization.
+    pub output_norm: Normalizer,
+    /// Super timestep Δt (s).
+    pub dt: f64,
+    /// Training MSE per output at the kept weights.
+    pub train_error: f64,
+    /// Held-out MSE per output at the kept weights.
+    pub heldout_error: f64,
+    /// Wall time of sampling and training when it was built (s).
+    pub train_s: f64,
+    /// Why training stopped.
+    pub stop: String,
+    /// Training trace.
+    pub trace: Vec<TracePoint>,
+}
+
+/// Reads the record at `path` if it exists, was stored under `key` and has `shape`
+/// (inputs, hidden, outputs); `None` otherwise (a stale or foreign file is a cache miss).
+pub fn read_record(path: &Path, key: &str, shape: [usize; 3]) -> Option<NetRecord> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let s: Stored = serde_json::from_str(&text).ok()?;
+    let [n_in, hidden, n_out] = shape;
+    if s.key != key
+        || s.shape != shape
+        || s.weights.len() != Mlp::weight_count(n_in, hidden, n_out)
+        || s.input_mean.len() != n_in
+        || s.input_std.len() != n_in
+        || s.output_mean.len() != n_out
+        || s.output_std.len() != n_out
+    {
+        return None;
+    }
+    Some(NetRecord {
+        mlp: Mlp::from_weights(n_in, hidden, n_out, floats(&s.weights)),
+        input_norm: Normalizer {
+            mean: floats(&s.input_mean),
+            std: floats(&s.input_std),
+        },
+        output_norm: Normalizer {
+            mean: floats(&s.output_mean),
+            std: floats(&s.output_std),
+        },
+        dt: f64::from_bits(s.dt),
+        train_error: f64::from_bits(s.train_error),
+        heldout_error: f64::from_bits(s.heldout_error),
+        train_s: s.train_s,
+        stop: s.stop,
+        trace: s
+            .trace
+            .iter()
+            .map(|&(iteration, a, b)| TracePoint {
+                iteration,
+                train_error: f64::from_bits(a),
+                held_out_error: f64::from_bits(b),
+            })
+            .collect(),
+    })
+}
+
+/// Writes `rec` under `key` to `path` atomically (temporary file, then rename), creating the
+/// folder.
+pub fn write_record(path: &Path, key: &str, rec: &NetRecord) -> Result<(), BuildError> {
+    let mlp = &rec.mlp;
+    let stored = Stored {
+        key: key.to_string(),
+        shape: [mlp.n_in(), mlp.n_hidden(), mlp.n_out()],
+        dt: rec.dt.to_bits(),
+        weights: bits(mlp.weights()),
+        input_mean: bits(&rec.input_norm.mean),
+        input_std: bits(&rec.input_norm.std),
+        output_mean: bits(&rec.output_norm.mean),
+        output_std: bits(&rec.output_norm.std),
+        train_error: rec.train_error.to_bits(),
+        heldout_error: rec.heldout_error.to_bits(),
+        train_s: rec.train_s,
+        stop: rec.stop.clone(),
+        trace: rec
+            .trace
+            .iter()
+            .map(|p| {
+                (
+                    p.iteration,
+                    p.train_error.to_bits(),
+                    p.held_out_error.to_bits(),
+                )
+            })
+            .collect(),
+    };
+    let fail = |message: String| BuildError::Cache {
+        path: path.display().to_string(),
+        message,
+    };
+    let text = serde_json::to_string(&stored).map_err(|e| fail(e.to_string()))?;
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| fail(e.to_string()))?;
+    }
+    let tmp = path.with_extension(format!("json.tmp{}", std::process::id()));
+    std::fs::write(&tmp, text).map_err(|e| fail(e.to_string()))?;
+    std::fs::rename(&tmp, path).map_err(|e| fail(e.to_string()))?;
+    Ok(())
+}
+
 /// A folder of trained emulators.
 #[derive(Debug, Clone)]
 pub struct EmulatorCache {
@@ -107,47 +216,24 @@ impl EmulatorCache {
 
     /// The cached emulator of `spec`, if a file with the same key exists and reads back.
     pub fn load(&self, spec: &BuildSpec) -> Option<Trained> {
-        let text = std::fs::read_to_string(self.path(spec)).ok()?;
-        let s: Stored = serde_json::from_str(&text).ok()?;
-        if s.key != Self::key(spec).to_string() {
-            return None;
-        }
         let model = spec.net.model;
         let (n, m) = (model.state_dim(), model.control_dim());
-        if s.shape != [n + m, spec.net.hidden, n]
-            || s.weights.len() != Mlp::weight_count(n + m, spec.net.hidden, n)
-        {
-            return None;
-        }
+        let rec = read_record(
+            &self.path(spec),
+            &Self::key(spec).to_string(),
+            [n + m, spec.net.hidden, n],
+        )?;
         let mut t = Transforms::unfitted(&model.transform_config(), n, m).ok()?;
-        t.input_norm = Normalizer {
-            mean: floats(&s.input_mean),
-            std: floats(&s.input_std),
-        };
-        t.output_norm = Normalizer {
-            mean: floats(&s.output_mean),
-            std: floats(&s.output_std),
-        };
-        if t.input_norm.len() != n + m || t.output_norm.len() != n {
-            return None;
-        }
-        let mlp = Mlp::from_weights(n + m, spec.net.hidden, n, floats(&s.weights));
-        let emulator = Emulator::new(t, mlp, f64::from_bits(s.dt)).ok()?;
+        t.input_norm = rec.input_norm;
+        t.output_norm = rec.output_norm;
+        let emulator = Emulator::new(t, rec.mlp, rec.dt).ok()?;
         Some(Trained {
             emulator,
-            trace: s
-                .trace
-                .iter()
-                .map(|&(iteration, a, b)| TracePoint {
-                    iteration,
-                    train_error: f64::from_bits(a),
-                    held_out_error: f64::from_bits(b),
-                })
-                .collect(),
-            train_error: f64::from_bits(s.train_error),
-            heldout_error: f64::from_bits(s.heldout_error),
-            train_s: s.train_s,
-            stop: s.stop,
+            trace: rec.trace,
+            train_error: rec.train_error,
+            heldout_error: rec.heldout_error,
+            train_s: rec.train_s,
+            stop: rec.stop,
             from_cache: true,
         })
     }
@@ -156,42 +242,22 @@ impl EmulatorCache {
     pub fn store(&self, spec: &BuildSpec, trained: &Trained) -> Result<PathBuf, BuildError> {
         let e = &trained.emulator;
         let t = e.transforms();
-        let mlp = e.mlp();
-        let stored = Stored {
-            key: Self::key(spec).to_string(),
-            shape: [mlp.n_in(), mlp.n_hidden(), mlp.n_out()],
-            dt: e.dt().to_bits(),
-            weights: bits(mlp.weights()),
-            input_mean: bits(&t.input_norm.mean),
-            input_std: bits(&t.input_norm.std),
-            output_mean: bits(&t.output_norm.mean),
-            output_std: bits(&t.output_norm.std),
-            train_error: trained.train_error.to_bits(),
-            heldout_error: trained.heldout_error.to_bits(),
-            train_s: trained.train_s,
-            stop: trained.stop.clone(),
-            trace: trained
-                .trace
-                .iter()
-                .map(|p| {
-                    (
-                        p.iteration,
-                        p.train_error.to_bits(),
-                        p.held_out_error.to_bits(),
-                    )
-                })
-                .collect(),
-        };
         let path = self.path(spec);
-        let fail = |message: String| BuildError::Cache {
-            path: path.display().to_string(),
-            message,
-        };
-        let text = serde_json::to_string(&stored).map_err(|e| fail(e.to_string()))?;
-        std::fs::create_dir_all(&self.dir).map_err(|e| fail(e.to_string()))?;
-        let tmp = path.with_extension(format!("json.tmp{}", std::process::id()));
-        std::fs::write(&tmp, text).map_err(|e| fail(e.to_string()))?;
-        std::fs::rename(&tmp, &path).map_err(|e| fail(e.to_string()))?;
+        write_record(
+            &path,
+            &Self::key(spec).to_string(),
+            &NetRecord {
+                mlp: e.mlp().clone(),
+                input_norm: t.input_norm.clone(),
+                output_norm: t.output_norm.clone(),
+                dt: e.dt(),
+                train_error: trained.train_error,
+                heldout_error: trained.heldout_error,
+                train_s: trained.train_s,
+                stop: trained.stop.clone(),
+                trace: trained.trace.clone(),
+            },
+        )?;
         Ok(path)
     }
 

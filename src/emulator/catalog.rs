@@ -28,8 +28,8 @@
 use super::dataset::{sample_transitions, ControlLimits, ControlProcess, SamplingConfig};
 use super::mlp::{Mlp, WeightInit};
 use super::train::{
-    mse, train_full_batch, train_momentum, FullBatchConfig, FullBatchMethod, MomentumConfig,
-    StopReason, TracePoint,
+    mse, train_full_batch, train_momentum, Dataset, FullBatchConfig, FullBatchMethod,
+    MomentumConfig, StopReason, TracePoint, TrainReport,
 };
 use super::transform::{PlanarFrame, SpatialFrame};
 use super::{Emulator, EmulatorError, TransformConfig, Transforms};
@@ -371,6 +371,60 @@ pub enum BuildError {
     },
 }
 
+/// Trains `mlp` on `train` with early stopping on `held` by `method` (§3.5): full-batch CG or
+/// L-BFGS, or momentum mini-batches shuffled from `seed`. The net is left at its best
+/// held-out weights.
+pub fn train_mlp(
+    mlp: &mut Mlp,
+    train: &Dataset,
+    held: &Dataset,
+    method: TrainMethod,
+    s: &TrainSettings,
+    seed: u64,
+) -> Result<TrainReport, EmulatorError> {
+    match method {
+        TrainMethod::Cg | TrainMethod::Lbfgs => train_full_batch(
+            mlp,
+            train,
+            held,
+            &FullBatchConfig {
+                method: if method == TrainMethod::Cg {
+                    FullBatchMethod::ConjugateGradient { restart_iters: 50 }
+                } else {
+                    FullBatchMethod::Lbfgs { memory: 20 }
+                },
+                max_iters: s.cg_max_iters,
+                patience: s.patience,
+                min_improvement: s.min_improvement,
+            },
+        ),
+        TrainMethod::Momentum => train_momentum(
+            mlp,
+            train,
+            held,
+            &MomentumConfig {
+                learning_rate: s.learning_rate,
+                momentum: s.momentum,
+                batch_size: s.batch_size,
+                max_epochs: s.max_epochs,
+                patience: s.patience,
+                min_improvement: s.min_improvement,
+                seed,
+            },
+        ),
+    }
+}
+
+/// The name of a stop reason in tables and cache files.
+pub fn stop_name(stop: &StopReason) -> String {
+    match stop {
+        StopReason::NoImprovement => "no_improvement".to_string(),
+        StopReason::MaxIterations => "max_iterations".to_string(),
+        StopReason::Converged => "converged".to_string(),
+        StopReason::OptimizerFailed(e) => format!("optimizer_failed: {e}"),
+    }
+}
+
 /// Samples training and held-out data, fits the transforms and trains the network of `spec`.
 /// Deterministic for a given spec (the wall time aside).
 pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
@@ -401,46 +455,17 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
     );
     let (n, m) = (model.state_dim(), model.control_dim());
     let mut mlp = Mlp::new(n + m, spec.net.hidden, n, WeightInit::FanIn, &mut stream(3));
-    let s = &spec.settings;
-    let report = match spec.net.method {
-        TrainMethod::Cg | TrainMethod::Lbfgs => train_full_batch(
-            &mut mlp,
-            &train_ds,
-            &held_ds,
-            &FullBatchConfig {
-                method: if spec.net.method == TrainMethod::Cg {
-                    FullBatchMethod::ConjugateGradient { restart_iters: 50 }
-                } else {
-                    FullBatchMethod::Lbfgs { memory: 20 }
-                },
-                max_iters: s.cg_max_iters,
-                patience: s.patience,
-                min_improvement: s.min_improvement,
-            },
-        )?,
-        TrainMethod::Momentum => train_momentum(
-            &mut mlp,
-            &train_ds,
-            &held_ds,
-            &MomentumConfig {
-                learning_rate: s.learning_rate,
-                momentum: s.momentum,
-                batch_size: s.batch_size,
-                max_epochs: s.max_epochs,
-                patience: s.patience,
-                min_improvement: s.min_improvement,
-                seed: crate::experiment::mix_seed(spec.seed, 4),
-            },
-        )?,
-    };
+    let report = train_mlp(
+        &mut mlp,
+        &train_ds,
+        &held_ds,
+        spec.net.method,
+        &spec.settings,
+        crate::experiment::mix_seed(spec.seed, 4),
+    )?;
     let train_error = mse(&mlp, &train_ds);
     let heldout_error = mse(&mlp, &held_ds);
-    let stop = match &report.stop {
-        StopReason::NoImprovement => "no_improvement".to_string(),
-        StopReason::MaxIterations => "max_iterations".to_string(),
-        StopReason::Converged => "converged".to_string(),
-        StopReason::OptimizerFailed(e) => format!("optimizer_failed: {e}"),
-    };
+    let stop = stop_name(&report.stop);
     let emulator = Emulator::new(transforms, mlp, spec.super_dt())?;
     Ok(Trained {
         emulator,

@@ -84,6 +84,26 @@ pub enum ControlProcess {
         /// Longest knot spacing (s).
         hold_max: f64,
     },
+    /// Coordinated actions that travel along a chain of actuators (a swimming wave, §3.4's
+    /// "coordinated muscle actions that produce locomotion"): per episode a frequency f, a
+    /// phase lag φ per channel (either direction), an amplitude a (a fraction of each
+    /// channel's half-range) and a phase ψ are drawn; at knots held for U[`hold_min`,
+    /// `hold_max`] seconds channel c takes centre_c + half_c (a sin(2π f t − c φ + ψ) + ε),
+    /// ε ~ U[−`noise`, `noise`], clamped to the limits, and holds it until the next knot.
+    TravellingWave {
+        /// Shortest hold (s).
+        hold_min: f64,
+        /// Longest hold (s).
+        hold_max: f64,
+        /// Lowest wave frequency (Hz).
+        freq_min: f64,
+        /// Highest wave frequency (Hz).
+        freq_max: f64,
+        /// Largest phase lag between neighbouring channels (rad).
+        lag_max: f64,
+        /// Knot noise, as a fraction of the half-range.
+        noise: f64,
+    },
 }
 
 /// One realisation of a [`ControlProcess`] over `[0, duration]`.
@@ -106,17 +126,58 @@ impl ControlSignal {
         rng: &mut ChaCha8Rng,
     ) -> Self {
         let (smooth, lo, hi) = match process {
-            ControlProcess::PiecewiseConstant { hold_min, hold_max } => (false, hold_min, hold_max),
+            ControlProcess::PiecewiseConstant { hold_min, hold_max }
+            | ControlProcess::TravellingWave {
+                hold_min, hold_max, ..
+            } => (false, hold_min, hold_max),
             ControlProcess::Smooth { hold_min, hold_max } => (true, hold_min, hold_max),
         };
         let channels = limits.len();
+        // (frequency, lag, amplitude, phase, noise) of a travelling wave.
+        let wave = match process {
+            ControlProcess::TravellingWave {
+                freq_min,
+                freq_max,
+                lag_max,
+                noise,
+                ..
+            } => Some((
+                if freq_max > freq_min {
+                    rng.random_range(freq_min..freq_max)
+                } else {
+                    freq_min
+                },
+                if lag_max > 0.0 {
+                    rng.random_range(-lag_max..lag_max)
+                } else {
+                    0.0
+                },
+                rng.random_range(0.2..1.0),
+                rng.random_range(0.0..std::f64::consts::TAU),
+                noise,
+            )),
+            _ => None,
+        };
         let mut times = vec![];
         let mut values = vec![];
         let mut t = 0.0;
         loop {
             times.push(t);
             for c in 0..channels {
-                values.push(rng.random_range(limits.low[c]..=limits.high[c]));
+                let (low, high) = (limits.low[c], limits.high[c]);
+                values.push(match wave {
+                    None => rng.random_range(low..=high),
+                    Some((f, lag, amp, psi, noise)) => {
+                        let (mid, half) = (0.5 * (low + high), 0.5 * (high - low));
+                        let arg = std::f64::consts::TAU * f * t - c as f64 * lag + psi;
+                        let eps = if noise > 0.0 {
+                            rng.random_range(-noise..noise)
+                        } else {
+                            0.0
+                        };
+                        (mid + half * (amp * arg.sin() + eps)).clamp(low, high)
+                    }
+                });
             }
             if t > duration {
                 break;

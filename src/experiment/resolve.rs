@@ -25,6 +25,14 @@ impl ParamError {
             message: message.to_string(),
         }
     }
+
+    /// The same error with its key under `prefix` (`training.patience` → `dolphin.training.patience`).
+    pub fn prefixed(self, prefix: &str) -> Self {
+        Self {
+            key: format!("{prefix}.{}", self.key),
+            message: self.message,
+        }
+    }
 }
 
 /// Fails with `message` at `key` unless `ok`.
