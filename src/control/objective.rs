@@ -16,7 +16,8 @@
 //! - [`FinalState`]: μ_s/2 Σ_k w_k (s_{M+1,k} − s_{d,k})², the final-state term with a weight
 //!   per state variable;
 //! - [`StateWindow`]: μ/2 Σ_{i ∈ window} Σ_k w_k (s_{i,k} − r_k)², a trajectory term over a
-//!   range of states (e.g. the descent velocity in the last seconds before touchdown).
+//!   range of states (e.g. the descent velocity in the last seconds before touchdown);
+//! - [`Progress`]: −μ d·(p̄_M − p̄_0), distance travelled along a direction (swimming forward).
 //!
 //! Layout: `states` holds the M + 1 states s_0 … s_M row after row (n each; s_0 is the given
 //! start state, the paper's s_1), `controls` the M per-step controls (m each).
@@ -193,6 +194,57 @@ impl Term for StateWindow {
     }
 }
 
+/// Progress along a direction (e.g. distance swum forward, to be maximized, so it enters the
+/// objective with a minus sign): −μ d · (p̄_M − p̄_0), where p̄ is the mean of the points whose
+/// x, y, z sit at state indices `points[j]`, `points[j] + 1`, `points[j] + 2`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Progress {
+    /// Weight μ (per metre).
+    pub mu: f64,
+    /// Direction d (the objective rewards motion along it; normally a unit vector).
+    pub direction: [f64; 3],
+    /// State index of the x coordinate of each point averaged.
+    pub points: Vec<usize>,
+}
+
+impl Progress {
+    fn along(&self, s: &[f64]) -> f64 {
+        let k = self.points.len().max(1) as f64;
+        self.points
+            .iter()
+            .map(|&i| (0..3).map(|a| self.direction[a] * s[i + a]).sum::<f64>())
+            .sum::<f64>()
+            / k
+    }
+}
+
+impl Term for Progress {
+    fn value(&self, states: &[f64], _controls: &[f64], n: usize, _m: usize) -> f64 {
+        let last = &states[states.len() - n..];
+        -self.mu * (self.along(last) - self.along(&states[..n]))
+    }
+
+    fn gradient(
+        &self,
+        states: &[f64],
+        controls: &[f64],
+        n: usize,
+        m: usize,
+        s_bar: &mut [f64],
+        _u_bar: &mut [f64],
+    ) -> f64 {
+        let k0 = states.len() - n;
+        let c = self.mu / self.points.len().max(1) as f64;
+        for &i in &self.points {
+            for a in 0..3 {
+                s_bar[k0 + i + a] -= c * self.direction[a];
+                s_bar[i + a] += c * self.direction[a];
+            }
+        }
+        self.value(states, controls, n, m)
+    }
+}
+
 /// A sum of terms.
 #[derive(Debug, Default)]
 pub struct Objective {
@@ -290,6 +342,11 @@ mod tests {
             to: 99,
             reference: vec![0.0, 1.0, 0.0],
             weights: vec![0.5, 2.0, 1.0],
+        });
+        check_fd(&Progress {
+            mu: 2.5,
+            direction: [0.6, 0.0, -0.8],
+            points: vec![0],
         });
         let all = Objective::default()
             .with(ControlEffort::plain(0.1, 2))

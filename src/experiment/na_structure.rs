@@ -63,7 +63,11 @@ impl DolphinNets {
     /// Checks the settings; `key` prefixes the keys in messages.
     pub fn validate(&self, key: &str, scale: f64) -> Result<(), ParamError> {
         for (name, n) in [("global", &self.global), ("local", &self.local)] {
-            ensure(n.hidden >= 1, &format!("{key}.{name}.hidden"), "must be >= 1")?;
+            ensure(
+                n.hidden >= 1,
+                &format!("{key}.{name}.hidden"),
+                "must be >= 1",
+            )?;
             ensure(
                 (n.examples as f64 * scale).round() >= 10.0,
                 &format!("{key}.{name}.examples"),

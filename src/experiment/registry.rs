@@ -2,7 +2,8 @@
 
 use super::{
     lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, ms_lattices, ms_motion, na_control,
-    na_error, na_momentum, na_speedup, na_structure, physics_validation, Experiment,
+    na_error, na_momentum, na_regularization, na_speedup, na_structure, physics_validation,
+    Experiment,
 };
 
 static FAMILIES: &[&dyn Experiment] = &[
@@ -21,6 +22,7 @@ static FAMILIES: &[&dyn Experiment] = &[
     &ms_motion::MsLearning,
     &na_momentum::NaMomentum,
     &na_control::NaControl,
+    &na_regularization::NaRegularization,
 ];
 
 /// All families.
