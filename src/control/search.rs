@@ -49,10 +49,10 @@
 //! ([`climb_batch`]). Proposals evaluated in parallel are combined in a fixed order, so a
 //! result depends on the seed and the settings, never on the number of threads.
 
-mod adapters;
-mod annealing;
-mod hill_climb;
-mod simplex;
+pub mod adapters;
+pub mod annealing;
+pub mod hill_climb;
+pub mod simplex;
 
 pub use adapters::{
     bptt_search, trace_from_bptt, BpttProblem, ReplayProblem, ReplayRollout, StateMap,
