@@ -15,7 +15,7 @@
 //!
 //! The optimizers: [`anneal`] (simulated annealing with Gaussian proposals scaled to the box),
 //! [`nelder_mead`] (argmin's Nelder–Mead simplex, evaluated at the projection onto the box),
-//! [`hill_climb`] (parallel hill climbing: a batch of perturbations of the best point per
+//! [`hill_climb()`] (parallel hill climbing: a batch of perturbations of the best point per
 //! iteration, evaluated with rayon) and [`bptt_search`] (plain or momentum descent of
 //! [`super::bptt::learn_until`] under the same budget). The adapters [`BpttProblem`] (an
 //! emulator rollout, with its BPTT gradient) and [`ReplayProblem`] (the same knots replayed on
