@@ -28,7 +28,10 @@
 //!   LQR tracking with the quadratic value function of linear Bellman combination, eq. 12);
 //!   NeuroAnimator control learning: [`control::objective`] (composable objective terms with
 //!   gradients) and [`control::bptt`] (backpropagation through time through any differentiable
-//!   step, e.g. an emulator; plain and momentum descent on bounded piecewise-constant controls).
+//!   step, e.g. an emulator; plain and momentum descent on bounded piecewise-constant controls);
+//!   [`control::search`]: box-bounded searches sharing one trace and budget — simulated
+//!   annealing, Nelder–Mead, parallel hill climbing and BPTT — on emulator or simulator
+//!   rollouts of the same controller (§6 baselines).
 //! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
 //!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
@@ -51,6 +54,7 @@
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
 //! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
 //! | BPTT control learning, plain / momentum descent | [`control::bptt`], [`control::objective`] | NeuroAnimator §4, eq. 11–15 |
+//! | simulated annealing, Nelder–Mead, parallel hill climbing over a box | [`control::search`] | NeuroAnimator §6 baselines |
 //! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
 //! | z-weights, log-sum-exp | [`bellman::combine`] | LBC eq. 1, 11 |
 //! | grid DP (linear / ordinary backup) | [`bellman::grid_dp`] | LBC §5.2, Todorov 2009 |

@@ -28,7 +28,8 @@
 //! quadratic is stable for η < 2 and heavy-ball momentum for η < 2(1 + α). The momentum state
 //! carries the step actually taken (after projection).
 //!
-//! [`learn`] runs the loop and returns the trace (objective and gradient norm per iteration);
+//! [`learn`] runs the loop and returns the trace (objective, gradient norm and wall seconds per
+//! iteration; [`learn_until`] adds a stop rule, e.g. a [`super::search::Budget`]);
 //! [`replay`] drives a physical simulator with the learned controls to measure the gap between
 //! the emulated and the simulated final state. Nothing here writes files.
 //!
@@ -217,6 +218,15 @@ impl Bounds {
             (0.0, 1.0)
         }
     }
+    /// Control values from normalized values `v` of consecutive actuators (value i belongs to
+    /// actuator i mod m): u_i = c_j + h_j v_i with [`Bounds::affine`] of j.
+    pub fn denormalize(&self, v: &[f64], u: &mut [f64]) {
+        let m = self.low.len();
+        for (i, (u, v)) in u.iter_mut().zip(v).enumerate() {
+            let (c, h) = self.affine(i % m);
+            *u = c + h * v;
+        }
+    }
     /// Projects a normalized value of actuator j onto its box.
     pub fn project(&self, j: usize, v: f64) -> f64 {
         let (lo, hi) = (self.low[j], self.high[j]);
@@ -243,6 +253,8 @@ pub struct Bptt<'a, D: DifferentiableStep> {
     u_bar: Vec<f64>,
     sb: Vec<f64>,
     ub: Vec<f64>,
+    forward_passes: usize,
+    backward_passes: usize,
 }
 
 impl<'a, D: DifferentiableStep> Bptt<'a, D> {
@@ -298,7 +310,41 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
             u_bar: vec![0.0; big_m * m],
             sb: vec![0.0; n],
             ub: vec![0.0; m],
+            forward_passes: 0,
+            backward_passes: 0,
         })
+    }
+
+    /// The differentiable step it rolls out.
+    pub fn dynamics(&self) -> &'a D {
+        self.dynamics
+    }
+
+    /// The objective J.
+    pub fn objective(&self) -> &'a Objective {
+        self.objective
+    }
+
+    /// The actuator boxes.
+    pub fn bounds(&self) -> &Bounds {
+        &self.bounds
+    }
+
+    /// The start state s_0.
+    pub fn start_state(&self) -> &[f64] {
+        &self.x0
+    }
+
+    /// Forward rollouts run so far (each [`Bptt::rollout`], including those inside
+    /// [`Bptt::gradient`] and [`Bptt::curvature`]): the objective-evaluation count.
+    pub fn forward_passes(&self) -> usize {
+        self.forward_passes
+    }
+
+    /// Backward passes run so far (each [`Bptt::gradient`], including those inside
+    /// [`Bptt::curvature`]).
+    pub fn backward_passes(&self) -> usize {
+        self.backward_passes
     }
 
     /// Number of optimization variables (knot values).
@@ -313,11 +359,7 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
 
     /// Knot values in control units from normalized ones.
     pub fn to_controls(&self, v: &[f64], u: &mut [f64]) {
-        let m = self.knots.m;
-        for (i, (u, v)) in u.iter_mut().zip(v).enumerate() {
-            let (c, h) = self.bounds.affine(i % m);
-            *u = c + h * v;
-        }
+        self.bounds.denormalize(v, u);
     }
 
     /// Normalized knot values from knot values in control units (projected onto the box).
@@ -347,6 +389,7 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
         self.to_controls(v, &mut ku);
         self.knots.expand(&ku, &mut self.controls);
         self.knot_u = ku;
+        self.forward_passes += 1;
         self.states[..n].copy_from_slice(&self.x0);
         for i in 0..self.knots.steps {
             let (head, tail) = self.states.split_at_mut((i + 1) * n);
@@ -363,6 +406,7 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
     /// J and its gradient with respect to the normalized knots (written to `grad`).
     pub fn gradient(&mut self, v: &[f64], grad: &mut [f64]) -> f64 {
         self.rollout(v);
+        self.backward_passes += 1;
         let (n, m) = (self.dynamics.state_dim(), self.knots.m);
         let j = self.objective.gradient(
             &self.states,
@@ -509,6 +553,8 @@ impl Descent {
 }
 
 /// One traced iteration: J and |∇J| at the iterate v^l (iteration 0 = the initial knots).
+/// Iteration l has cost l + 1 gradient evaluations (one forward rollout and one backward pass
+/// each).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IterationTrace {
     /// Iteration l.
@@ -517,6 +563,9 @@ pub struct IterationTrace {
     pub objective: f64,
     /// |∇_v J(v^l)| (normalized knots).
     pub grad_norm: f64,
+    /// Wall-clock seconds from the start of [`learn`] to the end of this iteration's gradient
+    /// (timing only: not deterministic, never used by the loop unless a stop rule reads it).
+    pub seconds: f64,
 }
 
 /// What [`learn`] returns.
@@ -548,19 +597,37 @@ pub fn learn<D: DifferentiableStep>(
     scale: f64,
     iterations: usize,
 ) -> Learned {
+    learn_until(bptt, v0, descent, scale, iterations, &mut |_, _| false)
+}
+
+/// [`learn`] with a stop rule: each iteration's trace entry is passed, with the normalized
+/// knots v^l it was computed at, to `stop`, which ends the loop there by returning true (as
+/// reaching `iterations` or a non-finite J would). The updates are those of [`learn`], so a
+/// rule that never fires gives exactly its result.
+pub fn learn_until<D: DifferentiableStep>(
+    bptt: &mut Bptt<'_, D>,
+    v0: &[f64],
+    descent: Descent,
+    scale: f64,
+    iterations: usize,
+    stop: &mut dyn FnMut(&IterationTrace, &[f64]) -> bool,
+) -> Learned {
+    let start = std::time::Instant::now();
     let mut v = v0.to_vec();
     bptt.project(&mut v);
     let mut g = vec![0.0; v.len()];
     let mut state = DescentState::default();
-    let mut trace = Vec::with_capacity(iterations + 1);
+    let mut trace = Vec::with_capacity(iterations.min(4096) + 1);
     for l in 0..=iterations {
         let j = bptt.gradient(&v, &mut g);
-        trace.push(IterationTrace {
+        let entry = IterationTrace {
             iteration: l,
             objective: j,
             grad_norm: norm(&g),
-        });
-        if !j.is_finite() || l == iterations {
+            seconds: start.elapsed().as_secs_f64(),
+        };
+        trace.push(entry);
+        if stop(&entry, &v) || !j.is_finite() || l == iterations {
             break;
         }
         let (step, next) = descent.update(&g, scale, state);

@@ -26,7 +26,9 @@
 //!
 //! - [`objective`]: NeuroAnimator control-learning objectives (§4.2) as composable terms with
 //!   gradients; [`bptt`]: backpropagation through time through any differentiable step (an
-//!   emulator), plain and momentum descent on piecewise-constant controls (§4.3).
+//!   emulator), plain and momentum descent on piecewise-constant controls (§4.3);
+//!   [`search`]: box-bounded searches with one trace and budget — simulated annealing,
+//!   Nelder–Mead, parallel hill climbing and BPTT — on emulator or simulator rollouts (§6).
 //!
 //! Solvers return data; they never print or write files.
 
@@ -34,6 +36,7 @@ pub mod bptt;
 pub mod ddp;
 pub mod lqr;
 pub mod objective;
+pub mod search;
 
 use crate::physics::linearize::Linearize;
 use crate::physics::Ode;
@@ -74,6 +77,17 @@ pub enum ControlError {
     NonFinite {
         /// Step index whose result was not finite.
         step: usize,
+    },
+    /// A search budget sets no limit (iterations, evaluations or seconds).
+    #[error("the search budget sets no limit")]
+    UnboundedBudget,
+    /// A search setting is out of its range.
+    #[error("{what} out of range: {value}")]
+    InvalidSetting {
+        /// Which setting.
+        what: &'static str,
+        /// The value given.
+        value: f64,
     },
     /// The control Hessian Q_uu of the LQR recursion is not positive definite.
     #[error("Q_uu is not positive definite at step {step}")]

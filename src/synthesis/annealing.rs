@@ -40,30 +40,10 @@ pub struct AnnealConfig {
     pub period: f64,
 }
 
-/// A robust standard deviation of `v`: 1.4826 × the median absolute deviation (a few failed
-/// simulations scored [`super::BLOWUP_OBJECTIVE`] must not set the temperature scale); 1
-/// when that is zero.
-pub fn robust_scale(v: &[f64]) -> f64 {
-    let median = |mut x: Vec<f64>| -> f64 {
-        x.sort_by(f64::total_cmp);
-        let n = x.len();
-        if n == 0 {
-            0.0
-        } else if n % 2 == 1 {
-            x[n / 2]
-        } else {
-            0.5 * (x[n / 2 - 1] + x[n / 2])
-        }
-    };
-    let m = median(v.to_vec());
-    let mad = median(v.iter().map(|x| (x - m).abs()).collect());
-    let s = 1.4826 * mad;
-    if s.is_finite() && s > 0.0 {
-        s
-    } else {
-        1.0
-    }
-}
+/// A robust standard deviation of the initial objectives (1.4826 × the median absolute
+/// deviation, so a few failed simulations scored [`super::BLOWUP_OBJECTIVE`] do not set the
+/// temperature scale); shared with the box annealing of [`crate::control::search`].
+pub use crate::control::search::robust_scale;
 
 /// Runs simulated annealing maximizing `evaluate`; `progress(done)` is called every 100
 /// iterations.

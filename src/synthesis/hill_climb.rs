@@ -13,7 +13,7 @@
 //! ## Batching and determinism
 //!
 //! Evaluations (each a full simulation over T) run in parallel with rayon in batches of
-//! `batch` consecutive iterations. Iteration i draws everything it needs (the parent's rank
+//! `batch` consecutive iterations ([`climb_batch`], shared with the box searches). Iteration i draws everything it needs (the parent's rank
 //! in S, the perturbation kind and its values) from its own ChaCha8 stream: seed `seed`,
 //! stream 2⁴⁰ + i (the initial controller j uses stream j). All proposals of a batch pick
 //! their parents from S as it stood at the start of the batch; the proposals are evaluated
@@ -31,7 +31,7 @@
 
 use super::controller::Controller;
 use super::perturb::{perturb, random_controller};
-use rand::{Rng, SeedableRng};
+use crate::control::search::climb_batch;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
@@ -75,19 +75,10 @@ pub struct SearchResult {
     pub set: Vec<(Controller, f64)>,
 }
 
-/// The random stream of initial controller `j` (also used by simulated annealing).
-pub fn init_rng(seed: u64, j: usize) -> ChaCha8Rng {
-    let mut r = ChaCha8Rng::seed_from_u64(seed);
-    r.set_stream(j as u64);
-    r
-}
-
-/// The random stream of iteration `i` ≥ 1.
-pub fn iteration_rng(seed: u64, i: usize) -> ChaCha8Rng {
-    let mut r = ChaCha8Rng::seed_from_u64(seed);
-    r.set_stream((1u64 << 40) + i as u64);
-    r
-}
+/// The random streams of initial controller `j` (also used by simulated annealing) and of
+/// iteration `i` ≥ 1, and the ranked insertion: shared with the box searches of
+/// [`crate::control::search`].
+pub use crate::control::search::{init_rng, insert_by_rank, iteration_rng};
 
 /// `n` random controllers from streams 0..n, evaluated in parallel; returned in order.
 pub fn initial_set<F>(
@@ -108,14 +99,6 @@ where
             (c, v)
         })
         .collect()
-}
-
-/// Inserts `(c, v)` into the ranked set `set` (best first) after any equal objective, then
-/// deletes the lowest-ranked controller.
-pub fn insert_by_rank(set: &mut Vec<(Controller, f64)>, c: Controller, v: f64) {
-    let pos = set.partition_point(|(_, w)| *w >= v);
-    set.insert(pos, (c, v));
-    set.pop();
 }
 
 /// Runs parallel hill climbing maximizing `evaluate`; `progress(done)` is called after each
@@ -148,25 +131,20 @@ where
     let mut i0 = 1;
     while i0 <= cfg.iterations {
         let i1 = (i0 + batch).min(cfg.iterations + 1);
-        let snapshot = &set;
-        let proposals: Vec<(Controller, f64)> = (i0..i1)
-            .into_par_iter()
-            .map(|i| {
-                let mut rng = iteration_rng(seed, i);
-                let parent = rng.random_range(0..snapshot.len());
-                let (c, _) = perturb(&mut rng, &snapshot[parent].0);
-                let v = evaluate(&c);
-                (c, v)
-            })
-            .collect();
-        for (k, (c, v)) in proposals.into_iter().enumerate() {
+        let scores = climb_batch(
+            &mut set,
+            evaluate,
+            &|rng: &mut ChaCha8Rng, c: &Controller| perturb(rng, c).0,
+            seed,
+            i0..i1,
+        );
+        for (k, v) in scores.into_iter().enumerate() {
             best = best.max(v);
             trace.push(Evaluation {
                 iteration: i0 + k,
                 objective: v,
                 best,
             });
-            insert_by_rank(&mut set, c, v);
         }
         progress(i1 - 1);
         i0 = i1;
