@@ -47,9 +47,12 @@ const GOAL_ALPHA: f64 = 0.35;
 
 /// Most frames drawn per emulator super-step.
 pub const FRAMES_PER_STEP: usize = 10;
-/// Shortest delay between frames (s); GIF viewers slow shorter delays down.
-pub const MIN_FRAME_DELAY: f64 = 0.02;
-/// How long the last frame is held before the animation loops (s).
+/// Most frames in one animation (before the held last frame): bounds the GIF's size (each
+/// frame is quantised and compressed on its own, some 10-20 kB) and the time to write it.
+pub const MAX_FRAMES: usize = 200;
+/// Shortest delay between frames (s): at most 25 frames per second.
+pub const MIN_FRAME_DELAY: f64 = 0.04;
+/// How long the last frame is held before the animation loops (s), in at most 10 frames.
 const HOLD: f64 = 0.5;
 
 /// The truck model has axles but no body: the body reaches this far beyond each axle (m).
@@ -168,14 +171,17 @@ fn chart<'a, DB: DrawingBackend>(
         .y_labels(8)
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 15))
-        .light_line_style(RGBColor(240, 240, 240))
-        .bold_line_style(RGBColor(220, 220, 220))
+        .light_line_style(TRANSPARENT)
+        .bold_line_style(RGBColor(225, 225, 225))
         .draw()
         .map_err(es)?;
     Ok(c)
 }
 
-fn legend<'a, DB: DrawingBackend + 'a>(c: &mut Chart<'a, DB>, at: SeriesLabelPosition) -> Result<(), String> {
+fn legend<'a, DB: DrawingBackend + 'a>(
+    c: &mut Chart<'a, DB>,
+    at: SeriesLabelPosition,
+) -> Result<(), String> {
     c.configure_series_labels()
         .background_style(WHITE.mix(0.85))
         .border_style(RGBColor(180, 180, 180))
@@ -653,9 +659,9 @@ impl Scene {
     /// GIF size in pixels.
     pub fn size(&self) -> (u32, u32) {
         match self {
-            Self::Pendulum(_) => (560, 500),
-            Self::Truck(_) => (640, 500),
-            Self::Lander(_) => (880, 520),
+            Self::Pendulum(_) => (480, 440),
+            Self::Truck(_) => (560, 440),
+            Self::Lander(_) => (760, 440),
         }
     }
 
@@ -706,10 +712,11 @@ impl Scene {
                     .map(|s| (s[0], s[2]))
                     .chain(once((goal[0], l.ground_height - 1.0)));
                 let top = states().map(|s| (s[0], s[1]));
-                vec![
-                    Axes::fit(side, reach, half, "x (m)", "z (m)"),
-                    Axes::fit(top, reach, half, "x (m)", "y (m)"),
-                ]
+                let mut side = Axes::fit(side, reach, half, "x (m)", "z (m)");
+                // Spare room goes above, not under the ground.
+                let lift = (l.ground_height - 1.0 - reach - side.y.0).max(0.0);
+                side.y = (side.y.0 + lift, side.y.1 + lift);
+                vec![side, Axes::fit(top, reach, half, "x (m)", "y (m)")]
             }
         }
     }
@@ -731,12 +738,25 @@ impl Scene {
     }
 }
 
-/// Frames per super-step of `step` seconds and the frame delay in centiseconds: as many
-/// frames as fit (at most [`FRAMES_PER_STEP`], at least [`MIN_FRAME_DELAY`] apart).
-pub fn frame_timing(step: f64) -> (usize, u32) {
-    let per = ((step / MIN_FRAME_DELAY + 1e-9).floor() as usize).clamp(1, FRAMES_PER_STEP);
-    let cs = ((100.0 * step / per as f64).round() as u32).max((100.0 * MIN_FRAME_DELAY) as u32);
-    (per, cs)
+/// Frames per super-step of `step` seconds over `steps` super-steps, and the frame delay in
+/// centiseconds: as many frames as fit (at most [`FRAMES_PER_STEP`] per step and
+/// [`MAX_FRAMES`] in all, at least [`MIN_FRAME_DELAY`] apart), preferring a count whose delay
+/// is a whole number of centiseconds (GIF's unit) so that the motion plays in real time.
+pub fn frame_timing(step: f64, steps: usize) -> (usize, u32) {
+    let cs = 100.0 * step;
+    let most = ((step / MIN_FRAME_DELAY + 1e-9).floor() as usize)
+        .min(FRAMES_PER_STEP)
+        .min(MAX_FRAMES / steps.max(1))
+        .max(1);
+    let per = (1..=most)
+        .rev()
+        .find(|&p| {
+            let d = cs / p as f64;
+            (d - d.round()).abs() < 1e-6
+        })
+        .unwrap_or(most);
+    let delay = ((cs / per as f64).round() as u32).max((100.0 * MIN_FRAME_DELAY) as u32);
+    (per, delay)
 }
 
 /// `states` (one per super-step) resampled at `per` frames per step.
@@ -768,14 +788,15 @@ pub fn write_animation(
     })?;
     ensure_fonts();
     let gif = dir.join(format!("{stem}.gif"));
-    let (per, cs) = frame_timing(step);
+    let steps = tracks.iter().map(|t| t.states.len()).max().unwrap_or(1);
+    let (per, cs) = frame_timing(step, steps.saturating_sub(1));
     let speed = step / per as f64 / (cs as f64 / 100.0);
     let played: Vec<Vec<Vec<f64>>> = tracks
         .iter()
         .map(|t| resample(scene, &t.states, per))
         .collect();
     let len = played.iter().map(Vec::len).max().unwrap_or(0).max(1);
-    let hold = (HOLD * 100.0 / cs as f64).ceil() as usize;
+    let hold = ((HOLD * 100.0 / cs as f64).ceil() as usize).min(10);
     let size = scene.size();
     let tmp = temp_path(&gif);
     let e = |m: String| perr(&gif, m);
@@ -936,10 +957,18 @@ mod tests {
 
     #[test]
     fn timing_and_resampling() {
-        // Truck and lander super-steps (0.5 s): 10 frames 5 cs apart; pendulum (0.1 s): 5 at 2 cs.
-        assert_eq!(frame_timing(0.5), (10, 5));
-        assert_eq!(frame_timing(0.1), (5, 2));
-        assert_eq!(frame_timing(0.01), (1, 2));
+        // Few steps: truck and lander super-steps (0.5 s): 10 frames 5 cs apart; pendulum
+        // (0.1 s): 2 frames 5 cs apart; shorter steps play slowed down.
+        assert_eq!(frame_timing(0.5, 10), (10, 5));
+        assert_eq!(frame_timing(0.1, 10), (2, 5));
+        assert_eq!(frame_timing(0.01, 10), (1, 4));
+        // 40 steps: at most MAX_FRAMES = 200 frames.
+        assert_eq!(frame_timing(0.5, 40), (5, 10));
+        assert_eq!(frame_timing(0.1, 40), (2, 5));
+        // 0.3 s: 7 frames would not be whole centiseconds, 6 are.
+        assert_eq!(frame_timing(0.3, 1), (6, 5));
+        // 0.35 s over 25 steps: at most 8 frames a step; 7 make whole centiseconds.
+        assert_eq!(frame_timing(0.35, 25), (7, 5));
         let scene = Scene::for_model(NetModel::Truck);
         let r = resample(&scene, &[vec![0.0], vec![1.0], vec![3.0]], 4);
         assert_eq!(r.len(), 9);
@@ -985,8 +1014,8 @@ mod tests {
         )
         .unwrap();
         assert_eq!(p, dir.path().join("anim.gif"));
-        // 5 frames per 0.1 s step + the final state + 0.5 s held at 2 cs a frame.
-        assert_eq!(frames, 5 + 1 + 25);
+        // 2 frames per 0.1 s step + the final state, held for 0.5 s (10 frames of 5 cs).
+        assert_eq!(frames, 2 + 1 + 10);
         let bytes = std::fs::read(&p).unwrap();
         assert_eq!(&bytes[..6], b"GIF89a");
         let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
