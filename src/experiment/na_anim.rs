@@ -771,13 +771,16 @@ pub fn resample(scene: &Scene, states: &[Vec<f64>], per: usize) -> Vec<Vec<f64>>
 
 /// Writes `<dir>/<stem>.gif` atomically: `tracks` (one state per super-step of `step`
 /// seconds, starting at t = 0) played together over `goal`, resampled by [`resample`] with
-/// [`frame_timing`], the last frame held briefly. Each frame is captioned with `title`, the
-/// time and the playback speed. Returns the path and the number of frames.
+/// [`frame_timing`], the last frame held briefly. Each frame is headed by `title`, the time and
+/// the playback speed, with `caption` (e.g. which colour is which source) below. Returns the
+/// path and the number of frames.
+#[allow(clippy::too_many_arguments)]
 pub fn write_animation(
     dir: &Path,
     stem: &str,
     scene: &Scene,
     title: &str,
+    caption: &str,
     step: f64,
     goal: &[f64],
     tracks: &[Track],
@@ -817,8 +820,14 @@ pub fn write_animation(
             let t = k as f64 * step / per as f64;
             head.draw(&Text::new(
                 format!("{title}   t = {t:.2} s{note}"),
-                (10, 12),
+                (10, 4),
                 ("sans-serif", 16).into_font().color(&BLACK),
+            ))
+            .map_err(|x| e(x.to_string()))?;
+            head.draw(&Text::new(
+                caption,
+                (10, 23),
+                ("sans-serif", 13).into_font().color(&RGBColor(60, 60, 60)),
             ))
             .map_err(|x| e(x.to_string()))?;
             let bodies: Vec<Body> = tracks
@@ -1008,6 +1017,7 @@ mod tests {
             "anim",
             &scene,
             "pendulum",
+            "test",
             0.1,
             &[0.6, 0.0, 0.0, 0.0, 0.0, 0.0],
             &tr,

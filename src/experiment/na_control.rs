@@ -377,12 +377,12 @@ fn animations(fig: &super::plot::FigureSink, tables: &Tables) -> Result<Vec<Path
                     .collect(),
             })
             .collect();
-            let title = format!("{name}: learned controls, emulator (purple) and simulator (grey)");
             write_animation(
                 &fig.dir,
                 &format!("{}_{name}", fig.id),
                 &Scene::for_model(model),
-                &title,
+                name,
+                "learned controls: emulator (purple), simulator replay (grey), goal (green)",
                 step,
                 &goal,
                 &tracks,
