@@ -228,4 +228,21 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     let f = rows(&out.join("final.csv"));
     assert_eq!(f.len(), 3);
     figure_exists(&d, "na_fig13_control_control");
+    assert_eq!(
+        header(&out.join("goal.csv"))
+            .split(',')
+            .take(3)
+            .collect::<Vec<_>>(),
+        ["task", "model", "s0"]
+    );
+    // One animation per task: emulator and simulator replay over the goal.
+    for task in ["pendulum", "truck", "lander"] {
+        let p = d.path().join(format!("figs/na_fig13_control_{task}.gif"));
+        let bytes = std::fs::read(&p).unwrap_or_default();
+        assert!(
+            bytes.len() > 10_000 && bytes.starts_with(b"GIF89a"),
+            "{}",
+            p.display()
+        );
+    }
 }

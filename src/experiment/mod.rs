@@ -23,6 +23,7 @@ pub mod lbc_push;
 pub mod ms_draw;
 pub mod ms_lattices;
 pub mod ms_motion;
+pub mod na_anim;
 pub mod na_control;
 pub mod na_error;
 pub mod na_momentum;

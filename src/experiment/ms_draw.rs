@@ -237,7 +237,8 @@ fn register() {
     super::plot::ensure_fonts();
 }
 
-fn perr(p: &Path, e: String) -> Error {
+/// A plotters error on the figure `p` as an [`Error::Plot`].
+pub(crate) fn perr(p: &Path, e: String) -> Error {
     Error::Plot {
         path: p.display().to_string(),
         message: e,

@@ -17,13 +17,19 @@
 //! Tables: `objective` (task, iteration, objective), `final` (task, emulator_error,
 //! simulator_error): the RMS of (s_M − s_d)/σ over the weighted state variables when the learned
 //! controls drive the emulator and the physical simulator (≤ 1: within tolerance), and
-//! `trajectory` (task, step, t, source, state variables s0 …) for both.
+//! `trajectory` (task, step, t, source, state variables s0 …) for both, and `goal` (task, model,
+//! target state s0 …).
+//!
+//! Figures: `control` (objectives and two state variables over time) and, per task, an
+//! animated GIF `<id>_<task>.gif` of the emulator-driven motion and its simulator replay over
+//! the goal ([`super::na_anim`]).
 
 use super::na_structure::{
     build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
     DolphinNets,
 };
 use super::na_swim::SwimTask;
+use super::na_anim::{write_animation, Scene, Track, EMULATOR, SIMULATOR};
 use super::output::{df_f64, df_str, read_csv, Table, Tables};
 use super::plot::{Figure, Legend, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
@@ -37,6 +43,7 @@ use crate::physics::dolphin::N_SEGMENTS;
 use crate::physics::lander::Lander;
 use crate::row;
 use rand::Rng;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -265,6 +272,9 @@ impl Job for Params {
         cols.extend((0..width).map(|k| format!("s{k}")));
         let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
         let mut trajectory = Table::new(&col_refs);
+        let mut goal_cols = vec!["task", "model"];
+        goal_cols.extend_from_slice(&col_refs[4..]);
+        let mut goal = Table::new(&goal_cols);
         for task in &self.tasks {
             let model = task.net.model;
             let (n, m) = (model.state_dim(), model.control_dim());
@@ -330,6 +340,9 @@ impl Job for Params {
                 task.final_error(emu_final),
                 task.final_error(sim_final)
             ]);
+            let mut row = row![task.name.as_str(), model.name()];
+            row.extend((0..width).map(|k| task.target.get(k).copied().unwrap_or(f64::NAN).into()));
+            goal.push(row);
             let dt = task.net.physical_dt * self.steps as f64;
             for (source, states) in [("emulator", &r.states), ("simulator", &rep.states)] {
                 for (i, s) in states.chunks_exact(n).enumerate() {
@@ -356,6 +369,7 @@ impl Job for Params {
         out.insert("objective", objective_t);
         out.insert("final", final_t);
         out.insert("trajectory", trajectory);
+        out.insert("goal", goal);
         Ok(out)
     }
 }
@@ -463,6 +477,72 @@ fn first_seen(v: &[String]) -> Vec<String> {
     out
 }
 
+/// One animated GIF per task (see [`super::na_anim`]): the emulator-driven motion and its
+/// simulator replay, from the `trajectory` table, over the goal from the `goal` table.
+fn animations(fig: &super::plot::FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let g = tables.require("goal")?;
+    let tr = tables.require("trajectory")?;
+    let (gtask, gmodel) = (g.strs("task"), g.strs("model"));
+    let (ttask, tt, src) = (tr.strs("task"), tr.f64s("t"), tr.strs("source"));
+    let width = (0..)
+        .take_while(|k| tr.column(&format!("s{k}")).is_some())
+        .count();
+    let (gs, ts): (Vec<Vec<f64>>, Vec<Vec<f64>>) = (0..width)
+        .map(|k| (g.f64s(&format!("s{k}")), tr.f64s(&format!("s{k}"))))
+        .unzip();
+    let jobs: Vec<(usize, NetModel)> = (0..gtask.len())
+        .map(|r| {
+            NetModel::ALL
+                .into_iter()
+                .find(|m| m.name() == gmodel[r])
+                .filter(|m| m.state_dim() <= width)
+                .map(|m| (r, m))
+                .ok_or_else(|| super::other(format!("goal: unknown model {}", gmodel[r])))
+        })
+        .collect::<Result<_, _>>()?;
+    jobs.par_iter()
+        .map(|&(r, model)| {
+            let (name, n) = (&gtask[r], model.state_dim());
+            let goal: Vec<f64> = (0..n).map(|k| gs[k][r]).collect();
+            let rows = |s: &str| -> Vec<usize> {
+                (0..ttask.len())
+                    .filter(|&i| &ttask[i] == name && src[i] == s)
+                    .collect()
+            };
+            let emu = rows("emulator");
+            let step = match emu.as_slice() {
+                [a, b, ..] => tt[*b] - tt[*a],
+                _ => 1.0,
+            };
+            let tracks: Vec<Track> = [
+                ("simulator replay", SIMULATOR, rows("simulator")),
+                ("emulator", EMULATOR, emu),
+            ]
+            .into_iter()
+            .map(|(label, color, rows)| Track {
+                label: label.into(),
+                color,
+                states: rows
+                    .iter()
+                    .map(|&i| (0..n).map(|k| ts[k][i]).collect())
+                    .collect(),
+            })
+            .collect();
+            write_animation(
+                &fig.dir,
+                &format!("{}_{name}", fig.id),
+                &Scene::for_model(model),
+                name,
+                "learned controls: emulator (purple), simulator replay (grey), goal (green)",
+                step,
+                &goal,
+                &tracks,
+            )
+            .map(|(p, _)| p)
+        })
+        .collect()
+}
+
 impl Experiment for NaControl {
     fn kind(&self) -> &'static str {
         "na_fig13_control"
@@ -529,7 +609,9 @@ impl Experiment for NaControl {
                 ..Panel::default()
             });
         }
-        fig.draw("control", &Figure::grid(panels, 2))
+        let mut files = fig.draw("control", &Figure::grid(panels, 2))?;
+        files.extend(animations(fig, tables)?);
+        Ok(files)
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {

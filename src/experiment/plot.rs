@@ -317,7 +317,8 @@ fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
 }
 
 /// Tick label; `snap` > 0 (a linear axis's span) turns round-off around zero into `0`.
-fn tick(v: f64, snap: f64) -> String {
+/// A tick label: `v` with at most 3 decimals, "0" near zero (relative to the span `snap`).
+pub(crate) fn tick(v: f64, snap: f64) -> String {
     if v == 0.0 || v.abs() < 1e-9 * snap {
         "0".into()
     } else if v.abs() >= 1e4 || v.abs() < 1e-3 {
