@@ -42,7 +42,14 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
             "pendulum_active",
             "pendulum_ext",
             "lander",
-            "truck"
+            "truck",
+            "dolphin_global",
+            "dolphin_local1",
+            "dolphin_local2",
+            "dolphin_local3",
+            "dolphin_local4",
+            "dolphin_local5",
+            "dolphin_local6"
         ]
     );
     let shapes: Vec<(&str, &str, &str)> = r
@@ -56,7 +63,16 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
             ("9", "20", "6"),
             ("12", "20", "6"),
             ("17", "50", "13"),
-            ("8", "40", "6")
+            ("8", "40", "6"),
+            // The dolphin: global net over 6 segment frames (Table 1: 78 + 6 -> 50 -> 78) and
+            // a local net per segment (Table 1: 72 + 6 -> 40 -> 36).
+            ("84", "50", "78"),
+            ("52", "40", "30"),
+            ("70", "40", "24"),
+            ("70", "40", "24"),
+            ("70", "40", "24"),
+            ("70", "40", "24"),
+            ("58", "40", "12")
         ]
     );
     // Training reduced the held-out error below that of predicting the mean (1.0).
@@ -67,7 +83,7 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
     figure_exists(&d, "na_table1_structure_training");
     // The networks were cached in the working directory; a rerun loads them.
     let cache = d.path().join("target/motionlab-cache");
-    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 5);
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 12);
     ok(&motionlab(
         d.path(),
         &[
@@ -106,6 +122,8 @@ fn na_table2_quick_emulators_are_faster_than_simulation() {
         ("pendulum_active", "N100"),
         ("truck", "N50"),
         ("lander", "N50"),
+        ("dolphin", "N50"),
+        ("dolphin", "N50_reg"),
     ]
     .iter()
     .map(|(a, b)| (a.to_string(), b.to_string()))
@@ -214,7 +232,12 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         "task,emulator_error,simulator_error"
     );
     let r = rows(&out.join("objective.csv"));
-    for (task, iters) in [("pendulum", 20), ("truck", 15), ("lander", 15)] {
+    for (task, iters) in [
+        ("pendulum", 20),
+        ("truck", 15),
+        ("lander", 15),
+        ("dolphin", 20),
+    ] {
         let js: Vec<f64> = r
             .iter()
             .filter(|c| c[0] == task)
@@ -226,7 +249,8 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         assert!(best < js[0], "{task}: no descent {js:?}");
     }
     let f = rows(&out.join("final.csv"));
-    assert_eq!(f.len(), 3);
+    assert_eq!(f.len(), 4);
+    assert_eq!(header(&out.join("swim.csv")), "source,distance_m,effort");
     figure_exists(&d, "na_fig13_control_control");
     assert_eq!(
         header(&out.join("goal.csv"))
@@ -236,7 +260,7 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         ["task", "model", "s0"]
     );
     // One animation per task: emulator and simulator replay over the goal.
-    for task in ["pendulum", "truck", "lander"] {
+    for task in ["pendulum", "truck", "lander", "dolphin"] {
         let p = d.path().join(format!("figs/na_fig13_control_{task}.gif"));
         let bytes = std::fs::read(&p).unwrap_or_default();
         assert!(
@@ -245,4 +269,34 @@ fn na_fig13_quick_learns_controls_for_every_task() {
             p.display()
         );
     }
+}
+
+#[test]
+fn na_regularization_quick_regularizing_keeps_the_dolphin_in_shape() {
+    let d = run_quick("na_regularization", "2");
+    let out = d.path().join("out/na_regularization");
+    assert_eq!(
+        header(&out.join("shape_error.csv")),
+        "schedule,t,shape_error"
+    );
+    assert!(header(&out.join("cost.csv")).starts_with("schedule,reg_steps,every,seconds"));
+    let c = rows(&out.join("cost.csv"));
+    let names: Vec<&str> = c.iter().map(|r| r[0].as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "simulator",
+            "none",
+            "1_per_step",
+            "5_per_step",
+            "25_every_5"
+        ]
+    );
+    let mean_err =
+        |name: &str| -> f64 { c.iter().find(|r| r[0] == name).unwrap()[5].parse().unwrap() };
+    // §5.3 at small scale: emulation alone drifts out of shape; a few regularization steps
+    // after every emulation step keep the shape error far lower.
+    assert!(mean_err("none") > mean_err("simulator"), "{c:?}");
+    assert!(mean_err("5_per_step") < 0.5 * mean_err("none"), "{c:?}");
+    figure_exists(&d, "na_regularization_shape_error");
 }

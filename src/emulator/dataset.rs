@@ -86,10 +86,11 @@ pub enum ControlProcess {
     },
     /// Coordinated actions that travel along a chain of actuators (a swimming wave, §3.4's
     /// "coordinated muscle actions that produce locomotion"): per episode a frequency f, a
-    /// phase lag φ per channel (either direction), an amplitude a (a fraction of each
+    /// phase lag φ per channel (either direction), an amplitude a (0 in a fifth of the episodes,
+    /// else U[0, 1]; a fraction of each
     /// channel's half-range) and a phase ψ are drawn; at knots held for U[`hold_min`,
     /// `hold_max`] seconds channel c takes centre_c + half_c (a sin(2π f t − c φ + ψ) + ε),
-    /// ε ~ U[−`noise`, `noise`], clamped to the limits, and holds it until the next knot.
+    /// ε ~ U[−ν, ν] with ν ~ U[0, `noise`] per episode, clamped to the limits, and holds it until the next knot.
     TravellingWave {
         /// Shortest hold (s).
         hold_min: f64,
@@ -152,9 +153,14 @@ impl ControlSignal {
                 } else {
                     0.0
                 },
-                rng.random_range(0.2..1.0),
+                // A fifth of the episodes idle (no wave): the body at or near rest.
+                if rng.random_range(0.0..1.0) < 0.2 {
+                    0.0
+                } else {
+                    rng.random_range(0.0..1.0)
+                },
                 rng.random_range(0.0..std::f64::consts::TAU),
-                noise,
+                noise * rng.random_range(0.0..1.0),
             )),
             _ => None,
         };

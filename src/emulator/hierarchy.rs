@@ -43,7 +43,7 @@
 //!
 //! ## Training data (§3.4)
 //! Episodes of 20 s from the rest shape at a random position, heading, pitch and roll, swimming
-//! slowly forward, driven by travelling muscle waves of random frequency, lag, amplitude and
+//! at U[−0.5, 1] m/s along its axis, driven by travelling muscle waves of random frequency, lag, amplitude and
 //! direction held piecewise constant ([`ControlProcess::TravellingWave`]); samples at lags
 //! U[Δt, 5Δt]. Sampling runs in parallel chunks, each from its own seeded stream, so the data
 //! do not depend on the thread count. The local nets use the first `local.examples` of the
@@ -79,6 +79,9 @@ pub const GLOBAL_DIM: usize = FRAME_DIM * N_SEGMENTS;
 pub const MASS_DIM: usize = 2 * N_POS;
 /// The segment whose frame the global net works in.
 pub const REF_SEGMENT: usize = 2;
+/// Bumped whenever the hierarchy's sampling, transforms or training code changes meaning, so
+/// cached nets are retrained.
+pub const HIERARCHY_FORMAT: u32 = 2;
 /// Examples per sampling chunk (each chunk is simulated from its own seeded stream).
 const CHUNK: usize = 2000;
 
@@ -568,7 +571,7 @@ pub fn control_process() -> ControlProcess {
 pub const EPISODE_S: f64 = 20.0;
 
 /// An episode start: the rest shape at a random position (±20 m), heading, pitch (±0.5 rad)
-/// and roll (±0.3 rad), moving along its axis at U[0, 1] m/s.
+/// and roll (±0.3 rad), moving along its axis at U[−0.5, 1] m/s.
 pub fn start_state(d: &Dolphin, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let yaw = rng.random_range(-PI..PI);
     let pitch = rng.random_range(-0.5..0.5);
@@ -579,7 +582,7 @@ pub fn start_state(d: &Dolphin, rng: &mut ChaCha8Rng) -> Vec<f64> {
         rng.random_range(-20.0..20.0),
         rng.random_range(-20.0..20.0),
     );
-    let speed = rng.random_range(0.0..1.0);
+    let speed = rng.random_range(-0.5..1.0);
     let v = r * Vector3::new(speed, 0.0, 0.0);
     let rest = d.rest_state();
     let mut x = vec![0.0; MASS_DIM];
@@ -749,6 +752,7 @@ fn cache_key(spec: &HierarchySpec, d: &Dolphin, k: usize) -> String {
     let starts: Vec<Vec<f64>> = (0..2).map(|_| start_state(d, &mut rng)).collect();
     serde_json::json!({
         "format": super::cache::CACHE_FORMAT,
+        "hierarchy_format": HIERARCHY_FORMAT,
         "hierarchy": spec,
         "net": net_name(k),
         "physics": d,

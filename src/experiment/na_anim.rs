@@ -641,6 +641,8 @@ pub enum Scene {
     Truck(Truck),
     /// The lander, side and top views.
     Lander(Lander),
+    /// The dolphin (mass state: 69 positions, 69 velocities), side view.
+    Dolphin(Dolphin),
 }
 
 impl Scene {
@@ -652,7 +654,6 @@ impl Scene {
             NetModel::PendulumExt => Self::Pendulum(Pendulum3::new(PendulumVariant::ExtForce)),
             NetModel::Truck => Self::Truck(Truck::default()),
             NetModel::Lander => Self::Lander(Lander::default()),
-            // A dolphin model would go here: Self::Dolphin(Dolphin::default()).
         }
     }
 
@@ -662,6 +663,7 @@ impl Scene {
             Self::Pendulum(_) => (480, 440),
             Self::Truck(_) => (560, 440),
             Self::Lander(_) => (760, 440),
+            Self::Dolphin(_) => (760, 360),
         }
     }
 
@@ -718,6 +720,12 @@ impl Scene {
                 side.y = (side.y.0 + lift, side.y.1 + lift);
                 vec![side, Axes::fit(top, reach, half, "x (m)", "y (m)")]
             }
+            Self::Dolphin(_) => {
+                let pts = states()
+                    .filter(|s| s.len() >= N_POS)
+                    .flat_map(|s| (0..N_POS / 3).map(move |i| (s[3 * i], s[3 * i + 2])));
+                vec![Axes::fit(pts, 0.3, size, "x (m)", "z (m)")]
+            }
         }
     }
 
@@ -734,6 +742,7 @@ impl Scene {
             Self::Pendulum(p) => draw_pendulum(area, view(0)?, p, goal, bodies),
             Self::Truck(t) => draw_truck(area, view(0)?, t, goal, bodies),
             Self::Lander(l) => draw_lander(area, view(0)?, view(1)?, l, goal, bodies),
+            Self::Dolphin(d) => draw_dolphin_side(area, view(0)?, d, goal, bodies),
         }
     }
 }

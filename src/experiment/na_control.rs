@@ -24,12 +24,12 @@
 //! animated GIF `<id>_<task>.gif` of the emulator-driven motion and its simulator replay over
 //! the goal ([`super::na_anim`]).
 
+use super::na_anim::{write_animation, Scene, Track, EMULATOR, SIMULATOR};
 use super::na_structure::{
     build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
     DolphinNets,
 };
-use super::na_swim::SwimTask;
-use super::na_anim::{write_animation, Scene, Track, EMULATOR, SIMULATOR};
+use super::na_swim::{emulated_masses, SwimTask};
 use super::output::{df_f64, df_str, read_csv, Table, Tables};
 use super::plot::{Figure, Legend, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
@@ -39,7 +39,7 @@ use crate::control::bptt::{learn, replay, Bounds, Bptt, Descent, Knots};
 use crate::control::objective::{ControlEffort, FinalState, Objective};
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::hierarchy::{FRAME_DIM, GLOBAL_DIM};
-use crate::physics::dolphin::N_SEGMENTS;
+use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
 use crate::physics::lander::Lander;
 use crate::row;
 use rand::Rng;
@@ -353,6 +353,10 @@ impl Job for Params {
             }
         }
         let mut swim_t = Table::new(&["source", "distance_m", "effort"]);
+        let mut motion_cols = vec!["source".to_string(), "step".into(), "t".into()];
+        motion_cols.extend((0..N_POS).map(|k| format!("p{k}")));
+        let motion_refs: Vec<&str> = motion_cols.iter().map(String::as_str).collect();
+        let mut motion_t = Table::new(&motion_refs);
         if let Some(d) = &self.dolphin {
             self.run_dolphin(
                 ctx,
@@ -362,9 +366,11 @@ impl Job for Params {
                 &mut final_t,
                 &mut trajectory,
                 &mut swim_t,
+                &mut motion_t,
             )?;
         }
         let mut out = Tables::default();
+        out.insert("dolphin_motion", motion_t);
         out.insert("swim", swim_t);
         out.insert("objective", objective_t);
         out.insert("final", final_t);
@@ -386,6 +392,7 @@ impl Params {
         final_t: &mut Table,
         trajectory: &mut Table,
         swim_t: &mut Table,
+        motion_t: &mut Table,
     ) -> Result<(), Error> {
         let spec = d.nets.spec(ctx.seed, self.steps, self.example_scale);
         let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
@@ -420,9 +427,26 @@ impl Params {
             objective_t.push(row!["dolphin", t.iteration as i64, t.objective]);
         }
         let (dt, n) = (d.nets.physical_dt, self.steps);
-        let (_, sim_globals) = swim
+        let (sim_masses, sim_globals) = swim
             .simulate(&body, &x0, &r.controls, dt, n)
             .map_err(super::other)?;
+        // The body's motion for the animation: the full hierarchy (global and local nets,
+        // regularized) and the simulator, mass positions per emulator step.
+        let emu_masses = emulated_masses(
+            &built.emulator,
+            &swim.regularization,
+            swim.regularization_steps,
+            &x0,
+            &r.controls,
+        )?;
+        let big_dt = dt * n as f64;
+        for (source, traj) in [("emulator", &emu_masses), ("simulator", &sim_masses)] {
+            for (i, x) in traj.iter().enumerate() {
+                let mut row = row![source, i as i64, i as f64 * big_dt];
+                row.extend(x[..N_POS].iter().map(|&v| v.into()));
+                motion_t.push(row);
+            }
+        }
         let mut ref_u = vec![0.0; knots.steps * knots.m];
         knots.expand(&swim.reference_knots(dt * n as f64), &mut ref_u);
         let (_, ref_globals) = swim
@@ -447,7 +471,6 @@ impl Params {
             (ref_d - sim_d).max(0.0)
         ]);
         // Trajectory: the mean segment centroid (s0, s1, s2 = x, y, z).
-        let big_dt = dt * n as f64;
         for (source, globals) in [("emulator", &r.states), ("simulator", &sim_globals)] {
             for (i, g) in globals.chunks_exact(GLOBAL_DIM).enumerate() {
                 let mut row = row!["dolphin", i as i64, i as f64 * big_dt, source];
@@ -479,6 +502,52 @@ fn first_seen(v: &[String]) -> Vec<String> {
 
 /// One animated GIF per task (see [`super::na_anim`]): the emulator-driven motion and its
 /// simulator replay, from the `trajectory` table, over the goal from the `goal` table.
+/// `<id>_dolphin.gif` from the `dolphin_motion` table, when it has rows.
+fn dolphin_animation(
+    fig: &super::plot::FigureSink,
+    tables: &Tables,
+) -> Result<Vec<PathBuf>, Error> {
+    let Some(t) = tables.get("dolphin_motion").filter(|t| !t.is_empty()) else {
+        return Ok(vec![]);
+    };
+    let (src, tt) = (t.strs("source"), t.f64s("t"));
+    let cols: Vec<Vec<f64>> = (0..N_POS).map(|k| t.f64s(&format!("p{k}"))).collect();
+    let track = |name: &str| -> Vec<Vec<f64>> {
+        (0..src.len())
+            .filter(|&r| src[r] == name)
+            .map(|r| (0..N_POS).map(|k| cols[k][r]).collect())
+            .collect()
+    };
+    let emu_rows: Vec<usize> = (0..src.len()).filter(|&r| src[r] == "emulator").collect();
+    let step = match emu_rows.as_slice() {
+        [a, b, ..] => tt[*b] - tt[*a],
+        _ => 1.0,
+    };
+    let tracks = vec![
+        Track {
+            label: "simulator replay".into(),
+            color: SIMULATOR,
+            states: track("simulator"),
+        },
+        Track {
+            label: "emulator (global + local nets)".into(),
+            color: EMULATOR,
+            states: track("emulator"),
+        },
+    ];
+    let (p, _) = write_animation(
+        &fig.dir,
+        &format!("{}_dolphin", fig.id),
+        &Scene::Dolphin(Dolphin::default()),
+        "dolphin: swim forward",
+        "learned muscle controls: hierarchical emulator (purple), simulator replay (grey)",
+        step,
+        &[],
+        &tracks,
+    )?;
+    Ok(vec![p])
+}
+
 fn animations(fig: &super::plot::FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let g = tables.require("goal")?;
     let tr = tables.require("trajectory")?;
@@ -611,6 +680,7 @@ impl Experiment for NaControl {
         }
         let mut files = fig.draw("control", &Figure::grid(panels, 2))?;
         files.extend(animations(fig, tables)?);
+        files.extend(dolphin_animation(fig, tables)?);
         Ok(files)
     }
 
