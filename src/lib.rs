@@ -21,7 +21,9 @@
 //!   objective terms, the Table 2 perturbations, parallel hill climbing and simulated annealing.
 //! - [`emulator`]: NeuroAnimator emulators — a sigmoid MLP with backprop to weights and inputs,
 //!   the delta / local-frame / normalization transforms, and training (argmin CG or L-BFGS,
-//!   momentum mini-batches) with early stopping.
+//!   momentum mini-batches) with early stopping; [`emulator::hierarchy`]: the hierarchical
+//!   dolphin (a global net over the 6 segment frames, a local net per segment) and the §5.3
+//!   regularization steps.
 //! - [`control`]: optimal control on the RK4-discretized dynamics of any
 //!   [`physics::linearize::Linearize`] model — [`control::ddp`] (iLQR and full second-order
 //!   DDP with regularization, line search and box bounds) and [`control::lqr`] (time-varying
@@ -53,6 +55,7 @@
 //! | `diver`, `push_recovery` | [`physics::diver`], [`physics::push`] | planar articulated trees ([`physics::planar`]) |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
 //! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
+//! | hierarchical dolphin emulator, regularization | [`emulator::hierarchy`] | NeuroAnimator §3.3, §5.3 |
 //! | BPTT control learning, plain / momentum descent | [`control::bptt`], [`control::objective`] | NeuroAnimator §4, eq. 11–15 |
 //! | simulated annealing, Nelder–Mead, parallel hill climbing over a box | [`control::search`] | NeuroAnimator §6 baselines |
 //! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
