@@ -257,6 +257,7 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
         }),
     );
     push("bptt.lander.iters_per_s", bptt_lander(min_seconds));
+    push("bptt.dolphin.iters_per_s", bptt_dolphin(min_seconds));
     out
 }
 
@@ -294,6 +295,44 @@ fn bptt_lander(min_seconds: f64) -> f64 {
         m,
     };
     let mut b = Bptt::new(&e, &obj, knots, bounds, &x0).expect("dimensions agree");
+    let v = vec![0.0; b.dim()];
+    let mut g = vec![0.0; b.dim()];
+    throughput(min_seconds, 1, || {
+        black_box(b.gradient(black_box(&v), &mut g));
+    })
+}
+
+/// BPTT iterations per second through the dolphin's global net of the Table 1 shape (84-50-78,
+/// random weights, the global transforms): a 40-step emulated swim and the full gradient with
+/// respect to the 120 muscle knots (20 per muscle), under the swim objective of `na_swim`.
+fn bptt_dolphin(min_seconds: f64) -> f64 {
+    use crate::control::bptt::Bptt;
+    use crate::emulator::hierarchy::{global_transforms, Regularizer, GLOBAL_DIM};
+    use crate::experiment::na_swim::SwimTask;
+    use crate::physics::dolphin::{Dolphin, N_SEGMENTS};
+    use rand::SeedableRng;
+    let (n, m) = (GLOBAL_DIM, N_SEGMENTS);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let mlp = Mlp::new(n + m, 50, n, WeightInit::FanIn, &mut rng);
+    let transforms =
+        Transforms::unfitted(&global_transforms(), n, m).expect("global transforms fit");
+    let e = Emulator::new(transforms, mlp, 0.1).expect("shapes agree");
+    let swim = SwimTask {
+        horizon: 40,
+        knots: 20,
+        distance_mu: 1.0,
+        effort_mu: 0.01,
+        regularization: Regularizer {
+            dt: 0.005,
+            stiffness_scale: 0.1,
+            damping_scale: 1.5,
+        },
+        regularization_steps: 5,
+    };
+    let obj = swim.objective();
+    let (_, g0) = swim.start(&Dolphin::default());
+    let mut b =
+        Bptt::new(&e, &obj, swim.knot_layout(), swim.bounds(), &g0).expect("dimensions agree");
     let v = vec![0.0; b.dim()];
     let mut g = vec![0.0; b.dim()];
     throughput(min_seconds, 1, || {

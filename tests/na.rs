@@ -299,4 +299,43 @@ fn na_regularization_quick_regularizing_keeps_the_dolphin_in_shape() {
     assert!(mean_err("none") > mean_err("simulator"), "{c:?}");
     assert!(mean_err("5_per_step") < 0.5 * mean_err("none"), "{c:?}");
     figure_exists(&d, "na_regularization_shape_error");
+
+fn na_baselines_swim_quick_traces_every_method_on_its_substrates() {
+    let d = run_quick("na_baselines_swim", "2");
+    let out = d.path().join("out/na_baselines_swim");
+    assert!(header(&out.join("baselines.csv"))
+        .starts_with("method,substrate,iteration,evaluations,seconds,objective"));
+    let r = rows(&out.join("baselines.csv"));
+    let runs = [
+        ("bptt_momentum", "emulator"),
+        ("bptt_plain", "emulator"),
+        ("annealing", "emulator"),
+        ("annealing", "simulator"),
+        ("simplex", "emulator"),
+        ("simplex", "simulator"),
+        ("hill_climbing", "emulator"),
+        ("hill_climbing", "simulator"),
+    ];
+    for (method, substrate) in runs {
+        let trace: Vec<(usize, f64)> = r
+            .iter()
+            .filter(|c| c[0] == method && c[1] == substrate)
+            .map(|c| (c[2].parse().unwrap(), c[5].parse().unwrap()))
+            .collect();
+        assert!(!trace.is_empty(), "{method} on {substrate}");
+        assert_eq!(trace[0].0, 0, "{method} on {substrate}");
+        let j0 = trace[0].1;
+        let best = trace.iter().map(|t| t.1).fold(f64::INFINITY, f64::min);
+        assert!(j0.is_finite(), "{method} on {substrate}: {j0}");
+        assert!(best <= j0, "{method} on {substrate}: {best} > {j0}");
+        // The objective column is the best so far: it never rises.
+        assert!(trace.windows(2).all(|w| w[1].1 <= w[0].1));
+    }
+    // Exactly these runs: BPTT only on the emulator.
+    assert!(r
+        .iter()
+        .all(|c| runs.contains(&(c[0].as_str(), c[1].as_str()))));
+    let f = rows(&out.join("final.csv"));
+    assert_eq!(f.len(), runs.len());
+    figure_exists(&d, "na_baselines_swim_objective");
 }

@@ -24,6 +24,7 @@ pub mod ms_draw;
 pub mod ms_lattices;
 pub mod ms_motion;
 pub mod na_anim;
+pub mod na_baselines;
 pub mod na_control;
 pub mod na_error;
 pub mod na_momentum;

@@ -1,9 +1,9 @@
 //! Every experiment family, by the name experiment files use in `experiment = "…"`.
 
 use super::{
-    lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, ms_lattices, ms_motion, na_control,
-    na_error, na_momentum, na_regularization, na_speedup, na_structure, physics_validation,
-    Experiment,
+    lbc_acrobot, lbc_diver, lbc_grid, lbc_projection, lbc_push, ms_lattices, ms_motion,
+    na_baselines, na_control, na_error, na_momentum, na_regularization, na_speedup, na_structure,
+    physics_validation, Experiment,
 };
 
 static FAMILIES: &[&dyn Experiment] = &[
@@ -23,6 +23,7 @@ static FAMILIES: &[&dyn Experiment] = &[
     &na_momentum::NaMomentum,
     &na_control::NaControl,
     &na_regularization::NaRegularization,
+    &na_baselines::NaBaselines,
 ];
 
 /// All families.
