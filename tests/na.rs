@@ -299,7 +299,9 @@ fn na_regularization_quick_regularizing_keeps_the_dolphin_in_shape() {
     assert!(mean_err("none") > mean_err("simulator"), "{c:?}");
     assert!(mean_err("5_per_step") < 0.5 * mean_err("none"), "{c:?}");
     figure_exists(&d, "na_regularization_shape_error");
+}
 
+#[test]
 fn na_baselines_swim_quick_traces_every_method_on_its_substrates() {
     let d = run_quick("na_baselines_swim", "2");
     let out = d.path().join("out/na_baselines_swim");

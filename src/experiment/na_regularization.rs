@@ -368,9 +368,12 @@ impl Experiment for NaRegularization {
         let find = |pred: &dyn Fn(usize) -> bool| (0..name.len()).find(|&r| pred(r));
         let sim = find(&|r| name[r] == "simulator");
         let none = find(&|r| name[r] != "simulator" && steps[r] == 0.0);
-        let few = find(&|r| {
-            name[r] != "simulator" && steps[r] > 0.0 && every[r] == 1.0 && steps[r] <= 5.0
-        });
+        // "A few steps after each emulation step": the largest such schedule up to 5 steps.
+        let few = (0..name.len())
+            .filter(|&r| {
+                name[r] != "simulator" && steps[r] > 0.0 && every[r] == 1.0 && steps[r] <= 5.0
+            })
+            .max_by(|&a, &b| steps[a].total_cmp(&steps[b]));
         let rare = find(&|r| every[r] > 1.0 && steps[r] > 0.0);
         let (verdict, why) = match (sim, none, few, rare) {
             (Some(s), Some(z), Some(f), Some(r)) => {
