@@ -257,6 +257,9 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
         }),
     );
     push("bptt.lander.iters_per_s", bptt_lander(min_seconds));
+    for (name, value) in dolphin_metrics(min_seconds) {
+        push(&name, value);
+    }
     push("bptt.dolphin.iters_per_s", bptt_dolphin(min_seconds));
     out
 }
@@ -338,6 +341,134 @@ fn bptt_dolphin(min_seconds: f64) -> f64 {
     throughput(min_seconds, 1, || {
         black_box(b.gradient(black_box(&v), &mut g));
     })
+}
+
+/// Mini-batch (30, momentum) training and full-gradient throughput of an `n_in`-`hidden`-`n_out`
+/// net on `examples` random examples.
+fn mlp_training_metrics(
+    n_in: usize,
+    hidden: usize,
+    n_out: usize,
+    examples: usize,
+    min_seconds: f64,
+) -> (Mlp, Vec<(String, f64)>) {
+    use rand::{Rng, SeedableRng};
+    let shape = format!("{n_in}-{hidden}-{n_out}");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let mut mlp = Mlp::new(n_in, hidden, n_out, WeightInit::FanIn, &mut rng);
+    let x = ndarray::Array2::from_shape_fn((examples, n_in), |_| rng.random_range(-1.0..1.0));
+    let y = ndarray::Array2::from_shape_fn((examples, n_out), |_| rng.random_range(-1.0..1.0));
+    let mut grad = vec![0.0; mlp.n_weights()];
+    let mut state = MomentumState::new(mlp.n_weights());
+    let batch = 30;
+    let per_call = 600.min(examples / batch * batch);
+    let train = throughput(min_seconds, per_call as u64, || {
+        for b in 0..per_call / batch {
+            let rows = ndarray::s![b * batch..(b + 1) * batch, ..];
+            mlp.loss_grad(x.slice(rows), y.slice(rows), &mut grad);
+            state.step(mlp.weights_mut(), &grad, 1e-4, 0.9);
+        }
+    });
+    let full = throughput(min_seconds, 1, || {
+        black_box(mlp.loss_grad(x.view(), y.view(), &mut grad));
+    });
+    (
+        mlp,
+        vec![
+            (format!("mlp.{shape}.train_examples_per_s"), train),
+            (format!("mlp.{shape}.full_grad_per_s"), full),
+        ],
+    )
+}
+
+/// The dolphin's Table 1 shapes: the global net (84-50-78, with its frame transforms, batch-1
+/// steps of the 78-variable frame state), a middle segment's local net (70-40-24, batch-1
+/// forward), and the whole hierarchical step of the 138-variable mass state
+/// (`emulator.dolphin_hierarchy.steps_per_s`: six frame fits, the global net, six local nets).
+fn dolphin_metrics(min_seconds: f64) -> Vec<(String, f64)> {
+    use crate::emulator::hierarchy::{
+        global_state, global_transforms, DolphinEmulator, LocalLayout, LocalNet, GLOBAL_DIM,
+    };
+    use crate::emulator::transform::Normalizer;
+    use crate::physics::dolphin::{Dolphin, N_SEGMENTS};
+    let mut out = vec![];
+    let (gmlp, m) =
+        mlp_training_metrics(GLOBAL_DIM + N_SEGMENTS, 50, GLOBAL_DIM, 64000, min_seconds);
+    out.extend(m);
+    let t = Transforms::unfitted(&global_transforms(), GLOBAL_DIM, N_SEGMENTS)
+        .expect("dolphin transforms fit");
+    let global = Emulator::new(t, gmlp, 0.1).expect("shapes agree");
+    let d = Dolphin::default();
+    let x0 = d.rest_state();
+    let mut g0 = vec![0.0; GLOBAL_DIM];
+    global_state(&d, &x0, &mut g0);
+    let u = [0.3, -0.2, 0.1, 0.5, -0.4, 0.2];
+    let (mut sc, mut g1) = (global.scratch(), vec![0.0; GLOBAL_DIM]);
+    let k = 1000;
+    out.push((
+        format!(
+            "emulator.{}-50-{GLOBAL_DIM}.steps_per_s",
+            GLOBAL_DIM + N_SEGMENTS
+        ),
+        throughput(min_seconds, k, || {
+            for _ in 0..k {
+                global.predict(black_box(&g0), &u, &mut sc, &mut g1);
+                black_box(&g1);
+            }
+        }),
+    ));
+    let locals: Vec<LocalNet> = (0..N_SEGMENTS)
+        .map(|s| {
+            let layout = LocalLayout::new(s);
+            let (n_in, n_out) = (layout.n_in(), layout.n_out());
+            let (mlp, m) = if s == 2 {
+                mlp_training_metrics(n_in, 40, n_out, 32000, min_seconds)
+            } else {
+                let mut rng =
+                    <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(s as u64);
+                (
+                    Mlp::new(n_in, 40, n_out, WeightInit::FanIn, &mut rng),
+                    vec![],
+                )
+            };
+            out.extend(m);
+            LocalNet {
+                layout,
+                mlp,
+                input_norm: Normalizer::identity(n_in),
+                output_norm: Normalizer {
+                    mean: vec![0.0; n_out],
+                    std: vec![1e-3; n_out],
+                },
+            }
+        })
+        .collect();
+    let l = &locals[2].mlp;
+    let shape = format!("{}-40-{}", l.n_in(), l.n_out());
+    let z = vec![0.1; l.n_in()];
+    let (mut lsc, mut y) = (l.scratch(), vec![0.0; l.n_out()]);
+    out.push((
+        format!("emulator.{shape}.steps_per_s"),
+        throughput(min_seconds, k, || {
+            for _ in 0..k {
+                l.forward(black_box(&z), &mut lsc, &mut y);
+                black_box(&y);
+            }
+        }),
+    ));
+    let emu = DolphinEmulator::new(d, global, locals);
+    let (mut hs, mut x1) = (emu.scratch(), vec![0.0; x0.len()]);
+    let k = 200;
+    out.push((
+        "emulator.dolphin_hierarchy.steps_per_s".into(),
+        throughput(min_seconds, k, || {
+            for _ in 0..k {
+                emu.predict(black_box(&x0), &u, &mut hs, &mut x1);
+                black_box(&x1);
+            }
+        }),
+    ));
+    out
 }
 
 /// Training and stepping throughput of the Table 1 network of `model` (random weights and data

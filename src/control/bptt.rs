@@ -795,6 +795,46 @@ mod tests {
         fd_check(&mut b, &v, 1e-5);
     }
 
+    /// Through the dolphin's global net: 6 segment frames expressed in one segment's frame
+    /// (six points, twelve vectors, six quaternions), with the swim's progress term.
+    #[test]
+    fn bptt_gradient_matches_finite_differences_through_the_dolphin_global_net() {
+        use crate::control::objective::Progress;
+        use crate::emulator::hierarchy::{global_state, global_transforms, GLOBAL_DIM};
+        use crate::physics::dolphin::Dolphin;
+        let (n, m) = (GLOBAL_DIM, 6);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        let mlp = Mlp::new(n + m, 10, n, WeightInit::FanIn, &mut rng);
+        let t = Transforms::unfitted(&global_transforms(), n, m).unwrap();
+        let e = Emulator::new(t, mlp, 0.1).unwrap();
+        let d = Dolphin::default();
+        let mut x = d.rest_state();
+        for (i, q) in x.iter_mut().enumerate() {
+            *q += 0.02 * (i as f64 * 0.37).sin();
+        }
+        let mut g0 = vec![0.0; n];
+        global_state(&d, &x, &mut g0);
+        let obj = Objective::default()
+            .with(ControlEffort::plain(0.01, m))
+            .with(Progress {
+                mu: 1.0,
+                direction: [1.0, 0.0, 0.0],
+                points: (0..6).map(|s| 13 * s).collect(),
+            });
+        let knots = Knots {
+            steps: 4,
+            per_actuator: 2,
+            m,
+        };
+        let bounds = Bounds {
+            low: vec![-1.0; m],
+            high: vec![1.0; m],
+        };
+        let mut b = Bptt::new(&e, &obj, knots, bounds, &g0).unwrap();
+        let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.9).sin() * 0.5).collect();
+        fd_check(&mut b, &v, 1e-5);
+    }
+
     #[test]
     fn knots_expand_and_reduce_are_adjoint() {
         let k = Knots {

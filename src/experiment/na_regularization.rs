@@ -314,7 +314,8 @@ impl Experiment for NaRegularization {
             .enumerate()
             .map(|(i, nm)| {
                 let pts = (0..name.len())
-                    .filter(|&r| &name[r] == nm)
+                    // t = 0 is the exact rest shape (error ~1e-15), off the log scale.
+                    .filter(|&r| &name[r] == nm && time[r] > 0.0)
                     .map(|r| (time[r], err[r]))
                     .collect();
                 let s = Series::line(nm.clone(), pts, i);
