@@ -468,8 +468,8 @@ impl BoundRegularizer {
         for _ in 0..steps {
             self.soft.derivative(x, u, &mut self.dx);
             let (q, v) = x.split_at_mut(N_POS);
-            for k in 0..N_POS {
-                v[k] += h * self.dx[N_POS + k];
+            for (vk, ak) in v.iter_mut().zip(&self.dx[N_POS..]) {
+                *vk += h * ak;
             }
             // Internal forces leave the centre-of-mass velocity unchanged; moving by the
             // velocity relative to it deforms the body without advancing its flight.
@@ -504,7 +504,7 @@ pub struct Schedule {
 impl Schedule {
     /// Whether to regularize after emulation step `k` (1-based count of steps taken).
     pub fn due(&self, k: usize) -> bool {
-        self.steps > 0 && self.every > 0 && k % self.every == 0
+        self.steps > 0 && self.every > 0 && k.is_multiple_of(self.every)
     }
 }
 

@@ -642,7 +642,7 @@ pub enum Scene {
     /// The lander, side and top views.
     Lander(Lander),
     /// The dolphin (mass state: 69 positions, 69 velocities), side view.
-    Dolphin(Dolphin),
+    Dolphin(Box<Dolphin>),
 }
 
 impl Scene {

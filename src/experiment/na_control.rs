@@ -538,7 +538,7 @@ fn dolphin_animation(
     let (p, _) = write_animation(
         &fig.dir,
         &format!("{}_dolphin", fig.id),
-        &Scene::Dolphin(Dolphin::default()),
+        &Scene::Dolphin(Box::new(Dolphin::default())),
         "dolphin: swim forward",
         "learned muscle controls: hierarchical emulator (purple), simulator replay (grey)",
         step,

@@ -105,7 +105,7 @@ impl Validate for Params {
         if let Some(d) = &self.dolphin {
             d.nets.validate("dolphin.nets", self.example_scale)?;
             ensure(
-                d.steps >= 1 && self.physical_steps % d.steps == 0,
+                d.steps >= 1 && self.physical_steps.is_multiple_of(d.steps),
                 "dolphin.steps",
                 "must be >= 1 and divide physical_steps",
             )?;
