@@ -30,7 +30,7 @@ use super::na_structure::{
     DolphinNets,
 };
 use super::na_swim::{emulated_masses, SwimTask};
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
+use super::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use super::plot::{Figure, Legend, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
 use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
@@ -490,16 +490,6 @@ impl Params {
     }
 }
 
-fn first_seen(v: &[String]) -> Vec<String> {
-    let mut out: Vec<String> = vec![];
-    for s in v {
-        if !out.contains(s) {
-            out.push(s.clone());
-        }
-    }
-    out
-}
-
 /// One animated GIF per task (see [`super::na_anim`]): the emulator-driven motion and its
 /// simulator replay, from the `trajectory` table, over the goal from the `goal` table.
 /// `<id>_dolphin.gif` from the `dolphin_motion` table, when it has rows.
@@ -634,7 +624,7 @@ impl Experiment for NaControl {
         });
         let s1 = tr.f64s("s1");
         let mut panels = vec![];
-        for name in first_seen(&task) {
+        for name in unique(&task) {
             let pts = (0..task.len())
                 .filter(|&r| task[r] == name)
                 .map(|r| (it[r], obj[r]))

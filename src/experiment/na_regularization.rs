@@ -21,7 +21,7 @@
 
 use super::na_speedup::validate_regularizer;
 use super::na_structure::{build_dolphin_emulator, DolphinNets};
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
+use super::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use super::plot::{Figure, Legend, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
 use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
@@ -303,12 +303,7 @@ impl Experiment for NaRegularization {
     ) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("shape_error")?;
         let (name, time, err) = (t.strs("schedule"), t.f64s("t"), t.f64s("shape_error"));
-        let mut names: Vec<String> = vec![];
-        for n in &name {
-            if !names.contains(n) {
-                names.push(n.clone());
-            }
-        }
+        let names = unique(&name);
         let series = names
             .iter()
             .enumerate()

@@ -20,7 +20,7 @@ use super::na_structure::{
     build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
     DolphinNets,
 };
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
+use super::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use super::plot::{Figure, Legend, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
 use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
@@ -352,18 +352,8 @@ impl Experiment for NaSpeedup {
             t.f64s("physical_s"),
             t.f64s("emulator_s"),
         );
-        let mut models: Vec<String> = vec![];
-        for m in &model {
-            if !models.contains(m) {
-                models.push(m.clone());
-            }
-        }
-        let mut kinds: Vec<String> = vec![];
-        for e in &emu {
-            if !kinds.contains(e) {
-                kinds.push(e.clone());
-            }
-        }
+        let models = unique(&model);
+        let kinds = unique(&emu);
         // Groups of bars per model: physical, then each emulator kind.
         let slots = kinds.len() + 1;
         let w = 0.8 / slots as f64;

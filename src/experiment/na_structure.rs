@@ -12,7 +12,7 @@
 //! train_s, weights, examples_per_weight, stop, cached) and `training` (net, iteration,
 //! train_error, heldout_error).
 
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
+use super::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use super::plot::{Figure, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
 use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
@@ -300,12 +300,7 @@ impl Experiment for NaStructure {
             t.f64s("train_error"),
             t.f64s("heldout_error"),
         );
-        let mut names: Vec<String> = vec![];
-        for n in &net {
-            if !names.contains(n) {
-                names.push(n.clone());
-            }
-        }
+        let names = unique(&net);
         let panels = names
             .iter()
             .map(|name| {

@@ -346,6 +346,17 @@ pub fn df_str(df: &DataFrame, name: &str) -> Result<Vec<String>, Error> {
         .collect())
 }
 
+/// Unique values in first-seen order (e.g. the series names of a long table).
+pub fn unique(v: &[String]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for s in v {
+        if !out.contains(s) {
+            out.push(s.clone());
+        }
+    }
+    out
+}
+
 /// Reads a CSV written by [`write_table`] into a polars data frame.
 pub fn read_csv(path: &Path) -> Result<DataFrame, Error> {
     CsvReadOptions::default()

@@ -7,7 +7,7 @@
 //! theoretical_order, measured_order, points_used), `adaptive` (model, rtol, atol, drift,
 //! accepted_steps, rejected_steps, evaluations), `passive_<model>` (start, t, state…, energy).
 
-use super::output::{Table, Tables};
+use super::output::{unique, Table, Tables};
 use super::plot::{Figure, Legend, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
 use super::resolve::{all_positive, ensure, positive, typed_job, ParamError, Validate};
@@ -593,17 +593,6 @@ impl Experiment for PhysicsValidation {
             why: format!("{ok} of {total} measured energy-drift orders are within 0.5 of theory."),
         })
     }
-}
-
-/// Unique values in first-seen order.
-pub fn unique(v: &[String]) -> Vec<String> {
-    let mut out: Vec<String> = Vec::new();
-    for s in v {
-        if !out.contains(s) {
-            out.push(s.clone());
-        }
-    }
-    out
 }
 
 #[cfg(test)]
