@@ -303,7 +303,8 @@ pub struct DolphinEmulator {
     dolphin: Dolphin,
     global: Emulator,
     locals: Vec<LocalNet>,
-    scratch: DolphinScratch,
+    /// Scratch of [`Dynamics::step`] (taken out while stepping).
+    scratch: Option<Box<DolphinScratch>>,
 }
 
 impl DolphinEmulator {
@@ -340,7 +341,7 @@ impl DolphinEmulator {
             dolphin,
             global,
             locals,
-            scratch,
+            scratch: Some(Box::new(scratch)),
         }
     }
 
@@ -366,7 +367,11 @@ impl DolphinEmulator {
 
     /// Fresh scratch for [`DolphinEmulator::predict`].
     pub fn scratch(&self) -> DolphinScratch {
-        self.scratch.clone()
+        (**self
+            .scratch
+            .as_ref()
+            .expect("scratch is put back after each step"))
+        .clone()
     }
 
     /// Writes the next mass state: frames of `x` → global net → local nets.
@@ -381,6 +386,33 @@ impl DolphinEmulator {
             let f1 = Frame::from_slice(&sc.g1[FRAME_DIM * s..FRAME_DIM * (s + 1)]);
             net.apply(x, &f0, &f1, u, &mut sc.local[s], x1);
         }
+    }
+}
+
+impl DolphinEmulator {
+    /// Emulates from `x0` under per-step `controls` (m each), following each emulation step
+    /// with `schedule`'s regularization steps of `reg` when due, and calls `visit(k, x)` with
+    /// the state after step k = 1, 2, …. Returns the final state.
+    pub fn emulate(
+        &self,
+        reg: &mut BoundRegularizer,
+        schedule: Schedule,
+        x0: &[f64],
+        controls: &[f64],
+        scratch: &mut DolphinScratch,
+        mut visit: impl FnMut(usize, &[f64]),
+    ) -> Vec<f64> {
+        let mut x = x0.to_vec();
+        let mut y = x0.to_vec();
+        for (k, u) in controls.chunks_exact(N_SEGMENTS).enumerate() {
+            self.predict(&x, u, scratch, &mut y);
+            std::mem::swap(&mut x, &mut y);
+            if schedule.due(k + 1) {
+                reg.apply(&mut x, u, schedule.steps);
+            }
+            visit(k + 1, &x);
+        }
+        x
     }
 }
 
@@ -403,21 +435,15 @@ impl Dynamics for DolphinEmulator {
             (dt - own).abs() <= 1e-9 * own.abs().max(1.0),
             "dolphin emulator trained for Δt = {own} s was stepped with dt = {dt} s"
         );
-        let mut sc = std::mem::replace(
-            &mut self.scratch,
-            DolphinScratch {
-                g0: vec![],
-                g1: vec![],
-                global: self.global.scratch(),
-                local: vec![],
-                next: vec![],
-            },
-        );
+        let mut sc = self
+            .scratch
+            .take()
+            .expect("scratch is put back after each step");
         let mut next = std::mem::take(&mut sc.next);
         self.predict(x, u, &mut sc, &mut next);
         x.copy_from_slice(&next);
         sc.next = next;
-        self.scratch = sc;
+        self.scratch = Some(sc);
     }
 }
 

@@ -27,7 +27,7 @@ use super::report::{sig, Findings, Verdict};
 use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
 use super::{Error, Experiment, Job, RunContext};
 use crate::emulator::dataset::ControlSignal;
-use crate::emulator::hierarchy::{self, Regularizer, Schedule, MASS_DIM};
+use crate::emulator::hierarchy::{self, Regularizer, Schedule};
 use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
 use crate::physics::{check_finite, Dynamics};
 use crate::row;
@@ -206,22 +206,13 @@ impl Job for Params {
             let mut rough = 0.0;
             for (x0, u) in &cases {
                 let mut traj = vec![x0.clone()];
-                let mut x = x0.clone();
-                let mut y = vec![0.0; MASS_DIM];
-                curve[0] += d.shape_error(&x) / self.trials as f64;
-                for k in 0..k_steps {
-                    let uk = &u[k * m..(k + 1) * m];
-                    emu.predict(&x, uk, &mut scratch, &mut y);
-                    std::mem::swap(&mut x, &mut y);
-                    if sched.due(k + 1) {
-                        reg.apply(&mut x, uk, sched.steps);
-                    }
+                curve[0] += d.shape_error(x0) / self.trials as f64;
+                emu.emulate(&mut reg, sched, x0, u, &mut scratch, |k, x| {
                     // An emulator may diverge: record it (as inf) rather than abort the run.
-                    let e = d.shape_error(&x);
-                    curve[k + 1] +=
-                        if e.is_finite() { e } else { f64::INFINITY } / self.trials as f64;
-                    traj.push(x.clone());
-                }
+                    let e = d.shape_error(x);
+                    curve[k] += if e.is_finite() { e } else { f64::INFINITY } / self.trials as f64;
+                    traj.push(x.to_vec());
+                });
                 rough += mean_roughness(&d, &traj) / self.trials as f64;
             }
             // Timing: the first trial's loop, fastest of `repeats`.
@@ -229,16 +220,7 @@ impl Job for Params {
             let seconds = (0..self.repeats)
                 .map(|_| {
                     let t0 = Instant::now();
-                    let mut x = x0.clone();
-                    let mut y = vec![0.0; MASS_DIM];
-                    for k in 0..k_steps {
-                        let uk = &u[k * m..(k + 1) * m];
-                        emu.predict(&x, uk, &mut scratch, &mut y);
-                        std::mem::swap(&mut x, &mut y);
-                        if sched.due(k + 1) {
-                            reg.apply(&mut x, uk, sched.steps);
-                        }
-                    }
+                    let x = emu.emulate(&mut reg, sched, x0, u, &mut scratch, |_, _| {});
                     std::hint::black_box(&x);
                     t0.elapsed().as_secs_f64()
                 })

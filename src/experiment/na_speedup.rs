@@ -27,7 +27,7 @@ use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
 use super::{Error, Experiment, Job, RunContext};
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
-use crate::emulator::hierarchy::{self, BoundRegularizer, DolphinEmulator, Regularizer};
+use crate::emulator::hierarchy::{self, BoundRegularizer, DolphinEmulator, Regularizer, Schedule};
 use crate::emulator::Emulator;
 use crate::physics::Dynamics;
 use crate::row;
@@ -183,29 +183,23 @@ pub fn validate_regularizer(key: &str, r: &Regularizer) -> Result<(), ParamError
     )
 }
 
-/// Seconds for `steps` steps of the dolphin emulator, each followed by `reg` regularization
-/// steps when `reg > 0`.
+/// Seconds for the dolphin emulator to take one step per control in `u`, each followed by
+/// `reg_steps` regularization steps (fastest of `repeats`).
 fn time_dolphin(
     e: &DolphinEmulator,
     reg: &mut BoundRegularizer,
     reg_steps: usize,
     x0: &[f64],
     u: &[f64],
-    steps: usize,
     repeats: usize,
 ) -> f64 {
-    let m = Dynamics::control_dim(e);
     let mut scratch = e.scratch();
-    let mut x = x0.to_vec();
-    let mut y = x0.to_vec();
+    let schedule = Schedule {
+        steps: reg_steps,
+        every: 1,
+    };
     best_time(repeats, || {
-        x.copy_from_slice(x0);
-        for k in 0..steps {
-            let uk = &u[k * m..(k + 1) * m];
-            e.predict(&x, uk, &mut scratch, &mut y);
-            std::mem::swap(&mut x, &mut y);
-            reg.apply(&mut x, uk, reg_steps);
-        }
+        let x = e.emulate(reg, schedule, x0, u, &mut scratch, |_, _| {});
         black_box(&x);
     })
 }
@@ -304,15 +298,7 @@ impl Job for Params {
                 (format!("N{n}_reg"), d.regularization_steps),
             ] {
                 let emulator_s = ctx.stage(&format!("time dolphin {label}"), || {
-                    time_dolphin(
-                        &built.emulator,
-                        &mut reg,
-                        reg_steps,
-                        &x0,
-                        &ue,
-                        k_steps,
-                        self.repeats,
-                    )
+                    time_dolphin(&built.emulator, &mut reg, reg_steps, &x0, &ue, self.repeats)
                 });
                 table.push(row![
                     "dolphin",

@@ -179,15 +179,18 @@ pub fn emulated_masses(
     controls: &[f64],
 ) -> Result<Vec<Vec<f64>>, super::Error> {
     let mut r = reg.bind(emu.dolphin()).map_err(super::other)?;
-    let mut scratch = emu.scratch();
-    let mut x = x0.to_vec();
-    let mut y = x.clone();
-    let mut out = vec![x.clone()];
-    for u in controls.chunks_exact(Dynamics::control_dim(emu)) {
-        emu.predict(&x, u, &mut scratch, &mut y);
-        std::mem::swap(&mut x, &mut y);
-        r.apply(&mut x, u, reg_steps);
-        out.push(x.clone());
-    }
+    let schedule = hierarchy::Schedule {
+        steps: reg_steps,
+        every: 1,
+    };
+    let mut out = vec![x0.to_vec()];
+    emu.emulate(
+        &mut r,
+        schedule,
+        x0,
+        controls,
+        &mut emu.scratch(),
+        |_, x| out.push(x.to_vec()),
+    );
     Ok(out)
 }
