@@ -5,6 +5,7 @@
 //! algorithms add their loops to [`metrics`].
 
 use crate::bellman::projection::{project, GaussianReward};
+use crate::control::search::init_rng;
 use crate::emulator::catalog::NetModel;
 use crate::emulator::mlp::{Mlp, WeightInit};
 use crate::emulator::train::MomentumState;
@@ -14,7 +15,6 @@ use crate::physics::lattice::{Lattice, LatticeModel, LatticeSim, LOW_GRAVITY};
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
 use crate::physics::{Dynamics, IntegratorKind, Simulator};
 use crate::synthesis::controller::SimSetup;
-use crate::synthesis::hill_climb::init_rng;
 use crate::synthesis::objective::{Objective, Term, Weighted};
 use crate::synthesis::perturb::random_controller;
 use crate::synthesis::Problem;

@@ -18,7 +18,8 @@
 //!   mass-spring motion synthesis; [`physics::dolphin::Dolphin`], the muscle-driven
 //!   mass-spring-damper swimmer of NeuroAnimator.
 //! - [`synthesis`]: mass-spring motion synthesis — time-based reflex controllers, the Table 1
-//!   objective terms, the Table 2 perturbations, parallel hill climbing and simulated annealing.
+//!   objective terms, the Table 2 perturbations as a search operator; parallel hill climbing
+//!   and simulated annealing come from [`control::search`].
 //! - [`emulator`]: NeuroAnimator emulators — a sigmoid MLP with backprop to weights and inputs,
 //!   the delta / local-frame / normalization transforms, and training (argmin CG or L-BFGS,
 //!   momentum mini-batches) with early stopping; [`emulator::hierarchy`]: the hierarchical
@@ -31,9 +32,10 @@
 //!   NeuroAnimator control learning: [`control::objective`] (composable objective terms with
 //!   gradients) and [`control::bptt`] (backpropagation through time through any differentiable
 //!   step, e.g. an emulator; plain and momentum descent on bounded piecewise-constant controls);
-//!   [`control::search`]: box-bounded searches sharing one trace and budget — simulated
-//!   annealing, Nelder–Mead, parallel hill climbing and BPTT — on emulator or simulator
-//!   rollouts of the same controller (§6 baselines).
+//!   [`control::search`]: the one search library, with one trace and budget — simulated
+//!   annealing and parallel hill climbing generic over a proposal operator (box steps or the
+//!   mass-spring reflex perturbations), Nelder–Mead and BPTT — on emulator or simulator
+//!   rollouts of the same controller (§6 baselines) or on reflex controllers.
 //! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
 //!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
@@ -57,7 +59,7 @@
 //! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
 //! | hierarchical dolphin emulator, regularization | [`emulator::hierarchy`] | NeuroAnimator §3.3, §5.3 |
 //! | BPTT control learning, plain / momentum descent | [`control::bptt`], [`control::objective`] | NeuroAnimator §4, eq. 11–15 |
-//! | simulated annealing, Nelder–Mead, parallel hill climbing over a box | [`control::search`] | NeuroAnimator §6 baselines |
+//! | simulated annealing, parallel hill climbing (any proposal operator), Nelder–Mead | [`control::search`] | NeuroAnimator §6 baselines; mass-spring Fig. 4, 6 |
 //! | Gaussian reward projection | [`bellman::projection`] | LBC §4.1 fixed weights |
 //! | z-weights, log-sum-exp | [`bellman::combine`] | LBC eq. 1, 11 |
 //! | grid DP (linear / ordinary backup) | [`bellman::grid_dp`] | LBC §5.2, Todorov 2009 |

@@ -1,22 +1,29 @@
-//! # Box-bounded search: one problem, one trace, one budget (NeuroAnimator §6)
+//! # Gradient-free and gradient searches: one problem, one trace, one budget
 //!
 //! NeuroAnimator §6 compares control learning by backpropagation through time with
 //! gradient-free searches — simulated annealing and the simplex method — on the same
-//! controller: the gradient-free methods need 500–3,500 iterations, BPTT about 20. This module
-//! is the common ground for that comparison:
+//! controller; mass-spring motion synthesis (Christensen, Marks, Ngo 1995) finds reflex
+//! controllers by parallel hill climbing, with annealing as our baseline. This module is the
+//! one library both use:
 //!
-//! - a problem is a function J(v) over a box B = [low, high] ⊂ ℝᵈ ([`SearchProblem`],
-//!   [`SearchBox`]), optionally with a gradient;
+//! - a search minimizes J over points of some type T — a box point v ∈ B = [low, high] ⊂ ℝᵈ
+//!   ([`SearchProblem`], [`SearchBox`]) or a reflex controller ([`crate::synthesis`]);
+//! - the gradient-free searches are generic over a *proposal operator* ([`Perturb`]): how a
+//!   neighbour of a point is drawn, with a step size the search may cool or adapt. A box
+//!   perturbs by Gaussian steps scaled to its half-widths; a reflex controller by the
+//!   perturbation mix of the mass-spring paper's Table 2;
 //! - every optimizer spends a [`Budget`] (iterations, objective evaluations, wall seconds) and
-//!   returns the same trace: one [`TraceRow`] per iteration with the cumulative evaluations,
-//!   gradients and seconds and the best objective so far;
+//!   returns the same [`SearchResult`]: one [`TraceRow`] per iteration with the cumulative
+//!   evaluations, gradients and seconds and the best objective so far, and every
+//!   [`Evaluation`] in order;
 //! - [`time_to_target`] reads off the first iteration (evaluations, seconds) at which the best
 //!   objective reached a target.
 //!
-//! The optimizers: [`anneal`] (simulated annealing with Gaussian proposals scaled to the box),
-//! [`nelder_mead`] (argmin's Nelder–Mead simplex, evaluated at the projection onto the box),
-//! [`hill_climb()`] (parallel hill climbing: a batch of perturbations of the best point per
-//! iteration, evaluated with rayon) and [`bptt_search`] (plain or momentum descent of
+//! The optimizers: [`anneal_from`] (simulated annealing from a set of candidate starts) and
+//! [`climb_from`] (parallel hill climbing on a ranked set), generic over T and the operator;
+//! their box forms [`anneal`] (starts: x₀ and perturbed copies) and [`hill_climb()`] (a set
+//! of one, with an adaptive step); [`nelder_mead`] (argmin's Nelder–Mead simplex, evaluated at
+//! the projection onto the box) and [`bptt_search`] (plain or momentum descent of
 //! [`super::bptt::learn_until`] under the same budget). The adapters [`BpttProblem`] (an
 //! emulator rollout, with its BPTT gradient) and [`ReplayProblem`] (the same knots replayed on
 //! a physical simulator) make a control problem a search problem, so each method runs on
@@ -30,13 +37,14 @@
 //! - *Seconds* are wall-clock seconds from the start of the optimizer call (plus any
 //!   [`Spent`] set-up, such as the BPTT step-scale estimate) to the end of the iteration,
 //!   bookkeeping included. They are the only non-deterministic field of a trace.
-//! - Iteration 0 is the initialization (the start point, plus annealing's spread samples or
-//!   the initial simplex); iteration k ≥ 1 is one proposal (annealing), one reflection /
-//!   expansion / contraction / shrink step (simplex), one batch (hill climbing) or one
-//!   gradient step (BPTT).
+//! - Iteration 0 is the initialization (the start points, e.g. annealing's spread samples,
+//!   hill climbing's initial set or the initial simplex); iteration k ≥ 1 is one proposal
+//!   (annealing), one reflection / expansion / contraction / shrink step (simplex), one batch
+//!   (hill climbing) or one gradient step (BPTT).
 //! - Budgets are checked at the end of every iteration (iteration 0 included), so an
 //!   iteration is never cut short: evaluations can exceed `max_evaluations` by less than one
-//!   iteration's worth (a simplex shrink costs d + 2, a hill-climbing batch its size).
+//!   iteration's worth (a simplex shrink costs d + 2). Hill climbing, whose batch can be split
+//!   freely, cuts its last batch to the evaluation limit.
 //!
 //! Non-finite objective values (a simulation that blew up) rank worse than every finite one;
 //! they are never the best point.
@@ -44,27 +52,54 @@
 //! ## Determinism
 //!
 //! Randomness comes from ChaCha8 streams of one seed: stream j for the j-th initial sample
-//! ([`init_rng`]), stream 2⁴⁰ + i for proposal i ([`iteration_rng`]); the mass-spring
-//! searches of [`crate::synthesis`] use the same streams and the same ranked insertion
-//! ([`climb_batch`]). Proposals evaluated in parallel are combined in a fixed order, so a
-//! result depends on the seed and the settings, never on the number of threads.
+//! ([`init_rng`]), stream 2⁴⁰ + i for proposal i ([`iteration_rng`]). Proposals evaluated in
+//! parallel are combined in a fixed order, so a result depends on the seed and the settings,
+//! never on the number of threads.
 
 pub mod adapters;
 pub mod annealing;
 pub mod hill_climb;
 pub mod simplex;
+pub mod trace;
 
 pub use adapters::{
     bptt_search, trace_from_bptt, BpttProblem, ReplayProblem, ReplayRollout, StateMap,
 };
-pub use annealing::{anneal, robust_scale, AnnealingConfig};
-pub use hill_climb::{
-    climb_batch, hill_climb, init_rng, insert_by_rank, iteration_rng, ClimbConfig,
-};
+pub use annealing::{anneal, anneal_from, robust_scale, AnnealingConfig, Geometric};
+pub use hill_climb::{climb_batch, climb_from, hill_climb, insert_by_rank, ClimbConfig};
 pub use simplex::{nelder_mead, SimplexConfig};
+pub use trace::{
+    time_to_target, Budget, Evaluation, Progress, Reached, SearchResult, Spent, StopReason,
+    TraceRow,
+};
 
 use super::ControlError;
-use std::time::Instant;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use trace::Tracker;
+
+/// A proposal operator: how a gradient-free search draws a neighbour of a point of type `T`.
+pub trait Perturb<T>: Sync {
+    /// A neighbour of `x`, drawn from `rng`, at step size `scale` (in the operator's own unit;
+    /// an operator with a fixed size ignores it).
+    fn perturb(&self, rng: &mut ChaCha8Rng, x: &T, scale: f64) -> T;
+}
+
+/// The random stream of initial sample `j`: ChaCha8 seeded with `seed`, stream j.
+pub fn init_rng(seed: u64, j: usize) -> ChaCha8Rng {
+    let mut r = ChaCha8Rng::seed_from_u64(seed);
+    r.set_stream(j as u64);
+    r
+}
+
+/// The random stream of iteration (proposal) `i` ≥ 1: ChaCha8 seeded with `seed`, stream
+/// 2⁴⁰ + i.
+pub fn iteration_rng(seed: u64, i: usize) -> ChaCha8Rng {
+    let mut r = ChaCha8Rng::seed_from_u64(seed);
+    r.set_stream((1u64 << 40) + i as u64);
+    r
+}
 
 /// A box-bounded minimization problem over a flat vector v ∈ [low, high] ⊂ ℝᵈ.
 ///
@@ -153,165 +188,19 @@ impl SearchBox {
     }
 }
 
-/// Why a search stopped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StopReason {
-    /// The iteration limit was reached.
-    Iterations,
-    /// The evaluation limit was reached (possibly exceeded within the last iteration).
-    Evaluations,
-    /// The wall-clock limit was reached.
-    Seconds,
-    /// The method converged (the simplex's vertex values agree to its tolerance).
-    Converged,
-    /// BPTT met a non-finite objective and cannot take a step.
-    NonFinite,
-}
-
-/// Limits on a search; it stops at the end of the first iteration at which any set limit is
-/// reached. At least one must be set.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Budget {
-    /// Iterations after the initialization (iteration 0).
-    pub max_iterations: Option<usize>,
-    /// Objective evaluations, the initialization's included.
-    pub max_evaluations: Option<usize>,
-    /// Wall-clock seconds (timing-dependent: the other two are reproducible).
-    pub max_seconds: Option<f64>,
-}
-
-impl Budget {
-    /// At most `n` iterations.
-    pub fn iterations(n: usize) -> Self {
-        Self {
-            max_iterations: Some(n),
-            ..Self::default()
+/// Gaussian steps scaled to the box: y = Π(x + σ h ⊙ z), z ~ N(0, I), h the half-widths and Π
+/// the projection onto the box; σ is the `scale`.
+impl Perturb<Vec<f64>> for SearchBox {
+    fn perturb(&self, rng: &mut ChaCha8Rng, x: &Vec<f64>, scale: f64) -> Vec<f64> {
+        use rand::Rng;
+        let mut y = x.clone();
+        for (i, y) in y.iter_mut().enumerate() {
+            let z: f64 = rng.sample(StandardNormal);
+            *y += scale * self.half_width(i) * z;
         }
+        self.project(&mut y);
+        y
     }
-
-    /// At most (about, see the module doc) `n` objective evaluations.
-    pub fn evaluations(n: usize) -> Self {
-        Self {
-            max_evaluations: Some(n),
-            ..Self::default()
-        }
-    }
-
-    /// At most `s` wall-clock seconds.
-    pub fn seconds(s: f64) -> Self {
-        Self {
-            max_seconds: Some(s),
-            ..Self::default()
-        }
-    }
-
-    /// This budget with an evaluation limit as well.
-    pub fn with_evaluations(mut self, n: usize) -> Self {
-        self.max_evaluations = Some(n);
-        self
-    }
-
-    /// This budget with a wall-clock limit as well.
-    pub fn with_seconds(mut self, s: f64) -> Self {
-        self.max_seconds = Some(s);
-        self
-    }
-
-    /// Checks that some limit is set and the seconds are not NaN or negative.
-    pub fn validate(&self) -> Result<(), ControlError> {
-        if self.max_iterations.is_none()
-            && self.max_evaluations.is_none()
-            && self.max_seconds.is_none()
-        {
-            return Err(ControlError::UnboundedBudget);
-        }
-        if let Some(s) = self.max_seconds {
-            if s.is_nan() || s < 0.0 {
-                return Err(ControlError::InvalidSetting {
-                    what: "budget seconds",
-                    value: s,
-                });
-            }
-        }
-        Ok(())
-    }
-
-    /// The limit that a search reaches with `row` as its latest row, if any (iterations, then
-    /// evaluations, then seconds).
-    pub fn exhausted(&self, row: &TraceRow) -> Option<StopReason> {
-        if self.max_iterations.is_some_and(|n| row.iteration >= n) {
-            Some(StopReason::Iterations)
-        } else if self.max_evaluations.is_some_and(|n| row.evaluations >= n) {
-            Some(StopReason::Evaluations)
-        } else if self.max_seconds.is_some_and(|s| row.seconds >= s) {
-            Some(StopReason::Seconds)
-        } else {
-            None
-        }
-    }
-}
-
-/// One iteration of a search, with cumulative costs.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TraceRow {
-    /// Iteration (0: the initialization).
-    pub iteration: usize,
-    /// Objective evaluations so far (a gradient counts one).
-    pub evaluations: usize,
-    /// Gradient evaluations (backward passes) so far; 0 for gradient-free methods.
-    pub gradients: usize,
-    /// Wall-clock seconds so far.
-    pub seconds: f64,
-    /// Best objective evaluated so far (+∞ while none was finite).
-    pub best: f64,
-    /// Objective at the method's current point: the annealing state, the best simplex vertex,
-    /// the hill climber's point, the BPTT iterate.
-    pub current: f64,
-}
-
-/// Set-up costs charged to a search before its first iteration (e.g. the BPTT step-scale
-/// estimate); they offset every row's counts.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Spent {
-    /// Objective evaluations.
-    pub evaluations: usize,
-    /// Gradient evaluations.
-    pub gradients: usize,
-    /// Wall-clock seconds.
-    pub seconds: f64,
-}
-
-/// What a search returns.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SearchResult {
-    /// The best point evaluated (inside the box).
-    pub best: Vec<f64>,
-    /// J at `best` (+∞ when no evaluation was finite).
-    pub best_value: f64,
-    /// One row per iteration, 0 first.
-    pub trace: Vec<TraceRow>,
-    /// Why it stopped.
-    pub stop: StopReason,
-}
-
-/// Where a trace first reached a target objective.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Reached {
-    /// Iteration.
-    pub iteration: usize,
-    /// Objective evaluations spent by then.
-    pub evaluations: usize,
-    /// Seconds spent by then.
-    pub seconds: f64,
-}
-
-/// The first row of `trace` whose best objective is ≤ `target`, or `None` if none is.
-pub fn time_to_target(trace: &[TraceRow], target: f64) -> Option<Reached> {
-    trace.iter().find(|r| r.best <= target).map(|r| Reached {
-        iteration: r.iteration,
-        evaluations: r.evaluations,
-        seconds: r.seconds,
-    })
 }
 
 /// Non-finite values rank last: NaN becomes +∞.
@@ -320,77 +209,6 @@ fn rank_value(f: f64) -> f64 {
         f64::INFINITY
     } else {
         f
-    }
-}
-
-/// The one place where counts, timing, the best point and budget checks live; every optimizer
-/// reports its evaluations and iterations here.
-struct Tracker {
-    budget: Budget,
-    start: Instant,
-    offset: Spent,
-    evaluations: usize,
-    gradients: usize,
-    best: Vec<f64>,
-    best_value: f64,
-    rows: Vec<TraceRow>,
-}
-
-impl Tracker {
-    fn new(budget: &Budget, d: usize, offset: Spent) -> Result<Self, ControlError> {
-        budget.validate()?;
-        Ok(Self {
-            budget: *budget,
-            start: Instant::now(),
-            offset,
-            evaluations: 0,
-            gradients: 0,
-            best: vec![f64::NAN; d],
-            best_value: f64::INFINITY,
-            rows: Vec::new(),
-        })
-    }
-
-    /// Counts `n` evaluations.
-    fn count(&mut self, n: usize) {
-        self.evaluations += n;
-    }
-
-    /// Offers a point evaluated (and counted) elsewhere as the best one.
-    fn offer(&mut self, v: &[f64], f: f64) {
-        if f.is_finite() && f < self.best_value {
-            self.best_value = f;
-            self.best.copy_from_slice(v);
-        }
-    }
-
-    /// Counts one evaluation of `v` with value `f` and offers it as the best.
-    fn evaluated(&mut self, v: &[f64], f: f64) {
-        self.count(1);
-        self.offer(v, f);
-    }
-
-    /// Records the row of `iteration` and returns the limit reached, if any.
-    fn close(&mut self, iteration: usize, current: f64) -> Option<StopReason> {
-        let row = TraceRow {
-            iteration,
-            evaluations: self.offset.evaluations + self.evaluations,
-            gradients: self.offset.gradients + self.gradients,
-            seconds: self.offset.seconds + self.start.elapsed().as_secs_f64(),
-            best: self.best_value,
-            current,
-        };
-        self.rows.push(row);
-        self.budget.exhausted(&row)
-    }
-
-    fn finish(self, stop: StopReason) -> SearchResult {
-        SearchResult {
-            best: self.best,
-            best_value: self.best_value,
-            trace: self.rows,
-            stop,
-        }
     }
 }
 
@@ -526,6 +344,9 @@ pub(crate) mod test_problems {
         assert_eq!(p.outside(), 0, "points outside the box were evaluated");
         let last = r.trace.last().unwrap();
         assert_eq!(last.evaluations, p.calls());
+        assert_eq!(r.evaluations.len(), p.calls());
+        assert!(r.evaluations.windows(2).all(|w| w[1].best <= w[0].best));
+        assert_eq!(r.evaluations.last().unwrap().best, r.best_value);
         assert!(r.trace.windows(2).all(|w| w[1].best <= w[0].best));
         assert!(r.trace.windows(2).all(|w| w[1].seconds >= w[0].seconds));
         assert!(r
@@ -542,57 +363,6 @@ pub(crate) mod test_problems {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn row(iteration: usize, evaluations: usize, seconds: f64, best: f64) -> TraceRow {
-        TraceRow {
-            iteration,
-            evaluations,
-            gradients: 0,
-            seconds,
-            best,
-            current: best,
-        }
-    }
-
-    #[test]
-    fn time_to_target_finds_the_first_row_at_or_below_the_target() {
-        let t = [
-            row(0, 5, 0.1, 10.0),
-            row(1, 6, 0.2, 4.0),
-            row(2, 9, 0.4, 2.0),
-            row(3, 10, 0.5, 2.0),
-        ];
-        let r = time_to_target(&t, 2.0).unwrap();
-        assert_eq!((r.iteration, r.evaluations, r.seconds), (2, 9, 0.4));
-        assert_eq!(time_to_target(&t, 100.0).unwrap().iteration, 0);
-        assert_eq!(time_to_target(&t, 4.0).unwrap().evaluations, 6);
-        assert!(time_to_target(&t, 1.9).is_none());
-        assert!(time_to_target(&[], 1.0).is_none());
-    }
-
-    #[test]
-    fn budgets_stop_at_the_first_limit_reached() {
-        let b = Budget::iterations(3).with_evaluations(10);
-        assert_eq!(b.exhausted(&row(2, 9, 0.0, 1.0)), None);
-        assert_eq!(
-            b.exhausted(&row(3, 9, 0.0, 1.0)),
-            Some(StopReason::Iterations)
-        );
-        assert_eq!(
-            b.exhausted(&row(2, 11, 0.0, 1.0)),
-            Some(StopReason::Evaluations)
-        );
-        assert_eq!(
-            Budget::seconds(0.0).exhausted(&row(0, 1, 0.0, 1.0)),
-            Some(StopReason::Seconds)
-        );
-        assert_eq!(
-            Budget::default().validate(),
-            Err(ControlError::UnboundedBudget)
-        );
-        assert!(Budget::seconds(f64::NAN).validate().is_err());
-        assert!(b.validate().is_ok());
-    }
 
     #[test]
     fn search_box_projects_and_checks() {

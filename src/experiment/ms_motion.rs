@@ -22,13 +22,13 @@ use super::plot::{Figure, Legend, Mark, Panel, Series};
 use super::report::{sig, Findings, Verdict};
 use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
 use super::{Error, Experiment, Job, RunContext};
+use crate::control::search::SearchResult;
 use crate::physics::lattice::{Floor, LatticeModel};
 use crate::physics::reflex::Reflex;
 use crate::row;
-use crate::synthesis::annealing::{anneal, AnnealConfig};
-use crate::synthesis::controller::SimSetup;
-use crate::synthesis::hill_climb::{hill_climb, HillClimbConfig, SearchResult};
+use crate::synthesis::controller::{Controller, SimSetup};
 use crate::synthesis::objective::{Objective, Orientation, Term, Weighted};
+use crate::synthesis::search::{anneal, hill_climb, learning_curve, AnnealConfig, HillClimbConfig};
 use crate::synthesis::Problem;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -276,10 +276,10 @@ fn progress_fn(pb: &indicatif::ProgressBar) -> impl Fn(usize) + Sync + '_ {
     move |done| pb.set_position(done as u64)
 }
 
-fn search_table(r: &SearchResult) -> Table {
+fn search_table(r: &SearchResult<Controller>) -> Table {
     let mut t = Table::new(&["iteration", "objective", "best"]);
-    for e in &r.trace {
-        t.push(row![e.iteration, e.objective, e.best]);
+    for e in learning_curve(r) {
+        t.push(row![e.iteration, e.value, e.best]);
     }
     t
 }
@@ -292,15 +292,17 @@ impl Job for MotionJob {
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let p = &self.0;
         let problem = p.problem()?;
-        let eval = |c: &crate::synthesis::controller::Controller| problem.evaluate(c);
+        let eval = |c: &Controller| problem.evaluate(c);
         let pb = ctx.progress(
             p.iterations as u64,
             &format!("hill climbing ({})", p.motion.name()),
         );
         let t0 = Instant::now();
-        let res = ctx.stage("hill climbing", || {
-            hill_climb(&eval, &p.hill_config(), ctx.seed, &progress_fn(&pb))
-        });
+        let res = ctx
+            .stage("hill climbing", || {
+                hill_climb(&eval, &p.hill_config(), ctx.seed, &progress_fn(&pb))
+            })
+            .map_err(super::other)?;
         let seconds = t0.elapsed().as_secs_f64();
         pb.finish_and_clear();
         let tr = problem.trajectory(&res.best).map_err(super::other)?;
@@ -328,11 +330,10 @@ impl Job for MotionJob {
         for ((name, _), v) in measures().iter().zip(mobj.values(&tr)) {
             meas.push(row![*name, v]);
         }
-        let init_best = res
-            .trace
+        let init_best = learning_curve(&res)
             .iter()
             .filter(|e| e.iteration == 0)
-            .map(|e| e.objective)
+            .map(|e| e.value)
             .fold(f64::NEG_INFINITY, f64::max);
         let mut summary = Table::new(&[
             "motion",
@@ -349,7 +350,7 @@ impl Job for MotionJob {
             "best_objective",
             "filmstrip_frames",
         ]);
-        let evals = res.trace.len();
+        let evals = res.evaluations.len();
         summary.push(row![
             p.motion.name(),
             p.lattice.as_str(),
@@ -362,7 +363,7 @@ impl Job for MotionJob {
             seconds,
             evals as f64 / seconds.max(1e-9),
             init_best,
-            res.best_value,
+            -res.best_value,
             p.filmstrip_frames
         ]);
         let mut traj = Table::new(&["t", "regime", "mass", "x", "y", "z"]);
@@ -689,7 +690,7 @@ impl Job for LearningJob {
             .as_ref()
             .ok_or_else(|| super::other("missing anneal settings"))?;
         let problem = p.problem()?;
-        let eval = |c: &crate::synthesis::controller::Controller| problem.evaluate(c);
+        let eval = |c: &Controller| problem.evaluate(c);
         let hc_cfg = p.hill_config();
         let sa_cfg = AnnealConfig {
             initial: p.set_size,
@@ -733,10 +734,11 @@ impl Job for LearningJob {
             ("hill_climbing", &hc, hc_s),
             ("simulated_annealing", &sa, sa_s),
         ] {
-            for e in &r.trace {
-                learning.push(row![name, e.iteration, e.objective, e.best]);
+            let r = r.as_ref().map_err(super::other)?;
+            for e in learning_curve(r) {
+                learning.push(row![name, e.iteration, e.value, e.best]);
             }
-            summary.push(row![name, r.trace.len(), s, wall, r.best_value]);
+            summary.push(row![name, r.evaluations.len(), s, wall, -r.best_value]);
         }
         let mut t = Tables::default();
         t.insert("learning", learning);

@@ -43,7 +43,7 @@ use super::{mix_seed, Error, Experiment, Job, RunContext};
 use crate::control::bptt::{Bptt, Descent};
 use crate::control::search::{
     anneal, bptt_search, hill_climb, nelder_mead, time_to_target, AnnealingConfig, BpttProblem,
-    Budget, ClimbConfig, ReplayProblem, SearchProblem, SearchResult, SimplexConfig,
+    Budget, ClimbConfig, Geometric, ReplayProblem, SearchProblem, SearchResult, SimplexConfig,
 };
 use crate::emulator::hierarchy::{self, global_state};
 use crate::row;
@@ -133,14 +133,8 @@ impl AnnealingSettings {
         let planned = evaluations.saturating_sub(self.initial_samples + 1).max(2);
         AnnealingConfig {
             initial_samples: self.initial_samples,
-            start_temperature: self.start_temperature,
-            cooling: AnnealingConfig::factor_over(
-                self.start_temperature,
-                self.end_temperature,
-                planned,
-            ),
-            step: self.step,
-            step_cooling: AnnealingConfig::factor_over(self.step, self.end_step, planned),
+            temperature: Geometric::over(self.start_temperature, self.end_temperature, planned),
+            step: Geometric::over(self.step, self.end_step, planned),
         }
     }
 }
@@ -755,8 +749,9 @@ mod tests {
             end_step: 0.01,
         };
         let c = a.config(1009);
-        assert!((c.cooling.powi(999) * 0.5 - 0.005).abs() < 1e-9);
-        assert!((c.step_cooling.powi(999) * 0.1 - 0.01).abs() < 1e-9);
+        assert_eq!(c.temperature.at(1.0, 1), 0.5);
+        assert!((c.temperature.at(1.0, 1000) - 0.005).abs() < 1e-9);
+        assert!((c.step.at(1.0, 1000) - 0.01).abs() < 1e-9);
     }
 
     #[test]

@@ -3,8 +3,9 @@
 //! Controllers that pick one of the 12 actuation reflexes as a function of elapsed time
 //! ([`controller`]), objective functions built from the terms of the paper's Table 1
 //! ([`objective`]), the perturbation operator of Table 2 ([`perturb`]), and two gradient-free
-//! searches over the controller space: the paper's parallel hill climbing (Fig. 4,
-//! [`hill_climb`]) and simulated annealing as a baseline ([`annealing`]).
+//! searches over the controller space, run by the shared library of
+//! [`crate::control::search`] ([`search`]): the paper's parallel hill climbing (Fig. 4) and
+//! simulated annealing as a baseline.
 //!
 //! The searches need only an evaluation `controller → objective value`; [`Problem`] bundles
 //! the simulation setup and the objective and evaluates one controller by simulating the
@@ -14,11 +15,10 @@
 //! - J. Christensen, J. Marks, J. T. Ngo, *Automatic Motion Synthesis for 3D Mass-Spring
 //!   Models*, The Visual Computer 13(1), 1997 (MERL TR95-01).
 
-pub mod annealing;
 pub mod controller;
-pub mod hill_climb;
 pub mod objective;
 pub mod perturb;
+pub mod search;
 
 use crate::physics::lattice::LatticeError;
 use crate::physics::BlowUp;

@@ -185,7 +185,7 @@ where
 {
     budget.validate()?;
     let v = start_point(&problem.search_box, v0)?;
-    let mut best = vec![f64::NAN; v.len()];
+    let mut best = v.clone();
     let mut best_value = f64::INFINITY;
     let mut trace = Vec::new();
     let mut stop = None;
@@ -211,6 +211,7 @@ where
         best,
         best_value,
         trace,
+        evaluations: Vec::new(),
         stop,
     };
     Ok((result, learned))

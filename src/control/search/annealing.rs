@@ -1,30 +1,31 @@
-//! Simulated annealing over a box (the gradient-free baseline of NeuroAnimator §6).
+//! Simulated annealing, generic over the proposal operator (the gradient-free baseline of
+//! NeuroAnimator §6 and of our mass-spring learning plot).
 //!
-//! Initialization (iteration 0): the start point x_0 and `initial_samples` points
-//! Π(x_0 + σ_1 h ⊙ z_j) (stream j, [`init_rng`]) are evaluated; the search starts from the
-//! best of them, and the temperature scale is their spread s = [`robust_scale`] of the values.
-//! Iteration k ≥ 1 (stream [`iteration_rng`]`(seed, k)`) proposes
+//! Initialization (iteration 0): the candidate starts are evaluated (in parallel); the search
+//! starts from the first best of them, and the temperature scale is their spread
+//! s = [`robust_scale`] of the values. Iteration k ≥ 1 (stream [`iteration_rng`]`(seed, k)`)
+//! proposes y = perturb(x, σ_k) and accepts it by the Metropolis rule for minimization,
+//! J(y) ≤ J(x) or u < exp(−(J(y) − J(x)) / T_k) with u ~ U(0, 1), where temperature and step
+//! follow geometric schedules ([`Geometric`]),
 //!
 //! ```text
-//! y = Π(x + σ_k h ⊙ z),   z ~ N(0, I),   σ_k = step · step_cooling^(k−1)
+//! T_k = s · T_1 · r_T^((k − 1)/S_T),      σ_k = σ_1 · r_σ^((k − 1)/S_σ).
 //! ```
 //!
-//! (h the half-widths of the box, Π the projection onto it) and accepts it by the Metropolis
-//! rule for minimization, f(y) ≤ f(x) or u < exp(−(f(y) − f(x)) / T_k) with u ~ U(0, 1), at
-//! the geometrically cooled temperature T_k = start_temperature · s · cooling^(k−1).
 //! Non-finite proposals are never accepted (unless the current point is non-finite too).
+//! [`anneal_from`] takes any starts and operator; [`anneal`] is the box form: the starts are
+//! x_0 and `initial_samples` perturbed copies Π(x_0 + σ_1 h ⊙ z_j) (stream j, [`init_rng`]).
 //!
 //! ## References
 //! - S. Kirkpatrick, C. D. Gelatt, M. P. Vecchi, *Optimization by simulated annealing*,
 //!   Science 220, 1983.
 
 use super::{
-    check_setting, init_rng, iteration_rng, rank_value, start_point, Budget, SearchProblem,
-    SearchResult, Spent, Tracker,
+    check_setting, init_rng, iteration_rng, rank_value, start_point, Budget, Perturb, Progress,
+    SearchProblem, SearchResult, Spent, Tracker,
 };
 use crate::control::ControlError;
 use rand::Rng;
-use rand_distr::StandardNormal;
 use rayon::prelude::*;
 
 /// A robust standard deviation of `v`: 1.4826 × the median absolute deviation (a few
@@ -52,68 +53,140 @@ pub fn robust_scale(v: &[f64]) -> f64 {
     }
 }
 
-/// Settings of [`anneal`].
+/// A geometric schedule x_k = start · ratio^((k − 1) / span), k = 1, 2, … (it keeps falling
+/// past a planned length).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Geometric {
+    /// x_1.
+    pub start: f64,
+    /// The factor over `span` iterations.
+    pub ratio: f64,
+    /// Iterations over which the value changes by `ratio`.
+    pub span: f64,
+}
+
+impl Geometric {
+    /// From `start` at iteration 1 to `end` at iteration `iterations` (at least 2).
+    pub fn over(start: f64, end: f64, iterations: usize) -> Self {
+        Self {
+            start,
+            ratio: end / start,
+            span: (iterations.max(2) - 1) as f64,
+        }
+    }
+
+    /// From `start`, multiplied by `factor` every iteration.
+    pub fn per_iteration(start: f64, factor: f64) -> Self {
+        Self {
+            start,
+            ratio: factor,
+            span: 1.0,
+        }
+    }
+
+    /// The constant `value`.
+    pub fn constant(value: f64) -> Self {
+        Self::per_iteration(value, 1.0)
+    }
+
+    /// `scale` · x_k (k ≥ 1), computed as (scale · start) · ratio^((k − 1) / span).
+    pub fn at(&self, scale: f64, k: usize) -> f64 {
+        scale * self.start * self.ratio.powf((k - 1) as f64 / self.span)
+    }
+
+    fn validate(&self, what: &'static str) -> Result<(), ControlError> {
+        check_setting(what, self.start, 0.0, f64::MAX, false)?;
+        check_setting(what, self.ratio, 0.0, f64::MAX, false)?;
+        check_setting(what, self.span, 0.0, f64::MAX, false)
+    }
+}
+
+/// Settings of [`anneal_from`] and [`anneal`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AnnealingConfig {
-    /// Perturbed copies of the start point evaluated first to measure the objective's spread.
+    /// Perturbed copies of the start point evaluated first to measure the objective's spread
+    /// (box form [`anneal`] only: [`anneal_from`] is given its starts).
     pub initial_samples: usize,
-    /// Initial temperature T_1 as a multiple of that spread.
-    pub start_temperature: f64,
-    /// Temperature factor per iteration, in (0, 1].
-    pub cooling: f64,
-    /// Initial proposal standard deviation σ_1, in half-widths of the box.
-    pub step: f64,
-    /// Step factor per iteration, in (0, 1].
-    pub step_cooling: f64,
+    /// Temperature T_k in units of that spread.
+    pub temperature: Geometric,
+    /// Proposal step size σ_k, in the operator's unit (half-widths of a box).
+    pub step: Geometric,
 }
 
 impl Default for AnnealingConfig {
-    /// 8 spread samples, T_1 = 0.5 spread cooling by 0.99, σ_1 = 0.1 half-widths cooling by
-    /// 0.998.
+    /// 8 spread samples, T_1 = 0.5 spread cooling by 0.99 per iteration, σ_1 = 0.1 half-widths
+    /// cooling by 0.998.
     fn default() -> Self {
         Self {
             initial_samples: 8,
-            start_temperature: 0.5,
-            cooling: 0.99,
-            step: 0.1,
-            step_cooling: 0.998,
+            temperature: Geometric::per_iteration(0.5, 0.99),
+            step: Geometric::per_iteration(0.1, 0.998),
         }
     }
 }
 
 impl AnnealingConfig {
-    /// The factor per iteration that takes a quantity from `start` to `end` over `iterations`
-    /// iterations (geometric cooling over a planned length).
-    pub fn factor_over(start: f64, end: f64, iterations: usize) -> f64 {
-        (end / start).powf(1.0 / iterations.max(2).saturating_sub(1) as f64)
-    }
-
     fn validate(&self) -> Result<(), ControlError> {
-        check_setting(
-            "start temperature",
-            self.start_temperature,
-            0.0,
-            f64::MAX,
-            false,
-        )?;
-        check_setting("cooling", self.cooling, 0.0, 1.0, false)?;
-        check_setting("step", self.step, 0.0, f64::MAX, false)?;
-        check_setting("step cooling", self.step_cooling, 0.0, 1.0, false)
+        self.temperature.validate("temperature")?;
+        self.step.validate("step")
     }
 }
 
-/// Writes Π(x + σ h ⊙ z) into `y`, z drawn from `rng`.
-fn propose<R: Rng>(rng: &mut R, bx: &super::SearchBox, x: &[f64], sigma: f64, y: &mut [f64]) {
-    for (i, (y, x)) in y.iter_mut().zip(x).enumerate() {
-        let z: f64 = rng.sample(StandardNormal);
-        *y = x + sigma * bx.half_width(i) * z;
+/// Simulated annealing minimizing `objective` from the best of `starts` (evaluated in
+/// parallel) with proposals from `operator`, within `budget`; `progress` sees every row.
+pub fn anneal_from<T, F, P>(
+    objective: &F,
+    operator: &P,
+    starts: Vec<T>,
+    cfg: &AnnealingConfig,
+    seed: u64,
+    budget: &Budget,
+    progress: Option<Progress<'_>>,
+) -> Result<SearchResult<T>, ControlError>
+where
+    T: Clone + Send + Sync,
+    F: Fn(&T) -> f64 + Sync,
+    P: Perturb<T> + ?Sized,
+{
+    cfg.validate()?;
+    let Some(first) = starts.first() else {
+        return Err(ControlError::InvalidSetting {
+            what: "start points",
+            value: 0.0,
+        });
+    };
+    let mut tr = Tracker::new(budget, first.clone(), Spent::default())?.with_progress(progress);
+    let values: Vec<f64> = starts.par_iter().map(objective).collect();
+    let mut start = 0;
+    for (j, (y, f)) in starts.iter().zip(&values).enumerate() {
+        tr.evaluated(y, *f);
+        if rank_value(*f) < rank_value(values[start]) {
+            start = j;
+        }
     }
-    bx.project(y);
+    let spread = robust_scale(&values);
+    let mut fx = rank_value(values[start]);
+    let mut x = starts.into_iter().nth(start).expect("start indexes starts");
+    let mut stop = tr.close(0, fx);
+    let mut k = 0;
+    while stop.is_none() {
+        k += 1;
+        let mut rng = iteration_rng(seed, k);
+        let y = operator.perturb(&mut rng, &x, cfg.step.at(1.0, k));
+        let fy = rank_value(objective(&y));
+        tr.evaluated(&y, fy);
+        let u: f64 = rng.random();
+        if fy <= fx || u < (-(fy - fx) / cfg.temperature.at(spread, k)).exp() {
+            x = y;
+            fx = fy;
+        }
+        stop = tr.close(k, fx);
+    }
+    Ok(tr.finish(stop.expect("the loop ends on a stop reason")))
 }
 
-/// Simulated annealing minimizing `problem` from `x0` (projected onto the box) within
-/// `budget`; needs only the objective. The initial samples are evaluated in parallel, the
-/// iterations one after another.
+/// Simulated annealing minimizing a box `problem` from `x0` (projected onto the box) and
+/// `initial_samples` perturbed copies, within `budget`; needs only the objective.
 pub fn anneal<P: SearchProblem + ?Sized>(
     problem: &P,
     x0: &[f64],
@@ -121,53 +194,20 @@ pub fn anneal<P: SearchProblem + ?Sized>(
     seed: u64,
     budget: &Budget,
 ) -> Result<SearchResult, ControlError> {
-    cfg.validate()?;
     let bx = problem.search_box();
-    let x_start = start_point(bx, x0)?;
-    let d = x_start.len();
-    let mut tr = Tracker::new(budget, d, Spent::default())?;
-    let samples: Vec<(Vec<f64>, f64)> = (0..=cfg.initial_samples)
-        .into_par_iter()
-        .map(|j| {
-            let mut y = x_start.clone();
-            if j > 0 {
-                propose(&mut init_rng(seed, j - 1), bx, &x_start, cfg.step, &mut y);
-            }
-            let f = problem.evaluate(&y);
-            (y, f)
-        })
-        .collect();
-    let mut start = 0;
-    for (j, (y, f)) in samples.iter().enumerate() {
-        tr.evaluated(y, *f);
-        if rank_value(*f) < rank_value(samples[start].1) {
-            start = j;
-        }
-    }
-    let values: Vec<f64> = samples.iter().map(|s| s.1).collect();
-    let spread = robust_scale(&values);
-    let (mut x, mut fx) = (samples[start].0.clone(), rank_value(samples[start].1));
-    drop(samples);
-    let mut y = vec![0.0; d];
-    let mut stop = tr.close(0, fx);
-    let (mut temp, mut sigma) = (cfg.start_temperature * spread, cfg.step);
-    let mut k = 0;
-    while stop.is_none() {
-        k += 1;
-        let mut rng = iteration_rng(seed, k);
-        propose(&mut rng, bx, &x, sigma, &mut y);
-        let fy = rank_value(problem.evaluate(&y));
-        tr.evaluated(&y, fy);
-        let u: f64 = rng.random();
-        if fy <= fx || u < (-(fy - fx) / temp).exp() {
-            std::mem::swap(&mut x, &mut y);
-            fx = fy;
-        }
-        temp *= cfg.cooling;
-        sigma *= cfg.step_cooling;
-        stop = tr.close(k, fx);
-    }
-    Ok(tr.finish(stop.expect("the loop ends on a stop reason")))
+    let x = start_point(bx, x0)?;
+    let sigma = cfg.step.at(1.0, 1);
+    let copies = (0..cfg.initial_samples).map(|j| bx.perturb(&mut init_rng(seed, j), &x, sigma));
+    let starts: Vec<Vec<f64>> = std::iter::once(x.clone()).chain(copies).collect();
+    anneal_from(
+        &|v: &Vec<f64>| problem.evaluate(v),
+        bx,
+        starts,
+        cfg,
+        seed,
+        budget,
+        None,
+    )
 }
 
 #[cfg(test)]
@@ -179,9 +219,8 @@ mod tests {
     #[test]
     fn annealing_improves_a_shifted_sphere_reproducibly() {
         let cfg = AnnealingConfig {
-            cooling: AnnealingConfig::factor_over(1.0, 1e-4, 2000),
-            step_cooling: AnnealingConfig::factor_over(0.2, 0.01, 2000),
-            step: 0.2,
+            temperature: Geometric::over(0.5, 0.5e-4, 2000),
+            step: Geometric::over(0.2, 0.01, 2000),
             ..AnnealingConfig::default()
         };
         let run = || {
@@ -211,8 +250,8 @@ mod tests {
     #[test]
     fn annealing_minimizes_rosenbrock_in_a_box() {
         let cfg = AnnealingConfig {
-            cooling: AnnealingConfig::factor_over(1.0, 1e-5, 3000),
-            step_cooling: AnnealingConfig::factor_over(0.1, 0.005, 3000),
+            temperature: Geometric::over(0.5, 0.5e-5, 3000),
+            step: Geometric::over(0.1, 0.005, 3000),
             ..AnnealingConfig::default()
         };
         let p = Checked::new(Rosenbrock::new());
@@ -238,5 +277,24 @@ mod tests {
         assert_eq!(r.trace.len(), 1);
         assert_eq!(r.stop, StopReason::Seconds);
         assert_eq!(r.trace[0].evaluations, 9);
+    }
+
+    #[test]
+    fn geometric_schedules_hit_their_ends() {
+        let g = Geometric::over(2.0, 0.02, 101);
+        assert_eq!(g.at(1.0, 1), 2.0);
+        assert!((g.at(1.0, 101) - 0.02).abs() < 1e-15);
+        assert!((g.at(3.0, 51) - 0.6).abs() < 1e-14);
+        let p = Geometric::per_iteration(1.0, 0.5);
+        assert_eq!(p.at(1.0, 4), 0.125);
+        assert_eq!(Geometric::constant(0.3).at(1.0, 1000), 0.3);
+    }
+
+    #[test]
+    fn robust_scale_ignores_outliers() {
+        let v = [1.0, 2.0, 3.0, 4.0, 5.0, -1.0e6];
+        let s = robust_scale(&v);
+        assert!(s > 1.0 && s < 4.0, "{s}");
+        assert_eq!(robust_scale(&[2.0, 2.0]), 1.0);
     }
 }

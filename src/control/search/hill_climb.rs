@@ -1,57 +1,65 @@
-//! Parallel hill climbing over a box, and the ranked-set batch step it shares with the
-//! mass-spring search of [`crate::synthesis::hill_climb`].
+//! Parallel hill climbing on a ranked set, generic over the proposal operator (the search of
+//! Christensen, Marks, Ngo 1995, Fig. 4; a baseline of NeuroAnimator §6).
 //!
-//! Iteration t proposes a batch of b perturbations of the current point x,
-//! y_p = Π(x + σ_t h ⊙ z_p) with z_p ~ N(0, I), h the half-widths of the box and Π the
-//! projection onto it; the batch is evaluated in parallel and its best proposal replaces x if
-//! it is strictly better (ties go to the earliest proposal). The step adapts:
-//! σ_{t+1} = min(grow σ_t, step) after an improvement, shrink σ_t otherwise.
+//! The paper's loop, on a search set S of N points ranked by J (best first):
 //!
-//! This is [`climb_batch`] on a ranked set of one point: proposal i (numbered 1, 2, … across
-//! batches) draws from its own stream [`iteration_rng`]`(seed, i)`, and the proposals are
-//! inserted in order of i, so the result does not depend on the number of threads.
+//! ```text
+//! initialize S with N starting points; rank S
+//! for i = 1 … I:
+//!     pick a point of S uniformly at random; perturb it and evaluate it
+//!     insert it into S by rank; delete the lowest-ranked point of S
+//! return the best point of S
+//! ```
+//!
+//! ## Batching, step size and determinism
+//!
+//! Iteration t evaluates a batch of b consecutive proposals in parallel with rayon
+//! ([`climb_batch`]). Proposal i (numbered 1, 2, … across batches) draws everything it needs
+//! (the parent's rank in S, the perturbation) from its own ChaCha8 stream
+//! [`iteration_rng`]`(seed, i)`. All proposals of a batch pick their parents from S as it
+//! stood at the start of the batch; they are evaluated in parallel, then inserted into S one
+//! by one in order of i, exactly as the sequential loop would insert them. So:
+//!
+//! - with b = 1 this *is* the paper's sequential loop;
+//! - with b > 1 the only difference is that a proposal cannot descend from another proposal
+//!   of the same batch (parents are at most b − 1 insertions stale);
+//! - the result depends on the seed and the settings, never on the number of threads.
+//!
+//! Ties in rank go to the point that was in S first (a new point is inserted after equal
+//! ones), so a proposal equal to the worst is the one deleted. The operator's step size
+//! adapts: σ_{t+1} = min(grow σ_t, step) after a batch that improved the best point, shrink σ_t
+//! otherwise (grow = shrink = 1 keeps it fixed, as the mass-spring operator is). The last
+//! batch is cut to the evaluation limit of the budget.
+//!
+//! [`climb_from`] takes any starting set and operator; [`hill_climb`] is the box form: a set of
+//! one, the start point, with Gaussian steps scaled to the box.
 
 use super::{
-    check_setting, rank_value, start_point, Budget, SearchProblem, SearchResult, Spent, Tracker,
+    check_setting, iteration_rng, rank_value, start_point, Budget, Perturb, Progress,
+    SearchProblem, SearchResult, Spent, Tracker,
 };
 use crate::control::ControlError;
-use rand::{Rng, SeedableRng};
+use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 use rayon::prelude::*;
 use std::ops::Range;
 
-/// The random stream of initial sample `j`: ChaCha8 seeded with `seed`, stream j.
-pub fn init_rng(seed: u64, j: usize) -> ChaCha8Rng {
-    let mut r = ChaCha8Rng::seed_from_u64(seed);
-    r.set_stream(j as u64);
-    r
-}
-
-/// The random stream of iteration (proposal) `i` ≥ 1: ChaCha8 seeded with `seed`, stream
-/// 2⁴⁰ + i.
-pub fn iteration_rng(seed: u64, i: usize) -> ChaCha8Rng {
-    let mut r = ChaCha8Rng::seed_from_u64(seed);
-    r.set_stream((1u64 << 40) + i as u64);
-    r
-}
-
-/// Inserts `(c, v)` into the ranked set `set` (highest score first) after any equal score,
-/// then deletes the lowest-ranked member.
+/// Inserts `(c, v)` into the ranked set `set` (lowest value first) after any equal value, then
+/// deletes the lowest-ranked (last) member.
 pub fn insert_by_rank<T>(set: &mut Vec<(T, f64)>, c: T, v: f64) {
-    let pos = set.partition_point(|(_, w)| *w >= v);
+    let pos = set.partition_point(|(_, w)| *w <= v);
     set.insert(pos, (c, v));
     set.pop();
 }
 
-/// One batch of parallel hill climbing on a ranked set (highest `score` first, non-empty):
+/// One batch of parallel hill climbing on a ranked set (lowest value first, non-empty):
 /// proposal i ∈ `proposals` draws, from [`iteration_rng`]`(seed, i)`, a parent uniformly from
-/// `set` as it stands at the start of the batch and `perturb`s it; the proposals are scored in
-/// parallel, then inserted by rank ([`insert_by_rank`]) in order of i. Returns their scores in
-/// order of i.
+/// `set` as it stands at the start of the batch and `perturb`s it; the proposals are evaluated
+/// in parallel (non-finite values rank last), then inserted by rank ([`insert_by_rank`]) in
+/// order of i. Returns their values in order of i.
 pub fn climb_batch<T, F, P>(
     set: &mut Vec<(T, f64)>,
-    score: &F,
+    objective: &F,
     perturb: &P,
     seed: u64,
     proposals: Range<usize>,
@@ -68,24 +76,24 @@ where
             let mut rng = iteration_rng(seed, i);
             let parent = rng.random_range(0..snapshot.len());
             let c = perturb(&mut rng, &snapshot[parent].0);
-            let v = score(&c);
+            let v = rank_value(objective(&c));
             (c, v)
         })
         .collect();
-    let mut scores = Vec::with_capacity(evaluated.len());
+    let mut values = Vec::with_capacity(evaluated.len());
     for (c, v) in evaluated {
-        scores.push(v);
+        values.push(v);
         insert_by_rank(set, c, v);
     }
-    scores
+    values
 }
 
-/// Settings of [`hill_climb`].
+/// Settings of [`climb_from`] and [`hill_climb`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClimbConfig {
     /// Proposals per iteration b (evaluated in parallel).
     pub batch: usize,
-    /// Initial and largest step σ, in half-widths of the box.
+    /// Initial and largest step σ, in the operator's unit (half-widths of a box).
     pub step: f64,
     /// Step factor after an iteration without improvement, in (0, 1].
     pub shrink: f64,
@@ -107,6 +115,16 @@ impl Default for ClimbConfig {
 }
 
 impl ClimbConfig {
+    /// Batches of `batch` proposals of an operator with a fixed size (σ = 1 throughout).
+    pub fn fixed_step(batch: usize) -> Self {
+        Self {
+            batch,
+            step: 1.0,
+            shrink: 1.0,
+            grow: 1.0,
+        }
+    }
+
     fn validate(&self) -> Result<(), ControlError> {
         check_setting("batch", self.batch as f64, 1.0, f64::MAX, true)?;
         check_setting("step", self.step, 0.0, f64::MAX, false)?;
@@ -115,8 +133,66 @@ impl ClimbConfig {
     }
 }
 
-/// Parallel hill climbing minimizing `problem` from `x0` (projected onto the box) within
-/// `budget`; needs only the objective.
+/// Parallel hill climbing minimizing `objective` on the ranked set of `starts` (evaluated in
+/// parallel) with proposals from `operator`, within `budget`; `progress` sees every row.
+pub fn climb_from<T, F, P>(
+    objective: &F,
+    operator: &P,
+    starts: Vec<T>,
+    cfg: &ClimbConfig,
+    seed: u64,
+    budget: &Budget,
+    progress: Option<Progress<'_>>,
+) -> Result<SearchResult<T>, ControlError>
+where
+    T: Clone + Send + Sync,
+    F: Fn(&T) -> f64 + Sync,
+    P: Perturb<T> + ?Sized,
+{
+    cfg.validate()?;
+    let Some(first) = starts.first() else {
+        return Err(ControlError::InvalidSetting {
+            what: "start points",
+            value: 0.0,
+        });
+    };
+    let mut tr = Tracker::new(budget, first.clone(), Spent::default())?.with_progress(progress);
+    let values: Vec<f64> = starts
+        .par_iter()
+        .map(|x| rank_value(objective(x)))
+        .collect();
+    for (x, f) in starts.iter().zip(&values) {
+        tr.evaluated(x, *f);
+    }
+    let mut set: Vec<(T, f64)> = starts.into_iter().zip(values).collect();
+    // Rank: the stable sort keeps the initial order among ties.
+    set.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let mut stop = tr.close(0, set[0].1);
+    let mut sigma = cfg.step;
+    let mut t = 0;
+    while stop.is_none() {
+        t += 1;
+        let before = set[0].1;
+        let s = sigma;
+        let perturb = |rng: &mut ChaCha8Rng, x: &T| operator.perturb(rng, x, s);
+        let first = (t - 1) * cfg.batch + 1;
+        let size = tr.allowance(cfg.batch);
+        for v in climb_batch(&mut set, objective, &perturb, seed, first..first + size) {
+            tr.counted(v);
+        }
+        if set[0].1 < before {
+            tr.offer(&set[0].0, set[0].1);
+            sigma = (sigma * cfg.grow).min(cfg.step);
+        } else {
+            sigma *= cfg.shrink;
+        }
+        stop = tr.close(t, set[0].1);
+    }
+    Ok(tr.finish(stop.expect("the loop ends on a stop reason")))
+}
+
+/// Parallel hill climbing minimizing a box `problem` from `x0` (projected onto the box; a set
+/// of one) within `budget`; needs only the objective.
 pub fn hill_climb<P: SearchProblem + ?Sized>(
     problem: &P,
     x0: &[f64],
@@ -124,42 +200,17 @@ pub fn hill_climb<P: SearchProblem + ?Sized>(
     seed: u64,
     budget: &Budget,
 ) -> Result<SearchResult, ControlError> {
-    cfg.validate()?;
     let bx = problem.search_box();
     let x = start_point(bx, x0)?;
-    let mut tr = Tracker::new(budget, x.len(), Spent::default())?;
-    let f0 = problem.evaluate(&x);
-    tr.evaluated(&x, f0);
-    let mut set = vec![(x, -rank_value(f0))];
-    let mut stop = tr.close(0, -set[0].1);
-    let mut sigma = cfg.step;
-    let mut t = 0;
-    let score = |y: &Vec<f64>| -rank_value(problem.evaluate(y));
-    while stop.is_none() {
-        t += 1;
-        let before = set[0].1;
-        let s = sigma;
-        let perturb = |rng: &mut ChaCha8Rng, x: &Vec<f64>| {
-            let mut y = x.clone();
-            for (i, y) in y.iter_mut().enumerate() {
-                let z: f64 = rng.sample(StandardNormal);
-                *y += s * bx.half_width(i) * z;
-            }
-            bx.project(&mut y);
-            y
-        };
-        let first = (t - 1) * cfg.batch + 1;
-        climb_batch(&mut set, &score, &perturb, seed, first..first + cfg.batch);
-        tr.count(cfg.batch);
-        if set[0].1 > before {
-            tr.offer(&set[0].0, -set[0].1);
-            sigma = (sigma * cfg.grow).min(cfg.step);
-        } else {
-            sigma *= cfg.shrink;
-        }
-        stop = tr.close(t, -set[0].1);
-    }
-    Ok(tr.finish(stop.expect("the loop ends on a stop reason")))
+    climb_from(
+        &|v: &Vec<f64>| problem.evaluate(v),
+        bx,
+        vec![x],
+        cfg,
+        seed,
+        budget,
+        None,
+    )
 }
 
 #[cfg(test)]
@@ -200,32 +251,77 @@ mod tests {
     }
 
     #[test]
-    fn hill_climbing_minimizes_rosenbrock_in_a_box() {
+    fn hill_climbing_minimizes_rosenbrock_in_a_box_within_the_exact_evaluation_limit() {
         let p = Checked::new(Rosenbrock::new());
         let cfg = ClimbConfig::default();
         let r = hill_climb(&p, &[-1.5, 1.8], &cfg, 3, &Budget::evaluations(4000)).unwrap();
         check_trace(&p, &r);
         assert_eq!(r.stop, StopReason::Evaluations);
+        // 1 + 499 batches of 8 + a last batch cut to 7.
+        assert_eq!(p.calls(), 4000);
         assert!(r.best_value < 0.05, "{}", r.best_value);
         assert!((r.trace[0].best - 26.5).abs() < 1e-9);
     }
 
     #[test]
+    fn a_ranked_set_climbs_like_the_sequential_loop_for_batch_one() {
+        // Points are integers, the objective their distance to 40, the operator ±1..3; a set
+        // of 5 starts. Batch 1 and batch 4 both improve and agree on any thread count.
+        struct Step;
+        impl Perturb<i64> for Step {
+            fn perturb(&self, rng: &mut ChaCha8Rng, x: &i64, _: f64) -> i64 {
+                x + rng.random_range(-3..=3)
+            }
+        }
+        let f = |x: &i64| (x - 40).abs() as f64;
+        let starts = vec![0, 3, -2, 7, 1];
+        for batch in [1, 4] {
+            let cfg = ClimbConfig::fixed_step(batch);
+            let go = |threads: usize| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap()
+                    .install(|| {
+                        climb_from(
+                            &f,
+                            &Step,
+                            starts.clone(),
+                            &cfg,
+                            9,
+                            &Budget::evaluations(405),
+                            None,
+                        )
+                    })
+                    .unwrap()
+            };
+            let (a, b) = (go(1), go(2));
+            assert_eq!(a.evaluations, b.evaluations);
+            assert_eq!(a.evaluations.len(), 405);
+            assert_eq!(a.best, 40, "batch {batch}");
+            assert_eq!(a.best_value, 0.0);
+            assert!(a.evaluations.windows(2).all(|w| w[1].best <= w[0].best));
+        }
+    }
+
+    #[test]
     fn climb_batch_inserts_proposals_in_order() {
-        // A set of one, proposals scored by their stream index: the last is best.
+        // A set of one, proposals valued by minus their stream index: the last is best.
         let mut set = vec![(0usize, 0.0)];
-        let scores = climb_batch(
+        let values = climb_batch(
             &mut set,
-            &|c: &usize| *c as f64,
+            &|c: &usize| -(*c as f64),
             &|rng: &mut ChaCha8Rng, _: &usize| rng.get_stream() as usize - (1 << 40),
             1,
             3..6,
         );
-        assert_eq!(scores, vec![3.0, 4.0, 5.0]);
-        assert_eq!(set, vec![(5, 5.0)]);
-        let mut set: Vec<(u8, f64)> = vec![(0, 5.0), (1, 3.0), (2, 1.0)];
+        assert_eq!(values, vec![-3.0, -4.0, -5.0]);
+        assert_eq!(set, vec![(5, -5.0)]);
+        let mut set: Vec<(u8, f64)> = vec![(0, 1.0), (1, 3.0), (2, 5.0)];
         insert_by_rank(&mut set, 3, 3.0);
-        assert_eq!(set, vec![(0, 5.0), (1, 3.0), (3, 3.0)]);
+        assert_eq!(set, vec![(0, 1.0), (1, 3.0), (3, 3.0)]);
+        insert_by_rank(&mut set, 4, 0.0);
+        assert_eq!(set, vec![(4, 0.0), (0, 1.0), (1, 3.0)]);
     }
 
     #[test]

@@ -63,7 +63,7 @@ impl Default for SimplexConfig {
 struct ProjectedCost<'a, P: ?Sized> {
     problem: &'a P,
     penalty: f64,
-    tracker: RefCell<Tracker>,
+    tracker: RefCell<Tracker<'static, Vec<f64>>>,
     scratch: RefCell<Vec<f64>>,
 }
 
@@ -166,7 +166,7 @@ pub fn nelder_mead<P: SearchProblem + ?Sized>(
     let bx = problem.search_box();
     let mut start = start_point(bx, x0)?;
     let d = start.len();
-    let mut tracker = Tracker::new(budget, d, Spent::default())?;
+    let mut tracker = Tracker::new(budget, start.clone(), Spent::default())?;
     let mut restarts = cfg.restarts;
     loop {
         let before = tracker.best_value;
