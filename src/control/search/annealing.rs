@@ -22,7 +22,7 @@
 
 use super::{
     check_setting, init_rng, iteration_rng, rank_value, start_point, Budget, Perturb, Progress,
-    SearchProblem, SearchResult, Spent, Tracker,
+    SearchProblem, SearchResult, Tracker,
 };
 use crate::control::ControlError;
 use rand::Rng;
@@ -149,13 +149,7 @@ where
     P: Perturb<T> + ?Sized,
 {
     cfg.validate()?;
-    let Some(first) = starts.first() else {
-        return Err(ControlError::InvalidSetting {
-            what: "start points",
-            value: 0.0,
-        });
-    };
-    let mut tr = Tracker::new(budget, first.clone(), Spent::default())?.with_progress(progress);
+    let mut tr = Tracker::for_starts(budget, &starts)?.with_progress(progress);
     let values: Vec<f64> = starts.par_iter().map(objective).collect();
     let mut start = 0;
     for (j, (y, f)) in starts.iter().zip(&values).enumerate() {

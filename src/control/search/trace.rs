@@ -225,6 +225,18 @@ impl<'a, T: Clone> Tracker<'a, T> {
         })
     }
 
+    /// A tracker for a search from `starts` (at least one; the first is the best point until
+    /// a finite evaluation is offered).
+    pub(crate) fn for_starts(budget: &Budget, starts: &[T]) -> Result<Self, ControlError> {
+        match starts.first() {
+            Some(first) => Self::new(budget, first.clone(), Spent::default()),
+            None => Err(ControlError::InvalidSetting {
+                what: "start points",
+                value: 0.0,
+            }),
+        }
+    }
+
     /// Reports every closed row to `progress`.
     pub(crate) fn with_progress(mut self, progress: Option<Progress<'a>>) -> Self {
         self.progress = progress;
