@@ -17,6 +17,10 @@ use std::time::Instant;
 /// Experiments are TOML files in `experiments/` (one per experiment id). `run` runs one,
 /// `reproduce` runs them all and writes `results/REPORT.md` with the papers' numbers beside
 /// ours. Tables go to `results/<id>/` as CSV and Parquet, figures to `paper_figures/`.
+///
+/// Only a full-scale `reproduce` writes to `results/` and `paper_figures/` by default (the
+/// committed outputs); `--quick` runs default to `quick/results/` and `quick/paper_figures/`,
+/// and `run` to `runs/results/` and `runs/paper_figures/`.
 #[derive(Parser)]
 #[command(name = "motionlab", version, about, long_about)]
 struct Cli {
@@ -29,12 +33,14 @@ struct Cli {
 
 #[derive(Args, Clone)]
 struct Outputs {
-    /// Results root: tables go to <OUT>/<id>/.
-    #[arg(long, default_value = "results", value_name = "DIR")]
-    out: PathBuf,
-    /// Figures folder.
-    #[arg(long, default_value = "paper_figures", value_name = "DIR")]
-    figures: PathBuf,
+    /// Results root: tables go to <OUT>/<id>/. Default: `results` for a full `reproduce`,
+    /// `quick/results` with --quick, `runs/results` for `run`.
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Figures folder. Default: `paper_figures` for a full `reproduce`, `quick/paper_figures`
+    /// with --quick, `runs/paper_figures` for `run`.
+    #[arg(long, value_name = "DIR")]
+    figures: Option<PathBuf>,
     /// Worker threads (results are identical for any value). Default: all cores.
     #[arg(long, value_name = "N")]
     jobs: Option<usize>,
@@ -152,10 +158,34 @@ fn default_jobs() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
-fn run_options(o: &Outputs) -> RunOptions {
+impl Outputs {
+    /// The results and figures folders: as given, else by what runs. Only a full-scale
+    /// `reproduce` (`committed`) defaults to the committed `results/` and `paper_figures/`, so
+    /// quick and ad-hoc runs never overwrite them.
+    fn folders(&self, committed: bool) -> (PathBuf, PathBuf) {
+        let root = if self.quick {
+            Some("quick")
+        } else if committed {
+            None
+        } else {
+            Some("runs")
+        };
+        let under =
+            |name: &str| root.map_or_else(|| PathBuf::from(name), |r| Path::new(r).join(name));
+        (
+            self.out.clone().unwrap_or_else(|| under("results")),
+            self.figures
+                .clone()
+                .unwrap_or_else(|| under("paper_figures")),
+        )
+    }
+}
+
+fn run_options(o: &Outputs, committed: bool) -> RunOptions {
+    let (out, figures) = o.folders(committed);
     RunOptions {
-        out: o.out.clone(),
-        figures: o.figures.clone(),
+        out,
+        figures,
         jobs: o.jobs.unwrap_or_else(default_jobs),
         progress: true,
     }
@@ -217,7 +247,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                     sets,
                 },
             )?;
-            let s = run(&res, &run_options(&outputs))?;
+            let s = run(&res, &run_options(&outputs, false))?;
             eprintln!(
                 "{}: {} files in {:.2} s -> {}",
                 s.id,
@@ -247,7 +277,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                     bail!("--only: no experiment `{id}`");
                 }
             }
-            let opts = run_options(&outputs);
+            let opts = run_options(&outputs, true);
             for r in all
                 .iter()
                 .filter(|r| only.is_empty() || only.contains(&r.id))
@@ -255,7 +285,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                 let s = run(r, &opts).with_context(|| format!("experiment {}", r.id))?;
                 eprintln!("{:<26} {:>8.2} s  {} files", s.id, s.seconds, s.files.len());
             }
-            let report = write_report(&outputs.out, &outputs.figures, &all)?;
+            let report = write_report(&opts.out, &opts.figures, &all)?;
             eprintln!(
                 "report: {} (total {:.1} s)",
                 report.display(),

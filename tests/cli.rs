@@ -492,3 +492,51 @@ fn describe_and_simulate_every_model() {
             .all(|l| l.split(',').all(|c| c.parse::<f64>().unwrap().is_finite())));
     }
 }
+
+#[test]
+fn quick_and_ad_hoc_runs_leave_the_committed_results_untouched() {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    let exp = exp.to_str().unwrap();
+    let committed = dir.path().join("results");
+    std::fs::create_dir_all(&committed).unwrap();
+    std::fs::write(committed.join("REPORT.md"), "committed").unwrap();
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "--experiments",
+            exp,
+            "reproduce",
+            "--quick",
+            "--only",
+            "lbc_projection",
+        ],
+    ));
+    ok(&motionlab(
+        dir.path(),
+        &["--experiments", exp, "run", "lbc_projection"],
+    ));
+    let quick = dir.path().join("quick");
+    assert!(quick.join("results/REPORT.md").is_file());
+    assert!(quick.join("results/lbc_projection/run.json").is_file());
+    assert!(quick
+        .join("paper_figures/lbc_projection_cost.png")
+        .is_file());
+    let runs = dir.path().join("runs");
+    assert!(runs.join("results/lbc_projection/weights.csv").is_file());
+    assert!(runs.join("paper_figures/lbc_projection_cost.png").is_file());
+    // The committed folders are as they were.
+    let names: Vec<_> = std::fs::read_dir(&committed)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names, vec![std::ffi::OsString::from("REPORT.md")]);
+    assert_eq!(
+        std::fs::read_to_string(committed.join("REPORT.md")).unwrap(),
+        "committed"
+    );
+    assert!(!dir.path().join("paper_figures").exists());
+    // run.json says whether the code had uncommitted changes (null outside a checkout).
+    let meta = std::fs::read_to_string(runs.join("results/lbc_projection/run.json")).unwrap();
+    assert!(meta.contains("\"git_dirty\""), "{meta}");
+}

@@ -93,6 +93,7 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         "| experiment | paper item | verdict |\n| --- | --- | --- |"
     );
     let mut sections = String::new();
+    let code_rev = code_revision();
     for r in specs {
         let dir = out.join(&r.id);
         let (verdict, body) = if dir.join("run.json").exists() {
@@ -111,10 +112,12 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         } else {
             ("not run".into(), "Not run yet.\n".into())
         };
+        let stale = run_provenance(&dir, code_rev.as_deref());
+        let mark = if stale.is_some() { " (stale)" } else { "" };
         let _ = writeln!(
             md,
-            "| [`{}`](#{}) | {} | {} |",
-            r.id, r.id, r.paper_item, verdict
+            "| [`{}`](#{}) | {} | {verdict}{mark} |",
+            r.id, r.id, r.paper_item
         );
         let _ = writeln!(
             sections,
@@ -126,6 +129,9 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         }
         if let Some(meta) = read_run_json(&dir) {
             let _ = writeln!(sections, "**Run:** {meta}\n");
+        }
+        if let Some(w) = stale {
+            let _ = writeln!(sections, "**Stale results:** {w}.\n");
         }
         let _ = writeln!(sections, "**Ours:**\n\n{body}");
         let figs = figure_files(figures, &r.id);
@@ -140,6 +146,66 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
     let path = out.join("REPORT.md");
     atomic_write(&path, md.as_bytes())?;
     Ok(path)
+}
+
+/// The last commit that changed the code ([`super::runner::CODE_PATHS`]), in a git checkout.
+pub fn code_revision() -> Option<String> {
+    let out = std::process::Command::new("git")
+        .args(["log", "-1", "--format=%H", "--"])
+        .args(super::runner::CODE_PATHS)
+        .stderr(std::process::Stdio::null())
+        .output()
+        .ok()?;
+    let rev = String::from_utf8_lossy(&out.stdout).trim().to_string();
+    (out.status.success() && !rev.is_empty()).then_some(rev)
+}
+
+/// Whether commit `ancestor` is `rev` or one of its ancestors (git merge-base --is-ancestor).
+fn git_is_ancestor(ancestor: &str, rev: &str) -> bool {
+    std::process::Command::new("git")
+        .args(["merge-base", "--is-ancestor", ancestor, rev])
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
+}
+
+/// Why a section's results may not come from the code now in the tree, if so: they were made
+/// from uncommitted code (`dirty`), or at a revision `run_rev` that does not contain the last
+/// code change `code_rev` (`contains(code_rev, run_rev)` decides ancestry). Nothing is said
+/// outside a git checkout.
+pub fn provenance_warning(
+    run_rev: Option<&str>,
+    dirty: Option<bool>,
+    code_rev: Option<&str>,
+    contains: impl Fn(&str, &str) -> bool,
+) -> Option<String> {
+    let short = |r: &str| r.chars().take(7).collect::<String>();
+    let code = code_rev?;
+    match run_rev {
+        None => Some("the run recorded no git revision".into()),
+        Some(r) if !contains(code, r) => Some(format!(
+            "made at revision {}, which lacks the last code change ({}): rerun it",
+            short(r),
+            short(code)
+        )),
+        Some(r) if dirty == Some(true) => Some(format!(
+            "made at revision {} with uncommitted code changes",
+            short(r)
+        )),
+        Some(_) => None,
+    }
+}
+
+/// The provenance warning of the run in `dir` against the code revision `code_rev`.
+fn run_provenance(dir: &Path, code_rev: Option<&str>) -> Option<String> {
+    let text = std::fs::read_to_string(dir.join("run.json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    provenance_warning(
+        v.get("git_revision").and_then(|r| r.as_str()),
+        v.get("git_dirty").and_then(|d| d.as_bool()),
+        code_rev,
+        git_is_ancestor,
+    )
 }
 
 fn read_run_json(dir: &Path) -> Option<String> {
@@ -190,5 +256,33 @@ pub fn sig(v: f64) -> String {
     } else {
         let decimals = (2 - mag).max(0) as usize;
         format!("{v:.decimals$}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A history a ← b ← c (c newest): `contains(x, y)` when x is y or older.
+    fn contains(x: &str, y: &str) -> bool {
+        let order = |r: &str| "abc".find(&r[..1]).unwrap();
+        order(x) <= order(y)
+    }
+
+    #[test]
+    fn provenance_flags_old_or_dirty_runs_only() {
+        let w = |run: Option<&str>, dirty: Option<bool>, code: Option<&str>| {
+            provenance_warning(run, dirty, code, contains)
+        };
+        assert_eq!(w(Some("c111111aaa"), Some(false), Some("b222222")), None);
+        assert_eq!(w(Some("b222222"), None, Some("b222222")), None);
+        let old = w(Some("a333333ffff"), Some(false), Some("b222222")).unwrap();
+        assert!(old.contains("a333333") && old.contains("b222222"), "{old}");
+        assert!(!old.contains("ffff"));
+        let dirty = w(Some("c111111"), Some(true), Some("b222222")).unwrap();
+        assert!(dirty.contains("uncommitted"), "{dirty}");
+        assert!(w(None, None, Some("b222222")).is_some());
+        // Outside a git checkout nothing is said.
+        assert_eq!(w(Some("a333333"), Some(true), None), None);
     }
 }

@@ -1,7 +1,7 @@
 //! Runs a resolved experiment: every sweep point on a rayon pool of `jobs` threads, tables
 //! prefixed with the point's sweep values and concatenated, written as CSV + Parquet, figures,
-//! and `run.json` (id, seed, resolved spec, crate version, git revision, threads, seconds per
-//! stage).
+//! and `run.json` (id, seed, resolved spec, crate version, git revision and whether the code
+//! had uncommitted changes, threads, seconds per stage).
 
 use super::output::{atomic_write, write_table, Cell, Table, Tables};
 use super::plot::FigureSink;
@@ -46,6 +46,21 @@ pub fn git_revision() -> Option<String> {
     out.status
         .success()
         .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
+/// The paths whose changes change results: the code, the experiment files and the build.
+pub const CODE_PATHS: [&str; 4] = ["src", "experiments", "Cargo.toml", "Cargo.lock"];
+
+/// Whether the checkout has uncommitted changes to [`CODE_PATHS`] (`None` outside a git
+/// checkout).
+pub fn git_dirty() -> Option<bool> {
+    let out = std::process::Command::new("git")
+        .args(["status", "--porcelain", "--"])
+        .args(CODE_PATHS)
+        .stderr(std::process::Stdio::null())
+        .output()
+        .ok()?;
+    out.status.success().then(|| !out.stdout.is_empty())
 }
 
 /// Runs every sweep point, then writes tables, figures and `run.json`.
@@ -111,6 +126,7 @@ pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
         "spec": res.to_json(),
         "crate_version": env!("CARGO_PKG_VERSION"),
         "git_revision": git_revision(),
+        "git_dirty": git_dirty(),
         "threads": opts.jobs.max(1),
         "seconds_per_stage": stages,
         "seconds_total": seconds,
