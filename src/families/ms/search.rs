@@ -1,0 +1,477 @@
+//! The search jobs of mass-spring motion synthesis (MS §2.3, §3, Fig. 6–9): parallel hill
+//! climbing (and, for the learning plot, simulated annealing) of time-based reflex controllers
+//! for one objective, on one lattice. Two families share the parameters [`Params`] and run the
+//! jobs here; their figures and report sections sit in the files named after their ids:
+//!
+//! - [`MotionJob`] runs the `ms_motion` family ([`super::motion`]: `ms_spider_leap`,
+//!   `ms_poodle_somersault`, `ms_table_pirouette`): one hill climb; tables `controller` (regime,
+//!   time, reflex, reflex_name, alpha, period), `best` (term, value, weighted; one row per
+//!   objective term and `total`), `measures` (measure, value: a fixed set of Table 1 quantities
+//!   of the best motion, whatever the objective), `summary` (one row: motion, lattice,
+//!   evaluations, search_seconds, …), `search` (iteration, objective, best), `trajectory` (t,
+//!   regime, mass, x, y, z) and `springs`.
+//! - [`LearningJob`] runs the `ms_learning` family ([`super::fig6_learning_plot`]:
+//!   `ms_fig6_learning_plot`): the hill climb and simulated annealing with the same evaluation
+//!   budget on the same problem, side by side; tables `learning` (method, iteration, objective,
+//!   best) and `summary` (method, evaluations, seconds, best_objective).
+
+use super::lattices::lattice_by_name;
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::plot::{Legend, Mark, Panel, Series};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{Error, Job, RunContext};
+use crate::physics::lattice::{Floor, LatticeModel};
+use crate::physics::reflex::Reflex;
+use crate::row;
+use crate::synthesis::annealing::{anneal, AnnealConfig};
+use crate::synthesis::controller::SimSetup;
+use crate::synthesis::hill_climb::{hill_climb, HillClimbConfig, SearchResult};
+use crate::synthesis::objective::{Objective, Orientation, Term, Weighted};
+use crate::synthesis::Problem;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Which of the paper's motions an experiment reproduces (decides what its report checks).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Motion {
+    /// Fig. 7: the spider leans back, then leaps forward, staying upright.
+    Leap,
+    /// Fig. 8: the poodle's backward somersault while jumping forward.
+    Somersault,
+    /// Fig. 9: the table's twist–twist–jump pirouette.
+    Pirouette,
+}
+
+impl Motion {
+    fn name(self) -> &'static str {
+        match self {
+            Motion::Leap => "leap",
+            Motion::Somersault => "somersault",
+            Motion::Pirouette => "pirouette",
+        }
+    }
+}
+
+/// Simulated annealing settings of `ms_learning` (see [`AnnealConfig`]).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AnnealParams {
+    /// Initial temperature as a multiple of the initial objectives' standard deviation.
+    pub start_temperature: f64,
+    /// Final temperature, same unit.
+    pub end_temperature: f64,
+}
+
+/// Parameters shared by `ms_motion` and `ms_learning`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// The motion whose claim the report checks.
+    pub motion: Motion,
+    /// `cube`, `pyramid` or `chair`.
+    pub lattice: String,
+    /// Gravity (m/s²); the paper's low gravity is [`crate::physics::lattice::LOW_GRAVITY`].
+    pub gravity: f64,
+    /// Coulomb friction against or across the preferred direction.
+    pub friction: f64,
+    /// Coulomb friction along the preferred direction.
+    pub preferred_friction: f64,
+    /// Preferred horizontal direction of friction (x, y).
+    pub preferred_direction: [f64; 2],
+    /// Regimes C per controller.
+    pub regimes: usize,
+    /// Period t_per (s); t_per ≥ horizon means aperiodic.
+    pub period: f64,
+    /// Horizon T (s).
+    pub horizon: f64,
+    /// Trajectory sample interval (s), also the objective's time resolution.
+    pub sample_dt: f64,
+    /// RK45 relative tolerance of the evaluations.
+    pub rtol: f64,
+    /// RK45 absolute tolerance of the evaluations.
+    pub atol: f64,
+    /// Search set size N (the paper: 100).
+    pub set_size: usize,
+    /// Hill-climbing iterations (the paper: 25,000 for Fig. 6, 15,000 recommended).
+    pub iterations: usize,
+    /// Iterations evaluated in parallel per batch (1 = the paper's sequential loop).
+    pub batch: usize,
+    /// Panels of the filmstrip.
+    pub filmstrip_frames: usize,
+    /// The objective (Table 1 terms with weights).
+    pub objective: Objective,
+    /// Simulated annealing settings (`ms_learning` only).
+    #[serde(default)]
+    pub anneal: Option<AnnealParams>,
+}
+
+impl Params {
+    fn check(&self) -> Result<(), ParamError> {
+        let lattice = lattice_by_name(&self.lattice).ok_or_else(|| {
+            ParamError::new(
+                "lattice",
+                format!("unknown lattice `{}` (cube, pyramid, chair)", self.lattice),
+            )
+        })?;
+        positive("gravity", self.gravity)?;
+        ensure(
+            self.friction >= 0.0 && self.preferred_friction >= 0.0,
+            "friction",
+            "friction coefficients must be >= 0",
+        )?;
+        ensure(
+            self.preferred_direction[0].hypot(self.preferred_direction[1]) > 0.0,
+            "preferred_direction",
+            "must be non-zero",
+        )?;
+        ensure(self.regimes >= 1, "regimes", "must be at least 1")?;
+        positive("period", self.period)?;
+        positive("horizon", self.horizon)?;
+        positive("sample_dt", self.sample_dt)?;
+        ensure(
+            self.sample_dt <= self.horizon,
+            "sample_dt",
+            "must not exceed the horizon",
+        )?;
+        positive("rtol", self.rtol)?;
+        positive("atol", self.atol)?;
+        ensure(self.set_size >= 1, "set_size", "must be at least 1")?;
+        ensure(self.batch >= 1, "batch", "must be at least 1")?;
+        ensure(
+            self.filmstrip_frames >= 1,
+            "filmstrip_frames",
+            "must be at least 1",
+        )?;
+        ensure(
+            !self.objective.terms.is_empty(),
+            "objective.terms",
+            "need at least one term",
+        )?;
+        self.objective
+            .validate(&lattice.rest_positions())
+            .map_err(|e| ParamError::new("objective", e))?;
+        if let Some(a) = &self.anneal {
+            positive("anneal.start_temperature", a.start_temperature)?;
+            positive("anneal.end_temperature", a.end_temperature)?;
+        }
+        Ok(())
+    }
+
+    /// The synthesis problem these parameters describe.
+    pub fn problem(&self) -> Result<Problem, Error> {
+        let lattice = lattice_by_name(&self.lattice).ok_or_else(|| super::other("lattice"))?;
+        let floor = Floor {
+            friction: self.friction,
+            preferred_friction: self.preferred_friction,
+            preferred_direction: self.preferred_direction,
+            ..Floor::default()
+        };
+        let model = LatticeModel::new(lattice)
+            .map_err(super::other)?
+            .with_gravity(self.gravity)
+            .with_floor(floor)
+            .map_err(super::other)?;
+        Ok(Problem {
+            setup: SimSetup::new(model, self.horizon, self.sample_dt)
+                .with_tolerances(self.rtol, self.atol),
+            objective: self.objective.clone(),
+        })
+    }
+
+    fn period(&self) -> f64 {
+        self.period.min(self.horizon)
+    }
+
+    fn hill_config(&self) -> HillClimbConfig {
+        HillClimbConfig {
+            set_size: self.set_size,
+            iterations: self.iterations,
+            batch: self.batch,
+            regimes: self.regimes,
+            period: self.period(),
+        }
+    }
+}
+
+/// The fixed measures reported for every motion (unit weights; see [`Term`]).
+pub fn measures() -> Vec<(&'static str, Term)> {
+    let loss = |o, deg| Term::OrientationLoss {
+        orientation: o,
+        max_angle_deg: deg,
+        at_end_only: false,
+    };
+    let rot = |axis| Term::Rotation {
+        axis,
+        absolute: false,
+    };
+    vec![
+        (
+            "displacement_x",
+            Term::Displacement {
+                direction: [1.0, 0.0],
+            },
+        ),
+        (
+            "displacement_y",
+            Term::Displacement {
+                direction: [0.0, 1.0],
+            },
+        ),
+        ("horizontal_distance", Term::HorizontalDistance),
+        ("max_height", Term::MaxHeight),
+        ("min_contacts", Term::MinContacts),
+        ("contact_time", Term::ContactTime),
+        ("rotation_x", rot([1.0, 0.0, 0.0])),
+        ("rotation_back_y", rot([0.0, -1.0, 0.0])),
+        ("rotation_z", rot([0.0, 0.0, 1.0])),
+        ("uprightness_loss_60", loss(Orientation::Upright, 60.0)),
+        ("left_right_loss_45", loss(Orientation::LeftRight, 45.0)),
+        ("hops", Term::Hops),
+        ("on_ground", Term::OnGround),
+    ]
+}
+
+/// `ms_motion` parameters (no annealing).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct MotionJob(pub Params);
+/// `ms_learning` parameters (annealing required).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct LearningJob(pub Params);
+
+impl Validate for MotionJob {
+    fn validate(&self) -> Result<(), ParamError> {
+        self.0.check()?;
+        ensure(
+            self.0.anneal.is_none(),
+            "anneal",
+            "only the learning-plot experiment runs simulated annealing",
+        )
+    }
+}
+
+impl Validate for LearningJob {
+    fn validate(&self) -> Result<(), ParamError> {
+        self.0.check()?;
+        ensure(
+            self.0.anneal.is_some(),
+            "anneal",
+            "the learning plot needs [params.anneal]",
+        )
+    }
+}
+
+fn progress_fn(pb: &indicatif::ProgressBar) -> impl Fn(usize) + Sync + '_ {
+    move |done| pb.set_position(done as u64)
+}
+
+fn search_table(r: &SearchResult) -> Table {
+    let mut t = Table::new(&["iteration", "objective", "best"]);
+    for e in &r.trace {
+        t.push(row![e.iteration, e.objective, e.best]);
+    }
+    t
+}
+
+impl Job for MotionJob {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(&self.0).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let p = &self.0;
+        let problem = p.problem()?;
+        let eval = |c: &crate::synthesis::controller::Controller| problem.evaluate(c);
+        let pb = ctx.progress(
+            p.iterations as u64,
+            &format!("hill climbing ({})", p.motion.name()),
+        );
+        let t0 = Instant::now();
+        let res = ctx.stage("hill climbing", || {
+            hill_climb(&eval, &p.hill_config(), ctx.seed, &progress_fn(&pb))
+        });
+        let seconds = t0.elapsed().as_secs_f64();
+        pb.finish_and_clear();
+        let tr = problem.trajectory(&res.best).map_err(super::other)?;
+        let mut ctl = Table::new(&["regime", "time", "reflex", "reflex_name", "alpha", "period"]);
+        for (i, r) in res.best.regimes.iter().enumerate() {
+            let name = Reflex::from_number(r.reflex).map_err(super::other)?.name();
+            ctl.push(row![i, r.time, r.reflex, name, r.alpha, res.best.period]);
+        }
+        let values = problem.objective.values(&tr);
+        let mut best = Table::new(&["term", "value", "weighted"]);
+        let mut total = 0.0;
+        for (w, v) in problem.objective.terms.iter().zip(&values) {
+            best.push(row![w.term.name(), *v, w.weight * v]);
+            total += w.weight * v;
+        }
+        best.push(row!["total", total, total]);
+        let mobj = Objective {
+            terms: measures()
+                .into_iter()
+                .map(|(_, term)| Weighted { weight: 1.0, term })
+                .collect(),
+            ..problem.objective.clone()
+        };
+        let mut meas = Table::new(&["measure", "value"]);
+        for ((name, _), v) in measures().iter().zip(mobj.values(&tr)) {
+            meas.push(row![*name, v]);
+        }
+        let init_best = res
+            .trace
+            .iter()
+            .filter(|e| e.iteration == 0)
+            .map(|e| e.objective)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let mut summary = Table::new(&[
+            "motion",
+            "lattice",
+            "regimes",
+            "period",
+            "horizon",
+            "gravity",
+            "iterations",
+            "evaluations",
+            "search_seconds",
+            "evals_per_s",
+            "initial_best",
+            "best_objective",
+            "filmstrip_frames",
+        ]);
+        let evals = res.trace.len();
+        summary.push(row![
+            p.motion.name(),
+            p.lattice.as_str(),
+            p.regimes,
+            p.period(),
+            p.horizon,
+            p.gravity,
+            p.iterations,
+            evals,
+            seconds,
+            evals as f64 / seconds.max(1e-9),
+            init_best,
+            res.best_value,
+            p.filmstrip_frames
+        ]);
+        let mut traj = Table::new(&["t", "regime", "mass", "x", "y", "z"]);
+        for f in &tr.frames {
+            for (i, q) in f.positions.iter().enumerate() {
+                traj.push(row![f.t, f.regime, i, q[0], q[1], q[2]]);
+            }
+        }
+        let mut spr = Table::new(&["spring", "a", "b"]);
+        for (j, s) in problem.setup.model.lattice.springs.iter().enumerate() {
+            spr.push(row![j, s.a, s.b]);
+        }
+        let mut t = Tables::default();
+        t.insert("controller", ctl);
+        t.insert("best", best);
+        t.insert("measures", meas);
+        t.insert("summary", summary);
+        t.insert("search", search_table(&res));
+        t.insert("trajectory", traj);
+        t.insert("springs", spr);
+        Ok(t)
+    }
+}
+
+impl Job for LearningJob {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(&self.0).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let p = &self.0;
+        let a = p
+            .anneal
+            .as_ref()
+            .ok_or_else(|| super::other("missing anneal settings"))?;
+        let problem = p.problem()?;
+        let eval = |c: &crate::synthesis::controller::Controller| problem.evaluate(c);
+        let hc_cfg = p.hill_config();
+        let sa_cfg = AnnealConfig {
+            initial: p.set_size,
+            iterations: p.iterations,
+            start_temperature: a.start_temperature,
+            end_temperature: a.end_temperature,
+            regimes: p.regimes,
+            period: p.period(),
+        };
+        let pb_h = ctx.progress(p.iterations as u64, "hill climbing");
+        let pb_a = ctx.progress(p.iterations as u64, "simulated annealing");
+        let t0 = Instant::now();
+        // Both searches run side by side on the pool (annealing is sequential; hill climbing
+        // evaluates its batches in parallel on the remaining threads).
+        let ((hc, hc_s), (sa, sa_s)) = ctx.stage("hill climbing + annealing", || {
+            rayon::join(
+                || {
+                    let t = Instant::now();
+                    let r = hill_climb(&eval, &hc_cfg, ctx.seed, &progress_fn(&pb_h));
+                    (r, t.elapsed().as_secs_f64())
+                },
+                || {
+                    let t = Instant::now();
+                    let r = anneal(&eval, &sa_cfg, ctx.seed, &progress_fn(&pb_a));
+                    (r, t.elapsed().as_secs_f64())
+                },
+            )
+        });
+        let wall = t0.elapsed().as_secs_f64();
+        pb_h.finish_and_clear();
+        pb_a.finish_and_clear();
+        let mut learning = Table::new(&["method", "iteration", "objective", "best"]);
+        let mut summary = Table::new(&[
+            "method",
+            "evaluations",
+            "seconds",
+            "wall_seconds_both",
+            "best_objective",
+        ]);
+        for (name, r, s) in [
+            ("hill_climbing", &hc, hc_s),
+            ("simulated_annealing", &sa, sa_s),
+        ] {
+            for e in &r.trace {
+                learning.push(row![name, e.iteration, e.objective, e.best]);
+            }
+            summary.push(row![name, r.trace.len(), s, wall, r.best_value]);
+        }
+        let mut t = Tables::default();
+        t.insert("learning", learning);
+        t.insert("summary", summary);
+        Ok(t)
+    }
+}
+
+/// The search-trace panel: every evaluation's objective and the best so far, per method.
+pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &str) -> Panel {
+    let mut series = Vec::new();
+    for (k, (name, t)) in tables.iter().enumerate() {
+        let (it, obj, best) = (t.f64s("iteration"), t.f64s("objective"), t.f64s("best"));
+        // Rows with iteration 0 are the initial random controllers: drawn at x = 0.
+        series.push(
+            Series::line(
+                format!("{name}: every evaluation"),
+                it.iter().zip(&obj).map(|(&a, &b)| (a, b)).collect(),
+                2 * k + 1,
+            )
+            .mark(Mark::Points),
+        );
+        series.push(Series::line(
+            format!("{name}: best so far"),
+            it.iter().zip(&best).map(|(&a, &b)| (a, b)).collect(),
+            2 * k,
+        ));
+    }
+    Panel {
+        title: title.into(),
+        x_label: x_label.into(),
+        y_label: "objective".into(),
+        series,
+        legend: Legend::LowerRight,
+        ..Panel::default()
+    }
+}
