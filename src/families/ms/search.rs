@@ -1,19 +1,24 @@
-//! The search jobs of mass-spring motion synthesis (MS §2.3, §3, Fig. 6–9): parallel hill
-//! climbing (and, for the learning plot, simulated annealing) of time-based reflex controllers
-//! for one objective, on one lattice. Two families share the parameters [`Params`] and run the
-//! jobs here; their figures and report sections sit in the files named after their ids:
+//! # The search jobs of `ms_motion` and `ms_learning`
 //!
-//! - [`MotionJob`] runs the `ms_motion` family ([`super::motion`]: `ms_spider_leap`,
-//!   `ms_poodle_somersault`, `ms_table_pirouette`): one hill climb; tables `controller` (regime,
-//!   time, reflex, reflex_name, alpha, period), `best` (term, value, weighted; one row per
-//!   objective term and `total`), `measures` (measure, value: a fixed set of Table 1 quantities
-//!   of the best motion, whatever the objective), `summary` (one row: motion, lattice,
-//!   evaluations, search_seconds, …), `search` (iteration, objective, best), `trajectory` (t,
-//!   regime, mass, x, y, z) and `springs`.
-//! - [`LearningJob`] runs the `ms_learning` family ([`super::fig6_learning_plot`]:
-//!   `ms_fig6_learning_plot`): the hill climb and simulated annealing with the same evaluation
-//!   budget on the same problem, side by side; tables `learning` (method, iteration, objective,
-//!   best) and `summary` (method, evaluations, seconds, best_objective).
+//! Mass-spring motion synthesis experiments (MS §2.3, §3, Fig. 6–9): parallel hill climbing
+//! of time-based reflex controllers for one objective, on one lattice.
+//!
+//! Two families share the parameters [`Params`]:
+//!
+//! - `ms_motion` (`ms_spider_leap`, `ms_poodle_somersault`, `ms_table_pirouette`): one hill
+//!   climb; tables `controller` (regime, time, reflex, reflex_name, alpha, period), `best`
+//!   (term, value, weighted; one row per objective term and `total`), `measures` (measure,
+//!   value: a fixed set of Table 1 quantities of the best motion, whatever the objective),
+//!   `summary` (one row: motion, lattice, evaluations, search_seconds, …), `search`
+//!   (iteration, objective, best), `trajectory` (t, regime, mass, x, y, z) and `springs`.
+//!   Figures: `<id>_filmstrip.png/svg`, `<id>_motion.gif`, `<id>_search.png/svg`.
+//! - `ms_learning` (`ms_fig6_learning_plot`): the hill climb and simulated annealing with the
+//!   same evaluation budget on the same problem, run side by side; tables `learning` (method,
+//!   iteration, objective, best) and `summary` (method, evaluations, seconds, best_objective).
+//!   Figure: `<id>_learning.png/svg`, the scatter of every evaluation with best-so-far lines.
+//!
+//! The families' figures and report sections are in [`super::motion`] (`ms_motion`) and
+//! [`super::fig6_learning_plot`] (`ms_learning`), files named after the experiment ids.
 
 use super::lattices::lattice_by_name;
 use crate::experiment::output::{Table, Tables};
