@@ -32,7 +32,7 @@
 //!
 //! To add an experiment: a file in the paper's folder (`beyond/` for experiments beyond the
 //! papers, ids `x_*`) named after the id, its `mod` line in that folder's `mod.rs`, and one line
-//! in [`FAMILIES`] below.
+//! in `FAMILIES` below (listed by [`families`]).
 
 use crate::experiment::Experiment;
 
