@@ -311,7 +311,7 @@ fn bptt_lander(min_seconds: f64) -> f64 {
 fn bptt_dolphin(min_seconds: f64) -> f64 {
     use crate::control::bptt::Bptt;
     use crate::emulator::hierarchy::{global_transforms, Regularizer, GLOBAL_DIM};
-    use crate::experiment::na_swim::SwimTask;
+    use crate::families::na::swim::SwimTask;
     use crate::physics::dolphin::{Dolphin, N_SEGMENTS};
     use rand::SeedableRng;
     let (n, m) = (GLOBAL_DIM, N_SEGMENTS);

@@ -40,8 +40,28 @@
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
 //!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
 //!   solves 2-D problems on a grid (linearly-solvable and ordinary Bellman backups).
-//! - [`experiment`]: experiments as data — TOML specs, validation with file/line/key errors,
-//!   sweeps, the runner (CSV + Parquet, atomic writes, `run.json`), figures and `REPORT.md`.
+//! - [`experiment`]: the harness — experiments as data: TOML specs, validation with
+//!   file/line/key errors, sweeps, the runner (CSV + Parquet, atomic writes, `run.json`),
+//!   figures and `REPORT.md`; the [`experiment::Experiment`] / [`experiment::Job`] traits a
+//!   family implements.
+//! - [`families`]: the experiment families, one folder per paper, one file per experiment id
+//!   (without the paper prefix) with its figures and report section beside it, and the list of
+//!   families ([`families::families`]; an id → file table is in the module doc).
+//!   - [`families::na`]: NeuroAnimator — the Table 1 nets and their training
+//!     ([`families::na::table1_structure`], which also builds the cached emulators the other
+//!     `na_*` families use), Table 2 speedups, §5.3 regularization, Fig. 12 error, Fig. 13
+//!     BPTT control with animated GIFs ([`families::na::fig13_control`]), Fig. 14 momentum and
+//!     the §6 swim baselines; Fig. 13 and the baselines share the dolphin swim task
+//!     ([`families::na::swim`]).
+//!   - [`families::ms`]: mass-spring motion synthesis — the lattices and reflexes, the
+//!     hill-climbing / annealing search jobs ([`families::ms::search`]) behind the three motions
+//!     ([`families::ms::motion`]) and the Fig. 6 learning plot, and 3-D lattice drawing
+//!     ([`families::ms::lattice_draw`]).
+//!   - [`families::lbc`]: linear Bellman combination — reward projection, grid optimality, the
+//!     acrobot swing-up, the diver's interpolation and coordination (one file,
+//!     [`families::lbc::diver`]) and push recovery.
+//!   - [`families::beyond`]: beyond the papers — `physics_validation` (integrator energy drift
+//!     and convergence orders), and future `x_*` experiments.
 //! - [`bench`]: throughput of the hot loops (`motionlab bench`).
 //! - [`linalg`]: the one conversion point between ndarray and nalgebra types.
 //!
@@ -88,6 +108,7 @@ pub mod bench;
 pub mod control;
 pub mod emulator;
 pub mod experiment;
+pub mod families;
 pub mod linalg;
 pub mod physics;
 pub mod synthesis;

@@ -66,7 +66,7 @@ fn check_motion(id: &str, first_term: &str) {
         .collect();
     assert!(best_col.windows(2).all(|w| w[1] >= w[0]));
     // The report section is computed from the CSVs.
-    let f = motionlab::experiment::registry::family("ms_motion")
+    let f = motionlab::families::family("ms_motion")
         .unwrap()
         .report(&out)
         .unwrap();
@@ -109,7 +109,7 @@ fn ms_fig6_learning_plot_quick_writes_both_methods() {
                 .join(format!("figs/ms_fig6_learning_plot_learning.{ext}")),
         );
     }
-    let f = motionlab::experiment::registry::family("ms_learning")
+    let f = motionlab::families::family("ms_learning")
         .unwrap()
         .report(&out)
         .unwrap();

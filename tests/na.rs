@@ -167,23 +167,7 @@ fn na_tables_other_than_timings_are_identical_for_any_thread_count() {
         ("na_table1_structure", "training.csv"),
     ] {
         let run = |jobs: &str| {
-            let dir = tempfile::tempdir().unwrap();
-            ok(&motionlab(
-                dir.path(),
-                &[
-                    "--experiments",
-                    root().join("experiments").to_str().unwrap(),
-                    "run",
-                    id,
-                    "--quick",
-                    "--jobs",
-                    jobs,
-                    "--out",
-                    "out",
-                    "--figures",
-                    "figs",
-                ],
-            ));
+            let dir = run_quick(id, jobs);
             std::fs::read(dir.path().join("out").join(id).join(csv)).unwrap()
         };
         assert!(

@@ -11,31 +11,14 @@
 //!    writes `run.json`;
 //! 4. [`report`]: `REPORT.md`, each family's section read back from its CSVs.
 //!
-//! Families never write files themselves: jobs return tables, figure functions receive them.
-//! To add an experiment family, implement [`Experiment`] (and [`Job`] for its parameters) in a
-//! new file and list it in [`registry`].
+//! This module is the harness only; the families live in [`crate::families`], one folder per
+//! paper, and [`crate::families::families`] lists them. Families never write files themselves:
+//! jobs return tables, figure functions receive them. To add an experiment family, implement
+//! [`Experiment`] (and [`Job`] for its parameters) in a new file there and list it in
+//! [`crate::families`].
 
-pub mod lbc_acrobot;
-pub mod lbc_diver;
-pub mod lbc_grid;
-pub mod lbc_projection;
-pub mod lbc_push;
-pub mod ms_draw;
-pub mod ms_lattices;
-pub mod ms_motion;
-pub mod na_anim;
-pub mod na_baselines;
-pub mod na_control;
-pub mod na_error;
-pub mod na_momentum;
-pub mod na_regularization;
-pub mod na_speedup;
-pub mod na_structure;
-pub mod na_swim;
 pub mod output;
-pub mod physics_validation;
 pub mod plot;
-pub mod registry;
 pub mod report;
 pub mod resolve;
 pub mod runner;

@@ -249,42 +249,66 @@ impl FigureSink {
     /// Draws `fig` as `<id>_<name>.png` and `.svg`, atomically; returns both paths.
     pub fn draw(&self, name: &str, fig: &Figure) -> Result<Vec<PathBuf>, Error> {
         register_fonts();
-        std::fs::create_dir_all(&self.dir).map_err(|e| Error::Io {
-            path: self.dir.clone(),
-            source: e,
-        })?;
-        let stem = format!("{}_{name}", self.id);
         let rows = fig.count().div_ceil(fig.columns) as u32;
         let cols = fig.columns.min(fig.count()).max(1) as u32;
         let size = (fig.panel_size.0 * cols, fig.panel_size.1 * rows.max(1));
-        let png = self.dir.join(format!("{stem}.png"));
-        let svg = self.dir.join(format!("{stem}.svg"));
-        let perr = |p: &Path, e: String| Error::Plot {
-            path: p.display().to_string(),
-            message: e,
-        };
-        {
-            let tmp = temp_path(&png);
-            let root = BitMapBackend::new(&tmp, size).into_drawing_area();
-            render(&root, fig).map_err(|e| perr(&png, e))?;
-            root.present().map_err(|e| perr(&png, e.to_string()))?;
-            drop(root);
-            std::fs::rename(&tmp, &png).map_err(|e| Error::Io {
-                path: png.clone(),
-                source: e,
-            })?;
-        }
-        {
-            let mut text = String::new();
-            {
-                let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
-                render(&root, fig).map_err(|e| perr(&svg, e))?;
-                root.present().map_err(|e| perr(&svg, e.to_string()))?;
-            }
-            super::output::atomic_write(&svg, text.as_bytes())?;
-        }
-        Ok(vec![png, svg])
+        write_png_svg(&self.dir, &format!("{}_{name}", self.id), size, fig)
     }
+}
+
+/// A plotters error on the figure `path` as an [`Error::Plot`].
+pub fn perr(path: &Path, message: String) -> Error {
+    Error::Plot {
+        path: path.display().to_string(),
+        message,
+    }
+}
+
+/// Something drawn the same way on both figure backends (the PNG bitmap and the SVG).
+pub trait Drawing {
+    /// Draws onto `root`.
+    fn draw_on<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
+}
+
+impl Drawing for Figure {
+    fn draw_on<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        render(root, self)
+    }
+}
+
+/// Writes `drawing` as `<dir>/<stem>.png` and `.svg` of `size` pixels, each atomically
+/// (temporary file + rename); returns both paths.
+pub fn write_png_svg(
+    dir: &Path,
+    stem: &str,
+    size: (u32, u32),
+    drawing: &impl Drawing,
+) -> Result<Vec<PathBuf>, Error> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::Io {
+        path: dir.to_path_buf(),
+        source: e,
+    })?;
+    let png = dir.join(format!("{stem}.png"));
+    let svg = dir.join(format!("{stem}.svg"));
+    {
+        let tmp = temp_path(&png);
+        let root = BitMapBackend::new(&tmp, size).into_drawing_area();
+        drawing.draw_on(&root).map_err(|e| perr(&png, e))?;
+        root.present().map_err(|e| perr(&png, e.to_string()))?;
+        drop(root);
+        std::fs::rename(&tmp, &png).map_err(|e| Error::Io {
+            path: png.clone(),
+            source: e,
+        })?;
+    }
+    let mut text = String::new();
+    {
+        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
+        drawing.draw_on(&root).map_err(|e| perr(&svg, e))?;
+        root.present().map_err(|e| perr(&svg, e.to_string()))?;
+    }
+    super::output::atomic_write(&svg, text.as_bytes())?;
+    Ok(vec![png, svg])
 }
 
 fn tr(v: f64, log: bool) -> Option<f64> {

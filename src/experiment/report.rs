@@ -30,6 +30,22 @@ impl Verdict {
             Verdict::NotAssessed => "not assessed",
         }
     }
+
+    /// Held when all `total` checks passed, partly when some did, not held when none did.
+    pub fn from_counts(ok: usize, total: usize) -> Self {
+        if ok == total {
+            Verdict::Held
+        } else if ok > 0 {
+            Verdict::Partly
+        } else {
+            Verdict::NotHeld
+        }
+    }
+
+    /// [`Verdict::from_counts`] of the checks that passed.
+    pub fn from_checks(checks: &[bool]) -> Self {
+        Self::from_counts(checks.iter().filter(|&&c| c).count(), checks.len())
+    }
 }
 
 /// A family's findings from its CSVs.

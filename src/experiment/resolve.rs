@@ -2,7 +2,8 @@
 //! every point's parameters checked by its family before any work is done.
 
 use super::spec::{backticked, SpecError, SpecFile};
-use super::{registry, Experiment, Job};
+use super::{Experiment, Job};
+use crate::families;
 use serde::de::DeserializeOwned;
 use std::fmt::Display;
 use std::path::PathBuf;
@@ -210,8 +211,8 @@ fn parse_value(text: &str) -> toml::Value {
 /// parameters are valid. Nothing is run or written.
 pub fn resolve(file: &SpecFile, opts: &ResolveOptions) -> Result<Resolved, SpecError> {
     let raw = &file.raw;
-    let family = registry::family(&raw.experiment).ok_or_else(|| {
-        let known: Vec<&str> = registry::families().iter().map(|f| f.kind()).collect();
+    let family = families::family(&raw.experiment).ok_or_else(|| {
+        let known: Vec<&str> = families::families().iter().map(|f| f.kind()).collect();
         file.error_at(
             "experiment",
             format!(

@@ -16,19 +16,19 @@
 //! emulator_steps). Timings vary run to run; that table is the one output that is not
 //! bit-reproducible.
 
-use super::na_structure::{
+use super::table1_structure::{
     build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
     DolphinNets,
 };
-use super::output::{df_f64, df_str, read_csv, unique, Table, Tables};
-use super::plot::{Figure, Legend, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy::{self, BoundRegularizer, DolphinEmulator, Regularizer, Schedule};
 use crate::emulator::Emulator;
+use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
 use crate::physics::Dynamics;
 use crate::row;
 use serde::{Deserialize, Serialize};
@@ -292,7 +292,7 @@ impl Job for Params {
             for k in 0..k_steps {
                 ue[k * m..(k + 1) * m].copy_from_slice(&u[k * n * m..(k * n + 1) * m]);
             }
-            let mut reg = d.regularization.bind(&dolphin).map_err(super::other)?;
+            let mut reg = d.regularization.bind(&dolphin).map_err(other)?;
             for (label, reg_steps) in [
                 (format!("N{n}"), 0),
                 (format!("N{n}_reg"), d.regularization_steps),
@@ -326,11 +326,7 @@ impl Experiment for NaSpeedup {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("speedup")?;
         let (model, emu, phys, es) = (
             t.strs("model"),
@@ -435,11 +431,7 @@ impl Experiment for NaSpeedup {
             ),
             _ => " Dolphin rows not built.".into(),
         };
-        let verdict = match (n100_ok, n50_ok) {
-            (true, true) => Verdict::Held,
-            (false, true) | (true, false) => Verdict::Partly,
-            _ => Verdict::NotHeld,
-        };
+        let verdict = Verdict::from_checks(&[n100_ok, n50_ok]);
         Ok(Findings {
             ours: md,
             verdict,

@@ -9,12 +9,12 @@
 //! reconstructed_reward), `minima` (spacing, target, minima, locations, weight_sum,
 //! relative_residual).
 
-use super::output::{Table, Tables};
-use super::plot::{Figure, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{all_positive, ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
 use crate::bellman::projection::{combined_reward, project, GaussianReward};
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{all_positive, ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
 use crate::row;
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
@@ -122,7 +122,7 @@ impl Job for Params {
                 for &f in &self.targets {
                     let desired =
                         GaussianReward::isotropic(self.point(f * s).as_slice(), self.scale);
-                    let p = project(&comps, &desired).map_err(super::other)?;
+                    let p = project(&comps, &desired).map_err(other)?;
                     let sum: f64 = p.weights.iter().sum();
                     for (c, w) in p.weights.iter().enumerate() {
                         weights.push(row![s, c + 1, *w, f, sum, p.relative_residual]);
@@ -173,11 +173,7 @@ impl Experiment for LbcProjection {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let cost = tables.require("cost")?;
         let (cs, ct, cx, cd, cr) = (
             cost.f64s("spacing"),
@@ -277,7 +273,7 @@ impl Experiment for LbcProjection {
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
         use polars::prelude::*;
         let pe = |e: PolarsError| Error::Polars(e.to_string());
-        let df = super::output::read_csv(&dir.join("minima.csv"))?;
+        let df = crate::experiment::output::read_csv(&dir.join("minima.csv"))?;
         // The midpoint target per spacing, sorted by spacing.
         let mid = df
             .lazy()

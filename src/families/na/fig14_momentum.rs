@@ -32,15 +32,15 @@
 //! (method, eta, step, t, source, x, y, z, vz, tilt): every run's states at the emulator step
 //! times, emulated and simulated (tilt: angle of the thrust axis from vertical, rad).
 
-use super::na_structure::{build_emulator, build_spec, validate_nets, validate_training};
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
-use super::plot::{Figure, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
+use super::table1_structure::{build_emulator, build_spec, validate_nets, validate_training};
 use crate::control::bptt::{learn, replay, Bounds, Bptt, Descent, Knots, Learned};
 use crate::control::objective::{ControlEffort, FinalState, Objective, StateWindow};
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
 use crate::physics::lander::{Lander, VEL};
 use crate::row;
 use serde::{Deserialize, Serialize};
@@ -258,7 +258,7 @@ impl Job for Params {
             low: limits.low.clone(),
             high: limits.high.clone(),
         };
-        let mut bptt = Bptt::new(emu, &objective, knots, bounds, &x0).map_err(super::other)?;
+        let mut bptt = Bptt::new(emu, &objective, knots, bounds, &x0).map_err(other)?;
         let l = Lander::default();
         let hover: Vec<f64> = (0..knots.len())
             .map(|i| if i % m == 0 { l.mass * l.gravity } else { 0.0 })
@@ -268,7 +268,7 @@ impl Job for Params {
             bptt.curvature(&v0, self.curvature_iterations)
         });
         if !(scale.is_finite() && scale > 0.0) {
-            return Err(super::other(format!("step scale λ = {scale} at hover")));
+            return Err(other(format!("step scale λ = {scale} at hover")));
         }
         let mut objective_t = Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
         let mut gradient_t = Table::new(&["method", "eta", "alpha", "iteration", "grad_norm"]);
@@ -401,11 +401,7 @@ impl Experiment for NaMomentum {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("objective")?;
         let runs = tables.require("runs")?;
         let (meth, eta, it, obj) = (
@@ -491,12 +487,12 @@ impl Experiment for NaMomentum {
         let mom = tr
             .iter()
             .find(|t| t.0 == "momentum")
-            .ok_or_else(|| super::other("no momentum run"))?;
+            .ok_or_else(|| other("no momentum run"))?;
         let plain: Vec<&(String, f64, Vec<f64>)> = tr.iter().filter(|t| t.0 == "plain").collect();
         let base = plain
             .iter()
             .min_by(|a, b| (a.1 - 1.0).abs().total_cmp(&(b.1 - 1.0).abs()))
-            .ok_or_else(|| super::other("no plain run"))?;
+            .ok_or_else(|| other("no plain run"))?;
         let mut md = String::from(
             "| method | eta | J start | J end | landing error emulator (m) | landing error simulator (m) | final gap |\n| --- | --- | --- | --- | --- | --- | --- |\n",
         );

@@ -19,15 +19,15 @@
 //! mean_shape_error, final_shape_error, roughness). Seconds are wall time of the emulation loop
 //! (fastest of `repeats`) and the one column that is not bit-reproducible.
 
-use super::na_speedup::validate_regularizer;
-use super::na_structure::{build_dolphin_emulator, DolphinNets};
-use super::output::{df_f64, df_str, read_csv, unique, Table, Tables};
-use super::plot::{Figure, Legend, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
+use super::table1_structure::{build_dolphin_emulator, DolphinNets};
+use super::table2_speedup::validate_regularizer;
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy::{self, Regularizer, Schedule};
+use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
 use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
 use crate::physics::{check_finite, Dynamics};
 use crate::row;
@@ -175,7 +175,7 @@ impl Job for Params {
                     for j in 0..n {
                         sim.step(&mut x, &u[k * m..(k + 1) * m], dt);
                         check_finite("dolphin", k * n + j + 1, (k * n + j + 1) as f64 * dt, &x)
-                            .map_err(super::other)?;
+                            .map_err(other)?;
                     }
                     curve[k + 1] += d.shape_error(&x) / self.trials as f64;
                     traj.push(x.clone());
@@ -200,7 +200,7 @@ impl Job for Params {
                 steps: s.steps,
                 every: s.every,
             };
-            let mut reg = self.regularization.bind(&d).map_err(super::other)?;
+            let mut reg = self.regularization.bind(&d).map_err(other)?;
             let mut scratch = emu.scratch();
             let mut curve = vec![0.0; k_steps + 1];
             let mut rough = 0.0;
@@ -278,11 +278,7 @@ impl Experiment for NaRegularization {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("shape_error")?;
         let (name, time, err) = (t.strs("schedule"), t.f64s("t"), t.f64s("shape_error"));
         let names = unique(&name);
@@ -358,11 +354,7 @@ impl Experiment for NaRegularization {
                 let drift = final_e[z] > 2.0 * final_e[s];
                 let fixes = mean_e[f] < 0.7 * mean_e[z];
                 let smoother = rough[f] < rough[r];
-                let verdict = match (drift && fixes, smoother) {
-                    (true, true) => Verdict::Held,
-                    (false, false) => Verdict::NotHeld,
-                    _ => Verdict::Partly,
-                };
+                let verdict = Verdict::from_checks(&[drift && fixes, smoother]);
                 (
                     verdict,
                     format!(

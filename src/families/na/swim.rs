@@ -21,10 +21,11 @@
 //! documented with); a task's "final error" is how far (m) a controller falls short of the
 //! distance the reference swims on the simulator.
 
-use super::resolve::{ensure, positive, ParamError};
 use crate::control::bptt::{Bounds, Knots};
 use crate::control::objective::{ControlEffort, Objective, Progress};
 use crate::emulator::hierarchy::{self, global_state, Regularizer, FRAME_DIM, GLOBAL_DIM};
+use crate::experiment::resolve::{ensure, positive, ParamError};
+use crate::experiment::{other, Error};
 use crate::physics::dolphin::{Dolphin, N_SEGMENTS};
 use crate::physics::{check_finite, BlowUp, Dynamics};
 use serde::{Deserialize, Serialize};
@@ -64,7 +65,7 @@ impl SwimTask {
             &format!("{key}.effort_mu"),
             "must be >= 0",
         )?;
-        super::na_speedup::validate_regularizer(
+        super::table2_speedup::validate_regularizer(
             &format!("{key}.regularization"),
             &self.regularization,
         )
@@ -177,8 +178,8 @@ pub fn emulated_masses(
     reg_steps: usize,
     x0: &[f64],
     controls: &[f64],
-) -> Result<Vec<Vec<f64>>, super::Error> {
-    let mut r = reg.bind(emu.dolphin()).map_err(super::other)?;
+) -> Result<Vec<Vec<f64>>, Error> {
+    let mut r = reg.bind(emu.dolphin()).map_err(other)?;
     let schedule = hierarchy::Schedule {
         steps: reg_steps,
         every: 1,

@@ -12,15 +12,15 @@
 //! train_s, weights, examples_per_weight, stop, cached) and `training` (net, iteration,
 //! train_error, heldout_error).
 
-use super::output::{df_f64, df_str, read_csv, unique, Table, Tables};
-use super::plot::{Figure, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{mix_seed, Error, Experiment, Job, RunContext};
 use crate::emulator::cache::{fnv1a, EmulatorCache};
 use crate::emulator::catalog::{BuildSpec, NetSpec, TrainSettings, Trained};
 use crate::emulator::hierarchy::{build_dolphin, BuiltDolphin, HierarchyNet, HierarchySpec};
 use crate::emulator::mlp::Mlp;
+use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{mix_seed, other, Error, Experiment, Job, RunContext};
 use crate::row;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -101,7 +101,7 @@ impl DolphinNets {
 
 /// The dolphin hierarchy of `spec`, from the cache or trained now.
 pub fn build_dolphin_emulator(spec: &HierarchySpec) -> Result<BuiltDolphin, Error> {
-    build_dolphin(spec, &EmulatorCache::from_env()).map_err(super::other)
+    build_dolphin(spec, &EmulatorCache::from_env()).map_err(other)
 }
 
 /// Checks the shared training settings.
@@ -178,9 +178,7 @@ pub fn build_spec(
 
 /// The emulator of `spec`, from the cache ([`EmulatorCache::from_env`]) or trained now.
 pub fn build_emulator(spec: &BuildSpec) -> Result<Trained, Error> {
-    EmulatorCache::from_env()
-        .get_or_train(spec)
-        .map_err(super::other)
+    EmulatorCache::from_env().get_or_train(spec).map_err(other)
 }
 
 impl Job for Params {
@@ -288,11 +286,7 @@ impl Experiment for NaStructure {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("training")?;
         let (net, it, tr, ho) = (
             t.strs("net"),
@@ -362,13 +356,7 @@ impl Experiment for NaStructure {
                 good += 1;
             }
         }
-        let verdict = if good == net.len() {
-            Verdict::Held
-        } else if good > 0 {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        };
+        let verdict = Verdict::from_counts(good, net.len());
         Ok(Findings {
             ours: md,
             verdict,

@@ -7,11 +7,11 @@
 //! theoretical_order, measured_order, points_used), `adaptive` (model, rtol, atol, drift,
 //! accepted_steps, rejected_steps, evaluations), `passive_<model>` (start, t, state…, energy).
 
-use super::output::{unique, Table, Tables};
-use super::plot::{Figure, Legend, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{all_positive, ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
+use crate::experiment::output::{unique, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{all_positive, ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{Error, Experiment, Job, RunContext};
 use crate::physics::acrobot::Acrobot;
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
 use crate::physics::{Integrator, IntegratorKind, Model, Ode, Simulator};
@@ -350,11 +350,7 @@ impl Experiment for PhysicsValidation {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let mut files = Vec::new();
         let drift = tables.require("energy_drift")?;
         let orders = tables.require("orders")?;
@@ -504,7 +500,7 @@ impl Experiment for PhysicsValidation {
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
         use polars::prelude::*;
-        let df = super::output::read_csv(&dir.join("orders.csv"))?;
+        let df = crate::experiment::output::read_csv(&dir.join("orders.csv"))?;
         let pe = |e: PolarsError| Error::Polars(e.to_string());
         let m = df.column("model").map_err(pe)?.str().map_err(pe)?.clone();
         let i = df
@@ -542,7 +538,7 @@ impl Experiment for PhysicsValidation {
             ));
         }
         // Adaptive: does drift fall as the tolerance tightens?
-        let ad = super::output::read_csv(&dir.join("adaptive.csv"))?;
+        let ad = crate::experiment::output::read_csv(&dir.join("adaptive.csv"))?;
         let agg = ad
             .lazy()
             .group_by([col("model")])
@@ -580,13 +576,7 @@ impl Experiment for PhysicsValidation {
             .collect();
         md.push_str(&parts.join("; "));
         md.push('.');
-        let verdict = if ok == total {
-            Verdict::Held
-        } else if ok > 0 {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        };
+        let verdict = Verdict::from_counts(ok, total);
         Ok(Findings {
             ours: md,
             verdict,

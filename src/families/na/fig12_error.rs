@@ -19,14 +19,14 @@
 //! Table: `error` (variant, emulator, t, error); errors are in the state's units (rad and
 //! rad/s mixed, as in the paper's average over all state variables).
 
-use super::na_structure::{build_emulator, build_spec, validate_nets, validate_training};
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
-use super::plot::{Figure, Legend, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
+use super::table1_structure::{build_emulator, build_spec, validate_nets, validate_training};
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{Error, Experiment, Job, RunContext};
 use crate::row;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -235,11 +235,7 @@ impl Experiment for NaError {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let tb = tables.require("error")?;
         let (var, emu, t, err) = (
             tb.strs("variant"),

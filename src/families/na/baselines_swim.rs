@@ -4,7 +4,7 @@
 //! The paper: simulated annealing and the simplex method need 500–3,500 iterations (over an
 //! hour) to learn a controller; backpropagation through time through the emulator needs about
 //! 20 (under 10 s). Here every method searches the same 120 normalized knots (20 per muscle,
-//! 6 muscles, [−1, 1]) of the swim task of [`super::na_swim`] from the same random start
+//! 6 muscles, [−1, 1]) of the swim task of [`super::swim`] from the same random start
 //! (half-width `init_spread`, as in `na_fig13_control`) and minimizes the same objective
 //! J = effort − distance swum:
 //!
@@ -33,19 +33,19 @@
 //!   learned knots replayed there) and the `*_to_bptt` columns are where the run's best J
 //!   first reached it (NaN: never); `best_iteration` is where it reached its own best.
 
-use super::na_structure::{build_dolphin_emulator, DolphinNets};
-use super::na_swim::SwimTask;
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
-use super::plot::{Figure, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{mix_seed, Error, Experiment, Job, RunContext};
+use super::swim::SwimTask;
+use super::table1_structure::{build_dolphin_emulator, DolphinNets};
 use crate::control::bptt::{Bptt, Descent};
 use crate::control::search::{
     anneal, bptt_search, hill_climb, nelder_mead, time_to_target, AnnealingConfig, BpttProblem,
     Budget, ClimbConfig, Geometric, ReplayProblem, SearchProblem, SearchResult, SimplexConfig,
 };
 use crate::emulator::hierarchy::{self, global_state};
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{mix_seed, Error, Experiment, Job, RunContext};
 use crate::row;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -538,11 +538,7 @@ impl Experiment for NaBaselines {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("baselines")?;
         let (meth, sub, it, secs, obj) = (
             t.strs("method"),

@@ -7,15 +7,15 @@
 //! Tables: `weights` (t, alpha_forward, alpha_backward, force_x, body_angle, arm_angle,
 //! hand_x), `reaches` (one row per optimized reach).
 
-use super::output::{df_f64, read_csv, Table, Tables};
-use super::plot::{Figure, Legend, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
 use crate::bellman::combine::{BlendMode, TrackerBlend};
 use crate::control::ddp::{solve, DdpOptions};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map};
+use crate::experiment::output::{df_f64, read_csv, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::push::{push_figure, HAND_LINK};
 use crate::row;
@@ -149,7 +149,7 @@ impl Job for Params {
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let mut torque_only = push_figure();
         torque_only.forces.clear();
-        let map = Rk4Map::new(FiniteDifference::new(torque_only), self.dt).map_err(super::other)?;
+        let map = Rk4Map::new(FiniteDifference::new(torque_only), self.dt).map_err(other)?;
         let x0 = self.start();
         let mut reaches = Table::new(&["reach", "iterations", "cost", "final_error"]);
         let mut trackers: Vec<TrackingController> = Vec::new();
@@ -161,16 +161,15 @@ impl Job for Params {
                     max_iterations: self.max_iterations,
                     ..DdpOptions::default()
                 };
-                let sol = solve(&map, &cost, &x0, &u0, &opts).map_err(super::other)?;
+                let sol = solve(&map, &cost, &x0, &u0, &opts).map_err(other)?;
                 let err = (&sol.x[sol.u.len()] - &cost.x_final).norm();
                 reaches.push(row![name, sol.trace.len(), sol.cost, err]);
-                trackers.push(track(&map, &cost, &sol.x, &sol.u).map_err(super::other)?);
+                trackers.push(track(&map, &cost, &sol.x, &sol.u).map_err(other)?);
             }
             Ok(())
         })?;
         // Closed loop with tugs on the full model (torques + hand force).
-        let full =
-            Rk4Map::new(FiniteDifference::new(push_figure()), self.dt).map_err(super::other)?;
+        let full = Rk4Map::new(FiniteDifference::new(push_figure()), self.dt).map_err(other)?;
         let mut ws = full.workspace();
         let blend = TrackerBlend {
             trackers: &trackers,
@@ -196,7 +195,7 @@ impl Job for Params {
                 let t = k as f64 * self.dt;
                 blend
                     .control(x.as_slice(), k, &mut u, &mut alpha, &mut ui)
-                    .map_err(super::other)?;
+                    .map_err(other)?;
                 let f = self.force_at(t);
                 full_u.as_mut_slice()[..3].copy_from_slice(&u);
                 full_u[3] = f;
@@ -225,11 +224,7 @@ impl Experiment for LbcPush {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let w = tables.require("weights")?;
         let (t, a, f, hx) = (
             w.f64s("t"),
@@ -314,11 +309,7 @@ impl Experiment for LbcPush {
             sig(final_alpha)
         );
         let settled = !tail.is_empty() && settle_range < 0.1;
-        let verdict = match (swings >= 2, settled) {
-            (true, true) => Verdict::Held,
-            (true, false) | (false, true) => Verdict::Partly,
-            _ => Verdict::NotHeld,
-        };
+        let verdict = Verdict::from_checks(&[swings >= 2, settled]);
         Ok(Findings {
             ours: md,
             verdict,

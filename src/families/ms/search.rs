@@ -1,3 +1,5 @@
+//! # The search jobs of `ms_motion` and `ms_learning`
+//!
 //! Mass-spring motion synthesis experiments (MS §2.3, §3, Fig. 6–9): parallel hill climbing
 //! of time-based reflex controllers for one objective, on one lattice.
 //!
@@ -14,14 +16,15 @@
 //!   same evaluation budget on the same problem, run side by side; tables `learning` (method,
 //!   iteration, objective, best) and `summary` (method, evaluations, seconds, best_objective).
 //!   Figure: `<id>_learning.png/svg`, the scatter of every evaluation with best-so-far lines.
+//!
+//! The families' figures and report sections are in [`super::motion`] (`ms_motion`) and
+//! [`super::fig6_learning_plot`] (`ms_learning`), files named after the experiment ids.
 
-use super::ms_draw::{draw_panels, write_gif, LatticePanel};
-use super::ms_lattices::{lattice_by_name, springs_of};
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
-use super::plot::{Figure, Legend, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
+use super::lattices::lattice_by_name;
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::plot::{Legend, Mark, Panel, Series};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{Error, Job, RunContext};
 use crate::control::search::SearchResult;
 use crate::physics::lattice::{Floor, LatticeModel};
 use crate::physics::reflex::Reflex;
@@ -31,8 +34,6 @@ use crate::synthesis::objective::{Objective, Orientation, Term, Weighted};
 use crate::synthesis::search::{anneal, hill_climb, learning_curve, AnnealConfig, HillClimbConfig};
 use crate::synthesis::Problem;
 use serde::{Deserialize, Serialize};
-use std::f64::consts::PI;
-use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Which of the paper's motions an experiment reproduces (decides what its report checks).
@@ -236,11 +237,6 @@ pub fn measures() -> Vec<(&'static str, Term)> {
     ]
 }
 
-/// The motion family.
-pub struct MsMotion;
-/// The learning-plot family.
-pub struct MsLearning;
-
 /// `ms_motion` parameters (no annealing).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(transparent)]
@@ -388,296 +384,6 @@ impl Job for MotionJob {
     }
 }
 
-/// Frames `(t, regime, positions)` of a `trajectory` table.
-fn frames_of(t: &Table) -> Vec<(f64, usize, Vec<[f64; 3]>)> {
-    let (time, reg, mass) = (t.f64s("t"), t.f64s("regime"), t.f64s("mass"));
-    let (x, y, z) = (t.f64s("x"), t.f64s("y"), t.f64s("z"));
-    let mut out: Vec<(f64, usize, Vec<[f64; 3]>)> = Vec::new();
-    for i in 0..time.len() {
-        if mass[i] == 0.0 {
-            out.push((time[i], reg[i] as usize, Vec::new()));
-        }
-        if let Some(f) = out.last_mut() {
-            f.2.push([x[i], y[i], z[i]]);
-        }
-    }
-    out
-}
-
-fn com(p: &[[f64; 3]]) -> [f64; 3] {
-    // Shipped lattices have equal masses.
-    let n = p.len().max(1) as f64;
-    let mut c = [0.0; 3];
-    for q in p {
-        for k in 0..3 {
-            c[k] += q[k] / n;
-        }
-    }
-    c
-}
-
-fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &str) -> Panel {
-    let mut series = Vec::new();
-    for (k, (name, t)) in tables.iter().enumerate() {
-        let (it, obj, best) = (t.f64s("iteration"), t.f64s("objective"), t.f64s("best"));
-        // Rows with iteration 0 are the initial random controllers: drawn at x = 0.
-        series.push(
-            Series::line(
-                format!("{name}: every evaluation"),
-                it.iter().zip(&obj).map(|(&a, &b)| (a, b)).collect(),
-                2 * k + 1,
-            )
-            .mark(Mark::Points),
-        );
-        series.push(Series::line(
-            format!("{name}: best so far"),
-            it.iter().zip(&best).map(|(&a, &b)| (a, b)).collect(),
-            2 * k,
-        ));
-    }
-    Panel {
-        title: title.into(),
-        x_label: x_label.into(),
-        y_label: "objective".into(),
-        series,
-        legend: Legend::LowerRight,
-        ..Panel::default()
-    }
-}
-
-impl Experiment for MsMotion {
-    fn kind(&self) -> &'static str {
-        "ms_motion"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<MotionJob>(params)
-    }
-
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
-        let springs = springs_of(tables.require("springs")?, None);
-        let frames = frames_of(tables.require("trajectory")?);
-        let ctl = tables.require("controller")?;
-        let names = ctl.strs("reflex_name");
-        let alphas = ctl.f64s("alpha");
-        let trail: Vec<[f64; 3]> = frames.iter().map(|f| com(&f.2)).collect();
-        let label = |reg: usize| {
-            format!(
-                "{} {:+.2}",
-                names.get(reg).map(String::as_str).unwrap_or("?"),
-                alphas.get(reg).copied().unwrap_or(f64::NAN)
-            )
-        };
-        let mut files = Vec::new();
-        if frames.is_empty() {
-            return Ok(files);
-        }
-        let strip = (tables
-            .require("summary")?
-            .f64s("filmstrip_frames")
-            .first()
-            .copied()
-            .unwrap_or(8.0) as usize)
-            .clamp(1, frames.len());
-        let picks: Vec<usize> = (0..strip)
-            .map(|i| {
-                if strip == 1 {
-                    frames.len() - 1
-                } else {
-                    i * (frames.len() - 1) / (strip - 1)
-                }
-            })
-            .collect();
-        let panels: Vec<LatticePanel> = picks
-            .iter()
-            .map(|&i| LatticePanel {
-                title: format!("t = {:.2} s, {}", frames[i].0, label(frames[i].1)),
-                positions: frames[i].2.clone(),
-                ghost: None,
-                trail: trail[..=i].to_vec(),
-            })
-            .collect();
-        files.extend(draw_panels(
-            &fig.dir,
-            &format!("{}_filmstrip", fig.id),
-            &panels,
-            &springs,
-            4,
-            (360, 300),
-            true,
-        )?);
-        // GIF in real time with at most ~100 frames.
-        let dt = if frames.len() > 1 {
-            frames[1].0 - frames[0].0
-        } else {
-            0.04
-        };
-        let every = frames.len().div_ceil(100).max(1);
-        let gif_frames: Vec<(String, Vec<[f64; 3]>)> = frames
-            .iter()
-            .step_by(every)
-            .map(|f| {
-                (
-                    format!("{}  t = {:.2} s  {}", fig.id, f.0, label(f.1)),
-                    f.2.clone(),
-                )
-            })
-            .collect();
-        let delay = ((every as f64 * dt * 1000.0).round() as u32).max(20);
-        let gif_trail: Vec<[f64; 3]> = trail.iter().step_by(every).copied().collect();
-        files.push(write_gif(
-            &fig.dir,
-            &format!("{}_motion", fig.id),
-            &gif_frames,
-            &gif_trail,
-            &springs,
-            (560, 420),
-            delay,
-        )?);
-        let search = tables.require("search")?;
-        files.extend(fig.draw(
-            "search",
-            &Figure::grid(
-                vec![learning_panel(
-                    "hill climbing: objective of every evaluation",
-                    &[("hill climbing", search)],
-                    "iteration (0: initial random controllers)",
-                )],
-                1,
-            ),
-        )?);
-        Ok(files)
-    }
-
-    fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let s = read_csv(&dir.join("summary.csv"))?;
-        let motion = df_str(&s, "motion")?.first().cloned().unwrap_or_default();
-        let get1 = |c: &str| -> Result<f64, Error> {
-            Ok(df_f64(&s, c)?.first().copied().unwrap_or(f64::NAN))
-        };
-        let (evals, secs, best, init) = (
-            get1("evaluations")?,
-            get1("search_seconds")?,
-            get1("best_objective")?,
-            get1("initial_best")?,
-        );
-        let m = read_csv(&dir.join("measures.csv"))?;
-        let names = df_str(&m, "measure")?;
-        let vals = df_f64(&m, "value")?;
-        let mv = |n: &str| {
-            names
-                .iter()
-                .position(|x| x == n)
-                .map(|i| vals[i])
-                .unwrap_or(f64::NAN)
-        };
-        let b = read_csv(&dir.join("best.csv"))?;
-        let (bt, bv, bw) = (
-            df_str(&b, "term")?,
-            df_f64(&b, "value")?,
-            df_f64(&b, "weighted")?,
-        );
-        let mut md = String::from("| objective term | value | weighted |\n| --- | --- | --- |\n");
-        for i in 0..bt.len() {
-            md.push_str(&format!(
-                "| {} | {} | {} |\n",
-                bt[i],
-                sig(bv[i]),
-                sig(bw[i])
-            ));
-        }
-        md.push_str("\n| measure of the best motion | value |\n| --- | --- |\n");
-        for (n, v) in names.iter().zip(&vals) {
-            md.push_str(&format!("| {n} | {} |\n", sig(*v)));
-        }
-        md.push_str(&format!(
-            "\nSearch: {} evaluations in {} s ({} evaluations/s); best of the initial random set {}, final best {}.\n",
-            evals,
-            sig(secs),
-            sig(evals / secs.max(1e-9)),
-            sig(init),
-            sig(best)
-        ));
-        let upright = mv("uprightness_loss_60") == 0.0;
-        let airborne = mv("hops") >= 1.0 || mv("min_contacts") == 0.0;
-        let (verdict, why) = match motion.as_str() {
-            "leap" => {
-                let d = mv("displacement_x");
-                let v = if d > 1.0 && upright && airborne {
-                    Verdict::Held
-                } else if d > 0.3 && upright {
-                    Verdict::Partly
-                } else {
-                    Verdict::NotHeld
-                };
-                (
-                    v,
-                    format!(
-                        "The spider travels {} m along +x (1 m = its base width), stays upright: {}, leaves the ground: {}.",
-                        sig(d),
-                        upright,
-                        airborne
-                    ),
-                )
-            }
-            "somersault" => {
-                let r = mv("rotation_back_y");
-                let d = mv("displacement_x");
-                let ground = mv("on_ground") == 1.0;
-                let lr = mv("left_right_loss_45") == 0.0;
-                let v = if r >= 0.9 * 2.0 * PI && d > 0.0 && ground && lr {
-                    Verdict::Held
-                } else if r >= PI && d > 0.0 {
-                    Verdict::Partly
-                } else {
-                    Verdict::NotHeld
-                };
-                (
-                    v,
-                    format!(
-                        "Backward rotation {} turns while moving {} m forward; on the ground at T: {}; no rolling/turning beyond 45°: {}.",
-                        sig(r / (2.0 * PI)),
-                        sig(d),
-                        ground,
-                        lr
-                    ),
-                )
-            }
-            _ => {
-                let r = mv("rotation_z").abs();
-                let ground = mv("on_ground") == 1.0;
-                let v = if r >= PI && upright && ground && airborne {
-                    Verdict::Held
-                } else if r >= PI / 4.0 && upright {
-                    Verdict::Partly
-                } else {
-                    Verdict::NotHeld
-                };
-                (
-                    v,
-                    format!(
-                        "The table turns {}° about the vertical, stays upright: {}, jumps: {}, on the ground at T: {}, drifts {} m.",
-                        sig(r.to_degrees()),
-                        upright,
-                        airborne,
-                        ground,
-                        sig(mv("horizontal_distance"))
-                    ),
-                )
-            }
-        };
-        Ok(Findings {
-            ours: md,
-            verdict,
-            why,
-        })
-    }
-}
-
 impl Job for LearningJob {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(&self.0).unwrap_or_default()
@@ -747,150 +453,32 @@ impl Job for LearningJob {
     }
 }
 
-/// Learning-curve statistics of one method from `learning.csv` columns.
-struct Curve {
-    init_best: f64,
-    at_fifth: f64,
-    end_best: f64,
-    poor_late: f64,
-    iterations: f64,
-}
-
-fn curve(method: &str, m: &[String], it: &[f64], obj: &[f64], best: &[f64]) -> Curve {
-    let rows: Vec<usize> = (0..m.len()).filter(|&i| m[i] == method).collect();
-    let iterations = rows.iter().map(|&i| it[i]).fold(0.0, f64::max);
-    let best_at = |limit: f64| {
-        rows.iter()
-            .filter(|&&i| it[i] <= limit)
-            .map(|&i| best[i])
-            .fold(f64::NEG_INFINITY, f64::max)
-    };
-    let init_best = best_at(0.0);
-    let late: Vec<usize> = rows
-        .iter()
-        .copied()
-        .filter(|&i| it[i] > 0.8 * iterations)
-        .collect();
-    let poor = late.iter().filter(|&&i| obj[i] < init_best).count() as f64;
-    Curve {
-        init_best,
-        at_fifth: best_at(iterations / 5.0),
-        end_best: best_at(iterations),
-        poor_late: poor / late.len().max(1) as f64,
-        iterations,
-    }
-}
-
-impl Experiment for MsLearning {
-    fn kind(&self) -> &'static str {
-        "ms_learning"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<LearningJob>(params)
-    }
-
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
-        let t = tables.require("learning")?;
-        let methods = t.strs("method");
-        let split = |name: &str| {
-            let mut out = Table::new(&["iteration", "objective", "best"]);
-            let (it, o, b) = (t.f64s("iteration"), t.f64s("objective"), t.f64s("best"));
-            for i in 0..methods.len() {
-                if methods[i] == name {
-                    out.push(row![it[i], o[i], b[i]]);
-                }
-            }
-            out
-        };
-        let (h, s) = (split("hill_climbing"), split("simulated_annealing"));
-        // The y range: from a low quantile of all evaluations to above the best (blown-up or
-        // very poor evaluations would squash the plot otherwise).
-        let mut all: Vec<f64> = t
-            .f64s("objective")
-            .into_iter()
-            .filter(|v| v.is_finite())
-            .collect();
-        all.sort_by(f64::total_cmp);
-        let lo = all.get(all.len() / 50).copied().unwrap_or(0.0);
-        let hi = all.last().copied().unwrap_or(1.0);
-        let pad = 0.05 * (hi - lo).max(1e-9);
-        let mut panel = learning_panel(
-            "learning plot: poodle somersault (Fig. 6)",
-            &[("hill climbing", &h), ("simulated annealing", &s)],
-            "iteration (0: initial random controllers)",
+/// The search-trace panel: every evaluation's objective and the best so far, per method.
+pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &str) -> Panel {
+    let mut series = Vec::new();
+    for (k, (name, t)) in tables.iter().enumerate() {
+        let (it, obj, best) = (t.f64s("iteration"), t.f64s("objective"), t.f64s("best"));
+        // Rows with iteration 0 are the initial random controllers: drawn at x = 0.
+        series.push(
+            Series::line(
+                format!("{name}: every evaluation"),
+                it.iter().zip(&obj).map(|(&a, &b)| (a, b)).collect(),
+                2 * k + 1,
+            )
+            .mark(Mark::Points),
         );
-        panel.y_range = Some((lo - pad, hi + pad));
-        let mut fig6 = Figure::grid(vec![panel], 1);
-        fig6.panel_size = (960, 560);
-        fig.draw("learning", &fig6)
-    }
-
-    fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let df = read_csv(&dir.join("learning.csv"))?;
-        let (m, it, obj, best) = (
-            df_str(&df, "method")?,
-            df_f64(&df, "iteration")?,
-            df_f64(&df, "objective")?,
-            df_f64(&df, "best")?,
-        );
-        let s = read_csv(&dir.join("summary.csv"))?;
-        let (sm, secs, evals) = (
-            df_str(&s, "method")?,
-            df_f64(&s, "seconds")?,
-            df_f64(&s, "evaluations")?,
-        );
-        let wall = df_f64(&s, "wall_seconds_both")?
-            .first()
-            .copied()
-            .unwrap_or(f64::NAN);
-        let h = curve("hill_climbing", &m, &it, &obj, &best);
-        let a = curve("simulated_annealing", &m, &it, &obj, &best);
-        let frac = |c: &Curve| (c.at_fifth - c.init_best) / (c.end_best - c.init_best).max(1e-12);
-        let mut md = String::from(
-            "| method | evaluations | seconds | best of initial set | best at 1/5 of the iterations | final best | share of the gain by 1/5 | evaluations in the last 1/5 worse than the initial best |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
-        );
-        for (name, c) in [("hill_climbing", &h), ("simulated_annealing", &a)] {
-            let k = sm.iter().position(|x| x == name);
-            md.push_str(&format!(
-                "| {name} | {} | {} | {} | {} | {} | {} | {} |\n",
-                k.map(|k| evals[k]).unwrap_or(f64::NAN),
-                sig(k.map(|k| secs[k]).unwrap_or(f64::NAN)),
-                sig(c.init_best),
-                sig(c.at_fifth),
-                sig(c.end_best),
-                sig(frac(c)),
-                sig(c.poor_late)
-            ));
-        }
-        md.push_str(&format!(
-            "\nBoth searches ran side by side in {} s of wall time ({} iterations each; the paper: 25,000 iterations in 66 min on a DEC 3000/400 AXP).\n",
-            sig(wall),
-            h.iterations
+        series.push(Series::line(
+            format!("{name}: best so far"),
+            it.iter().zip(&best).map(|(&a, &b)| (a, b)).collect(),
+            2 * k,
         ));
-        let fast_then_slow = frac(&h) >= 0.6 && h.end_best > h.init_best;
-        let many_poor = h.poor_late >= 0.2;
-        let verdict = match (fast_then_slow, many_poor) {
-            (true, true) => Verdict::Held,
-            (false, false) => Verdict::NotHeld,
-            _ => Verdict::Partly,
-        };
-        Ok(Findings {
-            ours: md,
-            verdict,
-            why: format!(
-                "Hill climbing made {}% of its total gain in the first fifth of the iterations (fast, then slow: {}); {}% of its evaluations in the last fifth were worse than the best random controller (many stay poor: {}); simulated annealing with the same budget ended at {} vs {}.",
-                sig(100.0 * frac(&h)),
-                fast_then_slow,
-                sig(100.0 * h.poor_late),
-                many_poor,
-                sig(a.end_best),
-                sig(h.end_best)
-            ),
-        })
+    }
+    Panel {
+        title: title.into(),
+        x_label: x_label.into(),
+        y_label: "objective".into(),
+        series,
+        legend: Legend::LowerRight,
+        ..Panel::default()
     }
 }

@@ -17,16 +17,16 @@
 //!   the single tracker of the ω₀ = 1 dive, from eight sampled ω₀. `coordination.csv`:
 //!   initial_omega, method, entry_error, objective.
 
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
-use super::plot::{Figure, Legend, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
 use crate::bellman::combine::{BlendMode, TrackerBlend};
 use crate::bellman::projection::{project, GaussianReward};
 use crate::control::ddp::{solve, DdpOptions, DdpSolution};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map};
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
 use crate::physics::diver::{diver, entry_angle};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::planar::PlanarTree;
@@ -132,7 +132,7 @@ impl DiveSettings {
     }
 
     fn map(&self) -> Result<Rk4Map<FiniteDifference<PlanarTree>>, Error> {
-        Rk4Map::new(FiniteDifference::new(diver()), self.dt).map_err(super::other)
+        Rk4Map::new(FiniteDifference::new(diver()), self.dt).map_err(other)
     }
 
     /// DDP dive from take-off rate `omega` to the target `offset`, and its LQR tracker.
@@ -144,8 +144,8 @@ impl DiveSettings {
             max_iterations: self.max_iterations,
             ..DdpOptions::default()
         };
-        let sol = solve(&map, &cost, &self.takeoff(omega), &u0, &opts).map_err(super::other)?;
-        let tracker = track(&map, &cost, &sol.x, &sol.u).map_err(super::other)?;
+        let sol = solve(&map, &cost, &self.takeoff(omega), &u0, &opts).map_err(other)?;
+        let tracker = track(&map, &cost, &sol.x, &sol.u).map_err(other)?;
         Ok((sol, tracker))
     }
 
@@ -295,7 +295,7 @@ impl Job for InterpolationParams {
                     .par_iter()
                     .map(|&g| {
                         let w = project(&comps, &GaussianReward::isotropic(&[g], d.torso_weight))
-                            .map_err(super::other)?
+                            .map_err(other)?
                             .weights;
                         let cost = d.cost(g);
                         let mut out = Vec::new();
@@ -334,11 +334,7 @@ impl Experiment for LbcDiverInterpolation {
         typed_job::<InterpolationParams>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("interpolation")?;
         let (g, m, a) = (
             t.f64s("desired_angle"),
@@ -509,11 +505,7 @@ impl Experiment for LbcDiverCoordination {
         typed_job::<CoordinationParams>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("coordination")?;
         let (w, m, e, j) = (
             t.f64s("initial_omega"),

@@ -12,7 +12,7 @@
 //! s_{d,k})²/σ_k² (eq. 12 with a tolerance σ_k per state variable; u_0 is zero, or hover thrust
 //! for the lander; c the training limits' half-widths), descent with momentum (eq. 14–15) with
 //! η in units of 1/λ, λ the largest Hessian eigenvalue magnitude of J at the initial controls
-//! (see [`super::na_momentum`]).
+//! (see [`crate::families::na::fig14_momentum`]).
 //!
 //! Tables: `objective` (task, iteration, objective), `final` (task, emulator_error,
 //! simulator_error): the RMS of (s_M − s_d)/σ over the weighted state variables when the learned
@@ -22,26 +22,29 @@
 //!
 //! Figures: `control` (objectives and two state variables over time) and, per task, an
 //! animated GIF `<id>_<task>.gif` of the emulator-driven motion and its simulator replay over
-//! the goal ([`super::na_anim`]).
+//! the goal ([`anim`]).
 
-use super::na_anim::{write_animation, Scene, Track, EMULATOR, SIMULATOR};
-use super::na_structure::{
-    build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
-    DolphinNets,
-};
-use super::na_swim::{emulated_masses, SwimTask};
-use super::output::{df_f64, df_str, read_csv, unique, Table, Tables};
-use super::plot::{Figure, Legend, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
+pub mod anim;
+pub mod frames;
+
 use crate::control::bptt::{learn, replay, Bounds, Bptt, Descent, Knots};
 use crate::control::objective::{ControlEffort, FinalState, Objective};
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::hierarchy::{FRAME_DIM, GLOBAL_DIM};
+use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::families::na::swim::{emulated_masses, SwimTask};
+use crate::families::na::table1_structure::{
+    build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
+    DolphinNets,
+};
 use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
 use crate::physics::lander::Lander;
 use crate::row;
+use anim::{write_animation, Scene, Track, EMULATOR, SIMULATOR};
 use rand::Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -99,7 +102,7 @@ pub struct Params {
     pub dolphin: Option<DolphinControl>,
 }
 
-/// The dolphin swim task of Fig. 13(d) ([`super::na_swim`]).
+/// The dolphin swim task of Fig. 13(d) ([`crate::families::na::swim`]).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DolphinControl {
@@ -299,16 +302,13 @@ impl Job for Params {
                 Lander::default().normalize_state(&mut x0);
             }
             let mut bptt = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0)
-                .map_err(super::other)?;
+                .map_err(other)?;
             let rest = task.rest_control();
             let init: Vec<f64> = (0..knots.len()).map(|i| rest[i % m]).collect();
             let v0 = bptt.from_controls(&init);
             let lambda = bptt.curvature(&v0, self.curvature_iterations);
             if !(lambda.is_finite() && lambda > 0.0) {
-                return Err(super::other(format!(
-                    "{}: step scale λ = {lambda}",
-                    task.name
-                )));
+                return Err(other(format!("{}: step scale λ = {lambda}", task.name)));
             }
             let descent = if task.alpha > 0.0 {
                 Descent::Momentum {
@@ -402,15 +402,14 @@ impl Params {
         let objective = swim.objective();
         let knots = swim.knot_layout();
         let (x0, g0) = swim.start(&body);
-        let mut bptt =
-            Bptt::new(global, &objective, knots, swim.bounds(), &g0).map_err(super::other)?;
+        let mut bptt = Bptt::new(global, &objective, knots, swim.bounds(), &g0).map_err(other)?;
         let mut rng = ctx.rng(400);
         let v0: Vec<f64> = (0..knots.len())
             .map(|_| d.init_spread * (2.0 * rng.random::<f64>() - 1.0))
             .collect();
         let lambda = bptt.curvature(&v0, self.curvature_iterations);
         if !(lambda.is_finite() && lambda > 0.0) {
-            return Err(super::other(format!("dolphin: step scale λ = {lambda}")));
+            return Err(other(format!("dolphin: step scale λ = {lambda}")));
         }
         let descent = if d.alpha > 0.0 {
             Descent::Momentum {
@@ -429,7 +428,7 @@ impl Params {
         let (dt, n) = (d.nets.physical_dt, self.steps);
         let (sim_masses, sim_globals) = swim
             .simulate(&body, &x0, &r.controls, dt, n)
-            .map_err(super::other)?;
+            .map_err(other)?;
         // The body's motion for the animation: the full hierarchy (global and local nets,
         // regularized) and the simulator, mass positions per emulator step.
         let emu_masses = emulated_masses(
@@ -449,9 +448,7 @@ impl Params {
         }
         let mut ref_u = vec![0.0; knots.steps * knots.m];
         knots.expand(&swim.reference_knots(dt * n as f64), &mut ref_u);
-        let (_, ref_globals) = swim
-            .simulate(&body, &x0, &ref_u, dt, n)
-            .map_err(super::other)?;
+        let (_, ref_globals) = swim.simulate(&body, &x0, &ref_u, dt, n).map_err(other)?;
         let effort = |u: &[f64]| 0.5 * u.iter().map(|a| a * a).sum::<f64>();
         let (emu_d, sim_d, ref_d) = (
             swim.distance(&r.states),
@@ -490,13 +487,10 @@ impl Params {
     }
 }
 
-/// One animated GIF per task (see [`super::na_anim`]): the emulator-driven motion and its
+/// One animated GIF per task (see [`anim`]): the emulator-driven motion and its
 /// simulator replay, from the `trajectory` table, over the goal from the `goal` table.
 /// `<id>_dolphin.gif` from the `dolphin_motion` table, when it has rows.
-fn dolphin_animation(
-    fig: &super::plot::FigureSink,
-    tables: &Tables,
-) -> Result<Vec<PathBuf>, Error> {
+fn dolphin_animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let Some(t) = tables.get("dolphin_motion").filter(|t| !t.is_empty()) else {
         return Ok(vec![]);
     };
@@ -538,7 +532,7 @@ fn dolphin_animation(
     Ok(vec![p])
 }
 
-fn animations(fig: &super::plot::FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+fn animations(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let g = tables.require("goal")?;
     let tr = tables.require("trajectory")?;
     let (gtask, gmodel) = (g.strs("task"), g.strs("model"));
@@ -556,7 +550,7 @@ fn animations(fig: &super::plot::FigureSink, tables: &Tables) -> Result<Vec<Path
                 .find(|m| m.name() == gmodel[r])
                 .filter(|m| m.state_dim() <= width)
                 .map(|m| (r, m))
-                .ok_or_else(|| super::other(format!("goal: unknown model {}", gmodel[r])))
+                .ok_or_else(|| other(format!("goal: unknown model {}", gmodel[r])))
         })
         .collect::<Result<_, _>>()?;
     jobs.par_iter()
@@ -611,11 +605,7 @@ impl Experiment for NaControl {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("objective")?;
         let (task, it, obj) = (t.strs("task"), t.f64s("iteration"), t.f64s("objective"));
         let tr = tables.require("trajectory")?;
@@ -726,13 +716,7 @@ impl Experiment for NaControl {
             reached += usize::from(ok(ee[r]));
             reached_sim += usize::from(ok(se[r]));
         }
-        let verdict = if reached == ft.len() {
-            Verdict::Held
-        } else if reached > 0 {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        };
+        let verdict = Verdict::from_counts(reached, ft.len());
         Ok(Findings {
             ours: md,
             verdict,

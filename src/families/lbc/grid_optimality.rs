@@ -10,16 +10,16 @@
 //! `lbc_vs_direct`, `naive_vs_direct`, `lbc_policy_vs_direct`, `naive_policy_vs_direct`,
 //! `nonlinear_lbc_vs_direct`; `grid` (angle, rate, and the t = 0 fields per grid point).
 
-use super::output::{Table, Tables};
-use super::plot::{Figure, Heatmap};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
 use crate::bellman::combine::{blend_weights, naive_weights};
 use crate::bellman::grid_dp::{
     evaluate_mixture, mean_control, passive_transitions, solve_linear, solve_nonlinear, Grid2,
     GridSystem,
 };
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Heatmap};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
 use crate::row;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -181,8 +181,7 @@ impl Job for Params {
             for i in 0..k {
                 vals[i] = g[i][s];
             }
-            g_comb[s] =
-                blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(super::other)?;
+            g_comb[s] = blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(other)?;
         }
         // Linearly-solvable problems: components, and the combined terminal solved directly.
         let pb = ctx.progress((k + 1) as u64 * 2, "grid dynamic programming");
@@ -226,7 +225,7 @@ impl Job for Params {
                         ui[i] = mean_control(&grid, &p, &z[i][t + 1], self.dt, s);
                         vals[i] = v(z[i][t][s]);
                     }
-                    blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(super::other)?;
+                    blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(other)?;
                     let ul: f64 = (0..k).map(|i| alpha[i] * ui[i]).sum();
                     let un: f64 = (0..k).map(|i| beta[i] * ui[i]).sum();
                     lp_max = lp_max.max((ul - ud).abs());
@@ -278,8 +277,7 @@ impl Job for Params {
             for i in 0..k {
                 vals[i] = nl[i][s];
             }
-            nl_comb[s] =
-                blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(super::other)?;
+            nl_comb[s] = blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(other)?;
         }
         let (nn_max, nn_mean) = diff_stats((0..n).map(|s| (nl_comb[s], nl_direct[s])));
         let mut opt = Table::new(&["comparison", "max_abs_diff", "mean_abs_diff", "quantity"]);
@@ -359,16 +357,12 @@ impl Experiment for LbcGrid {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let g = tables.require("grid")?;
         let (a, r) = (g.f64s("angle"), g.f64s("rate"));
         let nx = r.iter().take_while(|&&v| v == r[0]).count();
         if nx == 0 || a.len() % nx != 0 {
-            return Err(super::other("grid table is not a regular grid"));
+            return Err(other("grid table is not a regular grid"));
         }
         let ny = a.len() / nx;
         let map = |title: &str, values: Vec<f64>, label: &str, diverging: bool| Heatmap {
@@ -464,7 +458,7 @@ impl Experiment for LbcGrid {
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
         use polars::prelude::*;
         let pe = |e: PolarsError| Error::Polars(e.to_string());
-        let df = super::output::read_csv(&dir.join("optimality.csv"))?;
+        let df = crate::experiment::output::read_csv(&dir.join("optimality.csv"))?;
         let c = df
             .column("comparison")
             .map_err(pe)?
@@ -501,11 +495,7 @@ impl Experiment for LbcGrid {
             .unwrap_or(f64::NAN);
         let exact = lbc < 1e-9 && lbcp < 1e-6;
         let worse = naive > 1e3 * lbc.max(1e-12) && naivep > 1e3 * lbcp.max(1e-12);
-        let verdict = match (exact, worse) {
-            (true, true) => Verdict::Held,
-            (true, false) | (false, true) => Verdict::Partly,
-            _ => Verdict::NotHeld,
-        };
+        let verdict = Verdict::from_checks(&[exact, worse]);
         Ok(Findings {
             ours: md,
             verdict,

@@ -3,8 +3,9 @@
 //! the floor a light grid with the masses' shadows. Used by the mass-spring experiments for
 //! lattice figures, filmstrips and animated GIFs.
 
-use super::output::temp_path;
-use super::Error;
+use crate::experiment::output::temp_path;
+use crate::experiment::plot::{perr, write_png_svg, Drawing};
+use crate::experiment::Error;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -234,15 +235,7 @@ fn render_panels<DB: DrawingBackend>(
 fn register() {
     // FigureSink registers the fonts; drawing a tiny figure through it is not needed here
     // because `titled` falls back on the registered "sans-serif" family.
-    super::plot::ensure_fonts();
-}
-
-/// A plotters error on the figure `p` as an [`Error::Plot`].
-pub(crate) fn perr(p: &Path, e: String) -> Error {
-    Error::Plot {
-        path: p.display().to_string(),
-        message: e,
-    }
+    crate::experiment::plot::ensure_fonts();
 }
 
 /// Draws `panels` (`columns` per row, `panel` pixels each) as `<dir>/<stem>.png` and `.svg`;
@@ -256,37 +249,39 @@ pub fn draw_panels(
     panel: (u32, u32),
     shared_view: bool,
 ) -> Result<Vec<PathBuf>, Error> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::Io {
-        path: dir.to_path_buf(),
-        source: e,
-    })?;
     register();
     let rows = panels.len().div_ceil(columns.max(1)).max(1) as u32;
     let size = (
         panel.0 * columns.min(panels.len()).max(1) as u32,
         panel.1 * rows,
     );
-    let png = dir.join(format!("{stem}.png"));
-    let svg = dir.join(format!("{stem}.svg"));
-    {
-        let tmp = temp_path(&png);
-        let root = BitMapBackend::new(&tmp, size).into_drawing_area();
-        render_panels(&root, panels, springs, columns, shared_view).map_err(|e| perr(&png, e))?;
-        root.present().map_err(|e| perr(&png, e.to_string()))?;
-        drop(root);
-        std::fs::rename(&tmp, &png).map_err(|e| Error::Io {
-            path: png.clone(),
-            source: e,
-        })?;
+    let drawing = Panels {
+        panels,
+        springs,
+        columns,
+        shared_view,
+    };
+    write_png_svg(dir, stem, size, &drawing)
+}
+
+/// The arguments of [`render_panels`], drawn on either backend.
+struct Panels<'a> {
+    panels: &'a [LatticePanel],
+    springs: &'a [(usize, usize)],
+    columns: usize,
+    shared_view: bool,
+}
+
+impl Drawing for Panels<'_> {
+    fn draw_on<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        render_panels(
+            root,
+            self.panels,
+            self.springs,
+            self.columns,
+            self.shared_view,
+        )
     }
-    let mut text = String::new();
-    {
-        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
-        render_panels(&root, panels, springs, columns, shared_view).map_err(|e| perr(&svg, e))?;
-        root.present().map_err(|e| perr(&svg, e.to_string()))?;
-    }
-    super::output::atomic_write(&svg, text.as_bytes())?;
-    Ok(vec![png, svg])
 }
 
 /// Writes an animated GIF `<dir>/<stem>.gif` of `frames` (title, positions), one camera for

@@ -6,11 +6,12 @@
 //! `positions` (lattice, reflex, alpha, mass, x, y, z; reflex −1 is the rest shape);
 //! `springs` (lattice, spring, a, b).
 
-use super::ms_draw::{draw_panels, LatticePanel};
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
-use super::report::{Findings, Verdict};
-use super::resolve::{ensure, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
+use super::lattice_draw::{draw_panels, LatticePanel};
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::FigureSink;
+use crate::experiment::report::{Findings, Verdict};
+use crate::experiment::resolve::{ensure, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
 use crate::physics::lattice::Lattice;
 use crate::physics::reflex::{deform, Reflex, ReflexGains};
 use crate::row;
@@ -94,7 +95,7 @@ impl Job for Params {
         let mut pos = Table::new(&["lattice", "reflex", "alpha", "mass", "x", "y", "z"]);
         let mut spr = Table::new(&["lattice", "spring", "a", "b"]);
         for name in &self.lattices {
-            let l = lattice_by_name(name).ok_or_else(|| super::other("unknown lattice"))?;
+            let l = lattice_by_name(name).ok_or_else(|| other("unknown lattice"))?;
             let rest = l.rest_lengths();
             for (j, s) in l.springs.iter().enumerate() {
                 spr.push(row![name.as_str(), j, s.a, s.b]);
@@ -104,9 +105,9 @@ impl Job for Params {
             }
             let mut rigid = 0usize;
             for r in 0..Reflex::COUNT {
-                let rname = Reflex::from_number(r).map_err(super::other)?.name();
+                let rname = Reflex::from_number(r).map_err(other)?.name();
                 for alpha in [self.alpha, -self.alpha] {
-                    let d = deform(&l, r, alpha, &self.gains).map_err(super::other)?;
+                    let d = deform(&l, r, alpha, &self.gains).map_err(other)?;
                     let mut change = 0.0f64;
                     for (j, s) in l.springs.iter().enumerate() {
                         let dl = d.rest_lengths[j] - rest[j];
@@ -163,11 +164,7 @@ impl Experiment for MsLattices {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let pos = tables.require("positions")?;
         let spr = tables.require("springs")?;
         let (names, reflex, alpha) = (pos.strs("lattice"), pos.f64s("reflex"), pos.f64s("alpha"));

@@ -9,15 +9,15 @@
 //! omega2, u, alpha1); `swingups` (one row per optimized swing-up); `ddp_trace`; `sweep`
 //! (theta1_deg, theta2_deg, policy, final_distance, control_cost, success).
 
-use super::output::{df_f64, df_str, read_csv, Table, Tables};
-use super::plot::{Figure, Heatmap, Legend, Mark, Panel, Series};
-use super::report::{sig, Findings, Verdict};
-use super::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use super::{Error, Experiment, Job, RunContext};
 use crate::bellman::combine::{BlendMode, TrackerBlend};
 use crate::control::ddp::{solve, DdpOptions, DdpSolution, DdpVariant};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map};
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Heatmap, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
+use crate::experiment::{other, Error, Experiment, Job, RunContext};
 use crate::physics::acrobot::Acrobot;
 use crate::row;
 use nalgebra::{DMatrix, DVector};
@@ -184,7 +184,7 @@ impl Params {
                 )
             })
             .collect();
-        solve(map, &self.cost(), &radians(start), &u0, &self.options()).map_err(super::other)
+        solve(map, &self.cost(), &radians(start), &u0, &self.options()).map_err(other)
     }
 
     fn run_policy(
@@ -250,7 +250,7 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let map = Rk4Map::new(Acrobot::default(), self.dt).map_err(super::other)?;
+        let map = Rk4Map::new(Acrobot::default(), self.dt).map_err(other)?;
         let cost = self.cost();
         let pb = ctx.progress(self.starts.len() as u64, "DDP swing-ups");
         let sols: Vec<Result<DdpSolution, Error>> = ctx.stage("ddp", || {
@@ -267,7 +267,7 @@ impl Job for Params {
         let sols: Vec<DdpSolution> = sols.into_iter().collect::<Result<_, _>>()?;
         let trackers: Vec<TrackingController> = ctx.stage("lqr", || {
             sols.iter()
-                .map(|s| track(&map, &cost, &s.x, &s.u).map_err(super::other))
+                .map(|s| track(&map, &cost, &s.x, &s.u).map_err(other))
                 .collect::<Result<_, _>>()
         })?;
         let mut swingups = Table::new(&[
@@ -422,11 +422,7 @@ impl Experiment for LbcAcrobot {
         typed_job::<Params>(params)
     }
 
-    fn figures(
-        &self,
-        fig: &super::plot::FigureSink,
-        tables: &Tables,
-    ) -> Result<Vec<PathBuf>, Error> {
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let traj = tables.require("trajectories")?;
         let (p, t, a1, a2, al) = (
             traj.strs("policy"),

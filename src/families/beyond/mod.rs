@@ -1,0 +1,3 @@
+//! Experiments beyond the papers (`physics_validation`, future `x_*` ids).
+
+pub mod physics_validation;

@@ -1,0 +1,279 @@
+//! `ms_spider_leap`, `ms_poodle_somersault`, `ms_table_pirouette` (MS Fig. 7–9): the
+//! `ms_motion` family, one family for three experiment files. Each runs one parallel hill climb
+//! of a reflex controller ([`MotionJob`], in [`super::search`], with the parameters shared with
+//! `ms_learning`) for its motion's objective; [`super::search::Motion`] says which claim the report checks.
+//!
+//! Tables: see [`super::search`]. Figures: `<id>_filmstrip.png/svg`, `<id>_motion.gif`,
+//! `<id>_search.png/svg`.
+
+use super::lattice_draw::{draw_panels, write_gif, LatticePanel};
+use super::lattices::springs_of;
+use super::search::{learning_panel, MotionJob};
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::Figure;
+use crate::experiment::plot::FigureSink;
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{typed_job, ParamError};
+use crate::experiment::{Error, Experiment, Job};
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+/// The motion family.
+pub struct MsMotion;
+
+/// Frames `(t, regime, positions)` of a `trajectory` table.
+fn frames_of(t: &Table) -> Vec<(f64, usize, Vec<[f64; 3]>)> {
+    let (time, reg, mass) = (t.f64s("t"), t.f64s("regime"), t.f64s("mass"));
+    let (x, y, z) = (t.f64s("x"), t.f64s("y"), t.f64s("z"));
+    let mut out: Vec<(f64, usize, Vec<[f64; 3]>)> = Vec::new();
+    for i in 0..time.len() {
+        if mass[i] == 0.0 {
+            out.push((time[i], reg[i] as usize, Vec::new()));
+        }
+        if let Some(f) = out.last_mut() {
+            f.2.push([x[i], y[i], z[i]]);
+        }
+    }
+    out
+}
+
+fn com(p: &[[f64; 3]]) -> [f64; 3] {
+    // Shipped lattices have equal masses.
+    let n = p.len().max(1) as f64;
+    let mut c = [0.0; 3];
+    for q in p {
+        for k in 0..3 {
+            c[k] += q[k] / n;
+        }
+    }
+    c
+}
+
+impl Experiment for MsMotion {
+    fn kind(&self) -> &'static str {
+        "ms_motion"
+    }
+
+    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
+        typed_job::<MotionJob>(params)
+    }
+
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+        let springs = springs_of(tables.require("springs")?, None);
+        let frames = frames_of(tables.require("trajectory")?);
+        let ctl = tables.require("controller")?;
+        let names = ctl.strs("reflex_name");
+        let alphas = ctl.f64s("alpha");
+        let trail: Vec<[f64; 3]> = frames.iter().map(|f| com(&f.2)).collect();
+        let label = |reg: usize| {
+            format!(
+                "{} {:+.2}",
+                names.get(reg).map(String::as_str).unwrap_or("?"),
+                alphas.get(reg).copied().unwrap_or(f64::NAN)
+            )
+        };
+        let mut files = Vec::new();
+        if frames.is_empty() {
+            return Ok(files);
+        }
+        let strip = (tables
+            .require("summary")?
+            .f64s("filmstrip_frames")
+            .first()
+            .copied()
+            .unwrap_or(8.0) as usize)
+            .clamp(1, frames.len());
+        let picks: Vec<usize> = (0..strip)
+            .map(|i| {
+                if strip == 1 {
+                    frames.len() - 1
+                } else {
+                    i * (frames.len() - 1) / (strip - 1)
+                }
+            })
+            .collect();
+        let panels: Vec<LatticePanel> = picks
+            .iter()
+            .map(|&i| LatticePanel {
+                title: format!("t = {:.2} s, {}", frames[i].0, label(frames[i].1)),
+                positions: frames[i].2.clone(),
+                ghost: None,
+                trail: trail[..=i].to_vec(),
+            })
+            .collect();
+        files.extend(draw_panels(
+            &fig.dir,
+            &format!("{}_filmstrip", fig.id),
+            &panels,
+            &springs,
+            4,
+            (360, 300),
+            true,
+        )?);
+        // GIF in real time with at most ~100 frames.
+        let dt = if frames.len() > 1 {
+            frames[1].0 - frames[0].0
+        } else {
+            0.04
+        };
+        let every = frames.len().div_ceil(100).max(1);
+        let gif_frames: Vec<(String, Vec<[f64; 3]>)> = frames
+            .iter()
+            .step_by(every)
+            .map(|f| {
+                (
+                    format!("{}  t = {:.2} s  {}", fig.id, f.0, label(f.1)),
+                    f.2.clone(),
+                )
+            })
+            .collect();
+        let delay = ((every as f64 * dt * 1000.0).round() as u32).max(20);
+        let gif_trail: Vec<[f64; 3]> = trail.iter().step_by(every).copied().collect();
+        files.push(write_gif(
+            &fig.dir,
+            &format!("{}_motion", fig.id),
+            &gif_frames,
+            &gif_trail,
+            &springs,
+            (560, 420),
+            delay,
+        )?);
+        let search = tables.require("search")?;
+        files.extend(fig.draw(
+            "search",
+            &Figure::grid(
+                vec![learning_panel(
+                    "hill climbing: objective of every evaluation",
+                    &[("hill climbing", search)],
+                    "iteration (0: initial random controllers)",
+                )],
+                1,
+            ),
+        )?);
+        Ok(files)
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        let s = read_csv(&dir.join("summary.csv"))?;
+        let motion = df_str(&s, "motion")?.first().cloned().unwrap_or_default();
+        let get1 = |c: &str| -> Result<f64, Error> {
+            Ok(df_f64(&s, c)?.first().copied().unwrap_or(f64::NAN))
+        };
+        let (evals, secs, best, init) = (
+            get1("evaluations")?,
+            get1("search_seconds")?,
+            get1("best_objective")?,
+            get1("initial_best")?,
+        );
+        let m = read_csv(&dir.join("measures.csv"))?;
+        let names = df_str(&m, "measure")?;
+        let vals = df_f64(&m, "value")?;
+        let mv = |n: &str| {
+            names
+                .iter()
+                .position(|x| x == n)
+                .map(|i| vals[i])
+                .unwrap_or(f64::NAN)
+        };
+        let b = read_csv(&dir.join("best.csv"))?;
+        let (bt, bv, bw) = (
+            df_str(&b, "term")?,
+            df_f64(&b, "value")?,
+            df_f64(&b, "weighted")?,
+        );
+        let mut md = String::from("| objective term | value | weighted |\n| --- | --- | --- |\n");
+        for i in 0..bt.len() {
+            md.push_str(&format!(
+                "| {} | {} | {} |\n",
+                bt[i],
+                sig(bv[i]),
+                sig(bw[i])
+            ));
+        }
+        md.push_str("\n| measure of the best motion | value |\n| --- | --- |\n");
+        for (n, v) in names.iter().zip(&vals) {
+            md.push_str(&format!("| {n} | {} |\n", sig(*v)));
+        }
+        md.push_str(&format!(
+            "\nSearch: {} evaluations in {} s ({} evaluations/s); best of the initial random set {}, final best {}.\n",
+            evals,
+            sig(secs),
+            sig(evals / secs.max(1e-9)),
+            sig(init),
+            sig(best)
+        ));
+        let upright = mv("uprightness_loss_60") == 0.0;
+        let airborne = mv("hops") >= 1.0 || mv("min_contacts") == 0.0;
+        let (verdict, why) = match motion.as_str() {
+            "leap" => {
+                let d = mv("displacement_x");
+                let v = if d > 1.0 && upright && airborne {
+                    Verdict::Held
+                } else if d > 0.3 && upright {
+                    Verdict::Partly
+                } else {
+                    Verdict::NotHeld
+                };
+                (
+                    v,
+                    format!(
+                        "The spider travels {} m along +x (1 m = its base width), stays upright: {}, leaves the ground: {}.",
+                        sig(d),
+                        upright,
+                        airborne
+                    ),
+                )
+            }
+            "somersault" => {
+                let r = mv("rotation_back_y");
+                let d = mv("displacement_x");
+                let ground = mv("on_ground") == 1.0;
+                let lr = mv("left_right_loss_45") == 0.0;
+                let v = if r >= 0.9 * 2.0 * PI && d > 0.0 && ground && lr {
+                    Verdict::Held
+                } else if r >= PI && d > 0.0 {
+                    Verdict::Partly
+                } else {
+                    Verdict::NotHeld
+                };
+                (
+                    v,
+                    format!(
+                        "Backward rotation {} turns while moving {} m forward; on the ground at T: {}; no rolling/turning beyond 45°: {}.",
+                        sig(r / (2.0 * PI)),
+                        sig(d),
+                        ground,
+                        lr
+                    ),
+                )
+            }
+            _ => {
+                let r = mv("rotation_z").abs();
+                let ground = mv("on_ground") == 1.0;
+                let v = if r >= PI && upright && ground && airborne {
+                    Verdict::Held
+                } else if r >= PI / 4.0 && upright {
+                    Verdict::Partly
+                } else {
+                    Verdict::NotHeld
+                };
+                (
+                    v,
+                    format!(
+                        "The table turns {}° about the vertical, stays upright: {}, jumps: {}, on the ground at T: {}, drifts {} m.",
+                        sig(r.to_degrees()),
+                        upright,
+                        airborne,
+                        ground,
+                        sig(mv("horizontal_distance"))
+                    ),
+                )
+            }
+        };
+        Ok(Findings {
+            ours: md,
+            verdict,
+            why,
+        })
+    }
+}
