@@ -21,11 +21,11 @@
 //! [`super::fig6_learning_plot`] (`ms_learning`), files named after the experiment ids.
 
 use super::lattices::lattice_by_name;
+use crate::control::search::SearchResult;
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::{Legend, Mark, Panel, Series};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Job, RunContext};
-use crate::control::search::SearchResult;
 use crate::physics::lattice::{Floor, LatticeModel};
 use crate::physics::reflex::Reflex;
 use crate::row;
