@@ -80,6 +80,37 @@ pub trait Experiment: Sync {
     fn report(&self, dir: &Path) -> Result<report::Findings, Error>;
 }
 
+/// What a family file implements: its name, its typed parameters (which run as the [`Job`])
+/// and its figures and report section; every `Family` is an [`Experiment`].
+pub trait Family: Sync {
+    /// Family name, the `experiment = "…"` of a spec.
+    const KIND: &'static str;
+    /// The `[params]` table, deserialized with unknown keys rejected and then validated.
+    type Params: serde::de::DeserializeOwned + resolve::Validate + Job + 'static;
+    /// Draws figures from the tables of a run; returns the files written.
+    fn figures(&self, fig: &plot::FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error>;
+    /// The report section, computed from the CSVs in `dir` (the experiment's result folder).
+    fn report(&self, dir: &Path) -> Result<report::Findings, Error>;
+}
+
+impl<F: Family> Experiment for F {
+    fn kind(&self) -> &'static str {
+        F::KIND
+    }
+
+    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
+        resolve::typed_job::<F::Params>(params)
+    }
+
+    fn figures(&self, fig: &plot::FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+        Family::figures(self, fig, tables)
+    }
+
+    fn report(&self, dir: &Path) -> Result<report::Findings, Error> {
+        Family::report(self, dir)
+    }
+}
+
 /// A typed, validated experiment point that can run.
 pub trait Job: Send + Sync {
     /// The parameters as JSON (for `run.json`).

@@ -10,8 +10,8 @@
 use crate::experiment::output::{unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{all_positive, ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{all_positive, ensure, positive, ParamError, Validate};
+use crate::experiment::{Error, Family, Job, RunContext};
 use crate::physics::acrobot::Acrobot;
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
 use crate::physics::{Integrator, IntegratorKind, Model, Ode, Simulator};
@@ -341,14 +341,9 @@ impl Job for Params {
     }
 }
 
-impl Experiment for PhysicsValidation {
-    fn kind(&self) -> &'static str {
-        "physics_validation"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for PhysicsValidation {
+    const KIND: &'static str = "physics_validation";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let mut files = Vec::new();

@@ -16,8 +16,8 @@ use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Heatmap, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::acrobot::Acrobot;
 use crate::row;
 use nalgebra::{DMatrix, DVector};
@@ -413,14 +413,9 @@ impl Job for Params {
     }
 }
 
-impl Experiment for LbcAcrobot {
-    fn kind(&self) -> &'static str {
-        "lbc_acrobot_swingup"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for LbcAcrobot {
+    const KIND: &'static str = "lbc_acrobot_swingup";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let traj = tables.require("trajectories")?;

@@ -25,8 +25,8 @@ use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::diver::{diver, entry_angle};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::planar::PlanarTree;
@@ -325,14 +325,9 @@ impl Job for InterpolationParams {
     }
 }
 
-impl Experiment for LbcDiverInterpolation {
-    fn kind(&self) -> &'static str {
-        "lbc_diver_interpolation"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<InterpolationParams>(params)
-    }
+impl Family for LbcDiverInterpolation {
+    const KIND: &'static str = "lbc_diver_interpolation";
+    type Params = InterpolationParams;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("interpolation")?;
@@ -496,14 +491,9 @@ impl Job for CoordinationParams {
     }
 }
 
-impl Experiment for LbcDiverCoordination {
-    fn kind(&self) -> &'static str {
-        "lbc_diver_coordination"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<CoordinationParams>(params)
-    }
+impl Family for LbcDiverCoordination {
+    const KIND: &'static str = "lbc_diver_coordination";
+    type Params = CoordinationParams;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("coordination")?;

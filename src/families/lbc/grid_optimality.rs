@@ -18,8 +18,8 @@ use crate::bellman::grid_dp::{
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Heatmap};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::row;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -348,14 +348,9 @@ impl Job for Params {
     }
 }
 
-impl Experiment for LbcGrid {
-    fn kind(&self) -> &'static str {
-        "lbc_grid_optimality"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for LbcGrid {
+    const KIND: &'static str = "lbc_grid_optimality";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let g = tables.require("grid")?;

@@ -13,8 +13,8 @@ use crate::bellman::projection::{combined_reward, project, GaussianReward};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{all_positive, ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{all_positive, ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::row;
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
@@ -164,14 +164,9 @@ impl Job for Params {
     }
 }
 
-impl Experiment for LbcProjection {
-    fn kind(&self) -> &'static str {
-        "lbc_projection"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for LbcProjection {
+    const KIND: &'static str = "lbc_projection";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let cost = tables.require("cost")?;

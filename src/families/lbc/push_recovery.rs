@@ -14,8 +14,8 @@ use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::push::{push_figure, HAND_LINK};
 use crate::row;
@@ -215,14 +215,9 @@ impl Job for Params {
     }
 }
 
-impl Experiment for LbcPush {
-    fn kind(&self) -> &'static str {
-        "lbc_push_recovery"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for LbcPush {
+    const KIND: &'static str = "lbc_push_recovery";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let w = tables.require("weights")?;

@@ -12,8 +12,7 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::Figure;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{typed_job, ParamError};
-use crate::experiment::{Error, Experiment, Job};
+use crate::experiment::{Error, Family};
 use crate::row;
 use std::path::{Path, PathBuf};
 
@@ -54,14 +53,9 @@ fn curve(method: &str, m: &[String], it: &[f64], obj: &[f64], best: &[f64]) -> C
     }
 }
 
-impl Experiment for MsLearning {
-    fn kind(&self) -> &'static str {
-        "ms_learning"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<LearningJob>(params)
-    }
+impl Family for MsLearning {
+    const KIND: &'static str = "ms_learning";
+    type Params = LearningJob;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("learning")?;

@@ -10,8 +10,8 @@ use super::lattice_draw::{draw_panels, LatticePanel};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::{Findings, Verdict};
-use crate::experiment::resolve::{ensure, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::lattice::Lattice;
 use crate::physics::reflex::{deform, Reflex, ReflexGains};
 use crate::row;
@@ -155,14 +155,9 @@ pub fn springs_of(t: &Table, lattice: Option<&str>) -> Vec<(usize, usize)> {
         .collect()
 }
 
-impl Experiment for MsLattices {
-    fn kind(&self) -> &'static str {
-        "ms_lattices"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for MsLattices {
+    const KIND: &'static str = "ms_lattices";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let pos = tables.require("positions")?;

@@ -13,8 +13,7 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::Figure;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{typed_job, ParamError};
-use crate::experiment::{Error, Experiment, Job};
+use crate::experiment::{Error, Family};
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
@@ -49,14 +48,9 @@ fn com(p: &[[f64; 3]]) -> [f64; 3] {
     c
 }
 
-impl Experiment for MsMotion {
-    fn kind(&self) -> &'static str {
-        "ms_motion"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<MotionJob>(params)
-    }
+impl Family for MsMotion {
+    const KIND: &'static str = "ms_motion";
+    type Params = MotionJob;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let springs = springs_of(tables.require("springs")?, None);

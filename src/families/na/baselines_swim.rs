@@ -44,8 +44,8 @@ use crate::emulator::hierarchy::{self, global_state};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{mix_seed, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{mix_seed, Error, Family, Job, RunContext};
 use crate::row;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -529,14 +529,9 @@ fn curves(method: &[String], substrate: &[String]) -> Vec<(String, String)> {
     out
 }
 
-impl Experiment for NaBaselines {
-    fn kind(&self) -> &'static str {
-        "na_baselines_swim"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for NaBaselines {
+    const KIND: &'static str = "na_baselines_swim";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("baselines")?;

@@ -25,8 +25,8 @@ use crate::emulator::dataset::ControlSignal;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -226,14 +226,9 @@ fn mean_errors(variant: &[String], emu: &[String], err: &[f64]) -> Vec<(String, 
         .collect()
 }
 
-impl Experiment for NaError {
-    fn kind(&self) -> &'static str {
-        "na_fig12_error"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for NaError {
+    const KIND: &'static str = "na_fig12_error";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let tb = tables.require("error")?;

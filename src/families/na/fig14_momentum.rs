@@ -39,8 +39,8 @@ use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::lander::{Lander, VEL};
 use crate::row;
 use serde::{Deserialize, Serialize};
@@ -392,14 +392,9 @@ fn traces(method: &[String], eta: &[f64], obj: &[f64]) -> Vec<(String, f64, Vec<
     out
 }
 
-impl Experiment for NaMomentum {
-    fn kind(&self) -> &'static str {
-        "na_fig14_momentum"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for NaMomentum {
+    const KIND: &'static str = "na_fig14_momentum";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("objective")?;

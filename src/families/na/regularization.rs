@@ -26,8 +26,8 @@ use crate::emulator::hierarchy::{self, Regularizer, Schedule};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
 use crate::physics::{check_finite, Dynamics};
 use crate::row;
@@ -269,14 +269,9 @@ fn push_curve(t: &mut Table, name: &str, curve: &[f64], big_dt: f64) {
     }
 }
 
-impl Experiment for NaRegularization {
-    fn kind(&self) -> &'static str {
-        "na_regularization"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for NaRegularization {
+    const KIND: &'static str = "na_regularization";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("shape_error")?;

@@ -19,8 +19,8 @@ use crate::emulator::mlp::Mlp;
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{mix_seed, other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{mix_seed, other, Error, Family, Job, RunContext};
 use crate::row;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -277,14 +277,9 @@ impl Job for Params {
     }
 }
 
-impl Experiment for NaStructure {
-    fn kind(&self) -> &'static str {
-        "na_table1_structure"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for NaStructure {
+    const KIND: &'static str = "na_table1_structure";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("training")?;

@@ -27,8 +27,8 @@ use crate::emulator::Emulator;
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::Dynamics;
 use crate::row;
 use serde::{Deserialize, Serialize};
@@ -317,14 +317,9 @@ impl Job for Params {
     }
 }
 
-impl Experiment for NaSpeedup {
-    fn kind(&self) -> &'static str {
-        "na_table2_speedup"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for NaSpeedup {
+    const KIND: &'static str = "na_table2_speedup";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("speedup")?;

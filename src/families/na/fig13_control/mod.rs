@@ -34,8 +34,8 @@ use crate::emulator::hierarchy::{FRAME_DIM, GLOBAL_DIM};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{ensure, positive, typed_job, ParamError, Validate};
-use crate::experiment::{other, Error, Experiment, Job, RunContext};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::na::swim::{emulated_masses, SwimTask};
 use crate::families::na::table1_structure::{
     build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
@@ -596,14 +596,9 @@ fn animations(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> 
         .collect()
 }
 
-impl Experiment for NaControl {
-    fn kind(&self) -> &'static str {
-        "na_fig13_control"
-    }
-
-    fn resolve(&self, params: &toml::Value) -> Result<Box<dyn Job>, ParamError> {
-        typed_job::<Params>(params)
-    }
+impl Family for NaControl {
+    const KIND: &'static str = "na_fig13_control";
+    type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("objective")?;
