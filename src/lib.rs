@@ -7,9 +7,11 @@
 //!
 //! ## Crate map
 //!
-//! - [`physics`]: the [`physics::Dynamics`] / [`physics::Ode`] traits, integrators (explicit
-//!   and semi-implicit Euler, RK4, fixed-step Dormand–Prince, adaptive RK45) and one file per
-//!   model: [`physics::pendulum::Pendulum3`] (3-link pendulum: passive, active, ext. force),
+//! - [`physics`]: the [`physics::Dynamics`] / [`physics::Ode`] traits, the
+//!   [`physics::DifferentiableStep`] trait (a discrete step with its vector–Jacobian product,
+//!   what BPTT needs; implemented by emulators and by the RK4 step of any
+//!   [`physics::linearize::Linearize`] model), integrators (explicit and semi-implicit Euler,
+//!   RK4, fixed-step Dormand–Prince, adaptive RK45) and one module per model: [`physics::pendulum::Pendulum3`] (3-link pendulum: passive, active, ext. force),
 //!   [`physics::truck::Truck`], [`physics::lander::Lander`], [`physics::acrobot::Acrobot`]
 //!   (two-link gymnast), and planar articulated trees ([`physics::planar::PlanarTree`]) for the
 //!   diver and the push-recovery figure.
@@ -30,7 +32,8 @@
 //!   LQR tracking with the quadratic value function of linear Bellman combination, eq. 12);
 //!   NeuroAnimator control learning: [`control::objective`] (composable objective terms with
 //!   gradients) and [`control::bptt`] (backpropagation through time through any differentiable
-//!   step, e.g. an emulator; plain and momentum descent on bounded piecewise-constant controls);
+//!   step, an emulator or a simulator's RK4 step; plain and momentum descent on bounded
+//!   piecewise-constant controls);
 //!   [`control::search`]: box-bounded searches sharing one trace and budget — simulated
 //!   annealing, Nelder–Mead, parallel hill climbing and BPTT — on emulator or simulator
 //!   rollouts of the same controller (§6 baselines).
@@ -42,6 +45,7 @@
 //!   sweeps, the runner (CSV + Parquet, atomic writes, `run.json`), figures and `REPORT.md`.
 //! - [`bench`]: throughput of the hot loops (`motionlab bench`).
 //! - [`linalg`]: the one conversion point between ndarray and nalgebra types.
+//! - [`seed`]: deterministic seed splitting ([`seed::mix_seed`]), one random stream per job.
 //!
 //! ## Models and algorithms
 //!
@@ -88,4 +92,5 @@ pub mod emulator;
 pub mod experiment;
 pub mod linalg;
 pub mod physics;
+pub mod seed;
 pub mod synthesis;

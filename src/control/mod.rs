@@ -25,8 +25,10 @@
 //!   (linear Bellman combination, eq. 12).
 //!
 //! - [`objective`]: NeuroAnimator control-learning objectives (§4.2) as composable terms with
-//!   gradients; [`bptt`]: backpropagation through time through any differentiable step (an
-//!   emulator), plain and momentum descent on piecewise-constant controls (§4.3);
+//!   gradients; [`bptt`]: backpropagation through time through any [`DifferentiableStep`] (an
+//!   emulator, or [`Rk4Map`] of a physical model: its vector–Jacobian product is
+//!   s̄ = F_xᵀ s̄', ū = F_uᵀ s̄' with the exact Jacobians above), plain and momentum descent on
+//!   piecewise-constant controls (§4.3);
 //!   [`search`]: box-bounded searches with one trace and budget — simulated annealing,
 //!   Nelder–Mead, parallel hill climbing and BPTT — on emulator or simulator rollouts (§6).
 //!
@@ -39,6 +41,7 @@ pub mod objective;
 pub mod search;
 
 use crate::physics::linearize::Linearize;
+use crate::physics::DifferentiableStep;
 use crate::physics::Ode;
 use nalgebra::{DMatrix, DVector};
 
@@ -95,6 +98,23 @@ pub enum ControlError {
         /// Step index.
         step: usize,
     },
+}
+
+/// `Ok` when a size is as expected, else [`ControlError::DimensionMismatch`] naming `what`.
+pub(crate) fn check_dim(
+    what: &'static str,
+    expected: usize,
+    found: usize,
+) -> Result<(), ControlError> {
+    if expected == found {
+        Ok(())
+    } else {
+        Err(ControlError::DimensionMismatch {
+            what,
+            expected,
+            found,
+        })
+    }
 }
 
 /// Scratch buffers of [`Rk4Map`]; make one with [`Rk4Map::workspace`].
@@ -178,16 +198,7 @@ impl<M: Ode> Rk4Map<M> {
         let h = self.dt;
         let c = [0.0, 0.5 * h, 0.5 * h, h];
         for s in 0..4 {
-            ws.y.copy_from(x);
-            if s > 0 {
-                let (prev, cur) = ws.k.split_at_mut(s);
-                ws.y.axpy(c[s], &prev[s - 1], 1.0);
-                self.model
-                    .derivative(ws.y.as_slice(), u.as_slice(), cur[0].as_mut_slice());
-            } else {
-                self.model
-                    .derivative(ws.y.as_slice(), u.as_slice(), ws.k[0].as_mut_slice());
-            }
+            self.stage(s, c[s], x, u, ws);
         }
         out.copy_from(x);
         let w = h / 6.0;
@@ -195,6 +206,17 @@ impl<M: Ode> Rk4Map<M> {
         out.axpy(2.0 * w, &ws.k[1], 1.0);
         out.axpy(2.0 * w, &ws.k[2], 1.0);
         out.axpy(w, &ws.k[3], 1.0);
+    }
+
+    /// RK4 stage `s`: the stage state y_s = x + c k_{s−1} (y_0 = x) into `ws.y` and the stage
+    /// slope k_s = f(y_s, u) into `ws.k[s]`.
+    fn stage(&self, s: usize, c: f64, x: &DVector<f64>, u: &DVector<f64>, ws: &mut Rk4Workspace) {
+        ws.y.copy_from(x);
+        if s > 0 {
+            ws.y.axpy(c, &ws.k[s - 1], 1.0);
+        }
+        self.model
+            .derivative(ws.y.as_slice(), u.as_slice(), ws.k[s].as_mut_slice());
     }
 
     /// Rolls out `us` from `x0`: returns the N + 1 states, or the first non-finite step.
@@ -232,13 +254,7 @@ impl<M: Linearize> Rk4Map<M> {
         let h = self.dt;
         let c = [0.0, 0.5 * h, 0.5 * h, h];
         for s in 0..4 {
-            ws.y.copy_from(x);
-            if s > 0 {
-                let k_prev = &ws.k[s - 1];
-                ws.y.axpy(c[s], k_prev, 1.0);
-            }
-            self.model
-                .derivative(ws.y.as_slice(), u.as_slice(), ws.k[s].as_mut_slice());
+            self.stage(s, c[s], x, u, ws);
             self.model
                 .jacobians(ws.y.as_slice(), u.as_slice(), &mut ws.a, &mut ws.b);
             if s == 0 {
@@ -327,6 +343,68 @@ impl<M: Linearize> Rk4Map<M> {
     }
 }
 
+/// Scratch of [`Rk4Map`] as a [`DifferentiableStep`]: the RK4 workspace, the state and control
+/// as vectors, and the step's Jacobians F_x, F_u.
+#[derive(Debug, Clone)]
+pub struct Rk4StepScratch {
+    ws: Rk4Workspace,
+    x: DVector<f64>,
+    u: DVector<f64>,
+    out: DVector<f64>,
+    fx: DMatrix<f64>,
+    fu: DMatrix<f64>,
+}
+
+/// The RK4 step of a physical model as a differentiable step, so that backpropagation through
+/// time ([`bptt`]) runs through a simulator as it does through an emulator: the vector–Jacobian
+/// product is s̄ = F_xᵀ s̄', ū = F_uᵀ s̄' with the exact Jacobians of [`Rk4Map::jacobians`].
+impl<M: Linearize> DifferentiableStep for Rk4Map<M> {
+    type Scratch = Rk4StepScratch;
+    fn state_dim(&self) -> usize {
+        self.model.state_dim()
+    }
+    fn control_dim(&self) -> usize {
+        self.model.control_dim()
+    }
+    fn scratch(&self) -> Rk4StepScratch {
+        let (n, m) = (self.model.state_dim(), self.model.control_dim());
+        Rk4StepScratch {
+            ws: self.workspace(),
+            x: DVector::zeros(n),
+            u: DVector::zeros(m),
+            out: DVector::zeros(n),
+            fx: DMatrix::zeros(n, n),
+            fu: DMatrix::zeros(n, m),
+        }
+    }
+    fn step(&self, s: &[f64], u: &[f64], sc: &mut Rk4StepScratch, s_next: &mut [f64]) {
+        sc.x.copy_from_slice(s);
+        sc.u.copy_from_slice(u);
+        Rk4Map::step(self, &sc.x, &sc.u, &mut sc.out, &mut sc.ws);
+        s_next.copy_from_slice(sc.out.as_slice());
+    }
+    fn vjp(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        s_next_bar: &[f64],
+        sc: &mut Rk4StepScratch,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        sc.x.copy_from_slice(s);
+        sc.u.copy_from_slice(u);
+        self.jacobians(&sc.x, &sc.u, &mut sc.fx, &mut sc.fu, &mut sc.ws);
+        let transpose_times = |f: &DMatrix<f64>, out: &mut [f64]| {
+            for (j, o) in out.iter_mut().enumerate() {
+                *o = f.column(j).iter().zip(s_next_bar).map(|(a, b)| a * b).sum();
+            }
+        };
+        transpose_times(&sc.fx, s_bar);
+        transpose_times(&sc.fu, u_bar);
+    }
+}
+
 /// Running state cost q(x) = (x − r_k)ᵀ Q (x − r_k) around a reference.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StateCost {
@@ -406,17 +484,7 @@ impl QuadraticCost {
 
     /// Checks sizes against a problem with n states, m controls and horizon N.
     pub fn validate(&self, n: usize, m: usize, horizon: usize) -> Result<(), ControlError> {
-        let dim = |what, expected, found| {
-            if expected == found {
-                Ok(())
-            } else {
-                Err(ControlError::DimensionMismatch {
-                    what,
-                    expected,
-                    found,
-                })
-            }
-        };
+        let dim = check_dim;
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return Err(ControlError::InvalidTimeStep(self.dt));
         }

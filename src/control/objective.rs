@@ -109,6 +109,13 @@ fn weighted_sq(s: &[f64], r: &[f64], w: &[f64]) -> f64 {
         .sum()
 }
 
+/// Adds the gradient of μ/2 Σ_k w_k (s_k − r_k)² to `s_bar`: s̄_k += μ w_k (s_k − r_k).
+fn add_weighted_sq_gradient(mu: f64, s: &[f64], r: &[f64], w: &[f64], s_bar: &mut [f64]) {
+    for (((g, a), b), w) in s_bar.iter_mut().zip(s).zip(r).zip(w) {
+        *g += mu * w * (a - b);
+    }
+}
+
 /// The final-state term: μ/2 Σ_k w_k (s_{M,k} − target_k)².
 #[derive(Debug, Clone, PartialEq)]
 pub struct FinalState {
@@ -136,9 +143,13 @@ impl Term for FinalState {
         _u_bar: &mut [f64],
     ) -> f64 {
         let k0 = states.len() - n;
-        for k in 0..n {
-            s_bar[k0 + k] += self.mu * self.weights[k] * (states[k0 + k] - self.target[k]);
-        }
+        add_weighted_sq_gradient(
+            self.mu,
+            &states[k0..],
+            &self.target,
+            &self.weights,
+            &mut s_bar[k0..],
+        );
         self.value(states, controls, n, m)
     }
 }
@@ -185,10 +196,13 @@ impl Term for StateWindow {
         _u_bar: &mut [f64],
     ) -> f64 {
         for i in self.range(states, n) {
-            for k in 0..n {
-                s_bar[i * n + k] +=
-                    self.mu * self.weights[k] * (states[i * n + k] - self.reference[k]);
-            }
+            add_weighted_sq_gradient(
+                self.mu,
+                &states[i * n..(i + 1) * n],
+                &self.reference,
+                &self.weights,
+                &mut s_bar[i * n..(i + 1) * n],
+            );
         }
         self.value(states, controls, n, m)
     }

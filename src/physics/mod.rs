@@ -5,6 +5,9 @@
 //! A [`Simulator`] pairs an [`Ode`] with an [`Integrator`] and implements the discrete
 //! [`Dynamics`] trait: `step(x, u, dt)` advances the state by `dt` seconds. Learned emulators
 //! implement [`Dynamics`] as well, so controllers and searches run unchanged on either.
+//! [`DifferentiableStep`] ([`differentiable`]) is a discrete step with its vector–Jacobian
+//! product, what backpropagation through time needs; emulators implement it, and so does the
+//! RK4 step of any [`linearize::Linearize`] model (`control::Rk4Map`).
 //!
 //! Physics knows nothing of learning, control or files.
 //!
@@ -17,6 +20,7 @@
 //! [`push::push_figure`] of the push-recovery experiment.
 
 pub mod acrobot;
+pub mod differentiable;
 pub mod diver;
 pub mod dolphin;
 pub mod integrate;
@@ -29,6 +33,7 @@ pub mod push;
 pub mod reflex;
 pub mod truck;
 
+pub use differentiable::DifferentiableStep;
 pub use integrate::{Integrator, IntegratorKind, Rk45Stats};
 
 use serde::Serialize;
