@@ -589,6 +589,41 @@ pub fn replay(
     }
 }
 
+/// Test fixtures shared by the BPTT tests and the search adapters' tests.
+#[cfg(test)]
+pub(crate) mod fixtures {
+    use super::super::objective::{ControlEffort, FinalState, Objective};
+    use crate::emulator::catalog::NetModel;
+    use crate::emulator::mlp::{Mlp, WeightInit};
+    use crate::emulator::{Emulator, Transforms};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    /// A lander-shaped emulator with random weights (seed 3, 12 hidden units, Δt = 0.5 s), a
+    /// soft-landing-like objective (reach the start state moved by (+3, ·, −5), small effort)
+    /// and the start state.
+    pub(crate) fn lander_emulator() -> (Emulator, Objective, Vec<f64>) {
+        let model = NetModel::Lander;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mlp = Mlp::new(n + m, 12, n, WeightInit::FanIn, &mut rng);
+        let t = Transforms::unfitted(&model.transform_config(), n, m).unwrap();
+        let e = Emulator::new(t, mlp, 0.5).unwrap();
+        let x0 = model.start_state(&mut rng);
+        let mut target = x0.clone();
+        target[0] += 3.0;
+        target[2] -= 5.0;
+        let obj = Objective::default()
+            .with(FinalState {
+                mu: 1.0,
+                target,
+                weights: vec![1.0; n],
+            })
+            .with(ControlEffort::plain(0.01, m));
+        (e, obj, x0)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::objective::{ControlEffort, FinalState, StateWindow};
@@ -662,23 +697,8 @@ mod tests {
 
     #[test]
     fn bptt_gradient_matches_finite_differences_through_an_emulator_with_transforms() {
-        let model = NetModel::Lander;
-        let (n, m) = (model.state_dim(), model.control_dim());
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let mlp = Mlp::new(n + m, 12, n, WeightInit::FanIn, &mut rng);
-        let t = Transforms::unfitted(&model.transform_config(), n, m).unwrap();
-        let e = Emulator::new(t, mlp, 0.5).unwrap();
-        let x0 = model.start_state(&mut rng);
-        let mut target = x0.clone();
-        target[0] += 3.0;
-        target[2] -= 5.0;
-        let obj = Objective::default()
-            .with(FinalState {
-                mu: 1.0,
-                target,
-                weights: vec![1.0; n],
-            })
-            .with(ControlEffort::plain(0.01, m));
+        let (e, obj, x0) = fixtures::lander_emulator();
+        let m = NetModel::Lander.control_dim();
         let knots = Knots {
             steps: 6,
             per_actuator: 3,

@@ -34,8 +34,17 @@ use std::fmt::Debug;
 pub trait Term: Debug + Send + Sync {
     /// Its value for the states (s_0 … s_M, n each) and controls (u_0 … u_{M−1}, m each).
     fn value(&self, states: &[f64], controls: &[f64], n: usize, m: usize) -> f64;
-    /// Adds ∂term/∂states to `s_bar` and ∂term/∂controls to `u_bar` (same layouts); returns
-    /// the value.
+    /// Adds ∂term/∂states to `s_bar` and ∂term/∂controls to `u_bar` (same layouts).
+    fn add_gradient(
+        &self,
+        states: &[f64],
+        controls: &[f64],
+        n: usize,
+        m: usize,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    );
+    /// [`Term::add_gradient`], then returns the value.
     fn gradient(
         &self,
         states: &[f64],
@@ -44,7 +53,10 @@ pub trait Term: Debug + Send + Sync {
         m: usize,
         s_bar: &mut [f64],
         u_bar: &mut [f64],
-    ) -> f64;
+    ) -> f64 {
+        self.add_gradient(states, controls, n, m, s_bar, u_bar);
+        self.value(states, controls, n, m)
+    }
 }
 
 /// Controller efficiency: μ/2 Σ_i Σ_j ((u_ij − offset_j)/scale_j)².
@@ -81,22 +93,21 @@ impl Term for ControlEffort {
         0.5 * self.mu * sum
     }
 
-    fn gradient(
+    fn add_gradient(
         &self,
-        states: &[f64],
+        _states: &[f64],
         controls: &[f64],
-        n: usize,
+        _n: usize,
         m: usize,
         _s_bar: &mut [f64],
         u_bar: &mut [f64],
-    ) -> f64 {
+    ) {
         for (u, g) in controls.chunks_exact(m).zip(u_bar.chunks_exact_mut(m)) {
             for j in 0..m {
                 let c = self.scale[j];
                 g[j] += self.mu * (u[j] - self.offset[j]) / (c * c);
             }
         }
-        self.value(states, controls, n, m)
     }
 }
 
@@ -133,15 +144,15 @@ impl Term for FinalState {
         0.5 * self.mu * weighted_sq(last, &self.target, &self.weights)
     }
 
-    fn gradient(
+    fn add_gradient(
         &self,
         states: &[f64],
-        controls: &[f64],
+        _controls: &[f64],
         n: usize,
-        m: usize,
+        _m: usize,
         s_bar: &mut [f64],
         _u_bar: &mut [f64],
-    ) -> f64 {
+    ) {
         let k0 = states.len() - n;
         add_weighted_sq_gradient(
             self.mu,
@@ -150,7 +161,6 @@ impl Term for FinalState {
             &self.weights,
             &mut s_bar[k0..],
         );
-        self.value(states, controls, n, m)
     }
 }
 
@@ -186,15 +196,15 @@ impl Term for StateWindow {
         0.5 * self.mu * sum
     }
 
-    fn gradient(
+    fn add_gradient(
         &self,
         states: &[f64],
-        controls: &[f64],
+        _controls: &[f64],
         n: usize,
-        m: usize,
+        _m: usize,
         s_bar: &mut [f64],
         _u_bar: &mut [f64],
-    ) -> f64 {
+    ) {
         for i in self.range(states, n) {
             add_weighted_sq_gradient(
                 self.mu,
@@ -204,7 +214,6 @@ impl Term for StateWindow {
                 &mut s_bar[i * n..(i + 1) * n],
             );
         }
-        self.value(states, controls, n, m)
     }
 }
 
@@ -238,15 +247,15 @@ impl Term for Progress {
         -self.mu * (self.along(last) - self.along(&states[..n]))
     }
 
-    fn gradient(
+    fn add_gradient(
         &self,
         states: &[f64],
-        controls: &[f64],
+        _controls: &[f64],
         n: usize,
-        m: usize,
+        _m: usize,
         s_bar: &mut [f64],
         _u_bar: &mut [f64],
-    ) -> f64 {
+    ) {
         let k0 = states.len() - n;
         let c = self.mu / self.points.len().max(1) as f64;
         for &i in &self.points {
@@ -255,7 +264,6 @@ impl Term for Progress {
                 s_bar[i + a] += c * self.direction[a];
             }
         }
-        self.value(states, controls, n, m)
     }
 }
 

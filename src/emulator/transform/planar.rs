@@ -115,6 +115,27 @@ impl PlanarFrame {
         self.shift_angles(map, inp, pose.theta, out);
     }
 
+    /// Each point and vector pair (i, j), whether it is a point, and v′, what the rotation
+    /// acts on: p − p₀ for points mapped to local, the input pair otherwise; out = R(±θ₀) v′
+    /// (+ p₀ for points mapped to world).
+    fn rotated_inputs<'a>(
+        &'a self,
+        map: FrameMap,
+        pose: Pose2,
+        inp: &'a [f64],
+    ) -> impl Iterator<Item = (usize, usize, bool, (f64, f64))> + 'a {
+        let points = self.points.iter().map(|p| (p, true));
+        let vectors = self.vectors.iter().map(|p| (p, false));
+        points.chain(vectors).map(move |(&(i, j), is_point)| {
+            let v = if is_point && map == FrameMap::ToLocal {
+                (inp[i] - pose.x, inp[j] - pose.y)
+            } else {
+                (inp[i], inp[j])
+            };
+            (i, j, is_point, v)
+        })
+    }
+
     /// The angles under `map` (θ ∓ θ₀, or unchanged for state changes); linear, so the same
     /// for tangents.
     fn shift_angles(&self, map: FrameMap, inp: &[f64], theta: f64, out: &mut [f64]) {
@@ -138,18 +159,7 @@ impl PlanarFrame {
         let sign = map.sign();
         let (sn, c) = (sign * pose.theta).sin_cos();
         let rot = |a: f64, b: f64| (c * a - sn * b, sn * a + c * b);
-        let pairs = self
-            .points
-            .iter()
-            .map(|p| (p, true))
-            .chain(self.vectors.iter().map(|p| (p, false)));
-        for (&(i, j), is_point) in pairs {
-            // v' is what gets rotated; out = R(φ) v' (+ p₀ for ToWorld points).
-            let (va, vb) = if is_point && map == FrameMap::ToLocal {
-                (inp[i] - pose.x, inp[j] - pose.y)
-            } else {
-                (inp[i], inp[j])
-            };
+        for (i, j, is_point, (va, vb)) in self.rotated_inputs(map, pose, inp) {
             let (ra, rb) = rot(va, vb);
             let (mut da, mut db) = rot(d_inp[i], d_inp[j]);
             // ∂/∂θ₀ of R(±θ₀) v' = ± perp(R v').
@@ -204,17 +214,7 @@ impl PlanarFrame {
                 inp_bar[i] += out_bar[i];
             }
         }
-        let pairs = self
-            .points
-            .iter()
-            .map(|p| (p, true))
-            .chain(self.vectors.iter().map(|p| (p, false)));
-        for (&(i, j), is_point) in pairs {
-            let (va, vb) = if is_point && map == FrameMap::ToLocal {
-                (inp[i] - pose.x, inp[j] - pose.y)
-            } else {
-                (inp[i], inp[j])
-            };
+        for (i, j, is_point, (va, vb)) in self.rotated_inputs(map, pose, inp) {
             let (ra, rb) = rot(va, vb);
             let (ga, gb) = (out_bar[i], out_bar[j]);
             let (ia, ib) = rot_t(ga, gb);
