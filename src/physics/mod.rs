@@ -66,6 +66,46 @@ impl Parameter {
             description,
         }
     }
+
+    /// Gravitational acceleration g (m/s²); `description` says along what, or what it loads.
+    pub fn gravity(value: f64, description: &'static str) -> Self {
+        Self::new("gravity", value, "m/s^2", description)
+    }
+
+    /// The parameters of rigid link `link`: mass, length (meaning `length_description`),
+    /// centre-of-mass distance from its joint, and moment of inertia about the centre of mass.
+    pub fn rigid_link(
+        link: &str,
+        [mass, length, com, inertia]: [f64; 4],
+        length_description: &'static str,
+    ) -> [Self; 4] {
+        [
+            Self::new(format!("{link}.mass"), mass, "kg", "link mass"),
+            Self::new(format!("{link}.length"), length, "m", length_description),
+            Self::new(
+                format!("{link}.com"),
+                com,
+                "m",
+                "centre of mass distance from the link's joint",
+            ),
+            Self::new(
+                format!("{link}.inertia"),
+                inertia,
+                "kg*m^2",
+                "moment of inertia about the centre of mass",
+            ),
+        ]
+    }
+
+    /// Viscous friction of link `link`'s joint (N·m·s/rad).
+    pub fn joint_damping(link: &str, value: f64) -> Self {
+        Self::new(
+            format!("{link}.damping"),
+            value,
+            "N*m*s/rad",
+            "viscous friction at the link's joint",
+        )
+    }
 }
 
 /// What a model is: its variables, parameters and natural time step.
