@@ -107,8 +107,8 @@ impl<M: Ode> Rk4Map<M> {
     ) {
         let h = self.dt;
         let c = [0.0, 0.5 * h, 0.5 * h, h];
-        for s in 0..4 {
-            self.stage(s, c[s], x, u, ws);
+        for (s, &cs) in c.iter().enumerate() {
+            self.stage(s, cs, x, u, ws);
         }
         out.copy_from(x);
         let w = h / 6.0;
