@@ -1,7 +1,7 @@
 //! # Optimal control: trajectory optimization and LQR tracking
 //!
 //! Everything here works on one discrete-time problem built from a continuous model
-//! ẋ = f(x, u) that implements [`Linearize`]:
+//! ẋ = f(x, u) that implements [`Linearize`](crate::physics::linearize::Linearize):
 //!
 //! - dynamics x_{k+1} = F(x_k, u_k), one classic RK4 step of `dt` with u_k held constant
 //!   ([`Rk4Map`]);
@@ -25,8 +25,9 @@
 //!   (linear Bellman combination, eq. 12).
 //!
 //! - [`objective`]: NeuroAnimator control-learning objectives (§4.2) as composable terms with
-//!   gradients; [`bptt`]: backpropagation through time through any [`DifferentiableStep`] (an
-//!   emulator, or [`Rk4Map`] of a physical model: its vector–Jacobian product is
+//!   gradients; [`bptt`]: backpropagation through time through any
+//!   [`crate::physics::DifferentiableStep`] (an emulator, or [`Rk4Map`] of a physical model:
+//!   its vector–Jacobian product is
 //!   s̄ = F_xᵀ s̄', ū = F_uᵀ s̄' with the exact Jacobians above), plain and momentum descent on
 //!   piecewise-constant controls (§4.3);
 //!   [`search`]: box-bounded searches with one trace and budget — simulated annealing,

@@ -266,7 +266,7 @@ pub struct Rk4StepScratch {
 }
 
 /// The RK4 step of a physical model as a differentiable step, so that backpropagation through
-/// time ([`bptt`]) runs through a simulator as it does through an emulator: the vector–Jacobian
+/// time ([`super::bptt`]) runs through a simulator as it does through an emulator: the vector–Jacobian
 /// product is s̄ = F_xᵀ s̄', ū = F_uᵀ s̄' with the exact Jacobians of [`Rk4Map::jacobians`].
 impl<M: Linearize> DifferentiableStep for Rk4Map<M> {
     type Scratch = Rk4StepScratch;

@@ -43,9 +43,9 @@
 //!
 //! ## Training data (§3.4)
 //! Episodes of 20 s from the rest shape at a random position, heading, pitch and roll, swimming
-//! at U[−0.5, 1] m/s along its axis, driven by travelling muscle waves of random frequency, lag, amplitude and
-//! direction held piecewise constant ([`ControlProcess::TravellingWave`]); samples at lags
-//! U[Δt, 5Δt]. Sampling runs in parallel chunks, each from its own seeded stream, so the data
+//! at U[−0.5, 1] m/s along its axis, driven by travelling muscle waves of random frequency,
+//! lag, amplitude and direction held piecewise constant
+//! ([`super::dataset::ControlProcess::TravellingWave`]); samples at lags U[Δt, 5Δt]. Sampling runs in parallel chunks, each from its own seeded stream, so the data
 //! do not depend on the thread count. The local nets use the first `local.examples` of the
 //! global net's examples.
 //!
