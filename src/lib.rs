@@ -7,9 +7,11 @@
 //!
 //! ## Crate map
 //!
-//! - [`physics`]: the [`physics::Dynamics`] / [`physics::Ode`] traits, integrators (explicit
-//!   and semi-implicit Euler, RK4, fixed-step Dormand–Prince, adaptive RK45) and one file per
-//!   model: [`physics::pendulum::Pendulum3`] (3-link pendulum: passive, active, ext. force),
+//! - [`physics`]: the [`physics::Dynamics`] / [`physics::Ode`] traits, the
+//!   [`physics::DifferentiableStep`] trait (a discrete step with its vector–Jacobian product,
+//!   what BPTT needs; implemented by emulators and by the RK4 step of any
+//!   [`physics::linearize::Linearize`] model), integrators (explicit and semi-implicit Euler,
+//!   RK4, fixed-step Dormand–Prince, adaptive RK45) and one module per model: [`physics::pendulum::Pendulum3`] (3-link pendulum: passive, active, ext. force),
 //!   [`physics::truck::Truck`], [`physics::lander::Lander`], [`physics::acrobot::Acrobot`]
 //!   (two-link gymnast), and planar articulated trees ([`physics::planar::PlanarTree`]) for the
 //!   diver and the push-recovery figure.
@@ -31,7 +33,8 @@
 //!   LQR tracking with the quadratic value function of linear Bellman combination, eq. 12);
 //!   NeuroAnimator control learning: [`control::objective`] (composable objective terms with
 //!   gradients) and [`control::bptt`] (backpropagation through time through any differentiable
-//!   step, e.g. an emulator; plain and momentum descent on bounded piecewise-constant controls);
+//!   step — an emulator or a simulator's RK4 step; plain and momentum descent on bounded
+//!   piecewise-constant controls);
 //!   [`control::search`]: the one search library, with one trace and budget — simulated
 //!   annealing and parallel hill climbing generic over a proposal operator (box steps or the
 //!   mass-spring reflex perturbations), Nelder–Mead and BPTT — on emulator or simulator
@@ -64,6 +67,7 @@
 //!     and convergence orders), and future `x_*` experiments.
 //! - [`bench`]: throughput of the hot loops (`motionlab bench`).
 //! - [`linalg`]: the one conversion point between ndarray and nalgebra types.
+//! - [`seed`]: deterministic seed splitting ([`seed::mix_seed`]), one random stream per job.
 //!
 //! ## Models and algorithms
 //!
@@ -111,4 +115,5 @@ pub mod experiment;
 pub mod families;
 pub mod linalg;
 pub mod physics;
+pub mod seed;
 pub mod synthesis;

@@ -14,7 +14,9 @@
 //! ```
 //!
 //! each product being one vector–Jacobian product of the step ([`DifferentiableStep::vjp`],
-//! for an emulator through its transforms and network). Knot gradients sum ū_i over the steps
+//! defined next to [`crate::physics::Dynamics`]: for an emulator through its transforms and
+//! network, for a physical model through the exact Jacobians of its RK4 step,
+//! [`super::Rk4Map`]). Knot gradients sum ū_i over the steps
 //! a knot holds. The update ([`Descent`]) is plain descent (eq. 13) or descent with momentum
 //! (eq. 14–15):
 //!
@@ -40,111 +42,8 @@
 
 use super::objective::Objective;
 use super::ControlError;
-use crate::emulator::{Emulator, EmulatorScratch};
+pub use crate::physics::differentiable::{DifferentiableStep, LinearStep};
 use crate::physics::Dynamics;
-
-/// A discrete-time step with a vector–Jacobian product: what BPTT needs of a model.
-pub trait DifferentiableStep {
-    /// Per-thread scratch.
-    type Scratch;
-    /// Number of state variables.
-    fn state_dim(&self) -> usize;
-    /// Number of control variables.
-    fn control_dim(&self) -> usize;
-    /// Fresh scratch.
-    fn scratch(&self) -> Self::Scratch;
-    /// Writes s' = N(s, u) into `s_next`.
-    fn step(&self, s: &[f64], u: &[f64], scratch: &mut Self::Scratch, s_next: &mut [f64]);
-    /// Writes `s_bar` = (∂N/∂s)ᵀ s̄' and `u_bar` = (∂N/∂u)ᵀ s̄' (overwritten).
-    fn vjp(
-        &self,
-        s: &[f64],
-        u: &[f64],
-        s_next_bar: &[f64],
-        scratch: &mut Self::Scratch,
-        s_bar: &mut [f64],
-        u_bar: &mut [f64],
-    );
-}
-
-impl DifferentiableStep for Emulator {
-    type Scratch = EmulatorScratch;
-    fn state_dim(&self) -> usize {
-        Dynamics::state_dim(self)
-    }
-    fn control_dim(&self) -> usize {
-        Dynamics::control_dim(self)
-    }
-    fn scratch(&self) -> EmulatorScratch {
-        Emulator::scratch(self)
-    }
-    fn step(&self, s: &[f64], u: &[f64], scratch: &mut EmulatorScratch, s_next: &mut [f64]) {
-        self.predict(s, u, scratch, s_next);
-    }
-    fn vjp(
-        &self,
-        s: &[f64],
-        u: &[f64],
-        s_next_bar: &[f64],
-        scratch: &mut EmulatorScratch,
-        s_bar: &mut [f64],
-        u_bar: &mut [f64],
-    ) {
-        Emulator::vjp(self, s, u, s_next_bar, scratch, s_bar, u_bar);
-    }
-}
-
-/// A linear step s' = A s + B u (row-major A: n × n, B: n × m), for tests and references.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LinearStep {
-    /// A, row-major n × n.
-    pub a: Vec<f64>,
-    /// B, row-major n × m.
-    pub b: Vec<f64>,
-    /// State dimension n.
-    pub n: usize,
-    /// Control dimension m.
-    pub m: usize,
-}
-
-impl DifferentiableStep for LinearStep {
-    type Scratch = ();
-    fn state_dim(&self) -> usize {
-        self.n
-    }
-    fn control_dim(&self) -> usize {
-        self.m
-    }
-    fn scratch(&self) {}
-    fn step(&self, s: &[f64], u: &[f64], _: &mut (), s_next: &mut [f64]) {
-        for r in 0..self.n {
-            let a = &self.a[r * self.n..(r + 1) * self.n];
-            let b = &self.b[r * self.m..(r + 1) * self.m];
-            s_next[r] = a.iter().zip(s).map(|(x, y)| x * y).sum::<f64>()
-                + b.iter().zip(u).map(|(x, y)| x * y).sum::<f64>();
-        }
-    }
-    fn vjp(
-        &self,
-        _s: &[f64],
-        _u: &[f64],
-        sb1: &[f64],
-        _: &mut (),
-        s_bar: &mut [f64],
-        u_bar: &mut [f64],
-    ) {
-        s_bar.fill(0.0);
-        u_bar.fill(0.0);
-        for r in 0..self.n {
-            for c in 0..self.n {
-                s_bar[c] += self.a[r * self.n + c] * sb1[r];
-            }
-            for c in 0..self.m {
-                u_bar[c] += self.b[r * self.m + c] * sb1[r];
-            }
-        }
-    }
-}
 
 /// Piecewise-constant controls: `per_actuator` knots per actuator over `steps` steps; knot k
 /// (of actuator j, stored at `k * m + j`) holds on the steps i with ⌊i K / M⌋ = k.
@@ -690,13 +589,60 @@ pub fn replay(
     }
 }
 
+/// Test fixtures shared by the BPTT tests and the search adapters' tests.
+#[cfg(test)]
+pub(crate) mod fixtures {
+    use super::super::objective::{ControlEffort, FinalState, Objective};
+    use super::LinearStep;
+    use crate::emulator::catalog::NetModel;
+    use crate::emulator::mlp::{Mlp, WeightInit};
+    use crate::emulator::{Emulator, Transforms};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    /// A lander-shaped emulator with random weights (seed 3, 12 hidden units, Δt = 0.5 s), a
+    /// soft-landing-like objective (reach the start state moved by (+3, ·, −5), small effort)
+    /// and the start state.
+    pub(crate) fn lander_emulator() -> (Emulator, Objective, Vec<f64>) {
+        let model = NetModel::Lander;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mlp = Mlp::new(n + m, 12, n, WeightInit::FanIn, &mut rng);
+        let t = Transforms::unfitted(&model.transform_config(), n, m).unwrap();
+        let e = Emulator::new(t, mlp, 0.5).unwrap();
+        let x0 = model.start_state(&mut rng);
+        let mut target = x0.clone();
+        target[0] += 3.0;
+        target[2] -= 5.0;
+        let obj = Objective::default()
+            .with(FinalState {
+                mu: 1.0,
+                target,
+                weights: vec![1.0; n],
+            })
+            .with(ControlEffort::plain(0.01, m));
+        (e, obj, x0)
+    }
+
+    /// A stable 3-state, 2-control linear map.
+    pub(crate) fn linear() -> LinearStep {
+        LinearStep {
+            a: vec![1.0, 0.1, 0.0, -0.2, 0.95, 0.1, 0.0, 0.05, 0.9],
+            b: vec![0.0, 0.1, 0.3, 0.0, 0.0, 0.2],
+            n: 3,
+            m: 2,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::objective::{ControlEffort, FinalState, StateWindow};
+    use super::fixtures::linear;
     use super::*;
     use crate::emulator::catalog::NetModel;
     use crate::emulator::mlp::{Mlp, WeightInit};
-    use crate::emulator::Transforms;
+    use crate::emulator::{Emulator, Transforms};
     use rand::SeedableRng;
 
     fn fd_check<D: DifferentiableStep>(bptt: &mut Bptt<'_, D>, v: &[f64], tol: f64) {
@@ -714,15 +660,6 @@ mod tests {
                 "knot {i}: fd {fd} vs bptt {}",
                 g[i]
             );
-        }
-    }
-
-    fn linear() -> LinearStep {
-        LinearStep {
-            a: vec![1.0, 0.1, 0.0, -0.2, 0.95, 0.1, 0.0, 0.05, 0.9],
-            b: vec![0.0, 0.1, 0.3, 0.0, 0.0, 0.2],
-            n: 3,
-            m: 2,
         }
     }
 
@@ -763,23 +700,8 @@ mod tests {
 
     #[test]
     fn bptt_gradient_matches_finite_differences_through_an_emulator_with_transforms() {
-        let model = NetModel::Lander;
-        let (n, m) = (model.state_dim(), model.control_dim());
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let mlp = Mlp::new(n + m, 12, n, WeightInit::FanIn, &mut rng);
-        let t = Transforms::unfitted(&model.transform_config(), n, m).unwrap();
-        let e = Emulator::new(t, mlp, 0.5).unwrap();
-        let x0 = model.start_state(&mut rng);
-        let mut target = x0.clone();
-        target[0] += 3.0;
-        target[2] -= 5.0;
-        let obj = Objective::default()
-            .with(FinalState {
-                mu: 1.0,
-                target,
-                weights: vec![1.0; n],
-            })
-            .with(ControlEffort::plain(0.01, m));
+        let (e, obj, x0) = fixtures::lander_emulator();
+        let m = NetModel::Lander.control_dim();
         let knots = Knots {
             steps: 6,
             per_actuator: 3,
@@ -832,6 +754,71 @@ mod tests {
         };
         let mut b = Bptt::new(&e, &obj, knots, bounds, &g0).unwrap();
         let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.9).sin() * 0.5).collect();
+        fd_check(&mut b, &v, 1e-5);
+    }
+
+    /// Through a physical simulator: the RK4 step of the acrobot, with its analytic Jacobians.
+    #[test]
+    fn bptt_gradient_matches_finite_differences_through_the_rk4_acrobot() {
+        use crate::control::Rk4Map;
+        use crate::physics::acrobot::Acrobot;
+        let map = Rk4Map::new(Acrobot::default(), 0.02).unwrap();
+        let x0 = [-1.2, 0.4, 0.3, -0.5];
+        let obj = Objective::default()
+            .with(ControlEffort::plain(0.05, 1))
+            .with(FinalState {
+                mu: 1.0,
+                target: vec![-0.9, 0.1, 0.0, 0.0],
+                weights: vec![1.0, 1.0, 0.1, 0.1],
+            })
+            .with(StateWindow {
+                mu: 0.2,
+                from: 3,
+                to: 6,
+                reference: vec![-1.0, 0.2, 0.0, 0.0],
+                weights: vec![1.0, 0.5, 0.0, 0.1],
+            });
+        let knots = Knots {
+            steps: 6,
+            per_actuator: 3,
+            m: 1,
+        };
+        let bounds = Bounds {
+            low: vec![-4.0],
+            high: vec![4.0],
+        };
+        let mut b = Bptt::new(&map, &obj, knots, bounds, &x0).unwrap();
+        let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.8).sin() * 0.6).collect();
+        fd_check(&mut b, &v, 1e-6);
+    }
+
+    /// Through the RK4 step of the active 3-link pendulum, linearized by central differences.
+    #[test]
+    fn bptt_gradient_matches_finite_differences_through_the_rk4_pendulum() {
+        use crate::control::Rk4Map;
+        use crate::physics::linearize::FiniteDifference;
+        use crate::physics::pendulum::{Pendulum3, PendulumVariant};
+        let model = FiniteDifference::new(Pendulum3::new(PendulumVariant::Active));
+        let map = Rk4Map::new(model, 0.01).unwrap();
+        let x0 = [0.3, -0.2, 0.1, 0.5, 0.0, -0.4];
+        let obj = Objective::default()
+            .with(ControlEffort::plain(0.01, 3))
+            .with(FinalState {
+                mu: 1.0,
+                target: vec![0.5, 0.0, 0.0, 0.0, 0.0, 0.0],
+                weights: vec![1.0, 1.0, 1.0, 0.1, 0.1, 0.1],
+            });
+        let knots = Knots {
+            steps: 4,
+            per_actuator: 2,
+            m: 3,
+        };
+        let bounds = Bounds {
+            low: vec![-2.0; 3],
+            high: vec![2.0; 3],
+        };
+        let mut b = Bptt::new(&map, &obj, knots, bounds, &x0).unwrap();
+        let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.6).cos() * 0.5).collect();
         fd_check(&mut b, &v, 1e-5);
     }
 
@@ -934,23 +921,9 @@ mod tests {
             assert!(u[1] >= -2.0 - 1e-12 && u[1] <= 0.5 + 1e-12);
         }
         assert!(r.final_objective() < r.trace[0].objective);
-        // A Dynamics wrapper of the same linear map: replay reproduces the final state.
-        struct Wrap(LinearStep);
-        impl Dynamics for Wrap {
-            fn state_dim(&self) -> usize {
-                self.0.n
-            }
-            fn control_dim(&self) -> usize {
-                self.0.m
-            }
-            fn step(&mut self, x: &mut [f64], u: &[f64], _dt: f64) {
-                let mut y = vec![0.0; self.0.n];
-                DifferentiableStep::step(&self.0, x, u, &mut (), &mut y);
-                x.copy_from_slice(&y);
-            }
-        }
+        // The same linear map as Dynamics: replay reproduces the final state.
         let last = &r.states[r.states.len() - 3..];
-        let rep = replay(&mut Wrap(linear()), &[0.0; 3], &r.controls, 0.1, 1, last);
+        let rep = replay(&mut linear(), &[0.0; 3], &r.controls, 0.1, 1, last);
         assert!(rep.final_gap < 1e-12);
         assert_eq!(rep.states.len(), 9 * 3);
     }

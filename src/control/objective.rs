@@ -19,8 +19,8 @@
 //!   range of states (e.g. the descent velocity in the last seconds before touchdown);
 //! - [`Progress`]: −μ d·(p̄_M − p̄_0), distance travelled along a direction (swimming forward).
 //!
-//! Layout: `states` holds the M + 1 states s_0 … s_M row after row (n each; s_0 is the given
-//! start state, the paper's s_1), `controls` the M per-step controls (m each).
+//! Layout ([`Trajectory`]): `states` holds the M + 1 states s_0 … s_M row after row (n each;
+//! s_0 is the given start state, the paper's s_1), `controls` the M per-step controls (m each).
 //!
 //! Objectives are minimized here (the paper writes J as a cost but the update with a plus sign).
 //!
@@ -30,21 +30,43 @@
 
 use std::fmt::Debug;
 
+/// A trajectory as the terms see it: the states s_0 … s_M (n each) and the controls
+/// u_0 … u_{M−1} (m each), row after row.
+#[derive(Debug, Clone, Copy)]
+pub struct Trajectory<'a> {
+    /// The M + 1 states.
+    pub states: &'a [f64],
+    /// The M controls.
+    pub controls: &'a [f64],
+    /// State dimension n.
+    pub n: usize,
+    /// Control dimension m.
+    pub m: usize,
+}
+
+impl Trajectory<'_> {
+    /// The final state s_M.
+    pub fn last(&self) -> &[f64] {
+        &self.states[self.states.len() - self.n..]
+    }
+
+    /// State s_i.
+    pub fn state(&self, i: usize) -> &[f64] {
+        &self.states[i * self.n..(i + 1) * self.n]
+    }
+}
+
 /// One term of an objective over a trajectory of `steps` emulator steps.
 pub trait Term: Debug + Send + Sync {
-    /// Its value for the states (s_0 … s_M, n each) and controls (u_0 … u_{M−1}, m each).
-    fn value(&self, states: &[f64], controls: &[f64], n: usize, m: usize) -> f64;
-    /// Adds ∂term/∂states to `s_bar` and ∂term/∂controls to `u_bar` (same layouts); returns
-    /// the value.
-    fn gradient(
-        &self,
-        states: &[f64],
-        controls: &[f64],
-        n: usize,
-        m: usize,
-        s_bar: &mut [f64],
-        u_bar: &mut [f64],
-    ) -> f64;
+    /// Its value on trajectory `t`.
+    fn value(&self, t: Trajectory<'_>) -> f64;
+    /// Adds ∂term/∂states to `s_bar` and ∂term/∂controls to `u_bar` (the layouts of `t`).
+    fn add_gradient(&self, t: Trajectory<'_>, s_bar: &mut [f64], u_bar: &mut [f64]);
+    /// [`Term::add_gradient`], then returns the value.
+    fn gradient(&self, t: Trajectory<'_>, s_bar: &mut [f64], u_bar: &mut [f64]) -> f64 {
+        self.add_gradient(t, s_bar, u_bar);
+        self.value(t)
+    }
 }
 
 /// Controller efficiency: μ/2 Σ_i Σ_j ((u_ij − offset_j)/scale_j)².
@@ -70,9 +92,10 @@ impl ControlEffort {
 }
 
 impl Term for ControlEffort {
-    fn value(&self, _states: &[f64], controls: &[f64], _n: usize, m: usize) -> f64 {
+    fn value(&self, t: Trajectory<'_>) -> f64 {
+        let m = t.m;
         let mut sum = 0.0;
-        for u in controls.chunks_exact(m) {
+        for u in t.controls.chunks_exact(m) {
             for j in 0..m {
                 let d = (u[j] - self.offset[j]) / self.scale[j];
                 sum += d * d;
@@ -81,22 +104,14 @@ impl Term for ControlEffort {
         0.5 * self.mu * sum
     }
 
-    fn gradient(
-        &self,
-        states: &[f64],
-        controls: &[f64],
-        n: usize,
-        m: usize,
-        _s_bar: &mut [f64],
-        u_bar: &mut [f64],
-    ) -> f64 {
-        for (u, g) in controls.chunks_exact(m).zip(u_bar.chunks_exact_mut(m)) {
+    fn add_gradient(&self, t: Trajectory<'_>, _s_bar: &mut [f64], u_bar: &mut [f64]) {
+        let m = t.m;
+        for (u, g) in t.controls.chunks_exact(m).zip(u_bar.chunks_exact_mut(m)) {
             for j in 0..m {
                 let c = self.scale[j];
                 g[j] += self.mu * (u[j] - self.offset[j]) / (c * c);
             }
         }
-        self.value(states, controls, n, m)
     }
 }
 
@@ -107,6 +122,13 @@ fn weighted_sq(s: &[f64], r: &[f64], w: &[f64]) -> f64 {
         .zip(w)
         .map(|((a, b), w)| w * (a - b) * (a - b))
         .sum()
+}
+
+/// Adds the gradient of μ/2 Σ_k w_k (s_k − r_k)² to `s_bar`: s̄_k += μ w_k (s_k − r_k).
+fn add_weighted_sq_gradient(mu: f64, s: &[f64], r: &[f64], w: &[f64], s_bar: &mut [f64]) {
+    for (((g, a), b), w) in s_bar.iter_mut().zip(s).zip(r).zip(w) {
+        *g += mu * w * (a - b);
+    }
 }
 
 /// The final-state term: μ/2 Σ_k w_k (s_{M,k} − target_k)².
@@ -121,25 +143,14 @@ pub struct FinalState {
 }
 
 impl Term for FinalState {
-    fn value(&self, states: &[f64], _controls: &[f64], n: usize, _m: usize) -> f64 {
-        let last = &states[states.len() - n..];
-        0.5 * self.mu * weighted_sq(last, &self.target, &self.weights)
+    fn value(&self, t: Trajectory<'_>) -> f64 {
+        0.5 * self.mu * weighted_sq(t.last(), &self.target, &self.weights)
     }
 
-    fn gradient(
-        &self,
-        states: &[f64],
-        controls: &[f64],
-        n: usize,
-        m: usize,
-        s_bar: &mut [f64],
-        _u_bar: &mut [f64],
-    ) -> f64 {
-        let k0 = states.len() - n;
-        for k in 0..n {
-            s_bar[k0 + k] += self.mu * self.weights[k] * (states[k0 + k] - self.target[k]);
-        }
-        self.value(states, controls, n, m)
+    fn add_gradient(&self, t: Trajectory<'_>, s_bar: &mut [f64], _u_bar: &mut [f64]) {
+        let k0 = t.states.len() - t.n;
+        let (target, weights) = (&self.target, &self.weights);
+        add_weighted_sq_gradient(self.mu, t.last(), target, weights, &mut s_bar[k0..]);
     }
 }
 
@@ -167,30 +178,21 @@ impl StateWindow {
 }
 
 impl Term for StateWindow {
-    fn value(&self, states: &[f64], _controls: &[f64], n: usize, _m: usize) -> f64 {
+    fn value(&self, t: Trajectory<'_>) -> f64 {
         let sum: f64 = self
-            .range(states, n)
-            .map(|i| weighted_sq(&states[i * n..(i + 1) * n], &self.reference, &self.weights))
+            .range(t.states, t.n)
+            .map(|i| weighted_sq(t.state(i), &self.reference, &self.weights))
             .sum();
         0.5 * self.mu * sum
     }
 
-    fn gradient(
-        &self,
-        states: &[f64],
-        controls: &[f64],
-        n: usize,
-        m: usize,
-        s_bar: &mut [f64],
-        _u_bar: &mut [f64],
-    ) -> f64 {
-        for i in self.range(states, n) {
-            for k in 0..n {
-                s_bar[i * n + k] +=
-                    self.mu * self.weights[k] * (states[i * n + k] - self.reference[k]);
-            }
+    fn add_gradient(&self, t: Trajectory<'_>, s_bar: &mut [f64], _u_bar: &mut [f64]) {
+        let n = t.n;
+        let (reference, weights) = (&self.reference, &self.weights);
+        for i in self.range(t.states, n) {
+            let bar = &mut s_bar[i * n..(i + 1) * n];
+            add_weighted_sq_gradient(self.mu, t.state(i), reference, weights, bar);
         }
-        self.value(states, controls, n, m)
     }
 }
 
@@ -219,21 +221,12 @@ impl Progress {
 }
 
 impl Term for Progress {
-    fn value(&self, states: &[f64], _controls: &[f64], n: usize, _m: usize) -> f64 {
-        let last = &states[states.len() - n..];
-        -self.mu * (self.along(last) - self.along(&states[..n]))
+    fn value(&self, t: Trajectory<'_>) -> f64 {
+        -self.mu * (self.along(t.last()) - self.along(t.state(0)))
     }
 
-    fn gradient(
-        &self,
-        states: &[f64],
-        controls: &[f64],
-        n: usize,
-        m: usize,
-        s_bar: &mut [f64],
-        _u_bar: &mut [f64],
-    ) -> f64 {
-        let k0 = states.len() - n;
+    fn add_gradient(&self, t: Trajectory<'_>, s_bar: &mut [f64], _u_bar: &mut [f64]) {
+        let k0 = t.states.len() - t.n;
         let c = self.mu / self.points.len().max(1) as f64;
         for &i in &self.points {
             for a in 0..3 {
@@ -241,7 +234,6 @@ impl Term for Progress {
                 s_bar[i + a] += c * self.direction[a];
             }
         }
-        self.value(states, controls, n, m)
     }
 }
 
@@ -266,10 +258,13 @@ impl Objective {
 
     /// J for a trajectory.
     pub fn value(&self, states: &[f64], controls: &[f64], n: usize, m: usize) -> f64 {
-        self.terms
-            .iter()
-            .map(|t| t.value(states, controls, n, m))
-            .sum()
+        let t = Trajectory {
+            states,
+            controls,
+            n,
+            m,
+        };
+        self.terms.iter().map(|term| term.value(t)).sum()
     }
 
     /// J and its partial derivatives with respect to every state and control (`s_bar` and
@@ -283,11 +278,17 @@ impl Objective {
         s_bar: &mut [f64],
         u_bar: &mut [f64],
     ) -> f64 {
+        let t = Trajectory {
+            states,
+            controls,
+            n,
+            m,
+        };
         s_bar.fill(0.0);
         u_bar.fill(0.0);
         self.terms
             .iter()
-            .map(|t| t.gradient(states, controls, n, m, s_bar, u_bar))
+            .map(|term| term.gradient(t, s_bar, u_bar))
             .sum()
     }
 }
@@ -295,6 +296,15 @@ impl Objective {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn traj<'a>(states: &'a [f64], controls: &'a [f64], n: usize, m: usize) -> Trajectory<'a> {
+        Trajectory {
+            states,
+            controls,
+            n,
+            m,
+        }
+    }
 
     fn check_fd(term: &dyn Term) {
         let (n, m, steps) = (3, 2, 5);
@@ -304,22 +314,24 @@ mod tests {
         let controls: Vec<f64> = (0..steps * m).map(|i| (i as f64 * 0.71).cos()).collect();
         let mut sb = vec![0.0; states.len()];
         let mut ub = vec![0.0; controls.len()];
-        let v = term.gradient(&states, &controls, n, m, &mut sb, &mut ub);
-        assert!((v - term.value(&states, &controls, n, m)).abs() < 1e-12);
+        let v = term.gradient(traj(&states, &controls, n, m), &mut sb, &mut ub);
+        assert!((v - term.value(traj(&states, &controls, n, m))).abs() < 1e-12);
         let h = 1e-6;
         for i in 0..states.len() {
             let (mut p, mut q) = (states.clone(), states.clone());
             p[i] += h;
             q[i] -= h;
-            let fd =
-                (term.value(&p, &controls, n, m) - term.value(&q, &controls, n, m)) / (2.0 * h);
+            let fd = (term.value(traj(&p, &controls, n, m))
+                - term.value(traj(&q, &controls, n, m)))
+                / (2.0 * h);
             assert!((fd - sb[i]).abs() < 1e-6, "state {i}: {fd} vs {}", sb[i]);
         }
         for i in 0..controls.len() {
             let (mut p, mut q) = (controls.clone(), controls.clone());
             p[i] += h;
             q[i] -= h;
-            let fd = (term.value(&states, &p, n, m) - term.value(&states, &q, n, m)) / (2.0 * h);
+            let fd = (term.value(traj(&states, &p, n, m)) - term.value(traj(&states, &q, n, m)))
+                / (2.0 * h);
             assert!((fd - ub[i]).abs() < 1e-6, "control {i}: {fd} vs {}", ub[i]);
         }
     }

@@ -433,7 +433,7 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
     let mut sim = model.simulator();
     let limits = model.control_limits();
     let start = move |r: &mut ChaCha8Rng| model.start_state(r);
-    let stream = |k: u64| ChaCha8Rng::seed_from_u64(crate::experiment::mix_seed(spec.seed, k));
+    let stream = |k: u64| ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, k));
     let train = sample_transitions(
         sim.as_mut(),
         &start,
@@ -461,7 +461,7 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
         &held_ds,
         spec.net.method,
         &spec.settings,
-        crate::experiment::mix_seed(spec.seed, 4),
+        crate::seed::mix_seed(spec.seed, 4),
     )?;
     let train_error = mse(&mlp, &train_ds);
     let heldout_error = mse(&mlp, &held_ds);

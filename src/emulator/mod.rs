@@ -10,8 +10,9 @@
 //! [`Emulator`] composes the fixed transforms of Fig. 6(c) ([`Transforms`]: local frame,
 //! normalization, state change; see [`transform`]) around a three-layer perceptron
 //! ([`mlp::Mlp`]). It implements [`crate::physics::Dynamics`], so controllers run unchanged on an
-//! emulator or on the simulator, and exposes the vector–Jacobian product of one step with respect
-//! to state and control ([`Emulator::vjp`]) that backpropagation through time needs (§4.3).
+//! emulator or on the simulator, and [`crate::physics::DifferentiableStep`]: the
+//! vector–Jacobian product of one step with respect to state and control that backpropagation
+//! through time needs (§4.3).
 //!
 //! Training data are simulated transitions ([`Transitions`]) mapped through the inverse output
 //! transforms into network space (Fig. 9, [`Transforms::encode`]); [`train`] fits the weights
@@ -30,8 +31,7 @@ pub mod transform;
 use crate::physics::Dynamics;
 use mlp::{Mlp, MlpScratch};
 use ndarray::{Array2, ArrayView2};
-use train::Dataset;
-use transform::{FrameMap, LocalFrame, Normalizer};
+pub use transform::{TransformConfig, Transforms};
 
 /// Errors of emulator construction and training.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -133,273 +133,6 @@ impl Transitions {
     }
 }
 
-/// Which transforms of Fig. 6 to use; each is optional.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TransformConfig {
-    /// Predict the state change Δs instead of the next state (T_y^Δ).
-    pub delta: bool,
-    /// Map inputs to the model's local frame and outputs back (T_x', T_y').
-    pub frame: Option<LocalFrame>,
-    /// Normalize inputs and outputs to zero mean, unit variance (T_x^σ, T_y^σ).
-    pub normalize: bool,
-    /// Group id per network input ([local state, control]); `None`: one group per variable.
-    pub input_groups: Option<Vec<usize>>,
-    /// Group id per network output (state); `None`: one group per variable.
-    pub output_groups: Option<Vec<usize>>,
-}
-
-impl TransformConfig {
-    /// No transforms: the bare network maps [s, u] to s'.
-    pub fn none() -> Self {
-        Self {
-            delta: false,
-            frame: None,
-            normalize: false,
-            input_groups: None,
-            output_groups: None,
-        }
-    }
-
-    /// State change and per-variable normalization, with an optional local frame.
-    pub fn standard(frame: Option<LocalFrame>) -> Self {
-        Self {
-            delta: true,
-            frame,
-            normalize: true,
-            input_groups: None,
-            output_groups: None,
-        }
-    }
-
-    /// Appendix A's grouping of the inputs: all state variables share one group, all controls
-    /// another.
-    pub fn state_control_groups(state_dim: usize, control_dim: usize) -> Vec<usize> {
-        (0..state_dim + control_dim)
-            .map(|k| usize::from(k >= state_dim))
-            .collect()
-    }
-}
-
-/// The fixed operators around the network (Fig. 6c), fitted to data.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Transforms {
-    state_dim: usize,
-    control_dim: usize,
-    /// Whether the network predicts the state change.
-    pub delta: bool,
-    /// The local frame, if any.
-    pub frame: Option<LocalFrame>,
-    /// Input normalization (identity when normalization is off).
-    pub input_norm: Normalizer,
-    /// Output normalization (identity when normalization is off).
-    pub output_norm: Normalizer,
-}
-
-impl Transforms {
-    /// Transforms without normalization (identity statistics).
-    pub fn unfitted(
-        config: &TransformConfig,
-        state_dim: usize,
-        control_dim: usize,
-    ) -> Result<Self, EmulatorError> {
-        if let Some(f) = &config.frame {
-            f.validate(state_dim)?;
-        }
-        Ok(Self {
-            state_dim,
-            control_dim,
-            delta: config.delta,
-            frame: config.frame.clone(),
-            input_norm: Normalizer::identity(state_dim + control_dim),
-            output_norm: Normalizer::identity(state_dim),
-        })
-    }
-
-    /// Builds the transforms of `config` and fits normalization statistics to `data` (after the
-    /// frame and delta transforms, as the network will see them).
-    pub fn fit(config: &TransformConfig, data: &Transitions) -> Result<Self, EmulatorError> {
-        let (n, m) = (data.states.ncols(), data.controls.ncols());
-        let mut t = Self::unfitted(config, n, m)?;
-        if config.normalize {
-            let raw = t.encode(data);
-            let in_groups = config
-                .input_groups
-                .clone()
-                .unwrap_or_else(|| (0..n + m).collect());
-            let out_groups = config
-                .output_groups
-                .clone()
-                .unwrap_or_else(|| (0..n).collect());
-            t.input_norm = Normalizer::fit(raw.inputs.view(), &in_groups)?;
-            t.output_norm = Normalizer::fit(raw.targets.view(), &out_groups)?;
-        }
-        Ok(t)
-    }
-
-    /// Number of state variables.
-    pub fn state_dim(&self) -> usize {
-        self.state_dim
-    }
-
-    /// Number of control variables.
-    pub fn control_dim(&self) -> usize {
-        self.control_dim
-    }
-
-    /// Network input z = T_x^σ(T_x'(s), u). Does not allocate.
-    pub fn encode_input(&self, s: &[f64], u: &[f64], z: &mut [f64]) {
-        let n = self.state_dim;
-        match &self.frame {
-            Some(f) => f.apply_at(FrameMap::ToLocal, s, s, &mut z[..n]),
-            None => z[..n].copy_from_slice(s),
-        }
-        z[n..].copy_from_slice(u);
-        for ((z, m), sd) in z
-            .iter_mut()
-            .zip(&self.input_norm.mean)
-            .zip(&self.input_norm.std)
-        {
-            *z = (*z - m) / sd;
-        }
-    }
-
-    /// Inverse of [`Transforms::encode_input`] given a state `pose_source` with the pose the
-    /// state was encoded at (the local frame forgets the pose itself).
-    pub fn decode_input(&self, pose_source: &[f64], z: &[f64], s: &mut [f64], u: &mut [f64]) {
-        let n = self.state_dim;
-        let mut a = vec![0.0; z.len()];
-        self.input_norm.denormalize(z, &mut a);
-        match &self.frame {
-            Some(f) => f.apply_at(FrameMap::ToWorld, pose_source, &a[..n], s),
-            None => s.copy_from_slice(&a[..n]),
-        }
-        u.copy_from_slice(&a[n..]);
-    }
-
-    /// Network target for the transition s → s' (the inverse output transforms, Fig. 9).
-    pub fn encode_target(&self, s: &[f64], s_next: &[f64], y: &mut [f64]) {
-        let mut raw = vec![0.0; self.state_dim];
-        if self.delta {
-            transform::delta_inverse(s, s_next, &mut raw);
-        } else {
-            raw.copy_from_slice(s_next);
-        }
-        let mut local = raw.clone();
-        if let Some(f) = &self.frame {
-            let map = if self.delta {
-                FrameMap::DeltaToLocal
-            } else {
-                FrameMap::ToLocal
-            };
-            f.apply_at(map, s, &raw, &mut local);
-        }
-        self.output_norm.normalize(&local, y);
-    }
-
-    /// Next state s' from the network output y at state s (the output transforms). `tmp` is
-    /// scratch of length state_dim. Does not allocate.
-    pub fn decode_output(&self, s: &[f64], y: &[f64], tmp: &mut [f64], s_next: &mut [f64]) {
-        self.output_norm.denormalize(y, s_next);
-        if let Some(f) = &self.frame {
-            let map = if self.delta {
-                FrameMap::DeltaToWorld
-            } else {
-                FrameMap::ToWorld
-            };
-            tmp.copy_from_slice(s_next);
-            f.apply_at(map, s, tmp, s_next);
-        }
-        if self.delta {
-            for (o, a) in s_next.iter_mut().zip(s) {
-                *o += a;
-            }
-        }
-    }
-
-    /// VJP of [`Transforms::encode_input`]: adds (∂z/∂s)ᵀ z̄ to `s_bar` and writes (∂z/∂u)ᵀ z̄
-    /// to `u_bar`. `tmp` is scratch of length state_dim. Does not allocate.
-    pub fn encode_input_vjp(
-        &self,
-        s: &[f64],
-        z_bar: &[f64],
-        tmp: &mut [f64],
-        s_bar: &mut [f64],
-        u_bar: &mut [f64],
-    ) {
-        let n = self.state_dim;
-        for (k, o) in tmp.iter_mut().enumerate() {
-            *o = z_bar[k] / self.input_norm.std[k];
-        }
-        for (k, o) in u_bar.iter_mut().enumerate() {
-            *o = z_bar[n + k] / self.input_norm.std[n + k];
-        }
-        match &self.frame {
-            Some(f) => {
-                f.apply_vjp_self(FrameMap::ToLocal, s, tmp, s_bar);
-            }
-            None => {
-                for (o, a) in s_bar.iter_mut().zip(tmp.iter()) {
-                    *o += a;
-                }
-            }
-        }
-    }
-
-    /// VJP of [`Transforms::decode_output`]: writes (∂s'/∂y)ᵀ s̄' to `y_bar` and adds
-    /// (∂s'/∂s)ᵀ s̄' to `s_bar`. `tmp1`, `tmp2` are scratch of length state_dim.
-    #[allow(clippy::too_many_arguments)]
-    pub fn decode_output_vjp(
-        &self,
-        s: &[f64],
-        y: &[f64],
-        s_next_bar: &[f64],
-        tmp1: &mut [f64],
-        tmp2: &mut [f64],
-        y_bar: &mut [f64],
-        s_bar: &mut [f64],
-    ) {
-        if self.delta {
-            for (o, a) in s_bar.iter_mut().zip(s_next_bar) {
-                *o += a;
-            }
-        }
-        match &self.frame {
-            Some(f) => {
-                let map = if self.delta {
-                    FrameMap::DeltaToWorld
-                } else {
-                    FrameMap::ToWorld
-                };
-                self.output_norm.denormalize(y, tmp1);
-                tmp2.fill(0.0);
-                f.apply_vjp_at(map, s, tmp1, s_next_bar, tmp2, s_bar);
-                self.output_norm.denormalize_tangent(tmp2, y_bar);
-            }
-            None => self.output_norm.denormalize_tangent(s_next_bar, y_bar),
-        }
-    }
-
-    /// Maps transitions to (network input, network target) pairs (Fig. 9).
-    pub fn encode(&self, data: &Transitions) -> Dataset {
-        let (n, m) = (self.state_dim, self.control_dim);
-        let rows = data.len();
-        let mut inputs = Array2::zeros((rows, n + m));
-        let mut targets = Array2::zeros((rows, n));
-        for r in 0..rows {
-            let s = data.states.row(r).to_vec();
-            let u = data.controls.row(r).to_vec();
-            let s1 = data.next_states.row(r).to_vec();
-            let mut z = vec![0.0; n + m];
-            let mut y = vec![0.0; n];
-            self.encode_input(&s, &u, &mut z);
-            self.encode_target(&s, &s1, &mut y);
-            inputs.row_mut(r).assign(&ndarray::ArrayView1::from(&z));
-            targets.row_mut(r).assign(&ndarray::ArrayView1::from(&y));
-        }
-        Dataset::new(inputs, targets).expect("rows agree by construction")
-    }
-}
-
 /// Scratch for one emulator step and its VJP, so the hot loop does not allocate.
 #[derive(Debug, Clone)]
 pub struct EmulatorScratch {
@@ -478,7 +211,7 @@ impl Emulator {
         }
     }
 
-    /// Scratch for [`Emulator::predict`] and [`Emulator::vjp`] (one per thread).
+    /// Scratch for [`Emulator::predict`] and [`crate::physics::DifferentiableStep::vjp`] (one per thread).
     pub fn scratch(&self) -> EmulatorScratch {
         Self::make_scratch(
             &self.mlp,
@@ -512,42 +245,6 @@ impl Emulator {
         predict_with(&self.transforms, &self.mlp, s, u, scratch, s_next);
     }
 
-    /// Vector–Jacobian product of one step: given s̄' = ∂J/∂s_{t+Δt}, writes
-    /// `s_bar` = (∂s'/∂s)ᵀ s̄' and `u_bar` = (∂s'/∂u)ᵀ s̄' (both overwritten). Recomputes the
-    /// forward pass at (s, u). Does not allocate.
-    pub fn vjp(
-        &self,
-        s: &[f64],
-        u: &[f64],
-        s_next_bar: &[f64],
-        scratch: &mut EmulatorScratch,
-        s_bar: &mut [f64],
-        u_bar: &mut [f64],
-    ) {
-        let t = &self.transforms;
-        t.encode_input(s, u, &mut scratch.z);
-        self.mlp
-            .forward(&scratch.z, &mut scratch.mlp, &mut scratch.y);
-        s_bar.fill(0.0);
-        t.decode_output_vjp(
-            s,
-            &scratch.y,
-            s_next_bar,
-            &mut scratch.t1,
-            &mut scratch.t2,
-            &mut scratch.y_bar,
-            s_bar,
-        );
-        self.mlp.backward(
-            &scratch.z,
-            &mut scratch.mlp,
-            &scratch.y_bar,
-            None,
-            Some(&mut scratch.z_bar),
-        );
-        t.encode_input_vjp(s, &scratch.z_bar, &mut scratch.t1, s_bar, u_bar);
-    }
-
     /// Jacobians A = ∂s'/∂s (n × n) and B = ∂s'/∂u (n × m) at (s, u), one VJP per row.
     pub fn jacobians(&self, s: &[f64], u: &[f64]) -> (Array2<f64>, Array2<f64>) {
         let (n, m) = (self.transforms.state_dim, self.transforms.control_dim);
@@ -560,7 +257,7 @@ impl Emulator {
         for i in 0..n {
             e.fill(0.0);
             e[i] = 1.0;
-            self.vjp(s, u, &e, &mut scratch, &mut sb, &mut ub);
+            crate::physics::DifferentiableStep::vjp(self, s, u, &e, &mut scratch, &mut sb, &mut ub);
             a.row_mut(i).assign(&ndarray::ArrayView1::from(&sb));
             b.row_mut(i).assign(&ndarray::ArrayView1::from(&ub));
         }
@@ -639,19 +336,71 @@ impl Dynamics for Emulator {
     }
 }
 
+/// The emulator as a differentiable step for backpropagation through time (§4.3).
+impl crate::physics::DifferentiableStep for Emulator {
+    type Scratch = EmulatorScratch;
+    fn state_dim(&self) -> usize {
+        Dynamics::state_dim(self)
+    }
+    fn control_dim(&self) -> usize {
+        Dynamics::control_dim(self)
+    }
+    fn scratch(&self) -> EmulatorScratch {
+        Emulator::scratch(self)
+    }
+    fn step(&self, s: &[f64], u: &[f64], scratch: &mut EmulatorScratch, s_next: &mut [f64]) {
+        self.predict(s, u, scratch, s_next);
+    }
+    /// Vector–Jacobian product of one step: given s̄' = ∂J/∂s_{t+Δt}, writes
+    /// `s_bar` = (∂s'/∂s)ᵀ s̄' and `u_bar` = (∂s'/∂u)ᵀ s̄' (both overwritten). Recomputes the
+    /// forward pass at (s, u). Does not allocate.
+    fn vjp(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        s_next_bar: &[f64],
+        scratch: &mut EmulatorScratch,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        let t = &self.transforms;
+        t.encode_input(s, u, &mut scratch.z);
+        self.mlp
+            .forward(&scratch.z, &mut scratch.mlp, &mut scratch.y);
+        s_bar.fill(0.0);
+        t.decode_output_vjp(
+            s,
+            &scratch.y,
+            s_next_bar,
+            &mut scratch.t1,
+            &mut scratch.t2,
+            &mut scratch.y_bar,
+            s_bar,
+        );
+        self.mlp.backward(
+            &scratch.z,
+            &mut scratch.mlp,
+            &scratch.y_bar,
+            None,
+            Some(&mut scratch.z_bar),
+        );
+        t.encode_input_vjp(s, &scratch.z_bar, &mut scratch.t1, s_bar, u_bar);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::mlp::WeightInit;
     use super::train::{
-        mse, train_full_batch, train_momentum, FullBatchConfig, FullBatchMethod, MomentumConfig,
-        StopReason, TrainingProblem,
+        mse, train_full_batch, train_momentum, Dataset, FullBatchConfig, FullBatchMethod,
+        MomentumConfig, StopReason, TrainingProblem,
     };
     use super::*;
     use argmin::core::{CostFunction, Gradient};
     use ndarray::Array1;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-    use transform::PlanarFrame;
+    use transform::{FrameMap, PlanarFrame};
 
     const N: usize = 6;
     const M: usize = 2;
@@ -794,7 +543,7 @@ mod tests {
             let u = data.controls.row(3).to_vec();
             let lam: Vec<f64> = (0..n).map(|i| ((i * 7 % 5) as f64 - 2.0) * 0.6).collect();
             let (mut sb, mut ub) = (vec![0.0; n], vec![0.0; m]);
-            e.vjp(&s, &u, &lam, &mut sc, &mut sb, &mut ub);
+            crate::physics::DifferentiableStep::vjp(&e, &s, &u, &lam, &mut sc, &mut sb, &mut ub);
             let (a, b) = e.jacobians(&s, &u);
             let f = |s: &[f64], u: &[f64]| {
                 let mut out = vec![0.0; n];

@@ -423,15 +423,12 @@ pub fn train_full_batch(
     let shape = (mlp.n_in(), mlp.n_hidden(), mlp.n_out());
     let stopper = EarlyStopper::new(config.patience, config.min_improvement, mlp.weights());
     let opt = |e: argmin::core::Error| EmulatorError::Optimizer(e.to_string());
-    let (stopper, trace, failed, stopped, reason) = match config.method {
-        FullBatchMethod::ConjugateGradient { restart_iters } => {
-            let solver =
-                NonlinearConjugateGradient::new(MoreThuenteLineSearch::new(), PolakRibiere::new())
-                    .restart_iters(restart_iters)
-                    .restart_orthogonality(0.1);
+    // One early-stopping run, whichever argmin solver (their types differ).
+    macro_rules! run {
+        ($solver:expr) => {
             run_early_stopping(
                 problem,
-                solver,
+                $solver,
                 held_out,
                 shape,
                 stopper,
@@ -439,6 +436,15 @@ pub fn train_full_batch(
                 config.max_iters,
             )
             .map_err(opt)?
+        };
+    }
+    let (stopper, trace, failed, stopped, reason) = match config.method {
+        FullBatchMethod::ConjugateGradient { restart_iters } => {
+            let solver =
+                NonlinearConjugateGradient::new(MoreThuenteLineSearch::new(), PolakRibiere::new())
+                    .restart_iters(restart_iters)
+                    .restart_orthogonality(0.1);
+            run!(solver)
         }
         FullBatchMethod::Lbfgs { memory } => {
             let solver = LBFGS::new(MoreThuenteLineSearch::new(), memory.max(1))
@@ -446,16 +452,7 @@ pub fn train_full_batch(
                 .map_err(opt)?
                 .with_tolerance_cost(0.0)
                 .map_err(opt)?;
-            run_early_stopping(
-                problem,
-                solver,
-                held_out,
-                shape,
-                stopper,
-                w0,
-                config.max_iters,
-            )
-            .map_err(opt)?
+            run!(solver)
         }
     };
     let stop = if let Some(e) = failed {

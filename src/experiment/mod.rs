@@ -129,13 +129,7 @@ pub struct RunContext {
     stages: Mutex<Vec<(String, f64)>>,
 }
 
-/// SplitMix64 finalizer: decorrelates nearby seeds.
-pub fn mix_seed(seed: u64, stream: u64) -> u64 {
-    let mut z = seed ^ stream.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
+pub use crate::seed::mix_seed;
 
 impl RunContext {
     /// A context; progress bars are drawn only when `show_progress` and stderr is a terminal.

@@ -85,12 +85,7 @@ impl Model for Acrobot {
             Parameter::new("m2", self.m2, "kg", "point mass at the end of link 2"),
             Parameter::new("l1", self.l1, "m", "length of link 1 (massless)"),
             Parameter::new("l2", self.l2, "m", "length of link 2 (massless)"),
-            Parameter::new(
-                "gravity",
-                self.gravity,
-                "m/s^2",
-                "gravitational acceleration",
-            ),
+            Parameter::gravity(self.gravity, "gravitational acceleration"),
         ]
     }
     fn default_dt(&self) -> f64 {

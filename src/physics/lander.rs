@@ -169,10 +169,8 @@ impl Model for Lander {
             ));
         }
         p.extend([
-            Parameter::new(
-                "gravity",
+            Parameter::gravity(
                 self.gravity,
-                "m/s^2",
                 "gravitational acceleration along world -z (Moon: 1.62)",
             ),
             Parameter::new(

@@ -5,6 +5,9 @@
 //! A [`Simulator`] pairs an [`Ode`] with an [`Integrator`] and implements the discrete
 //! [`Dynamics`] trait: `step(x, u, dt)` advances the state by `dt` seconds. Learned emulators
 //! implement [`Dynamics`] as well, so controllers and searches run unchanged on either.
+//! [`DifferentiableStep`] ([`differentiable`]) is a discrete step with its vector–Jacobian
+//! product, what backpropagation through time needs; emulators implement it, and so does the
+//! RK4 step of any [`linearize::Linearize`] model (`control::Rk4Map`).
 //!
 //! Physics knows nothing of learning, control or files.
 //!
@@ -17,6 +20,7 @@
 //! [`push::push_figure`] of the push-recovery experiment.
 
 pub mod acrobot;
+pub mod differentiable;
 pub mod diver;
 pub mod dolphin;
 pub mod integrate;
@@ -29,6 +33,7 @@ pub mod push;
 pub mod reflex;
 pub mod truck;
 
+pub use differentiable::DifferentiableStep;
 pub use integrate::{Integrator, IntegratorKind, Rk45Stats};
 
 use serde::Serialize;
@@ -60,6 +65,46 @@ impl Parameter {
             unit,
             description,
         }
+    }
+
+    /// Gravitational acceleration g (m/s²); `description` says along what, or what it loads.
+    pub fn gravity(value: f64, description: &'static str) -> Self {
+        Self::new("gravity", value, "m/s^2", description)
+    }
+
+    /// The parameters of rigid link `link`: mass, length (meaning `length_description`),
+    /// centre-of-mass distance from its joint, and moment of inertia about the centre of mass.
+    pub fn rigid_link(
+        link: &str,
+        [mass, length, com, inertia]: [f64; 4],
+        length_description: &'static str,
+    ) -> [Self; 4] {
+        [
+            Self::new(format!("{link}.mass"), mass, "kg", "link mass"),
+            Self::new(format!("{link}.length"), length, "m", length_description),
+            Self::new(
+                format!("{link}.com"),
+                com,
+                "m",
+                "centre of mass distance from the link's joint",
+            ),
+            Self::new(
+                format!("{link}.inertia"),
+                inertia,
+                "kg*m^2",
+                "moment of inertia about the centre of mass",
+            ),
+        ]
+    }
+
+    /// Viscous friction of link `link`'s joint (N·m·s/rad).
+    pub fn joint_damping(link: &str, value: f64) -> Self {
+        Self::new(
+            format!("{link}.damping"),
+            value,
+            "N*m*s/rad",
+            "viscous friction at the link's joint",
+        )
     }
 }
 

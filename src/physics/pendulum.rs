@@ -188,42 +188,13 @@ impl Model for Pendulum3 {
     fn parameters(&self) -> Vec<Parameter> {
         let mut p = Vec::new();
         for (i, l) in self.links.iter().enumerate() {
-            let k = i + 1;
-            p.push(Parameter::new(
-                format!("link{k}.mass"),
-                l.mass,
-                "kg",
-                "link mass",
-            ));
-            p.push(Parameter::new(
-                format!("link{k}.length"),
-                l.length,
-                "m",
-                "joint-to-joint length",
-            ));
-            p.push(Parameter::new(
-                format!("link{k}.com"),
-                l.com,
-                "m",
-                "centre of mass distance from the link's joint",
-            ));
-            p.push(Parameter::new(
-                format!("link{k}.inertia"),
-                l.inertia,
-                "kg*m^2",
-                "moment of inertia about the centre of mass",
-            ));
-            p.push(Parameter::new(
-                format!("link{k}.damping"),
-                l.damping,
-                "N*m*s/rad",
-                "viscous friction at the link's joint",
-            ));
+            let link = format!("link{}", i + 1);
+            let body = [l.mass, l.length, l.com, l.inertia];
+            p.extend(Parameter::rigid_link(&link, body, "joint-to-joint length"));
+            p.push(Parameter::joint_damping(&link, l.damping));
         }
-        p.push(Parameter::new(
-            "gravity",
+        p.push(Parameter::gravity(
             self.gravity,
-            "m/s^2",
             "gravitational acceleration",
         ));
         p

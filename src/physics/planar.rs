@@ -394,47 +394,18 @@ impl Model for PlanarTree {
         let mut p = Vec::new();
         for l in &self.links {
             let n = &l.name;
-            p.push(Parameter::new(
-                format!("{n}.mass"),
-                l.mass,
-                "kg",
-                "link mass",
-            ));
-            p.push(Parameter::new(
-                format!("{n}.length"),
-                l.length,
-                "m",
-                "joint-to-tip length",
-            ));
-            p.push(Parameter::new(
-                format!("{n}.com"),
-                l.com,
-                "m",
-                "centre of mass distance from the link's joint",
-            ));
-            p.push(Parameter::new(
-                format!("{n}.inertia"),
-                l.inertia,
-                "kg*m^2",
-                "moment of inertia about the centre of mass",
-            ));
+            let body = [l.mass, l.length, l.com, l.inertia];
+            p.extend(Parameter::rigid_link(n, body, "joint-to-tip length"));
             p.push(Parameter::new(
                 format!("{n}.attach"),
                 l.attach,
                 "m",
                 "joint position along the parent link",
             ));
-            p.push(Parameter::new(
-                format!("{n}.damping"),
-                l.damping,
-                "N*m*s/rad",
-                "viscous friction at the link's joint",
-            ));
+            p.push(Parameter::joint_damping(n, l.damping));
         }
-        p.push(Parameter::new(
-            "gravity",
+        p.push(Parameter::gravity(
             self.gravity,
-            "m/s^2",
             "gravitational acceleration (along -y)",
         ));
         p

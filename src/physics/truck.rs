@@ -256,12 +256,7 @@ impl Model for Truck {
                 "m/s^2",
                 "drive acceleration control clamp (forward and reverse)",
             ),
-            Parameter::new(
-                "gravity",
-                self.gravity,
-                "m/s^2",
-                "gravitational acceleration (axle loads)",
-            ),
+            Parameter::gravity(self.gravity, "gravitational acceleration (axle loads)"),
         ]
     }
     fn default_dt(&self) -> f64 {

@@ -377,22 +377,12 @@ impl SearchProblem for ReplayProblem<'_> {
 mod tests {
     use super::super::{anneal, hill_climb, time_to_target, AnnealingConfig, ClimbConfig};
     use super::*;
-    use crate::control::bptt::{learn, replay, LinearStep};
+    use crate::control::bptt::fixtures::{lander_emulator, linear};
+    use crate::control::bptt::{learn, replay};
     use crate::control::objective::{ControlEffort, FinalState};
     use crate::emulator::catalog::NetModel;
-    use crate::emulator::mlp::{Mlp, WeightInit};
-    use crate::emulator::{Emulator, Transforms};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
-
-    fn linear() -> LinearStep {
-        LinearStep {
-            a: vec![1.0, 0.1, 0.0, -0.2, 0.95, 0.1, 0.0, 0.05, 0.9],
-            b: vec![0.0, 0.1, 0.3, 0.0, 0.0, 0.2],
-            n: 3,
-            m: 2,
-        }
-    }
 
     fn objective() -> Objective {
         Objective::default()
@@ -409,23 +399,6 @@ mod tests {
             steps: 8,
             per_actuator: 4,
             m: 2,
-        }
-    }
-
-    /// The linear step as a simulator (its dt is ignored).
-    struct Sim(LinearStep);
-
-    impl Dynamics for Sim {
-        fn state_dim(&self) -> usize {
-            self.0.n
-        }
-        fn control_dim(&self) -> usize {
-            self.0.m
-        }
-        fn step(&mut self, x: &mut [f64], u: &[f64], _dt: f64) {
-            let mut y = [0.0; 3];
-            DifferentiableStep::step(&self.0, x, u, &mut (), &mut y);
-            x.copy_from_slice(&y);
         }
     }
 
@@ -473,16 +446,14 @@ mod tests {
         let x0 = [0.2, -0.1, 0.3];
         let mut b = Bptt::new(&sys, &obj, knots(), bounds, &x0).unwrap();
         let identity: StateMap = Box::new(|x, s| s.copy_from_slice(x));
-        let same =
-            ReplayProblem::new(&b, || Box::new(Sim(linear())), &x0, 0.1, 1, identity).unwrap();
+        let same = ReplayProblem::new(&b, || Box::new(linear()), &x0, 0.1, 1, identity).unwrap();
         // Two physical steps per emulator step, and a state map s = 2 x.
         let doubled: StateMap = Box::new(|x, s| {
             for (s, x) in s.iter_mut().zip(x) {
                 *s = 2.0 * x;
             }
         });
-        let mapped =
-            ReplayProblem::new(&b, || Box::new(Sim(linear())), &x0, 0.1, 2, doubled).unwrap();
+        let mapped = ReplayProblem::new(&b, || Box::new(linear()), &x0, 0.1, 2, doubled).unwrap();
         assert_eq!(same.search_box(), BpttProblem::new(&b).search_box());
         for v in random_points(8, 4, 2) {
             assert_eq!(same.evaluate(&v).to_bits(), b.rollout(&v).to_bits());
@@ -490,7 +461,7 @@ mod tests {
             assert_eq!(r.states, b.states());
             assert_eq!(r.controls, b.controls());
             // Reference: replay, then map and score.
-            let rep = replay(&mut Sim(linear()), &x0, b.controls(), 0.1, 2, &[0.0; 3]);
+            let rep = replay(&mut linear(), &x0, b.controls(), 0.1, 2, &[0.0; 3]);
             let states: Vec<f64> = rep.states.iter().map(|x| 2.0 * x).collect();
             let j = obj.value(&states, b.controls(), 3, 2);
             assert_eq!(mapped.evaluate(&v).to_bits(), j.to_bits());
@@ -499,7 +470,7 @@ mod tests {
         assert!(matches!(
             ReplayProblem::new(
                 &b,
-                || Box::new(Sim(linear())),
+                || Box::new(linear()),
                 &x0[..2],
                 0.1,
                 1,
@@ -509,35 +480,13 @@ mod tests {
         ));
         assert!(ReplayProblem::new(
             &b,
-            || Box::new(Sim(linear())),
+            || Box::new(linear()),
             &x0,
             0.0,
             1,
             Box::new(|x, s| s.copy_from_slice(x))
         )
         .is_err());
-    }
-
-    /// A lander-shaped emulator with random weights, a soft-landing-like objective.
-    fn lander_emulator() -> (Emulator, Objective, Vec<f64>) {
-        let model = NetModel::Lander;
-        let (n, m) = (model.state_dim(), model.control_dim());
-        let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let mlp = Mlp::new(n + m, 12, n, WeightInit::FanIn, &mut rng);
-        let t = Transforms::unfitted(&model.transform_config(), n, m).unwrap();
-        let e = Emulator::new(t, mlp, 0.5).unwrap();
-        let x0 = model.start_state(&mut rng);
-        let mut target = x0.clone();
-        target[0] += 3.0;
-        target[2] -= 5.0;
-        let obj = Objective::default()
-            .with(FinalState {
-                mu: 1.0,
-                target,
-                weights: vec![1.0; n],
-            })
-            .with(ControlEffort::plain(0.01, m));
-        (e, obj, x0)
     }
 
     #[test]

@@ -20,8 +20,9 @@ use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables}
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
-use crate::experiment::{mix_seed, other, Error, Family, Job, RunContext};
+use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::row;
+use crate::seed::mix_seed;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 

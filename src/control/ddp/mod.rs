@@ -34,6 +34,10 @@
 //! `tol_grad`, after `max_iterations` forward passes, or when μ exceeds `mu_max`.
 //! The returned gains always come from a backward pass at the returned trajectory.
 //!
+//! The backward pass and the adjoint gradient are in `backward`, the projected-Newton box QP
+//! in `box_qp`; this module holds the options, the forward pass with its line search, the
+//! regularization schedule and the solver loop ([`solve`]).
+//!
 //! ## References
 //! - D. H. Jacobson, D. Q. Mayne, *Differential Dynamic Programming*, Elsevier, 1970.
 //! - W. Li, E. Todorov, *Iterative linear quadratic regulator design for nonlinear biological
@@ -43,9 +47,15 @@
 //! - Y. Tassa, N. Mansard, E. Todorov, *Control-limited differential dynamic programming*,
 //!   ICRA 2014 (projected-Newton box QP).
 
-use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
+mod backward;
+mod box_qp;
+
+pub use backward::cost_gradient;
+pub use box_qp::{box_qp, BoxQpWorkspace};
+
 use super::{ControlError, QuadraticCost, Rk4Map, Rk4Workspace, StageDerivatives};
 use crate::physics::linearize::Linearize;
+use backward::backward;
 use nalgebra::{DMatrix, DVector};
 
 /// Which DDP variant to run.
@@ -181,182 +191,6 @@ impl DdpSolution {
     }
 }
 
-/// Scratch of [`box_qp`], sized for m controls.
-#[derive(Debug, Clone)]
-pub struct BoxQpWorkspace {
-    /// Solution δu after a successful call.
-    pub x: DVector<f64>,
-    /// `free[i]`: control i is not at an active bound.
-    pub free: Vec<bool>,
-    /// Indices of the free controls (its length is the factor's dimension).
-    pub free_index: Vec<usize>,
-    /// Cholesky factor (lower triangle of the leading block) of H restricted to the free set.
-    pub factor: DMatrix<f64>,
-    grad: DVector<f64>,
-    trial: DVector<f64>,
-    search: DVector<f64>,
-    rhs: Vec<f64>,
-}
-
-impl BoxQpWorkspace {
-    /// Buffers for an m-dimensional box QP.
-    pub fn new(m: usize) -> Self {
-        Self {
-            x: DVector::zeros(m),
-            free: vec![true; m],
-            free_index: Vec::with_capacity(m),
-            factor: DMatrix::zeros(m, m),
-            grad: DVector::zeros(m),
-            trial: DVector::zeros(m),
-            search: DVector::zeros(m),
-            rhs: Vec::with_capacity(m),
-        }
-    }
-}
-
-fn qp_value(h: &DMatrix<f64>, g: &DVector<f64>, x: &DVector<f64>) -> f64 {
-    let n = x.len();
-    let mut v = 0.0;
-    for j in 0..n {
-        v += g[j] * x[j];
-        for i in 0..n {
-            v += 0.5 * x[i] * h[(i, j)] * x[j];
-        }
-    }
-    v
-}
-
-/// Projected-Newton solution of min ½ xᵀHx + gᵀx subject to lower ≤ x ≤ upper (Tassa, Mansard,
-/// Todorov 2014), warm-started at clamp(`x0`). On success the solution, the free set and the
-/// Cholesky factor of H on the free set are in `ws`; returns false when H restricted to the
-/// free set is not positive definite. Does not allocate.
-pub fn box_qp(
-    h: &DMatrix<f64>,
-    g: &DVector<f64>,
-    lower: &DVector<f64>,
-    upper: &DVector<f64>,
-    x0: &DVector<f64>,
-    ws: &mut BoxQpWorkspace,
-) -> bool {
-    let m = g.len();
-    for i in 0..m {
-        ws.x[i] = x0[i].clamp(lower[i], upper[i]);
-    }
-    let mut value = qp_value(h, g, &ws.x);
-    let mut factored_free: Option<usize> = None; // number of free controls of the current factor
-    for iter in 0..100 {
-        // gradient and active set
-        ws.grad.copy_from(g);
-        ws.grad.gemv(1.0, h, &ws.x, 1.0);
-        let mut changed = false;
-        for i in 0..m {
-            let clamped = (ws.x[i] <= lower[i] && ws.grad[i] > 0.0)
-                || (ws.x[i] >= upper[i] && ws.grad[i] < 0.0);
-            if ws.free[i] == clamped || iter == 0 {
-                changed = true;
-            }
-            ws.free[i] = !clamped;
-        }
-        ws.free_index.clear();
-        ws.free_index.extend((0..m).filter(|&i| ws.free[i]));
-        let nf = ws.free_index.len();
-        if changed || factored_free.is_none() {
-            for (a, &i) in ws.free_index.iter().enumerate() {
-                for (b, &j) in ws.free_index.iter().enumerate() {
-                    ws.factor[(a, b)] = h[(i, j)];
-                }
-            }
-            if !cholesky_in_place(&mut ws.factor, nf) {
-                return false;
-            }
-            factored_free = Some(nf);
-        }
-        if nf == 0 {
-            return true; // every control at an active bound
-        }
-        let gnorm: f64 = ws
-            .free_index
-            .iter()
-            .map(|&i| ws.grad[i].powi(2))
-            .sum::<f64>();
-        if gnorm.sqrt() < 1e-12 * (1.0 + g.amax()) {
-            return true;
-        }
-        // Newton step on the free set with the clamped controls fixed:
-        // x_f* = −H_ff⁻¹ (g_f + H_fc x_c); search = x* − x on the free set, 0 elsewhere.
-        ws.rhs.clear();
-        for &i in &ws.free_index {
-            let mut s = g[i];
-            for j in 0..m {
-                if !ws.free[j] {
-                    s += h[(i, j)] * ws.x[j];
-                }
-            }
-            ws.rhs.push(-s);
-        }
-        cholesky_solve_in_place(&ws.factor, nf, &mut ws.rhs);
-        ws.search.fill(0.0);
-        for (a, &i) in ws.free_index.iter().enumerate() {
-            ws.search[i] = ws.rhs[a] - ws.x[i];
-        }
-        let slope = ws.search.dot(&ws.grad);
-        if slope >= 0.0 {
-            return true; // no descent direction left: converged
-        }
-        // Armijo backtracking along the projected path.
-        let mut step = 1.0;
-        let new_value = loop {
-            for i in 0..m {
-                ws.trial[i] = (ws.x[i] + step * ws.search[i]).clamp(lower[i], upper[i]);
-            }
-            let v = qp_value(h, g, &ws.trial);
-            if (v - value) / (step * slope) >= 0.1 {
-                break Some(v);
-            }
-            step *= 0.6;
-            if step < 1e-20 {
-                break None;
-            }
-        };
-        let Some(new_value) = new_value else {
-            return true;
-        };
-        std::mem::swap(&mut ws.x, &mut ws.trial);
-        let improvement = value - new_value;
-        value = new_value;
-        if improvement < 1e-14 * (1.0 + value.abs()) {
-            // Recompute the free set and factor at the final point on the next pass.
-            factored_free = None;
-        }
-    }
-    true
-}
-
-/// Exact gradient ∂J/∂u_k of the total cost for the controls `us` from `x0` (adjoint method).
-pub fn cost_gradient<M: Linearize>(
-    map: &Rk4Map<M>,
-    cost: &QuadraticCost,
-    x0: &DVector<f64>,
-    us: &[DVector<f64>],
-) -> Result<Vec<DVector<f64>>, ControlError> {
-    let (n, m) = (map.state_dim(), map.control_dim());
-    let xs = map.rollout(x0, us)?;
-    let mut ws = map.workspace();
-    let (mut fx, mut fu) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
-    let mut l = StageDerivatives::new(n, m);
-    let mut lam = DVector::zeros(n);
-    let mut gxx = DMatrix::zeros(n, n);
-    cost.terminal_derivatives(&xs[us.len()], &mut lam, &mut gxx);
-    let mut grads = vec![DVector::zeros(m); us.len()];
-    for k in (0..us.len()).rev() {
-        map.jacobians(&xs[k], &us[k], &mut fx, &mut fu, &mut ws);
-        cost.running_derivatives(k, &xs[k], &us[k], &mut l);
-        grads[k] = &l.lu + fu.transpose() * &lam;
-        lam = &l.lx + fx.transpose() * &lam;
-    }
-    Ok(grads)
-}
-
 /// Per-trajectory buffers of the solver, allocated once per [`solve`] call.
 struct Buffers {
     fx: Vec<DMatrix<f64>>,
@@ -430,148 +264,6 @@ impl Buffers {
     }
 }
 
-/// Result of a successful backward pass: Σ kᵀQ_u, Σ ½ kᵀQ_uu k, projected gradient norm.
-struct BackwardResult {
-    dv1: f64,
-    dv2: f64,
-    gradient_norm: f64,
-}
-
-/// Backward pass at (xs, us) with regularization μ; `None` when Q_uu + μI is not positive
-/// definite at some step. Does not allocate.
-fn backward(
-    cost: &QuadraticCost,
-    xs: &[DVector<f64>],
-    us: &[DVector<f64>],
-    mu: f64,
-    options: &DdpOptions,
-    b: &mut Buffers,
-) -> Option<BackwardResult> {
-    let horizon = us.len();
-    let n = xs[0].len();
-    let m = us[0].len();
-    let full = options.variant == DdpVariant::Full;
-    cost.terminal_derivatives(&xs[horizon], &mut b.vx, &mut b.vxx);
-    b.lam.copy_from(&b.vx);
-    let (mut dv1, mut dv2, mut g2) = (0.0, 0.0, 0.0);
-    for k in (0..horizon).rev() {
-        let (fx, fu) = (&b.fx[k], &b.fu[k]);
-        cost.running_derivatives(k, &xs[k], &us[k], &mut b.l);
-        // Exact (adjoint) gradient, projected on the bounds.
-        b.gu.copy_from(&b.l.lu);
-        b.gu.gemv_tr(1.0, fu, &b.lam, 1.0);
-        if let Some(bounds) = &options.bounds {
-            for (i, g) in b.gu.iter_mut().enumerate() {
-                let u = us[k][i];
-                if (u <= bounds.lower[i] && *g > 0.0) || (u >= bounds.upper[i] && *g < 0.0) {
-                    *g = 0.0;
-                }
-            }
-        }
-        g2 += b.gu.norm_squared();
-        b.lam_tmp.copy_from(&b.l.lx);
-        b.lam_tmp.gemv_tr(1.0, fx, &b.lam, 1.0);
-        std::mem::swap(&mut b.lam, &mut b.lam_tmp);
-
-        // Q function.
-        b.qx.copy_from(&b.l.lx);
-        b.qx.gemv_tr(1.0, fx, &b.vx, 1.0);
-        b.qu.copy_from(&b.l.lu);
-        b.qu.gemv_tr(1.0, fu, &b.vx, 1.0);
-        b.vxx.mul_to(fx, &mut b.vxx_fx);
-        b.vxx.mul_to(fu, &mut b.vxx_fu);
-        b.qxx.copy_from(&b.l.lxx);
-        b.qxx.gemm_tr(1.0, fx, &b.vxx_fx, 1.0);
-        b.quu.copy_from(&b.l.luu);
-        b.quu.gemm_tr(1.0, fu, &b.vxx_fu, 1.0);
-        b.qux.gemm_tr(1.0, fu, &b.vxx_fx, 0.0);
-        if full {
-            for (a, hess) in b.fzz[k].iter().enumerate() {
-                let w = b.vx[a];
-                for j in 0..n {
-                    for i in 0..n {
-                        b.qxx[(i, j)] += w * hess[(i, j)];
-                    }
-                    for i in 0..m {
-                        b.qux[(i, j)] += w * hess[(n + i, j)];
-                    }
-                }
-                for j in 0..m {
-                    for i in 0..m {
-                        b.quu[(i, j)] += w * hess[(n + i, n + j)];
-                    }
-                }
-            }
-        }
-        b.quu_reg.copy_from(&b.quu);
-        for i in 0..m {
-            b.quu_reg[(i, i)] += mu;
-        }
-
-        // Gains.
-        let (kff, gain) = (&mut b.kff[k], &mut b.gains[k]);
-        match &options.bounds {
-            None => {
-                if !cholesky_in_place(&mut b.quu_reg, m) {
-                    return None;
-                }
-                for i in 0..m {
-                    kff[i] = -b.qu[i];
-                }
-                cholesky_solve_in_place(&b.quu_reg, m, kff.as_mut_slice());
-                gain.copy_from(&b.qux);
-                gain.neg_mut();
-                for j in 0..n {
-                    cholesky_solve_in_place(&b.quu_reg, m, gain.column_mut(j).as_mut_slice());
-                }
-            }
-            Some(bounds) => {
-                b.lo.copy_from(&bounds.lower);
-                b.lo -= &us[k];
-                b.hi.copy_from(&bounds.upper);
-                b.hi -= &us[k];
-                // Warm start from the previous iteration's feedforward step.
-                if !box_qp(&b.quu_reg, &b.qu, &b.lo, &b.hi, kff, &mut b.qp) {
-                    return None;
-                }
-                kff.copy_from(&b.qp.x);
-                gain.fill(0.0);
-                let nf = b.qp.free_index.len();
-                for j in 0..n {
-                    b.qp.rhs.clear();
-                    for &i in &b.qp.free_index {
-                        b.qp.rhs.push(-b.qux[(i, j)]);
-                    }
-                    cholesky_solve_in_place(&b.qp.factor, nf, &mut b.qp.rhs);
-                    for (a, &i) in b.qp.free_index.iter().enumerate() {
-                        gain[(i, j)] = b.qp.rhs[a];
-                    }
-                }
-            }
-        }
-
-        // Expected reduction and value update.
-        b.tm.gemv(1.0, &b.quu, kff, 0.0);
-        dv1 += kff.dot(&b.qu);
-        dv2 += 0.5 * kff.dot(&b.tm);
-        b.vx.copy_from(&b.qx);
-        b.vx.gemv_tr(1.0, gain, &b.tm, 1.0);
-        b.vx.gemv_tr(1.0, gain, &b.qu, 1.0);
-        b.vx.gemv_tr(1.0, &b.qux, kff, 1.0);
-        b.tmn.gemm(1.0, &b.quu, gain, 0.0);
-        b.vxx.copy_from(&b.qxx);
-        b.vxx.gemm_tr(1.0, gain, &b.tmn, 1.0);
-        b.vxx.gemm_tr(1.0, gain, &b.qux, 1.0);
-        b.vxx.gemm_tr(1.0, &b.qux, gain, 1.0);
-        symmetrize(&mut b.vxx);
-    }
-    Some(BackwardResult {
-        dv1,
-        dv2,
-        gradient_norm: g2.sqrt(),
-    })
-}
-
 /// Forward pass with step α into `b.x_new`, `b.u_new`; returns the new cost, or `None` when
 /// the rollout is not finite. Does not allocate.
 fn forward<M: Linearize>(
@@ -635,17 +327,7 @@ fn validate<M: Linearize>(
     if u_init.is_empty() {
         return Err(ControlError::EmptyHorizon);
     }
-    let dim = |what, expected, found| {
-        if expected == found {
-            Ok(())
-        } else {
-            Err(ControlError::DimensionMismatch {
-                what,
-                expected,
-                found,
-            })
-        }
-    };
+    let dim = super::check_dim;
     dim("initial state", n, x0.len())?;
     for u in u_init {
         dim("initial control", m, u.len())?;
@@ -911,49 +593,6 @@ mod tests {
                 grads[k][0]
             );
         }
-    }
-
-    #[test]
-    fn box_qp_satisfies_the_kkt_conditions() {
-        let mut rng = ChaCha8Rng::seed_from_u64(21);
-        let mut ws = BoxQpWorkspace::new(3);
-        let mut clamped_seen = 0;
-        for _ in 0..50 {
-            let a = DMatrix::from_fn(3, 3, |_, _| rng.random_range(-1.0..1.0));
-            let h = &a * a.transpose() + DMatrix::identity(3, 3) * 0.1;
-            let g = DVector::from_fn(3, |_, _| rng.random_range(-3.0..3.0));
-            let lower = DVector::from_fn(3, |_, _| rng.random_range(-1.0..0.0));
-            let upper = DVector::from_fn(3, |_, _| rng.random_range(0.0..1.0));
-            let x0 = DVector::from_fn(3, |_, _| rng.random_range(-2.0..2.0));
-            assert!(box_qp(&h, &g, &lower, &upper, &x0, &mut ws));
-            let grad = &g + &h * &ws.x;
-            for i in 0..3 {
-                let x = ws.x[i];
-                assert!(x >= lower[i] && x <= upper[i]);
-                if x <= lower[i] {
-                    assert!(grad[i] >= -1e-9, "{grad} at {}", ws.x);
-                    clamped_seen += 1;
-                } else if x >= upper[i] {
-                    assert!(grad[i] <= 1e-9, "{grad} at {}", ws.x);
-                    clamped_seen += 1;
-                } else {
-                    assert!(grad[i].abs() < 1e-9, "{grad} at {}", ws.x);
-                }
-            }
-        }
-        assert!(clamped_seen > 10, "the test must exercise active bounds");
-        // An indefinite Hessian with an interior free set is reported.
-        let h = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, -1.0]);
-        let mut ws = BoxQpWorkspace::new(2);
-        let b = DVector::from_element(2, 1.0);
-        assert!(!box_qp(
-            &h,
-            &DVector::zeros(2),
-            &(-&b),
-            &b,
-            &DVector::zeros(2),
-            &mut ws
-        ));
     }
 
     /// |J(α) − J(0) + expected(α)| / α² for the step α of one backward pass at μ = 0.

@@ -1,0 +1,420 @@
+//! # The RK4 map of a continuous model and its exact derivatives
+//!
+//! F(x, u) is one classic RK4 step of `dt` with u held constant: with h = dt, stage states
+//! y_s = x + c_s k_{s−1} (c = 0, h/2, h/2, h) and slopes k_s = f(y_s, u),
+//!
+//! ```text
+//! F(x, u) = x + h/6 (k_1 + 2 k_2 + 2 k_3 + k_4).
+//! ```
+//!
+//! Its Jacobians are exact, chained through the stage Jacobians A_s, B_s of f at (y_s, u):
+//!
+//! ```text
+//! ∂k_s/∂x = A_s (I + c_s ∂k_{s−1}/∂x),   ∂k_s/∂u = A_s c_s ∂k_{s−1}/∂u + B_s,
+//! F_x = I + h/6 (∂k_1 + 2∂k_2 + 2∂k_3 + ∂k_4)/∂x,   F_u likewise without the I;
+//! ```
+//!
+//! second derivatives (full DDP) are central differences of (F_x, F_u). As a
+//! [`DifferentiableStep`] its vector–Jacobian product is s̄ = F_xᵀ s̄', ū = F_uᵀ s̄', so BPTT
+//! runs through a physical model exactly as through an emulator.
+//!
+//! ## References
+//! - E. Hairer, S. P. Nørsett, G. Wanner, *Solving Ordinary Differential Equations I*,
+//!   Springer 1993, §II.1 (the classic Runge–Kutta method).
+
+use super::{symmetrize, ControlError};
+use crate::physics::linearize::Linearize;
+use crate::physics::{DifferentiableStep, Ode};
+use nalgebra::{DMatrix, DVector};
+
+/// Scratch buffers of [`Rk4Map`]; make one with [`Rk4Map::workspace`].
+#[derive(Debug, Clone)]
+pub struct Rk4Workspace {
+    k: [DVector<f64>; 4],
+    y: DVector<f64>,
+    a: DMatrix<f64>,
+    b: DMatrix<f64>,
+    dkx: [DMatrix<f64>; 4],
+    dku: [DMatrix<f64>; 4],
+    tmp: DMatrix<f64>,
+    xp: DVector<f64>,
+    up: DVector<f64>,
+    fxp: DMatrix<f64>,
+    fup: DMatrix<f64>,
+    fxm: DMatrix<f64>,
+    fum: DMatrix<f64>,
+}
+
+/// The discrete-time map F(x, u): one classic RK4 step of `dt` of a continuous model, with the
+/// control held constant, and its exact first derivatives.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rk4Map<M> {
+    /// The continuous-time model.
+    pub model: M,
+    /// Step length (s).
+    pub dt: f64,
+}
+
+impl<M: Ode> Rk4Map<M> {
+    /// Discretizes `model` with step `dt` (s).
+    pub fn new(model: M, dt: f64) -> Result<Self, ControlError> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(ControlError::InvalidTimeStep(dt));
+        }
+        Ok(Self { model, dt })
+    }
+
+    /// State dimension n.
+    pub fn state_dim(&self) -> usize {
+        self.model.state_dim()
+    }
+
+    /// Control dimension m.
+    pub fn control_dim(&self) -> usize {
+        self.model.control_dim()
+    }
+
+    /// Scratch buffers sized for this model.
+    pub fn workspace(&self) -> Rk4Workspace {
+        let (n, m) = (self.state_dim(), self.control_dim());
+        let v = || DVector::zeros(n);
+        let nn = || DMatrix::zeros(n, n);
+        let nm = || DMatrix::zeros(n, m);
+        Rk4Workspace {
+            k: [v(), v(), v(), v()],
+            y: v(),
+            a: nn(),
+            b: nm(),
+            dkx: [nn(), nn(), nn(), nn()],
+            dku: [nm(), nm(), nm(), nm()],
+            tmp: nn(),
+            xp: v(),
+            up: DVector::zeros(m),
+            fxp: nn(),
+            fup: nm(),
+            fxm: nn(),
+            fum: nm(),
+        }
+    }
+
+    /// Writes F(x, u) into `out`. Does not allocate.
+    pub fn step(
+        &self,
+        x: &DVector<f64>,
+        u: &DVector<f64>,
+        out: &mut DVector<f64>,
+        ws: &mut Rk4Workspace,
+    ) {
+        let h = self.dt;
+        let c = [0.0, 0.5 * h, 0.5 * h, h];
+        for (s, &cs) in c.iter().enumerate() {
+            self.stage(s, cs, x, u, ws);
+        }
+        out.copy_from(x);
+        let w = h / 6.0;
+        out.axpy(w, &ws.k[0], 1.0);
+        out.axpy(2.0 * w, &ws.k[1], 1.0);
+        out.axpy(2.0 * w, &ws.k[2], 1.0);
+        out.axpy(w, &ws.k[3], 1.0);
+    }
+
+    /// RK4 stage `s`: the stage state y_s = x + c k_{s−1} (y_0 = x) into `ws.y` and the stage
+    /// slope k_s = f(y_s, u) into `ws.k[s]`.
+    fn stage(&self, s: usize, c: f64, x: &DVector<f64>, u: &DVector<f64>, ws: &mut Rk4Workspace) {
+        ws.y.copy_from(x);
+        if s > 0 {
+            ws.y.axpy(c, &ws.k[s - 1], 1.0);
+        }
+        self.model
+            .derivative(ws.y.as_slice(), u.as_slice(), ws.k[s].as_mut_slice());
+    }
+
+    /// Rolls out `us` from `x0`: returns the N + 1 states, or the first non-finite step.
+    pub fn rollout(
+        &self,
+        x0: &DVector<f64>,
+        us: &[DVector<f64>],
+    ) -> Result<Vec<DVector<f64>>, ControlError> {
+        let mut ws = self.workspace();
+        let mut xs = Vec::with_capacity(us.len() + 1);
+        xs.push(x0.clone());
+        for (k, u) in us.iter().enumerate() {
+            let mut next = DVector::zeros(x0.len());
+            self.step(&xs[k], u, &mut next, &mut ws);
+            if !next.iter().all(|v| v.is_finite()) {
+                return Err(ControlError::NonFinite { step: k });
+            }
+            xs.push(next);
+        }
+        Ok(xs)
+    }
+}
+
+impl<M: Linearize> Rk4Map<M> {
+    /// Writes the exact Jacobians F_x (n × n) and F_u (n × m) of the RK4 map at (x, u),
+    /// chained through the stage Jacobians (see the module docs). Does not allocate.
+    pub fn jacobians(
+        &self,
+        x: &DVector<f64>,
+        u: &DVector<f64>,
+        fx: &mut DMatrix<f64>,
+        fu: &mut DMatrix<f64>,
+        ws: &mut Rk4Workspace,
+    ) {
+        let h = self.dt;
+        let c = [0.0, 0.5 * h, 0.5 * h, h];
+        for s in 0..4 {
+            self.stage(s, c[s], x, u, ws);
+            self.model
+                .jacobians(ws.y.as_slice(), u.as_slice(), &mut ws.a, &mut ws.b);
+            if s == 0 {
+                ws.dkx[0].copy_from(&ws.a);
+                ws.dku[0].copy_from(&ws.b);
+            } else {
+                // ∂k_s/∂x = A (I + c ∂k_{s−1}/∂x)
+                ws.tmp.copy_from(&ws.dkx[s - 1]);
+                ws.tmp *= c[s];
+                for i in 0..ws.tmp.nrows() {
+                    ws.tmp[(i, i)] += 1.0;
+                }
+                ws.a.mul_to(&ws.tmp, &mut ws.dkx[s]);
+                // ∂k_s/∂u = c A ∂k_{s−1}/∂u + B
+                let (prev, cur) = ws.dku.split_at_mut(s);
+                cur[0].copy_from(&ws.b);
+                cur[0].gemm(c[s], &ws.a, &prev[s - 1], 1.0);
+            }
+        }
+        let w = h / 6.0;
+        fx.fill_with_identity();
+        fu.fill(0.0);
+        for (s, weight) in [w, 2.0 * w, 2.0 * w, w].into_iter().enumerate() {
+            fx.zip_apply(&ws.dkx[s], |a, b| *a += weight * b);
+            fu.zip_apply(&ws.dku[s], |a, b| *a += weight * b);
+        }
+    }
+
+    /// Second derivatives of the map: `out[a]` (length n, each (n + m) × (n + m)) receives the
+    /// Hessian of component F_a with respect to z = (x, u), by central differences of the exact
+    /// Jacobians with step `step`·max(1, |z_i|), symmetrized. Does not allocate.
+    pub fn second_derivatives(
+        &self,
+        x: &DVector<f64>,
+        u: &DVector<f64>,
+        step: f64,
+        out: &mut [DMatrix<f64>],
+        ws: &mut Rk4Workspace,
+    ) {
+        let (n, m) = (x.len(), u.len());
+        assert_eq!(out.len(), n, "one Hessian per state component");
+        // Temporarily move the perturbation buffers out so that `ws` can be lent to jacobians.
+        let mut xp = std::mem::replace(&mut ws.xp, DVector::zeros(0));
+        let mut up = std::mem::replace(&mut ws.up, DVector::zeros(0));
+        let mut fxp = std::mem::replace(&mut ws.fxp, DMatrix::zeros(0, 0));
+        let mut fup = std::mem::replace(&mut ws.fup, DMatrix::zeros(0, 0));
+        let mut fxm = std::mem::replace(&mut ws.fxm, DMatrix::zeros(0, 0));
+        let mut fum = std::mem::replace(&mut ws.fum, DMatrix::zeros(0, 0));
+        xp.copy_from(x);
+        up.copy_from(u);
+        for i in 0..n + m {
+            let zi = if i < n { x[i] } else { u[i - n] };
+            let hi = step * zi.abs().max(1.0);
+            for (sign, (fx, fu)) in [(1.0, (&mut fxp, &mut fup)), (-1.0, (&mut fxm, &mut fum))] {
+                if i < n {
+                    xp[i] = zi + sign * hi;
+                } else {
+                    up[i - n] = zi + sign * hi;
+                }
+                self.jacobians(&xp, &up, fx, fu, ws);
+            }
+            if i < n {
+                xp[i] = zi;
+            } else {
+                up[i - n] = zi;
+            }
+            // Column i of each Hessian: ∂(row a of [F_x F_u])/∂z_i.
+            for (a, hess) in out.iter_mut().enumerate() {
+                for j in 0..n {
+                    hess[(j, i)] = (fxp[(a, j)] - fxm[(a, j)]) / (2.0 * hi);
+                }
+                for j in 0..m {
+                    hess[(n + j, i)] = (fup[(a, j)] - fum[(a, j)]) / (2.0 * hi);
+                }
+            }
+        }
+        for hess in out.iter_mut() {
+            symmetrize(hess);
+        }
+        ws.xp = xp;
+        ws.up = up;
+        ws.fxp = fxp;
+        ws.fup = fup;
+        ws.fxm = fxm;
+        ws.fum = fum;
+    }
+}
+
+/// Scratch of [`Rk4Map`] as a [`DifferentiableStep`]: the RK4 workspace, the state and control
+/// as vectors, and the step's Jacobians F_x, F_u.
+#[derive(Debug, Clone)]
+pub struct Rk4StepScratch {
+    ws: Rk4Workspace,
+    x: DVector<f64>,
+    u: DVector<f64>,
+    out: DVector<f64>,
+    fx: DMatrix<f64>,
+    fu: DMatrix<f64>,
+}
+
+/// The RK4 step of a physical model as a differentiable step, so that backpropagation through
+/// time ([`super::bptt`]) runs through a simulator as it does through an emulator: the vector–Jacobian
+/// product is s̄ = F_xᵀ s̄', ū = F_uᵀ s̄' with the exact Jacobians of [`Rk4Map::jacobians`].
+impl<M: Linearize> DifferentiableStep for Rk4Map<M> {
+    type Scratch = Rk4StepScratch;
+    fn state_dim(&self) -> usize {
+        self.model.state_dim()
+    }
+    fn control_dim(&self) -> usize {
+        self.model.control_dim()
+    }
+    fn scratch(&self) -> Rk4StepScratch {
+        let (n, m) = (self.model.state_dim(), self.model.control_dim());
+        Rk4StepScratch {
+            ws: self.workspace(),
+            x: DVector::zeros(n),
+            u: DVector::zeros(m),
+            out: DVector::zeros(n),
+            fx: DMatrix::zeros(n, n),
+            fu: DMatrix::zeros(n, m),
+        }
+    }
+    fn step(&self, s: &[f64], u: &[f64], sc: &mut Rk4StepScratch, s_next: &mut [f64]) {
+        sc.x.copy_from_slice(s);
+        sc.u.copy_from_slice(u);
+        Rk4Map::step(self, &sc.x, &sc.u, &mut sc.out, &mut sc.ws);
+        s_next.copy_from_slice(sc.out.as_slice());
+    }
+    fn vjp(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        s_next_bar: &[f64],
+        sc: &mut Rk4StepScratch,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        sc.x.copy_from_slice(s);
+        sc.u.copy_from_slice(u);
+        self.jacobians(&sc.x, &sc.u, &mut sc.fx, &mut sc.fu, &mut sc.ws);
+        let transpose_times = |f: &DMatrix<f64>, out: &mut [f64]| {
+            for (j, o) in out.iter_mut().enumerate() {
+                *o = f.column(j).iter().zip(s_next_bar).map(|(a, b)| a * b).sum();
+            }
+        };
+        transpose_times(&sc.fx, s_bar);
+        transpose_times(&sc.fu, u_bar);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::test_models::random_vec;
+    use crate::physics::acrobot::Acrobot;
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn rk4_step_matches_the_simulator() {
+        use crate::physics::{Dynamics, IntegratorKind, Simulator};
+        let map = Rk4Map::new(Acrobot::default(), 0.02).unwrap();
+        let mut sim = Simulator::new(Acrobot::default(), IntegratorKind::Rk4);
+        let x = DVector::from_vec(vec![0.3, -0.7, 1.1, 2.0]);
+        let u = DVector::from_vec(vec![1.5]);
+        let mut out = DVector::zeros(4);
+        map.step(&x, &u, &mut out, &mut map.workspace());
+        let mut y = x.as_slice().to_vec();
+        sim.step(&mut y, u.as_slice(), 0.02);
+        // Same scheme; only the summation order (one rounding) may differ.
+        for (a, b) in out.iter().zip(&y) {
+            assert!((a - b).abs() < 1e-14, "{out} vs {y:?}");
+        }
+    }
+
+    #[test]
+    fn rk4_jacobians_match_finite_differences_of_the_map() {
+        let map = Rk4Map::new(Acrobot::default(), 0.05).unwrap();
+        let mut ws = map.workspace();
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let (mut fx, mut fu) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
+        let (mut fp, mut fm) = (DVector::zeros(4), DVector::zeros(4));
+        for _ in 0..10 {
+            let x = random_vec(&mut rng, 4, 3.0);
+            let u = random_vec(&mut rng, 1, 5.0);
+            map.jacobians(&x, &u, &mut fx, &mut fu, &mut ws);
+            let h = 1e-6;
+            for j in 0..5 {
+                let (mut xp, mut xm, mut up, mut um) = (x.clone(), x.clone(), u.clone(), u.clone());
+                if j < 4 {
+                    xp[j] += h;
+                    xm[j] -= h;
+                } else {
+                    up[0] += h;
+                    um[0] -= h;
+                }
+                map.step(&xp, &up, &mut fp, &mut ws);
+                map.step(&xm, &um, &mut fm, &mut ws);
+                let col = (&fp - &fm) / (2.0 * h);
+                let exact = if j < 4 {
+                    fx.column(j).into_owned()
+                } else {
+                    fu.column(0).into_owned()
+                };
+                let err = (&col - &exact).amax() / exact.amax().max(1.0);
+                assert!(err < 1e-7, "column {j}: {col} vs {exact}");
+            }
+        }
+    }
+
+    #[test]
+    fn rk4_second_derivatives_match_second_differences_of_the_map() {
+        let map = Rk4Map::new(Acrobot::default(), 0.05).unwrap();
+        let mut ws = map.workspace();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut hess = vec![DMatrix::zeros(5, 5); 4];
+        let mut f = [
+            DVector::zeros(4),
+            DVector::zeros(4),
+            DVector::zeros(4),
+            DVector::zeros(4),
+        ];
+        for _ in 0..4 {
+            let x = random_vec(&mut rng, 4, 2.0);
+            let u = random_vec(&mut rng, 1, 3.0);
+            map.second_derivatives(&x, &u, 1e-5, &mut hess, &mut ws);
+            let z = DVector::from_iterator(5, x.iter().chain(u.iter()).copied());
+            let h = 1e-4;
+            let mut worst: f64 = 0.0;
+            for i in 0..5 {
+                for j in 0..5 {
+                    for (q, (si, sj)) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)]
+                        .into_iter()
+                        .enumerate()
+                    {
+                        let mut zp = z.clone();
+                        zp[i] += si * h;
+                        zp[j] += sj * h;
+                        let xp = zp.rows(0, 4).into_owned();
+                        let up = zp.rows(4, 1).into_owned();
+                        map.step(&xp, &up, &mut f[q], &mut ws);
+                    }
+                    let d2 = (&f[0] - &f[1] - &f[2] + &f[3]) / (4.0 * h * h);
+                    for a in 0..4 {
+                        let scale = hess[a].amax().max(1.0);
+                        worst = worst.max((d2[a] - hess[a][(i, j)]).abs() / scale);
+                    }
+                }
+            }
+            assert!(worst < 1e-5, "second derivatives off by {worst}");
+        }
+    }
+}

@@ -1,0 +1,554 @@
+//! # Sampling and training the dolphin hierarchy (NeuroAnimator §3.4, §3.5, Table 1)
+//!
+//! Training data are episodes of 20 s ([`EPISODE_S`]) from the rest shape at a random position,
+//! heading, pitch and roll ([`start_state`]), driven by travelling muscle waves
+//! ([`control_process`]) and sampled at random lags; sampling runs in parallel chunks, each from
+//! its own seeded stream ([`crate::seed::mix_seed`]), so the data do not depend on the thread
+//! count ([`sample_dolphin`]). The global net learns the segment-frame transitions
+//! ([`global_transitions`]); each local net learns, with teacher forcing (the true next frame
+//! as its parent input), the change of its masses' local coordinates from frame F₀ to F₁, with
+//! per-variable normalization. [`train_hierarchy`] trains the seven nets in parallel;
+//! [`build_dolphin`] reuses them from the emulator cache under a key hashed from everything
+//! that determines them ([`HierarchySpec`], the dolphin, [`super::HIERARCHY_FORMAT`]).
+//!
+//! ## References
+//! - R. Grzeszczuk, D. Terzopoulos, G. Hinton, *NeuroAnimator*, SIGGRAPH 1998, §3.4–3.5,
+//!   Table 1.
+use super::{
+    global_state, global_transforms, point, put, DolphinEmulator, Frame, LocalLayout, LocalNet,
+    GLOBAL_DIM, HIERARCHY_FORMAT, MASS_DIM,
+};
+use crate::emulator::cache::{fnv1a, read_record, write_record, EmulatorCache, NetRecord};
+use crate::emulator::catalog::{stop_name, train_mlp, BuildError, TrainMethod, TrainSettings};
+use crate::emulator::dataset::{sample_transitions, ControlLimits, ControlProcess, SamplingConfig};
+use crate::emulator::mlp::{Mlp, WeightInit};
+use crate::emulator::train::{mse, Dataset, TracePoint};
+use crate::emulator::transform::Normalizer;
+use crate::emulator::{Emulator, Transforms, Transitions};
+use crate::physics::dolphin::{Dolphin, N_MASSES, N_POS, N_SEGMENTS};
+use crate::physics::{IntegratorKind, Simulator};
+use nalgebra::{UnitQuaternion, Vector3};
+use ndarray::{s, Array2};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Examples per sampling chunk (each chunk is simulated from its own seeded stream).
+const CHUNK: usize = 2000;
+
+/// Size and data of one net of the hierarchy.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HierarchyNet {
+    /// Hidden units.
+    pub hidden: usize,
+    /// Training examples.
+    pub examples: usize,
+    /// How to train.
+    pub method: TrainMethod,
+}
+
+/// Everything that determines the trained dolphin hierarchy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HierarchySpec {
+    /// The global net (Table 1: 50 hidden, 64,000 examples).
+    pub global: HierarchyNet,
+    /// Each local net (Table 1: 40 hidden, 32,000 examples).
+    pub local: HierarchyNet,
+    /// Physical step δt of the simulator (s).
+    pub physical_dt: f64,
+    /// Physical steps per emulator step n.
+    pub steps: usize,
+    /// Training settings.
+    pub settings: TrainSettings,
+    /// Seed of sampling, initialization and shuffles.
+    pub seed: u64,
+}
+
+impl HierarchySpec {
+    /// Super timestep Δt = n δt (s).
+    pub fn super_dt(&self) -> f64 {
+        self.steps as f64 * self.physical_dt
+    }
+
+    fn held_out(&self) -> usize {
+        ((self.global.examples as f64 * self.settings.held_out_fraction).round() as usize).max(2)
+    }
+}
+
+/// Muscle activations: [−1, 1] each.
+pub fn control_limits() -> ControlLimits {
+    ControlLimits::symmetric(&[1.0; N_SEGMENTS])
+}
+
+/// The typical controls of §3.4 for the dolphin: travelling waves of 0.3–1.5 Hz, up to 60° of
+/// lag per segment either way, held for 0.1–0.4 s, with 20% knot noise.
+pub fn control_process() -> ControlProcess {
+    ControlProcess::TravellingWave {
+        hold_min: 0.1,
+        hold_max: 0.4,
+        freq_min: 0.3,
+        freq_max: 1.5,
+        lag_max: 60f64.to_radians(),
+        noise: 0.2,
+    }
+}
+
+/// Episode length of the sampling runs (s).
+pub const EPISODE_S: f64 = 20.0;
+
+/// An episode start: the rest shape at a random position (±20 m), heading, pitch (±0.5 rad)
+/// and roll (±0.3 rad), moving along its axis at U[−0.5, 1] m/s.
+pub fn start_state(d: &Dolphin, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let yaw = rng.random_range(-PI..PI);
+    let pitch = rng.random_range(-0.5..0.5);
+    let roll = rng.random_range(-0.3..0.3);
+    let r = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
+    let t = Vector3::new(
+        rng.random_range(-20.0..20.0),
+        rng.random_range(-20.0..20.0),
+        rng.random_range(-20.0..20.0),
+    );
+    let speed = rng.random_range(-0.5..1.0);
+    let v = r * Vector3::new(speed, 0.0, 0.0);
+    let rest = d.rest_state();
+    let mut x = vec![0.0; MASS_DIM];
+    for i in 0..N_MASSES {
+        put(&mut x[..N_POS], i, &(t + r * point(&rest, i)));
+        put(&mut x[N_POS..], i, &v);
+    }
+    x
+}
+
+/// The dolphin's physical simulator: semi-implicit Euler.
+pub fn simulator(d: &Dolphin) -> Simulator<Dolphin> {
+    Simulator::new(d.clone(), IntegratorKind::SemiImplicitEuler)
+}
+
+/// Samples `examples` transitions of the mass state over `steps` physical steps of `dt`, in
+/// parallel chunks seeded from `seed` (independent of the thread count).
+pub fn sample_dolphin(
+    d: &Dolphin,
+    dt: f64,
+    steps: usize,
+    examples: usize,
+    seed: u64,
+) -> Result<Transitions, BuildError> {
+    let chunks: Vec<usize> = (0..examples.div_ceil(CHUNK))
+        .map(|k| CHUNK.min(examples - k * CHUNK))
+        .collect();
+    let cfg = |n: usize| SamplingConfig {
+        dt,
+        steps_per_sample: steps,
+        examples: n,
+        episode_duration: EPISODE_S.max(6.0 * steps as f64 * dt),
+        control: control_process(),
+    };
+    let parts: Vec<Transitions> = chunks
+        .par_iter()
+        .enumerate()
+        .map(|(k, &n)| {
+            let mut sim = simulator(d);
+            let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(seed, k as u64));
+            let start = |r: &mut ChaCha8Rng| start_state(d, r);
+            sample_transitions(&mut sim, &start, &control_limits(), &cfg(n), &mut rng)
+                .map(|s| s.transitions)
+        })
+        .collect::<Result<_, _>>()?;
+    let cat = |f: fn(&Transitions) -> &Array2<f64>| -> Array2<f64> {
+        let views: Vec<_> = parts.iter().map(|p| f(p).view()).collect();
+        ndarray::concatenate(ndarray::Axis(0), &views).expect("equal widths")
+    };
+    Ok(Transitions::new(
+        cat(|t| &t.states),
+        cat(|t| &t.controls),
+        cat(|t| &t.next_states),
+    )?)
+}
+
+/// The global-state transitions of mass-state transitions.
+pub fn global_transitions(d: &Dolphin, data: &Transitions) -> Transitions {
+    let rows = data.len();
+    let mut g0 = Array2::zeros((rows, GLOBAL_DIM));
+    let mut g1 = Array2::zeros((rows, GLOBAL_DIM));
+    let mut buf = vec![0.0; GLOBAL_DIM];
+    for r in 0..rows {
+        global_state(
+            d,
+            data.states.row(r).as_slice().expect("standard layout"),
+            &mut buf,
+        );
+        g0.row_mut(r).assign(&ndarray::ArrayView1::from(&buf));
+        global_state(
+            d,
+            data.next_states.row(r).as_slice().expect("standard layout"),
+            &mut buf,
+        );
+        g1.row_mut(r).assign(&ndarray::ArrayView1::from(&buf));
+    }
+    Transitions::new(g0, data.controls.clone(), g1).expect("rows agree")
+}
+
+/// Raw (input, target) rows of segment `layout` for the first `rows` transitions, with the
+/// true next frame as the parent input.
+fn local_raw(
+    d: &Dolphin,
+    layout: &LocalLayout,
+    data: &Transitions,
+    rows: usize,
+) -> (Array2<f64>, Array2<f64>) {
+    let rows = rows.min(data.len());
+    let mut inp = Array2::zeros((rows, layout.n_in()));
+    let mut out = Array2::zeros((rows, layout.n_out()));
+    let (mut z, mut y) = (vec![0.0; layout.n_in()], vec![0.0; layout.n_out()]);
+    for r in 0..rows {
+        let x0 = data.states.row(r);
+        let x1 = data.next_states.row(r);
+        let (x0, x1) = (
+            x0.as_slice().expect("layout"),
+            x1.as_slice().expect("layout"),
+        );
+        let f0 = Frame::from_segment(&d.segment_frame(x0, layout.segment));
+        let f1 = Frame::from_segment(&d.segment_frame(x1, layout.segment));
+        let u = data.controls.row(r);
+        layout.input(x0, &f0, &f1, u.as_slice().expect("layout"), &mut z);
+        layout.target(x0, &f0, x1, &f1, &mut y);
+        inp.row_mut(r).assign(&ndarray::ArrayView1::from(&z));
+        out.row_mut(r).assign(&ndarray::ArrayView1::from(&y));
+    }
+    (inp, out)
+}
+
+fn normalized(norm: &Normalizer, raw: &Array2<f64>) -> Array2<f64> {
+    let mut out = raw.clone();
+    let mut buf = vec![0.0; raw.ncols()];
+    for (mut o, r) in out.rows_mut().into_iter().zip(raw.rows()) {
+        norm.normalize(r.as_slice().expect("layout"), &mut buf);
+        o.assign(&ndarray::ArrayView1::from(&buf));
+    }
+    out
+}
+
+/// Training record of one net of the hierarchy (a Table 1 row).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetReport {
+    /// `dolphin_global` or `dolphin_local1` … `dolphin_local6`.
+    pub name: String,
+    /// Network inputs.
+    pub inputs: usize,
+    /// Hidden units.
+    pub hidden: usize,
+    /// Network outputs.
+    pub outputs: usize,
+    /// Training examples.
+    pub examples: usize,
+    /// Training MSE per output (normalized space).
+    pub train_error: f64,
+    /// Held-out MSE per output (normalized space).
+    pub heldout_error: f64,
+    /// Wall time of its training (the shared sampling time is added to the global net) (s).
+    pub train_s: f64,
+    /// Why training stopped.
+    pub stop: String,
+    /// Whether it came from the cache.
+    pub from_cache: bool,
+    /// Training trace.
+    pub trace: Vec<TracePoint>,
+}
+
+/// The trained hierarchy with a record per net.
+#[derive(Debug, Clone)]
+pub struct BuiltDolphin {
+    /// The composed emulator.
+    pub emulator: DolphinEmulator,
+    /// Global net first, then the six local nets.
+    pub nets: Vec<NetReport>,
+}
+
+/// Name of net `k` of the hierarchy (0 = global, 1..=6 local).
+pub fn net_name(k: usize) -> String {
+    if k == 0 {
+        "dolphin_global".into()
+    } else {
+        format!("dolphin_local{k}")
+    }
+}
+
+fn cache_key(spec: &HierarchySpec, d: &Dolphin, k: usize) -> String {
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let starts: Vec<Vec<f64>> = (0..2).map(|_| start_state(d, &mut rng)).collect();
+    serde_json::json!({
+        "format": crate::emulator::cache::CACHE_FORMAT,
+        "hierarchy_format": HIERARCHY_FORMAT,
+        "hierarchy": spec,
+        "net": net_name(k),
+        "physics": d,
+        "recipe": {
+            "process": control_process(),
+            "episode": EPISODE_S,
+            "chunk": CHUNK,
+            "transforms": format!("{:?}", global_transforms()),
+            "starts": starts,
+        },
+    })
+    .to_string()
+}
+
+fn cache_path(cache: &EmulatorCache, spec: &HierarchySpec, key: &str, k: usize) -> PathBuf {
+    cache.dir.join(format!(
+        "{}-n{}-{:016x}.json",
+        net_name(k),
+        spec.steps,
+        fnv1a(key.as_bytes())
+    ))
+}
+
+fn shape(spec: &HierarchySpec, k: usize) -> [usize; 3] {
+    if k == 0 {
+        [GLOBAL_DIM + N_SEGMENTS, spec.global.hidden, GLOBAL_DIM]
+    } else {
+        let l = LocalLayout::new(k - 1);
+        [l.n_in(), spec.local.hidden, l.n_out()]
+    }
+}
+
+fn assemble(
+    d: &Dolphin,
+    spec: &HierarchySpec,
+    recs: Vec<NetRecord>,
+) -> Result<DolphinEmulator, BuildError> {
+    let mut it = recs.into_iter();
+    let g = it.next().expect("seven records");
+    let mut t = Transforms::unfitted(&global_transforms(), GLOBAL_DIM, N_SEGMENTS)?;
+    t.input_norm = g.input_norm;
+    t.output_norm = g.output_norm;
+    let global = Emulator::new(t, g.mlp, spec.super_dt())?;
+    let locals = it
+        .enumerate()
+        .map(|(s, r)| LocalNet {
+            layout: LocalLayout::new(s),
+            mlp: r.mlp,
+            input_norm: r.input_norm,
+            output_norm: r.output_norm,
+        })
+        .collect();
+    Ok(DolphinEmulator::new(d.clone(), global, locals))
+}
+
+fn report(k: usize, spec: &HierarchySpec, r: &NetRecord, from_cache: bool) -> NetReport {
+    let [inputs, hidden, outputs] = shape(spec, k);
+    NetReport {
+        name: net_name(k),
+        inputs,
+        hidden,
+        outputs,
+        examples: if k == 0 {
+            spec.global.examples
+        } else {
+            spec.local.examples.min(spec.global.examples)
+        },
+        train_error: r.train_error,
+        heldout_error: r.heldout_error,
+        train_s: r.train_s,
+        stop: r.stop.clone(),
+        from_cache,
+        trace: r.trace.clone(),
+    }
+}
+
+/// The trained hierarchy of `spec` for the default dolphin, from `cache` when all seven nets
+/// are there, else sampled and trained now (and stored).
+pub fn build_dolphin(
+    spec: &HierarchySpec,
+    cache: &EmulatorCache,
+) -> Result<BuiltDolphin, BuildError> {
+    let d = Dolphin::default();
+    let keys: Vec<String> = (0..=N_SEGMENTS).map(|k| cache_key(spec, &d, k)).collect();
+    let cached: Option<Vec<NetRecord>> = (0..=N_SEGMENTS)
+        .map(|k| {
+            read_record(
+                &cache_path(cache, spec, &keys[k], k),
+                &keys[k],
+                shape(spec, k),
+            )
+        })
+        .collect();
+    if let Some(recs) = cached {
+        let nets = recs
+            .iter()
+            .enumerate()
+            .map(|(k, r)| report(k, spec, r, true))
+            .collect();
+        return Ok(BuiltDolphin {
+            emulator: assemble(&d, spec, recs)?,
+            nets,
+        });
+    }
+    let recs = train_hierarchy(&d, spec)?;
+    for (k, r) in recs.iter().enumerate() {
+        write_record(&cache_path(cache, spec, &keys[k], k), &keys[k], r)?;
+    }
+    let nets = recs
+        .iter()
+        .enumerate()
+        .map(|(k, r)| report(k, spec, r, false))
+        .collect();
+    Ok(BuiltDolphin {
+        emulator: assemble(&d, spec, recs)?,
+        nets,
+    })
+}
+
+/// Samples the data and trains the global net and the six local nets (in parallel).
+pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecord>, BuildError> {
+    let t0 = Instant::now();
+    let mix = |k: u64| crate::seed::mix_seed(spec.seed, k);
+    let train = sample_dolphin(
+        d,
+        spec.physical_dt,
+        spec.steps,
+        spec.global.examples,
+        mix(1),
+    )?;
+    let held = sample_dolphin(d, spec.physical_dt, spec.steps, spec.held_out(), mix(2))?;
+    let sampling_s = t0.elapsed().as_secs_f64();
+    let s = &spec.settings;
+    let jobs: Vec<usize> = (0..=N_SEGMENTS).collect();
+    let recs: Vec<NetRecord> = jobs
+        .par_iter()
+        .map(|&k| -> Result<NetRecord, BuildError> {
+            let t1 = Instant::now();
+            let mut rng = ChaCha8Rng::seed_from_u64(mix(10 + k as u64));
+            if k == 0 {
+                let (gt, gh) = (global_transitions(d, &train), global_transitions(d, &held));
+                let transforms = Transforms::fit(&global_transforms(), &gt)?;
+                let (tr, ho) = (transforms.encode(&gt), transforms.encode(&gh));
+                let mut mlp = Mlp::new(
+                    GLOBAL_DIM + N_SEGMENTS,
+                    spec.global.hidden,
+                    GLOBAL_DIM,
+                    WeightInit::FanIn,
+                    &mut rng,
+                );
+                let rep = train_mlp(&mut mlp, &tr, &ho, spec.global.method, s, mix(20))?;
+                Ok(NetRecord {
+                    train_error: mse(&mlp, &tr),
+                    heldout_error: mse(&mlp, &ho),
+                    mlp,
+                    input_norm: transforms.input_norm,
+                    output_norm: transforms.output_norm,
+                    dt: spec.super_dt(),
+                    train_s: sampling_s + t1.elapsed().as_secs_f64(),
+                    stop: stop_name(&rep.stop),
+                    trace: rep.trace,
+                })
+            } else {
+                let layout = LocalLayout::new(k - 1);
+                let rows = spec.local.examples;
+                let held_rows = ((rows as f64 * s.held_out_fraction).round() as usize).max(2);
+                let (ti, tt) = local_raw(d, &layout, &train, rows);
+                let (hi, ht) = local_raw(d, &layout, &held, held_rows);
+                let in_norm = Normalizer::fit(ti.view(), &(0..layout.n_in()).collect::<Vec<_>>())?;
+                let out_norm =
+                    Normalizer::fit(tt.view(), &(0..layout.n_out()).collect::<Vec<_>>())?;
+                let tr = Dataset::new(normalized(&in_norm, &ti), normalized(&out_norm, &tt))?;
+                let ho = Dataset::new(normalized(&in_norm, &hi), normalized(&out_norm, &ht))?;
+                let mut mlp = Mlp::new(
+                    layout.n_in(),
+                    spec.local.hidden,
+                    layout.n_out(),
+                    WeightInit::FanIn,
+                    &mut rng,
+                );
+                let rep = train_mlp(&mut mlp, &tr, &ho, spec.local.method, s, mix(20 + k as u64))?;
+                Ok(NetRecord {
+                    train_error: mse(&mlp, &tr),
+                    heldout_error: mse(&mlp, &ho),
+                    mlp,
+                    input_norm: in_norm,
+                    output_norm: out_norm,
+                    dt: spec.super_dt(),
+                    train_s: t1.elapsed().as_secs_f64(),
+                    stop: stop_name(&rep.stop),
+                    trace: rep.trace,
+                })
+            }
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(recs)
+}
+
+/// The `rows`-row slice of a transitions table (for tests and small experiments).
+pub fn head(data: &Transitions, rows: usize) -> Transitions {
+    let r = rows.min(data.len());
+    Transitions::new(
+        data.states.slice(s![..r, ..]).to_owned(),
+        data.controls.slice(s![..r, ..]).to_owned(),
+        data.next_states.slice(s![..r, ..]).to_owned(),
+    )
+    .expect("rows agree")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::Dynamics;
+
+    fn spec(examples: usize) -> HierarchySpec {
+        HierarchySpec {
+            global: HierarchyNet {
+                hidden: 8,
+                examples,
+                method: TrainMethod::Lbfgs,
+            },
+            local: HierarchyNet {
+                hidden: 6,
+                examples: examples / 2,
+                method: TrainMethod::Lbfgs,
+            },
+            physical_dt: 0.002,
+            steps: 10,
+            settings: TrainSettings {
+                held_out_fraction: 0.25,
+                cg_max_iters: 5,
+                max_epochs: 2,
+                patience: 3,
+                min_improvement: 0.001,
+                learning_rate: 0.05,
+                momentum: 0.9,
+                batch_size: 30,
+            },
+            seed: 3,
+        }
+    }
+
+    /// A tiny hierarchy trains end to end, deterministically, and round-trips the cache.
+    #[test]
+    fn tiny_hierarchy_trains_and_caches() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = EmulatorCache::new(dir.path());
+        let sp = spec(60);
+        let a = build_dolphin(&sp, &cache).unwrap();
+        assert_eq!(a.nets.len(), 7);
+        assert!(a
+            .nets
+            .iter()
+            .all(|n| !n.from_cache && n.heldout_error.is_finite()));
+        let b = build_dolphin(&sp, &cache).unwrap();
+        assert!(b.nets.iter().all(|n| n.from_cache));
+        let d = Dolphin::default();
+        let x = start_state(&d, &mut ChaCha8Rng::seed_from_u64(1));
+        let u = [0.3; 6];
+        let (mut xa, mut xb) = (x.clone(), x.clone());
+        let (mut ea, mut eb) = (a.emulator.clone(), b.emulator.clone());
+        ea.step(&mut xa, &u, sp.super_dt());
+        eb.step(&mut xb, &u, sp.super_dt());
+        assert_eq!(xa, xb, "a cached hierarchy is bit-identical");
+        assert!(xa.iter().all(|v| v.is_finite()));
+    }
+}

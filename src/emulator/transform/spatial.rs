@@ -1,0 +1,367 @@
+//! # The spatial local frame (NeuroAnimator §3.2; the lunar lander)
+//!
+//! A 3-D model whose pose (origin o, orientation quaternion q₀ = [w, x, y, z]) is part of its
+//! state is seen by the network in its own frame:
+//!
+//! ```text
+//! points  p ↦ Rᵀ(q₀)(p − o),   vectors  v ↦ Rᵀ(q₀) v,   quaternions  q ↦ q₀⁻¹ ⊗ q,
+//! ```
+//!
+//! with R(q) = M(q)/|q|², M(q) = (w² − v·v) I + 2 v vᵀ + 2 w [v]×, which is orthogonal for
+//! any q ≠ 0, so q₀ need not be exactly unit; state changes are only rotated. Products with
+//! the Jacobians use ∂R/∂q_k in closed form and the bilinearity of the Hamilton product ⊗.
+//!
+//! ## References
+//! - K. Shoemake, *Animating rotation with quaternion curves*, SIGGRAPH 1985.
+
+use super::{check_indices, FrameMap};
+use crate::emulator::EmulatorError;
+
+/// A 3D pose: origin and orientation quaternion `[w, x, y, z]`. The quaternion need not be
+/// exactly unit: the rotation used is R(q) = M(q) / |q|², which is orthogonal for any q ≠ 0.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Pose3 {
+    /// Origin (x, y, z).
+    pub origin: [f64; 3],
+    /// Orientation quaternion `[w, x, y, z]`.
+    pub q: [f64; 4],
+}
+
+/// Hamilton product a ⊗ b of quaternions `[w, x, y, z]`.
+pub fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    [
+        a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+        a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+        a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+        a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+    ]
+}
+
+fn quat_conj(a: [f64; 4]) -> [f64; 4] {
+    [a[0], -a[1], -a[2], -a[3]]
+}
+
+type M3 = [[f64; 3]; 3];
+
+fn mat_vec(m: &M3, v: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
+}
+
+fn mat_t_vec(m: &M3, v: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|j| m[0][j] * v[0] + m[1][j] * v[1] + m[2][j] * v[2])
+}
+
+fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// R(q) = M(q)/|q|² with M(q) = (w² − v·v) I + 2 v vᵀ + 2 w [v]×, and ∂R/∂q_k.
+fn rotation_and_derivatives(q: [f64; 4]) -> (M3, [M3; 4]) {
+    let n = q.iter().map(|a| a * a).sum::<f64>();
+    let (w, v) = (q[0], [q[1], q[2], q[3]]);
+    let cross =
+        |a: [f64; 3]| -> M3 { [[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]] };
+    let vv = dot3(v, v);
+    let cv = cross(v);
+    let mut m = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            m[i][j] =
+                if i == j { w * w - vv } else { 0.0 } + 2.0 * v[i] * v[j] + 2.0 * w * cv[i][j];
+        }
+    }
+    let mut dm = [[[0.0; 3]; 3]; 4];
+    for i in 0..3 {
+        for j in 0..3 {
+            dm[0][i][j] = if i == j { 2.0 * w } else { 0.0 } + 2.0 * cv[i][j];
+        }
+    }
+    for k in 0..3 {
+        let mut e = [0.0; 3];
+        e[k] = 1.0;
+        let ce = cross(e);
+        for i in 0..3 {
+            for j in 0..3 {
+                dm[k + 1][i][j] = if i == j { -2.0 * v[k] } else { 0.0 }
+                    + 2.0 * (e[i] * v[j] + v[i] * e[j])
+                    + 2.0 * w * ce[i][j];
+            }
+        }
+    }
+    let r = m.map(|row| row.map(|a| a / n));
+    let mut dr = [[[0.0; 3]; 3]; 4];
+    for k in 0..4 {
+        for i in 0..3 {
+            for j in 0..3 {
+                dr[k][i][j] = (dm[k][i][j] - 2.0 * q[k] * r[i][j]) / n;
+            }
+        }
+    }
+    (r, dr)
+}
+
+/// The local frame of a 3D model whose pose (origin, orientation quaternion) is part of its
+/// state; e.g. the lunar lander (position, quaternion, velocity, angular velocity).
+///
+/// Local coordinates: points Rᵀ(p − o), vectors Rᵀ v, quaternions q₀⁻¹ ⊗ q; state changes are
+/// only rotated (quaternion changes: q₀⁻¹ ⊗ Δq). Variables not listed pass through.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SpatialFrame {
+    /// State indices of the frame origin.
+    pub origin: [usize; 3],
+    /// State indices of the frame orientation quaternion `[w, x, y, z]`.
+    pub orientation: [usize; 4],
+    /// Index triples of positions (translated and rotated); normally includes `origin`.
+    pub points: Vec<[usize; 3]>,
+    /// Index triples of free vectors such as velocities (rotated only).
+    pub vectors: Vec<[usize; 3]>,
+    /// Index quadruples of orientation quaternions; normally includes `orientation`.
+    pub quaternions: Vec<[usize; 4]>,
+}
+
+impl SpatialFrame {
+    /// A rigid body whose state holds position at `pos..pos+3`, quaternion at `quat..quat+4`,
+    /// linear velocity at `vel..vel+3` and angular velocity (world frame) at `omega..omega+3`.
+    pub fn rigid_body(pos: usize, quat: usize, vel: usize, omega: usize) -> Self {
+        let tri = |a: usize| [a, a + 1, a + 2];
+        let quad = [quat, quat + 1, quat + 2, quat + 3];
+        Self {
+            origin: tri(pos),
+            orientation: quad,
+            points: vec![tri(pos)],
+            vectors: vec![tri(vel), tri(omega)],
+            quaternions: vec![quad],
+        }
+    }
+
+    /// Checks that every index is below `state_dim` and listed at most once.
+    pub fn validate(&self, state_dim: usize) -> Result<(), EmulatorError> {
+        check_indices(
+            state_dim,
+            self.origin.iter().chain(&self.orientation).copied(),
+            self.points
+                .iter()
+                .chain(&self.vectors)
+                .flatten()
+                .chain(self.quaternions.iter().flatten())
+                .copied(),
+        )
+    }
+
+    /// The pose read from a world-frame state.
+    pub fn pose(&self, s: &[f64]) -> Pose3 {
+        Pose3 {
+            origin: self.origin.map(|i| s[i]),
+            q: self.orientation.map(|i| s[i]),
+        }
+    }
+
+    /// Adds a pose cotangent to the state cotangent (the pose is read from the state).
+    pub fn pose_vjp(&self, pose_bar: &Pose3, s_bar: &mut [f64]) {
+        for (i, v) in self.origin.iter().zip(pose_bar.origin) {
+            s_bar[*i] += v;
+        }
+        for (i, v) in self.orientation.iter().zip(pose_bar.q) {
+            s_bar[*i] += v;
+        }
+    }
+
+    fn triples(&self) -> impl Iterator<Item = (&[usize; 3], bool)> {
+        self.points
+            .iter()
+            .map(|p| (p, true))
+            .chain(self.vectors.iter().map(|p| (p, false)))
+    }
+
+    /// Applies `map` at `pose` to `inp`, writing `out` (same length).
+    pub fn apply(&self, map: FrameMap, pose: &Pose3, inp: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(inp);
+        let (r, _) = rotation_and_derivatives(pose.q);
+        let local = map.sign() < 0.0;
+        for (t, is_point) in self.triples() {
+            let mut v = t.map(|i| inp[i]);
+            if is_point && map == FrameMap::ToLocal {
+                v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
+            }
+            let mut o = if local {
+                mat_t_vec(&r, v)
+            } else {
+                mat_vec(&r, v)
+            };
+            if is_point && map == FrameMap::ToWorld {
+                o = [0, 1, 2].map(|k| o[k] + pose.origin[k]);
+            }
+            for k in 0..3 {
+                out[t[k]] = o[k];
+            }
+        }
+        let n = pose.q.iter().map(|a| a * a).sum::<f64>();
+        for qi in &self.quaternions {
+            let a = qi.map(|i| inp[i]);
+            let o = if local {
+                quat_mul(quat_conj(pose.q), a).map(|x| x / n)
+            } else {
+                quat_mul(pose.q, a)
+            };
+            for k in 0..4 {
+                out[qi[k]] = o[k];
+            }
+        }
+    }
+
+    /// Jacobian–vector product of [`SpatialFrame::apply`] with respect to the input (tangent
+    /// `d_inp`) and the pose (tangent `d_pose`), written to `d_out`.
+    pub fn apply_jvp(
+        &self,
+        map: FrameMap,
+        pose: &Pose3,
+        inp: &[f64],
+        d_inp: &[f64],
+        d_pose: &Pose3,
+        d_out: &mut [f64],
+    ) {
+        d_out.copy_from_slice(d_inp);
+        let (r, dr) = rotation_and_derivatives(pose.q);
+        let local = map.sign() < 0.0;
+        for (t, is_point) in self.triples() {
+            let mut v = t.map(|i| inp[i]);
+            let mut dv = t.map(|i| d_inp[i]);
+            if is_point && map == FrameMap::ToLocal {
+                v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
+                dv = [0, 1, 2].map(|k| dv[k] - d_pose.origin[k]);
+            }
+            let mut o = if local {
+                mat_t_vec(&r, dv)
+            } else {
+                mat_vec(&r, dv)
+            };
+            for (k, drk) in dr.iter().enumerate() {
+                let term = if local {
+                    mat_t_vec(drk, v)
+                } else {
+                    mat_vec(drk, v)
+                };
+                for c in 0..3 {
+                    o[c] += term[c] * d_pose.q[k];
+                }
+            }
+            if is_point && map == FrameMap::ToWorld {
+                o = [0, 1, 2].map(|k| o[k] + d_pose.origin[k]);
+            }
+            for k in 0..3 {
+                d_out[t[k]] = o[k];
+            }
+        }
+        for qi in &self.quaternions {
+            let a = qi.map(|i| inp[i]);
+            let da = qi.map(|i| d_inp[i]);
+            let mut o = [0.0; 4];
+            for k in 0..4 {
+                let dq = quat_partial(map, pose.q, a, k);
+                for c in 0..4 {
+                    o[c] += dq[c] * d_pose.q[k];
+                }
+            }
+            let lin = quat_linear(map, pose.q, da);
+            for k in 0..4 {
+                d_out[qi[k]] = o[k] + lin[k];
+            }
+        }
+    }
+
+    /// Vector–Jacobian product of [`SpatialFrame::apply`]: adds (∂out/∂inp)ᵀ `out_bar` to
+    /// `inp_bar` and (∂out/∂pose)ᵀ `out_bar` to `pose_bar`.
+    pub fn apply_vjp(
+        &self,
+        map: FrameMap,
+        pose: &Pose3,
+        inp: &[f64],
+        out_bar: &[f64],
+        inp_bar: &mut [f64],
+        pose_bar: &mut Pose3,
+    ) {
+        let mapped = |i: usize| {
+            self.triples().any(|(t, _)| t.contains(&i))
+                || self.quaternions.iter().any(|q| q.contains(&i))
+        };
+        for (i, b) in inp_bar.iter_mut().enumerate() {
+            if !mapped(i) {
+                *b += out_bar[i];
+            }
+        }
+        let (r, dr) = rotation_and_derivatives(pose.q);
+        let local = map.sign() < 0.0;
+        for (t, is_point) in self.triples() {
+            let mut v = t.map(|i| inp[i]);
+            if is_point && map == FrameMap::ToLocal {
+                v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
+            }
+            let g = t.map(|i| out_bar[i]);
+            let ib = if local {
+                mat_vec(&r, g)
+            } else {
+                mat_t_vec(&r, g)
+            };
+            for k in 0..3 {
+                inp_bar[t[k]] += ib[k];
+            }
+            for (k, drk) in dr.iter().enumerate() {
+                let term = if local {
+                    mat_t_vec(drk, v)
+                } else {
+                    mat_vec(drk, v)
+                };
+                pose_bar.q[k] += dot3(g, term);
+            }
+            if is_point {
+                match map {
+                    FrameMap::ToLocal => (0..3).for_each(|k| pose_bar.origin[k] -= ib[k]),
+                    FrameMap::ToWorld => (0..3).for_each(|k| pose_bar.origin[k] += g[k]),
+                    _ => {}
+                }
+            }
+        }
+        let n = pose.q.iter().map(|a| a * a).sum::<f64>();
+        for qi in &self.quaternions {
+            let a = qi.map(|i| inp[i]);
+            let g = qi.map(|i| out_bar[i]);
+            // Transposes of left multiplication: L(q)ᵀ = L(q*).
+            let ib = if local {
+                quat_mul(pose.q, g).map(|x| x / n)
+            } else {
+                quat_mul(quat_conj(pose.q), g)
+            };
+            for k in 0..4 {
+                inp_bar[qi[k]] += ib[k];
+            }
+            for k in 0..4 {
+                let dq = quat_partial(map, pose.q, a, k);
+                pose_bar.q[k] += (0..4).map(|c| dq[c] * g[c]).sum::<f64>();
+            }
+        }
+    }
+}
+
+/// The quaternion part of a spatial map, linear in its argument: q₀⁻¹ ⊗ a or q₀ ⊗ a.
+fn quat_linear(map: FrameMap, q0: [f64; 4], a: [f64; 4]) -> [f64; 4] {
+    if map.sign() < 0.0 {
+        let n = q0.iter().map(|x| x * x).sum::<f64>();
+        quat_mul(quat_conj(q0), a).map(|x| x / n)
+    } else {
+        quat_mul(q0, a)
+    }
+}
+
+/// ∂/∂q₀ₖ of [`quat_linear`].
+fn quat_partial(map: FrameMap, q0: [f64; 4], a: [f64; 4], k: usize) -> [f64; 4] {
+    let mut e = [0.0; 4];
+    e[k] = 1.0;
+    if map.sign() < 0.0 {
+        let n = q0.iter().map(|x| x * x).sum::<f64>();
+        let f = quat_mul(quat_conj(q0), a).map(|x| x / n);
+        let d = quat_mul(quat_conj(e), a);
+        [0, 1, 2, 3].map(|c| d[c] / n - 2.0 * q0[k] * f[c] / n)
+    } else {
+        quat_mul(e, a)
+    }
+}
