@@ -277,6 +277,18 @@ impl Tables {
     }
 }
 
+impl<const N: usize> From<[(&str, Table); N]> for Tables {
+    /// Named tables, in the order given.
+    fn from(tables: [(&str, Table); N]) -> Self {
+        Tables(
+            tables
+                .into_iter()
+                .map(|(n, t)| (n.to_string(), t))
+                .collect(),
+        )
+    }
+}
+
 /// Writes `bytes` to `path` atomically: a temporary file beside it, then a rename.
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), Error> {
     let io = |e: std::io::Error| Error::Io {

@@ -42,6 +42,18 @@ impl Verdict {
         }
     }
 
+    /// Held when the claim's `held` rule passed, else partly when its weaker `partly` rule did,
+    /// else not held.
+    pub fn graded(held: bool, partly: bool) -> Self {
+        if held {
+            Verdict::Held
+        } else if partly {
+            Verdict::Partly
+        } else {
+            Verdict::NotHeld
+        }
+    }
+
     /// [`Verdict::from_counts`] of the checks that passed.
     pub fn from_checks(checks: &[bool]) -> Self {
         Self::from_counts(checks.iter().filter(|&&c| c).count(), checks.len())

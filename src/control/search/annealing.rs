@@ -26,7 +26,6 @@ use super::{
 };
 use crate::control::ControlError;
 use rand::Rng;
-use rayon::prelude::*;
 
 /// A robust standard deviation of `v`: 1.4826 × the median absolute deviation (a few
 /// failed simulations scored with a huge penalty must not set a temperature scale); 1 when
@@ -150,16 +149,11 @@ where
 {
     cfg.validate()?;
     let mut tr = Tracker::for_starts(budget, &starts)?.with_progress(progress);
-    let values: Vec<f64> = starts.par_iter().map(objective).collect();
-    let mut start = 0;
-    for (j, (y, f)) in starts.iter().zip(&values).enumerate() {
-        tr.evaluated(y, *f);
-        if rank_value(*f) < rank_value(values[start]) {
-            start = j;
-        }
-    }
+    let values = tr.evaluate_starts(&starts, objective);
+    // The first of the lowest values.
+    let start = (0..values.len()).fold(0, |s, j| if values[j] < values[s] { j } else { s });
     let spread = robust_scale(&values);
-    let mut fx = rank_value(values[start]);
+    let mut fx = values[start];
     let mut x = starts.into_iter().nth(start).expect("start indexes starts");
     let mut stop = tr.close(0, fx);
     let mut k = 0;

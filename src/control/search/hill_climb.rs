@@ -151,13 +151,7 @@ where
 {
     cfg.validate()?;
     let mut tr = Tracker::for_starts(budget, &starts)?.with_progress(progress);
-    let values: Vec<f64> = starts
-        .par_iter()
-        .map(|x| rank_value(objective(x)))
-        .collect();
-    for (x, f) in starts.iter().zip(&values) {
-        tr.evaluated(x, *f);
-    }
+    let values = tr.evaluate_starts(&starts, objective);
     let mut set: Vec<(T, f64)> = starts.into_iter().zip(values).collect();
     // Rank: the stable sort keeps the initial order among ties.
     set.sort_by(|a, b| a.1.total_cmp(&b.1));

@@ -278,6 +278,24 @@ impl<'a, T: Clone> Tracker<'a, T> {
         }
     }
 
+    /// Evaluates `starts` in parallel, then counts, logs and offers each in order; returns
+    /// their values, a NaN ranked as +∞.
+    pub(crate) fn evaluate_starts<F>(&mut self, starts: &[T], objective: &F) -> Vec<f64>
+    where
+        T: Sync,
+        F: Fn(&T) -> f64 + Sync,
+    {
+        use rayon::prelude::*;
+        let values: Vec<f64> = starts
+            .par_iter()
+            .map(|x| super::rank_value(objective(x)))
+            .collect();
+        for (x, f) in starts.iter().zip(&values) {
+            self.evaluated(x, *f);
+        }
+        values
+    }
+
     /// Counts one evaluation of `v` with value `f` and offers it as the best.
     pub(crate) fn evaluated(&mut self, v: &T, f: f64) {
         self.counted(f);

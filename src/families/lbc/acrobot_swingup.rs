@@ -403,13 +403,13 @@ impl Job for Params {
                 sweep.push(row![a, b, *name, d, c, (d < self.success_distance) as i64]);
             }
         }
-        let mut t = Tables::default();
-        t.insert("final", fin);
-        t.insert("trajectories", traj);
-        t.insert("swingups", swingups);
-        t.insert("ddp_trace", trace);
-        t.insert("sweep", sweep);
-        Ok(t)
+        Ok(Tables::from([
+            ("final", fin),
+            ("trajectories", traj),
+            ("swingups", swingups),
+            ("ddp_trace", trace),
+            ("sweep", sweep),
+        ]))
     }
 }
 
@@ -566,13 +566,7 @@ impl Family for LbcAcrobot {
         let (t1, t2, nv, lbc) = (g("tracker1"), g("tracker2"), g("naive"), g("lbc"));
         let lbc_best = lbc < nv && lbc < t1 && lbc < t2;
         let naive_mid = nv < t1.min(t2);
-        let verdict = if lbc_best && naive_mid {
-            Verdict::Held
-        } else if lbc < nv && lbc < t1.max(t2) {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        };
+        let verdict = Verdict::graded(lbc_best && naive_mid, lbc < nv && lbc < t1.max(t2));
         Ok(Findings {
             ours: md,
             verdict,

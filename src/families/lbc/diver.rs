@@ -318,10 +318,10 @@ impl Job for InterpolationParams {
                 table.push(row![g, m, a, w1, w2]);
             }
         }
-        let mut t = Tables::default();
-        t.insert("interpolation", table);
-        t.insert("dives", examples);
-        Ok(t)
+        Ok(Tables::from([
+            ("interpolation", table),
+            ("dives", examples),
+        ]))
     }
 }
 
@@ -484,10 +484,7 @@ impl Job for CoordinationParams {
                 table.push(row![w, m, e, j]);
             }
         }
-        let mut t = Tables::default();
-        t.insert("coordination", table);
-        t.insert("dives", examples);
-        Ok(t)
+        Ok(Tables::from([("coordination", table), ("dives", examples)]))
     }
 }
 
@@ -569,13 +566,10 @@ impl Family for LbcDiverCoordination {
                 sig(j[q])
             ));
         }
-        let verdict = if better_obj == n && better_err * 2 > n {
-            Verdict::Held
-        } else if better_obj * 2 > n || better_err * 2 > n {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        };
+        let verdict = Verdict::graded(
+            better_obj == n && better_err * 2 > n,
+            better_obj * 2 > n || better_err * 2 > n,
+        );
         Ok(Findings {
             ours: md,
             verdict,

@@ -341,10 +341,7 @@ impl Job for Params {
                 nl_comb[s]
             ]);
         }
-        let mut t = Tables::default();
-        t.insert("optimality", opt);
-        t.insert("grid", fields);
-        Ok(t)
+        Ok(Tables::from([("optimality", opt), ("grid", fields)]))
     }
 }
 

@@ -156,11 +156,11 @@ impl Job for Params {
             Ok(())
         })?;
         pb.finish_and_clear();
-        let mut t = Tables::default();
-        t.insert("weights", weights);
-        t.insert("cost", cost);
-        t.insert("minima", minima);
-        Ok(t)
+        Ok(Tables::from([
+            ("weights", weights),
+            ("cost", cost),
+            ("minima", minima),
+        ]))
     }
 }
 

@@ -208,10 +208,7 @@ impl Job for Params {
             }
             Ok(())
         })?;
-        let mut t = Tables::default();
-        t.insert("weights", table);
-        t.insert("reaches", reaches);
-        Ok(t)
+        Ok(Tables::from([("weights", table), ("reaches", reaches)]))
     }
 }
 

@@ -136,12 +136,12 @@ impl Job for Params {
             }
             lat.push(row![name.as_str(), l.n_masses(), l.springs.len(), rigid]);
         }
-        let mut t = Tables::default();
-        t.insert("lattices", lat);
-        t.insert("rest_lengths", rl);
-        t.insert("positions", pos);
-        t.insert("springs", spr);
-        Ok(t)
+        Ok(Tables::from([
+            ("lattices", lat),
+            ("rest_lengths", rl),
+            ("positions", pos),
+            ("springs", spr),
+        ]))
     }
 }
 

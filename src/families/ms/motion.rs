@@ -201,13 +201,7 @@ impl Family for MsMotion {
         let (verdict, why) = match motion.as_str() {
             "leap" => {
                 let d = mv("displacement_x");
-                let v = if d > 1.0 && upright && airborne {
-                    Verdict::Held
-                } else if d > 0.3 && upright {
-                    Verdict::Partly
-                } else {
-                    Verdict::NotHeld
-                };
+                let v = Verdict::graded(d > 1.0 && upright && airborne, d > 0.3 && upright);
                 (
                     v,
                     format!(
@@ -223,13 +217,10 @@ impl Family for MsMotion {
                 let d = mv("displacement_x");
                 let ground = mv("on_ground") == 1.0;
                 let lr = mv("left_right_loss_45") == 0.0;
-                let v = if r >= 0.9 * 2.0 * PI && d > 0.0 && ground && lr {
-                    Verdict::Held
-                } else if r >= PI && d > 0.0 {
-                    Verdict::Partly
-                } else {
-                    Verdict::NotHeld
-                };
+                let v = Verdict::graded(
+                    r >= 0.9 * 2.0 * PI && d > 0.0 && ground && lr,
+                    r >= PI && d > 0.0,
+                );
                 (
                     v,
                     format!(
@@ -244,13 +235,10 @@ impl Family for MsMotion {
             _ => {
                 let r = mv("rotation_z").abs();
                 let ground = mv("on_ground") == 1.0;
-                let v = if r >= PI && upright && ground && airborne {
-                    Verdict::Held
-                } else if r >= PI / 4.0 && upright {
-                    Verdict::Partly
-                } else {
-                    Verdict::NotHeld
-                };
+                let v = Verdict::graded(
+                    r >= PI && upright && ground && airborne,
+                    r >= PI / 4.0 && upright,
+                );
                 (
                     v,
                     format!(

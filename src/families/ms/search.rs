@@ -372,15 +372,15 @@ impl Job for MotionJob {
         for (j, s) in problem.setup.model.lattice.springs.iter().enumerate() {
             spr.push(row![j, s.a, s.b]);
         }
-        let mut t = Tables::default();
-        t.insert("controller", ctl);
-        t.insert("best", best);
-        t.insert("measures", meas);
-        t.insert("summary", summary);
-        t.insert("search", search_table(&res));
-        t.insert("trajectory", traj);
-        t.insert("springs", spr);
-        Ok(t)
+        Ok(Tables::from([
+            ("controller", ctl),
+            ("best", best),
+            ("measures", meas),
+            ("summary", summary),
+            ("search", search_table(&res)),
+            ("trajectory", traj),
+            ("springs", spr),
+        ]))
     }
 }
 
@@ -446,10 +446,7 @@ impl Job for LearningJob {
             }
             summary.push(row![name, r.evaluations.len(), s, wall, -r.best_value]);
         }
-        let mut t = Tables::default();
-        t.insert("learning", learning);
-        t.insert("summary", summary);
-        Ok(t)
+        Ok(Tables::from([("learning", learning), ("summary", summary)]))
     }
 }
 

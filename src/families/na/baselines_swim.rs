@@ -512,10 +512,7 @@ impl Job for Params {
                 opt(own.map(|x| x.iteration as f64))
             ]);
         }
-        let mut out = Tables::default();
-        out.insert("baselines", baselines);
-        out.insert("final", final_t);
-        Ok(out)
+        Ok(Tables::from([("baselines", baselines), ("final", final_t)]))
     }
 }
 
@@ -686,13 +683,10 @@ impl Family for NaBaselines {
                 }
             })
             .collect();
-        let verdict = if bptt_fast && fast.is_empty() && !slow.is_empty() {
-            Verdict::Held
-        } else if bptt_fast && !slow.is_empty() {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        };
+        let verdict = Verdict::graded(
+            bptt_fast && fast.is_empty() && !slow.is_empty(),
+            bptt_fast && !slow.is_empty(),
+        );
         // How the momentum iterate's J moved (a monotone descent never rises).
         let b = read_csv(&dir.join("baselines.csv"))?;
         let (bm, bs, cur) = (

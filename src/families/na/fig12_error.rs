@@ -203,9 +203,7 @@ impl Job for Params {
                 }
             }
         }
-        let mut out = Tables::default();
-        out.insert("error", table);
-        Ok(out)
+        Ok(Tables::from([("error", table)]))
     }
 }
 
@@ -297,16 +295,9 @@ impl Family for NaError {
                 ratios.push((v, hi / lo));
             }
         }
-        let finite = ratios.iter().all(|r| r.1.is_finite());
-        let verdict = if ratios.is_empty() || !finite {
-            Verdict::NotHeld
-        } else if ratios.iter().all(|r| r.1 <= 1.5) {
-            Verdict::Held
-        } else if ratios.iter().all(|r| r.1 <= 3.0) {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        };
+        // NaN ratios fail every comparison; no ratio at all is no evidence.
+        let within = |limit: f64| !ratios.is_empty() && ratios.iter().all(|r| r.1 <= limit);
+        let verdict = Verdict::graded(within(1.5), within(3.0));
         Ok(Findings {
             ours: md,
             verdict,

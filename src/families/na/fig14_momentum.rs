@@ -358,12 +358,12 @@ impl Job for Params {
             pb.inc(1);
         }
         pb.finish_and_clear();
-        let mut out = Tables::default();
-        out.insert("objective", objective_t);
-        out.insert("gradient", gradient_t);
-        out.insert("runs", runs);
-        out.insert("trajectory", trajectory);
-        Ok(out)
+        Ok(Tables::from([
+            ("objective", objective_t),
+            ("gradient", gradient_t),
+            ("runs", runs),
+            ("trajectory", trajectory),
+        ]))
     }
 }
 
@@ -531,13 +531,7 @@ impl Family for NaMomentum {
                 .filter(|t| t.1 > base.1)
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .is_some_and(|t| !converges(&t.2));
-        let verdict = if faster && base_is_limit {
-            Verdict::Held
-        } else if faster && base_converges {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        };
+        let verdict = Verdict::graded(faster && base_is_limit, faster && base_converges);
         Ok(Findings {
             ours: md,
             verdict,

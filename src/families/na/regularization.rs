@@ -239,10 +239,7 @@ impl Job for Params {
             pb.inc(1);
         }
         pb.finish_and_clear();
-        let mut out = Tables::default();
-        out.insert("shape_error", shape);
-        out.insert("cost", cost);
-        Ok(out)
+        Ok(Tables::from([("shape_error", shape), ("cost", cost)]))
     }
 }
 

@@ -271,10 +271,10 @@ impl Job for Params {
             }
         }
         pb.finish_and_clear();
-        let mut out = Tables::default();
-        out.insert("structure", structure);
-        out.insert("training", training);
-        Ok(out)
+        Ok(Tables::from([
+            ("structure", structure),
+            ("training", training),
+        ]))
     }
 }
 

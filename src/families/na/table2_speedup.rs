@@ -311,9 +311,7 @@ impl Job for Params {
                 ]);
             }
         }
-        let mut out = Tables::default();
-        out.insert("speedup", table);
-        Ok(out)
+        Ok(Tables::from([("speedup", table)]))
     }
 }
 

@@ -369,14 +369,14 @@ impl Job for Params {
                 &mut motion_t,
             )?;
         }
-        let mut out = Tables::default();
-        out.insert("dolphin_motion", motion_t);
-        out.insert("swim", swim_t);
-        out.insert("objective", objective_t);
-        out.insert("final", final_t);
-        out.insert("trajectory", trajectory);
-        out.insert("goal", goal);
-        Ok(out)
+        Ok(Tables::from([
+            ("dolphin_motion", motion_t),
+            ("swim", swim_t),
+            ("objective", objective_t),
+            ("final", final_t),
+            ("trajectory", trajectory),
+            ("goal", goal),
+        ]))
     }
 }
 
