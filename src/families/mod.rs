@@ -1,7 +1,8 @@
 //! # Experiment families, by paper
 //!
-//! A *family* is the code that runs one kind of experiment: its typed parameters (a [`crate::experiment::Job`]),
-//! its figures and its `REPORT.md` section (an [`Experiment`]). Experiment files name it in
+//! A *family* is the code that runs one kind of experiment: its typed parameters (a
+//! [`crate::experiment::Job`]), its figures and its `REPORT.md` section — a
+//! [`crate::experiment::Family`], and through it an [`Experiment`]. Experiment files name it in
 //! `experiment = "…"`; the harness ([`crate::experiment`]) finds it in [`families`]. Each
 //! paper has a folder, and each file is named after the experiment id it runs, without the
 //! paper prefix:
