@@ -31,7 +31,7 @@ use super::train::{
     mse, train_full_batch, train_momentum, Dataset, FullBatchConfig, FullBatchMethod,
     MomentumConfig, StopReason, TracePoint, TrainReport,
 };
-use super::transform::{PlanarFrame, SpatialFrame};
+use super::transform::{Attitude, PlanarFrame, SpatialFrame};
 use super::{Emulator, EmulatorError, TransformConfig, Transforms};
 use crate::physics::lander::{Lander, NormalizedLander};
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
@@ -234,9 +234,11 @@ impl NetModel {
                 TransformConfig::standard(Some(PlanarFrame::rigid_body(0, 1, 2, 3, 4).into()))
             }
             Self::Lander => {
-                // Angular velocity is already in the body frame: only position, attitude and
-                // linear velocity go to the local frame.
+                // Gravity points along −z: the frame removes position and heading only, so the
+                // net still sees the tilt. Angular velocity is already in the body frame: only
+                // position, attitude and linear velocity go to the local frame.
                 let mut f = SpatialFrame::rigid_body(0, 3, 7, 10);
+                f.attitude = Attitude::Heading;
                 f.vectors.truncate(1);
                 TransformConfig::standard(Some(f.into()))
             }
@@ -476,4 +478,108 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
         stop,
         from_cache: false,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::emulator::transform::FrameMap;
+
+    /// A lander at rest at 100 m, tilted by `tilt` about x after a heading `yaw` about z.
+    fn tilted(tilt: f64, yaw: f64) -> Vec<f64> {
+        let q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw)
+            * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), tilt);
+        let q = q.quaternion();
+        let mut s = vec![3.0, -4.0, 100.0, q.w, q.i, q.j, q.k];
+        s.extend([0.0; 6]);
+        s
+    }
+
+    fn to_local(s: &[f64]) -> Vec<f64> {
+        let cfg = NetModel::Lander.transform_config();
+        let frame = cfg.frame.expect("the lander has a local frame");
+        let mut l = vec![0.0; s.len()];
+        frame.apply_at(FrameMap::ToLocal, s, s, &mut l);
+        l
+    }
+
+    #[test]
+    fn the_lander_frame_keeps_the_tilt_and_removes_only_heading() {
+        // Heading is a symmetry of the lander under gravity: it must not reach the net.
+        let (a, b) = (to_local(&tilted(0.3, 0.0)), to_local(&tilted(0.3, 2.0)));
+        for k in 0..13 {
+            assert!(
+                (a[k] - b[k]).abs() < 1e-12,
+                "variable {k}: {} vs {}",
+                a[k],
+                b[k]
+            );
+        }
+        // Tilt is not a symmetry: an upright and a tilted lander must look different, with the
+        // local quaternion the tilt itself.
+        let up = to_local(&tilted(0.0, 2.0));
+        assert!((up[3] - 1.0).abs() < 1e-12);
+        let want = [0.15f64.cos(), 0.15f64.sin(), 0.0, 0.0];
+        for k in 0..4 {
+            assert!(
+                (a[3 + k] - want[k]).abs() < 1e-12,
+                "local quaternion {:?}",
+                &a[3..7]
+            );
+        }
+    }
+
+    #[test]
+    fn a_tilted_lander_at_hover_thrust_drifts_sideways_on_emulator_and_simulator_alike() {
+        // A small lander emulator (N = 25, 0.25 s super-steps) trained on the §3.4 data.
+        let spec = BuildSpec {
+            net: NetSpec {
+                model: NetModel::Lander,
+                hidden: 30,
+                examples: 4000,
+                method: TrainMethod::Lbfgs,
+                physical_dt: 0.01,
+            },
+            steps: 25,
+            settings: TrainSettings {
+                held_out_fraction: 0.2,
+                cg_max_iters: 300,
+                max_epochs: 0,
+                patience: 30,
+                min_improvement: 1e-4,
+                learning_rate: 0.0,
+                momentum: 0.0,
+                batch_size: 30,
+            },
+            seed: 11,
+        };
+        let trained = train_emulator(&spec).unwrap();
+        let e = trained.emulator;
+        let lander = Lander::default();
+        let hover = [lander.mass * lander.gravity, 0.0, 0.0, 0.0];
+        let x0 = tilted(0.3, 0.7);
+        let mut sim = NetModel::Lander.simulator();
+        let mut xs = x0.clone();
+        let mut xe = x0.clone();
+        let (mut scratch, mut next) = (e.scratch(), vec![0.0; 13]);
+        for _ in 0..16 {
+            for _ in 0..spec.steps {
+                sim.step(&mut xs, &hover, spec.net.physical_dt);
+            }
+            e.predict(&xe, &hover, &mut scratch, &mut next);
+            xe.copy_from_slice(&next);
+        }
+        let drift = |x: &[f64]| [x[0] - x0[0], x[1] - x0[1]];
+        let (ds, de) = (drift(&xs), drift(&xe));
+        let norm = |d: [f64; 2]| d[0].hypot(d[1]);
+        // The simulator: the thrust's horizontal part, g·sin(0.3) ≈ 0.48 m/s² under lunar
+        // gravity, pushes it about 3.8 m in 4 s along the tilt.
+        assert!(norm(ds) > 3.0, "simulator drift {ds:?}");
+        // The emulator must drift the same way by a similar amount (our tolerance: 40 %).
+        let err = norm([de[0] - ds[0], de[1] - ds[1]]);
+        assert!(
+            err < 0.4 * norm(ds),
+            "emulator drift {de:?} vs simulator {ds:?}"
+        );
+    }
 }

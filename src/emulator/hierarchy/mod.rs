@@ -64,7 +64,7 @@ pub use training::{
 };
 
 use super::mlp::{Mlp, MlpScratch};
-use super::transform::{Normalizer, SpatialFrame};
+use super::transform::{Attitude, Normalizer, SpatialFrame};
 use super::{Emulator, EmulatorScratch, TransformConfig};
 use crate::physics::dolphin::{
     segment_frame_masses, segment_of_mass, Dolphin, SegmentFrame, N_MASSES, N_POS, N_SEGMENTS,
@@ -95,7 +95,9 @@ pub fn global_state(d: &Dolphin, x: &[f64], out: &mut [f64]) {
 pub fn global_transforms() -> TransformConfig {
     let base = FRAME_DIM * REF_SEGMENT;
     let tri = |a: usize| [a, a + 1, a + 2];
+    // The swimmer is neutrally buoyant: no direction is special, the whole attitude goes.
     let frame = SpatialFrame {
+        attitude: Attitude::Full,
         origin: tri(base),
         orientation: [base + 3, base + 4, base + 5, base + 6],
         points: (0..N_SEGMENTS).map(|s| tri(FRAME_DIM * s)).collect(),

@@ -43,7 +43,7 @@ mod spatial;
 pub use chain::{TransformConfig, Transforms};
 pub use normalize::Normalizer;
 pub use planar::{PlanarFrame, Pose2};
-pub use spatial::{quat_mul, Pose3, SpatialFrame};
+pub use spatial::{quat_mul, Attitude, Pose3, SpatialFrame};
 
 use super::EmulatorError;
 
@@ -171,7 +171,9 @@ impl LocalFrame {
     ) {
         match self {
             Self::Planar(f) => f.apply_jvp(map, f.pose(ps), inp, d_inp, f.pose(d_ps), d_out),
-            Self::Spatial(f) => f.apply_jvp(map, &f.pose(ps), inp, d_inp, &f.pose(d_ps), d_out),
+            Self::Spatial(f) => {
+                f.apply_jvp(map, &f.pose(ps), inp, d_inp, &f.pose_jvp(ps, d_ps), d_out)
+            }
         }
     }
 
@@ -187,7 +189,7 @@ impl LocalFrame {
             Self::Spatial(f) => {
                 let mut pb = Pose3::default();
                 f.apply_vjp(map, &f.pose(s), s, out_bar, s_bar, &mut pb);
-                f.pose_vjp(&pb, s_bar);
+                f.pose_vjp(s, &pb, s_bar);
             }
         }
     }
@@ -212,7 +214,7 @@ impl LocalFrame {
             Self::Spatial(f) => {
                 let mut pb = Pose3::default();
                 f.apply_vjp(map, &f.pose(ps), inp, out_bar, inp_bar, &mut pb);
-                f.pose_vjp(&pb, ps_bar);
+                f.pose_vjp(ps, &pb, ps_bar);
             }
         }
     }
@@ -368,7 +370,15 @@ mod tests {
     }
 
     fn frames() -> Vec<(LocalFrame, usize)> {
-        vec![(frame().into(), 9), (spatial().into(), 21)]
+        let heading = SpatialFrame {
+            attitude: Attitude::Heading,
+            ..spatial()
+        };
+        vec![
+            (frame().into(), 9),
+            (spatial().into(), 21),
+            (heading.into(), 21),
+        ]
     }
 
     const MAPS: [FrameMap; 4] = [

@@ -11,6 +11,14 @@
 //! any q ≠ 0, so q₀ need not be exactly unit; state changes are only rotated. Products with
 //! the Jacobians use ∂R/∂q_k in closed form and the bilinearity of the Hamilton product ⊗.
 //!
+//! The frame's orientation q₀ is either the body's whole attitude ([`Attitude::Full`], for a
+//! body whose dynamics are invariant to any rotation, e.g. the swimming dolphin) or only its
+//! heading ([`Attitude::Heading`]): the twist of the body quaternion about the world vertical
+//! z, q₀ = (w, 0, 0, z)/√(w² + z²) (swing–twist decomposition). Under gravity the dynamics are
+//! invariant only to translation and rotation about the vertical, so a frame that removed the
+//! whole attitude would hide which way gravity points; the heading frame keeps the tilt in the
+//! local quaternion.
+//!
 //! ## References
 //! - K. Shoemake, *Animating rotation with quaternion curves*, SIGGRAPH 1985.
 
@@ -107,6 +115,8 @@ fn rotation_and_derivatives(q: [f64; 4]) -> (M3, [M3; 4]) {
 /// only rotated (quaternion changes: q₀⁻¹ ⊗ Δq). Variables not listed pass through.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SpatialFrame {
+    /// Which part of the orientation quaternion defines the frame.
+    pub attitude: Attitude,
     /// State indices of the frame origin.
     pub origin: [usize; 3],
     /// State indices of the frame orientation quaternion `[w, x, y, z]`.
@@ -119,6 +129,15 @@ pub struct SpatialFrame {
     pub quaternions: Vec<[usize; 4]>,
 }
 
+/// Which rotation defines a [`SpatialFrame`] (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Attitude {
+    /// The body's whole orientation: the body's own quaternion becomes the identity.
+    Full,
+    /// Only the heading, the rotation about the world vertical z: roll and pitch stay visible.
+    Heading,
+}
+
 impl SpatialFrame {
     /// A rigid body whose state holds position at `pos..pos+3`, quaternion at `quat..quat+4`,
     /// linear velocity at `vel..vel+3` and angular velocity (world frame) at `omega..omega+3`.
@@ -126,6 +145,7 @@ impl SpatialFrame {
         let tri = |a: usize| [a, a + 1, a + 2];
         let quad = [quat, quat + 1, quat + 2, quat + 3];
         Self {
+            attitude: Attitude::Full,
             origin: tri(pos),
             orientation: quad,
             points: vec![tri(pos)],
@@ -148,21 +168,71 @@ impl SpatialFrame {
         )
     }
 
+    /// The frame's heading quaternion read from a state: (w, z)/√(w² + z²) of the orientation
+    /// quaternion, as the unit pair and its norm.
+    fn heading(&self, s: &[f64]) -> ([f64; 2], f64) {
+        let (w, z) = (s[self.orientation[0]], s[self.orientation[3]]);
+        let n = w.hypot(z);
+        ([w / n, z / n], n)
+    }
+
     /// The pose read from a world-frame state.
     pub fn pose(&self, s: &[f64]) -> Pose3 {
+        let q = match self.attitude {
+            Attitude::Full => self.orientation.map(|i| s[i]),
+            Attitude::Heading => {
+                let ([w, z], _) = self.heading(s);
+                [w, 0.0, 0.0, z]
+            }
+        };
         Pose3 {
             origin: self.origin.map(|i| s[i]),
-            q: self.orientation.map(|i| s[i]),
+            q,
         }
     }
 
-    /// Adds a pose cotangent to the state cotangent (the pose is read from the state).
-    pub fn pose_vjp(&self, pose_bar: &Pose3, s_bar: &mut [f64]) {
+    /// The pose tangent for a state tangent `ds` at state `s`.
+    pub fn pose_jvp(&self, s: &[f64], ds: &[f64]) -> Pose3 {
+        let q = match self.attitude {
+            Attitude::Full => self.orientation.map(|i| ds[i]),
+            Attitude::Heading => {
+                // d(t/|t|) = (I − t̂ t̂ᵀ) dt / |t| for t = (w, z).
+                let (h, n) = self.heading(s);
+                let dt = [ds[self.orientation[0]], ds[self.orientation[3]]];
+                let along = h[0] * dt[0] + h[1] * dt[1];
+                [
+                    (dt[0] - h[0] * along) / n,
+                    0.0,
+                    0.0,
+                    (dt[1] - h[1] * along) / n,
+                ]
+            }
+        };
+        Pose3 {
+            origin: self.origin.map(|i| ds[i]),
+            q,
+        }
+    }
+
+    /// Adds a pose cotangent to the cotangent `s_bar` of the state `s` the pose is read from.
+    pub fn pose_vjp(&self, s: &[f64], pose_bar: &Pose3, s_bar: &mut [f64]) {
         for (i, v) in self.origin.iter().zip(pose_bar.origin) {
             s_bar[*i] += v;
         }
-        for (i, v) in self.orientation.iter().zip(pose_bar.q) {
-            s_bar[*i] += v;
+        match self.attitude {
+            Attitude::Full => {
+                for (i, v) in self.orientation.iter().zip(pose_bar.q) {
+                    s_bar[*i] += v;
+                }
+            }
+            Attitude::Heading => {
+                // The normalization's Jacobian is symmetric; x and y of the pose are constant.
+                let (h, n) = self.heading(s);
+                let g = [pose_bar.q[0], pose_bar.q[3]];
+                let along = h[0] * g[0] + h[1] * g[1];
+                s_bar[self.orientation[0]] += (g[0] - h[0] * along) / n;
+                s_bar[self.orientation[3]] += (g[1] - h[1] * along) / n;
+            }
         }
     }
 
