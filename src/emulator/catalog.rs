@@ -17,9 +17,12 @@
 //!   (about a fifth of the gravity torque each joint holds horizontal: 12.3, 7.4, 2.5 N·m);
 //!   ext. force: also link forces within ±2 N. Controls are smooth random functions with knots
 //!   every 0.3–1.5 s.
-//! - **Truck**: centre of mass uniform in a 100 m square, heading uniform, forward speed
-//!   U[−3, 8] m/s, no sideways or yaw rate; drive acceleration within ±3 m/s² and steering within
-//!   ±0.5 rad, piecewise constant for 0.5–2 s; episodes of 10 s.
+//! - **Truck**: centre of mass uniform in a 100 m square, heading uniform, no sideways or yaw
+//!   rate; forward speed 0 (at rest) in a quarter of the episodes, U[−1, 1.5] m/s (manoeuvring)
+//!   in a third, else U[−3, 8] m/s — the parking task starts and ends at rest, which uniform
+//!   speeds would almost never show the net; drive acceleration within ±3 m/s² and steering
+//!   within ±0.5 rad, piecewise constant for 0.5–2 s, with a quarter of the knots idle (no
+//!   drive, wheels straight: rest stays rest, coasting stays straight); episodes of 10 s.
 //! - **Lander**: centre of mass uniform in a 100 m square at 20–200 m height, yaw uniform, tilt up
 //!   to 0.4 rad about a random horizontal axis, velocity U[−5, 5] m/s per axis, body rates
 //!   U[−0.2, 0.2] rad/s; thrust within [0, 2 m g] (twice hover), attitude torques within
@@ -155,7 +158,14 @@ impl NetModel {
             Self::Truck => {
                 let (x, y) = (rng.random_range(-50.0..50.0), rng.random_range(-50.0..50.0));
                 let th: f64 = rng.random_range(-PI..PI);
-                let v = rng.random_range(-3.0..8.0);
+                let kind: f64 = rng.random_range(0.0..1.0);
+                let v = if kind < 0.25 {
+                    0.0
+                } else if kind < 0.25 + 1.0 / 3.0 {
+                    rng.random_range(-1.0..1.5)
+                } else {
+                    rng.random_range(-3.0..8.0)
+                };
                 vec![x, y, th, v * th.cos(), v * th.sin(), 0.0]
             }
             Self::Lander => {
@@ -207,9 +217,15 @@ impl NetModel {
     /// How the typical controls vary in time.
     pub fn control_process(self) -> ControlProcess {
         match self {
-            Self::Truck | Self::Lander => ControlProcess::PiecewiseConstant {
+            Self::Truck => ControlProcess::PiecewiseConstant {
                 hold_min: 0.5,
                 hold_max: 2.0,
+                idle: 0.25,
+            },
+            Self::Lander => ControlProcess::PiecewiseConstant {
+                hold_min: 0.5,
+                hold_max: 2.0,
+                idle: 0.0,
             },
             _ => ControlProcess::Smooth {
                 hold_min: 0.3,
@@ -503,6 +519,89 @@ mod tests {
         l
     }
 
+    /// A small net of `model` trained by L-BFGS with early stopping, δt = 0.01 s.
+    fn small(model: NetModel, hidden: usize, examples: usize, steps: usize) -> BuildSpec {
+        BuildSpec {
+            net: NetSpec {
+                model,
+                hidden,
+                examples,
+                method: TrainMethod::Lbfgs,
+                physical_dt: 0.01,
+            },
+            steps,
+            settings: TrainSettings {
+                held_out_fraction: 0.2,
+                cg_max_iters: 300,
+                max_epochs: 0,
+                patience: 30,
+                min_improvement: 1e-4,
+                learning_rate: 0.0,
+                momentum: 0.0,
+                batch_size: 30,
+            },
+            seed: 11,
+        }
+    }
+
+    #[test]
+    fn truck_data_show_the_rest_the_parking_task_starts_and_ends_in() {
+        // §3.4: sample the states the tasks visit. Parking starts and ends at rest, so at-rest
+        // examples under idle controls (and low speeds) must be a real share of the data, not
+        // the measure-zero set uniform speeds in [−3, 8] m/s would give.
+        let spec = small(NetModel::Truck, 20, 3000, 50);
+        let mut sim = NetModel::Truck.simulator();
+        let start = |r: &mut ChaCha8Rng| NetModel::Truck.start_state(r);
+        let data = sample_transitions(
+            sim.as_mut(),
+            &start,
+            &NetModel::Truck.control_limits(),
+            &spec.sampling(3000),
+            &mut ChaCha8Rng::seed_from_u64(4),
+        )
+        .unwrap()
+        .transitions;
+        let speed = |r: usize| data.states[[r, 3]].hypot(data.states[[r, 4]]);
+        let idle = |r: usize| data.controls.row(r).iter().all(|&u| u == 0.0);
+        let rows = data.states.nrows();
+        let at_rest = (0..rows).filter(|&r| speed(r) < 1e-9 && idle(r)).count();
+        let slow = (0..rows).filter(|&r| speed(r) < 1.0).count();
+        // Our thresholds: some (at least 10 of 3,000: only the first knot of an episode that
+        // starts parked can be idle at rest) at exact rest with idle controls, and at least 15 %
+        // below 1 m/s (a third of the episodes start below 1.5 m/s).
+        assert!(at_rest >= 10, "{at_rest} of {rows} at rest");
+        assert!(slow * 100 >= 15 * rows, "{slow} of {rows} below 1 m/s");
+        // At rest under idle controls the simulator stays exactly put.
+        for r in (0..rows).filter(|&r| speed(r) < 1e-9 && idle(r)) {
+            for k in 0..6 {
+                assert_eq!(data.states[[r, k]], data.next_states[[r, k]]);
+            }
+        }
+    }
+
+    #[test]
+    #[ignore = "open: issue 11 defect 5 — single-step training leaves a bias that drifts the \
+                parked truck 1–3 m over 40 super-steps; rollout-faithful training is to fix it"]
+    fn a_truck_emulator_parked_with_zero_controls_stays_parked() {
+        // The parking task's start, at rest; 20 s of zero controls in 0.5 s super-steps.
+        let spec = small(NetModel::Truck, 40, 5200, 50);
+        let e = train_emulator(&spec).unwrap().emulator;
+        let x0 = [-15.0, -8.0, 0.4, 0.0, 0.0, 0.0];
+        let (mut x, mut next, mut scratch) = (x0.to_vec(), vec![0.0; 6], e.scratch());
+        for _ in 0..40 {
+            e.predict(&x, &[0.0, 0.0], &mut scratch, &mut next);
+            x.copy_from_slice(&next);
+        }
+        // The simulator stays exactly put; the emulator must stay within the task's final
+        // tolerance (0.5 m, 0.05 rad).
+        let moved = (x[0] - x0[0]).hypot(x[1] - x0[1]);
+        let turned = (x[2] - x0[2]).abs();
+        assert!(
+            moved < 0.5 && turned < 0.05,
+            "moved {moved} m, turned {turned} rad: {x:?}"
+        );
+    }
+
     #[test]
     fn the_lander_frame_keeps_the_tilt_and_removes_only_heading() {
         // Heading is a symmetry of the lander under gravity: it must not reach the net.
@@ -532,27 +631,7 @@ mod tests {
     #[test]
     fn a_tilted_lander_at_hover_thrust_drifts_sideways_on_emulator_and_simulator_alike() {
         // A small lander emulator (N = 25, 0.25 s super-steps) trained on the §3.4 data.
-        let spec = BuildSpec {
-            net: NetSpec {
-                model: NetModel::Lander,
-                hidden: 30,
-                examples: 4000,
-                method: TrainMethod::Lbfgs,
-                physical_dt: 0.01,
-            },
-            steps: 25,
-            settings: TrainSettings {
-                held_out_fraction: 0.2,
-                cg_max_iters: 300,
-                max_epochs: 0,
-                patience: 30,
-                min_improvement: 1e-4,
-                learning_rate: 0.0,
-                momentum: 0.0,
-                batch_size: 30,
-            },
-            seed: 11,
-        };
+        let spec = small(NetModel::Lander, 30, 4000, 25);
         let trained = train_emulator(&spec).unwrap();
         let e = trained.emulator;
         let lander = Lander::default();

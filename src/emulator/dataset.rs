@@ -69,12 +69,15 @@ impl ControlLimits {
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum ControlProcess {
     /// Values drawn uniformly within the limits, held for durations drawn from
-    /// U[`hold_min`, `hold_max`] seconds.
+    /// U[`hold_min`, `hold_max`] seconds; a knot is idle (every control 0, clamped to the limits)
+    /// with probability `idle`, so rest and coasting are sampled too.
     PiecewiseConstant {
         /// Shortest hold (s).
         hold_min: f64,
         /// Longest hold (s).
         hold_max: f64,
+        /// Probability that a knot's controls are all zero.
+        idle: f64,
     },
     /// Knots as for `PiecewiseConstant`, joined by half-cosine blends (continuous, with zero
     /// slope at the knots).
@@ -127,7 +130,9 @@ impl ControlSignal {
         rng: &mut ChaCha8Rng,
     ) -> Self {
         let (smooth, lo, hi) = match process {
-            ControlProcess::PiecewiseConstant { hold_min, hold_max }
+            ControlProcess::PiecewiseConstant {
+                hold_min, hold_max, ..
+            }
             | ControlProcess::TravellingWave {
                 hold_min, hold_max, ..
             } => (false, hold_min, hold_max),
@@ -164,14 +169,21 @@ impl ControlSignal {
             )),
             _ => None,
         };
+        let idle = match process {
+            ControlProcess::PiecewiseConstant { idle, .. } => idle,
+            _ => 0.0,
+        };
         let mut times = vec![];
         let mut values = vec![];
         let mut t = 0.0;
         loop {
             times.push(t);
+            // Drawn only where idle knots are possible, so other processes keep their streams.
+            let rest = idle > 0.0 && rng.random_range(0.0..1.0) < idle;
             for c in 0..channels {
                 let (low, high) = (limits.low[c], limits.high[c]);
                 values.push(match wave {
+                    None if rest => 0.0f64.clamp(low, high),
                     None => rng.random_range(low..=high),
                     Some((f, lag, amp, psi, noise)) => {
                         let (mid, half) = (0.5 * (low + high), 0.5 * (high - low));
@@ -252,6 +264,11 @@ impl SamplingConfig {
         if !(self.episode_duration >= window) {
             // An episode must hold at least one lag (≤ 5Δt) plus one window (Δt).
             return bad("episode_duration", self.episode_duration);
+        }
+        if let ControlProcess::PiecewiseConstant { idle, .. } = self.control {
+            if !(0.0..=1.0).contains(&idle) {
+                return bad("idle", idle);
+            }
         }
         Ok(())
     }
@@ -361,6 +378,7 @@ mod tests {
             control: ControlProcess::PiecewiseConstant {
                 hold_min: 0.2,
                 hold_max: 1.0,
+                idle: 0.0,
             },
         };
         cfg.validate().unwrap();
