@@ -28,7 +28,9 @@
 //!   U[−0.2, 0.2] rad/s; thrust within [0, 2 m g] (twice hover), attitude torques within
 //!   ±400 N·m (a fifth of the jets' limit), piecewise constant for 0.5–2 s; episodes of 10 s.
 
-use super::dataset::{sample_transitions, ControlLimits, ControlProcess, SamplingConfig};
+use super::dataset::{
+    sample_transitions, ControlLimits, ControlProcess, ControlSignal, SamplingConfig,
+};
 use super::mlp::{Mlp, WeightInit};
 use super::train::{
     mse, train_full_batch, train_momentum, Dataset, FullBatchConfig, FullBatchMethod,
@@ -441,6 +443,77 @@ pub fn stop_name(stop: &StopReason) -> String {
         StopReason::Converged => "converged".to_string(),
         StopReason::OptimizerFailed(e) => format!("optimizer_failed: {e}"),
     }
+}
+
+/// Multi-step fidelity of a trained emulator of `spec` (what control learning needs, §6): from
+/// `episodes` start states drawn as for training (a stream of its own), the emulator and the
+/// simulator run `horizon` super-steps side by side under the same controls — the training
+/// control process, read at each super-step's start and held over it. Returns, for k = 1 …
+/// `horizon`, the mean over episodes and state variables of ((ŝ_k − s_k)/σ)², σ the spread of
+/// that variable over the simulated states (the emulator never sees the simulator's state
+/// after the start). Deterministic for a given spec.
+pub fn rollout_error(
+    emulator: &Emulator,
+    spec: &BuildSpec,
+    episodes: usize,
+    horizon: usize,
+) -> Result<Vec<f64>, BuildError> {
+    let model = spec.net.model;
+    let (n, m) = (model.state_dim(), model.control_dim());
+    let limits = model.control_limits();
+    let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 3));
+    let big_dt = spec.super_dt();
+    let mut sim = model.simulator();
+    let (mut scratch, mut next, mut u) = (emulator.scratch(), vec![0.0; n], vec![0.0; m]);
+    // Simulated and emulated states per episode and step, row-major (episode, step, variable).
+    let mut truth = Vec::with_capacity(episodes * horizon * n);
+    let mut guess = Vec::with_capacity(episodes * horizon * n);
+    for _ in 0..episodes {
+        let x0 = model.start_state(&mut rng);
+        let signal = ControlSignal::sample(
+            model.control_process(),
+            &limits,
+            horizon as f64 * big_dt,
+            &mut rng,
+        );
+        let (mut xs, mut xe) = (x0.clone(), x0);
+        for k in 0..horizon {
+            signal.at(k as f64 * big_dt, &mut u);
+            for i in 0..spec.steps {
+                sim.step(&mut xs, &u, spec.net.physical_dt);
+                let step = k * spec.steps + i + 1;
+                let t = step as f64 * spec.net.physical_dt;
+                crate::physics::check_finite(model.name(), step, t, &xs)?;
+            }
+            emulator.predict(&xe, &u, &mut scratch, &mut next);
+            xe.copy_from_slice(&next);
+            truth.extend_from_slice(&xs);
+            guess.extend_from_slice(&xe);
+        }
+    }
+    let rows = episodes * horizon;
+    let sigma: Vec<f64> = (0..n)
+        .map(|v| {
+            let mean = (0..rows).map(|r| truth[r * n + v]).sum::<f64>() / rows as f64;
+            let var = (0..rows)
+                .map(|r| (truth[r * n + v] - mean).powi(2))
+                .sum::<f64>()
+                / rows as f64;
+            var.sqrt().max(1e-6)
+        })
+        .collect();
+    Ok((0..horizon)
+        .map(|k| {
+            let mut sum = 0.0;
+            for e in 0..episodes {
+                let r = (e * horizon + k) * n;
+                for v in 0..n {
+                    sum += ((guess[r + v] - truth[r + v]) / sigma[v]).powi(2);
+                }
+            }
+            sum / (episodes * n) as f64
+        })
+        .collect())
 }
 
 /// Samples training and held-out data, fits the transforms and trains the network of `spec`.

@@ -13,7 +13,7 @@
 //! train_error, heldout_error).
 
 use crate::emulator::cache::{fnv1a, EmulatorCache};
-use crate::emulator::catalog::{BuildSpec, NetSpec, TrainSettings, Trained};
+use crate::emulator::catalog::{rollout_error, BuildSpec, NetSpec, TrainSettings, Trained};
 use crate::emulator::hierarchy::{build_dolphin, BuiltDolphin, HierarchyNet, HierarchySpec};
 use crate::emulator::mlp::Mlp;
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
@@ -182,6 +182,11 @@ pub fn build_emulator(spec: &BuildSpec) -> Result<Trained, Error> {
     EmulatorCache::from_env().get_or_train(spec).map_err(other)
 }
 
+/// Fresh episodes per net for the multi-step fidelity columns.
+pub const ROLLOUT_EPISODES: usize = 32;
+/// Super-steps per rollout: the 40 of the Fig. 13 control tasks.
+pub const ROLLOUT_STEPS: usize = 40;
+
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).unwrap_or_default()
@@ -201,8 +206,11 @@ impl Job for Params {
             "examples_per_weight",
             "stop",
             "cached",
+            "rollout40_error_mean",
+            "rollout40_error_final",
         ]);
         let mut training = Table::new(&["net", "iteration", "train_error", "heldout_error"]);
+        let mut rollout = Table::new(&["net", "step", "error"]);
         let pb = ctx.progress(self.nets.len() as u64, "training emulators");
         for net in &self.nets {
             let spec = build_spec(
@@ -217,6 +225,13 @@ impl Job for Params {
             let m = net.model;
             let (n_in, n_out) = (m.state_dim() + m.control_dim(), m.state_dim());
             let w = Mlp::weight_count(n_in, net.hidden, n_out);
+            let errors = ctx.stage(&format!("rollouts {name}"), || {
+                rollout_error(&t.emulator, &spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other)
+            })?;
+            for (k, e) in errors.iter().enumerate() {
+                rollout.push(row![name, (k + 1) as i64, *e]);
+            }
+            let mean = errors.iter().sum::<f64>() / errors.len() as f64;
             structure.push(row![
                 name,
                 n_in as i64,
@@ -229,7 +244,9 @@ impl Job for Params {
                 w as i64,
                 spec.net.examples as f64 / w as f64,
                 t.stop.as_str(),
-                i64::from(t.from_cache)
+                i64::from(t.from_cache),
+                mean,
+                errors[errors.len() - 1]
             ]);
             for p in &t.trace {
                 training.push(row![
@@ -258,7 +275,10 @@ impl Job for Params {
                     w as i64,
                     n.examples as f64 / w as f64,
                     n.stop.as_str(),
-                    i64::from(n.from_cache)
+                    i64::from(n.from_cache),
+                    // Rollouts of the composed hierarchy are not measured yet.
+                    f64::NAN,
+                    f64::NAN
                 ]);
                 for p in &n.trace {
                     training.push(row![
@@ -274,6 +294,7 @@ impl Job for Params {
         Ok(Tables::from([
             ("structure", structure),
             ("training", training),
+            ("rollout", rollout),
         ]))
     }
 }
@@ -313,7 +334,30 @@ impl Family for NaStructure {
                 }
             })
             .collect();
-        fig.draw("training", &Figure::grid(panels, 3))
+        let mut files = fig.draw("training", &Figure::grid(panels, 3))?;
+        let r = tables.require("rollout")?;
+        let (net, step, err) = (r.strs("net"), r.f64s("step"), r.f64s("error"));
+        let series = unique(&net)
+            .iter()
+            .enumerate()
+            .map(|(c, name)| {
+                let pts = (0..net.len())
+                    .filter(|&k| &net[k] == name && err[k] > 0.0)
+                    .map(|k| (step[k], err[k]))
+                    .collect();
+                Series::line(name, pts, c)
+            })
+            .collect();
+        let panel = Panel {
+            title: "emulator vs simulator over 40 super-steps (fresh episodes)".into(),
+            x_label: "super-steps k".into(),
+            y_label: "mean squared error / state variance".into(),
+            log_y: true,
+            series,
+            ..Panel::default()
+        };
+        files.extend(fig.draw("rollout", &Figure::grid(vec![panel], 1))?);
+        Ok(files)
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
@@ -330,13 +374,18 @@ impl Family for NaStructure {
             df_f64(&df, "heldout_error")?,
             df_f64(&df, "train_s")?,
         );
+        let (roll, roll_end) = (
+            df_f64(&df, "rollout40_error_mean")?,
+            df_f64(&df, "rollout40_error_final")?,
+        );
         let mut md = String::from(
-            "| net | inputs | hidden | outputs | examples | train MSE | held-out MSE | train s |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+            "| net | inputs | hidden | outputs | examples | train MSE | held-out MSE | train s | 40-step rollout error, mean / final |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
         );
         let mut good = 0;
+        let mut rolled = 0;
         for r in 0..net.len() {
             md.push_str(&format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} / {} |\n",
                 net[r],
                 inp[r],
                 hid[r],
@@ -344,11 +393,18 @@ impl Family for NaStructure {
                 ex[r],
                 sig(tr[r]),
                 sig(ho[r]),
-                sig(secs[r])
+                sig(secs[r]),
+                sig(roll[r]),
+                sig(roll_end[r])
             ));
-            // Learned (held-out error far below the 1.0 of predicting the mean) and not
-            // overfitted (held-out within 2x of training).
-            if ho[r] < 0.05 && ho[r] < 2.0 * tr[r].max(1e-12) {
+            // Our rule (the paper gives no number): learned — held-out one-step MSE below 0.05
+            // of the normalized state-change variance (1.0 is predicting the mean) — not
+            // overfitted — held-out at most 0.02 above training, an absolute gap — and, where
+            // measured, faithful over the 40 super-steps control uses: mean squared rollout
+            // error below 0.1 of the state variance.
+            let rollout_ok = roll[r].is_nan() || roll[r] < 0.1;
+            rolled += usize::from(!roll[r].is_nan());
+            if ho[r] < 0.05 && ho[r] - tr[r] <= 0.02 && rollout_ok {
                 good += 1;
             }
         }
@@ -357,7 +413,7 @@ impl Family for NaStructure {
             ours: md,
             verdict,
             why: format!(
-                "{good} of {} Table 1 nets (the dolphin counts its global and six local nets) reach a held-out MSE below 0.05 of the normalized state-change variance without overfitting (held-out < 2x train) at about 8-10 examples per weight.",
+                "{good} of {} Table 1 nets (the dolphin counts its global and six local nets) reach a held-out one-step MSE below 0.05 of the normalized state-change variance, held-out at most 0.02 above training, and (for the {rolled} nets whose rollouts are measured; not yet the dolphin's hierarchy) a mean 40-step rollout error below 0.1 of the state variance, at about 8-10 examples per weight. The thresholds are ours; the paper states none.",
                 net.len()
             ),
         })
