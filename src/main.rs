@@ -6,6 +6,9 @@ use motionlab::experiment::report::write_report;
 use motionlab::experiment::resolve::{resolve, ResolveOptions, Resolved};
 use motionlab::experiment::runner::{run, RunOptions};
 use motionlab::experiment::spec::SpecFile;
+use motionlab::families::na::table1_structure::{
+    table1_emulator, Params as Table1Params, EMULATOR_NAMES,
+};
 use motionlab::physics::{self, IntegratorKind, Model, Ode};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -110,6 +113,42 @@ enum Command {
         /// Output CSV (default: standard output).
         #[arg(long, value_name = "FILE.csv")]
         out: Option<PathBuf>,
+    },
+    /// Step a trained Table 1 emulator from a start state and write its trajectory as CSV with
+    /// `simulate`'s columns (t, state...), one row per super-step, so the two files compare row
+    /// by row. The net is built as `na_table1_structure` builds it (its experiment file gives
+    /// size, data, training and seed): loaded from the emulator cache (target/motionlab-cache or
+    /// $MOTIONLAB_CACHE), or trained now when no experiment has trained it yet.
+    Emulate {
+        /// Table 1 net: pendulum_passive, pendulum_active, pendulum_ext, truck, lander, dolphin.
+        #[arg(value_parser = clap::builder::PossibleValuesParser::new(EMULATOR_NAMES))]
+        net: String,
+        /// Physical steps per emulator step N (25, 50 or 100; 50 is Table 1's).
+        #[arg(long, default_value_t = 50)]
+        steps: usize,
+        /// Start state, comma-separated, in `describe`'s order and units for the emulated model
+        /// (pendulum_active: pendulum3, pendulum_passive: pendulum3_passive, pendulum_ext:
+        /// pendulum3_ext).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            allow_hyphen_values = true,
+            required = true
+        )]
+        state: Vec<f64>,
+        /// Controls: the same CSV as `simulate`'s, read at each super-step's start and held.
+        #[arg(long, value_name = "FILE.csv")]
+        controls: Option<PathBuf>,
+        /// Emulated time in seconds (rounded to whole super-steps).
+        #[arg(long)]
+        duration: f64,
+        /// Output CSV (default: standard output).
+        #[arg(long, value_name = "FILE.csv")]
+        out: Option<PathBuf>,
+        /// Use the nets of `reproduce --quick` (the spec's [quick] table): fewer examples,
+        /// trained in seconds, less accurate.
+        #[arg(long)]
+        quick: bool,
     },
     /// Throughput of the hot loops.
     Bench {
@@ -316,6 +355,22 @@ fn dispatch(cli: Cli) -> Result<()> {
             &integrator,
             out.as_deref(),
         ),
+        Command::Emulate {
+            net,
+            steps,
+            state,
+            controls,
+            duration,
+            out,
+            quick,
+        } => emulate(
+            &experiments_dir(&cli.experiments),
+            (&net, steps, quick),
+            &state,
+            controls.as_deref(),
+            duration,
+            out.as_deref(),
+        ),
         Command::Bench { json, seconds } => {
             if !(seconds > 0.0) {
                 bail!("--seconds must be > 0");
@@ -423,6 +478,87 @@ impl Schedule {
         let k = self.times.partition_point(|&s| s <= t + 1e-12);
         &self.values[k.saturating_sub(1)]
     }
+}
+
+fn emulate(
+    experiments: &Path,
+    (net, steps, quick): (&str, usize, bool),
+    state: &[f64],
+    controls: Option<&Path>,
+    duration: f64,
+    out: Option<&Path>,
+) -> Result<()> {
+    if steps == 0 {
+        bail!("--steps must be >= 1");
+    }
+    if !(duration.is_finite() && duration > 0.0) {
+        bail!("--duration must be > 0");
+    }
+    // The physical model first: a wrong --state or --controls fails before any training.
+    let physics_name = match net {
+        "dolphin" => "dolphin",
+        other => motionlab::emulator::catalog::NetModel::ALL
+            .iter()
+            .find(|m| m.name() == other)
+            .map(|m| m.physics_name())
+            .ok_or_else(|| anyhow!("unknown net {other}"))?,
+    };
+    let m = physics::model_by_name(physics_name)
+        .ok_or_else(|| anyhow!("unknown model {physics_name}"))?;
+    let names = m.state_names();
+    if state.len() != names.len() {
+        bail!(
+            "--state: {net} emulates {physics_name}, which has {} state variables ({}), got {}",
+            names.len(),
+            names.join(", "),
+            state.len()
+        );
+    }
+    let schedule = match controls {
+        Some(p) => Some(Schedule::load(p, &m.control_names())?),
+        None => None,
+    };
+    let path = experiments.join("na_table1_structure.toml");
+    let file = SpecFile::load(&path)?;
+    let mut table = file.raw.params.clone();
+    if quick {
+        motionlab::experiment::resolve::merge(&mut table, &file.raw.quick);
+    }
+    let params: Table1Params = toml::Value::Table(table)
+        .try_into()
+        .map_err(|e| anyhow!("{}: [params]: {e}", path.display()))?;
+    motionlab::experiment::resolve::Validate::validate(&params)
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    eprintln!("{net} N{steps}: loading from the emulator cache, or training (may take minutes)…");
+    let e = table1_emulator(&params, file.raw.seed, net, steps)?;
+    let n = ((duration / e.dt()).round() as usize).max(1);
+    let mut csv = String::from("t");
+    for name in &names {
+        csv.push(',');
+        csv.push_str(name);
+    }
+    csv.push('\n');
+    e.rollout(
+        state,
+        n,
+        |t, u| {
+            if let Some(s) = &schedule {
+                u.copy_from_slice(s.at(t));
+            }
+        },
+        |t, x| {
+            csv.push_str(&format!("{t}"));
+            for v in x {
+                csv.push_str(&format!(",{v}"));
+            }
+            csv.push('\n');
+        },
+    )?;
+    match out {
+        Some(p) => motionlab::experiment::output::atomic_write(p, csv.as_bytes())?,
+        None => std::io::stdout().write_all(csv.as_bytes())?,
+    }
+    Ok(())
 }
 
 fn simulate(

@@ -332,3 +332,103 @@ fn na_baselines_swim_quick_traces_every_method_on_its_substrates() {
     assert_eq!(f.len(), runs.len());
     figure_exists(&d, "na_baselines_swim_objective");
 }
+
+#[test]
+fn emulate_writes_simulates_columns_one_row_per_super_step_and_reuses_the_cache() {
+    let d = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    let exp = exp.to_str().unwrap();
+    std::fs::write(
+        d.path().join("u.csv"),
+        "t,accel,steer\n0,1.0,0.0\n2,0.0,0.2\n",
+    )
+    .unwrap();
+    let state = "--state=-15,-8,0.4,0,0,0";
+    let args = |out: &'static str| {
+        vec![
+            "--experiments",
+            exp,
+            "emulate",
+            "truck",
+            "--quick",
+            "--steps",
+            "50",
+            state,
+            "--controls",
+            "u.csv",
+            "--duration",
+            "5",
+            "--out",
+            out,
+        ]
+    };
+    // A bad state is rejected before any training.
+    let bad = motionlab(
+        d.path(),
+        &[
+            "--experiments",
+            exp,
+            "emulate",
+            "truck",
+            "--quick",
+            "--state=1,2",
+            "--duration",
+            "5",
+        ],
+    );
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("6 state variables"));
+    assert!(!d.path().join("target/motionlab-cache").exists());
+    ok(&motionlab(d.path(), &args("emu.csv")));
+    ok(&motionlab(
+        d.path(),
+        &[
+            "simulate",
+            "truck",
+            state,
+            "--controls",
+            "u.csv",
+            "--duration",
+            "5",
+            "--out",
+            "sim.csv",
+        ],
+    ));
+    let (emu, sim) = (d.path().join("emu.csv"), d.path().join("sim.csv"));
+    assert_eq!(header(&emu), header(&sim));
+    let (e, s) = (rows(&emu), rows(&sim));
+    // 0.5 s super-steps over 5 s: the start and 10 steps, at the simulator's times.
+    assert_eq!(e.len(), 11);
+    assert_eq!(e[0], s[0]);
+    for r in &e {
+        let t: f64 = r[0].parse().unwrap();
+        let twin = s
+            .iter()
+            .find(|q| (q[0].parse::<f64>().unwrap() - t).abs() < 1e-9);
+        assert!(twin.is_some(), "no simulator row at t = {t}");
+    }
+    // The emulated truck accelerates forward as the simulated one does.
+    let x = |rows: &[Vec<String>]| rows[rows.len() - 1][0..2].to_vec();
+    let moved = |p: Vec<String>| -> f64 {
+        (p[0].parse::<f64>().unwrap() + 15.0).hypot(p[1].parse::<f64>().unwrap() + 8.0)
+    };
+    let (me, ms) = (moved(x(&e)), moved(x(&s)));
+    assert!(
+        ms > 5.0 && (me - ms).abs() < 0.5 * ms,
+        "emulator {me} m vs simulator {ms} m"
+    );
+    // The net was cached; a rerun loads it and writes the same file.
+    assert!(
+        d.path()
+            .join("target/motionlab-cache")
+            .read_dir()
+            .unwrap()
+            .count()
+            >= 1
+    );
+    ok(&motionlab(d.path(), &args("emu2.csv")));
+    assert_eq!(
+        std::fs::read(&emu).unwrap(),
+        std::fs::read(d.path().join("emu2.csv")).unwrap()
+    );
+}

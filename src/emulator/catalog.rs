@@ -86,6 +86,17 @@ impl NetModel {
         }
     }
 
+    /// The physical model's name in `motionlab describe` / `simulate` (same state and controls).
+    pub fn physics_name(self) -> &'static str {
+        match self {
+            Self::PendulumPassive => "pendulum3_passive",
+            Self::PendulumActive => "pendulum3",
+            Self::PendulumExt => "pendulum3_ext",
+            Self::Truck => "truck",
+            Self::Lander => "lander",
+        }
+    }
+
     /// Number of state variables.
     pub fn state_dim(self) -> usize {
         match self {

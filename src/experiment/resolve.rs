@@ -189,7 +189,8 @@ fn set_path(table: &mut toml::Table, key: &str, value: toml::Value) -> Result<()
     Ok(())
 }
 
-fn merge(into: &mut toml::Table, from: &toml::Table) {
+/// Deep-merges `from` into `into`: tables merge key by key, any other value replaces.
+pub fn merge(into: &mut toml::Table, from: &toml::Table) {
     for (k, v) in from {
         match (into.get_mut(k), v) {
             (Some(toml::Value::Table(a)), toml::Value::Table(b)) => merge(a, b),

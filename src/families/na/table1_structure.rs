@@ -13,8 +13,12 @@
 //! train_error, heldout_error).
 
 use crate::emulator::cache::{fnv1a, EmulatorCache};
-use crate::emulator::catalog::{rollout_error, BuildSpec, NetSpec, TrainSettings, Trained};
-use crate::emulator::hierarchy::{build_dolphin, BuiltDolphin, HierarchyNet, HierarchySpec};
+use crate::emulator::catalog::{
+    rollout_error, BuildSpec, NetModel, NetSpec, TrainSettings, Trained,
+};
+use crate::emulator::hierarchy::{
+    build_dolphin, BuiltDolphin, DolphinEmulator, HierarchyNet, HierarchySpec,
+};
 use crate::emulator::mlp::Mlp;
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
@@ -180,6 +184,117 @@ pub fn build_spec(
 /// The emulator of `spec`, from the cache ([`EmulatorCache::from_env`]) or trained now.
 pub fn build_emulator(spec: &BuildSpec) -> Result<Trained, Error> {
     EmulatorCache::from_env().get_or_train(spec).map_err(other)
+}
+
+/// A Table 1 emulator ready to step, catalog net or dolphin hierarchy (`motionlab emulate`).
+pub enum Table1Emulator {
+    /// A single net (pendulums, truck, lander).
+    Net(NetModel, Box<crate::emulator::Emulator>),
+    /// The hierarchical dolphin.
+    Dolphin(Box<DolphinEmulator>),
+}
+
+/// Net names `motionlab emulate` accepts.
+pub const EMULATOR_NAMES: [&str; 6] = [
+    "pendulum_passive",
+    "pendulum_active",
+    "pendulum_ext",
+    "truck",
+    "lander",
+    "dolphin",
+];
+
+impl Table1Emulator {
+    /// The physical model it emulates, by its `describe` name.
+    pub fn physics_name(&self) -> &'static str {
+        match self {
+            Self::Net(m, _) => m.physics_name(),
+            Self::Dolphin(_) => "dolphin",
+        }
+    }
+
+    /// The super timestep Δt (s).
+    pub fn dt(&self) -> f64 {
+        match self {
+            Self::Net(_, e) => e.dt(),
+            Self::Dolphin(d) => d.dt(),
+        }
+    }
+
+    /// Emulates `steps` super-steps from `x0` with controls `control(k, t, u)` held over each;
+    /// `observe(t, x)` sees the start and every step.
+    pub fn rollout(
+        &self,
+        x0: &[f64],
+        steps: usize,
+        mut control: impl FnMut(f64, &mut [f64]),
+        mut observe: impl FnMut(f64, &[f64]),
+    ) -> Result<(), crate::physics::BlowUp> {
+        let n = x0.len();
+        let (mut x, mut next) = (x0.to_vec(), vec![0.0; n]);
+        let name = self.physics_name();
+        observe(0.0, &x);
+        let dt = self.dt();
+        let mut u = vec![0.0; crate::physics::model_by_name(name).map_or(0, |m| m.control_dim())];
+        // One scratch per kind, made once.
+        let mut net_scratch = match self {
+            Self::Net(_, e) => Some(e.scratch()),
+            Self::Dolphin(_) => None,
+        };
+        let mut dolphin_scratch = match self {
+            Self::Dolphin(d) => Some(d.scratch()),
+            Self::Net(..) => None,
+        };
+        for k in 0..steps {
+            let t = k as f64 * dt;
+            control(t, &mut u);
+            match self {
+                Self::Net(_, e) => {
+                    e.predict(&x, &u, net_scratch.as_mut().expect("made"), &mut next)
+                }
+                Self::Dolphin(d) => {
+                    d.predict(&x, &u, dolphin_scratch.as_mut().expect("made"), &mut next)
+                }
+            }
+            std::mem::swap(&mut x, &mut next);
+            let t1 = (k + 1) as f64 * dt;
+            crate::physics::check_finite(name, k + 1, t1, &x)?;
+            observe(t1, &x);
+        }
+        Ok(())
+    }
+}
+
+/// The Table 1 emulator `name` (one of [`EMULATOR_NAMES`]) at `steps` physical steps per
+/// emulator step, built exactly as `na_table1_structure` with these parameters and `seed` builds
+/// it (size, data, training, seed), so it comes from the cache when any experiment trained it.
+pub fn table1_emulator(
+    params: &Params,
+    seed: u64,
+    name: &str,
+    steps: usize,
+) -> Result<Table1Emulator, Error> {
+    if name == "dolphin" {
+        let d = params
+            .dolphin
+            .as_ref()
+            .ok_or_else(|| Error::Other("the Table 1 spec has no [params.dolphin]".into()))?;
+        let built = build_dolphin_emulator(&d.spec(seed, steps, params.example_scale))?;
+        return Ok(Table1Emulator::Dolphin(Box::new(built.emulator)));
+    }
+    let net = params
+        .nets
+        .iter()
+        .find(|n| n.model.name() == name)
+        .ok_or_else(|| {
+            Error::Other(format!(
+                "no net `{name}` in the Table 1 spec (nets: {})",
+                EMULATOR_NAMES.join(", ")
+            ))
+        })?;
+    let spec = build_spec(seed, net, steps, params.example_scale, &params.training);
+    let t = build_emulator(&spec)?;
+    Ok(Table1Emulator::Net(net.model, Box::new(t.emulator)))
 }
 
 /// Fresh episodes per net for the multi-step fidelity columns.
