@@ -175,6 +175,7 @@ impl Job for Params {
             trackers: &trackers,
             weights: vec![1.0, 1.0],
             lambda: self.lambda,
+            limits: None,
             mode: BlendMode::Lbc,
         };
         let tree = push_figure();
