@@ -186,6 +186,9 @@ fn lbc_diver_and_push_quick_runs_write_promised_outputs() {
     let d = run_quick("lbc_push_recovery", "2");
     let out = d.path().join("out/lbc_push_recovery");
     assert!(header(&out.join("weights.csv")).starts_with("t,alpha_forward,alpha_backward"));
+    assert!(
+        header(&out.join("weights.csv")).contains("alpha_forward_mirrored,alpha_forward_baseline")
+    );
     let text = std::fs::read_to_string(out.join("weights.csv")).unwrap();
     let alphas: Vec<f64> = text
         .lines()
