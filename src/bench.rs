@@ -150,6 +150,7 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             trackers: &trackers,
             weights: vec![1.0, 1.0],
             lambda: 1.0,
+            limits: None,
             mode: BlendMode::Lbc,
         };
         let (mut u, mut a, mut ui) = ([0.0], [0.0; 2], [0.0]);

@@ -129,10 +129,28 @@ fn lbc_acrobot_quick_lbc_beats_the_naive_blend() {
         assert!(!dist(p).is_nan(), "{p}");
     }
     assert!(dist("lbc") < dist("naive"), "{text}");
+    assert!(!dist("naive_sum").is_nan(), "{text}");
     assert!(
         header(&out.join("sweep.csv")).starts_with("theta1_deg,theta2_deg,policy,final_distance")
     );
-    for f in ["final_pose", "sweep"] {
+    assert!(header(&out.join("lambda_sweep.csv"))
+        .starts_with("lambda,test_final_distance,test_mean_entropy"));
+    assert!(header(&out.join("trajectories.csv")).contains("alpha1,alpha_entropy"));
+    let swingups = std::fs::read_to_string(out.join("swingups.csv")).unwrap();
+    assert!(swingups
+        .lines()
+        .next()
+        .unwrap()
+        .contains("first_swing_sign"));
+    // Every closed loop of the sweep respects the 9.81 N m hip torque limit of the spec.
+    let sweep = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let cols: Vec<&str> = sweep.lines().next().unwrap().split(',').collect();
+    let m = cols.iter().position(|c| *c == "max_abs_torque").unwrap();
+    for line in sweep.lines().skip(1) {
+        let v: f64 = line.split(',').nth(m).unwrap().parse().unwrap();
+        assert!(v <= 9.81, "{line}");
+    }
+    for f in ["final_pose", "sweep", "lambda"] {
         assert!(d
             .path()
             .join(format!("figs/lbc_acrobot_swingup_{f}.png"))
@@ -168,6 +186,9 @@ fn lbc_diver_and_push_quick_runs_write_promised_outputs() {
     let d = run_quick("lbc_push_recovery", "2");
     let out = d.path().join("out/lbc_push_recovery");
     assert!(header(&out.join("weights.csv")).starts_with("t,alpha_forward,alpha_backward"));
+    assert!(
+        header(&out.join("weights.csv")).contains("alpha_forward_mirrored,alpha_forward_baseline")
+    );
     let text = std::fs::read_to_string(out.join("weights.csv")).unwrap();
     let alphas: Vec<f64> = text
         .lines()

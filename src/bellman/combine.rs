@@ -157,6 +157,43 @@ mod tests {
     }
 
     #[test]
+    fn lambda_scales_between_a_switch_and_a_uniform_blend() {
+        // Values of three components; component 1 is cheapest.
+        let (w, v) = ([1.0, 1.0, 1.0], [12.0, 3.0, 7.5]);
+        let mut a = [0.0; 3];
+        let mut last_entropy = -1.0;
+        for lambda in [0.01, 0.1, 1.0, 10.0, 100.0, 1e4] {
+            blend_weights(&w, &v, lambda, &mut a).unwrap();
+            let h = normalized_entropy(&a);
+            assert!(
+                h > last_entropy,
+                "entropy must grow with lambda: {h} at {lambda}"
+            );
+            last_entropy = h;
+        }
+        // Small lambda: a switch to the cheapest component.
+        blend_weights(&w, &v, 0.01, &mut a).unwrap();
+        assert!(a[1] > 1.0 - 1e-12 && normalized_entropy(&a) < 1e-9, "{a:?}");
+        // Large lambda: uniform (the fixed weights).
+        blend_weights(&w, &v, 1e6, &mut a).unwrap();
+        assert!(a.iter().all(|x| (x - 1.0 / 3.0).abs() < 1e-5), "{a:?}");
+        assert!(normalized_entropy(&a) > 1.0 - 1e-9);
+        // Large lambda with unequal weights tends to w / sum(w), the naive blend.
+        blend_weights(&[3.0, 1.0, 0.0], &v, 1e6, &mut a).unwrap();
+        assert!(
+            (a[0] - 0.75).abs() < 1e-5 && (a[1] - 0.25).abs() < 1e-5,
+            "{a:?}"
+        );
+        // Only value differences matter: shifting every value leaves alpha unchanged.
+        let mut b = [0.0; 3];
+        blend_weights(&w, &v, 2.0, &mut a).unwrap();
+        blend_weights(&w, &[v[0] + 1e3, v[1] + 1e3, v[2] + 1e3], 2.0, &mut b).unwrap();
+        for i in 0..3 {
+            assert!((a[i] - b[i]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
     fn blend_controls_is_a_weighted_sum() {
         let mut out = [0.0; 2];
         blend_controls(&[0.25, 0.75], &[&[4.0, 0.0], &[0.0, 8.0]], &mut out);
@@ -169,8 +206,11 @@ mod tests {
 pub enum BlendMode {
     /// One component alone.
     Single(usize),
-    /// Fixed normalized weights w_i / Σ w_j (the naive blend).
+    /// Fixed normalized weights w_i / Σ w_j (the naive blend as an average).
     Naive,
+    /// Fixed weights w_i, not normalized: Σ w_i π_i (with w = 1, the sum of the component
+    /// controls, the naive blend as LBC §6.2 describes it: "simply sums the results").
+    Sum,
     /// Linear Bellman combination: α_i ∝ w_i exp(−v̂_i(x, t)/λ).
     Lbc,
 }
@@ -187,11 +227,14 @@ pub struct TrackerBlend<'a> {
     pub lambda: f64,
     /// How to combine.
     pub mode: BlendMode,
+    /// Symmetric actuator limits |u_j| ≤ limits[j] applied to the blended control (the
+    /// combined policy drives the same torque-limited character as its components).
+    pub limits: Option<&'a [f64]>,
 }
 
 impl TrackerBlend<'_> {
-    /// Writes the control at state `x`, step `k` into `u` and the blend weights into `alpha`
-    /// (scratch `ui` of the control's length). Does not allocate.
+    /// Writes the control at state `x`, step `k` into `u` (clamped to `limits`) and the blend
+    /// weights into `alpha` (scratch `ui` of the control's length). Does not allocate.
     pub fn control(
         &self,
         x: &[f64],
@@ -214,6 +257,7 @@ impl TrackerBlend<'_> {
                     *a = w / s;
                 }
             }
+            BlendMode::Sum => alpha.copy_from_slice(&self.weights),
             BlendMode::Lbc => {
                 let mut values = [0.0f64; 16];
                 assert!(n <= values.len(), "at most 16 components");
@@ -233,6 +277,26 @@ impl TrackerBlend<'_> {
                 *o += a * c;
             }
         }
+        if let Some(limits) = self.limits {
+            for (o, &l) in u.iter_mut().zip(limits) {
+                *o = o.clamp(-l, l);
+            }
+        }
         Ok(())
     }
+}
+
+/// Normalized entropy −Σ α_i ln α_i / ln n of blend weights, in [0, 1]: 0 when one component
+/// has all the weight (a switch), 1 when the weights are uniform. 0 for a single component.
+pub fn normalized_entropy(alpha: &[f64]) -> f64 {
+    if alpha.len() < 2 {
+        return 0.0;
+    }
+    let h: f64 = alpha
+        .iter()
+        .filter(|&&a| a > 0.0)
+        .map(|&a| -a * a.ln())
+        .sum();
+    // + 0.0 turns the −0 of a single full weight into 0.
+    h / (alpha.len() as f64).ln() + 0.0
 }

@@ -304,6 +304,7 @@ impl Job for InterpolationParams {
                                 trackers: &trackers,
                                 weights: w.clone(),
                                 lambda: d.lambda,
+                                limits: None,
                                 mode,
                             };
                             let (xn, _) = d.execute(&blend, &x0, &cost)?;
@@ -469,6 +470,7 @@ impl Job for CoordinationParams {
                             trackers: &trackers,
                             weights: ones.clone(),
                             lambda: d.lambda,
+                            limits: None,
                             mode,
                         };
                         let (xn, j) = d.execute(&blend, &x0, &cost)?;
