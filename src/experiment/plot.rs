@@ -8,7 +8,9 @@
 
 use super::output::temp_path;
 use super::Error;
-use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::combinators::LogCoord;
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, ValueFormatter};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -91,8 +93,11 @@ pub struct Panel {
 /// Corner of the legend box.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Legend {
-    /// Upper right (default).
+    /// The corner whose legend-sized box covers the fewest drawn data (default; ties go to
+    /// upper right, upper left, lower right, lower left in that order).
     #[default]
+    Auto,
+    /// Upper right.
     UpperRight,
     /// Upper left.
     UpperLeft,
@@ -353,6 +358,34 @@ pub(crate) fn tick(v: f64, snap: f64) -> String {
     }
 }
 
+/// Whether an axis's ticks need scientific notation (one of them is >= 1e4 or < 1e-3 in
+/// magnitude and not zero): then every label of that axis is written so.
+fn needs_sci(ticks: &[f64], snap: f64) -> bool {
+    ticks
+        .iter()
+        .any(|&v| tick(v, snap) != "0" && (v.abs() >= 1e4 || v.abs() < 1e-3))
+}
+
+/// A tick label in one axis-wide format: scientific (`2.5e-5`, `1e3`) when `sci`, else [`tick`].
+pub(crate) fn tick_as(v: f64, snap: f64, sci: bool) -> String {
+    let plain = tick(v, snap);
+    if !sci || plain == "0" {
+        return plain;
+    }
+    let s = format!("{v:.2e}");
+    match s.split_once('e') {
+        Some((m, e)) => {
+            let m = if m.contains('.') {
+                m.trim_end_matches('0').trim_end_matches('.')
+            } else {
+                m
+            };
+            format!("{m}e{e}")
+        }
+        None => s,
+    }
+}
+
 fn render<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let rows = fig.count().div_ceil(fig.columns);
@@ -516,7 +549,7 @@ fn draw_panel<DB: DrawingBackend>(
             p.log_x,
         ),
     };
-    let yr = match p.y_range {
+    let mut yr = match p.y_range {
         Some(r) => r,
         None => span(data.iter().flatten().map(|q| q.1).collect(), p.log_y),
     };
@@ -530,6 +563,40 @@ fn draw_panel<DB: DrawingBackend>(
         (12, 4),
         ("sans-serif", 15).into_font().color(&BLACK),
     ))?;
+    // The legend's corner, chosen before drawing; where every corner would cover data and the
+    // y range is ours to choose, the top is raised to leave room for it.
+    let labels: Vec<usize> = p
+        .series
+        .iter()
+        .filter(|s| !s.label.is_empty())
+        .map(|s| s.label.chars().count())
+        .collect();
+    let mut corner = p.legend;
+    if corner == Legend::Auto && !labels.is_empty() {
+        let (w, h) = plot_area.dim_in_pixel();
+        let px = ((w as i32 - 82).max(50), (h as i32 - 62).max(50));
+        let size = (
+            labels.iter().copied().max().unwrap_or(0) as i32 * 8 + 40,
+            labels.len() as i32 * 19 + 10,
+        );
+        let place = |yr: (f64, f64)| {
+            let cover = covered_pixels(p, &data, (xr, yr), px);
+            emptiest_corner(((0, 0), px), size, &cover)
+        };
+        let (c, n) = place(yr);
+        corner = c;
+        if n > 0 && p.y_range.is_none() && size.1 + 12 < px.1 / 2 {
+            let (t0, t1) = (tr(yr.0, p.log_y), tr(yr.1, p.log_y));
+            if let (Some(t0), Some(t1)) = (t0, t1) {
+                let t1 = t0 + (t1 - t0) * px.1 as f64 / (px.1 - size.1 - 12) as f64;
+                let raised = (yr.0, if p.log_y { 10f64.powf(t1) } else { t1 });
+                let (c2, n2) = place(raised);
+                if n2 < n {
+                    (corner, yr) = (c2, raised);
+                }
+            }
+        }
+    }
     let builder = || {
         let mut b = ChartBuilder::on(&plot_area);
         b.margin(10).x_label_area_size(42).y_label_area_size(62);
@@ -539,39 +606,247 @@ fn draw_panel<DB: DrawingBackend>(
         if p.log_x { 0.0 } else { xr.1 - xr.0 },
         if p.log_y { 0.0 } else { yr.1 - yr.0 },
     );
+    let xt = if p.x_categories.is_empty() {
+        axis_ticks(xr.0, xr.1, p.log_x)
+    } else {
+        (0..p.x_categories.len())
+            .map(|i| i as f64)
+            .filter(|v| (xr.0.min(xr.1)..=xr.0.max(xr.1)).contains(v))
+            .collect()
+    };
+    let yt = axis_ticks(yr.0, yr.1, p.log_y);
+    let sci = (
+        p.x_categories.is_empty() && needs_sci(&xt, snap.0),
+        needs_sci(&yt, snap.1),
+    );
     match (p.log_x, p.log_y) {
         (false, false) => finish(
-            builder().build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)?,
+            builder().build_cartesian_2d(
+                Ticked::new(RangedCoordf64::from(xr.0..xr.1), xt.clone()),
+                Ticked::new(RangedCoordf64::from(yr.0..yr.1), yt.clone()),
+            )?,
             p,
             data,
-            snap,
+            (snap, sci, corner),
         ),
         (true, false) => finish(
-            builder().build_cartesian_2d((xr.0..xr.1).log_scale(), yr.0..yr.1)?,
+            builder().build_cartesian_2d(
+                Ticked::new(LogCoord::from((xr.0..xr.1).log_scale()), xt.clone()),
+                Ticked::new(RangedCoordf64::from(yr.0..yr.1), yt.clone()),
+            )?,
             p,
             data,
-            snap,
+            (snap, sci, corner),
         ),
         (false, true) => finish(
-            builder().build_cartesian_2d(xr.0..xr.1, (yr.0..yr.1).log_scale())?,
+            builder().build_cartesian_2d(
+                Ticked::new(RangedCoordf64::from(xr.0..xr.1), xt.clone()),
+                Ticked::new(LogCoord::from((yr.0..yr.1).log_scale()), yt.clone()),
+            )?,
             p,
             data,
-            snap,
+            (snap, sci, corner),
         ),
         (true, true) => finish(
-            builder().build_cartesian_2d((xr.0..xr.1).log_scale(), (yr.0..yr.1).log_scale())?,
+            builder().build_cartesian_2d(
+                Ticked::new(LogCoord::from((xr.0..xr.1).log_scale()), xt.clone()),
+                Ticked::new(LogCoord::from((yr.0..yr.1).log_scale()), yt.clone()),
+            )?,
             p,
             data,
-            snap,
+            (snap, sci, corner),
         ),
     }
+}
+
+/// An axis with our own labelled ticks ([`axis_ticks`]) over plotters' linear or log axis.
+struct Ticked<R> {
+    inner: R,
+    ticks: Vec<f64>,
+}
+
+impl<R> Ticked<R> {
+    fn new(inner: R, ticks: Vec<f64>) -> Self {
+        Self { inner, ticks }
+    }
+}
+
+impl<R: Ranged<ValueType = f64>> Ranged for Ticked<R> {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        self.inner.map(value, limit)
+    }
+    fn key_points<Hint: KeyPointHint>(&self, _hint: Hint) -> Vec<f64> {
+        self.ticks.clone()
+    }
+    fn range(&self) -> std::ops::Range<f64> {
+        self.inner.range()
+    }
+}
+
+/// A round step near `span / 6` (1, 2, 2.5 or 5 times a power of ten).
+fn nice_step(span: f64) -> f64 {
+    let raw = span.abs() / 6.0;
+    let p = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 2.5, 5.0, 10.0]
+        .iter()
+        .map(|m| m * p)
+        .find(|&s| s >= raw)
+        .unwrap_or(10.0 * p)
+}
+
+/// Multiples of `step` in [lo, hi].
+fn multiples(lo: f64, hi: f64, step: f64) -> Vec<f64> {
+    let first = (lo / step - 1e-9).ceil() as i64;
+    let last = (hi / step + 1e-9).floor() as i64;
+    (first..=last).map(|k| k as f64 * step).collect()
+}
+
+/// The labelled ticks of an axis over [lo, hi]: round values, at least 4 of them wherever the
+/// range allows. Linear axes: multiples of a 1-2-2.5-5 step. Log axes: powers of ten, then
+/// 1-2-5 and 1…9 multiples of them where a decade gives too few, then round linear values for
+/// ranges narrower than a factor of about 2; more than 10 decades are thinned.
+pub fn axis_ticks(lo: f64, hi: f64, log: bool) -> Vec<f64> {
+    let (lo, hi) = (lo.min(hi), lo.max(hi));
+    if !(lo.is_finite() && hi.is_finite()) || hi <= lo {
+        return Vec::new();
+    }
+    let linear = |lo: f64, hi: f64| {
+        let mut step = nice_step(hi - lo);
+        let mut t = multiples(lo, hi, step);
+        while t.len() < 4 && step > 0.0 {
+            step /= 2.0;
+            t = multiples(lo, hi, step);
+        }
+        t
+    };
+    if !log || lo <= 0.0 {
+        return linear(lo, hi);
+    }
+    let (d0, d1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    let within = |v: &f64| *v >= lo * (1.0 - 1e-9) && *v <= hi * (1.0 + 1e-9);
+    for mults in [
+        &[1.0][..],
+        &[1.0, 2.0, 5.0],
+        &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0],
+    ] {
+        let t: Vec<f64> = (d0..=d1)
+            .flat_map(|d| mults.iter().map(move |m| m * 10f64.powi(d)))
+            .filter(within)
+            .collect();
+        if t.len() >= 4 {
+            let every = t.len().div_ceil(10);
+            if every == 1 {
+                return t;
+            }
+            if mults.len() > 1 {
+                return t.into_iter().step_by(every).collect();
+            }
+            // Thin to decades whose exponent is a multiple of `every` (1e-4, 1e-2, 1e0, …).
+            let aligned: Vec<f64> = t
+                .iter()
+                .copied()
+                .filter(|v| (v.log10().round() as i64).rem_euclid(every as i64) == 0)
+                .collect();
+            return if aligned.len() >= 4 {
+                aligned
+            } else {
+                t.into_iter().step_by(every).collect()
+            };
+        }
+    }
+    linear(lo, hi)
+}
+
+/// The legend corner for `Legend::Auto`: the one whose box of `size` pixels (inside `area`'s
+/// pixel rectangle) covers the fewest of the drawn data's pixels `points` (polylines sampled
+/// every few pixels by the caller).
+pub fn emptiest_corner(
+    area: ((i32, i32), (i32, i32)),
+    size: (i32, i32),
+    points: &[(i32, i32)],
+) -> (Legend, usize) {
+    let ((x0, y0), (x1, y1)) = area;
+    let (w, h) = (size.0 + 12, size.1 + 12);
+    let boxes = [
+        (Legend::UpperRight, (x1 - w, y0, x1, y0 + h)),
+        (Legend::UpperLeft, (x0, y0, x0 + w, y0 + h)),
+        (Legend::LowerRight, (x1 - w, y1 - h, x1, y1)),
+        (Legend::LowerLeft, (x0, y1 - h, x0 + w, y1)),
+    ];
+    let covered = |(a, b, c, d): (i32, i32, i32, i32)| {
+        points
+            .iter()
+            .filter(|&&(x, y)| x >= a && x <= c && y >= b && y <= d)
+            .count()
+    };
+    boxes
+        .iter()
+        .map(|&(corner, b)| (corner, covered(b)))
+        .min_by_key(|&(_, n)| n)
+        .unwrap_or((Legend::UpperRight, 0))
+}
+
+/// The pixels (in a `px`-sized plotting rectangle, y down) that a panel's drawn data cover:
+/// points, polylines sampled every 3 pixels, bars every 4 pixels up from the axis.
+fn covered_pixels(
+    p: &Panel,
+    data: &[Vec<(f64, f64)>],
+    (xr, yr): ((f64, f64), (f64, f64)),
+    px: (i32, i32),
+) -> Vec<(i32, i32)> {
+    let axis = |r: (f64, f64), log: bool| (tr(r.0, log), tr(r.1, log));
+    let (Some(x0), Some(x1)) = axis(xr, p.log_x) else {
+        return Vec::new();
+    };
+    let (Some(y0), Some(y1)) = axis(yr, p.log_y) else {
+        return Vec::new();
+    };
+    let map = |(x, y): (f64, f64)| -> Option<(i32, i32)> {
+        let u = (tr(x, p.log_x)? - x0) / (x1 - x0);
+        let v = (tr(y, p.log_y)? - y0) / (y1 - y0);
+        (u.is_finite() && v.is_finite()).then(|| {
+            (
+                (u.clamp(-1.0, 2.0) * px.0 as f64) as i32,
+                ((1.0 - v.clamp(-1.0, 2.0)) * px.1 as f64) as i32,
+            )
+        })
+    };
+    let mut out = Vec::new();
+    for (s, pts) in p.series.iter().zip(data) {
+        let pix: Vec<(i32, i32)> = pts.iter().filter_map(|&q| map(q)).collect();
+        match s.mark {
+            Mark::Points => out.extend(&pix),
+            Mark::Bars { half_width } => {
+                for &(x, y) in pts {
+                    let (Some(a), Some(b)) = (map((x - half_width, y)), map((x + half_width, y)))
+                    else {
+                        continue;
+                    };
+                    for xx in (a.0..=b.0).step_by(4).chain([b.0]) {
+                        out.extend((a.1.min(px.1)..=px.1).step_by(4).map(|yy| (xx, yy)));
+                    }
+                }
+            }
+            _ => {
+                out.extend(pix.first());
+                for w in pix.windows(2) {
+                    let (dx, dy) = (w[1].0 - w[0].0, w[1].1 - w[0].1);
+                    let n = (dx.abs().max(dy.abs()) / 3).clamp(1, 400);
+                    out.extend((1..=n).map(|k| (w[0].0 + dx * k / n, w[0].1 + dy * k / n)));
+                }
+            }
+        }
+    }
+    out
 }
 
 fn finish<'a, DB, X, Y>(
     mut chart: ChartContext<'a, DB, Cartesian2d<X, Y>>,
     p: &Panel,
     data: Vec<Vec<(f64, f64)>>,
-    snap: (f64, f64),
+    (snap, sci, corner): ((f64, f64), (bool, bool), Legend),
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
 where
     DB: DrawingBackend + 'a,
@@ -583,7 +858,7 @@ where
         .x_desc(p.x_label.as_str())
         .x_label_formatter(&|v| {
             if p.x_categories.is_empty() {
-                tick(*v, snap.0)
+                tick_as(*v, snap.0, sci.0)
             } else {
                 let i = v.round();
                 match p.x_categories.get(i as usize) {
@@ -592,11 +867,12 @@ where
                 }
             }
         })
-        .y_label_formatter(&|v| tick(*v, snap.1))
+        .y_label_formatter(&|v| tick_as(*v, snap.1, sci.1))
         .x_labels(8)
         .y_labels(8)
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 15))
+        .bold_line_style(RGBColor(225, 225, 225))
         .light_line_style(RGBColor(235, 235, 235))
         .draw()?;
     let mut any_label = false;
@@ -624,8 +900,31 @@ where
         };
         if !s.label.is_empty() {
             any_label = true;
+            let sample = LegendSample::of(s.mark);
             anno.label(s.label.clone()).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(3))
+                // One element type for every mark: unused parts are empty or transparent.
+                let piece = |k: usize| sample.pieces.get(k).cloned().unwrap_or_default();
+                let none = color.mix(0.0).filled();
+                EmptyElement::at((x, y))
+                    + PathElement::new(piece(0), color.stroke_width(3))
+                    + PathElement::new(piece(1), color.stroke_width(3))
+                    + Circle::new(
+                        (9, 0),
+                        sample.dot.unwrap_or(0),
+                        if sample.dot.is_some() {
+                            color.filled()
+                        } else {
+                            none
+                        },
+                    )
+                    + Rectangle::new(
+                        sample.bar.unwrap_or([(0, 0), (0, 0)]),
+                        if sample.bar.is_some() {
+                            color.filled()
+                        } else {
+                            none
+                        },
+                    )
             });
         }
     }
@@ -635,8 +934,8 @@ where
             .background_style(WHITE.mix(0.85))
             .border_style(RGBColor(180, 180, 180))
             .label_font(("sans-serif", 13))
-            .position(match p.legend {
-                Legend::UpperRight => SeriesLabelPosition::UpperRight,
+            .position(match corner {
+                Legend::Auto | Legend::UpperRight => SeriesLabelPosition::UpperRight,
                 Legend::UpperLeft => SeriesLabelPosition::UpperLeft,
                 Legend::LowerRight => SeriesLabelPosition::LowerRight,
                 Legend::LowerLeft => SeriesLabelPosition::LowerLeft,
@@ -644,4 +943,165 @@ where
             .draw()?;
     }
     Ok(())
+}
+
+/// What a legend entry's sample draws, relative to its anchor: line pieces, a dot, a bar.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LegendSample {
+    /// Polyline pieces (a dashed series has two with a gap).
+    pub pieces: Vec<Vec<(i32, i32)>>,
+    /// Radius of the marker dot at the sample's middle, if any.
+    pub dot: Option<i32>,
+    /// A filled bar, if any.
+    pub bar: Option<[(i32, i32); 2]>,
+}
+
+impl LegendSample {
+    /// The sample for a series drawn with `mark`: its own dash pattern, marker or bar.
+    pub fn of(mark: Mark) -> Self {
+        let line = |a: i32, b: i32| vec![(a, 0), (b, 0)];
+        let (pieces, dot, bar) = match mark {
+            Mark::Line => (vec![line(0, 18)], None, None),
+            Mark::Dashed => (vec![line(0, 6), line(12, 18)], None, None),
+            Mark::Points => (vec![], Some(3), None),
+            Mark::LinePoints => (vec![line(0, 18)], Some(3), None),
+            Mark::Bars { .. } => (vec![], None, Some([(0, -5), (18, 5)])),
+        };
+        Self { pieces, dot, bar }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_axis_gets_at_least_four_round_labelled_ticks_log_axes_included() {
+        let cases = [
+            (0.0, 1.0, false),
+            (-3.2, 7.9, false),
+            (0.999, 1.001, false),
+            (-1e-7, 3e-7, false),
+            (1e3, 1.1e6, false),
+            (1e-6, 1e2, true),
+            (0.5, 3.0, true), // less than a decade: 1-2-5 multiples
+            (1.2, 2.1, true), // within a factor of 2: round linear values
+            (3e-3, 4e-3, true),
+            (1e-30, 1e30, true), // sixty decades: thinned
+        ];
+        for (lo, hi, log) in cases {
+            let t = axis_ticks(lo, hi, log);
+            assert!((4..=12).contains(&t.len()), "{lo}..{hi} log={log}: {t:?}");
+            for w in t.windows(2) {
+                assert!(w[0] < w[1], "{t:?} not increasing");
+            }
+            for v in &t {
+                assert!(*v >= lo - 1e-9 * (hi - lo).abs() && *v <= hi * (1.0 + 1e-9) + 1e-12);
+            }
+        }
+        // Powers of ten first on a log axis over many decades.
+        assert_eq!(
+            axis_ticks(1e-3, 1e3, true),
+            vec![1e-3, 1e-2, 1e-1, 1.0, 1e1, 1e2, 1e3]
+        );
+        // Round values on a linear one.
+        assert_eq!(
+            axis_ticks(0.0, 10.0, false),
+            vec![0.0, 2.0, 4.0, 6.0, 8.0, 10.0]
+        );
+    }
+
+    #[test]
+    fn an_axis_labels_all_its_ticks_in_one_format() {
+        let t = axis_ticks(1e-9, 1.0, true);
+        let sci = needs_sci(&t, 0.0);
+        assert!(sci);
+        let labels: Vec<String> = t.iter().map(|&v| tick_as(v, 0.0, sci)).collect();
+        assert!(labels.iter().all(|l| l.contains('e')), "{labels:?}");
+        assert_eq!(tick_as(2.5e-5, 0.0, true), "2.5e-5");
+        assert_eq!(tick_as(1.0, 0.0, true), "1e0");
+        assert_eq!(tick_as(0.25, 1.0, false), "0.25");
+        assert!(!needs_sci(&axis_ticks(0.0, 10.0, false), 10.0));
+    }
+
+    #[test]
+    fn legend_samples_show_the_dash_pattern_marker_or_bar_of_their_series() {
+        let line = LegendSample::of(Mark::Line);
+        let dashed = LegendSample::of(Mark::Dashed);
+        assert_eq!(line.pieces.len(), 1);
+        assert_eq!(dashed.pieces.len(), 2, "a dashed series shows a gap");
+        assert_ne!(line, dashed);
+        assert!(LegendSample::of(Mark::Points).pieces.is_empty());
+        assert!(LegendSample::of(Mark::Points).dot.is_some());
+        let lp = LegendSample::of(Mark::LinePoints);
+        assert!(lp.dot.is_some() && lp.pieces.len() == 1);
+        assert!(LegendSample::of(Mark::Bars { half_width: 0.3 })
+            .bar
+            .is_some());
+    }
+
+    #[test]
+    fn the_auto_legend_takes_the_emptiest_corner() {
+        let area = ((0, 0), (400, 300));
+        // A rising line from lower left to upper right: both of those corners are covered.
+        let rising: Vec<(i32, i32)> = (0..=400).map(|x| (x, 300 - x * 3 / 4)).collect();
+        let (c, _) = emptiest_corner(area, (100, 40), &rising);
+        assert!(matches!(c, Legend::UpperLeft | Legend::LowerRight), "{c:?}");
+        // Data everywhere but the lower left.
+        let mut pts = Vec::new();
+        for x in (0..=400).step_by(5) {
+            for y in (0..=300).step_by(5) {
+                if !(x < 150 && y > 200) {
+                    pts.push((x, y));
+                }
+            }
+        }
+        assert_eq!(
+            emptiest_corner(area, (100, 40), &pts),
+            (Legend::LowerLeft, 0)
+        );
+        // No data: upper right.
+        assert_eq!(
+            emptiest_corner(area, (100, 40), &[]),
+            (Legend::UpperRight, 0)
+        );
+    }
+
+    #[test]
+    fn a_chart_with_every_mark_and_log_axes_draws() {
+        let d = tempfile::tempdir().unwrap();
+        let pts: Vec<(f64, f64)> = (1..20).map(|i| (i as f64, (i as f64).powi(2))).collect();
+        let series = vec![
+            Series::line("line", pts.clone(), 0),
+            Series::line("dashed", pts.clone(), 1).mark(Mark::Dashed),
+            Series::line("points", pts.clone(), 2).mark(Mark::Points),
+            Series::line("line+points", pts.clone(), 3).mark(Mark::LinePoints),
+            Series::line("bars", pts, 4).mark(Mark::Bars { half_width: 0.3 }),
+        ];
+        let panel = |log_x, log_y| Panel {
+            title: "t".into(),
+            x_label: "x (m)".into(),
+            y_label: "y (m)".into(),
+            log_x,
+            log_y,
+            series: series.clone(),
+            ..Panel::default()
+        };
+        let fig = Figure::grid(
+            vec![
+                panel(false, false),
+                panel(true, false),
+                panel(false, true),
+                panel(true, true),
+            ],
+            2,
+        );
+        let sink = FigureSink {
+            dir: d.path().to_path_buf(),
+            id: "x".into(),
+        };
+        for p in sink.draw("marks", &fig).unwrap() {
+            assert!(std::fs::metadata(p).unwrap().len() > 1000);
+        }
+    }
 }

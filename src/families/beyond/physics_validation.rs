@@ -8,7 +8,7 @@
 //! accepted_steps, rejected_steps, evaluations), `passive_<model>` (start, t, state…, energy).
 
 use crate::experiment::output::{unique, Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{all_positive, ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family, Job, RunContext};
@@ -392,10 +392,7 @@ impl Family for PhysicsValidation {
                 log_x: true,
                 log_y: true,
                 series,
-                y_range: None,
-                x_range: None,
-                x_categories: Vec::new(),
-                legend: Legend::LowerRight,
+                ..Panel::default()
             });
         }
         files.extend(fig.draw("energy_drift", &Figure::grid(panels, 2))?);
@@ -431,10 +428,7 @@ impl Family for PhysicsValidation {
                     log_x: true,
                     log_y: true,
                     series: drift_series,
-                    y_range: None,
-                    x_range: None,
-                    x_categories: Vec::new(),
-                    legend: Legend::UpperLeft,
+                    ..Panel::default()
                 },
                 Panel {
                     title: "adaptive RK45: accepted steps vs tolerance".into(),
@@ -443,10 +437,7 @@ impl Family for PhysicsValidation {
                     log_x: true,
                     log_y: true,
                     series: step_series,
-                    y_range: None,
-                    x_range: None,
-                    x_categories: Vec::new(),
-                    legend: Legend::UpperRight,
+                    ..Panel::default()
                 },
             ];
             files.extend(fig.draw("adaptive", &Figure::grid(panels, 2))?);

@@ -23,7 +23,7 @@
 use super::lattices::lattice_by_name;
 use crate::control::search::SearchResult;
 use crate::experiment::output::{Table, Tables};
-use crate::experiment::plot::{Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Mark, Panel, Series};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Job, RunContext};
 use crate::physics::lattice::{Floor, LatticeModel};
@@ -475,7 +475,6 @@ pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &s
         x_label: x_label.into(),
         y_label: "objective".into(),
         series,
-        legend: Legend::LowerRight,
         ..Panel::default()
     }
 }

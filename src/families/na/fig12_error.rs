@@ -23,7 +23,7 @@ use super::table1_structure::{build_emulator, build_spec, validate_nets, validat
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family, Job, RunContext};
@@ -264,7 +264,6 @@ impl Family for NaError {
                 x_label: "time (s)".into(),
                 y_label: "mean |emulated - simulated| state".into(),
                 series,
-                legend: Legend::LowerRight,
                 ..Panel::default()
             });
         }

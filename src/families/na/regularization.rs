@@ -24,7 +24,7 @@ use super::table2_speedup::validate_regularizer;
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy::{self, Regularizer, Schedule};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
@@ -297,7 +297,6 @@ impl Family for NaRegularization {
             y_label: "RMS relative spring-length deviation".into(),
             log_y: true,
             series,
-            legend: Legend::UpperLeft,
             ..Panel::default()
         };
         let mut f = Figure::grid(vec![panel], 1);

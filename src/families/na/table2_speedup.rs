@@ -25,7 +25,7 @@ use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy::{self, BoundRegularizer, DolphinEmulator, Regularizer, Schedule};
 use crate::emulator::Emulator;
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
@@ -371,7 +371,6 @@ impl Family for NaSpeedup {
             y_label: "wall time (s)".into(),
             log_y: true,
             series,
-            legend: Legend::UpperRight,
             ..Panel::default()
         };
         let mut fig_ = Figure::grid(vec![panel], 1);
