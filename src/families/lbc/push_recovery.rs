@@ -522,7 +522,7 @@ mod tests {
         ))
         .unwrap();
         let spec: toml::Table = toml::from_str(&text).unwrap();
-        let mut p: Params = spec["params"].clone().try_into().unwrap();
+        let p: Params = spec["params"].clone().try_into().unwrap();
         let (trackers, _) = p.reaches().unwrap();
         let x0 = p.start();
         for k in [0, p.steps() / 4, p.steps() / 2, 3 * p.steps() / 4] {
@@ -550,7 +550,7 @@ mod tests {
         ))
         .unwrap();
         let spec: toml::Table = toml::from_str(&text).unwrap();
-        let mut p: Params = spec["params"].clone().try_into().unwrap();
+        let p: Params = spec["params"].clone().try_into().unwrap();
         let (trackers, _) = p.reaches().unwrap();
         let tugged = p.closed_loop(&trackers, 1.0).unwrap();
         let mirrored = p.closed_loop(&trackers, -1.0).unwrap();
