@@ -29,7 +29,7 @@
 use crate::bellman::combine::{blend_weights, normalized_entropy, BlendMode, TrackerBlend};
 use crate::bellman::projection::{project, GaussianReward};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
-use crate::control::lqr::{track, TrackingController};
+use crate::control::lqr::{track, track_with, TrackingController, ValueModel};
 use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
@@ -46,6 +46,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::{Path, PathBuf};
+
+/// Relative difference step of the second-order dynamics terms of the DDP value function
+/// (differences of finite-difference Jacobians, so larger than DDP's default).
+const DDP_VALUE_STEP: f64 = 1e-4;
 
 /// Index of the torso angle in the diver's state.
 const TORSO: usize = 2;
@@ -941,10 +945,35 @@ impl Job for CoordinationParams {
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let d = &self.dive;
         let cases: Vec<(f64, f64)> = self.omegas.iter().map(|&w| (w, 0.0)).collect();
-        let (_, trackers, examples) = d.optimize_all(ctx, &cases)?;
+        let (sols, trackers, examples) = d.optimize_all(ctx, &cases)?;
         let cost = d.cost(0.0);
+        // The same dives tracked with DDP's value function (second-order dynamics terms).
+        let map = d.map()?;
+        let ddp_trackers: Vec<TrackingController> = ctx.stage("ddp value", || {
+            sols.par_iter()
+                .map(|s| {
+                    track_with(
+                        &map,
+                        &cost,
+                        &s.x,
+                        &s.u,
+                        ValueModel::Ddp {
+                            fd_step: DDP_VALUE_STEP,
+                        },
+                    )
+                    .map_err(other)
+                })
+                .collect::<Result<_, _>>()
+        })?;
         let ones = vec![1.0; trackers.len()];
         let limits = d.torque_limits;
+        let blend_of = |ddp: bool, mode: BlendMode, lambda: f64| TrackerBlend {
+            trackers: if ddp { &ddp_trackers } else { &trackers },
+            weights: ones.clone(),
+            lambda,
+            limits: Some(&limits),
+            mode,
+        };
         let blend = |mode: BlendMode, lambda: f64| TrackerBlend {
             trackers: &trackers,
             weights: ones.clone(),
@@ -959,6 +988,7 @@ impl Job for CoordinationParams {
         type Out = (
             Vec<(&'static str, f64, f64, f64, f64)>,
             Vec<(f64, f64, f64)>,
+            Vec<(&'static str, f64, f64, f64)>,
         );
         let rows: Vec<Result<Out, Error>> = ctx.stage("coordinate", || {
             self.tests
@@ -991,7 +1021,20 @@ impl Job for CoordinationParams {
                             ))
                         })
                         .collect::<Result<Vec<_>, Error>>()?;
-                    Ok((out, sweep))
+                    let mut ddp = Vec::new();
+                    for (name, mode) in [
+                        ("lbc", BlendMode::Lbc),
+                        ("single", BlendMode::Single(self.single)),
+                    ] {
+                        let r = d.execute(&blend_of(true, mode, d.lambda()), &x0)?;
+                        ddp.push((
+                            name,
+                            wrap(entry(&r.final_state)).abs(),
+                            objective(&r),
+                            r.mean_entropy,
+                        ));
+                    }
+                    Ok((out, sweep, ddp))
                 })
                 .collect()
         });
@@ -1012,8 +1055,22 @@ impl Job for CoordinationParams {
             "mean_entropy",
             "objective_outcome",
         ]);
+        let mut values = Table::new(&[
+            "initial_omega",
+            "value_function",
+            "method",
+            "entry_error",
+            "objective",
+            "mean_entropy",
+        ]);
         for (&w, r) in self.tests.iter().zip(rows) {
-            let (out, sweep) = r?;
+            let (out, sweep, ddp) = r?;
+            for &(m, e, j, h, _) in &out {
+                values.push(row![w, "lqr", m, e, j, h]);
+            }
+            for &(m, e, j, h) in &ddp {
+                values.push(row![w, "ddp", m, e, j, h]);
+            }
             let (jl, js) = (out[0].2, out[1].2);
             for &(m, e, j, h, t) in &out {
                 let outcome = if m == "lbc" {
@@ -1047,6 +1104,7 @@ impl Job for CoordinationParams {
             ("coordination", table),
             ("dives", examples),
             ("lambda_sweep", lam),
+            ("value_comparison", values),
             ("rule", rule),
         ]))
     }
@@ -1172,6 +1230,40 @@ impl Family for LbcDiverCoordination {
                     sig(hm)
                 ));
             }
+        }
+        let vc = read_csv(&dir.join("value_comparison.csv"))?;
+        let (vw, vf, vm, ve, vj) = (
+            df_f64(&vc, "initial_omega")?,
+            df_str(&vc, "value_function")?,
+            df_str(&vc, "method")?,
+            df_f64(&vc, "entry_error")?,
+            df_f64(&vc, "objective")?,
+        );
+        let find = |w: f64, f: &str, m: &str| {
+            (0..vw.len()).find(|&r| vw[r] == w && vf[r] == f && vm[r] == m)
+        };
+        md.push_str("\nTrackers with DDP's value function and gains (second-order dynamics terms, LBC §5.2) beside the LQR ones (not judged):\n\n| initial ω (rad/s) | LBC objective, LQR value | LBC objective, DDP value | single, LQR | single, DDP | LBC entry error, LQR / DDP |\n| --- | --- | --- | --- | --- | --- |\n");
+        let mut ws: Vec<f64> = vw.clone();
+        ws.dedup();
+        for &x in &ws {
+            let (Some(a), Some(b), Some(c), Some(e)) = (
+                find(x, "lqr", "lbc"),
+                find(x, "ddp", "lbc"),
+                find(x, "lqr", "single"),
+                find(x, "ddp", "single"),
+            ) else {
+                continue;
+            };
+            md.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} / {} |\n",
+                sig(x),
+                sig(vj[a]),
+                sig(vj[b]),
+                sig(vj[c]),
+                sig(vj[e]),
+                sig(ve[a]),
+                sig(ve[b])
+            ));
         }
         let held = worse == 0 && better * 2 >= n && (lv > sv || lv == n);
         let partly = better > worse || lv > sv;
