@@ -949,7 +949,9 @@ impl Job for CoordinationParams {
         let cost = d.cost(0.0);
         // The same dives tracked with DDP's value function (second-order dynamics terms).
         let map = d.map()?;
-        let ddp_trackers: Vec<TrackingController> = ctx.stage("ddp value", || {
+        // With the second-order terms Q_uu need not be positive definite away from a converged
+        // optimum (e.g. at the quick budgets); then the comparison is left out.
+        let ddp_trackers: Option<Vec<TrackingController>> = ctx.stage("ddp value", || {
             sols.par_iter()
                 .map(|s| {
                     track_with(
@@ -961,14 +963,17 @@ impl Job for CoordinationParams {
                             fd_step: DDP_VALUE_STEP,
                         },
                     )
-                    .map_err(other)
+                    .ok()
                 })
-                .collect::<Result<_, _>>()
-        })?;
+                .collect::<Option<Vec<_>>>()
+        });
         let ones = vec![1.0; trackers.len()];
         let limits = d.torque_limits;
         let blend_of = |ddp: bool, mode: BlendMode, lambda: f64| TrackerBlend {
-            trackers: if ddp { &ddp_trackers } else { &trackers },
+            trackers: match (&ddp_trackers, ddp) {
+                (Some(t), true) => t,
+                _ => &trackers,
+            },
             weights: ones.clone(),
             lambda,
             limits: Some(&limits),
@@ -1022,10 +1027,14 @@ impl Job for CoordinationParams {
                         })
                         .collect::<Result<Vec<_>, Error>>()?;
                     let mut ddp = Vec::new();
+                    let models = if ddp_trackers.is_some() { 2 } else { 0 };
                     for (name, mode) in [
                         ("lbc", BlendMode::Lbc),
                         ("single", BlendMode::Single(self.single)),
-                    ] {
+                    ]
+                    .into_iter()
+                    .take(models)
+                    {
                         let r = d.execute(&blend_of(true, mode, d.lambda()), &x0)?;
                         ddp.push((
                             name,
@@ -1097,6 +1106,7 @@ impl Job for CoordinationParams {
             ("torque_noise", d.torque_noise),
             ("entry_tolerance", self.entry_tolerance),
             ("objective_tolerance", self.objective_tolerance),
+            ("ddp_value_built", ddp_trackers.is_some() as u8 as f64),
         ] {
             rule.push(row![k, v]);
         }
@@ -1242,6 +1252,9 @@ impl Family for LbcDiverCoordination {
         let find = |w: f64, f: &str, m: &str| {
             (0..vw.len()).find(|&r| vw[r] == w && vf[r] == f && vm[r] == m)
         };
+        if setting("ddp_value_built") != 1.0 {
+            md.push_str("\nThe DDP value function (second-order dynamics terms) could not be built for every dive (Q_uu not positive definite), so its comparison is left out.\n");
+        }
         md.push_str("\nTrackers with DDP's value function and gains (second-order dynamics terms, LBC §5.2) beside the LQR ones (not judged):\n\n| initial ω (rad/s) | LBC objective, LQR value | LBC objective, DDP value | single, LQR | single, DDP | LBC entry error, LQR / DDP |\n| --- | --- | --- | --- | --- | --- |\n");
         let mut ws: Vec<f64> = vw.clone();
         ws.dedup();
