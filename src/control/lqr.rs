@@ -19,7 +19,10 @@
 //! trajectory. p and P are those of *this* policy (no feedforward correction), so that
 //! v̂(x̄_k, k) is exactly the remaining cost; when the trajectory is optimal (Q_u = 0, e.g. after
 //! [`super::ddp`] converges), they are the optimal value function's gradient and Hessian.
-//! Second-order dynamics terms are not included (the classical LQR approximation).
+//! By default second-order dynamics terms are not included (the classical LQR approximation,
+//! [`ValueModel::Lqr`]); [`ValueModel::Ddp`] adds them as the DDP backward pass does
+//! (Q_xx += p'·F_xx, Q_ux += p'·F_ux, Q_uu += p'·F_uu, with F_zz by differences of the exact
+//! Jacobians), giving DDP's gains and value function (LBC §5.2 uses DDP's).
 //!
 //! ## References
 //! - D. H. Jacobson, D. Q. Mayne, *Differential Dynamic Programming*, Elsevier, 1970.
@@ -97,6 +100,19 @@ impl TrackingController {
     }
 }
 
+/// Which backward recursion builds a tracker's gains and quadratic value function.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ValueModel {
+    /// First-order dynamics (LQR / iLQR).
+    Lqr,
+    /// With the second-order dynamics terms of DDP; F_zz by central differences of the
+    /// Jacobians with this relative step.
+    Ddp {
+        /// Relative difference step.
+        fd_step: f64,
+    },
+}
+
 /// Builds the LQR tracking controller of the trajectory (`xs`: N + 1 states, `us`: N controls)
 /// for `cost` under the RK4 dynamics `map` (needs [`Linearize`]).
 pub fn track<M: Linearize>(
@@ -104,6 +120,18 @@ pub fn track<M: Linearize>(
     cost: &QuadraticCost,
     xs: &[DVector<f64>],
     us: &[DVector<f64>],
+) -> Result<TrackingController, ControlError> {
+    track_with(map, cost, xs, us, ValueModel::Lqr)
+}
+
+/// [`track`] with the value model chosen: [`ValueModel::Ddp`] adds the second-order dynamics
+/// terms of the DDP backward pass.
+pub fn track_with<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    model: ValueModel,
 ) -> Result<TrackingController, ControlError> {
     let (n, m, horizon) = (map.state_dim(), map.control_dim(), us.len());
     if horizon == 0 {
@@ -134,6 +162,10 @@ pub fn track<M: Linearize>(
     let mut ws = map.workspace();
     let (mut a, mut b) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
     let mut l = StageDerivatives::new(n, m);
+    let mut fzz = match model {
+        ValueModel::Lqr => Vec::new(),
+        ValueModel::Ddp { .. } => vec![DMatrix::zeros(n + m, n + m); n],
+    };
     let mut gains = vec![DMatrix::zeros(m, n); horizon];
     let mut value_ref = vec![0.0; horizon + 1];
     let mut pv = vec![DVector::zeros(n); horizon + 1];
@@ -150,9 +182,18 @@ pub fn track<M: Linearize>(
         let qx = &l.lx + a.transpose() * p1;
         let qu = &l.lu + b.transpose() * p1;
         let pa = hess1 * &a;
-        let qxx = &l.lxx + a.transpose() * &pa;
-        let quu = &l.luu + b.transpose() * hess1 * &b;
-        let qux = b.transpose() * &pa;
+        let mut qxx = &l.lxx + a.transpose() * &pa;
+        let mut quu = &l.luu + b.transpose() * hess1 * &b;
+        let mut qux = b.transpose() * &pa;
+        if let ValueModel::Ddp { fd_step } = model {
+            map.second_derivatives(&xs[k], &us[k], fd_step, &mut fzz, &mut ws);
+            for (c, h) in fzz.iter().enumerate() {
+                let w = p1[c];
+                qxx += h.view((0, 0), (n, n)) * w;
+                qux += h.view((n, 0), (m, n)) * w;
+                quu += h.view((n, n), (m, m)) * w;
+            }
+        }
         let mut chol = quu.clone();
         if !cholesky_in_place(&mut chol, m) {
             return Err(ControlError::NotPositiveDefinite { step: k });
@@ -317,6 +358,31 @@ mod tests {
             sol.termination
         );
         let ctl = track(&map, &cost, &sol.x, &sol.u).unwrap();
+        // With the second-order terms the tracker is full DDP's last backward pass: at the
+        // optimum (unregularized, feedforward ~ 0) its gains are the solver's.
+        let ddp = track_with(
+            &map,
+            &cost,
+            &sol.x,
+            &sol.u,
+            ValueModel::Ddp {
+                fd_step: options.fd_step,
+            },
+        )
+        .unwrap();
+        assert_eq!(sol.regularization, 0.0);
+        let (mut diff, mut scale, mut lqr_diff) = (0.0f64, 0.0f64, 0.0f64);
+        for k in 0..150 {
+            diff = diff.max((&ddp.gains[k] - &sol.gains[k]).abs().max());
+            lqr_diff = lqr_diff.max((&ctl.gains[k] - &sol.gains[k]).abs().max());
+            scale = scale.max(sol.gains[k].abs().max());
+        }
+        assert!(
+            diff < 1e-6 * scale,
+            "DDP tracker gains off by {diff} (scale {scale})"
+        );
+        // The first-order (LQR) gains differ: the second-order terms matter here.
+        assert!(lqr_diff > 1e3 * diff, "LQR {lqr_diff} vs DDP {diff}");
         // eq. 12 along the trajectory: the remaining cost.
         assert!((ctl.value_ref[0] - sol.cost).abs() < 1e-9 * sol.cost);
         assert_eq!(ctl.value(sol.x[0].as_slice(), 0), ctl.value_ref[0]);

@@ -5,3 +5,15 @@ pub mod diver;
 pub mod grid_optimality;
 pub mod projection;
 pub mod push_recovery;
+
+use crate::experiment::output::{df_f64, df_str, read_csv};
+use crate::experiment::Error;
+use std::path::Path;
+
+/// The settings of an experiment's `rule` table (columns setting, value) in `dir`, by name;
+/// NaN for a setting the table lacks.
+pub(crate) fn rule_settings(dir: &Path) -> Result<impl Fn(&str) -> f64, Error> {
+    let rule = read_csv(&dir.join("rule.csv"))?;
+    let (rk, rv) = (df_str(&rule, "setting")?, df_f64(&rule, "value")?);
+    Ok(move |k: &str| rk.iter().position(|s| s == k).map_or(f64::NAN, |i| rv[i]))
+}
