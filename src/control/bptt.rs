@@ -475,10 +475,11 @@ impl Descent {
 ///   sufficient-decrease test J(v') ≤ J(v) + c ∇J·(v' − v); then t ← σ t, and t ← `grow` t when
 ///   the first try passed. After `max_backtracks` failures the iterate stays put and the
 ///   momentum is reset.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum StepRule {
     /// λ fixed at the initial knots.
+    #[default]
     Fixed,
     /// λ re-measured every `every` iterations.
     Reestimate {
