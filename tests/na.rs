@@ -220,8 +220,22 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     );
     assert_eq!(
         header(&out.join("final.csv")),
-        "task,emulator_error,simulator_error"
+        "task,emulator_error,simulator_error,best_iteration"
     );
+    // The sweep beside the headline: 3 tasks x 1 eta x 3 step rules (quick), and the physics
+    // sweep 3 tasks x 2 rules; iterations to goal are NaN or within the budget.
+    let cols = "task,rule,eta,alpha,iterations,evaluations,iterations_to_goal,evaluations_to_goal,best_iteration,best_objective,rollout_error,simulator_error";
+    for (file, runs) in [("sweep.csv", 9), ("physics_sweep.csv", 6)] {
+        assert_eq!(header(&out.join(file)), cols, "{file}");
+        let sw = rows(&out.join(file));
+        assert_eq!(sw.len(), runs, "{file}");
+        for c in &sw {
+            let (its, to): (f64, f64) = (c[4].parse().unwrap(), c[6].parse().unwrap());
+            assert!(to.is_nan() || to <= its, "{file}: {c:?}");
+            assert!(["fixed", "reestimate", "armijo"].contains(&c[1].as_str()));
+        }
+    }
+    assert_eq!(rows(&out.join("dolphin_restarts.csv")).len(), 2);
     let r = rows(&out.join("objective.csv"));
     for (task, iters) in [
         ("pendulum", 20),
@@ -241,6 +255,16 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     }
     let f = rows(&out.join("final.csv"));
     assert_eq!(f.len(), 4);
+    // Every task is scored at its best-so-far iterate: the lowest J of its trace.
+    for c in &f {
+        let js: Vec<f64> = r
+            .iter()
+            .filter(|o| o[0] == c[0])
+            .map(|o| o[2].parse().unwrap())
+            .collect();
+        let best: usize = c[3].parse().unwrap();
+        assert!(js.iter().all(|&j| j >= js[best]), "{}: {best} {js:?}", c[0]);
+    }
     assert_eq!(header(&out.join("swim.csv")), "source,distance_m,effort");
     figure_exists(&d, "na_fig13_control_control");
     assert_eq!(

@@ -30,8 +30,16 @@
 //! quadratic is stable for η < 2 and heavy-ball momentum for η < 2(1 + α). The momentum state
 //! carries the step actually taken (after projection).
 //!
+//! λ measured once is the paper's rule, and it is only right where the curvature does not
+//! change along the way: far from the goal the residual term of the Hessian makes λ large, and
+//! near it the fixed step is far too short (or, where the curvature grows, too long).
+//! [`StepRule`] adds two options ([`learn_with`]): re-measuring λ every few iterations, and a
+//! backtracking (Armijo) line search on the momentum step that grows the step after each
+//! first-try acceptance.
+//!
 //! [`learn`] runs the loop and returns the trace (objective, gradient norm and wall seconds per
-//! iteration; [`learn_until`] adds a stop rule, e.g. a [`super::search::Budget`]);
+//! iteration; [`learn_until`] adds a stop rule, e.g. a [`super::search::Budget`]) and the
+//! best-so-far iterate;
 //! [`replay`] drives a physical simulator with the learned controls to measure the gap between
 //! the emulated and the simulated final state. Nothing here writes files.
 //!
@@ -39,11 +47,15 @@
 //! - R. Grzeszczuk, D. Terzopoulos, G. Hinton, *NeuroAnimator*, SIGGRAPH 1998, §4.3, eq. 13–15.
 //! - P. J. Werbos, *Backpropagation through time: what it does and how to do it*, Proc. IEEE
 //!   78(10), 1990.
+//! - L. Armijo, *Minimization of functions having Lipschitz continuous first partial
+//!   derivatives*, Pacific J. Math. 16(1), 1966; J. Nocedal, S. Wright, *Numerical
+//!   Optimization*, 2nd ed., §3.1 (backtracking), §16.7 (projected gradient).
 
 use super::objective::Objective;
 use super::ControlError;
 pub use crate::physics::differentiable::{DifferentiableStep, LinearStep};
 use crate::physics::Dynamics;
+use serde::{Deserialize, Serialize};
 
 /// Piecewise-constant controls: `per_actuator` knots per actuator over `steps` steps; knot k
 /// (of actuator j, stored at `k * m + j`) holds on the steps i with ⌊i K / M⌋ = k.
@@ -451,9 +463,178 @@ impl Descent {
     }
 }
 
+/// `substeps` steps of an inner differentiable step as one step (e.g. 50 RK4 steps of a
+/// physical model as one N50 emulator step), so BPTT runs through the physics on the
+/// emulator's knots and horizon. The vector–Jacobian product replays the inner steps to store
+/// their states, then chains the inner products backwards.
+pub struct Substepped<D> {
+    /// The inner step.
+    pub inner: D,
+    /// Inner steps per step (≥ 1).
+    pub substeps: usize,
+}
+
+/// Scratch of [`Substepped`]: the inner scratch, the inner states and two adjoint buffers.
+pub struct SubsteppedScratch<S> {
+    inner: S,
+    states: Vec<f64>,
+    sb: Vec<f64>,
+    ub: Vec<f64>,
+    acc: Vec<f64>,
+}
+
+impl<D: DifferentiableStep> DifferentiableStep for Substepped<D> {
+    type Scratch = SubsteppedScratch<D::Scratch>;
+    fn state_dim(&self) -> usize {
+        self.inner.state_dim()
+    }
+    fn control_dim(&self) -> usize {
+        self.inner.control_dim()
+    }
+    fn scratch(&self) -> Self::Scratch {
+        let (n, m) = (self.state_dim(), self.control_dim());
+        SubsteppedScratch {
+            inner: self.inner.scratch(),
+            states: vec![0.0; (self.substeps + 1) * n],
+            sb: vec![0.0; n],
+            ub: vec![0.0; m],
+            acc: vec![0.0; n],
+        }
+    }
+    fn step(&self, s: &[f64], u: &[f64], scratch: &mut Self::Scratch, s_next: &mut [f64]) {
+        self.fill(s, u, scratch);
+        let n = self.state_dim();
+        s_next.copy_from_slice(&scratch.states[self.substeps * n..]);
+    }
+    fn vjp(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        s_next_bar: &[f64],
+        scratch: &mut Self::Scratch,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        self.fill(s, u, scratch);
+        let n = self.state_dim();
+        scratch.acc.copy_from_slice(s_next_bar);
+        u_bar.fill(0.0);
+        for k in (0..self.substeps).rev() {
+            self.inner.vjp(
+                &scratch.states[k * n..(k + 1) * n],
+                u,
+                &scratch.acc,
+                &mut scratch.inner,
+                &mut scratch.sb,
+                &mut scratch.ub,
+            );
+            scratch.acc.copy_from_slice(&scratch.sb);
+            for (a, b) in u_bar.iter_mut().zip(&scratch.ub) {
+                *a += b;
+            }
+        }
+        s_bar.copy_from_slice(&scratch.acc);
+    }
+}
+
+impl<D: DifferentiableStep> Substepped<D> {
+    /// Runs the inner steps from `s` under `u`, storing the states in the scratch.
+    fn fill(&self, s: &[f64], u: &[f64], scratch: &mut SubsteppedScratch<D::Scratch>) {
+        let n = self.state_dim();
+        scratch.states[..n].copy_from_slice(s);
+        for k in 0..self.substeps {
+            let (head, tail) = scratch.states.split_at_mut((k + 1) * n);
+            self.inner
+                .step(&head[k * n..], u, &mut scratch.inner, &mut tail[..n]);
+        }
+    }
+}
+
+/// How the step size evolves during learning (the paper: fixed).
+///
+/// - `Fixed`: λ measured once at the initial knots (the paper's η in units of 1/λ);
+/// - `Reestimate`: λ re-measured ([`Bptt::curvature`], as many power iterations as the
+///   first estimate) at the current iterate every `every` iterations, so η keeps its meaning
+///   where the curvature grows or shrinks along the way;
+/// - `Armijo`: a backtracking line search on the step η t/λ (t = 1 at the start): the step
+///   p = −(η t/λ) ∇J + α δ (momentum dropped when p is not a descent direction) is tried at
+///   σ = 1, `shrink`, `shrink`², … until the projected point v' = Π(v + σ p) satisfies the
+///   sufficient-decrease test J(v') ≤ J(v) + c ∇J·(v' − v); then t ← σ t, and t ← `grow` t when
+///   the first try passed. After `max_backtracks` failures the iterate stays put and the
+///   momentum is reset.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum StepRule {
+    /// λ fixed at the initial knots.
+    #[default]
+    Fixed,
+    /// λ re-measured every `every` iterations.
+    Reestimate {
+        /// Iterations between estimates (≥ 1).
+        every: usize,
+    },
+    /// Backtracking (Armijo) line search with step growth.
+    Armijo {
+        /// Sufficient-decrease constant c ∈ (0, 1).
+        c: f64,
+        /// Backtracking factor ∈ (0, 1).
+        shrink: f64,
+        /// Growth after a first-try acceptance (≥ 1).
+        grow: f64,
+        /// Backtracks per iteration before giving up (≥ 1).
+        max_backtracks: usize,
+    },
+}
+
+impl StepRule {
+    /// Its name in tables: `fixed`, `reestimate` or `armijo`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Fixed => "fixed",
+            Self::Reestimate { .. } => "reestimate",
+            Self::Armijo { .. } => "armijo",
+        }
+    }
+
+    /// Checks the settings; `key` names the spec key in messages.
+    pub fn validate(&self, key: &str) -> Result<(), crate::experiment::resolve::ParamError> {
+        use crate::experiment::resolve::ensure;
+        match *self {
+            Self::Fixed => Ok(()),
+            Self::Reestimate { every } => {
+                ensure(every >= 1, &format!("{key}.every"), "must be >= 1")
+            }
+            Self::Armijo {
+                c,
+                shrink,
+                grow,
+                max_backtracks,
+            } => {
+                ensure(c > 0.0 && c < 1.0, &format!("{key}.c"), "must be in (0, 1)")?;
+                ensure(
+                    shrink > 0.0 && shrink < 1.0,
+                    &format!("{key}.shrink"),
+                    "must be in (0, 1)",
+                )?;
+                ensure(
+                    grow >= 1.0 && grow.is_finite(),
+                    &format!("{key}.grow"),
+                    "must be >= 1",
+                )?;
+                ensure(
+                    max_backtracks >= 1,
+                    &format!("{key}.max_backtracks"),
+                    "must be >= 1",
+                )
+            }
+        }
+    }
+}
+
 /// One traced iteration: J and |∇J| at the iterate v^l (iteration 0 = the initial knots).
-/// Iteration l has cost l + 1 gradient evaluations (one forward rollout and one backward pass
-/// each).
+/// Under [`StepRule::Fixed`] iteration l has cost l + 1 gradient evaluations (one forward
+/// rollout and one backward pass each); `evaluations` counts every forward rollout, line-search
+/// trials and curvature re-estimates included.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IterationTrace {
     /// Iteration l.
@@ -465,6 +646,11 @@ pub struct IterationTrace {
     /// Wall-clock seconds from the start of [`learn`] to the end of this iteration's gradient
     /// (timing only: not deterministic, never used by the loop unless a stop rule reads it).
     pub seconds: f64,
+    /// Forward rollouts from the start of the loop to this iterate's gradient, inclusive.
+    pub evaluations: usize,
+    /// The effective step scale λ/t of the step that produced this iterate (iteration 0: the
+    /// initial λ).
+    pub scale: f64,
 }
 
 /// What [`learn`] returns.
@@ -478,12 +664,22 @@ pub struct Learned {
     pub states: Vec<f64>,
     /// One entry per iteration, 0 ..= iterations (fewer when J became non-finite).
     pub trace: Vec<IterationTrace>,
+    /// The iterate with the lowest finite J (best so far; the first on ties).
+    pub best_iteration: usize,
+    /// Its normalized knots.
+    pub best_knots: Vec<f64>,
 }
 
 impl Learned {
     /// J at the final knots.
     pub fn final_objective(&self) -> f64 {
         self.trace.last().map_or(f64::NAN, |t| t.objective)
+    }
+    /// J at the best iterate.
+    pub fn best_objective(&self) -> f64 {
+        self.trace
+            .get(self.best_iteration)
+            .map_or(f64::NAN, |t| t.objective)
     }
 }
 
@@ -511,33 +707,135 @@ pub fn learn_until<D: DifferentiableStep>(
     iterations: usize,
     stop: &mut dyn FnMut(&IterationTrace, &[f64]) -> bool,
 ) -> Learned {
+    let schedule = Schedule {
+        descent,
+        rule: StepRule::Fixed,
+        scale,
+        curvature_iterations: 0,
+    };
+    learn_with(bptt, v0, &schedule, iterations, &mut |e, v, _| stop(e, v))
+}
+
+/// The update rule, its step rule, the initial step scale λ and the power iterations of each
+/// re-estimate ([`StepRule::Reestimate`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Schedule {
+    /// Plain descent or momentum, η in units of 1/λ.
+    pub descent: Descent,
+    /// How λ evolves.
+    pub rule: StepRule,
+    /// The initial λ.
+    pub scale: f64,
+    /// Power iterations per re-estimate.
+    pub curvature_iterations: usize,
+}
+
+/// [`learn_until`] under any [`Schedule`]; `stop` also sees the states s_0 … s_M of the
+/// iterate's rollout. Under [`StepRule::Fixed`] the iterates are exactly those of [`learn`].
+pub fn learn_with<D: DifferentiableStep>(
+    bptt: &mut Bptt<'_, D>,
+    v0: &[f64],
+    schedule: &Schedule,
+    iterations: usize,
+    stop: &mut dyn FnMut(&IterationTrace, &[f64], &[f64]) -> bool,
+) -> Learned {
     let start = std::time::Instant::now();
+    let passes0 = bptt.forward_passes();
+    let descent = schedule.descent;
+    let (eta, alpha) = (descent.eta(), descent.alpha());
+    let mut lambda = schedule.scale;
+    let mut t = 1.0;
     let mut v = v0.to_vec();
     bptt.project(&mut v);
-    let mut g = vec![0.0; v.len()];
+    let d = v.len();
+    let mut g = vec![0.0; d];
+    let (mut p, mut trial) = (vec![0.0; d], vec![0.0; d]);
     let mut state = DescentState::default();
     let mut trace = Vec::with_capacity(iterations.min(4096) + 1);
+    let (mut best_iteration, mut best_value, mut best_knots) = (0, f64::INFINITY, v.clone());
+    let mut taken_scale = lambda;
     for l in 0..=iterations {
+        if let StepRule::Reestimate { every } = schedule.rule {
+            if l > 0 && l % every == 0 {
+                let est = bptt.curvature(&v, schedule.curvature_iterations.max(1));
+                if est.is_finite() && est > 0.0 {
+                    lambda = est;
+                }
+            }
+        }
         let j = bptt.gradient(&v, &mut g);
         let entry = IterationTrace {
             iteration: l,
             objective: j,
             grad_norm: norm(&g),
             seconds: start.elapsed().as_secs_f64(),
+            evaluations: bptt.forward_passes() - passes0,
+            scale: taken_scale,
         };
         trace.push(entry);
-        if stop(&entry, &v) || !j.is_finite() || l == iterations {
+        if j.is_finite() && j < best_value {
+            (best_iteration, best_value) = (l, j);
+            best_knots.copy_from_slice(&v);
+        }
+        if stop(&entry, &v, bptt.states()) || !j.is_finite() || l == iterations {
             break;
         }
-        let (step, next) = descent.update(&g, scale, state);
-        let old = v.clone();
-        for (x, s) in v.iter_mut().zip(&step) {
-            *x += s;
+        match schedule.rule {
+            StepRule::Fixed | StepRule::Reestimate { .. } => {
+                let (step, next) = descent.update(&g, lambda, std::mem::take(&mut state));
+                state = next;
+                for ((x, s), o) in v.iter_mut().zip(&step).zip(trial.iter_mut()) {
+                    *o = *x;
+                    *x += s;
+                }
+                taken_scale = lambda;
+            }
+            StepRule::Armijo {
+                c,
+                shrink,
+                grow,
+                max_backtracks,
+            } => {
+                for i in 0..d {
+                    p[i] = -eta * t / lambda * g[i]
+                        + alpha * state.delta.get(i).copied().unwrap_or(0.0);
+                }
+                if dot(&p, &g) >= 0.0 {
+                    for i in 0..d {
+                        p[i] = -eta * t / lambda * g[i];
+                    }
+                }
+                let (mut sigma, t_used) = (1.0, t);
+                let mut accepted = false;
+                for _ in 0..=max_backtracks {
+                    for i in 0..d {
+                        trial[i] = v[i] + sigma * p[i];
+                    }
+                    bptt.project(&mut trial);
+                    let decrease: f64 = (0..d).map(|i| g[i] * (trial[i] - v[i])).sum();
+                    if decrease < 0.0 && bptt.rollout(&trial) <= j + c * decrease {
+                        accepted = true;
+                        break;
+                    }
+                    sigma *= shrink;
+                }
+                taken_scale = lambda / (t_used * sigma);
+                if accepted {
+                    t = (t_used * if sigma == 1.0 { grow } else { sigma }).min(1e12);
+                    std::mem::swap(&mut v, &mut trial);
+                } else {
+                    t = (t_used * sigma).max(1e-12);
+                    taken_scale = f64::INFINITY;
+                    trial.copy_from_slice(&v);
+                }
+            }
         }
         bptt.project(&mut v);
-        state = next;
-        for (d, (a, b)) in state.delta.iter_mut().zip(v.iter().zip(&old)) {
-            *d = a - b;
+        // The momentum state carries the step actually taken (after projection); `trial`
+        // holds the previous iterate.
+        state.delta.resize(d, 0.0);
+        for (dl, (a, b)) in state.delta.iter_mut().zip(v.iter().zip(&trial)) {
+            *dl = a - b;
         }
     }
     bptt.rollout(&v);
@@ -546,6 +844,8 @@ pub fn learn_until<D: DifferentiableStep>(
         controls: bptt.controls().to_vec(),
         states: bptt.states().to_vec(),
         trace,
+        best_iteration,
+        best_knots,
     }
 }
 
@@ -822,6 +1122,61 @@ mod tests {
         fd_check(&mut b, &v, 1e-5);
     }
 
+    /// Substeps: five inner steps of the linear map are A⁵ s + Σ Aᵏ B u, and BPTT through the
+    /// composition matches finite differences (through the RK4 truck too).
+    #[test]
+    fn substepped_steps_compose_and_their_gradients_match_finite_differences() {
+        use crate::control::Rk4Map;
+        use crate::physics::linearize::FiniteDifference;
+        use crate::physics::truck::Truck;
+        let sub = Substepped {
+            inner: linear(),
+            substeps: 5,
+        };
+        let (s, u) = ([0.3, -0.2, 0.5], [0.7, -0.4]);
+        let mut y = [0.0; 3];
+        sub.step(&s, &u, &mut sub.scratch(), &mut y);
+        let mut x = s.to_vec();
+        for _ in 0..5 {
+            let mut z = [0.0; 3];
+            linear().step(&x, &u, &mut (), &mut z);
+            x = z.to_vec();
+        }
+        assert!(y.iter().zip(&x).all(|(a, b)| (a - b).abs() < 1e-14));
+        let obj = Objective::default()
+            .with(ControlEffort::plain(0.01, 2))
+            .with(FinalState {
+                mu: 1.0,
+                target: vec![1.0, -1.0, 0.5],
+                weights: vec![1.0, 2.0, 0.5],
+            });
+        let knots = Knots {
+            steps: 4,
+            per_actuator: 2,
+            m: 2,
+        };
+        let mut b = Bptt::new(&sub, &obj, knots, Bounds::unbounded(2), &s).unwrap();
+        let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.4).sin()).collect();
+        fd_check(&mut b, &v, 1e-6);
+        let truck = Substepped {
+            inner: Rk4Map::new(FiniteDifference::new(Truck::default()), 0.01).unwrap(),
+            substeps: 10,
+        };
+        let obj = Objective::default().with(FinalState {
+            mu: 1.0,
+            target: vec![0.0; 6],
+            weights: vec![1.0, 1.0, 10.0, 1.0, 1.0, 1.0],
+        });
+        let bounds = Bounds {
+            low: vec![-3.0, -0.5],
+            high: vec![3.0, 0.5],
+        };
+        let x0 = [-2.0, 1.0, 0.3, 1.0, 0.0, 0.0];
+        let mut b = Bptt::new(&truck, &obj, knots, bounds, &x0).unwrap();
+        let v: Vec<f64> = (0..b.dim()).map(|i| 0.5 * (i as f64 * 0.7).cos()).collect();
+        fd_check(&mut b, &v, 1e-5);
+    }
+
     #[test]
     fn knots_expand_and_reduce_are_adjoint() {
         let k = Knots {
@@ -893,6 +1248,205 @@ mod tests {
         // Plain descent above η = 2 (in units of 1/λ_max) diverges on a quadratic.
         let wild = learn(&mut b, &v0, Descent::Plain { eta: 2.2 }, lambda, 60);
         assert!(wild.final_objective() > wild.trace[0].objective);
+    }
+
+    /// s'_k = exp(u_k) (the state is ignored): J = ½ Σ (e^{u_k} − 1)² is steep far out
+    /// (J'' ≈ 2e^{2u}, about 790 at u = 3) and flat at the optimum u = 0 (J'' = 1), so a step
+    /// scale measured at the start is hundreds of times too small near the goal.
+    struct ExpStep;
+
+    impl DifferentiableStep for ExpStep {
+        type Scratch = ();
+        fn state_dim(&self) -> usize {
+            3
+        }
+        fn control_dim(&self) -> usize {
+            3
+        }
+        fn scratch(&self) {}
+        fn step(&self, _s: &[f64], u: &[f64], _: &mut (), s_next: &mut [f64]) {
+            for (y, u) in s_next.iter_mut().zip(u) {
+                *y = u.exp();
+            }
+        }
+        fn vjp(
+            &self,
+            _s: &[f64],
+            u: &[f64],
+            sb1: &[f64],
+            _: &mut (),
+            sb: &mut [f64],
+            ub: &mut [f64],
+        ) {
+            sb.fill(0.0);
+            for k in 0..3 {
+                ub[k] = u[k].exp() * sb1[k];
+            }
+        }
+    }
+
+    fn exp_problem() -> Objective {
+        Objective::default().with(FinalState {
+            mu: 1.0,
+            target: vec![1.0; 3],
+            weights: vec![1.0; 3],
+        })
+    }
+
+    fn schedule(descent: Descent, rule: StepRule, scale: f64) -> Schedule {
+        Schedule {
+            descent,
+            rule,
+            scale,
+            curvature_iterations: 30,
+        }
+    }
+
+    const MOMENTUM: Descent = Descent::Momentum {
+        eta: 1.5,
+        alpha: 0.5,
+    };
+    const ARMIJO: StepRule = StepRule::Armijo {
+        c: 1e-4,
+        shrink: 0.5,
+        grow: 2.0,
+        max_backtracks: 30,
+    };
+
+    /// Iterations until J ≤ `goal` (None: never within the run).
+    fn iterations_to(r: &Learned, goal: f64) -> Option<usize> {
+        r.trace
+            .iter()
+            .find(|e| e.objective <= goal)
+            .map(|e| e.iteration)
+    }
+
+    #[test]
+    fn reestimated_and_line_searched_steps_converge_where_the_fixed_scale_crawls() {
+        let obj = exp_problem();
+        let knots = Knots {
+            steps: 1,
+            per_actuator: 1,
+            m: 3,
+        };
+        let mut b = Bptt::new(&ExpStep, &obj, knots, Bounds::unbounded(3), &[0.0; 3]).unwrap();
+        let v0 = vec![3.0, 2.5, 2.0];
+        let lambda = b.curvature(&v0, 50);
+        assert!(lambda > 500.0, "{lambda}");
+        let goal = 1e-8;
+        let run = |b: &mut Bptt<'_, ExpStep>, rule| {
+            learn_with(
+                b,
+                &v0,
+                &schedule(MOMENTUM, rule, lambda),
+                300,
+                &mut |_, _, _| false,
+            )
+        };
+        let fixed = run(&mut b, StepRule::Fixed);
+        let re = run(&mut b, StepRule::Reestimate { every: 5 });
+        let ls = run(&mut b, ARMIJO);
+        // The paper's fixed step: still far from the goal after 300 iterations.
+        assert_eq!(
+            iterations_to(&fixed, goal),
+            None,
+            "{}",
+            fixed.final_objective()
+        );
+        for (name, r) in [("reestimate", &re), ("armijo", &ls)] {
+            let k =
+                iterations_to(r, goal).unwrap_or_else(|| panic!("{name}: {}", r.final_objective()));
+            assert!(k <= 60, "{name}: {k} iterations");
+            assert!(r.best_objective() <= goal);
+            assert!(
+                r.knots.iter().all(|u| u.abs() < 1e-3),
+                "{name}: {:?}",
+                r.knots
+            );
+        }
+        // The line search never raises J; its extra rollouts are counted.
+        assert!(ls
+            .trace
+            .windows(2)
+            .all(|w| w[1].objective <= w[0].objective));
+        let last = ls.trace.last().unwrap();
+        assert!(last.evaluations > last.iteration + 1);
+        // Re-estimates are counted too: 61 rollouts each (a gradient and 2 × 30 for the
+        // Hessian–vector products).
+        let r_last = re.trace.last().unwrap();
+        assert!(r_last.evaluations >= r_last.iteration + 1 + 61 * (r_last.iteration / 5));
+        assert!(
+            r_last.scale < 10.0,
+            "re-estimated λ near the optimum: {}",
+            r_last.scale
+        );
+    }
+
+    #[test]
+    fn line_search_converges_on_the_ill_conditioned_quadratic_and_the_linear_fixture() {
+        let (sys, obj) = ill_conditioned();
+        let knots = Knots {
+            steps: 1,
+            per_actuator: 1,
+            m: 4,
+        };
+        let mut b = Bptt::new(&sys, &obj, knots, Bounds::unbounded(4), &[0.0; 4]).unwrap();
+        let v0 = vec![0.0; 4];
+        let lambda = b.curvature(&v0, 50);
+        let s = schedule(MOMENTUM, ARMIJO, lambda);
+        let ls = learn_with(&mut b, &v0, &s, 200, &mut |_, _, _| false);
+        let fx = learn(&mut b, &v0, MOMENTUM, lambda, 200);
+        // On a quadratic λ_max is the right scale everywhere: the line search converges
+        // (J from 70.5 to below 1e-4) about as fast as the fixed step, no faster.
+        let (a, f) = (ls.final_objective(), fx.final_objective());
+        assert!(a < 1e-4 && a < 10.0 * f, "armijo {a} vs fixed {f}");
+        // A re-estimate on a quadratic measures the same λ: exactly the fixed run.
+        let fixed = learn(&mut b, &v0, MOMENTUM, lambda, 40);
+        let re = learn_with(
+            &mut b,
+            &v0,
+            &schedule(MOMENTUM, StepRule::Reestimate { every: 1000 }, lambda),
+            40,
+            &mut |_, _, _| false,
+        );
+        assert_eq!(fixed.knots, re.knots);
+        // The linear fixture within bounds: the line search stays in the box and ends at
+        // least as low as the paper's fixed step.
+        let sys = linear();
+        let obj = Objective::default()
+            .with(ControlEffort::plain(0.01, 2))
+            .with(FinalState {
+                mu: 1.0,
+                target: vec![2.0, -1.0, 1.0],
+                weights: vec![1.0, 10.0, 100.0],
+            });
+        let knots = Knots {
+            steps: 8,
+            per_actuator: 4,
+            m: 2,
+        };
+        let bounds = Bounds {
+            low: vec![-3.0, -3.0],
+            high: vec![3.0, 3.0],
+        };
+        let mut b = Bptt::new(&sys, &obj, knots, bounds, &[0.0; 3]).unwrap();
+        let v0 = vec![0.0; b.dim()];
+        let lambda = b.curvature(&v0, 50);
+        let fixed = learn(&mut b, &v0, MOMENTUM, lambda, 100);
+        let ls = learn_with(
+            &mut b,
+            &v0,
+            &schedule(MOMENTUM, ARMIJO, lambda),
+            100,
+            &mut |_, _, _| false,
+        );
+        assert!(ls.knots.iter().all(|v| v.abs() <= 1.0));
+        assert!(
+            ls.final_objective() <= fixed.final_objective() + 1e-12,
+            "armijo {} vs fixed {}",
+            ls.final_objective(),
+            fixed.final_objective()
+        );
     }
 
     #[test]

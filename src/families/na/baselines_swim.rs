@@ -5,8 +5,10 @@
 //! hour) to learn a controller; backpropagation through time through the emulator needs about
 //! 20 (under 10 s). Here every method searches the same 120 normalized knots (20 per muscle,
 //! 6 muscles, [−1, 1]) of the swim task of [`super::swim`] from the same random start
-//! (half-width `init_spread`, as in `na_fig13_control`) and minimizes the same objective
-//! J = effort − distance swum:
+//! (half-width `init_spread`, the full range in the spec; the first start of
+//! `na_fig13_control`'s dolphin) and minimizes the same objective J = effort − distance swum;
+//! every run is scored at its best-so-far iterate (lowest J on its substrate), as
+//! `na_fig13_control` scores its runs:
 //!
 //! - `bptt_momentum`, `bptt_plain`: descent through the hierarchy's global net
 //!   ([`crate::control::search::bptt_search`]), η in units of 1/λ (λ: the largest Hessian

@@ -27,8 +27,12 @@
 pub mod anim;
 pub mod frames;
 
-use crate::control::bptt::{learn, replay, Bounds, Bptt, Descent, Knots};
+use crate::control::bptt::{
+    learn_with, replay, Bounds, Bptt, Descent, DifferentiableStep, Knots, Learned, Schedule,
+    StepRule, Substepped,
+};
 use crate::control::objective::{ControlEffort, FinalState, Objective};
+use crate::control::Rk4Map;
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::hierarchy::{FRAME_DIM, GLOBAL_DIM};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
@@ -81,6 +85,50 @@ pub struct Task {
     pub eta: f64,
     /// Momentum α (0: plain descent).
     pub alpha: f64,
+    /// How the step scale evolves ([`StepRule`]; default `fixed`, the paper's).
+    #[serde(default)]
+    pub step_rule: StepRule,
+}
+
+/// The step-size sweep beside the headline runs: every task (dolphin excluded) learned with
+/// every η and step rule at momentum α, each run stopped at its goal (emulator final error
+/// ≤ 1) or after `iterations`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Sweep {
+    /// Learning rates η (units of 1/λ).
+    pub eta: Vec<f64>,
+    /// Momentum α.
+    pub alpha: f64,
+    /// Iteration budget per run.
+    pub iterations: usize,
+    /// Step rules.
+    pub rules: Vec<StepRule>,
+}
+
+impl Sweep {
+    fn validate(&self, key: &str) -> Result<(), ParamError> {
+        let k = |s: &str| format!("{key}.{s}");
+        ensure(!self.eta.is_empty(), &k("eta"), "needs at least one rate")?;
+        for (i, e) in self.eta.iter().enumerate() {
+            positive(&k(&format!("eta[{i}]")), *e)?;
+        }
+        ensure(
+            (0.0..1.0).contains(&self.alpha),
+            &k("alpha"),
+            "must be in [0, 1)",
+        )?;
+        ensure(self.iterations >= 1, &k("iterations"), "must be >= 1")?;
+        ensure(
+            !self.rules.is_empty(),
+            &k("rules"),
+            "needs at least one rule",
+        )?;
+        for (i, r) in self.rules.iter().enumerate() {
+            r.validate(&k(&format!("rules[{i}]")))?;
+        }
+        Ok(())
+    }
 }
 
 /// Parameters of `na_fig13_control`.
@@ -100,7 +148,33 @@ pub struct Params {
     /// The dolphin swim task (Fig. 13d), if run.
     #[serde(default)]
     pub dolphin: Option<DolphinControl>,
+    /// The step-size sweep, if run.
+    #[serde(default)]
+    pub sweep: Option<Sweep>,
+    /// The same kind of sweep learned through the physical model itself (its RK4 step with
+    /// finite-difference Jacobians, `steps` RK4 steps per emulator step), if run: whether
+    /// descent reaches the goal without the emulator.
+    #[serde(default)]
+    pub physics_sweep: Option<Sweep>,
 }
+
+/// Columns of the `sweep` and `physics_sweep` tables: `rollout_error` is the final error on
+/// the substrate learned through (emulator or differentiable physics), `simulator_error` the
+/// same controls replayed on the simulator; both at the run's best-so-far iterate.
+const SWEEP_COLUMNS: [&str; 12] = [
+    "task",
+    "rule",
+    "eta",
+    "alpha",
+    "iterations",
+    "evaluations",
+    "iterations_to_goal",
+    "evaluations_to_goal",
+    "best_iteration",
+    "best_objective",
+    "rollout_error",
+    "simulator_error",
+];
 
 /// The dolphin swim task of Fig. 13(d) ([`crate::families::na::swim`]).
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -117,8 +191,20 @@ pub struct DolphinControl {
     /// Momentum α (0: plain descent).
     pub alpha: f64,
     /// Half-width of the uniform random initial knots (muscle units): J's gradient vanishes
-    /// at exactly zero activation, where the forward distance is even in u.
+    /// at exactly zero activation, where the forward distance is even in u, so starts near
+    /// zero see almost no gradient; 1 = the full range.
     pub init_spread: f64,
+    /// Random starts (seeded streams 400, 401, …); the run with the lowest best-so-far
+    /// emulator J is scored.
+    #[serde(default = "one")]
+    pub restarts: usize,
+    /// How the step scale evolves (default `fixed`).
+    #[serde(default)]
+    pub step_rule: StepRule,
+}
+
+fn one() -> usize {
+    1
 }
 
 impl Validate for Params {
@@ -171,6 +257,15 @@ impl Validate for Params {
                 &key("alpha"),
                 "must be in [0, 1)",
             )?;
+            t.step_rule.validate(&key("step_rule"))?;
+        }
+        for (key, sw) in [
+            ("sweep", &self.sweep),
+            ("physics_sweep", &self.physics_sweep),
+        ] {
+            if let Some(sw) = sw {
+                sw.validate(key)?;
+            }
         }
         let nets: Vec<NetSpec> = self.tasks.iter().map(|t| t.net.clone()).collect();
         validate_nets(&nets, self.example_scale)?;
@@ -189,6 +284,8 @@ impl Validate for Params {
                 "dolphin.init_spread",
                 "must be in [0, 1]",
             )?;
+            ensure(d.restarts >= 1, "dolphin.restarts", "must be >= 1")?;
+            d.step_rule.validate("dolphin.step_rule")?;
         }
         validate_training(&self.training)
     }
@@ -261,7 +358,14 @@ impl Job for Params {
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let mut objective_t = Table::new(&["task", "iteration", "objective"]);
-        let mut final_t = Table::new(&["task", "emulator_error", "simulator_error"]);
+        let mut final_t = Table::new(&[
+            "task",
+            "emulator_error",
+            "simulator_error",
+            "best_iteration",
+        ]);
+        let mut sweep_t = Table::new(&SWEEP_COLUMNS);
+        let mut physics_t = Table::new(&SWEEP_COLUMNS);
         let width = self
             .tasks
             .iter()
@@ -310,27 +414,37 @@ impl Job for Params {
             if !(lambda.is_finite() && lambda > 0.0) {
                 return Err(other(format!("{}: step scale λ = {lambda}", task.name)));
             }
-            let descent = if task.alpha > 0.0 {
-                Descent::Momentum {
-                    eta: task.eta,
-                    alpha: task.alpha,
-                }
-            } else {
-                Descent::Plain { eta: task.eta }
-            };
-            let r = ctx.stage(&format!("learn {}", task.name), || {
-                learn(&mut bptt, &v0, descent, lambda, task.iterations)
+            let schedule = self.schedule(task.eta, task.alpha, task.step_rule, lambda);
+            let (r, best) = ctx.stage(&format!("learn {}", task.name), || {
+                learn_best(
+                    &mut bptt,
+                    &v0,
+                    &schedule,
+                    task.iterations,
+                    &mut |_, _, _| false,
+                )
             });
             for t in &r.trace {
                 objective_t.push(row![task.name.as_str(), t.iteration as i64, t.objective]);
             }
-            let emu_final = &r.states[task.horizon * n..];
             let mut sim = model.simulator();
+            let dt_phys = task.net.physical_dt;
+            if let Some(sw) = &self.sweep {
+                ctx.stage(&format!("sweep {}", task.name), || {
+                    self.sweep_task(task, sw, &mut bptt, &v0, lambda, &x0, &mut sweep_t)
+                });
+            }
+            if let Some(sw) = &self.physics_sweep {
+                ctx.stage(&format!("physics sweep {}", task.name), || {
+                    self.physics_sweep_task(task, sw, &objective, knots, &x0, &mut physics_t)
+                })?;
+            }
+            let emu_final = &best.states[task.horizon * n..];
             let rep = replay(
                 sim.as_mut(),
                 &x0,
-                &r.controls,
-                task.net.physical_dt,
+                &best.controls,
+                dt_phys,
                 self.steps,
                 emu_final,
             );
@@ -338,13 +452,14 @@ impl Job for Params {
             final_t.push(row![
                 task.name.as_str(),
                 task.final_error(emu_final),
-                task.final_error(sim_final)
+                task.final_error(sim_final),
+                r.best_iteration as i64
             ]);
             let mut row = row![task.name.as_str(), model.name()];
             row.extend((0..width).map(|k| task.target.get(k).copied().unwrap_or(f64::NAN).into()));
             goal.push(row);
             let dt = task.net.physical_dt * self.steps as f64;
-            for (source, states) in [("emulator", &r.states), ("simulator", &rep.states)] {
+            for (source, states) in [("emulator", &best.states), ("simulator", &rep.states)] {
                 for (i, s) in states.chunks_exact(n).enumerate() {
                     let mut row = row![task.name.as_str(), i as i64, i as f64 * dt, source];
                     row.extend((0..width).map(|k| s.get(k).copied().unwrap_or(f64::NAN).into()));
@@ -357,11 +472,21 @@ impl Job for Params {
         motion_cols.extend((0..N_POS).map(|k| format!("p{k}")));
         let motion_refs: Vec<&str> = motion_cols.iter().map(String::as_str).collect();
         let mut motion_t = Table::new(&motion_refs);
+        let mut restarts_t = Table::new(&[
+            "restart",
+            "scale",
+            "initial_objective",
+            "best_iteration",
+            "best_objective",
+            "distance_emulator_m",
+            "distance_simulator_m",
+        ]);
         if let Some(d) = &self.dolphin {
             self.run_dolphin(
                 ctx,
                 d,
                 width,
+                &mut restarts_t,
                 &mut objective_t,
                 &mut final_t,
                 &mut trajectory,
@@ -371,6 +496,9 @@ impl Job for Params {
         }
         Ok(Tables::from([
             ("dolphin_motion", motion_t),
+            ("sweep", sweep_t),
+            ("physics_sweep", physics_t),
+            ("dolphin_restarts", restarts_t),
             ("swim", swim_t),
             ("objective", objective_t),
             ("final", final_t),
@@ -380,7 +508,186 @@ impl Job for Params {
     }
 }
 
+/// Runs [`learn_with`] and rolls the best-so-far iterate out again: the run and the best
+/// iterate's rollout (its states and controls), which is what every task scores.
+pub fn learn_best<D: DifferentiableStep>(
+    bptt: &mut Bptt<'_, D>,
+    v0: &[f64],
+    schedule: &Schedule,
+    iterations: usize,
+    stop: &mut dyn FnMut(&crate::control::bptt::IterationTrace, &[f64], &[f64]) -> bool,
+) -> (Learned, BestRollout) {
+    let r = learn_with(bptt, v0, schedule, iterations, stop);
+    bptt.rollout(&r.best_knots);
+    let best = BestRollout {
+        states: bptt.states().to_vec(),
+        controls: bptt.controls().to_vec(),
+    };
+    (r, best)
+}
+
+/// The rollout of a run's best iterate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BestRollout {
+    /// Emulated states s_0 … s_M.
+    pub states: Vec<f64>,
+    /// Per-step controls (control units).
+    pub controls: Vec<f64>,
+}
+
 impl Params {
+    /// Every rule × η of `sw` for `task` through `bptt` (start `v0`, initial λ), each run
+    /// stopped at the goal; the best iterate replayed on the simulator; one row each.
+    #[allow(clippy::too_many_arguments)]
+    fn sweep_task<D: DifferentiableStep>(
+        &self,
+        task: &Task,
+        sw: &Sweep,
+        bptt: &mut Bptt<'_, D>,
+        v0: &[f64],
+        lambda: f64,
+        x0: &[f64],
+        table: &mut Table,
+    ) {
+        let n = task.net.model.state_dim();
+        let mut sim = task.net.model.simulator();
+        for rule in &sw.rules {
+            for &eta in &sw.eta {
+                let schedule = self.schedule(eta, sw.alpha, *rule, lambda);
+                let mut hit: Option<(usize, usize)> = None;
+                let (run, b) = learn_best(bptt, v0, &schedule, sw.iterations, &mut |e, _, st| {
+                    let reached = task.final_error(&st[task.horizon * n..]) <= 1.0;
+                    if reached {
+                        hit = Some((e.iteration, e.evaluations));
+                    }
+                    reached
+                });
+                let last = run.trace.last().expect("iteration 0 is traced");
+                let end = &b.states[task.horizon * n..];
+                let rep = replay(
+                    sim.as_mut(),
+                    x0,
+                    &b.controls,
+                    task.net.physical_dt,
+                    self.steps,
+                    end,
+                );
+                let to = |k: Option<usize>| k.map_or(f64::NAN, |k| k as f64);
+                table.push(row![
+                    task.name.as_str(),
+                    rule.name(),
+                    eta,
+                    sw.alpha,
+                    last.iteration as i64,
+                    last.evaluations as i64,
+                    to(hit.map(|h| h.0)),
+                    to(hit.map(|h| h.1)),
+                    run.best_iteration as i64,
+                    run.best_objective(),
+                    task.final_error(end),
+                    task.final_error(&rep.states[task.horizon * n..])
+                ]);
+            }
+        }
+    }
+
+    /// [`Params::sweep_task`] through the task's physical model: `steps` RK4 steps of the
+    /// net's physical δt per knot step, Jacobians by central differences.
+    fn physics_sweep_task(
+        &self,
+        task: &Task,
+        sw: &Sweep,
+        objective: &Objective,
+        knots: Knots,
+        x0: &[f64],
+        table: &mut Table,
+    ) -> Result<(), Error> {
+        fn go<M: crate::physics::linearize::Linearize>(
+            p: &Params,
+            model: M,
+            task: &Task,
+            sw: &Sweep,
+            objective: &Objective,
+            knots: Knots,
+            x0: &[f64],
+            table: &mut Table,
+        ) -> Result<(), Error> {
+            let step = Substepped {
+                inner: Rk4Map::new(model, task.net.physical_dt).map_err(other)?,
+                substeps: p.steps,
+            };
+            let mut bptt = Bptt::new(&step, objective, knots, task.bounds(), x0).map_err(other)?;
+            let rest = task.rest_control();
+            let init: Vec<f64> = (0..knots.len()).map(|i| rest[i % knots.m]).collect();
+            let v0 = bptt.from_controls(&init);
+            let lambda = bptt.curvature(&v0, p.curvature_iterations);
+            if !(lambda.is_finite() && lambda > 0.0) {
+                return Err(other(format!(
+                    "{} (physics): step scale λ = {lambda}",
+                    task.name
+                )));
+            }
+            p.sweep_task(task, sw, &mut bptt, &v0, lambda, x0, table);
+            Ok(())
+        }
+        use crate::physics::linearize::FiniteDifference;
+        use crate::physics::pendulum::{Pendulum3, PendulumVariant};
+        use crate::physics::truck::Truck;
+        let a = (self, task, sw, objective, knots, x0);
+        match task.net.model {
+            NetModel::Truck => go(
+                a.0,
+                FiniteDifference::new(Truck::default()),
+                a.1,
+                a.2,
+                a.3,
+                a.4,
+                a.5,
+                table,
+            ),
+            NetModel::Lander => go(
+                a.0,
+                FiniteDifference::new(Lander::default()),
+                a.1,
+                a.2,
+                a.3,
+                a.4,
+                a.5,
+                table,
+            ),
+            NetModel::PendulumActive => go(
+                a.0,
+                FiniteDifference::new(Pendulum3::new(PendulumVariant::Active)),
+                a.1,
+                a.2,
+                a.3,
+                a.4,
+                a.5,
+                table,
+            ),
+            other_model => Err(other(format!(
+                "{}: no physics sweep for {}",
+                task.name,
+                other_model.name()
+            ))),
+        }
+    }
+
+    /// The schedule of η, α (plain descent when α = 0), `rule` and initial λ.
+    fn schedule(&self, eta: f64, alpha: f64, rule: StepRule, lambda: f64) -> Schedule {
+        let descent = if alpha > 0.0 {
+            Descent::Momentum { eta, alpha }
+        } else {
+            Descent::Plain { eta }
+        };
+        Schedule {
+            descent,
+            rule,
+            scale: lambda,
+            curvature_iterations: self.curvature_iterations,
+        }
+    }
+
     /// Learns the swim through the global net; replays on the simulator and the reference wave.
     #[allow(clippy::too_many_arguments)]
     fn run_dolphin(
@@ -388,6 +695,7 @@ impl Params {
         ctx: &RunContext,
         d: &DolphinControl,
         width: usize,
+        restarts_t: &mut Table,
         objective_t: &mut Table,
         final_t: &mut Table,
         trajectory: &mut Table,
@@ -403,31 +711,52 @@ impl Params {
         let knots = swim.knot_layout();
         let (x0, g0) = swim.start(&body);
         let mut bptt = Bptt::new(global, &objective, knots, swim.bounds(), &g0).map_err(other)?;
-        let mut rng = ctx.rng(400);
-        let v0: Vec<f64> = (0..knots.len())
-            .map(|_| d.init_spread * (2.0 * rng.random::<f64>() - 1.0))
-            .collect();
-        let lambda = bptt.curvature(&v0, self.curvature_iterations);
-        if !(lambda.is_finite() && lambda > 0.0) {
-            return Err(other(format!("dolphin: step scale λ = {lambda}")));
-        }
-        let descent = if d.alpha > 0.0 {
-            Descent::Momentum {
-                eta: d.eta,
-                alpha: d.alpha,
+        let (dt, n) = (d.nets.physical_dt, self.steps);
+        // Seeded random starts; the run with the lowest best-so-far emulator J is scored (the
+        // simulator distances of the others are reported, never used to choose).
+        let mut chosen: Option<(Learned, BestRollout)> = None;
+        for restart in 0..d.restarts {
+            let mut rng = ctx.rng(400 + restart as u64);
+            let v0: Vec<f64> = (0..knots.len())
+                .map(|_| d.init_spread * (2.0 * rng.random::<f64>() - 1.0))
+                .collect();
+            let lambda = bptt.curvature(&v0, self.curvature_iterations);
+            if !(lambda.is_finite() && lambda > 0.0) {
+                return Err(other(format!(
+                    "dolphin restart {restart}: step scale λ = {lambda}"
+                )));
             }
-        } else {
-            Descent::Plain { eta: d.eta }
-        };
-        let r = ctx.stage("learn dolphin", || {
-            learn(&mut bptt, &v0, descent, lambda, d.iterations)
-        });
+            let schedule = self.schedule(d.eta, d.alpha, d.step_rule, lambda);
+            let (r, best) = ctx.stage(&format!("learn dolphin, start {restart}"), || {
+                learn_best(&mut bptt, &v0, &schedule, d.iterations, &mut |_, _, _| {
+                    false
+                })
+            });
+            let (_, sim_g) = swim
+                .simulate(&body, &x0, &best.controls, dt, n)
+                .map_err(other)?;
+            restarts_t.push(row![
+                restart as i64,
+                lambda,
+                r.trace[0].objective,
+                r.best_iteration as i64,
+                r.best_objective(),
+                swim.distance(&best.states),
+                swim.distance(&sim_g)
+            ]);
+            if chosen
+                .as_ref()
+                .is_none_or(|(c, _)| r.best_objective() < c.best_objective())
+            {
+                chosen = Some((r, best));
+            }
+        }
+        let (r, best) = chosen.ok_or_else(|| other("dolphin: no restarts"))?;
         for t in &r.trace {
             objective_t.push(row!["dolphin", t.iteration as i64, t.objective]);
         }
-        let (dt, n) = (d.nets.physical_dt, self.steps);
         let (sim_masses, sim_globals) = swim
-            .simulate(&body, &x0, &r.controls, dt, n)
+            .simulate(&body, &x0, &best.controls, dt, n)
             .map_err(other)?;
         // The body's motion for the animation: the full hierarchy (global and local nets,
         // regularized) and the simulator, mass positions per emulator step.
@@ -436,7 +765,7 @@ impl Params {
             &swim.regularization,
             swim.regularization_steps,
             &x0,
-            &r.controls,
+            &best.controls,
         )?;
         let big_dt = dt * n as f64;
         for (source, traj) in [("emulator", &emu_masses), ("simulator", &sim_masses)] {
@@ -451,13 +780,13 @@ impl Params {
         let (_, ref_globals) = swim.simulate(&body, &x0, &ref_u, dt, n).map_err(other)?;
         let effort = |u: &[f64]| 0.5 * u.iter().map(|a| a * a).sum::<f64>();
         let (emu_d, sim_d, ref_d) = (
-            swim.distance(&r.states),
+            swim.distance(&best.states),
             swim.distance(&sim_globals),
             swim.distance(&ref_globals),
         );
         for (source, dist, u) in [
-            ("emulator", emu_d, &r.controls),
-            ("simulator", sim_d, &r.controls),
+            ("emulator", emu_d, &best.controls),
+            ("simulator", sim_d, &best.controls),
             ("reference_wave_simulator", ref_d, &ref_u),
         ] {
             swim_t.push(row![source, dist, effort(u)]);
@@ -465,10 +794,11 @@ impl Params {
         final_t.push(row![
             "dolphin",
             (ref_d - emu_d).max(0.0),
-            (ref_d - sim_d).max(0.0)
+            (ref_d - sim_d).max(0.0),
+            r.best_iteration as i64
         ]);
         // Trajectory: the mean segment centroid (s0, s1, s2 = x, y, z).
-        for (source, globals) in [("emulator", &r.states), ("simulator", &sim_globals)] {
+        for (source, globals) in [("emulator", &best.states), ("simulator", &sim_globals)] {
             for (i, g) in globals.chunks_exact(GLOBAL_DIM).enumerate() {
                 let mut row = row!["dolphin", i as i64, i as f64 * big_dt, source];
                 for k in 0..width {
@@ -596,6 +926,62 @@ fn animations(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> 
         .collect()
 }
 
+/// One sentence per task of a sweep table: the fewest iterations to the goal over its rules and
+/// rates (and the simulator error of those controls), or the lowest final error reached.
+fn sweep_summary(path: &Path, title: &str) -> Result<Option<String>, Error> {
+    let Ok(df) = read_csv(path) else {
+        return Ok(None);
+    };
+    let (task, rule) = (df_str(&df, "task")?, df_str(&df, "rule")?);
+    let (eta, its) = (df_f64(&df, "eta")?, df_f64(&df, "iterations")?);
+    let (to_goal, rollout, sim) = (
+        df_f64(&df, "iterations_to_goal")?,
+        df_f64(&df, "rollout_error")?,
+        df_f64(&df, "simulator_error")?,
+    );
+    if task.is_empty() {
+        return Ok(None);
+    }
+    let parts: Vec<String> = unique(&task)
+        .into_iter()
+        .map(|name| {
+            let rows: Vec<usize> = (0..task.len()).filter(|&r| task[r] == name).collect();
+            let budget = rows.iter().map(|&r| its[r]).fold(0.0, f64::max);
+            let fastest = rows
+                .iter()
+                .copied()
+                .filter(|&r| to_goal[r].is_finite())
+                .min_by(|&a, &b| to_goal[a].total_cmp(&to_goal[b]));
+            match fastest {
+                Some(r) => format!(
+                    "{name} reaches its goal in {} iterations at best ({} rule, eta {}; simulator error {}; {} of {} runs reach it)",
+                    to_goal[r],
+                    rule[r],
+                    eta[r],
+                    sig(sim[r]),
+                    rows.iter().filter(|&&r| to_goal[r].is_finite()).count(),
+                    rows.len()
+                ),
+                None => {
+                    let r = rows
+                        .iter()
+                        .copied()
+                        .min_by(|&a, &b| rollout[a].total_cmp(&rollout[b]))
+                        .expect("a task has rows");
+                    format!(
+                        "{name} never does in {budget} iterations (lowest final error {} with the {} rule, eta {}; simulator {})",
+                        sig(rollout[r]),
+                        rule[r],
+                        eta[r],
+                        sig(sim[r])
+                    )
+                }
+            }
+        })
+        .collect();
+    Ok(Some(format!(" {title}: {}.", parts.join("; "))))
+}
+
 impl Family for NaControl {
     const KIND: &'static str = "na_fig13_control";
     type Params = Params;
@@ -711,12 +1097,23 @@ impl Family for NaControl {
             reached += usize::from(ok(ee[r]));
             reached_sim += usize::from(ok(se[r]));
         }
+        let sweeps: String = [
+            ("sweep.csv", "Step-size sweep through the emulator"),
+            (
+                "physics_sweep.csv",
+                "The same learned through the physical model's RK4 step",
+            ),
+        ]
+        .iter()
+        .filter_map(|(f, title)| sweep_summary(&dir.join(f), title).transpose())
+        .collect::<Result<Vec<_>, _>>()?
+        .concat();
         let verdict = Verdict::from_counts(reached, ft.len());
         Ok(Findings {
             ours: md,
             verdict,
             why: format!(
-                "Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far). {reached} of {} tasks reach their goal on the emulator within the paper's iteration counts; replayed on the physical simulator {reached_sim} do.{swim}",
+                "Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far). {reached} of {} tasks reach their goal on the emulator within the paper's iteration counts; replayed on the physical simulator {reached_sim} do (every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start).{swim}{sweeps}",
                 ft.len()
             ),
         })
