@@ -9,7 +9,8 @@
 //! ## Global net (Table 1: 78 + 6 → 50 → 78)
 //! Its state is the 6 segment frames ([`crate::physics::dolphin::SegmentFrame::to_array`]):
 //! centroid, orientation quaternion, velocity and angular velocity, 13 numbers each, 78 in all
-//! ([`global_state`]). It is an ordinary [`Emulator`] with the standard transforms: the state
+//! ([`global_state`]; quaternion signs follow the reference segment, and in training targets
+//! the previous step, so they never jump between q and −q). It is an ordinary [`Emulator`] with the standard transforms: the state
 //! change is predicted, everything is expressed in the frame of the middle segment
 //! ([`REF_SEGMENT`]) and normalized ([`global_transforms`]). Controllers are learned through
 //! this net alone (§6: the local deformation does not matter for locomotion).
@@ -82,11 +83,35 @@ pub const MASS_DIM: usize = 2 * N_POS;
 pub const REF_SEGMENT: usize = 2;
 /// Bumped whenever the hierarchy's sampling, transforms or training code changes meaning, so
 /// cached nets are retrained.
-pub const HIERARCHY_FORMAT: u32 = 2;
+pub const HIERARCHY_FORMAT: u32 = 3;
 /// Writes the global state (6 segment frames, 13 numbers each) of the mass state `x`.
+///
+/// Quaternion signs: the reference segment's has w ≥ 0 and every other segment's the sign
+/// that agrees with it (non-negative dot product), so that in the reference frame every
+/// segment's relative quaternion has w ≥ 0 whatever the heading (a per-segment w ≥ 0 would
+/// flip some segments' relative quaternions to w ≈ −1 near a half-turn heading).
 pub fn global_state(d: &Dolphin, x: &[f64], out: &mut [f64]) {
+    write_frames(&d.segment_frames(x), out);
+}
+
+/// The global state of `frames` with the signs of [`global_state`].
+fn write_frames(frames: &[SegmentFrame; N_SEGMENTS], out: &mut [f64]) {
+    let r = frames[REF_SEGMENT].to_array();
+    let q_ref = [r[3], r[4], r[5], r[6]];
+    for (s, f) in frames.iter().enumerate() {
+        out[FRAME_DIM * s..FRAME_DIM * (s + 1)].copy_from_slice(&f.to_array_aligned(q_ref));
+    }
+}
+
+/// Writes the global state of the mass state `x1` one step after the global state `prev`,
+/// each segment's quaternion signed to agree with its own quaternion in `prev`: the change
+/// from `prev` is then continuous (no ±q jump), which is what the global net is trained on.
+pub fn global_state_after(d: &Dolphin, x1: &[f64], prev: &[f64], out: &mut [f64]) {
     for s in 0..N_SEGMENTS {
-        out[FRAME_DIM * s..FRAME_DIM * (s + 1)].copy_from_slice(&d.segment_frame(x, s).to_array());
+        let q = FRAME_DIM * s + 3;
+        let reference = [prev[q], prev[q + 1], prev[q + 2], prev[q + 3]];
+        out[FRAME_DIM * s..FRAME_DIM * (s + 1)]
+            .copy_from_slice(&d.segment_frame(x1, s).to_array_aligned(reference));
     }
 }
 
@@ -377,9 +402,7 @@ impl DolphinEmulator {
     /// Writes the next mass state: frames of `x` → global net → local nets.
     pub fn predict(&self, x: &[f64], u: &[f64], sc: &mut DolphinScratch, x1: &mut [f64]) {
         let frames = self.dolphin.segment_frames(x);
-        for (s, f) in frames.iter().enumerate() {
-            sc.g0[FRAME_DIM * s..FRAME_DIM * (s + 1)].copy_from_slice(&f.to_array());
-        }
+        write_frames(&frames, &mut sc.g0);
         self.global.predict(&sc.g0, u, &mut sc.global, &mut sc.g1);
         for (s, net) in self.locals.iter().enumerate() {
             let f0 = Frame::from_segment(&frames[s]);
@@ -540,9 +563,9 @@ mod tests {
         tf.encode_input(&gx, &u, &mut zx);
         tf.encode_input(&gy, &u, &mut zy);
         for k in 0..GLOBAL_DIM + 6 {
-            // Quaternions are defined up to sign: compare the relative ones' absolute values.
+            // Signs follow the reference segment, so even the quaternions agree exactly.
             assert!(
-                (zx[k].abs() - zy[k].abs()).abs() < 1e-9,
+                (zx[k] - zy[k]).abs() < 1e-9,
                 "input {k}: {} vs {}",
                 zx[k],
                 zy[k]
