@@ -27,7 +27,7 @@
 //!
 //! and predicts, for each mass it owns, the change of its local position and velocity from
 //! frame F₀ to frame F₁: R₁ᵀ(p′ᵢ − c₁) − R₀ᵀ(pᵢ − c₀) and R₁ᵀ(v′ᵢ − v₁) − R₀ᵀ(vᵢ − v₀). Inputs
-//! and outputs are normalized per variable. The segment sizes differ (the nose segment owns 5
+//! and outputs are normalized by quantity groups ([`LocalLayout::input_groups`]). The segment sizes differ (the nose segment owns 5
 //! masses, the fluke 2), so the local nets differ slightly in shape; the paper's Table 1 gives
 //! one representative.
 //!
@@ -83,7 +83,7 @@ pub const MASS_DIM: usize = 2 * N_POS;
 pub const REF_SEGMENT: usize = 2;
 /// Bumped whenever the hierarchy's sampling, transforms or training code changes meaning, so
 /// cached nets are retrained.
-pub const HIERARCHY_FORMAT: u32 = 3;
+pub const HIERARCHY_FORMAT: u32 = 4;
 /// Writes the global state (6 segment frames, 13 numbers each) of the mass state `x`.
 ///
 /// Quaternion signs: the reference segment's has w ≥ 0 and every other segment's the sign
@@ -116,7 +116,8 @@ pub fn global_state_after(d: &Dolphin, x1: &[f64], prev: &[f64], out: &mut [f64]
 }
 
 /// The transforms of the global net: state change, the frame of [`REF_SEGMENT`] for every
-/// centroid, quaternion, velocity and angular velocity, and per-variable normalization.
+/// centroid, quaternion, velocity and angular velocity, and normalization by quantity groups
+/// ([`global_groups`]).
 pub fn global_transforms() -> TransformConfig {
     let base = FRAME_DIM * REF_SEGMENT;
     let tri = |a: usize| [a, a + 1, a + 2];
@@ -136,7 +137,33 @@ pub fn global_transforms() -> TransformConfig {
             })
             .collect(),
     };
-    TransformConfig::standard(Some(frame.into()))
+    let (input_groups, output_groups) = global_groups();
+    TransformConfig {
+        input_groups: Some(input_groups),
+        output_groups: Some(output_groups),
+        ..TransformConfig::standard(Some(frame.into()))
+    }
+}
+
+/// Normalization groups of the global net by physical quantity (Appendix A normalizes groups
+/// of variables, not variables one by one): every segment's centroid (0), quaternion (1),
+/// velocity (2) and angular velocity (3) share a mean and a deviation, and the controls form
+/// group 4. Per variable, the near-rigid spacings of the segments (a few millimetres of
+/// spread in the reference frame) would be divided by their own tiny deviations, so that
+/// millimetre errors of a rollout became many deviations of input within a few steps and the
+/// net left its training distribution (issue 11, defect 3).
+pub fn global_groups() -> (Vec<usize>, Vec<usize>) {
+    let state: Vec<usize> = (0..GLOBAL_DIM)
+        .map(|k| match k % FRAME_DIM {
+            0..=2 => 0,
+            3..=6 => 1,
+            7..=9 => 2,
+            _ => 3,
+        })
+        .collect();
+    let mut input = state.clone();
+    input.extend([4; N_SEGMENTS]);
+    (input, state)
 }
 
 /// A segment frame as vectors and a unit rotation.
@@ -210,6 +237,24 @@ impl LocalLayout {
     /// Network outputs: 6 per owned mass.
     pub fn n_out(&self) -> usize {
         6 * self.owned.len()
+    }
+
+    /// Normalization group of each input, by physical quantity (as the global net's,
+    /// [`global_groups`]): frame-mass positions (0) and velocities (1), ω₀ (2), the next
+    /// frame's centroid (3), quaternion (4), velocity (5) and angular velocity (6), controls (7).
+    pub fn input_groups(&self) -> Vec<usize> {
+        let mut g: Vec<usize> = (0..6 * self.frame_masses.len())
+            .map(|k| usize::from(k % 6 >= 3))
+            .collect();
+        for (group, len) in [(2, 3), (3, 3), (4, 4), (5, 3), (6, 3), (7, N_SEGMENTS)] {
+            g.extend(std::iter::repeat_n(group, len));
+        }
+        g
+    }
+
+    /// Normalization group of each output: position changes (0), velocity changes (1).
+    pub fn output_groups(&self) -> Vec<usize> {
+        (0..self.n_out()).map(|k| usize::from(k % 6 >= 3)).collect()
     }
 
     /// Raw (unnormalized) input for mass state `x` with current frame `f0`, next frame `f1`
