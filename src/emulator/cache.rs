@@ -296,6 +296,7 @@ mod tests {
                 learning_rate: 0.05,
                 momentum: 0.9,
                 batch_size: 30,
+                input_noise: 0.0,
             },
             seed: 7,
         }
@@ -340,6 +341,13 @@ mod tests {
             BuildSpec {
                 settings: TrainSettings {
                     patience: 6,
+                    ..s.settings
+                },
+                ..s.clone()
+            },
+            BuildSpec {
+                settings: TrainSettings {
+                    input_noise: 0.1,
                     ..s.settings
                 },
                 ..s.clone()

@@ -19,7 +19,9 @@ use super::{
     LocalLayout, LocalNet, GLOBAL_DIM, HIERARCHY_FORMAT, MASS_DIM,
 };
 use crate::emulator::cache::{fnv1a, read_record, write_record, EmulatorCache, NetRecord};
-use crate::emulator::catalog::{stop_name, train_mlp, BuildError, TrainMethod, TrainSettings};
+use crate::emulator::catalog::{
+    noisy, stop_name, train_mlp, BuildError, TrainMethod, TrainSettings,
+};
 use crate::emulator::dataset::{sample_transitions, ControlLimits, ControlProcess, SamplingConfig};
 use crate::emulator::mlp::{Mlp, WeightInit};
 use crate::emulator::train::{mse, Dataset, TracePoint};
@@ -430,7 +432,13 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
             if k == 0 {
                 let (gt, gh) = (global_transitions(d, &train), global_transitions(d, &held));
                 let transforms = Transforms::fit(&global_transforms(), &gt)?;
-                let (tr, ho) = (transforms.encode(&gt), transforms.encode(&gh));
+                let (clean, ho) = (transforms.encode(&gt), transforms.encode(&gh));
+                let tr = noisy(
+                    &transforms,
+                    &clean,
+                    s,
+                    &mut ChaCha8Rng::seed_from_u64(mix(30)),
+                );
                 let mut mlp = Mlp::new(
                     GLOBAL_DIM + N_SEGMENTS,
                     spec.global.hidden,
@@ -440,7 +448,7 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                 );
                 let rep = train_mlp(&mut mlp, &tr, &ho, spec.global.method, s, mix(20))?;
                 Ok(NetRecord {
-                    train_error: mse(&mlp, &tr),
+                    train_error: mse(&mlp, &clean),
                     heldout_error: mse(&mlp, &ho),
                     mlp,
                     input_norm: transforms.input_norm,
@@ -525,6 +533,7 @@ mod tests {
                 learning_rate: 0.05,
                 momentum: 0.9,
                 batch_size: 30,
+                input_noise: 0.0,
             },
             seed: 3,
         }
