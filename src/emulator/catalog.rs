@@ -521,6 +521,19 @@ pub fn rollout_error(
             guess.extend_from_slice(&xe);
         }
     }
+    Ok(rollout_errors(&truth, &guess, episodes, horizon, n))
+}
+
+/// Per step k = 1 … `horizon`, the mean over `episodes` and the `n` variables of
+/// ((ŝ_k − s_k)/σ)², σ the spread of each variable over all of `truth`; `truth` and `guess`
+/// hold the states row-major by (episode, step, variable).
+pub fn rollout_errors(
+    truth: &[f64],
+    guess: &[f64],
+    episodes: usize,
+    horizon: usize,
+    n: usize,
+) -> Vec<f64> {
     let rows = episodes * horizon;
     let sigma: Vec<f64> = (0..n)
         .map(|v| {
@@ -532,7 +545,7 @@ pub fn rollout_error(
             var.sqrt().max(1e-6)
         })
         .collect();
-    Ok((0..horizon)
+    (0..horizon)
         .map(|k| {
             let mut sum = 0.0;
             for e in 0..episodes {
@@ -543,7 +556,7 @@ pub fn rollout_error(
             }
             sum / (episodes * n) as f64
         })
-        .collect())
+        .collect()
 }
 
 /// Samples training and held-out data, fits the transforms and trains the network of `spec`.

@@ -20,15 +20,17 @@ use super::{
 };
 use crate::emulator::cache::{fnv1a, read_record, write_record, EmulatorCache, NetRecord};
 use crate::emulator::catalog::{
-    noisy, stop_name, train_mlp, BuildError, TrainMethod, TrainSettings,
+    noisy, rollout_errors, stop_name, train_mlp, BuildError, TrainMethod, TrainSettings,
 };
-use crate::emulator::dataset::{sample_transitions, ControlLimits, ControlProcess, SamplingConfig};
+use crate::emulator::dataset::{
+    sample_transitions, ControlLimits, ControlProcess, ControlSignal, SamplingConfig,
+};
 use crate::emulator::mlp::{Mlp, WeightInit};
 use crate::emulator::train::{mse, Dataset, TracePoint};
 use crate::emulator::transform::Normalizer;
 use crate::emulator::{Emulator, Transforms, Transitions};
 use crate::physics::dolphin::{Dolphin, N_MASSES, N_POS, N_SEGMENTS};
-use crate::physics::{IntegratorKind, Simulator};
+use crate::physics::{Dynamics, IntegratorKind, Simulator};
 use nalgebra::{UnitQuaternion, Vector3};
 use ndarray::{s, Array2};
 use rand::{Rng, SeedableRng};
@@ -493,6 +495,67 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
     Ok(recs)
 }
 
+/// Multi-step fidelity of the trained hierarchy (as [`crate::emulator::catalog::rollout_error`]
+/// for the catalog nets): from `episodes` start states drawn as for training (a stream of its
+/// own), the simulator, the global net alone (fed its own outputs) and the composed hierarchy
+/// run `horizon` super-steps side by side under the training control process, read at each
+/// super-step's start and held over it. Returns per step k the mean squared error over
+/// episodes and variables, each variable divided by its spread over the simulated states: of
+/// the global state (global net) and of the 138-variable mass state (composed hierarchy).
+/// Simulated global states keep their quaternion signs continuous from the start
+/// ([`global_state_after`]), as the emulated ones are.
+pub fn hierarchy_rollout_error(
+    emulator: &DolphinEmulator,
+    spec: &HierarchySpec,
+    episodes: usize,
+    horizon: usize,
+) -> Result<(Vec<f64>, Vec<f64>), BuildError> {
+    let d = emulator.dolphin();
+    let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 3));
+    let big_dt = spec.super_dt();
+    let mut sim = simulator(d);
+    let global = emulator.global();
+    let (mut gsc, mut hsc) = (global.scratch(), emulator.scratch());
+    let mut u = vec![0.0; N_SEGMENTS];
+    let (mut gt, mut ge, mut mt, mut me) = (vec![], vec![], vec![], vec![]);
+    let (mut g_sim, mut g_emu) = (vec![0.0; GLOBAL_DIM], vec![0.0; GLOBAL_DIM]);
+    let (mut g_next, mut x_next) = (vec![0.0; GLOBAL_DIM], vec![0.0; MASS_DIM]);
+    for _ in 0..episodes {
+        let x0 = start_state(d, &mut rng);
+        let signal = ControlSignal::sample(
+            control_process(),
+            &control_limits(),
+            horizon as f64 * big_dt,
+            &mut rng,
+        );
+        let (mut xs, mut xe) = (x0.clone(), x0);
+        global_state(d, &xs, &mut g_sim);
+        g_emu.copy_from_slice(&g_sim);
+        for k in 0..horizon {
+            signal.at(k as f64 * big_dt, &mut u);
+            for i in 0..spec.steps {
+                sim.step(&mut xs, &u, spec.physical_dt);
+                let step = k * spec.steps + i + 1;
+                crate::physics::check_finite("dolphin", step, step as f64 * spec.physical_dt, &xs)?;
+            }
+            global_state_after(d, &xs, &g_sim, &mut g_next);
+            g_sim.copy_from_slice(&g_next);
+            global.predict(&g_emu, &u, &mut gsc, &mut g_next);
+            g_emu.copy_from_slice(&g_next);
+            emulator.predict(&xe, &u, &mut hsc, &mut x_next);
+            xe.copy_from_slice(&x_next);
+            gt.extend_from_slice(&g_sim);
+            ge.extend_from_slice(&g_emu);
+            mt.extend_from_slice(&xs);
+            me.extend_from_slice(&xe);
+        }
+    }
+    Ok((
+        rollout_errors(&gt, &ge, episodes, horizon, GLOBAL_DIM),
+        rollout_errors(&mt, &me, episodes, horizon, MASS_DIM),
+    ))
+}
+
 /// The `rows`-row slice of a transitions table (for tests and small experiments).
 pub fn head(data: &Transitions, rows: usize) -> Transitions {
     let r = rows.min(data.len());
@@ -508,7 +571,6 @@ pub fn head(data: &Transitions, rows: usize) -> Transitions {
 mod tests {
     use super::*;
     use crate::emulator::hierarchy::{FRAME_DIM, REF_SEGMENT};
-    use crate::physics::Dynamics;
 
     fn spec(examples: usize) -> HierarchySpec {
         HierarchySpec {
