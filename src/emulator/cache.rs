@@ -296,6 +296,7 @@ mod tests {
                 learning_rate: 0.05,
                 momentum: 0.9,
                 batch_size: 30,
+                input_noise: 0.0,
             },
             seed: 7,
         }
@@ -344,13 +345,20 @@ mod tests {
                 },
                 ..s.clone()
             },
+            BuildSpec {
+                settings: TrainSettings {
+                    input_noise: 0.1,
+                    ..s.settings
+                },
+                ..s.clone()
+            },
         ] {
             assert_ne!(cache.path(&changed), cache.path(&s));
             assert!(cache.load(&changed).is_none());
             let t = cache.get_or_train(&changed).unwrap();
             assert!(!t.from_cache);
         }
-        assert_eq!(std::fs::read_dir(cache.dir).unwrap().count(), 5);
+        assert_eq!(std::fs::read_dir(cache.dir).unwrap().count(), 6);
     }
 
     #[test]

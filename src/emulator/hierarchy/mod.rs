@@ -9,7 +9,8 @@
 //! ## Global net (Table 1: 78 + 6 → 50 → 78)
 //! Its state is the 6 segment frames ([`crate::physics::dolphin::SegmentFrame::to_array`]):
 //! centroid, orientation quaternion, velocity and angular velocity, 13 numbers each, 78 in all
-//! ([`global_state`]). It is an ordinary [`Emulator`] with the standard transforms: the state
+//! ([`global_state`]; quaternion signs follow the reference segment, and in training targets
+//! the previous step, so they never jump between q and −q). It is an ordinary [`Emulator`] with the standard transforms: the state
 //! change is predicted, everything is expressed in the frame of the middle segment
 //! ([`REF_SEGMENT`]) and normalized ([`global_transforms`]). Controllers are learned through
 //! this net alone (§6: the local deformation does not matter for locomotion).
@@ -26,7 +27,7 @@
 //!
 //! and predicts, for each mass it owns, the change of its local position and velocity from
 //! frame F₀ to frame F₁: R₁ᵀ(p′ᵢ − c₁) − R₀ᵀ(pᵢ − c₀) and R₁ᵀ(v′ᵢ − v₁) − R₀ᵀ(vᵢ − v₀). Inputs
-//! and outputs are normalized per variable. The segment sizes differ (the nose segment owns 5
+//! and outputs are normalized by quantity groups ([`LocalLayout::input_groups`]). The segment sizes differ (the nose segment owns 5
 //! masses, the fluke 2), so the local nets differ slightly in shape; the paper's Table 1 gives
 //! one representative.
 //!
@@ -58,9 +59,9 @@ mod training;
 
 pub use regularize::{BoundRegularizer, Regularizer, Schedule};
 pub use training::{
-    build_dolphin, control_limits, control_process, global_transitions, head, net_name,
-    sample_dolphin, simulator, start_state, train_hierarchy, BuiltDolphin, HierarchyNet,
-    HierarchySpec, NetReport, EPISODE_S,
+    build_dolphin, control_limits, control_process, global_transitions, head,
+    hierarchy_rollout_error, net_name, sample_dolphin, simulator, start_state, train_hierarchy,
+    BuiltDolphin, HierarchyNet, HierarchySpec, NetReport, EPISODE_S,
 };
 
 use super::mlp::{Mlp, MlpScratch};
@@ -82,16 +83,41 @@ pub const MASS_DIM: usize = 2 * N_POS;
 pub const REF_SEGMENT: usize = 2;
 /// Bumped whenever the hierarchy's sampling, transforms or training code changes meaning, so
 /// cached nets are retrained.
-pub const HIERARCHY_FORMAT: u32 = 2;
+pub const HIERARCHY_FORMAT: u32 = 4;
 /// Writes the global state (6 segment frames, 13 numbers each) of the mass state `x`.
+///
+/// Quaternion signs: the reference segment's has w ≥ 0 and every other segment's the sign
+/// that agrees with it (non-negative dot product), so that in the reference frame every
+/// segment's relative quaternion has w ≥ 0 whatever the heading (a per-segment w ≥ 0 would
+/// flip some segments' relative quaternions to w ≈ −1 near a half-turn heading).
 pub fn global_state(d: &Dolphin, x: &[f64], out: &mut [f64]) {
+    write_frames(&d.segment_frames(x), out);
+}
+
+/// The global state of `frames` with the signs of [`global_state`].
+fn write_frames(frames: &[SegmentFrame; N_SEGMENTS], out: &mut [f64]) {
+    let r = frames[REF_SEGMENT].to_array();
+    let q_ref = [r[3], r[4], r[5], r[6]];
+    for (s, f) in frames.iter().enumerate() {
+        out[FRAME_DIM * s..FRAME_DIM * (s + 1)].copy_from_slice(&f.to_array_aligned(q_ref));
+    }
+}
+
+/// Writes the global state of the mass state `x1` one step after the global state `prev`,
+/// each segment's quaternion signed to agree with its own quaternion in `prev`: the change
+/// from `prev` is then continuous (no ±q jump), which is what the global net is trained on.
+pub fn global_state_after(d: &Dolphin, x1: &[f64], prev: &[f64], out: &mut [f64]) {
     for s in 0..N_SEGMENTS {
-        out[FRAME_DIM * s..FRAME_DIM * (s + 1)].copy_from_slice(&d.segment_frame(x, s).to_array());
+        let q = FRAME_DIM * s + 3;
+        let reference = [prev[q], prev[q + 1], prev[q + 2], prev[q + 3]];
+        out[FRAME_DIM * s..FRAME_DIM * (s + 1)]
+            .copy_from_slice(&d.segment_frame(x1, s).to_array_aligned(reference));
     }
 }
 
 /// The transforms of the global net: state change, the frame of [`REF_SEGMENT`] for every
-/// centroid, quaternion, velocity and angular velocity, and per-variable normalization.
+/// centroid, quaternion, velocity and angular velocity, and normalization by quantity groups
+/// ([`global_groups`]).
 pub fn global_transforms() -> TransformConfig {
     let base = FRAME_DIM * REF_SEGMENT;
     let tri = |a: usize| [a, a + 1, a + 2];
@@ -111,7 +137,33 @@ pub fn global_transforms() -> TransformConfig {
             })
             .collect(),
     };
-    TransformConfig::standard(Some(frame.into()))
+    let (input_groups, output_groups) = global_groups();
+    TransformConfig {
+        input_groups: Some(input_groups),
+        output_groups: Some(output_groups),
+        ..TransformConfig::standard(Some(frame.into()))
+    }
+}
+
+/// Normalization groups of the global net by physical quantity (Appendix A normalizes groups
+/// of variables, not variables one by one): every segment's centroid (0), quaternion (1),
+/// velocity (2) and angular velocity (3) share a mean and a deviation, and the controls form
+/// group 4. Per variable, the near-rigid spacings of the segments (a few millimetres of
+/// spread in the reference frame) would be divided by their own tiny deviations, so that
+/// millimetre errors of a rollout became many deviations of input within a few steps and the
+/// net left its training distribution (issue 11, defect 3).
+pub fn global_groups() -> (Vec<usize>, Vec<usize>) {
+    let state: Vec<usize> = (0..GLOBAL_DIM)
+        .map(|k| match k % FRAME_DIM {
+            0..=2 => 0,
+            3..=6 => 1,
+            7..=9 => 2,
+            _ => 3,
+        })
+        .collect();
+    let mut input = state.clone();
+    input.extend([4; N_SEGMENTS]);
+    (input, state)
 }
 
 /// A segment frame as vectors and a unit rotation.
@@ -185,6 +237,24 @@ impl LocalLayout {
     /// Network outputs: 6 per owned mass.
     pub fn n_out(&self) -> usize {
         6 * self.owned.len()
+    }
+
+    /// Normalization group of each input, by physical quantity (as the global net's,
+    /// [`global_groups`]): frame-mass positions (0) and velocities (1), ω₀ (2), the next
+    /// frame's centroid (3), quaternion (4), velocity (5) and angular velocity (6), controls (7).
+    pub fn input_groups(&self) -> Vec<usize> {
+        let mut g: Vec<usize> = (0..6 * self.frame_masses.len())
+            .map(|k| usize::from(k % 6 >= 3))
+            .collect();
+        for (group, len) in [(2, 3), (3, 3), (4, 4), (5, 3), (6, 3), (7, N_SEGMENTS)] {
+            g.extend(std::iter::repeat_n(group, len));
+        }
+        g
+    }
+
+    /// Normalization group of each output: position changes (0), velocity changes (1).
+    pub fn output_groups(&self) -> Vec<usize> {
+        (0..self.n_out()).map(|k| usize::from(k % 6 >= 3)).collect()
     }
 
     /// Raw (unnormalized) input for mass state `x` with current frame `f0`, next frame `f1`
@@ -377,9 +447,7 @@ impl DolphinEmulator {
     /// Writes the next mass state: frames of `x` → global net → local nets.
     pub fn predict(&self, x: &[f64], u: &[f64], sc: &mut DolphinScratch, x1: &mut [f64]) {
         let frames = self.dolphin.segment_frames(x);
-        for (s, f) in frames.iter().enumerate() {
-            sc.g0[FRAME_DIM * s..FRAME_DIM * (s + 1)].copy_from_slice(&f.to_array());
-        }
+        write_frames(&frames, &mut sc.g0);
         self.global.predict(&sc.g0, u, &mut sc.global, &mut sc.g1);
         for (s, net) in self.locals.iter().enumerate() {
             let f0 = Frame::from_segment(&frames[s]);
@@ -540,9 +608,9 @@ mod tests {
         tf.encode_input(&gx, &u, &mut zx);
         tf.encode_input(&gy, &u, &mut zy);
         for k in 0..GLOBAL_DIM + 6 {
-            // Quaternions are defined up to sign: compare the relative ones' absolute values.
+            // Signs follow the reference segment, so even the quaternions agree exactly.
             assert!(
-                (zx[k].abs() - zy[k].abs()).abs() < 1e-9,
+                (zx[k] - zy[k]).abs() < 1e-9,
                 "input {k}: {} vs {}",
                 zx[k],
                 zy[k]

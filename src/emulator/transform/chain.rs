@@ -268,6 +268,58 @@ impl Transforms {
         }
     }
 
+    /// Training noise on the state inputs with corrected targets (Sanchez-Gonzalez et al.
+    /// 2020, "Learning to simulate complex physics with graph networks", §4: noise on the
+    /// inputs so that the net learns to correct the errors its own rollouts make).
+    ///
+    /// Each local state input l_k of each example moves by δ_k ~ N(0, (`scale` · sd_k)²),
+    /// sd_k the spread of that input over `ds` (constant inputs — the model's own local pose —
+    /// get none). With the state change predicted (T_y^Δ), the target is the change from the
+    /// *perturbed* state to the true next state, Δl_k − δ_k: in the local frame a state input
+    /// and its change are the same coordinates (points Rᵀ(p − o) and Rᵀ(p′ − p), vectors,
+    /// angles, quaternions q₀⁻¹ ⊗ q and q₀⁻¹ ⊗ Δq), so the correction is exact. Without T_y^Δ
+    /// the target stays the true next state. Controls are not perturbed. Works on the encoded
+    /// (normalized) set; draws every δ from `rng`.
+    pub fn perturb(&self, ds: &Dataset, scale: f64, rng: &mut rand_chacha::ChaCha8Rng) -> Dataset {
+        use rand::Rng;
+        let n = self.state_dim;
+        let mut out = ds.clone();
+        let rows = ds.len().max(1) as f64;
+        let sd: Vec<f64> = (0..n)
+            .map(|k| {
+                let col = ds.inputs.column(k);
+                let mean = col.sum() / rows;
+                (col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / rows).sqrt()
+            })
+            .collect();
+        // A normalized input step δz is the local step δz σ_in, which is δz σ_in / σ_out of
+        // normalized output.
+        let gain: Vec<f64> = (0..n)
+            .map(|k| {
+                if self.delta {
+                    self.input_norm.std[k] / self.output_norm.std[k]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        for (mut z, mut y) in out
+            .inputs
+            .rows_mut()
+            .into_iter()
+            .zip(out.targets.rows_mut())
+        {
+            for k in 0..n {
+                if sd[k] > 1e-9 {
+                    let d = scale * sd[k] * rng.sample::<f64, _>(rand_distr::StandardNormal);
+                    z[k] += d;
+                    y[k] -= gain[k] * d;
+                }
+            }
+        }
+        out
+    }
+
     /// Maps transitions to (network input, network target) pairs (Fig. 9).
     pub fn encode(&self, data: &Transitions) -> Dataset {
         let (n, m) = (self.state_dim, self.control_dim);

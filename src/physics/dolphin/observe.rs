@@ -54,6 +54,26 @@ impl SegmentFrame {
         ]
     }
 
+    /// The 13 numbers of [`SegmentFrame::to_array`] with the quaternion's sign chosen so that
+    /// its dot product with `reference` (`[w, x, y, z]`) is not negative, rather than w ≥ 0.
+    ///
+    /// A rotation has two quaternions, ±q. Forcing w ≥ 0 makes the representation jump from q
+    /// to −q wherever a segment's rotation passes through a half turn (e.g. the heading passes
+    /// ±π), so neighbouring segments and successive steps disagree in sign. Choosing the sign
+    /// against a nearby rotation — the reference segment's, or the same segment's at the
+    /// previous step — keeps the numbers continuous (NeuroAnimator §3.3's global net learns
+    /// their changes).
+    pub fn to_array_aligned(&self, reference: [f64; 4]) -> [f64; 13] {
+        let mut a = self.to_array();
+        let dot: f64 = (0..4).map(|k| a[3 + k] * reference[k]).sum();
+        if dot < 0.0 {
+            for v in &mut a[3..7] {
+                *v = -*v;
+            }
+        }
+        a
+    }
+
     /// A world point expressed in the segment's frame.
     pub fn to_local(&self, p: &Vector3<f64>) -> Vector3<f64> {
         self.orientation
@@ -233,6 +253,12 @@ mod tests {
             let p = point(&x, segment_frame_masses(s)[0]);
             assert!((f.to_world(&f.to_local(&p)) - p).norm() < 1e-12);
             assert!(f.to_array()[3] >= 0.0);
+            // Aligned to a reference: the same rotation, the sign that agrees with it.
+            let a = f.to_array();
+            let neg = [-a[3], -a[4], -a[5], -a[6]];
+            let b = f.to_array_aligned(neg);
+            assert_eq!(b[3..7], neg[..]);
+            assert_eq!(f.to_array_aligned([a[3], a[4], a[5], a[6]]), a);
         }
         assert!((d.forward_axis(&x) - rot * Vector3::x()).norm() < 1e-12);
         assert!(d.shape_error(&x) < 1e-14);
