@@ -28,7 +28,7 @@ use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution, DdpVari
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Heatmap, Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Heatmap, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
@@ -831,7 +831,6 @@ impl Family for LbcAcrobot {
             series,
             x_range: Some((-2.2, 2.2)),
             y_range: Some((-2.2, 2.2)),
-            legend: Legend::LowerRight,
             ..Default::default()
         };
         let lbc_rows: Vec<usize> = (0..p.len())
@@ -842,7 +841,6 @@ impl Family for LbcAcrobot {
             x_label: "time (s)".into(),
             y_label: "theta1 (rad)".into(),
             series: angle_series,
-            legend: Legend::LowerRight,
             ..Default::default()
         };
         let weights = Panel {
@@ -928,7 +926,6 @@ impl Family for LbcAcrobot {
                     Series::line("mean entropy of alpha", pts(&hs), 2).mark(Mark::Dashed),
                 ],
                 y_range: Some((-0.05, 1.05)),
-                legend: Legend::UpperLeft,
                 ..Default::default()
             };
             files.extend(fig.draw("lambda", &Figure::grid(vec![panel], 1))?);

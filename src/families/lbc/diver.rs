@@ -32,7 +32,7 @@ use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
 use crate::control::lqr::{track, track_with, TrackingController, ValueModel};
 use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
@@ -752,7 +752,6 @@ impl Family for LbcDiverInterpolation {
                 x_label: "desired entry angle (rad from vertical)".into(),
                 y_label: "reached entry angle (rad)".into(),
                 series,
-                legend: Legend::UpperLeft,
                 ..Default::default()
             },
             Panel {
@@ -760,7 +759,6 @@ impl Family for LbcDiverInterpolation {
                 x_label: "desired entry angle (rad from vertical)".into(),
                 y_label: "(J - J*) / J*".into(),
                 series: excess,
-                legend: Legend::UpperLeft,
                 ..Default::default()
             },
         ];

@@ -21,7 +21,7 @@ use crate::control::ddp::{solve, ControlBounds, DdpOptions, Termination};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
@@ -387,7 +387,6 @@ impl Family for LbcPush {
                     .mark(Mark::Dashed),
                 ],
                 y_range: Some((-0.05, 1.05)),
-                legend: Legend::LowerRight,
                 ..Default::default()
             },
             Panel {

@@ -71,23 +71,11 @@ impl Family for MsLearning {
             out
         };
         let (h, s) = (split("hill_climbing"), split("simulated_annealing"));
-        // The y range: from a low quantile of all evaluations to above the best (blown-up or
-        // very poor evaluations would squash the plot otherwise).
-        let mut all: Vec<f64> = t
-            .f64s("objective")
-            .into_iter()
-            .filter(|v| v.is_finite())
-            .collect();
-        all.sort_by(f64::total_cmp);
-        let lo = all.get(all.len() / 50).copied().unwrap_or(0.0);
-        let hi = all.last().copied().unwrap_or(1.0);
-        let pad = 0.05 * (hi - lo).max(1e-9);
-        let mut panel = learning_panel(
+        let panel = learning_panel(
             "learning plot: poodle somersault (Fig. 6)",
             &[("hill climbing", &h), ("simulated annealing", &s)],
             "iteration (0: initial random controllers)",
         );
-        panel.y_range = Some((lo - pad, hi + pad));
         let mut fig6 = Figure::grid(vec![panel], 1);
         fig6.panel_size = (960, 560);
         fig.draw("learning", &fig6)

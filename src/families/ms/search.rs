@@ -451,7 +451,28 @@ impl Job for LearningJob {
 }
 
 /// The search-trace panel: every evaluation's objective and the best so far, per method.
+/// The y axis starts at the 2nd percentile of the evaluations, so the rare blow-ups (a
+/// diverged simulation scores -1e6) do not flatten the curves; the title says how many
+/// evaluations lie below the axis.
 pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &str) -> Panel {
+    let mut all: Vec<f64> = tables
+        .iter()
+        .flat_map(|(_, t)| t.f64s("objective"))
+        .filter(|v| v.is_finite())
+        .collect();
+    all.sort_by(f64::total_cmp);
+    let lo = all.get(all.len() / 50).copied().unwrap_or(0.0);
+    let hi = all.last().copied().unwrap_or(1.0);
+    let pad = 0.05 * (hi - lo).max(1e-9);
+    let clipped = all.iter().filter(|&&v| v < lo - pad).count();
+    let title = if clipped > 0 {
+        format!(
+            "{title} ({clipped} of {} evaluations below the axis, not shown)",
+            all.len()
+        )
+    } else {
+        title.to_string()
+    };
     let mut series = Vec::new();
     for (k, (name, t)) in tables.iter().enumerate() {
         let (it, obj, best) = (t.f64s("iteration"), t.f64s("objective"), t.f64s("best"));
@@ -471,10 +492,11 @@ pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &s
         ));
     }
     Panel {
-        title: title.into(),
+        title,
         x_label: x_label.into(),
         y_label: "objective".into(),
         series,
+        y_range: Some((lo - pad, hi + pad)),
         ..Panel::default()
     }
 }

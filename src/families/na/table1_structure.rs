@@ -25,7 +25,7 @@ use crate::emulator::hierarchy::{
 };
 use crate::emulator::mlp::Mlp;
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
@@ -672,7 +672,6 @@ impl Family for NaStructure {
             y_label: "mean squared error / state variance".into(),
             log_y: true,
             series,
-            legend: Legend::LowerRight,
             ..Panel::default()
         };
         files.extend(fig.draw("rollout", &Figure::grid(vec![panel], 1))?);

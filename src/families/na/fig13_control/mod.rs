@@ -36,7 +36,7 @@ use crate::control::Rk4Map;
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::hierarchy::{FRAME_DIM, GLOBAL_DIM};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
@@ -1035,7 +1035,6 @@ impl Family for NaControl {
                 x_label: "time (s)".into(),
                 y_label: "state".into(),
                 series,
-                legend: Legend::LowerRight,
                 ..Panel::default()
             });
         }
