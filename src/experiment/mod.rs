@@ -78,6 +78,11 @@ pub trait Experiment: Sync {
     fn figures(&self, fig: &plot::FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error>;
     /// The report section, computed from the CSVs in `dir` (the experiment's result folder).
     fn report(&self, dir: &Path) -> Result<report::Findings, Error>;
+    /// An implementation check (lattice counts, integrator orders, projection accuracy), not a
+    /// reproduction of a paper's claim: the report's summary lists these apart.
+    fn is_check(&self) -> bool {
+        false
+    }
 }
 
 /// What a family file implements: its name, its typed parameters (which run as the [`Job`])
@@ -91,9 +96,15 @@ pub trait Family: Sync {
     fn figures(&self, fig: &plot::FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error>;
     /// The report section, computed from the CSVs in `dir` (the experiment's result folder).
     fn report(&self, dir: &Path) -> Result<report::Findings, Error>;
+    /// Whether this family checks our implementation rather than reproducing a paper's claim.
+    const CHECK: bool = false;
 }
 
 impl<F: Family> Experiment for F {
+    fn is_check(&self) -> bool {
+        F::CHECK
+    }
+
     fn kind(&self) -> &'static str {
         F::KIND
     }

@@ -13,6 +13,7 @@ use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, ValueFormatter}
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
@@ -46,6 +47,9 @@ pub struct Series {
     pub mark: Mark,
     /// Index into the palette.
     pub color: usize,
+    /// Text written at each point (above a bar, beside a dot), aligned with `points`; empty:
+    /// none.
+    pub point_labels: Vec<String>,
 }
 
 impl Series {
@@ -56,7 +60,13 @@ impl Series {
             points,
             mark: Mark::Line,
             color,
+            point_labels: Vec::new(),
         }
+    }
+    /// The same series with a text at each point (e.g. a bar's value written on it).
+    pub fn labelled(mut self, labels: Vec<String>) -> Self {
+        self.point_labels = labels;
+        self
     }
     /// The same series drawn with another mark.
     pub fn mark(mut self, mark: Mark) -> Self {
@@ -881,6 +891,21 @@ where
         let style = ShapeStyle::from(&color).stroke_width(2);
         if s.mark == Mark::LinePoints {
             chart.draw_series(pts.iter().map(|&q| Circle::new(q, 3, color.filled())))?;
+        }
+        if !s.point_labels.is_empty() {
+            let font = ("sans-serif", 12)
+                .into_font()
+                .color(&BLACK)
+                .pos(Pos::new(HPos::Center, VPos::Bottom));
+            chart.draw_series(
+                s.points
+                    .iter()
+                    .zip(&s.point_labels)
+                    .filter(|(q, _)| pts.contains(q))
+                    .map(|(&q, text)| {
+                        EmptyElement::at(q) + Text::new(text.clone(), (0, -4), font.clone())
+                    }),
+            )?;
         }
         let anno = match s.mark {
             Mark::Line | Mark::LinePoints => chart.draw_series(LineSeries::new(pts, style))?,

@@ -116,18 +116,17 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
          in one run.\n",
         env!("CARGO_PKG_VERSION")
     );
-    let _ = writeln!(
-        md,
-        "| experiment | paper item | verdict |\n| --- | --- | --- |"
-    );
+    // Summary rows, reproductions and implementation checks apart: (row, verdict, is check).
+    let mut rows: Vec<(String, String, bool)> = Vec::new();
     let mut sections = String::new();
     let code_rev = code_revision();
     for r in specs {
         let dir = out.join(&r.id);
-        let (verdict, body) = if dir.join("run.json").exists() {
+        let (verdict, headline, body) = if dir.join("run.json").exists() {
             match r.family.report(&dir) {
                 Ok(f) => (
                     f.verdict.label().to_string(),
+                    headline(&f.why),
                     format!(
                         "{}\n\n**Verdict: {}.** {}\n",
                         f.ours.trim_end(),
@@ -135,18 +134,28 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
                         f.why
                     ),
                 ),
-                Err(e) => ("error".into(), format!("Could not read the results: {e}\n")),
+                Err(e) => (
+                    "error".into(),
+                    String::new(),
+                    format!("Could not read the results: {e}\n"),
+                ),
             }
         } else {
-            ("not run".into(), "Not run yet.\n".into())
+            ("not run".into(), String::new(), "Not run yet.\n".into())
         };
         let stale = run_provenance(&dir, code_rev.as_deref());
         let mark = if stale.is_some() { " (stale)" } else { "" };
-        let _ = writeln!(
-            md,
-            "| [`{}`](#{}) | {} | {verdict}{mark} |",
-            r.id, r.id, r.paper_item
-        );
+        rows.push((
+            format!(
+                "| [`{}`](#{}) | {} | {verdict}{mark} | {} |",
+                r.id,
+                r.id,
+                r.paper_item,
+                headline.replace('|', "\\|")
+            ),
+            verdict,
+            r.family.is_check(),
+        ));
         let _ = writeln!(
             sections,
             "\n## {}\n\n<a id=\"{}\"></a>*{}* — {}\n",
@@ -170,10 +179,71 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
             }
         }
     }
+    md.push_str(&summary(&rows));
     md.push_str(&sections);
     let path = out.join("REPORT.md");
     atomic_write(&path, md.as_bytes())?;
     Ok(path)
+}
+
+/// The summary at the top of the report: a count of the papers' claims that hold, then the
+/// reproductions and the implementation checks in separate tables, each row with its verdict and
+/// the first sentence of the verdict's reasons.
+fn summary(rows: &[(String, String, bool)]) -> String {
+    let mut md = String::new();
+    let repro: Vec<&(String, String, bool)> = rows.iter().filter(|r| !r.2).collect();
+    let count = |label: &str| repro.iter().filter(|r| r.1 == label).count();
+    let _ = writeln!(
+        md,
+        "**{} of {} reproduced claims held, {} partly, {} did not hold{}.** \
+         *Held*: every condition of the section's rule passed; *partly held*: its weaker rule \
+         passed (some conditions, each section says which); *did not hold*: neither. Each rule \
+         and its thresholds (ours where the paper gives none) are fixed in the experiment's spec \
+         before the run. \"(stale)\" marks results made by older code than the tree's.\n",
+        count("held"),
+        repro.len(),
+        count("partly held"),
+        count("did not hold"),
+        match repro.len() - count("held") - count("partly held") - count("did not hold") {
+            0 => String::new(),
+            n => format!(", {n} not assessed or not run"),
+        }
+    );
+    for (title, check) in [
+        ("Reproductions of the papers' claims", false),
+        ("Implementation checks", true),
+    ] {
+        let _ = writeln!(
+            md,
+            "### {title}\n\n| experiment | paper item | verdict | headline |\n| --- | --- | --- | --- |"
+        );
+        for r in rows.iter().filter(|r| r.2 == check) {
+            let _ = writeln!(md, "{}", r.0);
+        }
+        md.push('\n');
+    }
+    md
+}
+
+/// The first sentence of a verdict's reasons (at most about 220 characters), for the summary.
+pub fn headline(why: &str) -> String {
+    let why = why.trim();
+    let b = why.as_bytes();
+    let mut end = why.len();
+    for (i, _) in why.match_indices(". ") {
+        // A sentence ends at ". " followed by a capital letter (not "0.5 s" or "e.g. x").
+        if b.get(i + 2).is_some_and(|c| c.is_ascii_uppercase()) {
+            end = i + 1;
+            break;
+        }
+    }
+    let first = &why[..end];
+    if first.chars().count() > 220 {
+        let cut: String = first.chars().take(217).collect();
+        format!("{}…", cut.trim_end())
+    } else {
+        first.to_string()
+    }
 }
 
 /// The last commit that changed the code ([`super::runner::CODE_PATHS`]), in a git checkout.
@@ -290,6 +360,36 @@ pub fn sig(v: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_headline_is_the_first_sentence_of_the_reasons() {
+        assert_eq!(
+            headline("BPTT reaches J = -1.02 at 0.185 s (e.g. 15 steps). Annealing needs 0."),
+            "BPTT reaches J = -1.02 at 0.185 s (e.g. 15 steps)."
+        );
+        assert_eq!(headline("one sentence only"), "one sentence only");
+        let long = "x".repeat(400);
+        assert!(headline(&long).chars().count() <= 220);
+    }
+
+    #[test]
+    fn the_summary_counts_reproductions_and_lists_checks_apart() {
+        let row =
+            |id: &str, v: &str, check| (format!("| `{id}` | | {v} | |"), v.to_string(), check);
+        let md = summary(&[
+            row("a", "held", false),
+            row("b", "partly held", false),
+            row("c", "did not hold", false),
+            row("d", "held", true),
+        ]);
+        assert!(
+            md.contains("**1 of 3 reproduced claims held, 1 partly, 1 did not hold.**"),
+            "{md}"
+        );
+        let checks = md.find("### Implementation checks").unwrap();
+        assert!(md.find("`d`").unwrap() > checks);
+        assert!(md.find("`c`").unwrap() < checks);
+    }
 
     /// A history a ← b ← c (c newest): `contains(x, y)` when x is y or older.
     fn contains(x: &str, y: &str) -> bool {

@@ -342,6 +342,7 @@ impl Job for Params {
 }
 
 impl Family for PhysicsValidation {
+    const CHECK: bool = true;
     const KIND: &'static str = "physics_validation";
     type Params = Params;
 

@@ -165,6 +165,7 @@ impl Job for Params {
 }
 
 impl Family for LbcProjection {
+    const CHECK: bool = true;
     const KIND: &'static str = "lbc_projection";
     type Params = Params;
 

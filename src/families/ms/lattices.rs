@@ -156,6 +156,7 @@ pub fn springs_of(t: &Table, lattice: Option<&str>) -> Vec<(usize, usize)> {
 }
 
 impl Family for MsLattices {
+    const CHECK: bool = true;
     const KIND: &'static str = "ms_lattices";
     type Params = Params;
 

@@ -115,6 +115,14 @@ impl Validate for Params {
     }
 }
 
+/// The integrator our physical simulator of Table 2's `model` steps with.
+fn physical_integrator(model: &str) -> &'static str {
+    match model {
+        "dolphin" => "semi-implicit Euler",
+        _ => "RK4",
+    }
+}
+
 /// Fastest of `repeats` runs of `f`, in seconds.
 fn best_time(repeats: usize, mut f: impl FnMut()) -> f64 {
     (0..repeats)
@@ -333,33 +341,47 @@ impl Family for NaSpeedup {
         let slots = kinds.len() + 1;
         let w = 0.8 / slots as f64;
         let pos = |mi: usize, slot: usize| mi as f64 + (slot as f64 + 0.5) * w - 0.4;
-        let mut series = vec![Series::line(
-            "physical (RK4)",
-            models
-                .iter()
-                .enumerate()
-                .filter_map(|(mi, mname)| {
-                    let r = model.iter().position(|x| x == mname)?;
-                    Some((pos(mi, 0), phys[r]))
-                })
-                .collect(),
-            0,
-        )
-        .mark(Mark::Bars {
-            half_width: 0.45 * w,
-        })];
+        // Physical bars carry their seconds, emulator bars their speedup (physical / emulator).
+        let phys_rows: Vec<(f64, f64)> = models
+            .iter()
+            .enumerate()
+            .filter_map(|(mi, mname)| {
+                let r = model.iter().position(|x| x == mname)?;
+                Some((pos(mi, 0), phys[r]))
+            })
+            .collect();
+        let phys_text = phys_rows
+            .iter()
+            .map(|q| format!("{} s", sig(q.1)))
+            .collect();
+        let mut series = vec![Series::line("physical simulator", phys_rows, 0)
+            .mark(Mark::Bars {
+                half_width: 0.45 * w,
+            })
+            .labelled(phys_text)];
         for (ki, k) in kinds.iter().enumerate() {
-            let pts = models
+            let rows: Vec<usize> = models
                 .iter()
-                .enumerate()
-                .filter_map(|(mi, mname)| {
-                    let r = (0..model.len()).find(|&r| &model[r] == mname && &emu[r] == k)?;
-                    Some((pos(mi, ki + 1), es[r]))
+                .filter_map(|mname| (0..model.len()).find(|&r| &model[r] == mname && &emu[r] == k))
+                .collect();
+            let pts = rows
+                .iter()
+                .map(|&r| {
+                    let mi = models.iter().position(|m| *m == model[r]).unwrap_or(0);
+                    (pos(mi, ki + 1), es[r])
                 })
                 .collect();
-            series.push(Series::line(k.clone(), pts, ki + 1).mark(Mark::Bars {
-                half_width: 0.45 * w,
-            }));
+            let text = rows
+                .iter()
+                .map(|&r| format!("{:.0}×", phys[r] / es[r]))
+                .collect();
+            series.push(
+                Series::line(format!("{k} (×: speedup)"), pts, ki + 1)
+                    .mark(Mark::Bars {
+                        half_width: 0.45 * w,
+                    })
+                    .labelled(text),
+            );
         }
         let panel = Panel {
             title: format!(
@@ -367,7 +389,10 @@ impl Family for NaSpeedup {
                 t.f64s("physical_steps").first().copied().unwrap_or(0.0)
             ),
             x_label: "model".into(),
-            x_categories: models.iter().map(|m| m.to_string()).collect(),
+            x_categories: models
+                .iter()
+                .map(|m| format!("{m} ({})", physical_integrator(m)))
+                .collect(),
             y_label: "wall time (s)".into(),
             log_y: true,
             series,
