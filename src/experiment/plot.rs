@@ -369,15 +369,25 @@ pub(crate) fn tick(v: f64, snap: f64) -> String {
 }
 
 /// Whether an axis's ticks need scientific notation (one of them is >= 1e4 or < 1e-3 in
-/// magnitude and not zero): then every label of that axis is written so.
+/// magnitude and not zero; whole numbers up to 1e6 stay plain): then every label of that axis
+/// is written so.
 fn needs_sci(ticks: &[f64], snap: f64) -> bool {
-    ticks
-        .iter()
-        .any(|&v| tick(v, snap) != "0" && (v.abs() >= 1e4 || v.abs() < 1e-3))
+    let whole = ticks.iter().all(|v| v.fract() == 0.0 && v.abs() < 1e6);
+    !whole
+        && ticks
+            .iter()
+            .any(|&v| tick(v, snap) != "0" && (v.abs() >= 1e4 || v.abs() < 1e-3))
 }
 
 /// A tick label in one axis-wide format: scientific (`2.5e-5`, `1e3`) when `sci`, else [`tick`].
 pub(crate) fn tick_as(v: f64, snap: f64, sci: bool) -> String {
+    if !sci && v.fract() == 0.0 && v.abs() < 1e6 {
+        return if v == 0.0 {
+            "0".into()
+        } else {
+            format!("{v:.0}")
+        };
+    }
     let plain = tick(v, snap);
     if !sci || plain == "0" {
         return plain;
@@ -1047,6 +1057,11 @@ mod tests {
         assert_eq!(tick_as(1.0, 0.0, true), "1e0");
         assert_eq!(tick_as(0.25, 1.0, false), "0.25");
         assert!(!needs_sci(&axis_ticks(0.0, 10.0, false), 10.0));
+        // Iteration counts stay whole numbers.
+        let t = axis_ticks(0.0, 15000.0, false);
+        assert!(!needs_sci(&t, 15000.0));
+        assert_eq!(tick_as(15000.0, 15000.0, false), "15000");
+        assert_eq!(tick_as(-0.0, 1.0, false), "0");
     }
 
     #[test]

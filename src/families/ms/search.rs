@@ -465,13 +465,13 @@ pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &s
     let hi = all.last().copied().unwrap_or(1.0);
     let pad = 0.05 * (hi - lo).max(1e-9);
     let clipped = all.iter().filter(|&&v| v < lo - pad).count();
-    let title = if clipped > 0 {
+    let y_label = if clipped > 0 {
         format!(
-            "{title} ({clipped} of {} evaluations below the axis, not shown)",
+            "objective ({clipped} of {} evaluations, blow-ups among them, lie below the axis)",
             all.len()
         )
     } else {
-        title.to_string()
+        "objective".to_string()
     };
     let mut series = Vec::new();
     for (k, (name, t)) in tables.iter().enumerate() {
@@ -492,9 +492,9 @@ pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &s
         ));
     }
     Panel {
-        title,
+        title: title.into(),
         x_label: x_label.into(),
-        y_label: "objective".into(),
+        y_label,
         series,
         y_range: Some((lo - pad, hi + pad)),
         ..Panel::default()

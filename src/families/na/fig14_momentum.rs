@@ -536,7 +536,7 @@ impl Family for NaMomentum {
             ours: md,
             verdict,
             why: format!(
-                "Momentum (eta {}) ends at J = {} vs plain (eta {}) J = {} after {k_plain} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2). Held needs momentum to reach plain's final J in at most half the iterations and plain eta {} to be the largest converging rate; partly: only the first. Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim.",
+                "Momentum (eta {}) ends at J = {} vs plain (eta {}) J = {} after {k_plain} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2). Held needs momentum to reach plain's final J in at most half the iterations and the next plain rate tried above eta {} not to converge (the paper's 'largest rate that converges', read as the stability limit; rates further up that converge again are listed above, not counted); partly: only the first. Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim.",
                 mom.1,
                 sig(mom_end),
                 base.1,

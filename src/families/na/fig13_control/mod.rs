@@ -994,6 +994,9 @@ impl Family for NaControl {
             tr.f64s("s0")
         });
         let s1 = tr.f64s("s1");
+        let goal = tables.require("goal")?;
+        let (goal_task, goal_model) = (goal.strs("task"), goal.strs("model"));
+        let (goal_s0, goal_s1) = (goal.f64s("s0"), goal.f64s("s1"));
         let mut panels = vec![];
         for name in unique(&task) {
             let pts = (0..task.len())
@@ -1009,7 +1012,29 @@ impl Family for NaControl {
                 series: vec![Series::line("momentum descent", pts, 0)],
                 ..Panel::default()
             });
-            let series = ["emulator", "simulator"]
+            // The plotted variables by their `describe` names, and the goal's row.
+            let goal_row = (0..goal_task.len()).find(|&r| goal_task[r] == name);
+            let physics = goal_row.and_then(|r| {
+                crate::emulator::catalog::NetModel::ALL
+                    .iter()
+                    .find(|m| m.name() == goal_model[r])
+                    .map(|m| m.physics_name())
+            });
+            let state_names = physics
+                .and_then(crate::physics::model_by_name)
+                .map(|m| m.state_names())
+                .unwrap_or_default();
+            let names = match (state_names.first(), state_names.get(1)) {
+                (Some(a), Some(b)) if name != "dolphin" => (a.clone(), b.clone()),
+                _ => ("x".to_string(), "y".to_string()),
+            };
+            let names = (names.0.as_str(), names.1.as_str());
+            let unit = if physics.is_some_and(|p| p.starts_with("pendulum")) {
+                "rad"
+            } else {
+                "m"
+            };
+            let mut series: Vec<Series> = ["emulator", "simulator"]
                 .iter()
                 .enumerate()
                 .flat_map(|(c, s)| {
@@ -1021,19 +1046,38 @@ impl Family for NaControl {
                     };
                     let mark = if c == 0 { Mark::Line } else { Mark::Dashed };
                     [
-                        Series::line(format!("s0 {s}"), sel(&s0), 0).mark(mark),
-                        Series::line(format!("s1 {s}"), sel(&s1), 1).mark(mark),
+                        Series::line(format!("{} {s}", names.0), sel(&s0), 0).mark(mark),
+                        Series::line(format!("{} {s}", names.1), sel(&s1), 1).mark(mark),
                     ]
                 })
                 .collect();
+            // The goal of each plotted variable as a dotted line in its colour (the dolphin's
+            // is a distance to beat, not a state: none).
+            let t_end = (0..ttask.len())
+                .filter(|&r| ttask[r] == name)
+                .map(|r| tt[r])
+                .fold(0.0, f64::max);
+            if let Some(g) = goal_row.filter(|_| name != "dolphin") {
+                for (k, (v, label)) in [(goal_s0[g], names.0), (goal_s1[g], names.1)]
+                    .into_iter()
+                    .enumerate()
+                {
+                    if v.is_finite() {
+                        let dots = (0..=40).map(|i| (t_end * i as f64 / 40.0, v)).collect();
+                        series.push(
+                            Series::line(format!("{label} goal"), dots, k).mark(Mark::Points),
+                        );
+                    }
+                }
+            }
             panels.push(Panel {
                 title: if name == "dolphin" {
-                    "dolphin: mean centroid x (s0), y (s1), m".into()
+                    "dolphin: mean centroid x, y".into()
                 } else {
-                    format!("{name}: learned motion (s0, s1)")
+                    format!("{name}: learned motion ({}, {})", names.0, names.1)
                 },
                 x_label: "time (s)".into(),
-                y_label: "state".into(),
+                y_label: format!("{}, {} ({unit})", names.0, names.1),
                 series,
                 ..Panel::default()
             });
