@@ -150,7 +150,7 @@ fn lbc_acrobot_quick_lbc_beats_the_naive_blend() {
         let v: f64 = line.split(',').nth(m).unwrap().parse().unwrap();
         assert!(v <= 9.81, "{line}");
     }
-    for f in ["final_pose", "sweep", "lambda"] {
+    for f in ["final_pose", "sweep", "lambda", "filmstrip"] {
         assert!(d
             .path()
             .join(format!("figs/lbc_acrobot_swingup_{f}.png"))

@@ -448,6 +448,66 @@ const DIVERGED: f64 = 1e4;
 /// The compared policies; `naive` is the average (w_i / Σw), `naive_sum` the paper's sum.
 const POLICIES: [&str; 5] = ["tracker1", "tracker2", "naive", "lbc", "naive_sum"];
 
+/// Fig. 7 as a filmstrip: one row per policy from the test start, the acrobot's pose every
+/// `FRAME_DT` seconds left to right (frames `FRAME_GAP` m apart), the bar marked at each frame.
+fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])) -> Figure {
+    const FRAME_DT: f64 = 0.5;
+    const FRAME_GAP: f64 = 4.5;
+    let t_end = t
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    let frames = (t_end / FRAME_DT).floor() as usize + 1;
+    let mut panels = Vec::new();
+    for (c, name) in POLICIES.iter().enumerate() {
+        let rows: Vec<usize> = (0..p.len()).filter(|&r| p[r] == *name).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let mut series = Vec::new();
+        let mut bars = Vec::new();
+        for k in 0..frames {
+            let tk = k as f64 * FRAME_DT;
+            let Some(&r) = rows
+                .iter()
+                .min_by(|&&a, &&b| (t[a] - tk).abs().total_cmp(&(t[b] - tk).abs()))
+            else {
+                continue;
+            };
+            let off = k as f64 * FRAME_GAP;
+            let [e, h] = acro.positions(&[a1[r], a2[r], 0.0, 0.0]);
+            let label = if k == 0 {
+                format!("{name}: pose every {FRAME_DT} s, t = 0 to {t_end} s left to right")
+            } else {
+                String::new()
+            };
+            series.push(
+                Series::line(
+                    label,
+                    vec![(off, 0.0), (off + e[0], e[1]), (off + h[0], h[1])],
+                    c,
+                )
+                .mark(Mark::LinePoints),
+            );
+            bars.push((off, 0.0));
+        }
+        series.push(Series::line("bar (pivot)", bars, 7).mark(Mark::Points));
+        panels.push(Panel {
+            title: format!("{name} from the test start (handstand: both links straight up, 2 m)"),
+            x_label: format!("x (m), frames {FRAME_GAP} m apart"),
+            y_label: "height above the bar (m)".into(),
+            series,
+            x_range: Some((-2.4, (frames as f64 - 0.5) * FRAME_GAP)),
+            y_range: Some((-2.3, 3.6)),
+            ..Default::default()
+        });
+    }
+    let mut f = Figure::grid(panels, 1);
+    f.panel_size = ((frames as u32 * 150).max(900), 300);
+    f
+}
+
 fn mode(i: usize) -> BlendMode {
     match i {
         0 => BlendMode::Single(0),
@@ -864,6 +924,7 @@ impl Family for LbcAcrobot {
             ..Default::default()
         };
         let mut files = fig.draw("final_pose", &Figure::grid(vec![pose, angles, weights], 3))?;
+        files.extend(fig.draw("filmstrip", &filmstrip(&acro, (&p, &t, &a1, &a2)))?);
         // Sweep heat maps.
         const CLAMP: f64 = 3.0;
         let sw = tables.require("sweep")?;
