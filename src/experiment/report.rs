@@ -227,7 +227,13 @@ fn summary(rows: &[(String, String, bool)]) -> String {
 
 /// The first sentence of a verdict's reasons (at most about 220 characters), for the summary.
 pub fn headline(why: &str) -> String {
-    let why = why.trim();
+    let mut why = why.trim();
+    // A leading restatement of the paper's claim ("paper: …") is not our result: skip it.
+    if why.to_ascii_lowercase().starts_with("paper:") {
+        if let Some(i) = why.find(". ") {
+            why = why[i + 2..].trim_start();
+        }
+    }
     let b = why.as_bytes();
     let mut end = why.len();
     for (i, _) in why.match_indices(". ") {
@@ -368,6 +374,10 @@ mod tests {
             "BPTT reaches J = -1.02 at 0.185 s (e.g. 15 steps)."
         );
         assert_eq!(headline("one sentence only"), "one sentence only");
+        assert_eq!(
+            headline("paper: LBC comes closest. Rule: LBC rescues 2 of 26. More."),
+            "Rule: LBC rescues 2 of 26."
+        );
         let long = "x".repeat(400);
         assert!(headline(&long).chars().count() <= 220);
     }

@@ -1156,7 +1156,7 @@ impl Family for NaControl {
             ours: md,
             verdict,
             why: format!(
-                "Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far). {reached} of {} tasks reach their goal on the emulator within the paper's iteration counts; replayed on the physical simulator {reached_sim} do (every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start).{swim}{sweeps}",
+                "{reached} of {} tasks reach their goal on the emulator within the paper's iteration counts; replayed on the physical simulator {reached_sim} do (every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far).{swim}{sweeps}",
                 ft.len()
             ),
         })
