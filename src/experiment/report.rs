@@ -230,26 +230,27 @@ pub fn headline(why: &str) -> String {
     let mut why = why.trim();
     // A leading restatement of the paper's claim ("paper: …") is not our result: skip it.
     if why.to_ascii_lowercase().starts_with("paper:") {
-        if let Some(i) = why.find(". ") {
-            why = why[i + 2..].trim_start();
+        if let Some(end) = sentence_end(why) {
+            why = why[end..].trim_start();
         }
     }
-    let b = why.as_bytes();
-    let mut end = why.len();
-    for (i, _) in why.match_indices(". ") {
-        // A sentence ends at ". " followed by a capital letter (not "0.5 s" or "e.g. x").
-        if b.get(i + 2).is_some_and(|c| c.is_ascii_uppercase()) {
-            end = i + 1;
-            break;
-        }
-    }
-    let first = &why[..end];
+    let first = &why[..sentence_end(why).unwrap_or(why.len())];
     if first.chars().count() > 220 {
         let cut: String = first.chars().take(217).collect();
         format!("{}…", cut.trim_end())
     } else {
-        first.to_string()
+        first.trim_end().to_string()
     }
+}
+
+/// Where the first sentence of `text` ends (just after its full stop): at ". " followed by a
+/// capital letter, so "0.5 s", "e.g. x" and "(Fig. 9)" do not end one.
+fn sentence_end(text: &str) -> Option<usize> {
+    let b = text.as_bytes();
+    text.match_indices(". ")
+        .map(|(i, _)| i)
+        .find(|&i| b.get(i + 2).is_some_and(|c| c.is_ascii_uppercase()))
+        .map(|i| i + 1)
 }
 
 /// The last commit that changed the code ([`super::runner::CODE_PATHS`]), in a git checkout.
@@ -377,6 +378,10 @@ mod tests {
         assert_eq!(
             headline("paper: LBC comes closest. Rule: LBC rescues 2 of 26. More."),
             "Rule: LBC rescues 2 of 26."
+        );
+        assert_eq!(
+            headline("paper: it swings, then settles (Fig. 9). Held needs all four. Ours."),
+            "Held needs all four."
         );
         let long = "x".repeat(400);
         assert!(headline(&long).chars().count() <= 220);
