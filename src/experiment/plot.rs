@@ -888,8 +888,6 @@ where
             }
         })
         .y_label_formatter(&|v| tick_as(*v, snap.1, sci.1))
-        .x_labels(8)
-        .y_labels(8)
         .label_style(("sans-serif", 13))
         .axis_desc_style(("sans-serif", 15))
         .bold_line_style(RGBColor(225, 225, 225))

@@ -824,17 +824,14 @@ impl Job for Params {
                 h
             ]);
         }
-        let mut rule = Table::new(&["setting", "value"]);
-        for (k, v) in [
+        let rule = super::rule_table(&[
             ("lambda", lambda),
             ("torque_noise", self.torque_noise),
             ("torque_limit", self.torque_limit),
             ("success_distance", self.success_distance),
             ("held_fraction", self.held_fraction),
             ("max_cost_ratio", self.max_cost_ratio),
-        ] {
-            rule.push(row![k, v]);
-        }
+        ]);
         Ok(Tables::from([
             ("final", fin),
             ("trajectories", traj),
@@ -995,10 +992,7 @@ impl Family for LbcAcrobot {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let rule = read_csv(&dir.join("rule.csv"))?;
-        let (rk, rv) = (df_str(&rule, "setting")?, df_f64(&rule, "value")?);
-        let setting =
-            |k: &str| -> f64 { rk.iter().position(|s| s == k).map_or(f64::NAN, |i| rv[i]) };
+        let setting = super::rule_settings(dir)?;
         let (lambda, sigma, limit, success_distance, held_fraction, max_ratio) = (
             setting("lambda"),
             setting("torque_noise"),

@@ -688,8 +688,7 @@ impl Job for InterpolationParams {
             }
         }
         let spacing = 2.0 * self.offset;
-        let mut rule = Table::new(&["setting", "value"]);
-        for (k, v) in [
+        let rule = super::rule_table(&[
             ("lambda", lambda),
             ("torque_noise", d.torque_noise),
             ("entry_tolerance", self.entry_tolerance),
@@ -698,9 +697,7 @@ impl Job for InterpolationParams {
                 "q_spacing2_over_lambda",
                 d.torso_weight * spacing * spacing / lambda,
             ),
-        ] {
-            rule.push(row![k, v]);
-        }
+        ]);
         Ok(Tables::from([
             ("interpolation", table),
             ("dives", examples),
@@ -1098,16 +1095,13 @@ impl Job for CoordinationParams {
                 ]);
             }
         }
-        let mut rule = Table::new(&["setting", "value"]);
-        for (k, v) in [
+        let rule = super::rule_table(&[
             ("lambda", d.lambda()),
             ("torque_noise", d.torque_noise),
             ("entry_tolerance", self.entry_tolerance),
             ("objective_tolerance", self.objective_tolerance),
             ("ddp_value_built", ddp_trackers.is_some() as u8 as f64),
-        ] {
-            rule.push(row![k, v]);
-        }
+        ]);
         Ok(Tables::from([
             ("coordination", table),
             ("dives", examples),

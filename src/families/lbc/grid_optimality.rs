@@ -346,18 +346,15 @@ impl Job for Params {
                 nl_comb[s]
             ]);
         }
-        let mut rule = Table::new(&["setting", "value"]);
         let (lo, hi) = nl_direct
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
                 (a.min(v), b.max(v))
             });
-        for (k, v) in [
+        let rule = super::rule_table(&[
             ("nonlinear_tolerance", self.nonlinear_tolerance),
             ("nonlinear_direct_range", hi - lo),
-        ] {
-            rule.push(row![k, v]);
-        }
+        ]);
         Ok(Tables::from([
             ("optimality", opt),
             ("grid", fields),

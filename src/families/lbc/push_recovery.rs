@@ -315,8 +315,7 @@ impl Job for Params {
                 m[3]
             ]);
         }
-        let mut rule = Table::new(&["setting", "value"]);
-        for (k, v) in [
+        let rule = super::rule_table(&[
             ("lambda", self.lambda()),
             ("torque_noise", self.torque_noise),
             ("min_swings", self.min_swings as f64),
@@ -326,9 +325,7 @@ impl Job for Params {
             ("mirror_tolerance", self.mirror_tolerance),
             ("fall_angle", self.fall_angle),
             ("horizon", self.horizon),
-        ] {
-            rule.push(row![k, v]);
-        }
+        ]);
         Ok(Tables::from([
             ("weights", table),
             ("reaches", reaches),
@@ -405,9 +402,7 @@ impl Family for LbcPush {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let rule = read_csv(&dir.join("rule.csv"))?;
-        let (rk, rv) = (df_str(&rule, "setting")?, df_f64(&rule, "value")?);
-        let setting = |k: &str| rk.iter().position(|s| s == k).map_or(f64::NAN, |i| rv[i]);
+        let setting = super::rule_settings(dir)?;
         let df = read_csv(&dir.join("weights.csv"))?;
         let (t, a, f, body) = (
             df_f64(&df, "t")?,

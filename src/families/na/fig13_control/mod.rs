@@ -633,38 +633,27 @@ impl Params {
         use crate::physics::linearize::FiniteDifference;
         use crate::physics::pendulum::{Pendulum3, PendulumVariant};
         use crate::physics::truck::Truck;
-        let a = (self, task, sw, objective, knots, x0);
+        // One sweep per physical model type (`go` is generic over it).
+        macro_rules! sweep_through {
+            ($model:expr) => {
+                go(
+                    self,
+                    FiniteDifference::new($model),
+                    task,
+                    sw,
+                    objective,
+                    knots,
+                    x0,
+                    table,
+                )
+            };
+        }
         match task.net.model {
-            NetModel::Truck => go(
-                a.0,
-                FiniteDifference::new(Truck::default()),
-                a.1,
-                a.2,
-                a.3,
-                a.4,
-                a.5,
-                table,
-            ),
-            NetModel::Lander => go(
-                a.0,
-                FiniteDifference::new(Lander::default()),
-                a.1,
-                a.2,
-                a.3,
-                a.4,
-                a.5,
-                table,
-            ),
-            NetModel::PendulumActive => go(
-                a.0,
-                FiniteDifference::new(Pendulum3::new(PendulumVariant::Active)),
-                a.1,
-                a.2,
-                a.3,
-                a.4,
-                a.5,
-                table,
-            ),
+            NetModel::Truck => sweep_through!(Truck::default()),
+            NetModel::Lander => sweep_through!(Lander::default()),
+            NetModel::PendulumActive => {
+                sweep_through!(Pendulum3::new(PendulumVariant::Active))
+            }
             other_model => Err(other(format!(
                 "{}: no physics sweep for {}",
                 task.name,
