@@ -51,7 +51,7 @@
 //!   derivatives*, Pacific J. Math. 16(1), 1966; J. Nocedal, S. Wright, *Numerical
 //!   Optimization*, 2nd ed., §3.1 (backtracking), §16.7 (projected gradient).
 
-use super::objective::Objective;
+use super::objective::{GaussNewton, Objective};
 use super::ControlError;
 pub use crate::physics::differentiable::{DifferentiableStep, LinearStep};
 use crate::physics::Dynamics;
@@ -317,7 +317,6 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
     /// J and its gradient with respect to the normalized knots (written to `grad`).
     pub fn gradient(&mut self, v: &[f64], grad: &mut [f64]) -> f64 {
         self.rollout(v);
-        self.backward_passes += 1;
         let (n, m) = (self.dynamics.state_dim(), self.knots.m);
         let j = self.objective.gradient(
             &self.states,
@@ -327,7 +326,17 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
             &mut self.s_bar,
             &mut self.u_bar,
         );
-        for i in (0..self.knots.steps).rev() {
+        self.backpropagate(self.knots.steps, grad);
+        j
+    }
+
+    /// Runs the chain rule backwards from state s_`top` to s_0 over the adjoints seeded in
+    /// `s_bar` and `u_bar` (about the last rollout), and writes the knot gradient (normalized
+    /// knots) to `grad`.
+    fn backpropagate(&mut self, top: usize, grad: &mut [f64]) {
+        self.backward_passes += 1;
+        let (n, m) = (self.dynamics.state_dim(), self.knots.m);
+        for i in (0..top).rev() {
             self.dynamics.vjp(
                 &self.states[i * n..(i + 1) * n],
                 &self.controls[i * m..(i + 1) * m],
@@ -346,6 +355,61 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
         self.knots.reduce(&self.u_bar, grad);
         for (i, g) in grad.iter_mut().enumerate() {
             *g *= self.bounds.affine(i % m).1;
+        }
+    }
+
+    /// J, its gradient (to `grad`) and its Gauss–Newton matrix over the normalized knots (to
+    /// `h`, row-major d × d) at `v`, from the terms' curvatures `curvature`
+    /// ([`Objective::gauss_newton`]): Σ_terms Σ_{i,k} h_k r_ik r_ikᵀ with r_ik = ∂s_ik/∂v (one
+    /// backward pass from s_i per weighted state variable k), plus the exact control-effort
+    /// Hessian. Exact for a linear step.
+    pub fn gauss_newton(
+        &mut self,
+        v: &[f64],
+        curvature: &[GaussNewton],
+        grad: &mut [f64],
+        h: &mut [f64],
+    ) -> f64 {
+        let j = self.gradient(v, grad);
+        let (n, m, d) = (self.dynamics.state_dim(), self.knots.m, self.dim());
+        let last = self.knots.steps;
+        h.fill(0.0);
+        let mut row = vec![0.0; d];
+        for c in curvature {
+            match c {
+                GaussNewton::Zero => {}
+                GaussNewton::Controls { diagonal } => {
+                    for i in 0..last {
+                        let k = self.knots.knot_of(i);
+                        for (a, hd) in diagonal.iter().enumerate() {
+                            let s = self.bounds.affine(a).1;
+                            let q = k * m + a;
+                            h[q * d + q] += hd * s * s;
+                        }
+                    }
+                }
+                GaussNewton::States { from, to, diagonal } => {
+                    // The start state does not depend on the knots.
+                    for i in (*from).min(last).max(1)..=(*to).min(last) {
+                        for (k, &hk) in diagonal.iter().enumerate() {
+                            if hk == 0.0 {
+                                continue;
+                            }
+                            self.s_bar.fill(0.0);
+                            self.u_bar.fill(0.0);
+                            self.s_bar[i * n + k] = 1.0;
+                            self.backpropagate(i, &mut row);
+                            for (p, rp) in row.iter().enumerate() {
+                                if *rp != 0.0 {
+                                    for (q, rq) in row.iter().enumerate() {
+                                        h[p * d + q] += hk * rp * rq;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
         }
         j
     }
@@ -584,15 +648,24 @@ pub enum StepRule {
         /// Backtracks per iteration before giving up (≥ 1).
         max_backtracks: usize,
     },
+    /// Levenberg–Marquardt on the Gauss–Newton matrix of the objective ([`Bptt::gauss_newton`];
+    /// ours, not the paper's: η and α are not used).
+    LevenbergMarquardt {
+        /// Initial damping μ relative to the diagonal of the Gauss–Newton matrix (> 0).
+        damping: f64,
+        /// Trials per iteration, each with more damping, before giving up (≥ 1).
+        max_tries: usize,
+    },
 }
 
 impl StepRule {
-    /// Its name in tables: `fixed`, `reestimate` or `armijo`.
+    /// Its name in tables: `fixed`, `reestimate`, `armijo` or `levenberg_marquardt`.
     pub fn name(&self) -> &'static str {
         match self {
             Self::Fixed => "fixed",
             Self::Reestimate { .. } => "reestimate",
             Self::Armijo { .. } => "armijo",
+            Self::LevenbergMarquardt { .. } => "levenberg_marquardt",
         }
     }
 
@@ -626,6 +699,14 @@ impl StepRule {
                     &format!("{key}.max_backtracks"),
                     "must be >= 1",
                 )
+            }
+            Self::LevenbergMarquardt { damping, max_tries } => {
+                ensure(
+                    damping > 0.0 && damping.is_finite(),
+                    &format!("{key}.damping"),
+                    "must be > 0",
+                )?;
+                ensure(max_tries >= 1, &format!("{key}.max_tries"), "must be >= 1")
             }
         }
     }
@@ -754,6 +835,18 @@ pub fn learn_with<D: DifferentiableStep>(
     let mut trace = Vec::with_capacity(iterations.min(4096) + 1);
     let (mut best_iteration, mut best_value, mut best_knots) = (0, f64::INFINITY, v.clone());
     let mut taken_scale = lambda;
+    // Levenberg–Marquardt: the terms' curvatures (an objective without one gets none, and the
+    // damping alone scales the step), the Gauss–Newton matrix, the damping μ and its growth ν.
+    let curvature = bptt.objective().gauss_newton().unwrap_or_default();
+    let lm = matches!(schedule.rule, StepRule::LevenbergMarquardt { .. });
+    let mut hmat = vec![0.0; if lm { d * d } else { 0 }];
+    let (mut mu, mut nu) = match schedule.rule {
+        StepRule::LevenbergMarquardt { damping, .. } => (damping, 2.0),
+        _ => (0.0, 2.0),
+    };
+    if lm {
+        taken_scale = mu;
+    }
     for l in 0..=iterations {
         if let StepRule::Reestimate { every } = schedule.rule {
             if l > 0 && l % every == 0 {
@@ -763,7 +856,11 @@ pub fn learn_with<D: DifferentiableStep>(
                 }
             }
         }
-        let j = bptt.gradient(&v, &mut g);
+        let j = if lm {
+            bptt.gauss_newton(&v, &curvature, &mut g, &mut hmat)
+        } else {
+            bptt.gradient(&v, &mut g)
+        };
         let entry = IterationTrace {
             iteration: l,
             objective: j,
@@ -829,6 +926,38 @@ pub fn learn_with<D: DifferentiableStep>(
                     trial.copy_from_slice(&v);
                 }
             }
+            StepRule::LevenbergMarquardt { max_tries, .. } => {
+                let mut accepted = false;
+                for _ in 0..max_tries {
+                    if !lm_trial(bptt, &v, &g, &hmat, mu, &mut trial) {
+                        (mu, nu) = (mu * nu, nu * 2.0);
+                        continue;
+                    }
+                    // Predicted decrease of the quadratic model along the projected step.
+                    let dv: Vec<f64> = (0..d).map(|i| trial[i] - v[i]).collect();
+                    let curv: f64 = (0..d)
+                        .map(|p| dv[p] * dot(&hmat[p * d..(p + 1) * d], &dv))
+                        .sum();
+                    let predicted = -(dot(&g, &dv) + 0.5 * curv);
+                    let actual = j - bptt.rollout(&trial);
+                    let rho = actual / predicted;
+                    if predicted > 0.0 && rho.is_finite() && rho > 1e-4 {
+                        mu *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
+                        nu = 2.0;
+                        accepted = true;
+                        break;
+                    }
+                    (mu, nu) = (mu * nu, nu * 2.0);
+                }
+                mu = mu.clamp(1e-12, 1e12);
+                if accepted {
+                    taken_scale = mu;
+                    std::mem::swap(&mut v, &mut trial);
+                } else {
+                    taken_scale = f64::INFINITY;
+                    trial.copy_from_slice(&v);
+                }
+            }
         }
         bptt.project(&mut v);
         // The momentum state carries the step actually taken (after projection); `trial`
@@ -847,6 +976,47 @@ pub fn learn_with<D: DifferentiableStep>(
         best_iteration,
         best_knots,
     }
+}
+
+/// One Levenberg–Marquardt trial point: solves (H_FF + μ diag(H)_FF) δ_F = −g_F over the free
+/// knots F (those not held at a bound by the gradient) and writes Π(v + δ) to `trial`; false
+/// when the damped matrix is not positive definite.
+fn lm_trial<D: DifferentiableStep>(
+    bptt: &Bptt<'_, D>,
+    v: &[f64],
+    g: &[f64],
+    h: &[f64],
+    mu: f64,
+    trial: &mut [f64],
+) -> bool {
+    let (d, m) = (v.len(), bptt.knots().m);
+    let free: Vec<usize> = (0..d)
+        .filter(|&i| bptt.bounds().project(i % m, v[i] - 1e-9 * g[i].signum()) != v[i])
+        .collect();
+    trial.copy_from_slice(v);
+    if free.is_empty() {
+        return true;
+    }
+    let max_diag = (0..d).map(|i| h[i * d + i]).fold(0.0, f64::max);
+    let floor = if max_diag > 0.0 { 1e-9 * max_diag } else { 1.0 };
+    let f = free.len();
+    let a = nalgebra::DMatrix::from_fn(f, f, |r, c| {
+        let (p, q) = (free[r], free[c]);
+        h[p * d + q]
+            + if r == c {
+                mu * h[p * d + p].max(floor)
+            } else {
+                0.0
+            }
+    });
+    let Some(chol) = a.cholesky() else {
+        return false;
+    };
+    let step = chol.solve(&nalgebra::DVector::from_fn(f, |r, _| -g[free[r]]));
+    for (r, &p) in free.iter().enumerate() {
+        trial[p] = bptt.bounds().project(p % m, v[p] + step[r]);
+    }
+    true
 }
 
 /// The learned controls replayed on a physical simulator.
@@ -1447,6 +1617,179 @@ mod tests {
             ls.final_objective(),
             fixed.final_objective()
         );
+    }
+
+    const LM: StepRule = StepRule::LevenbergMarquardt {
+        damping: 1e-3,
+        max_tries: 30,
+    };
+
+    /// The linear fixture with effort, a final-state term and a trajectory window.
+    fn linear_problem() -> Objective {
+        Objective::default()
+            .with(ControlEffort {
+                mu: 0.05,
+                offset: vec![0.1, -0.2],
+                scale: vec![2.0, 0.5],
+            })
+            .with(FinalState {
+                mu: 1.0,
+                target: vec![2.0, -1.0, 1.0],
+                weights: vec![1.0, 10.0, 100.0],
+            })
+            .with(StateWindow {
+                mu: 0.3,
+                from: 3,
+                to: 5,
+                reference: vec![0.5, 0.0, 0.0],
+                weights: vec![1.0, 0.0, 2.0],
+            })
+    }
+
+    #[test]
+    fn gauss_newton_matrix_is_the_exact_hessian_for_a_linear_step() {
+        let sys = linear();
+        let obj = linear_problem();
+        let knots = Knots {
+            steps: 8,
+            per_actuator: 4,
+            m: 2,
+        };
+        let bounds = Bounds {
+            low: vec![-3.0, -1.0],
+            high: vec![3.0, 2.0],
+        };
+        let mut b = Bptt::new(&sys, &obj, knots, bounds, &[0.2, 0.0, -0.1]).unwrap();
+        let d = b.dim();
+        let v: Vec<f64> = (0..d).map(|i| 0.4 * (i as f64 * 0.9).sin()).collect();
+        let curvature = obj.gauss_newton().unwrap();
+        let (mut g, mut h) = (vec![0.0; d], vec![0.0; d * d]);
+        let j = b.gauss_newton(&v, &curvature, &mut g, &mut h);
+        let mut g0 = vec![0.0; d];
+        assert_eq!(j, b.gradient(&v, &mut g0));
+        assert_eq!(g, g0);
+        // J is quadratic in the knots: central differences of the gradient are exact.
+        let eps = 1e-3;
+        let (mut gp, mut gm) = (vec![0.0; d], vec![0.0; d]);
+        let scale = h.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        assert!(scale > 1.0);
+        for q in 0..d {
+            let (mut p, mut m) = (v.clone(), v.clone());
+            p[q] += eps;
+            m[q] -= eps;
+            b.gradient(&p, &mut gp);
+            b.gradient(&m, &mut gm);
+            for r in 0..d {
+                let fd = (gp[r] - gm[r]) / (2.0 * eps);
+                assert!(
+                    (fd - h[r * d + q]).abs() <= 1e-8 * scale,
+                    "H[{r},{q}]: fd {fd} vs {}",
+                    h[r * d + q]
+                );
+            }
+        }
+        // A term without a curvature rules Gauss–Newton out.
+        #[derive(Debug)]
+        struct Opaque;
+        impl crate::control::objective::Term for Opaque {
+            fn value(&self, _: crate::control::objective::Trajectory<'_>) -> f64 {
+                0.0
+            }
+            fn add_gradient(
+                &self,
+                _: crate::control::objective::Trajectory<'_>,
+                _: &mut [f64],
+                _: &mut [f64],
+            ) {
+            }
+        }
+        assert!(linear_problem().with(Opaque).gauss_newton().is_none());
+    }
+
+    #[test]
+    fn levenberg_marquardt_solves_the_linear_problem_in_a_few_iterations_and_stays_in_the_box() {
+        let sys = linear();
+        let obj = linear_problem();
+        let knots = Knots {
+            steps: 8,
+            per_actuator: 4,
+            m: 2,
+        };
+        // Wide bounds: the unconstrained optimum is inside, so LM reaches a zero gradient.
+        let wide = Bounds {
+            low: vec![-50.0, -50.0],
+            high: vec![50.0, 50.0],
+        };
+        let mut b = Bptt::new(&sys, &obj, knots, wide, &[0.0; 3]).unwrap();
+        let v0 = vec![0.0; b.dim()];
+        let lm = learn_with(
+            &mut b,
+            &v0,
+            &schedule(MOMENTUM, LM, 1.0),
+            5,
+            &mut |_, _, _| false,
+        );
+        let start = &lm.trace[0];
+        let last = lm.trace.last().unwrap();
+        assert!(
+            last.grad_norm < 1e-6 * start.grad_norm,
+            "|g| {} -> {}",
+            start.grad_norm,
+            last.grad_norm
+        );
+        // The paper's momentum descent after 100 iterations ends no lower.
+        let lambda = b.curvature(&v0, 50);
+        let fixed = learn(&mut b, &v0, MOMENTUM, lambda, 100);
+        assert!(lm.final_objective() <= fixed.final_objective() + 1e-9);
+        // Tight bounds: the iterates stay in the box and J never rises.
+        let tight = Bounds {
+            low: vec![-0.5, -0.3],
+            high: vec![0.5, 0.3],
+        };
+        let mut b = Bptt::new(&sys, &obj, knots, tight, &[0.0; 3]).unwrap();
+        let r = learn_with(
+            &mut b,
+            &v0,
+            &schedule(MOMENTUM, LM, 1.0),
+            30,
+            &mut |_, _, _| false,
+        );
+        assert!(r.knots.iter().all(|v| v.abs() <= 1.0));
+        assert!(r.knots.iter().any(|v| v.abs() == 1.0), "{:?}", r.knots);
+        assert!(r.trace.windows(2).all(|w| w[1].objective <= w[0].objective));
+        // Projected-gradient optimality: zero gradient on the free knots, and on each knot held
+        // at a bound the gradient pushes outwards.
+        let mut g = vec![0.0; r.knots.len()];
+        b.gradient(&r.knots, &mut g);
+        for (v, g) in r.knots.iter().zip(&g) {
+            if v.abs() < 1.0 {
+                assert!(g.abs() < 1e-6, "free knot {v}: gradient {g}");
+            } else {
+                assert!(g * v <= 1e-9, "knot at {v}: gradient {g}");
+            }
+        }
+    }
+
+    #[test]
+    fn levenberg_marquardt_converges_where_momentum_crawls_on_the_nonlinear_problem() {
+        let obj = exp_problem();
+        let knots = Knots {
+            steps: 1,
+            per_actuator: 1,
+            m: 3,
+        };
+        let mut b = Bptt::new(&ExpStep, &obj, knots, Bounds::unbounded(3), &[0.0; 3]).unwrap();
+        let v0 = vec![3.0, 2.5, 2.0];
+        let r = learn_with(
+            &mut b,
+            &v0,
+            &schedule(MOMENTUM, LM, 1.0),
+            40,
+            &mut |_, _, _| false,
+        );
+        let k = iterations_to(&r, 1e-8).unwrap_or_else(|| panic!("{}", r.final_objective()));
+        assert!(k <= 30, "{k} iterations");
+        assert!(r.trace.windows(2).all(|w| w[1].objective <= w[0].objective));
     }
 
     #[test]

@@ -67,6 +67,36 @@ pub trait Term: Debug + Send + Sync {
         self.add_gradient(t, s_bar, u_bar);
         self.value(t)
     }
+    /// Its Gauss–Newton curvature, for terms that are weighted sums of squares of states or
+    /// controls (or linear); `None` (the default) for any other term, which rules out
+    /// [`crate::control::bptt::StepRule::LevenbergMarquardt`].
+    fn gauss_newton(&self) -> Option<GaussNewton> {
+        None
+    }
+}
+
+/// The Gauss–Newton curvature of a [`Term`]: its exact Hessian with respect to the states and
+/// controls it reads (constant for these forms), which the chain rule through the dynamics'
+/// Jacobians turns into the Gauss–Newton matrix over the knots.
+#[derive(Debug, Clone, PartialEq)]
+pub enum GaussNewton {
+    /// Linear in the trajectory: no curvature.
+    Zero,
+    /// μ/2 Σ_i Σ_j h_j (u_ij − o_j)² over every control: Hessian diag(h) per step.
+    Controls {
+        /// h_j per actuator.
+        diagonal: Vec<f64>,
+    },
+    /// μ/2 Σ_{i ∈ from..=to} Σ_k h_k (s_ik − r_k)²: Hessian diag(h) on each state in the
+    /// window (indices clamped to the trajectory like [`StateWindow`]).
+    States {
+        /// First state index.
+        from: usize,
+        /// Last state index.
+        to: usize,
+        /// h_k per state variable.
+        diagonal: Vec<f64>,
+    },
 }
 
 /// Controller efficiency: μ/2 Σ_i Σ_j ((u_ij − offset_j)/scale_j)².
@@ -113,6 +143,11 @@ impl Term for ControlEffort {
             }
         }
     }
+
+    fn gauss_newton(&self) -> Option<GaussNewton> {
+        let diagonal = self.scale.iter().map(|c| self.mu / (c * c)).collect();
+        Some(GaussNewton::Controls { diagonal })
+    }
 }
 
 /// Weighted squared distance of a state to a reference: Σ_k w_k (s_k − r_k)².
@@ -151,6 +186,14 @@ impl Term for FinalState {
         let k0 = t.states.len() - t.n;
         let (target, weights) = (&self.target, &self.weights);
         add_weighted_sq_gradient(self.mu, t.last(), target, weights, &mut s_bar[k0..]);
+    }
+
+    fn gauss_newton(&self) -> Option<GaussNewton> {
+        Some(GaussNewton::States {
+            from: usize::MAX,
+            to: usize::MAX,
+            diagonal: self.weights.iter().map(|w| self.mu * w).collect(),
+        })
     }
 }
 
@@ -194,6 +237,14 @@ impl Term for StateWindow {
             add_weighted_sq_gradient(self.mu, t.state(i), reference, weights, bar);
         }
     }
+
+    fn gauss_newton(&self) -> Option<GaussNewton> {
+        Some(GaussNewton::States {
+            from: self.from,
+            to: self.to,
+            diagonal: self.weights.iter().map(|w| self.mu * w).collect(),
+        })
+    }
 }
 
 /// Progress along a direction (e.g. distance swum forward, to be maximized, so it enters the
@@ -235,6 +286,10 @@ impl Term for Progress {
             }
         }
     }
+
+    fn gauss_newton(&self) -> Option<GaussNewton> {
+        Some(GaussNewton::Zero)
+    }
 }
 
 /// A sum of terms.
@@ -265,6 +320,11 @@ impl Objective {
             m,
         };
         self.terms.iter().map(|term| term.value(t)).sum()
+    }
+
+    /// The Gauss–Newton curvature of every term, or `None` if a term has none.
+    pub fn gauss_newton(&self) -> Option<Vec<GaussNewton>> {
+        self.terms.iter().map(|t| t.gauss_newton()).collect()
     }
 
     /// J and its partial derivatives with respect to every state and control (`s_bar` and

@@ -552,8 +552,16 @@ impl Params {
         let n = task.net.model.state_dim();
         let mut sim = task.net.model.simulator();
         for rule in &sw.rules {
-            for &eta in &sw.eta {
+            // Levenberg–Marquardt uses neither η nor α: one run, both reported as NaN.
+            let lm = matches!(rule, StepRule::LevenbergMarquardt { .. });
+            let etas = if lm { &sw.eta[..1] } else { &sw.eta[..] };
+            for &eta in etas {
                 let schedule = self.schedule(eta, sw.alpha, *rule, lambda);
+                let (eta, alpha) = if lm {
+                    (f64::NAN, f64::NAN)
+                } else {
+                    (eta, sw.alpha)
+                };
                 let mut hit: Option<(usize, usize)> = None;
                 let (run, b) = learn_best(bptt, v0, &schedule, sw.iterations, &mut |e, _, st| {
                     let reached = task.final_error(&st[task.horizon * n..]) <= 1.0;
@@ -577,7 +585,7 @@ impl Params {
                     task.name.as_str(),
                     rule.name(),
                     eta,
-                    sw.alpha,
+                    alpha,
                     last.iteration as i64,
                     last.evaluations as i64,
                     to(hit.map(|h| h.0)),
@@ -931,41 +939,61 @@ fn sweep_summary(path: &Path, title: &str) -> Result<Option<String>, Error> {
     if task.is_empty() {
         return Ok(None);
     }
+    // One clause for a group of runs: the fewest iterations to the goal, or the lowest error.
+    let clause = |rows: &[usize]| -> String {
+        let budget = rows.iter().map(|&r| its[r]).fold(0.0, f64::max);
+        let setting = |r: usize| {
+            if eta[r].is_finite() {
+                format!("{} rule, eta {}", rule[r], eta[r])
+            } else {
+                format!("{} rule", rule[r])
+            }
+        };
+        let fastest = rows
+            .iter()
+            .copied()
+            .filter(|&r| to_goal[r].is_finite())
+            .min_by(|&a, &b| to_goal[a].total_cmp(&to_goal[b]));
+        match fastest {
+            Some(r) => format!(
+                "reaches its goal in {} iterations at best ({}; simulator error {}; {} of {} runs reach it)",
+                to_goal[r],
+                setting(r),
+                sig(sim[r]),
+                rows.iter().filter(|&&r| to_goal[r].is_finite()).count(),
+                rows.len()
+            ),
+            None => {
+                let r = rows
+                    .iter()
+                    .copied()
+                    .min_by(|&a, &b| rollout[a].total_cmp(&rollout[b]))
+                    .expect("a group has rows");
+                format!(
+                    "never does in {budget} iterations (lowest final error {} with the {}; simulator {})",
+                    sig(rollout[r]),
+                    setting(r),
+                    sig(sim[r])
+                )
+            }
+        }
+    };
+    let lm = "levenberg_marquardt";
     let parts: Vec<String> = unique(&task)
         .into_iter()
         .map(|name| {
             let rows: Vec<usize> = (0..task.len()).filter(|&r| task[r] == name).collect();
-            let budget = rows.iter().map(|&r| its[r]).fold(0.0, f64::max);
-            let fastest = rows
-                .iter()
-                .copied()
-                .filter(|&r| to_goal[r].is_finite())
-                .min_by(|&a, &b| to_goal[a].total_cmp(&to_goal[b]));
-            match fastest {
-                Some(r) => format!(
-                    "{name} reaches its goal in {} iterations at best ({} rule, eta {}; simulator error {}; {} of {} runs reach it)",
-                    to_goal[r],
-                    rule[r],
-                    eta[r],
-                    sig(sim[r]),
-                    rows.iter().filter(|&&r| to_goal[r].is_finite()).count(),
-                    rows.len()
-                ),
-                None => {
-                    let r = rows
-                        .iter()
-                        .copied()
-                        .min_by(|&a, &b| rollout[a].total_cmp(&rollout[b]))
-                        .expect("a task has rows");
-                    format!(
-                        "{name} never does in {budget} iterations (lowest final error {} with the {} rule, eta {}; simulator {})",
-                        sig(rollout[r]),
-                        rule[r],
-                        eta[r],
-                        sig(sim[r])
-                    )
-                }
+            let (second, first): (Vec<usize>, Vec<usize>) =
+                rows.iter().partition(|&&r| rule[r] == lm);
+            let mut out = name.clone();
+            if !first.is_empty() {
+                out += &format!(" {}", clause(&first));
             }
+            if !second.is_empty() {
+                let sep = if first.is_empty() { "" } else { ", and" };
+                out += &format!("{sep} with Levenberg-Marquardt (ours) {}", clause(&second));
+            }
+            out
         })
         .collect();
     Ok(Some(format!(" {title}: {}.", parts.join("; "))))
