@@ -273,7 +273,10 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         if c[1] == "levenberg_marquardt" {
             assert!(to <= 10.0, "LM through the physics: {c:?}");
         } else if c[1] == "fixed" {
-            assert!(to.is_nan(), "fixed-scale momentum through the physics: {c:?}");
+            assert!(
+                to.is_nan(),
+                "fixed-scale momentum through the physics: {c:?}"
+            );
         }
     }
     assert_eq!(rows(&out.join("dolphin_restarts.csv")).len(), 2);
