@@ -188,9 +188,34 @@ fn na_fig12_quick_writes_error_curves() {
             assert_eq!(curve.len(), 21, "{v} {e}");
             assert_eq!(curve[0], 0.0);
             assert!(curve.iter().all(|x| x.is_finite() && *x >= 0.0));
+            // capacity.csv: the net's own 20 hidden units carry the curve's time average;
+            // 40 hidden units keep the examples per weight.
+            let c = rows(&out.join("capacity.csv"));
+            let at = |h: &str| {
+                c.iter()
+                    .find(|c| c[0] == v && c[1] == e && c[2] == h)
+                    .unwrap()
+            };
+            let mean = curve.iter().sum::<f64>() / curve.len() as f64;
+            let own: f64 = at("20")[4].parse().unwrap();
+            assert!((own - mean).abs() <= 1e-12 * mean.max(1.0), "{v} {e}");
+            let (e20, e40): (f64, f64) =
+                (at("20")[3].parse().unwrap(), at("40")[3].parse().unwrap());
+            let w = |h: f64, n_in: f64| h * (n_in + 1.0) + 6.0 * (h + 1.0);
+            let n_in = if v == "passive" { 6.0 } else { 9.0 };
+            assert!(
+                (e40 / e20 - w(40.0, n_in) / w(20.0, n_in)).abs() < 0.01,
+                "{v} {e}"
+            );
         }
     }
+    assert_eq!(
+        header(&out.join("capacity.csv")),
+        "variant,emulator,hidden,examples,mean_error"
+    );
+    assert_eq!(rows(&out.join("capacity.csv")).len(), 12);
     figure_exists(&d, "na_fig12_error_error");
+    figure_exists(&d, "na_fig12_error_capacity");
 }
 
 #[test]
