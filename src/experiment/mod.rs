@@ -22,6 +22,8 @@ pub mod plot;
 pub mod report;
 pub mod resolve;
 pub mod runner;
+pub mod seeds;
+pub mod shard;
 pub mod spec;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -188,6 +190,14 @@ impl RunContext {
             .expect("stage timer poisoned")
             .push((name.to_string(), dt));
         out
+    }
+
+    /// Records a stage timed elsewhere (e.g. a unit run in its own context).
+    pub fn record(&self, name: &str, seconds: f64) {
+        self.stages
+            .lock()
+            .expect("stage timer poisoned")
+            .push((name.to_string(), seconds));
     }
 
     /// Seconds per stage so far.
