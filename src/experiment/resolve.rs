@@ -332,13 +332,15 @@ pub fn resolve(file: &SpecFile, opts: &ResolveOptions) -> Result<Resolved, SpecE
         }
         (None, Some(k)) => Some(
             (0..k as u64)
-                .map(|i| seed.checked_add(i))
+                .map(|i| seed.checked_add(i).filter(|&s| i64::try_from(s).is_ok()))
                 .collect::<Option<Vec<u64>>>()
                 .ok_or_else(|| SpecError {
                     path: PathBuf::from("--seeds"),
                     line: None,
                     key: "seeds".into(),
-                    message: format!("seed {seed} + {k} overflows"),
+                    message: format!(
+                        "seeds {seed} to {seed} + {k} - 1 pass 2^63 (the `seed` column is i64)"
+                    ),
                 })?,
         ),
         (None, None) => None,

@@ -409,3 +409,51 @@ pub fn read_shards(file: &SpecFile, out: &Path) -> Result<MergedShards, Error> {
         count: n,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shard_parses_i_of_n_and_partitions_the_units() {
+        assert_eq!(Shard::parse("2/5"), Ok(Shard { index: 2, count: 5 }));
+        assert_eq!(Shard::parse("3/3").unwrap().dir_name(), "3-of-3");
+        for bad in ["0/3", "4/3", "1/0", "3", "a/2", "1/2/3", ""] {
+            assert!(Shard::parse(bad).is_err(), "{bad}");
+        }
+        // Every unit belongs to exactly one of N shards.
+        for n in 1..6 {
+            for u in 0..20 {
+                let owners = (1..=n)
+                    .filter(|&i| Shard { index: i, count: n }.owns(u))
+                    .count();
+                assert_eq!(owners, 1, "unit {u} of {n} shards");
+            }
+        }
+    }
+
+    #[test]
+    fn units_round_trip_bit_for_bit() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut t = Table::new(&["name", "n", "x"]);
+        t.push(crate::row!["a", 1i64, 0.1 + 0.2]);
+        t.push(crate::row!["b", -3i64, f64::NAN]);
+        t.push(crate::row!["c", 0i64, -0.0]);
+        let tables = Tables::from([("t", t.clone()), ("empty", Table::new(&["y"]))]);
+        let path = unit_path(dir.path(), "key");
+        save_unit(&path, "key", &(tables, vec![("run".into(), 0.5)])).unwrap();
+        let (back, stages) = load_unit(&path, "key").unwrap();
+        let bt = back.get("t").unwrap();
+        assert_eq!(bt.strs("name"), t.strs("name"));
+        let bits = |v: Vec<f64>| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(bt.f64s("x")), bits(t.f64s("x")));
+        assert_eq!(bt.column("n"), t.column("n"));
+        assert_eq!(back.get("empty").unwrap().names(), ["y"]);
+        assert_eq!(stages, vec![("run".to_string(), 0.5)]);
+        // Another key, or a truncated file, is not a stored result.
+        assert!(load_unit(&path, "other").is_err());
+        let text = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &text[..text.len() - 3]).unwrap();
+        assert!(load_unit(&path, "key").is_err());
+    }
+}
