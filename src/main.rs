@@ -4,7 +4,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use motionlab::experiment::report::write_report;
 use motionlab::experiment::resolve::{resolve, ResolveOptions, Resolved};
-use motionlab::experiment::runner::{run, RunOptions};
+use motionlab::experiment::runner::{merge, run, RunOptions};
+use motionlab::experiment::shard::Shard;
 use motionlab::experiment::spec::SpecFile;
 use motionlab::families::na::table1_structure::{
     table1_emulator, Params as Table1Params, EMULATOR_NAMES,
@@ -69,6 +70,30 @@ enum Command {
         /// Repeatable. `seed=N` sets the seed. Overriding a swept key removes that sweep axis.
         #[arg(long = "set", value_name = "KEY=VALUE")]
         sets: Vec<String>,
+        /// Run every sweep point with K seeds (the spec's seed, +1, …, +K-1): tables get a
+        /// leading `seed` column, each seed's tables go to <OUT>/<id>/seeds/<seed>/ as well, and
+        /// seed_summary.csv and the report give mean and spread over seeds.
+        #[arg(long, value_name = "K")]
+        seeds: Option<usize>,
+        /// Run only the units (sweep points times seeds) whose index is I-1 modulo N, into
+        /// <OUT>/<id>/shards/I-of-N/; `motionlab merge` joins the N shards.
+        #[arg(long, value_name = "I/N", value_parser = parse_shard)]
+        shard: Option<Shard>,
+        /// Skip the units whose stored results are complete (a sweep keeps each unit's results
+        /// in <OUT>/<id>/units/, a shard in its folder), keyed by a hash of the unit's resolved
+        /// spec and the code revision; run the rest.
+        #[arg(long)]
+        resume: bool,
+    },
+    /// Merge the shards of `run <ID> --shard I/N` (all N of them, from <OUT>/<id>/shards/) into
+    /// the tables, figures and run.json the unsharded run writes. Refuses, writing nothing, when
+    /// a shard is missing, unfinished or duplicated, or the shards came from different specs or
+    /// revisions.
+    Merge {
+        /// Experiment id or path to its .toml file (as given to `run`).
+        target: String,
+        #[command(flatten)]
+        outputs: Outputs,
     },
     /// Run every experiment (or --only some), then write <OUT>/REPORT.md.
     Reproduce {
@@ -77,6 +102,10 @@ enum Command {
         /// Comma-separated experiment ids to run (the report still covers every experiment).
         #[arg(long, value_delimiter = ',', value_name = "ID,...")]
         only: Vec<String>,
+        /// Run every experiment with K seeds, as `run --seeds K`; each section then reports the
+        /// first seed, the verdict of every seed and the mean and spread over seeds.
+        #[arg(long, value_name = "K")]
+        seeds: Option<usize>,
     },
     /// Print a model as JSON: state and control names, parameters with units, dt.
     Describe {
@@ -193,6 +222,23 @@ fn spec_files(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// Every experiment file of `dir`, resolved (quick or not, with `--seeds`), in report order.
+fn resolve_all(dir: &Path, quick: bool, seeds: Option<usize>) -> Result<Vec<Resolved>> {
+    let mut all = Vec::new();
+    for f in spec_files(dir)? {
+        let file = SpecFile::load(&f)?;
+        all.push(resolve(
+            &file,
+            &ResolveOptions {
+                quick,
+                seeds,
+                ..Default::default()
+            },
+        )?);
+    }
+    Ok(all)
+}
+
 fn default_jobs() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
@@ -227,7 +273,28 @@ fn run_options(o: &Outputs, committed: bool) -> RunOptions {
         figures,
         jobs: o.jobs.unwrap_or_else(default_jobs),
         progress: true,
+        resume: false,
+        shard: None,
     }
+}
+
+fn parse_shard(text: &str) -> Result<Shard, String> {
+    Shard::parse(text)
+}
+
+/// The experiment file of `target`: a path to a .toml file, or an id in `exp_dir`.
+fn spec_path(exp_dir: &Path, target: &str) -> Result<PathBuf> {
+    if target.ends_with(".toml") || Path::new(target).is_file() {
+        return Ok(PathBuf::from(target));
+    }
+    let p = exp_dir.join(format!("{target}.toml"));
+    if !p.is_file() {
+        bail!(
+            "no experiment `{target}` (no file {}); `motionlab list` shows them",
+            p.display()
+        );
+    }
+    Ok(p)
 }
 
 fn check_jobs(o: &Outputs) -> Result<()> {
@@ -263,32 +330,34 @@ fn dispatch(cli: Cli) -> Result<()> {
             outputs,
             seed,
             sets,
+            seeds,
+            shard,
+            resume,
         } => {
             check_jobs(&outputs)?;
-            let path = if target.ends_with(".toml") || Path::new(&target).is_file() {
-                PathBuf::from(&target)
-            } else {
-                let p = exp_dir.join(format!("{target}.toml"));
-                if !p.is_file() {
-                    bail!(
-                        "no experiment `{target}` (no file {}); `motionlab list` shows them",
-                        p.display()
-                    );
-                }
-                p
-            };
-            let file = SpecFile::load(&path)?;
+            let file = SpecFile::load(&spec_path(&exp_dir, &target)?)?;
             let res = resolve(
                 &file,
                 &ResolveOptions {
                     quick: outputs.quick,
                     seed,
                     sets,
+                    seeds,
                 },
             )?;
-            let s = run(&res, &run_options(&outputs, false))?;
+            let opts = RunOptions {
+                resume,
+                shard,
+                ..run_options(&outputs, false)
+            };
+            let s = run(&res, &opts)?;
+            let units = if resume || shard.is_some() {
+                format!(" ({} units run, {} resumed)", s.computed, s.reused)
+            } else {
+                String::new()
+            };
             eprintln!(
-                "{}: {} files in {:.2} s -> {}",
+                "{}: {} files in {:.2} s{units} -> {}",
                 s.id,
                 s.files.len(),
                 s.seconds,
@@ -296,21 +365,39 @@ fn dispatch(cli: Cli) -> Result<()> {
             );
             Ok(())
         }
-        Command::Reproduce { outputs, only } => {
+        Command::Merge { target, outputs } => {
+            check_jobs(&outputs)?;
+            let file = SpecFile::load(&spec_path(&exp_dir, &target)?)?;
+            let opts = run_options(&outputs, false);
+            // The report covers every experiment file, as `reproduce` writes it; a bad file
+            // stops everything before any work.
+            let mut all = resolve_all(&exp_dir, outputs.quick, None)?;
+            let (s, merged) = merge(&file, &opts)?;
+            eprintln!(
+                "{}: merged {} units, {} files in {:.2} s -> {}",
+                s.id,
+                s.reused,
+                s.files.len(),
+                s.seconds,
+                s.dir.display()
+            );
+            match all.iter().position(|r| r.id == merged.id) {
+                Some(i) => all[i] = merged,
+                None => all.push(merged),
+            }
+            let report = write_report(&opts.out, &opts.figures, &all)?;
+            eprintln!("report: {}", report.display());
+            Ok(())
+        }
+        Command::Reproduce {
+            outputs,
+            only,
+            seeds,
+        } => {
             check_jobs(&outputs)?;
             let t0 = Instant::now();
             // Resolve every file first: a bad file stops everything before any work.
-            let mut all: Vec<Resolved> = Vec::new();
-            for f in spec_files(&exp_dir)? {
-                let file = SpecFile::load(&f)?;
-                all.push(resolve(
-                    &file,
-                    &ResolveOptions {
-                        quick: outputs.quick,
-                        ..Default::default()
-                    },
-                )?);
-            }
+            let all = resolve_all(&exp_dir, outputs.quick, seeds)?;
             for id in &only {
                 if !all.iter().any(|r| r.id == *id) {
                     bail!("--only: no experiment `{id}`");

@@ -4,5 +4,6 @@
 mod cli;
 mod ms;
 mod na;
+mod shard;
 mod spec_errors;
 mod util;

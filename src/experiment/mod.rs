@@ -6,9 +6,10 @@
 //! 1. [`spec::SpecFile::load`]: TOML → raw serde types, with source positions;
 //! 2. [`resolve::resolve`]: `[quick]` and `--set` overrides, sweep expansion, and each family's
 //!    typed, validated parameters (errors name file, line and key; nothing has run yet);
-//! 3. [`runner::run`]: each sweep point's [`Job`] produces [`output::Tables`]; the runner
-//!    prefixes sweep values, writes CSV + Parquet atomically, asks the family for figures and
-//!    writes `run.json`;
+//! 3. [`runner::run`]: each unit's (sweep point, times seed when seeds are swept) [`Job`]
+//!    produces [`output::Tables`]; the runner prefixes seed and sweep values, writes CSV +
+//!    Parquet atomically, asks the family for figures and writes `run.json`; [`shard`] keeps
+//!    units for `--resume`, runs `--shard I/N` and merges shards, [`seeds`] aggregates seeds;
 //! 4. [`report`]: `REPORT.md`, each family's section read back from its CSVs.
 //!
 //! This module is the harness only; the families live in [`crate::families`], one folder per
@@ -22,6 +23,8 @@ pub mod plot;
 pub mod report;
 pub mod resolve;
 pub mod runner;
+pub mod seeds;
+pub mod shard;
 pub mod spec;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -188,6 +191,14 @@ impl RunContext {
             .expect("stage timer poisoned")
             .push((name.to_string(), dt));
         out
+    }
+
+    /// Records a stage timed elsewhere (e.g. a unit run in its own context).
+    pub fn record(&self, name: &str, seconds: f64) {
+        self.stages
+            .lock()
+            .expect("stage timer poisoned")
+            .push((name.to_string(), seconds));
     }
 
     /// Seconds per stage so far.

@@ -83,12 +83,17 @@ pub enum ColumnData {
 }
 
 impl ColumnData {
-    fn len(&self) -> usize {
+    /// Number of values.
+    pub fn len(&self) -> usize {
         match self {
             ColumnData::F(v) => v.len(),
             ColumnData::I(v) => v.len(),
             ColumnData::S(v) => v.len(),
         }
+    }
+    /// Whether it holds no values.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
     fn push(&mut self, c: Cell) -> Result<(), String> {
         match (self, c) {
@@ -215,6 +220,49 @@ impl Table {
             .collect();
         columns.extend(self.columns.iter().cloned());
         Table { names, columns }
+    }
+
+    /// The column data, in the order of [`Table::names`] (empty before the first row).
+    pub fn columns(&self) -> &[ColumnData] {
+        &self.columns
+    }
+
+    /// A table from its column names and data (all columns of one length, or no data at all).
+    pub fn from_parts(names: Vec<String>, columns: Vec<ColumnData>) -> Result<Table, String> {
+        if !columns.is_empty() && columns.len() != names.len() {
+            return Err(format!(
+                "{} columns of data for {} names",
+                columns.len(),
+                names.len()
+            ));
+        }
+        if let Some(first) = columns.first() {
+            if columns.iter().any(|c| c.len() != first.len()) {
+                return Err("columns of different lengths".into());
+            }
+        }
+        Ok(Table { names, columns })
+    }
+
+    /// The rows `i` for which `keep(i)` holds, in order, without the column `drop` (if given).
+    pub fn select(&self, keep: impl Fn(usize) -> bool, drop: Option<&str>) -> Table {
+        let rows: Vec<usize> = (0..self.len()).filter(|&i| keep(i)).collect();
+        let pick = |c: &ColumnData| match c {
+            ColumnData::F(v) => ColumnData::F(rows.iter().map(|&i| v[i]).collect()),
+            ColumnData::I(v) => ColumnData::I(rows.iter().map(|&i| v[i]).collect()),
+            ColumnData::S(v) => ColumnData::S(rows.iter().map(|&i| v[i].clone()).collect()),
+        };
+        let kept = |n: &String| Some(n.as_str()) != drop;
+        Table {
+            names: self.names.iter().filter(|n| kept(n)).cloned().collect(),
+            columns: self
+                .names
+                .iter()
+                .zip(&self.columns)
+                .filter(|(n, _)| kept(n))
+                .map(|(_, c)| pick(c))
+                .collect(),
+        }
     }
 
     /// Appends the rows of a table with the same columns.

@@ -123,15 +123,27 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
     for r in specs {
         let dir = out.join(&r.id);
         let (verdict, headline, body) = if dir.join("run.json").exists() {
-            match r.family.report(&dir) {
+            let seeds = run_seeds(&dir);
+            // With swept seeds the section reads the first seed's tables, then the spread.
+            let first = seeds.first().map(|s| dir.join("seeds").join(s.to_string()));
+            match r.family.report(first.as_deref().unwrap_or(&dir)) {
                 Ok(f) => (
                     f.verdict.label().to_string(),
                     headline(&f.why),
                     format!(
-                        "{}\n\n**Verdict: {}.** {}\n",
+                        "{}{}\n\n**Verdict: {}.** {}\n{}",
+                        match seeds.first() {
+                            Some(s) => format!(
+                                "*Seed {s}, the first of {} (the verdict of each seed and the \
+                                 spread over seeds follow).*\n\n",
+                                seeds.len()
+                            ),
+                            None => String::new(),
+                        },
                         f.ours.trim_end(),
                         f.verdict.label(),
-                        f.why
+                        f.why,
+                        seeds_section(r, &dir, &seeds)
                     ),
                 ),
                 Err(e) => (
@@ -184,6 +196,55 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
     let path = out.join("REPORT.md");
     atomic_write(&path, md.as_bytes())?;
     Ok(path)
+}
+
+/// The seeds of the run in `dir` when it swept seeds (`spec.seeds` of its `run.json`).
+fn run_seeds(dir: &Path) -> Vec<u64> {
+    std::fs::read_to_string(dir.join("run.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| {
+            v.pointer("/spec/seeds")?
+                .as_array()?
+                .iter()
+                .map(|s| s.as_u64())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// With swept seeds: the verdict of each seed (its section computed from its own tables in
+/// `seeds/<seed>/`) and the mean and spread over seeds of `seed_summary.csv`; empty otherwise.
+fn seeds_section(r: &Resolved, dir: &Path, seeds: &[u64]) -> String {
+    if seeds.is_empty() {
+        return String::new();
+    }
+    let mut counts: Vec<(String, usize)> = Vec::new();
+    for s in seeds {
+        let label = match r.family.report(&dir.join("seeds").join(s.to_string())) {
+            Ok(f) => f.verdict.label().to_string(),
+            Err(_) => "could not be read".to_string(),
+        };
+        match counts.iter_mut().find(|(l, _)| *l == label) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((label, 1)),
+        }
+    }
+    let list: Vec<String> = seeds.iter().map(|s| s.to_string()).collect();
+    let tally: Vec<String> = counts.iter().map(|(l, n)| format!("{l} for {n}")).collect();
+    let mut md = format!(
+        "\n**Over {} seeds** ({}): the verdict {}.\n\n",
+        seeds.len(),
+        list.join(", "),
+        tally.join(", ")
+    );
+    match super::seeds::summary_markdown(dir) {
+        Ok(t) => md.push_str(&t),
+        Err(e) => {
+            let _ = writeln!(md, "Could not read the seed summary: {e}");
+        }
+    }
+    md
 }
 
 /// The summary at the top of the report: a count of the papers' claims that hold, then the

@@ -101,7 +101,7 @@ where
 }
 
 /// How to resolve a spec: quick mode, seed override, `--set KEY=VALUE` overrides.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct ResolveOptions {
     /// Apply the `[quick]` table.
     pub quick: bool,
@@ -110,6 +110,8 @@ pub struct ResolveOptions {
     /// `KEY=VALUE` overrides of `[params]` keys (or `seed`); VALUE is a TOML value, or a bare
     /// string.
     pub sets: Vec<String>,
+    /// `--seeds K`: run every sweep point with the K seeds `seed, seed + 1, …, seed + K - 1`.
+    pub seeds: Option<usize>,
 }
 
 /// One point of the sweep: the axis values that define it and its validated job.
@@ -140,6 +142,23 @@ pub struct Resolved {
     pub points: Vec<SweepPoint>,
     /// The file it came from.
     pub path: PathBuf,
+    /// The seeds every point runs with, when seeds are swept (`--seeds K` or a `seeds = [...]`
+    /// axis of `[sweep]`); `None` runs each point once with `seed` and adds no `seed` column.
+    pub seeds: Option<Vec<u64>>,
+    /// The options it was resolved with (recorded by shards, so `merge` resolves alike).
+    pub options: ResolveOptions,
+}
+
+/// One run of one sweep point with one seed: the unit that shards, resumes and merges.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Unit {
+    /// Position in [`Resolved::units`] (seed-major: every point of the first seed, then the
+    /// next seed).
+    pub index: usize,
+    /// Index into [`Resolved::points`].
+    pub point: usize,
+    /// The seed it runs with.
+    pub seed: u64,
 }
 
 impl Resolved {
@@ -155,7 +174,7 @@ impl Resolved {
                 })
             })
             .collect();
-        serde_json::json!({
+        let mut v = serde_json::json!({
             "id": self.id,
             "experiment": self.family.kind(),
             "title": self.title,
@@ -164,7 +183,42 @@ impl Resolved {
             "quick": self.quick,
             "spec_file": self.path.display().to_string(),
             "points": points,
-        })
+        });
+        if let Some(seeds) = &self.seeds {
+            v["seeds"] = serde_json::json!(seeds);
+        }
+        v
+    }
+
+    /// Every run of the experiment: each sweep point once with `seed`, or, when seeds are swept,
+    /// each point with each seed, seed-major.
+    pub fn units(&self) -> Vec<Unit> {
+        let seeds = self.seeds.clone().unwrap_or_else(|| vec![self.seed]);
+        let n = self.points.len();
+        seeds
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &seed)| {
+                (0..n).map(move |point| Unit {
+                    index: k * n + point,
+                    point,
+                    seed,
+                })
+            })
+            .collect()
+    }
+
+    /// A content hash (64-bit FNV-1a, hex) of everything that determines the results: the
+    /// resolved spec without the path of its file, and the seeds.
+    pub fn spec_hash(&self) -> String {
+        let mut v = self.to_json();
+        if let Some(m) = v.as_object_mut() {
+            m.remove("spec_file");
+        }
+        format!(
+            "{:016x}",
+            crate::emulator::cache::fnv1a(v.to_string().as_bytes())
+        )
     }
 }
 
@@ -232,6 +286,8 @@ pub fn resolve(file: &SpecFile, opts: &ResolveOptions) -> Result<Resolved, SpecE
         seed = s;
     }
     let mut sweep = raw.sweep.clone();
+    let seeds_axis = sweep.remove("seeds");
+    let mut seed_overridden = opts.seed.is_some();
     let mut set_keys = Vec::new();
     let set_err = |key: &str, message: String| SpecError {
         path: PathBuf::from("--set"),
@@ -249,6 +305,7 @@ pub fn resolve(file: &SpecFile, opts: &ResolveOptions) -> Result<Resolved, SpecE
                 .trim()
                 .parse()
                 .map_err(|e| set_err(k, format!("seed must be a non-negative integer: {e}")))?;
+            seed_overridden = true;
             continue;
         }
         let key = k.strip_prefix("params.").unwrap_or(k);
@@ -256,6 +313,38 @@ pub fn resolve(file: &SpecFile, opts: &ResolveOptions) -> Result<Resolved, SpecE
         sweep.remove(key);
         set_keys.push(key.to_string());
     }
+    // Seeds: an explicit seed override drops a `seeds` axis, as overriding a swept key does.
+    let seeds = match (seeds_axis.filter(|_| !seed_overridden), opts.seeds) {
+        (Some(_), Some(_)) => {
+            return Err(file.error_at(
+                "sweep.seeds",
+                "give either --seeds or a `seeds` sweep axis, not both",
+            ))
+        }
+        (Some(axis), None) => Some(seed_list(file, &axis)?),
+        (None, Some(0)) => {
+            return Err(SpecError {
+                path: PathBuf::from("--seeds"),
+                line: None,
+                key: "seeds".into(),
+                message: "must be at least 1".into(),
+            })
+        }
+        (None, Some(k)) => Some(
+            (0..k as u64)
+                .map(|i| seed.checked_add(i).filter(|&s| i64::try_from(s).is_ok()))
+                .collect::<Option<Vec<u64>>>()
+                .ok_or_else(|| SpecError {
+                    path: PathBuf::from("--seeds"),
+                    line: None,
+                    key: "seeds".into(),
+                    message: format!(
+                        "seeds {seed} to {seed} + {k} - 1 pass 2^63 (the `seed` column is i64)"
+                    ),
+                })?,
+        ),
+        (None, None) => None,
+    };
     // Sweep axes.
     let mut axes: Vec<(String, Vec<toml::Value>)> = Vec::new();
     for (k, v) in &sweep {
@@ -317,5 +406,40 @@ pub fn resolve(file: &SpecFile, opts: &ResolveOptions) -> Result<Resolved, SpecE
         quick: opts.quick,
         points,
         path: file.path.clone(),
+        seeds,
+        options: opts.clone(),
     })
+}
+
+/// The seeds of a `seeds = [...]` sweep axis: distinct non-negative integers.
+fn seed_list(file: &SpecFile, axis: &toml::Value) -> Result<Vec<u64>, SpecError> {
+    let values = match axis {
+        toml::Value::Array(a) if !a.is_empty() => a,
+        _ => {
+            return Err(file.error_at(
+                "sweep.seeds",
+                "a sweep axis must be a non-empty array of values",
+            ))
+        }
+    };
+    let mut seeds = Vec::with_capacity(values.len());
+    for (i, v) in values.iter().enumerate() {
+        let s = v
+            .as_integer()
+            .and_then(|s| u64::try_from(s).ok())
+            .ok_or_else(|| {
+                file.error_at(
+                    &format!("sweep.seeds[{i}]"),
+                    format!("a seed must be a non-negative integer, got {v}"),
+                )
+            })?;
+        if seeds.contains(&s) {
+            return Err(file.error_at(
+                &format!("sweep.seeds[{i}]"),
+                format!("seed {s} is listed twice"),
+            ));
+        }
+        seeds.push(s);
+    }
+    Ok(seeds)
 }

@@ -1,11 +1,19 @@
-//! Runs a resolved experiment: every sweep point on a rayon pool of `jobs` threads, tables
-//! prefixed with the point's sweep values and concatenated, written as CSV + Parquet, figures,
-//! and `run.json` (id, seed, resolved spec, crate version, git revision and whether the code
-//! had uncommitted changes, threads, seconds per stage).
+//! Runs a resolved experiment: every unit (sweep point, times seed when seeds are swept) on a
+//! rayon pool of `jobs` threads, tables prefixed with the unit's seed and sweep values and
+//! concatenated in unit order, written as CSV + Parquet, figures, and `run.json` (id, seed,
+//! resolved spec, crate version, git revision and whether the code had uncommitted changes,
+//! threads, seconds per stage). A sweep's units are also kept one file each for `--resume`;
+//! `--shard I/N` runs a share of the units and [`merge`] joins the shares (see
+//! [`super::shard`]).
 
 use super::output::{atomic_write, write_table, Cell, Table, Tables};
 use super::plot::FigureSink;
-use super::resolve::Resolved;
+use super::resolve::{Resolved, Unit};
+use super::seeds;
+use super::shard::{
+    load_unit, read_shards, save_unit, unit_key, unit_path, Shard, ShardRecord, SHARD_RECORD,
+};
+use super::spec::SpecFile;
 use super::{Error, RunContext};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -21,6 +29,10 @@ pub struct RunOptions {
     pub jobs: usize,
     /// Draw progress bars (only on a terminal).
     pub progress: bool,
+    /// Reuse the stored units whose key matches instead of running them again.
+    pub resume: bool,
+    /// Run only this shard's units into `<out>/<id>/shards/I-of-N/`.
+    pub shard: Option<Shard>,
 }
 
 /// What a run wrote.
@@ -34,6 +46,10 @@ pub struct RunSummary {
     pub files: Vec<PathBuf>,
     /// Wall time in seconds.
     pub seconds: f64,
+    /// Units run now.
+    pub computed: usize,
+    /// Units loaded from their stored results (`--resume`, `merge`).
+    pub reused: usize,
 }
 
 /// The git revision of the working directory, when it is a git checkout.
@@ -63,55 +79,247 @@ pub fn git_dirty() -> Option<bool> {
     out.status.success().then(|| !out.stdout.is_empty())
 }
 
-/// Runs every sweep point, then writes tables, figures and `run.json`.
+/// Runs the experiment's units (or, with [`RunOptions::shard`], only the shard's), then writes
+/// tables, figures and `run.json` (a shard writes its units and `shard.json` instead; see
+/// [`super::shard`]).
 pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
     let t0 = Instant::now();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.jobs.max(1))
         .build()
         .map_err(|e| Error::Other(format!("thread pool: {e}")))?;
+    let dir = opts.out.join(&res.id);
+    let units = res.units();
+    let revision = git_revision();
+    let dirty = git_dirty();
+    let (selected, store): (Vec<Unit>, Option<PathBuf>) = match opts.shard {
+        Some(sh) => {
+            let shard_dir = dir.join("shards").join(sh.dir_name());
+            // An unfinished shard has no record: remove an old one before any work.
+            let record = shard_dir.join(SHARD_RECORD);
+            if record.exists() {
+                std::fs::remove_file(&record).map_err(|e| Error::Io {
+                    path: record.clone(),
+                    source: e,
+                })?;
+            }
+            (
+                units.iter().copied().filter(|u| sh.owns(u.index)).collect(),
+                Some(shard_dir.join("units")),
+            )
+        }
+        None => {
+            let keep = units.len() > 1 || opts.resume;
+            (units, keep.then(|| dir.join("units")))
+        }
+    };
     let ctx = RunContext::new(res.seed, res.quick, opts.progress);
-    let mut merged: Vec<(String, Table)> = Vec::new();
+    let (mut results, mut reused) = (Vec::with_capacity(selected.len()), 0);
     pool.install(|| -> Result<(), Error> {
-        for (i, point) in res.points.iter().enumerate() {
-            let label = if point.values.is_empty() {
-                "run".to_string()
-            } else {
-                format!("run point {i}")
-            };
-            let tables = ctx.stage(&label, || point.job.run(&ctx))?;
-            let prefix: Vec<(String, Cell)> = point
-                .values
-                .iter()
-                .map(|(k, v)| (k.clone(), Cell::from(v)))
-                .collect();
-            for (name, t) in tables.0 {
-                let t = t.with_prefix(&prefix);
-                match merged.iter_mut().find(|(n, _)| *n == name) {
-                    Some((_, acc)) => acc
-                        .append(&t)
-                        .map_err(|e| Error::Other(format!("table {name}: {e}")))?,
-                    None => merged.push((name, t)),
+        for unit in &selected {
+            let key = unit_key(res, unit, revision.as_deref());
+            let path = store.as_ref().map(|s| unit_path(s, &key));
+            if let Some(p) = path.as_ref().filter(|_| opts.resume) {
+                if let Ok(r) = load_unit(p, &key) {
+                    reused += 1;
+                    results.push((unit.index, key, r));
+                    continue;
                 }
             }
+            let r = run_unit(res, unit, opts.progress)?;
+            if let Some(p) = &path {
+                save_unit(p, &key, &r)?;
+            }
+            results.push((unit.index, key, r));
         }
         Ok(())
     })?;
+    let computed = results.len() - reused;
+    for (_, _, (_, stages)) in &results {
+        for (name, secs) in stages {
+            ctx.record(name, *secs);
+        }
+    }
+    if let Some(sh) = opts.shard {
+        let shard_dir = dir.join("shards").join(sh.dir_name());
+        let record = ShardRecord {
+            id: res.id.clone(),
+            shard: sh.index,
+            of: sh.count,
+            spec_hash: res.spec_hash(),
+            git_revision: revision,
+            git_dirty: dirty,
+            quick: res.options.quick,
+            seed: res.options.seed,
+            sets: res.options.sets.clone(),
+            seeds: res.options.seeds,
+            units: results
+                .iter()
+                .map(|(i, key, _)| {
+                    let name = unit_path(Path::new(""), key).display().to_string();
+                    (*i, name)
+                })
+                .collect(),
+            threads: opts.jobs.max(1),
+            seconds_total: t0.elapsed().as_secs_f64(),
+        };
+        let path = shard_dir.join(SHARD_RECORD);
+        let text =
+            serde_json::to_string_pretty(&record).map_err(|e| Error::Other(e.to_string()))?;
+        atomic_write(&path, text.as_bytes())?;
+        let mut files: Vec<PathBuf> = results
+            .iter()
+            .filter_map(|(_, key, _)| store.as_ref().map(|s| unit_path(s, key)))
+            .collect();
+        files.push(path);
+        return Ok(RunSummary {
+            id: res.id.clone(),
+            dir: shard_dir,
+            files,
+            seconds: t0.elapsed().as_secs_f64(),
+            computed,
+            reused,
+        });
+    }
+    let tables = results.into_iter().map(|(_, _, (t, _))| t).collect();
+    let provenance = Provenance {
+        git_revision: revision,
+        git_dirty: dirty,
+        extra: serde_json::json!({ "units": { "total": selected.len(), "computed": computed, "reused": reused } }),
+    };
+    let mut s = finish(res, opts, tables, &ctx, provenance, &pool, t0)?;
+    s.computed = computed;
+    s.reused = reused;
+    Ok(s)
+}
+
+/// Merges the shards in `<out>/<id>/shards/` (see [`super::shard::read_shards`]) into the tables,
+/// figures and `run.json` of the unsharded run; returns them and the experiment as the shards
+/// resolved it.
+pub fn merge(file: &SpecFile, opts: &RunOptions) -> Result<(RunSummary, Resolved), Error> {
+    let t0 = Instant::now();
+    let m = read_shards(file, &opts.out)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(opts.jobs.max(1))
+        .build()
+        .map_err(|e| Error::Other(format!("thread pool: {e}")))?;
+    let ctx = RunContext::new(m.resolved.seed, m.resolved.quick, opts.progress);
+    let mut tables = Vec::with_capacity(m.results.len());
+    for (t, stages) in m.results {
+        for (name, secs) in &stages {
+            ctx.record(name, *secs);
+        }
+        tables.push(t);
+    }
+    let provenance = Provenance {
+        git_revision: m.git_revision,
+        git_dirty: m.git_dirty,
+        extra: serde_json::json!({ "merged_shards": m.count }),
+    };
+    let n = tables.len();
+    let mut s = finish(&m.resolved, opts, tables, &ctx, provenance, &pool, t0)?;
+    s.reused = n;
+    Ok((s, m.resolved))
+}
+
+/// Runs one unit: its point's job with its seed; tables prefixed with its seed (when seeds are
+/// swept) and sweep values.
+fn run_unit(
+    res: &Resolved,
+    unit: &Unit,
+    progress: bool,
+) -> Result<(Tables, Vec<(String, f64)>), Error> {
+    let point = &res.points[unit.point];
+    let ctx = RunContext::new(unit.seed, res.quick, progress);
+    let mut label = match res.seeds {
+        Some(_) => format!("run seed {}", unit.seed),
+        None => "run".to_string(),
+    };
+    if !point.values.is_empty() {
+        label = format!("{label} point {}", unit.point);
+    }
+    let tables = ctx.stage(&label, || point.job.run(&ctx))?;
+    let mut prefix: Vec<(String, Cell)> = Vec::new();
+    if res.seeds.is_some() {
+        prefix.push(("seed".into(), Cell::I(unit.seed as i64)));
+    }
+    prefix.extend(point.values.iter().map(|(k, v)| (k.clone(), Cell::from(v))));
+    let tables = Tables(
+        tables
+            .0
+            .into_iter()
+            .map(|(name, t)| (name, t.with_prefix(&prefix)))
+            .collect(),
+    );
+    Ok((tables, ctx.stages()))
+}
+
+/// Where the results came from, for `run.json`.
+struct Provenance {
+    git_revision: Option<String>,
+    git_dirty: Option<bool>,
+    extra: serde_json::Value,
+}
+
+/// Concatenates the units' tables (in unit order), writes them, the per-seed tables and seed
+/// summary when seeds are swept, figures and `run.json`.
+fn finish(
+    res: &Resolved,
+    opts: &RunOptions,
+    units: Vec<Tables>,
+    ctx: &RunContext,
+    provenance: Provenance,
+    pool: &rayon::ThreadPool,
+    t0: Instant,
+) -> Result<RunSummary, Error> {
+    let mut merged: Vec<(String, Table)> = Vec::new();
+    for tables in units {
+        for (name, t) in tables.0 {
+            match merged.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, acc)) => acc
+                    .append(&t)
+                    .map_err(|e| Error::Other(format!("table {name}: {e}")))?,
+                None => merged.push((name, t)),
+            }
+        }
+    }
     let dir = opts.out.join(&res.id);
     let mut files = Vec::new();
+    let tables = Tables(merged);
+    // With swept seeds, figures (like the report) show the first seed.
+    let mut figure_tables = None;
     ctx.stage("write tables", || -> Result<(), Error> {
-        for (name, t) in &merged {
+        for (name, t) in &tables.0 {
             files.extend(write_table(&dir, name, t)?);
+        }
+        if let Some(seeds) = &res.seeds {
+            for &seed in seeds {
+                let one = seeds::one_seed(&tables, seed);
+                let seed_dir = dir.join("seeds").join(seed.to_string());
+                for (name, t) in &one.0 {
+                    files.extend(write_table(&seed_dir, name, t)?);
+                }
+                figure_tables.get_or_insert(one);
+            }
+            let axes: Vec<String> = res.points[0]
+                .values
+                .iter()
+                .map(|(k, _)| k.clone())
+                .collect();
+            let summary = seeds::seed_summary(&tables, seeds, &axes);
+            files.extend(write_table(&dir, seeds::SUMMARY, &summary)?);
         }
         Ok(())
     })?;
-    let tables = Tables(merged);
     let sink = FigureSink {
         dir: opts.figures.clone(),
         id: res.id.clone(),
     };
     let figs = ctx.stage("figures", || {
-        pool.install(|| res.family.figures(&sink, &tables))
+        pool.install(|| {
+            res.family
+                .figures(&sink, figure_tables.as_ref().unwrap_or(&tables))
+        })
     })?;
     files.extend(figs);
     let seconds = t0.elapsed().as_secs_f64();
@@ -120,18 +328,23 @@ pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
         .into_iter()
         .map(|(k, v)| (k, serde_json::json!(v)))
         .collect();
-    let meta = serde_json::json!({
+    let mut meta = serde_json::json!({
         "id": res.id,
         "seed": res.seed,
         "spec": res.to_json(),
         "crate_version": env!("CARGO_PKG_VERSION"),
-        "git_revision": git_revision(),
-        "git_dirty": git_dirty(),
+        "git_revision": provenance.git_revision,
+        "git_dirty": provenance.git_dirty,
         "threads": opts.jobs.max(1),
         "seconds_per_stage": stages,
         "seconds_total": seconds,
         "files": files.iter().map(|f| rel_name(&opts.out, &opts.figures, f)).collect::<Vec<_>>(),
     });
+    if let (Some(m), Some(extra)) = (meta.as_object_mut(), provenance.extra.as_object()) {
+        for (k, v) in extra {
+            m.insert(k.clone(), v.clone());
+        }
+    }
     let run_json = dir.join("run.json");
     let text = serde_json::to_string_pretty(&meta).map_err(|e| Error::Other(e.to_string()))?;
     atomic_write(&run_json, text.as_bytes())?;
@@ -141,6 +354,8 @@ pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
         dir,
         files,
         seconds,
+        computed: 0,
+        reused: 0,
     })
 }
 

@@ -1,0 +1,249 @@
+//! # Results over seeds
+//!
+//! When seeds are swept (`--seeds K` or a `seeds = [...]` axis of `[sweep]`), every table gets a
+//! leading `seed` column, each seed's rows are also written without it to
+//! `<out>/<id>/seeds/<seed>/` (so the family's figures and report read one seed's results as they
+//! read an unseeded run), and `seed_summary.csv` aggregates the seeds row by row:
+//!
+//! - rows align by position: row r of a table in every seed is the same quantity, which holds
+//!   when its string columns (and sweep values) agree across seeds, as they do when seeds change
+//!   values, not the shape of the results; a table where they disagree is left out;
+//! - tables longer than [`MAX_ROWS_PER_SEED`] rows per seed (traces over time or iterations,
+//!   ours) are left out;
+//! - each numeric column (integers too, except `seed` and the sweep axes) of each row gives one
+//!   line: `table, row, label, column, seeds, mean, std, min, max` over the seeds whose value is
+//!   finite (`std`: sample standard deviation, NaN below two seeds).
+
+use super::output::{df_f64, df_str, read_csv, Cell, ColumnData, Table, Tables};
+use super::report::sig;
+use super::Error;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Tables longer than this (rows per seed) are left out of `seed_summary.csv` (ours).
+pub const MAX_ROWS_PER_SEED: usize = 100;
+
+/// The name of the summary table.
+pub const SUMMARY: &str = "seed_summary";
+
+/// The rows of one seed, without the `seed` column.
+pub fn one_seed(tables: &Tables, seed: u64) -> Tables {
+    Tables(
+        tables
+            .0
+            .iter()
+            .map(|(name, t)| {
+                let col = match t.column("seed") {
+                    Some(ColumnData::I(v)) => v.clone(),
+                    _ => Vec::new(),
+                };
+                let t = t.select(|i| col.get(i) == Some(&(seed as i64)), Some("seed"));
+                (name.clone(), t)
+            })
+            .collect(),
+    )
+}
+
+fn cell_text(c: &ColumnData, i: usize) -> String {
+    match c {
+        ColumnData::F(v) => format!("{}", v[i]),
+        ColumnData::I(v) => v[i].to_string(),
+        ColumnData::S(v) => v[i].clone(),
+    }
+}
+
+/// Mean, sample standard deviation, min and max of the finite values, and their count.
+fn stats(values: &[f64]) -> (usize, f64, f64, f64, f64) {
+    let v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    let n = v.len();
+    if n == 0 {
+        return (0, f64::NAN, f64::NAN, f64::NAN, f64::NAN);
+    }
+    let mean = v.iter().sum::<f64>() / n as f64;
+    let std = if n < 2 {
+        f64::NAN
+    } else {
+        (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+    };
+    let min = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (n, mean, std, min, max)
+}
+
+/// `seed_summary`: every numeric cell of the (short, row-aligned) tables aggregated over seeds.
+/// `axes` are the sweep axis names (labels, not aggregated).
+pub fn seed_summary(tables: &Tables, seeds: &[u64], axes: &[String]) -> Table {
+    let mut out = Table::new(&[
+        "table", "row", "label", "column", "seeds", "mean", "std", "min", "max",
+    ]);
+    for (name, t) in &tables.0 {
+        let Some(ColumnData::I(seed_col)) = t.column("seed") else {
+            continue;
+        };
+        let rows: Vec<Vec<usize>> = seeds
+            .iter()
+            .map(|&s| (0..t.len()).filter(|&i| seed_col[i] == s as i64).collect())
+            .collect();
+        let longest = rows.iter().map(Vec::len).max().unwrap_or(0);
+        if longest > MAX_ROWS_PER_SEED {
+            continue;
+        }
+        let cols: Vec<(&String, &ColumnData)> = t.names().iter().zip(t.columns()).collect();
+        let is_label = |n: &String, c: &ColumnData| {
+            axes.contains(n) || matches!(c, ColumnData::S(_)) && n != "seed"
+        };
+        let label = |i: usize| -> String {
+            cols.iter()
+                .filter(|(n, c)| is_label(n, c))
+                .map(|(n, c)| format!("{n}={}", cell_text(c, i)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        // Labels of each row position; the table is left out unless every seed agrees.
+        let mut labels = Vec::with_capacity(longest);
+        let mut aligned = true;
+        for r in 0..longest {
+            let ls: Vec<String> = rows
+                .iter()
+                .filter_map(|v| v.get(r))
+                .map(|&i| label(i))
+                .collect();
+            aligned &= ls.iter().all(|l| *l == ls[0]);
+            labels.push(ls[0].clone());
+        }
+        if !aligned {
+            continue;
+        }
+        for (r, l) in labels.iter().enumerate() {
+            for (n, c) in cols.iter().filter(|(n, c)| !is_label(n, c) && *n != "seed") {
+                let values: Vec<f64> = rows
+                    .iter()
+                    .filter_map(|v| v.get(r))
+                    .map(|&i| match c {
+                        ColumnData::F(v) => v[i],
+                        ColumnData::I(v) => v[i] as f64,
+                        ColumnData::S(_) => f64::NAN,
+                    })
+                    .collect();
+                let (k, mean, std, min, max) = stats(&values);
+                out.push(vec![
+                    Cell::from(name.as_str()),
+                    Cell::from(r),
+                    Cell::from(l.as_str()),
+                    Cell::from(n.as_str()),
+                    Cell::from(k),
+                    Cell::F(mean),
+                    Cell::F(std),
+                    Cell::F(min),
+                    Cell::F(max),
+                ]);
+            }
+        }
+    }
+    out
+}
+
+/// Lines of `seed_summary.csv` shown in the report (the rest stay in the file).
+pub const REPORT_ROWS: usize = 30;
+
+/// The report's table of `seed_summary.csv` in `dir`: the first [`REPORT_ROWS`] lines whose
+/// value varies over the seeds (min < max), with mean, std, min and max, and how many lines are
+/// equal for every seed.
+pub fn summary_markdown(dir: &Path) -> Result<String, Error> {
+    let df = read_csv(&dir.join(format!("{SUMMARY}.csv")))?;
+    let rows = df_f64(&df, "row")?;
+    let (table, label, column) = (
+        df_str(&df, "table")?,
+        df_str(&df, "label")?,
+        df_str(&df, "column")?,
+    );
+    let (n, mean, std, min, max) = (
+        df_f64(&df, "seeds")?,
+        df_f64(&df, "mean")?,
+        df_f64(&df, "std")?,
+        df_f64(&df, "min")?,
+        df_f64(&df, "max")?,
+    );
+    let varying: Vec<usize> = (0..df.height()).filter(|&i| min[i] < max[i]).collect();
+    let mut md = format!(
+        "Mean and spread over seeds (`{SUMMARY}.csv`, row by row of the result tables): {} of {} \
+         values vary with the seed",
+        varying.len(),
+        df.height()
+    );
+    if varying.is_empty() {
+        md.push_str(".\n");
+        return Ok(md);
+    }
+    md.push_str(if varying.len() > REPORT_ROWS {
+        "; the first of them:\n\n"
+    } else {
+        ":\n\n"
+    });
+    md.push_str(
+        "| table | row | column | seeds | mean | std | min | max |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for &i in varying.iter().take(REPORT_ROWS) {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} | {} | {} |",
+            table[i],
+            if label[i].is_empty() {
+                format!("{}", rows[i])
+            } else {
+                label[i].replace('|', "\\|")
+            },
+            column[i],
+            n[i],
+            sig(mean[i]),
+            sig(std[i]),
+            sig(min[i]),
+            sig(max[i])
+        );
+    }
+    Ok(md)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::row;
+
+    #[test]
+    fn summary_aggregates_aligned_rows_over_seeds() {
+        let mut t = Table::new(&["seed", "scale", "method", "error", "steps"]);
+        for (s, e) in [(5u64, [1.0, 10.0]), (6, [3.0, 20.0]), (7, [2.0, f64::NAN])] {
+            t.push(row![s as i64, 0.5, "a", e[0], 4i64]);
+            t.push(row![s as i64, 0.5, "b", e[1], 4i64]);
+        }
+        let tables = Tables::from([("final", t)]);
+        let s = seed_summary(&tables, &[5, 6, 7], &["scale".to_string()]);
+        assert_eq!(s.len(), 4, "rows a, b times columns error, steps");
+        let mean = s.f64s("mean");
+        let std = s.f64s("std");
+        assert_eq!(s.strs("label")[0], "scale=0.5, method=a");
+        assert_eq!(s.strs("column")[0], "error");
+        assert!((mean[0] - 2.0).abs() < 1e-12 && (std[0] - 1.0).abs() < 1e-12);
+        assert_eq!(s.f64s("seeds")[2], 2.0, "the NaN of seed 7 is left out");
+        assert!((mean[2] - 15.0).abs() < 1e-12);
+        assert_eq!((s.f64s("min")[0], s.f64s("max")[0]), (1.0, 3.0));
+        // One seed's rows, without the seed column.
+        let one = one_seed(&tables, 6);
+        let t6 = one.get("final").unwrap();
+        assert_eq!(t6.names()[0], "scale");
+        assert_eq!(t6.f64s("error"), vec![3.0, 20.0]);
+    }
+
+    #[test]
+    fn misaligned_or_long_tables_are_left_out() {
+        let mut t = Table::new(&["seed", "method", "x"]);
+        t.push(row![1i64, "a", 1.0]);
+        t.push(row![2i64, "b", 1.0]);
+        let mut long = Table::new(&["seed", "x"]);
+        for i in 0..=MAX_ROWS_PER_SEED {
+            long.push(row![1i64, i as f64]);
+        }
+        let tables = Tables::from([("mis", t), ("long", long)]);
+        assert!(seed_summary(&tables, &[1, 2], &[]).is_empty());
+    }
+}
