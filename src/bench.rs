@@ -131,19 +131,19 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             max_iterations: 1,
             ..DdpOptions::default()
         };
-        push(
-            "ddp.acrobot.iters_per_s",
-            throughput(min_seconds, 1, || {
-                black_box(solve(&map, &cost, &x0, &u0, &one_iter).ok());
-            }),
-        );
+        let ddp_iters = throughput(min_seconds, 1, || {
+            black_box(solve(&map, &cost, &x0, &u0, &one_iter).ok());
+        });
+        push("ddp.acrobot.iters_per_s", ddp_iters);
+        // Derived: microseconds per knot of one DDP iteration (the peers' unit).
+        push("ddp.acrobot.us_per_knot", 1e6 / (ddp_iters * steps as f64));
         let xs = map.rollout(&x0, &u0).expect("finite rollout");
-        push(
-            "lqr.acrobot.backward_passes_per_s",
-            throughput(min_seconds, 1, || {
-                black_box(track(&map, &cost, &xs, &u0).ok());
-            }),
-        );
+        let lqr_passes = throughput(min_seconds, 1, || {
+            black_box(track(&map, &cost, &xs, &u0).ok());
+        });
+        push("lqr.acrobot.backward_passes_per_s", lqr_passes);
+        // Derived: microseconds per Riccati step of the tracker's backward pass.
+        push("lqr.acrobot.us_per_step", 1e6 / (lqr_passes * steps as f64));
         let t = track(&map, &cost, &xs, &u0).expect("tracker");
         let trackers = vec![t.clone(), t];
         let blend = TrackerBlend {

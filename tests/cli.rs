@@ -461,6 +461,21 @@ fn bench_json_is_one_object_of_named_numbers() {
     let obj = v.as_object().unwrap();
     assert!(obj.contains_key("sim.pendulum3.steps_per_s"));
     assert!(obj.values().all(|x| x.as_f64().is_some_and(|f| f > 0.0)));
+    // The derived per-knot / per-step metrics are the reciprocals of their rates (400 knots).
+    let f = |k: &str| obj[k].as_f64().unwrap();
+    let rel = |a: f64, b: f64| ((a - b) / b).abs();
+    assert!(
+        rel(
+            f("ddp.acrobot.us_per_knot"),
+            1e6 / (400.0 * f("ddp.acrobot.iters_per_s"))
+        ) < 1e-9
+    );
+    assert!(
+        rel(
+            f("lqr.acrobot.us_per_step"),
+            1e6 / (400.0 * f("lqr.acrobot.backward_passes_per_s"))
+        ) < 1e-9
+    );
 }
 
 #[test]
