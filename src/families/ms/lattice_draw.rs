@@ -83,6 +83,76 @@ pub const LATTICE: RGBColor = RGBColor(31, 119, 180);
 /// Colour of a faint reference lattice.
 pub const GHOST: RGBColor = RGBColor(200, 200, 200);
 
+/// Colour of the marked face's masses and springs.
+pub const MARKED: RGBColor = RGBColor(255, 127, 14);
+
+/// How a lattice picture is framed and annotated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    /// A line of text above the panels (or the frames of a GIF).
+    pub caption: Option<String>,
+    /// Camera azimuth about the vertical (rad).
+    pub azimuth: f64,
+    /// Camera elevation above the floor (rad).
+    pub elevation: f64,
+    /// Masses of one face, drawn in [`MARKED`] with the springs between them, so that a
+    /// rotation of the body is visible.
+    pub marked: Vec<usize>,
+    /// A 1 m bar on the floor (the first panel of a filmstrip, every GIF frame).
+    pub scale_bar: bool,
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        Self {
+            caption: None,
+            azimuth: -0.45,
+            elevation: 0.35,
+            marked: Vec::new(),
+            scale_bar: false,
+        }
+    }
+}
+
+/// The masses of the face at the largest x (within 5 cm) of `positions`: the front face.
+pub fn front_face(positions: &[[f64; 3]]) -> Vec<usize> {
+    let xmax = positions
+        .iter()
+        .map(|p| p[0])
+        .fold(f64::NEG_INFINITY, f64::max);
+    (0..positions.len())
+        .filter(|&i| positions[i][0] >= xmax - 0.05)
+        .collect()
+}
+
+/// The ends of the 1 m scale bar: along x on the floor at the extent's near corner.
+fn scale_bar_ends(extent: ([f64; 2], [f64; 2])) -> [[f64; 3]; 2] {
+    let (x0, y0) = (extent.0[0] + 0.25, extent.1[0]);
+    [[x0, y0, 0.0], [x0 + 1.0, y0, 0.0]]
+}
+
+/// Draws a 1 m bar along x on the floor at the extent's near corner, labelled.
+fn draw_scale_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    view: &View,
+    extent: ([f64; 2], [f64; 2]),
+) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let [p, q] = scale_bar_ends(extent);
+    let (a, b) = (view.pixel(p), view.pixel(q));
+    area.draw(&PathElement::new(
+        vec![a, b],
+        ShapeStyle::from(&BLACK).stroke_width(3),
+    ))
+    .map_err(e)?;
+    area.draw(&Text::new(
+        "1 m",
+        ((a.0 + b.0) / 2 - 10, (a.1 + b.1) / 2 - 18),
+        ("sans-serif", 13).into_font().color(&BLACK),
+    ))
+    .map_err(e)
+}
+
 /// The floor extent (x and y ranges, m) around `points`, padded.
 pub fn floor_extent(points: impl Iterator<Item = [f64; 3]>) -> ([f64; 2], [f64; 2]) {
     let mut x = [f64::INFINITY, f64::NEG_INFINITY];
@@ -138,6 +208,7 @@ pub fn draw_lattice<DB: DrawingBackend>(
     springs: &[(usize, usize)],
     color: RGBColor,
     shadow: bool,
+    marked: &[usize],
 ) -> Result<(), String> {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     if shadow {
@@ -151,22 +222,28 @@ pub fn draw_lattice<DB: DrawingBackend>(
         }
     }
     let style = ShapeStyle::from(&color).stroke_width(2);
-    for &(a, b) in springs {
-        if a < positions.len() && b < positions.len() {
-            area.draw(&PathElement::new(
-                vec![view.pixel(positions[a]), view.pixel(positions[b])],
-                style,
-            ))
-            .map_err(e)?;
+    let face = ShapeStyle::from(&MARKED).stroke_width(3);
+    // The marked face's springs last, so that they stay visible.
+    let on_face = |a: usize, b: usize| marked.contains(&a) && marked.contains(&b);
+    for pass in [false, true] {
+        for &(a, b) in springs {
+            if a < positions.len() && b < positions.len() && on_face(a, b) == pass {
+                area.draw(&PathElement::new(
+                    vec![view.pixel(positions[a]), view.pixel(positions[b])],
+                    if pass { face } else { style },
+                ))
+                .map_err(e)?;
+            }
         }
     }
-    for p in positions {
-        area.draw(&Circle::new(
-            view.pixel(*p),
-            4,
-            RGBColor(20, 20, 20).filled(),
-        ))
-        .map_err(e)?;
+    for (i, p) in positions.iter().enumerate() {
+        let fill = if marked.contains(&i) {
+            MARKED
+        } else {
+            RGBColor(20, 20, 20)
+        };
+        area.draw(&Circle::new(view.pixel(*p), 4, fill.filled()))
+            .map_err(e)?;
     }
     Ok(())
 }
@@ -190,8 +267,22 @@ fn render_panels<DB: DrawingBackend>(
     springs: &[(usize, usize)],
     columns: usize,
     shared_view: bool,
+    scene: &Scene,
 ) -> Result<(), String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let root = match &scene.caption {
+        Some(text) => {
+            let (top, rest) = root.split_vertically(CAPTION_PX);
+            top.draw(&Text::new(
+                text.clone(),
+                (10, 6),
+                ("sans-serif", 16).into_font().color(&BLACK),
+            ))
+            .map_err(|e| e.to_string())?;
+            rest
+        }
+        None => root.clone(),
+    };
     let rows = panels.len().div_ceil(columns.max(1)).max(1);
     let areas = root.split_evenly((rows, columns.max(1)));
     let all = |p: &LatticePanel| {
@@ -202,25 +293,51 @@ fn render_panels<DB: DrawingBackend>(
     };
     let every: Vec<[f64; 3]> = panels.iter().flat_map(all).collect();
     let extent = floor_extent(every.iter().copied());
-    for (p, area) in panels.iter().zip(areas.iter()) {
+    for (k, (p, area)) in panels.iter().zip(areas.iter()).enumerate() {
         register();
         let area = area
             .titled(&p.title, ("sans-serif", 16).into_font())
             .map_err(|e| e.to_string())?;
         let size = area.dim_in_pixel();
-        let pts: Vec<[f64; 3]> = if shared_view { every.clone() } else { all(p) };
-        let (az, el) = (-0.45, 0.35);
-        let view = View::fit(pts.iter().copied(), size, az, el, 18);
+        let mut pts: Vec<[f64; 3]> = if shared_view { every.clone() } else { all(p) };
+        let bar = scene.scale_bar && (k == 0 || !shared_view);
+        if scene.scale_bar {
+            // Every panel frames the bar's place, so a shared view stays shared.
+            let ext = if shared_view {
+                extent
+            } else {
+                floor_extent(pts.iter().copied())
+            };
+            pts.extend(scale_bar_ends(ext));
+        }
+        let view = View::fit(
+            pts.iter().copied(),
+            size,
+            scene.azimuth,
+            scene.elevation,
+            18,
+        );
         let ext = if shared_view {
             extent
         } else {
             floor_extent(pts.iter().copied())
         };
         draw_floor(&area, &view, ext)?;
-        if let Some(g) = &p.ghost {
-            draw_lattice(&area, &view, g, springs, GHOST, false)?;
+        if bar {
+            draw_scale_bar(&area, &view, ext)?;
         }
-        draw_lattice(&area, &view, &p.positions, springs, LATTICE, true)?;
+        if let Some(g) = &p.ghost {
+            draw_lattice(&area, &view, g, springs, GHOST, false, &[])?;
+        }
+        draw_lattice(
+            &area,
+            &view,
+            &p.positions,
+            springs,
+            LATTICE,
+            true,
+            &scene.marked,
+        )?;
         if p.trail.len() > 1 {
             area.draw(&PathElement::new(
                 p.trail.iter().map(|q| view.pixel(*q)).collect::<Vec<_>>(),
@@ -238,8 +355,13 @@ fn register() {
     crate::experiment::plot::ensure_fonts();
 }
 
-/// Draws `panels` (`columns` per row, `panel` pixels each) as `<dir>/<stem>.png` and `.svg`;
-/// with `shared_view` every panel uses one camera fitted to all of them.
+/// Height of a caption line (pixels).
+const CAPTION_PX: u32 = 28;
+
+/// Draws `panels` (`columns` per row, `panel` pixels each) as `<dir>/<stem>.png` and `.svg`,
+/// framed and annotated by `scene`; with `shared_view` every panel uses one camera fitted to
+/// all of them.
+#[allow(clippy::too_many_arguments)]
 pub fn draw_panels(
     dir: &Path,
     stem: &str,
@@ -248,18 +370,25 @@ pub fn draw_panels(
     columns: usize,
     panel: (u32, u32),
     shared_view: bool,
+    scene: &Scene,
 ) -> Result<Vec<PathBuf>, Error> {
     register();
     let rows = panels.len().div_ceil(columns.max(1)).max(1) as u32;
+    let caption = if scene.caption.is_some() {
+        CAPTION_PX
+    } else {
+        0
+    };
     let size = (
         panel.0 * columns.min(panels.len()).max(1) as u32,
-        panel.1 * rows,
+        panel.1 * rows + caption,
     );
     let drawing = Panels {
         panels,
         springs,
         columns,
         shared_view,
+        scene,
     };
     write_png_svg(dir, stem, size, &drawing)
 }
@@ -270,6 +399,7 @@ struct Panels<'a> {
     springs: &'a [(usize, usize)],
     columns: usize,
     shared_view: bool,
+    scene: &'a Scene,
 }
 
 impl Drawing for Panels<'_> {
@@ -280,13 +410,15 @@ impl Drawing for Panels<'_> {
             self.springs,
             self.columns,
             self.shared_view,
+            self.scene,
         )
     }
 }
 
 /// Writes an animated GIF `<dir>/<stem>.gif` of `frames` (title, positions), one camera for
 /// all frames, `delay_ms` between frames; the centre-of-mass path `trail` is drawn up to
-/// each frame's time.
+/// each frame's time; `scene` frames it, marks its face and scale, and its caption is written
+/// at the foot of every frame (a key).
 #[allow(clippy::too_many_arguments)]
 pub fn write_gif(
     dir: &Path,
@@ -296,6 +428,7 @@ pub fn write_gif(
     springs: &[(usize, usize)],
     size: (u32, u32),
     delay_ms: u32,
+    scene: &Scene,
 ) -> Result<PathBuf, Error> {
     std::fs::create_dir_all(dir).map_err(|e| Error::Io {
         path: dir.to_path_buf(),
@@ -311,7 +444,20 @@ pub fn write_gif(
             .map_err(|e| perr(&gif, e.to_string()))?
             .into_drawing_area();
         let (_, body) = root.split_vertically(24);
-        let view = View::fit(every.iter().copied(), body.dim_in_pixel(), -0.45, 0.35, 16);
+        let foot = if scene.caption.is_some() { 22 } else { 0 };
+        let (body, _) = body.split_vertically(body.dim_in_pixel().1.saturating_sub(foot));
+        let bar = if scene.scale_bar {
+            scale_bar_ends(extent).to_vec()
+        } else {
+            vec![]
+        };
+        let view = View::fit(
+            every.iter().chain(&bar).copied(),
+            body.dim_in_pixel(),
+            scene.azimuth,
+            scene.elevation,
+            16,
+        );
         let n = frames.len().max(1);
         for (k, (title, pos)) in frames.iter().enumerate() {
             root.fill(&WHITE).map_err(|e| perr(&gif, e.to_string()))?;
@@ -322,6 +468,17 @@ pub fn write_gif(
             ))
             .map_err(|e| perr(&gif, e.to_string()))?;
             draw_floor(&body, &view, extent).map_err(|e| perr(&gif, e))?;
+            if scene.scale_bar {
+                draw_scale_bar(&body, &view, extent).map_err(|e| perr(&gif, e))?;
+            }
+            if let Some(key) = &scene.caption {
+                root.draw(&Text::new(
+                    key.clone(),
+                    (10, size.1 as i32 - 20),
+                    ("sans-serif", 13).into_font().color(&BLACK),
+                ))
+                .map_err(|e| perr(&gif, e.to_string()))?;
+            }
             let upto = ((k + 1) * trail.len()) / n;
             if upto > 1 {
                 body.draw(&PathElement::new(
@@ -333,7 +490,8 @@ pub fn write_gif(
                 ))
                 .map_err(|e| perr(&gif, e.to_string()))?;
             }
-            draw_lattice(&body, &view, pos, springs, LATTICE, true).map_err(|e| perr(&gif, e))?;
+            draw_lattice(&body, &view, pos, springs, LATTICE, true, &scene.marked)
+                .map_err(|e| perr(&gif, e))?;
             root.present().map_err(|e| perr(&gif, e.to_string()))?;
         }
     }

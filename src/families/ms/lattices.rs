@@ -6,7 +6,7 @@
 //! `positions` (lattice, reflex, alpha, mass, x, y, z; reflex −1 is the rest shape);
 //! `springs` (lattice, spring, a, b).
 
-use super::lattice_draw::{draw_panels, LatticePanel};
+use super::lattice_draw::{draw_panels, LatticePanel, Scene};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::{Findings, Verdict};
@@ -194,6 +194,7 @@ impl Family for MsLattices {
                 1,
                 (420, 380),
                 false,
+                &Scene::default(),
             )?);
             let a = alpha
                 .iter()
@@ -222,6 +223,7 @@ impl Family for MsLattices {
                 3,
                 (340, 300),
                 true,
+                &Scene::default(),
             )?);
         }
         Ok(files)

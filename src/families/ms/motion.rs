@@ -6,7 +6,7 @@
 //! Tables: see [`super::search`]. Figures: `<id>_filmstrip.png/svg`, `<id>_motion.gif`,
 //! `<id>_search.png/svg`.
 
-use super::lattice_draw::{draw_panels, write_gif, LatticePanel};
+use super::lattice_draw::{draw_panels, front_face, write_gif, LatticePanel, Scene};
 use super::lattices::springs_of;
 use super::search::{learning_panel, MotionJob};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
@@ -34,6 +34,16 @@ fn frames_of(t: &Table) -> Vec<(f64, usize, Vec<[f64; 3]>)> {
         }
     }
     out
+}
+
+/// The paper's name of a motion (`summary.csv`'s `motion`).
+fn motion_title(motion: &str) -> &str {
+    match motion {
+        "leap" => "Spider leap",
+        "somersault" => "Poodle somersault",
+        "pirouette" => "Table pirouette",
+        other => other,
+    }
 }
 
 fn com(p: &[[f64; 3]]) -> [f64; 3] {
@@ -70,6 +80,21 @@ impl Family for MsMotion {
         if frames.is_empty() {
             return Ok(files);
         }
+        // The motion's name, a side camera (looking along +y: the floor level, the motion along x
+        // across the picture), the front face at t = 0 marked, a 1 m bar.
+        let summary = tables.require("summary")?;
+        let (motion, lattice) = (summary.strs("motion"), summary.strs("lattice"));
+        let name = motion_title(motion.first().map_or("", String::as_str));
+        let lattice = lattice.first().cloned().unwrap_or_default();
+        let scene = Scene {
+            caption: Some(format!(
+                "{name} ({lattice} lattice): red line = centre-of-mass path, orange = the face in front at t = 0, floor grid 0.5 m, black bar 1 m"
+            )),
+            azimuth: 0.0,
+            elevation: 0.3,
+            marked: front_face(&frames[0].2),
+            scale_bar: true,
+        };
         let strip = (tables
             .require("summary")?
             .f64s("filmstrip_frames")
@@ -103,6 +128,7 @@ impl Family for MsMotion {
             4,
             (360, 300),
             true,
+            &scene,
         )?);
         // GIF in real time with at most ~100 frames.
         let dt = if frames.len() > 1 {
@@ -116,7 +142,7 @@ impl Family for MsMotion {
             .step_by(every)
             .map(|f| {
                 (
-                    format!("{}  t = {:.2} s  {}", fig.id, f.0, label(f.1)),
+                    format!("{name}  t = {:.2} s  {}", f.0, label(f.1)),
                     f.2.clone(),
                 )
             })
@@ -129,8 +155,15 @@ impl Family for MsMotion {
             &gif_frames,
             &gif_trail,
             &springs,
-            (560, 420),
+            (640, 460),
             delay,
+            &Scene {
+                caption: Some(
+                    "red: centre-of-mass path; orange: front face at t = 0; grid 0.5 m; bar 1 m"
+                        .into(),
+                ),
+                ..scene.clone()
+            },
         )?);
         let search = tables.require("search")?;
         files.extend(fig.draw(
