@@ -127,7 +127,12 @@ impl Reference {
             self.spec.super_dt() / substeps as f64
         };
         self.mean_error(|x, u| {
+            // A blown-up state stays NaN (some models cannot step a non-finite state).
             for _ in 0..substeps {
+                if !x.iter().all(|v| v.is_finite()) {
+                    x.fill(f64::NAN);
+                    return;
+                }
                 sim.step(x, u, dt);
             }
         })
