@@ -598,7 +598,7 @@ impl Family for NaSpeedup {
                 eq.f64s("substeps"),
             );
             let cats: Vec<String> = (0..em.len())
-                .map(|r| format!("{} {}", em[r], ee[r]))
+                .map(|r| format!("{} {}", em[r].trim_start_matches("pendulum_"), ee[r]))
                 .collect();
             let at_dt: Vec<(f64, f64)> = (0..em.len())
                 .filter_map(|r| {
@@ -614,7 +614,7 @@ impl Family for NaSpeedup {
                 .map(|r| format!("{}× (j={})", sig(esp[r]), ej[r]))
                 .collect();
             panels.push(Panel {
-                title: "Speedup: 20,000 steps at the training δt vs the largest step Δt/j as accurate as the emulator (log scale)".into(),
+                title: "Speedup over the physical simulator at the training δt and at the largest step Δt/j as accurate as the emulator (log scale)".into(),
                 x_label: "emulator".into(),
                 x_categories: cats,
                 y_label: "speedup (physical s / emulator s)".into(),
