@@ -156,17 +156,60 @@ fn na_table2_quick_emulators_are_faster_than_simulation() {
         ("truck", "N50"),
         ("lander", "N50"),
         ("dolphin", "N50"),
+        ("dolphin", "N50"),
         ("dolphin", "N50_reg"),
     ]
     .iter()
     .map(|(a, b)| (a.to_string(), b.to_string()))
     .collect();
     assert_eq!(keys, want);
+    assert_eq!(
+        header(&out.join("speedup.csv")),
+        "model,emulator,physical_s,emulator_s,speedup,physical_steps,emulator_steps,physical_step_s,emulator_step_s,n,step_cost_ratio,physical_integrator,physical_dt"
+    );
+    let f = |c: &[String], i: usize| -> f64 { c[i].parse().unwrap() };
     for c in &r {
-        let speedup: f64 = c[4].parse().unwrap();
-        if c[1] == "N50" {
-            assert!(speedup > 1.0, "N50 emulator slower than simulation: {c:?}");
+        if c[1] == "N50" && c[11] != "backward Euler" {
+            assert!(f(c, 4) > 1.0, "N50 emulator slower than simulation: {c:?}");
         }
+        // speedup = n x step cost ratio; n = physical steps per emulator step.
+        assert_eq!(f(c, 9), f(c, 5) / f(c, 6), "{c:?}");
+        assert!(
+            (f(c, 9) * f(c, 10) - f(c, 4)).abs() <= 1e-9 * f(c, 4),
+            "{c:?}"
+        );
+    }
+    let integrators: Vec<(&str, &str)> = r
+        .iter()
+        .filter(|c| c[0] == "dolphin")
+        .map(|c| (c[11].as_str(), c[12].as_str()))
+        .collect();
+    assert_eq!(
+        integrators,
+        [
+            ("semi-implicit Euler", "0.002"),
+            ("backward Euler", "0.01"),
+            ("semi-implicit Euler", "0.002")
+        ]
+    );
+    // The implicit row covers the emulator's simulated time at 0.01 s: 5x fewer steps.
+    assert_eq!(f(&r[9], 5) * 5.0, f(&r[8], 5));
+    // Equal accuracy: one row per rigid emulator, a matched step that divides the super-step
+    // and an error bracket around the emulator's.
+    assert_eq!(
+        header(&out.join("equal_accuracy.csv")),
+        "model,emulator,emulator_error,substeps,matched_dt,matched_error,coarser_error,physical_steps,emulator_steps,physical_s,emulator_s,speedup"
+    );
+    let eq = rows(&out.join("equal_accuracy.csv"));
+    assert_eq!(eq.len(), 8);
+    for (c, k) in eq.iter().zip(&keys) {
+        assert_eq!((&c[0], &c[1]), (&k.0, &k.1));
+        let n: f64 = c[1][1..].parse().unwrap();
+        let (err, j, matched, coarser) = (f(c, 2), f(c, 3), f(c, 5), f(c, 6));
+        assert!(j >= 1.0 && j <= n, "{c:?}");
+        assert!(matched <= err, "{c:?}");
+        assert!(coarser.is_nan() == (j == 1.0) && !(coarser <= err), "{c:?}");
+        assert_eq!(f(c, 7), f(c, 8) * j, "{c:?}");
     }
     figure_exists(&d, "na_table2_speedup_speedup");
 }

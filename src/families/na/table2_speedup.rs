@@ -12,13 +12,27 @@
 //! loop is timed `repeats` times and the fastest is kept. Emulators come from the cache when
 //! `na_table1_structure` (same seed and settings) trained them already.
 //!
-//! Table: `speedup` (model, emulator, physical_s, emulator_s, speedup, physical_steps,
-//! emulator_steps). Timings vary run to run; that table is the one output that is not
-//! bit-reproducible.
+//! Speedup = n × (physical step cost / emulator step cost), with n the physical steps one
+//! emulator step covers, so a cheap simulator makes a small speedup whatever the net costs
+//! (issue 11, defect 8): every row carries that breakdown. Two comparisons the paper made
+//! besides: the dolphin against an implicit mass-spring integrator like its [18]
+//! ([`crate::physics::dolphin::ImplicitDolphin`], linearized backward Euler) at the paper's
+//! δt = 0.01 s (§6: 20 s are 2,000 physical steps), covering the emulator's simulated time; and
+//! every rigid model at equal accuracy ([`super::equal_accuracy`]): the largest physical step
+//! Δt / j whose 40-super-step rollout error (Table 1's `rollout40_error_mean` measure) is at
+//! most the emulator's, timed over the emulator's simulated time.
+//!
+//! Tables: `speedup` (model, emulator, physical_s, emulator_s, speedup, physical_steps,
+//! emulator_steps, physical_step_s, emulator_step_s, n, step_cost_ratio, physical_integrator,
+//! physical_dt) and `equal_accuracy` (model, emulator, emulator_error, substeps, matched_dt,
+//! matched_error, coarser_error, physical_steps, emulator_steps, physical_s, emulator_s,
+//! speedup). Timings (`physical_s`, `emulator_s`, `speedup`, `*_step_s`, `step_cost_ratio`)
+//! vary run to run; every other column is bit-reproducible.
 
+use super::equal_accuracy::{match_substeps, Reference};
 use super::table1_structure::{
     build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
-    DolphinNets,
+    DolphinNets, ROLLOUT_EPISODES, ROLLOUT_STEPS,
 };
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
@@ -29,6 +43,7 @@ use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
+use crate::physics::dolphin::ImplicitDolphin;
 use crate::physics::Dynamics;
 use crate::row;
 use serde::{Deserialize, Serialize};
@@ -80,6 +95,10 @@ pub struct TimedDolphin {
     pub regularization: Regularizer,
     /// Regularization steps after each emulation step (the paper: 5).
     pub regularization_steps: usize,
+    /// Step of the implicit (backward Euler) physical dolphin timed against N`steps` over the
+    /// same simulated time (the paper's δt: 0.01 s); absent: no such row.
+    #[serde(default)]
+    pub implicit_dt: Option<f64>,
 }
 
 impl Validate for Params {
@@ -110,17 +129,111 @@ impl Validate for Params {
                 "must be >= 1 and divide physical_steps",
             )?;
             validate_regularizer("dolphin.regularization", &d.regularization)?;
+            if let Some(h) = d.implicit_dt {
+                positive("dolphin.implicit_dt", h)?;
+                let per_super = d.steps as f64 * d.nets.physical_dt / h;
+                ensure(
+                    (per_super - per_super.round()).abs() < 1e-9 && per_super.round() >= 1.0,
+                    "dolphin.implicit_dt",
+                    format!(
+                        "must divide the emulator's super-step {} s",
+                        d.steps as f64 * d.nets.physical_dt
+                    ),
+                )?;
+            }
         }
         validate_training(&self.training)
     }
 }
 
-/// The integrator our physical simulator of Table 2's `model` steps with.
-fn physical_integrator(model: &str) -> &'static str {
-    match model {
-        "dolphin" => "semi-implicit Euler",
-        _ => "RK4",
+/// The explicit integrator of the dolphin's training data.
+const DOLPHIN_EXPLICIT: &str = "semi-implicit Euler";
+/// The implicit integrator of the dolphin's extra row.
+const DOLPHIN_IMPLICIT: &str = "backward Euler";
+
+/// A row's cost breakdown: speedup = physical_s / emulator_s = n × ratio.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Breakdown {
+    /// Seconds per physical step.
+    pub physical_step_s: f64,
+    /// Seconds per emulator (super-)step.
+    pub emulator_step_s: f64,
+    /// Physical steps per emulator step.
+    pub n: i64,
+    /// Physical step cost / emulator step cost.
+    pub ratio: f64,
+}
+
+/// The breakdown of `physical_s` for `physical_steps` steps against `emulator_s` for
+/// `emulator_steps` steps covering the same simulated time.
+pub fn breakdown(
+    physical_s: f64,
+    physical_steps: usize,
+    emulator_s: f64,
+    emulator_steps: usize,
+) -> Breakdown {
+    let physical_step_s = physical_s / physical_steps as f64;
+    let emulator_step_s = emulator_s / emulator_steps as f64;
+    Breakdown {
+        physical_step_s,
+        emulator_step_s,
+        n: (physical_steps / emulator_steps) as i64,
+        ratio: physical_step_s / emulator_step_s,
     }
+}
+
+/// The paper's step cost ratio for a Table 2 cell: (physical s / 20,000) / (emulator s / (20,000 / n)).
+fn paper_ratio(model: &str, emulator: &str) -> Option<f64> {
+    let (physical, emulator_s, n) = match (model, emulator) {
+        ("pendulum_passive", "N25") => (4.70, 0.10, 25.0),
+        ("pendulum_passive", "N50") => (4.70, 0.05, 50.0),
+        ("pendulum_passive", "N100") => (4.70, 0.02, 100.0),
+        ("pendulum_active", "N25") => (4.52, 0.12, 25.0),
+        ("pendulum_active", "N50") => (4.52, 0.06, 50.0),
+        ("pendulum_active", "N100") => (4.52, 0.03, 100.0),
+        ("truck", "N50") => (4.88, 0.07, 50.0),
+        ("lander", "N50") => (6.44, 0.12, 50.0),
+        ("dolphin", "N50") => (63.0, 0.95, 50.0),
+        ("dolphin", "N50_reg") => (63.0, 2.48, 50.0),
+        _ => return None,
+    };
+    Some(physical / (emulator_s * n))
+}
+
+/// One `speedup` row (the timings with their breakdown).
+#[allow(clippy::too_many_arguments)]
+fn push_speedup(
+    table: &mut Table,
+    model: &str,
+    emulator: &str,
+    integrator: &str,
+    dt: f64,
+    (physical_s, physical_steps): (f64, usize),
+    (emulator_s, emulator_steps): (f64, usize),
+) {
+    let b = breakdown(physical_s, physical_steps, emulator_s, emulator_steps);
+    table.push(row![
+        model,
+        emulator,
+        physical_s,
+        emulator_s,
+        physical_s / emulator_s,
+        physical_steps as i64,
+        emulator_steps as i64,
+        b.physical_step_s,
+        b.emulator_step_s,
+        b.n,
+        b.ratio,
+        integrator,
+        dt
+    ]);
+}
+
+/// `u` (rows of `m` controls) with each row repeated `times` times.
+fn hold(u: &[f64], m: usize, times: usize) -> Vec<f64> {
+    u.chunks(m.max(1))
+        .flat_map(|r| std::iter::repeat_n(r, times).flatten().copied())
+        .collect()
 }
 
 /// Fastest of `repeats` runs of `f`, in seconds.
@@ -226,6 +339,26 @@ impl Job for Params {
             "speedup",
             "physical_steps",
             "emulator_steps",
+            "physical_step_s",
+            "emulator_step_s",
+            "n",
+            "step_cost_ratio",
+            "physical_integrator",
+            "physical_dt",
+        ]);
+        let mut equal = Table::new(&[
+            "model",
+            "emulator",
+            "emulator_error",
+            "substeps",
+            "matched_dt",
+            "matched_error",
+            "coarser_error",
+            "physical_steps",
+            "emulator_steps",
+            "physical_s",
+            "emulator_s",
+            "speedup",
         ]);
         let steps = self.physical_steps;
         for (i, tm) in self.models.iter().enumerate() {
@@ -261,14 +394,59 @@ impl Job for Params {
                 let emulator_s = ctx.stage(&format!("time {} N{n}", model.name()), || {
                     time_emulator(&trained.emulator, &x0, &ue, k_steps, self.repeats)
                 });
-                table.push(row![
+                let label = format!("N{n}");
+                push_speedup(
+                    &mut table,
                     model.name(),
-                    format!("N{n}"),
-                    physical_s,
+                    &label,
+                    "RK4",
+                    dt,
+                    (physical_s, steps),
+                    (emulator_s, k_steps),
+                );
+                // Equal accuracy: the largest step Δt / j as accurate as the emulator.
+                let reference = ctx
+                    .stage(&format!("reference rollouts {} N{n}", model.name()), || {
+                        Reference::sample(&spec, ROLLOUT_EPISODES, ROLLOUT_STEPS)
+                    })
+                    .map_err(other)?;
+                let emulator_error = reference.emulator_error(&trained.emulator);
+                let matched = ctx.stage(&format!("match {} N{n}", model.name()), || {
+                    match_substeps(emulator_error, n, |j| reference.physical_error(j))
+                });
+                let Some(matched) = matched else {
+                    return Err(other(format!(
+                        "{} N{n}: no physical step matches the emulator's error {emulator_error}",
+                        model.name()
+                    )));
+                };
+                let j = matched.substeps;
+                let matched_dt = spec.super_dt() / j as f64;
+                let uj = hold(&ue, m, j);
+                let matched_s =
+                    ctx.stage(&format!("time {} at {matched_dt} s", model.name()), || {
+                        time_physical(
+                            sim.as_mut(),
+                            &x0,
+                            &uj,
+                            matched_dt,
+                            k_steps * j,
+                            self.repeats,
+                        )
+                    });
+                equal.push(row![
+                    model.name(),
+                    label.as_str(),
+                    emulator_error,
+                    j as i64,
+                    matched_dt,
+                    matched.error,
+                    matched.coarser_error,
+                    (k_steps * j) as i64,
+                    k_steps as i64,
+                    matched_s,
                     emulator_s,
-                    physical_s / emulator_s,
-                    steps as i64,
-                    k_steps as i64
+                    matched_s / emulator_s
                 ]);
             }
         }
@@ -308,18 +486,46 @@ impl Job for Params {
                 let emulator_s = ctx.stage(&format!("time dolphin {label}"), || {
                     time_dolphin(&built.emulator, &mut reg, reg_steps, &x0, &ue, self.repeats)
                 });
-                table.push(row![
+                push_speedup(
+                    &mut table,
                     "dolphin",
-                    label.as_str(),
-                    physical_s,
-                    emulator_s,
-                    physical_s / emulator_s,
-                    steps as i64,
-                    k_steps as i64
-                ]);
+                    &label,
+                    DOLPHIN_EXPLICIT,
+                    dt,
+                    (physical_s, steps),
+                    (emulator_s, k_steps),
+                );
+                if reg_steps > 0 {
+                    continue;
+                }
+                // The implicit integrator at the paper's step over the same simulated time,
+                // against the plain N50 (controls held over each implicit step as sampled).
+                let Some(h) = d.implicit_dt else { continue };
+                let per_super = (n as f64 * dt / h).round() as usize;
+                let implicit_steps = k_steps * per_super;
+                let mut ui = vec![0.0; implicit_steps * m];
+                for k in 0..implicit_steps {
+                    signal.at(k as f64 * h, &mut ui[k * m..(k + 1) * m]);
+                }
+                let mut imp = ImplicitDolphin::new(dolphin.clone());
+                let implicit_s = ctx.stage("time dolphin implicit", || {
+                    time_physical(&mut imp, &x0, &ui, h, implicit_steps, self.repeats)
+                });
+                push_speedup(
+                    &mut table,
+                    "dolphin",
+                    &label,
+                    DOLPHIN_IMPLICIT,
+                    h,
+                    (implicit_s, implicit_steps),
+                    (emulator_s, k_steps),
+                );
             }
         }
-        Ok(Tables::from([("speedup", table)]))
+        Ok(Tables::from([
+            ("speedup", table),
+            ("equal_accuracy", equal),
+        ]))
     }
 }
 
@@ -329,24 +535,29 @@ impl Family for NaSpeedup {
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("speedup")?;
-        let (model, emu, phys, es) = (
+        let (model, emu, phys, es, integ) = (
             t.strs("model"),
             t.strs("emulator"),
             t.f64s("physical_s"),
             t.f64s("emulator_s"),
+            t.strs("physical_integrator"),
         );
-        let models = unique(&model);
+        // One group of bars per physical simulator: model and integrator.
+        let group: Vec<String> = (0..model.len())
+            .map(|r| format!("{} ({})", model[r], integ[r]))
+            .collect();
+        let groups = unique(&group);
         let kinds = unique(&emu);
         // Groups of bars per model: physical, then each emulator kind.
         let slots = kinds.len() + 1;
         let w = 0.8 / slots as f64;
         let pos = |mi: usize, slot: usize| mi as f64 + (slot as f64 + 0.5) * w - 0.4;
         // Physical bars carry their seconds, emulator bars their speedup (physical / emulator).
-        let phys_rows: Vec<(f64, f64)> = models
+        let phys_rows: Vec<(f64, f64)> = groups
             .iter()
             .enumerate()
-            .filter_map(|(mi, mname)| {
-                let r = model.iter().position(|x| x == mname)?;
+            .filter_map(|(mi, g)| {
+                let r = group.iter().position(|x| x == g)?;
                 Some((pos(mi, 0), phys[r]))
             })
             .collect();
@@ -360,14 +571,14 @@ impl Family for NaSpeedup {
             })
             .labelled(phys_text)];
         for (ki, k) in kinds.iter().enumerate() {
-            let rows: Vec<usize> = models
+            let rows: Vec<usize> = groups
                 .iter()
-                .filter_map(|mname| (0..model.len()).find(|&r| &model[r] == mname && &emu[r] == k))
+                .filter_map(|g| (0..model.len()).find(|&r| &group[r] == g && &emu[r] == k))
                 .collect();
             let pts = rows
                 .iter()
                 .map(|&r| {
-                    let mi = models.iter().position(|m| *m == model[r]).unwrap_or(0);
+                    let mi = groups.iter().position(|g| *g == group[r]).unwrap_or(0);
                     (pos(mi, ki + 1), es[r])
                 })
                 .collect();
@@ -385,45 +596,104 @@ impl Family for NaSpeedup {
         }
         let panel = Panel {
             title: format!(
-                "Seconds for {} physical steps (log scale)",
+                "Seconds for the simulated time of {} physical steps (log scale)",
                 t.f64s("physical_steps").first().copied().unwrap_or(0.0)
             ),
-            x_label: "model".into(),
-            x_categories: models
-                .iter()
-                .map(|m| format!("{m} ({})", physical_integrator(m)))
-                .collect(),
+            x_label: "physical simulator".into(),
+            x_categories: groups,
             y_label: "wall time (s)".into(),
             log_y: true,
             series,
             ..Panel::default()
         };
-        let mut fig_ = Figure::grid(vec![panel], 1);
-        fig_.panel_size = (1000, 560);
+        let mut panels = vec![panel];
+        // Speedup at the training step against speedup at equal accuracy, per emulator.
+        if let Ok(eq) = tables.require("equal_accuracy") {
+            let (em, ee, esp, ej) = (
+                eq.strs("model"),
+                eq.strs("emulator"),
+                eq.f64s("speedup"),
+                eq.f64s("substeps"),
+            );
+            let cats: Vec<String> = (0..em.len())
+                .map(|r| format!("{} {}", em[r].trim_start_matches("pendulum_"), ee[r]))
+                .collect();
+            let at_dt: Vec<(f64, f64)> = (0..em.len())
+                .filter_map(|r| {
+                    let s = (0..model.len()).find(|&q| {
+                        model[q] == em[r] && emu[q] == ee[r] && integ[q] != DOLPHIN_IMPLICIT
+                    })?;
+                    Some((r as f64 - 0.2, phys[s] / es[s]))
+                })
+                .collect();
+            let at_dt_text = at_dt.iter().map(|p| format!("{:.0}×", p.1)).collect();
+            let eq_pts: Vec<(f64, f64)> = (0..em.len()).map(|r| (r as f64 + 0.2, esp[r])).collect();
+            let eq_text = (0..em.len())
+                .map(|r| format!("{}× (j={})", sig(esp[r]), ej[r]))
+                .collect();
+            panels.push(Panel {
+                title: "Speedup over the physical simulator at the training δt and at the largest step Δt/j as accurate as the emulator (log scale)".into(),
+                x_label: "emulator".into(),
+                x_categories: cats,
+                y_label: "speedup (physical s / emulator s)".into(),
+                log_y: true,
+                series: vec![
+                    Series::line("at the training δt", at_dt, 0)
+                        .mark(Mark::Bars { half_width: 0.18 })
+                        .labelled(at_dt_text),
+                    Series::line("at equal accuracy", eq_pts, 3)
+                        .mark(Mark::Bars { half_width: 0.18 })
+                        .labelled(eq_text),
+                ],
+                ..Panel::default()
+            });
+        }
+        let mut fig_ = Figure::grid(panels, 1);
+        fig_.panel_size = (1100, 560);
         fig.draw("speedup", &fig_)
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
         let df = read_csv(&dir.join("speedup.csv"))?;
-        let (model, emu) = (df_str(&df, "model")?, df_str(&df, "emulator")?);
+        let (model, emu, integ) = (
+            df_str(&df, "model")?,
+            df_str(&df, "emulator")?,
+            df_str(&df, "physical_integrator")?,
+        );
         let (phys, es, sp) = (
             df_f64(&df, "physical_s")?,
             df_f64(&df, "emulator_s")?,
             df_f64(&df, "speedup")?,
         );
+        let (ps, esr, n, ratio, pdt) = (
+            df_f64(&df, "physical_step_s")?,
+            df_f64(&df, "emulator_step_s")?,
+            df_f64(&df, "n")?,
+            df_f64(&df, "step_cost_ratio")?,
+            df_f64(&df, "physical_dt")?,
+        );
         let mut md = String::from(
-            "| model | emulator | physical s | emulator s | speedup |\n| --- | --- | --- | --- | --- |\n",
+            "| model | physical integrator, δt (s) | emulator | physical s | emulator s | speedup | = n | × step cost ratio | paper's ratio | physical step s | emulator step s |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
         );
         for r in 0..model.len() {
+            let paper = paper_ratio(&model[r], &emu[r]).map_or("—".to_string(), sig);
             md.push_str(&format!(
-                "| {} | {} | {} | {} | {} |\n",
+                "| {} | {}, {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 model[r],
+                integ[r],
+                pdt[r],
                 emu[r],
                 sig(phys[r]),
                 sig(es[r]),
-                sig(sp[r])
+                sig(sp[r]),
+                n[r],
+                sig(ratio[r]),
+                paper,
+                sig(ps[r]),
+                sig(esr[r])
             ));
         }
+        let explicit = |r: usize| integ[r] != DOLPHIN_IMPLICIT;
         let n100: Vec<f64> = (0..model.len())
             .filter(|&r| emu[r] == "N100")
             .map(|r| sp[r])
@@ -435,28 +705,128 @@ impl Family for NaSpeedup {
         // Paper: N100 50-100x "and more"; every emulator an order of magnitude or more.
         let n100_ok = !n100.is_empty() && n100.iter().all(|&s| s >= 50.0);
         let n50_ok = n50_min >= 10.0;
-        let dolphin = |e: &str| {
+        let dolphin = |e: &str, implicit: bool| {
             (0..model.len())
-                .find(|&r| model[r] == "dolphin" && emu[r] == e)
-                .map(|r| sp[r])
+                .find(|&r| model[r] == "dolphin" && emu[r] == e && explicit(r) != implicit)
         };
-        let dolphin_text = match (dolphin("N50"), dolphin("N50_reg")) {
+        let dolphin_text = match (dolphin("N50", false), dolphin("N50_reg", false)) {
             (Some(a), Some(b)) => format!(
-                " Dolphin: N50 {}x, N50 with regularization {}x (paper: 66x and 25x; our mass-spring simulator is a cheap semi-implicit Euler over 91 springs, the paper's [18] was not).",
-                sig(a),
-                sig(b)
+                " Dolphin: N50 {}x, N50 with regularization {}x over our semi-implicit Euler at δt = {} s (paper: 66x and 25x over its [18]).",
+                sig(sp[a]),
+                sig(sp[b]),
+                pdt[a]
             ),
             _ => " Dolphin rows not built.".into(),
         };
+        let implicit_text = match dolphin("N50", true) {
+            Some(r) => format!(
+                " Against the implicit (backward Euler) integrator at the paper's δt = {} s, one step costs {} s ({}x an N50 step), n = {}, so N50 is {}x faster (paper: 63.0 s / 0.95 s = 66x).",
+                pdt[r],
+                sig(ps[r]),
+                sig(ratio[r]),
+                n[r],
+                sig(sp[r])
+            ),
+            None => String::new(),
+        };
+        let mut equal_text = String::new();
+        let eq_path = dir.join("equal_accuracy.csv");
+        if eq_path.exists() {
+            let eq = read_csv(&eq_path)?;
+            let (em, ee) = (df_str(&eq, "model")?, df_str(&eq, "emulator")?);
+            let (err, j, mdt, merr, cerr, eps, ees, esp) = (
+                df_f64(&eq, "emulator_error")?,
+                df_f64(&eq, "substeps")?,
+                df_f64(&eq, "matched_dt")?,
+                df_f64(&eq, "matched_error")?,
+                df_f64(&eq, "coarser_error")?,
+                df_f64(&eq, "physical_s")?,
+                df_f64(&eq, "emulator_s")?,
+                df_f64(&eq, "speedup")?,
+            );
+            md.push_str("\n**Equal accuracy** (data, not part of the verdict): error = mean over 40 super-steps of the per-step mean squared state error in units of each variable's spread (Table 1's `rollout40_error_mean`), against the simulator at the training δt; the physical step is the largest Δt/j (j = 1 … n) whose error is at most the emulator's.\n\n| model | emulator | emulator error | j | matched δt (s) | its error | error at Δt/(j−1) | physical s | emulator s | speedup |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+            for r in 0..em.len() {
+                md.push_str(&format!(
+                    "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                    em[r],
+                    ee[r],
+                    sig(err[r]),
+                    j[r],
+                    sig(mdt[r]),
+                    sig(merr[r]),
+                    if cerr[r].is_nan() {
+                        "— (j = 1)".to_string()
+                    } else {
+                        sig(cerr[r])
+                    },
+                    sig(eps[r]),
+                    sig(ees[r]),
+                    sig(esp[r])
+                ));
+            }
+            let at_one = (0..em.len()).filter(|&r| j[r] == 1.0).count();
+            equal_text = format!(
+                " At equal accuracy the speedups are {} ({} of {} emulators are matched by one physical step per super-step, so their equal-accuracy speedup is only the step cost ratio, an upper bound on the emulator's advantage).",
+                esp.iter().map(|s| sig(*s)).collect::<Vec<_>>().join(", "),
+                at_one,
+                em.len()
+            );
+        }
+        let pend: Vec<f64> = (0..model.len())
+            .filter(|&r| model[r].starts_with("pendulum"))
+            .map(|r| ratio[r])
+            .collect();
+        let pend_lo = sig(pend.iter().copied().fold(f64::INFINITY, f64::min));
+        let pend_hi = sig(pend.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+        let ratio_of = |m: &str| {
+            (0..model.len())
+                .find(|&r| model[r] == m)
+                .map_or("—".to_string(), |r| sig(ratio[r]))
+        };
+        let (truck_ratio, lander_ratio) = (ratio_of("truck"), ratio_of("lander"));
         let verdict = Verdict::from_checks(&[n100_ok, n50_ok]);
         Ok(Findings {
             ours: md,
             verdict,
             why: format!(
-                "N100 speedups {} (paper: 50-100x and more); the slowest rigid-body N50 speedup is {} (paper: one to two orders of magnitude).{dolphin_text}",
+                "N100 speedups {} (paper: 50-100x and more); the slowest rigid-body N50 speedup is {} (paper: one to two orders of magnitude); speedup = n x step cost ratio (physical step s / emulator step s); the paper's ratios, from its Table 2, are 1.1-2.4 (0.5 with regularization), ours {pend_lo}-{pend_hi} for the pendulums, {truck_ratio} for the truck, {lander_ratio} for the lander (a 13-variable rigid body: one RK4 step costs less than a 17-50-13 net).{dolphin_text}{implicit_text}{equal_text}",
                 n100.iter().map(|s| sig(*s)).collect::<Vec<_>>().join(", "),
                 sig(n50_min)
             ),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn speedup_is_n_times_the_step_cost_ratio() {
+        for (ps, pn, es, en) in [
+            (0.0134, 20000, 1.21e-4, 400),
+            (0.0027, 20000, 5.9e-4, 400),
+            (0.21, 4000, 0.0118, 400),
+            (3.3e-3, 77, 1.7e-2, 7),
+        ] {
+            let b = breakdown(ps, pn, es, en);
+            let speedup = ps / es;
+            assert_eq!(b.n, (pn / en) as i64);
+            assert!(
+                (b.n as f64 * b.ratio - speedup).abs() <= 1e-12 * speedup,
+                "{b:?} vs {speedup}"
+            );
+            assert!((b.physical_step_s * pn as f64 - ps).abs() <= 1e-15 * ps);
+        }
+    }
+
+    #[test]
+    fn held_controls_repeat_each_row() {
+        let u = [1.0, 2.0, 3.0, 4.0];
+        assert_eq!(
+            hold(&u, 2, 3),
+            [1.0, 2.0, 1.0, 2.0, 1.0, 2.0, 3.0, 4.0, 3.0, 4.0, 3.0, 4.0]
+        );
+        assert_eq!(hold(&u, 2, 1), u);
     }
 }
