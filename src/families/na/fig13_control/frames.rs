@@ -546,6 +546,12 @@ fn dolphin_pose<'a, DB: DrawingBackend + 'a>(
     )?;
     c.draw_series((0..N_MASSES).map(|i| Circle::new(xz(i), 2, color.filled())))
         .map_err(es)?;
+    // The head: the nose (mass 0) as a large ringed dot.
+    c.draw_series([
+        Circle::new(xz(0), 6, color.filled()),
+        Circle::new(xz(0), 6, BLACK.stroke_width(1)),
+    ])
+    .map_err(es)?;
     Ok(())
 }
 
@@ -580,6 +586,43 @@ pub fn draw_dolphin_side<DB: DrawingBackend>(
         c.draw_series(once(path(trail, b.color.mix(0.8), 1)))
             .map_err(es)?;
         dolphin_pose(&mut c, dolphin, s, b.color.to_rgba(), b.label)?;
+    }
+    // Forward (from the centre of mass towards the nose of the first body) as an arrow with a
+    // key for the head marker, in the upper left corner.
+    if let Some(s) = bodies
+        .iter()
+        .find_map(|b| b.current().filter(|s| s.len() >= N_POS))
+    {
+        let com = dolphin.centre_of_mass(s);
+        let sign = if s[0] >= com.x { 1.0 } else { -1.0 };
+        let (w, h) = (axes.x.1 - axes.x.0, axes.y.1 - axes.y.0);
+        let (x0, y0) = (axes.x.0 + 0.04 * w, axes.y.1 - 0.08 * h);
+        let len = 0.12 * w;
+        let (a, b) = if sign > 0.0 {
+            (x0, x0 + len)
+        } else {
+            (x0 + len, x0)
+        };
+        let tip = 0.02 * w;
+        c.draw_series([
+            path(vec![(a, y0), (b, y0)], BLACK.to_rgba(), 2),
+            path(
+                vec![
+                    (b - sign * tip, y0 + 0.4 * tip),
+                    (b, y0),
+                    (b - sign * tip, y0 - 0.4 * tip),
+                ],
+                BLACK.to_rgba(),
+                2,
+            ),
+        ])
+        .map_err(es)?;
+        c.draw_series(once(Text::new(
+            "forward (head = large dot)",
+            (x0 + len + 0.02 * w, y0 + 0.03 * h),
+            ("sans-serif", 13).into_font().color(&BLACK),
+        )))
+        .map_err(es)?;
     }
     legend(&mut c, SeriesLabelPosition::UpperRight)
 }
