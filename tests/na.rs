@@ -377,7 +377,17 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         let best: usize = c[3].parse().unwrap();
         assert!(js.iter().all(|&j| j >= js[best]), "{}: {best} {js:?}", c[0]);
     }
-    assert_eq!(header(&out.join("swim.csv")), "source,distance_m,effort");
+    assert_eq!(
+        header(&out.join("swim.csv")),
+        "source,distance_m,effort,periodicity,period_s"
+    );
+    // The hand-made 1 Hz travelling wave is periodic: period 1 s at 0.1 s steps.
+    let wave = rows(&out.join("swim.csv"))
+        .into_iter()
+        .find(|c| c[0] == "reference_wave_simulator")
+        .unwrap();
+    let (p, t): (f64, f64) = (wave[3].parse().unwrap(), wave[4].parse().unwrap());
+    assert!(p > 0.8 && (t - 1.0).abs() < 1e-9, "{wave:?}");
     figure_exists(&d, "na_fig13_control_control");
     assert_eq!(
         header(&out.join("goal.csv"))

@@ -195,3 +195,75 @@ pub fn emulated_masses(
     );
     Ok(out)
 }
+
+/// How periodic per-step controls `u` (m actuators, row after row) are: per actuator the
+/// largest autocorrelation of its demeaned sequence at lags 3 … N/2 steps (each lag's mean
+/// product over the variance; a sinusoid with a period in that range scores about 1, white
+/// noise about 0, a constant 0), averaged over the actuators; and the median lag of those
+/// maxima (steps; per actuator the shortest lag within 10% of its maximum), the dominant
+/// period. Empty or too short sequences give (0, NaN).
+pub fn periodicity(u: &[f64], m: usize) -> (f64, f64) {
+    let n = if m == 0 { 0 } else { u.len() / m };
+    if n < 6 {
+        return (0.0, f64::NAN);
+    }
+    let mut scores = Vec::with_capacity(m);
+    let mut lags = Vec::with_capacity(m);
+    for j in 0..m {
+        let x: Vec<f64> = (0..n).map(|i| u[i * m + j]).collect();
+        let mean = x.iter().sum::<f64>() / n as f64;
+        let x: Vec<f64> = x.iter().map(|v| v - mean).collect();
+        let var = x.iter().map(|v| v * v).sum::<f64>() / n as f64;
+        if var <= 1e-12 {
+            scores.push(0.0);
+            continue;
+        }
+        let r: Vec<(usize, f64)> = (3..=n / 2)
+            .map(|l| {
+                let c = (0..n - l).map(|i| x[i] * x[i + l]).sum::<f64>() / (n - l) as f64;
+                (l, c / var)
+            })
+            .collect();
+        let best = r.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+        // The period: the shortest lag within 10% of the best (not one of its multiples).
+        let lag = r
+            .iter()
+            .find(|p| p.1 >= best - 0.1 * best.abs())
+            .map_or(0, |p| p.0);
+        scores.push(best.max(0.0));
+        lags.push(lag as f64);
+    }
+    lags.sort_by(f64::total_cmp);
+    let median = if lags.is_empty() {
+        f64::NAN
+    } else {
+        lags[lags.len() / 2]
+    };
+    (scores.iter().sum::<f64>() / m as f64, median)
+}
+
+#[cfg(test)]
+mod periodicity_tests {
+    use super::periodicity;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn a_travelling_sine_is_periodic_and_noise_or_a_constant_is_not() {
+        let (n, m) = (40, 6);
+        // A 10-step period travelling along the actuators.
+        let wave: Vec<f64> = (0..n * m)
+            .map(|k| {
+                let (i, j) = (k / m, k % m);
+                (std::f64::consts::TAU * (i as f64 / 10.0 - j as f64 / 6.0)).sin()
+            })
+            .collect();
+        let (p, lag) = periodicity(&wave, m);
+        assert!(p > 0.9, "{p}");
+        assert_eq!(lag, 10.0);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let noise: Vec<f64> = (0..n * m).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let (q, _) = periodicity(&noise, m);
+        assert!(q < 0.6, "{q}");
+        assert_eq!(periodicity(&vec![0.3; n * m], m).0, 0.0);
+    }
+}

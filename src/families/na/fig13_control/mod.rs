@@ -40,7 +40,7 @@ use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
-use crate::families::na::swim::{emulated_masses, SwimTask};
+use crate::families::na::swim::{emulated_masses, periodicity, SwimTask};
 use crate::families::na::table1_structure::{
     build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
     DolphinNets,
@@ -467,7 +467,7 @@ impl Job for Params {
                 }
             }
         }
-        let mut swim_t = Table::new(&["source", "distance_m", "effort"]);
+        let mut swim_t = Table::new(&["source", "distance_m", "effort", "periodicity", "period_s"]);
         let mut motion_cols = vec!["source".to_string(), "step".into(), "t".into()];
         motion_cols.extend((0..N_POS).map(|k| format!("p{k}")));
         let motion_refs: Vec<&str> = motion_cols.iter().map(String::as_str).collect();
@@ -786,7 +786,8 @@ impl Params {
             ("simulator", sim_d, &best.controls),
             ("reference_wave_simulator", ref_d, &ref_u),
         ] {
-            swim_t.push(row![source, dist, effort(u)]);
+            let (p, lag) = periodicity(u, knots.m);
+            swim_t.push(row![source, dist, effort(u), p, lag * big_dt]);
         }
         final_t.push(row![
             "dolphin",
@@ -1123,10 +1124,27 @@ impl Family for NaControl {
                 let parts: Vec<String> = (0..src.len())
                     .map(|r| format!("{} {} m", src[r], sig(dist[r])))
                     .collect();
+                // Periodicity of the controls (older runs have no column).
+                let period = match (df_f64(&sw, "periodicity"), df_f64(&sw, "period_s")) {
+                    (Ok(p), Ok(t)) => {
+                        let at = |name: &str| (0..src.len()).find(|&r| src[r] == name);
+                        match (at("simulator"), at("reference_wave_simulator")) {
+                            (Some(a), Some(b)) => format!(
+                                " Periodicity of the muscle controls (mean over muscles of the largest autocorrelation at lags of 3 steps to half the horizon; 1: a sinusoid, 0: noise or constant): learned {} (period {} s), hand-made wave {} (period {} s).",
+                                sig(p[a]),
+                                sig(t[a]),
+                                sig(p[b]),
+                                sig(t[b])
+                            ),
+                            _ => String::new(),
+                        }
+                    }
+                    _ => String::new(),
+                };
                 if parts.is_empty() {
                     String::new()
                 } else {
-                    format!(" Dolphin swim distances: {}.", parts.join(", "))
+                    format!(" Dolphin swim distances: {}.{period}", parts.join(", "))
                 }
             }
             Err(_) => String::new(),
