@@ -29,9 +29,11 @@
 //!   ±400 N·m (a fifth of the jets' limit), piecewise constant for 0.5–2 s; episodes of 10 s.
 
 use super::dataset::{
-    sample_transitions, ControlLimits, ControlProcess, ControlSignal, SamplingConfig,
+    sample_transitions, sample_windows, ControlLimits, ControlProcess, ControlSignal,
+    SamplingConfig,
 };
 use super::mlp::{Mlp, WeightInit};
+use super::rollout::{change_spread, fine_tune, FineTune};
 use super::train::{
     mse, train_full_batch, train_momentum, Dataset, FullBatchConfig, FullBatchMethod,
     MomentumConfig, StopReason, TracePoint, TrainReport,
@@ -330,10 +332,31 @@ pub struct TrainSettings {
     /// out of cache keys) is the paper's plain one-step training.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub input_noise: f64,
+    /// k-step rollout fine-tuning (issue 11, defect 5; [`super::rollout`]): after one-step
+    /// training, the net is fine-tuned by L-BFGS on its one-step loss plus `rollout_weight`
+    /// times its k-step rollout loss on simulated windows of k = `rollout_k` super-steps
+    /// (examples / k windows, held out as the examples), for at most `rollout_iters`
+    /// iterations with the settings' patience. 0 (the default, left out of cache keys) is off.
+    #[serde(default, skip_serializing_if = "is_zero_usize")]
+    pub rollout_k: usize,
+    /// Weight of the k-step rollout loss against the one-step loss.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub rollout_weight: f64,
+    /// L-BFGS iteration limit of the rollout fine-tuning.
+    #[serde(default, skip_serializing_if = "is_zero_u64")]
+    pub rollout_iters: u64,
 }
 
 fn is_zero(v: &f64) -> bool {
     *v == 0.0
+}
+
+fn is_zero_usize(v: &usize) -> bool {
+    *v == 0
+}
+
+fn is_zero_u64(v: &u64) -> bool {
+    *v == 0
 }
 
 /// Everything that determines a trained emulator.
@@ -390,6 +413,9 @@ pub struct Trained {
     pub stop: String,
     /// Whether it came from the cache.
     pub from_cache: bool,
+    /// Trace of the k-step rollout fine-tuning (errors: one-step loss + weight · rollout loss,
+    /// training and held-out); empty when it is off.
+    pub rollout_trace: Vec<TracePoint>,
 }
 
 /// Errors of building an emulator.
@@ -598,11 +624,42 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
         &spec.settings,
         crate::seed::mix_seed(spec.seed, 4),
     )?;
+    let mut emulator = Emulator::new(transforms, mlp, spec.super_dt())?;
+    let mut stop = stop_name(&report.stop);
+    let rollout_trace = if spec.settings.rollout_k > 0 {
+        let k = spec.settings.rollout_k;
+        let mut windows = |count: usize, seed: u64| {
+            let mut cfg = spec.sampling(count);
+            cfg.episode_duration = cfg.episode_duration.max((k + 6) as f64 * spec.super_dt());
+            sample_windows(sim.as_mut(), &start, &limits, &cfg, k, &mut stream(seed))
+        };
+        let count = spec.net.examples.div_ceil(k).max(2);
+        let held_count = ((count as f64 * spec.settings.held_out_fraction).round() as usize).max(2);
+        let train_windows = windows(count, 6)?;
+        let held_windows = windows(held_count, 7)?;
+        let sigma = change_spread(&train.transitions);
+        let report = fine_tune(
+            &mut emulator,
+            &FineTune {
+                train: &train_ds,
+                held: &held_ds,
+                train_windows: &train_windows,
+                held_windows: &held_windows,
+                sigma: &sigma,
+                weight: spec.settings.rollout_weight,
+                max_iters: spec.settings.rollout_iters,
+                patience: spec.settings.patience,
+                min_improvement: spec.settings.min_improvement,
+            },
+        )?;
+        stop = format!("{stop}; rollout: {}", stop_name(&report.stop));
+        report.trace
+    } else {
+        Vec::new()
+    };
     // Errors on the clean examples (the held-out set is clean too).
-    let train_error = mse(&mlp, &clean_ds);
-    let heldout_error = mse(&mlp, &held_ds);
-    let stop = stop_name(&report.stop);
-    let emulator = Emulator::new(transforms, mlp, spec.super_dt())?;
+    let train_error = mse(emulator.mlp(), &clean_ds);
+    let heldout_error = mse(emulator.mlp(), &held_ds);
     Ok(Trained {
         emulator,
         trace: report.trace,
@@ -611,6 +668,7 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
         train_s: t0.elapsed().as_secs_f64(),
         stop,
         from_cache: false,
+        rollout_trace,
     })
 }
 
@@ -658,6 +716,9 @@ mod tests {
                 momentum: 0.0,
                 batch_size: 30,
                 input_noise: 0.0,
+                rollout_k: 0,
+                rollout_weight: 0.0,
+                rollout_iters: 0,
             },
             seed: 11,
         }
