@@ -398,6 +398,22 @@ pub fn step_vjp(
 ) {
     t.encode_input(s, u, &mut scratch.z);
     mlp.forward(&scratch.z, &mut scratch.mlp, &mut scratch.y);
+    step_vjp_after_forward(t, mlp, s, s_next_bar, scratch, s_bar, u_bar, grad_w);
+}
+
+/// [`step_vjp`] when `scratch` already holds the forward pass at (s, u): the network input
+/// `z`, output `y` and hidden activations (as [`predict_with`] leaves them).
+#[allow(clippy::too_many_arguments)]
+fn step_vjp_after_forward(
+    t: &Transforms,
+    mlp: &Mlp,
+    s: &[f64],
+    s_next_bar: &[f64],
+    scratch: &mut EmulatorScratch,
+    s_bar: &mut [f64],
+    u_bar: &mut [f64],
+    grad_w: Option<&mut [f64]>,
+) {
     t.decode_output_vjp(
         s,
         &scratch.y,

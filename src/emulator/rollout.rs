@@ -27,7 +27,7 @@ use super::train::{
     minimize_early_stopping, mse, Dataset, FullBatchConfig, FullBatchMethod, TrainReport,
     TrainingProblem,
 };
-use super::{predict_with, step_vjp, Emulator, EmulatorError, Transforms, Transitions};
+use super::{predict_with, step_vjp_after_forward, Emulator, EmulatorError, Transforms, Transitions};
 use argmin::core::{CostFunction, Gradient};
 use ndarray::Array1;
 use rayon::prelude::*;
@@ -132,10 +132,13 @@ impl<'a> RolloutLoss<'a> {
     /// Unscaled loss and gradient sums over windows `rows`.
     fn chunk(&self, mlp: &Mlp, rows: std::ops::Range<usize>, want_grad: bool) -> (f64, Vec<f64>) {
         let (t, w) = (self.transforms, self.windows);
-        let (n, m, k) = (w.state_dim, w.control_dim, w.k);
+        let (n, m, k, q) = (w.state_dim, w.control_dim, w.k, mlp.n_hidden());
         let mut scratch = Emulator::make_scratch(mlp, n, m);
         let mut grad = vec![0.0; if want_grad { mlp.n_weights() } else { 0 }];
         let mut traj = vec![0.0; (k + 1) * n];
+        // Each step's forward pass (network input, output, hidden activations), kept for the
+        // backward pass.
+        let (mut zs, mut ys, mut hs) = (vec![0.0; k * (n + m)], vec![0.0; k * n], vec![0.0; k * q]);
         let (mut next_bar, mut prev_bar, mut u_bar) = (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
         let mut loss = 0.0;
         for r in rows {
@@ -143,14 +146,11 @@ impl<'a> RolloutLoss<'a> {
             for i in 0..k {
                 let (done, rest) = traj.split_at_mut((i + 1) * n);
                 let s_next = &mut rest[..n];
-                predict_with(
-                    t,
-                    mlp,
-                    &done[i * n..],
-                    w.control(r, i),
-                    &mut scratch,
-                    s_next,
-                );
+                let u = w.control(r, i);
+                predict_with(t, mlp, &done[i * n..], u, &mut scratch, s_next);
+                zs[i * (n + m)..(i + 1) * (n + m)].copy_from_slice(&scratch.z);
+                ys[i * n..(i + 1) * n].copy_from_slice(&scratch.y);
+                hs[i * q..(i + 1) * q].copy_from_slice(&scratch.mlp.hidden);
                 let truth = w.state(r, i + 1);
                 for v in 0..n {
                     loss += (s_next[v] - truth[v]).powi(2) * self.inv_var[v];
@@ -165,12 +165,15 @@ impl<'a> RolloutLoss<'a> {
                 for v in 0..n {
                     next_bar[v] += 2.0 * (s_hat[v] - truth[v]) * self.inv_var[v];
                 }
+                let j = i - 1;
+                scratch.z.copy_from_slice(&zs[j * (n + m)..i * (n + m)]);
+                scratch.y.copy_from_slice(&ys[j * n..i * n]);
+                scratch.mlp.hidden.copy_from_slice(&hs[j * q..i * q]);
                 prev_bar.fill(0.0);
-                step_vjp(
+                step_vjp_after_forward(
                     t,
                     mlp,
-                    &traj[(i - 1) * n..i * n],
-                    w.control(r, i - 1),
+                    &traj[j * n..i * n],
                     &next_bar,
                     &mut scratch,
                     &mut prev_bar,
@@ -185,13 +188,16 @@ impl<'a> RolloutLoss<'a> {
 }
 
 /// The fine-tuning objective over flat weights: the one-step loss (eq. 5, as
-/// [`TrainingProblem`]) plus `weight` · L_k.
-#[derive(Debug, Clone)]
+/// [`TrainingProblem`]) plus `weight` · L_k. The line search asks for the cost and then the
+/// gradient at the same weights (and L-BFGS the gradient again at the accepted point), so one
+/// evaluation computes both and keeps them for the next request at the same weights.
+#[derive(Debug)]
 pub struct FineTuneProblem<'a> {
     one_step: TrainingProblem<'a>,
     rollout: RolloutLoss<'a>,
     weight: f64,
     shape: (usize, usize, usize),
+    last: std::sync::Mutex<Option<(Array1<f64>, f64, Array1<f64>)>>,
 }
 
 impl<'a> FineTuneProblem<'a> {
@@ -202,21 +208,38 @@ impl<'a> FineTuneProblem<'a> {
             rollout,
             weight,
             shape: (mlp.n_in(), mlp.n_hidden(), mlp.n_out()),
+            last: std::sync::Mutex::new(None),
         }
     }
 
-    fn net(&self, w: &[f64]) -> Mlp {
-        let (p, q, r) = self.shape;
-        Mlp::from_weights(p, q, r, w.to_vec())
+    /// Cost and gradient at `w` (from the last evaluation when `w` is the same).
+    fn eval(&self, w: &Array1<f64>) -> Result<(f64, Array1<f64>), argmin::core::Error> {
+        let mut last = self.last.lock().expect("no panics while held");
+        if let Some((lw, c, g)) = last.as_ref() {
+            if lw == w {
+                return Ok((*c, g.clone()));
+            }
+        }
+        let net = net_of(self.shape, w.as_slice().expect("contiguous weights"));
+        let mut g = vec![0.0; net.n_weights()];
+        let roll = self.rollout.value_grad(&net, &mut g);
+        let cost = self.one_step.cost(w)? + self.weight * roll;
+        let one = self.one_step.gradient(w)?;
+        let grad = Array1::from_iter(one.iter().zip(&g).map(|(a, b)| a + self.weight * b));
+        *last = Some((w.clone(), cost, grad.clone()));
+        Ok((cost, grad))
     }
+}
+
+fn net_of((p, q, r): (usize, usize, usize), w: &[f64]) -> Mlp {
+    Mlp::from_weights(p, q, r, w.to_vec())
 }
 
 impl CostFunction for FineTuneProblem<'_> {
     type Param = Array1<f64>;
     type Output = f64;
     fn cost(&self, w: &Self::Param) -> Result<f64, argmin::core::Error> {
-        let net = self.net(w.as_slice().expect("contiguous weights"));
-        Ok(self.one_step.cost(w)? + self.weight * self.rollout.value(&net))
+        Ok(self.eval(w)?.0)
     }
 }
 
@@ -224,13 +247,7 @@ impl Gradient for FineTuneProblem<'_> {
     type Param = Array1<f64>;
     type Gradient = Array1<f64>;
     fn gradient(&self, w: &Self::Param) -> Result<Self::Gradient, argmin::core::Error> {
-        let net = self.net(w.as_slice().expect("contiguous weights"));
-        let mut g = vec![0.0; net.n_weights()];
-        self.rollout.value_grad(&net, &mut g);
-        let one = self.one_step.gradient(w)?;
-        Ok(Array1::from_iter(
-            one.iter().zip(&g).map(|(a, b)| a + self.weight * b),
-        ))
+        Ok(self.eval(w)?.1)
     }
 }
 
@@ -272,8 +289,9 @@ pub fn fine_tune(emulator: &mut Emulator, ft: &FineTune<'_>) -> Result<TrainRepo
     let held_loss = RolloutLoss::new(&transforms, ft.held_windows, ft.sigma)?;
     let mlp = emulator.mlp_mut();
     let problem = FineTuneProblem::new(mlp, ft.train, train_loss, ft.weight);
+    let shape = (mlp.n_in(), mlp.n_hidden(), mlp.n_out());
     let held = |w: &[f64]| {
-        let net = problem.net(w);
+        let net = net_of(shape, w);
         mse(&net, ft.held) + ft.weight * held_loss.value(&net)
     };
     let config = FullBatchConfig {
@@ -282,7 +300,7 @@ pub fn fine_tune(emulator: &mut Emulator, ft: &FineTune<'_>) -> Result<TrainRepo
         patience: ft.patience,
         min_improvement: ft.min_improvement,
     };
-    minimize_early_stopping(problem.clone(), mlp.weights_mut(), &held, &config)
+    minimize_early_stopping(problem, mlp.weights_mut(), &held, &config)
 }
 
 /// L_k of `emulator` on `windows` with scales `sigma`.
