@@ -298,6 +298,7 @@ mod tests {
                 examples: 120,
                 method: TrainMethod::Cg,
                 physical_dt: 0.01,
+                input_noise: None,
             },
             steps: 10,
             settings: TrainSettings {

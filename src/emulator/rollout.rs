@@ -27,7 +27,9 @@ use super::train::{
     minimize_early_stopping, mse, Dataset, FullBatchConfig, FullBatchMethod, TrainReport,
     TrainingProblem,
 };
-use super::{predict_with, step_vjp_after_forward, Emulator, EmulatorError, Transforms, Transitions};
+use super::{
+    predict_with, step_vjp_after_forward, Emulator, EmulatorError, Transforms, Transitions,
+};
 use argmin::core::{CostFunction, Gradient};
 use ndarray::Array1;
 use rayon::prelude::*;
