@@ -803,3 +803,57 @@ impl Family for NaStructure {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::resolve::merge;
+
+    /// The `[params]` table of an experiment file, with its `[quick]` table merged when asked.
+    fn params(id: &str, quick: bool) -> toml::Value {
+        let path = format!("{}/experiments/{id}.toml", env!("CARGO_MANIFEST_DIR"));
+        let spec: toml::Table = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let mut p = spec["params"].as_table().unwrap().clone();
+        if quick {
+            merge(&mut p, spec["quick"].as_table().unwrap());
+        }
+        toml::Value::Table(p)
+    }
+
+    #[test]
+    fn control_experiments_use_table_1s_rollout_faithful_nets() {
+        // Fig. 13 and Fig. 14 must learn through the very nets Table 1 trains and reports (the
+        // same cache key: same model, size, data, settings, rollout fine-tuning), full and quick.
+        for quick in [false, true] {
+            let t1: Params = params("na_table1_structure", quick).try_into().unwrap();
+            let key = |net: &NetSpec, steps: usize, scale: f64, s: &TrainSettings| {
+                EmulatorCache::key(&build_spec(1, net, steps, scale, s))
+            };
+            let table1 = |model: NetModel| {
+                let net = t1.nets.iter().find(|n| n.model == model).unwrap();
+                key(net, t1.steps, t1.example_scale, &t1.training)
+            };
+            assert!(
+                t1.training.rollout_k > 0,
+                "Table 1 nets are rollout fine-tuned"
+            );
+            let f13: crate::families::na::fig13_control::Params =
+                params("na_fig13_control", quick).try_into().unwrap();
+            for task in &f13.tasks {
+                assert_eq!(
+                    key(&task.net, f13.steps, f13.example_scale, &f13.training),
+                    table1(task.net.model),
+                    "Fig. 13 {} (quick {quick})",
+                    task.name
+                );
+            }
+            let f14: crate::families::na::fig14_momentum::Params =
+                params("na_fig14_momentum", quick).try_into().unwrap();
+            assert_eq!(
+                key(&f14.net, f14.steps, f14.example_scale, &f14.training),
+                table1(f14.net.model),
+                "Fig. 14 (quick {quick})"
+            );
+        }
+    }
+}
