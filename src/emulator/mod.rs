@@ -640,15 +640,14 @@ mod tests {
         assert_eq!(value, loss.value(&net));
         assert!(value.is_finite() && value > 0.0);
         let h = 1e-6;
-        for k in 0..net.n_weights() {
+        for (k, gk) in g.iter().enumerate() {
             let (mut p, mut m) = (net.clone(), net.clone());
             p.weights_mut()[k] += h;
             m.weights_mut()[k] -= h;
             let fd = (loss.value(&p) - loss.value(&m)) / (2.0 * h);
             assert!(
-                (fd - g[k]).abs() < 1e-5 * (1.0 + fd.abs()),
-                "w{k}: {fd} vs {}",
-                g[k]
+                (fd - gk).abs() < 1e-5 * (1.0 + fd.abs()),
+                "w{k}: {fd} vs {gk}"
             );
         }
     }

@@ -199,8 +199,11 @@ pub struct FineTuneProblem<'a> {
     rollout: RolloutLoss<'a>,
     weight: f64,
     shape: (usize, usize, usize),
-    last: std::sync::Mutex<Option<(Array1<f64>, f64, Array1<f64>)>>,
+    last: std::sync::Mutex<Option<Evaluated>>,
 }
+
+/// Weights with the cost and gradient evaluated there.
+type Evaluated = (Array1<f64>, f64, Array1<f64>);
 
 impl<'a> FineTuneProblem<'a> {
     /// The objective for nets shaped like `mlp`.
