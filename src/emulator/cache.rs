@@ -62,6 +62,9 @@ struct Stored {
     stop: String,
     /// (iteration, train error bits, held-out error bits).
     trace: Vec<(usize, u64, u64)>,
+    /// The rollout fine-tuning trace, same layout (absent when it was off).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    rollout_trace: Vec<(usize, u64, u64)>,
 }
 
 /// One trained network with its normalization and training record, as a cache file holds it.
@@ -85,6 +88,8 @@ pub struct NetRecord {
     pub stop: String,
     /// Training trace.
     pub trace: Vec<TracePoint>,
+    /// Rollout fine-tuning trace (empty when it was off).
+    pub rollout_trace: Vec<TracePoint>,
 }
 
 /// Reads the record at `path` if it exists, was stored under `key` and has `shape`
@@ -118,16 +123,31 @@ pub fn read_record(path: &Path, key: &str, shape: [usize; 3]) -> Option<NetRecor
         heldout_error: f64::from_bits(s.heldout_error),
         train_s: s.train_s,
         stop: s.stop,
-        trace: s
-            .trace
-            .iter()
-            .map(|&(iteration, a, b)| TracePoint {
-                iteration,
-                train_error: f64::from_bits(a),
-                held_out_error: f64::from_bits(b),
-            })
-            .collect(),
+        trace: trace_from_bits(&s.trace),
+        rollout_trace: trace_from_bits(&s.rollout_trace),
     })
+}
+
+fn trace_from_bits(t: &[(usize, u64, u64)]) -> Vec<TracePoint> {
+    t.iter()
+        .map(|&(iteration, a, b)| TracePoint {
+            iteration,
+            train_error: f64::from_bits(a),
+            held_out_error: f64::from_bits(b),
+        })
+        .collect()
+}
+
+fn trace_bits(t: &[TracePoint]) -> Vec<(usize, u64, u64)> {
+    t.iter()
+        .map(|p| {
+            (
+                p.iteration,
+                p.train_error.to_bits(),
+                p.held_out_error.to_bits(),
+            )
+        })
+        .collect()
 }
 
 /// Writes `rec` under `key` to `path` atomically (temporary file, then rename), creating the
@@ -147,17 +167,8 @@ pub fn write_record(path: &Path, key: &str, rec: &NetRecord) -> Result<(), Build
         heldout_error: rec.heldout_error.to_bits(),
         train_s: rec.train_s,
         stop: rec.stop.clone(),
-        trace: rec
-            .trace
-            .iter()
-            .map(|p| {
-                (
-                    p.iteration,
-                    p.train_error.to_bits(),
-                    p.held_out_error.to_bits(),
-                )
-            })
-            .collect(),
+        trace: trace_bits(&rec.trace),
+        rollout_trace: trace_bits(&rec.rollout_trace),
     };
     let fail = |message: String| BuildError::Cache {
         path: path.display().to_string(),
@@ -235,6 +246,7 @@ impl EmulatorCache {
             train_s: rec.train_s,
             stop: rec.stop,
             from_cache: true,
+            rollout_trace: rec.rollout_trace,
         })
     }
 
@@ -256,6 +268,7 @@ impl EmulatorCache {
                 train_s: trained.train_s,
                 stop: trained.stop.clone(),
                 trace: trained.trace.clone(),
+                rollout_trace: trained.rollout_trace.clone(),
             },
         )?;
         Ok(path)
@@ -285,6 +298,7 @@ mod tests {
                 examples: 120,
                 method: TrainMethod::Cg,
                 physical_dt: 0.01,
+                input_noise: None,
             },
             steps: 10,
             settings: TrainSettings {
@@ -297,6 +311,9 @@ mod tests {
                 momentum: 0.9,
                 batch_size: 30,
                 input_noise: 0.0,
+                rollout_k: 0,
+                rollout_weight: 0.0,
+                rollout_iters: 0,
             },
             seed: 7,
         }
@@ -348,6 +365,9 @@ mod tests {
             BuildSpec {
                 settings: TrainSettings {
                     input_noise: 0.1,
+                    rollout_k: 0,
+                    rollout_weight: 0.0,
+                    rollout_iters: 0,
                     ..s.settings
                 },
                 ..s.clone()

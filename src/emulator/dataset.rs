@@ -295,6 +295,84 @@ pub fn sample_transitions<D: Dynamics + ?Sized>(
     cfg: &SamplingConfig,
     rng: &mut ChaCha8Rng,
 ) -> Result<Sampled, BlowUp> {
+    let w = sample_windows(sim, start, limits, cfg, 1, rng)?;
+    let (n_state, m, rows) = (w.state_dim, w.control_dim, w.len());
+    let pick = |src: &[f64], stride: usize, offset: usize, width: usize| -> Array2<f64> {
+        Array2::from_shape_fn((rows, width), |(r, c)| src[r * stride + offset + c])
+    };
+    let transitions = Transitions::new(
+        pick(&w.states, 2 * n_state, 0, n_state),
+        pick(&w.controls, m, 0, m),
+        pick(&w.states, 2 * n_state, n_state, n_state),
+    )
+    .expect("rows agree by construction");
+    Ok(Sampled {
+        transitions,
+        episode: w.episode,
+        start_step: w.start_step,
+    })
+}
+
+/// Windows of `k` consecutive super-steps (k-step rollout training, issue 11): per window the
+/// k + 1 simulated states s_0 … s_k and the k controls u_0 … u_{k−1}, u_j read from the
+/// episode's control signal at the start of super-step j and held over it. Rows (windows) are
+/// shuffled; row r's states are `states[r (k+1) n ..]`, its controls `controls[r k m ..]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Windows {
+    /// Super-steps per window, k.
+    pub k: usize,
+    /// State dimension n.
+    pub state_dim: usize,
+    /// Control dimension m.
+    pub control_dim: usize,
+    /// States, windows × (k + 1) × n, row-major.
+    pub states: Vec<f64>,
+    /// Controls, windows × k × m, row-major.
+    pub controls: Vec<f64>,
+    /// Episode index of each window.
+    pub episode: Vec<usize>,
+    /// Physical step within its episode at which each window starts.
+    pub start_step: Vec<usize>,
+}
+
+impl Windows {
+    /// Number of windows.
+    pub fn len(&self) -> usize {
+        self.episode.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.episode.is_empty()
+    }
+
+    /// State j (0 … k) of window r.
+    pub fn state(&self, r: usize, j: usize) -> &[f64] {
+        let n = self.state_dim;
+        let o = (r * (self.k + 1) + j) * n;
+        &self.states[o..o + n]
+    }
+
+    /// Control j (0 … k − 1) of window r.
+    pub fn control(&self, r: usize, j: usize) -> &[f64] {
+        let m = self.control_dim;
+        let o = (r * self.k + j) * m;
+        &self.controls[o..o + m]
+    }
+}
+
+/// Samples `cfg.examples` windows of `k` super-steps exactly as [`sample_transitions`] samples
+/// its examples (which are the windows of k = 1, drawn from the same random stream): episodes
+/// from `start`, window starts one lag U[n, 5n] physical steps after the previous one (a
+/// window is a copy of the simulation, the episode goes on under its own signal), shuffled.
+pub fn sample_windows<D: Dynamics + ?Sized>(
+    sim: &mut D,
+    start: &dyn Fn(&mut ChaCha8Rng) -> Vec<f64>,
+    limits: &ControlLimits,
+    cfg: &SamplingConfig,
+    k: usize,
+    rng: &mut ChaCha8Rng,
+) -> Result<Windows, BlowUp> {
     let n_state = sim.state_dim();
     let m = sim.control_dim();
     assert_eq!(
@@ -302,14 +380,18 @@ pub fn sample_transitions<D: Dynamics + ?Sized>(
         m,
         "control limits must match the control dimension"
     );
+    assert!(k >= 1, "a window needs at least one super-step");
     let n = cfg.steps_per_sample;
     let rows = cfg.examples;
-    let mut states = Vec::with_capacity(rows * n_state);
-    let mut controls = Vec::with_capacity(rows * m);
-    let mut next = Vec::with_capacity(rows * n_state);
+    let mut states = Vec::with_capacity(rows * (k + 1) * n_state);
+    let mut controls = Vec::with_capacity(rows * k * m);
     let mut episode = Vec::with_capacity(rows);
     let mut start_step = Vec::with_capacity(rows);
     let episode_steps = (cfg.episode_duration / cfg.dt).floor() as usize;
+    assert!(
+        episode_steps >= (k + 1) * n,
+        "episodes of {episode_steps} steps cannot hold a lag and a window of {k} x {n} steps"
+    );
     let mut u = vec![0.0; m];
     let mut y = vec![0.0; n_state];
     let mut e = 0;
@@ -320,24 +402,27 @@ pub fn sample_transitions<D: Dynamics + ?Sized>(
         let mut step = 0usize;
         while episode.len() < rows {
             let lag = rng.random_range(n..=5 * n);
-            if step + lag + n > episode_steps {
+            if step + lag + k * n > episode_steps {
                 break;
             }
-            for k in step..step + lag {
-                signal.at(k as f64 * cfg.dt, &mut u);
+            for s in step..step + lag {
+                signal.at(s as f64 * cfg.dt, &mut u);
                 sim.step(&mut x, &u, cfg.dt);
             }
             step += lag;
             check_finite("sampling", step, step as f64 * cfg.dt, &x)?;
-            signal.at(step as f64 * cfg.dt, &mut u);
-            y.copy_from_slice(&x);
-            for _ in 0..n {
-                sim.step(&mut y, &u, cfg.dt);
-            }
-            check_finite("sampling", step + n, (step + n) as f64 * cfg.dt, &y)?;
             states.extend_from_slice(&x);
-            controls.extend_from_slice(&u);
-            next.extend_from_slice(&y);
+            y.copy_from_slice(&x);
+            for j in 0..k {
+                let at = step + j * n;
+                signal.at(at as f64 * cfg.dt, &mut u);
+                for _ in 0..n {
+                    sim.step(&mut y, &u, cfg.dt);
+                }
+                check_finite("sampling", at + n, (at + n) as f64 * cfg.dt, &y)?;
+                controls.extend_from_slice(&u);
+                states.extend_from_slice(&y);
+            }
             episode.push(e);
             start_step.push(step);
         }
@@ -345,17 +430,18 @@ pub fn sample_transitions<D: Dynamics + ?Sized>(
     }
     let mut order: Vec<usize> = (0..rows).collect();
     order.shuffle(rng);
-    let pick = |src: &[f64], w: usize| -> Array2<f64> {
-        Array2::from_shape_fn((rows, w), |(r, c)| src[order[r] * w + c])
+    let permute = |src: &[f64], w: usize| -> Vec<f64> {
+        order
+            .iter()
+            .flat_map(|&r| src[r * w..(r + 1) * w].iter().copied())
+            .collect()
     };
-    let transitions = Transitions::new(
-        pick(&states, n_state),
-        pick(&controls, m),
-        pick(&next, n_state),
-    )
-    .expect("rows agree by construction");
-    Ok(Sampled {
-        transitions,
+    Ok(Windows {
+        k,
+        state_dim: n_state,
+        control_dim: m,
+        states: permute(&states, (k + 1) * n_state),
+        controls: permute(&controls, k * m),
         episode: order.iter().map(|&r| episode[r]).collect(),
         start_step: order.iter().map(|&r| start_step[r]).collect(),
     })

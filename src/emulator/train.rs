@@ -119,6 +119,10 @@ impl<'a> TrainingProblem<'a> {
     }
 
     fn net(&self, w: &Array1<f64>) -> Mlp {
+        self.net_from(w.as_slice().expect("contiguous weights"))
+    }
+
+    fn net_from(&self, w: &[f64]) -> Mlp {
         let (p, q, r) = self.shape;
         Mlp::from_weights(p, q, r, w.to_vec())
     }
@@ -291,11 +295,13 @@ impl Default for FullBatchConfig {
 
 type WState = IterState<Array1<f64>, Array1<f64>, (), (), (), f64>;
 
+/// Held-out error of a flat weight vector.
+pub type HeldOutError<'a> = &'a dyn Fn(&[f64]) -> f64;
+
 /// Wraps an argmin solver to evaluate the held-out error after every iteration and stop early.
 struct EarlyStopping<'a, S> {
     inner: S,
-    held_out: &'a Dataset,
-    shape: (usize, usize, usize),
+    held_out: HeldOutError<'a>,
     stopper: EarlyStopper,
     trace: Vec<TracePoint>,
     stopped: bool,
@@ -305,24 +311,23 @@ struct EarlyStopping<'a, S> {
 impl<S> EarlyStopping<'_, S> {
     fn record(&mut self, state: &WState) {
         let Some(w) = state.get_param() else { return };
-        let (p, q, r) = self.shape;
-        let net = Mlp::from_weights(p, q, r, w.to_vec());
-        let held = mse(&net, self.held_out);
+        let w = w.as_slice().expect("contiguous weights");
+        let held = (self.held_out)(w);
         let iteration = self.trace.len();
         self.trace.push(TracePoint {
             iteration,
             train_error: state.get_cost(),
             held_out_error: held,
         });
-        if self.stopper.observe(iteration, held, net.weights()) {
+        if self.stopper.observe(iteration, held, w) {
             self.stopped = true;
         }
     }
 }
 
-impl<'p, S> Solver<TrainingProblem<'p>, WState> for EarlyStopping<'_, S>
+impl<P, S> Solver<P, WState> for EarlyStopping<'_, S>
 where
-    S: Solver<TrainingProblem<'p>, WState>,
+    S: Solver<P, WState>,
 {
     fn name(&self) -> &str {
         "early stopping"
@@ -330,7 +335,7 @@ where
 
     fn init(
         &mut self,
-        problem: &mut Problem<TrainingProblem<'p>>,
+        problem: &mut Problem<P>,
         state: WState,
     ) -> Result<(WState, Option<KV>), argmin::core::Error> {
         let (state, kv) = self.inner.init(problem, state)?;
@@ -340,7 +345,7 @@ where
 
     fn next_iter(
         &mut self,
-        problem: &mut Problem<TrainingProblem<'p>>,
+        problem: &mut Problem<P>,
         state: WState,
     ) -> Result<(WState, Option<KV>), argmin::core::Error> {
         let backup = state.clone();
@@ -380,22 +385,20 @@ type EarlyStopOutcome = (
 );
 
 /// Runs `solver` from `w0` for at most `max_iters` iterations inside [`EarlyStopping`].
-fn run_early_stopping<'p, S>(
-    problem: TrainingProblem<'p>,
+fn run_early_stopping<P, S>(
+    problem: P,
     solver: S,
-    held_out: &Dataset,
-    shape: (usize, usize, usize),
+    held_out: HeldOutError<'_>,
     stopper: EarlyStopper,
     w0: Array1<f64>,
     max_iters: u64,
 ) -> Result<EarlyStopOutcome, argmin::core::Error>
 where
-    S: Solver<TrainingProblem<'p>, WState>,
+    S: Solver<P, WState>,
 {
     let wrapped = EarlyStopping {
         inner: solver,
         held_out,
-        shape,
         stopper,
         trace: Vec::new(),
         stopped: false,
@@ -419,23 +422,32 @@ pub fn train_full_batch(
 ) -> Result<TrainReport, EmulatorError> {
     check_common(train, held_out, config.patience, config.min_improvement)?;
     let problem = TrainingProblem::new(mlp, train);
-    let w0 = Array1::from(mlp.weights().to_vec());
-    let shape = (mlp.n_in(), mlp.n_hidden(), mlp.n_out());
-    let stopper = EarlyStopper::new(config.patience, config.min_improvement, mlp.weights());
+    let held = |w: &[f64]| mse(&problem.net_from(w), held_out);
+    minimize_early_stopping(problem.clone(), mlp.weights_mut(), &held, config)
+}
+
+/// Minimizes a full-batch objective `problem` over flat weights `w` (started from and left at
+/// the best held-out weights) by conjugate gradient or L-BFGS, evaluating `held_out` after
+/// every iteration and stopping early on it (the shared loop of [`train_full_batch`] and the
+/// k-step rollout fine-tuning, [`super::rollout`]).
+pub fn minimize_early_stopping<P>(
+    problem: P,
+    w: &mut [f64],
+    held_out: HeldOutError<'_>,
+    config: &FullBatchConfig,
+) -> Result<TrainReport, EmulatorError>
+where
+    P: CostFunction<Param = Array1<f64>, Output = f64>
+        + Gradient<Param = Array1<f64>, Gradient = Array1<f64>>,
+{
+    let w0 = Array1::from(w.to_vec());
+    let stopper = EarlyStopper::new(config.patience, config.min_improvement, w);
     let opt = |e: argmin::core::Error| EmulatorError::Optimizer(e.to_string());
     // One early-stopping run, whichever argmin solver (their types differ).
     macro_rules! run {
         ($solver:expr) => {
-            run_early_stopping(
-                problem,
-                $solver,
-                held_out,
-                shape,
-                stopper,
-                w0,
-                config.max_iters,
-            )
-            .map_err(opt)?
+            run_early_stopping(problem, $solver, held_out, stopper, w0, config.max_iters)
+                .map_err(opt)?
         };
     }
     let (stopper, trace, failed, stopped, reason) = match config.method {
@@ -464,7 +476,7 @@ pub fn train_full_batch(
     } else {
         StopReason::Converged
     };
-    mlp.weights_mut().copy_from_slice(&stopper.best_weights);
+    w.copy_from_slice(&stopper.best_weights);
     Ok(TrainReport {
         trace,
         best_iteration: stopper.best_iteration,

@@ -459,6 +459,7 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                     train_s: sampling_s + t1.elapsed().as_secs_f64(),
                     stop: stop_name(&rep.stop),
                     trace: rep.trace,
+                    rollout_trace: Vec::new(),
                 })
             } else {
                 let layout = LocalLayout::new(k - 1);
@@ -488,6 +489,7 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                     train_s: t1.elapsed().as_secs_f64(),
                     stop: stop_name(&rep.stop),
                     trace: rep.trace,
+                    rollout_trace: Vec::new(),
                 })
             }
         })
@@ -596,6 +598,9 @@ mod tests {
                 momentum: 0.9,
                 batch_size: 30,
                 input_noise: 0.0,
+                rollout_k: 0,
+                rollout_weight: 0.0,
+                rollout_iters: 0,
             },
             seed: 3,
         }

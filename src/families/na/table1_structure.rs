@@ -13,7 +13,10 @@
 //! rollout40_error_final), `training` (net, iteration, train_error, heldout_error), `rollout`
 //! (net, step, error; the dolphin as `dolphin_global`, its global net alone, and `dolphin`, the
 //! composed hierarchy) and `drift` (net, task, horizon_s, emulator_drift, simulator_drift, gap,
-//! tolerance: neutral-control drift from the control tasks' starts, [`DriftTask`]).
+//! tolerance: neutral-control drift from the control tasks' starts, [`DriftTask`]) and
+//! `rollout_training` (net, iteration, train_loss, heldout_loss: the k-step rollout
+//! fine-tuning, [`crate::emulator::rollout`], when `training.rollout_k` is set; the `stop`
+//! column then ends with `; rollout: <its stop reason>`).
 
 use crate::emulator::cache::{fnv1a, EmulatorCache};
 use crate::emulator::catalog::{
@@ -121,6 +124,11 @@ impl DolphinNets {
             &format!("{key}.physical_dt"),
             "must be in (0, 0.004] s: the dolphin's semi-implicit Euler step is stable up to about 0.006 s",
         )?;
+        ensure(
+            self.training.rollout_k == 0,
+            &format!("{key}.training.rollout_k"),
+            "the dolphin hierarchy is trained one step at a time (no rollout fine-tuning yet)",
+        )?;
         validate_training(&self.training).map_err(|e| e.prefixed(key))
     }
 
@@ -167,7 +175,21 @@ pub fn validate_training(t: &TrainSettings) -> Result<(), ParamError> {
         "training.momentum",
         "must be in [0, 1)",
     )?;
-    ensure(t.batch_size >= 1, "training.batch_size", "must be >= 1")
+    ensure(t.batch_size >= 1, "training.batch_size", "must be >= 1")?;
+    ensure(
+        t.input_noise >= 0.0 && t.input_noise.is_finite(),
+        "training.input_noise",
+        "must be >= 0",
+    )?;
+    if t.rollout_k > 0 {
+        positive("training.rollout_weight", t.rollout_weight)?;
+        ensure(
+            t.rollout_iters >= 1,
+            "training.rollout_iters",
+            "must be >= 1 when rollout_k is set",
+        )?;
+    }
+    Ok(())
 }
 
 /// Checks a list of nets.
@@ -177,6 +199,13 @@ pub fn validate_nets(nets: &[NetSpec], scale: f64) -> Result<(), ParamError> {
     for (i, n) in nets.iter().enumerate() {
         ensure(n.hidden >= 1, &format!("nets[{i}].hidden"), "must be >= 1")?;
         positive(&format!("nets[{i}].physical_dt"), n.physical_dt)?;
+        if let Some(v) = n.input_noise {
+            ensure(
+                v >= 0.0 && v.is_finite(),
+                &format!("nets[{i}].input_noise"),
+                "must be >= 0",
+            )?;
+        }
         ensure(
             (n.examples as f64 * scale).round() >= 10.0,
             &format!("nets[{i}].examples"),
@@ -467,6 +496,9 @@ impl Job for Params {
         ]);
         let mut training = Table::new(&["net", "iteration", "train_error", "heldout_error"]);
         let mut rollout = Table::new(&["net", "step", "error"]);
+        // The k-step rollout fine-tuning (training.rollout_k): one-step loss + rollout_weight x
+        // k-step rollout loss, on the training and held-out examples and windows.
+        let mut rollout_training = Table::new(&["net", "iteration", "train_loss", "heldout_loss"]);
         let mut drift = Table::new(&[
             "net",
             "task",
@@ -548,6 +580,14 @@ impl Job for Params {
                     p.held_out_error
                 ]);
             }
+            for p in &t.rollout_trace {
+                rollout_training.push(row![
+                    name,
+                    p.iteration as i64,
+                    p.train_error,
+                    p.held_out_error
+                ]);
+            }
             pb.inc(1);
         }
         if let Some(d) = &self.dolphin {
@@ -613,6 +653,7 @@ impl Job for Params {
             ("training", training),
             ("rollout", rollout),
             ("drift", drift),
+            ("rollout_training", rollout_training),
         ]))
     }
 }
@@ -760,5 +801,59 @@ impl Family for NaStructure {
                 net.len()
             ),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::resolve::merge;
+
+    /// The `[params]` table of an experiment file, with its `[quick]` table merged when asked.
+    fn params(id: &str, quick: bool) -> toml::Value {
+        let path = format!("{}/experiments/{id}.toml", env!("CARGO_MANIFEST_DIR"));
+        let spec: toml::Table = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let mut p = spec["params"].as_table().unwrap().clone();
+        if quick {
+            merge(&mut p, spec["quick"].as_table().unwrap());
+        }
+        toml::Value::Table(p)
+    }
+
+    #[test]
+    fn control_experiments_use_table_1s_rollout_faithful_nets() {
+        // Fig. 13 and Fig. 14 must learn through the very nets Table 1 trains and reports (the
+        // same cache key: same model, size, data, settings, rollout fine-tuning), full and quick.
+        for quick in [false, true] {
+            let t1: Params = params("na_table1_structure", quick).try_into().unwrap();
+            let key = |net: &NetSpec, steps: usize, scale: f64, s: &TrainSettings| {
+                EmulatorCache::key(&build_spec(1, net, steps, scale, s))
+            };
+            let table1 = |model: NetModel| {
+                let net = t1.nets.iter().find(|n| n.model == model).unwrap();
+                key(net, t1.steps, t1.example_scale, &t1.training)
+            };
+            assert!(
+                t1.training.rollout_k > 0,
+                "Table 1 nets are rollout fine-tuned"
+            );
+            let f13: crate::families::na::fig13_control::Params =
+                params("na_fig13_control", quick).try_into().unwrap();
+            for task in &f13.tasks {
+                assert_eq!(
+                    key(&task.net, f13.steps, f13.example_scale, &f13.training),
+                    table1(task.net.model),
+                    "Fig. 13 {} (quick {quick})",
+                    task.name
+                );
+            }
+            let f14: crate::families::na::fig14_momentum::Params =
+                params("na_fig14_momentum", quick).try_into().unwrap();
+            assert_eq!(
+                key(&f14.net, f14.steps, f14.example_scale, &f14.training),
+                table1(f14.net.model),
+                "Fig. 14 (quick {quick})"
+            );
+        }
     }
 }

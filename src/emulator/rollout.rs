@@ -1,0 +1,318 @@
+//! # k-step rollout training (issue 11, defect 5)
+//!
+//! A net trained for one super-step is used for 40 in a row by control learning (§4), and its
+//! small one-step errors compound: the rollout leaves the states it was trained on. The k-step
+//! rollout loss ("multi-step" training, Venkatraman, Hebert and Bagnell 2015; Abbeel et al.
+//! 2005) trains the net on its own rollouts instead. From the first state s_0 of a simulated
+//! window of k super-steps (the same episodes and control processes as the one-step data,
+//! [`super::dataset::sample_windows`]) the emulator runs k steps under the window's controls,
+//!
+//! ```text
+//! ŝ_0 = s_0,   ŝ_i = T(ŝ_{i−1}, u_{i−1}; w)      (T: transforms ∘ net ∘ transforms, Fig. 6c)
+//! L_k(w) = 1/(R k n) Σ_windows Σ_{i=1..k} Σ_v ((ŝ_{i,v} − s_{i,v}) / σ_v)²
+//! ```
+//!
+//! with the simulated states s_i as targets and σ_v the spread of variable v's one-step change
+//! over the one-step training data (so L_1 is about the one-step error). The gradient is
+//! backpropagation through the whole chain: the cotangent of ŝ_i flows through the output
+//! transforms, the net (adding to ∂L/∂w) and the input transforms (local frame at ŝ_{i−1},
+//! normalization) into ŝ_{i−1}, and on to the earlier steps; every transform's derivative is
+//! exact ([`super::step_vjp`]), no approximation is made. Fine-tuning
+//! ([`fine_tune`]) minimizes the one-step training loss plus `weight` · L_k by L-BFGS from the
+//! one-step net, stopping early on the same sum over held-out data and windows.
+
+use super::dataset::Windows;
+use super::mlp::Mlp;
+use super::train::{
+    minimize_early_stopping, mse, Dataset, FullBatchConfig, FullBatchMethod, TrainReport,
+    TrainingProblem,
+};
+use super::{
+    predict_with, step_vjp_after_forward, Emulator, EmulatorError, Transforms, Transitions,
+};
+use argmin::core::{CostFunction, Gradient};
+use ndarray::Array1;
+use rayon::prelude::*;
+
+/// Windows per parallel chunk; fixed, and the chunks' sums are added in order, so the loss and
+/// its gradient are bit-identical for any number of rayon threads.
+const WINDOW_CHUNK: usize = 16;
+
+/// Per-variable scale σ_v of the rollout loss: the spread of each state variable's one-step
+/// change s' − s over `data` (floored at 1e-9 of the largest, so a constant variable counts
+/// little but stays finite).
+pub fn change_spread(data: &Transitions) -> Vec<f64> {
+    let d = &data.next_states - &data.states;
+    let rows = d.nrows().max(1) as f64;
+    let sd: Vec<f64> = d
+        .columns()
+        .into_iter()
+        .map(|c| {
+            let mean = c.sum() / rows;
+            (c.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / rows).sqrt()
+        })
+        .collect();
+    let floor = 1e-9 * sd.iter().copied().fold(1e-300, f64::max);
+    sd.into_iter().map(|s| s.max(floor)).collect()
+}
+
+/// The k-step rollout loss L_k of networks shaped like one net, on fixed windows.
+#[derive(Debug, Clone)]
+pub struct RolloutLoss<'a> {
+    transforms: &'a Transforms,
+    windows: &'a Windows,
+    inv_var: Vec<f64>,
+}
+
+impl<'a> RolloutLoss<'a> {
+    /// The loss on `windows` through `transforms`, with per-variable scales `sigma`
+    /// ([`change_spread`]).
+    pub fn new(
+        transforms: &'a Transforms,
+        windows: &'a Windows,
+        sigma: &[f64],
+    ) -> Result<Self, EmulatorError> {
+        let (n, m) = (transforms.state_dim, transforms.control_dim);
+        for (what, expected, got) in [
+            ("rollout window states", n, windows.state_dim),
+            ("rollout window controls", m, windows.control_dim),
+            ("rollout scales", n, sigma.len()),
+        ] {
+            if expected != got {
+                return Err(EmulatorError::Dimension {
+                    what,
+                    expected,
+                    got,
+                });
+            }
+        }
+        if windows.is_empty() {
+            return Err(EmulatorError::TooFewExamples(0));
+        }
+        Ok(Self {
+            transforms,
+            windows,
+            inv_var: sigma.iter().map(|s| 1.0 / (s * s)).collect(),
+        })
+    }
+
+    /// L_k(w) of `mlp`.
+    pub fn value(&self, mlp: &Mlp) -> f64 {
+        self.eval(mlp, None)
+    }
+
+    /// L_k(w) of `mlp`; adds ∂L_k/∂w to `grad`.
+    pub fn value_grad(&self, mlp: &Mlp, grad: &mut [f64]) -> f64 {
+        self.eval(mlp, Some(grad))
+    }
+
+    fn eval(&self, mlp: &Mlp, grad: Option<&mut [f64]>) -> f64 {
+        let w = self.windows;
+        let chunks = w.len().div_ceil(WINDOW_CHUNK);
+        let want_grad = grad.is_some();
+        let parts: Vec<(f64, Vec<f64>)> = (0..chunks)
+            .into_par_iter()
+            .map(|c| {
+                let rows = c * WINDOW_CHUNK..w.len().min((c + 1) * WINDOW_CHUNK);
+                self.chunk(mlp, rows, want_grad)
+            })
+            .collect();
+        let scale = 1.0 / (w.len() * w.k * w.state_dim) as f64;
+        let mut total = 0.0;
+        let mut grad = grad;
+        for (loss, g) in parts {
+            total += loss;
+            if let Some(out) = grad.as_deref_mut() {
+                for (o, v) in out.iter_mut().zip(&g) {
+                    *o += scale * v;
+                }
+            }
+        }
+        scale * total
+    }
+
+    /// Unscaled loss and gradient sums over windows `rows`.
+    fn chunk(&self, mlp: &Mlp, rows: std::ops::Range<usize>, want_grad: bool) -> (f64, Vec<f64>) {
+        let (t, w) = (self.transforms, self.windows);
+        let (n, m, k, q) = (w.state_dim, w.control_dim, w.k, mlp.n_hidden());
+        let mut scratch = Emulator::make_scratch(mlp, n, m);
+        let mut grad = vec![0.0; if want_grad { mlp.n_weights() } else { 0 }];
+        let mut traj = vec![0.0; (k + 1) * n];
+        // Each step's forward pass (network input, output, hidden activations), kept for the
+        // backward pass.
+        let (mut zs, mut ys, mut hs) = (vec![0.0; k * (n + m)], vec![0.0; k * n], vec![0.0; k * q]);
+        let (mut next_bar, mut prev_bar, mut u_bar) = (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
+        let mut loss = 0.0;
+        for r in rows {
+            traj[..n].copy_from_slice(w.state(r, 0));
+            for i in 0..k {
+                let (done, rest) = traj.split_at_mut((i + 1) * n);
+                let s_next = &mut rest[..n];
+                let u = w.control(r, i);
+                predict_with(t, mlp, &done[i * n..], u, &mut scratch, s_next);
+                zs[i * (n + m)..(i + 1) * (n + m)].copy_from_slice(&scratch.z);
+                ys[i * n..(i + 1) * n].copy_from_slice(&scratch.y);
+                hs[i * q..(i + 1) * q].copy_from_slice(&scratch.mlp.hidden);
+                let truth = w.state(r, i + 1);
+                for v in 0..n {
+                    loss += (s_next[v] - truth[v]).powi(2) * self.inv_var[v];
+                }
+            }
+            if !want_grad {
+                continue;
+            }
+            next_bar.fill(0.0);
+            for i in (1..=k).rev() {
+                let (s_hat, truth) = (&traj[i * n..(i + 1) * n], w.state(r, i));
+                for v in 0..n {
+                    next_bar[v] += 2.0 * (s_hat[v] - truth[v]) * self.inv_var[v];
+                }
+                let j = i - 1;
+                scratch.z.copy_from_slice(&zs[j * (n + m)..i * (n + m)]);
+                scratch.y.copy_from_slice(&ys[j * n..i * n]);
+                scratch.mlp.hidden.copy_from_slice(&hs[j * q..i * q]);
+                prev_bar.fill(0.0);
+                step_vjp_after_forward(
+                    t,
+                    mlp,
+                    &traj[j * n..i * n],
+                    &next_bar,
+                    &mut scratch,
+                    &mut prev_bar,
+                    &mut u_bar,
+                    Some(&mut grad),
+                );
+                std::mem::swap(&mut next_bar, &mut prev_bar);
+            }
+        }
+        (loss, grad)
+    }
+}
+
+/// The fine-tuning objective over flat weights: the one-step loss (eq. 5, as
+/// [`TrainingProblem`]) plus `weight` · L_k. The line search asks for the cost and then the
+/// gradient at the same weights (and L-BFGS the gradient again at the accepted point), so one
+/// evaluation computes both and keeps them for the next request at the same weights.
+#[derive(Debug)]
+pub struct FineTuneProblem<'a> {
+    one_step: TrainingProblem<'a>,
+    rollout: RolloutLoss<'a>,
+    weight: f64,
+    shape: (usize, usize, usize),
+    last: std::sync::Mutex<Option<Evaluated>>,
+}
+
+/// Weights with the cost and gradient evaluated there.
+type Evaluated = (Array1<f64>, f64, Array1<f64>);
+
+impl<'a> FineTuneProblem<'a> {
+    /// The objective for nets shaped like `mlp`.
+    pub fn new(mlp: &Mlp, one_step: &'a Dataset, rollout: RolloutLoss<'a>, weight: f64) -> Self {
+        Self {
+            one_step: TrainingProblem::new(mlp, one_step),
+            rollout,
+            weight,
+            shape: (mlp.n_in(), mlp.n_hidden(), mlp.n_out()),
+            last: std::sync::Mutex::new(None),
+        }
+    }
+
+    /// Cost and gradient at `w` (from the last evaluation when `w` is the same).
+    fn eval(&self, w: &Array1<f64>) -> Result<(f64, Array1<f64>), argmin::core::Error> {
+        let mut last = self.last.lock().expect("no panics while held");
+        if let Some((lw, c, g)) = last.as_ref() {
+            if lw == w {
+                return Ok((*c, g.clone()));
+            }
+        }
+        let net = net_of(self.shape, w.as_slice().expect("contiguous weights"));
+        let mut g = vec![0.0; net.n_weights()];
+        let roll = self.rollout.value_grad(&net, &mut g);
+        let cost = self.one_step.cost(w)? + self.weight * roll;
+        let one = self.one_step.gradient(w)?;
+        let grad = Array1::from_iter(one.iter().zip(&g).map(|(a, b)| a + self.weight * b));
+        *last = Some((w.clone(), cost, grad.clone()));
+        Ok((cost, grad))
+    }
+}
+
+fn net_of((p, q, r): (usize, usize, usize), w: &[f64]) -> Mlp {
+    Mlp::from_weights(p, q, r, w.to_vec())
+}
+
+impl CostFunction for FineTuneProblem<'_> {
+    type Param = Array1<f64>;
+    type Output = f64;
+    fn cost(&self, w: &Self::Param) -> Result<f64, argmin::core::Error> {
+        Ok(self.eval(w)?.0)
+    }
+}
+
+impl Gradient for FineTuneProblem<'_> {
+    type Param = Array1<f64>;
+    type Gradient = Array1<f64>;
+    fn gradient(&self, w: &Self::Param) -> Result<Self::Gradient, argmin::core::Error> {
+        Ok(self.eval(w)?.1)
+    }
+}
+
+/// Rollout fine-tuning data and settings for [`fine_tune`].
+#[derive(Debug, Clone, Copy)]
+pub struct FineTune<'a> {
+    /// One-step training examples (network space, as trained on).
+    pub train: &'a Dataset,
+    /// One-step held-out examples.
+    pub held: &'a Dataset,
+    /// Training windows.
+    pub train_windows: &'a Windows,
+    /// Held-out windows.
+    pub held_windows: &'a Windows,
+    /// Per-variable scales σ_v ([`change_spread`]).
+    pub sigma: &'a [f64],
+    /// Weight of L_k against the one-step loss.
+    pub weight: f64,
+    /// L-BFGS iteration limit.
+    pub max_iters: u64,
+    /// Early-stopping patience (iterations).
+    pub patience: usize,
+    /// Relative held-out improvement that counts.
+    pub min_improvement: f64,
+}
+
+/// Fine-tunes `emulator`'s net on the one-step loss + `weight` · L_k by L-BFGS, early-stopped on
+/// the same sum over the held-out examples and windows; leaves it at the best held-out weights.
+/// The report's errors are those sums.
+pub fn fine_tune(emulator: &mut Emulator, ft: &FineTune<'_>) -> Result<TrainReport, EmulatorError> {
+    if !(ft.weight > 0.0 && ft.weight.is_finite()) {
+        return Err(EmulatorError::Setting {
+            name: "rollout_weight",
+            value: ft.weight,
+        });
+    }
+    let transforms = emulator.transforms.clone();
+    let train_loss = RolloutLoss::new(&transforms, ft.train_windows, ft.sigma)?;
+    let held_loss = RolloutLoss::new(&transforms, ft.held_windows, ft.sigma)?;
+    let mlp = emulator.mlp_mut();
+    let problem = FineTuneProblem::new(mlp, ft.train, train_loss, ft.weight);
+    let shape = (mlp.n_in(), mlp.n_hidden(), mlp.n_out());
+    let held = |w: &[f64]| {
+        let net = net_of(shape, w);
+        mse(&net, ft.held) + ft.weight * held_loss.value(&net)
+    };
+    let config = FullBatchConfig {
+        method: FullBatchMethod::Lbfgs { memory: 20 },
+        max_iters: ft.max_iters,
+        patience: ft.patience,
+        min_improvement: ft.min_improvement,
+    };
+    minimize_early_stopping(problem, mlp.weights_mut(), &held, &config)
+}
+
+/// L_k of `emulator` on `windows` with scales `sigma`.
+pub fn rollout_loss(
+    emulator: &Emulator,
+    windows: &Windows,
+    sigma: &[f64],
+) -> Result<f64, EmulatorError> {
+    Ok(RolloutLoss::new(&emulator.transforms, windows, sigma)?.value(&emulator.mlp))
+}
