@@ -261,7 +261,7 @@ mod periodicity_tests {
         assert!(p > 0.9, "{p}");
         assert_eq!(lag, 10.0);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let noise: Vec<f64> = (0..n * m).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let noise: Vec<f64> = (0..n * m).map(|_| rng.random_range(-1.0..1.0)).collect();
         let (q, _) = periodicity(&noise, m);
         assert!(q < 0.6, "{q}");
         assert_eq!(periodicity(&vec![0.3; n * m], m).0, 0.0);
