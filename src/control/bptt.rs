@@ -730,7 +730,8 @@ pub struct IterationTrace {
     /// Forward rollouts from the start of the loop to this iterate's gradient, inclusive.
     pub evaluations: usize,
     /// The effective step scale λ/t of the step that produced this iterate (iteration 0: the
-    /// initial λ).
+    /// initial λ; under [`StepRule::LevenbergMarquardt`], the damping μ after the step; ∞ after
+    /// a step that found no decrease).
     pub scale: f64,
 }
 
@@ -837,8 +838,12 @@ pub fn learn_with<D: DifferentiableStep>(
     let mut taken_scale = lambda;
     // Levenberg–Marquardt: the terms' curvatures (an objective without one gets none, and the
     // damping alone scales the step), the Gauss–Newton matrix, the damping μ and its growth ν.
-    let curvature = bptt.objective().gauss_newton().unwrap_or_default();
     let lm = matches!(schedule.rule, StepRule::LevenbergMarquardt { .. });
+    let curvature = if lm {
+        bptt.objective().gauss_newton().unwrap_or_default()
+    } else {
+        Vec::new()
+    };
     let mut hmat = vec![0.0; if lm { d * d } else { 0 }];
     let (mut mu, mut nu) = match schedule.rule {
         StepRule::LevenbergMarquardt { damping, .. } => (damping, 2.0),

@@ -505,53 +505,131 @@ pub fn stop_name(stop: &StopReason) -> String {
     }
 }
 
+/// The true rollouts a candidate (an emulator, or the simulator at a coarser step) is scored
+/// against by [`rollout_errors`].
+#[derive(Debug, Clone)]
+pub struct RolloutReference {
+    spec: BuildSpec,
+    episodes: usize,
+    horizon: usize,
+    /// Start states, row-major (episode, variable).
+    starts: Vec<f64>,
+    /// Controls held over each super-step, row-major (episode, step, control).
+    controls: Vec<f64>,
+    /// True states at the end of each super-step, row-major (episode, step, variable).
+    truth: Vec<f64>,
+}
+
+impl RolloutReference {
+    /// Simulates the true rollouts of `spec`'s model: `episodes` start states drawn as for
+    /// training (a stream of its own), each run `horizon` super-steps under the training control
+    /// process, read at each super-step's start and held over it.
+    pub fn sample(spec: &BuildSpec, episodes: usize, horizon: usize) -> Result<Self, BuildError> {
+        let model = spec.net.model;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        let limits = model.control_limits();
+        let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 3));
+        let big_dt = spec.super_dt();
+        let mut sim = model.simulator();
+        let mut u = vec![0.0; m];
+        let mut starts = Vec::with_capacity(episodes * n);
+        let mut controls = Vec::with_capacity(episodes * horizon * m);
+        let mut truth = Vec::with_capacity(episodes * horizon * n);
+        for _ in 0..episodes {
+            let mut xs = model.start_state(&mut rng);
+            starts.extend_from_slice(&xs);
+            let signal = ControlSignal::sample(
+                model.control_process(),
+                &limits,
+                horizon as f64 * big_dt,
+                &mut rng,
+            );
+            for k in 0..horizon {
+                signal.at(k as f64 * big_dt, &mut u);
+                controls.extend_from_slice(&u);
+                for i in 0..spec.steps {
+                    sim.step(&mut xs, &u, spec.net.physical_dt);
+                    let step = k * spec.steps + i + 1;
+                    let t = step as f64 * spec.net.physical_dt;
+                    crate::physics::check_finite(model.name(), step, t, &xs)?;
+                }
+                truth.extend_from_slice(&xs);
+            }
+        }
+        Ok(Self {
+            spec: spec.clone(),
+            episodes,
+            horizon,
+            starts,
+            controls,
+            truth,
+        })
+    }
+
+    /// Per super-step error of a candidate that advances a state by one super-step under a
+    /// control (`advance(x, u)`, in place).
+    pub fn errors(&self, mut advance: impl FnMut(&mut [f64], &[f64])) -> Vec<f64> {
+        let model = self.spec.net.model;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        let mut guess = Vec::with_capacity(self.truth.len());
+        let mut x = vec![0.0; n];
+        for e in 0..self.episodes {
+            x.copy_from_slice(&self.starts[e * n..(e + 1) * n]);
+            for k in 0..self.horizon {
+                let r = (e * self.horizon + k) * m;
+                advance(&mut x, &self.controls[r..r + m]);
+                guess.extend_from_slice(&x);
+            }
+        }
+        rollout_errors(&self.truth, &guess, self.episodes, self.horizon, n)
+    }
+
+    /// Mean over the super-steps of [`Self::errors`]; a candidate that blew up (NaN) scores +∞.
+    pub fn mean_error(&self, advance: impl FnMut(&mut [f64], &[f64])) -> f64 {
+        let e = self.errors(advance);
+        let mean = e.iter().sum::<f64>() / e.len().max(1) as f64;
+        if mean.is_nan() {
+            f64::INFINITY
+        } else {
+            mean
+        }
+    }
+
+    /// The spec whose model and steps it simulates.
+    pub fn spec(&self) -> &BuildSpec {
+        &self.spec
+    }
+
+    /// Mean error of the emulator (one prediction per super-step).
+    pub fn emulator_error(&self, emulator: &Emulator) -> f64 {
+        let mut scratch = emulator.scratch();
+        let mut next = vec![0.0; emulator.state_dim()];
+        self.mean_error(|x, u| {
+            emulator.predict(x, u, &mut scratch, &mut next);
+            x.copy_from_slice(&next);
+        })
+    }
+}
+
 /// Multi-step fidelity of a trained emulator of `spec` (what control learning needs, §6): from
 /// `episodes` start states drawn as for training (a stream of its own), the emulator and the
 /// simulator run `horizon` super-steps side by side under the same controls — the training
-/// control process, read at each super-step's start and held over it. Returns, for k = 1 …
-/// `horizon`, the mean over episodes and state variables of ((ŝ_k − s_k)/σ)², σ the spread of
-/// that variable over the simulated states (the emulator never sees the simulator's state
-/// after the start). Deterministic for a given spec.
+/// control process, read at each super-step's start and held over it ([`RolloutReference`]).
+/// Returns, for k = 1 … `horizon`, the mean over episodes and state variables of
+/// ((ŝ_k − s_k)/σ)², σ the spread of that variable over the simulated states (the emulator
+/// never sees the simulator's state after the start). Deterministic for a given spec.
 pub fn rollout_error(
     emulator: &Emulator,
     spec: &BuildSpec,
     episodes: usize,
     horizon: usize,
 ) -> Result<Vec<f64>, BuildError> {
-    let model = spec.net.model;
-    let (n, m) = (model.state_dim(), model.control_dim());
-    let limits = model.control_limits();
-    let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 3));
-    let big_dt = spec.super_dt();
-    let mut sim = model.simulator();
-    let (mut scratch, mut next, mut u) = (emulator.scratch(), vec![0.0; n], vec![0.0; m]);
-    // Simulated and emulated states per episode and step, row-major (episode, step, variable).
-    let mut truth = Vec::with_capacity(episodes * horizon * n);
-    let mut guess = Vec::with_capacity(episodes * horizon * n);
-    for _ in 0..episodes {
-        let x0 = model.start_state(&mut rng);
-        let signal = ControlSignal::sample(
-            model.control_process(),
-            &limits,
-            horizon as f64 * big_dt,
-            &mut rng,
-        );
-        let (mut xs, mut xe) = (x0.clone(), x0);
-        for k in 0..horizon {
-            signal.at(k as f64 * big_dt, &mut u);
-            for i in 0..spec.steps {
-                sim.step(&mut xs, &u, spec.net.physical_dt);
-                let step = k * spec.steps + i + 1;
-                let t = step as f64 * spec.net.physical_dt;
-                crate::physics::check_finite(model.name(), step, t, &xs)?;
-            }
-            emulator.predict(&xe, &u, &mut scratch, &mut next);
-            xe.copy_from_slice(&next);
-            truth.extend_from_slice(&xs);
-            guess.extend_from_slice(&xe);
-        }
-    }
-    Ok(rollout_errors(&truth, &guess, episodes, horizon, n))
+    let reference = RolloutReference::sample(spec, episodes, horizon)?;
+    let (mut scratch, mut next) = (emulator.scratch(), vec![0.0; spec.net.model.state_dim()]);
+    Ok(reference.errors(|x, u| {
+        emulator.predict(x, u, &mut scratch, &mut next);
+        x.copy_from_slice(&next);
+    }))
 }
 
 /// Per step k = 1 … `horizon`, the mean over `episodes` and the `n` variables of

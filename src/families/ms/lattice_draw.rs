@@ -323,9 +323,6 @@ fn render_panels<DB: DrawingBackend>(
             floor_extent(pts.iter().copied())
         };
         draw_floor(&area, &view, ext)?;
-        if bar {
-            draw_scale_bar(&area, &view, ext)?;
-        }
         if let Some(g) = &p.ghost {
             draw_lattice(&area, &view, g, springs, GHOST, false, &[])?;
         }
@@ -338,6 +335,10 @@ fn render_panels<DB: DrawingBackend>(
             true,
             &scene.marked,
         )?;
+        // The bar and its label on top of the lattice, so that neither hides them.
+        if bar {
+            draw_scale_bar(&area, &view, ext)?;
+        }
         if p.trail.len() > 1 {
             area.draw(&PathElement::new(
                 p.trail.iter().map(|q| view.pixel(*q)).collect::<Vec<_>>(),
@@ -468,9 +469,6 @@ pub fn write_gif(
             ))
             .map_err(|e| perr(&gif, e.to_string()))?;
             draw_floor(&body, &view, extent).map_err(|e| perr(&gif, e))?;
-            if scene.scale_bar {
-                draw_scale_bar(&body, &view, extent).map_err(|e| perr(&gif, e))?;
-            }
             if let Some(key) = &scene.caption {
                 root.draw(&Text::new(
                     key.clone(),
@@ -492,6 +490,9 @@ pub fn write_gif(
             }
             draw_lattice(&body, &view, pos, springs, LATTICE, true, &scene.marked)
                 .map_err(|e| perr(&gif, e))?;
+            if scene.scale_bar {
+                draw_scale_bar(&body, &view, extent).map_err(|e| perr(&gif, e))?;
+            }
             root.present().map_err(|e| perr(&gif, e.to_string()))?;
         }
     }

@@ -10,121 +10,22 @@
 //! variable's spread over the true states; then the mean over the `horizon` steps. A candidate
 //! is the emulator (one prediction per super-step) or the same simulator at a coarser step
 //! Δt / j (j steps per super-step, j = 1 … n; j = n is the truth itself, error 0).
+//! The true rollouts are [`RolloutReference`]'s, the same that score the emulator in
+//! `rollout_error`; this module adds the simulator at a coarser step as a candidate.
 //! [`match_substeps`] finds the smallest j, i.e. the largest physical step, whose error is at
 //! most the emulator's.
 
-use crate::emulator::catalog::{rollout_errors, BuildError, BuildSpec};
-use crate::emulator::dataset::ControlSignal;
-use crate::emulator::Emulator;
-use crate::physics::Dynamics;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
+use crate::emulator::catalog::RolloutReference;
 
-/// The true rollouts a candidate is scored against.
-#[derive(Debug, Clone)]
-pub struct Reference {
-    spec: BuildSpec,
-    episodes: usize,
-    horizon: usize,
-    /// Start states, row-major (episode, variable).
-    starts: Vec<f64>,
-    /// Controls held over each super-step, row-major (episode, step, control).
-    controls: Vec<f64>,
-    /// True states at the end of each super-step, row-major (episode, step, variable).
-    truth: Vec<f64>,
-}
-
-impl Reference {
-    /// Simulates the true rollouts of `spec`'s model (the episodes of
-    /// [`crate::emulator::catalog::rollout_error`]: same stream, starts and controls).
-    pub fn sample(spec: &BuildSpec, episodes: usize, horizon: usize) -> Result<Self, BuildError> {
-        let model = spec.net.model;
-        let (n, m) = (model.state_dim(), model.control_dim());
-        let limits = model.control_limits();
-        let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 3));
-        let big_dt = spec.super_dt();
-        let mut sim = model.simulator();
-        let mut u = vec![0.0; m];
-        let mut starts = Vec::with_capacity(episodes * n);
-        let mut controls = Vec::with_capacity(episodes * horizon * m);
-        let mut truth = Vec::with_capacity(episodes * horizon * n);
-        for _ in 0..episodes {
-            let mut xs = model.start_state(&mut rng);
-            starts.extend_from_slice(&xs);
-            let signal = ControlSignal::sample(
-                model.control_process(),
-                &limits,
-                horizon as f64 * big_dt,
-                &mut rng,
-            );
-            for k in 0..horizon {
-                signal.at(k as f64 * big_dt, &mut u);
-                controls.extend_from_slice(&u);
-                for i in 0..spec.steps {
-                    sim.step(&mut xs, &u, spec.net.physical_dt);
-                    let step = k * spec.steps + i + 1;
-                    let t = step as f64 * spec.net.physical_dt;
-                    crate::physics::check_finite(model.name(), step, t, &xs)?;
-                }
-                truth.extend_from_slice(&xs);
-            }
-        }
-        Ok(Self {
-            spec: spec.clone(),
-            episodes,
-            horizon,
-            starts,
-            controls,
-            truth,
-        })
-    }
-
-    /// Per super-step error of a candidate that advances a state by one super-step under a
-    /// control (`advance(x, u)`, in place).
-    pub fn errors(&self, mut advance: impl FnMut(&mut [f64], &[f64])) -> Vec<f64> {
-        let model = self.spec.net.model;
-        let (n, m) = (model.state_dim(), model.control_dim());
-        let mut guess = Vec::with_capacity(self.truth.len());
-        let mut x = vec![0.0; n];
-        for e in 0..self.episodes {
-            x.copy_from_slice(&self.starts[e * n..(e + 1) * n]);
-            for k in 0..self.horizon {
-                let r = (e * self.horizon + k) * m;
-                advance(&mut x, &self.controls[r..r + m]);
-                guess.extend_from_slice(&x);
-            }
-        }
-        rollout_errors(&self.truth, &guess, self.episodes, self.horizon, n)
-    }
-
-    /// Mean over the super-steps of [`Self::errors`]; a candidate that blew up (NaN) scores +∞.
-    pub fn mean_error(&self, advance: impl FnMut(&mut [f64], &[f64])) -> f64 {
-        let e = self.errors(advance);
-        let mean = e.iter().sum::<f64>() / e.len().max(1) as f64;
-        if mean.is_nan() {
-            f64::INFINITY
-        } else {
-            mean
-        }
-    }
-
-    /// Mean error of the emulator (one prediction per super-step).
-    pub fn emulator_error(&self, emulator: &Emulator) -> f64 {
-        let mut scratch = emulator.scratch();
-        let mut next = vec![0.0; emulator.state_dim()];
-        self.mean_error(|x, u| {
-            emulator.predict(x, u, &mut scratch, &mut next);
-            x.copy_from_slice(&next);
-        })
-    }
-
+impl RolloutReference {
     /// Mean error of the simulator at step Δt / `substeps`.
     pub fn physical_error(&self, substeps: usize) -> f64 {
-        let mut sim = self.spec.net.model.simulator();
-        let dt = if substeps == self.spec.steps {
-            self.spec.net.physical_dt
+        let spec = self.spec();
+        let mut sim = spec.net.model.simulator();
+        let dt = if substeps == spec.steps {
+            spec.net.physical_dt
         } else {
-            self.spec.super_dt() / substeps as f64
+            spec.super_dt() / substeps as f64
         };
         self.mean_error(|x, u| {
             // A blown-up state stays NaN (some models cannot step a non-finite state).
@@ -176,7 +77,7 @@ pub fn match_substeps(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emulator::catalog::{rollout_error, train_emulator, NetModel, NetSpec};
+    use crate::emulator::catalog::{rollout_error, train_emulator, BuildSpec, NetModel, NetSpec};
 
     fn spec(steps: usize) -> BuildSpec {
         let net: NetSpec = serde_json::from_value(serde_json::json!({
@@ -202,7 +103,7 @@ mod tests {
     fn emulator_error_is_table1s_rollout_error() {
         let s = spec(25);
         let trained = train_emulator(&s).unwrap();
-        let reference = Reference::sample(&s, 3, 8).unwrap();
+        let reference = RolloutReference::sample(&s, 3, 8).unwrap();
         let ours = reference.errors(|x, u| {
             let mut scratch = trained.emulator.scratch();
             let mut next = vec![0.0; x.len()];
@@ -217,7 +118,7 @@ mod tests {
     #[test]
     fn search_brackets_the_target_on_the_pendulum() {
         let s = spec(25);
-        let reference = Reference::sample(&s, 4, 10).unwrap();
+        let reference = RolloutReference::sample(&s, 4, 10).unwrap();
         // The truth itself scores 0; coarser RK4 steps score more, falling with j (order 4).
         assert_eq!(reference.physical_error(25), 0.0);
         let errs: Vec<f64> = (1..=5).map(|j| reference.physical_error(j)).collect();

@@ -29,11 +29,12 @@
 //! speedup). Timings (`physical_s`, `emulator_s`, `speedup`, `*_step_s`, `step_cost_ratio`)
 //! vary run to run; every other column is bit-reproducible.
 
-use super::equal_accuracy::{match_substeps, Reference};
+use super::equal_accuracy::match_substeps;
 use super::table1_structure::{
     build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
     DolphinNets, ROLLOUT_EPISODES, ROLLOUT_STEPS,
 };
+use crate::emulator::catalog::RolloutReference;
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy::{self, BoundRegularizer, DolphinEmulator, Regularizer, Schedule};
@@ -407,7 +408,7 @@ impl Job for Params {
                 // Equal accuracy: the largest step Δt / j as accurate as the emulator.
                 let reference = ctx
                     .stage(&format!("reference rollouts {} N{n}", model.name()), || {
-                        Reference::sample(&spec, ROLLOUT_EPISODES, ROLLOUT_STEPS)
+                        RolloutReference::sample(&spec, ROLLOUT_EPISODES, ROLLOUT_STEPS)
                     })
                     .map_err(other)?;
                 let emulator_error = reference.emulator_error(&trained.emulator);
