@@ -352,3 +352,35 @@ fn reproduce_with_seeds_reports_each_seed_and_the_spread() {
     );
     assert!(report.contains("values vary with the seed"), "{report}");
 }
+
+#[test]
+fn the_shipped_sweep_example_runs_and_plots_its_seeds() {
+    let d = tempfile::tempdir().unwrap();
+    let file = root().join("experiments/sweeps/ms_spider_leap_regimes.toml");
+    ok(&motionlab(
+        d.path(),
+        &[
+            "run",
+            file.to_str().unwrap(),
+            "--quick",
+            "--jobs",
+            "2",
+            "--out",
+            "o",
+            "--figures",
+            "f",
+        ],
+    ));
+    let out = d.path().join("o/ms_spider_leap_regimes");
+    // The swept parameter the summary already carries is not duplicated.
+    let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    let head = summary.lines().next().unwrap();
+    assert!(head.starts_with("seed,motion,lattice,regimes,"), "{head}");
+    assert_eq!(summary.lines().count() - 1, 9, "3 regime counts x 3 seeds");
+    let spread = std::fs::read_to_string(out.join("seed_summary.csv")).unwrap();
+    assert!(spread.contains("regimes=6\",best_objective,3,"), "{spread}");
+    assert!(d
+        .path()
+        .join("f/ms_spider_leap_regimes_seeds.png")
+        .is_file());
+}

@@ -86,6 +86,10 @@ pub trait Experiment: Sync {
     fn is_check(&self) -> bool {
         false
     }
+    /// Results plotted over seeds (mean and spread) in `<id>_seeds` when seeds are swept.
+    fn seed_metrics(&self) -> &'static [seeds::SeedMetric] {
+        &[]
+    }
 }
 
 /// What a family file implements: its name, its typed parameters (which run as the [`Job`])
@@ -101,11 +105,18 @@ pub trait Family: Sync {
     fn report(&self, dir: &Path) -> Result<report::Findings, Error>;
     /// Whether this family checks our implementation rather than reproducing a paper's claim.
     const CHECK: bool = false;
+    /// Results plotted over seeds (mean and spread) in the `<id>_seeds` figure when seeds are
+    /// swept (`--seeds K` or a `seeds` sweep axis); none by default.
+    const SEED_METRICS: &'static [seeds::SeedMetric] = &[];
 }
 
 impl<F: Family> Experiment for F {
     fn is_check(&self) -> bool {
         F::CHECK
+    }
+
+    fn seed_metrics(&self) -> &'static [seeds::SeedMetric] {
+        F::SEED_METRICS
     }
 
     fn kind(&self) -> &'static str {

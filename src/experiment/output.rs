@@ -112,6 +112,17 @@ impl ColumnData {
             ColumnData::S(_) => "string",
         }
     }
+    /// Whether row `i` holds the value `c` (integers and floats compare as numbers).
+    fn cell_matches(&self, i: usize, c: &Cell) -> bool {
+        match (self, c) {
+            (ColumnData::S(v), Cell::S(x)) => v[i] == *x,
+            (ColumnData::F(v), Cell::F(x)) => v[i] == *x,
+            (ColumnData::I(v), Cell::I(x)) => v[i] == *x,
+            (ColumnData::F(v), Cell::I(x)) => v[i] == *x as f64,
+            (ColumnData::I(v), Cell::F(x)) => v[i] as f64 == *x,
+            _ => false,
+        }
+    }
     fn repeat(c: &Cell, n: usize) -> Self {
         match c {
             Cell::F(x) => ColumnData::F(vec![*x; n]),
@@ -209,15 +220,23 @@ impl Table {
         }
     }
 
-    /// This table with constant columns prepended (the sweep values of its point).
+    /// This table with constant columns prepended (the sweep values of its point). A table that
+    /// already has a column of that name holding that value in every row (a swept parameter the
+    /// job also writes, e.g. `regimes` in a summary) keeps its own column alone; one whose column
+    /// of that name holds other values gets the prefix as `sweep_<name>`.
     pub fn with_prefix(&self, prefix: &[(String, Cell)]) -> Table {
         let n = self.len();
-        let mut names: Vec<String> = prefix.iter().map(|(k, _)| k.clone()).collect();
+        let (mut names, mut columns) = (Vec::new(), Vec::new());
+        for (k, c) in prefix {
+            let name = match self.column(k) {
+                None => k.clone(),
+                Some(own) if (0..n).all(|i| own.cell_matches(i, c)) => continue,
+                Some(_) => format!("sweep_{k}"),
+            };
+            names.push(name);
+            columns.push(ColumnData::repeat(c, n));
+        }
         names.extend(self.names.iter().cloned());
-        let mut columns: Vec<ColumnData> = prefix
-            .iter()
-            .map(|(_, c)| ColumnData::repeat(c, n))
-            .collect();
         columns.extend(self.columns.iter().cloned());
         Table { names, columns }
     }
@@ -466,5 +485,21 @@ mod tests {
         all.append(&p).unwrap();
         assert_eq!(all.len(), 2);
         assert_eq!(all.f64s("dt"), vec![0.1, 0.1]);
+    }
+
+    #[test]
+    fn prefix_of_a_column_the_table_has() {
+        let mut a = Table::new(&["regimes", "x"]);
+        a.push(row![4i64, 1.0]);
+        a.push(row![4i64, 2.0]);
+        // The same value: the table's own column stands for the sweep axis.
+        let same = a.with_prefix(&[("regimes".into(), Cell::I(4))]);
+        assert_eq!(same.names(), &["regimes", "x"]);
+        let same_f = a.with_prefix(&[("regimes".into(), Cell::F(4.0))]);
+        assert_eq!(same_f.names(), &["regimes", "x"]);
+        // Another value: the sweep value gets its own column, no duplicate name.
+        let other = a.with_prefix(&[("seed".into(), Cell::I(1)), ("regimes".into(), Cell::I(6))]);
+        assert_eq!(other.names(), &["seed", "sweep_regimes", "regimes", "x"]);
+        assert_eq!(other.f64s("sweep_regimes"), vec![6.0, 6.0]);
     }
 }

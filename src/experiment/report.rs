@@ -16,6 +16,10 @@ pub enum Verdict {
     Partly,
     /// It did not reproduce.
     NotHeld,
+    /// The condition the paper's claim rests on (e.g. "both trackers fail from these starts")
+    /// does not hold in our setup, so the experiment cannot test the claim; each family states
+    /// its premise in its spec.
+    PremiseNotReproduced,
     /// Nothing to judge (e.g. an illustration).
     NotAssessed,
 }
@@ -27,6 +31,7 @@ impl Verdict {
             Verdict::Held => "held",
             Verdict::Partly => "partly held",
             Verdict::NotHeld => "did not hold",
+            Verdict::PremiseNotReproduced => "premise not reproduced",
             Verdict::NotAssessed => "not assessed",
         }
     }
@@ -256,16 +261,27 @@ fn summary(rows: &[(String, String, bool)]) -> String {
     let count = |label: &str| repro.iter().filter(|r| r.1 == label).count();
     let _ = writeln!(
         md,
-        "**{} of {} reproduced claims held, {} partly, {} did not hold{}.** \
+        "**{} of {} reproduced claims held, {} partly, {} did not hold{}{}.** \
          *Held*: every condition of the section's rule passed; *partly held*: its weaker rule \
-         passed (some conditions, each section says which); *did not hold*: neither. Each rule \
+         passed (some conditions, each section says which); *did not hold*: neither; *premise not \
+         reproduced*: the condition the claim rests on (stated in the section) does not hold in \
+         our setup, so the claim is untested. Each rule \
          and its thresholds (ours where the paper gives none) are fixed in the experiment's spec \
          before the run. \"(stale)\" marks results made by older code than the tree's.\n",
         count("held"),
         repro.len(),
         count("partly held"),
         count("did not hold"),
-        match repro.len() - count("held") - count("partly held") - count("did not hold") {
+        match count("premise not reproduced") {
+            0 => String::new(),
+            n => format!(", {n} premise not reproduced"),
+        },
+        match repro.len()
+            - count("held")
+            - count("partly held")
+            - count("did not hold")
+            - count("premise not reproduced")
+        {
             0 => String::new(),
             n => format!(", {n} not assessed or not run"),
         }
@@ -465,6 +481,14 @@ mod tests {
         let checks = md.find("### Implementation checks").unwrap();
         assert!(md.find("`d`").unwrap() > checks);
         assert!(md.find("`c`").unwrap() < checks);
+        let md = summary(&[
+            row("a", "held", false),
+            row("e", Verdict::PremiseNotReproduced.label(), false),
+        ]);
+        assert!(
+            md.contains("**1 of 2 reproduced claims held, 0 partly, 0 did not hold, 1 premise not reproduced.**"),
+            "{md}"
+        );
     }
 
     /// A history a ← b ← c (c newest): `contains(x, y)` when x is y or older.

@@ -288,6 +288,11 @@ fn finish(
     let tables = Tables(merged);
     // With swept seeds, figures (like the report) show the first seed.
     let mut figure_tables = None;
+    let axes: Vec<String> = res.points[0]
+        .values
+        .iter()
+        .map(|(k, _)| k.clone())
+        .collect();
     ctx.stage("write tables", || -> Result<(), Error> {
         for (name, t) in &tables.0 {
             files.extend(write_table(&dir, name, t)?);
@@ -301,11 +306,6 @@ fn finish(
                 }
                 figure_tables.get_or_insert(one);
             }
-            let axes: Vec<String> = res.points[0]
-                .values
-                .iter()
-                .map(|(k, _)| k.clone())
-                .collect();
             let summary = seeds::seed_summary(&tables, seeds, &axes);
             files.extend(write_table(&dir, seeds::SUMMARY, &summary)?);
         }
@@ -322,6 +322,12 @@ fn finish(
         })
     })?;
     files.extend(figs);
+    if res.seeds.is_some() {
+        let metrics = res.family.seed_metrics();
+        if let Some(fig) = seeds::seed_figure(&tables, &axes, metrics) {
+            files.extend(ctx.stage("seed figure", || sink.draw("seeds", &fig))?);
+        }
+    }
     let seconds = t0.elapsed().as_secs_f64();
     let stages: serde_json::Map<String, serde_json::Value> = ctx
         .stages()

@@ -15,6 +15,7 @@
 //!   finite (`std`: sample standard deviation, NaN below two seeds).
 
 use super::output::{df_f64, df_str, read_csv, Cell, ColumnData, Table, Tables};
+use super::plot::{Figure, Mark, Panel, Series};
 use super::report::sig;
 use super::Error;
 use std::fmt::Write as _;
@@ -143,6 +144,126 @@ pub fn seed_summary(tables: &Tables, seeds: &[u64], axes: &[String]) -> Table {
     out
 }
 
+/// A result a family plots over seeds in its `<id>_seeds` figure: `column` of `table`, in the rows
+/// whose string column `row.0` equals `row.1` when `row` is set (one row per seed and sweep point).
+#[derive(Debug, Clone, Copy)]
+pub struct SeedMetric {
+    /// Result table.
+    pub table: &'static str,
+    /// Numeric column.
+    pub column: &'static str,
+    /// Row selector (key column, value) for tables with one row per quantity.
+    pub row: Option<(&'static str, &'static str)>,
+    /// Axis description with unit.
+    pub label: &'static str,
+}
+
+/// The seeds figure: one panel per metric, the sweep points along x (one category when there is
+/// no sweep), every seed's value as a dot, and the mean with a ±1 sample standard deviation bar
+/// and the min–max range beside it. `tables` hold every seed (a leading `seed` column); `axes`
+/// are the sweep axes. `None` when no metric has values.
+pub fn seed_figure(tables: &Tables, axes: &[String], metrics: &[SeedMetric]) -> Option<Figure> {
+    let mut panels = Vec::new();
+    for m in metrics {
+        let Some(t) = tables.get(m.table) else {
+            continue;
+        };
+        let Some(ColumnData::I(seed_col)) = t.column("seed") else {
+            continue;
+        };
+        let values = t.f64s(m.column);
+        if values.is_empty() {
+            continue;
+        }
+        let key = m.row.map(|(k, _)| t.strs(k));
+        let cols: Vec<(&String, &ColumnData)> = t
+            .names()
+            .iter()
+            .zip(t.columns())
+            .filter(|(n, _)| axes.contains(n))
+            .collect();
+        // Sweep points in order of first appearance (units run seed-major).
+        let mut points: Vec<(String, Vec<(i64, f64)>)> = Vec::new();
+        for i in 0..t.len() {
+            if let (Some(k), Some((_, want))) = (&key, m.row) {
+                if k.get(i).map(String::as_str) != Some(want) {
+                    continue;
+                }
+            }
+            let label = cols
+                .iter()
+                .map(|(n, c)| format!("{n}={}", cell_text(c, i)))
+                .collect::<Vec<_>>()
+                .join(", ");
+            let label = if label.is_empty() {
+                "all".to_string()
+            } else {
+                label
+            };
+            match points.iter_mut().find(|(l, _)| *l == label) {
+                Some((_, v)) => v.push((seed_col[i], values[i])),
+                None => points.push((label, vec![(seed_col[i], values[i])])),
+            }
+        }
+        if points.is_empty() {
+            continue;
+        }
+        let mut dots = Vec::new();
+        let (mut means, mut bars, mut ranges) = (Vec::new(), Vec::new(), Vec::new());
+        for (x, (_, v)) in points.iter().enumerate() {
+            let n = v.len().max(2) as f64;
+            for (j, &(_, y)) in v.iter().enumerate() {
+                // Seeds spread a little to the left of the point so equal values stay visible.
+                dots.push((x as f64 - 0.25 + 0.15 * j as f64 / (n - 1.0), y));
+            }
+            let ys: Vec<f64> = v.iter().map(|p| p.1).collect();
+            let (k, mean, std, min, max) = stats(&ys);
+            if k == 0 {
+                continue;
+            }
+            means.push((x as f64 + 0.1, mean));
+            if std.is_finite() {
+                bars.push(vec![
+                    (x as f64 + 0.1, mean - std),
+                    (x as f64 + 0.1, mean + std),
+                ]);
+            }
+            ranges.push(vec![(x as f64 + 0.2, min), (x as f64 + 0.2, max)]);
+        }
+        let mut series = vec![
+            Series::line("each seed", dots, 0).mark(Mark::Points),
+            Series::line("mean", means, 1).mark(Mark::Points),
+        ];
+        for (i, b) in bars.into_iter().enumerate() {
+            let label = if i == 0 { "mean ± 1 std" } else { "" };
+            series.push(Series::line(label, b, 1));
+        }
+        for (i, r) in ranges.into_iter().enumerate() {
+            let label = if i == 0 { "min to max" } else { "" };
+            series.push(Series::line(label, r, 2).mark(Mark::Dashed));
+        }
+        let seeds = points.iter().map(|(_, v)| v.len()).max().unwrap_or(0);
+        panels.push(Panel {
+            title: format!("{} over {seeds} seeds", m.label),
+            x_label: if axes.is_empty() {
+                "sweep point".into()
+            } else {
+                format!("sweep point ({})", axes.join(", "))
+            },
+            y_label: m.label.to_string(),
+            x_range: Some((-0.5, points.len() as f64 - 0.5)),
+            x_categories: points.into_iter().map(|(l, _)| l).collect(),
+            series,
+            ..Default::default()
+        });
+    }
+    if panels.is_empty() {
+        return None;
+    }
+    let columns = panels.len().min(2);
+    Some(Figure::grid(panels, columns))
+}
+
 /// Lines of `seed_summary.csv` shown in the report (the rest stay in the file).
 pub const REPORT_ROWS: usize = 30;
 
@@ -232,6 +353,47 @@ mod tests {
         let t6 = one.get("final").unwrap();
         assert_eq!(t6.names()[0], "scale");
         assert_eq!(t6.f64s("error"), vec![3.0, 20.0]);
+    }
+
+    #[test]
+    fn seed_figure_has_a_category_per_sweep_point_and_a_dot_per_seed() {
+        let mut t = Table::new(&["seed", "regimes", "measure", "value"]);
+        for s in [3i64, 4] {
+            for r in [2i64, 4, 6] {
+                t.push(row![s, r, "distance", (s * r) as f64]);
+                t.push(row![s, r, "other", -1.0]);
+            }
+        }
+        let tables = Tables::from([("measures", t)]);
+        let metric = SeedMetric {
+            table: "measures",
+            column: "value",
+            row: Some(("measure", "distance")),
+            label: "distance (m)",
+        };
+        let missing = SeedMetric {
+            table: "absent",
+            ..metric
+        };
+        let fig = seed_figure(&tables, &["regimes".to_string()], &[metric, missing]).unwrap();
+        assert_eq!(
+            fig.panels.len(),
+            1,
+            "a metric without a table draws nothing"
+        );
+        let p = &fig.panels[0];
+        assert_eq!(p.x_categories, ["regimes=2", "regimes=4", "regimes=6"]);
+        let dots = &p.series[0].points;
+        assert_eq!(
+            dots.len(),
+            6,
+            "one dot per seed and point, the other rows left out"
+        );
+        assert!(dots.iter().all(|&(x, _)| x > -0.5 && x < 2.5));
+        // Means at each point: (3r + 4r) / 2.
+        let means: Vec<f64> = p.series[1].points.iter().map(|q| q.1).collect();
+        assert_eq!(means, vec![7.0, 14.0, 21.0]);
+        assert!(seed_figure(&tables, &[], &[missing]).is_none());
     }
 
     #[test]

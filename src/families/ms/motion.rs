@@ -13,6 +13,7 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::Figure;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::seeds::SeedMetric;
 use crate::experiment::{Error, Family};
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -61,6 +62,20 @@ fn com(p: &[[f64; 3]]) -> [f64; 3] {
 impl Family for MsMotion {
     const KIND: &'static str = "ms_motion";
     type Params = MotionJob;
+    const SEED_METRICS: &'static [SeedMetric] = &[
+        SeedMetric {
+            table: "summary",
+            column: "best_objective",
+            row: None,
+            label: "objective J after hill climbing",
+        },
+        SeedMetric {
+            table: "summary",
+            column: "initial_best",
+            row: None,
+            label: "J of the best random controller",
+        },
+    ];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let springs = springs_of(tables.require("springs")?, None);
