@@ -781,7 +781,7 @@ impl Family for XLbcEmulator {
             sig(mean(&errs("bptt_tracked"))),
         ));
         md.push_str(
-            "\nThe error is an RMS over all 13 state variables, so it dilutes a miss along the axis (a landing 3 m off the desired x alone gives 0.83): the mean distance |x_M − d| (m) from the desired x on the simulator over the in-between targets, per method:\n\n| method | mean |x_M − d| (m) | mean final error |\n| --- | --- | --- |\n",
+            "\nThe error is an RMS over all 13 state variables, so it dilutes a miss along the axis (a landing 3 m off the desired x alone gives 0.83): the mean distance of the final x from the desired x (m) on the simulator over the in-between targets, per method:\n\n| method | mean distance to the desired x (m) | mean final error |\n| --- | --- | --- |\n",
         );
         for mm in METHODS {
             md.push_str(&format!(
