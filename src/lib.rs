@@ -30,7 +30,9 @@
 //! - [`control`]: optimal control on the RK4-discretized dynamics of any
 //!   [`physics::linearize::Linearize`] model — [`control::ddp`] (iLQR and full second-order
 //!   DDP with regularization, line search and box bounds) and [`control::lqr`] (time-varying
-//!   LQR tracking with the quadratic value function of linear Bellman combination, eq. 12);
+//!   LQR tracking with the quadratic value function of linear Bellman combination, eq. 12) and
+//!   [`control::step_tracker`] (the same tracker along a tape learned through an emulator,
+//!   from the emulator's exact Jacobians);
 //!   NeuroAnimator control learning: [`control::objective`] (composable objective terms with
 //!   gradients) and [`control::bptt`] (backpropagation through time through any differentiable
 //!   step — an emulator or a simulator's RK4 step; plain and momentum descent on bounded
@@ -42,7 +44,9 @@
 //! - [`bellman`]: linear Bellman combination; [`bellman::projection`] projects a desired
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
 //!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
-//!   solves 2-D problems on a grid (linearly-solvable and ordinary Bellman backups).
+//!   solves 2-D problems on a grid (linearly-solvable and ordinary Bellman backups);
+//!   [`bellman::tracker::ValueTracker`] is the value-function contract DDP/LQR and
+//!   emulator-derived trackers share.
 //! - [`experiment`]: the harness — experiments as data: TOML specs, validation with
 //!   file/line/key errors, sweeps, the runner (CSV + Parquet, atomic writes, `run.json`),
 //!   figures and `REPORT.md`; the [`experiment::Experiment`] / [`experiment::Job`] traits a
@@ -64,7 +68,8 @@
 //!     acrobot swing-up, the diver's interpolation and coordination (one file,
 //!     [`families::lbc::diver`]) and push recovery.
 //!   - [`families::beyond`]: beyond the papers — `physics_validation` (integrator energy drift
-//!     and convergence orders), and future `x_*` experiments.
+//!     and convergence orders) and `x_lbc_emulator` (linear Bellman combination of
+//!     controllers learned through a NeuroAnimator emulator).
 //! - [`bench`]: throughput of the hot loops (`motionlab bench`).
 //! - [`linalg`]: the one conversion point between ndarray and nalgebra types.
 //! - [`seed`]: deterministic seed splitting ([`seed::mix_seed`]), one random stream per job.
@@ -81,6 +86,7 @@
 //! | `diver`, `push_recovery` | [`physics::diver`], [`physics::push`] | planar articulated trees ([`physics::planar`]) |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
 //! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
+//! | LQR trackers of emulator tapes | [`control::step_tracker`], [`bellman::tracker`] | LBC §5.2 on NeuroAnimator BPTT tapes |
 //! | hierarchical dolphin emulator, regularization | [`emulator::hierarchy`] | NeuroAnimator §3.3, §5.3 |
 //! | BPTT control learning, plain / momentum descent | [`control::bptt`], [`control::objective`] | NeuroAnimator §4, eq. 11–15 |
 //! | simulated annealing, parallel hill climbing (any proposal operator), Nelder–Mead | [`control::search`] | NeuroAnimator §6 baselines; mass-spring Fig. 4, 6 |

@@ -576,3 +576,61 @@ fn quick_and_ad_hoc_runs_leave_the_committed_results_untouched() {
     let meta = std::fs::read_to_string(runs.join("results/lbc_projection/run.json")).unwrap();
     assert!(meta.contains("\"git_dirty\""), "{meta}");
 }
+
+#[test]
+fn x_lbc_emulator_quick_compares_every_method_on_both_substrates() {
+    let d = run_quick("x_lbc_emulator", "2");
+    let out = d.path().join("out/x_lbc_emulator");
+    assert_eq!(
+        header(&out.join("targets.csv")),
+        "desired_target,method,final_error_emulator,final_error_simulator,effort,seconds,weight1,weight2,final_axis_value,mean_entropy"
+    );
+    let t = std::fs::read_to_string(out.join("targets.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = t.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let methods = [
+        "lbc",
+        "naive",
+        "tracker1",
+        "tracker2",
+        "open_loop1",
+        "open_loop2",
+        "bptt",
+        "bptt_tracked",
+    ];
+    // quick: three desired targets, every method at each, finite errors on both substrates.
+    assert_eq!(rows.len(), 3 * methods.len());
+    for r in &rows {
+        assert!(methods.contains(&r[1]), "{r:?}");
+        for c in [2, 3, 4] {
+            assert!(r[c].parse::<f64>().unwrap().is_finite(), "{r:?}");
+        }
+    }
+    // At a component's own target (-3) the projected weights are (1, 0): LBC, the naive blend
+    // and tracker 1 are the same policy, so they land in the same state.
+    let at = |d: &str, m: &str| {
+        rows.iter()
+            .find(|r| r[0] == d && r[1] == m)
+            .unwrap()
+            .clone()
+    };
+    let (l, n, t1) = (
+        at("-3.0", "lbc"),
+        at("-3.0", "naive"),
+        at("-3.0", "tracker1"),
+    );
+    let f = |r: &Vec<&str>, c: usize| r[c].parse::<f64>().unwrap();
+    assert!(
+        (f(&l, 6) - 1.0).abs() < 1e-9 && f(&l, 7).abs() < 1e-9,
+        "{l:?}"
+    );
+    assert!((f(&l, 3) - f(&t1, 3)).abs() < 1e-9 && (f(&n, 3) - f(&t1, 3)).abs() < 1e-9);
+    // Strictly between the components both weights are positive.
+    let mid = at("0.0", "lbc");
+    assert!(f(&mid, 6) > 0.0 && f(&mid, 7) > 0.0, "{mid:?}");
+    for f in ["components.csv", "trajectory.csv", "goal.csv", "rule.csv"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let figs = d.path().join("figs");
+    assert!(figs.join("x_lbc_emulator_error.png").is_file());
+    assert!(figs.join("x_lbc_emulator_lbc.gif").is_file());
+}

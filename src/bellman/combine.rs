@@ -17,6 +17,8 @@
 //! - M. da Silva, F. Durand, J. Popović, *Linear Bellman Combination for Control of Character
 //!   Animation*, SIGGRAPH 2009, eq. 1, 11 and §5.2.
 
+use super::tracker::ValueTracker;
+
 /// Errors of the combination.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
@@ -215,12 +217,14 @@ pub enum BlendMode {
     Lbc,
 }
 
-/// A policy combining LQR tracking controllers (LBC §5.2):
-/// π(x, t) = Σ α_i(x, t) (ū_i(t) + K_i(t) Δx_i).
+/// A policy combining tracking controllers (LBC §5.2):
+/// π(x, t) = Σ α_i(x, t) π_i(x, t), e.g. π_i = ū_i(t) + K_i(t) Δx_i. The components are any
+/// [`ValueTracker`]s (DDP/LQR trackers, emulator-derived trackers, or a mix through
+/// `&dyn ValueTracker`); the blend asks only for their policies and values.
 #[derive(Debug, Clone)]
-pub struct TrackerBlend<'a> {
+pub struct TrackerBlend<'a, T = crate::control::lqr::TrackingController> {
     /// The component trackers (same state and control dimensions and horizon).
-    pub trackers: &'a [crate::control::lqr::TrackingController],
+    pub trackers: &'a [T],
     /// Fixed weights w.
     pub weights: Vec<f64>,
     /// Temperature λ of z = exp(−v/λ).
@@ -232,7 +236,7 @@ pub struct TrackerBlend<'a> {
     pub limits: Option<&'a [f64]>,
 }
 
-impl TrackerBlend<'_> {
+impl<T: ValueTracker> TrackerBlend<'_, T> {
     /// Writes the control at state `x`, step `k` into `u` (clamped to `limits`) and the blend
     /// weights into `alpha` (scratch `ui` of the control's length). Does not allocate.
     pub fn control(

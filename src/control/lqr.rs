@@ -133,7 +133,62 @@ pub fn track_with<M: Linearize>(
     us: &[DVector<f64>],
     model: ValueModel,
 ) -> Result<TrackingController, ControlError> {
-    let (n, m, horizon) = (map.state_dim(), map.control_dim(), us.len());
+    let (n, m) = (map.state_dim(), map.control_dim());
+    let mut ws = map.workspace();
+    let mut second = |x: &DVector<f64>, u: &DVector<f64>, h: f64, fzz: &mut [DMatrix<f64>]| {
+        map.second_derivatives(x, u, h, fzz, &mut ws)
+    };
+    let second: Option<&mut SecondDerivatives<'_>> = match model {
+        ValueModel::Lqr => None,
+        ValueModel::Ddp { .. } => Some(&mut second),
+    };
+    let mut ws = map.workspace();
+    riccati(
+        (n, m),
+        cost,
+        xs,
+        us,
+        model,
+        &mut |_, x, u, a, b| map.jacobians(x, u, a, b, &mut ws),
+        second,
+    )
+}
+
+/// The step Jacobians (A_k, B_k) of step `k` at (x̄_k, ū_k), written into `a` (n × n) and `b`
+/// (n × m): the source of the linearization the Riccati recursion follows.
+pub type StepJacobians<'a> =
+    dyn FnMut(usize, &DVector<f64>, &DVector<f64>, &mut DMatrix<f64>, &mut DMatrix<f64>) + 'a;
+
+/// Second derivatives F_zz of each state component at (x, u), by differences with relative step
+/// h, written into n matrices of size (n + m) × (n + m) (full DDP's value model only).
+pub type SecondDerivatives<'a> =
+    dyn FnMut(&DVector<f64>, &DVector<f64>, f64, &mut [DMatrix<f64>]) + 'a;
+
+/// The LQR tracker ([`ValueModel::Lqr`]) of the trajectory (`xs`: N + 1 states, `us`: N
+/// controls) of any discrete map of n states and m controls whose Jacobians (A_k, B_k) come
+/// from `jacobians` (e.g. those of a learned emulator, [`super::step_tracker`]): the same
+/// recursion as [`track`].
+pub fn track_linearized(
+    dims: (usize, usize),
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    jacobians: &mut StepJacobians<'_>,
+) -> Result<TrackingController, ControlError> {
+    riccati(dims, cost, xs, us, ValueModel::Lqr, jacobians, None)
+}
+
+/// The backward recursion of the module docs, for `dims` = (n, m).
+fn riccati(
+    (n, m): (usize, usize),
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    model: ValueModel,
+    jacobians: &mut StepJacobians<'_>,
+    mut second: Option<&mut SecondDerivatives<'_>>,
+) -> Result<TrackingController, ControlError> {
+    let horizon = us.len();
     if horizon == 0 {
         return Err(ControlError::EmptyHorizon);
     }
@@ -159,7 +214,6 @@ pub fn track_with<M: Linearize>(
     }
     cost.validate(n, m, horizon)?;
 
-    let mut ws = map.workspace();
     let (mut a, mut b) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
     let mut l = StageDerivatives::new(n, m);
     let mut fzz = match model {
@@ -176,7 +230,7 @@ pub fn track_with<M: Linearize>(
         value_ref[horizon] = cost.terminal(&xs[horizon]);
     }
     for k in (0..horizon).rev() {
-        map.jacobians(&xs[k], &us[k], &mut a, &mut b, &mut ws);
+        jacobians(k, &xs[k], &us[k], &mut a, &mut b);
         cost.running_derivatives(k, &xs[k], &us[k], &mut l);
         let (p1, hess1) = (&pv[k + 1], &pm[k + 1]);
         let qx = &l.lx + a.transpose() * p1;
@@ -185,8 +239,8 @@ pub fn track_with<M: Linearize>(
         let mut qxx = &l.lxx + a.transpose() * &pa;
         let mut quu = &l.luu + b.transpose() * hess1 * &b;
         let mut qux = b.transpose() * &pa;
-        if let ValueModel::Ddp { fd_step } = model {
-            map.second_derivatives(&xs[k], &us[k], fd_step, &mut fzz, &mut ws);
+        if let (ValueModel::Ddp { fd_step }, Some(second)) = (model, second.as_mut()) {
+            second(&xs[k], &us[k], fd_step, &mut fzz);
             for (c, h) in fzz.iter().enumerate() {
                 let w = p1[c];
                 qxx += h.view((0, 0), (n, n)) * w;

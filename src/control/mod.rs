@@ -22,7 +22,10 @@
 //! - [`ddp`]: differential dynamic programming, iLQR and full second-order, with
 //!   Levenberg–Marquardt regularization, line search and box control bounds.
 //! - [`lqr`]: time-varying LQR tracking of a given trajectory and its quadratic value function
-//!   (linear Bellman combination, eq. 12).
+//!   (linear Bellman combination, eq. 12), for an RK4 map or any source of step Jacobians;
+//!   [`step_tracker`]: the same tracker along a tape learned through an emulator, linearized by
+//!   the emulator's exact Jacobians (value functions for linear Bellman combination of BPTT
+//!   controllers).
 //!
 //! - [`objective`]: NeuroAnimator control-learning objectives (§4.2) as composable terms with
 //!   gradients; [`bptt`]: backpropagation through time through any
@@ -40,6 +43,7 @@ pub mod ddp;
 pub mod lqr;
 pub mod objective;
 pub mod search;
+pub mod step_tracker;
 
 mod cost;
 mod rk4;

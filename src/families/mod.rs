@@ -10,6 +10,7 @@
 //! | experiment id | family (`experiment = "…"`) | file |
 //! | --- | --- | --- |
 //! | `physics_validation` | `physics_validation` | [`beyond::physics_validation`] |
+//! | `x_lbc_emulator` | `x_lbc_emulator` | [`beyond::x_lbc_emulator`] |
 //! | `lbc_projection` | `lbc_projection` | [`lbc::projection`] |
 //! | `lbc_grid_optimality` | `lbc_grid_optimality` | [`lbc::grid_optimality`] |
 //! | `lbc_acrobot_swingup` | `lbc_acrobot_swingup` | [`lbc::acrobot_swingup`] |
@@ -61,6 +62,7 @@ static FAMILIES: &[&dyn Experiment] = &[
     &na::fig13_control::NaControl,
     &na::regularization::NaRegularization,
     &na::baselines_swim::NaBaselines,
+    &beyond::x_lbc_emulator::XLbcEmulator,
 ];
 
 /// All families.

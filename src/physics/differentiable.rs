@@ -114,3 +114,32 @@ impl Dynamics for LinearStep {
         x.copy_from_slice(&y);
     }
 }
+
+/// The full Jacobians A = ∂N/∂s (n × n) and B = ∂N/∂u (n × m) of a step at (s, u), row by
+/// row from n vector–Jacobian products with the unit adjoints e_r: row r of [A B] is
+/// e_rᵀ [∂N/∂s ∂N/∂u]. Exact wherever the step's VJP is (an emulator's passes through its
+/// transforms and network). `adjoint`, `s_bar` and `u_bar` are scratch of sizes n, n, m.
+#[allow(clippy::too_many_arguments)]
+pub fn jacobians<D: DifferentiableStep + ?Sized>(
+    step: &D,
+    s: &[f64],
+    u: &[f64],
+    scratch: &mut D::Scratch,
+    a: &mut nalgebra::DMatrix<f64>,
+    b: &mut nalgebra::DMatrix<f64>,
+    adjoint: &mut [f64],
+    (s_bar, u_bar): (&mut [f64], &mut [f64]),
+) {
+    adjoint.fill(0.0);
+    for r in 0..step.state_dim() {
+        adjoint[r] = 1.0;
+        step.vjp(s, u, adjoint, scratch, s_bar, u_bar);
+        adjoint[r] = 0.0;
+        for (c, v) in s_bar.iter().enumerate() {
+            a[(r, c)] = *v;
+        }
+        for (c, v) in u_bar.iter().enumerate() {
+            b[(r, c)] = *v;
+        }
+    }
+}
