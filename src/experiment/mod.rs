@@ -86,6 +86,11 @@ pub trait Experiment: Sync {
     fn is_check(&self) -> bool {
         false
     }
+    /// An experiment beyond the papers (its claim is ours, not a paper's): the report's summary
+    /// lists these apart and does not count them among the reproduced claims.
+    fn is_beyond(&self) -> bool {
+        false
+    }
     /// Results plotted over seeds (mean and spread) in `<id>_seeds` when seeds are swept.
     fn seed_metrics(&self) -> &'static [seeds::SeedMetric] {
         &[]
@@ -105,6 +110,8 @@ pub trait Family: Sync {
     fn report(&self, dir: &Path) -> Result<report::Findings, Error>;
     /// Whether this family checks our implementation rather than reproducing a paper's claim.
     const CHECK: bool = false;
+    /// Whether its claim is ours, beyond the papers (listed apart in the report's summary).
+    const BEYOND: bool = false;
     /// Results plotted over seeds (mean and spread) in the `<id>_seeds` figure when seeds are
     /// swept (`--seeds K` or a `seeds` sweep axis); none by default.
     const SEED_METRICS: &'static [seeds::SeedMetric] = &[];
@@ -117,6 +124,10 @@ impl<F: Family> Experiment for F {
 
     fn seed_metrics(&self) -> &'static [seeds::SeedMetric] {
         F::SEED_METRICS
+    }
+
+    fn is_beyond(&self) -> bool {
+        F::BEYOND
     }
 
     fn kind(&self) -> &'static str {

@@ -122,7 +122,7 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         env!("CARGO_PKG_VERSION")
     );
     // Summary rows, reproductions and implementation checks apart: (row, verdict, is check).
-    let mut rows: Vec<(String, String, bool)> = Vec::new();
+    let mut rows: Vec<(String, String, Group)> = Vec::new();
     let mut sections = String::new();
     let code_rev = code_revision();
     for r in specs {
@@ -171,7 +171,13 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
                 headline.replace('|', "\\|")
             ),
             verdict,
-            r.family.is_check(),
+            if r.family.is_check() {
+                Group::Check
+            } else if r.family.is_beyond() {
+                Group::Beyond
+            } else {
+                Group::Reproduction
+            },
         ));
         let _ = writeln!(
             sections,
@@ -252,12 +258,24 @@ fn seeds_section(r: &Resolved, dir: &Path, seeds: &[u64]) -> String {
     md
 }
 
+/// Where the summary lists a section.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Group {
+    /// A paper's claim (counted).
+    Reproduction,
+    /// Our claim, beyond the papers.
+    Beyond,
+    /// An implementation check.
+    Check,
+}
+
 /// The summary at the top of the report: a count of the papers' claims that hold, then the
 /// reproductions and the implementation checks in separate tables, each row with its verdict and
 /// the first sentence of the verdict's reasons.
-fn summary(rows: &[(String, String, bool)]) -> String {
+fn summary(rows: &[(String, String, Group)]) -> String {
     let mut md = String::new();
-    let repro: Vec<&(String, String, bool)> = rows.iter().filter(|r| !r.2).collect();
+    let repro: Vec<&(String, String, Group)> =
+        rows.iter().filter(|r| r.2 == Group::Reproduction).collect();
     let count = |label: &str| repro.iter().filter(|r| r.1 == label).count();
     let _ = writeln!(
         md,
@@ -286,15 +304,22 @@ fn summary(rows: &[(String, String, bool)]) -> String {
             n => format!(", {n} not assessed or not run"),
         }
     );
-    for (title, check) in [
-        ("Reproductions of the papers' claims", false),
-        ("Implementation checks", true),
+    for (title, group) in [
+        ("Reproductions of the papers' claims", Group::Reproduction),
+        (
+            "Beyond the papers (our claims, not counted above)",
+            Group::Beyond,
+        ),
+        ("Implementation checks", Group::Check),
     ] {
+        if group == Group::Beyond && rows.iter().all(|r| r.2 != group) {
+            continue;
+        }
         let _ = writeln!(
             md,
             "### {title}\n\n| experiment | paper item | verdict | headline |\n| --- | --- | --- | --- |"
         );
-        for r in rows.iter().filter(|r| r.2 == check) {
+        for r in rows.iter().filter(|r| r.2 == group) {
             let _ = writeln!(md, "{}", r.0);
         }
         md.push('\n');
@@ -466,8 +491,14 @@ mod tests {
 
     #[test]
     fn the_summary_counts_reproductions_and_lists_checks_apart() {
-        let row =
-            |id: &str, v: &str, check| (format!("| `{id}` | | {v} | |"), v.to_string(), check);
+        let row = |id: &str, v: &str, check: bool| {
+            let g = if check {
+                Group::Check
+            } else {
+                Group::Reproduction
+            };
+            (format!("| `{id}` | | {v} | |"), v.to_string(), g)
+        };
         let md = summary(&[
             row("a", "held", false),
             row("b", "partly held", false),
@@ -480,11 +511,23 @@ mod tests {
         );
         let checks = md.find("### Implementation checks").unwrap();
         assert!(md.find("`d`").unwrap() > checks);
+        assert!(
+            !md.contains("Beyond the papers"),
+            "no such section without rows"
+        );
         assert!(md.find("`c`").unwrap() < checks);
         let md = summary(&[
             row("a", "held", false),
             row("e", Verdict::PremiseNotReproduced.label(), false),
         ]);
+        let mut rows = vec![
+            row("a", "held", false),
+            row("e", Verdict::PremiseNotReproduced.label(), false),
+        ];
+        rows.push(("| `x` | | held | |".into(), "held".into(), Group::Beyond));
+        let md = summary(&rows);
+        let beyond = md.find("### Beyond the papers").unwrap();
+        assert!(md.find("`x`").unwrap() > beyond);
         assert!(
             md.contains("**1 of 2 reproduced claims held, 0 partly, 0 did not hold, 1 premise not reproduced.**"),
             "{md}"
