@@ -25,6 +25,7 @@
 //! the goal ([`anim`]).
 
 pub mod anim;
+pub mod dagger;
 pub mod frames;
 
 use crate::control::bptt::{
@@ -156,6 +157,9 @@ pub struct Params {
     /// descent reaches the goal without the emulator.
     #[serde(default)]
     pub physics_sweep: Option<Sweep>,
+    /// The DAgger stage (ours, issue 11; [`dagger`]), if run.
+    #[serde(default)]
+    pub dagger: Option<dagger::DaggerControl>,
 }
 
 /// Columns of the `sweep` and `physics_sweep` tables: `rollout_error` is the final error on
@@ -267,6 +271,9 @@ impl Validate for Params {
                 sw.validate(key)?;
             }
         }
+        if let Some(d) = &self.dagger {
+            d.validate(self)?;
+        }
         let nets: Vec<NetSpec> = self.tasks.iter().map(|t| t.net.clone()).collect();
         validate_nets(&nets, self.example_scale)?;
         if let Some(d) = &self.dolphin {
@@ -366,6 +373,7 @@ impl Job for Params {
         ]);
         let mut sweep_t = Table::new(&SWEEP_COLUMNS);
         let mut physics_t = Table::new(&SWEEP_COLUMNS);
+        let mut dagger_t = Table::new(&dagger::COLUMNS);
         let width = self
             .tasks
             .iter()
@@ -439,6 +447,9 @@ impl Job for Params {
                     self.physics_sweep_task(task, sw, &objective, knots, &x0, &mut physics_t)
                 })?;
             }
+            if let Some(d) = &self.dagger {
+                self.run_dagger(ctx, d, task, &spec, &trained, &x0, &mut dagger_t)?;
+            }
             let emu_final = &best.states[task.horizon * n..];
             let rep = replay(
                 sim.as_mut(),
@@ -498,6 +509,7 @@ impl Job for Params {
             ("dolphin_motion", motion_t),
             ("sweep", sweep_t),
             ("physics_sweep", physics_t),
+            ("dagger", dagger_t),
             ("dolphin_restarts", restarts_t),
             ("swim", swim_t),
             ("objective", objective_t),
