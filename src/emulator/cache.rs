@@ -227,7 +227,12 @@ impl EmulatorCache {
     }
 
     /// The file of the net derived from `spec`'s under `derived`, named with `tag`.
-    pub fn derived_path(&self, spec: &BuildSpec, tag: &str, derived: &serde_json::Value) -> PathBuf {
+    pub fn derived_path(
+        &self,
+        spec: &BuildSpec,
+        tag: &str,
+        derived: &serde_json::Value,
+    ) -> PathBuf {
         self.file(spec, tag, &Self::derived_key(spec, derived))
     }
 

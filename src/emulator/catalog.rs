@@ -721,7 +721,12 @@ pub fn training_data(spec: &BuildSpec) -> Result<TrainingData, BuildError> {
     .transitions;
     let transforms = Transforms::fit(&model.transform_config(), &train)?;
     let (clean_ds, held_ds) = (transforms.encode(&train), transforms.encode(&held));
-    let train_ds = noisy(&transforms, &clean_ds, &spec.effective_settings(), &mut stream(5));
+    let train_ds = noisy(
+        &transforms,
+        &clean_ds,
+        &spec.effective_settings(),
+        &mut stream(5),
+    );
     let sigma = change_spread(&train);
     Ok(TrainingData {
         train,

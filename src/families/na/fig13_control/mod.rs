@@ -1115,6 +1115,7 @@ impl Family for NaControl {
         let mut files = fig.draw("control", &Figure::grid(panels, 2))?;
         files.extend(animations(fig, tables)?);
         files.extend(dolphin_animation(fig, tables)?);
+        files.extend(dagger::figure(fig, tables)?);
         Ok(files)
     }
 
@@ -1199,11 +1200,13 @@ impl Family for NaControl {
         .collect::<Result<Vec<_>, _>>()?
         .concat();
         let verdict = Verdict::from_counts(reached, ft.len());
+        let (dagger_md, dagger_why) = dagger::summary(dir)?.unwrap_or_default();
+        md.push_str(&dagger_md);
         Ok(Findings {
             ours: md,
             verdict,
             why: format!(
-                "{reached} of {} tasks reach their goal on the emulator within the paper's iteration counts; replayed on the physical simulator {reached_sim} do (every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far).{swim}{sweeps}",
+                "{reached} of {} tasks reach their goal on the emulator within the paper's iteration counts; replayed on the physical simulator {reached_sim} do (every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far).{swim}{sweeps}{dagger_why}",
                 ft.len()
             ),
         })
