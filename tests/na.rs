@@ -348,6 +348,26 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         }
     }
     assert_eq!(rows(&out.join("dolphin_restarts.csv")).len(), 2);
+    // DAgger (quick: 2 rounds): per task rounds 0, 1, 2; round 0 is the Table 1 net (no
+    // aggregated examples); every round keeps all earlier examples and adds new ones.
+    assert_eq!(
+        header(&out.join("dagger.csv")),
+        "task,round,optimizer,final_error_emulator,final_error_simulator,iterations,iterations_to_goal,best_iteration,examples,dagger_examples,dagger_windows,fine_tune_iterations,drift_emulator,drift_simulator,drift_gap"
+    );
+    let dg = rows(&out.join("dagger.csv"));
+    assert_eq!(dg.len(), 9);
+    for task in ["pendulum", "truck", "lander"] {
+        let t: Vec<&Vec<String>> = dg.iter().filter(|c| c[0] == task).collect();
+        let ex: Vec<usize> = t.iter().map(|c| c[9].parse().unwrap()).collect();
+        assert_eq!(ex[0], 0, "{task}");
+        assert!(ex[1] > 0 && ex[2] > ex[1], "{task}: {ex:?}");
+        for c in &t {
+            assert_eq!(c[2], "levenberg_marquardt");
+            let errs: Vec<f64> = [3, 4, 14].iter().map(|&i| c[i].parse().unwrap()).collect();
+            assert!(errs.iter().all(|e| e.is_finite()), "{c:?}");
+        }
+    }
+    figure_exists(&d, "na_fig13_control_dagger");
     let r = rows(&out.join("objective.csv"));
     for (task, iters) in [
         ("pendulum", 20),

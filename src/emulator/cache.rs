@@ -215,11 +215,36 @@ impl EmulatorCache {
         })
     }
 
+    /// The key of a net derived from `spec`'s (e.g. a DAgger round, [`super::dagger`]): the
+    /// base key plus `derived`, everything else that determines it.
+    pub fn derived_key(spec: &BuildSpec, derived: &serde_json::Value) -> serde_json::Value {
+        serde_json::json!({ "base": Self::key(spec), "derived": derived })
+    }
+
     /// The file that holds (or would hold) the emulator of `spec`.
     pub fn path(&self, spec: &BuildSpec) -> PathBuf {
-        let h = fnv1a(Self::key(spec).to_string().as_bytes());
+        self.file(spec, "", &Self::key(spec))
+    }
+
+    /// The file of the net derived from `spec`'s under `derived`, named with `tag`.
+    pub fn derived_path(
+        &self,
+        spec: &BuildSpec,
+        tag: &str,
+        derived: &serde_json::Value,
+    ) -> PathBuf {
+        self.file(spec, tag, &Self::derived_key(spec, derived))
+    }
+
+    fn file(&self, spec: &BuildSpec, tag: &str, key: &serde_json::Value) -> PathBuf {
+        let h = fnv1a(key.to_string().as_bytes());
+        let tag = if tag.is_empty() {
+            String::new()
+        } else {
+            format!("-{tag}")
+        };
         self.dir.join(format!(
-            "{}-n{}-{h:016x}.json",
+            "{}-n{}{tag}-{h:016x}.json",
             spec.net.model.name(),
             spec.steps
         ))
@@ -227,13 +252,24 @@ impl EmulatorCache {
 
     /// The cached emulator of `spec`, if a file with the same key exists and reads back.
     pub fn load(&self, spec: &BuildSpec) -> Option<Trained> {
+        self.load_at(spec, &self.path(spec), &Self::key(spec))
+    }
+
+    /// The cached net derived from `spec`'s under `derived` (same shape and transforms).
+    pub fn load_derived(
+        &self,
+        spec: &BuildSpec,
+        tag: &str,
+        derived: &serde_json::Value,
+    ) -> Option<Trained> {
+        let key = Self::derived_key(spec, derived);
+        self.load_at(spec, &self.file(spec, tag, &key), &key)
+    }
+
+    fn load_at(&self, spec: &BuildSpec, path: &Path, key: &serde_json::Value) -> Option<Trained> {
         let model = spec.net.model;
         let (n, m) = (model.state_dim(), model.control_dim());
-        let rec = read_record(
-            &self.path(spec),
-            &Self::key(spec).to_string(),
-            [n + m, spec.net.hidden, n],
-        )?;
+        let rec = read_record(path, &key.to_string(), [n + m, spec.net.hidden, n])?;
         let mut t = Transforms::unfitted(&model.transform_config(), n, m).ok()?;
         t.input_norm = rec.input_norm;
         t.output_norm = rec.output_norm;
@@ -252,12 +288,32 @@ impl EmulatorCache {
 
     /// Writes `trained` as the emulator of `spec` (atomically).
     pub fn store(&self, spec: &BuildSpec, trained: &Trained) -> Result<PathBuf, BuildError> {
+        self.store_at(self.path(spec), &Self::key(spec), trained)
+    }
+
+    /// Writes `trained` as the net derived from `spec`'s under `derived` (atomically).
+    pub fn store_derived(
+        &self,
+        spec: &BuildSpec,
+        tag: &str,
+        derived: &serde_json::Value,
+        trained: &Trained,
+    ) -> Result<PathBuf, BuildError> {
+        let key = Self::derived_key(spec, derived);
+        self.store_at(self.file(spec, tag, &key), &key, trained)
+    }
+
+    fn store_at(
+        &self,
+        path: PathBuf,
+        key: &serde_json::Value,
+        trained: &Trained,
+    ) -> Result<PathBuf, BuildError> {
         let e = &trained.emulator;
         let t = e.transforms();
-        let path = self.path(spec);
         write_record(
             &path,
-            &Self::key(spec).to_string(),
+            &key.to_string(),
             &NetRecord {
                 mlp: e.mlp().clone(),
                 input_norm: t.input_norm.clone(),

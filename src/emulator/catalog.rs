@@ -30,7 +30,7 @@
 
 use super::dataset::{
     sample_transitions, sample_windows, ControlLimits, ControlProcess, ControlSignal,
-    SamplingConfig,
+    SamplingConfig, Windows,
 };
 use super::mlp::{Mlp, WeightInit};
 use super::rollout::{change_spread, fine_tune, FineTune};
@@ -39,7 +39,7 @@ use super::train::{
     MomentumConfig, StopReason, TracePoint, TrainReport,
 };
 use super::transform::{Attitude, PlanarFrame, SpatialFrame};
-use super::{Emulator, EmulatorError, TransformConfig, Transforms};
+use super::{Emulator, EmulatorError, TransformConfig, Transforms, Transitions};
 use crate::physics::lander::{Lander, NormalizedLander};
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
 use crate::physics::truck::Truck;
@@ -387,6 +387,14 @@ impl BuildSpec {
         ((self.net.examples as f64 * self.settings.held_out_fraction).round() as usize).max(2)
     }
 
+    /// The training settings with this net's own input noise, if it has one.
+    pub fn effective_settings(&self) -> TrainSettings {
+        TrainSettings {
+            input_noise: self.net.input_noise.unwrap_or(self.settings.input_noise),
+            ..self.settings
+        }
+    }
+
     /// Sampling settings for `examples` examples.
     pub fn sampling(&self, examples: usize) -> SamplingConfig {
         let m = self.net.model;
@@ -667,10 +675,29 @@ pub fn rollout_errors(
         .collect()
 }
 
-/// Samples training and held-out data, fits the transforms and trains the network of `spec`.
-/// Deterministic for a given spec (the wall time aside).
-pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
-    let t0 = Instant::now();
+/// The data a net of `spec` is trained on, as [`train_emulator`] samples it (the same seeded
+/// streams, so the same examples): the DAgger stage ([`super::dagger`]) aggregates onto it.
+#[derive(Debug, Clone)]
+pub struct TrainingData {
+    /// The one-step training transitions (simulator space).
+    pub train: Transitions,
+    /// The one-step held-out transitions.
+    pub held: Transitions,
+    /// The transforms fitted on `train`.
+    pub transforms: Transforms,
+    /// `train` encoded, with the settings' input noise (as trained on).
+    pub train_ds: Dataset,
+    /// `train` encoded, clean.
+    pub clean_ds: Dataset,
+    /// `held` encoded.
+    pub held_ds: Dataset,
+    /// Per-variable scales of the rollout loss ([`change_spread`] of `train`).
+    pub sigma: Vec<f64>,
+}
+
+/// Samples the one-step data of `spec` and fits its transforms (streams 1, 2 and 5 of the
+/// spec's seed).
+pub fn training_data(spec: &BuildSpec) -> Result<TrainingData, BuildError> {
     let model = spec.net.model;
     let mut sim = model.simulator();
     let limits = model.control_limits();
@@ -682,56 +709,84 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
         &limits,
         &spec.sampling(spec.net.examples),
         &mut stream(1),
-    )?;
+    )?
+    .transitions;
     let held = sample_transitions(
         sim.as_mut(),
         &start,
         &limits,
         &spec.sampling(spec.held_out()),
         &mut stream(2),
-    )?;
-    let transforms = Transforms::fit(&model.transform_config(), &train.transitions)?;
-    let (clean_ds, held_ds) = (
-        transforms.encode(&train.transitions),
-        transforms.encode(&held.transitions),
+    )?
+    .transitions;
+    let transforms = Transforms::fit(&model.transform_config(), &train)?;
+    let (clean_ds, held_ds) = (transforms.encode(&train), transforms.encode(&held));
+    let train_ds = noisy(
+        &transforms,
+        &clean_ds,
+        &spec.effective_settings(),
+        &mut stream(5),
     );
-    let settings = TrainSettings {
-        input_noise: spec.net.input_noise.unwrap_or(spec.settings.input_noise),
-        ..spec.settings
+    let sigma = change_spread(&train);
+    Ok(TrainingData {
+        train,
+        held,
+        transforms,
+        train_ds,
+        clean_ds,
+        held_ds,
+        sigma,
+    })
+}
+
+/// The k-step rollout windows of `spec` (k = `rollout_k` ≥ 1), training and held-out, as
+/// [`train_emulator`] samples them (streams 6 and 7).
+pub fn rollout_windows(spec: &BuildSpec) -> Result<(Windows, Windows), BuildError> {
+    let model = spec.net.model;
+    let mut sim = model.simulator();
+    let limits = model.control_limits();
+    let start = move |r: &mut ChaCha8Rng| model.start_state(r);
+    let stream = |k: u64| ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, k));
+    let k = spec.settings.rollout_k.max(1);
+    let mut windows = |count: usize, seed: u64| {
+        let mut cfg = spec.sampling(count);
+        cfg.episode_duration = cfg.episode_duration.max((k + 6) as f64 * spec.super_dt());
+        sample_windows(sim.as_mut(), &start, &limits, &cfg, k, &mut stream(seed))
     };
-    let train_ds = noisy(&transforms, &clean_ds, &settings, &mut stream(5));
+    let count = spec.net.examples.div_ceil(k).max(2);
+    let held_count = ((count as f64 * spec.settings.held_out_fraction).round() as usize).max(2);
+    Ok((windows(count, 6)?, windows(held_count, 7)?))
+}
+
+/// Samples training and held-out data, fits the transforms and trains the network of `spec`.
+/// Deterministic for a given spec (the wall time aside).
+pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
+    let t0 = Instant::now();
+    let model = spec.net.model;
+    let stream = |k: u64| ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, k));
+    let data = training_data(spec)?;
     let (n, m) = (model.state_dim(), model.control_dim());
     let mut mlp = Mlp::new(n + m, spec.net.hidden, n, WeightInit::FanIn, &mut stream(3));
     let report = train_mlp(
         &mut mlp,
-        &train_ds,
-        &held_ds,
+        &data.train_ds,
+        &data.held_ds,
         spec.net.method,
         &spec.settings,
         crate::seed::mix_seed(spec.seed, 4),
     )?;
-    let mut emulator = Emulator::new(transforms, mlp, spec.super_dt())?;
+    let mut emulator = Emulator::new(data.transforms.clone(), mlp, spec.super_dt())?;
     let mut stop = stop_name(&report.stop);
     let rollout_trace = if spec.settings.rollout_k > 0 {
-        let k = spec.settings.rollout_k;
-        let mut windows = |count: usize, seed: u64| {
-            let mut cfg = spec.sampling(count);
-            cfg.episode_duration = cfg.episode_duration.max((k + 6) as f64 * spec.super_dt());
-            sample_windows(sim.as_mut(), &start, &limits, &cfg, k, &mut stream(seed))
-        };
-        let count = spec.net.examples.div_ceil(k).max(2);
-        let held_count = ((count as f64 * spec.settings.held_out_fraction).round() as usize).max(2);
-        let train_windows = windows(count, 6)?;
-        let held_windows = windows(held_count, 7)?;
-        let sigma = change_spread(&train.transitions);
+        let (train_windows, held_windows) = rollout_windows(spec)?;
         let report = fine_tune(
             &mut emulator,
             &FineTune {
-                train: &train_ds,
-                held: &held_ds,
+                train: &data.train_ds,
+                held: &data.held_ds,
                 train_windows: &train_windows,
                 held_windows: &held_windows,
-                sigma: &sigma,
+                sigma: &data.sigma,
                 weight: spec.settings.rollout_weight,
                 max_iters: spec.settings.rollout_iters,
                 patience: spec.settings.patience,
@@ -744,8 +799,8 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
         Vec::new()
     };
     // Errors on the clean examples (the held-out set is clean too).
-    let train_error = mse(emulator.mlp(), &clean_ds);
-    let heldout_error = mse(emulator.mlp(), &held_ds);
+    let train_error = mse(emulator.mlp(), &data.clean_ds);
+    let heldout_error = mse(emulator.mlp(), &data.held_ds);
     Ok(Trained {
         emulator,
         trace: report.trace,

@@ -22,6 +22,7 @@
 
 pub mod cache;
 pub mod catalog;
+pub mod dagger;
 pub mod dataset;
 pub mod hierarchy;
 pub mod mlp;

@@ -83,7 +83,7 @@ pub struct DriftTask {
 }
 
 /// Indices of the position part of a catalog model's state, for the drift checks.
-fn position_part(m: NetModel) -> std::ops::Range<usize> {
+pub fn position_part(m: NetModel) -> std::ops::Range<usize> {
     match m {
         NetModel::Truck => 0..2,
         _ => 0..3,

@@ -25,6 +25,7 @@
 //! the goal ([`anim`]).
 
 pub mod anim;
+pub mod dagger;
 pub mod frames;
 
 use crate::control::bptt::{
@@ -156,6 +157,9 @@ pub struct Params {
     /// descent reaches the goal without the emulator.
     #[serde(default)]
     pub physics_sweep: Option<Sweep>,
+    /// The DAgger stage (ours, issue 11; [`dagger`]), if run.
+    #[serde(default)]
+    pub dagger: Option<dagger::DaggerControl>,
 }
 
 /// Columns of the `sweep` and `physics_sweep` tables: `rollout_error` is the final error on
@@ -267,6 +271,9 @@ impl Validate for Params {
                 sw.validate(key)?;
             }
         }
+        if let Some(d) = &self.dagger {
+            d.validate(self)?;
+        }
         let nets: Vec<NetSpec> = self.tasks.iter().map(|t| t.net.clone()).collect();
         validate_nets(&nets, self.example_scale)?;
         if let Some(d) = &self.dolphin {
@@ -366,6 +373,7 @@ impl Job for Params {
         ]);
         let mut sweep_t = Table::new(&SWEEP_COLUMNS);
         let mut physics_t = Table::new(&SWEEP_COLUMNS);
+        let mut dagger_t = Table::new(&dagger::COLUMNS);
         let width = self
             .tasks
             .iter()
@@ -439,6 +447,9 @@ impl Job for Params {
                     self.physics_sweep_task(task, sw, &objective, knots, &x0, &mut physics_t)
                 })?;
             }
+            if let Some(d) = &self.dagger {
+                self.run_dagger(ctx, d, task, &spec, &trained, &x0, &mut dagger_t)?;
+            }
             let emu_final = &best.states[task.horizon * n..];
             let rep = replay(
                 sim.as_mut(),
@@ -498,6 +509,7 @@ impl Job for Params {
             ("dolphin_motion", motion_t),
             ("sweep", sweep_t),
             ("physics_sweep", physics_t),
+            ("dagger", dagger_t),
             ("dolphin_restarts", restarts_t),
             ("swim", swim_t),
             ("objective", objective_t),
@@ -1103,6 +1115,7 @@ impl Family for NaControl {
         let mut files = fig.draw("control", &Figure::grid(panels, 2))?;
         files.extend(animations(fig, tables)?);
         files.extend(dolphin_animation(fig, tables)?);
+        files.extend(dagger::figure(fig, tables)?);
         Ok(files)
     }
 
@@ -1187,11 +1200,13 @@ impl Family for NaControl {
         .collect::<Result<Vec<_>, _>>()?
         .concat();
         let verdict = Verdict::from_counts(reached, ft.len());
+        let (dagger_md, dagger_why) = dagger::summary(dir)?.unwrap_or_default();
+        md.push_str(&dagger_md);
         Ok(Findings {
             ours: md,
             verdict,
             why: format!(
-                "{reached} of {} tasks reach their goal on the emulator within the paper's iteration counts; replayed on the physical simulator {reached_sim} do (every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far).{swim}{sweeps}",
+                "{reached} of {} tasks reach their goal on the emulator within the paper's iteration counts; replayed on the physical simulator {reached_sim} do (every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far).{swim}{sweeps}{dagger_why}",
                 ft.len()
             ),
         })

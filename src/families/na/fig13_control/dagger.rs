@@ -1,0 +1,495 @@
+//! The DAgger stage of `na_fig13_control` (ours, issue 11; [`crate::emulator::dagger`]): per
+//! task with a catalog net, R rounds of (learn controls through the current net with the
+//! learner, replay them on the simulator, aggregate the visited states' examples, fine-tune
+//! the net from the previous round's weights). One `dagger.csv` row per task and round: the
+//! learned controls' final error on the net and on the simulator, iterations to the goal, the
+//! examples the net was trained on, and its drift from the task start under the neutral
+//! control beside the simulator's. Round r's net is cached under the base net's key plus the
+//! task, the learner, the DAgger settings and r, so reruns are warm.
+
+use super::{learn_best, Params, Task};
+use crate::control::bptt::{replay, Bptt, Knots, StepRule};
+use crate::emulator::cache::EmulatorCache;
+use crate::emulator::catalog::{
+    rollout_windows, stop_name, training_data, BuildSpec, Trained, TrainingData,
+};
+use crate::emulator::dagger::{
+    aggregate, collect, fine_tune_aggregated, DaggerSettings, Plan, Visits,
+};
+use crate::emulator::dataset::Windows;
+use crate::emulator::train::mse;
+use crate::emulator::Emulator;
+use crate::experiment::output::Table;
+use crate::experiment::resolve::ParamError;
+use crate::experiment::{other, Error};
+use crate::families::na::table1_structure::position_part;
+use crate::row;
+use crate::seed::mix_seed;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+/// `[params.dagger]`: the learner and the aggregation settings.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DaggerControl {
+    /// The learner's step rule (Levenberg–Marquardt: momentum stalls even on the physics).
+    pub learner: StepRule,
+    /// Rounds, perturbations, fine-tuning budget.
+    pub settings: DaggerSettings,
+}
+
+impl DaggerControl {
+    /// Checks the settings.
+    pub fn validate(&self, p: &Params) -> Result<(), ParamError> {
+        self.learner.validate("dagger.learner")?;
+        self.settings.validate("dagger.settings")?;
+        crate::experiment::resolve::ensure(
+            p.training.rollout_k >= 1,
+            "dagger",
+            "needs training.rollout_k >= 1 (the fine-tuning's k-step rollout loss)",
+        )
+    }
+}
+
+/// Columns of `dagger.csv`.
+pub const COLUMNS: [&str; 15] = [
+    "task",
+    "round",
+    "optimizer",
+    "final_error_emulator",
+    "final_error_simulator",
+    "iterations",
+    "iterations_to_goal",
+    "best_iteration",
+    "examples",
+    "dagger_examples",
+    "dagger_windows",
+    "fine_tune_iterations",
+    "drift_emulator",
+    "drift_simulator",
+    "drift_gap",
+];
+
+/// The cache tag of `task`'s DAgger nets.
+fn tag(task: &Task) -> String {
+    format!("dagger-{}", task.name)
+}
+
+/// Everything besides the base net that determines round `round`'s net.
+pub fn derived_key(
+    task: &Task,
+    d: &DaggerControl,
+    curvature_iterations: usize,
+    round: usize,
+) -> serde_json::Value {
+    serde_json::json!({
+        "task": task,
+        "learner": d.learner,
+        "settings": d.settings,
+        "curvature_iterations": curvature_iterations,
+        "round": round,
+    })
+}
+
+/// One round's learned controls, scored.
+struct Round {
+    controls: Vec<f64>,
+    emulator_error: f64,
+    simulator_error: f64,
+    iterations: usize,
+    to_goal: Option<usize>,
+    best_iteration: usize,
+}
+
+impl Params {
+    /// Learns `task` through `net` with the learner from the rest control; scores the best
+    /// iterate on the net and replayed on the simulator.
+    fn dagger_learn(
+        &self,
+        task: &Task,
+        d: &DaggerControl,
+        net: &Emulator,
+        x0: &[f64],
+    ) -> Result<Round, Error> {
+        let model = task.net.model;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        let objective = task.objective();
+        let knots = Knots {
+            steps: task.horizon,
+            per_actuator: task.knots,
+            m,
+        };
+        let mut bptt = Bptt::new(net, &objective, knots, task.bounds(), x0).map_err(other)?;
+        let rest = task.rest_control();
+        let init: Vec<f64> = (0..knots.len()).map(|i| rest[i % m]).collect();
+        let v0 = bptt.from_controls(&init);
+        let lambda = bptt.curvature(&v0, self.curvature_iterations);
+        let schedule = self.schedule(task.eta, task.alpha, d.learner, lambda);
+        let mut to_goal = None;
+        let (run, best) = learn_best(
+            &mut bptt,
+            &v0,
+            &schedule,
+            task.iterations,
+            &mut |e, _, st| {
+                if to_goal.is_none() && task.final_error(&st[task.horizon * n..]) <= 1.0 {
+                    to_goal = Some(e.iteration);
+                }
+                false
+            },
+        );
+        let emu_final = &best.states[task.horizon * n..];
+        let mut sim = model.simulator();
+        let rep = replay(
+            sim.as_mut(),
+            x0,
+            &best.controls,
+            task.net.physical_dt,
+            self.steps,
+            emu_final,
+        );
+        Ok(Round {
+            emulator_error: task.final_error(emu_final),
+            simulator_error: task.final_error(&rep.states[task.horizon * n..]),
+            iterations: run.trace.last().map_or(0, |t| t.iteration),
+            to_goal,
+            best_iteration: run.best_iteration,
+            controls: best.controls,
+        })
+    }
+
+    /// The DAgger rounds of `task` from its base net `base` (built from `spec`), one row each
+    /// into `table`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn run_dagger(
+        &self,
+        ctx: &crate::experiment::RunContext,
+        d: &DaggerControl,
+        task: &Task,
+        spec: &BuildSpec,
+        base: &Trained,
+        x0: &[f64],
+        table: &mut Table,
+    ) -> Result<(), Error> {
+        let model = task.net.model;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        let k = self.training.rollout_k;
+        let cache = EmulatorCache::from_env();
+        let settings = spec.effective_settings();
+        let limits = model.control_limits();
+        let neutral = task.rest_control();
+        let mut sim = model.simulator();
+        let mut net = base.emulator.clone();
+        let mut fine_tune_iterations = 0usize;
+        let (mut train, mut held) = (Visits::empty(n, m, k), Visits::empty(n, m, k));
+        let mut base_data: Option<(TrainingData, Windows)> = None;
+        let stream = mix_seed(
+            spec.seed,
+            crate::emulator::cache::fnv1a(tag(task).as_bytes()),
+        );
+        for round in 0..=d.settings.rounds {
+            let r = ctx.stage(
+                &format!("dagger {} round {round}: learn", task.name),
+                || self.dagger_learn(task, d, &net, x0),
+            )?;
+            // Drift under the neutral control from the start: emulator vs simulator.
+            let plan = Plan {
+                x0,
+                controls: &r.controls,
+                neutral: &neutral,
+                limits: &limits,
+                physical_dt: task.net.physical_dt,
+                substeps: self.steps,
+            };
+            let held_u: Vec<f64> = (0..task.horizon)
+                .flat_map(|_| neutral.iter().copied())
+                .collect();
+            let sim_drift = plan.rollout(sim.as_mut(), &held_u).map_err(other)?;
+            let (mut xe, mut next, mut sc) = (x0.to_vec(), vec![0.0; n], net.scratch());
+            for _ in 0..task.horizon {
+                net.predict(&xe, &neutral, &mut sc, &mut next);
+                xe.copy_from_slice(&next);
+            }
+            let xs = &sim_drift[task.horizon * n..];
+            let p = position_part(model);
+            let dist =
+                |a: &[f64], b: &[f64]| p.clone().map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+            table.push(row![
+                task.name.as_str(),
+                round as i64,
+                d.learner.name(),
+                r.emulator_error,
+                r.simulator_error,
+                r.iterations as i64,
+                r.to_goal.map_or(f64::NAN, |i| i as f64),
+                r.best_iteration as i64,
+                (spec.net.examples + train.len()) as i64,
+                train.len() as i64,
+                train.windows.len() as i64,
+                fine_tune_iterations as i64,
+                dist(&xe, x0),
+                dist(xs, x0),
+                dist(&xe, xs)
+            ]);
+            if round == d.settings.rounds {
+                break;
+            }
+            // Aggregate the states these controls visit, then fine-tune the next net.
+            let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(stream, 2 * round as u64));
+            let (t, h) = collect(sim.as_mut(), &plan, &d.settings, k, round == 0, &mut rng)
+                .map_err(other)?;
+            train.extend(&t);
+            held.extend(&h);
+            let key = derived_key(task, d, self.curvature_iterations, round + 1);
+            let next = match cache.load_derived(spec, &tag(task), &key) {
+                Some(t) => t,
+                None => {
+                    let t0 = std::time::Instant::now();
+                    if base_data.is_none() {
+                        let data = ctx.stage(&format!("dagger {}: base data", task.name), || {
+                            training_data(spec)
+                        });
+                        base_data = Some((
+                            data.map_err(other)?,
+                            rollout_windows(spec).map_err(other)?.0,
+                        ));
+                    }
+                    let (data, windows) = base_data.as_ref().expect("just built");
+                    let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(stream, 2 * round as u64 + 1));
+                    let agg = aggregate(&net, data, windows, &train, &held, &settings, &mut rng)
+                        .map_err(other)?;
+                    let mut emulator = net.clone();
+                    let report = ctx.stage(
+                        &format!("dagger {} round {}: fine-tune", task.name, round + 1),
+                        || {
+                            fine_tune_aggregated(
+                                &mut emulator,
+                                &agg,
+                                &data.sigma,
+                                &settings,
+                                d.settings.iters,
+                            )
+                        },
+                    );
+                    let report = report.map_err(other)?;
+                    let trained = Trained {
+                        train_error: mse(emulator.mlp(), &agg.clean),
+                        heldout_error: mse(emulator.mlp(), &agg.held),
+                        emulator,
+                        trace: report.trace,
+                        train_s: t0.elapsed().as_secs_f64(),
+                        stop: stop_name(&report.stop),
+                        from_cache: false,
+                        rollout_trace: Vec::new(),
+                    };
+                    cache
+                        .store_derived(spec, &tag(task), &key, &trained)
+                        .map_err(other)?;
+                    trained
+                }
+            };
+            fine_tune_iterations = next.trace.last().map_or(0, |t| t.iteration);
+            net = next.emulator;
+        }
+        Ok(())
+    }
+}
+
+/// The DAgger figure: per task, the learned controls' final error on the simulator (solid) and
+/// on the net learned through (dashed) against the round, log y, with the tolerance (1).
+pub fn figure(
+    fig: &crate::experiment::plot::FigureSink,
+    tables: &crate::experiment::output::Tables,
+) -> Result<Vec<std::path::PathBuf>, Error> {
+    use crate::experiment::output::unique;
+    use crate::experiment::plot::{Figure, Mark, Panel, Series};
+    let Some(t) = tables.get("dagger").filter(|t| !t.is_empty()) else {
+        return Ok(vec![]);
+    };
+    let (task, round) = (t.strs("task"), t.f64s("round"));
+    let (emu, sim) = (
+        t.f64s("final_error_emulator"),
+        t.f64s("final_error_simulator"),
+    );
+    let mut series = vec![];
+    let last = round.iter().copied().fold(0.0, f64::max);
+    for (c, name) in unique(&task).into_iter().enumerate() {
+        let pts = |v: &[f64]| -> Vec<(f64, f64)> {
+            (0..task.len())
+                .filter(|&r| task[r] == name)
+                .map(|r| (round[r], v[r].max(1e-3)))
+                .collect()
+        };
+        series.push(Series::line(format!("{name}: simulator"), pts(&sim), c));
+        series.push(Series::line(format!("{name}: DAgger net"), pts(&emu), c).mark(Mark::Dashed));
+    }
+    let dots = (0..=20).map(|i| (last * i as f64 / 20.0, 1.0)).collect();
+    series.push(Series::line("tolerance (final error 1)", dots, 7).mark(Mark::Points));
+    let panel = Panel {
+        title: "DAgger (ours): final error of the LM-learned controls by round".into(),
+        x_label: "DAgger round (0: the Table 1 net)".into(),
+        y_label: "final error, RMS of (s_M - s_d)/tolerance (1)".into(),
+        log_y: true,
+        series,
+        ..Panel::default()
+    };
+    fig.draw("dagger", &Figure::grid(vec![panel], 1))
+}
+
+/// The report's DAgger paragraph and its verdict (rule in the spec): per task the rounds'
+/// simulator errors, and at the last round whether the goal is reached on the net within the
+/// paper's iteration count and on the simulator. `None` when there is no `dagger.csv`.
+pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error> {
+    use crate::experiment::output::{df_f64, df_str, read_csv, unique};
+    use crate::experiment::report::{sig, Verdict};
+    let Ok(df) = read_csv(&dir.join("dagger.csv")) else {
+        return Ok(None);
+    };
+    let (task, round) = (df_str(&df, "task")?, df_f64(&df, "round")?);
+    if task.is_empty() {
+        return Ok(None);
+    }
+    let (emu, sim, its, to_goal, ex, dg) = (
+        df_f64(&df, "final_error_emulator")?,
+        df_f64(&df, "final_error_simulator")?,
+        df_f64(&df, "iterations")?,
+        df_f64(&df, "iterations_to_goal")?,
+        df_f64(&df, "examples")?,
+        df_f64(&df, "drift_gap")?,
+    );
+    let mut md = String::from(
+        "\nControl through DAgger emulators (ours, `dagger.csv`; Levenberg-Marquardt through each round's net, controls replayed on the simulator; round 0 is the Table 1 net):\n\n| task | round | examples | iterations to goal (budget) | final error, net | final error, simulator | neutral drift gap (m) |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for r in 0..task.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} ({}) | {} | {} | {} |\n",
+            task[r],
+            round[r],
+            ex[r],
+            if to_goal[r].is_finite() {
+                to_goal[r].to_string()
+            } else {
+                "never".into()
+            },
+            its[r],
+            sig(emu[r]),
+            sig(sim[r]),
+            sig(dg[r])
+        ));
+    }
+    let names = unique(&task);
+    let mut ok = 0;
+    let parts: Vec<String> = names
+        .iter()
+        .map(|name| {
+            let rows: Vec<usize> = (0..task.len()).filter(|&r| &task[r] == name).collect();
+            let last = *rows
+                .iter()
+                .max_by(|&&a, &&b| round[a].total_cmp(&round[b]))
+                .expect("a task has rows");
+            let on_net = to_goal[last].is_finite() && to_goal[last] <= its[last];
+            let on_sim = sim[last] <= 1.0;
+            ok += usize::from(on_net && on_sim);
+            let by_round: Vec<String> = rows.iter().map(|&r| sig(sim[r])).collect();
+            format!(
+                "{name}: simulator error by round {} (net {} at round {}; goal on the net within {} iterations: {}; on the simulator: {})",
+                by_round.join(" -> "),
+                sig(emu[last]),
+                round[last],
+                its[last],
+                if on_net { "yes" } else { "no" },
+                if on_sim { "yes" } else { "no" }
+            )
+        })
+        .collect();
+    let v = Verdict::from_counts(ok, names.len());
+    Ok(Some((
+        md,
+        format!(
+            " Control through DAgger emulators (ours), LM, judged at the last round (rule fixed in the spec): {} ({ok} of {} tasks reach their goal on the net within the paper's iteration count and end within tolerance on the simulator); {}.",
+            v.label(),
+            names.len(),
+            parts.join("; ")
+        ),
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::spec::SpecFile;
+
+    #[test]
+    fn the_dagger_cache_key_changes_with_every_setting_round_task_and_base_net() {
+        let file =
+            SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml")).unwrap();
+        let p: Params = toml::Value::Table(file.raw.params).try_into().unwrap();
+        let d = p.dagger.clone().expect("the spec runs DAgger");
+        let task = &p.tasks[0];
+        let base = crate::families::na::table1_structure::build_spec(
+            1,
+            &task.net,
+            p.steps,
+            p.example_scale,
+            &p.training,
+        );
+        let cache = EmulatorCache::new("/nonexistent");
+        let path = |b: &BuildSpec, t: &Task, d: &DaggerControl, ci: usize, r: usize| {
+            cache.derived_path(b, &tag(t), &derived_key(t, d, ci, r))
+        };
+        let here = path(&base, task, &d, p.curvature_iterations, 1);
+        assert_eq!(here, path(&base, task, &d, p.curvature_iterations, 1));
+        let s = d.settings;
+        let mut variants: Vec<DaggerControl> = [
+            DaggerSettings {
+                rounds: s.rounds + 1,
+                ..s
+            },
+            DaggerSettings {
+                perturbations: s.perturbations + 1,
+                ..s
+            },
+            DaggerSettings {
+                perturbed_rollouts: s.perturbed_rollouts + 1,
+                ..s
+            },
+            DaggerSettings {
+                control_noise: s.control_noise * 2.0,
+                ..s
+            },
+            DaggerSettings {
+                iters: s.iters + 1,
+                ..s
+            },
+        ]
+        .into_iter()
+        .map(|settings| DaggerControl {
+            settings,
+            ..d.clone()
+        })
+        .collect();
+        variants.push(DaggerControl {
+            learner: StepRule::Fixed,
+            ..d.clone()
+        });
+        for v in &variants {
+            assert_ne!(
+                path(&base, task, v, p.curvature_iterations, 1),
+                here,
+                "{v:?}"
+            );
+        }
+        assert_ne!(path(&base, task, &d, p.curvature_iterations, 2), here);
+        assert_ne!(path(&base, task, &d, p.curvature_iterations + 1, 1), here);
+        assert_ne!(
+            path(&base, &p.tasks[1], &d, p.curvature_iterations, 1),
+            here
+        );
+        let other_seed = BuildSpec {
+            seed: base.seed + 1,
+            ..base.clone()
+        };
+        assert_ne!(path(&other_seed, task, &d, p.curvature_iterations, 1), here);
+    }
+}
