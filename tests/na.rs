@@ -136,6 +136,19 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
         assert_eq!(a[..7], b[..7], "cached nets give the same errors");
         assert_eq!(b[11], "1", "{b:?} was retrained");
     }
+    // run.json says what the wall time includes: 12 nets trained, then 12 loaded.
+    let nets = |dir: &str| -> serde_json::Value {
+        let p = d.path().join(dir).join("na_table1_structure/run.json");
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        v["emulator_nets"].clone()
+    };
+    let (first, second) = (nets("out"), nets("out2"));
+    assert_eq!(first["trained"], 12, "{first}");
+    assert_eq!(first["loaded_from_cache"], 0, "{first}");
+    assert_eq!(second["trained"], 0, "{second}");
+    assert_eq!(second["loaded_from_cache"], 12, "{second}");
+    assert!(second["cached_training_seconds"].as_f64().unwrap() > 0.0);
 }
 
 #[test]

@@ -24,6 +24,51 @@ use super::{Emulator, Transforms};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
+/// What a run did with emulator nets: how many distinct nets it loaded from the cache (and the
+/// training seconds recorded when they were made) and how many it trained (and their seconds).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct NetUsage {
+    /// Distinct nets loaded from the cache.
+    pub loaded: usize,
+    /// Training seconds recorded in those files (what training them cold cost then).
+    pub loaded_train_s: f64,
+    /// Nets trained (or fine-tuned) and stored.
+    pub trained: usize,
+    /// Their training seconds.
+    pub trained_s: f64,
+}
+
+/// Every net file loaded or stored since the last [`take_usage`], with whether it was trained
+/// and its training seconds; a net used twice counts once.
+static USAGE: std::sync::Mutex<std::collections::BTreeMap<PathBuf, (bool, f64)>> =
+    std::sync::Mutex::new(std::collections::BTreeMap::new());
+
+fn note_use(path: &Path, trained: bool, seconds: f64) {
+    let mut map = USAGE.lock().unwrap_or_else(|e| e.into_inner());
+    let e = map.entry(path.to_path_buf()).or_insert((trained, seconds));
+    // Trained in this run, then loaded again: it stays a trained net.
+    if trained {
+        *e = (true, seconds);
+    }
+}
+
+/// The nets used (process-wide) since the last call, and forgets them. The runner takes it
+/// before and after an experiment, which runs alone.
+pub fn take_usage() -> NetUsage {
+    let map = std::mem::take(&mut *USAGE.lock().unwrap_or_else(|e| e.into_inner()));
+    let mut u = NetUsage::default();
+    for (trained, s) in map.into_values() {
+        if trained {
+            u.trained += 1;
+            u.trained_s += s;
+        } else {
+            u.loaded += 1;
+            u.loaded_train_s += s;
+        }
+    }
+    u
+}
+
 /// Bumped whenever the meaning of a stored file changes (transforms, sampling, training code).
 pub const CACHE_FORMAT: u32 = 1;
 
@@ -108,6 +153,7 @@ pub fn read_record(path: &Path, key: &str, shape: [usize; 3]) -> Option<NetRecor
     {
         return None;
     }
+    note_use(path, false, s.train_s);
     Some(NetRecord {
         mlp: Mlp::from_weights(n_in, hidden, n_out, floats(&s.weights)),
         input_norm: Normalizer {
@@ -181,6 +227,7 @@ pub fn write_record(path: &Path, key: &str, rec: &NetRecord) -> Result<(), Build
     let tmp = path.with_extension(format!("json.tmp{}", std::process::id()));
     std::fs::write(&tmp, text).map_err(|e| fail(e.to_string()))?;
     std::fs::rename(&tmp, path).map_err(|e| fail(e.to_string()))?;
+    note_use(path, true, rec.train_s);
     Ok(())
 }
 

@@ -428,13 +428,47 @@ fn read_run_json(dir: &Path) -> Option<String> {
         .and_then(|q| q.as_u64())
         .unwrap_or(0);
     Some(format!(
-        "seed {seed}, {}, {secs:.2} s wall time{}.",
+        "seed {seed}, {}, {secs:.2} s wall time{}{}.",
         if quick { "quick mode" } else { "full scale" },
         v.get("threads")
             .and_then(|t| t.as_u64())
             .map(|t| format!(" on {t} threads"))
-            .unwrap_or_default()
+            .unwrap_or_default(),
+        v.get("emulator_nets").map(nets_text).unwrap_or_default()
     ))
+}
+
+/// What the run's wall time includes of emulator training (`run.json`'s `emulator_nets`).
+fn nets_text(n: &serde_json::Value) -> String {
+    let get = |k: &str| n.get(k).and_then(|x| x.as_f64()).unwrap_or(0.0);
+    let (loaded, cached_s, trained, trained_s) = (
+        get("loaded_from_cache"),
+        get("cached_training_seconds"),
+        get("trained"),
+        get("training_seconds"),
+    );
+    let plural = |k: f64| if k == 1.0 { "net" } else { "nets" };
+    let mut parts = Vec::new();
+    if trained > 0.0 {
+        parts.push(format!(
+            "training {trained} emulator {} ({} s) included",
+            plural(trained),
+            sig(trained_s)
+        ));
+    }
+    if loaded > 0.0 {
+        parts.push(format!(
+            "{loaded} emulator {} loaded from the cache (training {} took {} s when made, not included)",
+            plural(loaded),
+            if loaded == 1.0 { "it" } else { "them" },
+            sig(cached_s)
+        ));
+    }
+    if parts.is_empty() {
+        String::new()
+    } else {
+        format!("; {}", parts.join(", "))
+    }
 }
 
 fn figure_files(dir: &Path, id: &str) -> Vec<String> {
@@ -532,6 +566,27 @@ mod tests {
             md.contains("**1 of 2 reproduced claims held, 0 partly, 0 did not hold, 1 premise not reproduced.**"),
             "{md}"
         );
+    }
+
+    #[test]
+    fn run_line_says_what_emulator_training_the_time_includes() {
+        let j = |l: u64, t: u64| {
+            serde_json::json!({"loaded_from_cache": l, "cached_training_seconds": 120.0,
+                "trained": t, "training_seconds": 30.5})
+        };
+        assert_eq!(nets_text(&j(0, 0)), "");
+        let cached = nets_text(&j(3, 0));
+        assert!(
+            cached.contains("3 emulator nets loaded from the cache"),
+            "{cached}"
+        );
+        assert!(cached.contains("120 s when made, not included"), "{cached}");
+        let both = nets_text(&j(1, 1));
+        assert!(
+            both.contains("training 1 emulator net (30.5 s) included"),
+            "{both}"
+        );
+        assert!(both.contains("1 emulator net loaded"), "{both}");
     }
 
     /// A history a ← b ← c (c newest): `contains(x, y)` when x is y or older.

@@ -84,6 +84,8 @@ pub fn git_dirty() -> Option<bool> {
 /// [`super::shard`]).
 pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
     let t0 = Instant::now();
+    // Nets used before this run (another experiment's) are not this run's.
+    let _ = crate::emulator::cache::take_usage();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.jobs.max(1))
         .build()
@@ -254,6 +256,16 @@ fn run_unit(
     Ok((tables, ctx.stages()))
 }
 
+/// `run.json`'s record of the emulator nets a run loaded from the cache or trained.
+fn net_usage_json(u: crate::emulator::cache::NetUsage) -> serde_json::Value {
+    serde_json::json!({
+        "loaded_from_cache": u.loaded,
+        "cached_training_seconds": u.loaded_train_s,
+        "trained": u.trained,
+        "training_seconds": u.trained_s,
+    })
+}
+
 /// Where the results came from, for `run.json`.
 struct Provenance {
     git_revision: Option<String>,
@@ -344,6 +356,7 @@ fn finish(
         "threads": opts.jobs.max(1),
         "seconds_per_stage": stages,
         "seconds_total": seconds,
+        "emulator_nets": net_usage_json(crate::emulator::cache::take_usage()),
         "files": files.iter().map(|f| rel_name(&opts.out, &opts.figures, f)).collect::<Vec<_>>(),
     });
     if let (Some(m), Some(extra)) = (meta.as_object_mut(), provenance.extra.as_object()) {
