@@ -822,7 +822,7 @@ impl Family for LbcDiverInterpolation {
                     &tree,
                     &dives,
                     2.0,
-                    "Dives from one take-off; naive and LBC aim at a vertical entry",
+                    "One take-off; naive and LBC weights projected for vertical",
                 );
                 files.push(fig.gif("dives", &frames, film::GIF_DELAY_CS)?);
             }

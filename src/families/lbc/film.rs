@@ -50,7 +50,7 @@ pub fn fitted(x: (f64, f64), y: (f64, f64), height: u32) -> ((u32, u32), (f64, f
 }
 
 /// Narrowest panel (pixels), for the legend and the title.
-const MIN_WIDTH: u32 = 640;
+const MIN_WIDTH: u32 = 720;
 
 /// The row among `rows` whose time `t[row]` is closest to `tk`.
 pub fn nearest(rows: &[usize], t: &[f64], tk: f64) -> Option<usize> {
@@ -347,8 +347,9 @@ pub fn diver_frames(tree: &PlanarTree, dives: &[Dive], gap: f64, caption: &str) 
             -1.2,
             (dives.len().max(1) - 1) as f64 * gap + drift(dives) + 1.2,
         ),
-        (lo - 0.3, hi + 1.2),
-        600,
+        // Headroom above the dives' apex for the legend.
+        (lo - 0.3, hi + 2.8),
+        620,
     );
     gif_times(t_end)
         .into_iter()
