@@ -181,6 +181,13 @@ impl Figure {
     fn count(&self) -> usize {
         self.panels.len() + self.heatmaps.len()
     }
+
+    /// Size in pixels: the panel size times the grid.
+    fn size(&self) -> (u32, u32) {
+        let rows = self.count().div_ceil(self.columns) as u32;
+        let cols = self.columns.min(self.count()).max(1) as u32;
+        (self.panel_size.0 * cols, self.panel_size.1 * rows.max(1))
+    }
 }
 
 /// Viridis colour at t in [0, 1].
@@ -264,10 +271,39 @@ impl FigureSink {
     /// Draws `fig` as `<id>_<name>.png` and `.svg`, atomically; returns both paths.
     pub fn draw(&self, name: &str, fig: &Figure) -> Result<Vec<PathBuf>, Error> {
         register_fonts();
-        let rows = fig.count().div_ceil(fig.columns) as u32;
-        let cols = fig.columns.min(fig.count()).max(1) as u32;
-        let size = (fig.panel_size.0 * cols, fig.panel_size.1 * rows.max(1));
-        write_png_svg(&self.dir, &format!("{}_{name}", self.id), size, fig)
+        write_png_svg(&self.dir, &format!("{}_{name}", self.id), fig.size(), fig)
+    }
+
+    /// Draws `frames` (figures of one layout, sized by the first) as the animated GIF
+    /// `<id>_<name>.gif`, each frame shown for `delay_cs` hundredths of a second, atomically;
+    /// returns its path. Each frame carries its own caption (e.g. the time in a panel title).
+    pub fn gif(&self, name: &str, frames: &[Figure], delay_cs: u32) -> Result<PathBuf, Error> {
+        register_fonts();
+        std::fs::create_dir_all(&self.dir).map_err(|e| Error::Io {
+            path: self.dir.clone(),
+            source: e,
+        })?;
+        let gif = self.dir.join(format!("{}_{name}.gif", self.id));
+        let e = |m: String| perr(&gif, m);
+        let size = frames
+            .first()
+            .ok_or_else(|| e("an animation needs at least one frame".into()))?
+            .size();
+        let tmp = temp_path(&gif);
+        {
+            let root = BitMapBackend::gif(&tmp, size, delay_cs.max(1) * 10)
+                .map_err(|x| e(x.to_string()))?
+                .into_drawing_area();
+            for f in frames {
+                render(&root, f).map_err(e)?;
+                root.present().map_err(|x| e(x.to_string()))?;
+            }
+        }
+        std::fs::rename(&tmp, &gif).map_err(|x| Error::Io {
+            path: gif.clone(),
+            source: x,
+        })?;
+        Ok(gif)
     }
 }
 
@@ -1141,5 +1177,47 @@ mod tests {
         for p in sink.draw("marks", &fig).unwrap() {
             assert!(std::fs::metadata(p).unwrap().len() > 1000);
         }
+    }
+
+    #[test]
+    fn figures_animate_as_a_gif_written_atomically() {
+        let d = tempfile::tempdir().unwrap();
+        let sink = FigureSink {
+            dir: d.path().to_path_buf(),
+            id: "x".into(),
+        };
+        let frame = |t: f64| {
+            let mut f = Figure::grid(
+                vec![Panel {
+                    title: format!("t = {t:.1} s"),
+                    x_label: "x (m)".into(),
+                    y_label: "y (m)".into(),
+                    series: vec![Series::line("bar", vec![(0.0, 0.0), (t.cos(), t.sin())], 0)],
+                    x_range: Some((-1.0, 1.0)),
+                    y_range: Some((-1.0, 1.0)),
+                    ..Panel::default()
+                }],
+                1,
+            );
+            f.panel_size = (200, 160);
+            f
+        };
+        let frames: Vec<Figure> = (0..3).map(|k| frame(k as f64)).collect();
+        let p = sink.gif("anim", &frames, 5).unwrap();
+        assert_eq!(p, d.path().join("x_anim.gif"));
+        let bytes = std::fs::read(&p).unwrap();
+        assert_eq!(&bytes[..6], b"GIF89a");
+        // Logical screen of the first frame's size; one image descriptor (0x2C after a
+        // graphic control extension) per frame.
+        assert_eq!(u16::from_le_bytes([bytes[6], bytes[7]]), 200);
+        assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 160);
+        let frames_written = bytes.windows(2).filter(|w| w == &[0x21, 0xF9]).count();
+        assert!(
+            frames_written >= 3,
+            "{frames_written} graphic control blocks"
+        );
+        let names: Vec<_> = std::fs::read_dir(d.path()).unwrap().collect();
+        assert_eq!(names.len(), 1, "no temp file left behind");
+        assert!(sink.gif("none", &[], 5).is_err());
     }
 }

@@ -15,17 +15,25 @@
 //!   equation holds when the control-channel noise has covariance λR⁻¹; the spec states the
 //!   hip-torque noise intensity σ (N·m·√s), so λ = σ²R, used in z = exp(−v̂/λ).
 //! - **Torque limits** |τ| ≤ `torque_limit` in DDP (box constraints) and in every closed loop.
+//! - **Value model.** The trackers' gains and quadratic value functions come from the LQR
+//!   recursion (first-order dynamics) or from DDP's backward pass with the second-order
+//!   dynamics terms (LBC §5.2), chosen by `value_model`; the sweep is also run with the other
+//!   model (`value_model.csv`, judged by the same rule in the report, not in the verdict).
 //!
 //! Tables: `final` (policy, final_distance, control_cost, final_theta1, final_theta2,
 //! max_abs_torque, mean_entropy) with rows `tracker1`, `tracker2`, `naive`, `lbc`, `naive_sum`;
 //! `trajectories` (policy, t, theta1, theta2, omega1, omega2, u, alpha1, alpha_entropy);
 //! `swingups` (one row per optimized swing-up, with its family markers); `swingup_candidates`
 //! (every DDP run); `ddp_trace` (of the kept runs); `sweep` (theta1_deg, theta2_deg, policy,
-//! final_distance, control_cost, success, max_abs_torque, mean_entropy); `lambda_sweep`.
+//! final_distance, control_cost, success, max_abs_torque, mean_entropy); `lambda_sweep`;
+//! `value_model` (value_model, theta1_deg, theta2_deg, policy, final_distance, success: the
+//! sweep's policies with trackers of both value models); `showcase` (policy, t, theta1,
+//! theta2: tracker 1, tracker 2 and LBC from the first sweep start LBC rescues, for the GIF).
 
+use super::film;
 use crate::bellman::combine::{normalized_entropy, BlendMode, TrackerBlend};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution, DdpVariant};
-use crate::control::lqr::{track, TrackingController};
+use crate::control::lqr::{track_with, TrackingController, ValueModel};
 use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Heatmap, Mark, Panel, Series};
@@ -95,7 +103,19 @@ pub struct Params {
     pub sweep_theta2: [f64; 2],
     /// Grid points per axis of the sweep.
     pub sweep_points: usize,
+    /// Value model of the trackers the verdict judges: `lqr` (first-order dynamics, the
+    /// default) or `ddp` (with DDP's second-order dynamics terms, LBC §5.2); the other model
+    /// is run over the same sweep for comparison.
+    #[serde(default = "default_value_model")]
+    pub value_model: String,
 }
+
+fn default_value_model() -> String {
+    VALUE_MODELS[0].into()
+}
+
+/// The value models compared, by spec name: the LQR recursion and DDP's backward pass.
+pub const VALUE_MODELS: [&str; 2] = ["lqr", "ddp"];
 
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
@@ -161,6 +181,11 @@ impl Validate for Params {
             "must be in (0, 1]",
         )?;
         ensure(self.sweep_points >= 1, "sweep_points", "must be at least 1")?;
+        ensure(
+            VALUE_MODELS.contains(&self.value_model.as_str()),
+            "value_model",
+            format!("unknown value model `{}` (lqr, ddp)", self.value_model),
+        )?;
         for v in self.starts.iter().flatten().chain(&self.test_start) {
             ensure(v.is_finite(), "starts", "must be finite")?;
         }
@@ -301,6 +326,53 @@ impl Params {
                 upper: DVector::from_element(1, self.torque_limit),
             }),
             ..DdpOptions::default()
+        }
+    }
+
+    /// The [`ValueModel`] named `name` (one of [`VALUE_MODELS`]); DDP's second-order terms by
+    /// central differences with DDP's own step.
+    fn model(&self, name: &str) -> ValueModel {
+        if name == "ddp" {
+            ValueModel::Ddp {
+                fd_step: self.options().fd_step,
+            }
+        } else {
+            ValueModel::Lqr
+        }
+    }
+
+    /// The value model run beside the spec's for comparison.
+    fn other_model(&self) -> &'static str {
+        VALUE_MODELS[(self.value_model == VALUE_MODELS[0]) as usize]
+    }
+
+    /// Trackers of `sols` under the value model `name`.
+    fn trackers(
+        &self,
+        map: &Rk4Map<Acrobot>,
+        sols: &[&DdpSolution],
+        name: &str,
+    ) -> Result<Vec<TrackingController>, Error> {
+        let cost = self.cost();
+        sols.iter()
+            .map(|s| track_with(map, &cost, &s.x, &s.u, self.model(name)).map_err(other))
+            .collect()
+    }
+
+    /// The spec's combination of `trackers` in mode `m` at temperature `lambda`.
+    fn blend<'a>(
+        &self,
+        trackers: &'a [TrackingController],
+        limits: &'a [f64],
+        m: BlendMode,
+        lambda: f64,
+    ) -> TrackerBlend<'a> {
+        TrackerBlend {
+            trackers,
+            weights: self.weights.clone(),
+            lambda,
+            mode: m,
+            limits: Some(limits),
         }
     }
 
@@ -469,26 +541,18 @@ fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])
         let mut bars = Vec::new();
         for k in 0..frames {
             let tk = k as f64 * FRAME_DT;
-            let Some(&r) = rows
-                .iter()
-                .min_by(|&&a, &&b| (t[a] - tk).abs().total_cmp(&(t[b] - tk).abs()))
-            else {
+            let Some(r) = film::nearest(&rows, t, tk) else {
                 continue;
             };
             let off = k as f64 * FRAME_GAP;
-            let [e, h] = acro.positions(&[a1[r], a2[r], 0.0, 0.0]);
             let label = if k == 0 {
                 format!("{name}: pose every {FRAME_DT} s, t = 0 to {t_end} s left to right")
             } else {
                 String::new()
             };
             series.push(
-                Series::line(
-                    label,
-                    vec![(off, 0.0), (off + e[0], e[1]), (off + h[0], h[1])],
-                    c,
-                )
-                .mark(Mark::LinePoints),
+                Series::line(label, film::acrobot_pose(acro, off, a1[r], a2[r]), c)
+                    .mark(Mark::LinePoints),
             );
             bars.push((off, 0.0));
         }
@@ -516,6 +580,13 @@ fn mode(i: usize) -> BlendMode {
         3 => BlendMode::Lbc,
         _ => BlendMode::Sum,
     }
+}
+
+/// Index in [`POLICIES`] of the policy of `m` (inverse of [`mode`] on its range).
+fn mode_index(m: BlendMode) -> usize {
+    (0..POLICIES.len())
+        .find(|&i| mode(i) == m)
+        .expect("a policy per mode")
 }
 
 /// Counts over the start-state sweep: per policy successes, and on the subset where both
@@ -553,6 +624,46 @@ pub fn sweep_counts(ok: &[Vec<bool>]) -> SweepCounts {
     c
 }
 
+/// The spec's rule on sweep counts: (held, partly). Held: same-family swing-ups, LBC succeeds
+/// on at least `held_fraction` of the starts where both trackers fail and on more of them than
+/// either naive blend, and over the whole sweep on at least as many starts as the better
+/// tracker. Partly: LBC rescues a start where both trackers fail, or covers more starts than
+/// the better tracker.
+pub fn judge(c: &SweepCounts, same_family: bool, held_fraction: f64) -> (bool, bool) {
+    let (t1, t2, nv, lbc, ns) = (0, 1, 2, 3, 4);
+    let better_tracker = c.successes[t1].max(c.successes[t2]);
+    let rescued = c.rescued[lbc];
+    let premise = c.both_fail > 0;
+    let enough = premise && rescued as f64 >= held_fraction * c.both_fail as f64;
+    let beats_naive = rescued > c.rescued[nv].max(c.rescued[ns]);
+    let covers = c.successes[lbc] >= better_tracker;
+    let held = same_family && enough && beats_naive && covers;
+    let partly = (premise && rescued > 0) || c.successes[lbc] > better_tracker;
+    (held, partly)
+}
+
+/// Per-start success flags (in [`POLICIES`] order) of a long table's rows `(θ1, θ2, policy,
+/// success)`, starts in order of first appearance.
+fn start_flags(a: &[f64], b: &[f64], p: &[String], s: &[f64]) -> Vec<Vec<bool>> {
+    let mut starts: Vec<(f64, f64)> = Vec::new();
+    let mut flags: Vec<Vec<bool>> = Vec::new();
+    for r in 0..a.len() {
+        let key = (a[r], b[r]);
+        let i = match starts.iter().position(|&k| k == key) {
+            Some(i) => i,
+            None => {
+                starts.push(key);
+                flags.push(vec![false; POLICIES.len()]);
+                starts.len() - 1
+            }
+        };
+        if let Some(pi) = POLICIES.iter().position(|&q| q == p[r]) {
+            flags[i][pi] = s[r] == 1.0;
+        }
+    }
+    flags
+}
+
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).unwrap_or_default()
@@ -560,13 +671,14 @@ impl Job for Params {
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let map = Rk4Map::new(Acrobot::default(), self.dt).map_err(other)?;
-        let cost = self.cost();
         let (cands, best) = ctx.stage("ddp", || self.swing_ups(&map))?;
         let sols: Vec<&DdpSolution> = best.iter().map(|&b| &cands[b].sol).collect();
-        let trackers: Vec<TrackingController> = ctx.stage("lqr", || {
-            sols.iter()
-                .map(|s| track(&map, &cost, &s.x, &s.u).map_err(other))
-                .collect::<Result<_, _>>()
+        // The verdict's trackers (the spec's value model) and the other model's, for the
+        // comparison; DDP's Q_uu need not be positive definite, so the other may be missing.
+        let (trackers, alt) = ctx.stage("lqr", || -> Result<_, Error> {
+            let main = self.trackers(&map, &sols, &self.value_model)?;
+            let alt = self.trackers(&map, &sols, self.other_model()).ok();
+            Ok((main, alt))
         })?;
         let mut candidates = Table::new(&[
             "start",
@@ -661,13 +773,7 @@ impl Job for Params {
             }
         }
         let limits = [self.torque_limit];
-        let blend = |m: BlendMode, lambda: f64| TrackerBlend {
-            trackers: &trackers,
-            weights: self.weights.clone(),
-            lambda,
-            mode: m,
-            limits: Some(&limits),
-        };
+        let blend = |m: BlendMode, lambda: f64| self.blend(&trackers, &limits, m, lambda);
         let lambda = self.lambda();
         // The test start.
         let x0 = radians(&self.test_start);
@@ -749,7 +855,8 @@ impl Job for Params {
             )
         };
         let pb = ctx.progress(grid.len() as u64, "start-state sweep");
-        let rows: Vec<Result<(Vec<Outcome>, Vec<Outcome>), Error>> = ctx.stage("sweep", || {
+        type Row = (Vec<Outcome>, Vec<Outcome>, Vec<Outcome>);
+        let rows: Vec<Result<Row, Error>> = ctx.stage("sweep", || {
             grid.par_iter()
                 .map(|&(a, b)| {
                     let x0 = radians(&[a, b, 0.0, 0.0]);
@@ -773,13 +880,26 @@ impl Job for Params {
                             )?))
                         })
                         .collect::<Result<Vec<_>, Error>>()?;
+                    // The same policies with the other value model's trackers.
+                    let others = match &alt {
+                        Some(ts) => (0..POLICIES.len())
+                            .map(|i| {
+                                Ok(summary(&self.run_policy(
+                                    &map,
+                                    &self.blend(ts, &limits, mode(i), lambda),
+                                    &x0,
+                                )?))
+                            })
+                            .collect::<Result<Vec<_>, Error>>()?,
+                        None => Vec::new(),
+                    };
                     pb.inc(1);
-                    Ok((policies, lambdas))
+                    Ok((policies, lambdas, others))
                 })
                 .collect()
         });
         pb.finish_and_clear();
-        let rows: Vec<(Vec<Outcome>, Vec<Outcome>)> = rows.into_iter().collect::<Result<_, _>>()?;
+        let rows: Vec<Row> = rows.into_iter().collect::<Result<_, _>>()?;
         let mut sweep = Table::new(&[
             "theta1_deg",
             "theta2_deg",
@@ -791,9 +911,51 @@ impl Job for Params {
             "mean_entropy",
         ]);
         let ok = |d: f64| d < self.success_distance;
-        for (&(a, b), (r, _)) in grid.iter().zip(&rows) {
+        let mut models = Table::new(&[
+            "value_model",
+            "theta1_deg",
+            "theta2_deg",
+            "policy",
+            "final_distance",
+            "success",
+        ]);
+        for (&(a, b), (r, _, o)) in grid.iter().zip(&rows) {
             for (name, &(d, c, m, h)) in POLICIES.iter().zip(r) {
                 sweep.push(row![a, b, *name, d, c, ok(d) as i64, m, h]);
+            }
+            for (model, outs) in [(self.value_model.as_str(), r), (self.other_model(), o)] {
+                for (name, &(d, ..)) in POLICIES.iter().zip(outs) {
+                    models.push(row![model, a, b, *name, d, ok(d) as i64]);
+                }
+            }
+        }
+        // The showcase (GIF): tracker 1, tracker 2 and LBC from the first start LBC rescues
+        // (both trackers fail there), else from the test start.
+        let rescued = rows
+            .iter()
+            .position(|(r, ..)| !ok(r[0].0) && !ok(r[1].0) && ok(r[mode_index(BlendMode::Lbc)].0));
+        let show = rescued.map_or(self.test_start, |i| [grid[i].0, grid[i].1, 0.0, 0.0]);
+        let mut showcase = Table::new(&[
+            "policy",
+            "theta1_deg",
+            "theta2_deg",
+            "rescued",
+            "t",
+            "theta1",
+            "theta2",
+        ]);
+        for i in [0, 1, mode_index(BlendMode::Lbc)] {
+            let r = self.run_policy(&map, &blend(mode(i), lambda), &radians(&show))?;
+            for (k, x) in r.xs.iter().enumerate() {
+                showcase.push(row![
+                    POLICIES[i],
+                    show[0],
+                    show[1],
+                    rescued.is_some() as i64,
+                    k as f64 * self.dt,
+                    x[0],
+                    x[1]
+                ]);
             }
         }
         // The λ sweep: LBC at the test start and over the sweep, the both-fail subset included.
@@ -810,10 +972,10 @@ impl Job for Params {
             let r = self.run_policy(&map, &blend(BlendMode::Lbc, l), &x0)?;
             let flags: Vec<Vec<bool>> = rows
                 .iter()
-                .map(|(p, ls)| vec![ok(p[0].0), ok(p[1].0), ok(ls[li].0)])
+                .map(|(p, ls, _)| vec![ok(p[0].0), ok(p[1].0), ok(ls[li].0)])
                 .collect();
             let c = sweep_counts(&flags);
-            let h: f64 = rows.iter().map(|(_, ls)| ls[li].3).sum::<f64>() / rows.len() as f64;
+            let h: f64 = rows.iter().map(|(_, ls, _)| ls[li].3).sum::<f64>() / rows.len() as f64;
             lam.push(row![
                 l,
                 r.final_distance(),
@@ -831,6 +993,8 @@ impl Job for Params {
             ("success_distance", self.success_distance),
             ("held_fraction", self.held_fraction),
             ("max_cost_ratio", self.max_cost_ratio),
+            ("value_model_ddp", (self.value_model == "ddp") as u8 as f64),
+            ("other_value_model_built", alt.is_some() as u8 as f64),
         ]);
         Ok(Tables::from([
             ("final", fin),
@@ -840,6 +1004,8 @@ impl Job for Params {
             ("ddp_trace", trace),
             ("sweep", sweep),
             ("lambda_sweep", lam),
+            ("value_model", models),
+            ("showcase", showcase),
             ("rule", rule),
         ]))
     }
@@ -922,6 +1088,45 @@ impl Family for LbcAcrobot {
         };
         let mut files = fig.draw("final_pose", &Figure::grid(vec![pose, angles, weights], 3))?;
         files.extend(fig.draw("filmstrip", &filmstrip(&acro, (&p, &t, &a1, &a2)))?);
+        // The showcase GIF: the trackers and LBC from a start where both trackers fail.
+        if let Some(sc) = tables.get("showcase") {
+            let (sp, s1, s2, sr, st, sa1, sa2) = (
+                sc.strs("policy"),
+                sc.f64s("theta1_deg"),
+                sc.f64s("theta2_deg"),
+                sc.f64s("rescued"),
+                sc.f64s("t"),
+                sc.f64s("theta1"),
+                sc.f64s("theta2"),
+            );
+            let rows: Vec<Vec<usize>> = POLICIES
+                .iter()
+                .map(|name| (0..sp.len()).filter(|&r| sp[r] == *name).collect())
+                .collect();
+            let motions: Vec<film::Motion> = POLICIES
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| !rows[*i].is_empty())
+                .map(|(i, name)| film::Motion {
+                    label: (*name).into(),
+                    color: i,
+                    rows: &rows[i],
+                })
+                .collect();
+            if let Some(&r0) = motions.first().and_then(|m| m.rows.first()) {
+                let caption = if sr[r0] == 1.0 {
+                    format!(
+                        "From ({}, {}) deg at rest: both trackers fail, LBC swings up",
+                        s1[r0], s2[r0]
+                    )
+                } else {
+                    format!("From the test start ({}, {}) deg at rest", s1[r0], s2[r0])
+                };
+                let frames =
+                    film::acrobot_frames(&acro, &motions, (&st, &sa1, &sa2), 4.5, &caption);
+                files.push(fig.gif("swingup", &frames, film::GIF_DELAY_CS)?);
+            }
+        }
         // Sweep heat maps.
         const CLAMP: f64 = 3.0;
         let sw = tables.require("sweep")?;
@@ -1080,23 +1285,7 @@ impl Family for LbcAcrobot {
             df_str(&sw, "policy")?,
             df_f64(&sw, "success")?,
         );
-        let mut starts: Vec<(f64, f64)> = Vec::new();
-        let mut flags: Vec<Vec<bool>> = Vec::new();
-        for r in 0..wa.len() {
-            let key = (wa[r], wb[r]);
-            let i = match starts.iter().position(|&k| k == key) {
-                Some(i) => i,
-                None => {
-                    starts.push(key);
-                    flags.push(vec![false; POLICIES.len()]);
-                    starts.len() - 1
-                }
-            };
-            if let Some(pi) = POLICIES.iter().position(|&q| q == wp[r]) {
-                flags[i][pi] = ws[r] == 1.0;
-            }
-        }
-        let counts = sweep_counts(&flags);
+        let counts = sweep_counts(&start_flags(&wa, &wb, &wp, &ws));
         md.push_str(&format!(
             "\nStart-state sweep ({} starts; both trackers fail on {}):\n\n| policy | successes | successes where both trackers fail |\n| --- | --- | --- |\n",
             counts.starts, counts.both_fail
@@ -1130,17 +1319,71 @@ impl Family for LbcAcrobot {
                 sig(lsh[i])
             ));
         }
+        // The value models over the same sweep, judged by the same rule (not the verdict).
+        let vm = read_csv(&dir.join("value_model.csv"))?;
+        let (vn, va, vb, vp, vs) = (
+            df_str(&vm, "value_model")?,
+            df_f64(&vm, "theta1_deg")?,
+            df_f64(&vm, "theta2_deg")?,
+            df_str(&vm, "policy")?,
+            df_f64(&vm, "success")?,
+        );
+        let chosen = VALUE_MODELS[(setting("value_model_ddp") == 1.0) as usize];
+        md.push_str(&format!(
+            "\nValue models (the verdict uses `{chosen}`; `lqr`: the LQR recursion, first-order dynamics; `ddp`: DDP's backward pass with the second-order dynamics terms, LBC §5.2), the same rule over the same sweep:\n\n| value model | both trackers fail on | LBC succeeds there | naive average / sum there | LBC successes, all starts | better tracker | rule's grade |\n| --- | --- | --- | --- | --- | --- | --- |\n"
+        ));
+        let mut per_model = Vec::new();
+        for name in VALUE_MODELS {
+            let rows: Vec<usize> = (0..vn.len()).filter(|&r| vn[r] == name).collect();
+            if rows.is_empty() {
+                md.push_str(&format!(
+                    "| {name} | not built (Q_uu not positive definite) | - | - | - | - | - |\n"
+                ));
+                continue;
+            }
+            let pick = |v: &[f64]| rows.iter().map(|&r| v[r]).collect::<Vec<_>>();
+            let names: Vec<String> = rows.iter().map(|&r| vp[r].clone()).collect();
+            let c = sweep_counts(&start_flags(&pick(&va), &pick(&vb), &names, &pick(&vs)));
+            let (h, p) = judge(&c, same_family, held_fraction);
+            md.push_str(&format!(
+                "| {name} | {} of {} | {} | {} / {} | {} | {} | {} |\n",
+                c.both_fail,
+                c.starts,
+                c.rescued[3],
+                c.rescued[2],
+                c.rescued[4],
+                c.successes[3],
+                c.successes[0].max(c.successes[1]),
+                Verdict::graded(h, p).label()
+            ));
+            per_model.push((name, c));
+        }
+        // The reading, fixed in the spec before the run: the DDP value is better for LBC when
+        // it raises LBC's successes where both trackers fail or its margin over the better
+        // tracker and lowers neither, worse when it lowers one and raises neither, else mixed.
+        if let [(_, l), (_, d)] = per_model.as_slice() {
+            let margin =
+                |c: &SweepCounts| c.successes[3] as i64 - c.successes[0].max(c.successes[1]) as i64;
+            let (dr, dm) = (
+                d.rescued[3] as i64 - l.rescued[3] as i64,
+                margin(d) - margin(l),
+            );
+            let reading = match (dr.signum(), dm.signum()) {
+                (0, 0) => "no different for LBC",
+                (a, b) if a >= 0 && b >= 0 => "better for LBC",
+                (a, b) if a <= 0 && b <= 0 => "worse for LBC",
+                _ => "mixed",
+            };
+            md.push_str(&format!(
+                "\nReading (fixed in the spec): with DDP's value LBC's successes where both trackers fail change by {dr:+} and its margin over the better tracker by {dm:+}: the DDP value is {reading}.\n"
+            ));
+        }
         // The rule, fixed in the spec before the run.
         let (t1, t2, nv, lbc, ns) = (0, 1, 2, 3, 4);
         let better_tracker = counts.successes[t1].max(counts.successes[t2]);
         let rescued = counts.rescued[lbc];
         let naive_rescued = counts.rescued[nv].max(counts.rescued[ns]);
-        let premise = counts.both_fail > 0;
-        let enough = premise && rescued as f64 >= held_fraction * counts.both_fail as f64;
-        let beats_naive = rescued > naive_rescued;
-        let covers = counts.successes[lbc] >= better_tracker;
-        let held = same_family && enough && beats_naive && covers;
-        let partly = (premise && rescued > 0) || counts.successes[lbc] > better_tracker;
+        let (held, partly) = judge(&counts, same_family, held_fraction);
         let verdict = Verdict::graded(held, partly);
         Ok(Findings {
             ours: md,
@@ -1185,6 +1428,7 @@ mod tests {
             sweep_theta1: [-125.0, -75.0],
             sweep_theta2: [-40.0, 20.0],
             sweep_points: 1,
+            value_model: "lqr".into(),
         }
     }
 
@@ -1237,11 +1481,8 @@ mod tests {
     fn every_closed_loop_respects_the_torque_limit() {
         let (p, cands, kept) = solved();
         let map = Rk4Map::new(Acrobot::default(), p.dt).unwrap();
-        let cost = p.cost();
-        let trackers: Vec<TrackingController> = kept
-            .iter()
-            .map(|&k| track(&map, &cost, &cands[k].sol.x, &cands[k].sol.u).unwrap())
-            .collect();
+        let sols: Vec<&DdpSolution> = kept.iter().map(|&k| &cands[k].sol).collect();
+        let trackers = p.trackers(&map, &sols, "lqr").unwrap();
         let limits = [p.torque_limit];
         let mut saturated = 0;
         for start in [
@@ -1266,6 +1507,78 @@ mod tests {
         }
         // The limit binds: far from the references the LQR feedback asks for more.
         assert!(saturated > 0);
+    }
+
+    #[test]
+    fn alpha_is_uniform_as_lambda_grows_and_a_switch_as_it_shrinks_in_closed_loop() {
+        let (p, cands, kept) = solved();
+        let map = Rk4Map::new(Acrobot::default(), p.dt).unwrap();
+        let sols: Vec<&DdpSolution> = kept.iter().map(|&k| &cands[k].sol).collect();
+        let trackers = p.trackers(&map, &sols, "lqr").unwrap();
+        let limits = [p.torque_limit];
+        let x0 = radians(&p.test_start);
+        let run = |m: BlendMode, lambda: f64| {
+            p.run_policy(&map, &p.blend(&trackers, &limits, m, lambda), &x0)
+                .unwrap()
+        };
+        let (small, large) = (run(BlendMode::Lbc, 1e-3), run(BlendMode::Lbc, 1e15));
+        let spec = run(BlendMode::Lbc, p.lambda());
+        let (hs, hm, hl) = (
+            small.mean_entropy(),
+            spec.mean_entropy(),
+            large.mean_entropy(),
+        );
+        assert!(hs < 0.1 && hs < 0.5 * hm && hm < hl, "{hs} {hm} {hl}");
+        assert!(hl > 1.0 - 1e-9, "{hl}");
+        // At large λ LBC is the naive average (w = 1: α = 1/2), step for step.
+        let naive = run(BlendMode::Naive, p.lambda());
+        assert!(naive.diverged.is_none() && large.diverged.is_none());
+        for (a, b) in large.xs.iter().zip(&naive.xs) {
+            assert!((a - b).amax() < 1e-4, "{a} vs {b}");
+        }
+        // At small λ it is a switch: α₁ within 0.01 of 0 or 1 over the first 80 % of the
+        // horizon (near its end the remaining costs, hence the values, converge).
+        let n = small.alpha1.len() * 4 / 5;
+        let mixed = small.alpha1[..n]
+            .iter()
+            .filter(|a| (0.01..0.99).contains(*a))
+            .count();
+        assert_eq!(mixed, 0, "{:?}", &small.alpha1[..n]);
+    }
+
+    #[test]
+    fn value_models_build_different_trackers_and_the_rule_grades_counts() {
+        let (p, cands, kept) = solved();
+        let map = Rk4Map::new(Acrobot::default(), p.dt).unwrap();
+        let sols: Vec<&DdpSolution> = kept.iter().map(|&k| &cands[k].sol).collect();
+        let lqr = p.trackers(&map, &sols, "lqr").unwrap();
+        let ddp = p.trackers(&map, &sols, "ddp").unwrap();
+        // Same references and remaining cost; the second-order terms change the gains.
+        let gap = (0..lqr[0].gains.len())
+            .map(|k| (&lqr[0].gains[k] - &ddp[0].gains[k]).amax())
+            .fold(0.0, f64::max);
+        assert!(gap > 1e-3, "gains differ by {gap}");
+        let (a, b) = (lqr[0].value_ref[0], ddp[0].value_ref[0]);
+        assert!((a - b).abs() <= 1e-9 * a.abs(), "{a} vs {b}");
+        let mut bad = params();
+        bad.value_model = "ilqr".into();
+        let e = bad.validate().unwrap_err();
+        assert!(format!("{e}").contains("value_model"), "{e}");
+        assert_eq!(params().other_model(), "ddp");
+        // The rule: held, partly (one rescue), and not held.
+        let counts = |successes: Vec<usize>, rescued: Vec<usize>| SweepCounts {
+            starts: 10,
+            both_fail: 4,
+            successes,
+            rescued,
+        };
+        let held = counts(vec![5, 6, 3, 8, 2], vec![0, 0, 1, 2, 1]);
+        assert_eq!(judge(&held, true, 0.5), (true, true));
+        assert_eq!(judge(&held, false, 0.5), (false, true));
+        let one = counts(vec![5, 6, 3, 6, 2], vec![0, 0, 1, 1, 1]);
+        assert_eq!(judge(&one, true, 0.5), (false, true));
+        let none = counts(vec![5, 6, 3, 6, 2], vec![0, 0, 1, 0, 1]);
+        assert_eq!(judge(&none, true, 0.5), (false, false));
     }
 
     #[test]

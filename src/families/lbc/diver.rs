@@ -36,7 +36,7 @@ use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
-use crate::families::lbc::rule_settings;
+use crate::families::lbc::{film, rule_settings};
 use crate::physics::diver::{diver, entry_angle};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::planar::PlanarTree;
@@ -687,6 +687,23 @@ impl Job for InterpolationParams {
                 ]);
             }
         }
+        // The filmstrip's dives: the two components and, with the weights projected for the
+        // vertical entry, the naive average and LBC (every executed state).
+        let (w0, _) = self.weights(0.0, lambda)?;
+        let mut motion = Table::new(&MOTION_COLUMNS);
+        for (name, mode) in MOTION_DIVES.iter().zip([
+            BlendMode::Single(0),
+            BlendMode::Single(1),
+            BlendMode::Naive,
+            BlendMode::Lbc,
+        ]) {
+            let r = d.execute(&blend(&w0, mode, lambda), &x0)?;
+            for (k, x) in r.states.iter().enumerate() {
+                let mut cells = vec![(*name).into(), (k as f64 * d.dt).into()];
+                cells.extend(x.iter().take(film::DIVER_COORDS).map(|&v| v.into()));
+                motion.push(cells);
+            }
+        }
         let spacing = 2.0 * self.offset;
         let rule = super::rule_table(&[
             ("lambda", lambda),
@@ -703,10 +720,21 @@ impl Job for InterpolationParams {
             ("dives", examples),
             ("projection", proj),
             ("lambda_sweep", lam),
+            ("motion", motion),
             ("rule", rule),
         ]))
     }
 }
+
+/// Columns of the interpolation's `motion` table: the dive, the time and the diver's
+/// generalized coordinates (hip position, torso angle, joint angles).
+const MOTION_COLUMNS: [&str; 2 + film::DIVER_COORDS] = [
+    "dive", "t", "x", "y", "torso", "neck", "shoulder", "elbow", "hip", "knee", "ankle",
+];
+
+/// The dives of the `motion` table: the components, and the naive average and LBC with the
+/// weights projected for the vertical entry.
+const MOTION_DIVES: [&str; 4] = ["under-rotating", "over-rotating", "naive", "lbc"];
 
 /// Per-method column of rows `m == name` as (x, y) points.
 fn method_points(x: &[f64], m: &[String], y: &[f64], name: &str) -> Vec<(f64, f64)> {
@@ -759,7 +787,47 @@ impl Family for LbcDiverInterpolation {
                 ..Default::default()
             },
         ];
-        fig.draw("entry", &Figure::grid(panels, 2))
+        let mut files = fig.draw("entry", &Figure::grid(panels, 2))?;
+        // Filmstrip and GIF of the component dives, the naive average and LBC.
+        if let Some(mt) = tables.get("motion") {
+            let (names, t) = (mt.strs("dive"), mt.f64s("t"));
+            let cols: Vec<Vec<f64>> = MOTION_COLUMNS[2..].iter().map(|c| mt.f64s(c)).collect();
+            let q: Vec<Vec<f64>> = (0..t.len())
+                .map(|r| cols.iter().map(|c| c[r]).collect())
+                .collect();
+            let dives: Vec<film::Dive> = MOTION_DIVES
+                .iter()
+                .enumerate()
+                .map(|(c, name)| {
+                    let rows: Vec<usize> =
+                        (0..names.len()).filter(|&r| names[r] == *name).collect();
+                    film::Dive {
+                        label: match *name {
+                            "naive" | "lbc" => format!("{name}, weights for vertical"),
+                            other => format!("{other} component"),
+                        },
+                        color: c,
+                        t: rows.iter().map(|&r| t[r]).collect(),
+                        q: rows.iter().map(|&r| q[r].as_slice()).collect(),
+                    }
+                })
+                .filter(|d| !d.t.is_empty())
+                .collect();
+            if !dives.is_empty() {
+                let tree = diver();
+                files.extend(
+                    fig.draw("filmstrip", &film::diver_filmstrip(&tree, &dives, 0.2, 1.6))?,
+                );
+                let frames = film::diver_frames(
+                    &tree,
+                    &dives,
+                    2.0,
+                    "One take-off; naive and LBC weights projected for vertical",
+                );
+                files.push(fig.gif("dives", &frames, film::GIF_DELAY_CS)?);
+            }
+        }
+        Ok(files)
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {

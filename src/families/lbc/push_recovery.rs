@@ -14,9 +14,12 @@
 //!
 //! Tables: `weights` (t, alpha_forward, alpha_backward, force_x, body_angle, arm_angle,
 //! hand_x, alpha_forward_mirrored, alpha_forward_baseline, body_angle_mirrored), `reaches`
-//! (one row per optimized reach, with its termination), `rule` (the spec's thresholds).
+//! (one row per optimized reach, with its termination), `rule` (the spec's thresholds),
+//! `lambda_sweep` (lambda, swings, settle_gap, mirror_gap, mean_entropy, max_lean: the checks
+//! repeated at each temperature of `lambda_sweep`, not judged, with the mean normalized entropy
+//! of α under the tugs, so that no verdict rests on a degenerate α unseen).
 
-use crate::bellman::combine::{BlendMode, TrackerBlend};
+use crate::bellman::combine::{normalized_entropy, BlendMode, TrackerBlend};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, Termination};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map};
@@ -80,6 +83,42 @@ pub struct Params {
     pub mirror_tolerance: f64,
     /// The body has fallen when its lean from upright exceeds this (rad).
     pub fall_angle: f64,
+    /// Temperatures λ at which the checks are repeated (not judged; the noise model's λ is).
+    #[serde(default)]
+    pub lambda_sweep: Vec<f64>,
+}
+
+/// Crossings of 0.5 by the forward weight `a` before time `before`.
+pub fn swings(t: &[f64], a: &[f64], before: f64) -> usize {
+    let mut n = 0;
+    let mut side = a.first().map(|v| *v > 0.5);
+    for k in 0..t.len() {
+        if t[k] >= before {
+            break;
+        }
+        let s = a[k] > 0.5;
+        if Some(s) != side {
+            n += 1;
+            side = Some(s);
+        }
+    }
+    n
+}
+
+/// Largest |a − b| over the steps with `t` in `window` (NaN when none is).
+pub fn window_gap(t: &[f64], a: &[f64], b: &[f64], window: [f64; 2]) -> f64 {
+    (0..t.len())
+        .filter(|&k| t[k] >= window[0] && t[k] <= window[1])
+        .map(|k| (a[k] - b[k]).abs())
+        .fold(f64::NAN, f64::max)
+}
+
+/// Largest |α_forward(tugs) − α_backward(mirrored tugs)|, with α_backward = 1 − α_forward.
+pub fn mirror_gap(a: &[f64], mirrored: &[f64]) -> f64 {
+    a.iter()
+        .zip(mirrored)
+        .map(|(x, m)| (x - (1.0 - m)).abs())
+        .fold(0.0, f64::max)
 }
 
 impl Validate for Params {
@@ -119,6 +158,9 @@ impl Validate for Params {
             "max_iterations",
             "must be at least 1",
         )?;
+        for (i, l) in self.lambda_sweep.iter().enumerate() {
+            positive(&format!("lambda_sweep[{i}]"), *l)?;
+        }
         for (i, t) in self.tugs.iter().enumerate() {
             ensure(
                 t.start >= 0.0 && t.start.is_finite(),
@@ -226,19 +268,21 @@ impl Params {
         Ok((trackers, reaches))
     }
 
-    /// The closed loop under the tugs scaled by `sign` (1: as scripted, −1: mirrored, 0: none):
-    /// per step (α_forward, α_backward, force, body angle, absolute arm angle, hand x).
+    /// The closed loop at temperature `lambda` under the tugs scaled by `sign` (1: as scripted,
+    /// −1: mirrored, 0: none): per step (α_forward, α_backward, force, body angle, absolute
+    /// arm angle, hand x).
     fn closed_loop(
         &self,
         trackers: &[TrackingController],
         sign: f64,
+        lambda: f64,
     ) -> Result<Vec<[f64; 6]>, Error> {
         let full = Rk4Map::new(FiniteDifference::new(push_figure()), self.dt).map_err(other)?;
         let mut ws = full.workspace();
         let blend = TrackerBlend {
             trackers,
             weights: vec![1.0, 1.0],
-            lambda: self.lambda(),
+            lambda,
             limits: Some(&self.torque_limits),
             mode: BlendMode::Lbc,
         };
@@ -284,9 +328,9 @@ impl Job for Params {
         let (trackers, reaches) = ctx.stage("ddp + lqr", || self.reaches())?;
         let (tugged, mirrored, baseline) = ctx.stage("tugs", || -> Result<_, Error> {
             Ok((
-                self.closed_loop(&trackers, 1.0)?,
-                self.closed_loop(&trackers, -1.0)?,
-                self.closed_loop(&trackers, 0.0)?,
+                self.closed_loop(&trackers, 1.0, self.lambda())?,
+                self.closed_loop(&trackers, -1.0, self.lambda())?,
+                self.closed_loop(&trackers, 0.0, self.lambda())?,
             ))
         })?;
         let mut table = Table::new(&[
@@ -315,6 +359,44 @@ impl Job for Params {
                 m[3]
             ]);
         }
+        // The same checks at each swept λ (not judged).
+        let mut lam = Table::new(&[
+            "lambda",
+            "swings",
+            "settle_gap",
+            "mirror_gap",
+            "mean_entropy",
+            "max_lean",
+        ]);
+        ctx.stage("lambda sweep", || -> Result<(), Error> {
+            for &l in &self.lambda_sweep {
+                let runs = [1.0, -1.0, 0.0]
+                    .map(|sign| self.closed_loop(&trackers, sign, l))
+                    .into_iter()
+                    .collect::<Result<Vec<_>, _>>()?;
+                let col = |r: &[[f64; 6]], i: usize| r.iter().map(|v| v[i]).collect::<Vec<f64>>();
+                let t: Vec<f64> = (0..runs[0].len()).map(|k| k as f64 * self.dt).collect();
+                let a = col(&runs[0], 0);
+                let h = runs[0]
+                    .iter()
+                    .map(|v| normalized_entropy(&v[..2]))
+                    .sum::<f64>()
+                    / runs[0].len().max(1) as f64;
+                let lean = runs[..2]
+                    .iter()
+                    .flat_map(|r| r.iter().map(|v| (v[3] - FRAC_PI_2).abs()))
+                    .fold(0.0, f64::max);
+                lam.push(row![
+                    l,
+                    swings(&t, &a, self.settle_window[0]) as i64,
+                    window_gap(&t, &a, &col(&runs[2], 0), self.settle_window),
+                    mirror_gap(&a, &col(&runs[1], 0)),
+                    h,
+                    lean
+                ]);
+            }
+            Ok(())
+        })?;
         let rule = super::rule_table(&[
             ("lambda", self.lambda()),
             ("torque_noise", self.torque_noise),
@@ -329,6 +411,7 @@ impl Job for Params {
         Ok(Tables::from([
             ("weights", table),
             ("reaches", reaches),
+            ("lambda_sweep", lam),
             ("rule", rule),
         ]))
     }
@@ -421,27 +504,11 @@ impl Family for LbcPush {
             .find(|&k| f[k] != 0.0)
             .map_or(0.0, |k| t[k]);
         // Crossings of 0.5 before the settling window.
-        let mut swings = 0;
-        let mut side = a.first().map(|v| *v > 0.5);
-        for k in 0..t.len() {
-            if t[k] >= w0 {
-                break;
-            }
-            let s = a[k] > 0.5;
-            if Some(s) != side {
-                swings += 1;
-                side = Some(s);
-            }
-        }
+        let swings = swings(&t, &a, w0);
         let window: Vec<usize> = (0..t.len()).filter(|&k| t[k] >= w0 && t[k] <= w1).collect();
-        let settle_gap = window
-            .iter()
-            .map(|&k| (a[k] - ab[k]).abs())
-            .fold(f64::NAN, f64::max);
+        let settle_gap = window_gap(&t, &a, &ab, [w0, w1]);
         // Mirrored tugs must give the mirrored choice: α_backward(mirrored) = 1 − α_fwd(mirrored).
-        let mirror_gap = (0..t.len())
-            .map(|k| (a[k] - (1.0 - am[k])).abs())
-            .fold(0.0, f64::max);
+        let mirror_gap = mirror_gap(&a, &am);
         let lean = body
             .iter()
             .chain(&bm)
@@ -495,6 +562,29 @@ impl Family for LbcPush {
             sig(range(&am)),
             sig(mean(&am))
         ));
+        let ls = read_csv(&dir.join("lambda_sweep.csv"))?;
+        let (ll, lsw, lse, lmi, lh, lle) = (
+            df_f64(&ls, "lambda")?,
+            df_f64(&ls, "swings")?,
+            df_f64(&ls, "settle_gap")?,
+            df_f64(&ls, "mirror_gap")?,
+            df_f64(&ls, "mean_entropy")?,
+            df_f64(&ls, "max_lean")?,
+        );
+        if !ll.is_empty() {
+            md.push_str("\nThe same checks over λ (not judged; entropy of α normalized to [0, 1], 0 a switch, 1 uniform):\n\n| λ | swings | settle gap | mirror gap | mean entropy of α under the tugs | largest lean (rad) |\n| --- | --- | --- | --- | --- | --- |\n");
+            for i in 0..ll.len() {
+                md.push_str(&format!(
+                    "| {} | {} | {} | {} | {} | {} |\n",
+                    sig(ll[i]),
+                    lsw[i],
+                    sig(lse[i]),
+                    sig(lmi[i]),
+                    sig(lh[i]),
+                    sig(lle[i])
+                ));
+            }
+        }
         let verdict = Verdict::graded(swung && settled && mirrored && stood, swung && mirrored);
         Ok(Findings {
             ours: md,
@@ -546,8 +636,8 @@ mod tests {
         let spec: toml::Table = toml::from_str(&text).unwrap();
         let p: Params = spec["params"].clone().try_into().unwrap();
         let (trackers, _) = p.reaches().unwrap();
-        let tugged = p.closed_loop(&trackers, 1.0).unwrap();
-        let mirrored = p.closed_loop(&trackers, -1.0).unwrap();
+        let tugged = p.closed_loop(&trackers, 1.0, p.lambda()).unwrap();
+        let mirrored = p.closed_loop(&trackers, -1.0, p.lambda()).unwrap();
         // The tugs move the choice both ways (so the mirror check is not about a constant 1/2).
         assert!(tugged.iter().any(|r| r[0] > 0.75) && tugged.iter().any(|r| r[0] < 0.25));
         for (k, (a, m)) in tugged.iter().zip(&mirrored).enumerate() {
