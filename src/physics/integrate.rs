@@ -98,6 +98,42 @@ pub struct Integrator {
     scratch: Vec<f64>,
     h: f64,
     stats: Rk45Stats,
+    fsal: Fsal,
+}
+
+/// "First same as last" reuse of the Dormand–Prince first stage: k1 = f(x, u) is kept with
+/// the exact bits of the `x` and `u` it was computed for, so that a trial step from the same
+/// state and control (the next step after an accepted one, whose k7 = f(x_new, u) is k1 of
+/// the next step; a retry after a rejection; a later call continuing from where the last one
+/// stopped) skips that evaluation. The model is a pure function of (x, u), so the result is
+/// bit-identical to evaluating again.
+#[derive(Debug, Clone, Default)]
+struct Fsal {
+    enabled: bool,
+    valid: bool,
+    x: Vec<f64>,
+    u: Vec<f64>,
+}
+
+impl Fsal {
+    /// Whether the stored k1 was computed at exactly `x`, `u`.
+    fn hit(&self, x: &[f64], u: &[f64]) -> bool {
+        let same = |a: &[f64], b: &[f64]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(p, q)| p.to_bits() == q.to_bits())
+        };
+        self.enabled && self.valid && same(&self.x, x) && same(&self.u, u)
+    }
+
+    /// Records that k1 now holds f(x, u).
+    fn store(&mut self, x: &[f64], u: &[f64]) {
+        if self.enabled {
+            self.x.clear();
+            self.x.extend_from_slice(x);
+            self.u.clear();
+            self.u.extend_from_slice(u);
+            self.valid = true;
+        }
+    }
 }
 
 // Dormand–Prince tableau (the system is autonomous, so the nodes c_i are not needed).
@@ -140,7 +176,19 @@ impl Integrator {
             scratch: vec![0.0; 9 * n],
             h: f64::INFINITY,
             stats: Rk45Stats::default(),
+            fsal: Fsal::default(),
         }
+    }
+
+    /// Reuses the Dormand–Prince first stage across trial steps and calls ("first same as
+    /// last"; Rk45 and Dopri5 kinds): f(x, u) is not evaluated again for the exact `x` and `u`
+    /// of the last evaluation kept. Results are bit-identical and [`Rk45Stats::evaluations`]
+    /// counts only the evaluations made. Valid only while every call passes the same model
+    /// (or an identical one): the cache is keyed on `x` and `u`, not on the model.
+    pub fn with_fsal(mut self) -> Self {
+        self.fsal.enabled = true;
+        self.fsal.x.reserve(self.n);
+        self
     }
 
     /// Sets the adaptive method's tolerances.
@@ -246,7 +294,14 @@ impl Integrator {
         let (k7, rest) = rest.split_at_mut(n);
         let (xn, rest) = rest.split_at_mut(n);
         let tmp = &mut rest[..n];
-        model.derivative(x, u, k1);
+        let x = &x[..n];
+        if self.fsal.hit(x, u) {
+            // k1 already holds f(x, u).
+        } else {
+            model.derivative(x, u, k1);
+            self.stats.evaluations += 1;
+            self.fsal.store(x, u);
+        }
         for i in 0..n {
             tmp[i] = x[i] + h * A21 * k1[i];
         }
@@ -271,7 +326,7 @@ impl Integrator {
         for i in 0..n {
             xn[i] = x[i] + h * (B1 * k1[i] + B3 * k3[i] + B4 * k4[i] + B5 * k5[i] + B6 * k6[i]);
         }
-        self.stats.evaluations += 6;
+        self.stats.evaluations += 5;
         if !want_error {
             return 0.0;
         }
@@ -305,6 +360,11 @@ impl Integrator {
             };
             if accept {
                 x.copy_from_slice(&self.scratch[7 * n..8 * n]);
+                if self.fsal.enabled {
+                    // k7 = f(x_new, u) is the next step's k1.
+                    self.scratch.copy_within(6 * n..7 * n, 0);
+                    self.fsal.store(x, u);
+                }
                 t += hh;
                 self.stats.accepted += 1;
                 // Keep the proposed size for the next call unless this was a clipped last step.
@@ -398,6 +458,57 @@ mod tests {
         let mut y = [1.0, 0.0];
         loose.step(&Oscillator, &mut y, &[], 3.0);
         assert!(loose.stats().accepted < integ.stats().accepted);
+    }
+
+    /// A damped oscillator driven by its control: q̈ = −q − 0.3 q̇ + u.
+    struct Driven;
+    impl Model for Driven {
+        fn name(&self) -> &str {
+            "driven"
+        }
+        fn state_names(&self) -> Vec<String> {
+            vec!["q".into(), "v".into()]
+        }
+        fn control_names(&self) -> Vec<String> {
+            vec!["u".into()]
+        }
+        fn parameters(&self) -> Vec<Parameter> {
+            vec![]
+        }
+        fn default_dt(&self) -> f64 {
+            0.01
+        }
+    }
+    impl Ode for Driven {
+        fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+            dx[0] = x[1];
+            dx[1] = -x[0] - 0.3 * x[1] + u[0];
+        }
+    }
+
+    #[test]
+    fn fsal_reuse_is_bit_identical_and_saves_evaluations() {
+        // Calls that continue from the last state, a control change, and a state changed
+        // from outside between calls (as an impact does): the same bits either way.
+        let mut plain = Integrator::new(IntegratorKind::Rk45, 2).with_tolerances(1e-8, 1e-10);
+        let mut fsal = plain.clone().with_fsal();
+        let (mut x, mut y) = ([1.0, 0.0], [1.0, 0.0]);
+        for k in 0..40 {
+            let u = [if (k / 10) % 2 == 0 { 0.5 } else { -0.5 }];
+            if k == 25 {
+                x[1] = 0.0;
+                y[1] = 0.0;
+            }
+            plain.step(&Driven, &mut x, &u, 0.1);
+            fsal.step(&Driven, &mut y, &u, 0.1);
+            assert_eq!(x.map(f64::to_bits), y.map(f64::to_bits), "call {k}");
+        }
+        let (a, b) = (plain.stats(), fsal.stats());
+        assert_eq!((a.accepted, a.rejected), (b.accepted, b.rejected));
+        assert_eq!(a.evaluations, 7 * (a.accepted + a.rejected));
+        // Each trial step evaluates 6 stages instead of 7; k1 is evaluated only for a new
+        // (x, u): the first call, the three control changes and the state change.
+        assert_eq!(b.evaluations, 6 * (b.accepted + b.rejected) + 5, "{b:?}");
     }
 
     #[test]

@@ -263,7 +263,8 @@ pub fn simulate(setup: &SimSetup, c: &Controller) -> Result<Trajectory, Synthesi
     let schedule = c.schedule(setup.horizon);
     let mut sim = LatticeSim::new(setup.model.clone())
         .with_tolerances(setup.rtol, setup.atol)
-        .with_min_step(setup.min_step);
+        .with_min_step(setup.min_step)
+        .with_fsal();
     let n = setup.model.lattice.n_masses();
     let mut x = setup.initial.clone();
     let positions = |x: &[f64]| -> Vec<[f64; 3]> {

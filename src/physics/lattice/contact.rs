@@ -159,6 +159,14 @@ impl LatticeSim {
         self
     }
 
+    /// Reuses the first RK45 stage when a step starts from the exact state and rest lengths
+    /// of the last evaluation kept ([`Integrator::with_fsal`]): fewer evaluations, the same
+    /// bits. Only while [`Self::model`] is left unchanged between steps.
+    pub fn with_fsal(mut self) -> Self {
+        self.integrator = self.integrator.with_fsal();
+        self
+    }
+
     /// Sets the smallest internal RK45 step (s), below which a step is accepted whatever its
     /// error estimate: bounds the work when contact making and breaking chatters.
     pub fn with_min_step(mut self, min_step: f64) -> Self {

@@ -211,20 +211,29 @@ impl LatticeModel {
     pub fn add_spring_forces(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
         let n = self.lattice.n_masses();
         let (p, v) = x.split_at(3 * n);
+        // Per-mass 3-vectors: one bounds check per mass access instead of one per coordinate.
+        let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
+        let f = f[..3 * n].as_chunks_mut::<3>().0;
         for (s, &l0) in self.lattice.springs.iter().zip(rest) {
-            let (a, b) = (3 * s.a, 3 * s.b);
-            let d = [p[a] - p[b], p[a + 1] - p[b + 1], p[a + 2] - p[b + 2]];
-            let dv = [v[a] - v[b], v[a + 1] - v[b + 1], v[a + 2] - v[b + 2]];
+            let (pa, pb, va, vb) = (p[s.a], p[s.b], v[s.a], v[s.b]);
+            let d = [pa[0] - pb[0], pa[1] - pb[1], pa[2] - pb[2]];
+            let dv = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
             let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
             if len == 0.0 {
                 continue;
             }
             let rate = (d[0] * dv[0] + d[1] * dv[1] + d[2] * dv[2]) / len;
             let tension = s.stiffness * (len - l0) + s.damping * rate;
+            let fk = d.map(|dk| tension * dk / len);
+            // Each coordinate is updated once on each end, so grouping the updates by end
+            // (rather than by coordinate) gives the same sums, also when a == b.
+            let fa = &mut f[s.a];
             for k in 0..3 {
-                let fk = tension * d[k] / len;
-                f[a + k] -= fk;
-                f[b + k] += fk;
+                fa[k] -= fk[k];
+            }
+            let fb = &mut f[s.b];
+            for k in 0..3 {
+                fb[k] += fk[k];
             }
         }
     }
@@ -369,11 +378,12 @@ impl Ode for LatticeModel {
         dv.fill(0.0);
         self.add_spring_forces(x, rest, dv);
         let fl = &self.floor;
-        for (i, m) in self.lattice.masses.iter().enumerate() {
-            let f = &mut dv[3 * i..3 * i + 3];
+        let (p, v) = x.split_at(3 * n);
+        let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
+        let masses = self.lattice.masses.iter();
+        for (((m, f), p), v) in masses.zip(dv.as_chunks_mut::<3>().0).zip(p).zip(v) {
             f[2] -= m.mass * self.gravity;
-            let (z, v) = (x[3 * i + 2], &x[3 * n + 3 * i..3 * n + 3 * i + 3]);
-            if self.in_contact(z, v[2]) {
+            if self.in_contact(p[2], v[2]) {
                 let normal = (-f[2]).max(0.0);
                 f[2] += normal;
                 // Force that would stop the tangential motion within τ, clipped to Coulomb.
