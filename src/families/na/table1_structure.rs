@@ -873,7 +873,13 @@ mod tests {
             let t14 = &g.tasks[0];
             let base = |p: &crate::families::na::fig13_control::Params,
                         t: &crate::families::na::fig13_control::Task| {
-                EmulatorCache::key(&build_spec(1, &t.net, p.steps, p.example_scale, &p.training))
+                EmulatorCache::key(&build_spec(
+                    1,
+                    &t.net,
+                    p.steps,
+                    p.example_scale,
+                    &p.training,
+                ))
             };
             assert_eq!(base(&g, t14), base(&f13, t13), "base net (quick {quick})");
             assert_eq!(t14.name, t13.name);
