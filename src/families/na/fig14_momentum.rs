@@ -652,7 +652,9 @@ impl Family for NaMomentum {
                 Series::line(format!("plain (eta {e})"), pick("plain", e), 1).mark(Mark::Dashed),
             );
         }
-        // The same two runs through the lander's DAgger net (ours), dotted.
+        // The same two runs through the lander's DAgger net (ours), a panel of their own (the
+        // curves lie almost on the Table 1 net's), same colours and line styles.
+        let mut dagger = vec![];
         if let Some(dt) = tables.get("dagger_objective").filter(|t| !t.is_empty()) {
             let (dm, de, di, dobj) = (
                 dt.strs("method"),
@@ -660,7 +662,7 @@ impl Family for NaMomentum {
                 dt.f64s("iteration"),
                 dt.f64s("objective"),
             );
-            for (c, (mm, mark)) in [("momentum", Mark::LinePoints), ("plain", Mark::Points)]
+            for (c, (mm, mark)) in [("momentum", Mark::Line), ("plain", Mark::Dashed)]
                 .into_iter()
                 .enumerate()
             {
@@ -671,9 +673,7 @@ impl Family for NaMomentum {
                     .filter(|&r| dm[r] == mm && de[r] == e)
                     .map(|r| (di[r], dobj[r]))
                     .collect();
-                main.push(
-                    Series::line(format!("{mm} (eta {e}), DAgger net"), pts, 2 + c).mark(mark),
-                );
+                dagger.push(Series::line(format!("{mm} (eta {e}), DAgger net"), pts, c).mark(mark));
             }
         }
         let sweep = plain_eta
@@ -681,9 +681,9 @@ impl Family for NaMomentum {
             .enumerate()
             .map(|(i, &e)| Series::line(format!("eta {e}"), pick("plain", e), i))
             .collect();
-        let panels = vec![
+        let mut panels = vec![
             Panel {
-                title: "lander landing: momentum vs plain (dots: DAgger net)".into(),
+                title: "lander soft landing: momentum vs plain descent".into(),
                 x_label: "iteration".into(),
                 y_label: "objective J".into(),
                 log_y: true,
@@ -699,7 +699,21 @@ impl Family for NaMomentum {
                 ..Panel::default()
             },
         ];
-        fig.draw("objective", &Figure::grid(panels, 2))
+        if !dagger.is_empty() {
+            panels.insert(
+                1,
+                Panel {
+                    title: "the same through the lander's DAgger net (ours)".into(),
+                    x_label: "iteration".into(),
+                    y_label: "objective J".into(),
+                    log_y: true,
+                    series: dagger,
+                    ..Panel::default()
+                },
+            );
+        }
+        let cols = panels.len();
+        fig.draw("objective", &Figure::grid(panels, cols))
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
