@@ -315,6 +315,37 @@ fn na_fig14_quick_momentum_beats_plain_descent() {
     // The sweep's rates are there too.
     assert!(r.iter().any(|c| c[0] == "plain" && c[1] == "3.0"));
     figure_exists(&d, "na_fig14_momentum_objective");
+    // The same two runs through the lander's DAgger net (and the Table 1 net's beside them),
+    // every number finite, and the DAgger net's objective curves.
+    let dagger = out.join("dagger.csv");
+    assert!(header(&dagger).starts_with("net,round,method,eta,alpha,scale"));
+    assert!(header(&dagger).ends_with("emulator_final_error,simulator_final_error"));
+    let rows_d = rows(&dagger);
+    let pairs: Vec<(&str, &str)> = rows_d
+        .iter()
+        .map(|c| (c[0].as_str(), c[2].as_str()))
+        .collect();
+    assert_eq!(
+        pairs,
+        [
+            ("table1", "momentum"),
+            ("table1", "plain"),
+            ("dagger", "momentum"),
+            ("dagger", "plain")
+        ]
+    );
+    for c in &rows_d {
+        for v in &c[3..] {
+            let x: f64 = v.parse().unwrap();
+            assert!(x.is_finite(), "dagger.csv: {c:?}");
+        }
+    }
+    assert_eq!(rows_d[2][1], "2", "quick mode: the round-2 net");
+    let curves = rows(&out.join("dagger_objective.csv"));
+    assert_eq!(curves.len(), 2 * 41, "two runs of 40 iterations");
+    assert!(curves
+        .iter()
+        .all(|c| c[4].parse::<f64>().unwrap().is_finite()));
 }
 
 #[test]

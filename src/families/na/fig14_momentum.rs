@@ -31,17 +31,35 @@
 //! the physical simulator; the gap is |s_emulated − s_simulated| at the end. `trajectory`
 //! (method, eta, step, t, source, x, y, z, vz, tilt): every run's states at the emulator step
 //! times, emulated and simulated (tilt: angle of the thrust axis from vertical, rad).
+//!
+//! **Through the DAgger net (ours, issue 11).** With `[params.dagger]`, momentum and plain
+//! descent (same η, α, iterations) also learn through the lander's final-round DAgger net of
+//! `na_fig13_control` ([`crate::families::na::fig13_control::dagger`]; its task, learner and
+//! settings are rebuilt here from this spec so its cache key is Fig. 13's), λ re-measured at
+//! hover on that net, and both runs' controls are replayed on the simulator. `dagger`
+//! (net, round, method, eta, alpha, the `runs` columns from scale to final_gap,
+//! emulator_final_error, simulator_final_error): the Table 1 net's two runs (round 0) and the
+//! DAgger net's; final error = RMS over the 13 state variables of (s_M − s_d)/σ (Fig. 13's
+//! measure, ≤ 1: within tolerance). `dagger_objective` (method, eta, alpha, iteration,
+//! objective): the DAgger-net curves.
 
+use super::fig13_control::dagger::DaggerControl;
+use super::fig13_control::Task;
 use super::table1_structure::{build_emulator, build_spec, validate_nets, validate_training};
-use crate::control::bptt::{learn, replay, Bounds, Bptt, Descent, Knots, Learned};
+use crate::control::bptt::{
+    learn, replay, Bounds, Bptt, Descent, Knots, Learned, Replay, StepRule,
+};
 use crate::control::objective::{ControlEffort, FinalState, Objective, StateWindow};
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::emulator::dagger::DaggerSettings;
+use crate::emulator::Emulator;
+use crate::experiment::output::{df_f64, df_str, read_csv, Cell, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::lander::{Lander, VEL};
+use crate::physics::Dynamics;
 use crate::row;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -89,7 +107,47 @@ pub struct Params {
     pub net: NetSpec,
     /// Training settings.
     pub training: TrainSettings,
+    /// The comparison through the lander's DAgger net (ours), if run.
+    #[serde(default)]
+    pub dagger: Option<DaggerNet>,
 }
+
+/// `[params.dagger]`: the settings of `na_fig13_control`'s lander DAgger stage (so the nets
+/// come from its cache).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DaggerNet {
+    /// The DAgger learner's iterations per round (Fig. 13's lander task: the paper's 15).
+    pub iterations: usize,
+    /// The DAgger learner's step rule.
+    pub learner: StepRule,
+    /// Rounds, perturbations, fine-tuning budget.
+    pub settings: DaggerSettings,
+}
+
+/// The DAgger verdict's partly-held bar (m, ours; the spec states the rule): the norm of the
+/// position tolerances (1, 1, 0.5) m.
+pub const LANDING_DISTANCE: f64 = 1.5;
+
+/// Columns of `dagger.csv`.
+pub const DAGGER_COLUMNS: [&str; 16] = [
+    "net",
+    "round",
+    "method",
+    "eta",
+    "alpha",
+    "scale",
+    "initial_objective",
+    "final_objective",
+    "min_objective",
+    "emulator_landing_error",
+    "simulator_landing_error",
+    "emulator_final_speed",
+    "simulator_final_speed",
+    "final_gap",
+    "emulator_final_error",
+    "simulator_final_error",
+];
 
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
@@ -146,6 +204,11 @@ impl Validate for Params {
             "Fig. 14 is the lander",
         )?;
         validate_nets(std::slice::from_ref(&self.net), self.example_scale)?;
+        if let Some(d) = &self.dagger {
+            ensure(d.iterations >= 1, "dagger.iterations", "must be >= 1")?;
+            let (f13, control) = self.fig13(d);
+            control.validate(&f13)?;
+        }
         validate_training(&self.training)
     }
 }
@@ -187,6 +250,47 @@ impl Params {
                 reference: vec![0.0; n],
                 weights: vz,
             })
+    }
+
+    /// Fig. 13's lander task as this spec states it (same start, target, tolerances, horizon,
+    /// knots, effort weight and net; the DAgger learner's budget `d.iterations`).
+    pub fn dagger_task(&self, d: &DaggerNet) -> Task {
+        Task {
+            name: "lander".into(),
+            net: self.net.clone(),
+            horizon: self.horizon,
+            knots: self.knots,
+            iterations: d.iterations,
+            limit_fraction: 1.0,
+            start: self.start.clone(),
+            target: self.target.clone(),
+            final_tolerance: self.final_tolerance.clone(),
+            effort_mu: self.effort_mu,
+            eta: self.momentum_eta,
+            alpha: self.momentum_alpha,
+            step_rule: StepRule::Fixed,
+        }
+    }
+
+    /// `na_fig13_control`'s parameters with the lander task alone and its DAgger stage: what
+    /// keys and builds the DAgger nets.
+    pub fn fig13(&self, d: &DaggerNet) -> (super::fig13_control::Params, DaggerControl) {
+        let control = DaggerControl {
+            learner: d.learner,
+            settings: d.settings,
+        };
+        let p = super::fig13_control::Params {
+            steps: self.steps,
+            curvature_iterations: self.curvature_iterations,
+            example_scale: self.example_scale,
+            tasks: vec![self.dagger_task(d)],
+            training: self.training.clone(),
+            dolphin: None,
+            sweep: None,
+            physics_sweep: None,
+            dagger: Some(control.clone()),
+        };
+        (p, control)
     }
 
     /// The start state with a unit quaternion.
@@ -243,59 +347,29 @@ impl Job for Params {
             &self.training,
         );
         let trained = ctx.stage("train lander N50", || build_emulator(&spec))?;
-        let emu = &trained.emulator;
         let model = NetModel::Lander;
-        let (n, m) = (model.state_dim(), model.control_dim());
-        let limits = model.control_limits();
+        let n = model.state_dim();
         let objective = self.objective();
         let x0 = self.start_state();
-        let knots = Knots {
-            steps: self.horizon,
-            per_actuator: self.knots,
-            m,
-        };
-        let bounds = Bounds {
-            low: limits.low.clone(),
-            high: limits.high.clone(),
-        };
-        let mut bptt = Bptt::new(emu, &objective, knots, bounds, &x0).map_err(other)?;
-        let l = Lander::default();
-        let hover: Vec<f64> = (0..knots.len())
-            .map(|i| if i % m == 0 { l.mass * l.gravity } else { 0.0 })
-            .collect();
-        let v0 = bptt.from_controls(&hover);
-        let scale = ctx.stage("curvature", || {
-            bptt.curvature(&v0, self.curvature_iterations)
-        });
-        if !(scale.is_finite() && scale > 0.0) {
-            return Err(other(format!("step scale λ = {scale} at hover")));
-        }
+        let mut problem = self.problem(ctx, &trained.emulator, &objective, &x0)?;
+        let scale = problem.scale;
         let mut objective_t = Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
         let mut gradient_t = Table::new(&["method", "eta", "alpha", "iteration", "grad_norm"]);
-        let mut runs = Table::new(&[
-            "method",
-            "eta",
-            "alpha",
-            "scale",
-            "initial_objective",
-            "final_objective",
-            "min_objective",
-            "emulator_landing_error",
-            "simulator_landing_error",
-            "emulator_final_speed",
-            "simulator_final_speed",
-            "final_gap",
-        ]);
+        let mut runs_cols = vec!["method", "eta", "alpha"];
+        runs_cols.extend_from_slice(&DAGGER_COLUMNS[5..14]);
+        let mut runs = Table::new(&runs_cols);
         let mut trajectory = Table::new(&[
             "method", "eta", "step", "t", "source", "x", "y", "z", "vz", "tilt",
         ]);
+        let mut dagger_t = Table::new(&DAGGER_COLUMNS);
+        let mut dagger_objective =
+            Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
+        let compared = self.compared();
         let descents = self.descents();
         let pb = ctx.progress(descents.len() as u64, "control learning");
         let mut sim = model.simulator();
         for d in &descents {
-            let r: Learned = ctx.stage(&format!("{} eta {}", method(d), d.eta()), || {
-                learn(&mut bptt, &v0, *d, scale, self.iterations)
-            });
+            let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, "");
             for t in &r.trace {
                 objective_t.push(row![
                     method(d),
@@ -312,16 +386,6 @@ impl Job for Params {
                     t.grad_norm
                 ]);
             }
-            let emu_final = &r.states[self.horizon * n..];
-            let rep = replay(
-                sim.as_mut(),
-                &x0,
-                &r.controls,
-                self.net.physical_dt,
-                self.steps,
-                emu_final,
-            );
-            let sim_final = &rep.states[self.horizon * n..];
             let dt = self.net.physical_dt * self.steps as f64;
             for (source, states) in [("emulator", &r.states), ("simulator", &rep.states)] {
                 for (i, s) in states.chunks_exact(n).enumerate() {
@@ -340,30 +404,180 @@ impl Job for Params {
                     ]);
                 }
             }
-            let objs: Vec<f64> = r.trace.iter().map(|t| t.objective).collect();
-            runs.push(row![
-                method(d),
-                d.eta(),
-                d.alpha(),
-                scale,
-                objs[0],
-                r.final_objective(),
-                objs.iter().copied().fold(f64::INFINITY, f64::min),
-                distance(&emu_final[..3], &self.target[..3]),
-                distance(&sim_final[..3], &self.target[..3]),
-                distance(&emu_final[VEL..VEL + 3], &[0.0; 3]),
-                distance(&sim_final[VEL..VEL + 3], &[0.0; 3]),
-                rep.final_gap
-            ]);
+            let scores = self.scores(scale, &r, &rep);
+            let mut run = row![method(d), d.eta(), d.alpha()];
+            run.extend(scores.iter().cloned());
+            runs.push(run);
+            if let (Some(dn), true) = (&self.dagger, compared.contains(d)) {
+                dagger_t.push(self.dagger_row("table1", 0, d, scores, &r, &rep, dn));
+            }
             pb.inc(1);
         }
         pb.finish_and_clear();
+        if let Some(dn) = &self.dagger {
+            // The lander's final-round DAgger net of na_fig13_control (cached: only its
+            // rounds' learning and replays run again).
+            let (f13, control) = self.fig13(dn);
+            let mut rounds = Table::new(&super::fig13_control::dagger::COLUMNS);
+            let net = f13.run_dagger(
+                ctx,
+                &control,
+                &f13.tasks[0],
+                &spec,
+                &trained,
+                &x0,
+                &mut rounds,
+            )?;
+            let mut problem = self.problem(ctx, &net, &objective, &x0)?;
+            for d in &compared {
+                let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, "DAgger net ");
+                for t in &r.trace {
+                    dagger_objective.push(row![
+                        method(d),
+                        d.eta(),
+                        d.alpha(),
+                        t.iteration as i64,
+                        t.objective
+                    ]);
+                }
+                let scores = self.scores(problem.scale, &r, &rep);
+                let round = dn.settings.rounds as i64;
+                dagger_t.push(self.dagger_row("dagger", round, d, scores, &r, &rep, dn));
+            }
+        }
         Ok(Tables::from([
             ("objective", objective_t),
             ("gradient", gradient_t),
             ("runs", runs),
             ("trajectory", trajectory),
+            ("dagger", dagger_t),
+            ("dagger_objective", dagger_objective),
         ]))
+    }
+}
+
+/// One net's landing problem from hover: BPTT through the net, the hover knots, λ there.
+struct Problem<'a> {
+    bptt: Bptt<'a, Emulator>,
+    v0: Vec<f64>,
+    scale: f64,
+}
+
+impl Params {
+    /// The landing problem through `emu` from hover, λ measured there.
+    fn problem<'a>(
+        &self,
+        ctx: &RunContext,
+        emu: &'a Emulator,
+        objective: &'a Objective,
+        x0: &[f64],
+    ) -> Result<Problem<'a>, Error> {
+        let model = NetModel::Lander;
+        let m = model.control_dim();
+        let limits = model.control_limits();
+        let knots = Knots {
+            steps: self.horizon,
+            per_actuator: self.knots,
+            m,
+        };
+        let bounds = Bounds {
+            low: limits.low.clone(),
+            high: limits.high.clone(),
+        };
+        let mut bptt = Bptt::new(emu, objective, knots, bounds, x0).map_err(other)?;
+        let l = Lander::default();
+        let hover: Vec<f64> = (0..knots.len())
+            .map(|i| if i % m == 0 { l.mass * l.gravity } else { 0.0 })
+            .collect();
+        let v0 = bptt.from_controls(&hover);
+        let scale = ctx.stage("curvature", || {
+            bptt.curvature(&v0, self.curvature_iterations)
+        });
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(other(format!("step scale λ = {scale} at hover")));
+        }
+        Ok(Problem { bptt, v0, scale })
+    }
+
+    /// The two runs of the paper's comparison: momentum and plain descent at `plain_eta`.
+    fn compared(&self) -> Vec<Descent> {
+        vec![
+            Descent::Momentum {
+                eta: self.momentum_eta,
+                alpha: self.momentum_alpha,
+            },
+            Descent::Plain {
+                eta: self.plain_eta,
+            },
+        ]
+    }
+
+    /// Learns with `d` through the problem's net for `iterations` and replays the learned
+    /// controls on `sim`.
+    fn descend(
+        &self,
+        ctx: &RunContext,
+        p: &mut Problem<'_>,
+        d: &Descent,
+        sim: &mut dyn Dynamics,
+        x0: &[f64],
+        label: &str,
+    ) -> (Learned, Replay) {
+        let r: Learned = ctx.stage(&format!("{label}{} eta {}", method(d), d.eta()), || {
+            learn(&mut p.bptt, &p.v0, *d, p.scale, self.iterations)
+        });
+        let emu_final = &r.states[self.horizon * NetModel::Lander.state_dim()..];
+        let rep = replay(
+            sim,
+            x0,
+            &r.controls,
+            self.net.physical_dt,
+            self.steps,
+            emu_final,
+        );
+        (r, rep)
+    }
+
+    /// The `runs` columns from `scale` to `final_gap` of one descent and its replay.
+    fn scores(&self, scale: f64, r: &Learned, rep: &Replay) -> Vec<Cell> {
+        let n = NetModel::Lander.state_dim();
+        let emu_final = &r.states[self.horizon * n..];
+        let sim_final = &rep.states[self.horizon * n..];
+        let objs: Vec<f64> = r.trace.iter().map(|t| t.objective).collect();
+        row![
+            scale,
+            objs[0],
+            r.final_objective(),
+            objs.iter().copied().fold(f64::INFINITY, f64::min),
+            distance(&emu_final[..3], &self.target[..3]),
+            distance(&sim_final[..3], &self.target[..3]),
+            distance(&emu_final[VEL..VEL + 3], &[0.0; 3]),
+            distance(&sim_final[VEL..VEL + 3], &[0.0; 3]),
+            rep.final_gap
+        ]
+    }
+
+    /// A `dagger.csv` row: the net, its round, the descent, its scores and final errors.
+    #[allow(clippy::too_many_arguments)]
+    fn dagger_row(
+        &self,
+        net: &str,
+        round: i64,
+        d: &Descent,
+        scores: Vec<Cell>,
+        r: &Learned,
+        rep: &Replay,
+        dn: &DaggerNet,
+    ) -> Vec<Cell> {
+        let n = NetModel::Lander.state_dim();
+        let task = self.dagger_task(dn);
+        let mut out = row![net, round, method(d), d.eta(), d.alpha()];
+        out.extend(scores);
+        out.extend(row![
+            task.final_error(&r.states[self.horizon * n..]),
+            task.final_error(&rep.states[self.horizon * n..])
+        ]);
+        out
     }
 }
 
@@ -438,12 +652,36 @@ impl Family for NaMomentum {
                 Series::line(format!("plain (eta {e})"), pick("plain", e), 1).mark(Mark::Dashed),
             );
         }
+        // The same two runs through the lander's DAgger net (ours), a panel of their own (the
+        // curves lie almost on the Table 1 net's), same colours and line styles.
+        let mut dagger = vec![];
+        if let Some(dt) = tables.get("dagger_objective").filter(|t| !t.is_empty()) {
+            let (dm, de, di, dobj) = (
+                dt.strs("method"),
+                dt.f64s("eta"),
+                dt.f64s("iteration"),
+                dt.f64s("objective"),
+            );
+            for (c, (mm, mark)) in [("momentum", Mark::Line), ("plain", Mark::Dashed)]
+                .into_iter()
+                .enumerate()
+            {
+                let Some(e) = (0..dm.len()).find(|&r| dm[r] == mm).map(|r| de[r]) else {
+                    continue;
+                };
+                let pts = (0..dm.len())
+                    .filter(|&r| dm[r] == mm && de[r] == e)
+                    .map(|r| (di[r], dobj[r]))
+                    .collect();
+                dagger.push(Series::line(format!("{mm} (eta {e}), DAgger net"), pts, c).mark(mark));
+            }
+        }
         let sweep = plain_eta
             .iter()
             .enumerate()
             .map(|(i, &e)| Series::line(format!("eta {e}"), pick("plain", e), i))
             .collect();
-        let panels = vec![
+        let mut panels = vec![
             Panel {
                 title: "lander soft landing: momentum vs plain descent".into(),
                 x_label: "iteration".into(),
@@ -461,7 +699,21 @@ impl Family for NaMomentum {
                 ..Panel::default()
             },
         ];
-        fig.draw("objective", &Figure::grid(panels, 2))
+        if !dagger.is_empty() {
+            panels.insert(
+                1,
+                Panel {
+                    title: "the same through the lander's DAgger net (ours)".into(),
+                    x_label: "iteration".into(),
+                    y_label: "objective J".into(),
+                    log_y: true,
+                    series: dagger,
+                    ..Panel::default()
+                },
+            );
+        }
+        let cols = panels.len();
+        fig.draw("objective", &Figure::grid(panels, cols))
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
@@ -532,6 +784,8 @@ impl Family for NaMomentum {
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .is_some_and(|t| !converges(&t.2));
         let verdict = Verdict::graded(faster && base_is_limit, faster && base_converges);
+        let (dagger_md, dagger_why) = dagger_summary(dir)?.unwrap_or_default();
+        md.push_str(&dagger_md);
         Ok(Findings {
             ours: md,
             verdict,
@@ -550,9 +804,93 @@ impl Family for NaMomentum {
                 sig(mom_row.map_or(f64::NAN, |r| sim_err[r])),
                 sig(mom_row.map_or(f64::NAN, |r| emu_err[r])),
                 sig(mom_row.map_or(f64::NAN, |r| gap[r]))
-            ),
+            ) + &dagger_why,
         })
     }
+}
+
+/// The report's DAgger paragraph, table and verdict sentence (rule in the spec): `None` when
+/// there is no `dagger.csv` or it is empty.
+fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
+    let Ok(df) = read_csv(&dir.join("dagger.csv")) else {
+        return Ok(None);
+    };
+    let net = df_str(&df, "net")?;
+    if net.is_empty() {
+        return Ok(None);
+    }
+    let (round, meth, eta) = (
+        df_f64(&df, "round")?,
+        df_str(&df, "method")?,
+        df_f64(&df, "eta")?,
+    );
+    let col = |c: &str| df_f64(&df, c);
+    let (j0, j1, emu_d, sim_d, emu_e, sim_e, gap) = (
+        col("initial_objective")?,
+        col("final_objective")?,
+        col("emulator_landing_error")?,
+        col("simulator_landing_error")?,
+        col("emulator_final_error")?,
+        col("simulator_final_error")?,
+        col("final_gap")?,
+    );
+    let mut md = String::from(
+        "\nThe same comparison through the lander's final-round DAgger net of `na_fig13_control` (ours, `dagger.csv`; aggregated on Fig. 13's lander task, whose start, target and tolerances are this experiment's; lambda re-measured at hover on that net), every run's controls replayed on the simulator. Final error = RMS over the 13 state variables of (s_M - s_d)/tolerance (<= 1: within tolerance); landing distance = |p_M - p_d| (m):\n\n| net | round | method | eta | J start | J end | landing distance, net (m) | landing distance, simulator (m) | final error, net | final error, simulator | final gap |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for r in 0..net.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            net[r],
+            round[r],
+            meth[r],
+            eta[r],
+            sig(j0[r]),
+            sig(j1[r]),
+            sig(emu_d[r]),
+            sig(sim_d[r]),
+            sig(emu_e[r]),
+            sig(sim_e[r]),
+            sig(gap[r])
+        ));
+    }
+    let find = |n: &str, m: &str| (0..net.len()).find(|&r| net[r] == n && meth[r] == m);
+    let (Some(dm), Some(dp)) = (find("dagger", "momentum"), find("dagger", "plain")) else {
+        return Ok(Some((md, " No DAgger-net runs in dagger.csv.".into())));
+    };
+    let before = find("table1", "momentum");
+    let obj = read_csv(&dir.join("dagger_objective.csv"))?;
+    let tr = traces(
+        &df_str(&obj, "method")?,
+        &df_f64(&obj, "eta")?,
+        &df_f64(&obj, "objective")?,
+    );
+    let k_mom = tr
+        .iter()
+        .find(|t| t.0 == "momentum")
+        .and_then(|t| iterations_to(&t.2, j1[dp]));
+    let held = sim_e[dm] <= 1.0;
+    let partly = sim_d[dm] <= LANDING_DISTANCE;
+    let v = Verdict::graded(held, partly);
+    Ok(Some((
+        md,
+        format!(
+            " Through the lander's round-{} DAgger net (ours; Fig. 13's, aggregated on Fig. 13's lander task, same start and target): momentum (eta {}) ends at J = {} vs plain (eta {}) J = {}, reaching plain's final J at iteration {}; replayed on the simulator, momentum's controls land {} m from the target with final error {} (Table 1 net: {} m, {}), plain's {} m with {}. Fig. 14 through the DAgger net (ours; rule fixed in the spec: held when momentum's simulator final error <= 1, partly when its simulator landing distance <= {} m): {}.",
+            round[dm],
+            eta[dm],
+            sig(j1[dm]),
+            eta[dp],
+            sig(j1[dp]),
+            k_mom.map_or("never".to_string(), |k| k.to_string()),
+            sig(sim_d[dm]),
+            sig(sim_e[dm]),
+            sig(before.map_or(f64::NAN, |r| sim_d[r])),
+            sig(before.map_or(f64::NAN, |r| sim_e[r])),
+            sig(sim_d[dp]),
+            sig(sim_e[dp]),
+            LANDING_DISTANCE,
+            v.label()
+        ),
+    )))
 }
 
 #[cfg(test)]

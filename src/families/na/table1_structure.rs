@@ -856,4 +856,41 @@ mod tests {
             );
         }
     }
+
+    #[test]
+    fn fig14_learns_through_fig13s_lander_dagger_nets() {
+        // Fig. 14's DAgger comparison must load the very nets Fig. 13's DAgger stage caches for
+        // its lander task: the same base net and, for every round, the same derived key.
+        use crate::families::na::fig13_control::dagger::derived_key;
+        for quick in [false, true] {
+            let f13: crate::families::na::fig13_control::Params =
+                params("na_fig13_control", quick).try_into().unwrap();
+            let f14: crate::families::na::fig14_momentum::Params =
+                params("na_fig14_momentum", quick).try_into().unwrap();
+            let d13 = f13.dagger.clone().expect("Fig. 13 runs DAgger");
+            let t13 = f13.tasks.iter().find(|t| t.name == "lander").unwrap();
+            let (g, d14) = f14.fig13(f14.dagger.as_ref().expect("Fig. 14 runs DAgger"));
+            let t14 = &g.tasks[0];
+            let base = |p: &crate::families::na::fig13_control::Params,
+                        t: &crate::families::na::fig13_control::Task| {
+                EmulatorCache::key(&build_spec(
+                    1,
+                    &t.net,
+                    p.steps,
+                    p.example_scale,
+                    &p.training,
+                ))
+            };
+            assert_eq!(base(&g, t14), base(&f13, t13), "base net (quick {quick})");
+            assert_eq!(t14.name, t13.name);
+            for round in 1..=d13.settings.rounds {
+                assert_eq!(
+                    derived_key(t14, &d14, g.curvature_iterations, round),
+                    derived_key(t13, &d13, f13.curvature_iterations, round),
+                    "round {round} (quick {quick})"
+                );
+            }
+            assert_eq!(d14.settings.rounds, d13.settings.rounds);
+        }
+    }
 }

@@ -160,9 +160,11 @@ impl Params {
     }
 
     /// The DAgger rounds of `task` from its base net `base` (built from `spec`), one row each
-    /// into `table`.
+    /// into `table`; returns the last round's net (the one whose row comes last). Every
+    /// fine-tuned net is loaded from the cache when there, so a warm call only learns and
+    /// replays (`na_fig14_momentum` uses this to get the lander's final-round net).
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn run_dagger(
+    pub(crate) fn run_dagger(
         &self,
         ctx: &crate::experiment::RunContext,
         d: &DaggerControl,
@@ -171,7 +173,7 @@ impl Params {
         base: &Trained,
         x0: &[f64],
         table: &mut Table,
-    ) -> Result<(), Error> {
+    ) -> Result<Emulator, Error> {
         let model = task.net.model;
         let (n, m) = (model.state_dim(), model.control_dim());
         let k = self.training.rollout_k;
@@ -292,7 +294,7 @@ impl Params {
             fine_tune_iterations = next.trace.last().map_or(0, |t| t.iteration);
             net = next.emulator;
         }
-        Ok(())
+        Ok(net)
     }
 }
 
