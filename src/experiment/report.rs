@@ -59,6 +59,15 @@ impl Verdict {
         }
     }
 
+    /// [`Verdict::PremiseNotReproduced`] when the claim's premise fails, else `self`.
+    pub fn given(self, premise: bool) -> Self {
+        if premise {
+            self
+        } else {
+            Verdict::PremiseNotReproduced
+        }
+    }
+
     /// [`Verdict::from_counts`] of the checks that passed.
     pub fn from_checks(checks: &[bool]) -> Self {
         Self::from_counts(checks.iter().filter(|&&c| c).count(), checks.len())
@@ -550,10 +559,6 @@ mod tests {
             "no such section without rows"
         );
         assert!(md.find("`c`").unwrap() < checks);
-        let md = summary(&[
-            row("a", "held", false),
-            row("e", Verdict::PremiseNotReproduced.label(), false),
-        ]);
         let mut rows = vec![
             row("a", "held", false),
             row("e", Verdict::PremiseNotReproduced.label(), false),
@@ -565,6 +570,18 @@ mod tests {
         assert!(
             md.contains("**1 of 2 reproduced claims held, 0 partly, 0 did not hold, 1 premise not reproduced.**"),
             "{md}"
+        );
+    }
+
+    #[test]
+    fn a_failed_premise_overrides_the_grade() {
+        assert_eq!(Verdict::Partly.given(true), Verdict::Partly);
+        for v in [Verdict::Held, Verdict::Partly, Verdict::NotHeld] {
+            assert_eq!(v.given(false), Verdict::PremiseNotReproduced);
+        }
+        assert_eq!(
+            Verdict::PremiseNotReproduced.label(),
+            "premise not reproduced"
         );
     }
 

@@ -526,38 +526,26 @@ impl Family for PhysicsValidation {
         }
         // Adaptive: does drift fall as the tolerance tightens?
         let ad = crate::experiment::output::read_csv(&dir.join("adaptive.csv"))?;
-        let agg = ad
-            .lazy()
-            .group_by([col("model")])
-            .agg([
-                col("drift").min().alias("best_drift"),
-                col("drift").max().alias("worst_drift"),
-                col("accepted_steps").max().alias("max_steps"),
-            ])
-            .sort(["model"], Default::default())
-            .collect()
-            .map_err(pe)?;
-        let am = agg.column("model").map_err(pe)?.str().map_err(pe)?.clone();
-        let best = agg
-            .column("best_drift")
-            .map_err(pe)?
-            .f64()
-            .map_err(pe)?
-            .clone();
-        let worst = agg
-            .column("worst_drift")
-            .map_err(pe)?
-            .f64()
-            .map_err(pe)?
-            .clone();
+        use crate::experiment::output as out;
+        // Per model (sorted by name): the tightest and loosest tolerance's drift.
+        let mut per_model: std::collections::BTreeMap<String, (f64, f64)> = Default::default();
+        for (m, d) in out::df_str(&ad, "model")?
+            .into_iter()
+            .zip(out::df_f64(&ad, "drift")?)
+        {
+            let e = per_model
+                .entry(m)
+                .or_insert((f64::INFINITY, f64::NEG_INFINITY));
+            *e = (e.0.min(d), e.1.max(d));
+        }
         md.push_str("\nAdaptive RK45 over the tolerance sweep: ");
-        let parts: Vec<String> = (0..agg.height())
-            .map(|r| {
+        let parts: Vec<String> = per_model
+            .iter()
+            .map(|(m, (best, worst))| {
                 format!(
-                    "{} drift from {} J (loosest) to {} J (tightest)",
-                    am.get(r).unwrap_or(""),
-                    sig(worst.get(r).unwrap_or(f64::NAN)),
-                    sig(best.get(r).unwrap_or(f64::NAN))
+                    "{m} drift from {} J (loosest) to {} J (tightest)",
+                    sig(*worst),
+                    sig(*best)
                 )
             })
             .collect();

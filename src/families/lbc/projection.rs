@@ -271,11 +271,16 @@ impl Family for LbcProjection {
         let pe = |e: PolarsError| Error::Polars(e.to_string());
         let df = crate::experiment::output::read_csv(&dir.join("minima.csv"))?;
         // The midpoint target per spacing, sorted by spacing.
+        let at_mid = df
+            .column("target")
+            .map_err(pe)?
+            .f64()
+            .map_err(pe)?
+            .equal(0.5);
         let mid = df
-            .lazy()
-            .filter(col("target").eq(lit(0.5)))
+            .filter(&at_mid)
+            .map_err(pe)?
             .sort(["spacing"], Default::default())
-            .collect()
             .map_err(pe)?;
         if mid.height() == 0 {
             return Ok(Findings {
