@@ -1392,7 +1392,7 @@ impl Family for LbcAcrobot {
             ours: md,
             verdict,
             why: format!(
-                "paper: from a start neither was made for, both trackers fail, the naive blend does better, LBC comes closest. Premise (else \"premise not reproduced\"): same-family swing-ups and at least one sweep start where both trackers fail. Rule (fixed in the spec): held needs same-family swing-ups ({}), LBC to succeed on at least {} of the starts where both torque-limited trackers fail ({} of {}), more of them than the naive average or sum ({}), and over the whole sweep at least as many starts as the better tracker ({} vs {}); partly needs LBC to rescue at least one start where both trackers fail, or to cover more starts than the better tracker.",
+                "paper: from a start neither was made for, both trackers fail, the naive blend does better, LBC comes closest. Rule (fixed in the spec): held needs same-family swing-ups ({}), LBC to succeed on at least {} of the starts where both torque-limited trackers fail ({} of {}), more of them than the naive average or sum ({}), and over the whole sweep at least as many starts as the better tracker ({} vs {}); partly needs LBC to rescue at least one start where both trackers fail, or to cover more starts than the better tracker. Premise (else \"premise not reproduced\"): same-family swing-ups and at least one sweep start where both trackers fail.",
                 if same_family { "yes" } else { "no" },
                 sig(held_fraction),
                 rescued,

@@ -927,7 +927,7 @@ impl Family for LbcDiverInterpolation {
             verdict: Verdict::graded(claim && optimal, claim || optimal)
                 .given(de[0] < -tol_entry && de[1] > tol_entry),
             why: format!(
-                "paper: with weights projected for a vertical goal, LBC enters vertically and the naive average with the same weights does not. Premise (else \"premise not reproduced\"): one component dive enters short of vertical and the other past it, each by more than the entry tolerance. Rule (fixed in the spec): held needs LBC within {} rad of vertical and the naive average not ({}), and LBC's mean excess objective over the direct DDP optimum of the reconstructed cost lower than naive's by more than {} ({} vs {}); partly needs one of the two.",
+                "paper: with weights projected for a vertical goal, LBC enters vertically and the naive average with the same weights does not. Rule (fixed in the spec): held needs LBC within {} rad of vertical and the naive average not ({}), and LBC's mean excess objective over the direct DDP optimum of the reconstructed cost lower than naive's by more than {} ({} vs {}); partly needs one of the two. Premise (else \"premise not reproduced\"): one component dive enters short of vertical and the other past it, each by more than the entry tolerance.",
                 sig(tol_entry),
                 if claim { "yes" } else { "no" },
                 sig(tol_obj),
@@ -1347,7 +1347,7 @@ impl Family for LbcDiverCoordination {
             ours: md,
             // The premise: the single tracker misses vertical from some take-off rate.
             verdict: Verdict::graded(held, partly).given(sv < n),
-            why: format!("paper: the combination recovers a vertical entry better than one tracker, with a better objective in every case. Premise (else \"premise not reproduced\"): the single tracker misses a vertical entry from at least one take-off rate. Rule (fixed in the spec): held needs LBC's objective never worse than the single tracker's beyond the tolerance and better beyond it on at least half the rates ({better} better, {worse} worse of {n}), and LBC vertical from more rates than the single tracker, or from all ({lv} vs {sv}); partly needs more better than worse objectives, or more vertical entries."),
+            why: format!("paper: the combination recovers a vertical entry better than one tracker, with a better objective in every case. Rule (fixed in the spec): held needs LBC's objective never worse than the single tracker's beyond the tolerance and better beyond it on at least half the rates ({better} better, {worse} worse of {n}), and LBC vertical from more rates than the single tracker, or from all ({lv} vs {sv}); partly needs more better than worse objectives, or more vertical entries. Premise (else \"premise not reproduced\"): the single tracker misses a vertical entry from at least one take-off rate."),
         })
     }
 }

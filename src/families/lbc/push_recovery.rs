@@ -652,7 +652,18 @@ impl Family for LbcPush {
         Ok(Findings {
             ours: md,
             verdict,
-            why: "paper: the blend weight swings as the arm is tugged back and forth, then settles (Fig. 9). Premise (else \"premise not reproduced\"): without a reach the same tugs lean the body beyond the fall angle. Held needs all four checks; partly needs the swings with mirrored choices.".into(),
+            why: format!(
+                "paper: the blend weight swings as the arm is tugged back and forth, then settles (Fig. 9). {}Held needs all four checks; partly needs the swings with mirrored choices. Premise (else \"premise not reproduced\"): without a reach the same tugs lean the body beyond the fall angle.",
+                if premise {
+                    String::new()
+                } else {
+                    format!(
+                        "Premise not reproduced: without a reach the tugs lean the body at most {} rad from upright, within the fall angle {} rad, so no reach is needed to prevent a fall. ",
+                        sig(no_reach),
+                        sig(fall)
+                    )
+                }
+            ),
         })
     }
 }
