@@ -176,6 +176,23 @@ impl PlanarTree {
         [k.joint[i][0] + r * c, k.joint[i][1] + r * s]
     }
 
+    /// Position (m) and velocity (m/s) of the point at distance `r` along link `i`, for the
+    /// state `x = [q, q̇]`: v = J(q) q̇ with J the point's Jacobian. Never allocates.
+    pub fn point_state(&self, x: &[f64], i: usize, r: f64) -> ([f64; 2], [f64; 2]) {
+        let n = self.dof();
+        let (q, qd) = (&x[..n], &x[n..2 * n]);
+        let kin = self.kinematics(q);
+        let mut jac = [[0.0; MAX_DOF]; 2];
+        self.point_jacobian(&kin, qd, i, r, &mut jac);
+        let (s, c) = kin.phi[i].sin_cos();
+        let p = [kin.joint[i][0] + r * c, kin.joint[i][1] + r * s];
+        let v = [
+            jac[0][..n].iter().zip(qd).map(|(a, b)| a * b).sum(),
+            jac[1][..n].iter().zip(qd).map(|(a, b)| a * b).sum(),
+        ];
+        (p, v)
+    }
+
     /// Whole-body centre of mass (m).
     pub fn center_of_mass(&self, q: &[f64]) -> [f64; 2] {
         let mut acc = [0.0; 2];
@@ -533,6 +550,32 @@ mod tests {
                 link: 1,
                 offset: 0.6,
             }],
+        }
+    }
+
+    #[test]
+    fn point_velocity_is_the_time_derivative_of_the_point() {
+        let t = floating_tree();
+        let n = t.dof();
+        let x: Vec<f64> = (0..2 * n).map(|k| 0.3 + 0.17 * k as f64).collect();
+        for (i, r) in [(0, 0.5), (1, 0.6), (3, 0.2)] {
+            let (p, v) = t.point_state(&x, i, r);
+            assert_eq!(p, t.point(&x[..n], i, r));
+            // Central difference of the position along q(t) = q + t q̇.
+            let h = 1e-6;
+            let at = |s: f64| {
+                let q: Vec<f64> = (0..n).map(|k| x[k] + s * x[n + k]).collect();
+                t.point(&q, i, r)
+            };
+            let (a, b) = (at(h), at(-h));
+            for d in 0..2 {
+                let fd = (a[d] - b[d]) / (2.0 * h);
+                assert!(
+                    (fd - v[d]).abs() < 1e-7 * (1.0 + fd.abs()),
+                    "{i} {d}: {fd} vs {}",
+                    v[d]
+                );
+            }
         }
     }
 
