@@ -53,7 +53,7 @@ impl DaggerControl {
 }
 
 /// Columns of `dagger.csv`.
-pub const COLUMNS: [&str; 15] = [
+pub const COLUMNS: [&str; 16] = [
     "task",
     "round",
     "optimizer",
@@ -69,6 +69,7 @@ pub const COLUMNS: [&str; 15] = [
     "drift_emulator",
     "drift_simulator",
     "drift_gap",
+    "simulator_error_spread",
 ];
 
 /// The cache tag of `task`'s DAgger nets.
@@ -92,11 +93,23 @@ pub fn derived_key(
     })
 }
 
+/// Replays behind `simulator_error_spread`.
+pub const SPREAD_REPLAYS: usize = 8;
+/// Size of the control perturbations behind `simulator_error_spread`, as a fraction of each
+/// channel's half-range within the task's bounds.
+pub const SPREAD_FRACTION: f64 = 0.01;
+
 /// One round's learned controls, scored.
 struct Round {
     controls: Vec<f64>,
     emulator_error: f64,
     simulator_error: f64,
+    /// Range (max − min) of the simulator final error over [`SPREAD_REPLAYS`] replays of the
+    /// controls each perturbed by uniform noise of up to [`SPREAD_FRACTION`] of its channel's
+    /// half-range (clamped to the bounds): how much the open-loop outcome moves under control
+    /// changes far smaller than any emulator's error, i.e. how exactly a net would have to
+    /// predict the task for its learned controls to transfer.
+    simulator_spread: f64,
     iterations: usize,
     to_goal: Option<usize>,
     best_iteration: usize,
@@ -111,6 +124,7 @@ impl Params {
         d: &DaggerControl,
         net: &Emulator,
         x0: &[f64],
+        seed: u64,
     ) -> Result<Round, Error> {
         let model = task.net.model;
         let (n, m) = (model.state_dim(), model.control_dim());
@@ -149,9 +163,33 @@ impl Params {
             self.steps,
             emu_final,
         );
+        // Sensitivity of the open-loop outcome to tiny control perturbations.
+        let bounds = task.bounds();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        let mut perturbed = best.controls.clone();
+        for _ in 0..SPREAD_REPLAYS {
+            for (i, (v, c)) in perturbed.iter_mut().zip(&best.controls).enumerate() {
+                let j = i % m;
+                let h = 0.5 * (bounds.high[j] - bounds.low[j]);
+                let e: f64 = rand::Rng::random_range(&mut rng, -1.0..=1.0);
+                *v = (c + SPREAD_FRACTION * h * e).clamp(bounds.low[j], bounds.high[j]);
+            }
+            let r = replay(
+                sim.as_mut(),
+                x0,
+                &perturbed,
+                task.net.physical_dt,
+                self.steps,
+                emu_final,
+            );
+            let err = task.final_error(&r.states[task.horizon * n..]);
+            (lo, hi) = (lo.min(err), hi.max(err));
+        }
         Ok(Round {
             emulator_error: task.final_error(emu_final),
             simulator_error: task.final_error(&rep.states[task.horizon * n..]),
+            simulator_spread: hi - lo,
             iterations: run.trace.last().map_or(0, |t| t.iteration),
             to_goal,
             best_iteration: run.best_iteration,
@@ -193,7 +231,7 @@ impl Params {
         for round in 0..=d.settings.rounds {
             let r = ctx.stage(
                 &format!("dagger {} round {round}: learn", task.name),
-                || self.dagger_learn(task, d, &net, x0),
+                || self.dagger_learn(task, d, &net, x0, mix_seed(stream, 1000 + round as u64)),
             )?;
             // Drift under the neutral control from the start: emulator vs simulator.
             let plan = Plan {
@@ -232,7 +270,8 @@ impl Params {
                 fine_tune_iterations as i64,
                 dist(&xe, x0),
                 dist(xs, x0),
-                dist(&xe, xs)
+                dist(&xe, xs),
+                r.simulator_spread
             ]);
             if round == d.settings.rounds {
                 break;
@@ -360,12 +399,17 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
         df_f64(&df, "examples")?,
         df_f64(&df, "drift_gap")?,
     );
-    let mut md = String::from(
-        "\nControl through DAgger emulators (ours, `dagger.csv`; Levenberg-Marquardt through each round's net, controls replayed on the simulator; round 0 is the Table 1 net):\n\n| task | round | examples | iterations to goal (budget) | final error, net | final error, simulator | neutral drift gap (m) |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+    // Older results have no spread column.
+    let spread =
+        df_f64(&df, "simulator_error_spread").unwrap_or_else(|_| vec![f64::NAN; task.len()]);
+    let mut md = format!(
+        "\nControl through DAgger emulators (ours, `dagger.csv`; Levenberg-Marquardt through each round's net, controls replayed on the simulator; round 0 is the Table 1 net). The last column is the range of the simulator's final error over {SPREAD_REPLAYS} replays of the same controls, each perturbed by up to {}% of its channel's half-range: how far the open-loop outcome moves under control changes far smaller than a net's error (near or above 1, the tolerance, no emulator short of exact can make the learned controls land reliably).\n\n| task | round | examples | iterations to goal (budget) | final error, net | final error, simulator | neutral drift gap (m) | simulator error spread, controls ±{}% |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        SPREAD_FRACTION * 100.0,
+        SPREAD_FRACTION * 100.0
     );
     for r in 0..task.len() {
         md.push_str(&format!(
-            "| {} | {} | {} | {} ({}) | {} | {} | {} |\n",
+            "| {} | {} | {} | {} ({}) | {} | {} | {} | {} |\n",
             task[r],
             round[r],
             ex[r],
@@ -377,7 +421,8 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
             its[r],
             sig(emu[r]),
             sig(sim[r]),
-            sig(dg[r])
+            sig(dg[r]),
+            sig(spread[r])
         ));
     }
     let names = unique(&task);
