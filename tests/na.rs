@@ -396,7 +396,7 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     // aggregated examples); every round keeps all earlier examples and adds new ones.
     assert_eq!(
         header(&out.join("dagger.csv")),
-        "task,round,optimizer,final_error_emulator,final_error_simulator,iterations,iterations_to_goal,best_iteration,examples,dagger_examples,dagger_windows,fine_tune_iterations,drift_emulator,drift_simulator,drift_gap"
+        "task,round,optimizer,final_error_emulator,final_error_simulator,iterations,iterations_to_goal,best_iteration,examples,dagger_examples,dagger_windows,fine_tune_iterations,drift_emulator,drift_simulator,drift_gap,simulator_error_spread"
     );
     let dg = rows(&out.join("dagger.csv"));
     assert_eq!(dg.len(), 9);
@@ -409,6 +409,9 @@ fn na_fig13_quick_learns_controls_for_every_task() {
             assert_eq!(c[2], "levenberg_marquardt");
             let errs: Vec<f64> = [3, 4, 14].iter().map(|&i| c[i].parse().unwrap()).collect();
             assert!(errs.iter().all(|e| e.is_finite()), "{c:?}");
+            // The open loop's sensitivity: perturbed replays move the final error, a little.
+            let spread: f64 = c[15].parse().unwrap();
+            assert!(spread > 0.0 && spread.is_finite(), "{c:?}");
         }
     }
     figure_exists(&d, "na_fig13_control_dagger");
