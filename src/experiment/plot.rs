@@ -279,32 +279,53 @@ impl FigureSink {
     /// returns its path. Each frame carries its own caption (e.g. the time in a panel title).
     pub fn gif(&self, name: &str, frames: &[Figure], delay_cs: u32) -> Result<PathBuf, Error> {
         register_fonts();
-        std::fs::create_dir_all(&self.dir).map_err(|e| Error::Io {
-            path: self.dir.clone(),
-            source: e,
-        })?;
         let gif = self.dir.join(format!("{}_{name}.gif", self.id));
-        let e = |m: String| perr(&gif, m);
         let size = frames
             .first()
-            .ok_or_else(|| e("an animation needs at least one frame".into()))?
+            .ok_or_else(|| perr(&gif, "an animation needs at least one frame".into()))?
             .size();
-        let tmp = temp_path(&gif);
-        {
-            let root = BitMapBackend::gif(&tmp, size, delay_cs.max(1) * 10)
-                .map_err(|x| e(x.to_string()))?
-                .into_drawing_area();
+        write_gif_atomically(&gif, size, delay_cs.max(1) * 10, |root| {
             for f in frames {
-                render(&root, f).map_err(e)?;
-                root.present().map_err(|x| e(x.to_string()))?;
+                render(root, f)?;
+                root.present().map_err(|x| x.to_string())?;
             }
-        }
-        std::fs::rename(&tmp, &gif).map_err(|x| Error::Io {
-            path: gif.clone(),
-            source: x,
+            Ok(())
         })?;
         Ok(gif)
     }
+}
+
+/// Writes the animated GIF `gif` of `size` pixels, `delay_ms` between frames, atomically (a
+/// temporary file beside it, renamed when complete; its folder is created): `draw` draws each
+/// frame on the root area and calls `present()` after each. The one GIF path every animation
+/// uses ([`FigureSink::gif`], the mass-spring films, NeuroAnimator's task animations).
+pub fn write_gif_atomically(
+    gif: &Path,
+    size: (u32, u32),
+    delay_ms: u32,
+    draw: impl FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> Result<(), String>,
+) -> Result<(), Error> {
+    if let Some(dir) = gif.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| Error::Io {
+            path: dir.to_path_buf(),
+            source: e,
+        })?;
+    }
+    let tmp = temp_path(gif);
+    {
+        let root = BitMapBackend::gif(&tmp, size, delay_ms)
+            .map_err(|x| perr(gif, x.to_string()))?
+            .into_drawing_area();
+        if let Err(m) = draw(&root) {
+            drop(root);
+            let _ = std::fs::remove_file(&tmp);
+            return Err(perr(gif, m));
+        }
+    }
+    std::fs::rename(&tmp, gif).map_err(|x| Error::Io {
+        path: gif.to_path_buf(),
+        source: x,
+    })
 }
 
 /// A plotters error on the figure `path` as an [`Error::Plot`].

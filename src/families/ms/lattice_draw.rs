@@ -3,8 +3,7 @@
 //! the floor a light grid with the masses' shadows. Used by the mass-spring experiments for
 //! lattice figures, filmstrips and animated GIFs.
 
-use crate::experiment::output::temp_path;
-use crate::experiment::plot::{perr, write_png_svg, Drawing};
+use crate::experiment::plot::{write_gif_atomically, write_png_svg, Drawing};
 use crate::experiment::Error;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -431,19 +430,12 @@ pub fn write_gif(
     delay_ms: u32,
     scene: &Scene,
 ) -> Result<PathBuf, Error> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::Io {
-        path: dir.to_path_buf(),
-        source: e,
-    })?;
     register();
     let gif = dir.join(format!("{stem}.gif"));
-    let tmp = temp_path(&gif);
     let every: Vec<[f64; 3]> = frames.iter().flat_map(|f| f.1.iter().copied()).collect();
     let extent = floor_extent(every.iter().copied());
-    {
-        let root = BitMapBackend::gif(&tmp, size, delay_ms)
-            .map_err(|e| perr(&gif, e.to_string()))?
-            .into_drawing_area();
+    write_gif_atomically(&gif, size, delay_ms, |root| {
+        let s = |e: DrawingAreaErrorKind<_>| e.to_string();
         let (_, body) = root.split_vertically(24);
         let foot = if scene.caption.is_some() { 22 } else { 0 };
         let (body, _) = body.split_vertically(body.dim_in_pixel().1.saturating_sub(foot));
@@ -461,21 +453,21 @@ pub fn write_gif(
         );
         let n = frames.len().max(1);
         for (k, (title, pos)) in frames.iter().enumerate() {
-            root.fill(&WHITE).map_err(|e| perr(&gif, e.to_string()))?;
+            root.fill(&WHITE).map_err(s)?;
             root.draw(&Text::new(
                 title.clone(),
                 (10, 4),
                 ("sans-serif", 16).into_font().color(&BLACK),
             ))
-            .map_err(|e| perr(&gif, e.to_string()))?;
-            draw_floor(&body, &view, extent).map_err(|e| perr(&gif, e))?;
+            .map_err(s)?;
+            draw_floor(&body, &view, extent)?;
             if let Some(key) = &scene.caption {
                 root.draw(&Text::new(
                     key.clone(),
                     (10, size.1 as i32 - 20),
                     ("sans-serif", 13).into_font().color(&BLACK),
                 ))
-                .map_err(|e| perr(&gif, e.to_string()))?;
+                .map_err(s)?;
             }
             let upto = ((k + 1) * trail.len()) / n;
             if upto > 1 {
@@ -486,19 +478,15 @@ pub fn write_gif(
                         .collect::<Vec<_>>(),
                     ShapeStyle::from(&RGBColor(214, 39, 40)).stroke_width(1),
                 ))
-                .map_err(|e| perr(&gif, e.to_string()))?;
+                .map_err(s)?;
             }
-            draw_lattice(&body, &view, pos, springs, LATTICE, true, &scene.marked)
-                .map_err(|e| perr(&gif, e))?;
+            draw_lattice(&body, &view, pos, springs, LATTICE, true, &scene.marked)?;
             if scene.scale_bar {
-                draw_scale_bar(&body, &view, extent).map_err(|e| perr(&gif, e))?;
+                draw_scale_bar(&body, &view, extent)?;
             }
-            root.present().map_err(|e| perr(&gif, e.to_string()))?;
+            root.present().map_err(s)?;
         }
-    }
-    std::fs::rename(&tmp, &gif).map_err(|e| Error::Io {
-        path: gif.clone(),
-        source: e,
+        Ok(())
     })?;
     Ok(gif)
 }

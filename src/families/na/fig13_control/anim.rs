@@ -19,8 +19,7 @@ use super::frames::{
     TRUCK_OVERHANG, TRUCK_WIDTH,
 };
 use crate::emulator::catalog::NetModel;
-use crate::experiment::output::temp_path;
-use crate::experiment::plot::{ensure_fonts, perr};
+use crate::experiment::plot::{ensure_fonts, write_gif_atomically};
 use crate::experiment::Error;
 use crate::physics::dolphin::{Dolphin, N_POS};
 use crate::physics::lander::{Lander, QUAT};
@@ -226,10 +225,6 @@ pub fn write_animation(
     goal: &[f64],
     tracks: &[Track],
 ) -> Result<(PathBuf, usize), Error> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::Io {
-        path: dir.to_path_buf(),
-        source: e,
-    })?;
     ensure_fonts();
     let gif = dir.join(format!("{stem}.gif"));
     let steps = tracks.iter().map(|t| t.states.len()).max().unwrap_or(1);
@@ -242,12 +237,7 @@ pub fn write_animation(
     let len = played.iter().map(Vec::len).max().unwrap_or(0).max(1);
     let hold = ((HOLD * 100.0 / cs as f64).ceil() as usize).min(10);
     let size = scene.size();
-    let tmp = temp_path(&gif);
-    let e = |m: String| perr(&gif, m);
-    {
-        let root = BitMapBackend::gif(&tmp, size, cs * 10)
-            .map_err(|x| e(x.to_string()))?
-            .into_drawing_area();
+    write_gif_atomically(&gif, size, cs * 10, |root| {
         let (head, body) = root.split_vertically(TITLE_HEIGHT);
         let views = scene.views(body.dim_in_pixel(), goal, tracks);
         let note = if (speed - 1.0).abs() > 0.01 {
@@ -257,20 +247,20 @@ pub fn write_animation(
         };
         for k in 0..len + hold {
             let k = k.min(len - 1);
-            root.fill(&WHITE).map_err(|x| e(x.to_string()))?;
+            root.fill(&WHITE).map_err(|x| x.to_string())?;
             let t = k as f64 * step / per as f64;
             head.draw(&Text::new(
                 format!("{title}   t = {t:.2} s{note}"),
                 (10, 4),
                 ("sans-serif", 16).into_font().color(&BLACK),
             ))
-            .map_err(|x| e(x.to_string()))?;
+            .map_err(|x| x.to_string())?;
             head.draw(&Text::new(
                 caption,
                 (10, 23),
                 ("sans-serif", 13).into_font().color(&RGBColor(60, 60, 60)),
             ))
-            .map_err(|x| e(x.to_string()))?;
+            .map_err(|x| x.to_string())?;
             let bodies: Vec<Body> = tracks
                 .iter()
                 .zip(&played)
@@ -280,13 +270,10 @@ pub fn write_animation(
                     history: &p[..(k + 1).min(p.len())],
                 })
                 .collect();
-            scene.draw(&body, &views, goal, &bodies).map_err(e)?;
-            root.present().map_err(|x| e(x.to_string()))?;
+            scene.draw(&body, &views, goal, &bodies)?;
+            root.present().map_err(|x| x.to_string())?;
         }
-    }
-    std::fs::rename(&tmp, &gif).map_err(|x| Error::Io {
-        path: gif.clone(),
-        source: x,
+        Ok(())
     })?;
     Ok((gif, len + hold))
 }
