@@ -638,6 +638,10 @@ fn x_lbc_emulator_quick_compares_every_method_on_both_substrates() {
     for f in ["components.csv", "trajectory.csv", "goal.csv", "rule.csv"] {
         assert!(out.join(f).is_file(), "{f}");
     }
+    // States by their `describe` names (the lander's), never s0, s1, ...
+    assert!(header(&out.join("trajectory.csv"))
+        .starts_with("desired_target,method,step,t,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz"));
+    assert!(header(&out.join("goal.csv")).starts_with("desired_target,x,y,z,qw"));
     let figs = d.path().join("figs");
     assert!(figs.join("x_lbc_emulator_error.png").is_file());
     assert!(figs.join("x_lbc_emulator_lbc.gif").is_file());

@@ -99,6 +99,13 @@ impl NetModel {
         }
     }
 
+    /// Names of the state variables, as `motionlab describe` gives them for the physical model.
+    pub fn state_names(self) -> Vec<String> {
+        crate::physics::model_by_name(self.physics_name())
+            .map(|m| m.state_names())
+            .unwrap_or_else(|| (0..self.state_dim()).map(|k| format!("s{k}")).collect())
+    }
+
     /// Number of state variables.
     pub fn state_dim(self) -> usize {
         match self {

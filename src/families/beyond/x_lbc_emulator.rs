@@ -480,7 +480,9 @@ impl Job for Params {
             .iter()
             .map(|s| s.to_string())
             .collect();
-        cols.extend((0..n).map(|k| format!("s{k}")));
+        // The state variables by their `describe` names.
+        cols.extend(model.state_names());
+        debug_assert_eq!(cols.len(), 4 + n);
         let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
         let mut trajectory = Table::new(&col_refs);
         let mut goal_cols = vec!["desired_target"];
@@ -839,20 +841,28 @@ fn animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     else {
         return Ok(Vec::new());
     };
-    let width = (0..)
-        .take_while(|k| tr.column(&format!("s{k}")).is_some())
-        .count();
-    let cols: Vec<Vec<f64>> = (0..width).map(|k| tr.f64s(&format!("s{k}"))).collect();
+    // The model whose state names the table has (results before the names: s0, s1, ...).
+    let (model, names) = [NetModel::Lander, NetModel::Truck]
+        .into_iter()
+        .map(|m| (m, m.state_names()))
+        .find(|(_, names)| names.iter().all(|c| tr.column(c).is_some()))
+        .unwrap_or_else(|| {
+            let width = (0..)
+                .take_while(|k| tr.column(&format!("s{k}")).is_some())
+                .count();
+            let model = if width == NetModel::Lander.state_dim() {
+                NetModel::Lander
+            } else {
+                NetModel::Truck
+            };
+            (model, (0..width).map(|k| format!("s{k}")).collect())
+        });
+    let cols: Vec<Vec<f64>> = names.iter().map(|c| tr.f64s(c)).collect();
     let track = |mm: &str| -> Vec<Vec<f64>> {
         (0..d.len())
             .filter(|&r| d[r] == pick && meth[r] == mm)
             .map(|r| cols.iter().map(|c| c[r]).collect())
             .collect()
-    };
-    let model = if width == NetModel::Lander.state_dim() {
-        NetModel::Lander
-    } else {
-        NetModel::Truck
     };
     let lbc = track("lbc");
     let g = tables.require("goal")?;
@@ -860,7 +870,7 @@ fn animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let Some(gr) = gd.iter().position(|&x| x == pick) else {
         return Ok(Vec::new());
     };
-    let goal: Vec<f64> = (0..width).map(|k| g.f64s(&format!("s{k}"))[gr]).collect();
+    let goal: Vec<f64> = names.iter().map(|c| g.f64s(c)[gr]).collect();
     let tracks = vec![
         Track {
             label: "LBC of the two emulator-derived trackers".into(),
