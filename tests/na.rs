@@ -463,6 +463,11 @@ fn na_fig13_quick_learns_controls_for_every_task() {
             .collect::<Vec<_>>(),
         ["task", "model", "s0"]
     );
+    // The generic columns by name: the lander's s0 is its x, the pendulum's its first joint.
+    let names = rows(&out.join("states.csv"));
+    assert!(names.contains(&vec!["lander".to_string(), "s0".into(), "x".into()]));
+    assert!(names.contains(&vec!["lander".to_string(), "s12".into(), "wz".into()]));
+    assert_eq!(names.iter().filter(|c| c[0] == "truck").count(), 6);
     // One animation per task: emulator and simulator replay over the goal.
     for task in ["pendulum", "truck", "lander", "dolphin"] {
         let p = d.path().join(format!("figs/na_fig13_control_{task}.gif"));

@@ -390,6 +390,13 @@ impl Job for Params {
         let mut goal_cols = vec!["task", "model"];
         goal_cols.extend_from_slice(&col_refs[4..]);
         let mut goal = Table::new(&goal_cols);
+        // The generic state columns (one table holds tasks of different models) by name.
+        let mut states_t = Table::new(&["task", "column", "name"]);
+        for task in &self.tasks {
+            for (k, name) in task.net.model.state_names().into_iter().enumerate() {
+                states_t.push(row![task.name.as_str(), format!("s{k}"), name]);
+            }
+        }
         for task in &self.tasks {
             let model = task.net.model;
             let (n, m) = (model.state_dim(), model.control_dim());
@@ -516,6 +523,7 @@ impl Job for Params {
             ("final", final_t),
             ("trajectory", trajectory),
             ("goal", goal),
+            ("states", states_t),
         ]))
     }
 }
