@@ -379,6 +379,61 @@ impl crate::physics::DifferentiableStep for Emulator {
             None,
         );
     }
+    /// The network input z, output y and hidden activations h of the step.
+    fn tape_len(&self) -> usize {
+        let (n, m) = (self.transforms.state_dim, self.transforms.control_dim);
+        (n + m) + n + self.mlp.n_hidden()
+    }
+    fn step_taped(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        scratch: &mut EmulatorScratch,
+        s_next: &mut [f64],
+        tape: &mut [f64],
+    ) {
+        let (z, y, h) = split_tape(&self.transforms, tape);
+        self.transforms.encode_input(s, u, z);
+        self.mlp.forward_into(z, h, y);
+        self.transforms.decode_output(s, y, &mut scratch.t1, s_next);
+    }
+    fn vjp_taped(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        tape: &[f64],
+        s_next_bar: &[f64],
+        scratch: &mut EmulatorScratch,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        let _ = u;
+        let n = self.transforms.state_dim;
+        let (z, rest) = tape.split_at(n + self.transforms.control_dim);
+        let (y, h) = rest.split_at(n);
+        s_bar.fill(0.0);
+        vjp_from_forward(
+            &self.transforms,
+            &self.mlp,
+            s,
+            (z, y, h),
+            s_next_bar,
+            scratch,
+            s_bar,
+            u_bar,
+            None,
+        );
+    }
+}
+
+/// An emulator step's tape as (network input z, output y, hidden activations h).
+fn split_tape<'a>(
+    t: &Transforms,
+    tape: &'a mut [f64],
+) -> (&'a mut [f64], &'a mut [f64], &'a mut [f64]) {
+    let (z, rest) = tape.split_at_mut(t.state_dim + t.control_dim);
+    let (y, h) = rest.split_at_mut(t.state_dim);
+    (z, y, h)
 }
 
 /// Vector–Jacobian product of one emulator step s' = T(s, u; w) through the transforms and the
@@ -415,18 +470,52 @@ fn step_vjp_after_forward(
     u_bar: &mut [f64],
     grad_w: Option<&mut [f64]>,
 ) {
+    let z = std::mem::take(&mut scratch.z);
+    let y = std::mem::take(&mut scratch.y);
+    let h = std::mem::take(&mut scratch.mlp.hidden);
+    vjp_from_forward(
+        t,
+        mlp,
+        s,
+        (&z, &y, &h),
+        s_next_bar,
+        scratch,
+        s_bar,
+        u_bar,
+        grad_w,
+    );
+    scratch.z = z;
+    scratch.y = y;
+    scratch.mlp.hidden = h;
+}
+
+/// The backward half of [`step_vjp`] from the forward pass at (s, u) given as (network input
+/// z, output y, hidden activations h); uses the rest of `scratch` as buffers.
+#[allow(clippy::too_many_arguments)]
+fn vjp_from_forward(
+    t: &Transforms,
+    mlp: &Mlp,
+    s: &[f64],
+    (z, y, h): (&[f64], &[f64], &[f64]),
+    s_next_bar: &[f64],
+    scratch: &mut EmulatorScratch,
+    s_bar: &mut [f64],
+    u_bar: &mut [f64],
+    grad_w: Option<&mut [f64]>,
+) {
     t.decode_output_vjp(
         s,
-        &scratch.y,
+        y,
         s_next_bar,
         &mut scratch.t1,
         &mut scratch.t2,
         &mut scratch.y_bar,
         s_bar,
     );
-    mlp.backward(
-        &scratch.z,
-        &mut scratch.mlp,
+    mlp.backward_from(
+        z,
+        h,
+        &mut scratch.mlp.hidden_bar,
         &scratch.y_bar,
         grad_w,
         Some(&mut scratch.z_bar),

@@ -51,16 +51,37 @@ fn quat_conj(a: [f64; 4]) -> [f64; 4] {
 
 type M3 = [[f64; 3]; 3];
 
+#[inline]
 fn mat_vec(m: &M3, v: [f64; 3]) -> [f64; 3] {
-    [0, 1, 2].map(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
+    let row = |i: usize| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2];
+    [row(0), row(1), row(2)]
 }
 
+#[inline]
 fn mat_t_vec(m: &M3, v: [f64; 3]) -> [f64; 3] {
-    [0, 1, 2].map(|j| m[0][j] * v[0] + m[1][j] * v[1] + m[2][j] * v[2])
+    let col = |j: usize| m[0][j] * v[0] + m[1][j] * v[1] + m[2][j] * v[2];
+    [col(0), col(1), col(2)]
 }
 
 fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// R(q) = M(q)/|q|² alone, as [`rotation_and_derivatives`] computes it (the same operations,
+/// without the derivatives the forward maps do not need).
+fn rotation(q: [f64; 4]) -> M3 {
+    let n = q.iter().map(|a| a * a).sum::<f64>();
+    let (w, v) = (q[0], [q[1], q[2], q[3]]);
+    let cv = [[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]];
+    let vv = dot3(v, v);
+    let mut r = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            let m = if i == j { w * w - vv } else { 0.0 } + 2.0 * v[i] * v[j] + 2.0 * w * cv[i][j];
+            r[i][j] = m / n;
+        }
+    }
+    r
 }
 
 /// R(q) = M(q)/|q|² with M(q) = (w² − v·v) I + 2 v vᵀ + 2 w [v]×, and ∂R/∂q_k.
@@ -246,7 +267,7 @@ impl SpatialFrame {
     /// Applies `map` at `pose` to `inp`, writing `out` (same length).
     pub fn apply(&self, map: FrameMap, pose: &Pose3, inp: &[f64], out: &mut [f64]) {
         out.copy_from_slice(inp);
-        let (r, _) = rotation_and_derivatives(pose.q);
+        let r = rotation(pose.q);
         let local = map.sign() < 0.0;
         for (t, is_point) in self.triples() {
             let mut v = t.map(|i| inp[i]);
@@ -326,8 +347,8 @@ impl SpatialFrame {
             let a = qi.map(|i| inp[i]);
             let da = qi.map(|i| d_inp[i]);
             let mut o = [0.0; 4];
-            for k in 0..4 {
-                let dq = quat_partial(map, pose.q, a, k);
+            let partials = quat_partials(map, pose.q, a);
+            for (k, dq) in partials.iter().enumerate() {
                 for c in 0..4 {
                     o[c] += dq[c] * d_pose.q[k];
                 }
@@ -350,13 +371,30 @@ impl SpatialFrame {
         inp_bar: &mut [f64],
         pose_bar: &mut Pose3,
     ) {
-        let mapped = |i: usize| {
-            self.triples().any(|(t, _)| t.contains(&i))
-                || self.quaternions.iter().any(|q| q.contains(&i))
-        };
-        for (i, b) in inp_bar.iter_mut().enumerate() {
-            if !mapped(i) {
-                *b += out_bar[i];
+        // Variables the map does not touch pass their cotangent through.
+        const SMALL: usize = 256;
+        if inp_bar.len() <= SMALL {
+            let mut mapped = [false; SMALL];
+            for (t, _) in self.triples() {
+                t.iter().for_each(|&i| mapped[i] = true);
+            }
+            for q in &self.quaternions {
+                q.iter().for_each(|&i| mapped[i] = true);
+            }
+            for (i, b) in inp_bar.iter_mut().enumerate() {
+                if !mapped[i] {
+                    *b += out_bar[i];
+                }
+            }
+        } else {
+            let mapped = |i: usize| {
+                self.triples().any(|(t, _)| t.contains(&i))
+                    || self.quaternions.iter().any(|q| q.contains(&i))
+            };
+            for (i, b) in inp_bar.iter_mut().enumerate() {
+                if !mapped(i) {
+                    *b += out_bar[i];
+                }
             }
         }
         let (r, dr) = rotation_and_derivatives(pose.q);
@@ -404,8 +442,8 @@ impl SpatialFrame {
             for k in 0..4 {
                 inp_bar[qi[k]] += ib[k];
             }
-            for k in 0..4 {
-                let dq = quat_partial(map, pose.q, a, k);
+            let partials = quat_partials(map, pose.q, a);
+            for (k, dq) in partials.iter().enumerate() {
                 pose_bar.q[k] += (0..4).map(|c| dq[c] * g[c]).sum::<f64>();
             }
         }
@@ -422,16 +460,29 @@ fn quat_linear(map: FrameMap, q0: [f64; 4], a: [f64; 4]) -> [f64; 4] {
     }
 }
 
-/// ∂/∂q₀ₖ of [`quat_linear`].
-fn quat_partial(map: FrameMap, q0: [f64; 4], a: [f64; 4], k: usize) -> [f64; 4] {
-    let mut e = [0.0; 4];
-    e[k] = 1.0;
+/// ∂/∂q₀ₖ of [`quat_linear`] for k = 0 … 3 (the norm and the product shared by the four
+/// computed once).
+fn quat_partials(map: FrameMap, q0: [f64; 4], a: [f64; 4]) -> [[f64; 4]; 4] {
+    let unit = |k: usize| {
+        let mut e = [0.0; 4];
+        e[k] = 1.0;
+        e
+    };
+    let mut out = [[0.0; 4]; 4];
     if map.sign() < 0.0 {
         let n = q0.iter().map(|x| x * x).sum::<f64>();
-        let f = quat_mul(quat_conj(q0), a).map(|x| x / n);
-        let d = quat_mul(quat_conj(e), a);
-        [0, 1, 2, 3].map(|c| d[c] / n - 2.0 * q0[k] * f[c] / n)
+        let p = quat_mul(quat_conj(q0), a);
+        let f = [p[0] / n, p[1] / n, p[2] / n, p[3] / n];
+        for (k, o) in out.iter_mut().enumerate() {
+            let d = quat_mul(quat_conj(unit(k)), a);
+            for c in 0..4 {
+                o[c] = d[c] / n - 2.0 * q0[k] * f[c] / n;
+            }
+        }
     } else {
-        quat_mul(e, a)
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = quat_mul(unit(k), a);
+        }
     }
+    out
 }
