@@ -157,9 +157,10 @@ pub fn predict_with(
     scratch: &mut EmulatorScratch,
     s_next: &mut [f64],
 ) {
-    t.encode_input(s, u, &mut scratch.z);
+    let at = t.frame_at(s, false);
+    t.encode_input_with(at.as_ref(), s, u, &mut scratch.z);
     mlp.forward(&scratch.z, &mut scratch.mlp, &mut scratch.y);
-    t.decode_output(s, &scratch.y, &mut scratch.t1, s_next);
+    t.decode_output_with(at.as_ref(), s, &scratch.y, &mut scratch.t1, s_next);
 }
 
 /// A NeuroAnimator: transforms + network, one call = one super timestep Δt.
@@ -393,9 +394,11 @@ impl crate::physics::DifferentiableStep for Emulator {
         tape: &mut [f64],
     ) {
         let (z, y, h) = split_tape(&self.transforms, tape);
-        self.transforms.encode_input(s, u, z);
+        let t = &self.transforms;
+        let at = t.frame_at(s, false);
+        t.encode_input_with(at.as_ref(), s, u, z);
         self.mlp.forward_into(z, h, y);
-        self.transforms.decode_output(s, y, &mut scratch.t1, s_next);
+        t.decode_output_with(at.as_ref(), s, y, &mut scratch.t1, s_next);
     }
     fn vjp_taped(
         &self,
@@ -503,12 +506,14 @@ fn vjp_from_forward(
     u_bar: &mut [f64],
     grad_w: Option<&mut [f64]>,
 ) {
-    t.decode_output_vjp(
+    // The frame at s (with the rotation's derivatives) serves both transforms' products.
+    let at = t.frame_at(s, true);
+    t.decode_output_vjp_with(
+        at.as_ref(),
         s,
         y,
         s_next_bar,
-        &mut scratch.t1,
-        &mut scratch.t2,
+        (&mut scratch.t1, &mut scratch.t2),
         &mut scratch.y_bar,
         s_bar,
     );
@@ -520,7 +525,14 @@ fn vjp_from_forward(
         grad_w,
         Some(&mut scratch.z_bar),
     );
-    t.encode_input_vjp(s, &scratch.z_bar, &mut scratch.t1, s_bar, u_bar);
+    t.encode_input_vjp_with(
+        at.as_ref(),
+        s,
+        &scratch.z_bar,
+        &mut scratch.t1,
+        s_bar,
+        u_bar,
+    );
 }
 
 #[cfg(test)]

@@ -8,14 +8,14 @@
 //! inputs k updates W accumulators at once,
 //!
 //! ```text
-//! acc[l] ← acc[l] + a[k, j₀ + l] · x[k]     for l < W, k = 0, 1, …   (W = 32, 16 or 8)
+//! acc[l] ← acc[l] + a[k, j₀ + l] · x[k]     for l < W, k = 0, 1, …   (W ≤ 32, a multiple of 4)
 //! ```
 //!
 //! which is exactly the scalar recurrence of each output, evaluated lane by lane (a separate
 //! multiply and add: no fused multiply–add, as before).
 //!
 //! [`Packed`] holds the four layouts the passes read, each with its row stride padded with
-//! zeros to a multiple of 8 so that every block is full width (padded lanes are computed and
+//! zeros to a multiple of 4 so that every lane group is full (padded lanes are computed and
 //! dropped):
 //!
 //! ```text
@@ -25,15 +25,86 @@
 //! w1   q × p̃   W₁ as stored: row j holds hidden unit j's weights              (backward, x̄)
 //! ```
 //!
-//! On x86-64 the entry points run the same generic body compiled for AVX2 when the processor
-//! has it (runtime detection; AVX2 only widens the vectors, the operations are the same IEEE
-//! multiplies and adds, so results do not depend on the path taken).
+//! The lanes are groups of 4 ([`Lanes`]): 256-bit AVX2 registers on x86-64 processors that
+//! have them (runtime detection), else plain `[f64; 4]` arrays. Both are the same IEEE
+//! multiplies and adds lane by lane, so results do not depend on the path taken.
 
 use super::sigmoid;
 
-/// A multiple of 8 at least `n`.
-fn pad8(n: usize) -> usize {
-    n.div_ceil(8) * 8
+/// A multiple of 4 (one lane group) at least `n`.
+fn pad4(n: usize) -> usize {
+    n.div_ceil(4) * 4
+}
+
+/// Four f64 lanes and the three operations the kernels need. Implementations must evaluate
+/// each lane exactly as the scalar `acc + w * x` (a rounded multiply, then a rounded add).
+trait Lanes {
+    /// A group of four lanes.
+    type V: Copy;
+    /// All four lanes set to `x`.
+    fn splat(x: f64) -> Self::V;
+    /// The first four values of `p`.
+    fn load(p: &[f64]) -> Self::V;
+    /// `acc + w * x` lane by lane.
+    fn mul_add(acc: Self::V, w: Self::V, x: Self::V) -> Self::V;
+    /// Writes the lanes to the first four values of `out`.
+    fn store(v: Self::V, out: &mut [f64]);
+}
+
+/// Lanes as plain arrays (any target; the compiler vectorizes what it can).
+struct Portable;
+
+impl Lanes for Portable {
+    type V = [f64; 4];
+    #[inline(always)]
+    fn splat(x: f64) -> [f64; 4] {
+        [x; 4]
+    }
+    #[inline(always)]
+    fn load(p: &[f64]) -> [f64; 4] {
+        p[..4].try_into().expect("4 values")
+    }
+    #[inline(always)]
+    fn mul_add(acc: [f64; 4], w: [f64; 4], x: [f64; 4]) -> [f64; 4] {
+        [0, 1, 2, 3].map(|l| acc[l] + w[l] * x[l])
+    }
+    #[inline(always)]
+    fn store(v: [f64; 4], out: &mut [f64]) {
+        out[..4].copy_from_slice(&v);
+    }
+}
+
+/// Lanes in AVX2 registers; only used from functions compiled with AVX2 enabled, on
+/// processors that have it.
+#[cfg(target_arch = "x86_64")]
+struct Avx2;
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes for Avx2 {
+    type V = std::arch::x86_64::__m256d;
+    #[inline(always)]
+    fn splat(x: f64) -> Self::V {
+        // SAFETY: only reached from `#[target_feature(enable = "avx2")]` code (see `dispatch`).
+        unsafe { std::arch::x86_64::_mm256_set1_pd(x) }
+    }
+    #[inline(always)]
+    fn load(p: &[f64]) -> Self::V {
+        assert!(p.len() >= 4);
+        // SAFETY: four values are in bounds (checked); AVX2 as for `splat`.
+        unsafe { std::arch::x86_64::_mm256_loadu_pd(p.as_ptr()) }
+    }
+    #[inline(always)]
+    fn mul_add(acc: Self::V, w: Self::V, x: Self::V) -> Self::V {
+        use std::arch::x86_64::{_mm256_add_pd, _mm256_mul_pd};
+        // SAFETY: AVX2 as for `splat`. A separate multiply and add, as the scalar code.
+        unsafe { _mm256_add_pd(acc, _mm256_mul_pd(w, x)) }
+    }
+    #[inline(always)]
+    fn store(v: Self::V, out: &mut [f64]) {
+        assert!(out.len() >= 4);
+        // SAFETY: four values are in bounds (checked); AVX2 as for `splat`.
+        unsafe { std::arch::x86_64::_mm256_storeu_pd(out.as_mut_ptr(), v) }
+    }
 }
 
 /// The weights of a p → q → r net in the layouts of the single-example kernels (module docs).
@@ -55,7 +126,7 @@ pub(super) struct Packed {
 impl Packed {
     /// Packs W₁ (q × p, row-major) and W₂ (r × q, row-major).
     pub(super) fn new(p: usize, q: usize, r: usize, w1: &[f64], w2: &[f64]) -> Self {
-        let (ps, qs, rs) = (pad8(p), pad8(q), pad8(r));
+        let (ps, qs, rs) = (pad4(p), pad4(q), pad4(r));
         let mut w1t = vec![0.0; p * qs];
         let mut w1p = vec![0.0; q * ps];
         for j in 0..q {
@@ -88,9 +159,9 @@ impl Packed {
 }
 
 /// `emit(l, init + Σ_k a[k, l] x[k])` for l < n, each sum taken in order k = 0, 1, …: the
-/// columns of `a` (rows of `stride` values, stride a multiple of 8 and at least n) against `x`.
+/// columns of `a` (rows of `stride` values, stride a multiple of 4 and at least n) against `x`.
 #[inline(always)]
-fn columns(
+fn columns<L: Lanes>(
     a: &[f64],
     stride: usize,
     x: &[f64],
@@ -98,27 +169,29 @@ fn columns(
     n: usize,
     mut emit: impl FnMut(usize, f64),
 ) {
-    debug_assert!(stride % 8 == 0 && n <= stride);
+    debug_assert!(stride % 4 == 0 && n <= stride);
     assert!(a.len() >= x.len() * stride, "packed matrix too short");
     let mut j0 = 0;
     while j0 < n {
-        let left = stride - j0;
-        if left >= 32 {
-            block::<32>(a, stride, j0, x, init, n, &mut emit);
-            j0 += 32;
-        } else if left >= 16 {
-            block::<16>(a, stride, j0, x, init, n, &mut emit);
-            j0 += 16;
-        } else {
-            block::<8>(a, stride, j0, x, init, n, &mut emit);
-            j0 += 8;
+        // Blocks of up to 32 lanes (8 groups), each lane a separate sum.
+        let w = (stride - j0).min(32);
+        match w / 4 {
+            8 => block::<L, 8>(a, stride, j0, x, init, n, &mut emit),
+            7 => block::<L, 7>(a, stride, j0, x, init, n, &mut emit),
+            6 => block::<L, 6>(a, stride, j0, x, init, n, &mut emit),
+            5 => block::<L, 5>(a, stride, j0, x, init, n, &mut emit),
+            4 => block::<L, 4>(a, stride, j0, x, init, n, &mut emit),
+            3 => block::<L, 3>(a, stride, j0, x, init, n, &mut emit),
+            2 => block::<L, 2>(a, stride, j0, x, init, n, &mut emit),
+            _ => block::<L, 1>(a, stride, j0, x, init, n, &mut emit),
         }
+        j0 += w;
     }
 }
 
-/// Columns `j0 .. j0 + W` of [`columns`], accumulated in W independent lanes.
+/// Columns `j0 .. j0 + 4G` of [`columns`], accumulated in G groups of 4 independent lanes.
 #[inline(always)]
-fn block<const W: usize>(
+fn block<L: Lanes, const G: usize>(
     a: &[f64],
     stride: usize,
     j0: usize,
@@ -127,31 +200,37 @@ fn block<const W: usize>(
     n: usize,
     emit: &mut impl FnMut(usize, f64),
 ) {
-    let mut acc = [init; W];
+    let mut acc = [L::splat(init); G];
     for (k, &xk) in x.iter().enumerate() {
         let start = k * stride + j0;
-        let row: &[f64; W] = a[start..start + W].try_into().expect("W values");
-        for l in 0..W {
-            acc[l] += row[l] * xk;
+        let row = &a[start..start + 4 * G];
+        let xv = L::splat(xk);
+        for (g, acc) in acc.iter_mut().enumerate() {
+            *acc = L::mul_add(*acc, L::load(&row[4 * g..]), xv);
         }
     }
-    for (l, &v) in acc.iter().enumerate().take(n - j0) {
+    let mut sums = [0.0; 32];
+    for (g, acc) in acc.iter().enumerate() {
+        L::store(*acc, &mut sums[4 * g..]);
+    }
+    for (l, &v) in sums.iter().enumerate().take((4 * G).min(n - j0)) {
         emit(j0 + l, v);
     }
 }
 
-/// Runs `$body` compiled for AVX2 when the processor has it, else for the baseline target.
+/// `$name` runs `$generic` on AVX2 lanes, compiled with AVX2 enabled, when the processor has
+/// it, else on portable lanes.
 macro_rules! dispatch {
     ($name:ident, $generic:ident, ($($arg:ident : $ty:ty),*)) => {
         #[allow(clippy::too_many_arguments)]
         pub(super) fn $name($($arg: $ty),*) {
             #[cfg(target_arch = "x86_64")]
             {
-                /// The generic body compiled with AVX2 enabled.
+                /// The generic body on AVX2 lanes, compiled with AVX2 enabled.
                 #[target_feature(enable = "avx2")]
                 #[allow(clippy::too_many_arguments)]
-                unsafe fn avx2($($arg: $ty),*) {
-                    $generic($($arg),*)
+                fn avx2($($arg: $ty),*) {
+                    $generic::<Avx2>($($arg),*)
                 }
                 if std::arch::is_x86_feature_detected!("avx2") {
                     // SAFETY: the processor supports AVX2 (checked just above).
@@ -159,32 +238,39 @@ macro_rules! dispatch {
                     return;
                 }
             }
-            $generic($($arg),*)
+            $generic::<Portable>($($arg),*)
         }
     };
 }
 
 /// Hidden activations h = σ(W₁ x + b₁).
 #[inline(always)]
-fn hidden_generic(pk: &Packed, b1: &[f64], x: &[f64], h: &mut [f64]) {
+fn hidden_generic<L: Lanes>(pk: &Packed, b1: &[f64], x: &[f64], h: &mut [f64]) {
     debug_assert_eq!(x.len(), pk.p);
-    columns(&pk.w1t, pk.qs, x, -0.0, pk.q, |j, s| {
+    columns::<L>(&pk.w1t, pk.qs, x, -0.0, pk.q, |j, s| {
         h[j] = sigmoid(b1[j] + s)
     });
 }
 
 /// Forward pass: h = σ(W₁ x + b₁), y = W₂ h + b₂.
 #[inline(always)]
-fn forward_generic(pk: &Packed, b1: &[f64], b2: &[f64], x: &[f64], h: &mut [f64], y: &mut [f64]) {
-    hidden_generic(pk, b1, x, h);
-    columns(&pk.w2t, pk.rs, h, -0.0, pk.r, |i, s| y[i] = b2[i] + s);
+fn forward_generic<L: Lanes>(
+    pk: &Packed,
+    b1: &[f64],
+    b2: &[f64],
+    x: &[f64],
+    h: &mut [f64],
+    y: &mut [f64],
+) {
+    hidden_generic::<L>(pk, b1, x, h);
+    columns::<L>(&pk.w2t, pk.rs, h, -0.0, pk.r, |i, s| y[i] = b2[i] + s);
 }
 
 /// Hidden cotangent h̄ = (W₂ᵀ ȳ) ⊙ h ⊙ (1 − h).
 #[inline(always)]
-fn hidden_bar_generic(pk: &Packed, h: &[f64], y_bar: &[f64], hb: &mut [f64]) {
+fn hidden_bar_generic<L: Lanes>(pk: &Packed, h: &[f64], y_bar: &[f64], hb: &mut [f64]) {
     debug_assert_eq!(y_bar.len(), pk.r);
-    columns(&pk.w2, pk.qs, y_bar, 0.0, pk.q, |j, s| {
+    columns::<L>(&pk.w2, pk.qs, y_bar, 0.0, pk.q, |j, s| {
         let hj = h[j];
         hb[j] = s * hj * (1.0 - hj);
     });
@@ -192,14 +278,14 @@ fn hidden_bar_generic(pk: &Packed, h: &[f64], y_bar: &[f64], hb: &mut [f64]) {
 
 /// Input cotangent x̄ = W₁ᵀ h̄.
 #[inline(always)]
-fn input_bar_generic(pk: &Packed, hb: &[f64], xb: &mut [f64]) {
-    columns(&pk.w1, pk.ps, hb, 0.0, pk.p, |k, s| xb[k] = s);
+fn input_bar_generic<L: Lanes>(pk: &Packed, hb: &[f64], xb: &mut [f64]) {
+    columns::<L>(&pk.w1, pk.ps, hb, 0.0, pk.p, |k, s| xb[k] = s);
 }
 
 /// Weight-gradient accumulation: ∂E/∂W₂ += ȳ hᵀ, ∂E/∂b₂ += ȳ, ∂E/∂W₁ += h̄ xᵀ, ∂E/∂b₁ += h̄.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn weight_grad_generic(
+fn weight_grad_generic<L: Lanes>(
     x: &[f64],
     h: &[f64],
     hb: &[f64],

@@ -35,6 +35,21 @@ pub struct Pose3 {
     pub q: [f64; 4],
 }
 
+/// A [`SpatialFrame`] read from one state: the pose, the heading normalization it came from
+/// and the rotation R(q₀) (with ∂R/∂q₀ₖ when asked for), computed once and shared by every map
+/// at that state ([`SpatialFrame::at`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpatialAt {
+    /// The pose read from the state.
+    pub pose: Pose3,
+    /// The heading as a unit pair and its norm ([`Attitude::Heading`] only).
+    heading: Option<([f64; 2], f64)>,
+    /// R(q₀).
+    r: M3,
+    /// ∂R/∂q₀ₖ, when computed.
+    dr: Option<[M3; 4]>,
+}
+
 /// Hamilton product a ⊗ b of quaternions `[w, x, y, z]`.
 pub fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
     [
@@ -199,16 +214,44 @@ impl SpatialFrame {
 
     /// The pose read from a world-frame state.
     pub fn pose(&self, s: &[f64]) -> Pose3 {
-        let q = match self.attitude {
-            Attitude::Full => self.orientation.map(|i| s[i]),
-            Attitude::Heading => {
-                let ([w, z], _) = self.heading(s);
-                [w, 0.0, 0.0, z]
-            }
+        let heading = match self.attitude {
+            Attitude::Full => None,
+            Attitude::Heading => Some(self.heading(s)),
+        };
+        self.pose_from(s, heading)
+    }
+
+    /// [`SpatialFrame::pose`] given the heading of `s` (for [`Attitude::Heading`]).
+    fn pose_from(&self, s: &[f64], heading: Option<([f64; 2], f64)>) -> Pose3 {
+        let q = match (self.attitude, heading) {
+            (Attitude::Heading, Some(([w, z], _))) => [w, 0.0, 0.0, z],
+            _ => self.orientation.map(|i| s[i]),
         };
         Pose3 {
             origin: self.origin.map(|i| s[i]),
             q,
+        }
+    }
+
+    /// The frame read from state `s`: its pose and rotation, with the rotation's derivatives
+    /// when `derivatives` (the vector–Jacobian products need them; the maps do not).
+    pub fn at(&self, s: &[f64], derivatives: bool) -> SpatialAt {
+        let heading = match self.attitude {
+            Attitude::Full => None,
+            Attitude::Heading => Some(self.heading(s)),
+        };
+        let pose = self.pose_from(s, heading);
+        let (r, dr) = if derivatives {
+            let (r, dr) = rotation_and_derivatives(pose.q);
+            (r, Some(dr))
+        } else {
+            (rotation(pose.q), None)
+        };
+        SpatialAt {
+            pose,
+            heading,
+            r,
+            dr,
         }
     }
 
@@ -237,6 +280,19 @@ impl SpatialFrame {
 
     /// Adds a pose cotangent to the cotangent `s_bar` of the state `s` the pose is read from.
     pub fn pose_vjp(&self, s: &[f64], pose_bar: &Pose3, s_bar: &mut [f64]) {
+        let heading = match self.attitude {
+            Attitude::Full => None,
+            Attitude::Heading => Some(self.heading(s)),
+        };
+        self.pose_vjp_from(heading, pose_bar, s_bar);
+    }
+
+    /// [`SpatialFrame::pose_vjp`] given the heading of the state (for [`Attitude::Heading`]).
+    pub fn pose_vjp_at(&self, at: &SpatialAt, pose_bar: &Pose3, s_bar: &mut [f64]) {
+        self.pose_vjp_from(at.heading, pose_bar, s_bar);
+    }
+
+    fn pose_vjp_from(&self, heading: Option<([f64; 2], f64)>, pose_bar: &Pose3, s_bar: &mut [f64]) {
         for (i, v) in self.origin.iter().zip(pose_bar.origin) {
             s_bar[*i] += v;
         }
@@ -248,7 +304,7 @@ impl SpatialFrame {
             }
             Attitude::Heading => {
                 // The normalization's Jacobian is symmetric; x and y of the pose are constant.
-                let (h, n) = self.heading(s);
+                let (h, n) = heading.expect("a heading frame reads its heading");
                 let g = [pose_bar.q[0], pose_bar.q[3]];
                 let along = h[0] * g[0] + h[1] * g[1];
                 s_bar[self.orientation[0]] += (g[0] - h[0] * along) / n;
@@ -266,8 +322,17 @@ impl SpatialFrame {
 
     /// Applies `map` at `pose` to `inp`, writing `out` (same length).
     pub fn apply(&self, map: FrameMap, pose: &Pose3, inp: &[f64], out: &mut [f64]) {
+        self.apply_rotated(map, pose, &rotation(pose.q), inp, out);
+    }
+
+    /// [`SpatialFrame::apply`] at the frame read from a state ([`SpatialFrame::at`]).
+    pub fn apply_at(&self, map: FrameMap, at: &SpatialAt, inp: &[f64], out: &mut [f64]) {
+        self.apply_rotated(map, &at.pose, &at.r, inp, out);
+    }
+
+    /// [`SpatialFrame::apply`] with R(q₀) given.
+    fn apply_rotated(&self, map: FrameMap, pose: &Pose3, r: &M3, inp: &[f64], out: &mut [f64]) {
         out.copy_from_slice(inp);
-        let r = rotation(pose.q);
         let local = map.sign() < 0.0;
         for (t, is_point) in self.triples() {
             let mut v = t.map(|i| inp[i]);
@@ -275,9 +340,9 @@ impl SpatialFrame {
                 v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
             }
             let mut o = if local {
-                mat_t_vec(&r, v)
+                mat_t_vec(r, v)
             } else {
-                mat_vec(&r, v)
+                mat_vec(r, v)
             };
             if is_point && map == FrameMap::ToWorld {
                 o = [0, 1, 2].map(|k| o[k] + pose.origin[k]);
@@ -371,6 +436,44 @@ impl SpatialFrame {
         inp_bar: &mut [f64],
         pose_bar: &mut Pose3,
     ) {
+        let (r, dr) = rotation_and_derivatives(pose.q);
+        self.apply_vjp_rotated(map, pose, (&r, &dr), inp, out_bar, inp_bar, pose_bar);
+    }
+
+    /// [`SpatialFrame::apply_vjp`] at the frame read from a state ([`SpatialFrame::at`]; the
+    /// rotation's derivatives are computed here if `at` lacks them).
+    pub fn apply_vjp_at(
+        &self,
+        map: FrameMap,
+        at: &SpatialAt,
+        inp: &[f64],
+        out_bar: &[f64],
+        inp_bar: &mut [f64],
+        pose_bar: &mut Pose3,
+    ) {
+        let computed;
+        let dr = match &at.dr {
+            Some(dr) => dr,
+            None => {
+                computed = rotation_and_derivatives(at.pose.q).1;
+                &computed
+            }
+        };
+        self.apply_vjp_rotated(map, &at.pose, (&at.r, dr), inp, out_bar, inp_bar, pose_bar);
+    }
+
+    /// [`SpatialFrame::apply_vjp`] with R(q₀) and ∂R/∂q₀ₖ given.
+    #[allow(clippy::too_many_arguments)]
+    fn apply_vjp_rotated(
+        &self,
+        map: FrameMap,
+        pose: &Pose3,
+        (r, dr): (&M3, &[M3; 4]),
+        inp: &[f64],
+        out_bar: &[f64],
+        inp_bar: &mut [f64],
+        pose_bar: &mut Pose3,
+    ) {
         // Variables the map does not touch pass their cotangent through.
         const SMALL: usize = 256;
         if inp_bar.len() <= SMALL {
@@ -397,7 +500,6 @@ impl SpatialFrame {
                 }
             }
         }
-        let (r, dr) = rotation_and_derivatives(pose.q);
         let local = map.sign() < 0.0;
         for (t, is_point) in self.triples() {
             let mut v = t.map(|i| inp[i]);
@@ -406,9 +508,9 @@ impl SpatialFrame {
             }
             let g = t.map(|i| out_bar[i]);
             let ib = if local {
-                mat_vec(&r, g)
+                mat_vec(r, g)
             } else {
-                mat_t_vec(&r, g)
+                mat_t_vec(r, g)
             };
             for k in 0..3 {
                 inp_bar[t[k]] += ib[k];
