@@ -38,6 +38,10 @@ mod kernels;
 /// Rows per chunk in the batch passes; fixed so results do not depend on the thread count.
 pub const BATCH_CHUNK: usize = 128;
 
+/// Chunks whose gradients [`Mlp::loss_grad`] computes (in parallel) before adding them, in
+/// chunk order, to the total.
+const GRAD_WINDOW: usize = 16;
+
 fn chunk_count(n: usize) -> usize {
     n.div_ceil(BATCH_CHUNK)
 }
@@ -387,16 +391,34 @@ impl Mlp {
         assert_eq!(inputs.nrows(), targets.nrows());
         assert_eq!(grad.len(), self.n_weights());
         let n = inputs.nrows();
-        let parts: Vec<(f64, Vec<f64>)> = (0..chunk_count(n))
-            .into_par_iter()
-            .map(|c| self.chunk_loss_grad(inputs.slice(chunk(c, n)), targets.slice(chunk(c, n))))
-            .collect();
+        let nw = self.n_weights();
+        let chunks = chunk_count(n);
+        // Chunk gradients of one window at a time, summed in chunk order: the same sums as
+        // over all chunks at once, without holding a gradient per chunk of a large batch.
+        let width = GRAD_WINDOW.min(chunks);
+        let mut parts = vec![0.0; width * nw];
+        let mut losses = vec![0.0; width];
         grad.fill(0.0);
         let mut loss = 0.0;
-        for (l, g) in parts {
-            loss += l;
-            for (a, b) in grad.iter_mut().zip(&g) {
-                *a += b;
+        for w0 in (0..chunks).step_by(GRAD_WINDOW) {
+            let count = GRAD_WINDOW.min(chunks - w0);
+            parts[..count * nw]
+                .par_chunks_mut(nw)
+                .zip(losses[..count].par_iter_mut())
+                .enumerate()
+                .for_each(|(i, (g, l))| {
+                    let c = w0 + i;
+                    *l = self.chunk_loss_grad(
+                        inputs.slice(chunk(c, n)),
+                        targets.slice(chunk(c, n)),
+                        g,
+                    );
+                });
+            for (l, g) in losses[..count].iter().zip(parts.chunks(nw)) {
+                loss += l;
+                for (a, b) in grad.iter_mut().zip(g) {
+                    *a += b;
+                }
             }
         }
         loss
@@ -421,7 +443,13 @@ impl Mlp {
         parts.iter().sum()
     }
 
-    fn chunk_loss_grad(&self, x: ArrayView2<'_, f64>, t: ArrayView2<'_, f64>) -> (f64, Vec<f64>) {
+    /// Loss of one chunk; its gradient overwrites `grad` (every value is written).
+    fn chunk_loss_grad(
+        &self,
+        x: ArrayView2<'_, f64>,
+        t: ArrayView2<'_, f64>,
+        grad: &mut [f64],
+    ) -> f64 {
         let (q, r) = (self.n_hidden, self.n_out);
         let (_, _, w2, _) = self.views();
         let h = self.hidden_batch(x);
@@ -432,9 +460,9 @@ impl Mlp {
         // Hidden cotangent: (E W₂) ⊙ h ⊙ (1 − h).
         let mut hb = e.dot(&w2);
         hb.zip_mut_with(&h, |a, &h| *a *= h * (1.0 - h));
-        let mut grad = vec![0.0; self.n_weights()];
         {
-            let (g1, gb1, g2, gb2) = self.split_mut(&mut grad);
+            // β = 0: the products overwrite g1 and g2 without reading them.
+            let (g1, gb1, g2, gb2) = self.split_mut(grad);
             let mut g1 = ArrayViewMut2::from_shape((q, self.n_in), g1).expect("shape");
             general_mat_mul(1.0, &hb.t(), &x, 0.0, &mut g1);
             let mut g2 = ArrayViewMut2::from_shape((r, q), g2).expect("shape");
@@ -446,7 +474,7 @@ impl Mlp {
                 *g = s;
             }
         }
-        (loss, grad)
+        loss
     }
 }
 
@@ -624,6 +652,77 @@ mod tests {
                     *o += w * hb;
                 }
             }
+        }
+    }
+
+    /// The batch gradient as first written: every chunk's gradient in its own vector, all
+    /// collected, then summed in chunk order.
+    fn oracle_loss_grad(
+        m: &Mlp,
+        inputs: ArrayView2<'_, f64>,
+        targets: ArrayView2<'_, f64>,
+        grad: &mut [f64],
+    ) -> f64 {
+        let chunk_grad = |x: ArrayView2<'_, f64>, t: ArrayView2<'_, f64>| {
+            let (q, r) = (m.n_hidden, m.n_out);
+            let (_, _, w2, _) = m.views();
+            let h = m.hidden_batch(x);
+            let mut e = Array2::zeros((x.nrows(), r));
+            m.output_batch(h.view(), e.view_mut());
+            e -= &t;
+            let loss = 0.5 * e.iter().map(|v| v * v).sum::<f64>();
+            let mut hb = e.dot(&w2);
+            hb.zip_mut_with(&h, |a, &h| *a *= h * (1.0 - h));
+            let mut grad = vec![0.0; m.n_weights()];
+            {
+                let (g1, gb1, g2, gb2) = m.split_mut(&mut grad);
+                let mut g1 = ArrayViewMut2::from_shape((q, m.n_in), g1).expect("shape");
+                general_mat_mul(1.0, &hb.t(), &x, 0.0, &mut g1);
+                let mut g2 = ArrayViewMut2::from_shape((r, q), g2).expect("shape");
+                general_mat_mul(1.0, &e.t(), &h, 0.0, &mut g2);
+                for (g, s) in gb1.iter_mut().zip(hb.sum_axis(Axis(0))) {
+                    *g = s;
+                }
+                for (g, s) in gb2.iter_mut().zip(e.sum_axis(Axis(0))) {
+                    *g = s;
+                }
+            }
+            (loss, grad)
+        };
+        let n = inputs.nrows();
+        let parts: Vec<(f64, Vec<f64>)> = (0..chunk_count(n))
+            .map(|c| chunk_grad(inputs.slice(chunk(c, n)), targets.slice(chunk(c, n))))
+            .collect();
+        grad.fill(0.0);
+        let mut loss = 0.0;
+        for (l, g) in parts {
+            loss += l;
+            for (a, b) in grad.iter_mut().zip(&g) {
+                *a += b;
+            }
+        }
+        loss
+    }
+
+    #[test]
+    fn windowed_batch_gradient_is_bit_identical_to_collecting_every_chunk() {
+        for (s, &(p, q, r, rows)) in [(4, 6, 3, 5000), (17, 50, 13, 2100), (8, 7, 6, 30)]
+            .iter()
+            .enumerate()
+        {
+            let mut rng = ChaCha8Rng::seed_from_u64(200 + s as u64);
+            let m = Mlp::new(p, q, r, WeightInit::FanIn, &mut rng);
+            let (x, t) = random_batch(rows, p, r, 300 + s as u64);
+            let mut g0 = vec![0.0; m.n_weights()];
+            let mut g1 = vec![f64::NAN; m.n_weights()];
+            let l0 = oracle_loss_grad(&m, x.view(), t.view(), &mut g0);
+            let l1 = m.loss_grad(x.view(), t.view(), &mut g1);
+            assert_eq!(l0.to_bits(), l1.to_bits(), "{p}-{q}-{r} loss");
+            assert!(same_bits(&g0, &g1), "{p}-{q}-{r} gradient");
+            // Again with the buffers of the first call's last chunks dirty.
+            let l2 = m.loss_grad(x.view(), t.view(), &mut g1);
+            assert_eq!(l0.to_bits(), l2.to_bits());
+            assert!(same_bits(&g0, &g1));
         }
     }
 

@@ -138,6 +138,7 @@ impl Transforms {
     /// The local frame read from state `s` (none without a frame), to share between the maps
     /// of one step ([`Transforms::encode_input_with`] and the other `_with` methods); with the
     /// derivatives the vector–Jacobian products need when `derivatives`.
+    #[inline]
     pub fn frame_at(&self, s: &[f64], derivatives: bool) -> Option<FrameAt> {
         self.frame.as_ref().map(|f| f.at(s, derivatives))
     }

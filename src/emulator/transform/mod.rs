@@ -155,6 +155,7 @@ pub enum FrameAt {
 impl LocalFrame {
     /// The frame read from the pose source `ps`, with what the vector–Jacobian products need
     /// when `derivatives` (the maps alone need less).
+    #[inline]
     pub fn at(&self, ps: &[f64], derivatives: bool) -> FrameAt {
         match self {
             Self::Planar(f) => FrameAt::Planar(f.pose(ps)),

@@ -100,6 +100,7 @@ fn rotation(q: [f64; 4]) -> M3 {
 }
 
 /// R(q) = M(q)/|q|² with M(q) = (w² − v·v) I + 2 v vᵀ + 2 w [v]×, and ∂R/∂q_k.
+#[inline]
 fn rotation_and_derivatives(q: [f64; 4]) -> (M3, [M3; 4]) {
     let n = q.iter().map(|a| a * a).sum::<f64>();
     let (w, v) = (q[0], [q[1], q[2], q[3]]);
@@ -235,6 +236,7 @@ impl SpatialFrame {
 
     /// The frame read from state `s`: its pose and rotation, with the rotation's derivatives
     /// when `derivatives` (the vector–Jacobian products need them; the maps do not).
+    #[inline]
     pub fn at(&self, s: &[f64], derivatives: bool) -> SpatialAt {
         let heading = match self.attitude {
             Attitude::Full => None,
