@@ -99,9 +99,19 @@ fn rotation(q: [f64; 4]) -> M3 {
     r
 }
 
+/// All four quaternion components.
+const ALL_Q: [usize; 4] = [0, 1, 2, 3];
+
 /// R(q) = M(q)/|q|² with M(q) = (w² − v·v) I + 2 v vᵀ + 2 w [v]×, and ∂R/∂q_k.
 #[inline]
 fn rotation_and_derivatives(q: [f64; 4]) -> (M3, [M3; 4]) {
+    rotation_and_derivatives_of(q, &ALL_Q)
+}
+
+/// [`rotation_and_derivatives`] with ∂R/∂q_k for the k in `live` only (the others are left
+/// zero); each computed value is the same.
+#[inline]
+fn rotation_and_derivatives_of(q: [f64; 4], live: &[usize]) -> (M3, [M3; 4]) {
     let n = q.iter().map(|a| a * a).sum::<f64>();
     let (w, v) = (q[0], [q[1], q[2], q[3]]);
     let cross =
@@ -121,7 +131,7 @@ fn rotation_and_derivatives(q: [f64; 4]) -> (M3, [M3; 4]) {
             dm[0][i][j] = if i == j { 2.0 * w } else { 0.0 } + 2.0 * cv[i][j];
         }
     }
-    for k in 0..3 {
+    for k in (0..3).filter(|k| live.contains(&(k + 1))) {
         let mut e = [0.0; 3];
         e[k] = 1.0;
         let ce = cross(e);
@@ -135,7 +145,7 @@ fn rotation_and_derivatives(q: [f64; 4]) -> (M3, [M3; 4]) {
     }
     let r = m.map(|row| row.map(|a| a / n));
     let mut dr = [[[0.0; 3]; 3]; 4];
-    for k in 0..4 {
+    for &k in live {
         for i in 0..3 {
             for j in 0..3 {
                 dr[k][i][j] = (dm[k][i][j] - 2.0 * q[k] * r[i][j]) / n;
@@ -234,6 +244,15 @@ impl SpatialFrame {
         }
     }
 
+    /// The components of the frame's quaternion that depend on the state, the only ones whose
+    /// cotangents [`SpatialFrame::pose_vjp`] reads: all four, or w and z of a heading.
+    fn live_q(&self) -> &'static [usize] {
+        match self.attitude {
+            Attitude::Full => &ALL_Q,
+            Attitude::Heading => &[0, 3],
+        }
+    }
+
     /// The frame read from state `s`: its pose and rotation, with the rotation's derivatives
     /// when `derivatives` (the vector–Jacobian products need them; the maps do not).
     #[inline]
@@ -244,7 +263,7 @@ impl SpatialFrame {
         };
         let pose = self.pose_from(s, heading);
         let (r, dr) = if derivatives {
-            let (r, dr) = rotation_and_derivatives(pose.q);
+            let (r, dr) = rotation_and_derivatives_of(pose.q, self.live_q());
             (r, Some(dr))
         } else {
             (rotation(pose.q), None)
@@ -414,7 +433,7 @@ impl SpatialFrame {
             let a = qi.map(|i| inp[i]);
             let da = qi.map(|i| d_inp[i]);
             let mut o = [0.0; 4];
-            let partials = quat_partials(map, pose.q, a);
+            let partials = quat_partials(map, pose.q, a, &ALL_Q);
             for (k, dq) in partials.iter().enumerate() {
                 for c in 0..4 {
                     o[c] += dq[c] * d_pose.q[k];
@@ -439,12 +458,15 @@ impl SpatialFrame {
         pose_bar: &mut Pose3,
     ) {
         let (r, dr) = rotation_and_derivatives(pose.q);
-        self.apply_vjp_rotated(map, pose, (&r, &dr), inp, out_bar, inp_bar, pose_bar);
+        let rot = (&r, &dr, &ALL_Q[..]);
+        self.apply_vjp_rotated(map, pose, rot, inp, out_bar, inp_bar, pose_bar);
     }
 
     /// [`SpatialFrame::apply_vjp`] at the frame read from a state ([`SpatialFrame::at`]; the
-    /// rotation's derivatives are computed here if `at` lacks them).
-    pub fn apply_vjp_at(
+    /// rotation's derivatives are computed here if `at` lacks them), for
+    /// [`SpatialFrame::pose_vjp_at`]: of `pose_bar`'s quaternion only the components that
+    /// depend on the state are computed (w and z of a heading frame).
+    pub(super) fn apply_vjp_at(
         &self,
         map: FrameMap,
         at: &SpatialAt,
@@ -457,20 +479,22 @@ impl SpatialFrame {
         let dr = match &at.dr {
             Some(dr) => dr,
             None => {
-                computed = rotation_and_derivatives(at.pose.q).1;
+                computed = rotation_and_derivatives_of(at.pose.q, self.live_q()).1;
                 &computed
             }
         };
-        self.apply_vjp_rotated(map, &at.pose, (&at.r, dr), inp, out_bar, inp_bar, pose_bar);
+        let rot = (&at.r, dr, self.live_q());
+        self.apply_vjp_rotated(map, &at.pose, rot, inp, out_bar, inp_bar, pose_bar);
     }
 
-    /// [`SpatialFrame::apply_vjp`] with R(q₀) and ∂R/∂q₀ₖ given.
+    /// [`SpatialFrame::apply_vjp`] with R(q₀) and ∂R/∂q₀ₖ given, computing the quaternion
+    /// cotangent for the components k in `live` only.
     #[allow(clippy::too_many_arguments)]
     fn apply_vjp_rotated(
         &self,
         map: FrameMap,
         pose: &Pose3,
-        (r, dr): (&M3, &[M3; 4]),
+        (r, dr, live): (&M3, &[M3; 4], &[usize]),
         inp: &[f64],
         out_bar: &[f64],
         inp_bar: &mut [f64],
@@ -517,11 +541,11 @@ impl SpatialFrame {
             for k in 0..3 {
                 inp_bar[t[k]] += ib[k];
             }
-            for (k, drk) in dr.iter().enumerate() {
+            for &k in live {
                 let term = if local {
-                    mat_t_vec(drk, v)
+                    mat_t_vec(&dr[k], v)
                 } else {
-                    mat_vec(drk, v)
+                    mat_vec(&dr[k], v)
                 };
                 pose_bar.q[k] += dot3(g, term);
             }
@@ -546,8 +570,9 @@ impl SpatialFrame {
             for k in 0..4 {
                 inp_bar[qi[k]] += ib[k];
             }
-            let partials = quat_partials(map, pose.q, a);
-            for (k, dq) in partials.iter().enumerate() {
+            let partials = quat_partials(map, pose.q, a, live);
+            for &k in live {
+                let dq = partials[k];
                 pose_bar.q[k] += (0..4).map(|c| dq[c] * g[c]).sum::<f64>();
             }
         }
@@ -564,9 +589,9 @@ fn quat_linear(map: FrameMap, q0: [f64; 4], a: [f64; 4]) -> [f64; 4] {
     }
 }
 
-/// ∂/∂q₀ₖ of [`quat_linear`] for k = 0 … 3 (the norm and the product shared by the four
-/// computed once).
-fn quat_partials(map: FrameMap, q0: [f64; 4], a: [f64; 4]) -> [[f64; 4]; 4] {
+/// ∂/∂q₀ₖ of [`quat_linear`] for the k in `live` (the others left zero; the norm and the
+/// product shared by the four computed once).
+fn quat_partials(map: FrameMap, q0: [f64; 4], a: [f64; 4], live: &[usize]) -> [[f64; 4]; 4] {
     let unit = |k: usize| {
         let mut e = [0.0; 4];
         e[k] = 1.0;
@@ -577,15 +602,16 @@ fn quat_partials(map: FrameMap, q0: [f64; 4], a: [f64; 4]) -> [[f64; 4]; 4] {
         let n = q0.iter().map(|x| x * x).sum::<f64>();
         let p = quat_mul(quat_conj(q0), a);
         let f = [p[0] / n, p[1] / n, p[2] / n, p[3] / n];
-        for (k, o) in out.iter_mut().enumerate() {
+        for &k in live {
+            let o = &mut out[k];
             let d = quat_mul(quat_conj(unit(k)), a);
             for c in 0..4 {
                 o[c] = d[c] / n - 2.0 * q0[k] * f[c] / n;
             }
         }
     } else {
-        for (k, o) in out.iter_mut().enumerate() {
-            *o = quat_mul(unit(k), a);
+        for &k in live {
+            out[k] = quat_mul(unit(k), a);
         }
     }
     out
