@@ -402,18 +402,20 @@ impl Mlp {
         let mut loss = 0.0;
         for w0 in (0..chunks).step_by(GRAD_WINDOW) {
             let count = GRAD_WINDOW.min(chunks - w0);
-            parts[..count * nw]
-                .par_chunks_mut(nw)
-                .zip(losses[..count].par_iter_mut())
-                .enumerate()
-                .for_each(|(i, (g, l))| {
-                    let c = w0 + i;
-                    *l = self.chunk_loss_grad(
-                        inputs.slice(chunk(c, n)),
-                        targets.slice(chunk(c, n)),
-                        g,
-                    );
-                });
+            let run = |(i, (g, l)): (usize, (&mut [f64], &mut f64))| {
+                let c = w0 + i;
+                *l = self.chunk_loss_grad(inputs.slice(chunk(c, n)), targets.slice(chunk(c, n)), g);
+            };
+            if count == 1 {
+                // One chunk (e.g. a mini-batch): no hand-off to the thread pool.
+                run((0, (&mut parts[..nw], &mut losses[0])));
+            } else {
+                parts[..count * nw]
+                    .par_chunks_mut(nw)
+                    .zip(losses[..count].par_iter_mut())
+                    .enumerate()
+                    .for_each(run);
+            }
             for (l, g) in losses[..count].iter().zip(parts.chunks(nw)) {
                 loss += l;
                 for (a, b) in grad.iter_mut().zip(g) {
