@@ -16,7 +16,10 @@
 //! each product being one vector–Jacobian product of the step ([`DifferentiableStep::vjp`],
 //! defined next to [`crate::physics::Dynamics`]: for an emulator through its transforms and
 //! network, for a physical model through the exact Jacobians of its RK4 step,
-//! [`super::Rk4Map`]). Knot gradients sum ū_i over the steps
+//! [`super::Rk4Map`]). The rollout records what each step's product needs on one contiguous
+//! tape ([`DifferentiableStep::step_taped`]; for an emulator its network's input, hidden
+//! activations and output), so the backward sweep does not repeat the forward passes and gives
+//! bit for bit the same products. Knot gradients sum ū_i over the steps
 //! a knot holds. The update ([`Descent`]) is plain descent (eq. 13) or descent with momentum
 //! (eq. 14–15):
 //!

@@ -647,6 +647,86 @@ mod tests {
         out
     }
 
+    fn same_bits(a: &[f64], b: &[f64]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+    }
+
+    /// The taped step and VJP, and the transforms at a frame read once per step, give bit for
+    /// bit what the untaped step and VJP and the transforms reading the frame per map give.
+    #[test]
+    fn taped_and_frame_sharing_paths_are_bit_identical() {
+        use crate::physics::DifferentiableStep;
+        let mut emulators = all_emulators();
+        let mut heading = transform::SpatialFrame::rigid_body(0, 3, 7, 10);
+        heading.attitude = transform::Attitude::Heading;
+        let (e, d) = spatial_emulator(true);
+        let t = Transforms {
+            frame: Some(heading.into()),
+            ..e.transforms().clone()
+        };
+        emulators.push((
+            "spatial heading",
+            Emulator::new(t, e.mlp().clone(), 0.1).unwrap(),
+            d,
+        ));
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        for (name, e, data) in &emulators {
+            let (n, m) = (e.transforms.state_dim, e.transforms.control_dim);
+            let t = &e.transforms;
+            let mut sc = e.scratch();
+            let mut tape = vec![0.0; e.tape_len()];
+            for r in 0..10 {
+                let s = data.states.row(r).to_vec();
+                let u = data.controls.row(r).to_vec();
+                let sb1: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+                let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+                e.predict(&s, &u, &mut sc, &mut a);
+                e.step_taped(&s, &u, &mut sc, &mut b, &mut tape);
+                assert!(same_bits(&a, &b), "{name}: step");
+                let (mut sb_a, mut ub_a) = (vec![0.0; n], vec![0.0; m]);
+                let (mut sb_b, mut ub_b) = (vec![1.0; n], vec![1.0; m]);
+                e.vjp(&s, &u, &sb1, &mut sc, &mut sb_a, &mut ub_a);
+                e.vjp_taped(&s, &u, &tape, &sb1, &mut sc, &mut sb_b, &mut ub_b);
+                assert!(
+                    same_bits(&sb_a, &sb_b) && same_bits(&ub_a, &ub_b),
+                    "{name}: vjp"
+                );
+                // Each transform with the frame read per map (at = None) and read once.
+                for at in [t.frame_at(&s, false), t.frame_at(&s, true)] {
+                    let (mut z0, mut z1) = (vec![0.0; n + m], vec![0.0; n + m]);
+                    t.encode_input_with(None, &s, &u, &mut z0);
+                    t.encode_input_with(at.as_ref(), &s, &u, &mut z1);
+                    assert!(same_bits(&z0, &z1), "{name}: encode");
+                    let y: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+                    let mut tmp = vec![0.0; n];
+                    let (mut s0, mut s1) = (vec![0.0; n], vec![0.0; n]);
+                    t.decode_output_with(None, &s, &y, &mut tmp, &mut s0);
+                    t.decode_output_with(at.as_ref(), &s, &y, &mut tmp, &mut s1);
+                    assert!(same_bits(&s0, &s1), "{name}: decode");
+                    let mut t2 = vec![0.0; n];
+                    let (mut yb0, mut yb1) = (vec![0.0; n], vec![0.0; n]);
+                    let (mut sb0, mut sb1_) = (vec![0.5; n], vec![0.5; n]);
+                    let bufs = (&mut tmp[..], &mut t2[..]);
+                    t.decode_output_vjp_with(None, &s, &y, &sb1, bufs, &mut yb0, &mut sb0);
+                    let bufs = (&mut tmp[..], &mut t2[..]);
+                    t.decode_output_vjp_with(at.as_ref(), &s, &y, &sb1, bufs, &mut yb1, &mut sb1_);
+                    assert!(
+                        same_bits(&yb0, &yb1) && same_bits(&sb0, &sb1_),
+                        "{name}: decode vjp"
+                    );
+                    let zb: Vec<f64> = (0..n + m).map(|_| rng.random_range(-1.0..1.0)).collect();
+                    let (mut ub0, mut ub1) = (vec![0.0; m], vec![0.0; m]);
+                    t.encode_input_vjp_with(None, &s, &zb, &mut tmp, &mut sb0, &mut ub0);
+                    t.encode_input_vjp_with(at.as_ref(), &s, &zb, &mut tmp, &mut sb1_, &mut ub1);
+                    assert!(
+                        same_bits(&ub0, &ub1) && same_bits(&sb0, &sb1_),
+                        "{name}: encode vjp"
+                    );
+                }
+            }
+        }
+    }
+
     /// [`fake_body`] as a simulator (one call = one 0.1 s step, whatever `dt`).
     struct FakeBody;
 
