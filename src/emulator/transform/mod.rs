@@ -144,6 +144,8 @@ impl From<SpatialFrame> for LocalFrame {
 /// A [`LocalFrame`] read from one state ([`LocalFrame::at`]): the pose and, for a spatial
 /// frame, the rotation its maps use, computed once for every map at that state (an emulator
 /// step maps its input to the frame and its output back, both at the current state).
+// The spatial variant is much larger, but boxing it would allocate in the hot loop.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum FrameAt {
     /// A planar pose.
