@@ -16,7 +16,10 @@
 //! each product being one vector–Jacobian product of the step ([`DifferentiableStep::vjp`],
 //! defined next to [`crate::physics::Dynamics`]: for an emulator through its transforms and
 //! network, for a physical model through the exact Jacobians of its RK4 step,
-//! [`super::Rk4Map`]). Knot gradients sum ū_i over the steps
+//! [`super::Rk4Map`]). The rollout records what each step's product needs on one contiguous
+//! tape ([`DifferentiableStep::step_taped`]; for an emulator its network's input, hidden
+//! activations and output), so the backward sweep does not repeat the forward passes and gives
+//! bit for bit the same products. Knot gradients sum ū_i over the steps
 //! a knot holds. The update ([`Descent`]) is plain descent (eq. 13) or descent with momentum
 //! (eq. 14–15):
 //!
@@ -160,6 +163,10 @@ pub struct Bptt<'a, D: DifferentiableStep> {
     knot_u: Vec<f64>,
     states: Vec<f64>,
     controls: Vec<f64>,
+    /// Per-step records of the last rollout for the backward sweep
+    /// ([`DifferentiableStep::step_taped`]), `tape_len` values per step.
+    tape: Vec<f64>,
+    tape_len: usize,
     s_bar: Vec<f64>,
     u_bar: Vec<f64>,
     sb: Vec<f64>,
@@ -207,6 +214,7 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
             }
         }
         let big_m = knots.steps;
+        let tape_len = dynamics.tape_len();
         Ok(Self {
             dynamics,
             objective,
@@ -217,6 +225,8 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
             knot_u: vec![0.0; knots.len()],
             states: vec![0.0; (big_m + 1) * n],
             controls: vec![0.0; big_m * m],
+            tape: vec![0.0; big_m * tape_len],
+            tape_len,
             s_bar: vec![0.0; (big_m + 1) * n],
             u_bar: vec![0.0; big_m * m],
             sb: vec![0.0; n],
@@ -302,13 +312,15 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
         self.knot_u = ku;
         self.forward_passes += 1;
         self.states[..n].copy_from_slice(&self.x0);
+        let tl = self.tape_len;
         for i in 0..self.knots.steps {
             let (head, tail) = self.states.split_at_mut((i + 1) * n);
-            self.dynamics.step(
+            self.dynamics.step_taped(
                 &head[i * n..],
                 &self.controls[i * m..(i + 1) * m],
                 &mut self.scratch,
                 &mut tail[..n],
+                &mut self.tape[i * tl..(i + 1) * tl],
             );
         }
         self.objective.value(&self.states, &self.controls, n, m)
@@ -335,11 +347,13 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
     /// knots) to `grad`.
     fn backpropagate(&mut self, top: usize, grad: &mut [f64]) {
         self.backward_passes += 1;
-        let (n, m) = (self.dynamics.state_dim(), self.knots.m);
+        let (n, m, tl) = (self.dynamics.state_dim(), self.knots.m, self.tape_len);
         for i in (0..top).rev() {
-            self.dynamics.vjp(
+            // The tape is the last rollout's, at these same states and controls.
+            self.dynamics.vjp_taped(
                 &self.states[i * n..(i + 1) * n],
                 &self.controls[i * m..(i + 1) * m],
+                &self.tape[i * tl..(i + 1) * tl],
                 &self.s_bar[(i + 1) * n..(i + 2) * n],
                 &mut self.scratch,
                 &mut self.sb,

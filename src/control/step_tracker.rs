@@ -88,6 +88,45 @@ impl<D: DifferentiableStep> DifferentiableStep for AffineControls<'_, D> {
             *b *= c;
         }
     }
+    fn tape_len(&self) -> usize {
+        self.inner.tape_len()
+    }
+    fn step_taped(
+        &self,
+        s: &[f64],
+        v: &[f64],
+        scratch: &mut Self::Scratch,
+        s_next: &mut [f64],
+        tape: &mut [f64],
+    ) {
+        self.to_controls(v, &mut scratch.u);
+        self.inner
+            .step_taped(s, &scratch.u, &mut scratch.inner, s_next, tape);
+    }
+    fn vjp_taped(
+        &self,
+        s: &[f64],
+        v: &[f64],
+        tape: &[f64],
+        s_next_bar: &[f64],
+        scratch: &mut Self::Scratch,
+        s_bar: &mut [f64],
+        v_bar: &mut [f64],
+    ) {
+        self.to_controls(v, &mut scratch.u);
+        self.inner.vjp_taped(
+            s,
+            &scratch.u,
+            tape,
+            s_next_bar,
+            &mut scratch.inner,
+            s_bar,
+            v_bar,
+        );
+        for (b, c) in v_bar.iter_mut().zip(&self.scale) {
+            *b *= c;
+        }
+    }
 }
 
 /// The LQR tracker of a tape of a discrete differentiable step (an emulator), with its

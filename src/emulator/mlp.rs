@@ -20,8 +20,10 @@
 //!
 //! All weights live in one flat vector so that optimizers see a single parameter vector. The
 //! layout is `[W₁ (q×p, row-major), b₁ (q), W₂ (r×q, row-major), b₂ (r)]`; gradients use the same
-//! layout. The single-example forward pass (Appendix C) writes into caller-provided scratch and
-//! never allocates; the batch pass works on fixed chunks of [`BATCH_CHUNK`] rows with ordered
+//! layout. The single-example passes (Appendix C) write into caller-provided scratch and never
+//! allocate; they run the kernels of [`kernels`] on a packed copy of the weights (transposed and
+//! padded so that the products vectorize across outputs, each sum still taken in input order),
+//! built on first use and dropped whenever the weights are handed out mutably. The batch pass works on fixed chunks of [`BATCH_CHUNK`] rows with ordered
 //! reduction, so its result is bit-identical for any number of rayon threads.
 
 use ndarray::linalg::general_mat_mul;
@@ -29,9 +31,16 @@ use ndarray::{s, Array2, ArrayView1, ArrayView2, ArrayViewMut2, Axis};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
+use std::sync::OnceLock;
+
+mod kernels;
 
 /// Rows per chunk in the batch passes; fixed so results do not depend on the thread count.
 pub const BATCH_CHUNK: usize = 128;
+
+/// Chunks whose gradients [`Mlp::loss_grad`] computes (in parallel) before adding them, in
+/// chunk order, to the total.
+const GRAD_WINDOW: usize = 16;
 
 fn chunk_count(n: usize) -> usize {
     n.div_ceil(BATCH_CHUNK)
@@ -66,12 +75,36 @@ pub enum WeightInit {
 }
 
 /// A fully connected p → q (sigmoid) → r (linear) network with flattened weights.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Clone)]
 pub struct Mlp {
     n_in: usize,
     n_hidden: usize,
     n_out: usize,
     weights: Vec<f64>,
+    /// The weights in the single-example kernels' layouts, built on first use; reset by
+    /// [`Mlp::weights_mut`].
+    packed: OnceLock<kernels::Packed>,
+}
+
+impl std::fmt::Debug for Mlp {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Mlp")
+            .field("n_in", &self.n_in)
+            .field("n_hidden", &self.n_hidden)
+            .field("n_out", &self.n_out)
+            .field("weights", &self.weights)
+            .finish()
+    }
+}
+
+/// Networks are equal when their shapes and weights are (the packed copy is derived).
+impl PartialEq for Mlp {
+    fn eq(&self, other: &Self) -> bool {
+        self.n_in == other.n_in
+            && self.n_hidden == other.n_hidden
+            && self.n_out == other.n_out
+            && self.weights == other.weights
+    }
 }
 
 /// Scratch for one example: hidden activations and the hidden cotangent.
@@ -115,6 +148,7 @@ impl Mlp {
             n_hidden,
             n_out,
             weights,
+            packed: OnceLock::new(),
         }
     }
 
@@ -130,6 +164,7 @@ impl Mlp {
             n_hidden,
             n_out,
             weights,
+            packed: OnceLock::new(),
         }
     }
 
@@ -150,9 +185,19 @@ impl Mlp {
         &self.weights
     }
 
-    /// The flattened weights, mutably (the length is fixed by the network shape).
+    /// The flattened weights, mutably (the length is fixed by the network shape). Drops the
+    /// packed copy of the single-example kernels (rebuilt on the next single-example pass).
     pub fn weights_mut(&mut self) -> &mut [f64] {
+        self.packed = OnceLock::new();
         &mut self.weights
+    }
+
+    /// The packed weights of the single-example kernels (built on first use).
+    fn packed(&self) -> &kernels::Packed {
+        self.packed.get_or_init(|| {
+            let (w1, _, w2, _) = self.split(&self.weights);
+            kernels::Packed::new(self.n_in, self.n_hidden, self.n_out, w1, w2)
+        })
     }
 
     /// Number of weights.
@@ -193,23 +238,17 @@ impl Mlp {
     pub fn forward(&self, x: &[f64], scratch: &mut MlpScratch, y: &mut [f64]) {
         debug_assert_eq!(x.len(), self.n_in);
         debug_assert_eq!(y.len(), self.n_out);
-        let (w1, b1, w2, b2) = self.split(&self.weights);
-        let p = self.n_in;
-        for (j, h) in scratch.hidden.iter_mut().enumerate() {
-            let row = &w1[j * p..(j + 1) * p];
-            let z = b1[j] + row.iter().zip(x).map(|(a, b)| a * b).sum::<f64>();
-            *h = sigmoid(z);
-        }
-        let q = self.n_hidden;
-        for (i, yi) in y.iter_mut().enumerate() {
-            let row = &w2[i * q..(i + 1) * q];
-            *yi = b2[i]
-                + row
-                    .iter()
-                    .zip(&scratch.hidden)
-                    .map(|(a, b)| a * b)
-                    .sum::<f64>();
-        }
+        let (_, b1, _, b2) = self.split(&self.weights);
+        kernels::forward(self.packed(), b1, b2, x, &mut scratch.hidden, y);
+    }
+
+    /// [`Mlp::forward`] writing the hidden activations to `hidden` (length q), e.g. a tape
+    /// for a later [`Mlp::backward_from`]. Does not allocate.
+    pub fn forward_into(&self, x: &[f64], hidden: &mut [f64], y: &mut [f64]) {
+        debug_assert_eq!(x.len(), self.n_in);
+        debug_assert_eq!(y.len(), self.n_out);
+        let (_, b1, _, b2) = self.split(&self.weights);
+        kernels::forward(self.packed(), b1, b2, x, hidden, y);
     }
 
     /// Backward pass for one example after [`Mlp::forward`] on the same `x` and `scratch`: adds
@@ -223,40 +262,31 @@ impl Mlp {
         grad_w: Option<&mut [f64]>,
         x_bar: Option<&mut [f64]>,
     ) {
-        let (p, q) = (self.n_in, self.n_hidden);
-        let (w1, _, w2, _) = self.split(&self.weights);
-        for j in 0..q {
-            let mut s = 0.0;
-            for (i, yb) in y_bar.iter().enumerate() {
-                s += w2[i * q + j] * yb;
-            }
-            let h = scratch.hidden[j];
-            scratch.hidden_bar[j] = s * h * (1.0 - h);
-        }
+        let MlpScratch { hidden, hidden_bar } = scratch;
+        self.backward_from(x, hidden, hidden_bar, y_bar, grad_w, x_bar);
+    }
+
+    /// [`Mlp::backward`] with the hidden activations `hidden` of the forward pass at `x` given
+    /// directly (e.g. from a tape); `hidden_bar` (length q) receives h̄. Does not allocate.
+    pub fn backward_from(
+        &self,
+        x: &[f64],
+        hidden: &[f64],
+        hidden_bar: &mut [f64],
+        y_bar: &[f64],
+        grad_w: Option<&mut [f64]>,
+        x_bar: Option<&mut [f64]>,
+    ) {
+        debug_assert_eq!(x.len(), self.n_in);
+        debug_assert_eq!(y_bar.len(), self.n_out);
+        let pk = self.packed();
+        kernels::hidden_bar(pk, hidden, y_bar, hidden_bar);
         if let Some(g) = grad_w {
             let (g1, gb1, g2, gb2) = self.split_mut(g);
-            for (i, yb) in y_bar.iter().enumerate() {
-                gb2[i] += yb;
-                for (g, h) in g2[i * q..(i + 1) * q].iter_mut().zip(&scratch.hidden) {
-                    *g += yb * h;
-                }
-            }
-            for j in 0..q {
-                let hb = scratch.hidden_bar[j];
-                gb1[j] += hb;
-                for (g, xi) in g1[j * p..(j + 1) * p].iter_mut().zip(x) {
-                    *g += hb * xi;
-                }
-            }
+            kernels::weight_grad(x, hidden, hidden_bar, y_bar, g1, gb1, g2, gb2);
         }
         if let Some(xb) = x_bar {
-            xb.fill(0.0);
-            for j in 0..q {
-                let hb = scratch.hidden_bar[j];
-                for (o, w) in xb.iter_mut().zip(&w1[j * p..(j + 1) * p]) {
-                    *o += w * hb;
-                }
-            }
+            kernels::input_bar(pk, hidden_bar, xb);
         }
     }
 
@@ -267,12 +297,8 @@ impl Mlp {
     }
 
     fn hidden_only(&self, x: &[f64], scratch: &mut MlpScratch) {
-        let (w1, b1, _, _) = self.split(&self.weights);
-        let p = self.n_in;
-        for (j, h) in scratch.hidden.iter_mut().enumerate() {
-            let row = &w1[j * p..(j + 1) * p];
-            *h = sigmoid(b1[j] + row.iter().zip(x).map(|(a, b)| a * b).sum::<f64>());
-        }
+        let (_, b1, _, _) = self.split(&self.weights);
+        kernels::hidden(self.packed(), b1, x, &mut scratch.hidden);
     }
 
     /// Full input Jacobian ∂N/∂x at `x`, row-major r × p into `jac`.
@@ -365,16 +391,36 @@ impl Mlp {
         assert_eq!(inputs.nrows(), targets.nrows());
         assert_eq!(grad.len(), self.n_weights());
         let n = inputs.nrows();
-        let parts: Vec<(f64, Vec<f64>)> = (0..chunk_count(n))
-            .into_par_iter()
-            .map(|c| self.chunk_loss_grad(inputs.slice(chunk(c, n)), targets.slice(chunk(c, n))))
-            .collect();
+        let nw = self.n_weights();
+        let chunks = chunk_count(n);
+        // Chunk gradients of one window at a time, summed in chunk order: the same sums as
+        // over all chunks at once, without holding a gradient per chunk of a large batch.
+        let width = GRAD_WINDOW.min(chunks);
+        let mut parts = vec![0.0; width * nw];
+        let mut losses = vec![0.0; width];
         grad.fill(0.0);
         let mut loss = 0.0;
-        for (l, g) in parts {
-            loss += l;
-            for (a, b) in grad.iter_mut().zip(&g) {
-                *a += b;
+        for w0 in (0..chunks).step_by(GRAD_WINDOW) {
+            let count = GRAD_WINDOW.min(chunks - w0);
+            let run = |(i, (g, l)): (usize, (&mut [f64], &mut f64))| {
+                let c = w0 + i;
+                *l = self.chunk_loss_grad(inputs.slice(chunk(c, n)), targets.slice(chunk(c, n)), g);
+            };
+            if count == 1 {
+                // One chunk (e.g. a mini-batch): no hand-off to the thread pool.
+                run((0, (&mut parts[..nw], &mut losses[0])));
+            } else {
+                parts[..count * nw]
+                    .par_chunks_mut(nw)
+                    .zip(losses[..count].par_iter_mut())
+                    .enumerate()
+                    .for_each(run);
+            }
+            for (l, g) in losses[..count].iter().zip(parts.chunks(nw)) {
+                loss += l;
+                for (a, b) in grad.iter_mut().zip(g) {
+                    *a += b;
+                }
             }
         }
         loss
@@ -399,7 +445,13 @@ impl Mlp {
         parts.iter().sum()
     }
 
-    fn chunk_loss_grad(&self, x: ArrayView2<'_, f64>, t: ArrayView2<'_, f64>) -> (f64, Vec<f64>) {
+    /// Loss of one chunk; its gradient overwrites `grad` (every value is written).
+    fn chunk_loss_grad(
+        &self,
+        x: ArrayView2<'_, f64>,
+        t: ArrayView2<'_, f64>,
+        grad: &mut [f64],
+    ) -> f64 {
         let (q, r) = (self.n_hidden, self.n_out);
         let (_, _, w2, _) = self.views();
         let h = self.hidden_batch(x);
@@ -410,9 +462,9 @@ impl Mlp {
         // Hidden cotangent: (E W₂) ⊙ h ⊙ (1 − h).
         let mut hb = e.dot(&w2);
         hb.zip_mut_with(&h, |a, &h| *a *= h * (1.0 - h));
-        let mut grad = vec![0.0; self.n_weights()];
         {
-            let (g1, gb1, g2, gb2) = self.split_mut(&mut grad);
+            // β = 0: the products overwrite g1 and g2 without reading them.
+            let (g1, gb1, g2, gb2) = self.split_mut(grad);
             let mut g1 = ArrayViewMut2::from_shape((q, self.n_in), g1).expect("shape");
             general_mat_mul(1.0, &hb.t(), &x, 0.0, &mut g1);
             let mut g2 = ArrayViewMut2::from_shape((r, q), g2).expect("shape");
@@ -424,7 +476,7 @@ impl Mlp {
                 *g = s;
             }
         }
-        (loss, grad)
+        loss
     }
 }
 
@@ -540,6 +592,193 @@ mod tests {
                 vjp_fd += yb[i] * d;
             }
             assert!((vjp_fd - xb[k]).abs() < 1e-8);
+        }
+    }
+
+    /// The single-example passes as first written (row-major weights, one sum per output in
+    /// input order): the oracle the packed kernels must match bit for bit.
+    mod oracle {
+        use super::super::sigmoid;
+
+        pub fn forward(m: &super::Mlp, x: &[f64], hidden: &mut [f64], y: &mut [f64]) {
+            let (p, q) = (m.n_in(), m.n_hidden());
+            let (w1, b1, w2, b2) = m.split(m.weights());
+            for (j, h) in hidden.iter_mut().enumerate() {
+                let row = &w1[j * p..(j + 1) * p];
+                let z = b1[j] + row.iter().zip(x).map(|(a, b)| a * b).sum::<f64>();
+                *h = sigmoid(z);
+            }
+            for (i, yi) in y.iter_mut().enumerate() {
+                let row = &w2[i * q..(i + 1) * q];
+                *yi = b2[i] + row.iter().zip(&*hidden).map(|(a, b)| a * b).sum::<f64>();
+            }
+        }
+
+        pub fn backward(
+            m: &super::Mlp,
+            x: &[f64],
+            hidden: &[f64],
+            y_bar: &[f64],
+            grad_w: &mut [f64],
+            xb: &mut [f64],
+        ) {
+            let (p, q) = (m.n_in(), m.n_hidden());
+            let (w1, _, w2, _) = m.split(m.weights());
+            let mut hidden_bar = vec![0.0; q];
+            for j in 0..q {
+                let mut s = 0.0;
+                for (i, yb) in y_bar.iter().enumerate() {
+                    s += w2[i * q + j] * yb;
+                }
+                let h = hidden[j];
+                hidden_bar[j] = s * h * (1.0 - h);
+            }
+            let (g1, gb1, g2, gb2) = m.split_mut(grad_w);
+            for (i, yb) in y_bar.iter().enumerate() {
+                gb2[i] += yb;
+                for (g, h) in g2[i * q..(i + 1) * q].iter_mut().zip(hidden) {
+                    *g += yb * h;
+                }
+            }
+            for j in 0..q {
+                let hb = hidden_bar[j];
+                gb1[j] += hb;
+                for (g, xi) in g1[j * p..(j + 1) * p].iter_mut().zip(x) {
+                    *g += hb * xi;
+                }
+            }
+            xb.fill(0.0);
+            for j in 0..q {
+                let hb = hidden_bar[j];
+                for (o, w) in xb.iter_mut().zip(&w1[j * p..(j + 1) * p]) {
+                    *o += w * hb;
+                }
+            }
+        }
+    }
+
+    /// The batch gradient as first written: every chunk's gradient in its own vector, all
+    /// collected, then summed in chunk order.
+    fn oracle_loss_grad(
+        m: &Mlp,
+        inputs: ArrayView2<'_, f64>,
+        targets: ArrayView2<'_, f64>,
+        grad: &mut [f64],
+    ) -> f64 {
+        let chunk_grad = |x: ArrayView2<'_, f64>, t: ArrayView2<'_, f64>| {
+            let (q, r) = (m.n_hidden, m.n_out);
+            let (_, _, w2, _) = m.views();
+            let h = m.hidden_batch(x);
+            let mut e = Array2::zeros((x.nrows(), r));
+            m.output_batch(h.view(), e.view_mut());
+            e -= &t;
+            let loss = 0.5 * e.iter().map(|v| v * v).sum::<f64>();
+            let mut hb = e.dot(&w2);
+            hb.zip_mut_with(&h, |a, &h| *a *= h * (1.0 - h));
+            let mut grad = vec![0.0; m.n_weights()];
+            {
+                let (g1, gb1, g2, gb2) = m.split_mut(&mut grad);
+                let mut g1 = ArrayViewMut2::from_shape((q, m.n_in), g1).expect("shape");
+                general_mat_mul(1.0, &hb.t(), &x, 0.0, &mut g1);
+                let mut g2 = ArrayViewMut2::from_shape((r, q), g2).expect("shape");
+                general_mat_mul(1.0, &e.t(), &h, 0.0, &mut g2);
+                for (g, s) in gb1.iter_mut().zip(hb.sum_axis(Axis(0))) {
+                    *g = s;
+                }
+                for (g, s) in gb2.iter_mut().zip(e.sum_axis(Axis(0))) {
+                    *g = s;
+                }
+            }
+            (loss, grad)
+        };
+        let n = inputs.nrows();
+        let parts: Vec<(f64, Vec<f64>)> = (0..chunk_count(n))
+            .map(|c| chunk_grad(inputs.slice(chunk(c, n)), targets.slice(chunk(c, n))))
+            .collect();
+        grad.fill(0.0);
+        let mut loss = 0.0;
+        for (l, g) in parts {
+            loss += l;
+            for (a, b) in grad.iter_mut().zip(&g) {
+                *a += b;
+            }
+        }
+        loss
+    }
+
+    #[test]
+    fn windowed_batch_gradient_is_bit_identical_to_collecting_every_chunk() {
+        for (s, &(p, q, r, rows)) in [(4, 6, 3, 5000), (17, 50, 13, 2100), (8, 7, 6, 30)]
+            .iter()
+            .enumerate()
+        {
+            let mut rng = ChaCha8Rng::seed_from_u64(200 + s as u64);
+            let m = Mlp::new(p, q, r, WeightInit::FanIn, &mut rng);
+            let (x, t) = random_batch(rows, p, r, 300 + s as u64);
+            let mut g0 = vec![0.0; m.n_weights()];
+            let mut g1 = vec![f64::NAN; m.n_weights()];
+            let l0 = oracle_loss_grad(&m, x.view(), t.view(), &mut g0);
+            let l1 = m.loss_grad(x.view(), t.view(), &mut g1);
+            assert_eq!(l0.to_bits(), l1.to_bits(), "{p}-{q}-{r} loss");
+            assert!(same_bits(&g0, &g1), "{p}-{q}-{r} gradient");
+            // Again with the buffers of the first call's last chunks dirty.
+            let l2 = m.loss_grad(x.view(), t.view(), &mut g1);
+            assert_eq!(l0.to_bits(), l2.to_bits());
+            assert!(same_bits(&g0, &g1));
+        }
+    }
+
+    fn same_bits(a: &[f64], b: &[f64]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+    }
+
+    #[test]
+    fn single_example_passes_are_bit_identical_to_the_row_major_oracle() {
+        let shapes = [
+            (1, 1, 1),
+            (4, 6, 3),
+            (17, 50, 13),
+            (8, 7, 6),
+            (15, 7, 13),
+            (84, 50, 78),
+            (70, 40, 24),
+            (9, 33, 17),
+        ];
+        for (s, &(p, q, r)) in shapes.iter().enumerate() {
+            let mut rng = ChaCha8Rng::seed_from_u64(100 + s as u64);
+            let init = WeightInit::Uniform {
+                low: -2.0,
+                high: 2.0,
+            };
+            let mut m = Mlp::new(p, q, r, init, &mut rng);
+            for round in 0..3 {
+                if round == 2 {
+                    // New weights after the packed copy was built: it must be rebuilt.
+                    m.weights_mut().iter_mut().for_each(|w| *w *= -0.7);
+                }
+                let mut sc = m.scratch();
+                for _ in 0..20 {
+                    let x: Vec<f64> = (0..p).map(|_| rng.random_range(-3.0..3.0)).collect();
+                    let yb: Vec<f64> = (0..r).map(|_| rng.random_range(-2.0..2.0)).collect();
+                    let (mut h0, mut y0, mut y1) = (vec![0.0; q], vec![0.0; r], vec![0.0; r]);
+                    oracle::forward(&m, &x, &mut h0, &mut y0);
+                    m.forward(&x, &mut sc, &mut y1);
+                    assert!(same_bits(&y0, &y1), "{p}-{q}-{r} forward");
+                    assert!(same_bits(&h0, &sc.hidden), "{p}-{q}-{r} hidden");
+                    let g_start: Vec<f64> = (0..m.n_weights())
+                        .map(|_| rng.random_range(-1.0..1.0))
+                        .collect();
+                    let (mut g0, mut g1) = (g_start.clone(), g_start);
+                    let (mut xb0, mut xb1) = (vec![0.0; p], vec![7.0; p]);
+                    oracle::backward(&m, &x, &h0, &yb, &mut g0, &mut xb0);
+                    m.backward(&x, &mut sc, &yb, Some(&mut g1), Some(&mut xb1));
+                    assert!(same_bits(&g0, &g1), "{p}-{q}-{r} weight gradient");
+                    assert!(same_bits(&xb0, &xb1), "{p}-{q}-{r} input cotangent");
+                    let mut xb2 = vec![0.0; p];
+                    m.vjp_input(&x, &yb, &mut sc, &mut xb2);
+                    assert!(same_bits(&xb0, &xb2), "{p}-{q}-{r} vjp_input");
+                }
+            }
         }
     }
 

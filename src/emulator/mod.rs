@@ -157,9 +157,10 @@ pub fn predict_with(
     scratch: &mut EmulatorScratch,
     s_next: &mut [f64],
 ) {
-    t.encode_input(s, u, &mut scratch.z);
+    let at = t.frame_at(s, false);
+    t.encode_input_with(at.as_ref(), s, u, &mut scratch.z);
     mlp.forward(&scratch.z, &mut scratch.mlp, &mut scratch.y);
-    t.decode_output(s, &scratch.y, &mut scratch.t1, s_next);
+    t.decode_output_with(at.as_ref(), s, &scratch.y, &mut scratch.t1, s_next);
 }
 
 /// A NeuroAnimator: transforms + network, one call = one super timestep Δt.
@@ -379,6 +380,63 @@ impl crate::physics::DifferentiableStep for Emulator {
             None,
         );
     }
+    /// The network input z, output y and hidden activations h of the step.
+    fn tape_len(&self) -> usize {
+        let (n, m) = (self.transforms.state_dim, self.transforms.control_dim);
+        (n + m) + n + self.mlp.n_hidden()
+    }
+    fn step_taped(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        scratch: &mut EmulatorScratch,
+        s_next: &mut [f64],
+        tape: &mut [f64],
+    ) {
+        let (z, y, h) = split_tape(&self.transforms, tape);
+        let t = &self.transforms;
+        let at = t.frame_at(s, false);
+        t.encode_input_with(at.as_ref(), s, u, z);
+        self.mlp.forward_into(z, h, y);
+        t.decode_output_with(at.as_ref(), s, y, &mut scratch.t1, s_next);
+    }
+    fn vjp_taped(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        tape: &[f64],
+        s_next_bar: &[f64],
+        scratch: &mut EmulatorScratch,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        let _ = u;
+        let n = self.transforms.state_dim;
+        let (z, rest) = tape.split_at(n + self.transforms.control_dim);
+        let (y, h) = rest.split_at(n);
+        s_bar.fill(0.0);
+        vjp_from_forward(
+            &self.transforms,
+            &self.mlp,
+            s,
+            (z, y, h),
+            s_next_bar,
+            scratch,
+            s_bar,
+            u_bar,
+            None,
+        );
+    }
+}
+
+/// An emulator step's tape as (network input z, output y, hidden activations h).
+fn split_tape<'a>(
+    t: &Transforms,
+    tape: &'a mut [f64],
+) -> (&'a mut [f64], &'a mut [f64], &'a mut [f64]) {
+    let (z, rest) = tape.split_at_mut(t.state_dim + t.control_dim);
+    let (y, h) = rest.split_at_mut(t.state_dim);
+    (z, y, h)
 }
 
 /// Vector–Jacobian product of one emulator step s' = T(s, u; w) through the transforms and the
@@ -415,23 +473,66 @@ fn step_vjp_after_forward(
     u_bar: &mut [f64],
     grad_w: Option<&mut [f64]>,
 ) {
-    t.decode_output_vjp(
+    let z = std::mem::take(&mut scratch.z);
+    let y = std::mem::take(&mut scratch.y);
+    let h = std::mem::take(&mut scratch.mlp.hidden);
+    vjp_from_forward(
+        t,
+        mlp,
         s,
-        &scratch.y,
+        (&z, &y, &h),
         s_next_bar,
-        &mut scratch.t1,
-        &mut scratch.t2,
+        scratch,
+        s_bar,
+        u_bar,
+        grad_w,
+    );
+    scratch.z = z;
+    scratch.y = y;
+    scratch.mlp.hidden = h;
+}
+
+/// The backward half of [`step_vjp`] from the forward pass at (s, u) given as (network input
+/// z, output y, hidden activations h); uses the rest of `scratch` as buffers.
+#[allow(clippy::too_many_arguments)]
+fn vjp_from_forward(
+    t: &Transforms,
+    mlp: &Mlp,
+    s: &[f64],
+    (z, y, h): (&[f64], &[f64], &[f64]),
+    s_next_bar: &[f64],
+    scratch: &mut EmulatorScratch,
+    s_bar: &mut [f64],
+    u_bar: &mut [f64],
+    grad_w: Option<&mut [f64]>,
+) {
+    // The frame at s (with the rotation's derivatives) serves both transforms' products.
+    let at = t.frame_at(s, true);
+    t.decode_output_vjp_with(
+        at.as_ref(),
+        s,
+        y,
+        s_next_bar,
+        (&mut scratch.t1, &mut scratch.t2),
         &mut scratch.y_bar,
         s_bar,
     );
-    mlp.backward(
-        &scratch.z,
-        &mut scratch.mlp,
+    mlp.backward_from(
+        z,
+        h,
+        &mut scratch.mlp.hidden_bar,
         &scratch.y_bar,
         grad_w,
         Some(&mut scratch.z_bar),
     );
-    t.encode_input_vjp(s, &scratch.z_bar, &mut scratch.t1, s_bar, u_bar);
+    t.encode_input_vjp_with(
+        at.as_ref(),
+        s,
+        &scratch.z_bar,
+        &mut scratch.t1,
+        s_bar,
+        u_bar,
+    );
 }
 
 #[cfg(test)]
@@ -544,6 +645,86 @@ mod tests {
         let e = Emulator::new(t, random_mlp(N + M, N), 0.1).unwrap();
         out.push(("none", e, data));
         out
+    }
+
+    fn same_bits(a: &[f64], b: &[f64]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+    }
+
+    /// The taped step and VJP, and the transforms at a frame read once per step, give bit for
+    /// bit what the untaped step and VJP and the transforms reading the frame per map give.
+    #[test]
+    fn taped_and_frame_sharing_paths_are_bit_identical() {
+        use crate::physics::DifferentiableStep;
+        let mut emulators = all_emulators();
+        let mut heading = transform::SpatialFrame::rigid_body(0, 3, 7, 10);
+        heading.attitude = transform::Attitude::Heading;
+        let (e, d) = spatial_emulator(true);
+        let t = Transforms {
+            frame: Some(heading.into()),
+            ..e.transforms().clone()
+        };
+        emulators.push((
+            "spatial heading",
+            Emulator::new(t, e.mlp().clone(), 0.1).unwrap(),
+            d,
+        ));
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        for (name, e, data) in &emulators {
+            let (n, m) = (e.transforms.state_dim, e.transforms.control_dim);
+            let t = &e.transforms;
+            let mut sc = e.scratch();
+            let mut tape = vec![0.0; e.tape_len()];
+            for r in 0..10 {
+                let s = data.states.row(r).to_vec();
+                let u = data.controls.row(r).to_vec();
+                let sb1: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+                let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+                e.predict(&s, &u, &mut sc, &mut a);
+                e.step_taped(&s, &u, &mut sc, &mut b, &mut tape);
+                assert!(same_bits(&a, &b), "{name}: step");
+                let (mut sb_a, mut ub_a) = (vec![0.0; n], vec![0.0; m]);
+                let (mut sb_b, mut ub_b) = (vec![1.0; n], vec![1.0; m]);
+                e.vjp(&s, &u, &sb1, &mut sc, &mut sb_a, &mut ub_a);
+                e.vjp_taped(&s, &u, &tape, &sb1, &mut sc, &mut sb_b, &mut ub_b);
+                assert!(
+                    same_bits(&sb_a, &sb_b) && same_bits(&ub_a, &ub_b),
+                    "{name}: vjp"
+                );
+                // Each transform with the frame read per map (at = None) and read once.
+                for at in [t.frame_at(&s, false), t.frame_at(&s, true)] {
+                    let (mut z0, mut z1) = (vec![0.0; n + m], vec![0.0; n + m]);
+                    t.encode_input_with(None, &s, &u, &mut z0);
+                    t.encode_input_with(at.as_ref(), &s, &u, &mut z1);
+                    assert!(same_bits(&z0, &z1), "{name}: encode");
+                    let y: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+                    let mut tmp = vec![0.0; n];
+                    let (mut s0, mut s1) = (vec![0.0; n], vec![0.0; n]);
+                    t.decode_output_with(None, &s, &y, &mut tmp, &mut s0);
+                    t.decode_output_with(at.as_ref(), &s, &y, &mut tmp, &mut s1);
+                    assert!(same_bits(&s0, &s1), "{name}: decode");
+                    let mut t2 = vec![0.0; n];
+                    let (mut yb0, mut yb1) = (vec![0.0; n], vec![0.0; n]);
+                    let (mut sb0, mut sb1_) = (vec![0.5; n], vec![0.5; n]);
+                    let bufs = (&mut tmp[..], &mut t2[..]);
+                    t.decode_output_vjp_with(None, &s, &y, &sb1, bufs, &mut yb0, &mut sb0);
+                    let bufs = (&mut tmp[..], &mut t2[..]);
+                    t.decode_output_vjp_with(at.as_ref(), &s, &y, &sb1, bufs, &mut yb1, &mut sb1_);
+                    assert!(
+                        same_bits(&yb0, &yb1) && same_bits(&sb0, &sb1_),
+                        "{name}: decode vjp"
+                    );
+                    let zb: Vec<f64> = (0..n + m).map(|_| rng.random_range(-1.0..1.0)).collect();
+                    let (mut ub0, mut ub1) = (vec![0.0; m], vec![0.0; m]);
+                    t.encode_input_vjp_with(None, &s, &zb, &mut tmp, &mut sb0, &mut ub0);
+                    t.encode_input_vjp_with(at.as_ref(), &s, &zb, &mut tmp, &mut sb1_, &mut ub1);
+                    assert!(
+                        same_bits(&ub0, &ub1) && same_bits(&sb0, &sb1_),
+                        "{name}: encode vjp"
+                    );
+                }
+            }
+        }
     }
 
     /// [`fake_body`] as a simulator (one call = one 0.1 s step, whatever `dt`).

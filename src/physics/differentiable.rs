@@ -45,6 +45,46 @@ pub trait DifferentiableStep {
         s_bar: &mut [f64],
         u_bar: &mut [f64],
     );
+
+    /// How many values one step records for its VJP in [`DifferentiableStep::step_taped`]
+    /// (0, the default: nothing, the VJP recomputes what it needs).
+    fn tape_len(&self) -> usize {
+        0
+    }
+
+    /// [`DifferentiableStep::step`] that also records, in `tape` ([`DifferentiableStep::tape_len`]
+    /// values), what [`DifferentiableStep::vjp_taped`] at the same (s, u) needs (e.g. an
+    /// emulator's network activations), so that the backward sweep of BPTT does not repeat the
+    /// forward pass. The default records nothing.
+    fn step_taped(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        scratch: &mut Self::Scratch,
+        s_next: &mut [f64],
+        tape: &mut [f64],
+    ) {
+        let _ = tape;
+        self.step(s, u, scratch, s_next);
+    }
+
+    /// [`DifferentiableStep::vjp`] from the `tape` that [`DifferentiableStep::step_taped`]
+    /// recorded at the same (s, u); the result is bit for bit that of `vjp`. The default
+    /// ignores the tape.
+    #[allow(clippy::too_many_arguments)]
+    fn vjp_taped(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        tape: &[f64],
+        s_next_bar: &[f64],
+        scratch: &mut Self::Scratch,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        let _ = tape;
+        self.vjp(s, u, s_next_bar, scratch, s_bar, u_bar);
+    }
 }
 
 /// A linear step s' = A s + B u (row-major A: n × n, B: n × m), for tests and references.

@@ -17,7 +17,7 @@
 //! ## References
 //! - R. Grzeszczuk, D. Terzopoulos, G. Hinton, *NeuroAnimator*, SIGGRAPH 1998, §3.2, Fig. 6, 9.
 
-use super::{delta_inverse, FrameMap, LocalFrame, Normalizer};
+use super::{delta_inverse, FrameAt, FrameMap, LocalFrame, Normalizer};
 use crate::emulator::train::Dataset;
 use crate::emulator::{EmulatorError, Transitions};
 use ndarray::Array2;
@@ -135,12 +135,27 @@ impl Transforms {
         self.control_dim
     }
 
+    /// The local frame read from state `s` (none without a frame), to share between the maps
+    /// of one step ([`Transforms::encode_input_with`] and the other `_with` methods); with the
+    /// derivatives the vector–Jacobian products need when `derivatives`.
+    #[inline]
+    pub fn frame_at(&self, s: &[f64], derivatives: bool) -> Option<FrameAt> {
+        self.frame.as_ref().map(|f| f.at(s, derivatives))
+    }
+
     /// Network input z = T_x^σ(T_x'(s), u). Does not allocate.
     pub fn encode_input(&self, s: &[f64], u: &[f64], z: &mut [f64]) {
+        self.encode_input_with(self.frame_at(s, false).as_ref(), s, u, z);
+    }
+
+    /// [`Transforms::encode_input`] with the frame read from `s` given
+    /// ([`Transforms::frame_at`]).
+    pub fn encode_input_with(&self, at: Option<&FrameAt>, s: &[f64], u: &[f64], z: &mut [f64]) {
         let n = self.state_dim;
-        match &self.frame {
-            Some(f) => f.apply_at(FrameMap::ToLocal, s, s, &mut z[..n]),
-            None => z[..n].copy_from_slice(s),
+        match (&self.frame, at) {
+            (Some(f), Some(at)) => f.apply_with(FrameMap::ToLocal, at, s, &mut z[..n]),
+            (Some(f), None) => f.apply_at(FrameMap::ToLocal, s, s, &mut z[..n]),
+            (None, _) => z[..n].copy_from_slice(s),
         }
         z[n..].copy_from_slice(u);
         for ((z, m), sd) in z
@@ -188,6 +203,19 @@ impl Transforms {
     /// Next state s' from the network output y at state s (the output transforms). `tmp` is
     /// scratch of length state_dim. Does not allocate.
     pub fn decode_output(&self, s: &[f64], y: &[f64], tmp: &mut [f64], s_next: &mut [f64]) {
+        self.decode_output_with(self.frame_at(s, false).as_ref(), s, y, tmp, s_next);
+    }
+
+    /// [`Transforms::decode_output`] with the frame read from `s` given
+    /// ([`Transforms::frame_at`]).
+    pub fn decode_output_with(
+        &self,
+        at: Option<&FrameAt>,
+        s: &[f64],
+        y: &[f64],
+        tmp: &mut [f64],
+        s_next: &mut [f64],
+    ) {
         self.output_norm.denormalize(y, s_next);
         if let Some(f) = &self.frame {
             let map = if self.delta {
@@ -196,7 +224,10 @@ impl Transforms {
                 FrameMap::ToWorld
             };
             tmp.copy_from_slice(s_next);
-            f.apply_at(map, s, tmp, s_next);
+            match at {
+                Some(at) => f.apply_with(map, at, tmp, s_next),
+                None => f.apply_at(map, s, tmp, s_next),
+            }
         }
         if self.delta {
             for (o, a) in s_next.iter_mut().zip(s) {
@@ -215,6 +246,20 @@ impl Transforms {
         s_bar: &mut [f64],
         u_bar: &mut [f64],
     ) {
+        self.encode_input_vjp_with(None, s, z_bar, tmp, s_bar, u_bar);
+    }
+
+    /// [`Transforms::encode_input_vjp`] with the frame read from `s` given
+    /// ([`Transforms::frame_at`], best with derivatives).
+    pub fn encode_input_vjp_with(
+        &self,
+        at: Option<&FrameAt>,
+        s: &[f64],
+        z_bar: &[f64],
+        tmp: &mut [f64],
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
         let n = self.state_dim;
         for (k, o) in tmp.iter_mut().enumerate() {
             *o = z_bar[k] / self.input_norm.std[k];
@@ -223,9 +268,10 @@ impl Transforms {
             *o = z_bar[n + k] / self.input_norm.std[n + k];
         }
         match &self.frame {
-            Some(f) => {
-                f.apply_vjp_self(FrameMap::ToLocal, s, tmp, s_bar);
-            }
+            Some(f) => match at {
+                Some(at) => f.apply_vjp_self_with(FrameMap::ToLocal, at, s, tmp, s_bar),
+                None => f.apply_vjp_self(FrameMap::ToLocal, s, tmp, s_bar),
+            },
             None => {
                 for (o, a) in s_bar.iter_mut().zip(tmp.iter()) {
                     *o += a;
@@ -247,6 +293,22 @@ impl Transforms {
         y_bar: &mut [f64],
         s_bar: &mut [f64],
     ) {
+        self.decode_output_vjp_with(None, s, y, s_next_bar, (tmp1, tmp2), y_bar, s_bar);
+    }
+
+    /// [`Transforms::decode_output_vjp`] with the frame read from `s` given
+    /// ([`Transforms::frame_at`], best with derivatives).
+    #[allow(clippy::too_many_arguments)]
+    pub fn decode_output_vjp_with(
+        &self,
+        at: Option<&FrameAt>,
+        s: &[f64],
+        y: &[f64],
+        s_next_bar: &[f64],
+        (tmp1, tmp2): (&mut [f64], &mut [f64]),
+        y_bar: &mut [f64],
+        s_bar: &mut [f64],
+    ) {
         if self.delta {
             for (o, a) in s_bar.iter_mut().zip(s_next_bar) {
                 *o += a;
@@ -261,7 +323,10 @@ impl Transforms {
                 };
                 self.output_norm.denormalize(y, tmp1);
                 tmp2.fill(0.0);
-                f.apply_vjp_at(map, s, tmp1, s_next_bar, tmp2, s_bar);
+                match at {
+                    Some(at) => f.apply_vjp_with(map, at, tmp1, s_next_bar, tmp2, s_bar),
+                    None => f.apply_vjp_at(map, s, tmp1, s_next_bar, tmp2, s_bar),
+                }
                 self.output_norm.denormalize_tangent(tmp2, y_bar);
             }
             None => self.output_norm.denormalize_tangent(s_next_bar, y_bar),

@@ -43,7 +43,7 @@ mod spatial;
 pub use chain::{TransformConfig, Transforms};
 pub use normalize::Normalizer;
 pub use planar::{PlanarFrame, Pose2};
-pub use spatial::{quat_mul, Attitude, Pose3, SpatialFrame};
+pub use spatial::{quat_mul, Attitude, Pose3, SpatialAt, SpatialFrame};
 
 use super::EmulatorError;
 
@@ -141,7 +141,89 @@ impl From<SpatialFrame> for LocalFrame {
     }
 }
 
+/// A [`LocalFrame`] read from one state ([`LocalFrame::at`]): the pose and, for a spatial
+/// frame, the rotation its maps use, computed once for every map at that state (an emulator
+/// step maps its input to the frame and its output back, both at the current state).
+// The spatial variant is much larger, but boxing it would allocate in the hot loop.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FrameAt {
+    /// A planar pose.
+    Planar(Pose2),
+    /// A spatial pose with its rotation.
+    Spatial(SpatialAt),
+}
+
 impl LocalFrame {
+    /// The frame read from the pose source `ps`, with what the vector–Jacobian products need
+    /// when `derivatives` (the maps alone need less).
+    #[inline]
+    pub fn at(&self, ps: &[f64], derivatives: bool) -> FrameAt {
+        match self {
+            Self::Planar(f) => FrameAt::Planar(f.pose(ps)),
+            Self::Spatial(f) => FrameAt::Spatial(f.at(ps, derivatives)),
+        }
+    }
+
+    /// [`LocalFrame::apply_at`] at a frame read by [`LocalFrame::at`] from the pose source.
+    pub fn apply_with(&self, map: FrameMap, at: &FrameAt, inp: &[f64], out: &mut [f64]) {
+        match (self, at) {
+            (Self::Planar(f), FrameAt::Planar(pose)) => f.apply(map, *pose, inp, out),
+            (Self::Spatial(f), FrameAt::Spatial(a)) => f.apply_at(map, a, inp, out),
+            _ => panic!("frame read by a different kind of local frame"),
+        }
+    }
+
+    /// [`LocalFrame::apply_vjp_self`] at the frame read by [`LocalFrame::at`] from `s`.
+    pub fn apply_vjp_self_with(
+        &self,
+        map: FrameMap,
+        at: &FrameAt,
+        s: &[f64],
+        out_bar: &[f64],
+        s_bar: &mut [f64],
+    ) {
+        match (self, at) {
+            (Self::Planar(f), FrameAt::Planar(pose)) => {
+                let mut pb = Pose2::default();
+                f.apply_vjp(map, *pose, s, out_bar, s_bar, &mut pb);
+                f.pose_vjp(pb, s_bar);
+            }
+            (Self::Spatial(f), FrameAt::Spatial(a)) => {
+                let mut pb = Pose3::default();
+                f.apply_vjp_at(map, a, s, out_bar, s_bar, &mut pb);
+                f.pose_vjp_at(a, &pb, s_bar);
+            }
+            _ => panic!("frame read by a different kind of local frame"),
+        }
+    }
+
+    /// [`LocalFrame::apply_vjp_at`] at the frame read by [`LocalFrame::at`] from the pose
+    /// source.
+    pub fn apply_vjp_with(
+        &self,
+        map: FrameMap,
+        at: &FrameAt,
+        inp: &[f64],
+        out_bar: &[f64],
+        inp_bar: &mut [f64],
+        ps_bar: &mut [f64],
+    ) {
+        match (self, at) {
+            (Self::Planar(f), FrameAt::Planar(pose)) => {
+                let mut pb = Pose2::default();
+                f.apply_vjp(map, *pose, inp, out_bar, inp_bar, &mut pb);
+                f.pose_vjp(pb, ps_bar);
+            }
+            (Self::Spatial(f), FrameAt::Spatial(a)) => {
+                let mut pb = Pose3::default();
+                f.apply_vjp_at(map, a, inp, out_bar, inp_bar, &mut pb);
+                f.pose_vjp_at(a, &pb, ps_bar);
+            }
+            _ => panic!("frame read by a different kind of local frame"),
+        }
+    }
+
     /// Checks indices against the state dimension.
     pub fn validate(&self, state_dim: usize) -> Result<(), EmulatorError> {
         match self {

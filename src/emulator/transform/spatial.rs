@@ -35,6 +35,21 @@ pub struct Pose3 {
     pub q: [f64; 4],
 }
 
+/// A [`SpatialFrame`] read from one state: the pose, the heading normalization it came from
+/// and the rotation R(q₀) (with ∂R/∂q₀ₖ when asked for), computed once and shared by every map
+/// at that state ([`SpatialFrame::at`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpatialAt {
+    /// The pose read from the state.
+    pub pose: Pose3,
+    /// The heading as a unit pair and its norm ([`Attitude::Heading`] only).
+    heading: Option<([f64; 2], f64)>,
+    /// R(q₀).
+    r: M3,
+    /// ∂R/∂q₀ₖ, when computed.
+    dr: Option<[M3; 4]>,
+}
+
 /// Hamilton product a ⊗ b of quaternions `[w, x, y, z]`.
 pub fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
     [
@@ -51,20 +66,52 @@ fn quat_conj(a: [f64; 4]) -> [f64; 4] {
 
 type M3 = [[f64; 3]; 3];
 
+#[inline]
 fn mat_vec(m: &M3, v: [f64; 3]) -> [f64; 3] {
-    [0, 1, 2].map(|i| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2])
+    let row = |i: usize| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2];
+    [row(0), row(1), row(2)]
 }
 
+#[inline]
 fn mat_t_vec(m: &M3, v: [f64; 3]) -> [f64; 3] {
-    [0, 1, 2].map(|j| m[0][j] * v[0] + m[1][j] * v[1] + m[2][j] * v[2])
+    let col = |j: usize| m[0][j] * v[0] + m[1][j] * v[1] + m[2][j] * v[2];
+    [col(0), col(1), col(2)]
 }
 
 fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// R(q) = M(q)/|q|² alone, as [`rotation_and_derivatives`] computes it (the same operations,
+/// without the derivatives the forward maps do not need).
+fn rotation(q: [f64; 4]) -> M3 {
+    let n = q.iter().map(|a| a * a).sum::<f64>();
+    let (w, v) = (q[0], [q[1], q[2], q[3]]);
+    let cv = [[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]];
+    let vv = dot3(v, v);
+    let mut r = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            let m = if i == j { w * w - vv } else { 0.0 } + 2.0 * v[i] * v[j] + 2.0 * w * cv[i][j];
+            r[i][j] = m / n;
+        }
+    }
+    r
+}
+
+/// All four quaternion components.
+const ALL_Q: [usize; 4] = [0, 1, 2, 3];
+
 /// R(q) = M(q)/|q|² with M(q) = (w² − v·v) I + 2 v vᵀ + 2 w [v]×, and ∂R/∂q_k.
+#[inline]
 fn rotation_and_derivatives(q: [f64; 4]) -> (M3, [M3; 4]) {
+    rotation_and_derivatives_of(q, &ALL_Q)
+}
+
+/// [`rotation_and_derivatives`] with ∂R/∂q_k for the k in `live` only (the others are left
+/// zero); each computed value is the same.
+#[inline]
+fn rotation_and_derivatives_of(q: [f64; 4], live: &[usize]) -> (M3, [M3; 4]) {
     let n = q.iter().map(|a| a * a).sum::<f64>();
     let (w, v) = (q[0], [q[1], q[2], q[3]]);
     let cross =
@@ -84,7 +131,7 @@ fn rotation_and_derivatives(q: [f64; 4]) -> (M3, [M3; 4]) {
             dm[0][i][j] = if i == j { 2.0 * w } else { 0.0 } + 2.0 * cv[i][j];
         }
     }
-    for k in 0..3 {
+    for k in (0..3).filter(|k| live.contains(&(k + 1))) {
         let mut e = [0.0; 3];
         e[k] = 1.0;
         let ce = cross(e);
@@ -98,7 +145,7 @@ fn rotation_and_derivatives(q: [f64; 4]) -> (M3, [M3; 4]) {
     }
     let r = m.map(|row| row.map(|a| a / n));
     let mut dr = [[[0.0; 3]; 3]; 4];
-    for k in 0..4 {
+    for &k in live {
         for i in 0..3 {
             for j in 0..3 {
                 dr[k][i][j] = (dm[k][i][j] - 2.0 * q[k] * r[i][j]) / n;
@@ -178,16 +225,54 @@ impl SpatialFrame {
 
     /// The pose read from a world-frame state.
     pub fn pose(&self, s: &[f64]) -> Pose3 {
-        let q = match self.attitude {
-            Attitude::Full => self.orientation.map(|i| s[i]),
-            Attitude::Heading => {
-                let ([w, z], _) = self.heading(s);
-                [w, 0.0, 0.0, z]
-            }
+        let heading = match self.attitude {
+            Attitude::Full => None,
+            Attitude::Heading => Some(self.heading(s)),
+        };
+        self.pose_from(s, heading)
+    }
+
+    /// [`SpatialFrame::pose`] given the heading of `s` (for [`Attitude::Heading`]).
+    fn pose_from(&self, s: &[f64], heading: Option<([f64; 2], f64)>) -> Pose3 {
+        let q = match (self.attitude, heading) {
+            (Attitude::Heading, Some(([w, z], _))) => [w, 0.0, 0.0, z],
+            _ => self.orientation.map(|i| s[i]),
         };
         Pose3 {
             origin: self.origin.map(|i| s[i]),
             q,
+        }
+    }
+
+    /// The components of the frame's quaternion that depend on the state, the only ones whose
+    /// cotangents [`SpatialFrame::pose_vjp`] reads: all four, or w and z of a heading.
+    fn live_q(&self) -> &'static [usize] {
+        match self.attitude {
+            Attitude::Full => &ALL_Q,
+            Attitude::Heading => &[0, 3],
+        }
+    }
+
+    /// The frame read from state `s`: its pose and rotation, with the rotation's derivatives
+    /// when `derivatives` (the vector–Jacobian products need them; the maps do not).
+    #[inline]
+    pub fn at(&self, s: &[f64], derivatives: bool) -> SpatialAt {
+        let heading = match self.attitude {
+            Attitude::Full => None,
+            Attitude::Heading => Some(self.heading(s)),
+        };
+        let pose = self.pose_from(s, heading);
+        let (r, dr) = if derivatives {
+            let (r, dr) = rotation_and_derivatives_of(pose.q, self.live_q());
+            (r, Some(dr))
+        } else {
+            (rotation(pose.q), None)
+        };
+        SpatialAt {
+            pose,
+            heading,
+            r,
+            dr,
         }
     }
 
@@ -216,6 +301,19 @@ impl SpatialFrame {
 
     /// Adds a pose cotangent to the cotangent `s_bar` of the state `s` the pose is read from.
     pub fn pose_vjp(&self, s: &[f64], pose_bar: &Pose3, s_bar: &mut [f64]) {
+        let heading = match self.attitude {
+            Attitude::Full => None,
+            Attitude::Heading => Some(self.heading(s)),
+        };
+        self.pose_vjp_from(heading, pose_bar, s_bar);
+    }
+
+    /// [`SpatialFrame::pose_vjp`] given the heading of the state (for [`Attitude::Heading`]).
+    pub fn pose_vjp_at(&self, at: &SpatialAt, pose_bar: &Pose3, s_bar: &mut [f64]) {
+        self.pose_vjp_from(at.heading, pose_bar, s_bar);
+    }
+
+    fn pose_vjp_from(&self, heading: Option<([f64; 2], f64)>, pose_bar: &Pose3, s_bar: &mut [f64]) {
         for (i, v) in self.origin.iter().zip(pose_bar.origin) {
             s_bar[*i] += v;
         }
@@ -227,7 +325,7 @@ impl SpatialFrame {
             }
             Attitude::Heading => {
                 // The normalization's Jacobian is symmetric; x and y of the pose are constant.
-                let (h, n) = self.heading(s);
+                let (h, n) = heading.expect("a heading frame reads its heading");
                 let g = [pose_bar.q[0], pose_bar.q[3]];
                 let along = h[0] * g[0] + h[1] * g[1];
                 s_bar[self.orientation[0]] += (g[0] - h[0] * along) / n;
@@ -245,8 +343,17 @@ impl SpatialFrame {
 
     /// Applies `map` at `pose` to `inp`, writing `out` (same length).
     pub fn apply(&self, map: FrameMap, pose: &Pose3, inp: &[f64], out: &mut [f64]) {
+        self.apply_rotated(map, pose, &rotation(pose.q), inp, out);
+    }
+
+    /// [`SpatialFrame::apply`] at the frame read from a state ([`SpatialFrame::at`]).
+    pub fn apply_at(&self, map: FrameMap, at: &SpatialAt, inp: &[f64], out: &mut [f64]) {
+        self.apply_rotated(map, &at.pose, &at.r, inp, out);
+    }
+
+    /// [`SpatialFrame::apply`] with R(q₀) given.
+    fn apply_rotated(&self, map: FrameMap, pose: &Pose3, r: &M3, inp: &[f64], out: &mut [f64]) {
         out.copy_from_slice(inp);
-        let (r, _) = rotation_and_derivatives(pose.q);
         let local = map.sign() < 0.0;
         for (t, is_point) in self.triples() {
             let mut v = t.map(|i| inp[i]);
@@ -254,9 +361,9 @@ impl SpatialFrame {
                 v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
             }
             let mut o = if local {
-                mat_t_vec(&r, v)
+                mat_t_vec(r, v)
             } else {
-                mat_vec(&r, v)
+                mat_vec(r, v)
             };
             if is_point && map == FrameMap::ToWorld {
                 o = [0, 1, 2].map(|k| o[k] + pose.origin[k]);
@@ -326,8 +433,8 @@ impl SpatialFrame {
             let a = qi.map(|i| inp[i]);
             let da = qi.map(|i| d_inp[i]);
             let mut o = [0.0; 4];
-            for k in 0..4 {
-                let dq = quat_partial(map, pose.q, a, k);
+            let partials = quat_partials(map, pose.q, a, &ALL_Q);
+            for (k, dq) in partials.iter().enumerate() {
                 for c in 0..4 {
                     o[c] += dq[c] * d_pose.q[k];
                 }
@@ -350,16 +457,75 @@ impl SpatialFrame {
         inp_bar: &mut [f64],
         pose_bar: &mut Pose3,
     ) {
-        let mapped = |i: usize| {
-            self.triples().any(|(t, _)| t.contains(&i))
-                || self.quaternions.iter().any(|q| q.contains(&i))
+        let (r, dr) = rotation_and_derivatives(pose.q);
+        let rot = (&r, &dr, &ALL_Q[..]);
+        self.apply_vjp_rotated(map, pose, rot, inp, out_bar, inp_bar, pose_bar);
+    }
+
+    /// [`SpatialFrame::apply_vjp`] at the frame read from a state ([`SpatialFrame::at`]; the
+    /// rotation's derivatives are computed here if `at` lacks them), for
+    /// [`SpatialFrame::pose_vjp_at`]: of `pose_bar`'s quaternion only the components that
+    /// depend on the state are computed (w and z of a heading frame).
+    pub(super) fn apply_vjp_at(
+        &self,
+        map: FrameMap,
+        at: &SpatialAt,
+        inp: &[f64],
+        out_bar: &[f64],
+        inp_bar: &mut [f64],
+        pose_bar: &mut Pose3,
+    ) {
+        let computed;
+        let dr = match &at.dr {
+            Some(dr) => dr,
+            None => {
+                computed = rotation_and_derivatives_of(at.pose.q, self.live_q()).1;
+                &computed
+            }
         };
-        for (i, b) in inp_bar.iter_mut().enumerate() {
-            if !mapped(i) {
-                *b += out_bar[i];
+        let rot = (&at.r, dr, self.live_q());
+        self.apply_vjp_rotated(map, &at.pose, rot, inp, out_bar, inp_bar, pose_bar);
+    }
+
+    /// [`SpatialFrame::apply_vjp`] with R(q₀) and ∂R/∂q₀ₖ given, computing the quaternion
+    /// cotangent for the components k in `live` only.
+    #[allow(clippy::too_many_arguments)]
+    fn apply_vjp_rotated(
+        &self,
+        map: FrameMap,
+        pose: &Pose3,
+        (r, dr, live): (&M3, &[M3; 4], &[usize]),
+        inp: &[f64],
+        out_bar: &[f64],
+        inp_bar: &mut [f64],
+        pose_bar: &mut Pose3,
+    ) {
+        // Variables the map does not touch pass their cotangent through.
+        const SMALL: usize = 256;
+        if inp_bar.len() <= SMALL {
+            let mut mapped = [false; SMALL];
+            for (t, _) in self.triples() {
+                t.iter().for_each(|&i| mapped[i] = true);
+            }
+            for q in &self.quaternions {
+                q.iter().for_each(|&i| mapped[i] = true);
+            }
+            for (i, b) in inp_bar.iter_mut().enumerate() {
+                if !mapped[i] {
+                    *b += out_bar[i];
+                }
+            }
+        } else {
+            let mapped = |i: usize| {
+                self.triples().any(|(t, _)| t.contains(&i))
+                    || self.quaternions.iter().any(|q| q.contains(&i))
+            };
+            for (i, b) in inp_bar.iter_mut().enumerate() {
+                if !mapped(i) {
+                    *b += out_bar[i];
+                }
             }
         }
-        let (r, dr) = rotation_and_derivatives(pose.q);
         let local = map.sign() < 0.0;
         for (t, is_point) in self.triples() {
             let mut v = t.map(|i| inp[i]);
@@ -368,18 +534,18 @@ impl SpatialFrame {
             }
             let g = t.map(|i| out_bar[i]);
             let ib = if local {
-                mat_vec(&r, g)
+                mat_vec(r, g)
             } else {
-                mat_t_vec(&r, g)
+                mat_t_vec(r, g)
             };
             for k in 0..3 {
                 inp_bar[t[k]] += ib[k];
             }
-            for (k, drk) in dr.iter().enumerate() {
+            for &k in live {
                 let term = if local {
-                    mat_t_vec(drk, v)
+                    mat_t_vec(&dr[k], v)
                 } else {
-                    mat_vec(drk, v)
+                    mat_vec(&dr[k], v)
                 };
                 pose_bar.q[k] += dot3(g, term);
             }
@@ -404,8 +570,9 @@ impl SpatialFrame {
             for k in 0..4 {
                 inp_bar[qi[k]] += ib[k];
             }
-            for k in 0..4 {
-                let dq = quat_partial(map, pose.q, a, k);
+            let partials = quat_partials(map, pose.q, a, live);
+            for &k in live {
+                let dq = partials[k];
                 pose_bar.q[k] += (0..4).map(|c| dq[c] * g[c]).sum::<f64>();
             }
         }
@@ -422,16 +589,30 @@ fn quat_linear(map: FrameMap, q0: [f64; 4], a: [f64; 4]) -> [f64; 4] {
     }
 }
 
-/// ∂/∂q₀ₖ of [`quat_linear`].
-fn quat_partial(map: FrameMap, q0: [f64; 4], a: [f64; 4], k: usize) -> [f64; 4] {
-    let mut e = [0.0; 4];
-    e[k] = 1.0;
+/// ∂/∂q₀ₖ of [`quat_linear`] for the k in `live` (the others left zero; the norm and the
+/// product shared by the four computed once).
+fn quat_partials(map: FrameMap, q0: [f64; 4], a: [f64; 4], live: &[usize]) -> [[f64; 4]; 4] {
+    let unit = |k: usize| {
+        let mut e = [0.0; 4];
+        e[k] = 1.0;
+        e
+    };
+    let mut out = [[0.0; 4]; 4];
     if map.sign() < 0.0 {
         let n = q0.iter().map(|x| x * x).sum::<f64>();
-        let f = quat_mul(quat_conj(q0), a).map(|x| x / n);
-        let d = quat_mul(quat_conj(e), a);
-        [0, 1, 2, 3].map(|c| d[c] / n - 2.0 * q0[k] * f[c] / n)
+        let p = quat_mul(quat_conj(q0), a);
+        let f = [p[0] / n, p[1] / n, p[2] / n, p[3] / n];
+        for &k in live {
+            let o = &mut out[k];
+            let d = quat_mul(quat_conj(unit(k)), a);
+            for c in 0..4 {
+                o[c] = d[c] / n - 2.0 * q0[k] * f[c] / n;
+            }
+        }
     } else {
-        quat_mul(e, a)
+        for &k in live {
+            out[k] = quat_mul(unit(k), a);
+        }
     }
+    out
 }
