@@ -19,7 +19,8 @@
 //! Table: `error` (variant, emulator, t, error); errors are in the state's units (rad and
 //! rad/s mixed, as in the paper's average over all state variables).
 
-use super::table1_structure::{build_emulator, build_spec, validate_nets, validate_training};
+use super::table1_structure::{build_emulators, build_spec, validate_nets, validate_training};
+use crate::emulator::catalog::BuildSpec;
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::mlp::Mlp;
@@ -146,17 +147,23 @@ impl Job for Params {
             // Every emulator at the net's own hidden units, then at each extra capacity.
             let mut hiddens = vec![net.hidden];
             hiddens.extend(self.capacity_hidden.iter().filter(|&&h| h != net.hidden));
-            let mut emulators = vec![];
+            let mut specs = vec![];
             for &hidden in &hiddens {
                 let mut sized = net.clone();
                 (sized.hidden, sized.examples) = (hidden, scaled_examples(net, hidden));
                 for &k in &self.emulators {
                     let spec = build_spec(ctx.seed, &sized, k, self.example_scale, &self.training);
-                    let label = format!("train {} N{k} ({hidden} hidden)", model.name());
-                    let t = ctx.stage(&label, || build_emulator(&spec))?;
-                    emulators.push((k, hidden, spec.net.examples, t.emulator));
+                    specs.push((k, hidden, spec));
                 }
             }
+            let only: Vec<BuildSpec> = specs.iter().map(|s| s.2.clone()).collect();
+            let label = format!("train {} emulators (side by side)", model.name());
+            let built = ctx.stage(&label, || build_emulators(&only))?;
+            let emulators: Vec<_> = specs
+                .into_iter()
+                .zip(built)
+                .map(|((k, hidden, spec), t)| (k, hidden, spec.net.examples, t.emulator))
+                .collect();
             // Sum of |error| per emulator and frame over trials and variables.
             let mut sums = vec![vec![0.0; frames + 1]; emulators.len()];
             let mut sim = model.simulator();

@@ -356,6 +356,15 @@ pub fn build_emulator(spec: &BuildSpec) -> Result<Trained, Error> {
     EmulatorCache::from_env().get_or_train(spec).map_err(other)
 }
 
+/// The emulators of `specs`, in order, each as [`build_emulator`] builds it, the ones not in the
+/// cache trained side by side (rayon): nets are independent and each is seeded by its spec, so
+/// the nets, and everything made from them, are the same as built one by one. A cold run
+/// otherwise trains its nets serially on one core.
+pub fn build_emulators(specs: &[BuildSpec]) -> Result<Vec<Trained>, Error> {
+    use rayon::prelude::*;
+    specs.par_iter().map(build_emulator).collect()
+}
+
 /// A Table 1 emulator ready to step, catalog net or dolphin hierarchy (`motionlab emulate`).
 pub enum Table1Emulator {
     /// A single net (pendulums, truck, lander).
@@ -527,16 +536,22 @@ impl Job for Params {
             ]);
         };
         let pb = ctx.progress(self.nets.len() as u64, "training emulators");
-        for net in &self.nets {
-            let spec = build_spec(
-                ctx.seed,
-                net,
-                self.steps,
-                self.example_scale,
-                &self.training,
-            );
+        let specs: Vec<BuildSpec> = self
+            .nets
+            .iter()
+            .map(|net| {
+                build_spec(
+                    ctx.seed,
+                    net,
+                    self.steps,
+                    self.example_scale,
+                    &self.training,
+                )
+            })
+            .collect();
+        let built = ctx.stage("train emulators (side by side)", || build_emulators(&specs))?;
+        for ((net, spec), t) in self.nets.iter().zip(&specs).zip(built) {
             let name = net.model.name();
-            let t = ctx.stage(&format!("train {name}"), || build_emulator(&spec))?;
             let m = net.model;
             let (n_in, n_out) = (m.state_dim() + m.control_dim(), m.state_dim());
             let w = Mlp::weight_count(n_in, net.hidden, n_out);

@@ -34,7 +34,7 @@ use crate::control::bptt::{
 };
 use crate::control::objective::{ControlEffort, FinalState, Objective};
 use crate::control::Rk4Map;
-use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
+use crate::emulator::catalog::{BuildSpec, NetModel, NetSpec, TrainSettings};
 use crate::emulator::hierarchy::{FRAME_DIM, GLOBAL_DIM};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
@@ -43,7 +43,7 @@ use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::na::swim::{emulated_masses, periodicity, SwimTask};
 use crate::families::na::table1_structure::{
-    build_dolphin_emulator, build_emulator, build_spec, validate_nets, validate_training,
+    build_dolphin_emulator, build_emulators, build_spec, validate_nets, validate_training,
     DolphinNets,
 };
 use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
@@ -397,19 +397,26 @@ impl Job for Params {
                 states_t.push(row![task.name.as_str(), format!("s{k}"), name]);
             }
         }
-        for task in &self.tasks {
+        let specs: Vec<BuildSpec> = self
+            .tasks
+            .iter()
+            .map(|task| {
+                build_spec(
+                    ctx.seed,
+                    &task.net,
+                    self.steps,
+                    self.example_scale,
+                    &self.training,
+                )
+            })
+            .collect();
+        let built = ctx.stage(
+            &format!("train N{} emulators (side by side)", self.steps),
+            || build_emulators(&specs),
+        )?;
+        for ((task, spec), trained) in self.tasks.iter().zip(&specs).zip(built) {
             let model = task.net.model;
             let (n, m) = (model.state_dim(), model.control_dim());
-            let spec = build_spec(
-                ctx.seed,
-                &task.net,
-                self.steps,
-                self.example_scale,
-                &self.training,
-            );
-            let trained = ctx.stage(&format!("train {} N{}", model.name(), self.steps), || {
-                build_emulator(&spec)
-            })?;
             let objective = task.objective();
             let knots = Knots {
                 steps: task.horizon,
