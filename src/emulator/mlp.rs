@@ -23,8 +23,9 @@
 //! layout. The single-example passes (Appendix C) write into caller-provided scratch and never
 //! allocate; they run the kernels of [`kernels`] on a packed copy of the weights (transposed and
 //! padded so that the products vectorize across outputs, each sum still taken in input order),
-//! built on first use and dropped whenever the weights are handed out mutably. The batch pass works on fixed chunks of [`BATCH_CHUNK`] rows with ordered
-//! reduction, so its result is bit-identical for any number of rayon threads.
+//! built on first use and dropped whenever the weights are handed out mutably. The batch pass
+//! works on fixed chunks of [`BATCH_CHUNK`] rows with ordered reduction, so its result is
+//! bit-identical for any number of rayon threads.
 
 use ndarray::linalg::general_mat_mul;
 use ndarray::{s, Array2, ArrayView1, ArrayView2, ArrayViewMut2, Axis};
@@ -236,10 +237,7 @@ impl Mlp {
     /// Forward pass for one example (Appendix C): `y = N(x, w)`. Hidden activations are left in
     /// `scratch.hidden` for a following backward pass. Does not allocate.
     pub fn forward(&self, x: &[f64], scratch: &mut MlpScratch, y: &mut [f64]) {
-        debug_assert_eq!(x.len(), self.n_in);
-        debug_assert_eq!(y.len(), self.n_out);
-        let (_, b1, _, b2) = self.split(&self.weights);
-        kernels::forward(self.packed(), b1, b2, x, &mut scratch.hidden, y);
+        self.forward_into(x, &mut scratch.hidden, y);
     }
 
     /// [`Mlp::forward`] writing the hidden activations to `hidden` (length q), e.g. a tape

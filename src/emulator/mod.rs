@@ -157,10 +157,28 @@ pub fn predict_with(
     scratch: &mut EmulatorScratch,
     s_next: &mut [f64],
 ) {
+    let EmulatorScratch {
+        z, y, t1, mlp: m, ..
+    } = scratch;
+    step_through(t, mlp, s, u, (z, y, &mut m.hidden), t1, s_next);
+}
+
+/// One emulator step through transforms `t` and network `mlp`, writing the network's input z,
+/// output y and hidden activations h to the buffers given (a scratch, or a step of BPTT's
+/// tape) and using `tmp` (length n). Does not allocate.
+fn step_through(
+    t: &Transforms,
+    mlp: &Mlp,
+    s: &[f64],
+    u: &[f64],
+    (z, y, h): (&mut [f64], &mut [f64], &mut [f64]),
+    tmp: &mut [f64],
+    s_next: &mut [f64],
+) {
     let at = t.frame_at(s, false);
-    t.encode_input_with(at.as_ref(), s, u, &mut scratch.z);
-    mlp.forward(&scratch.z, &mut scratch.mlp, &mut scratch.y);
-    t.decode_output_with(at.as_ref(), s, &scratch.y, &mut scratch.t1, s_next);
+    t.encode_input_with(at.as_ref(), s, u, z);
+    mlp.forward_into(z, h, y);
+    t.decode_output_with(at.as_ref(), s, y, tmp, s_next);
 }
 
 /// A NeuroAnimator: transforms + network, one call = one super timestep Δt.
@@ -393,12 +411,17 @@ impl crate::physics::DifferentiableStep for Emulator {
         s_next: &mut [f64],
         tape: &mut [f64],
     ) {
-        let (z, y, h) = split_tape(&self.transforms, tape);
-        let t = &self.transforms;
-        let at = t.frame_at(s, false);
-        t.encode_input_with(at.as_ref(), s, u, z);
-        self.mlp.forward_into(z, h, y);
-        t.decode_output_with(at.as_ref(), s, y, &mut scratch.t1, s_next);
+        let (z, rest) = tape.split_at_mut(self.transforms.state_dim + self.transforms.control_dim);
+        let (y, h) = rest.split_at_mut(self.transforms.state_dim);
+        step_through(
+            &self.transforms,
+            &self.mlp,
+            s,
+            u,
+            (z, y, h),
+            &mut scratch.t1,
+            s_next,
+        );
     }
     fn vjp_taped(
         &self,
@@ -427,16 +450,6 @@ impl crate::physics::DifferentiableStep for Emulator {
             None,
         );
     }
-}
-
-/// An emulator step's tape as (network input z, output y, hidden activations h).
-fn split_tape<'a>(
-    t: &Transforms,
-    tape: &'a mut [f64],
-) -> (&'a mut [f64], &'a mut [f64], &'a mut [f64]) {
-    let (z, rest) = tape.split_at_mut(t.state_dim + t.control_dim);
-    let (y, h) = rest.split_at_mut(t.state_dim);
-    (z, y, h)
 }
 
 /// Vector–Jacobian product of one emulator step s' = T(s, u; w) through the transforms and the

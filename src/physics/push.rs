@@ -100,10 +100,14 @@ impl Walls {
     /// Horizontal contact force on the hand at position `x` (m) moving at `vx` (m/s): push-only,
     /// frictionless, zero off the walls.
     pub fn force(&self, x: f64, vx: f64) -> f64 {
+        // The back wall is the front wall mirrored (x → −x), so the pair is symmetric exactly.
+        let (side, x, vx) = if x < 0.0 {
+            (-1.0, -x, -vx)
+        } else {
+            (1.0, x, vx)
+        };
         if x > self.distance {
-            -(self.stiffness * (x - self.distance) + self.damping * vx).max(0.0)
-        } else if x < -self.distance {
-            (self.stiffness * (-self.distance - x) - self.damping * vx).max(0.0)
+            -side * (self.stiffness * (x - self.distance) + self.damping * vx).max(0.0)
         } else {
             0.0
         }

@@ -154,6 +154,14 @@ pub fn window_gap(t: &[f64], a: &[f64], b: &[f64], window: [f64; 2]) -> f64 {
         .fold(f64::NAN, f64::max)
 }
 
+/// Largest lean from upright (rad) over runs of body angles.
+fn largest_lean(runs: &[Vec<f64>]) -> f64 {
+    runs.iter()
+        .flatten()
+        .map(|b| (b - FRAC_PI_2).abs())
+        .fold(0.0, f64::max)
+}
+
 /// Range (max − min) of `a` over the steps with `t` in `window` (NaN when none is).
 pub fn window_range(t: &[f64], a: &[f64], window: [f64; 2]) -> f64 {
     let w = (0..t.len()).filter(|&k| t[k] >= window[0] && t[k] <= window[1]);
@@ -395,20 +403,14 @@ impl Params {
 
     /// Largest lean from upright (rad) of the premise's runs, as scripted and mirrored.
     pub fn no_reach_lean(&self) -> Result<f64, Error> {
-        let mut lean = 0.0f64;
-        for sign in [1.0, -1.0] {
-            for b in self.no_reach(sign)? {
-                lean = lean.max((b - FRAC_PI_2).abs());
-            }
-        }
-        Ok(lean)
+        Ok(largest_lean(&[self.no_reach(1.0)?, self.no_reach(-1.0)?]))
     }
 
     /// Simulates the figure between the walls under the tugs scaled by `sign` with
     /// `policy(x, k, u, alpha)` writing the three motor torques (and the blend weights, if any)
     /// once per control step; a body that leans a right angle has hit the floor and stays
-    /// there (the model has no floor contact of its own): per step (α_forward, α_backward, tug force, body angle, absolute
-    /// arm angle, hand x, wall force on the hand).
+    /// there (the model has no floor contact of its own). Per step: (α_forward, α_backward,
+    /// tug force, body angle, absolute arm angle, hand x, wall force on the hand).
     fn rollout(
         &self,
         sign: f64,
@@ -428,7 +430,7 @@ impl Params {
             let f = sign * self.force_at(t);
             full_u[..3].copy_from_slice(&u);
             full_u[3] = f;
-            let (hand, _) = scene.hand(&x);
+            let (hand, v) = scene.hand(&x);
             out.push([
                 alpha[0],
                 alpha[1],
@@ -436,7 +438,7 @@ impl Params {
                 x[0],
                 x[0] + x[1],
                 hand[0],
-                scene.wall_force(&x),
+                self.walls.force(hand[0], v[0]),
             ]);
             // A body that has fallen to the floor (lean of a right angle) lies there.
             if (x[0] - FRAC_PI_2).abs() < FRAC_PI_2 {
@@ -490,7 +492,10 @@ impl Job for Params {
             "wall_force",
             "body_angle_no_reach",
         ]);
-        let no_reach = ctx.stage("no reach", || self.no_reach(1.0))?;
+        // The premise's runs (no reach), as scripted and mirrored.
+        let no_reach = ctx.stage("no reach", || -> Result<_, Error> {
+            Ok([self.no_reach(1.0)?, self.no_reach(-1.0)?])
+        })?;
         for (k, ((a, m), b)) in tugged.iter().zip(&mirrored).zip(&baseline).enumerate() {
             table.push(row![
                 k as f64 * self.dt,
@@ -504,7 +509,7 @@ impl Job for Params {
                 b[0],
                 m[3],
                 a[6],
-                no_reach[k]
+                no_reach[0][k]
             ]);
         }
         // The same checks at each swept λ (not judged).
@@ -557,10 +562,7 @@ impl Job for Params {
             ("mirror_tolerance", self.mirror_tolerance),
             ("fall_angle", self.fall_angle),
             ("horizon", self.horizon),
-            (
-                "no_reach_lean",
-                ctx.stage("no reach", || self.no_reach_lean())?,
-            ),
+            ("no_reach_lean", largest_lean(&no_reach)),
             ("walls_distance", self.walls.distance),
             ("rest_rate", self.rest_rate),
         ]);
@@ -573,11 +575,11 @@ impl Job for Params {
     }
 }
 
-/// The fall angle of the run's `rule` table, if it has one.
-fn self_fall_angle(tables: &Tables) -> Option<f64> {
+/// The setting `key` of the run's `rule` table, if it has one.
+fn rule_setting(tables: &Tables, key: &str) -> Option<f64> {
     let rule = tables.get("rule")?;
     let (k, v) = (rule.strs("setting"), rule.f64s("value"));
-    k.iter().position(|s| s == "fall_angle").map(|i| v[i])
+    k.iter().position(|s| s == key).map(|i| v[i])
 }
 
 impl Family for LbcPush {
@@ -597,7 +599,7 @@ impl Family for LbcPush {
             w.f64s("alpha_forward_baseline"),
         );
         let fmax = f.iter().fold(1e-9f64, |m, v| m.max(v.abs()));
-        let panels = vec![
+        let mut panels = vec![
             Panel {
                 title: "LBC blend weight under tugs on the hand".into(),
                 x_label: "time (s)".into(),
@@ -644,7 +646,6 @@ impl Family for LbcPush {
                 ..Default::default()
             },
         ];
-        let mut panels = panels;
         // The body's lean (+ forward) with LBC and with no reach, and the fall angle.
         let lean = |b: &[f64]| -> Vec<(f64, f64)> {
             t.iter().zip(b).map(|(&x, &y)| (x, FRAC_PI_2 - y)).collect()
@@ -669,7 +670,7 @@ impl Family for LbcPush {
                 3,
             ));
         }
-        if let Some(fall) = self_fall_angle(tables) {
+        if let Some(fall) = rule_setting(tables, "fall_angle") {
             let (t0, t1) = (
                 t.first().copied().unwrap_or(0.0),
                 t.last().copied().unwrap_or(1.0),
@@ -710,9 +711,8 @@ impl Family for LbcPush {
             .rev()
             .find(|&k| f[k] != 0.0)
             .map_or(0.0, |k| t[k]);
-        // Crossings of 0.5 before the settling window, tugged and without tugs.
-        let swings = swings(&t, &a, w0);
-        let baseline_swings = super::push_recovery::swings(&t, &ab, w0);
+        // Side-to-side swings before the settling window, tugged and without tugs.
+        let (tugged_swings, baseline_swings) = (swings(&t, &a, w0), swings(&t, &ab, w0));
         let window: Vec<usize> = (0..t.len()).filter(|&k| t[k] >= w0 && t[k] <= w1).collect();
         let settle_gap = window_gap(&t, &a, &ab, [w0, w1]);
         // Settled: the tugged and the mirrored weights each stay within the tolerance over the
@@ -731,8 +731,8 @@ impl Family for LbcPush {
             setting("mirror_tolerance"),
             setting("fall_angle"),
         );
-        let swung = swings as f64 >= min_swings;
-        let from_tugs = baseline_swings < swings;
+        let swung = tugged_swings as f64 >= min_swings;
+        let from_tugs = baseline_swings < tugged_swings;
         let settled = !window.is_empty() && settle_range < settle_tol;
         let mirrored = mirror_gap < mirror_tol;
         // At rest over the window: the body's largest angular rate (finite differences of the
@@ -766,7 +766,7 @@ impl Family for LbcPush {
         );
         md.push_str(&format!(
             "| check (thresholds ours, in the spec) | measured | passes |\n| --- | --- | --- |\n| the weight swings from one side to the other (below 0.25 to above 0.75, or back) at least {} times before t = {} s | {} | {} |\n| the swings come from the tugs: the no-tug baseline swings fewer times before t = {} s | {} | {} |\n| settles: the weight's range over [{}, {}] s (horizon {} s), tugged and mirrored, below {} | {} | {} |\n| mirrored tugs give the mirrored choice: max abs(alpha_fwd − alpha_bwd(mirrored)) below {} | {} | {} |\n| no fall: largest lean from upright (tugged and mirrored) below {} rad, and at rest over the window (body rate below {} rad/s) | {} rad, {} rad/s | {} |\n\nThe last tug ends at t = {} s. Walls at ±{} m from the ankle. Beside the rule: the tugged weight's largest distance from the no-tug baseline's over the window is {} (the tugs may change which strategy is kept).\n",
-            min_swings, sig(w0), swings, swung,
+            min_swings, sig(w0), tugged_swings, swung,
             sig(w0), baseline_swings, from_tugs,
             sig(w0), sig(w1), sig(setting("horizon")), sig(settle_tol), sig(settle_range), settled,
             sig(mirror_tol), sig(mirror_gap), mirrored,
@@ -786,7 +786,7 @@ impl Family for LbcPush {
                 "\nThe tugged weight first leaves the undecided middle (0.25 to 0.75) at t = {} s, for the {} reach{}; when the first tug ends (t = {} s) the hand is at x = {} m (walls at ±{} m).\n",
                 sig(t[k]),
                 if a[k] > 0.75 { "forward" } else { "backward" },
-                if swings == 0 {
+                if tugged_swings == 0 {
                     ", and never swings to the other side afterwards"
                 } else {
                     ""
@@ -797,11 +797,7 @@ impl Family for LbcPush {
             ),
             None => "\nThe tugged weight never leaves the undecided middle (0.25 to 0.75).\n".into(),
         });
-        let range = |v: &[f64]| {
-            let w: Vec<f64> = window.iter().map(|&k| v[k]).collect();
-            w.iter().fold(f64::NEG_INFINITY, |m, x| m.max(*x))
-                - w.iter().fold(f64::INFINITY, |m, x| m.min(*x))
-        };
+        let range = |v: &[f64]| window_range(&t, v, [w0, w1]);
         let mean = |v: &[f64]| window.iter().map(|&k| v[k]).sum::<f64>() / window.len() as f64;
         md.push_str(&format!(
             "\nOver the window the tugged forward weight varies by {} (mean {}); the no-tug baseline's by {} (mean {}); the mirrored run's by {} (mean {}).\n",
@@ -868,7 +864,7 @@ impl Family for LbcPush {
                 if premise {
                     format!(
                         "Ours: the weight swings {} times under the tugs (held and partly need {}; the no-tug baseline {}), keeps one reach over the window (range {}), mirrors (gap {}); with LBC the body leans at most {} rad and is at rest{}, while without a reach the same tugs topple it ({} rad). ",
-                        swings,
+                        tugged_swings,
                         min_swings as usize,
                         baseline_swings,
                         sig(settle_range),
@@ -903,23 +899,30 @@ mod tests {
         spec["params"].clone().try_into().unwrap()
     }
 
-    /// The spec's calibration of the tug force by the premise alone (no LBC run): prints the
-    /// no-reach lean for each candidate force with the spec's tug timing. Run on demand.
+    /// The spec's calibration of the tug force by the premise alone (no LBC run): the tugs'
+    /// force is the smallest candidate whose no-reach runs lean the body beyond the fall angle.
+    /// Prints the no-reach lean of each candidate (`-- --nocapture`).
     #[test]
-    #[ignore]
-    fn tug_force_by_the_premise() {
+    fn the_tug_force_is_the_smallest_candidate_that_topples_the_body() {
         let p = spec_params();
-        for f in [40.0, 80.0, 120.0, 160.0, 200.0, 250.0, 300.0] {
-            let mut q = p.clone();
-            for (g, o) in q.tugs.iter_mut().zip(&p.tugs) {
-                g.force = f * o.force.signum();
-            }
-            println!(
-                "force {f} N: no-reach lean {:.4} rad (fall angle {})",
-                q.no_reach_lean().unwrap(),
-                p.fall_angle
-            );
-        }
+        let toppling = [40.0, 80.0, 120.0, 160.0, 200.0, 250.0, 300.0]
+            .into_iter()
+            .find(|&f| {
+                let mut q = p.clone();
+                for (g, o) in q.tugs.iter_mut().zip(&p.tugs) {
+                    g.force = f * o.force.signum();
+                }
+                let lean = q.no_reach_lean().unwrap();
+                println!(
+                    "force {f} N: no-reach lean {lean:.4} rad (fall angle {})",
+                    p.fall_angle
+                );
+                lean > p.fall_angle
+            });
+        assert!(
+            p.tugs.iter().all(|g| Some(g.force.abs()) == toppling),
+            "{toppling:?}"
+        );
     }
 
     #[test]
