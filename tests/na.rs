@@ -415,6 +415,29 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         }
     }
     figure_exists(&d, "na_fig13_control_dagger");
+    // The dolphin's DAgger (quick: 2 rounds): rounds 0, 1, 2 through the global net; every
+    // round keeps the earlier examples and adds new ones; the wave's distance is the same in
+    // every row and the fraction is the simulator distance over it.
+    assert_eq!(
+        header(&out.join("dolphin_dagger.csv")),
+        "round,examples,dagger_examples,dagger_windows,fine_tune_iterations,best_iteration,best_objective,distance_emulator_m,distance_simulator_m,reference_distance_m,fraction_of_reference,periodicity,period_s,drift_emulator_m,drift_simulator_m,drift_gap_m"
+    );
+    let dd = rows(&out.join("dolphin_dagger.csv"));
+    assert_eq!(dd.len(), 3);
+    let num = |c: &Vec<String>, i: usize| -> f64 { c[i].parse().unwrap() };
+    assert_eq!(num(&dd[0], 2), 0.0);
+    assert!(
+        num(&dd[1], 2) > 0.0 && num(&dd[2], 2) > num(&dd[1], 2),
+        "{dd:?}"
+    );
+    assert!(num(&dd[1], 3) > 0.0 && num(&dd[1], 4) >= 1.0, "{dd:?}");
+    for c in &dd {
+        assert_eq!(c[9], dd[0][9]);
+        let frac = num(c, 8) / num(c, 9);
+        assert!((num(c, 10) - frac).abs() < 1e-12, "{c:?}");
+        assert!((0..16).all(|i| num(c, i).is_finite()), "{c:?}");
+    }
+    figure_exists(&d, "na_fig13_control_dolphin_dagger");
     let r = rows(&out.join("objective.csv"));
     for (task, iters) in [
         ("pendulum", 20),

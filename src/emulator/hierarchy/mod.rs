@@ -54,12 +54,13 @@
 //! composed emulator; `regularize` the §5.3 steps; `training` the sampling, training and
 //! caching of the seven nets.
 
+pub mod dagger;
 mod regularize;
 mod training;
 
 pub use regularize::{BoundRegularizer, Regularizer, Schedule};
 pub use training::{
-    build_dolphin, control_limits, control_process, global_transitions, head,
+    build_dolphin, control_limits, control_process, global_training_data, global_transitions, head,
     hierarchy_rollout_error, net_name, sample_dolphin, simulator, start_state, train_hierarchy,
     BuiltDolphin, HierarchyNet, HierarchySpec, NetReport, EPISODE_S,
 };

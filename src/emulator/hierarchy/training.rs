@@ -21,11 +21,13 @@ use super::{
 use crate::emulator::cache::{fnv1a, read_record, write_record, EmulatorCache, NetRecord};
 use crate::emulator::catalog::{
     noisy, rollout_errors, stop_name, train_mlp, BuildError, TrainMethod, TrainSettings,
+    TrainingData,
 };
 use crate::emulator::dataset::{
     sample_transitions, ControlLimits, ControlProcess, ControlSignal, SamplingConfig,
 };
 use crate::emulator::mlp::{Mlp, WeightInit};
+use crate::emulator::rollout::change_spread;
 use crate::emulator::train::{mse, Dataset, TracePoint};
 use crate::emulator::transform::Normalizer;
 use crate::emulator::{Emulator, Transforms, Transitions};
@@ -286,7 +288,7 @@ pub fn net_name(k: usize) -> String {
     }
 }
 
-fn cache_key(spec: &HierarchySpec, d: &Dolphin, k: usize) -> String {
+pub(super) fn cache_key(spec: &HierarchySpec, d: &Dolphin, k: usize) -> String {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let starts: Vec<Vec<f64>> = (0..2).map(|_| start_state(d, &mut rng)).collect();
     serde_json::json!({
@@ -315,7 +317,7 @@ fn cache_path(cache: &EmulatorCache, spec: &HierarchySpec, key: &str, k: usize) 
     ))
 }
 
-fn shape(spec: &HierarchySpec, k: usize) -> [usize; 3] {
+pub(super) fn shape(spec: &HierarchySpec, k: usize) -> [usize; 3] {
     if k == 0 {
         [GLOBAL_DIM + N_SEGMENTS, spec.global.hidden, GLOBAL_DIM]
     } else {
@@ -324,17 +326,21 @@ fn shape(spec: &HierarchySpec, k: usize) -> [usize; 3] {
     }
 }
 
+/// The global net of a stored record as an [`Emulator`].
+pub(super) fn global_emulator(spec: &HierarchySpec, g: NetRecord) -> Result<Emulator, BuildError> {
+    let mut t = Transforms::unfitted(&global_transforms(), GLOBAL_DIM, N_SEGMENTS)?;
+    t.input_norm = g.input_norm;
+    t.output_norm = g.output_norm;
+    Ok(Emulator::new(t, g.mlp, spec.super_dt())?)
+}
+
 fn assemble(
     d: &Dolphin,
     spec: &HierarchySpec,
     recs: Vec<NetRecord>,
 ) -> Result<DolphinEmulator, BuildError> {
     let mut it = recs.into_iter();
-    let g = it.next().expect("seven records");
-    let mut t = Transforms::unfitted(&global_transforms(), GLOBAL_DIM, N_SEGMENTS)?;
-    t.input_norm = g.input_norm;
-    t.output_norm = g.output_norm;
-    let global = Emulator::new(t, g.mlp, spec.super_dt())?;
+    let global = global_emulator(spec, it.next().expect("seven records"))?;
     let locals = it
         .enumerate()
         .map(|(s, r)| LocalNet {
@@ -411,6 +417,53 @@ pub fn build_dolphin(
     })
 }
 
+/// The global net's one-step data from the sampled mass transitions `train` and `held`: their
+/// global transitions, the transforms fitted on the training ones, both encoded, the training
+/// set with the settings' input noise (stream 30 of the spec's seed), and the rollout-loss
+/// scales ([`change_spread`]). What [`train_hierarchy`] trains the global net on, and what
+/// DAgger ([`super::dagger`]) aggregates onto.
+fn global_data(
+    d: &Dolphin,
+    spec: &HierarchySpec,
+    train: &Transitions,
+    held: &Transitions,
+) -> Result<TrainingData, BuildError> {
+    let (gt, gh) = (global_transitions(d, train), global_transitions(d, held));
+    let transforms = Transforms::fit(&global_transforms(), &gt)?;
+    let (clean_ds, held_ds) = (transforms.encode(&gt), transforms.encode(&gh));
+    let train_ds = noisy(
+        &transforms,
+        &clean_ds,
+        &spec.settings,
+        &mut ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 30)),
+    );
+    let sigma = change_spread(&gt);
+    Ok(TrainingData {
+        train: gt,
+        held: gh,
+        transforms,
+        train_ds,
+        clean_ds,
+        held_ds,
+        sigma,
+    })
+}
+
+/// The global net's training data of `spec`, sampled again from the spec's streams (the same
+/// examples [`train_hierarchy`] trained on).
+pub fn global_training_data(d: &Dolphin, spec: &HierarchySpec) -> Result<TrainingData, BuildError> {
+    let mix = |k: u64| crate::seed::mix_seed(spec.seed, k);
+    let train = sample_dolphin(
+        d,
+        spec.physical_dt,
+        spec.steps,
+        spec.global.examples,
+        mix(1),
+    )?;
+    let held = sample_dolphin(d, spec.physical_dt, spec.steps, spec.held_out(), mix(2))?;
+    global_data(d, spec, &train, &held)
+}
+
 /// Samples the data and trains the global net and the six local nets (in parallel).
 pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecord>, BuildError> {
     let t0 = Instant::now();
@@ -432,15 +485,7 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
             let t1 = Instant::now();
             let mut rng = ChaCha8Rng::seed_from_u64(mix(10 + k as u64));
             if k == 0 {
-                let (gt, gh) = (global_transitions(d, &train), global_transitions(d, &held));
-                let transforms = Transforms::fit(&global_transforms(), &gt)?;
-                let (clean, ho) = (transforms.encode(&gt), transforms.encode(&gh));
-                let tr = noisy(
-                    &transforms,
-                    &clean,
-                    s,
-                    &mut ChaCha8Rng::seed_from_u64(mix(30)),
-                );
+                let data = global_data(d, spec, &train, &held)?;
                 let mut mlp = Mlp::new(
                     GLOBAL_DIM + N_SEGMENTS,
                     spec.global.hidden,
@@ -448,13 +493,20 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                     WeightInit::FanIn,
                     &mut rng,
                 );
-                let rep = train_mlp(&mut mlp, &tr, &ho, spec.global.method, s, mix(20))?;
+                let rep = train_mlp(
+                    &mut mlp,
+                    &data.train_ds,
+                    &data.held_ds,
+                    spec.global.method,
+                    s,
+                    mix(20),
+                )?;
                 Ok(NetRecord {
-                    train_error: mse(&mlp, &clean),
-                    heldout_error: mse(&mlp, &ho),
+                    train_error: mse(&mlp, &data.clean_ds),
+                    heldout_error: mse(&mlp, &data.held_ds),
                     mlp,
-                    input_norm: transforms.input_norm,
-                    output_norm: transforms.output_norm,
+                    input_norm: data.transforms.input_norm,
+                    output_norm: data.transforms.output_norm,
                     dt: spec.super_dt(),
                     train_s: sampling_s + t1.elapsed().as_secs_f64(),
                     stop: stop_name(&rep.stop),

@@ -26,6 +26,7 @@
 
 pub mod anim;
 pub mod dagger;
+pub mod dolphin_dagger;
 pub mod frames;
 
 use crate::control::bptt::{
@@ -205,6 +206,9 @@ pub struct DolphinControl {
     /// How the step scale evolves (default `fixed`).
     #[serde(default)]
     pub step_rule: StepRule,
+    /// DAgger of the global net (ours, issue 11; [`dolphin_dagger`]), if run.
+    #[serde(default)]
+    pub dagger: Option<dolphin_dagger::DolphinDagger>,
 }
 
 fn one() -> usize {
@@ -293,6 +297,9 @@ impl Validate for Params {
             )?;
             ensure(d.restarts >= 1, "dolphin.restarts", "must be >= 1")?;
             d.step_rule.validate("dolphin.step_rule")?;
+            if let Some(dd) = &d.dagger {
+                dd.validate("dolphin.dagger")?;
+            }
         }
         validate_training(&self.training)
     }
@@ -506,6 +513,7 @@ impl Job for Params {
             "distance_emulator_m",
             "distance_simulator_m",
         ]);
+        let mut dolphin_dagger_t = Table::new(&dolphin_dagger::COLUMNS);
         if let Some(d) = &self.dolphin {
             self.run_dolphin(
                 ctx,
@@ -517,6 +525,7 @@ impl Job for Params {
                 &mut trajectory,
                 &mut swim_t,
                 &mut motion_t,
+                &mut dolphin_dagger_t,
             )?;
         }
         Ok(Tables::from([
@@ -525,6 +534,7 @@ impl Job for Params {
             ("physics_sweep", physics_t),
             ("dagger", dagger_t),
             ("dolphin_restarts", restarts_t),
+            ("dolphin_dagger", dolphin_dagger_t),
             ("swim", swim_t),
             ("objective", objective_t),
             ("final", final_t),
@@ -712,33 +722,34 @@ impl Params {
         }
     }
 
-    /// Learns the swim through the global net; replays on the simulator and the reference wave.
-    #[allow(clippy::too_many_arguments)]
-    fn run_dolphin(
+    /// The swim learned through `global` as the headline learns it: `d.restarts` seeded random
+    /// starts (streams 400, 401, …), each `d.iterations` descent steps from its own step scale;
+    /// the run with the lowest best-so-far emulator J is chosen (the simulator distances of the
+    /// others are reported, never used to choose). Returns the chosen run, its best rollout and
+    /// one `dolphin_restarts` row per start. `label` names the net in progress messages.
+    fn learn_swim(
         &self,
         ctx: &RunContext,
         d: &DolphinControl,
-        width: usize,
-        restarts_t: &mut Table,
-        objective_t: &mut Table,
-        final_t: &mut Table,
-        trajectory: &mut Table,
-        swim_t: &mut Table,
-        motion_t: &mut Table,
-    ) -> Result<(), Error> {
-        let spec = d.nets.spec(ctx.seed, self.steps, self.example_scale);
-        let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
-        let body = built.emulator.dolphin().clone();
-        let global = built.emulator.global();
+        global: &crate::emulator::Emulator,
+        body: &Dolphin,
+        label: &str,
+    ) -> Result<
+        (
+            Learned,
+            BestRollout,
+            Vec<Vec<crate::experiment::output::Cell>>,
+        ),
+        Error,
+    > {
         let swim = &d.swim;
-        let objective = swim.objective();
         let knots = swim.knot_layout();
-        let (x0, g0) = swim.start(&body);
+        let (x0, g0) = swim.start(body);
+        let objective = swim.objective();
         let mut bptt = Bptt::new(global, &objective, knots, swim.bounds(), &g0).map_err(other)?;
         let (dt, n) = (d.nets.physical_dt, self.steps);
-        // Seeded random starts; the run with the lowest best-so-far emulator J is scored (the
-        // simulator distances of the others are reported, never used to choose).
         let mut chosen: Option<(Learned, BestRollout)> = None;
+        let mut rows = Vec::with_capacity(d.restarts);
         for restart in 0..d.restarts {
             let mut rng = ctx.rng(400 + restart as u64);
             let v0: Vec<f64> = (0..knots.len())
@@ -747,19 +758,19 @@ impl Params {
             let lambda = bptt.curvature(&v0, self.curvature_iterations);
             if !(lambda.is_finite() && lambda > 0.0) {
                 return Err(other(format!(
-                    "dolphin restart {restart}: step scale λ = {lambda}"
+                    "dolphin{label} restart {restart}: step scale λ = {lambda}"
                 )));
             }
             let schedule = self.schedule(d.eta, d.alpha, d.step_rule, lambda);
-            let (r, best) = ctx.stage(&format!("learn dolphin, start {restart}"), || {
+            let (r, best) = ctx.stage(&format!("learn dolphin{label}, start {restart}"), || {
                 learn_best(&mut bptt, &v0, &schedule, d.iterations, &mut |_, _, _| {
                     false
                 })
             });
             let (_, sim_g) = swim
-                .simulate(&body, &x0, &best.controls, dt, n)
+                .simulate(body, &x0, &best.controls, dt, n)
                 .map_err(other)?;
-            restarts_t.push(row![
+            rows.push(row![
                 restart as i64,
                 lambda,
                 r.trace[0].objective,
@@ -776,6 +787,35 @@ impl Params {
             }
         }
         let (r, best) = chosen.ok_or_else(|| other("dolphin: no restarts"))?;
+        Ok((r, best, rows))
+    }
+
+    /// Learns the swim through the global net; replays on the simulator and the reference wave.
+    #[allow(clippy::too_many_arguments)]
+    fn run_dolphin(
+        &self,
+        ctx: &RunContext,
+        d: &DolphinControl,
+        width: usize,
+        restarts_t: &mut Table,
+        objective_t: &mut Table,
+        final_t: &mut Table,
+        trajectory: &mut Table,
+        swim_t: &mut Table,
+        motion_t: &mut Table,
+        dagger_t: &mut Table,
+    ) -> Result<(), Error> {
+        let spec = d.nets.spec(ctx.seed, self.steps, self.example_scale);
+        let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
+        let body = built.emulator.dolphin().clone();
+        let swim = &d.swim;
+        let knots = swim.knot_layout();
+        let (x0, _) = swim.start(&body);
+        let (dt, n) = (d.nets.physical_dt, self.steps);
+        let (r, best, rows) = self.learn_swim(ctx, d, built.emulator.global(), &body, "")?;
+        for row in rows {
+            restarts_t.push(row);
+        }
         for t in &r.trace {
             objective_t.push(row!["dolphin", t.iteration as i64, t.objective]);
         }
@@ -808,6 +848,18 @@ impl Params {
             swim.distance(&sim_globals),
             swim.distance(&ref_globals),
         );
+        if let Some(dd) = &d.dagger {
+            self.run_dolphin_dagger(
+                ctx,
+                d,
+                dd,
+                &spec,
+                built.emulator.global(),
+                &body,
+                ref_d,
+                dagger_t,
+            )?;
+        }
         for (source, dist, u) in [
             ("emulator", emu_d, &best.controls),
             ("simulator", sim_d, &best.controls),
@@ -1131,6 +1183,7 @@ impl Family for NaControl {
         files.extend(animations(fig, tables)?);
         files.extend(dolphin_animation(fig, tables)?);
         files.extend(dagger::figure(fig, tables)?);
+        files.extend(dolphin_dagger::figure(fig, tables)?);
         Ok(files)
     }
 
@@ -1215,8 +1268,11 @@ impl Family for NaControl {
         .collect::<Result<Vec<_>, _>>()?
         .concat();
         let verdict = Verdict::from_counts(reached, ft.len());
-        let (dagger_md, dagger_why) = dagger::summary(dir)?.unwrap_or_default();
+        let (dagger_md, mut dagger_why) = dagger::summary(dir)?.unwrap_or_default();
         md.push_str(&dagger_md);
+        let (dolphin_md, dolphin_why) = dolphin_dagger::summary(dir)?.unwrap_or_default();
+        md.push_str(&dolphin_md);
+        dagger_why.push_str(&dolphin_why);
         Ok(Findings {
             ours: md,
             verdict,
