@@ -331,9 +331,25 @@ fn na_fig14_quick_momentum_beats_plain_descent() {
             ("table1", "momentum"),
             ("table1", "plain"),
             ("dagger", "momentum"),
-            ("dagger", "plain")
+            ("dagger", "plain"),
+            ("momentum_dagger", "momentum"),
+            ("momentum_dagger", "plain")
         ]
     );
+    // The chain whose learner is the momentum descent: rounds 0, 1, 2 of its own task, each
+    // keeping the earlier examples and adding new ones, the final iterate scored.
+    let chain = rows(&out.join("momentum_dagger_rounds.csv"));
+    assert_eq!(chain.len(), 3);
+    let added: Vec<usize> = chain.iter().map(|c| c[9].parse().unwrap()).collect();
+    assert!(
+        added[0] == 0 && added[1] > 0 && added[2] > added[1],
+        "{added:?}"
+    );
+    for c in &chain {
+        assert_eq!(c[0], "lander_momentum");
+        assert_eq!((c[5].as_str(), c[7].as_str()), ("40", "40"), "{c:?}");
+    }
+    assert_eq!(rows_d[4][1], "2", "quick mode: the chain's round-2 net");
     for c in &rows_d {
         for v in &c[3..] {
             let x: f64 = v.parse().unwrap();

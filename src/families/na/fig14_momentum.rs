@@ -43,7 +43,7 @@
 //! measure, ≤ 1: within tolerance). `dagger_objective` (method, eta, alpha, iteration,
 //! objective): the DAgger-net curves.
 
-use super::fig13_control::dagger::DaggerControl;
+use super::fig13_control::dagger::{ChainLearner, DaggerControl, Round};
 use super::fig13_control::Task;
 use super::table1_structure::{build_emulator, build_spec, validate_nets, validate_training};
 use crate::control::bptt::{
@@ -110,6 +110,20 @@ pub struct Params {
     /// The comparison through the lander's DAgger net (ours), if run.
     #[serde(default)]
     pub dagger: Option<DaggerNet>,
+    /// The comparison through the last net of a DAgger chain whose learner is this
+    /// experiment's momentum descent itself (ours), if run.
+    #[serde(default)]
+    pub momentum_dagger: Option<MomentumDagger>,
+}
+
+/// `[params.momentum_dagger]`: DAgger rounds whose learner is Fig. 14's momentum descent on its
+/// landing objective from hover (`iterations`, `momentum_eta`, `momentum_alpha`), from the
+/// Table 1 lander net, aggregating on the states those controls visit.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MomentumDagger {
+    /// Rounds, perturbations, fine-tuning budget.
+    pub settings: DaggerSettings,
 }
 
 /// `[params.dagger]`: the settings of `na_fig13_control`'s lander DAgger stage (so the nets
@@ -209,6 +223,10 @@ impl Validate for Params {
             let (f13, control) = self.fig13(d);
             control.validate(&f13)?;
         }
+        if let Some(md) = &self.momentum_dagger {
+            let (f13, control) = self.fig13(&self.momentum_chain(md));
+            control.validate(&f13)?;
+        }
         validate_training(&self.training)
     }
 }
@@ -291,6 +309,16 @@ impl Params {
             dagger: Some(control.clone()),
         };
         (p, control)
+    }
+
+    /// The momentum chain as a [`DaggerNet`] (its `learner` only keys the nets: the rounds
+    /// are learned by this experiment's momentum descent).
+    pub fn momentum_chain(&self, md: &MomentumDagger) -> DaggerNet {
+        DaggerNet {
+            iterations: self.iterations,
+            learner: StepRule::Fixed,
+            settings: md.settings,
+        }
     }
 
     /// The start state with a unit quaternion.
@@ -445,6 +473,76 @@ impl Job for Params {
                 dagger_t.push(self.dagger_row("dagger", round, d, scores, &r, &rep, dn));
             }
         }
+        let mut chain_rounds = Table::new(&super::fig13_control::dagger::COLUMNS);
+        if let Some(md) = &self.momentum_dagger {
+            let dn = self.momentum_chain(md);
+            let (f13, control) = self.fig13(&dn);
+            let mut task = f13.tasks[0].clone();
+            task.name = "lander_momentum".into();
+            let momentum = Descent::Momentum {
+                eta: self.momentum_eta,
+                alpha: self.momentum_alpha,
+            };
+            let mut chain_sim = model.simulator();
+            let mut learn = |net: &Emulator, seed: u64| -> Result<Round, Error> {
+                let mut p = self.problem(ctx, net, &objective, &x0)?;
+                let (r, rep) = self.descend(
+                    ctx,
+                    &mut p,
+                    &momentum,
+                    chain_sim.as_mut(),
+                    &x0,
+                    "momentum DAgger ",
+                );
+                let emu_final = &r.states[self.horizon * n..];
+                Ok(Round {
+                    emulator_error: task.final_error(emu_final),
+                    simulator_error: task.final_error(&rep.states[self.horizon * n..]),
+                    simulator_spread: f13.open_loop_spread(
+                        &task,
+                        &x0,
+                        &r.controls,
+                        emu_final,
+                        seed,
+                    ),
+                    iterations: r.trace.last().map_or(0, |t| t.iteration),
+                    to_goal: None,
+                    best_iteration: r.trace.len().saturating_sub(1),
+                    controls: r.controls,
+                })
+            };
+            let key = serde_json::json!({
+                "learner": "na_fig14_momentum momentum descent from hover",
+                "momentum_eta": self.momentum_eta,
+                "momentum_alpha": self.momentum_alpha,
+                "iterations": self.iterations,
+                "touchdown_states": self.touchdown_states,
+                "touchdown_tolerance": self.touchdown_tolerance,
+                "effort_mu": self.effort_mu,
+                "curvature_iterations": self.curvature_iterations,
+            });
+            let net = f13.run_dagger_with(
+                ctx,
+                &control,
+                &task,
+                &spec,
+                &trained,
+                &x0,
+                &mut chain_rounds,
+                Some(ChainLearner {
+                    key,
+                    learn: &mut learn,
+                }),
+            )?;
+            let mut problem = self.problem(ctx, &net, &objective, &x0)?;
+            for d in &compared {
+                let label = "momentum-DAgger net ";
+                let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, label);
+                let scores = self.scores(problem.scale, &r, &rep);
+                let round = md.settings.rounds as i64;
+                dagger_t.push(self.dagger_row("momentum_dagger", round, d, scores, &r, &rep, &dn));
+            }
+        }
         Ok(Tables::from([
             ("objective", objective_t),
             ("gradient", gradient_t),
@@ -452,6 +550,7 @@ impl Job for Params {
             ("trajectory", trajectory),
             ("dagger", dagger_t),
             ("dagger_objective", dagger_objective),
+            ("momentum_dagger_rounds", chain_rounds),
         ]))
     }
 }
@@ -871,6 +970,48 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
     let held = sim_e[dm] <= 1.0;
     let partly = sim_d[dm] <= LANDING_DISTANCE;
     let v = Verdict::graded(held, partly);
+    // The chain whose learner is the momentum descent itself (rule in the spec).
+    let chain = match (
+        find("momentum_dagger", "momentum"),
+        find("momentum_dagger", "plain"),
+    ) {
+        (Some(cm), Some(cp)) => {
+            let v = Verdict::graded(sim_e[cm] <= 1.0, sim_d[cm] <= LANDING_DISTANCE);
+            // The chain's rounds: the learner's final error on its net and on the simulator.
+            let by_round = match read_csv(&dir.join("momentum_dagger_rounds.csv")) {
+                Ok(rd) => {
+                    let (e, s) = (
+                        df_f64(&rd, "final_error_emulator")?,
+                        df_f64(&rd, "final_error_simulator")?,
+                    );
+                    let f = |v: &[f64]| v.iter().map(|&x| sig(x)).collect::<Vec<_>>().join(" -> ");
+                    let short = if e.last().is_some_and(|&x| x > 1.0) {
+                        " (at the last round above 1 on the net itself: the descent stops short of the goal on the substrate it learns through, so no accuracy of the net would bring its controls within tolerance)"
+                    } else {
+                        ""
+                    };
+                    format!(
+                        " By round, the chain's momentum controls end with final error {} on the simulator and {} on the net learned through{short}.",
+                        f(&s),
+                        f(&e)
+                    )
+                }
+                Err(_) => String::new(),
+            };
+            format!(
+                " Through the round-{} net of a DAgger chain whose learner is this momentum descent itself (ours; aggregated on the states its controls visit, from the Table 1 net): momentum ends at J = {} (plain: {}); replayed on the simulator its controls land {} m from the target with final error {} (plain's {} m, {}).{by_round} Fig. 14 through the momentum-DAgger net (ours; the same rule): {}.",
+                round[cm],
+                sig(j1[cm]),
+                sig(j1[cp]),
+                sig(sim_d[cm]),
+                sig(sim_e[cm]),
+                sig(sim_d[cp]),
+                sig(sim_e[cp]),
+                v.label()
+            )
+        }
+        _ => String::new(),
+    };
     Ok(Some((
         md,
         format!(
@@ -889,7 +1030,7 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
             sig(sim_e[dp]),
             LANDING_DISTANCE,
             v.label()
-        ),
+        ) + &chain,
     )))
 }
 

@@ -100,19 +100,35 @@ pub const SPREAD_REPLAYS: usize = 8;
 pub const SPREAD_FRACTION: f64 = 0.01;
 
 /// One round's learned controls, scored.
-struct Round {
-    controls: Vec<f64>,
-    emulator_error: f64,
-    simulator_error: f64,
+pub(crate) struct Round {
+    /// Per-step controls (M m).
+    pub controls: Vec<f64>,
+    /// Final error of the task on the net learned through.
+    pub emulator_error: f64,
+    /// Final error of the controls replayed on the simulator.
+    pub simulator_error: f64,
     /// Range (max − min) of the simulator final error over [`SPREAD_REPLAYS`] replays of the
     /// controls each perturbed by uniform noise of up to [`SPREAD_FRACTION`] of its channel's
     /// half-range (clamped to the bounds): how much the open-loop outcome moves under control
     /// changes far smaller than any emulator's error, i.e. how exactly a net would have to
     /// predict the task for its learned controls to transfer.
-    simulator_spread: f64,
-    iterations: usize,
-    to_goal: Option<usize>,
-    best_iteration: usize,
+    pub simulator_spread: f64,
+    /// Iterations run.
+    pub iterations: usize,
+    /// First iteration at the goal on the net, if known and reached.
+    pub to_goal: Option<usize>,
+    /// The iterate scored.
+    pub best_iteration: usize,
+}
+
+/// A DAgger learner other than the task's own (Fig. 14's momentum descent on its landing
+/// objective): `key` identifies it in the cache keys of the chain's nets, `learn` learns and
+/// scores one round through the given net (seeded by the second argument).
+pub(crate) struct ChainLearner<'a> {
+    /// What identifies the learner (added to the derived nets' keys).
+    pub key: serde_json::Value,
+    /// One round's learning and scoring through a net.
+    pub learn: &'a mut dyn FnMut(&Emulator, u64) -> Result<Round, Error>,
 }
 
 impl Params {
@@ -163,13 +179,38 @@ impl Params {
             self.steps,
             emu_final,
         );
-        // Sensitivity of the open-loop outcome to tiny control perturbations.
+        let simulator_spread = self.open_loop_spread(task, x0, &best.controls, emu_final, seed);
+        Ok(Round {
+            emulator_error: task.final_error(emu_final),
+            simulator_error: task.final_error(&rep.states[task.horizon * n..]),
+            simulator_spread,
+            iterations: run.trace.last().map_or(0, |t| t.iteration),
+            to_goal,
+            best_iteration: run.best_iteration,
+            controls: best.controls,
+        })
+    }
+
+    /// Range of the simulator final error of `task` over [`SPREAD_REPLAYS`] replays of
+    /// `controls` from `x0`, each perturbed uniformly by up to [`SPREAD_FRACTION`] of its
+    /// channel's half-range within the task's bounds (stream `seed`): see [`Round`].
+    pub(crate) fn open_loop_spread(
+        &self,
+        task: &Task,
+        x0: &[f64],
+        controls: &[f64],
+        emu_final: &[f64],
+        seed: u64,
+    ) -> f64 {
+        let model = task.net.model;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        let mut sim = model.simulator();
         let bounds = task.bounds();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let mut perturbed = best.controls.clone();
+        let mut perturbed = controls.to_vec();
         for _ in 0..SPREAD_REPLAYS {
-            for (i, (v, c)) in perturbed.iter_mut().zip(&best.controls).enumerate() {
+            for (i, (v, c)) in perturbed.iter_mut().zip(controls).enumerate() {
                 let j = i % m;
                 let h = 0.5 * (bounds.high[j] - bounds.low[j]);
                 let e: f64 = rand::Rng::random_range(&mut rng, -1.0..=1.0);
@@ -186,15 +227,7 @@ impl Params {
             let err = task.final_error(&r.states[task.horizon * n..]);
             (lo, hi) = (lo.min(err), hi.max(err));
         }
-        Ok(Round {
-            emulator_error: task.final_error(emu_final),
-            simulator_error: task.final_error(&rep.states[task.horizon * n..]),
-            simulator_spread: hi - lo,
-            iterations: run.trace.last().map_or(0, |t| t.iteration),
-            to_goal,
-            best_iteration: run.best_iteration,
-            controls: best.controls,
-        })
+        hi - lo
     }
 
     /// The DAgger rounds of `task` from its base net `base` (built from `spec`), one row each
@@ -211,6 +244,23 @@ impl Params {
         base: &Trained,
         x0: &[f64],
         table: &mut Table,
+    ) -> Result<Emulator, Error> {
+        self.run_dagger_with(ctx, d, task, spec, base, x0, table, None)
+    }
+
+    /// [`Params::run_dagger`] with the rounds learned by `chain` instead of the task's own
+    /// learner (its key joins the nets' cache keys; `d.learner` is then only part of the key).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn run_dagger_with(
+        &self,
+        ctx: &crate::experiment::RunContext,
+        d: &DaggerControl,
+        task: &Task,
+        spec: &BuildSpec,
+        base: &Trained,
+        x0: &[f64],
+        table: &mut Table,
+        mut chain: Option<ChainLearner<'_>>,
     ) -> Result<Emulator, Error> {
         let model = task.net.model;
         let (n, m) = (model.state_dim(), model.control_dim());
@@ -229,9 +279,13 @@ impl Params {
             crate::emulator::cache::fnv1a(tag(task).as_bytes()),
         );
         for round in 0..=d.settings.rounds {
+            let seed = mix_seed(stream, 1000 + round as u64);
             let r = ctx.stage(
                 &format!("dagger {} round {round}: learn", task.name),
-                || self.dagger_learn(task, d, &net, x0, mix_seed(stream, 1000 + round as u64)),
+                || match chain.as_mut() {
+                    Some(c) => (c.learn)(&net, seed),
+                    None => self.dagger_learn(task, d, &net, x0, seed),
+                },
             )?;
             // Drift under the neutral control from the start: emulator vs simulator.
             let plan = Plan {
@@ -282,7 +336,10 @@ impl Params {
                 .map_err(other)?;
             train.extend(&t);
             held.extend(&h);
-            let key = derived_key(task, d, self.curvature_iterations, round + 1);
+            let mut key = derived_key(task, d, self.curvature_iterations, round + 1);
+            if let Some(c) = &chain {
+                key["chain_learner"] = c.key.clone();
+            }
             let next = match cache.load_derived(spec, &tag(task), &key) {
                 Some(t) => t,
                 None => {

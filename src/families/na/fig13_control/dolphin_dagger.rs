@@ -119,7 +119,7 @@ impl Params {
         let settings = TrainSettings {
             rollout_k: dd.rollout_k,
             rollout_weight: dd.rollout_weight,
-            ..spec.settings.clone()
+            ..spec.settings
         };
         let stream = mix_seed(spec.seed, crate::emulator::cache::fnv1a(b"dagger-dolphin"));
         let mut sim = simulator(body);
