@@ -452,6 +452,15 @@ fn global_data(
 /// The global net's training data of `spec`, sampled again from the spec's streams (the same
 /// examples [`train_hierarchy`] trained on).
 pub fn global_training_data(d: &Dolphin, spec: &HierarchySpec) -> Result<TrainingData, BuildError> {
+    let (train, held) = sample_spec(d, spec)?;
+    global_data(d, spec, &train, &held)
+}
+
+/// The mass-state training and held-out transitions of `spec` (streams 1 and 2 of its seed).
+fn sample_spec(
+    d: &Dolphin,
+    spec: &HierarchySpec,
+) -> Result<(Transitions, Transitions), BuildError> {
     let mix = |k: u64| crate::seed::mix_seed(spec.seed, k);
     let train = sample_dolphin(
         d,
@@ -461,21 +470,14 @@ pub fn global_training_data(d: &Dolphin, spec: &HierarchySpec) -> Result<Trainin
         mix(1),
     )?;
     let held = sample_dolphin(d, spec.physical_dt, spec.steps, spec.held_out(), mix(2))?;
-    global_data(d, spec, &train, &held)
+    Ok((train, held))
 }
 
 /// Samples the data and trains the global net and the six local nets (in parallel).
 pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecord>, BuildError> {
     let t0 = Instant::now();
     let mix = |k: u64| crate::seed::mix_seed(spec.seed, k);
-    let train = sample_dolphin(
-        d,
-        spec.physical_dt,
-        spec.steps,
-        spec.global.examples,
-        mix(1),
-    )?;
-    let held = sample_dolphin(d, spec.physical_dt, spec.steps, spec.held_out(), mix(2))?;
+    let (train, held) = sample_spec(d, spec)?;
     let sampling_s = t0.elapsed().as_secs_f64();
     let s = &spec.settings;
     let jobs: Vec<usize> = (0..=N_SEGMENTS).collect();
