@@ -565,6 +565,12 @@ fn na_baselines_swim_quick_traces_every_method_on_its_substrates() {
         ("simplex", "simulator"),
         ("hill_climbing", "emulator"),
         ("hill_climbing", "simulator"),
+        // The same runs on the dolphin's last-round DAgger net (ours).
+        ("bptt_momentum", "dagger_emulator"),
+        ("bptt_plain", "dagger_emulator"),
+        ("annealing", "dagger_emulator"),
+        ("simplex", "dagger_emulator"),
+        ("hill_climbing", "dagger_emulator"),
     ];
     for (method, substrate) in runs {
         let trace: Vec<(usize, f64)> = r
@@ -581,12 +587,18 @@ fn na_baselines_swim_quick_traces_every_method_on_its_substrates() {
         // The objective column is the best so far: it never rises.
         assert!(trace.windows(2).all(|w| w[1].1 <= w[0].1));
     }
-    // Exactly these runs: BPTT only on the emulator.
+    // Exactly these runs: BPTT only on the nets.
     assert!(r
         .iter()
         .all(|c| runs.contains(&(c[0].as_str(), c[1].as_str()))));
     let f = rows(&out.join("final.csv"));
     assert_eq!(f.len(), runs.len());
+    // The DAgger-net runs' target is BPTT-momentum's best J there, which its own run reaches.
+    let dagger_mom = f
+        .iter()
+        .find(|c| c[0] == "bptt_momentum" && c[1] == "dagger_emulator")
+        .unwrap();
+    assert_eq!(dagger_mom[5], dagger_mom[10], "{dagger_mom:?}");
     figure_exists(&d, "na_baselines_swim_objective");
 }
 

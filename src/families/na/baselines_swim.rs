@@ -196,6 +196,63 @@ pub struct Params {
     pub simplex: SimplexSettings,
     /// Parallel hill climbing.
     pub hill_climbing: ClimbSettings,
+    /// The same runs again on the dolphin's last-round DAgger global net of
+    /// `na_fig13_control` (ours), if run.
+    #[serde(default)]
+    pub dagger: Option<SwimDagger>,
+}
+
+/// `[params.dagger]`: what, besides this file's task, nets and BPTT settings, determines
+/// `na_fig13_control`'s dolphin DAgger chain (its `[params.dolphin]` restarts and
+/// `[params.dolphin.dagger]`), so its cached nets are the ones searched on.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SwimDagger {
+    /// Seeded restarts of the chain's learner.
+    pub restarts: usize,
+    /// Rounds, perturbations, fine-tuning budget.
+    pub settings: crate::emulator::dagger::DaggerSettings,
+    /// Super-steps of the fine-tuning's rollout windows.
+    pub rollout_k: usize,
+    /// Weight of the rollout loss.
+    pub rollout_weight: f64,
+}
+
+/// The substrate name of runs on the DAgger net.
+pub const DAGGER_SUBSTRATE: &str = "dagger_emulator";
+
+impl Params {
+    /// `na_fig13_control`'s parameters with the dolphin task alone and its DAgger chain, as
+    /// this file states them: what keys and builds the DAgger nets.
+    pub fn fig13(&self, d: &SwimDagger) -> super::fig13_control::Params {
+        use super::fig13_control::dolphin_dagger::DolphinDagger;
+        use super::fig13_control::DolphinControl;
+        super::fig13_control::Params {
+            steps: self.steps,
+            curvature_iterations: self.curvature_iterations,
+            example_scale: self.example_scale,
+            tasks: vec![],
+            training: self.nets.training,
+            dolphin: Some(DolphinControl {
+                nets: self.nets.clone(),
+                swim: self.swim.clone(),
+                iterations: self.bptt.iterations,
+                eta: self.bptt.eta,
+                alpha: self.bptt.alpha,
+                init_spread: self.init_spread,
+                restarts: d.restarts,
+                step_rule: crate::control::bptt::StepRule::Fixed,
+                dagger: Some(DolphinDagger {
+                    settings: d.settings,
+                    rollout_k: d.rollout_k,
+                    rollout_weight: d.rollout_weight,
+                }),
+            }),
+            sweep: None,
+            physics_sweep: None,
+            dagger: None,
+        }
+    }
 }
 
 impl Validate for Params {
@@ -214,6 +271,15 @@ impl Validate for Params {
         )?;
         self.swim.validate("swim")?;
         self.nets.validate("nets", self.example_scale)?;
+        if let Some(d) = &self.dagger {
+            ensure(d.restarts >= 1, "dagger.restarts", "must be >= 1")?;
+            super::fig13_control::dolphin_dagger::DolphinDagger {
+                settings: d.settings,
+                rollout_k: d.rollout_k,
+                rollout_weight: d.rollout_weight,
+            }
+            .validate("dagger")?;
+        }
         let b = &self.bptt;
         ensure(b.iterations >= 1, "bptt.iterations", "must be >= 1")?;
         positive("bptt.eta", b.eta)?;
@@ -330,6 +396,66 @@ impl Params {
     }
 }
 
+impl Params {
+    /// The two BPTT runs (momentum, plain) through `problem`'s net from `v0`, with the step
+    /// scale λ measured there first (its cost charged to both); `substrate` names the net
+    /// (`emulator`: the Table 1 net, whose stages keep their plain names).
+    fn bptt_runs(
+        &self,
+        ctx: &RunContext,
+        problem: &BpttProblem<'_, crate::emulator::Emulator>,
+        v0: &[f64],
+        substrate: &'static str,
+    ) -> Result<Vec<Run>, Error> {
+        let label = |name: &str| {
+            if substrate == "emulator" {
+                name.to_string()
+            } else {
+                format!("{name} ({substrate})")
+            }
+        };
+        let (lambda, spent) = ctx.stage(&label("curvature"), || {
+            problem.curvature(v0, self.curvature_iterations)
+        });
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return Err(super::other(format!(
+                "dolphin ({substrate}): step scale λ = {lambda}"
+            )));
+        }
+        let b = &self.bptt;
+        let mut runs = vec![];
+        for (method, descent) in [
+            (
+                "bptt_momentum",
+                Descent::Momentum {
+                    eta: b.eta,
+                    alpha: b.alpha,
+                },
+            ),
+            ("bptt_plain", Descent::Plain { eta: b.plain_eta }),
+        ] {
+            let (result, _) = ctx
+                .stage(&label(method), || {
+                    bptt_search(
+                        problem,
+                        v0,
+                        descent,
+                        lambda,
+                        &Budget::iterations(b.iterations),
+                        spent,
+                    )
+                })
+                .map_err(super::other)?;
+            runs.push(Run {
+                method,
+                substrate,
+                result,
+            });
+        }
+        Ok(runs)
+    }
+}
+
 fn opt(v: Option<f64>) -> f64 {
     v.unwrap_or(f64::NAN)
 }
@@ -367,41 +493,7 @@ impl Job for Params {
         .map_err(super::other)?;
 
         let mut runs: Vec<Run> = vec![];
-        let (lambda, spent) = ctx.stage("curvature", || {
-            emulator.curvature(&v0, self.curvature_iterations)
-        });
-        if !(lambda.is_finite() && lambda > 0.0) {
-            return Err(super::other(format!("dolphin: step scale λ = {lambda}")));
-        }
-        let b = &self.bptt;
-        for (method, descent) in [
-            (
-                "bptt_momentum",
-                Descent::Momentum {
-                    eta: b.eta,
-                    alpha: b.alpha,
-                },
-            ),
-            ("bptt_plain", Descent::Plain { eta: b.plain_eta }),
-        ] {
-            let (result, _) = ctx
-                .stage(method, || {
-                    bptt_search(
-                        &emulator,
-                        &v0,
-                        descent,
-                        lambda,
-                        &Budget::iterations(b.iterations),
-                        spent,
-                    )
-                })
-                .map_err(super::other)?;
-            runs.push(Run {
-                method,
-                substrate: "emulator",
-                result,
-            });
-        }
+        runs.extend(self.bptt_runs(ctx, &emulator, &v0, "emulator")?);
         let pb = ctx.progress(2 * SEARCHES.len() as u64, "gradient-free searches");
         for (k, method) in SEARCHES.into_iter().enumerate() {
             let seed = mix_seed(ctx.seed, 410 + k as u64);
@@ -425,6 +517,33 @@ impl Job for Params {
             pb.inc(1);
         }
         pb.finish_and_clear();
+
+        // The same runs on the dolphin's last-round DAgger net (ours), from the same start.
+        let dagger_net = match &self.dagger {
+            Some(d) => Some(self.fig13(d).dolphin_dagger_net(ctx)?),
+            None => None,
+        };
+        let dagger_bptt = match &dagger_net {
+            Some(net) => {
+                Some(Bptt::new(net, &objective, knots, swim.bounds(), &g0).map_err(super::other)?)
+            }
+            None => None,
+        };
+        if let Some(b) = &dagger_bptt {
+            let problem = BpttProblem::new(b);
+            runs.extend(self.bptt_runs(ctx, &problem, &v0, DAGGER_SUBSTRATE)?);
+            for (k, method) in SEARCHES.into_iter().enumerate() {
+                let seed = mix_seed(ctx.seed, 410 + k as u64);
+                let result = ctx.stage(&format!("{method} (DAgger net)"), || {
+                    self.search(method, &problem, &v0, &self.budget.emulator, seed)
+                })?;
+                runs.push(Run {
+                    method,
+                    substrate: DAGGER_SUBSTRATE,
+                    result,
+                });
+            }
+        }
 
         let mut baselines = Table::new(&[
             "method",
@@ -469,6 +588,11 @@ impl Job for Params {
             .position(|r| r.method == "bptt_momentum")
             .expect("the momentum run is first");
         let targets = (evaluated[momentum].0, evaluated[momentum].1);
+        // On the DAgger net: its own momentum run's best J there.
+        let dagger_target = runs
+            .iter()
+            .find(|r| r.method == "bptt_momentum" && r.substrate == DAGGER_SUBSTRATE)
+            .map_or(f64::NAN, |r| r.result.best_value);
         let mut final_t = Table::new(&[
             "method",
             "substrate",
@@ -487,10 +611,10 @@ impl Job for Params {
             "best_iteration",
         ]);
         for (r, &(je, js, de, ds)) in runs.iter().zip(&evaluated) {
-            let target = if r.substrate == "emulator" {
-                targets.0
-            } else {
-                targets.1
+            let target = match r.substrate {
+                "emulator" => targets.0,
+                DAGGER_SUBSTRATE => dagger_target,
+                _ => targets.1,
             };
             let trace = &r.result.trace;
             let last = trace.last().expect("a search has iteration 0");
@@ -542,9 +666,11 @@ impl Family for NaBaselines {
             t.f64s("seconds"),
             t.f64s("objective"),
         );
-        let series = |x: &dyn Fn(usize) -> f64| -> Vec<Series> {
+        // `dagger`: the runs on the DAgger net alone, else the others.
+        let series = |x: &dyn Fn(usize) -> f64, dagger: bool| -> Vec<Series> {
             curves(&meth, &sub)
                 .iter()
+                .filter(|(_, s)| (s == DAGGER_SUBSTRATE) == dagger)
                 .map(|(m, s)| {
                     let pts = (0..meth.len())
                         .filter(|&r| &meth[r] == m && &sub[r] == s && obj[r].is_finite())
@@ -561,13 +687,13 @@ impl Family for NaBaselines {
                 })
                 .collect()
         };
-        let panels = vec![
+        let mut panels = vec![
             Panel {
                 title: "dolphin swim: objective vs iterations".into(),
                 x_label: "iteration + 1 (log)".into(),
                 y_label: "best objective J (effort - distance in m)".into(),
                 log_x: true,
-                series: series(&|r| it[r] + 1.0),
+                series: series(&|r| it[r] + 1.0, false),
                 ..Panel::default()
             },
             Panel {
@@ -575,11 +701,23 @@ impl Family for NaBaselines {
                 x_label: "wall-clock seconds (log)".into(),
                 y_label: "best objective J (effort - distance in m)".into(),
                 log_x: true,
-                series: series(&|r| secs[r]),
+                series: series(&|r| secs[r], false),
                 ..Panel::default()
             },
         ];
-        fig.draw("objective", &Figure::grid(panels, 2))
+        let on_dagger = series(&|r| it[r] + 1.0, true);
+        if !on_dagger.is_empty() {
+            panels.push(Panel {
+                title: "the same on the DAgger global net (ours)".into(),
+                x_label: "iteration + 1 (log)".into(),
+                y_label: "best objective J on the DAgger net".into(),
+                log_x: true,
+                series: on_dagger,
+                ..Panel::default()
+            });
+        }
+        let cols = panels.len();
+        fig.draw("objective", &Figure::grid(panels, cols))
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
@@ -628,40 +766,64 @@ impl Family for NaBaselines {
                 sig(d_sim[r])
             ));
         }
-        let k_bptt = k_to[mom];
-        let bptt_fast = k_bptt.is_finite() && k_bptt <= 30.0;
-        // Per gradient-free method on the emulator: needs >= 10x BPTT's iterations (or never
-        // gets there within its budget).
-        let mut slow = vec![];
-        let mut fast = vec![];
-        let mut notes = vec![];
-        for m in SEARCHES {
-            let Some(r) = row_of(m, "emulator") else {
-                continue;
-            };
-            let ok = !k_to[r].is_finite() || k_to[r] >= 10.0 * k_bptt.max(1.0);
-            if ok {
-                slow.push(m);
-            } else {
-                fast.push(m);
+        // The rule on one emulator substrate: BPTT-momentum's row there, whether it is fast
+        // (its result within 30 iterations), the gradient-free methods that need >= 10x its
+        // iterations there (or never get there within their budget) and those that do not,
+        // a note per method, the farthest the methods' knots learned there swim on the
+        // simulator, and the verdict (held: fast, every method slow, BPTT's knots swim at
+        // least as far; partly: fast and some method slow).
+        let judge = |substrate: &str| -> Option<Judged> {
+            let mom = row_of("bptt_momentum", substrate)?;
+            let k_bptt = k_to[mom];
+            let bptt_fast = k_bptt.is_finite() && k_bptt <= 30.0;
+            let (mut slow, mut fast, mut notes) = (vec![], vec![], vec![]);
+            for m in SEARCHES {
+                let Some(r) = row_of(m, substrate) else {
+                    continue;
+                };
+                let ok = !k_to[r].is_finite() || k_to[r] >= 10.0 * k_bptt.max(1.0);
+                if ok {
+                    slow.push(m);
+                } else {
+                    fast.push(m);
+                }
+                notes.push(if k_to[r].is_finite() {
+                    format!(
+                        "{m} reached it after {} iterations ({}x, {} s vs {} s)",
+                        k_to[r],
+                        sig(k_to[r] / k_bptt.max(1.0)),
+                        sig(s_to[r]),
+                        sig(s_to[mom])
+                    )
+                } else {
+                    format!(
+                        "{m} never did in {} iterations / {} evaluations (best J {})",
+                        iters[r],
+                        evals[r],
+                        sig(j_sub[r])
+                    )
+                });
             }
-            notes.push(if k_to[r].is_finite() {
-                format!(
-                    "{m} reached it after {} iterations ({}x, {} s vs {} s)",
-                    k_to[r],
-                    sig(k_to[r] / k_bptt.max(1.0)),
-                    sig(s_to[r]),
-                    sig(s_to[mom])
-                )
-            } else {
-                format!(
-                    "{m} never did in {} iterations / {} evaluations (best J {})",
-                    iters[r],
-                    evals[r],
-                    sig(j_sub[r])
-                )
-            });
-        }
+            let rival_sim = SEARCHES
+                .iter()
+                .filter_map(|m| row_of(m, substrate))
+                .map(|r| d_sim[r])
+                .fold(f64::NEG_INFINITY, f64::max);
+            let verdict = Verdict::graded(
+                bptt_fast && fast.is_empty() && !slow.is_empty() && d_sim[mom] >= rival_sim,
+                bptt_fast && !slow.is_empty(),
+            );
+            Some(Judged {
+                mom,
+                k_bptt,
+                notes,
+                rival_sim,
+                verdict,
+            })
+        };
+        let main = judge("emulator").ok_or_else(|| super::other("no bptt_momentum run"))?;
+        let (k_bptt, notes, rival_sim, verdict) =
+            (main.k_bptt, &main.notes, main.rival_sim, main.verdict);
         let sim_notes: Vec<String> = SEARCHES
             .iter()
             .filter_map(|m| row_of(m, "simulator"))
@@ -685,18 +847,6 @@ impl Family for NaBaselines {
                 }
             })
             .collect();
-        // Judged on the physical model too: BPTT's emulator-learned knots must swim on the
-        // simulator at least as far as every gradient-free method's emulator-learned knots.
-        let rival_sim = SEARCHES
-            .iter()
-            .filter_map(|m| row_of(m, "emulator"))
-            .map(|r| d_sim[r])
-            .fold(f64::NEG_INFINITY, f64::max);
-        let transfers = d_sim[mom] >= rival_sim;
-        let verdict = Verdict::graded(
-            bptt_fast && fast.is_empty() && !slow.is_empty() && transfers,
-            bptt_fast && !slow.is_empty(),
-        );
         // How the momentum iterate's J moved (a monotone descent never rises).
         let b = read_csv(&dir.join("baselines.csv"))?;
         let (bm, bs, cur) = (
@@ -712,6 +862,19 @@ impl Family for NaBaselines {
         let sim_target = (0..meth.len())
             .find(|&r| sub[r] == "simulator")
             .map_or(f64::NAN, |r| target[r]);
+        // The same rule on the DAgger net (ours; a line beside the headline, rule in the spec).
+        let dagger_line = match judge(DAGGER_SUBSTRATE) {
+            Some(g) => format!(
+                " On the dolphin's last-round DAgger global net (ours, substrate `{DAGGER_SUBSTRATE}`, the same start and budgets): BPTT with momentum reaches its best J = {} at iteration {}; {}. Replayed on the simulator, BPTT's knots learned there swim {} m, the gradient-free methods' at most {} m. The same rule on the DAgger net: {}.",
+                sig(j_sub[g.mom]),
+                g.k_bptt,
+                g.notes.join("; "),
+                sig(d_sim[g.mom]),
+                sig(g.rival_sim),
+                g.verdict.label()
+            ),
+            None => String::new(),
+        };
         Ok(Findings {
             ours: md,
             verdict,
@@ -728,14 +891,56 @@ impl Family for NaBaselines {
                 sim_notes.join("; "),
                 sig(d_sim[mom]),
                 sig(rival_sim)
-            ),
+            ) + &dagger_line,
         })
     }
+}
+
+/// The verdict rule's parts on one emulator substrate (see `report`).
+struct Judged {
+    mom: usize,
+    k_bptt: f64,
+    notes: Vec<String>,
+    rival_sim: f64,
+    verdict: Verdict,
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The DAgger net searched on is `na_fig13_control`'s: this file's task, nets, BPTT
+    /// settings and `[params.dagger]` rebuild exactly its dolphin task and chain (and its
+    /// steps, step-scale iterations and example scale), so the chain's cache keys agree.
+    #[test]
+    fn the_dagger_net_is_fig13s_dolphin_chain() {
+        use crate::experiment::spec::SpecFile;
+        let params = |file: &str| -> toml::Table {
+            let f = SpecFile::load(std::path::Path::new(file)).unwrap();
+            f.raw.params
+        };
+        let ours: Params = toml::Value::Table(params("experiments/na_baselines_swim.toml"))
+            .try_into()
+            .unwrap();
+        let theirs: crate::families::na::fig13_control::Params =
+            toml::Value::Table(params("experiments/na_fig13_control.toml"))
+                .try_into()
+                .unwrap();
+        let built = ours.fig13(&ours.dagger.expect("the spec runs the DAgger net"));
+        assert_eq!(
+            serde_json::to_value(&built.dolphin).unwrap(),
+            serde_json::to_value(&theirs.dolphin).unwrap(),
+            "dolphin task and chain"
+        );
+        assert_eq!(
+            (built.steps, built.curvature_iterations, built.example_scale),
+            (
+                theirs.steps,
+                theirs.curvature_iterations,
+                theirs.example_scale
+            )
+        );
+    }
 
     #[test]
     fn annealing_cools_from_start_to_end_over_the_budget() {

@@ -108,7 +108,7 @@ impl Params {
         body: &Dolphin,
         reference_m: f64,
         table: &mut Table,
-    ) -> Result<(), Error> {
+    ) -> Result<Emulator, Error> {
         let swim = &d.swim;
         let (x0, g0) = swim.start(body);
         let (dt, n, k) = (d.nets.physical_dt, self.steps, dd.rollout_k);
@@ -260,7 +260,36 @@ impl Params {
             fine_tune_iterations = rec.trace.last().map_or(0, |t| t.iteration);
             net = next_net;
         }
-        Ok(())
+        Ok(net)
+    }
+
+    /// The dolphin's last-round DAgger global net (the chain runs again, its nets from the
+    /// emulator cache when there): what `na_baselines_swim` searches on beside the Table 1 net.
+    pub(crate) fn dolphin_dagger_net(&self, ctx: &RunContext) -> Result<Emulator, Error> {
+        let d = self
+            .dolphin
+            .as_ref()
+            .ok_or_else(|| other("no dolphin task"))?;
+        let dd = d
+            .dagger
+            .as_ref()
+            .ok_or_else(|| other("no dolphin DAgger settings"))?;
+        let spec = d.nets.spec(ctx.seed, self.steps, self.example_scale);
+        let built = ctx.stage("train dolphin hierarchy", || {
+            crate::families::na::table1_structure::build_dolphin_emulator(&spec)
+        })?;
+        let body = built.emulator.dolphin().clone();
+        let mut rounds = Table::new(&COLUMNS);
+        self.run_dolphin_dagger(
+            ctx,
+            d,
+            dd,
+            &spec,
+            built.emulator.global(),
+            &body,
+            f64::NAN,
+            &mut rounds,
+        )
     }
 }
 

@@ -849,7 +849,7 @@ impl Params {
             swim.distance(&ref_globals),
         );
         if let Some(dd) = &d.dagger {
-            self.run_dolphin_dagger(
+            let _last = self.run_dolphin_dagger(
                 ctx,
                 d,
                 dd,
