@@ -934,7 +934,7 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
         col("final_gap")?,
     );
     let mut md = String::from(
-        "\nThe same comparison through the lander's final-round DAgger net of `na_fig13_control` (ours, `dagger.csv`; aggregated on Fig. 13's lander task, whose start, target and tolerances are this experiment's; lambda re-measured at hover on that net), every run's controls replayed on the simulator. Final error = RMS over the 13 state variables of (s_M - s_d)/tolerance (<= 1: within tolerance); landing distance = |p_M - p_d| (m):\n\n| net | round | method | eta | J start | J end | landing distance, net (m) | landing distance, simulator (m) | final error, net | final error, simulator | final gap |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        "\nThe same comparison through the lander's final-round DAgger net of `na_fig13_control` (ours, `dagger.csv`; aggregated on Fig. 13's lander task, whose start, target and tolerances are this experiment's; lambda re-measured at hover on that net; net `table1`: the Table 1 net's runs, for the before/after; net `momentum_dagger`: the last net of the chain whose learner is the momentum descent itself, `momentum_dagger_rounds.csv`), every run's controls replayed on the simulator. Final error = RMS over the 13 state variables of (s_M - s_d)/tolerance (<= 1: within tolerance); landing distance = |p_M - p_d| (m):\n\n| net | round | method | eta | J start | J end | landing distance, net (m) | landing distance, simulator (m) | final error, net | final error, simulator | final gap |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
     for r in 0..net.len() {
         md.push_str(&format!(
