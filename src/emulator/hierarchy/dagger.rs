@@ -36,13 +36,13 @@ pub fn global_visits(d: &Dolphin, visits: &Visits) -> Visits {
         out.next_states = flat(&t.next_states);
     }
     let w = &visits.windows;
-    let mut g = vec![0.0; GLOBAL_DIM];
+    let (mut g, mut prev) = (vec![0.0; GLOBAL_DIM], vec![0.0; GLOBAL_DIM]);
     for win in w.states.chunks_exact((k + 1) * MASS_DIM) {
         let mut steps = win.chunks_exact(MASS_DIM);
         global_state(d, steps.next().expect("k + 1 states"), &mut g);
         out.windows.states.extend_from_slice(&g);
         for x in steps {
-            let prev = g.clone();
+            std::mem::swap(&mut g, &mut prev);
             global_state_after(d, x, &prev, &mut g);
             out.windows.states.extend_from_slice(&g);
         }

@@ -534,7 +534,7 @@ impl Job for Params {
             runs.extend(self.bptt_runs(ctx, &problem, &v0, DAGGER_SUBSTRATE)?);
             for (k, method) in SEARCHES.into_iter().enumerate() {
                 let seed = mix_seed(ctx.seed, 410 + k as u64);
-                let result = ctx.stage(&format!("{method} (DAgger net)"), || {
+                let result = ctx.stage(&format!("{method} ({DAGGER_SUBSTRATE})"), || {
                     self.search(method, &problem, &v0, &self.budget.emulator, seed)
                 })?;
                 runs.push(Run {

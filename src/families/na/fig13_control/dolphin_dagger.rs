@@ -136,7 +136,7 @@ impl Params {
         let start = centroid(&g0);
         for round in 0..=dd.settings.rounds {
             let label = format!(" (DAgger round {round})");
-            let (r, best, _) = self.learn_swim(ctx, d, &net, body, &label)?;
+            let (r, best) = self.learn_swim(ctx, d, &net, body, &label, None)?;
             let (_, sim_g) = swim
                 .simulate(body, &x0, &best.controls, dt, n)
                 .map_err(other)?;
@@ -187,21 +187,7 @@ impl Params {
                 .map_err(other)?;
             train.extend(&global_visits(body, &t));
             held.extend(&global_visits(body, &h));
-            let key = serde_json::json!({
-                "learner": {
-                    "iterations": d.iterations,
-                    "eta": d.eta,
-                    "alpha": d.alpha,
-                    "init_spread": d.init_spread,
-                    "restarts": d.restarts,
-                    "step_rule": d.step_rule,
-                    "curvature_iterations": self.curvature_iterations,
-                    "seed": ctx.seed,
-                },
-                "swim": swim,
-                "dagger": dd,
-                "round": round + 1,
-            });
+            let key = self.chain_key(ctx, d, dd, round + 1);
             let (next_net, rec) = match load_derived(&cache, spec, body, &key) {
                 Some(found) => found,
                 None => {
@@ -263,8 +249,34 @@ impl Params {
         Ok(net)
     }
 
-    /// The dolphin's last-round DAgger global net (the chain runs again, its nets from the
-    /// emulator cache when there): what `na_baselines_swim` searches on beside the Table 1 net.
+    /// Everything besides the base net that determines round `round`'s global net.
+    fn chain_key(
+        &self,
+        ctx: &RunContext,
+        d: &DolphinControl,
+        dd: &DolphinDagger,
+        round: usize,
+    ) -> serde_json::Value {
+        serde_json::json!({
+            "learner": {
+                "iterations": d.iterations,
+                "eta": d.eta,
+                "alpha": d.alpha,
+                "init_spread": d.init_spread,
+                "restarts": d.restarts,
+                "step_rule": d.step_rule,
+                "curvature_iterations": self.curvature_iterations,
+                "seed": ctx.seed,
+            },
+            "swim": d.swim,
+            "dagger": dd,
+            "round": round,
+        })
+    }
+
+    /// The dolphin's last-round DAgger global net: from the emulator cache when there, else
+    /// the chain runs (and stores its nets). What `na_baselines_swim` searches on beside the
+    /// Table 1 net.
     pub(crate) fn dolphin_dagger_net(&self, ctx: &RunContext) -> Result<Emulator, Error> {
         let d = self
             .dolphin
@@ -279,6 +291,10 @@ impl Params {
             crate::families::na::table1_structure::build_dolphin_emulator(&spec)
         })?;
         let body = built.emulator.dolphin().clone();
+        let last = self.chain_key(ctx, d, dd, dd.settings.rounds);
+        if let Some((net, _)) = load_derived(&EmulatorCache::from_env(), &spec, &body, &last) {
+            return Ok(net);
+        }
         let mut rounds = Table::new(&COLUMNS);
         self.run_dolphin_dagger(
             ctx,

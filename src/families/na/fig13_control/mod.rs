@@ -725,8 +725,9 @@ impl Params {
     /// The swim learned through `global` as the headline learns it: `d.restarts` seeded random
     /// starts (streams 400, 401, …), each `d.iterations` descent steps from its own step scale;
     /// the run with the lowest best-so-far emulator J is chosen (the simulator distances of the
-    /// others are reported, never used to choose). Returns the chosen run, its best rollout and
-    /// one `dolphin_restarts` row per start. `label` names the net in progress messages.
+    /// others are reported, never used to choose). Returns the chosen run and its best rollout;
+    /// with `restarts_t`, pushes one `dolphin_restarts` row per start (each start's knots
+    /// replayed on the simulator). `label` names the net in progress messages.
     fn learn_swim(
         &self,
         ctx: &RunContext,
@@ -734,14 +735,8 @@ impl Params {
         global: &crate::emulator::Emulator,
         body: &Dolphin,
         label: &str,
-    ) -> Result<
-        (
-            Learned,
-            BestRollout,
-            Vec<Vec<crate::experiment::output::Cell>>,
-        ),
-        Error,
-    > {
+        mut restarts_t: Option<&mut Table>,
+    ) -> Result<(Learned, BestRollout), Error> {
         let swim = &d.swim;
         let knots = swim.knot_layout();
         let (x0, g0) = swim.start(body);
@@ -749,7 +744,6 @@ impl Params {
         let mut bptt = Bptt::new(global, &objective, knots, swim.bounds(), &g0).map_err(other)?;
         let (dt, n) = (d.nets.physical_dt, self.steps);
         let mut chosen: Option<(Learned, BestRollout)> = None;
-        let mut rows = Vec::with_capacity(d.restarts);
         for restart in 0..d.restarts {
             let mut rng = ctx.rng(400 + restart as u64);
             let v0: Vec<f64> = (0..knots.len())
@@ -767,18 +761,20 @@ impl Params {
                     false
                 })
             });
-            let (_, sim_g) = swim
-                .simulate(body, &x0, &best.controls, dt, n)
-                .map_err(other)?;
-            rows.push(row![
-                restart as i64,
-                lambda,
-                r.trace[0].objective,
-                r.best_iteration as i64,
-                r.best_objective(),
-                swim.distance(&best.states),
-                swim.distance(&sim_g)
-            ]);
+            if let Some(t) = restarts_t.as_deref_mut() {
+                let (_, sim_g) = swim
+                    .simulate(body, &x0, &best.controls, dt, n)
+                    .map_err(other)?;
+                t.push(row![
+                    restart as i64,
+                    lambda,
+                    r.trace[0].objective,
+                    r.best_iteration as i64,
+                    r.best_objective(),
+                    swim.distance(&best.states),
+                    swim.distance(&sim_g)
+                ]);
+            }
             if chosen
                 .as_ref()
                 .is_none_or(|(c, _)| r.best_objective() < c.best_objective())
@@ -786,8 +782,7 @@ impl Params {
                 chosen = Some((r, best));
             }
         }
-        let (r, best) = chosen.ok_or_else(|| other("dolphin: no restarts"))?;
-        Ok((r, best, rows))
+        chosen.ok_or_else(|| other("dolphin: no restarts"))
     }
 
     /// Learns the swim through the global net; replays on the simulator and the reference wave.
@@ -812,10 +807,8 @@ impl Params {
         let knots = swim.knot_layout();
         let (x0, _) = swim.start(&body);
         let (dt, n) = (d.nets.physical_dt, self.steps);
-        let (r, best, rows) = self.learn_swim(ctx, d, built.emulator.global(), &body, "")?;
-        for row in rows {
-            restarts_t.push(row);
-        }
+        let (r, best) =
+            self.learn_swim(ctx, d, built.emulator.global(), &body, "", Some(restarts_t))?;
         for t in &r.trace {
             objective_t.push(row!["dolphin", t.iteration as i64, t.objective]);
         }
@@ -849,7 +842,7 @@ impl Params {
             swim.distance(&ref_globals),
         );
         if let Some(dd) = &d.dagger {
-            let _last = self.run_dolphin_dagger(
+            self.run_dolphin_dagger(
                 ctx,
                 d,
                 dd,
