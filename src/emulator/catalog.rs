@@ -25,8 +25,12 @@
 //!   drive, wheels straight: rest stays rest, coasting stays straight); episodes of 10 s.
 //! - **Lander**: centre of mass uniform in a 100 m square at 20–200 m height, yaw uniform, tilt up
 //!   to 0.4 rad about a random horizontal axis, velocity U[−5, 5] m/s per axis, body rates
-//!   U[−0.2, 0.2] rad/s; thrust within [0, 2 m g] (twice hover), attitude torques within
-//!   ±400 N·m (a fifth of the jets' limit), piecewise constant for 0.5–2 s; episodes of 10 s.
+//!   U[−0.2, 0.2] rad/s (zero in a quarter of the episodes: the landing task starts with the
+//!   jets still); thrust within [0, 2 m g] (twice hover), attitude torques within ±400 N·m (a
+//!   fifth of the jets' limit), piecewise constant for 0.5–2 s, with a quarter of the knots'
+//!   torques idle (zero torque at the knot's thrust: the attitude coasts, as under the tasks'
+//!   neutral hover control, which uniform torques would almost never show the net); episodes
+//!   of 10 s.
 
 use super::dataset::{
     sample_transitions, sample_windows, ControlLimits, ControlProcess, ControlSignal,
@@ -208,7 +212,17 @@ impl NetModel {
                     q.k,
                 ];
                 s.extend((0..3).map(|_| rng.random_range(-5.0..5.0)));
-                s.extend((0..3).map(|_| rng.random_range(-0.2..0.2)));
+                // A quarter of the episodes start with the jets' rates at zero (the tasks'
+                // starts), which idle jets then keep.
+                let still = rng.random_range(0.0..1.0) < 0.25;
+                s.extend((0..3).map(|_| {
+                    let w = rng.random_range(-0.2..0.2);
+                    if still {
+                        0.0
+                    } else {
+                        w
+                    }
+                }));
                 s
             }
             _ => {
@@ -247,7 +261,7 @@ impl NetModel {
             Self::Lander => ControlProcess::PiecewiseConstant {
                 hold_min: 0.5,
                 hold_max: 2.0,
-                idle: 0.0,
+                idle: 0.25,
             },
             _ => ControlProcess::Smooth {
                 hold_min: 0.3,
@@ -904,6 +918,61 @@ mod tests {
         for r in (0..rows).filter(|&r| speed(r) < 1e-9 && idle(r)) {
             for k in 0..6 {
                 assert_eq!(data.states[[r, k]], data.next_states[[r, k]]);
+            }
+        }
+    }
+
+    #[test]
+    fn lander_data_show_idle_jets_and_still_starts_at_every_thrust() {
+        // §3.4 again: the landing task starts with the jets still (zero body rates) and its
+        // neutral control is hover thrust with zero torque, under which the attitude coasts.
+        // Uniform torques never show the net zero torque; idle knots must, at any thrust.
+        let spec = small(NetModel::Lander, 50, 3000, 50);
+        let mut sim = NetModel::Lander.simulator();
+        let start = |r: &mut ChaCha8Rng| NetModel::Lander.start_state(r);
+        let sampled = sample_transitions(
+            sim.as_mut(),
+            &start,
+            &NetModel::Lander.control_limits(),
+            &spec.sampling(3000),
+            &mut ChaCha8Rng::seed_from_u64(4),
+        )
+        .unwrap();
+        let data = &sampled.transitions;
+        let rows = data.states.nrows();
+        let idle = |r: usize| (1..4).all(|j| data.controls[[r, j]] == 0.0);
+        let still = |r: usize| (10..13).all(|k| data.states[[r, k]] == 0.0);
+        let idle_rows: Vec<usize> = (0..rows).filter(|&r| idle(r)).collect();
+        // Our thresholds: at least 15 % of the examples with idle jets (a quarter of the knots),
+        // their thrusts spread over the range (not all at one end), and some still and idle.
+        assert!(
+            idle_rows.len() * 100 >= 15 * rows,
+            "{} of {rows} idle",
+            idle_rows.len()
+        );
+        let thrust: Vec<f64> = idle_rows.iter().map(|&r| data.controls[[r, 0]]).collect();
+        let hover = {
+            let l = Lander::default();
+            l.mass * l.gravity
+        };
+        let (below, above) = (
+            thrust.iter().filter(|&&t| t < hover).count(),
+            thrust.iter().filter(|&&t| t > hover).count(),
+        );
+        assert!(
+            below * 4 >= thrust.len() && above * 4 >= thrust.len(),
+            "idle thrusts {below} below and {above} above hover"
+        );
+        let still_idle: Vec<usize> = idle_rows.iter().copied().filter(|&r| still(r)).collect();
+        assert!(
+            still_idle.len() >= 10,
+            "{} still and idle",
+            still_idle.len()
+        );
+        // Still jets under zero torque stay still on the simulator (Euler's equations).
+        for &r in &still_idle {
+            for k in 10..13 {
+                assert_eq!(data.next_states[[r, k]], 0.0, "row {r}");
             }
         }
     }

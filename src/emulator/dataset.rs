@@ -69,8 +69,9 @@ impl ControlLimits {
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum ControlProcess {
     /// Values drawn uniformly within the limits, held for durations drawn from
-    /// U[`hold_min`, `hold_max`] seconds; a knot is idle (every control 0, clamped to the limits)
-    /// with probability `idle`, so rest and coasting are sampled too.
+    /// U[`hold_min`, `hold_max`] seconds; a knot is idle (every control 0, clamped to the limits,
+    /// except a channel whose range starts or ends at 0, which keeps its draw) with probability
+    /// `idle`, so rest and coasting are sampled too.
     PiecewiseConstant {
         /// Shortest hold (s).
         hold_min: f64,
@@ -183,7 +184,10 @@ impl ControlSignal {
             for c in 0..channels {
                 let (low, high) = (limits.low[c], limits.high[c]);
                 values.push(match wave {
-                    None if rest => 0.0f64.clamp(low, high),
+                    // Idle: every channel rests at zero (clamped to its limits) except one
+                    // whose range starts or ends at zero (the lander's thrust), which keeps its
+                    // draw: idle attitude jets then coast at any thrust.
+                    None if rest && low != 0.0 && high != 0.0 => 0.0f64.clamp(low, high),
                     None => rng.random_range(low..=high),
                     Some((f, lag, amp, psi, noise)) => {
                         let (mid, half) = (0.5 * (low + high), 0.5 * (high - low));
