@@ -229,42 +229,93 @@ fn riccati(
         cost.terminal_derivatives(&xs[horizon], p_n, hess_n);
         value_ref[horizon] = cost.terminal(&xs[horizon]);
     }
+    // Scratch for the step: every product is written in place (`mul_to`, `transpose_to`), the
+    // same kernels and summation order as the operator forms, so the loop does not allocate.
+    let (mut at, mut bt) = (DMatrix::zeros(n, n), DMatrix::zeros(m, n));
+    let (mut qx, mut qu) = (DVector::zeros(n), DVector::zeros(m));
+    let (mut tn, mut tm) = (DVector::zeros(n), DVector::zeros(m));
+    let (mut pa, mut qxx, mut tnn) = (
+        DMatrix::zeros(n, n),
+        DMatrix::zeros(n, n),
+        DMatrix::zeros(n, n),
+    );
+    let (mut quu, mut tmm, mut chol) = (
+        DMatrix::zeros(m, m),
+        DMatrix::zeros(m, m),
+        DMatrix::zeros(m, m),
+    );
+    let (mut qux, mut tmn) = (DMatrix::zeros(m, n), DMatrix::zeros(m, n));
+    let (mut gt, mut tnm) = (DMatrix::zeros(n, m), DMatrix::zeros(n, m));
     for k in (0..horizon).rev() {
         jacobians(k, &xs[k], &us[k], &mut a, &mut b);
         cost.running_derivatives(k, &xs[k], &us[k], &mut l);
-        let (p1, hess1) = (&pv[k + 1], &pm[k + 1]);
-        let qx = &l.lx + a.transpose() * p1;
-        let qu = &l.lu + b.transpose() * p1;
-        let pa = hess1 * &a;
-        let mut qxx = &l.lxx + a.transpose() * &pa;
-        let mut quu = &l.luu + b.transpose() * hess1 * &b;
-        let mut qux = b.transpose() * &pa;
+        let (done, next) = pm.split_at_mut(k + 1);
+        let (p1, hess1, hess) = (&pv[k + 1], &next[0], &mut done[k]);
+        a.transpose_to(&mut at);
+        b.transpose_to(&mut bt);
+        // Q_x = l_x + Aᵀ p', Q_u = l_u + Bᵀ p'.
+        at.mul_to(p1, &mut tn);
+        qx.copy_from(&l.lx);
+        qx += &tn;
+        bt.mul_to(p1, &mut tm);
+        qu.copy_from(&l.lu);
+        qu += &tm;
+        // Q_xx = l_xx + Aᵀ (P' A), Q_uu = l_uu + (Bᵀ P') B, Q_ux = Bᵀ (P' A).
+        hess1.mul_to(&a, &mut pa);
+        at.mul_to(&pa, &mut tnn);
+        qxx.copy_from(&l.lxx);
+        qxx += &tnn;
+        bt.mul_to(hess1, &mut tmn);
+        tmn.mul_to(&b, &mut tmm);
+        quu.copy_from(&l.luu);
+        quu += &tmm;
+        bt.mul_to(&pa, &mut qux);
         if let (ValueModel::Ddp { fd_step }, Some(second)) = (model, second.as_mut()) {
             second(&xs[k], &us[k], fd_step, &mut fzz);
             for (c, h) in fzz.iter().enumerate() {
                 let w = p1[c];
-                qxx += h.view((0, 0), (n, n)) * w;
-                qux += h.view((n, 0), (m, n)) * w;
-                quu += h.view((n, n), (m, m)) * w;
+                for j in 0..n {
+                    for i in 0..n {
+                        qxx[(i, j)] += h[(i, j)] * w;
+                    }
+                    for i in 0..m {
+                        qux[(i, j)] += h[(n + i, j)] * w;
+                    }
+                }
+                for j in 0..m {
+                    for i in 0..m {
+                        quu[(i, j)] += h[(n + i, n + j)] * w;
+                    }
+                }
             }
         }
-        let mut chol = quu.clone();
+        chol.copy_from(&quu);
         if !cholesky_in_place(&mut chol, m) {
             return Err(ControlError::NotPositiveDefinite { step: k });
         }
-        let mut gain = -qux.clone();
+        let gain = &mut gains[k];
+        gain.copy_from(&qux);
+        gain.neg_mut();
         for j in 0..n {
             cholesky_solve_in_place(&chol, m, gain.column_mut(j).as_mut_slice());
         }
-        pv[k] = &qx + gain.transpose() * &qu;
-        let mut hess = &qxx
-            + gain.transpose() * &quu * &gain
-            + gain.transpose() * &qux
-            + qux.transpose() * &gain;
-        symmetrize(&mut hess);
-        pm[k] = hess;
+        // p = Q_x + Kᵀ Q_u.
+        gain.transpose_to(&mut gt);
+        gt.mul_to(&qu, &mut tn);
+        pv[k].copy_from(&qx);
+        pv[k] += &tn;
+        // P = Q_xx + (Kᵀ Q_uu) K + Kᵀ Q_ux + Q_uxᵀ K, summed in that order.
+        gt.mul_to(&quu, &mut tnm);
+        tnm.mul_to(gain, &mut tnn);
+        hess.copy_from(&qxx);
+        *hess += &tnn;
+        gt.mul_to(&qux, &mut tnn);
+        *hess += &tnn;
+        qux.transpose_to(&mut tnm);
+        tnm.mul_to(gain, &mut tnn);
+        *hess += &tnn;
+        symmetrize(hess);
         value_ref[k] = cost.running(k, &xs[k], &us[k]) + value_ref[k + 1];
-        gains[k] = gain;
     }
     Ok(TrackingController {
         x_ref: xs.to_vec(),
