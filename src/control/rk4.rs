@@ -164,9 +164,18 @@ impl<M: Linearize> Rk4Map<M> {
         let h = self.dt;
         let c = [0.0, 0.5 * h, 0.5 * h, h];
         for s in 0..4 {
-            self.stage(s, c[s], x, u, ws);
-            self.model
-                .jacobians(ws.y.as_slice(), u.as_slice(), &mut ws.a, &mut ws.b);
+            // The stage of [`Rk4Map::stage`], its derivative and Jacobians in one evaluation.
+            ws.y.copy_from(x);
+            if s > 0 {
+                ws.y.axpy(c[s], &ws.k[s - 1], 1.0);
+            }
+            self.model.derivative_and_jacobians(
+                ws.y.as_slice(),
+                u.as_slice(),
+                ws.k[s].as_mut_slice(),
+                &mut ws.a,
+                &mut ws.b,
+            );
             if s == 0 {
                 ws.dkx[0].copy_from(&ws.a);
                 ws.dku[0].copy_from(&ws.b);

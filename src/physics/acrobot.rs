@@ -133,6 +133,32 @@ impl Ode for Acrobot {
 
 impl Linearize for Acrobot {
     fn jacobians(&self, x: &[f64], u: &[f64], a: &mut DMatrix<f64>, b: &mut DMatrix<f64>) {
+        self.linearize(x, u, None, a, b);
+    }
+
+    fn derivative_and_jacobians(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        dx: &mut [f64],
+        a: &mut DMatrix<f64>,
+        b: &mut DMatrix<f64>,
+    ) {
+        self.linearize(x, u, Some(dx), a, b);
+    }
+}
+
+impl Acrobot {
+    /// The Jacobians at (x, u), and f(x, u) into `dx` when given: θ̈ = M⁻¹ r is computed on
+    /// the way with the operations of [`Ode::derivative`], so it is bit-identical to it.
+    fn linearize(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        dx: Option<&mut [f64]>,
+        a: &mut DMatrix<f64>,
+        b: &mut DMatrix<f64>,
+    ) {
         let Self {
             m1,
             m2,
@@ -155,6 +181,9 @@ impl Linearize for Acrobot {
         // θ̈ = M⁻¹ r with M⁻¹ = [[m22, −m12], [−m12, m11]] / det.
         let solve = |v1: f64, v2: f64| ((m22 * v1 - m12 * v2) / det, (m11 * v2 - m12 * v1) / det);
         let (a1, a2) = solve(r1, r2);
+        if let Some(dx) = dx {
+            dx.copy_from_slice(&[w1, w2, a1, a2]);
+        }
         // ∂r/∂z for z = θ1, θ2, ω1, ω2.
         let gs12 = m2 * g * l2 * s12;
         let dr_t1 = ((m1 + m2) * g * l1 * t1.sin() + gs12, gs12);
@@ -237,6 +266,34 @@ mod tests {
         };
         let de = (e(h) - e(-h)) / (2.0 * h);
         assert!((de - u[0] * x[3]).abs() < 1e-6, "{de} vs {}", u[0] * x[3]);
+    }
+
+    /// The shared evaluation is exactly the two separate ones (bit for bit), so the RK4 map's
+    /// Jacobians, and everything built on them, do not depend on which path ran.
+    #[test]
+    fn derivative_and_jacobians_are_bit_identical_to_the_separate_calls() {
+        let model = Acrobot::default();
+        let mut z: u64 = 0x9e37_79b9_7f4a_7c15;
+        let mut draw = |scale: f64| {
+            z ^= z << 13;
+            z ^= z >> 7;
+            z ^= z << 17;
+            scale * ((z >> 11) as f64 / (1u64 << 53) as f64 - 0.5)
+        };
+        let (mut a1, mut b1) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
+        let (mut a2, mut b2) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
+        for _ in 0..1000 {
+            let x = [draw(20.0), draw(20.0), draw(40.0), draw(40.0)];
+            let u = [draw(100.0)];
+            let (mut d1, mut d2) = ([0.0; 4], [0.0; 4]);
+            model.derivative(&x, &u, &mut d1);
+            model.jacobians(&x, &u, &mut a1, &mut b1);
+            model.derivative_and_jacobians(&x, &u, &mut d2, &mut a2, &mut b2);
+            let bits = |v: &[f64]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&d1), bits(&d2), "f at {x:?}");
+            assert_eq!(bits(a1.as_slice()), bits(a2.as_slice()), "A at {x:?}");
+            assert_eq!(bits(b1.as_slice()), bits(b2.as_slice()), "B at {x:?}");
+        }
     }
 
     #[test]

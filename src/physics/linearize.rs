@@ -22,6 +22,22 @@ pub trait Linearize: Ode {
     ///
     /// `a` and `b` must already have those shapes.
     fn jacobians(&self, x: &[f64], u: &[f64], a: &mut DMatrix<f64>, b: &mut DMatrix<f64>);
+
+    /// Writes f(x, u) into `dx` and the Jacobians into `a` and `b` at the same point, exactly
+    /// the values of [`Ode::derivative`] and [`Linearize::jacobians`] (the default calls
+    /// both). A model overrides it to share the work of the two (the acrobot's trigonometry),
+    /// as the RK4 map's Jacobians need both at every stage.
+    fn derivative_and_jacobians(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        dx: &mut [f64],
+        a: &mut DMatrix<f64>,
+        b: &mut DMatrix<f64>,
+    ) {
+        self.derivative(x, u, dx);
+        self.jacobians(x, u, a, b);
+    }
 }
 
 /// Default relative step of [`finite_difference_jacobians`]: about ε_mach^(1/3), the best
