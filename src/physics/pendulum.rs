@@ -206,17 +206,31 @@ impl Model for Pendulum3 {
 
 impl Ode for Pendulum3 {
     fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        let (_, a, g) = self.coefficients();
+        let (d, a, g) = self.coefficients();
         let phi = Self::absolute(x);
         let w = Self::absolute(&x[3..6]);
-        let m = self.absolute_mass_matrix(&phi);
+        // sin and cos of φ_i − φ_j once per pair i < j: φ_j − φ_i is exactly −(φ_i − φ_j) and
+        // libm's sin is odd and cos even, bit for bit, so the other half are these (tested
+        // against the pairwise evaluation).
+        let mut sd = [[0.0; 3]; 3];
+        let mut m = Matrix3::zeros();
+        for i in 0..3 {
+            m[(i, i)] = d[i];
+            for j in i + 1..3 {
+                let (s, c) = (phi[i] - phi[j]).sin_cos();
+                sd[i][j] = s;
+                sd[j][i] = -s;
+                m[(i, j)] = a[i][j] * c;
+                m[(j, i)] = a[j][i] * c;
+            }
+        }
         // Q_abs − b − G sin φ in absolute coordinates.
         let mut rhs = Vector3::zeros();
         for i in 0..3 {
             let mut b = 0.0;
             for j in 0..3 {
                 if j != i {
-                    b += a[i][j] * (phi[i] - phi[j]).sin() * w[j] * w[j];
+                    b += a[i][j] * sd[i][j] * w[j] * w[j];
                 }
             }
             rhs[i] = -b - g[i] * phi[i].sin();
@@ -241,9 +255,7 @@ impl Ode for Pendulum3 {
         let mq = s.transpose() * m * s;
         // Positive definite for every finite state; a non-finite one (a blown-up coarse step)
         // gives NaN rates, which `check_finite` reports, rather than a panic.
-        let qdd = mq
-            .cholesky()
-            .map_or(Vector3::repeat(f64::NAN), |c| c.solve(&tau));
+        let qdd = cholesky_solve3(&mq, &tau).unwrap_or(Vector3::repeat(f64::NAN));
         dx[..3].copy_from_slice(&x[3..6]);
         dx[3] = qdd[0];
         dx[4] = qdd[1];
@@ -264,10 +276,181 @@ impl Ode for Pendulum3 {
     }
 }
 
+/// x with M x = b for a symmetric positive definite 3 × 3 M (its lower triangle read), or
+/// `None` where the factorization fails (a pivot that is zero, negative or NaN): nalgebra's
+/// `M.cholesky()` then `solve(b)`, operation for operation (the column-oriented factorization,
+/// the forward substitution by axpy, the backward one by dot products summed from zero), so it
+/// is bit-identical to them (tested), without their generic views. The pendulum solves one
+/// such system per derivative evaluation.
+fn cholesky_solve3(m: &Matrix3<f64>, b: &Vector3<f64>) -> Option<Vector3<f64>> {
+    let mut l = *m;
+    for j in 0..3 {
+        for k in 0..j {
+            let factor = -l[(j, k)];
+            for i in j..3 {
+                l[(i, j)] = factor * l[(i, k)] + l[(i, j)];
+            }
+        }
+        let diag = l[(j, j)];
+        // nalgebra's `try_sqrt` of a real: none for a negative (or NaN) value; zero is refused
+        // before it.
+        if diag == 0.0 || !(diag >= 0.0) {
+            return None;
+        }
+        let denom = diag.sqrt();
+        l[(j, j)] = denom;
+        for i in j + 1..3 {
+            l[(i, j)] /= denom;
+        }
+    }
+    let mut x = *b;
+    for i in 0..3 {
+        let coeff = x[i] / l[(i, i)];
+        x[i] = coeff;
+        for r in i + 1..3 {
+            x[r] = -coeff * l[(r, i)] + x[r];
+        }
+    }
+    for i in (0..3).rev() {
+        let mut dot = 0.0;
+        for r in i + 1..3 {
+            dot += l[(r, i)] * x[r];
+        }
+        x[i] = (x[i] - dot) / l[(i, i)];
+    }
+    Some(x)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::physics::{IntegratorKind, Simulator};
+
+    /// The derivative as it was before the shared trigonometry and the hand-written solve
+    /// (pairwise sin and cos, nalgebra's Cholesky), kept to prove the rewrite bit-identical.
+    fn reference_derivative(p: &Pendulum3, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        let (_, a, g) = p.coefficients();
+        let phi = Pendulum3::absolute(x);
+        let w = Pendulum3::absolute(&x[3..6]);
+        let m = p.absolute_mass_matrix(&phi);
+        // Q_abs − b − G sin φ in absolute coordinates.
+        let mut rhs = Vector3::zeros();
+        for i in 0..3 {
+            let mut b = 0.0;
+            for j in 0..3 {
+                if j != i {
+                    b += a[i][j] * (phi[i] - phi[j]).sin() * w[j] * w[j];
+                }
+            }
+            rhs[i] = -b - g[i] * phi[i].sin();
+        }
+        if p.variant == PendulumVariant::ExtForce {
+            for i in 0..3 {
+                let f = u[3 + i];
+                rhs[i] += f * p.links[i].com;
+                for k in 0..i {
+                    rhs[k] += f * p.links[k].length * (phi[i] - phi[k]).cos();
+                }
+            }
+        }
+        let s = Matrix3::new(1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 1.0, 1.0);
+        let mut tau = s.transpose() * rhs;
+        for j in 0..3 {
+            tau[j] -= p.links[j].damping * x[3 + j];
+            if p.variant != PendulumVariant::Passive {
+                tau[j] += u[j];
+            }
+        }
+        let mq = s.transpose() * m * s;
+        // Positive definite for every finite state; a non-finite one (a blown-up coarse step)
+        // gives NaN rates, which `check_finite` reports, rather than a panic.
+        let qdd = mq
+            .cholesky()
+            .map_or(Vector3::repeat(f64::NAN), |c| c.solve(&tau));
+        dx[..3].copy_from_slice(&x[3..6]);
+        dx[3] = qdd[0];
+        dx[4] = qdd[1];
+        dx[5] = qdd[2];
+    }
+    /// The derivative is bit-identical to the pairwise evaluation (every variant, many random
+    /// states and controls, far outside the training ranges too), so cached pendulum nets and
+    /// every pendulum table are unchanged by the faster code.
+    #[test]
+    fn derivative_is_bit_identical_to_the_pairwise_reference() {
+        let mut z: u64 = 0x5851_f42d_4c95_7f2d;
+        let mut draw = || {
+            z ^= z << 13;
+            z ^= z >> 7;
+            z ^= z << 17;
+            (z >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for variant in [
+            PendulumVariant::Passive,
+            PendulumVariant::Active,
+            PendulumVariant::ExtForce,
+        ] {
+            let p = Pendulum3::new(variant);
+            let m = p.control_dim();
+            for i in 0..20_000 {
+                let scale = if i % 4 == 0 { 200.0 } else { 4.0 };
+                let x: Vec<f64> = (0..6).map(|_| draw() * scale).collect();
+                let u: Vec<f64> = (0..m).map(|_| draw() * 10.0).collect();
+                let (mut a, mut b) = ([0.0; 6], [0.0; 6]);
+                p.derivative(&x, &u, &mut a);
+                reference_derivative(&p, &x, &u, &mut b);
+                assert_eq!(
+                    a.map(f64::to_bits),
+                    b.map(f64::to_bits),
+                    "{variant:?} {x:?} {u:?}"
+                );
+            }
+        }
+    }
+
+    /// The hand-written solve is nalgebra's, bit for bit: on the pendulum's own joint-space
+    /// mass matrices at random states, on random SPD matrices spanning many scales, and on
+    /// matrices nalgebra refuses (zero, negative or NaN pivots), where both refuse.
+    #[test]
+    fn cholesky_solve3_is_bit_identical_to_nalgebra() {
+        let mut z: u64 = 0x2545_f491_4f6c_dd1d;
+        let mut draw = || {
+            z ^= z << 13;
+            z ^= z >> 7;
+            z ^= z << 17;
+            (z >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let p = Pendulum3::new(PendulumVariant::Active);
+        let nalgebra = |m: &Matrix3<f64>, b: &Vector3<f64>| m.cholesky().map(|c| c.solve(b));
+        let bits = |v: Option<Vector3<f64>>| v.map(|v| v.map(f64::to_bits));
+        let mut cases = 0;
+        for i in 0..20_000 {
+            let b = Vector3::new(draw() * 50.0, draw() * 50.0, draw() * 50.0);
+            let m = if i % 2 == 0 {
+                let q = [draw() * 20.0, draw() * 20.0, draw() * 20.0];
+                p.mass_matrix(&q)
+            } else {
+                let a = Matrix3::from_fn(|_, _| draw() * 10f64.powi((i % 7) as i32 - 3));
+                a * a.transpose() + Matrix3::identity() * (draw() + 0.5) * 1e-6
+            };
+            assert_eq!(
+                bits(cholesky_solve3(&m, &b)),
+                bits(nalgebra(&m, &b)),
+                "{m} {b}"
+            );
+            cases += 1;
+        }
+        let b = Vector3::new(1.0, -2.0, 0.5);
+        for m in [
+            Matrix3::zeros(),
+            Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+            Matrix3::from_diagonal(&Vector3::new(1.0, f64::NAN, 1.0)),
+            Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -0.0)),
+            Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, f64::INFINITY)),
+        ] {
+            assert_eq!(bits(cholesky_solve3(&m, &b)), bits(nalgebra(&m, &b)), "{m}");
+        }
+        assert_eq!(cases, 20_000);
+    }
 
     #[test]
     fn mass_matrix_is_symmetric_positive_definite() {
