@@ -22,7 +22,9 @@
 //!   in a third, else U[−3, 8] m/s — the parking task starts and ends at rest, which uniform
 //!   speeds would almost never show the net; drive acceleration within ±3 m/s² and steering
 //!   within ±0.5 rad, piecewise constant for 0.5–2 s, with a quarter of the knots idle (no
-//!   drive, wheels straight: rest stays rest, coasting stays straight); episodes of 10 s.
+//!   drive, wheels straight: rest stays rest, coasting stays straight) and half of the first
+//!   knots (so half the episodes that start at rest stay parked for a while, the parking
+//!   task's neutral); episodes of 10 s.
 //! - **Lander**: centre of mass uniform in a 100 m square at 20–200 m height, yaw uniform, tilt up
 //!   to 0.4 rad about a random horizontal axis, velocity U[−5, 5] m/s per axis, body rates
 //!   U[−0.2, 0.2] rad/s (zero in a quarter of the episodes: the landing task starts with the
@@ -257,11 +259,13 @@ impl NetModel {
                 hold_min: 0.5,
                 hold_max: 2.0,
                 idle: 0.25,
+                idle_first: 0.5,
             },
             Self::Lander => ControlProcess::PiecewiseConstant {
                 hold_min: 0.5,
                 hold_max: 2.0,
                 idle: 0.25,
+                idle_first: 0.0,
             },
             _ => ControlProcess::Smooth {
                 hold_min: 0.3,
@@ -909,10 +913,12 @@ mod tests {
         let rows = data.states.nrows();
         let at_rest = (0..rows).filter(|&r| speed(r) < 1e-9 && idle(r)).count();
         let slow = (0..rows).filter(|&r| speed(r) < 1.0).count();
-        // Our thresholds: some (at least 10 of 3,000: only the first knot of an episode that
-        // starts parked can be idle at rest) at exact rest with idle controls, and at least 15 %
-        // below 1 m/s (a third of the episodes start below 1.5 m/s).
-        assert!(at_rest >= 10, "{at_rest} of {rows} at rest");
+        // Our thresholds: at least 1 % (30 of 3,000) at exact rest with idle controls (a quarter
+        // of the episodes start at rest and half of those stay parked through an idle first
+        // knot of 0.5-2 s: 45 here; 23 before the idle first knots), and
+        // at least 15 % below 1 m/s (a third of the episodes start below 1.5 m/s).
+        eprintln!("{at_rest} of {rows} parked under idle controls");
+        assert!(at_rest * 100 >= rows, "{at_rest} of {rows} at rest");
         assert!(slow * 100 >= 15 * rows, "{slow} of {rows} below 1 m/s");
         // At rest under idle controls the simulator stays exactly put.
         for r in (0..rows).filter(|&r| speed(r) < 1e-9 && idle(r)) {

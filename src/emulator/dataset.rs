@@ -79,6 +79,11 @@ pub enum ControlProcess {
         hold_max: f64,
         /// Probability that a knot's controls are all zero.
         idle: f64,
+        /// Probability that an episode's first knot is idle (instead of `idle`): with the
+        /// model's at-rest starts, the parked (or coasting) state under idle controls that a
+        /// task starts from. 0 (the default, left out of the serialized form) draws nothing.
+        #[serde(default, skip_serializing_if = "is_zero")]
+        idle_first: f64,
     },
     /// Knots as for `PiecewiseConstant`, joined by half-cosine blends (continuous, with zero
     /// slope at the knots).
@@ -109,6 +114,11 @@ pub enum ControlProcess {
         /// Knot noise, as a fraction of the half-range.
         noise: f64,
     },
+}
+
+/// Serde: leaves a zero probability out, so older serialized processes (and cache keys) stay.
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 /// One realisation of a [`ControlProcess`] over `[0, duration]`.
@@ -170,9 +180,11 @@ impl ControlSignal {
             )),
             _ => None,
         };
-        let idle = match process {
-            ControlProcess::PiecewiseConstant { idle, .. } => idle,
-            _ => 0.0,
+        let (idle, idle_first) = match process {
+            ControlProcess::PiecewiseConstant {
+                idle, idle_first, ..
+            } => (idle, idle_first),
+            _ => (0.0, 0.0),
         };
         let mut times = vec![];
         let mut values = vec![];
@@ -180,7 +192,12 @@ impl ControlSignal {
         loop {
             times.push(t);
             // Drawn only where idle knots are possible, so other processes keep their streams.
-            let rest = idle > 0.0 && rng.random_range(0.0..1.0) < idle;
+            let p = if times.len() == 1 && idle_first > 0.0 {
+                idle_first
+            } else {
+                idle
+            };
+            let rest = p > 0.0 && rng.random_range(0.0..1.0) < p;
             for c in 0..channels {
                 let (low, high) = (limits.low[c], limits.high[c]);
                 values.push(match wave {
@@ -269,9 +286,15 @@ impl SamplingConfig {
             // An episode must hold at least one lag (≤ 5Δt) plus one window (Δt).
             return bad("episode_duration", self.episode_duration);
         }
-        if let ControlProcess::PiecewiseConstant { idle, .. } = self.control {
+        if let ControlProcess::PiecewiseConstant {
+            idle, idle_first, ..
+        } = self.control
+        {
             if !(0.0..=1.0).contains(&idle) {
                 return bad("idle", idle);
+            }
+            if !(0.0..=1.0).contains(&idle_first) {
+                return bad("idle_first", idle_first);
             }
         }
         Ok(())
@@ -469,6 +492,7 @@ mod tests {
                 hold_min: 0.2,
                 hold_max: 1.0,
                 idle: 0.0,
+                idle_first: 0.0,
             },
         };
         cfg.validate().unwrap();

@@ -774,6 +774,7 @@ mod tests {
                 hold_min: 0.3,
                 hold_max: 1.0,
                 idle: 0.0,
+                idle_first: 0.0,
             },
         }
     }
