@@ -37,7 +37,7 @@
 //! simulator (0: one component, 1: even; NaN for the open-loop replays and where extrapolation
 //! makes a weight negative).
 
-use crate::bellman::combine::{normalized_entropy, BlendMode, TrackerBlend};
+use crate::bellman::combine::{normalized_entropy, BlendMode, CombineError, TrackerBlend};
 use crate::bellman::projection::{project, GaussianReward};
 use crate::bellman::tracker::ValueTracker;
 use crate::control::bptt::{learn_with, Bptt, Descent, Knots, Schedule, StepRule};
@@ -404,15 +404,25 @@ impl Params {
 }
 
 /// A blend of the component trackers as a policy.
+///
+/// Where LBC's combined reward Σ w_i z_i is not positive (extrapolating weights, one w_i < 0,
+/// whose negative term dominates at the state reached) the blend is undefined there: `undefined`
+/// is set and the run stops with an error, which the caller records as a failed run.
 fn blend_policy<'a>(
     blend: &'a TrackerBlend<'a, StepTracker>,
     alpha_log: &'a mut Vec<f64>,
+    undefined: &'a std::cell::Cell<bool>,
 ) -> impl FnMut(&[f64], usize, &mut [f64]) -> Result<(), Error> + 'a {
     let n = blend.trackers.len();
     let m = blend.trackers[0].control_dim();
     let (mut alpha, mut ui) = (vec![0.0; n], vec![0.0; m]);
     move |x, k, v| {
-        blend.control(x, k, v, &mut alpha, &mut ui).map_err(other)?;
+        blend.control(x, k, v, &mut alpha, &mut ui).map_err(|e| {
+            if matches!(e, CombineError::NonPositiveReward(_)) {
+                undefined.set(true);
+            }
+            other(format!("super-step {k}: {e}"))
+        })?;
         // Entropy is defined for α ≥ 0; extrapolating weights (one w_i < 0) give NaN.
         alpha_log.push(if alpha.iter().all(|&a| a > -1e-12) {
             normalized_entropy(&alpha).max(0.0)
@@ -524,9 +534,18 @@ impl Job for Params {
                     .iter()
                     .map(|&c| GaussianReward::isotropic(&[c], q))
                     .collect();
-                let w = project(&comp_rewards, &GaussianReward::isotropic(&[d], q))
+                let mut w = project(&comp_rewards, &GaussianReward::isotropic(&[d], q))
                     .map_err(other)?
                     .weights;
+                // Projection round-off: at a component's own target the other weight comes out
+                // as ±1e-16, and a negative one makes Σ w_i z_i ≤ 0 wherever that component's
+                // z dominates. A weight within 1e-12 of the largest's magnitude is zero.
+                let largest = w.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+                for wi in &mut w {
+                    if wi.abs() <= 1e-12 * largest {
+                        *wi = 0.0;
+                    }
+                }
                 let projection_seconds = t0.elapsed().as_secs_f64();
                 let fresh = self.learn(emu, d)?;
                 let limits = None;
@@ -563,12 +582,16 @@ impl Job for Params {
                         _ => &fresh.tape,
                     };
                     let mut entropy = Vec::new();
+                    let undefined = std::cell::Cell::new(false);
                     let mut run = |substrate| -> Result<Outcome, Error> {
                         match &blend {
                             Some(b) => {
                                 let mut log = Vec::new();
-                                let r =
-                                    self.execute(emu, substrate, &mut blend_policy(b, &mut log));
+                                let r = self.execute(
+                                    emu,
+                                    substrate,
+                                    &mut blend_policy(b, &mut log, &undefined),
+                                );
                                 if matches!(substrate, Substrate::Simulator) {
                                     entropy = log;
                                 }
@@ -580,8 +603,33 @@ impl Job for Params {
                             }),
                         }
                     };
-                    let on_emu = run(Substrate::Emulator)?;
-                    let on_sim = run(Substrate::Simulator)?;
+                    // A blend undefined along a run (above) is a failed run on that substrate:
+                    // its row has NaN final errors, effort and axis value.
+                    let mut outcome = |substrate| match run(substrate) {
+                        Ok(o) => Ok(Some(o)),
+                        Err(_) if undefined.replace(false) => Ok(None),
+                        Err(e) => Err(e),
+                    };
+                    let on_emu = outcome(Substrate::Emulator)?;
+                    let on_sim = outcome(Substrate::Simulator)?;
+                    let (Some(on_emu), Some(on_sim)) = (&on_emu, on_sim) else {
+                        let emu_error = on_emu
+                            .as_ref()
+                            .map_or(f64::NAN, |o| task.final_error(&o.states[self.horizon]));
+                        targets_t.push(row![
+                            d,
+                            method,
+                            emu_error,
+                            f64::NAN,
+                            f64::NAN,
+                            seconds,
+                            w[0],
+                            w[1],
+                            f64::NAN,
+                            f64::NAN
+                        ]);
+                        continue;
+                    };
                     let end = &on_sim.states[self.horizon];
                     let mean_entropy = if entropy.is_empty() {
                         f64::NAN
