@@ -891,23 +891,28 @@ mod tests {
         }
     }
 
+    /// 3,000 examples of `model`'s training data as the catalog samples them (N50, seed 4).
+    fn catalog_data(model: NetModel, hidden: usize) -> Transitions {
+        let spec = small(model, hidden, 3000, 50);
+        let mut sim = model.simulator();
+        let start = |r: &mut ChaCha8Rng| model.start_state(r);
+        sample_transitions(
+            sim.as_mut(),
+            &start,
+            &model.control_limits(),
+            &spec.sampling(3000),
+            &mut ChaCha8Rng::seed_from_u64(4),
+        )
+        .unwrap()
+        .transitions
+    }
+
     #[test]
     fn truck_data_show_the_rest_the_parking_task_starts_and_ends_in() {
         // §3.4: sample the states the tasks visit. Parking starts and ends at rest, so at-rest
         // examples under idle controls (and low speeds) must be a real share of the data, not
         // the measure-zero set uniform speeds in [−3, 8] m/s would give.
-        let spec = small(NetModel::Truck, 20, 3000, 50);
-        let mut sim = NetModel::Truck.simulator();
-        let start = |r: &mut ChaCha8Rng| NetModel::Truck.start_state(r);
-        let data = sample_transitions(
-            sim.as_mut(),
-            &start,
-            &NetModel::Truck.control_limits(),
-            &spec.sampling(3000),
-            &mut ChaCha8Rng::seed_from_u64(4),
-        )
-        .unwrap()
-        .transitions;
+        let data = catalog_data(NetModel::Truck, 20);
         let speed = |r: usize| data.states[[r, 3]].hypot(data.states[[r, 4]]);
         let idle = |r: usize| data.controls.row(r).iter().all(|&u| u == 0.0);
         let rows = data.states.nrows();
@@ -933,18 +938,7 @@ mod tests {
         // §3.4 again: the landing task starts with the jets still (zero body rates) and its
         // neutral control is hover thrust with zero torque, under which the attitude coasts.
         // Uniform torques never show the net zero torque; idle knots must, at any thrust.
-        let spec = small(NetModel::Lander, 50, 3000, 50);
-        let mut sim = NetModel::Lander.simulator();
-        let start = |r: &mut ChaCha8Rng| NetModel::Lander.start_state(r);
-        let sampled = sample_transitions(
-            sim.as_mut(),
-            &start,
-            &NetModel::Lander.control_limits(),
-            &spec.sampling(3000),
-            &mut ChaCha8Rng::seed_from_u64(4),
-        )
-        .unwrap();
-        let data = &sampled.transitions;
+        let data = &catalog_data(NetModel::Lander, 50);
         let rows = data.states.nrows();
         let idle = |r: usize| (1..4).all(|j| data.controls[[r, j]] == 0.0);
         let still = |r: usize| (10..13).all(|k| data.states[[r, k]] == 0.0);
