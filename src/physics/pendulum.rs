@@ -288,13 +288,13 @@ fn cholesky_solve3(m: &Matrix3<f64>, b: &Vector3<f64>) -> Option<Vector3<f64>> {
         for k in 0..j {
             let factor = -l[(j, k)];
             for i in j..3 {
-                l[(i, j)] = factor * l[(i, k)] + l[(i, j)];
+                l[(i, j)] += factor * l[(i, k)];
             }
         }
         let diag = l[(j, j)];
         // nalgebra's `try_sqrt` of a real: none for a negative (or NaN) value; zero is refused
         // before it.
-        if diag == 0.0 || !(diag >= 0.0) {
+        if diag == 0.0 || diag.is_nan() || diag < 0.0 {
             return None;
         }
         let denom = diag.sqrt();
@@ -308,7 +308,7 @@ fn cholesky_solve3(m: &Matrix3<f64>, b: &Vector3<f64>) -> Option<Vector3<f64>> {
         let coeff = x[i] / l[(i, i)];
         x[i] = coeff;
         for r in i + 1..3 {
-            x[r] = -coeff * l[(r, i)] + x[r];
+            x[r] += -coeff * l[(r, i)];
         }
     }
     for i in (0..3).rev() {
@@ -429,7 +429,7 @@ mod tests {
                 let q = [draw() * 20.0, draw() * 20.0, draw() * 20.0];
                 p.mass_matrix(&q)
             } else {
-                let a = Matrix3::from_fn(|_, _| draw() * 10f64.powi((i % 7) as i32 - 3));
+                let a = Matrix3::from_fn(|_, _| draw() * 10f64.powi(i % 7 - 3));
                 a * a.transpose() + Matrix3::identity() * (draw() + 0.5) * 1e-6
             };
             assert_eq!(
