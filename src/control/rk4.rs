@@ -118,13 +118,18 @@ impl<M: Ode> Rk4Map<M> {
         out.axpy(w, &ws.k[3], 1.0);
     }
 
-    /// RK4 stage `s`: the stage state y_s = x + c k_{s−1} (y_0 = x) into `ws.y` and the stage
-    /// slope k_s = f(y_s, u) into `ws.k[s]`.
-    fn stage(&self, s: usize, c: f64, x: &DVector<f64>, u: &DVector<f64>, ws: &mut Rk4Workspace) {
+    /// The stage state y_s = x + c k_{s−1} (y_0 = x) of RK4 stage `s` into `ws.y`.
+    fn stage_point(s: usize, c: f64, x: &DVector<f64>, ws: &mut Rk4Workspace) {
         ws.y.copy_from(x);
         if s > 0 {
             ws.y.axpy(c, &ws.k[s - 1], 1.0);
         }
+    }
+
+    /// RK4 stage `s`: the stage state y_s into `ws.y` ([`Rk4Map::stage_point`]) and the stage
+    /// slope k_s = f(y_s, u) into `ws.k[s]`.
+    fn stage(&self, s: usize, c: f64, x: &DVector<f64>, u: &DVector<f64>, ws: &mut Rk4Workspace) {
+        Self::stage_point(s, c, x, ws);
         self.model
             .derivative(ws.y.as_slice(), u.as_slice(), ws.k[s].as_mut_slice());
     }
@@ -164,11 +169,8 @@ impl<M: Linearize> Rk4Map<M> {
         let h = self.dt;
         let c = [0.0, 0.5 * h, 0.5 * h, h];
         for s in 0..4 {
-            // The stage of [`Rk4Map::stage`], its derivative and Jacobians in one evaluation.
-            ws.y.copy_from(x);
-            if s > 0 {
-                ws.y.axpy(c[s], &ws.k[s - 1], 1.0);
-            }
+            // The stage of [`Rk4Map::stage`], its slope and Jacobians in one evaluation.
+            Self::stage_point(s, c[s], x, ws);
             self.model.derivative_and_jacobians(
                 ws.y.as_slice(),
                 u.as_slice(),

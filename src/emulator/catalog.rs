@@ -215,7 +215,8 @@ impl NetModel {
                 ];
                 s.extend((0..3).map(|_| rng.random_range(-5.0..5.0)));
                 // A quarter of the episodes start with the jets' rates at zero (the tasks'
-                // starts), which idle jets then keep.
+                // starts), which idle jets then keep. The rates are drawn either way, so the
+                // stream does not depend on it.
                 let still = rng.random_range(0.0..1.0) < 0.25;
                 s.extend((0..3).map(|_| {
                     let w = rng.random_range(-0.2..0.2);
@@ -922,7 +923,6 @@ mod tests {
         // of the episodes start at rest and half of those stay parked through an idle first
         // knot of 0.5-2 s: 45 here; 23 before the idle first knots), and
         // at least 15 % below 1 m/s (a third of the episodes start below 1.5 m/s).
-        eprintln!("{at_rest} of {rows} parked under idle controls");
         assert!(at_rest * 100 >= rows, "{at_rest} of {rows} at rest");
         assert!(slow * 100 >= 15 * rows, "{slow} of {rows} below 1 m/s");
         // At rest under idle controls the simulator stays exactly put.

@@ -325,6 +325,8 @@ fn cholesky_solve3(m: &Matrix3<f64>, b: &Vector3<f64>) -> Option<Vector3<f64>> {
 mod tests {
     use super::*;
     use crate::physics::{IntegratorKind, Simulator};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     /// The derivative as it was before the shared trigonometry and the hand-written solve
     /// (pairwise sin and cos, nalgebra's Cholesky), kept to prove the rewrite bit-identical.
@@ -377,13 +379,8 @@ mod tests {
     /// every pendulum table are unchanged by the faster code.
     #[test]
     fn derivative_is_bit_identical_to_the_pairwise_reference() {
-        let mut z: u64 = 0x5851_f42d_4c95_7f2d;
-        let mut draw = || {
-            z ^= z << 13;
-            z ^= z >> 7;
-            z ^= z << 17;
-            (z >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let mut draw = || rng.random_range(-0.5..0.5);
         for variant in [
             PendulumVariant::Passive,
             PendulumVariant::Active,
@@ -412,13 +409,8 @@ mod tests {
     /// matrices nalgebra refuses (zero, negative or NaN pivots), where both refuse.
     #[test]
     fn cholesky_solve3_is_bit_identical_to_nalgebra() {
-        let mut z: u64 = 0x2545_f491_4f6c_dd1d;
-        let mut draw = || {
-            z ^= z << 13;
-            z ^= z >> 7;
-            z ^= z << 17;
-            (z >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut draw = || rng.random_range(-0.5..0.5);
         let p = Pendulum3::new(PendulumVariant::Active);
         let nalgebra = |m: &Matrix3<f64>, b: &Vector3<f64>| m.cholesky().map(|c| c.solve(b));
         let bits = |v: Option<Vector3<f64>>| v.map(|v| v.map(f64::to_bits));
