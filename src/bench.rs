@@ -258,6 +258,10 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
         }),
     );
     push("bptt.lander.iters_per_s", bptt_lander(min_seconds));
+    push("bptt.17-50-13.bare.iters_per_s", bptt_bare(min_seconds));
+    for (name, value) in fma_peaks(min_seconds) {
+        push(&name, value);
+    }
     for (name, value) in dolphin_metrics(min_seconds) {
         push(&name, value);
     }
@@ -304,6 +308,119 @@ fn bptt_lander(min_seconds: f64) -> f64 {
     throughput(min_seconds, 1, || {
         black_box(b.gradient(black_box(&v), &mut g));
     })
+}
+
+/// BPTT iterations per second on the problem `../shared/peers/bench_bptt.py` times in JAX: a
+/// bare 17-50-13 net predicting the state change (no frame, no normalization), 13 states and 4
+/// controls, one control per step over 40 steps, J = ½ μ_u Σ|u_t|² + ½ μ_s |s₄₀ − s_d|²; an
+/// iteration is the rollout, the full gradient and a plain descent update of the controls.
+/// Besides `bptt.lander.iters_per_s` (the lander's frame transforms, which the peer lacks),
+/// it compares the two codes on the same work.
+fn bptt_bare(min_seconds: f64) -> f64 {
+    use crate::control::bptt::{Bounds, Bptt, Knots};
+    use crate::control::objective::{ControlEffort, FinalState, Objective};
+    use crate::emulator::transform::TransformConfig;
+    use rand::{Rng, SeedableRng};
+    let (n, m, steps) = (13, 4, 40);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+    let mlp = Mlp::new(n + m, 50, n, WeightInit::FanIn, &mut rng);
+    let config = TransformConfig {
+        delta: true,
+        ..TransformConfig::none()
+    };
+    let transforms = Transforms::unfitted(&config, n, m).expect("no frame to check");
+    let e = Emulator::new(transforms, mlp, 0.5).expect("shapes agree");
+    let x0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let target: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let obj = Objective::default()
+        .with(ControlEffort::plain(1e-3, m))
+        .with(FinalState {
+            mu: 1.0,
+            target,
+            weights: vec![1.0; n],
+        });
+    let bounds = Bounds {
+        low: vec![-1.0; m],
+        high: vec![1.0; m],
+    };
+    let knots = Knots {
+        steps,
+        per_actuator: steps,
+        m,
+    };
+    let mut b = Bptt::new(&e, &obj, knots, bounds, &x0).expect("dimensions agree");
+    let mut v = vec![0.0; b.dim()];
+    let mut g = vec![0.0; b.dim()];
+    throughput(min_seconds, 1, || {
+        black_box(b.gradient(black_box(&v), &mut g));
+        for (v, g) in v.iter_mut().zip(&g) {
+            *v -= 0.05 * g;
+        }
+    })
+}
+
+/// The f64 multiply–add throughput of one core (`cpu.fma_f64.<lanes>.gmac_per_s`, 10⁹ per
+/// second): 12 independent chains of fused multiply–adds, on 4-lane AVX2 registers (the
+/// single-example kernels' lanes) and, where the processor has AVX-512, 8-lane registers (which
+/// the batch products' GEMM uses there); none on other processors. The roofline the neural metrics are
+/// measured against: `mlp.<shape>.*_gmac_per_s` count a batch example's multiply–adds as
+/// 2pq + 3qr (forward pq + qr, backward qr for h̄ and qr + pq for the weight gradient).
+fn fma_peaks(min_seconds: f64) -> Vec<(String, f64)> {
+    const CHAINS: usize = 12;
+    const ITERS: u64 = 100_000;
+    let mut out = vec![];
+    let mut rate = |name: &str, lanes: usize, run: &dyn Fn(u64) -> f64| {
+        let macs = ITERS * (CHAINS * lanes) as u64;
+        let per_s = throughput(min_seconds, macs, || {
+            black_box(run(black_box(ITERS)));
+        });
+        out.push((format!("cpu.fma_f64.{name}.gmac_per_s"), per_s / 1e9));
+    };
+    #[cfg(target_arch = "x86_64")]
+    {
+        if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+            #[target_feature(enable = "avx2,fma")]
+            fn chains(iters: u64) -> f64 {
+                use std::arch::x86_64::*;
+                let (a, b) = (_mm256_set1_pd(0.999_999), _mm256_set1_pd(1e-7));
+                let mut acc = [_mm256_set1_pd(0.5); CHAINS];
+                for _ in 0..iters {
+                    for x in acc.iter_mut() {
+                        *x = _mm256_fmadd_pd(*x, a, b);
+                    }
+                }
+                let mut lanes = [0.0; 4];
+                let s = acc
+                    .iter()
+                    .fold(_mm256_set1_pd(0.0), |s, x| _mm256_add_pd(s, *x));
+                // SAFETY: four f64 values are written to a 4-value array.
+                unsafe { _mm256_storeu_pd(lanes.as_mut_ptr(), s) };
+                lanes.iter().sum()
+            }
+            // SAFETY: the processor has AVX2 and FMA (checked just above).
+            rate("avx2", 4, &|iters| unsafe { chains(iters) });
+        }
+        if is_x86_feature_detected!("avx512f") {
+            #[target_feature(enable = "avx512f")]
+            fn chains(iters: u64) -> f64 {
+                use std::arch::x86_64::*;
+                let (a, b) = (_mm512_set1_pd(0.999_999), _mm512_set1_pd(1e-7));
+                let mut acc = [_mm512_set1_pd(0.5); CHAINS];
+                for _ in 0..iters {
+                    for x in acc.iter_mut() {
+                        *x = _mm512_fmadd_pd(*x, a, b);
+                    }
+                }
+                let s = acc
+                    .iter()
+                    .fold(_mm512_set1_pd(0.0), |s, x| _mm512_add_pd(s, *x));
+                _mm512_reduce_add_pd(s)
+            }
+            // SAFETY: the processor has AVX-512F (checked just above).
+            rate("avx512", 8, &|iters| unsafe { chains(iters) });
+        }
+    }
+    out
 }
 
 /// BPTT iterations per second through the dolphin's global net of the Table 1 shape (84-50-78,
@@ -373,11 +490,17 @@ fn mlp_training_metrics(
     let full = throughput(min_seconds, 1, || {
         black_box(mlp.loss_grad(x.view(), y.view(), &mut grad));
     });
+    let macs = (2 * n_in * hidden + 3 * hidden * n_out) as f64;
     (
         mlp,
         vec![
             (format!("mlp.{shape}.train_examples_per_s"), train),
             (format!("mlp.{shape}.full_grad_per_s"), full),
+            (format!("mlp.{shape}.train_gmac_per_s"), train * macs / 1e9),
+            (
+                format!("mlp.{shape}.full_grad_gmac_per_s"),
+                full * examples as f64 * macs / 1e9,
+            ),
         ],
     )
 }

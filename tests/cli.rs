@@ -484,6 +484,21 @@ fn bench_json_is_one_object_of_named_numbers() {
             1e6 / (400.0 * f("lqr.acrobot.backward_passes_per_s"))
         ) < 1e-9
     );
+    // Multiply–add rates: 2pq + 3qr per example (64,000 examples in the full batch).
+    let macs = (2 * 84 * 50 + 3 * 50 * 78) as f64;
+    assert!(
+        rel(
+            f("mlp.84-50-78.full_grad_gmac_per_s"),
+            f("mlp.84-50-78.full_grad_per_s") * 64000.0 * macs / 1e9
+        ) < 1e-9
+    );
+    assert!(
+        rel(
+            f("mlp.84-50-78.train_gmac_per_s"),
+            f("mlp.84-50-78.train_examples_per_s") * macs / 1e9
+        ) < 1e-9
+    );
+    assert!(obj.contains_key("bptt.17-50-13.bare.iters_per_s"));
 }
 
 #[test]

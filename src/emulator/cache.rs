@@ -69,8 +69,10 @@ pub fn take_usage() -> NetUsage {
     u
 }
 
-/// Bumped whenever the meaning of a stored file changes (transforms, sampling, training code).
-pub const CACHE_FORMAT: u32 = 1;
+/// Bumped whenever the meaning of a stored file changes (transforms, sampling, training code,
+/// the network's arithmetic). 2: the network's σ and sums became fused multiply–adds on lanes
+/// (issue 14), so a net trained before is not the net this code trains.
+pub const CACHE_FORMAT: u32 = 2;
 
 /// 64-bit FNV-1a hash.
 pub fn fnv1a(bytes: &[u8]) -> u64 {

@@ -54,10 +54,11 @@ fn chunk(
     s![c * BATCH_CHUNK..n.min((c + 1) * BATCH_CHUNK), ..]
 }
 
-/// The logistic sigmoid σ(z) = 1 / (1 + e^{−z}).
+/// The logistic sigmoid σ(z) = 1 / (1 + e^{−z}), evaluated as every pass of the net evaluates
+/// it (a vectorizable exponential within a few units in the last place; `kernels`' docs).
 #[inline]
 pub fn sigmoid(z: f64) -> f64 {
-    1.0 / (1.0 + (-z).exp())
+    kernels::sigmoid_scalar(z)
 }
 
 /// How the weights are drawn at construction.
@@ -196,8 +197,8 @@ impl Mlp {
     /// The packed weights of the single-example kernels (built on first use).
     fn packed(&self) -> &kernels::Packed {
         self.packed.get_or_init(|| {
-            let (w1, _, w2, _) = self.split(&self.weights);
-            kernels::Packed::new(self.n_in, self.n_hidden, self.n_out, w1, w2)
+            let (w1, b1, w2, b2) = self.split(&self.weights);
+            kernels::Packed::new(self.n_in, self.n_hidden, self.n_out, w1, b1, w2, b2)
         })
     }
 
@@ -245,8 +246,7 @@ impl Mlp {
     pub fn forward_into(&self, x: &[f64], hidden: &mut [f64], y: &mut [f64]) {
         debug_assert_eq!(x.len(), self.n_in);
         debug_assert_eq!(y.len(), self.n_out);
-        let (_, b1, _, b2) = self.split(&self.weights);
-        kernels::forward(self.packed(), b1, b2, x, hidden, y);
+        kernels::forward(self.packed(), x, hidden, y);
     }
 
     /// Backward pass for one example after [`Mlp::forward`] on the same `x` and `scratch`: adds
@@ -295,8 +295,7 @@ impl Mlp {
     }
 
     fn hidden_only(&self, x: &[f64], scratch: &mut MlpScratch) {
-        let (_, b1, _, _) = self.split(&self.weights);
-        kernels::hidden(self.packed(), b1, x, &mut scratch.hidden);
+        kernels::hidden(self.packed(), x, &mut scratch.hidden);
     }
 
     /// Full input Jacobian ∂N/∂x at `x`, row-major r × p into `jac`.
@@ -364,7 +363,7 @@ impl Mlp {
         let mut h = Array2::zeros((x.nrows(), self.n_hidden));
         h.rows_mut().into_iter().for_each(|mut row| row.assign(&b1));
         general_mat_mul(1.0, &x, &w1.t(), 1.0, &mut h);
-        h.mapv_inplace(sigmoid);
+        kernels::sigmoid_slice(h.as_slice_mut().expect("a new array is contiguous"));
         h
     }
 
@@ -593,22 +592,42 @@ mod tests {
         }
     }
 
-    /// The single-example passes as first written (row-major weights, one sum per output in
-    /// input order): the oracle the packed kernels must match bit for bit.
+    /// The single-example passes written out one output at a time (row-major weights): each
+    /// output one fused multiply–add per input from its bias (two chains, even and odd inputs,
+    /// where the kernels use two), the oracle the packed kernels must match bit for bit.
     mod oracle {
+        use super::super::kernels::output_has_dual_chains;
         use super::super::sigmoid;
 
+        /// init + Σ_k w(k) x[k] as the kernels sum output `j` of a product with `outputs`
+        /// outputs.
+        fn sum(init: f64, x: &[f64], w: impl Fn(usize) -> f64, outputs: usize, j: usize) -> f64 {
+            let stride = outputs.div_ceil(4) * 4;
+            if output_has_dual_chains(stride, j) {
+                let (mut even, mut odd) = (init, 0.0);
+                for (k, xk) in x.iter().enumerate() {
+                    if k % 2 == 0 {
+                        even = w(k).mul_add(*xk, even);
+                    } else {
+                        odd = w(k).mul_add(*xk, odd);
+                    }
+                }
+                even + odd
+            } else {
+                x.iter()
+                    .enumerate()
+                    .fold(init, |acc, (k, xk)| w(k).mul_add(*xk, acc))
+            }
+        }
+
         pub fn forward(m: &super::Mlp, x: &[f64], hidden: &mut [f64], y: &mut [f64]) {
-            let (p, q) = (m.n_in(), m.n_hidden());
+            let (p, q, r) = (m.n_in(), m.n_hidden(), m.n_out());
             let (w1, b1, w2, b2) = m.split(m.weights());
             for (j, h) in hidden.iter_mut().enumerate() {
-                let row = &w1[j * p..(j + 1) * p];
-                let z = b1[j] + row.iter().zip(x).map(|(a, b)| a * b).sum::<f64>();
-                *h = sigmoid(z);
+                *h = sigmoid(sum(b1[j], x, |k| w1[j * p + k], q, j));
             }
             for (i, yi) in y.iter_mut().enumerate() {
-                let row = &w2[i * q..(i + 1) * q];
-                *yi = b2[i] + row.iter().zip(&*hidden).map(|(a, b)| a * b).sum::<f64>();
+                *yi = sum(b2[i], hidden, |j| w2[i * q + j], r, i);
             }
         }
 
@@ -624,10 +643,7 @@ mod tests {
             let (w1, _, w2, _) = m.split(m.weights());
             let mut hidden_bar = vec![0.0; q];
             for j in 0..q {
-                let mut s = 0.0;
-                for (i, yb) in y_bar.iter().enumerate() {
-                    s += w2[i * q + j] * yb;
-                }
+                let s = sum(0.0, y_bar, |i| w2[i * q + j], q, j);
                 let h = hidden[j];
                 hidden_bar[j] = s * h * (1.0 - h);
             }
@@ -635,22 +651,18 @@ mod tests {
             for (i, yb) in y_bar.iter().enumerate() {
                 gb2[i] += yb;
                 for (g, h) in g2[i * q..(i + 1) * q].iter_mut().zip(hidden) {
-                    *g += yb * h;
+                    *g = yb.mul_add(*h, *g);
                 }
             }
             for j in 0..q {
                 let hb = hidden_bar[j];
                 gb1[j] += hb;
                 for (g, xi) in g1[j * p..(j + 1) * p].iter_mut().zip(x) {
-                    *g += hb * xi;
+                    *g = hb.mul_add(*xi, *g);
                 }
             }
-            xb.fill(0.0);
-            for j in 0..q {
-                let hb = hidden_bar[j];
-                for (o, w) in xb.iter_mut().zip(&w1[j * p..(j + 1) * p]) {
-                    *o += w * hb;
-                }
+            for (k, o) in xb.iter_mut().enumerate() {
+                *o = sum(0.0, &hidden_bar, |j| w1[j * p + k], p, k);
             }
         }
     }

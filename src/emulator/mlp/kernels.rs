@@ -1,22 +1,31 @@
 //! # Single-example kernels of the perceptron, vectorized across outputs
 //!
 //! Every single-example pass of [`super::Mlp`] is a handful of matrix–vector products. Each
-//! output of such a product is one dot product summed *sequentially* over its inputs, and that
-//! order is part of the result (floating-point addition does not associate), so the kernels
-//! here never split or reorder a sum. They vectorize *across* outputs instead: with the matrix
-//! stored so that the weights of all outputs for one input are contiguous, one pass over the
-//! inputs k updates W accumulators at once,
+//! output of such a product is one dot product summed *sequentially* over its inputs, with one
+//! fused multiply–add per input, starting from the bias:
 //!
 //! ```text
-//! acc[l] ← acc[l] + a[k, j₀ + l] · x[k]     for l < W, k = 0, 1, …   (W ≤ 32, a multiple of 4)
+//! acc[l] ← b[j₀ + l];   acc[l] ← fma(a[k, j₀ + l], x[k], acc[l])   for k = 0, 1, …
 //! ```
 //!
-//! which is exactly the scalar recurrence of each output, evaluated lane by lane (a separate
-//! multiply and add: no fused multiply–add, as before).
+//! That order is part of the result (floating-point addition does not associate), and it is
+//! fixed by the shapes alone. The kernels vectorize *across* outputs: with the matrix stored so
+//! that the weights of all outputs for one input are contiguous, one pass over the inputs
+//! updates W accumulators (W ≤ 32, a multiple of 4) at once, each lane evaluating exactly the
+//! scalar recurrence of its output. Where a block has 5 lane groups or fewer (20 outputs or
+//! fewer), too few chains are in flight to hide the multiply–add's latency, so each output is
+//! summed in two chains, even k (from the bias) and odd k (from zero), added at the end
+//! (`output_has_dual_chains` says which outputs).
 //!
-//! [`Packed`] holds the four layouts the passes read, each with its row stride padded with
-//! zeros to a multiple of 4 so that every lane group is full (padded lanes are computed and
-//! dropped):
+//! The hidden units' logistic sigmoid is computed on the lanes too ([`sigmoid_lanes`]): a
+//! Cody–Waite reduction e^t = 2ⁿ e^r, |r| ≤ ln 2 / 2, a degree-13 Taylor polynomial in Horner
+//! form (fused multiply–adds) and one division, within a few units in the last place of the
+//! exact value. [`super::sigmoid`] and the batch passes use the same lanes, so every pass of a
+//! net, single or batch, agrees bit for bit on σ.
+//!
+//! [`Packed`] holds the four layouts the passes read and the biases, each with its row stride
+//! padded with zeros to a multiple of 4 so that every lane group is full (padded lanes are
+//! computed and dropped):
 //!
 //! ```text
 //! w1t  p × q̃   W₁ᵀ: row k holds the weights of input k to every hidden unit  (forward, hidden)
@@ -25,19 +34,18 @@
 //! w1   q × p̃   W₁ as stored: row j holds hidden unit j's weights              (backward, x̄)
 //! ```
 //!
-//! The lanes are groups of 4 ([`Lanes`]): 256-bit AVX2 registers on x86-64 processors that
-//! have them (runtime detection), else plain `[f64; 4]` arrays. Both are the same IEEE
-//! multiplies and adds lane by lane, so results do not depend on the path taken.
-
-use super::sigmoid;
+//! The lanes are groups of 4 ([`Lanes`]): 256-bit AVX2 registers with FMA on x86-64 processors
+//! that have them (runtime detection), else plain `[f64; 4]` arrays with [`f64::mul_add`]. Both
+//! are the same IEEE operations lane by lane (a fused multiply–add is exactly rounded either
+//! way), so results do not depend on the path taken.
 
 /// A multiple of 4 (one lane group) at least `n`.
 fn pad4(n: usize) -> usize {
     n.div_ceil(4) * 4
 }
 
-/// Four f64 lanes and the three operations the kernels need. Implementations must evaluate
-/// each lane exactly as the scalar `acc + w * x` (a rounded multiply, then a rounded add).
+/// Four f64 lanes and the operations the kernels need. Implementations must evaluate each lane
+/// exactly as the scalar IEEE operation named (fused multiply–add rounded once).
 trait Lanes {
     /// A group of four lanes.
     type V: Copy;
@@ -45,8 +53,21 @@ trait Lanes {
     fn splat(x: f64) -> Self::V;
     /// The first four values of `p`.
     fn load(p: &[f64]) -> Self::V;
-    /// `acc + w * x` lane by lane.
-    fn mul_add(acc: Self::V, w: Self::V, x: Self::V) -> Self::V;
+    /// `w * x + acc` lane by lane, rounded once.
+    fn fma(w: Self::V, x: Self::V, acc: Self::V) -> Self::V;
+    /// `a + b`.
+    fn add(a: Self::V, b: Self::V) -> Self::V;
+    /// `a - b`.
+    fn sub(a: Self::V, b: Self::V) -> Self::V;
+    /// `a * b`.
+    fn mul(a: Self::V, b: Self::V) -> Self::V;
+    /// `a / b`.
+    fn div(a: Self::V, b: Self::V) -> Self::V;
+    /// `lo` where `x < lo`, `hi` where `x > hi`, else `x` (NaN stays NaN).
+    fn clamp(x: Self::V, lo: Self::V, hi: Self::V) -> Self::V;
+    /// 2ⁿ from `k = n + 1.5·2⁵²` (the shifter's sum; −1022 ≤ n ≤ 1023): the bit pattern of k
+    /// plus 1023, shifted into the exponent field.
+    fn exp2_from_shifted(k: Self::V) -> Self::V;
     /// Writes the lanes to the first four values of `out`.
     fn store(v: Self::V, out: &mut [f64]);
 }
@@ -65,8 +86,40 @@ impl Lanes for Portable {
         p[..4].try_into().expect("4 values")
     }
     #[inline(always)]
-    fn mul_add(acc: [f64; 4], w: [f64; 4], x: [f64; 4]) -> [f64; 4] {
-        [0, 1, 2, 3].map(|l| acc[l] + w[l] * x[l])
+    fn fma(w: [f64; 4], x: [f64; 4], acc: [f64; 4]) -> [f64; 4] {
+        [0, 1, 2, 3].map(|l| w[l].mul_add(x[l], acc[l]))
+    }
+    #[inline(always)]
+    fn add(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        [0, 1, 2, 3].map(|l| a[l] + b[l])
+    }
+    #[inline(always)]
+    fn sub(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        [0, 1, 2, 3].map(|l| a[l] - b[l])
+    }
+    #[inline(always)]
+    fn mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        [0, 1, 2, 3].map(|l| a[l] * b[l])
+    }
+    #[inline(always)]
+    fn div(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+        [0, 1, 2, 3].map(|l| a[l] / b[l])
+    }
+    #[inline(always)]
+    fn clamp(x: [f64; 4], lo: [f64; 4], hi: [f64; 4]) -> [f64; 4] {
+        // As AVX's max(lo, x) then min(hi, ·): the second operand when either is NaN.
+        [0, 1, 2, 3].map(|l| {
+            let v = if lo[l] > x[l] { lo[l] } else { x[l] };
+            if hi[l] < v {
+                hi[l]
+            } else {
+                v
+            }
+        })
+    }
+    #[inline(always)]
+    fn exp2_from_shifted(k: [f64; 4]) -> [f64; 4] {
+        k.map(|k| f64::from_bits(k.to_bits().wrapping_add(1023) << 52))
     }
     #[inline(always)]
     fn store(v: [f64; 4], out: &mut [f64]) {
@@ -74,37 +127,126 @@ impl Lanes for Portable {
     }
 }
 
-/// Lanes in AVX2 registers; only used from functions compiled with AVX2 enabled, on
-/// processors that have it.
+/// Lanes in AVX2 registers; only used from functions compiled with AVX2 and FMA enabled, on
+/// processors that have them.
 #[cfg(target_arch = "x86_64")]
 struct Avx2;
 
 #[cfg(target_arch = "x86_64")]
 impl Lanes for Avx2 {
     type V = std::arch::x86_64::__m256d;
+    // SAFETY (every method): only reached from `#[target_feature(enable = "avx2,fma")]` code
+    // (see `dispatch`), on processors that have both.
     #[inline(always)]
     fn splat(x: f64) -> Self::V {
-        // SAFETY: only reached from `#[target_feature(enable = "avx2")]` code (see `dispatch`).
         unsafe { std::arch::x86_64::_mm256_set1_pd(x) }
     }
     #[inline(always)]
     fn load(p: &[f64]) -> Self::V {
         assert!(p.len() >= 4);
-        // SAFETY: four values are in bounds (checked); AVX2 as for `splat`.
+        // SAFETY: four values are in bounds (checked).
         unsafe { std::arch::x86_64::_mm256_loadu_pd(p.as_ptr()) }
     }
     #[inline(always)]
-    fn mul_add(acc: Self::V, w: Self::V, x: Self::V) -> Self::V {
-        use std::arch::x86_64::{_mm256_add_pd, _mm256_mul_pd};
-        // SAFETY: AVX2 as for `splat`. A separate multiply and add, as the scalar code.
-        unsafe { _mm256_add_pd(acc, _mm256_mul_pd(w, x)) }
+    fn fma(w: Self::V, x: Self::V, acc: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm256_fmadd_pd(w, x, acc) }
+    }
+    #[inline(always)]
+    fn add(a: Self::V, b: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm256_add_pd(a, b) }
+    }
+    #[inline(always)]
+    fn sub(a: Self::V, b: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm256_sub_pd(a, b) }
+    }
+    #[inline(always)]
+    fn mul(a: Self::V, b: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm256_mul_pd(a, b) }
+    }
+    #[inline(always)]
+    fn div(a: Self::V, b: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm256_div_pd(a, b) }
+    }
+    #[inline(always)]
+    fn clamp(x: Self::V, lo: Self::V, hi: Self::V) -> Self::V {
+        use std::arch::x86_64::{_mm256_max_pd, _mm256_min_pd};
+        unsafe { _mm256_min_pd(hi, _mm256_max_pd(lo, x)) }
+    }
+    #[inline(always)]
+    fn exp2_from_shifted(k: Self::V) -> Self::V {
+        use std::arch::x86_64::*;
+        unsafe {
+            let bits = _mm256_add_epi64(_mm256_castpd_si256(k), _mm256_set1_epi64x(1023));
+            _mm256_castsi256_pd(_mm256_slli_epi64::<52>(bits))
+        }
     }
     #[inline(always)]
     fn store(v: Self::V, out: &mut [f64]) {
         assert!(out.len() >= 4);
-        // SAFETY: four values are in bounds (checked); AVX2 as for `splat`.
+        // SAFETY: four values are in bounds (checked).
         unsafe { std::arch::x86_64::_mm256_storeu_pd(out.as_mut_ptr(), v) }
     }
+}
+
+/// σ(z) = 1 / (1 + e^{−z}) on each lane (module docs): e^t for t = −z clamped to ±708 (beyond
+/// that σ is 0 or 1 to double precision), by t = n ln 2 + r with n = round(t / ln 2) (the
+/// 1.5·2⁵² shifter) and ln 2 in two parts, e^r by its Taylor series to degree 13 (the
+/// truncation is below 2⁻⁵⁵ of e^r for |r| ≤ ln 2 / 2), then 2ⁿ from the exponent bits.
+#[inline(always)]
+fn sigmoid_lanes<L: Lanes>(z: L::V) -> L::V {
+    const SHIFT: f64 = 6755399441055744.0; // 1.5 · 2⁵²
+    // ln 2 = LN2_HI + LN2_LO, the first with 32 significant bits (fdlibm's split).
+    const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
+                                                     // 1/k! for k = 13, 12, …, 0.
+    const C: [f64; 14] = [
+        1.0 / 6_227_020_800.0,
+        1.0 / 479_001_600.0,
+        1.0 / 39_916_800.0,
+        1.0 / 3_628_800.0,
+        1.0 / 362_880.0,
+        1.0 / 40_320.0,
+        1.0 / 5_040.0,
+        1.0 / 720.0,
+        1.0 / 120.0,
+        1.0 / 24.0,
+        1.0 / 6.0,
+        0.5,
+        1.0,
+        1.0,
+    ];
+    let t = L::clamp(L::sub(L::splat(0.0), z), L::splat(-708.0), L::splat(708.0));
+    let k = L::fma(t, L::splat(std::f64::consts::LOG2_E), L::splat(SHIFT));
+    let n = L::sub(k, L::splat(SHIFT));
+    let r = L::fma(n, L::splat(-LN2_HI), t);
+    let r = L::fma(n, L::splat(-LN2_LO), r);
+    let mut p = L::splat(C[0]);
+    for &c in &C[1..] {
+        p = L::fma(p, r, L::splat(c));
+    }
+    let e = L::mul(p, L::exp2_from_shifted(k));
+    L::div(L::splat(1.0), L::add(L::splat(1.0), e))
+}
+
+/// σ on every value of `v`, four at a time (the tail through a zero-padded group).
+#[inline(always)]
+fn sigmoid_slice_generic<L: Lanes>(v: &mut [f64]) {
+    let mut groups = v.chunks_exact_mut(4);
+    for g in &mut groups {
+        L::store(sigmoid_lanes::<L>(L::load(g)), g);
+    }
+    let tail = groups.into_remainder();
+    if !tail.is_empty() {
+        let mut buf = [0.0; 4];
+        buf[..tail.len()].copy_from_slice(tail);
+        L::store(sigmoid_lanes::<L>(L::load(&buf)), &mut buf);
+        tail.copy_from_slice(&buf[..tail.len()]);
+    }
+}
+
+/// The scalar σ: lane 0 of [`sigmoid_lanes`] (the same bits as every kernel).
+pub(super) fn sigmoid_scalar(z: f64) -> f64 {
+    sigmoid_lanes::<Portable>([z; 4])[0]
 }
 
 /// The weights of a p → q → r net in the layouts of the single-example kernels (module docs).
@@ -121,11 +263,24 @@ pub(super) struct Packed {
     w2t: Vec<f64>,
     w2: Vec<f64>,
     w1: Vec<f64>,
+    /// b₁ and b₂, zero-padded to q̃ and r̃.
+    b1: Vec<f64>,
+    b2: Vec<f64>,
+    /// q̃ zeros: the start of the sums without a bias.
+    zeros: Vec<f64>,
 }
 
 impl Packed {
-    /// Packs W₁ (q × p, row-major) and W₂ (r × q, row-major).
-    pub(super) fn new(p: usize, q: usize, r: usize, w1: &[f64], w2: &[f64]) -> Self {
+    /// Packs W₁ (q × p, row-major), b₁, W₂ (r × q, row-major) and b₂.
+    pub(super) fn new(
+        p: usize,
+        q: usize,
+        r: usize,
+        w1: &[f64],
+        b1: &[f64],
+        w2: &[f64],
+        b2: &[f64],
+    ) -> Self {
         let (ps, qs, rs) = (pad4(p), pad4(q), pad4(r));
         let mut w1t = vec![0.0; p * qs];
         let mut w1p = vec![0.0; q * ps];
@@ -143,6 +298,11 @@ impl Packed {
                 w2p[i * qs + j] = w2[i * q + j];
             }
         }
+        let padded = |b: &[f64], n: usize| {
+            let mut v = vec![0.0; n];
+            v[..b.len()].copy_from_slice(b);
+            v
+        };
         Self {
             p,
             q,
@@ -154,36 +314,43 @@ impl Packed {
             w2t,
             w2: w2p,
             w1: w1p,
+            b1: padded(b1, qs),
+            b2: padded(b2, rs),
+            zeros: vec![0.0; qs.max(ps)],
         }
     }
 }
 
-/// `emit(l, init + Σ_k a[k, l] x[k])` for l < n, each sum taken in order k = 0, 1, …: the
-/// columns of `a` (rows of `stride` values, stride a multiple of 4 and at least n) against `x`.
+/// `emit(l, s)` for l < n with s = init[l] + Σ_k a[k, l] x[k], or σ(s) when `SIGMOID`, each
+/// sum one fused multiply–add per k in order k = 0, 1, …: the columns of `a` (rows of `stride`
+/// values, stride a multiple of 4 and at least n) against `x`, from `init` (at least `stride`
+/// values). σ acts on whole lane groups ([`sigmoid_lanes`]).
 #[inline(always)]
-fn columns<L: Lanes>(
+fn columns<L: Lanes, const SIGMOID: bool>(
     a: &[f64],
     stride: usize,
     x: &[f64],
-    init: f64,
+    init: &[f64],
     n: usize,
     mut emit: impl FnMut(usize, f64),
 ) {
     debug_assert!(stride.is_multiple_of(4) && n <= stride);
     assert!(a.len() >= x.len() * stride, "packed matrix too short");
+    assert!(init.len() >= stride, "initial values too short");
     let mut j0 = 0;
     while j0 < n {
         // Blocks of up to 32 lanes (8 groups), each lane a separate sum.
         let w = (stride - j0).min(32);
+        let e = &mut emit;
         match w / 4 {
-            8 => block::<L, 8>(a, stride, j0, x, init, n, &mut emit),
-            7 => block::<L, 7>(a, stride, j0, x, init, n, &mut emit),
-            6 => block::<L, 6>(a, stride, j0, x, init, n, &mut emit),
-            5 => block::<L, 5>(a, stride, j0, x, init, n, &mut emit),
-            4 => block::<L, 4>(a, stride, j0, x, init, n, &mut emit),
-            3 => block::<L, 3>(a, stride, j0, x, init, n, &mut emit),
-            2 => block::<L, 2>(a, stride, j0, x, init, n, &mut emit),
-            _ => block::<L, 1>(a, stride, j0, x, init, n, &mut emit),
+            8 => block::<L, SIGMOID, 8>(a, stride, j0, x, init, n, e),
+            7 => block::<L, SIGMOID, 7>(a, stride, j0, x, init, n, e),
+            6 => block::<L, SIGMOID, 6>(a, stride, j0, x, init, n, e),
+            5 => block::<L, SIGMOID, 5>(a, stride, j0, x, init, n, e),
+            4 => block::<L, SIGMOID, 4>(a, stride, j0, x, init, n, e),
+            3 => block::<L, SIGMOID, 3>(a, stride, j0, x, init, n, e),
+            2 => block::<L, SIGMOID, 2>(a, stride, j0, x, init, n, e),
+            _ => block::<L, SIGMOID, 1>(a, stride, j0, x, init, n, e),
         }
         j0 += w;
     }
@@ -191,49 +358,105 @@ fn columns<L: Lanes>(
 
 /// Columns `j0 .. j0 + 4G` of [`columns`], accumulated in G groups of 4 independent lanes.
 #[inline(always)]
-fn block<L: Lanes, const G: usize>(
+#[allow(clippy::too_many_arguments)]
+fn block<L: Lanes, const SIGMOID: bool, const G: usize>(
     a: &[f64],
     stride: usize,
     j0: usize,
     x: &[f64],
-    init: f64,
+    init: &[f64],
     n: usize,
     emit: &mut impl FnMut(usize, f64),
 ) {
-    let mut acc = [L::splat(init); G];
-    for (k, &xk) in x.iter().enumerate() {
-        let start = k * stride + j0;
-        let row = &a[start..start + 4 * G];
-        let xv = L::splat(xk);
-        for (g, acc) in acc.iter_mut().enumerate() {
-            *acc = L::mul_add(*acc, L::load(&row[4 * g..]), xv);
+    let mut acc = [L::splat(0.0); G];
+    for (g, acc) in acc.iter_mut().enumerate() {
+        *acc = L::load(&init[j0 + 4 * g..]);
+    }
+    if dual_chains(G) {
+        // Too few groups to hide the multiply–add latency: even k into `acc`, odd k into a
+        // second set, added at the end.
+        let mut odd = [L::splat(0.0); G];
+        let mut k = 0;
+        while k + 1 < x.len() {
+            step::<L, G>(&mut acc, a, stride, j0, x, k);
+            step::<L, G>(&mut odd, a, stride, j0, x, k + 1);
+            k += 2;
+        }
+        if k < x.len() {
+            step::<L, G>(&mut acc, a, stride, j0, x, k);
+        }
+        for (a, o) in acc.iter_mut().zip(odd) {
+            *a = L::add(*a, o);
+        }
+    } else {
+        for k in 0..x.len() {
+            step::<L, G>(&mut acc, a, stride, j0, x, k);
         }
     }
     let mut sums = [0.0; 32];
     for (g, acc) in acc.iter().enumerate() {
-        L::store(*acc, &mut sums[4 * g..]);
+        let v = if SIGMOID {
+            sigmoid_lanes::<L>(*acc)
+        } else {
+            *acc
+        };
+        L::store(v, &mut sums[4 * g..]);
     }
     for (l, &v) in sums.iter().enumerate().take((4 * G).min(n - j0)) {
         emit(j0 + l, v);
     }
 }
 
-/// `$name` runs `$generic` on AVX2 lanes, compiled with AVX2 enabled, when the processor has
-/// it, else on portable lanes.
+/// One input k of a [`block`]: acc ← fma(a[k, j₀ ..], x[k], acc).
+#[inline(always)]
+fn step<L: Lanes, const G: usize>(
+    acc: &mut [L::V; G],
+    a: &[f64],
+    stride: usize,
+    j0: usize,
+    x: &[f64],
+    k: usize,
+) {
+    let start = k * stride + j0;
+    let row = &a[start..start + 4 * G];
+    let xv = L::splat(x[k]);
+    for (g, acc) in acc.iter_mut().enumerate() {
+        *acc = L::fma(L::load(&row[4 * g..]), xv, *acc);
+    }
+}
+
+/// Whether a block of `groups` lane groups sums each output in two chains (module docs).
+#[inline(always)]
+const fn dual_chains(groups: usize) -> bool {
+    groups <= 5
+}
+
+/// Whether output `j` of a product with padded stride `stride` is summed in two chains: the
+/// block [`columns`] puts it in has at most 5 lane groups.
+#[cfg(test)]
+pub(super) fn output_has_dual_chains(stride: usize, j: usize) -> bool {
+    let j0 = j / 32 * 32;
+    dual_chains((stride - j0).min(32) / 4)
+}
+
+/// `$name` runs `$generic` on AVX2 lanes, compiled with AVX2 and FMA enabled, when the
+/// processor has both, else on portable lanes.
 macro_rules! dispatch {
     ($name:ident, $generic:ident, ($($arg:ident : $ty:ty),*)) => {
         #[allow(clippy::too_many_arguments)]
         pub(super) fn $name($($arg: $ty),*) {
             #[cfg(target_arch = "x86_64")]
             {
-                /// The generic body on AVX2 lanes, compiled with AVX2 enabled.
-                #[target_feature(enable = "avx2")]
+                /// The generic body on AVX2 lanes, compiled with AVX2 and FMA enabled.
+                #[target_feature(enable = "avx2,fma")]
                 #[allow(clippy::too_many_arguments)]
                 fn avx2($($arg: $ty),*) {
                     $generic::<Avx2>($($arg),*)
                 }
-                if std::arch::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the processor supports AVX2 (checked just above).
+                if std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma")
+                {
+                    // SAFETY: the processor supports AVX2 and FMA (checked just above).
                     unsafe { avx2($($arg),*) };
                     return;
                 }
@@ -245,32 +468,23 @@ macro_rules! dispatch {
 
 /// Hidden activations h = σ(W₁ x + b₁).
 #[inline(always)]
-fn hidden_generic<L: Lanes>(pk: &Packed, b1: &[f64], x: &[f64], h: &mut [f64]) {
+fn hidden_generic<L: Lanes>(pk: &Packed, x: &[f64], h: &mut [f64]) {
     debug_assert_eq!(x.len(), pk.p);
-    columns::<L>(&pk.w1t, pk.qs, x, -0.0, pk.q, |j, s| {
-        h[j] = sigmoid(b1[j] + s)
-    });
+    columns::<L, true>(&pk.w1t, pk.qs, x, &pk.b1, pk.q, |j, s| h[j] = s);
 }
 
 /// Forward pass: h = σ(W₁ x + b₁), y = W₂ h + b₂.
 #[inline(always)]
-fn forward_generic<L: Lanes>(
-    pk: &Packed,
-    b1: &[f64],
-    b2: &[f64],
-    x: &[f64],
-    h: &mut [f64],
-    y: &mut [f64],
-) {
-    hidden_generic::<L>(pk, b1, x, h);
-    columns::<L>(&pk.w2t, pk.rs, h, -0.0, pk.r, |i, s| y[i] = b2[i] + s);
+fn forward_generic<L: Lanes>(pk: &Packed, x: &[f64], h: &mut [f64], y: &mut [f64]) {
+    hidden_generic::<L>(pk, x, h);
+    columns::<L, false>(&pk.w2t, pk.rs, h, &pk.b2, pk.r, |i, s| y[i] = s);
 }
 
 /// Hidden cotangent h̄ = (W₂ᵀ ȳ) ⊙ h ⊙ (1 − h).
 #[inline(always)]
 fn hidden_bar_generic<L: Lanes>(pk: &Packed, h: &[f64], y_bar: &[f64], hb: &mut [f64]) {
     debug_assert_eq!(y_bar.len(), pk.r);
-    columns::<L>(&pk.w2, pk.qs, y_bar, 0.0, pk.q, |j, s| {
+    columns::<L, false>(&pk.w2, pk.qs, y_bar, &pk.zeros, pk.q, |j, s| {
         let hj = h[j];
         hb[j] = s * hj * (1.0 - hj);
     });
@@ -279,10 +493,11 @@ fn hidden_bar_generic<L: Lanes>(pk: &Packed, h: &[f64], y_bar: &[f64], hb: &mut 
 /// Input cotangent x̄ = W₁ᵀ h̄.
 #[inline(always)]
 fn input_bar_generic<L: Lanes>(pk: &Packed, hb: &[f64], xb: &mut [f64]) {
-    columns::<L>(&pk.w1, pk.ps, hb, 0.0, pk.p, |k, s| xb[k] = s);
+    columns::<L, false>(&pk.w1, pk.ps, hb, &pk.zeros, pk.p, |k, s| xb[k] = s);
 }
 
-/// Weight-gradient accumulation: ∂E/∂W₂ += ȳ hᵀ, ∂E/∂b₂ += ȳ, ∂E/∂W₁ += h̄ xᵀ, ∂E/∂b₁ += h̄.
+/// Weight-gradient accumulation: ∂E/∂W₂ += ȳ hᵀ, ∂E/∂b₂ += ȳ, ∂E/∂W₁ += h̄ xᵀ, ∂E/∂b₁ += h̄
+/// (each product added by one fused multiply–add).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn weight_grad_generic<L: Lanes>(
@@ -295,26 +510,34 @@ fn weight_grad_generic<L: Lanes>(
     g2: &mut [f64],
     gb2: &mut [f64],
 ) {
+    #[inline(always)]
+    fn rank1<L: Lanes>(g: &mut [f64], s: f64, v: &[f64]) {
+        let sv = L::splat(s);
+        let mut gc = g.chunks_exact_mut(4);
+        let mut vc = v.chunks_exact(4);
+        for (g, v) in (&mut gc).zip(&mut vc) {
+            L::store(L::fma(sv, L::load(v), L::load(g)), g);
+        }
+        for (g, v) in gc.into_remainder().iter_mut().zip(vc.remainder()) {
+            *g = s.mul_add(*v, *g);
+        }
+    }
     let (p, q) = (x.len(), h.len());
     for (i, yb) in y_bar.iter().enumerate() {
         gb2[i] += yb;
-        for (g, h) in g2[i * q..(i + 1) * q].iter_mut().zip(h) {
-            *g += yb * h;
-        }
+        rank1::<L>(&mut g2[i * q..(i + 1) * q], *yb, h);
     }
     for (j, &hbj) in hb.iter().enumerate() {
         gb1[j] += hbj;
-        for (g, xi) in g1[j * p..(j + 1) * p].iter_mut().zip(x) {
-            *g += hbj * xi;
-        }
+        rank1::<L>(&mut g1[j * p..(j + 1) * p], hbj, x);
     }
 }
 
-dispatch!(hidden, hidden_generic, (pk: &Packed, b1: &[f64], x: &[f64], h: &mut [f64]));
+dispatch!(hidden, hidden_generic, (pk: &Packed, x: &[f64], h: &mut [f64]));
 dispatch!(
     forward,
     forward_generic,
-    (pk: &Packed, b1: &[f64], b2: &[f64], x: &[f64], h: &mut [f64], y: &mut [f64])
+    (pk: &Packed, x: &[f64], h: &mut [f64], y: &mut [f64])
 );
 dispatch!(
     hidden_bar,
@@ -336,6 +559,7 @@ dispatch!(
         gb2: &mut [f64]
     )
 );
+dispatch!(sigmoid_slice, sigmoid_slice_generic, (v: &mut [f64]));
 
 #[cfg(test)]
 mod tests {
@@ -347,8 +571,8 @@ mod tests {
         v.iter().map(|x| x.to_bits()).collect()
     }
 
-    /// The portable lanes give bit for bit what the dispatched entry points (AVX2 where the
-    /// processor has it) give.
+    /// The portable lanes give bit for bit what the dispatched entry points (AVX2 and FMA where
+    /// the processor has them) give.
     #[test]
     fn portable_lanes_match_the_dispatched_kernels() {
         let mut rng = ChaCha8Rng::seed_from_u64(9);
@@ -357,11 +581,11 @@ mod tests {
                 |n: usize| -> Vec<f64> { (0..n).map(|_| rng.random_range(-2.0..2.0)).collect() };
             let (w1, w2, b1, b2) = (draw(q * p), draw(r * q), draw(q), draw(r));
             let (x, yb) = (draw(p), draw(r));
-            let pk = Packed::new(p, q, r, &w1, &w2);
+            let pk = Packed::new(p, q, r, &w1, &b1, &w2, &b2);
             let (mut h0, mut y0, mut h1, mut y1) =
                 (vec![0.0; q], vec![0.0; r], vec![0.0; q], vec![0.0; r]);
-            forward(&pk, &b1, &b2, &x, &mut h0, &mut y0);
-            forward_generic::<Portable>(&pk, &b1, &b2, &x, &mut h1, &mut y1);
+            forward(&pk, &x, &mut h0, &mut y0);
+            forward_generic::<Portable>(&pk, &x, &mut h1, &mut y1);
             assert_eq!(
                 (bits(&h0), bits(&y0)),
                 (bits(&h1), bits(&y1)),
@@ -375,6 +599,74 @@ mod tests {
             input_bar(&pk, &hb0, &mut xb0);
             input_bar_generic::<Portable>(&pk, &hb0, &mut xb1);
             assert_eq!(bits(&xb0), bits(&xb1), "{p}-{q}-{r}");
+            let n = q * (p + 1) + r * (q + 1);
+            let (mut ga, mut gb) = (draw(n), vec![0.0; n]);
+            gb.copy_from_slice(&ga);
+            let split = |g: &mut [f64]| -> [Vec<f64>; 4] {
+                let (g1, rest) = g.split_at(q * p);
+                let (gb1, rest) = rest.split_at(q);
+                let (g2, gb2) = rest.split_at(r * q);
+                [g1.to_vec(), gb1.to_vec(), g2.to_vec(), gb2.to_vec()]
+            };
+            let [mut a1, mut ab1, mut a2, mut ab2] = split(&mut ga);
+            let [mut c1, mut cb1, mut c2, mut cb2] = split(&mut gb);
+            weight_grad(&x, &h0, &hb0, &yb, &mut a1, &mut ab1, &mut a2, &mut ab2);
+            weight_grad_generic::<Portable>(
+                &x, &h0, &hb0, &yb, &mut c1, &mut cb1, &mut c2, &mut cb2,
+            );
+            assert_eq!(
+                [bits(&a1), bits(&ab1), bits(&a2), bits(&ab2)],
+                [bits(&c1), bits(&cb1), bits(&c2), bits(&cb2)],
+                "{p}-{q}-{r}"
+            );
         }
+        let mut z: Vec<f64> = (0..1003).map(|_| rng.random_range(-60.0..60.0)).collect();
+        let mut zp = z.clone();
+        sigmoid_slice(&mut z);
+        sigmoid_slice_generic::<Portable>(&mut zp);
+        assert_eq!(bits(&z), bits(&zp));
+    }
+
+    /// σ on the lanes is within 4 units in the last place of 1 / (1 + e^{−z}) evaluated with
+    /// libm's exp (itself within one) over the whole range, exact at the saturated ends, odd
+    /// about one half (σ(−z) = 1 − σ(z) to rounding), and NaN stays NaN.
+    #[test]
+    fn lane_sigmoid_is_accurate_to_a_few_ulps() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let reference = |z: f64| 1.0 / (1.0 + (-z).exp());
+        let mut zs: Vec<f64> = (0..200_000)
+            .map(|i| match i % 4 {
+                0 => rng.random_range(-1.0..1.0),
+                1 => rng.random_range(-40.0..40.0),
+                2 => rng.random_range(-750.0..750.0),
+                _ => rng.random_range(-1e-6..1e-6),
+            })
+            .collect();
+        zs.extend([0.0, -0.0, 708.0, -708.0, 709.5, -709.5, 1e300, -1e300]);
+        zs.extend([f64::INFINITY, f64::NEG_INFINITY, f64::MIN_POSITIVE]);
+        let mut s = zs.clone();
+        sigmoid_slice(&mut s);
+        let mut worst = 0.0f64;
+        for (&z, &v) in zs.iter().zip(&s) {
+            let r = reference(z);
+            assert!((0.0..=1.0).contains(&v), "σ({z}) = {v}");
+            if r > 1e-300 {
+                let ulps = (v - r).abs() / (r * f64::EPSILON);
+                worst = worst.max(ulps);
+                assert!(ulps <= 4.0, "σ({z}) = {v:e}, libm {r:e}: {ulps} ulp");
+            } else {
+                assert!(v < 1e-300, "σ({z}) = {v:e}");
+            }
+            assert_eq!(v.to_bits(), sigmoid_scalar(z).to_bits(), "scalar σ({z})");
+            if z.abs() < 30.0 {
+                assert!((sigmoid_scalar(-z) - (1.0 - v)).abs() <= 4.0 * f64::EPSILON);
+            }
+        }
+        assert!(worst > 0.0, "compared against libm at all");
+        assert_eq!(sigmoid_scalar(800.0), 1.0);
+        assert!(sigmoid_scalar(f64::NAN).is_nan());
+        let mut v = [0.3, f64::NAN, -2.0, f64::NAN, 1.0];
+        sigmoid_slice(&mut v);
+        assert!(v[1].is_nan() && v[3].is_nan() && v[0] > 0.5 && v[2] < 0.5);
     }
 }

@@ -500,31 +500,11 @@ impl SpatialFrame {
         inp_bar: &mut [f64],
         pose_bar: &mut Pose3,
     ) {
-        // Variables the map does not touch pass their cotangent through.
-        const SMALL: usize = 256;
-        if inp_bar.len() <= SMALL {
-            let mut mapped = [false; SMALL];
-            for (t, _) in self.triples() {
-                t.iter().for_each(|&i| mapped[i] = true);
-            }
-            for q in &self.quaternions {
-                q.iter().for_each(|&i| mapped[i] = true);
-            }
-            for (i, b) in inp_bar.iter_mut().enumerate() {
-                if !mapped[i] {
-                    *b += out_bar[i];
-                }
-            }
-        } else {
-            let mapped = |i: usize| {
-                self.triples().any(|(t, _)| t.contains(&i))
-                    || self.quaternions.iter().any(|q| q.contains(&i))
-            };
-            for (i, b) in inp_bar.iter_mut().enumerate() {
-                if !mapped(i) {
-                    *b += out_bar[i];
-                }
-            }
+        // Variables the map does not touch pass their cotangent through. Indices are listed at
+        // most once (`validate`), so when the map's count equals the length it touches all.
+        let touched = 3 * (self.points.len() + self.vectors.len()) + 4 * self.quaternions.len();
+        if touched < inp_bar.len() {
+            pass_untouched(self, inp_bar, out_bar);
         }
         let local = map.sign() < 0.0;
         for (t, is_point) in self.triples() {
@@ -574,6 +554,35 @@ impl SpatialFrame {
             for &k in live {
                 let dq = partials[k];
                 pose_bar.q[k] += (0..4).map(|c| dq[c] * g[c]).sum::<f64>();
+            }
+        }
+    }
+}
+
+/// Adds `out_bar` to `inp_bar` at the variables `frame` does not map (they pass through).
+fn pass_untouched(frame: &SpatialFrame, inp_bar: &mut [f64], out_bar: &[f64]) {
+    const SMALL: usize = 256;
+    if inp_bar.len() <= SMALL {
+        let mut mapped = [false; SMALL];
+        for (t, _) in frame.triples() {
+            t.iter().for_each(|&i| mapped[i] = true);
+        }
+        for q in &frame.quaternions {
+            q.iter().for_each(|&i| mapped[i] = true);
+        }
+        for (i, b) in inp_bar.iter_mut().enumerate() {
+            if !mapped[i] {
+                *b += out_bar[i];
+            }
+        }
+    } else {
+        let mapped = |i: usize| {
+            frame.triples().any(|(t, _)| t.contains(&i))
+                || frame.quaternions.iter().any(|q| q.contains(&i))
+        };
+        for (i, b) in inp_bar.iter_mut().enumerate() {
+            if !mapped(i) {
+                *b += out_bar[i];
             }
         }
     }
