@@ -70,9 +70,12 @@ pub fn take_usage() -> NetUsage {
 }
 
 /// Bumped whenever the meaning of a stored file changes (transforms, sampling, training code,
-/// the network's arithmetic). 2: the network's σ and sums became fused multiply–adds on lanes
-/// (issue 14), so a net trained before is not the net this code trains.
-pub const CACHE_FORMAT: u32 = 2;
+/// the network's arithmetic, the simulators' arithmetic: the key fingerprints the sampling
+/// recipe, not the simulated transitions). 2: the network's σ and sums became fused
+/// multiply–adds on lanes; 3: the pendulum's derivative takes its angle differences by the
+/// angle identities and solves by L D Lᵀ (issue 14). A net trained before is not the net this
+/// code trains.
+pub const CACHE_FORMAT: u32 = 3;
 
 /// 64-bit FNV-1a hash.
 pub fn fnv1a(bytes: &[u8]) -> u64 {

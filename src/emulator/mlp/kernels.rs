@@ -195,10 +195,10 @@ impl Lanes for Avx2 {
 #[inline(always)]
 fn sigmoid_lanes<L: Lanes>(z: L::V) -> L::V {
     const SHIFT: f64 = 6755399441055744.0; // 1.5 · 2⁵²
-    // ln 2 = LN2_HI + LN2_LO, the first with 32 significant bits (fdlibm's split).
+                                           // ln 2 = LN2_HI + LN2_LO, the first with 32 significant bits (fdlibm's split).
     const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
     const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
-                                                     // 1/k! for k = 13, 12, …, 0.
+    // 1/k! for k = 13, 12, …, 0.
     const C: [f64; 14] = [
         1.0 / 6_227_020_800.0,
         1.0 / 479_001_600.0,
