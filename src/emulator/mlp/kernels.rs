@@ -194,8 +194,9 @@ impl Lanes for Avx2 {
 /// truncation is below 2⁻⁵⁵ of e^r for |r| ≤ ln 2 / 2), then 2ⁿ from the exponent bits.
 #[inline(always)]
 fn sigmoid_lanes<L: Lanes>(z: L::V) -> L::V {
-    const SHIFT: f64 = 6755399441055744.0; // 1.5 · 2⁵²
-                                           // ln 2 = LN2_HI + LN2_LO, the first with 32 significant bits (fdlibm's split).
+    // The shifter 1.5 · 2⁵², and ln 2 = LN2_HI + LN2_LO with 32 significant bits in the first
+    // (fdlibm's split).
+    const SHIFT: f64 = 6755399441055744.0;
     const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
     const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
     // 1/k! for k = 13, 12, …, 0.
