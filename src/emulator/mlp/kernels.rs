@@ -12,9 +12,11 @@
 //! fixed by the shapes alone. The kernels vectorize *across* outputs: with the matrix stored so
 //! that the weights of all outputs for one input are contiguous, one pass over the inputs
 //! updates W accumulators (W ≤ 32, a multiple of 4) at once, each lane evaluating exactly the
-//! scalar recurrence of its output. Where a block has 5 lane groups or fewer (20 outputs or
-//! fewer), too few chains are in flight to hide the multiply–add's latency, so each output is
-//! summed in two chains, even k (from the bias) and odd k (from zero), added at the end
+//! scalar recurrence of its output. The outputs go in blocks of 32, the last block of a product
+//! taking what is left; where a block has 5 lane groups or fewer (20 outputs or fewer, e.g. all
+//! 13 outputs of a 17-50-13 net, or the last 20 of its 52 padded hidden units), too few chains
+//! are in flight to hide the multiply–add's latency, so each of its outputs is summed in two
+//! chains, even k (from the bias) and odd k (from zero), added at the end
 //! (`output_has_dual_chains` says which outputs).
 //!
 //! The hidden units' logistic sigmoid is computed on the lanes too ([`sigmoid_lanes`]): a
