@@ -361,10 +361,11 @@ fn bptt_bare(min_seconds: f64) -> f64 {
 
 /// The f64 multiply–add throughput of one core (`cpu.fma_f64.<lanes>.gmac_per_s`, 10⁹ per
 /// second): 12 independent chains of fused multiply–adds, on 4-lane AVX2 registers (the
-/// single-example kernels' lanes) and, where the processor has AVX-512, 8-lane registers (which
-/// the batch products' GEMM uses there); none on other processors. The roofline the neural metrics are
-/// measured against: `mlp.<shape>.*_gmac_per_s` count a batch example's multiply–adds as
-/// 2pq + 3qr (forward pq + qr, backward qr for h̄ and qr + pq for the weight gradient).
+/// single-example kernels' lanes) and, where the processor has AVX-512, 8-lane registers
+/// (which the batch products' GEMM uses there); none on other processors. The roofline the
+/// neural metrics are measured against: `mlp.<shape>.*_gmac_per_s` count a batch example's
+/// multiply–adds as 2pq + 3qr (forward pq + qr, backward qr for h̄ and qr + pq for the
+/// weight gradient).
 fn fma_peaks(min_seconds: f64) -> Vec<(String, f64)> {
     const CHAINS: usize = 12;
     const ITERS: u64 = 100_000;

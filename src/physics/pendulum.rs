@@ -119,11 +119,20 @@ impl Pendulum3 {
 
     fn absolute_mass_matrix(&self, phi: &[f64; 3]) -> Matrix3<f64> {
         let (d, a, _) = self.coefficients();
+        Self::mass_of(&d, &a, |i, j| (phi[i] - phi[j]).cos())
+    }
+
+    /// M(φ) from the coefficients and cos(φ_i − φ_j) (`cos_diff`, symmetric in i and j).
+    fn mass_of(
+        d: &[f64; 3],
+        a: &[[f64; 3]; 3],
+        cos_diff: impl Fn(usize, usize) -> f64,
+    ) -> Matrix3<f64> {
         Matrix3::from_fn(|i, j| {
             if i == j {
                 d[i]
             } else {
-                a[i][j] * (phi[i] - phi[j]).cos()
+                a[i][j] * cos_diff(i, j)
             }
         })
     }
@@ -210,29 +219,19 @@ impl Ode for Pendulum3 {
         let phi = Self::absolute(x);
         let w = Self::absolute(&x[3..6]);
         // sin and cos of each absolute angle once; those of the differences by the angle
-        // identities sin(φ_i − φ_j) = s_i c_j − c_i s_j, cos(φ_i − φ_j) = c_i c_j + s_i s_j.
+        // identities sin(φ_i − φ_j) = s_i c_j − c_i s_j, cos(φ_i − φ_j) = c_i c_j + s_i s_j
+        // (exactly odd and even in the swap of i and j).
         let sc = phi.map(f64::sin_cos);
         let sin_diff = |i: usize, j: usize| sc[i].0 * sc[j].1 - sc[i].1 * sc[j].0;
         let cos_diff = |i: usize, j: usize| sc[i].1 * sc[j].1 + sc[i].0 * sc[j].0;
-        let mut sd = [[0.0; 3]; 3];
-        let mut m = Matrix3::zeros();
-        for i in 0..3 {
-            m[(i, i)] = d[i];
-            for j in i + 1..3 {
-                let (s, c) = (sin_diff(i, j), cos_diff(i, j));
-                sd[i][j] = s;
-                sd[j][i] = -s;
-                m[(i, j)] = a[i][j] * c;
-                m[(j, i)] = a[j][i] * c;
-            }
-        }
+        let m = Self::mass_of(&d, &a, cos_diff);
         // Q_abs − b − G sin φ in absolute coordinates.
         let mut rhs = Vector3::zeros();
         for i in 0..3 {
             let mut b = 0.0;
             for j in 0..3 {
                 if j != i {
-                    b += a[i][j] * sd[i][j] * w[j] * w[j];
+                    b += a[i][j] * sin_diff(i, j) * w[j] * w[j];
                 }
             }
             rhs[i] = -b - g[i] * sc[i].0;
