@@ -407,6 +407,7 @@ mod tests {
                 method: TrainMethod::Cg,
                 physical_dt: 0.01,
                 input_noise: None,
+                anchor: false,
             },
             steps: 10,
             settings: TrainSettings {

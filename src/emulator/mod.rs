@@ -20,6 +20,7 @@
 //!
 //! External forces f_t (§3.1) are treated as extra control inputs: put them after the controls.
 
+pub mod anchor;
 pub mod cache;
 pub mod catalog;
 pub mod dagger;
@@ -879,7 +880,7 @@ mod tests {
                 patience: 50,
                 min_improvement: 1e-4,
             };
-            train_full_batch(e.mlp_mut(), &train, &held, &config).unwrap();
+            train_full_batch(e.mlp_mut(), &train, &held, &config, None).unwrap();
             let before = rollout::rollout_loss(&e, &test, &sigma).unwrap();
             let one_step_before = mse(e.mlp(), &held);
             rollout::fine_tune(
@@ -894,6 +895,7 @@ mod tests {
                     max_iters: 150,
                     patience: 30,
                     min_improvement: 1e-4,
+                    anchor: None,
                 },
             )
             .unwrap();
@@ -1109,7 +1111,7 @@ mod tests {
                 patience: 20,
                 min_improvement: 1e-3,
             };
-            let report = train_full_batch(e.mlp_mut(), &train, &held, &config).unwrap();
+            let report = train_full_batch(e.mlp_mut(), &train, &held, &config, None).unwrap();
             let after = mse(e.mlp(), &held);
             assert_eq!(after, report.best_held_out_error, "{method:?}");
             assert!(
@@ -1146,7 +1148,7 @@ mod tests {
             min_improvement: 1e-3,
             seed: 3,
         };
-        let report = train_momentum(e.mlp_mut(), &train, &held, &config).unwrap();
+        let report = train_momentum(e.mlp_mut(), &train, &held, &config, None).unwrap();
         let after = mse(e.mlp(), &held);
         assert!(
             after < 5e-3 && after < 1e-2 * before,
@@ -1161,7 +1163,7 @@ mod tests {
         );
         // Same seed, same result.
         let (mut e2, ..) = linear_setup();
-        let report2 = train_momentum(e2.mlp_mut(), &train, &held, &config).unwrap();
+        let report2 = train_momentum(e2.mlp_mut(), &train, &held, &config, None).unwrap();
         assert_eq!(report, report2);
         assert_eq!(e.mlp(), e2.mlp());
     }
@@ -1183,7 +1185,7 @@ mod tests {
             patience: 5,
             ..MomentumConfig::default()
         };
-        let r1 = train_momentum(&mut m1, &train, &noise, &config).unwrap();
+        let r1 = train_momentum(&mut m1, &train, &noise, &config, None).unwrap();
         assert_eq!(r1.stop, StopReason::NoImprovement);
         assert!(r1.trace.len() < 1000);
         assert!(r1.trace.len() <= r1.best_iteration + 1 + 5);
@@ -1194,7 +1196,7 @@ mod tests {
             patience: 5,
             ..FullBatchConfig::default()
         };
-        let r2 = train_full_batch(&mut m2, &train, &noise, &config).unwrap();
+        let r2 = train_full_batch(&mut m2, &train, &noise, &config, None).unwrap();
         assert_eq!(r2.stop, StopReason::NoImprovement);
         assert!(r2.trace.len() < 1000);
         assert_eq!(mse(&m2, &noise), r2.best_held_out_error);

@@ -22,6 +22,7 @@
 //! one-step net, stopping early on the same sum over held-out data and windows.
 
 use super::dataset::Windows;
+use super::anchor::Anchor;
 use super::mlp::Mlp;
 use super::train::{
     minimize_early_stopping, mse, Dataset, FullBatchConfig, FullBatchMethod, TrainReport,
@@ -199,6 +200,7 @@ pub struct FineTuneProblem<'a> {
     rollout: RolloutLoss<'a>,
     weight: f64,
     shape: (usize, usize, usize),
+    anchor: Option<&'a Anchor>,
     last: std::sync::Mutex<Option<Evaluated>>,
 }
 
@@ -213,8 +215,14 @@ impl<'a> FineTuneProblem<'a> {
             rollout,
             weight,
             shape: (mlp.n_in(), mlp.n_hidden(), mlp.n_out()),
+            anchor: None,
             last: std::sync::Mutex::new(None),
         }
+    }
+
+    /// The same objective over nets that reproduce `anchor` exactly ([`Anchor`]).
+    pub fn anchored(self, anchor: Option<&'a Anchor>) -> Self {
+        Self { anchor, ..self }
     }
 
     /// Cost and gradient at `w` (from the last evaluation when `w` is the same).
@@ -225,12 +233,20 @@ impl<'a> FineTuneProblem<'a> {
                 return Ok((*c, g.clone()));
             }
         }
-        let net = net_of(self.shape, w.as_slice().expect("contiguous weights"));
+        // Both losses at the projected weights; the sum of their gradients is pulled back once.
+        let mut wp = w.clone();
+        if let Some(a) = self.anchor {
+            a.project_weights(self.shape, wp.as_slice_mut().expect("contiguous weights"));
+        }
+        let net = net_of(self.shape, wp.as_slice().expect("contiguous weights"));
         let mut g = vec![0.0; net.n_weights()];
         let roll = self.rollout.value_grad(&net, &mut g);
-        let cost = self.one_step.cost(w)? + self.weight * roll;
-        let one = self.one_step.gradient(w)?;
-        let grad = Array1::from_iter(one.iter().zip(&g).map(|(a, b)| a + self.weight * b));
+        let cost = self.one_step.cost(&wp)? + self.weight * roll;
+        let one = self.one_step.gradient(&wp)?;
+        let mut grad = Array1::from_iter(one.iter().zip(&g).map(|(a, b)| a + self.weight * b));
+        if let Some(a) = self.anchor {
+            a.pull_back(&net, grad.as_slice_mut().expect("contiguous gradient"));
+        }
         *last = Some((w.clone(), cost, grad.clone()));
         Ok((cost, grad))
     }
@@ -277,6 +293,8 @@ pub struct FineTune<'a> {
     pub patience: usize,
     /// Relative held-out improvement that counts.
     pub min_improvement: f64,
+    /// An example the net keeps reproducing exactly ([`Anchor`]), if any.
+    pub anchor: Option<&'a Anchor>,
 }
 
 /// Fine-tunes `emulator`'s net on the one-step loss + `weight` · L_k by L-BFGS, early-stopped on
@@ -293,10 +311,13 @@ pub fn fine_tune(emulator: &mut Emulator, ft: &FineTune<'_>) -> Result<TrainRepo
     let train_loss = RolloutLoss::new(&transforms, ft.train_windows, ft.sigma)?;
     let held_loss = RolloutLoss::new(&transforms, ft.held_windows, ft.sigma)?;
     let mlp = emulator.mlp_mut();
-    let problem = FineTuneProblem::new(mlp, ft.train, train_loss, ft.weight);
+    let problem = FineTuneProblem::new(mlp, ft.train, train_loss, ft.weight).anchored(ft.anchor);
     let shape = (mlp.n_in(), mlp.n_hidden(), mlp.n_out());
     let held = |w: &[f64]| {
-        let net = net_of(shape, w);
+        let mut net = net_of(shape, w);
+        if let Some(a) = ft.anchor {
+            a.project(&mut net);
+        }
         mse(&net, ft.held) + ft.weight * held_loss.value(&net)
     };
     let config = FullBatchConfig {
@@ -305,7 +326,11 @@ pub fn fine_tune(emulator: &mut Emulator, ft: &FineTune<'_>) -> Result<TrainRepo
         patience: ft.patience,
         min_improvement: ft.min_improvement,
     };
-    minimize_early_stopping(problem, mlp.weights_mut(), &held, &config)
+    let report = minimize_early_stopping(problem, mlp.weights_mut(), &held, &config)?;
+    if let Some(a) = ft.anchor {
+        a.project(mlp);
+    }
+    Ok(report)
 }
 
 /// L_k of `emulator` on `windows` with scales `sigma`.

@@ -21,6 +21,7 @@
 //! significantly" — or at an iteration limit, and leave the network at the weights with the best
 //! held-out error. They return a [`TrainReport`] trace and never print or write files.
 
+use super::anchor::Anchor;
 use super::mlp::Mlp;
 use super::EmulatorError;
 use argmin::core::{
@@ -107,6 +108,7 @@ pub fn mse(mlp: &Mlp, data: &Dataset) -> f64 {
 pub struct TrainingProblem<'a> {
     shape: (usize, usize, usize),
     data: &'a Dataset,
+    anchor: Option<&'a Anchor>,
 }
 
 impl<'a> TrainingProblem<'a> {
@@ -115,16 +117,28 @@ impl<'a> TrainingProblem<'a> {
         Self {
             shape: (mlp.n_in(), mlp.n_hidden(), mlp.n_out()),
             data,
+            anchor: None,
         }
+    }
+
+    /// The same problem over nets that reproduce `anchor` exactly (the output bias follows
+    /// the other weights, [`Anchor`]); `None` leaves it unanchored.
+    pub fn anchored(self, anchor: Option<&'a Anchor>) -> Self {
+        Self { anchor, ..self }
     }
 
     fn net(&self, w: &Array1<f64>) -> Mlp {
         self.net_from(w.as_slice().expect("contiguous weights"))
     }
 
+    /// The net of flat weights `w` (projected onto the anchor, if any).
     fn net_from(&self, w: &[f64]) -> Mlp {
         let (p, q, r) = self.shape;
-        Mlp::from_weights(p, q, r, w.to_vec())
+        let mut net = Mlp::from_weights(p, q, r, w.to_vec());
+        if let Some(a) = self.anchor {
+            a.project(&mut net);
+        }
+        net
     }
 }
 
@@ -143,6 +157,9 @@ impl Gradient for TrainingProblem<'_> {
         let net = self.net(w);
         let mut g = vec![0.0; net.n_weights()];
         net.loss_grad(self.data.inputs.view(), self.data.targets.view(), &mut g);
+        if let Some(a) = self.anchor {
+            a.pull_back(&net, &mut g);
+        }
         let scale = 2.0 / (self.data.len() * net.n_out()).max(1) as f64;
         Ok(Array1::from_iter(g.into_iter().map(|v| v * scale)))
     }
@@ -414,16 +431,23 @@ where
 
 /// Trains `mlp` on `train` with conjugate gradient or L-BFGS over all examples at once
 /// (§3.5, small nets), stopping early on `held_out`. Leaves `mlp` at the best held-out weights.
+/// With an `anchor`, over the nets that reproduce it exactly ([`Anchor`]).
 pub fn train_full_batch(
     mlp: &mut Mlp,
     train: &Dataset,
     held_out: &Dataset,
     config: &FullBatchConfig,
+    anchor: Option<&Anchor>,
 ) -> Result<TrainReport, EmulatorError> {
     check_common(train, held_out, config.patience, config.min_improvement)?;
-    let problem = TrainingProblem::new(mlp, train);
+    let problem = TrainingProblem::new(mlp, train).anchored(anchor);
     let held = |w: &[f64]| mse(&problem.net_from(w), held_out);
-    minimize_early_stopping(problem.clone(), mlp.weights_mut(), &held, config)
+    let report = minimize_early_stopping(problem.clone(), mlp.weights_mut(), &held, config)?;
+    if let Some(a) = anchor {
+        // The optimizer's b₂ never moves (its gradient is zero); the net's is the projection.
+        a.project(mlp);
+    }
+    Ok(report)
 }
 
 /// Minimizes a full-batch objective `problem` over flat weights `w` (started from and left at
@@ -543,12 +567,15 @@ impl MomentumState {
 }
 
 /// Trains `mlp` by gradient descent with momentum over shuffled mini-batches (§3.5, large nets),
-/// checking `held_out` after every epoch. Leaves `mlp` at the best held-out weights.
+/// checking `held_out` after every epoch. Leaves `mlp` at the best held-out weights. With an
+/// `anchor`, over the nets that reproduce it exactly ([`Anchor`]): b₂ is re-projected after
+/// every step.
 pub fn train_momentum(
     mlp: &mut Mlp,
     train: &Dataset,
     held_out: &Dataset,
     config: &MomentumConfig,
+    anchor: Option<&Anchor>,
 ) -> Result<TrainReport, EmulatorError> {
     check_common(train, held_out, config.patience, config.min_improvement)?;
     if !(config.learning_rate > 0.0 && config.learning_rate.is_finite()) {
@@ -568,6 +595,9 @@ pub fn train_momentum(
             name: "batch_size",
             value: 0.0,
         });
+    }
+    if let Some(a) = anchor {
+        a.project(mlp);
     }
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut state = MomentumState::new(mlp.n_weights());
@@ -589,12 +619,18 @@ pub fn train_momentum(
             mlp.loss_grad(x.view(), t.view(), &mut grad);
             let scale = 2.0 / (batch.len() * mlp.n_out()) as f64;
             grad.iter_mut().for_each(|g| *g *= scale);
+            if let Some(a) = anchor {
+                a.pull_back(mlp, &mut grad);
+            }
             state.step(
                 mlp.weights_mut(),
                 &grad,
                 config.learning_rate,
                 config.momentum,
             );
+            if let Some(a) = anchor {
+                a.project(mlp);
+            }
         }
         let point = TracePoint {
             iteration: epoch,

@@ -502,6 +502,7 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                     spec.global.method,
                     s,
                     mix(20),
+                    None,
                 )?;
                 Ok(NetRecord {
                     train_error: mse(&mlp, &data.clean_ds),
@@ -532,7 +533,15 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                     WeightInit::FanIn,
                     &mut rng,
                 );
-                let rep = train_mlp(&mut mlp, &tr, &ho, spec.local.method, s, mix(20 + k as u64))?;
+                let rep = train_mlp(
+                    &mut mlp,
+                    &tr,
+                    &ho,
+                    spec.local.method,
+                    s,
+                    mix(20 + k as u64),
+                    None,
+                )?;
                 Ok(NetRecord {
                     train_error: mse(&mlp, &tr),
                     heldout_error: mse(&mlp, &ho),
@@ -777,7 +786,7 @@ mod tests {
         let mut st = spec(examples).settings;
         st.cg_max_iters = 300;
         st.patience = 30;
-        train_mlp(&mut mlp, &tr, &ho, TrainMethod::Lbfgs, &st, 24).unwrap();
+        train_mlp(&mut mlp, &tr, &ho, TrainMethod::Lbfgs, &st, 24, None).unwrap();
         let e = Emulator::new(tf, mlp, 0.1).unwrap();
         let mut g = vec![0.0; GLOBAL_DIM];
         global_state(&d, &d.rest_state(), &mut g);

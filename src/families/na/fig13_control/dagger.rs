@@ -11,6 +11,7 @@ use super::{learn_best, Params, Task};
 use crate::control::bptt::{replay, Bptt, Knots, StepRule};
 use crate::emulator::cache::EmulatorCache;
 use crate::emulator::catalog::{
+    anchor_of,
     rollout_windows, stop_name, training_data, BuildSpec, Trained, TrainingData,
 };
 use crate::emulator::dagger::{
@@ -358,6 +359,7 @@ impl Params {
                     let agg = aggregate(&net, data, windows, &train, &held, &settings, &mut rng)
                         .map_err(other)?;
                     let mut emulator = net.clone();
+                    let anchor = anchor_of(spec, emulator.transforms());
                     let report = ctx.stage(
                         &format!("dagger {} round {}: fine-tune", task.name, round + 1),
                         || {
@@ -367,6 +369,7 @@ impl Params {
                                 &data.sigma,
                                 &settings,
                                 d.settings.iters,
+                                anchor.as_ref(),
                             )
                         },
                     );

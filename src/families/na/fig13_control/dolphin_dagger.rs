@@ -222,6 +222,7 @@ impl Params {
                                 &data.sigma,
                                 &settings,
                                 dd.settings.iters,
+                                None,
                             )
                         },
                     );
