@@ -39,6 +39,7 @@
 //! Solvers return data; they never print or write files.
 
 pub mod bptt;
+pub mod conditioning;
 pub mod ddp;
 pub mod lqr;
 pub mod objective;

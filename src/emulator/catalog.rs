@@ -1182,7 +1182,11 @@ mod tests {
                 sim.step(&mut s, &u, 0.01);
             }
             for (k, (a, b)) in s.iter().zip(&s0).enumerate() {
-                assert!((a - b).abs() < 1e-9, "{}: variable {k} {b} -> {a}", model.name());
+                assert!(
+                    (a - b).abs() < 1e-9,
+                    "{}: variable {k} {b} -> {a}",
+                    model.name()
+                );
             }
         }
     }
@@ -1222,7 +1226,11 @@ mod tests {
             let anchored = train_emulator(&spec).unwrap().emulator;
             let a = anchor_of(&spec, anchored.transforms()).unwrap();
             assert!(a.residual(anchored.mlp()) < 1e-12, "{method:?}");
-            assert!(parked(&anchored) < 1e-12, "{method:?}: {}", parked(&anchored));
+            assert!(
+                parked(&anchored) < 1e-12,
+                "{method:?}: {}",
+                parked(&anchored)
+            );
             assert!(a.residual(free.mlp()) > 1e-6, "{method:?}");
             assert!(parked(&free) > 1e-6, "{method:?}: {}", parked(&free));
         }

@@ -603,8 +603,7 @@ mod tests {
         );
         assert_eq!(agg.train_windows.len(), windows.len() + train.windows.len());
         let mut tuned = base.clone();
-        fine_tune_aggregated(&mut tuned, &agg, &data.sigma, &spec.settings, s.iters, None)
-            .unwrap();
+        fine_tune_aggregated(&mut tuned, &agg, &data.sigma, &spec.settings, s.iters, None).unwrap();
         let after = plan_error(&tuned, &plan, &data.sigma);
         // The open-loop error along the visited states drops clearly (ours: by a fifth at
         // least; measured 3.51 -> 2.06 with these settings, where our first threshold, a half,

@@ -21,8 +21,8 @@
 //! ([`fine_tune`]) minimizes the one-step training loss plus `weight` · L_k by L-BFGS from the
 //! one-step net, stopping early on the same sum over held-out data and windows.
 
-use super::dataset::Windows;
 use super::anchor::Anchor;
+use super::dataset::Windows;
 use super::mlp::Mlp;
 use super::train::{
     minimize_early_stopping, mse, Dataset, FullBatchConfig, FullBatchMethod, TrainReport,

@@ -574,12 +574,19 @@ impl Job for Params {
                     task.control.clone()
                 };
                 let ends = catalog_drift(&t.emulator, &spec, &task.start, &u, ROLLOUT_STEPS)?;
-                let at_anchor = anchor_of(&spec, t.emulator.transforms()).is_some_and(|a| {
+                let at_anchor = anchor_of(spec, t.emulator.transforms()).is_some_and(|a| {
                     let mut z = vec![0.0; a.input.len()];
-                    t.emulator.transforms().encode_input(&task.start, &u, &mut z);
+                    t.emulator
+                        .transforms()
+                        .encode_input(&task.start, &u, &mut z);
                     z.iter().zip(&a.input).all(|(p, q)| (p - q).abs() <= 1e-12)
                 });
-                push_drift(task, ROLLOUT_STEPS as f64 * spec.super_dt(), ends, at_anchor);
+                push_drift(
+                    task,
+                    ROLLOUT_STEPS as f64 * spec.super_dt(),
+                    ends,
+                    at_anchor,
+                );
             }
             let mean = errors.iter().sum::<f64>() / errors.len() as f64;
             structure.push(row![
@@ -813,7 +820,7 @@ impl Family for NaStructure {
                 df_f64(&df, "tolerance")?,
             );
             let at_anchor = df_f64(&df, "at_anchor").unwrap_or_else(|_| vec![0.0; dn.len()]);
-            md.push_str("\nNeutral-control drift from the Fig. 13 task starts and near them (`drift.csv`; position part, not part of the verdict). *At the anchor*: the start and control are the anchored net's equilibrium (ours, `anchor = true`), so the first step is exact by construction; the rows beside it, off the anchor, measure the fit near rest:\n\n| net | task | horizon s | emulator moved | simulator moved | end gap | tolerance (ours) | at the anchor |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n");
+            md.push_str("\nNeutral-control drift from the Fig. 13 task starts and near them (`drift.csv`; position part, not part of the verdict). *At the anchor*: the start and control are the anchored net's equilibrium (ours, `anchor = true`), so the first step is exact by construction and the drift measures only whether the net is stable there; the rows off the anchor measure the fit near rest:\n\n| net | task | horizon s | emulator moved | simulator moved | end gap | tolerance (ours) | at the anchor |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n");
             for r in 0..dn.len() {
                 md.push_str(&format!(
                     "| {} | {} | {} | {} | {} | {} | {} | {} |\n",

@@ -11,8 +11,7 @@ use super::{learn_best, Params, Task};
 use crate::control::bptt::{replay, Bptt, Knots, StepRule};
 use crate::emulator::cache::EmulatorCache;
 use crate::emulator::catalog::{
-    anchor_of,
-    rollout_windows, stop_name, training_data, BuildSpec, Trained, TrainingData,
+    anchor_of, rollout_windows, stop_name, training_data, BuildSpec, Trained, TrainingData,
 };
 use crate::emulator::dagger::{
     aggregate, collect, fine_tune_aggregated, DaggerSettings, Plan, Visits,
