@@ -48,15 +48,45 @@ impl Default for Acrobot {
     }
 }
 
+/// Sines and cosines of the joint angles and their sum ([`Acrobot::trig`]).
+#[derive(Debug, Clone, Copy)]
+struct Trig {
+    s1: f64,
+    c1: f64,
+    s2: f64,
+    c2: f64,
+    s12: f64,
+    c12: f64,
+}
+
 impl Acrobot {
     /// Joint-space mass matrix as `[[M11, M12], [M12, M22]]`.
     pub fn mass_matrix(&self, theta2: f64) -> [[f64; 2]; 2] {
+        self.mass_of(theta2.cos())
+    }
+
+    /// [`Acrobot::mass_matrix`] given cos θ2.
+    fn mass_of(&self, c2: f64) -> [[f64; 2]; 2] {
         let Self { m1, m2, l1, l2, .. } = *self;
-        let c2 = theta2.cos();
         let m11 = (m1 + m2) * l1 * l1 + m2 * l2 * l2 + 2.0 * m2 * l1 * l2 * c2;
         let m12 = m2 * l2 * l2 + m2 * l1 * l2 * c2;
         let m22 = m2 * l2 * l2;
         [[m11, m12], [m12, m22]]
+    }
+
+    /// sin and cos of θ1, θ2 and θ1 + θ2: one `sin_cos` per joint angle, the sum's by the
+    /// angle-sum identities (shared by [`Ode::derivative`] and the linearization, so their
+    /// θ̈ agree bit for bit).
+    fn trig(t1: f64, t2: f64) -> Trig {
+        let ((s1, c1), (s2, c2)) = (t1.sin_cos(), t2.sin_cos());
+        Trig {
+            s1,
+            c1,
+            s2,
+            c2,
+            s12: s1 * c2 + c1 * s2,
+            c12: c1 * c2 - s1 * s2,
+        }
     }
 
     /// Positions of the two masses (m).
@@ -103,10 +133,12 @@ impl Ode for Acrobot {
             gravity: g,
         } = *self;
         let (t1, t2, w1, w2) = (x[0], x[1], x[2], x[3]);
-        let [[a, b], [_, d]] = self.mass_matrix(t2);
-        let h = m2 * l1 * l2 * t2.sin();
-        let c12 = (t1 + t2).cos();
-        let g1 = (m1 + m2) * g * l1 * t1.cos() + m2 * g * l2 * c12;
+        let Trig {
+            c1, s2, c2, c12, ..
+        } = Self::trig(t1, t2);
+        let [[a, b], [_, d]] = self.mass_of(c2);
+        let h = m2 * l1 * l2 * s2;
+        let g1 = (m1 + m2) * g * l1 * c1 + m2 * g * l2 * c12;
         let g2 = m2 * g * l2 * c12;
         let r1 = h * (2.0 * w1 * w2 + w2 * w2) - g1;
         let r2 = -h * w1 * w1 - g2 + u[0];
@@ -167,13 +199,18 @@ impl Acrobot {
             gravity: g,
         } = *self;
         let (t1, t2, w1, w2) = (x[0], x[1], x[2], x[3]);
-        let [[m11, m12], [_, m22]] = self.mass_matrix(t2);
-        let (s2, c2) = t2.sin_cos();
-        let s12 = (t1 + t2).sin();
-        let c12 = (t1 + t2).cos();
+        let Trig {
+            s1,
+            c1,
+            s2,
+            c2,
+            s12,
+            c12,
+        } = Self::trig(t1, t2);
+        let [[m11, m12], [_, m22]] = self.mass_of(c2);
         let h = m2 * l1 * l2 * s2;
         let dh = m2 * l1 * l2 * c2; // ∂h/∂θ2
-        let g1 = (m1 + m2) * g * l1 * t1.cos() + m2 * g * l2 * c12;
+        let g1 = (m1 + m2) * g * l1 * c1 + m2 * g * l2 * c12;
         let g2 = m2 * g * l2 * c12;
         let r1 = h * (2.0 * w1 * w2 + w2 * w2) - g1;
         let r2 = -h * w1 * w1 - g2 + u[0];
@@ -186,7 +223,7 @@ impl Acrobot {
         }
         // ∂r/∂z for z = θ1, θ2, ω1, ω2.
         let gs12 = m2 * g * l2 * s12;
-        let dr_t1 = ((m1 + m2) * g * l1 * t1.sin() + gs12, gs12);
+        let dr_t1 = ((m1 + m2) * g * l1 * s1 + gs12, gs12);
         let dr_t2 = (dh * (2.0 * w1 * w2 + w2 * w2) + gs12, -dh * w1 * w1 + gs12);
         let dr_w1 = (2.0 * h * w2, -2.0 * h * w1);
         let dr_w2 = (2.0 * h * (w1 + w2), 0.0);
