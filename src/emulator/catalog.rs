@@ -1030,7 +1030,9 @@ mod tests {
                 at 1,000 iterations); with na_table1_structure's k = 8 rollout fine-tuning \
                 (600 iterations, no noise) 0.72 m (1.3 m with noise 0.05); full scale 0.99 m \
                 with the idle first knots (1.81 m before them, 5.95 m before the rest starts); \
-                slow (25 s)"]
+                slow (25 s). The experiments now anchor their nets (anchor = true): a step from \
+                rest is then exact by construction (staying there needs a net stable at rest): \
+                an_anchored_net_reproduces_its_equilibrium_whichever_trainer_made_it"]
     fn a_truck_emulator_parked_with_zero_controls_stays_parked() {
         // The parking task's start, at rest; 20 s of zero controls in 0.5 s super-steps, from
         // a net trained as na_table1_structure's truck: no input noise, k = 8 rollout
