@@ -22,8 +22,8 @@
 //! every parked truck encodes to the same `x₀`.
 //!
 //! The drift check from the anchored state itself then measures the construction, not the
-//! fit; `na_table1_structure` adds near-rest checks off the anchor (steered wheels, a coast to
-//! a stop) for that.
+//! fit; `na_table1_structure` adds near-rest checks off the anchor (steered wheels, coasting)
+//! for that.
 
 use super::mlp::Mlp;
 use super::Transforms;
@@ -46,6 +46,16 @@ impl Anchor {
         transforms.encode_input(state, control, &mut input);
         transforms.encode_target(state, state, &mut output);
         Self { input, output }
+    }
+
+    /// Whether `state` under `control` encodes to this anchor's input (to 1e-12): then the
+    /// net's step from it is exact by construction, not by fit.
+    pub fn covers(&self, transforms: &Transforms, state: &[f64], control: &[f64]) -> bool {
+        let mut z = vec![0.0; self.input.len()];
+        transforms.encode_input(state, control, &mut z);
+        z.iter()
+            .zip(&self.input)
+            .all(|(p, q)| (p - q).abs() <= 1e-12)
     }
 
     /// Sets the output bias of `mlp` so that N(x₀) = y₀.

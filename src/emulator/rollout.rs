@@ -234,11 +234,11 @@ impl<'a> FineTuneProblem<'a> {
             }
         }
         // Both losses at the projected weights; the sum of their gradients is pulled back once.
-        let mut wp = w.clone();
+        let mut net = net_of(self.shape, w.as_slice().expect("contiguous weights"));
         if let Some(a) = self.anchor {
-            a.project_weights(self.shape, wp.as_slice_mut().expect("contiguous weights"));
+            a.project(&mut net);
         }
-        let net = net_of(self.shape, wp.as_slice().expect("contiguous weights"));
+        let wp = Array1::from(net.weights().to_vec());
         let mut g = vec![0.0; net.n_weights()];
         let roll = self.rollout.value_grad(&net, &mut g);
         let cost = self.one_step.cost(&wp)? + self.weight * roll;

@@ -574,13 +574,8 @@ impl Job for Params {
                     task.control.clone()
                 };
                 let ends = catalog_drift(&t.emulator, &spec, &task.start, &u, ROLLOUT_STEPS)?;
-                let at_anchor = anchor_of(spec, t.emulator.transforms()).is_some_and(|a| {
-                    let mut z = vec![0.0; a.input.len()];
-                    t.emulator
-                        .transforms()
-                        .encode_input(&task.start, &u, &mut z);
-                    z.iter().zip(&a.input).all(|(p, q)| (p - q).abs() <= 1e-12)
-                });
+                let tf = t.emulator.transforms();
+                let at_anchor = anchor_of(spec, tf).is_some_and(|a| a.covers(tf, &task.start, &u));
                 push_drift(
                     task,
                     ROLLOUT_STEPS as f64 * spec.super_dt(),
