@@ -119,6 +119,7 @@ pub mod control;
 pub mod emulator;
 pub mod experiment;
 pub mod families;
+pub mod fastmath;
 pub mod linalg;
 pub mod physics;
 pub mod seed;

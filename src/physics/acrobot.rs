@@ -74,11 +74,11 @@ impl Acrobot {
         [[m11, m12], [m12, m22]]
     }
 
-    /// sin and cos of θ1, θ2 and θ1 + θ2: one `sin_cos` per joint angle, the sum's by the
-    /// angle-sum identities (shared by [`Ode::derivative`] and the linearization, so their
-    /// θ̈ agree bit for bit).
+    /// sin and cos of θ1, θ2 and θ1 + θ2: both joint angles' pairs at once
+    /// ([`crate::fastmath::sin_cos2`]), the sum's by the angle-sum identities (shared by
+    /// [`Ode::derivative`] and the linearization, so their θ̈ agree bit for bit).
     fn trig(t1: f64, t2: f64) -> Trig {
-        let ((s1, c1), (s2, c2)) = (t1.sin_cos(), t2.sin_cos());
+        let ((s1, c1), (s2, c2)) = crate::fastmath::sin_cos2(t1, t2);
         Trig {
             s1,
             c1,
