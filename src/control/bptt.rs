@@ -385,7 +385,7 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
         h: &mut [f64],
     ) -> f64 {
         let j = self.gradient(v, grad);
-        let (n, m, d) = (self.dynamics.state_dim(), self.knots.m, self.dim());
+        let (m, d) = (self.knots.m, self.dim());
         let last = self.knots.steps;
         h.fill(0.0);
         let mut row = vec![0.0; d];
@@ -409,10 +409,7 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
                             if hk == 0.0 {
                                 continue;
                             }
-                            self.s_bar.fill(0.0);
-                            self.u_bar.fill(0.0);
-                            self.s_bar[i * n + k] = 1.0;
-                            self.backpropagate(i, &mut row);
+                            self.state_row(i, k, &mut row);
                             for (p, rp) in row.iter().enumerate() {
                                 if *rp != 0.0 {
                                     for (q, rq) in row.iter().enumerate() {
@@ -426,6 +423,30 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
             }
         }
         j
+    }
+
+    /// ∂s_ik/∂v over the normalized knots (to `row`) at the last rollout's knots: one
+    /// backward pass from s_i.
+    fn state_row(&mut self, i: usize, k: usize, row: &mut [f64]) {
+        let n = self.dynamics.state_dim();
+        self.s_bar.fill(0.0);
+        self.u_bar.fill(0.0);
+        self.s_bar[i * n + k] = 1.0;
+        self.backpropagate(i, row);
+    }
+
+    /// Rows ∂s_{step,k}/∂v over the normalized knots at `v`, one per variable k of `vars`
+    /// (a rollout, then one backward pass each; `step` is clamped to the horizon).
+    pub fn state_jacobian(&mut self, v: &[f64], step: usize, vars: &[usize]) -> Vec<Vec<f64>> {
+        self.rollout(v);
+        let i = step.min(self.knots.steps);
+        vars.iter()
+            .map(|&k| {
+                let mut row = vec![0.0; self.dim()];
+                self.state_row(i, k, &mut row);
+                row
+            })
+            .collect()
     }
 
     /// States s_0 … s_M of the last rollout (n each).

@@ -77,6 +77,51 @@ pub fn terminal_spectrum<D: DifferentiableStep>(
     Spectrum { eigenvalues, dof }
 }
 
+/// How far any choice of final-state weights could improve the conditioning: for the rows
+/// J_k = ∂s_Mk/∂v of r independent final-state variables, every positive diagonal weighting
+/// W gives G = Jᵀ W J the nonzero spectrum of W^½ K W^½, K = J Jᵀ (r × r). Equilibrating
+/// (w_k = 1/K_kk, unit diagonal) is within a factor r of the best weighting (van der Sluis,
+/// 1969: κ(D_J K D_J) ≤ r min_D κ(D K D) for symmetric positive definite K), so
+/// κ_eq / r bounds from below the condition of every weighting.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WeightingBound {
+    /// r, the variables weighed.
+    pub vars: usize,
+    /// κ of the equilibrated K (infinite when K is singular: some variable combination does
+    /// not respond to the knots under any weights).
+    pub condition_equilibrated: f64,
+    /// max(1, κ_eq / r): no diagonal weighting of these variables does better.
+    pub condition_any_weighting: f64,
+}
+
+/// [`WeightingBound`] of the Jacobian rows `rows` (one per independent variable, each over
+/// the knots). K's smallest eigenvalue below 1e-13 of its largest counts as singular.
+pub fn weighting_bound(rows: &[Vec<f64>]) -> WeightingBound {
+    let r = rows.len();
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let diag: Vec<f64> = rows.iter().map(|a| dot(a, a)).collect();
+    let k = nalgebra::DMatrix::from_fn(r, r, |i, j| {
+        let (di, dj) = (diag[i], diag[j]);
+        if di > 0.0 && dj > 0.0 {
+            dot(&rows[i], &rows[j]) / (di * dj).sqrt()
+        } else {
+            0.0
+        }
+    });
+    let e = k.symmetric_eigenvalues();
+    let (lo, hi) = (e.min(), e.max());
+    let condition_equilibrated = if r == 0 || !(lo > 1e-13 * hi) {
+        f64::INFINITY
+    } else {
+        hi / lo
+    };
+    WeightingBound {
+        vars: r,
+        condition_equilibrated,
+        condition_any_weighting: (condition_equilibrated / r.max(1) as f64).max(1.0),
+    }
+}
+
 /// Per-iteration contraction ρ of heavy-ball descent (momentum `alpha`, 0 for plain) along a
 /// direction whose scaled curvature is h = η μ / λ: the larger root magnitude of
 /// z² − (1 + α − h) z + α (1 or more: no progress, or divergence).
@@ -114,6 +159,60 @@ mod tests {
         }
         assert!(heavy_ball_rate(2.5, 0.0) > 1.0);
         assert_eq!(iterations_per_decade(0.0, 0.5), f64::INFINITY);
+    }
+
+    /// Rows whose Gram matrix is the Hilbert-like K_ij = 1/(i + j + 1) (monomials 1 … s³ on
+    /// a fine grid): the bound holds against random weightings and the equilibrated one, and
+    /// orthogonal rows of any lengths are perfectly conditionable.
+    #[test]
+    fn no_weighting_beats_the_van_der_sluis_bound() {
+        use rand::{Rng, SeedableRng};
+        let grid = 400;
+        let rows: Vec<Vec<f64>> = (0..4)
+            .map(|p| {
+                (0..grid)
+                    .map(|t| ((t as f64 + 0.5) / grid as f64).powi(p) * 10f64.powi(p))
+                    .collect()
+            })
+            .collect();
+        let b = weighting_bound(&rows);
+        assert_eq!(b.vars, 4);
+        // The Hilbert matrix H₄ equilibrated has κ in the thousands.
+        assert!(b.condition_equilibrated > 1e3, "{b:?}");
+        let kappa = |w: &[f64]| {
+            let k = nalgebra::DMatrix::from_fn(4, 4, |i, j| {
+                let d: f64 = rows[i].iter().zip(&rows[j]).map(|(x, y)| x * y).sum();
+                d * (w[i] * w[j]).sqrt()
+            });
+            let e = k.symmetric_eigenvalues();
+            e.max() / e.min()
+        };
+        // Weights within 10^±3 of the equilibrating ones (further out the weighted matrix's
+        // smallest eigenvalue falls below what its eigen-solver resolves).
+        let norm2: Vec<f64> = rows.iter().map(|r| r.iter().map(|x| x * x).sum()).collect();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        for _ in 0..2000 {
+            let w: Vec<f64> = (0..4)
+                .map(|i| 10f64.powf(rng.gen_range(-3.0..3.0)) / norm2[i])
+                .collect();
+            assert!(kappa(&w) >= b.condition_any_weighting, "{w:?}");
+        }
+        let ortho = vec![
+            vec![3.0, 0.0, 0.0],
+            vec![0.0, 1e-4, 0.0],
+            vec![0.0, 0.0, 7e5],
+        ];
+        let o = weighting_bound(&ortho);
+        assert!((o.condition_equilibrated - 1.0).abs() < 1e-12);
+        assert_eq!(o.condition_any_weighting, 1.0);
+        // A variable that does not respond: singular under every weighting.
+        let dead = vec![vec![1.0, 2.0], vec![0.0, 0.0]];
+        assert_eq!(weighting_bound(&dead).condition_equilibrated, f64::INFINITY);
+        let collinear = vec![vec![1.0, 2.0], vec![-2.0, -4.0]];
+        assert_eq!(
+            weighting_bound(&collinear).condition_any_weighting,
+            f64::INFINITY
+        );
     }
 
     /// On a quadratic ½ Σ μ_i x_i², momentum descent with step η/λ needs, along its slowest

@@ -33,7 +33,9 @@ use crate::control::bptt::{
     learn_with, replay, Bounds, Bptt, Descent, DifferentiableStep, Knots, Learned, Schedule,
     StepRule, Substepped,
 };
-use crate::control::conditioning::{iterations_per_decade, terminal_spectrum, Spectrum};
+use crate::control::conditioning::{
+    iterations_per_decade, terminal_spectrum, weighting_bound, Spectrum, WeightingBound,
+};
 use crate::control::objective::{ControlEffort, FinalState, Objective};
 use crate::control::Rk4Map;
 use crate::emulator::catalog::{BuildSpec, NetModel, NetSpec, TrainSettings};
@@ -169,8 +171,13 @@ pub struct Params {
 /// its knot count, the independent final-state variables r, the headline's step scale lambda,
 /// G's largest and r-th eigenvalues, their ratio kappa, and the iterations per tenfold
 /// reduction of the residual along the r-th eigenvector at the headline eta, alpha and lambda
-/// ([`crate::control::conditioning`]).
-pub const CONDITIONING_COLUMNS: [&str; 10] = [
+/// ([`crate::control::conditioning`]); then whether other final-state weights could help:
+/// kappa of the equilibrated K = J J^T over the r independent weighted variables, the bound
+/// kappa_eq / r that no diagonal weighting beats (van der Sluis), and the iterations per
+/// tenfold reduction at that bound (at least this many under any weights, the headline's eta
+/// and alpha, lambda >= mu_1) ([`WeightingBound`]); and the paper's iteration count for the
+/// task, which the spec's reading compares that bound with.
+pub const CONDITIONING_COLUMNS: [&str; 14] = [
     "task",
     "substrate",
     "knots",
@@ -181,13 +188,17 @@ pub const CONDITIONING_COLUMNS: [&str; 10] = [
     "condition",
     "eta",
     "iterations_per_decade",
+    "condition_equilibrated",
+    "condition_any_weighting",
+    "iterations_per_decade_any_weighting",
+    "paper_iterations",
 ];
 
 /// Rows of `conditioning.csv` and `spectrum.csv` for one task on one substrate.
 fn record_spectrum(
     task: &Task,
     substrate: &str,
-    spectrum: &Spectrum,
+    (spectrum, bound): (&Spectrum, &WeightingBound),
     lambda: f64,
     (cond, table): (&mut Table, &mut Table),
 ) {
@@ -202,7 +213,11 @@ fn record_spectrum(
         spectrum.slowest(),
         spectrum.condition(),
         task.eta,
-        iterations_per_decade(h, task.alpha)
+        iterations_per_decade(h, task.alpha),
+        bound.condition_equilibrated,
+        bound.condition_any_weighting,
+        iterations_per_decade(task.eta / bound.condition_any_weighting, task.alpha),
+        task.iterations as i64
     ]);
     for (i, e) in spectrum.eigenvalues.iter().enumerate() {
         table.push(row![task.name.as_str(), substrate, (i + 1) as i64, *e]);
@@ -270,6 +285,16 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
         df_f64(&df, "eta")?,
         df_f64(&df, "iterations_per_decade")?,
     );
+    // The weighting bound (absent in runs before 2026-11-24).
+    let any = df_f64(&df, "condition_any_weighting").ok();
+    let (eq, any_pace, paper) = match any {
+        Some(_) => (
+            df_f64(&df, "condition_equilibrated")?,
+            df_f64(&df, "iterations_per_decade_any_weighting")?,
+            df_f64(&df, "paper_iterations")?,
+        ),
+        None => (vec![], vec![], vec![]),
+    };
     // Above 1e12 the r-th eigenvalue is rounding: the matrix is singular at the start.
     let show = |k: f64| {
         if k.is_finite() && k < 1e12 {
@@ -278,12 +303,13 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
             "singular".to_string()
         }
     };
-    let mut md = String::from("\nWhy the headline's fixed-step descent cannot reach these goals in 15-20 iterations (ours; `conditioning.csv`, `spectrum.csv`, figure `spectrum`): the terminal Gauss-Newton matrix G = J^T W J of the final-state term over the normalized knots at the start, J = ds_M/dv, through the emulator and through the physics. Along G's r-th eigenvector (r: the independent final-state variables, the rank G can have) the headline's step eta/lambda shrinks the residual by the heavy-ball rate of that eigenvalue; the last column counts iterations per tenfold reduction (`src/control/conditioning.rs`; exact for a quadratic).\n\n| task | substrate | knots | r | condition mu_1/mu_r | iterations per tenfold reduction (eta, alpha of the headline) |\n| --- | --- | --- | --- | --- | --- |\n");
+    let mut md = String::from("\nWhy the headline's fixed-step descent cannot reach these goals in 15-20 iterations (ours; `conditioning.csv`, `spectrum.csv`, figure `spectrum`): the terminal Gauss-Newton matrix G = J^T W J of the final-state term over the normalized knots at the start, J = ds_M/dv, through the emulator and through the physics. Along G's r-th eigenvector (r: the independent final-state variables, the rank G can have) the headline's step eta/lambda shrinks the residual by the heavy-ball rate of that eigenvalue; the next column counts iterations per tenfold reduction (`src/control/conditioning.rs`; exact for a quadratic). Could other final-state weights help? With K = J J^T over the r independent weighted variables (the lander's quaternion scalar part left out), no positive diagonal weighting has a condition below kappa(equilibrated K)/r (van der Sluis), nor, with the headline's eta and alpha, fewer iterations per tenfold reduction than the last column.\n\n| task | substrate | knots | r | condition mu_1/mu_r | iterations per tenfold reduction (eta, alpha of the headline) | condition, equilibrated | condition, any weighting (at least) | iterations per tenfold reduction, any weighting (at least) |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
     let mut parts = vec![];
     // The physics' fewest iterations per tenfold reduction, and the tasks whose matrix is
     // singular at the start (no progress along some weighted direction).
     let mut fewest = f64::INFINITY;
     let mut singular = vec![];
+    let mut weights = vec![];
     for r in 0..task.len() {
         let progress = pace[r].is_finite() && kappa[r] < 1e12;
         let p = if progress {
@@ -291,8 +317,22 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
         } else {
             "no progress".to_string()
         };
+        let (e, a, ap) = if any.is_some() {
+            let ap = if any_pace[r].is_finite() {
+                sig(any_pace[r])
+            } else {
+                "no progress".to_string()
+            };
+            (
+                show(eq[r]),
+                show(any.as_ref().map_or(f64::NAN, |a| a[r])),
+                ap,
+            )
+        } else {
+            ("-".to_string(), "-".to_string(), "-".to_string())
+        };
         md.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} (eta {}) |\n",
+            "| {} | {} | {} | {} | {} | {} (eta {}) | {e} | {a} | {ap} |\n",
             task[r],
             sub[r],
             knots[r],
@@ -301,6 +341,28 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
             p,
             sig(eta[r])
         ));
+        if let (Some(any), "physics") = (&any, sub[r].as_str()) {
+            // The spec's reading: the bound against the paper's iteration count.
+            weights.push(if !(any_pace[r].is_finite() && any[r] < 1e12) {
+                format!("{}: singular under any weights", task[r])
+            } else if any_pace[r] > paper[r] {
+                format!(
+                    "{}: condition at least {}, at least {} iterations per tenfold reduction under any weights against the paper's {}, so the cause is the task's dynamics over its knots and horizon, not our weights",
+                    task[r],
+                    sig(any[r]),
+                    sig(any_pace[r]),
+                    paper[r]
+                )
+            } else {
+                format!(
+                    "{}: condition at least {}, at least {} iterations per tenfold reduction under any weights, within the paper's {}, so our tolerance weights may be to blame",
+                    task[r],
+                    sig(any[r]),
+                    sig(any_pace[r]),
+                    paper[r]
+                )
+            });
+        }
         if sub[r] == "physics" {
             parts.push(if progress {
                 fewest = fewest.min(pace[r]);
@@ -327,9 +389,17 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
             )
         };
         format!(
-            " Why the headline's descent is slow (ours, `conditioning.csv`): through the exact physics the terminal Gauss-Newton matrix at the start knots has condition mu_1/mu_r {}. Along the slowest weighted direction the headline's fixed step needs at least {} iterations per tenfold reduction of the residual{singular}, so 15-20 iterations of eq. 13-15 reach a goal only where the start's residual along the slow directions is already within tolerance, whatever the gradient's source (descent through the physics is in the sweep above); Levenberg-Marquardt is invariant to the conditioning. This is a property of our task formulations (knots, horizons, tolerance weights).",
+            " Why the headline's descent is slow (ours, `conditioning.csv`): through the exact physics the terminal Gauss-Newton matrix at the start knots has condition mu_1/mu_r {}. Along the slowest weighted direction the headline's fixed step needs at least {} iterations per tenfold reduction of the residual{singular}, so 15-20 iterations of eq. 13-15 reach a goal only where the start's residual along the slow directions is already within tolerance, whatever the gradient's source (descent through the physics is in the sweep above); Levenberg-Marquardt is invariant to the conditioning. This is a property of our task formulations (knots, horizons, tolerance weights).{}",
             parts.join(", "),
-            sig(fewest)
+            sig(fewest),
+            if weights.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " Could other final-state weights help (ours; the reading fixed in the spec, through the physics; no diagonal weighting beats kappa(equilibrated)/r)? {}.",
+                    weights.join("; ")
+                )
+            }
         )
     };
     Ok(Some((md, why)))
@@ -534,6 +604,25 @@ impl Task {
         n - usize::from(self.net.model == NetModel::Lander)
     }
 
+    /// The weighted final-state variables that are independent: all with a tolerance but
+    /// the lander's quaternion scalar part (the unit norm ties it to the vector part, and at
+    /// level attitude it responds only at second order).
+    pub fn independent_final_vars(&self) -> Vec<usize> {
+        let lander = self.net.model == NetModel::Lander;
+        (0..self.final_tolerance.len())
+            .filter(|&k| self.final_tolerance[k] > 0.0 && !(lander && k == 3))
+            .collect()
+    }
+
+    /// [`WeightingBound`] of the final state's independent variables at knots `v`.
+    fn weighting_bound<D: DifferentiableStep>(
+        &self,
+        bptt: &mut Bptt<'_, D>,
+        v: &[f64],
+    ) -> WeightingBound {
+        weighting_bound(&bptt.state_jacobian(v, self.horizon, &self.independent_final_vars()))
+    }
+
     /// RMS of (s − s_d)/σ over the variables with a tolerance.
     pub fn final_error(&self, s: &[f64]) -> f64 {
         let w = self.weights();
@@ -631,10 +720,11 @@ impl Job for Params {
                 .gauss_newton()
                 .ok_or_else(|| other(format!("{}: objective without curvature", task.name)))?;
             let spectrum = terminal_spectrum(&mut bptt, &v0, &curvature, task.final_dof());
+            let bound = task.weighting_bound(&mut bptt, &v0);
             record_spectrum(
                 task,
                 "emulator",
-                &spectrum,
+                (&spectrum, &bound),
                 lambda,
                 (&mut cond_t, &mut spectrum_t),
             );
@@ -874,7 +964,8 @@ impl Params {
                 .gauss_newton()
                 .ok_or_else(|| other(format!("{}: objective without curvature", task.name)))?;
             let spec = terminal_spectrum(&mut bptt, &v0, &curvature, task.final_dof());
-            record_spectrum(task, "physics", &spec, lambda, (cond, spectrum));
+            let bound = task.weighting_bound(&mut bptt, &v0);
+            record_spectrum(task, "physics", (&spec, &bound), lambda, (cond, spectrum));
             p.sweep_task(task, sw, &mut bptt, &v0, lambda, x0, table);
             Ok(())
         }
