@@ -328,6 +328,19 @@ fn na_fig14_quick_momentum_beats_plain_descent() {
     figure_exists(&d, "na_fig14_momentum_objective");
     // The same two runs through the lander's DAgger net (and the Table 1 net's beside them),
     // every number finite, and the DAgger net's objective curves.
+    // Run to convergence (quick: at most 300 iterations): per net, momentum and plain, with
+    // dagger.csv's columns, the iterations run and whether the stop rule ended the run.
+    let conv = out.join("converged.csv");
+    assert!(header(&conv).starts_with("net,round,method,eta,alpha,scale"));
+    assert!(header(&conv).ends_with("simulator_final_error,iterations,converged"));
+    let rows_c = rows(&conv);
+    assert_eq!(rows_c.len(), 6);
+    for c in &rows_c {
+        let (iters, converged): (usize, i64) = (c[16].parse().unwrap(), c[17].parse().unwrap());
+        assert!(iters <= 300 && (converged == 1 || iters == 300), "{c:?}");
+        let sim: f64 = c[15].parse().unwrap();
+        assert!(sim.is_finite(), "{c:?}");
+    }
     let dagger = out.join("dagger.csv");
     assert!(header(&dagger).starts_with("net,round,method,eta,alpha,scale"));
     assert!(header(&dagger).ends_with("emulator_final_error,simulator_final_error"));

@@ -47,7 +47,7 @@ use super::fig13_control::dagger::{ChainLearner, DaggerControl, Round};
 use super::fig13_control::Task;
 use super::table1_structure::{build_emulator, build_spec, validate_nets, validate_training};
 use crate::control::bptt::{
-    learn, replay, Bounds, Bptt, Descent, Knots, Learned, Replay, StepRule,
+    learn_until, replay, Bounds, Bptt, Descent, IterationTrace, Knots, Learned, Replay, StepRule,
 };
 use crate::control::objective::{ControlEffort, FinalState, Objective, StateWindow};
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
@@ -114,7 +114,64 @@ pub struct Params {
     /// experiment's momentum descent itself (ours), if run.
     #[serde(default)]
     pub momentum_dagger: Option<MomentumDagger>,
+    /// The compared descents through every net above continued until J stops falling
+    /// (ours), if run.
+    #[serde(default)]
+    pub converged: Option<Converged>,
 }
+
+/// `[params.converged]` (ours): beside the paper's budget, the compared descents (same η, α,
+/// start) continued until J is converged — it fell by at most `tolerance` × |J| over the last
+/// `window` iterations — or `max_iterations`; `converged.csv`, one row per net and descent.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Converged {
+    /// Iteration cap.
+    pub max_iterations: usize,
+    /// Iterations over which J's fall is measured.
+    pub window: usize,
+    /// Relative fall of J over `window` iterations at or below which J is converged.
+    pub tolerance: f64,
+}
+
+impl Converged {
+    /// The stop rule of [`learn_until`] and a flag it raises when the rule (not the cap)
+    /// ends the run.
+    fn rule(self) -> impl FnMut(&IterationTrace, &[f64]) -> bool {
+        let mut history: Vec<f64> = Vec::new();
+        move |t: &IterationTrace, _: &[f64]| {
+            history.push(t.objective);
+            let l = history.len();
+            l > self.window && {
+                let (then, now) = (history[l - 1 - self.window], history[l - 1]);
+                then - now <= self.tolerance * now.abs()
+            }
+        }
+    }
+}
+
+/// Columns of `converged.csv`: those of `dagger.csv`, the iterations run and whether J
+/// converged by the rule (1) or the cap ended the run (0).
+pub const CONVERGED_COLUMNS: [&str; 18] = [
+    "net",
+    "round",
+    "method",
+    "eta",
+    "alpha",
+    "scale",
+    "initial_objective",
+    "final_objective",
+    "min_objective",
+    "emulator_landing_error",
+    "simulator_landing_error",
+    "emulator_final_speed",
+    "simulator_final_speed",
+    "final_gap",
+    "emulator_final_error",
+    "simulator_final_error",
+    "iterations",
+    "converged",
+];
 
 /// `[params.momentum_dagger]`: DAgger rounds whose learner is Fig. 14's momentum descent on its
 /// landing objective from hover (`iterations`, `momentum_eta`, `momentum_alpha`), from the
@@ -226,6 +283,19 @@ impl Validate for Params {
         if let Some(md) = &self.momentum_dagger {
             let (f13, control) = self.fig13(&self.momentum_chain(md));
             control.validate(&f13)?;
+        }
+        if let Some(c) = &self.converged {
+            ensure(
+                c.window >= 1 && c.max_iterations > c.window,
+                "converged.window",
+                "must be >= 1 and below converged.max_iterations",
+            )?;
+            positive("converged.tolerance", c.tolerance)?;
+            ensure(
+                self.dagger.is_some(),
+                "converged",
+                "needs [params.dagger] (its task scores the final error)",
+            )?;
         }
         validate_training(&self.training)
     }
@@ -392,6 +462,7 @@ impl Job for Params {
         let mut dagger_t = Table::new(&DAGGER_COLUMNS);
         let mut dagger_objective =
             Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
+        let mut converged_t = Table::new(&CONVERGED_COLUMNS);
         let compared = self.compared();
         let descents = self.descents();
         let pb = ctx.progress(descents.len() as u64, "control learning");
@@ -442,6 +513,14 @@ impl Job for Params {
             pb.inc(1);
         }
         pb.finish_and_clear();
+        self.converged_rows(
+            ctx,
+            &mut problem,
+            sim.as_mut(),
+            &x0,
+            ("table1", 0),
+            &mut converged_t,
+        );
         if let Some(dn) = &self.dagger {
             // The lander's final-round DAgger net of na_fig13_control (cached: only its
             // rounds' learning and replays run again).
@@ -472,6 +551,9 @@ impl Job for Params {
                 let round = dn.settings.rounds as i64;
                 dagger_t.push(self.dagger_row("dagger", round, d, scores, &r, &rep, dn));
             }
+            let round = dn.settings.rounds as i64;
+            let at = ("dagger", round);
+            self.converged_rows(ctx, &mut problem, sim.as_mut(), &x0, at, &mut converged_t);
         }
         let mut chain_rounds = Table::new(&super::fig13_control::dagger::COLUMNS);
         if let Some(md) = &self.momentum_dagger {
@@ -542,6 +624,8 @@ impl Job for Params {
                 let round = md.settings.rounds as i64;
                 dagger_t.push(self.dagger_row("momentum_dagger", round, d, scores, &r, &rep, &dn));
             }
+            let at = ("momentum_dagger", md.settings.rounds as i64);
+            self.converged_rows(ctx, &mut problem, sim.as_mut(), &x0, at, &mut converged_t);
         }
         Ok(Tables::from([
             ("objective", objective_t),
@@ -551,6 +635,7 @@ impl Job for Params {
             ("dagger", dagger_t),
             ("dagger_objective", dagger_objective),
             ("momentum_dagger_rounds", chain_rounds),
+            ("converged", converged_t),
         ]))
     }
 }
@@ -622,8 +707,26 @@ impl Params {
         x0: &[f64],
         label: &str,
     ) -> (Learned, Replay) {
+        self.descend_until(ctx, p, d, sim, x0, label, self.iterations, &mut |_, _| {
+            false
+        })
+    }
+
+    /// [`Self::descend`] for at most `iterations`, ended early by `stop` ([`learn_until`]).
+    #[allow(clippy::too_many_arguments)]
+    fn descend_until(
+        &self,
+        ctx: &RunContext,
+        p: &mut Problem<'_>,
+        d: &Descent,
+        sim: &mut dyn Dynamics,
+        x0: &[f64],
+        label: &str,
+        iterations: usize,
+        stop: &mut dyn FnMut(&IterationTrace, &[f64]) -> bool,
+    ) -> (Learned, Replay) {
         let r: Learned = ctx.stage(&format!("{label}{} eta {}", method(d), d.eta()), || {
-            learn(&mut p.bptt, &p.v0, *d, p.scale, self.iterations)
+            learn_until(&mut p.bptt, &p.v0, *d, p.scale, iterations, stop)
         });
         let emu_final = &r.states[self.horizon * NetModel::Lander.state_dim()..];
         let rep = replay(
@@ -654,6 +757,41 @@ impl Params {
             distance(&sim_final[VEL..VEL + 3], &[0.0; 3]),
             rep.final_gap
         ]
+    }
+
+    /// `converged.csv` rows of the compared descents through problem `p` (net `net` of
+    /// round `round`), when `[params.converged]` is set.
+    #[allow(clippy::too_many_arguments)]
+    fn converged_rows(
+        &self,
+        ctx: &RunContext,
+        p: &mut Problem<'_>,
+        sim: &mut dyn Dynamics,
+        x0: &[f64],
+        (net, round): (&str, i64),
+        table: &mut Table,
+    ) {
+        let (Some(c), Some(dn)) = (&self.converged, &self.dagger) else {
+            return;
+        };
+        for d in &self.compared() {
+            let mut rule = c.rule();
+            let mut converged = false;
+            let mut stop = |t: &IterationTrace, v: &[f64]| {
+                converged = rule(t, v);
+                converged
+            };
+            let label = format!("{net} net to convergence: ");
+            let (r, rep) =
+                self.descend_until(ctx, p, d, sim, x0, &label, c.max_iterations, &mut stop);
+            let scores = self.scores(p.scale, &r, &rep);
+            let mut out = self.dagger_row(net, round, d, scores, &r, &rep, dn);
+            out.extend(row![
+                r.trace.last().map_or(0, |t| t.iteration) as i64,
+                i64::from(converged)
+            ]);
+            table.push(out);
+        }
     }
 
     /// A `dagger.csv` row: the net, its round, the descent, its scores and final errors.
@@ -914,9 +1052,57 @@ impl Family for NaMomentum {
                 } else {
                     ""
                 }
-            ) + &dagger_why,
+            ) + &dagger_why
+                + &converged_summary(dir)?,
         })
     }
+}
+
+/// The report's sentence on `converged.csv` (empty when absent): per net, where momentum's
+/// and plain descent's controls run to convergence end on the emulator and the simulator.
+fn converged_summary(dir: &Path) -> Result<String, Error> {
+    let Ok(df) = read_csv(&dir.join("converged.csv")) else {
+        return Ok(String::new());
+    };
+    let (net, method) = (df_str(&df, "net")?, df_str(&df, "method")?);
+    if net.is_empty() {
+        return Ok(String::new());
+    }
+    let (iters, conv, emu, sim, land, j) = (
+        df_f64(&df, "iterations")?,
+        df_f64(&df, "converged")?,
+        df_f64(&df, "emulator_final_error")?,
+        df_f64(&df, "simulator_final_error")?,
+        df_f64(&df, "simulator_landing_error")?,
+        df_f64(&df, "final_objective")?,
+    );
+    let mut parts = vec![];
+    let mut within = vec![];
+    for r in 0..net.len() {
+        parts.push(format!(
+            "through the {} net {} runs {} iterations ({}) to J = {}, final error {} on the net and {} on the simulator ({} m from the target)",
+            net[r],
+            method[r],
+            iters[r],
+            if conv[r] > 0.5 { "converged" } else { "the cap" },
+            sig(j[r]),
+            sig(emu[r]),
+            sig(sim[r]),
+            sig(land[r])
+        ));
+        if method[r] == "momentum" && sim[r] <= 1.0 {
+            within.push(net[r].clone());
+        }
+    }
+    Ok(format!(
+        " Run to convergence (ours; converged.csv, stop rule in the spec, added after an exploratory run, no verdict rests on it): {}. Momentum's converged controls end within tolerance on the simulator through {}.",
+        parts.join("; "),
+        if within.is_empty() {
+            "none of the nets".to_string()
+        } else {
+            format!("the {} net(s)", within.join(", "))
+        }
+    ))
 }
 
 /// The report's DAgger paragraph, table and verdict sentence (rule in the spec): `None` when
@@ -1057,5 +1243,37 @@ mod tests {
         assert!(!converges(&[10.0, f64::NAN]));
         assert_eq!(iterations_to(&[5.0, 3.0, 1.0], 3.0), Some(1));
         assert_eq!(iterations_to(&[5.0, 4.0], 3.0), None);
+    }
+
+    /// J = 1 + 0.9^l: the rule fires at the first l where J fell by at most 1e-3 · J over
+    /// the last 5 iterations, i.e. 0.9^(l−5) (1 − 0.9⁵) ≤ 1e-3 (1 + 0.9^l), and never
+    /// on a J still falling fast.
+    #[test]
+    fn the_convergence_rule_fires_when_j_stops_falling() {
+        let c = Converged {
+            max_iterations: 1000,
+            window: 5,
+            tolerance: 1e-3,
+        };
+        let trace = |l: usize| IterationTrace {
+            iteration: l,
+            objective: 1.0 + 0.9f64.powi(l as i32),
+            grad_norm: 0.0,
+            seconds: 0.0,
+            evaluations: 0,
+            scale: 0.0,
+        };
+        let mut rule = c.rule();
+        let fired = (0..1000).find(|&l| rule(&trace(l), &[])).unwrap();
+        let expected = (5..1000)
+            .find(|&l| {
+                let (then, now) = (trace(l - 5).objective, trace(l).objective);
+                then - now <= 1e-3 * now
+            })
+            .unwrap();
+        assert_eq!(fired, expected);
+        assert!(fired > 40, "{fired}");
+        let mut rule = c.rule();
+        assert!((0..40).all(|l| !rule(&trace(l), &[])));
     }
 }
