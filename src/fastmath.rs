@@ -72,7 +72,7 @@ fn estrin(c: &[f64; 8], z: f64, z2: f64, z4: f64) -> f64 {
 
 #[inline(always)]
 fn sin_cos_reduced(x: f64) -> (f64, f64) {
-    if !(x.abs() < REDUCED_LIMIT) {
+    if x.is_nan() || x.abs() >= REDUCED_LIMIT {
         return x.sin_cos();
     }
     let k = (x * std::f64::consts::FRAC_2_PI + ROUNDER) - ROUNDER;

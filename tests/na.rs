@@ -473,6 +473,29 @@ fn na_fig13_quick_learns_controls_for_every_task() {
             other => panic!("unexpected task {other}"),
         }
     }
+    // The best-weights run: exactly the tasks whose bound admits the paper's count, their
+    // found condition between the bound and equilibration, one headline row each.
+    assert_eq!(
+        header(&out.join("best_weights.csv")),
+        "task,variable,tolerance,tolerance_best,condition,condition_best"
+    );
+    let admitted: Vec<&Vec<String>> = cond
+        .iter()
+        .filter(|c| {
+            c[1] == "physics" && c[12].parse::<f64>().unwrap() <= c[13].parse::<f64>().unwrap()
+        })
+        .collect();
+    let bw = rows(&out.join("best_weights.csv"));
+    let bs = rows(&out.join("best_weights_sweep.csv"));
+    assert_eq!(bs.len(), admitted.len());
+    for c in &admitted {
+        let mine: Vec<&Vec<String>> = bw.iter().filter(|b| b[0] == c[0]).collect();
+        assert_eq!(mine.len().to_string(), c[3], "{c:?}");
+        let found: f64 = mine[0][5].parse().unwrap();
+        let (eq, any): (f64, f64) = (c[10].parse().unwrap(), c[11].parse().unwrap());
+        assert!(any <= found && found <= eq, "{c:?}: {found}");
+        assert!(bs.iter().any(|b| b[0] == c[0] && b[1] == "fixed"), "{c:?}");
+    }
     let n_eigen: usize = cond.iter().map(|c| c[2].parse::<usize>().unwrap()).sum();
     assert_eq!(rows(&out.join("spectrum.csv")).len(), n_eigen);
     figure_exists(&d, "na_fig13_control_spectrum");

@@ -34,7 +34,8 @@ use crate::control::bptt::{
     StepRule, Substepped,
 };
 use crate::control::conditioning::{
-    iterations_per_decade, terminal_spectrum, weighting_bound, Spectrum, WeightingBound,
+    best_weighting, iterations_per_decade, terminal_spectrum, weighting_bound, Spectrum,
+    WeightingBound,
 };
 use crate::control::objective::{ControlEffort, FinalState, Objective};
 use crate::control::Rk4Map;
@@ -193,6 +194,28 @@ pub const CONDITIONING_COLUMNS: [&str; 14] = [
     "iterations_per_decade_any_weighting",
     "paper_iterations",
 ];
+
+/// Columns of `best_weights.csv` (ours): per task run under the best-conditioned weights and
+/// independent weighted final-state variable (its state index), the task's tolerance, the
+/// tolerance those weights amount to (1/sqrt(w), w scaled so the largest Gauss-Newton
+/// eigenvalue is the task's), and the condition of the task's and of the best weights.
+pub const BEST_WEIGHTS_COLUMNS: [&str; 6] = [
+    "task",
+    "variable",
+    "tolerance",
+    "tolerance_best",
+    "condition",
+    "condition_best",
+];
+
+/// The tables the physics sweep writes to.
+struct PhysicsTables<'a> {
+    sweep: &'a mut Table,
+    conditioning: &'a mut Table,
+    spectrum: &'a mut Table,
+    best_sweep: &'a mut Table,
+    best_weights: &'a mut Table,
+}
 
 /// Rows of `conditioning.csv` and `spectrum.csv` for one task on one substrate.
 fn record_spectrum(
@@ -396,13 +419,86 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
                 String::new()
             } else {
                 format!(
-                    " Could other final-state weights help (ours; the reading fixed in the spec, through the physics; no diagonal weighting beats kappa(equilibrated)/r)? {}.",
-                    weights.join("; ")
+                    " Could other final-state weights help (ours; the reading fixed in the spec, through the physics; no diagonal weighting beats kappa(equilibrated)/r)? {}.{}",
+                    weights.join("; "),
+                    best_weights_summary(dir, &task, &paper)?
                 )
             }
         )
     };
     Ok(Some((md, why)))
+}
+
+/// The sentence on `best_weights*.csv` (empty when absent or empty): per task run under the
+/// best-conditioned weights, the headline's iterations to the goal through the physics with
+/// those weights and with the task's own (`physics_sweep.csv`), beside the paper's count.
+fn best_weights_summary(dir: &Path, cond_task: &[String], paper: &[f64]) -> Result<String, Error> {
+    let (Ok(bw), Ok(bs), Ok(ps)) = (
+        read_csv(&dir.join("best_weights.csv")),
+        read_csv(&dir.join("best_weights_sweep.csv")),
+        read_csv(&dir.join("physics_sweep.csv")),
+    ) else {
+        return Ok(String::new());
+    };
+    let (wt, kappa, kappa_best) = (
+        df_str(&bw, "task")?,
+        df_f64(&bw, "condition")?,
+        df_f64(&bw, "condition_best")?,
+    );
+    let (bt, b_to, b_err) = (
+        df_str(&bs, "task")?,
+        df_f64(&bs, "iterations_to_goal")?,
+        df_f64(&bs, "rollout_error")?,
+    );
+    let (pt, pr, pe, p_to) = (
+        df_str(&ps, "task")?,
+        df_str(&ps, "rule")?,
+        df_f64(&ps, "eta")?,
+        df_f64(&ps, "iterations_to_goal")?,
+    );
+    let b_eta = df_f64(&bs, "eta")?;
+    let to = |k: f64| {
+        if k.is_finite() {
+            format!("in {k} iterations")
+        } else {
+            "never".to_string()
+        }
+    };
+    let mut parts = vec![];
+    for r in 0..bt.len() {
+        let Some(w) = wt.iter().position(|t| *t == bt[r]) else {
+            continue;
+        };
+        let ours = (0..pt.len())
+            .find(|&i| pt[i] == bt[r] && pr[i] == "fixed" && pe[i] == b_eta[r])
+            .map_or(f64::NAN, |i| p_to[i]);
+        let count = cond_task
+            .iter()
+            .position(|t| *t == bt[r])
+            .map_or(f64::NAN, |i| paper[i]);
+        let reading = if b_to[r] <= count {
+            "our weights were to blame"
+        } else {
+            "our weights slow it but are not the whole cause"
+        };
+        parts.push(format!(
+            "{}: condition {} with the best weights a search finds (ours: {}), the headline reaches the goal through the physics {} with them (final error {}) and {} with ours (paper: {count}): {reading}",
+            bt[r],
+            sig(kappa_best[w]),
+            sig(kappa[w]),
+            to(b_to[r]),
+            sig(b_err[r]),
+            to(ours)
+        ));
+    }
+    Ok(if parts.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " Under the best-conditioned weights (ours; `best_weights.csv`, `best_weights_sweep.csv`, the reading fixed in the spec): {}.",
+            parts.join("; ")
+        )
+    })
 }
 
 /// Columns of the `sweep` and `physics_sweep` tables: `rollout_error` is the final error on
@@ -649,6 +745,10 @@ impl Job for Params {
         ]);
         let mut sweep_t = Table::new(&SWEEP_COLUMNS);
         let mut physics_t = Table::new(&SWEEP_COLUMNS);
+        // The headline through the physics under the best-conditioned final-state weights
+        // (ours; `best_weights*.csv`), where conditioning.csv does not rule them out.
+        let mut best_t = Table::new(&SWEEP_COLUMNS);
+        let mut best_tol_t = Table::new(&BEST_WEIGHTS_COLUMNS);
         // The terminal Gauss-Newton spectrum at the start knots on both substrates
         // (src/control/conditioning.rs): why fixed-step descent is slow.
         let mut cond_t = Table::new(&CONDITIONING_COLUMNS);
@@ -750,7 +850,13 @@ impl Job for Params {
             }
             if let Some(sw) = &self.physics_sweep {
                 ctx.stage(&format!("physics sweep {}", task.name), || {
-                    let tables = (&mut physics_t, &mut cond_t, &mut spectrum_t);
+                    let tables = PhysicsTables {
+                        sweep: &mut physics_t,
+                        conditioning: &mut cond_t,
+                        spectrum: &mut spectrum_t,
+                        best_sweep: &mut best_t,
+                        best_weights: &mut best_tol_t,
+                    };
                     self.physics_sweep_task(task, sw, &objective, knots, &x0, tables)
                 })?;
             }
@@ -818,6 +924,8 @@ impl Job for Params {
             ("dolphin_motion", motion_t),
             ("sweep", sweep_t),
             ("physics_sweep", physics_t),
+            ("best_weights", best_tol_t),
+            ("best_weights_sweep", best_t),
             ("conditioning", cond_t),
             ("spectrum", spectrum_t),
             ("dagger", dagger_t),
@@ -933,8 +1041,9 @@ impl Params {
         objective: &Objective,
         knots: Knots,
         x0: &[f64],
-        tables: (&mut Table, &mut Table, &mut Table),
+        tables: PhysicsTables<'_>,
     ) -> Result<(), Error> {
+        #[allow(clippy::too_many_arguments)]
         fn go<M: crate::physics::linearize::Linearize>(
             p: &Params,
             model: M,
@@ -943,7 +1052,7 @@ impl Params {
             objective: &Objective,
             knots: Knots,
             x0: &[f64],
-            (table, cond, spectrum): (&mut Table, &mut Table, &mut Table),
+            t: PhysicsTables<'_>,
         ) -> Result<(), Error> {
             let step = Substepped {
                 inner: Rk4Map::new(model, task.net.physical_dt).map_err(other)?,
@@ -965,8 +1074,45 @@ impl Params {
                 .ok_or_else(|| other(format!("{}: objective without curvature", task.name)))?;
             let spec = terminal_spectrum(&mut bptt, &v0, &curvature, task.final_dof());
             let bound = task.weighting_bound(&mut bptt, &v0);
-            record_spectrum(task, "physics", (&spec, &bound), lambda, (cond, spectrum));
-            p.sweep_task(task, sw, &mut bptt, &v0, lambda, x0, table);
+            let tables = (&mut *t.conditioning, &mut *t.spectrum);
+            record_spectrum(task, "physics", (&spec, &bound), lambda, tables);
+            p.sweep_task(task, sw, &mut bptt, &v0, lambda, x0, t.sweep);
+            // The spec's best-weights run, where no weighting is ruled out: the headline rule
+            // (fixed step, the task's eta and alpha, lambda at the start) on the objective with
+            // the best-conditioned weights, scored with the task's own tolerances.
+            let any_pace =
+                iterations_per_decade(task.eta / bound.condition_any_weighting, task.alpha);
+            if any_pace <= task.iterations as f64 {
+                let vars = task.independent_final_vars();
+                let rows = bptt.state_jacobian(&v0, task.horizon, &vars);
+                if let Some((w, kappa)) = best_weighting(&rows) {
+                    // W's largest Gauss-Newton eigenvalue set to ours (mu_1), so the effort
+                    // term weighs as much against the fastest direction as in the task.
+                    let mut best = task.clone();
+                    for (&k, wk) in vars.iter().zip(&w) {
+                        best.final_tolerance[k] = 1.0 / (wk * spec.largest()).sqrt();
+                        t.best_weights.push(row![
+                            task.name.as_str(),
+                            k as i64,
+                            task.final_tolerance[k],
+                            best.final_tolerance[k],
+                            spec.condition(),
+                            kappa
+                        ]);
+                    }
+                    let objective = best.objective();
+                    let mut b =
+                        Bptt::new(&step, &objective, knots, task.bounds(), x0).map_err(other)?;
+                    let lambda = b.curvature(&v0, p.curvature_iterations);
+                    let headline = Sweep {
+                        eta: vec![task.eta],
+                        alpha: task.alpha,
+                        iterations: sw.iterations,
+                        rules: vec![StepRule::Fixed],
+                    };
+                    p.sweep_task(task, &headline, &mut b, &v0, lambda, x0, t.best_sweep);
+                }
+            }
             Ok(())
         }
         use crate::physics::linearize::FiniteDifference;
@@ -983,7 +1129,7 @@ impl Params {
                     objective,
                     knots,
                     x0,
-                    (&mut *tables.0, &mut *tables.1, &mut *tables.2),
+                    tables,
                 )
             };
         }
