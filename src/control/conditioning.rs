@@ -237,20 +237,26 @@ mod tests {
         assert_eq!(iterations_per_decade(0.0, 0.5), f64::INFINITY);
     }
 
+    /// The monomials (10 s)^p, p = 0 … 3, on a 400-point grid of [0, 1]: rows whose Gram
+    /// matrix is a scaled Hilbert matrix H₄.
+    fn hilbert_rows() -> Vec<Vec<f64>> {
+        let grid = 400;
+        (0..4)
+            .map(|p| {
+                (0..grid)
+                    .map(|t| ((t as f64 + 0.5) / grid as f64).powi(p) * 10f64.powi(p))
+                    .collect()
+            })
+            .collect()
+    }
+
     /// Rows whose Gram matrix is the Hilbert-like K_ij = 1/(i + j + 1) (monomials 1 … s³ on
     /// a fine grid): the bound holds against random weightings and the equilibrated one, and
     /// orthogonal rows of any lengths are perfectly conditionable.
     #[test]
     fn no_weighting_beats_the_van_der_sluis_bound() {
         use rand::{Rng, SeedableRng};
-        let grid = 400;
-        let rows: Vec<Vec<f64>> = (0..4)
-            .map(|p| {
-                (0..grid)
-                    .map(|t| ((t as f64 + 0.5) / grid as f64).powi(p) * 10f64.powi(p))
-                    .collect()
-            })
-            .collect();
+        let rows = hilbert_rows();
         let b = weighting_bound(&rows);
         assert_eq!(b.vars, 4);
         // The Hilbert matrix H₄ equilibrated has κ in the thousands.
@@ -295,14 +301,7 @@ mod tests {
     /// van der Sluis bound, and its scale puts W^½ K W^½'s largest eigenvalue at 1.
     #[test]
     fn the_best_weighting_lies_between_the_bound_and_equilibration() {
-        let grid = 400;
-        let rows: Vec<Vec<f64>> = (0..4)
-            .map(|p| {
-                (0..grid)
-                    .map(|t| ((t as f64 + 0.5) / grid as f64).powi(p) * 10f64.powi(p))
-                    .collect()
-            })
-            .collect();
+        let rows = hilbert_rows();
         let b = weighting_bound(&rows);
         let (w, kappa) = best_weighting(&rows).unwrap();
         assert!(kappa >= b.condition_any_weighting, "{kappa} {b:?}");

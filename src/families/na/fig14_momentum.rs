@@ -152,26 +152,13 @@ impl Converged {
 
 /// Columns of `converged.csv`: those of `dagger.csv`, the iterations run and whether J
 /// converged by the rule (1) or the cap ended the run (0).
-pub const CONVERGED_COLUMNS: [&str; 18] = [
-    "net",
-    "round",
-    "method",
-    "eta",
-    "alpha",
-    "scale",
-    "initial_objective",
-    "final_objective",
-    "min_objective",
-    "emulator_landing_error",
-    "simulator_landing_error",
-    "emulator_final_speed",
-    "simulator_final_speed",
-    "final_gap",
-    "emulator_final_error",
-    "simulator_final_error",
-    "iterations",
-    "converged",
-];
+pub fn converged_columns() -> Vec<&'static str> {
+    DAGGER_COLUMNS
+        .iter()
+        .copied()
+        .chain(["iterations", "converged"])
+        .collect()
+}
 
 /// `[params.momentum_dagger]`: DAgger rounds whose learner is Fig. 14's momentum descent on its
 /// landing objective from hover (`iterations`, `momentum_eta`, `momentum_alpha`), from the
@@ -462,7 +449,7 @@ impl Job for Params {
         let mut dagger_t = Table::new(&DAGGER_COLUMNS);
         let mut dagger_objective =
             Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
-        let mut converged_t = Table::new(&CONVERGED_COLUMNS);
+        let mut converged_t = Table::new(&converged_columns());
         let compared = self.compared();
         let descents = self.descents();
         let pb = ctx.progress(descents.len() as u64, "control learning");

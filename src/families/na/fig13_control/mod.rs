@@ -368,17 +368,17 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
             // The spec's reading: the bound against the paper's iteration count.
             weights.push(if !(any_pace[r].is_finite() && any[r] < 1e12) {
                 format!("{}: singular under any weights", task[r])
-            } else if any_pace[r] > paper[r] {
-                format!(
-                    "{}: condition at least {}, at least {} iterations per tenfold reduction under any weights against the paper's {}, so the cause is the task's dynamics over its knots and horizon, not our weights",
-                    task[r],
-                    sig(any[r]),
-                    sig(any_pace[r]),
-                    paper[r]
-                )
             } else {
+                let (link, reading) = if any_pace[r] > paper[r] {
+                    (
+                        " against",
+                        "the cause is the task's dynamics over its knots and horizon, not our weights",
+                    )
+                } else {
+                    (", within", "our tolerance weights may be to blame")
+                };
                 format!(
-                    "{}: condition at least {}, at least {} iterations per tenfold reduction under any weights, within the paper's {}, so our tolerance weights may be to blame",
+                    "{}: condition at least {}, at least {} iterations per tenfold reduction under any weights{link} the paper's {}, so {reading}",
                     task[r],
                     sig(any[r]),
                     sig(any_pace[r]),
