@@ -477,7 +477,7 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     // found condition between the bound and equilibration, one headline row each.
     assert_eq!(
         header(&out.join("best_weights.csv")),
-        "task,variable,tolerance,tolerance_best,condition,condition_best"
+        "task,variable,tolerance,tolerance_best,condition,condition_best,iterations_per_decade_best"
     );
     let admitted: Vec<&Vec<String>> = cond
         .iter()
@@ -488,6 +488,10 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     let bw = rows(&out.join("best_weights.csv"));
     let bs = rows(&out.join("best_weights_sweep.csv"));
     assert_eq!(bs.len(), admitted.len());
+    assert_eq!(
+        rows(&out.join("best_weights_emulator_sweep.csv")).len(),
+        admitted.len()
+    );
     for c in &admitted {
         let mine: Vec<&Vec<String>> = bw.iter().filter(|b| b[0] == c[0]).collect();
         assert_eq!(mine.len().to_string(), c[3], "{c:?}");

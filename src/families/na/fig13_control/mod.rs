@@ -198,14 +198,16 @@ pub const CONDITIONING_COLUMNS: [&str; 14] = [
 /// Columns of `best_weights.csv` (ours): per task run under the best-conditioned weights and
 /// independent weighted final-state variable (its state index), the task's tolerance, the
 /// tolerance those weights amount to (1/sqrt(w), w scaled so the largest Gauss-Newton
-/// eigenvalue is the task's), and the condition of the task's and of the best weights.
-pub const BEST_WEIGHTS_COLUMNS: [&str; 6] = [
+/// eigenvalue is the task's), the condition of the task's and of the best weights, and the
+/// iterations per tenfold reduction the headline's eta and alpha need at the latter.
+pub const BEST_WEIGHTS_COLUMNS: [&str; 7] = [
     "task",
     "variable",
     "tolerance",
     "tolerance_best",
     "condition",
     "condition_best",
+    "iterations_per_decade_best",
 ];
 
 /// The tables the physics sweep writes to.
@@ -440,11 +442,25 @@ fn best_weights_summary(dir: &Path, cond_task: &[String], paper: &[f64]) -> Resu
     ) else {
         return Ok(String::new());
     };
+    // Through the Table 1 net under the same weights (absent in earlier runs).
+    let through_net = read_csv(&dir.join("best_weights_emulator_sweep.csv"))
+        .ok()
+        .map(|e| -> Result<_, Error> {
+            Ok((
+                df_str(&e, "task")?,
+                df_f64(&e, "iterations_to_goal")?,
+                df_f64(&e, "rollout_error")?,
+                df_f64(&e, "simulator_error")?,
+            ))
+        })
+        .transpose()?;
     let (wt, kappa, kappa_best) = (
         df_str(&bw, "task")?,
         df_f64(&bw, "condition")?,
         df_f64(&bw, "condition_best")?,
     );
+    // Absent in runs before the column was added.
+    let pace_best = df_f64(&bw, "iterations_per_decade_best").ok();
     let (bt, b_to, b_err) = (
         df_str(&bs, "task")?,
         df_f64(&bs, "iterations_to_goal")?,
@@ -481,11 +497,27 @@ fn best_weights_summary(dir: &Path, cond_task: &[String], paper: &[f64]) -> Resu
         } else {
             "our weights slow it but are not the whole cause"
         };
+        let net = through_net
+            .as_ref()
+            .and_then(|(et, eto, ee, es)| {
+                let i = et.iter().position(|t| *t == bt[r])?;
+                Some(format!(
+                    "; through the Table 1 net under the same weights it reaches the goal on the net {} (final error {} there, {} on the simulator replay)",
+                    to(eto[i]),
+                    sig(ee[i]),
+                    sig(es[i])
+                ))
+            })
+            .unwrap_or_default();
         parts.push(format!(
-            "{}: condition {} with the best weights a search finds (ours: {}), the headline reaches the goal through the physics {} with them (final error {}) and {} with ours (paper: {count}): {reading}",
+            "{}: condition {} with the best weights a search finds (ours: {}){}, the headline reaches the goal through the physics {} with them (final error {}) and {} with ours (paper: {count}): {reading}{net}",
             bt[r],
             sig(kappa_best[w]),
             sig(kappa[w]),
+            pace_best.as_ref().map_or(String::new(), |p| format!(
+                ", at which the headline's step needs {} iterations per tenfold reduction",
+                sig(p[w])
+            )),
             to(b_to[r]),
             sig(b_err[r]),
             to(ours)
@@ -749,6 +781,7 @@ impl Job for Params {
         // (ours; `best_weights*.csv`), where conditioning.csv does not rule them out.
         let mut best_t = Table::new(&SWEEP_COLUMNS);
         let mut best_tol_t = Table::new(&BEST_WEIGHTS_COLUMNS);
+        let mut best_emulator_t = Table::new(&SWEEP_COLUMNS);
         // The terminal Gauss-Newton spectrum at the start knots on both substrates
         // (src/control/conditioning.rs): why fixed-step descent is slow.
         let mut cond_t = Table::new(&CONDITIONING_COLUMNS);
@@ -849,7 +882,7 @@ impl Job for Params {
                 });
             }
             if let Some(sw) = &self.physics_sweep {
-                ctx.stage(&format!("physics sweep {}", task.name), || {
+                let best_tolerance = ctx.stage(&format!("physics sweep {}", task.name), || {
                     let tables = PhysicsTables {
                         sweep: &mut physics_t,
                         conditioning: &mut cond_t,
@@ -859,6 +892,24 @@ impl Job for Params {
                     };
                     self.physics_sweep_task(task, sw, &objective, knots, &x0, tables)
                 })?;
+                // The same headline through the Table 1 net under the best weights (the
+                // spec's reading: data beside the physics' run).
+                if let Some(tolerance) = best_tolerance {
+                    let mut best = task.clone();
+                    best.final_tolerance = tolerance;
+                    let objective = best.objective();
+                    let mut b = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0)
+                        .map_err(other)?;
+                    let lambda = b.curvature(&v0, self.curvature_iterations);
+                    let headline = Sweep {
+                        eta: vec![task.eta],
+                        alpha: task.alpha,
+                        iterations: sw.iterations,
+                        rules: vec![StepRule::Fixed],
+                    };
+                    let table = &mut best_emulator_t;
+                    self.sweep_task(task, &headline, &mut b, &v0, lambda, &x0, table);
+                }
             }
             if let Some(d) = &self.dagger {
                 self.run_dagger(ctx, d, task, &spec, &trained, &x0, &mut dagger_t)?;
@@ -926,6 +977,7 @@ impl Job for Params {
             ("physics_sweep", physics_t),
             ("best_weights", best_tol_t),
             ("best_weights_sweep", best_t),
+            ("best_weights_emulator_sweep", best_emulator_t),
             ("conditioning", cond_t),
             ("spectrum", spectrum_t),
             ("dagger", dagger_t),
@@ -1033,7 +1085,8 @@ impl Params {
     }
 
     /// [`Params::sweep_task`] through the task's physical model: `steps` RK4 steps of the
-    /// net's physical δt per knot step, Jacobians by central differences.
+    /// net's physical δt per knot step, Jacobians by central differences. Returns the best
+    /// weights' tolerances when the spec's best-weights run ran.
     fn physics_sweep_task(
         &self,
         task: &Task,
@@ -1042,7 +1095,7 @@ impl Params {
         knots: Knots,
         x0: &[f64],
         tables: PhysicsTables<'_>,
-    ) -> Result<(), Error> {
+    ) -> Result<Option<Vec<f64>>, Error> {
         #[allow(clippy::too_many_arguments)]
         fn go<M: crate::physics::linearize::Linearize>(
             p: &Params,
@@ -1053,7 +1106,7 @@ impl Params {
             knots: Knots,
             x0: &[f64],
             t: PhysicsTables<'_>,
-        ) -> Result<(), Error> {
+        ) -> Result<Option<Vec<f64>>, Error> {
             let step = Substepped {
                 inner: Rk4Map::new(model, task.net.physical_dt).map_err(other)?,
                 substeps: p.steps,
@@ -1097,7 +1150,8 @@ impl Params {
                             task.final_tolerance[k],
                             best.final_tolerance[k],
                             spec.condition(),
-                            kappa
+                            kappa,
+                            iterations_per_decade(task.eta / kappa, task.alpha)
                         ]);
                     }
                     let objective = best.objective();
@@ -1111,9 +1165,10 @@ impl Params {
                         rules: vec![StepRule::Fixed],
                     };
                     p.sweep_task(task, &headline, &mut b, &v0, lambda, x0, t.best_sweep);
+                    return Ok(Some(best.final_tolerance));
                 }
             }
-            Ok(())
+            Ok(None)
         }
         use crate::physics::linearize::FiniteDifference;
         use crate::physics::pendulum::{Pendulum3, PendulumVariant};
