@@ -144,6 +144,36 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
         push("lqr.acrobot.backward_passes_per_s", lqr_passes);
         // Derived: microseconds per Riccati step of the tracker's backward pass.
         push("lqr.acrobot.us_per_step", 1e6 / (lqr_passes * steps as f64));
+        // The Riccati recursion alone, on the same trajectory and cost with its A_k, B_k
+        // computed beforehand: the problem `../shared/peers/bench_scipy_lqr.py` times in NumPy
+        // (compare.py's LQR row times `track`, linearization included).
+        {
+            use crate::control::lqr::track_linearized;
+            let (n, m) = (map.state_dim(), map.control_dim());
+            let mut ws = map.workspace();
+            let (mut a_k, mut b_k) = (vec![], vec![]);
+            for k in 0..steps {
+                let (mut a, mut b) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
+                map.jacobians(&xs[k], &u0[k], &mut a, &mut b, &mut ws);
+                a_k.push(a);
+                b_k.push(b);
+            }
+            let riccati_passes = throughput(min_seconds, 1, || {
+                let mut given = |k: usize,
+                                 _: &DVector<f64>,
+                                 _: &DVector<f64>,
+                                 a: &mut DMatrix<f64>,
+                                 b: &mut DMatrix<f64>| {
+                    a.copy_from(&a_k[k]);
+                    b.copy_from(&b_k[k]);
+                };
+                black_box(track_linearized((n, m), &cost, &xs, &u0, &mut given).ok());
+            });
+            push(
+                "lqr.riccati_n4_m1.us_per_step",
+                1e6 / (riccati_passes * steps as f64),
+            );
+        }
         let t = track(&map, &cost, &xs, &u0).expect("tracker");
         let trackers = vec![t.clone(), t];
         let blend = TrackerBlend {
