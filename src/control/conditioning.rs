@@ -98,12 +98,11 @@ pub struct WeightingBound {
 /// the knots). K's smallest eigenvalue below 1e-13 of its largest counts as singular.
 pub fn weighting_bound(rows: &[Vec<f64>]) -> WeightingBound {
     let r = rows.len();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let diag: Vec<f64> = rows.iter().map(|a| dot(a, a)).collect();
+    let g = gram(rows);
     let k = nalgebra::DMatrix::from_fn(r, r, |i, j| {
-        let (di, dj) = (diag[i], diag[j]);
+        let (di, dj) = (g[(i, i)], g[(j, j)]);
         if di > 0.0 && dj > 0.0 {
-            dot(&rows[i], &rows[j]) / (di * dj).sqrt()
+            g[(i, j)] / (di * dj).sqrt()
         } else {
             0.0
         }
@@ -183,7 +182,7 @@ pub fn best_weighting(rows: &[Vec<f64>]) -> Option<(Vec<f64>, f64)> {
         }
     }
     let problem = LogCondition {
-        k: k.clone(),
+        k,
         base,
         bx: SearchBox::cube(r, -3.0, 3.0).expect("a valid box"),
     };
@@ -193,6 +192,7 @@ pub fn best_weighting(rows: &[Vec<f64>]) -> Option<(Vec<f64>, f64)> {
     };
     let found = nelder_mead(&problem, &vec![0.0; r], &cfg, &Budget::iterations(4000)).ok()?;
     let w = problem.weights(&found.best);
+    let k = &problem.k;
     let m = nalgebra::DMatrix::from_fn(r, r, |i, j| k[(i, j)] * (w[i] * w[j]).sqrt());
     let top = m.symmetric_eigenvalues().max();
     Some((w.iter().map(|w| w / top).collect(), found.best_value.exp()))

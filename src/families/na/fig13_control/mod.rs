@@ -742,13 +742,23 @@ impl Task {
             .collect()
     }
 
-    /// [`WeightingBound`] of the final state's independent variables at knots `v`.
-    fn weighting_bound<D: DifferentiableStep>(
+    /// The Jacobian rows ∂s_M/∂v of [`Task::independent_final_vars`] at knots `v`.
+    fn final_rows<D: DifferentiableStep>(
         &self,
         bptt: &mut Bptt<'_, D>,
         v: &[f64],
-    ) -> WeightingBound {
-        weighting_bound(&bptt.state_jacobian(v, self.horizon, &self.independent_final_vars()))
+    ) -> Vec<Vec<f64>> {
+        bptt.state_jacobian(v, self.horizon, &self.independent_final_vars())
+    }
+
+    /// The headline's rule alone (fixed step, the task's eta and alpha) for `iterations`.
+    fn headline_sweep(&self, iterations: usize) -> Sweep {
+        Sweep {
+            eta: vec![self.eta],
+            alpha: self.alpha,
+            iterations,
+            rules: vec![StepRule::Fixed],
+        }
     }
 
     /// RMS of (s − s_d)/σ over the variables with a tolerance.
@@ -853,7 +863,7 @@ impl Job for Params {
                 .gauss_newton()
                 .ok_or_else(|| other(format!("{}: objective without curvature", task.name)))?;
             let spectrum = terminal_spectrum(&mut bptt, &v0, &curvature, task.final_dof());
-            let bound = task.weighting_bound(&mut bptt, &v0);
+            let bound = weighting_bound(&task.final_rows(&mut bptt, &v0));
             record_spectrum(
                 task,
                 "emulator",
@@ -901,12 +911,7 @@ impl Job for Params {
                     let mut b = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0)
                         .map_err(other)?;
                     let lambda = b.curvature(&v0, self.curvature_iterations);
-                    let headline = Sweep {
-                        eta: vec![task.eta],
-                        alpha: task.alpha,
-                        iterations: sw.iterations,
-                        rules: vec![StepRule::Fixed],
-                    };
+                    let headline = task.headline_sweep(sw.iterations);
                     let table = &mut best_emulator_t;
                     self.sweep_task(task, &headline, &mut b, &v0, lambda, &x0, table);
                 }
@@ -1126,7 +1131,8 @@ impl Params {
                 .gauss_newton()
                 .ok_or_else(|| other(format!("{}: objective without curvature", task.name)))?;
             let spec = terminal_spectrum(&mut bptt, &v0, &curvature, task.final_dof());
-            let bound = task.weighting_bound(&mut bptt, &v0);
+            let rows = task.final_rows(&mut bptt, &v0);
+            let bound = weighting_bound(&rows);
             let tables = (&mut *t.conditioning, &mut *t.spectrum);
             record_spectrum(task, "physics", (&spec, &bound), lambda, tables);
             p.sweep_task(task, sw, &mut bptt, &v0, lambda, x0, t.sweep);
@@ -1137,7 +1143,6 @@ impl Params {
                 iterations_per_decade(task.eta / bound.condition_any_weighting, task.alpha);
             if any_pace <= task.iterations as f64 {
                 let vars = task.independent_final_vars();
-                let rows = bptt.state_jacobian(&v0, task.horizon, &vars);
                 if let Some((w, kappa)) = best_weighting(&rows) {
                     // W's largest Gauss-Newton eigenvalue set to ours (mu_1), so the effort
                     // term weighs as much against the fastest direction as in the task.
@@ -1158,12 +1163,7 @@ impl Params {
                     let mut b =
                         Bptt::new(&step, &objective, knots, task.bounds(), x0).map_err(other)?;
                     let lambda = b.curvature(&v0, p.curvature_iterations);
-                    let headline = Sweep {
-                        eta: vec![task.eta],
-                        alpha: task.alpha,
-                        iterations: sw.iterations,
-                        rules: vec![StepRule::Fixed],
-                    };
+                    let headline = task.headline_sweep(sw.iterations);
                     p.sweep_task(task, &headline, &mut b, &v0, lambda, x0, t.best_sweep);
                     return Ok(Some(best.final_tolerance));
                 }
