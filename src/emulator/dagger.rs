@@ -133,11 +133,7 @@ impl Visits {
         self.states.extend_from_slice(&other.states);
         self.controls.extend_from_slice(&other.controls);
         self.next_states.extend_from_slice(&other.next_states);
-        let (w, o) = (&mut self.windows, &other.windows);
-        w.states.extend_from_slice(&o.states);
-        w.controls.extend_from_slice(&o.controls);
-        w.episode.extend_from_slice(&o.episode);
-        w.start_step.extend_from_slice(&o.start_step);
+        self.windows.extend(&other.windows);
     }
 
     /// The one-step examples as [`Transitions`].
@@ -317,10 +313,7 @@ fn stack(a: &Dataset, b: &Dataset) -> Result<Dataset, EmulatorError> {
 
 fn join_windows(a: &Windows, b: &Windows) -> Windows {
     let mut out = a.clone();
-    out.states.extend_from_slice(&b.states);
-    out.controls.extend_from_slice(&b.controls);
-    out.episode.extend_from_slice(&b.episode);
-    out.start_step.extend_from_slice(&b.start_step);
+    out.extend(b);
     out
 }
 

@@ -386,6 +386,22 @@ impl Windows {
         let o = (r * self.k + j) * m;
         &self.controls[o..o + m]
     }
+
+    /// Appends `other`'s windows after every one already held.
+    ///
+    /// # Panics
+    /// When the two differ in k or in their state or control dimension.
+    pub fn extend(&mut self, other: &Windows) {
+        assert_eq!(
+            (self.k, self.state_dim, self.control_dim),
+            (other.k, other.state_dim, other.control_dim),
+            "windows of different shapes"
+        );
+        self.states.extend_from_slice(&other.states);
+        self.controls.extend_from_slice(&other.controls);
+        self.episode.extend_from_slice(&other.episode);
+        self.start_step.extend_from_slice(&other.start_step);
+    }
 }
 
 /// Samples `cfg.examples` windows of `k` super-steps exactly as [`sample_transitions`] samples

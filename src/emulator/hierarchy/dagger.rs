@@ -16,6 +16,7 @@ use super::{global_state, global_state_after, global_transitions, GLOBAL_DIM, MA
 use crate::emulator::cache::{fnv1a, read_record, write_record, EmulatorCache, NetRecord};
 use crate::emulator::catalog::BuildError;
 use crate::emulator::dagger::Visits;
+use crate::emulator::dataset::Windows;
 use crate::emulator::Emulator;
 use crate::physics::dolphin::Dolphin;
 use std::path::PathBuf;
@@ -35,22 +36,40 @@ pub fn global_visits(d: &Dolphin, visits: &Visits) -> Visits {
         out.controls = flat(&t.controls);
         out.next_states = flat(&t.next_states);
     }
-    let w = &visits.windows;
+    out.windows = global_windows(d, &visits.windows);
+    out
+}
+
+/// The global-state chains of mass-state windows `w`: each window's first state as
+/// [`global_state`] writes it, every later one with its quaternion signs following the
+/// window's own previous step ([`global_state_after`]), as the net's own rollout continues them.
+///
+/// # Panics
+/// When `w` are not mass-state windows of the dolphin.
+pub fn global_windows(d: &Dolphin, w: &Windows) -> Windows {
+    assert_eq!(w.state_dim, MASS_DIM, "mass-state windows");
+    let k = w.k;
+    let mut states = Vec::with_capacity(w.len() * (k + 1) * GLOBAL_DIM);
     let (mut g, mut prev) = (vec![0.0; GLOBAL_DIM], vec![0.0; GLOBAL_DIM]);
     for win in w.states.chunks_exact((k + 1) * MASS_DIM) {
         let mut steps = win.chunks_exact(MASS_DIM);
         global_state(d, steps.next().expect("k + 1 states"), &mut g);
-        out.windows.states.extend_from_slice(&g);
+        states.extend_from_slice(&g);
         for x in steps {
             std::mem::swap(&mut g, &mut prev);
             global_state_after(d, x, &prev, &mut g);
-            out.windows.states.extend_from_slice(&g);
+            states.extend_from_slice(&g);
         }
     }
-    out.windows.controls.clone_from(&w.controls);
-    out.windows.episode.clone_from(&w.episode);
-    out.windows.start_step.clone_from(&w.start_step);
-    out
+    Windows {
+        k,
+        state_dim: GLOBAL_DIM,
+        control_dim: w.control_dim,
+        states,
+        controls: w.controls.clone(),
+        episode: w.episode.clone(),
+        start_step: w.start_step.clone(),
+    }
 }
 
 fn derived_key(spec: &HierarchySpec, d: &Dolphin, derived: &serde_json::Value) -> String {

@@ -24,10 +24,11 @@ use crate::emulator::catalog::{
     TrainingData,
 };
 use crate::emulator::dataset::{
-    sample_transitions, ControlLimits, ControlProcess, ControlSignal, SamplingConfig,
+    sample_transitions, sample_windows, ControlLimits, ControlProcess, ControlSignal,
+    SamplingConfig, Windows,
 };
 use crate::emulator::mlp::{Mlp, WeightInit};
-use crate::emulator::rollout::change_spread;
+use crate::emulator::rollout::{change_spread, fine_tune, FineTune};
 use crate::emulator::train::{mse, Dataset, TracePoint};
 use crate::emulator::transform::Normalizer;
 use crate::emulator::{Emulator, Transforms, Transitions};
@@ -177,6 +178,73 @@ pub fn sample_dolphin(
     )?)
 }
 
+/// Windows per sampling chunk of [`sample_dolphin_windows`].
+const WINDOW_CHUNK: usize = 250;
+
+/// Samples `count` windows of `k` super-steps of the mass state (`steps` physical steps of `dt`
+/// each) from the same episodes, starts and controls as [`sample_dolphin`], in parallel chunks
+/// seeded from `seed` (independent of the thread count).
+pub fn sample_dolphin_windows(
+    d: &Dolphin,
+    dt: f64,
+    steps: usize,
+    count: usize,
+    k: usize,
+    seed: u64,
+) -> Result<Windows, BuildError> {
+    let chunks: Vec<usize> = (0..count.div_ceil(WINDOW_CHUNK))
+        .map(|c| WINDOW_CHUNK.min(count - c * WINDOW_CHUNK))
+        .collect();
+    let parts: Vec<Windows> = chunks
+        .par_iter()
+        .enumerate()
+        .map(|(c, &n)| {
+            let cfg = SamplingConfig {
+                dt,
+                steps_per_sample: steps,
+                examples: n,
+                episode_duration: EPISODE_S.max((k + 6) as f64 * steps as f64 * dt),
+                control: control_process(),
+            };
+            let mut sim = simulator(d);
+            let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(seed, c as u64));
+            let start = |r: &mut ChaCha8Rng| start_state(d, r);
+            sample_windows(&mut sim, &start, &control_limits(), &cfg, k, &mut rng)
+        })
+        .collect::<Result<_, _>>()?;
+    let mut out = Windows {
+        k,
+        state_dim: MASS_DIM,
+        control_dim: N_SEGMENTS,
+        states: Vec::new(),
+        controls: Vec::new(),
+        episode: Vec::new(),
+        start_step: Vec::new(),
+    };
+    for p in &parts {
+        out.extend(p);
+    }
+    Ok(out)
+}
+
+/// The global net's k-step rollout windows of `spec` (k = `rollout_k` ≥ 1), training and
+/// held-out, as global-state chains ([`super::dagger::global_windows`]): examples / k windows
+/// (streams 40 and 41 of its seed), the held-out share as for the one-step data.
+pub fn global_rollout_windows(
+    d: &Dolphin,
+    spec: &HierarchySpec,
+) -> Result<(Windows, Windows), BuildError> {
+    let k = spec.settings.rollout_k.max(1);
+    let count = spec.global.examples.div_ceil(k).max(2);
+    let held_count = ((count as f64 * spec.settings.held_out_fraction).round() as usize).max(2);
+    let windows = |n: usize, stream: u64| -> Result<Windows, BuildError> {
+        let seed = crate::seed::mix_seed(spec.seed, stream);
+        let w = sample_dolphin_windows(d, spec.physical_dt, spec.steps, n, k, seed)?;
+        Ok(super::dagger::global_windows(d, &w))
+    };
+    Ok((windows(count, 40)?, windows(held_count, 41)?))
+}
+
 /// The global-state transitions of mass-state transitions: the start state as
 /// [`global_state`] writes it, the next state with each quaternion signed to agree with the
 /// start's ([`global_state_after`]), so no target jumps between q and −q.
@@ -268,6 +336,9 @@ pub struct NetReport {
     pub from_cache: bool,
     /// Training trace.
     pub trace: Vec<TracePoint>,
+    /// Trace of the k-step rollout fine-tuning (the global net's, when its settings ask for
+    /// one; empty otherwise).
+    pub rollout_trace: Vec<TracePoint>,
 }
 
 /// The trained hierarchy with a record per net.
@@ -371,6 +442,7 @@ fn report(k: usize, spec: &HierarchySpec, r: &NetRecord, from_cache: bool) -> Ne
         stop: r.stop.clone(),
         from_cache,
         trace: r.trace.clone(),
+        rollout_trace: r.rollout_trace.clone(),
     }
 }
 
@@ -504,6 +576,31 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                     mix(20),
                     None,
                 )?;
+                let mut emulator = Emulator::new(data.transforms.clone(), mlp, spec.super_dt())?;
+                let mut stop = stop_name(&rep.stop);
+                let rollout_trace = if s.rollout_k > 0 {
+                    let (train_windows, held_windows) = global_rollout_windows(d, spec)?;
+                    let report = fine_tune(
+                        &mut emulator,
+                        &FineTune {
+                            train: &data.train_ds,
+                            held: &data.held_ds,
+                            train_windows: &train_windows,
+                            held_windows: &held_windows,
+                            sigma: &data.sigma,
+                            weight: s.rollout_weight,
+                            max_iters: s.rollout_iters,
+                            patience: s.patience,
+                            min_improvement: s.min_improvement,
+                            anchor: None,
+                        },
+                    )?;
+                    stop = format!("{stop}; rollout: {}", stop_name(&report.stop));
+                    report.trace
+                } else {
+                    Vec::new()
+                };
+                let mlp = emulator.mlp().clone();
                 Ok(NetRecord {
                     train_error: mse(&mlp, &data.clean_ds),
                     heldout_error: mse(&mlp, &data.held_ds),
@@ -512,9 +609,9 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                     output_norm: data.transforms.output_norm,
                     dt: spec.super_dt(),
                     train_s: sampling_s + t1.elapsed().as_secs_f64(),
-                    stop: stop_name(&rep.stop),
+                    stop,
                     trace: rep.trace,
-                    rollout_trace: Vec::new(),
+                    rollout_trace,
                 })
             } else {
                 let layout = LocalLayout::new(k - 1);
@@ -825,6 +922,69 @@ mod tests {
     }
 
     /// A tiny hierarchy trains end to end, deterministically, and round-trips the cache.
+    /// Each sampled window is a chain of true simulator super-steps under its held controls,
+    /// and the global chains continue every quaternion without a sign jump.
+    #[test]
+    fn dolphin_windows_are_simulator_super_steps_and_their_global_chains_are_continuous() {
+        let d = Dolphin::default();
+        let (dt, n, k) = (0.002, 10, 3);
+        let w = sample_dolphin_windows(&d, dt, n, 2 * WINDOW_CHUNK + 3, k, 9).unwrap();
+        assert_eq!(w.len(), 2 * WINDOW_CHUNK + 3);
+        assert_eq!(w.states.len(), w.len() * (k + 1) * MASS_DIM);
+        let mut sim = simulator(&d);
+        for r in (0..w.len()).step_by(97) {
+            for j in 0..k {
+                let mut x = w.state(r, j).to_vec();
+                for _ in 0..n {
+                    sim.step(&mut x, w.control(r, j), dt);
+                }
+                assert_eq!(&x[..], w.state(r, j + 1), "window {r} step {j}");
+            }
+        }
+        let g = crate::emulator::hierarchy::dagger::global_windows(&d, &w);
+        assert_eq!(g.states.len(), w.len() * (k + 1) * GLOBAL_DIM);
+        assert_eq!(g.controls, w.controls);
+        let mut first = vec![0.0; GLOBAL_DIM];
+        for r in 0..g.len() {
+            global_state(&d, w.state(r, 0), &mut first);
+            assert_eq!(g.state(r, 0), &first[..]);
+            for j in 0..k {
+                let (a, b) = (g.state(r, j), g.state(r, j + 1));
+                for seg in 0..N_SEGMENTS {
+                    let q = FRAME_DIM * seg + 3;
+                    let dot: f64 = (0..4).map(|i| a[q + i] * b[q + i]).sum();
+                    assert!(dot > 0.0, "window {r} step {j} segment {seg}: sign jump");
+                }
+            }
+        }
+    }
+
+    /// With `rollout_k` set, the global net is fine-tuned on its k-step rollouts: the record
+    /// carries the trace, the stop names both phases, and the fine-tuned net's held-out
+    /// rollout loss is below the one-step net's (the trace's first point); the local nets stay
+    /// one-step.
+    #[test]
+    fn a_global_net_with_rollout_k_is_fine_tuned_on_its_rollouts() {
+        let d = Dolphin::default();
+        let mut sp = spec(400);
+        sp.settings.rollout_k = 3;
+        sp.settings.rollout_weight = 1.0;
+        sp.settings.rollout_iters = 30;
+        sp.settings.patience = 30;
+        let recs = train_hierarchy(&d, &sp).unwrap();
+        let g = &recs[0];
+        assert!(g.stop.contains("; rollout: "), "{}", g.stop);
+        assert!(g.rollout_trace.len() > 1);
+        let first = g.rollout_trace[0].held_out_error;
+        let best = g
+            .rollout_trace
+            .iter()
+            .map(|t| t.held_out_error)
+            .fold(f64::INFINITY, f64::min);
+        assert!(best < first, "held-out {first} -> {best}");
+        assert!(recs[1..].iter().all(|r| r.rollout_trace.is_empty()));
+    }
+
     #[test]
     fn tiny_hierarchy_trains_and_caches() {
         let dir = tempfile::tempdir().unwrap();

@@ -124,11 +124,6 @@ impl DolphinNets {
             &format!("{key}.physical_dt"),
             "must be in (0, 0.004] s: the dolphin's semi-implicit Euler step is stable up to about 0.006 s",
         )?;
-        ensure(
-            self.training.rollout_k == 0,
-            &format!("{key}.training.rollout_k"),
-            "the dolphin hierarchy is trained one step at a time (no rollout fine-tuning yet)",
-        )?;
         validate_training(&self.training).map_err(|e| e.prefixed(key))
     }
 
@@ -669,6 +664,14 @@ impl Job for Params {
                 ]);
                 for p in &n.trace {
                     training.push(row![
+                        n.name.as_str(),
+                        p.iteration as i64,
+                        p.train_error,
+                        p.held_out_error
+                    ]);
+                }
+                for p in &n.rollout_trace {
+                    rollout_training.push(row![
                         n.name.as_str(),
                         p.iteration as i64,
                         p.train_error,
