@@ -98,6 +98,8 @@ pub struct Panel {
     pub legend: Legend,
     /// Category names for integer x positions 0, 1, … (a categorical x axis); empty: numeric.
     pub x_categories: Vec<String>,
+    /// Whether x counts something (an index): ticks between whole numbers get no label.
+    pub x_integer: bool,
 }
 
 /// Corner of the legend box.
@@ -934,7 +936,9 @@ where
         .configure_mesh()
         .x_desc(p.x_label.as_str())
         .x_label_formatter(&|v| {
-            if p.x_categories.is_empty() {
+            if p.x_integer && v.fract() != 0.0 {
+                String::new()
+            } else if p.x_categories.is_empty() {
                 tick_as(*v, snap.0, sci.0)
             } else {
                 let i = v.round();

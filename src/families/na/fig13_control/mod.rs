@@ -251,7 +251,7 @@ fn record_spectrum(
 
 /// Figure `spectrum`: per task, the terminal Gauss-Newton eigenvalues at the start knots
 /// through the emulator and through the physics (log y; eigenvalues below 1e-14 of the
-/// largest, the null space and rounding, are left out).
+/// largest, the null space and rounding, are left out; the legend says how many are drawn).
 fn spectrum_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let Some(sp) = tables.get("spectrum") else {
         return Ok(vec![]);
@@ -267,13 +267,18 @@ fn spectrum_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
             .filter(|&r| st[r] == name && sub[r] == s)
             .collect();
         let top = rows.iter().map(|&r| ev[r]).fold(0.0, f64::max);
-        let pts = rows
+        let total = rows.len();
+        let pts: Vec<(f64, f64)> = rows
             .into_iter()
             .filter(|&r| ev[r] > 1e-14 * top)
             .map(|r| (idx[r], ev[r]))
             .collect();
+        let label = format!(
+            "through the {s} ({} of {total} above 1e-14 of the largest)",
+            pts.len()
+        );
         let mark = if c == 0 { Mark::Line } else { Mark::Dashed };
-        Series::line(format!("through the {s}"), pts, c).mark(mark)
+        Series::line(label, pts, c).mark(mark)
     };
     let panels: Vec<Panel> = unique(&st)
         .into_iter()
@@ -282,6 +287,7 @@ fn spectrum_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
             x_label: "eigenvalue index (largest first)".into(),
             y_label: "eigenvalue of J^T W J (1)".into(),
             log_y: true,
+            x_integer: true,
             series: vec![
                 series_of(&name, 0, "emulator"),
                 series_of(&name, 1, "physics"),
