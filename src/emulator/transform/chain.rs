@@ -216,18 +216,19 @@ impl Transforms {
         tmp: &mut [f64],
         s_next: &mut [f64],
     ) {
-        self.output_norm.denormalize(y, s_next);
         if let Some(f) = &self.frame {
             let map = if self.delta {
                 FrameMap::DeltaToWorld
             } else {
                 FrameMap::ToWorld
             };
-            tmp.copy_from_slice(s_next);
+            self.output_norm.denormalize(y, tmp);
             match at {
                 Some(at) => f.apply_with(map, at, tmp, s_next),
                 None => f.apply_at(map, s, tmp, s_next),
             }
+        } else {
+            self.output_norm.denormalize(y, s_next);
         }
         if self.delta {
             for (o, a) in s_next.iter_mut().zip(s) {
