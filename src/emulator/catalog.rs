@@ -827,6 +827,36 @@ pub fn rollout_windows(spec: &BuildSpec) -> Result<(Windows, Windows), BuildErro
     Ok((windows(count, 6)?, windows(held_count, 7)?))
 }
 
+/// The k-step rollout fine-tuning after one-step training ([`fine_tune`]): on `data`'s
+/// one-step sets and the (training, held-out) `windows`, with `settings`' weight, iteration
+/// limit, patience and threshold; appends its stop to `stop` and returns its trace.
+pub(crate) fn rollout_phase(
+    emulator: &mut Emulator,
+    data: &TrainingData,
+    windows: &(Windows, Windows),
+    settings: &TrainSettings,
+    anchor: Option<&Anchor>,
+    stop: &mut String,
+) -> Result<Vec<TracePoint>, BuildError> {
+    let report = fine_tune(
+        emulator,
+        &FineTune {
+            train: &data.train_ds,
+            held: &data.held_ds,
+            train_windows: &windows.0,
+            held_windows: &windows.1,
+            sigma: &data.sigma,
+            weight: settings.rollout_weight,
+            max_iters: settings.rollout_iters,
+            patience: settings.patience,
+            min_improvement: settings.min_improvement,
+            anchor,
+        },
+    )?;
+    *stop = format!("{stop}; rollout: {}", stop_name(&report.stop));
+    Ok(report.trace)
+}
+
 /// Samples training and held-out data, fits the transforms and trains the network of `spec`.
 /// Deterministic for a given spec (the wall time aside).
 pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
@@ -849,24 +879,16 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
     let mut emulator = Emulator::new(data.transforms.clone(), mlp, spec.super_dt())?;
     let mut stop = stop_name(&report.stop);
     let rollout_trace = if spec.settings.rollout_k > 0 {
-        let (train_windows, held_windows) = rollout_windows(spec)?;
-        let report = fine_tune(
+        let windows = rollout_windows(spec)?;
+        let s = &spec.settings;
+        rollout_phase(
             &mut emulator,
-            &FineTune {
-                train: &data.train_ds,
-                held: &data.held_ds,
-                train_windows: &train_windows,
-                held_windows: &held_windows,
-                sigma: &data.sigma,
-                weight: spec.settings.rollout_weight,
-                max_iters: spec.settings.rollout_iters,
-                patience: spec.settings.patience,
-                min_improvement: spec.settings.min_improvement,
-                anchor: anchor.as_ref(),
-            },
-        )?;
-        stop = format!("{stop}; rollout: {}", stop_name(&report.stop));
-        report.trace
+            &data,
+            &windows,
+            s,
+            anchor.as_ref(),
+            &mut stop,
+        )?
     } else {
         Vec::new()
     };

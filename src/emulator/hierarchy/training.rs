@@ -20,15 +20,15 @@ use super::{
 };
 use crate::emulator::cache::{fnv1a, read_record, write_record, EmulatorCache, NetRecord};
 use crate::emulator::catalog::{
-    noisy, rollout_errors, stop_name, train_mlp, BuildError, TrainMethod, TrainSettings,
-    TrainingData,
+    noisy, rollout_errors, rollout_phase, stop_name, train_mlp, BuildError, TrainMethod,
+    TrainSettings, TrainingData,
 };
 use crate::emulator::dataset::{
     sample_transitions, sample_windows, ControlLimits, ControlProcess, ControlSignal,
     SamplingConfig, Windows,
 };
 use crate::emulator::mlp::{Mlp, WeightInit};
-use crate::emulator::rollout::{change_spread, fine_tune, FineTune};
+use crate::emulator::rollout::change_spread;
 use crate::emulator::train::{mse, Dataset, TracePoint};
 use crate::emulator::transform::Normalizer;
 use crate::emulator::{Emulator, Transforms, Transitions};
@@ -137,6 +137,30 @@ pub fn simulator(d: &Dolphin) -> Simulator<Dolphin> {
     Simulator::new(d.clone(), IntegratorKind::SemiImplicitEuler)
 }
 
+/// `sample(simulator, rows, stream)` over chunks of at most `chunk` of `total` rows, in
+/// parallel, chunk c drawing from stream c of `seed`: the parts do not depend on the thread
+/// count.
+fn in_chunks<T: Send, E: Send>(
+    d: &Dolphin,
+    total: usize,
+    chunk: usize,
+    seed: u64,
+    sample: impl Fn(&mut Simulator<Dolphin>, usize, &mut ChaCha8Rng) -> Result<T, E> + Sync,
+) -> Result<Vec<T>, E> {
+    let sizes: Vec<usize> = (0..total.div_ceil(chunk))
+        .map(|c| chunk.min(total - c * chunk))
+        .collect();
+    sizes
+        .par_iter()
+        .enumerate()
+        .map(|(c, &n)| {
+            let mut sim = simulator(d);
+            let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(seed, c as u64));
+            sample(&mut sim, n, &mut rng)
+        })
+        .collect()
+}
+
 /// Samples `examples` transitions of the mass state over `steps` physical steps of `dt`, in
 /// parallel chunks seeded from `seed` (independent of the thread count).
 pub fn sample_dolphin(
@@ -146,27 +170,17 @@ pub fn sample_dolphin(
     examples: usize,
     seed: u64,
 ) -> Result<Transitions, BuildError> {
-    let chunks: Vec<usize> = (0..examples.div_ceil(CHUNK))
-        .map(|k| CHUNK.min(examples - k * CHUNK))
-        .collect();
-    let cfg = |n: usize| SamplingConfig {
-        dt,
-        steps_per_sample: steps,
-        examples: n,
-        episode_duration: EPISODE_S.max(6.0 * steps as f64 * dt),
-        control: control_process(),
-    };
-    let parts: Vec<Transitions> = chunks
-        .par_iter()
-        .enumerate()
-        .map(|(k, &n)| {
-            let mut sim = simulator(d);
-            let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(seed, k as u64));
-            let start = |r: &mut ChaCha8Rng| start_state(d, r);
-            sample_transitions(&mut sim, &start, &control_limits(), &cfg(n), &mut rng)
-                .map(|s| s.transitions)
-        })
-        .collect::<Result<_, _>>()?;
+    let parts = in_chunks(d, examples, CHUNK, seed, |sim, n, rng| {
+        let cfg = SamplingConfig {
+            dt,
+            steps_per_sample: steps,
+            examples: n,
+            episode_duration: EPISODE_S.max(6.0 * steps as f64 * dt),
+            control: control_process(),
+        };
+        let start = |r: &mut ChaCha8Rng| start_state(d, r);
+        sample_transitions(sim, &start, &control_limits(), &cfg, rng).map(|s| s.transitions)
+    })?;
     let cat = |f: fn(&Transitions) -> &Array2<f64>| -> Array2<f64> {
         let views: Vec<_> = parts.iter().map(|p| f(p).view()).collect();
         ndarray::concatenate(ndarray::Axis(0), &views).expect("equal widths")
@@ -192,26 +206,17 @@ pub fn sample_dolphin_windows(
     k: usize,
     seed: u64,
 ) -> Result<Windows, BuildError> {
-    let chunks: Vec<usize> = (0..count.div_ceil(WINDOW_CHUNK))
-        .map(|c| WINDOW_CHUNK.min(count - c * WINDOW_CHUNK))
-        .collect();
-    let parts: Vec<Windows> = chunks
-        .par_iter()
-        .enumerate()
-        .map(|(c, &n)| {
-            let cfg = SamplingConfig {
-                dt,
-                steps_per_sample: steps,
-                examples: n,
-                episode_duration: EPISODE_S.max((k + 6) as f64 * steps as f64 * dt),
-                control: control_process(),
-            };
-            let mut sim = simulator(d);
-            let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(seed, c as u64));
-            let start = |r: &mut ChaCha8Rng| start_state(d, r);
-            sample_windows(&mut sim, &start, &control_limits(), &cfg, k, &mut rng)
-        })
-        .collect::<Result<_, _>>()?;
+    let parts = in_chunks(d, count, WINDOW_CHUNK, seed, |sim, n, rng| {
+        let cfg = SamplingConfig {
+            dt,
+            steps_per_sample: steps,
+            examples: n,
+            episode_duration: EPISODE_S.max((k + 6) as f64 * steps as f64 * dt),
+            control: control_process(),
+        };
+        let start = |r: &mut ChaCha8Rng| start_state(d, r);
+        sample_windows(sim, &start, &control_limits(), &cfg, k, rng)
+    })?;
     let mut out = Windows {
         k,
         state_dim: MASS_DIM,
@@ -579,24 +584,8 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                 let mut emulator = Emulator::new(data.transforms.clone(), mlp, spec.super_dt())?;
                 let mut stop = stop_name(&rep.stop);
                 let rollout_trace = if s.rollout_k > 0 {
-                    let (train_windows, held_windows) = global_rollout_windows(d, spec)?;
-                    let report = fine_tune(
-                        &mut emulator,
-                        &FineTune {
-                            train: &data.train_ds,
-                            held: &data.held_ds,
-                            train_windows: &train_windows,
-                            held_windows: &held_windows,
-                            sigma: &data.sigma,
-                            weight: s.rollout_weight,
-                            max_iters: s.rollout_iters,
-                            patience: s.patience,
-                            min_improvement: s.min_improvement,
-                            anchor: None,
-                        },
-                    )?;
-                    stop = format!("{stop}; rollout: {}", stop_name(&report.stop));
-                    report.trace
+                    let windows = global_rollout_windows(d, spec)?;
+                    rollout_phase(&mut emulator, &data, &windows, s, None, &mut stop)?
                 } else {
                     Vec::new()
                 };
