@@ -137,6 +137,19 @@ pub fn simulator(d: &Dolphin) -> Simulator<Dolphin> {
     Simulator::new(d.clone(), IntegratorKind::SemiImplicitEuler)
 }
 
+/// The sampling runs of `examples` rows, `steps` physical steps of `dt` per super-step, in
+/// episodes of [`EPISODE_S`] or of `min_super_steps` super-steps if longer, under the typical
+/// muscle waves.
+fn sampling(dt: f64, steps: usize, examples: usize, min_super_steps: usize) -> SamplingConfig {
+    SamplingConfig {
+        dt,
+        steps_per_sample: steps,
+        examples,
+        episode_duration: EPISODE_S.max(min_super_steps as f64 * steps as f64 * dt),
+        control: control_process(),
+    }
+}
+
 /// `sample(simulator, rows, stream)` over chunks of at most `chunk` of `total` rows, in
 /// parallel, chunk c drawing from stream c of `seed`: the parts do not depend on the thread
 /// count.
@@ -171,13 +184,7 @@ pub fn sample_dolphin(
     seed: u64,
 ) -> Result<Transitions, BuildError> {
     let parts = in_chunks(d, examples, CHUNK, seed, |sim, n, rng| {
-        let cfg = SamplingConfig {
-            dt,
-            steps_per_sample: steps,
-            examples: n,
-            episode_duration: EPISODE_S.max(6.0 * steps as f64 * dt),
-            control: control_process(),
-        };
+        let cfg = sampling(dt, steps, n, 6);
         let start = |r: &mut ChaCha8Rng| start_state(d, r);
         sample_transitions(sim, &start, &control_limits(), &cfg, rng).map(|s| s.transitions)
     })?;
@@ -197,7 +204,8 @@ const WINDOW_CHUNK: usize = 250;
 
 /// Samples `count` windows of `k` super-steps of the mass state (`steps` physical steps of `dt`
 /// each) from the same episodes, starts and controls as [`sample_dolphin`], in parallel chunks
-/// seeded from `seed` (independent of the thread count).
+/// seeded from `seed` (independent of the thread count); episode indices are unique across
+/// chunks.
 pub fn sample_dolphin_windows(
     d: &Dolphin,
     dt: f64,
@@ -207,13 +215,7 @@ pub fn sample_dolphin_windows(
     seed: u64,
 ) -> Result<Windows, BuildError> {
     let parts = in_chunks(d, count, WINDOW_CHUNK, seed, |sim, n, rng| {
-        let cfg = SamplingConfig {
-            dt,
-            steps_per_sample: steps,
-            examples: n,
-            episode_duration: EPISODE_S.max((k + 6) as f64 * steps as f64 * dt),
-            control: control_process(),
-        };
+        let cfg = sampling(dt, steps, n, k + 6);
         let start = |r: &mut ChaCha8Rng| start_state(d, r);
         sample_windows(sim, &start, &control_limits(), &cfg, k, rng)
     })?;
@@ -226,8 +228,13 @@ pub fn sample_dolphin_windows(
         episode: Vec::new(),
         start_step: Vec::new(),
     };
+    // Each chunk counts its episodes from 0: offset them so that indices stay unique.
+    let mut next = 0;
     for p in &parts {
+        let from = out.len();
         out.extend(p);
+        out.episode[from..].iter_mut().for_each(|e| *e += next);
+        next += p.episode.iter().max().map_or(0, |m| m + 1);
     }
     Ok(out)
 }
@@ -920,6 +927,16 @@ mod tests {
         let w = sample_dolphin_windows(&d, dt, n, 2 * WINDOW_CHUNK + 3, k, 9).unwrap();
         assert_eq!(w.len(), 2 * WINDOW_CHUNK + 3);
         assert_eq!(w.states.len(), w.len() * (k + 1) * MASS_DIM);
+        // Chunks keep their order; their episodes do not share indices.
+        let (a, b) = w.episode.split_at(WINDOW_CHUNK);
+        let (a_max, b_min) = (
+            a.iter().max().unwrap(),
+            b[..WINDOW_CHUNK].iter().min().unwrap(),
+        );
+        assert!(
+            a_max < b_min,
+            "chunk 0 episodes up to {a_max}, chunk 1 from {b_min}"
+        );
         let mut sim = simulator(&d);
         for r in (0..w.len()).step_by(97) {
             for j in 0..k {
