@@ -610,47 +610,111 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                     rollout_trace,
                 })
             } else {
-                let layout = LocalLayout::new(k - 1);
-                let rows = spec.local.examples;
-                let held_rows = ((rows as f64 * s.held_out_fraction).round() as usize).max(2);
-                let (ti, tt) = local_raw(d, &layout, &train, rows);
-                let (hi, ht) = local_raw(d, &layout, &held, held_rows);
-                let in_norm = Normalizer::fit(ti.view(), &layout.input_groups())?;
-                let out_norm = Normalizer::fit(tt.view(), &layout.output_groups())?;
-                let tr = Dataset::new(normalized(&in_norm, &ti), normalized(&out_norm, &tt))?;
-                let ho = Dataset::new(normalized(&in_norm, &hi), normalized(&out_norm, &ht))?;
-                let mut mlp = Mlp::new(
-                    layout.n_in(),
-                    spec.local.hidden,
-                    layout.n_out(),
-                    WeightInit::FanIn,
-                    &mut rng,
-                );
-                let rep = train_mlp(
-                    &mut mlp,
-                    &tr,
-                    &ho,
-                    spec.local.method,
-                    s,
-                    mix(20 + k as u64),
-                    None,
-                )?;
-                Ok(NetRecord {
-                    train_error: mse(&mlp, &tr),
-                    heldout_error: mse(&mlp, &ho),
-                    mlp,
-                    input_norm: in_norm,
-                    output_norm: out_norm,
-                    dt: spec.super_dt(),
-                    train_s: t1.elapsed().as_secs_f64(),
-                    stop: stop_name(&rep.stop),
-                    trace: rep.trace,
-                    rollout_trace: Vec::new(),
-                })
+                train_local(d, spec, LocalLayout::new(k - 1), &train, &held, rng, t1)
             }
         })
         .collect::<Result<_, _>>()?;
     Ok(recs)
+}
+
+/// Noise injection for a local net (as [`Transforms::perturb`] for the global net, issue 11
+/// defect 5): each local coordinate of each seen mass (positions and velocities in frame F₀,
+/// raw inputs `inp`) moves by δ ~ N(0, (`scale` · sd)²), sd that column's spread, and the target
+/// of each owned mass becomes the change from the perturbed local state to the true next one
+/// (Δl − δ), so that the net learns to pull its own deformation errors back. The frame inputs
+/// and controls are not perturbed.
+fn local_perturbed(
+    layout: &LocalLayout,
+    inp: &Array2<f64>,
+    out: &Array2<f64>,
+    scale: f64,
+    rng: &mut ChaCha8Rng,
+) -> (Array2<f64>, Array2<f64>) {
+    let seen = 6 * layout.frame_masses.len();
+    let sd: Vec<f64> = (0..seen).map(|c| inp.column(c).std(0.0)).collect();
+    // Input column of each target column (owned masses are frame masses).
+    let source: Vec<usize> = layout
+        .owned
+        .iter()
+        .flat_map(|i| {
+            let f = layout
+                .frame_masses
+                .iter()
+                .position(|m| m == i)
+                .expect("owned masses are frame masses");
+            (0..6).map(move |c| 6 * f + c)
+        })
+        .collect();
+    let (mut inp, mut out) = (inp.clone(), out.clone());
+    let mut delta = vec![0.0; seen];
+    for (mut z, mut y) in inp.rows_mut().into_iter().zip(out.rows_mut()) {
+        for (c, d) in delta.iter_mut().enumerate() {
+            *d = scale * sd[c] * rng.sample::<f64, _>(rand_distr::StandardNormal);
+            z[c] += *d;
+        }
+        for (t, &c) in source.iter().enumerate() {
+            y[t] -= delta[c];
+        }
+    }
+    (inp, out)
+}
+
+/// Trains the local net of `layout` (net k = segment + 1) on the first `spec.local.examples`
+/// of `train` (teacher forcing), held out on `held`, from the weights `rng` draws.
+fn train_local(
+    d: &Dolphin,
+    spec: &HierarchySpec,
+    layout: LocalLayout,
+    train: &Transitions,
+    held: &Transitions,
+    mut rng: ChaCha8Rng,
+    t1: Instant,
+) -> Result<NetRecord, BuildError> {
+    let s = &spec.settings;
+    let k = layout.segment + 1;
+    let rows = spec.local.examples;
+    let held_rows = ((rows as f64 * s.held_out_fraction).round() as usize).max(2);
+    let (ti, tt) = local_raw(d, &layout, train, rows);
+    let (hi, ht) = local_raw(d, &layout, held, held_rows);
+    let in_norm = Normalizer::fit(ti.view(), &layout.input_groups())?;
+    let out_norm = Normalizer::fit(tt.view(), &layout.output_groups())?;
+    let tr = Dataset::new(normalized(&in_norm, &ti), normalized(&out_norm, &tt))?;
+    let ho = Dataset::new(normalized(&in_norm, &hi), normalized(&out_norm, &ht))?;
+    let train_ds = if s.input_noise > 0.0 {
+        let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 50 + k as u64));
+        let (ni, nt) = local_perturbed(&layout, &ti, &tt, s.input_noise, &mut rng);
+        Dataset::new(normalized(&in_norm, &ni), normalized(&out_norm, &nt))?
+    } else {
+        tr.clone()
+    };
+    let mut mlp = Mlp::new(
+        layout.n_in(),
+        spec.local.hidden,
+        layout.n_out(),
+        WeightInit::FanIn,
+        &mut rng,
+    );
+    let rep = train_mlp(
+        &mut mlp,
+        &train_ds,
+        &ho,
+        spec.local.method,
+        s,
+        crate::seed::mix_seed(spec.seed, 20 + k as u64),
+        None,
+    )?;
+    Ok(NetRecord {
+        train_error: mse(&mlp, &tr),
+        heldout_error: mse(&mlp, &ho),
+        mlp,
+        input_norm: in_norm,
+        output_norm: out_norm,
+        dt: spec.super_dt(),
+        train_s: t1.elapsed().as_secs_f64(),
+        stop: stop_name(&rep.stop),
+        trace: rep.trace,
+        rollout_trace: Vec::new(),
+    })
 }
 
 /// Multi-step fidelity of the trained hierarchy (as [`crate::emulator::catalog::rollout_error`]
@@ -659,7 +723,8 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
 /// run `horizon` super-steps side by side under the training control process, read at each
 /// super-step's start and held over it. Returns per step k the mean squared error over
 /// episodes and variables, each variable divided by its spread over the simulated states: of
-/// the global state (global net) and of the 138-variable mass state (composed hierarchy).
+/// the global state (global net) and of the 138-variable mass state (composed hierarchy,
+/// carrying its global state, [`DolphinEmulator::predict_carried`]).
 /// Simulated global states keep their quaternion signs continuous from the start
 /// ([`global_state_after`]), as the emulated ones are.
 pub fn hierarchy_rollout_error(
@@ -677,6 +742,7 @@ pub fn hierarchy_rollout_error(
     let mut u = vec![0.0; N_SEGMENTS];
     let (mut gt, mut ge, mut mt, mut me) = (vec![], vec![], vec![], vec![]);
     let (mut g_sim, mut g_emu) = (vec![0.0; GLOBAL_DIM], vec![0.0; GLOBAL_DIM]);
+    let mut g_cmp = vec![0.0; GLOBAL_DIM];
     let (mut g_next, mut x_next) = (vec![0.0; GLOBAL_DIM], vec![0.0; MASS_DIM]);
     for _ in 0..episodes {
         let x0 = start_state(d, &mut rng);
@@ -689,6 +755,7 @@ pub fn hierarchy_rollout_error(
         let (mut xs, mut xe) = (x0.clone(), x0);
         global_state(d, &xs, &mut g_sim);
         g_emu.copy_from_slice(&g_sim);
+        g_cmp.copy_from_slice(&g_sim);
         for k in 0..horizon {
             signal.at(k as f64 * big_dt, &mut u);
             for i in 0..spec.steps {
@@ -700,7 +767,8 @@ pub fn hierarchy_rollout_error(
             g_sim.copy_from_slice(&g_next);
             global.predict(&g_emu, &u, &mut gsc, &mut g_next);
             g_emu.copy_from_slice(&g_next);
-            emulator.predict(&xe, &u, &mut hsc, &mut x_next);
+            emulator.predict_carried(&xe, &g_cmp, &u, &mut hsc, &mut x_next, &mut g_next);
+            g_cmp.copy_from_slice(&g_next);
             xe.copy_from_slice(&x_next);
             gt.extend_from_slice(&g_sim);
             ge.extend_from_slice(&g_emu);
@@ -759,6 +827,44 @@ mod tests {
                 rollout_iters: 0,
             },
             seed: 3,
+        }
+    }
+
+    /// Noise injection for the local nets: every seen mass's local coordinates move by about
+    /// the requested fraction of their spread, each owned mass's target moves back by exactly
+    /// its input's move (the change to the true next state), and neither the frame inputs, the
+    /// controls nor the targets of masses a net does not own change.
+    #[test]
+    fn local_noise_targets_the_true_next_state() {
+        let d = Dolphin::default();
+        let data = sample_dolphin(&d, 0.002, 10, 400, 9).unwrap();
+        for segment in [0, 3, 5] {
+            let layout = LocalLayout::new(segment);
+            let (inp, out) = local_raw(&d, &layout, &data, 400);
+            let mut rng = ChaCha8Rng::seed_from_u64(4);
+            let (ni, nt) = local_perturbed(&layout, &inp, &out, 0.05, &mut rng);
+            let seen = 6 * layout.frame_masses.len();
+            for c in 0..inp.ncols() {
+                let moved = &ni.column(c) - &inp.column(c);
+                if c < seen {
+                    let ratio = moved.std(0.0) / inp.column(c).std(0.0);
+                    assert!((ratio - 0.05).abs() < 0.01, "column {c}: {ratio}");
+                } else {
+                    assert!(moved.iter().all(|&v| v == 0.0), "column {c} moved");
+                }
+            }
+            for (j, &i) in layout.owned.iter().enumerate() {
+                let f = layout.frame_masses.iter().position(|&m| m == i).unwrap();
+                for c in 0..6 {
+                    let input_move = &ni.column(6 * f + c) - &inp.column(6 * f + c);
+                    let target_move = &nt.column(6 * j + c) - &out.column(6 * j + c);
+                    for (a, b) in input_move.iter().zip(&target_move) {
+                        assert!((a + b).abs() <= 1e-12, "mass {i}: {a} vs {b}");
+                    }
+                }
+            }
+            let (same_i, same_t) = local_perturbed(&layout, &inp, &out, 0.0, &mut rng);
+            assert_eq!((same_i, same_t), (inp, out), "no noise, no change");
         }
     }
 
