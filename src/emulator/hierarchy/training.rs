@@ -57,6 +57,20 @@ pub struct HierarchyNet {
     pub examples: usize,
     /// How to train.
     pub method: TrainMethod,
+    /// Mini-batch epoch limit of this net, overriding the settings' `max_epochs` (left out of
+    /// cache keys when not set).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_epochs: Option<usize>,
+}
+
+impl HierarchyNet {
+    /// The training settings `s` with this net's own epoch limit, if it has one.
+    pub fn settings(&self, s: &TrainSettings) -> TrainSettings {
+        TrainSettings {
+            max_epochs: self.max_epochs.unwrap_or(s.max_epochs),
+            ..*s
+        }
+    }
 }
 
 /// Everything that determines the trained dolphin hierarchy.
@@ -584,7 +598,7 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
                     &data.train_ds,
                     &data.held_ds,
                     spec.global.method,
-                    s,
+                    &spec.global.settings(s),
                     mix(20),
                     None,
                 )?;
@@ -670,7 +684,7 @@ fn train_local(
     mut rng: ChaCha8Rng,
     t1: Instant,
 ) -> Result<NetRecord, BuildError> {
-    let s = &spec.settings;
+    let s = &spec.local.settings(&spec.settings);
     let k = layout.segment + 1;
     let rows = spec.local.examples;
     let held_rows = ((rows as f64 * s.held_out_fraction).round() as usize).max(2);
@@ -804,11 +818,13 @@ mod tests {
                 hidden: 8,
                 examples,
                 method: TrainMethod::Lbfgs,
+                max_epochs: None,
             },
             local: HierarchyNet {
                 hidden: 6,
                 examples: examples / 2,
                 method: TrainMethod::Lbfgs,
+                max_epochs: None,
             },
             physical_dt: 0.002,
             steps: 10,

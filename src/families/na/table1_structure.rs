@@ -118,6 +118,11 @@ impl DolphinNets {
                 &format!("{key}.{name}.examples"),
                 "need at least 10 examples after example_scale",
             )?;
+            ensure(
+                n.max_epochs.is_none_or(|e| e >= 1),
+                &format!("{key}.{name}.max_epochs"),
+                "must be >= 1",
+            )?;
         }
         ensure(
             self.physical_dt > 0.0 && self.physical_dt <= 0.004,
