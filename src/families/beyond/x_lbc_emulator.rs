@@ -730,15 +730,20 @@ impl Family for XLbcEmulator {
                 ..Panel::default()
             }
         };
+        // Tall panels: the nine-entry legend then fits above the data (the plot raises the
+        // top of the y range for it) instead of covering it.
         let mut files = fig.draw(
             "error",
-            &Figure::grid(
-                vec![
-                    panel("on the physical simulator", &es),
-                    panel("on the emulator", &ee),
-                ],
-                2,
-            ),
+            &Figure {
+                panel_size: (640, 640),
+                ..Figure::grid(
+                    vec![
+                        panel("on the physical simulator", &es),
+                        panel("on the emulator", &ee),
+                    ],
+                    2,
+                )
+            },
         )?;
         files.extend(animation(fig, tables)?);
         Ok(files)
