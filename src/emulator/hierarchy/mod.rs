@@ -70,9 +70,9 @@ mod training;
 
 pub use regularize::{BoundRegularizer, Regularizer, Schedule};
 pub use training::{
-    build_dolphin, control_limits, control_process, global_training_data, global_transitions, head,
-    hierarchy_rollout_error, net_name, sample_dolphin, simulator, start_state, train_hierarchy,
-    BuiltDolphin, HierarchyNet, HierarchySpec, NetReport, EPISODE_S,
+    build_dolphin, control_limits, control_process, global_heldout_errors, global_training_data,
+    global_transitions, head, hierarchy_rollout_error, net_name, sample_dolphin, simulator,
+    start_state, train_hierarchy, BuiltDolphin, HierarchyNet, HierarchySpec, NetReport, EPISODE_S,
 };
 
 use super::mlp::{Mlp, MlpScratch};

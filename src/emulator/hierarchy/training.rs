@@ -796,6 +796,38 @@ pub fn hierarchy_rollout_error(
     ))
 }
 
+/// The global net's held-out one-step error per output (the 78 numbers of
+/// [`global_state`]: segment s's centroid, quaternion, velocity and angular velocity at
+/// 13 s … 13 s + 12), in the units it trains in (reference-segment frame, normalized by quantity
+/// groups): the mean squared error over the spec's held-out transitions (stream 2, sampled
+/// again). Their mean is the global net's held-out MSE of Table 1.
+pub fn global_heldout_errors(
+    emulator: &DolphinEmulator,
+    spec: &HierarchySpec,
+) -> Result<Vec<f64>, BuildError> {
+    let d = emulator.dolphin();
+    let held = sample_dolphin(
+        d,
+        spec.physical_dt,
+        spec.steps,
+        spec.held_out(),
+        crate::seed::mix_seed(spec.seed, 2),
+    )?;
+    let global = emulator.global();
+    let ds = global.transforms().encode(&global_transitions(d, &held));
+    let mlp = global.mlp();
+    let (mut sc, mut y) = (mlp.scratch(), vec![0.0; mlp.n_out()]);
+    let mut sum = vec![0.0; mlp.n_out()];
+    for (z, t) in ds.inputs.rows().into_iter().zip(ds.targets.rows()) {
+        mlp.forward(z.as_slice().expect("layout"), &mut sc, &mut y);
+        for ((a, p), q) in sum.iter_mut().zip(&y).zip(t) {
+            *a += (p - q).powi(2);
+        }
+    }
+    let n = ds.len().max(1) as f64;
+    Ok(sum.into_iter().map(|a| a / n).collect())
+}
+
 /// The `rows`-row slice of a transitions table (for tests and small experiments).
 pub fn head(data: &Transitions, rows: usize) -> Transitions {
     let r = rows.min(data.len());
@@ -1135,5 +1167,15 @@ mod tests {
         eb.step(&mut xb, &u, sp.super_dt());
         assert_eq!(xa, xb, "a cached hierarchy is bit-identical");
         assert!(xa.iter().all(|v| v.is_finite()));
+        // The per-output breakdown of the global net's held-out error averages to its
+        // held-out MSE (the same held-out examples, sampled again).
+        let per = global_heldout_errors(&a.emulator, &sp).unwrap();
+        assert_eq!(per.len(), GLOBAL_DIM);
+        let mean = per.iter().sum::<f64>() / per.len() as f64;
+        let reported = a.nets[0].heldout_error;
+        assert!(
+            (mean - reported).abs() <= 1e-9 * reported,
+            "{mean} vs {reported}"
+        );
     }
 }

@@ -16,15 +16,17 @@
 //! tolerance: neutral-control drift from the control tasks' starts, [`DriftTask`]) and
 //! `rollout_training` (net, iteration, train_loss, heldout_loss: the k-step rollout
 //! fine-tuning, [`crate::emulator::rollout`], when `training.rollout_k` is set; the `stop`
-//! column then ends with `; rollout: <its stop reason>`).
+//! column then ends with `; rollout: <its stop reason>`), and for the dolphin `global_error`
+//! (segment, quantity, component, heldout_mse: the global net's held-out one-step error per
+//! output, whose mean is its `heldout_error`).
 
 use crate::emulator::cache::{fnv1a, EmulatorCache};
 use crate::emulator::catalog::{
     anchor_of, rollout_error, BuildSpec, NetModel, NetSpec, TrainSettings, Trained,
 };
 use crate::emulator::hierarchy::{
-    build_dolphin, hierarchy_rollout_error, BuiltDolphin, DolphinEmulator, HierarchyNet,
-    HierarchySpec,
+    build_dolphin, global_heldout_errors, hierarchy_rollout_error, BuiltDolphin, DolphinEmulator,
+    HierarchyNet, HierarchySpec,
 };
 use crate::emulator::mlp::Mlp;
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
@@ -59,6 +61,23 @@ pub struct Params {
     #[serde(default)]
     pub drift: Vec<DriftTask>,
 }
+
+/// Quantity and component of each of a segment's 13 global-state numbers (`global_error.csv`).
+const GLOBAL_OUTPUTS: [(&str, &str); 13] = [
+    ("centroid", "x"),
+    ("centroid", "y"),
+    ("centroid", "z"),
+    ("orientation", "w"),
+    ("orientation", "x"),
+    ("orientation", "y"),
+    ("orientation", "z"),
+    ("velocity", "x"),
+    ("velocity", "y"),
+    ("velocity", "z"),
+    ("angular_velocity", "x"),
+    ("angular_velocity", "y"),
+    ("angular_velocity", "z"),
+];
 
 /// A drift check: from a control task's start, `ROLLOUT_STEPS` super-steps of a neutral control
 /// held on the emulator and on the simulator; the position part of the state (pendulum: the
@@ -509,6 +528,7 @@ impl Job for Params {
         // The k-step rollout fine-tuning (training.rollout_k): one-step loss + rollout_weight x
         // k-step rollout loss, on the training and held-out examples and windows.
         let mut rollout_training = Table::new(&["net", "iteration", "train_loss", "heldout_loss"]);
+        let mut global_error = Table::new(&["segment", "quantity", "component", "heldout_mse"]);
         let mut drift = Table::new(&[
             "net",
             "task",
@@ -631,6 +651,13 @@ impl Job for Params {
                     rollout.push(row![name, (k + 1) as i64, *e]);
                 }
             }
+            let per_output = ctx.stage("dolphin global error by output", || {
+                global_heldout_errors(&built.emulator, &spec).map_err(other)
+            })?;
+            for (j, e) in per_output.iter().enumerate() {
+                let (quantity, component) = GLOBAL_OUTPUTS[j % 13];
+                global_error.push(row![(j / 13) as i64, quantity, component, *e]);
+            }
             for task in self.drift.iter().filter(|d| d.net == "dolphin") {
                 let u = if task.control.is_empty() {
                     vec![0.0; 6]
@@ -692,6 +719,7 @@ impl Job for Params {
             ("rollout", rollout),
             ("drift", drift),
             ("rollout_training", rollout_training),
+            ("global_error", global_error),
         ]))
     }
 }
@@ -837,6 +865,26 @@ impl Family for NaStructure {
                     if at_anchor[r] > 0.5 { "yes" } else { "no" }
                 ));
             }
+        }
+        let ge_path = dir.join("global_error.csv");
+        if ge_path.exists() {
+            let df = read_csv(&ge_path)?;
+            let (seg, mse) = (df_f64(&df, "segment")?, df_f64(&df, "heldout_mse")?);
+            let mut by_seg = [0.0; 6];
+            for (s, e) in seg.iter().zip(&mse) {
+                by_seg[(*s as usize).min(5)] += e / 13.0;
+            }
+            let total: f64 = by_seg.iter().sum();
+            let parts: Vec<String> = by_seg
+                .iter()
+                .enumerate()
+                .map(|(s, e)| format!("{s}: {}", sig(*e)))
+                .collect();
+            md.push_str(&format!(
+                "\nThe dolphin's global net, held-out one-step MSE by segment (0 nose … 5 fluke; mean over each segment's 13 outputs, in the units it trains in; `global_error.csv` has every output): {}. The fluke segment carries {:.0}% of the sum.\n",
+                parts.join(", "),
+                100.0 * by_seg[5] / total.max(f64::MIN_POSITIVE)
+            ));
         }
         let verdict = Verdict::from_counts(good, net.len());
         Ok(Findings {
