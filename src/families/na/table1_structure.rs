@@ -17,8 +17,9 @@
 //! `rollout_training` (net, iteration, train_loss, heldout_loss: the k-step rollout
 //! fine-tuning, [`crate::emulator::rollout`], when `training.rollout_k` is set; the `stop`
 //! column then ends with `; rollout: <its stop reason>`), and for the dolphin `global_error`
-//! (segment, quantity, component, heldout_mse: the global net's held-out one-step error per
-//! output, whose mean is its `heldout_error`).
+//! (segment, quantity, component, heldout_mse, target_variance: the global net's held-out
+//! one-step error per output, whose mean is its `heldout_error`, and the variance of that
+//! output's target).
 
 use crate::emulator::cache::{fnv1a, EmulatorCache};
 use crate::emulator::catalog::{
@@ -528,7 +529,13 @@ impl Job for Params {
         // The k-step rollout fine-tuning (training.rollout_k): one-step loss + rollout_weight x
         // k-step rollout loss, on the training and held-out examples and windows.
         let mut rollout_training = Table::new(&["net", "iteration", "train_loss", "heldout_loss"]);
-        let mut global_error = Table::new(&["segment", "quantity", "component", "heldout_mse"]);
+        let mut global_error = Table::new(&[
+            "segment",
+            "quantity",
+            "component",
+            "heldout_mse",
+            "target_variance",
+        ]);
         let mut drift = Table::new(&[
             "net",
             "task",
@@ -654,9 +661,9 @@ impl Job for Params {
             let per_output = ctx.stage("dolphin global error by output", || {
                 global_heldout_errors(&built.emulator, &spec).map_err(other)
             })?;
-            for (j, e) in per_output.iter().enumerate() {
+            for (j, (e, v)) in per_output.iter().enumerate() {
                 let (quantity, component) = GLOBAL_OUTPUTS[j % 13];
-                global_error.push(row![(j / 13) as i64, quantity, component, *e]);
+                global_error.push(row![(j / 13) as i64, quantity, component, *e, *v]);
             }
             for task in self.drift.iter().filter(|d| d.net == "dolphin") {
                 let u = if task.control.is_empty() {
@@ -869,11 +876,22 @@ impl Family for NaStructure {
         let ge_path = dir.join("global_error.csv");
         if ge_path.exists() {
             let df = read_csv(&ge_path)?;
-            let (seg, mse) = (df_f64(&df, "segment")?, df_f64(&df, "heldout_mse")?);
-            let mut by_seg = [0.0; 6];
-            for (s, e) in seg.iter().zip(&mse) {
+            let (seg, mse, var) = (
+                df_f64(&df, "segment")?,
+                df_f64(&df, "heldout_mse")?,
+                df_f64(&df, "target_variance")?,
+            );
+            let (mut by_seg, mut seg_var) = ([0.0; 6], [0.0; 6]);
+            for ((s, e), v) in seg.iter().zip(&mse).zip(&var) {
                 by_seg[(*s as usize).min(5)] += e / 13.0;
+                seg_var[(*s as usize).min(5)] += v / 13.0;
             }
+            let unexplained: Vec<String> = by_seg
+                .iter()
+                .zip(&seg_var)
+                .enumerate()
+                .map(|(s, (e, v))| format!("{s}: {}", sig(e / v.max(f64::MIN_POSITIVE))))
+                .collect();
             let total: f64 = by_seg.iter().sum();
             let parts: Vec<String> = by_seg
                 .iter()
@@ -881,9 +899,10 @@ impl Family for NaStructure {
                 .map(|(s, e)| format!("{s}: {}", sig(*e)))
                 .collect();
             md.push_str(&format!(
-                "\nThe dolphin's global net, held-out one-step MSE by segment (0 nose … 5 fluke; mean over each segment's 13 outputs, in the units it trains in; `global_error.csv` has every output): {}. The fluke segment carries {:.0}% of the sum.\n",
+                "\nThe dolphin's global net, held-out one-step MSE by segment (0 nose … 5 fluke; mean over each segment's 13 outputs, in the units it trains in; `global_error.csv` has every output): {}. The fluke segment carries {:.0}% of the sum. Each segment's error over its outputs' own variance (the share left unexplained): {}.\n",
                 parts.join(", "),
-                100.0 * by_seg[5] / total.max(f64::MIN_POSITIVE)
+                100.0 * by_seg[5] / total.max(f64::MIN_POSITIVE),
+                unexplained.join(", ")
             ));
         }
         let verdict = Verdict::from_counts(good, net.len());
