@@ -694,13 +694,17 @@ fn train_local(
     let out_norm = Normalizer::fit(tt.view(), &layout.output_groups())?;
     let tr = Dataset::new(normalized(&in_norm, &ti), normalized(&out_norm, &tt))?;
     let ho = Dataset::new(normalized(&in_norm, &hi), normalized(&out_norm, &ht))?;
-    let train_ds = if s.input_noise > 0.0 {
+    let noisy = if s.input_noise > 0.0 {
         let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 50 + k as u64));
         let (ni, nt) = local_perturbed(&layout, &ti, &tt, s.input_noise, &mut rng);
-        Dataset::new(normalized(&in_norm, &ni), normalized(&out_norm, &nt))?
+        Some(Dataset::new(
+            normalized(&in_norm, &ni),
+            normalized(&out_norm, &nt),
+        )?)
     } else {
-        tr.clone()
+        None
     };
+    let train_ds = noisy.as_ref().unwrap_or(&tr);
     let mut mlp = Mlp::new(
         layout.n_in(),
         spec.local.hidden,
@@ -710,7 +714,7 @@ fn train_local(
     );
     let rep = train_mlp(
         &mut mlp,
-        &train_ds,
+        train_ds,
         &ho,
         spec.local.method,
         s,
@@ -751,12 +755,10 @@ pub fn hierarchy_rollout_error(
     let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 3));
     let big_dt = spec.super_dt();
     let mut sim = simulator(d);
-    let global = emulator.global();
-    let (mut gsc, mut hsc) = (global.scratch(), emulator.scratch());
+    let mut hsc = emulator.scratch();
     let mut u = vec![0.0; N_SEGMENTS];
     let (mut gt, mut ge, mut mt, mut me) = (vec![], vec![], vec![], vec![]);
     let (mut g_sim, mut g_emu) = (vec![0.0; GLOBAL_DIM], vec![0.0; GLOBAL_DIM]);
-    let mut g_cmp = vec![0.0; GLOBAL_DIM];
     let (mut g_next, mut x_next) = (vec![0.0; GLOBAL_DIM], vec![0.0; MASS_DIM]);
     for _ in 0..episodes {
         let x0 = start_state(d, &mut rng);
@@ -769,7 +771,6 @@ pub fn hierarchy_rollout_error(
         let (mut xs, mut xe) = (x0.clone(), x0);
         global_state(d, &xs, &mut g_sim);
         g_emu.copy_from_slice(&g_sim);
-        g_cmp.copy_from_slice(&g_sim);
         for k in 0..horizon {
             signal.at(k as f64 * big_dt, &mut u);
             for i in 0..spec.steps {
@@ -779,10 +780,10 @@ pub fn hierarchy_rollout_error(
             }
             global_state_after(d, &xs, &g_sim, &mut g_next);
             g_sim.copy_from_slice(&g_next);
-            global.predict(&g_emu, &u, &mut gsc, &mut g_next);
+            // The composed step carries the global net's own rollout (its frames are exactly
+            // the global net's alone), so one global prediction serves both.
+            emulator.predict_carried(&xe, &g_emu, &u, &mut hsc, &mut x_next, &mut g_next);
             g_emu.copy_from_slice(&g_next);
-            emulator.predict_carried(&xe, &g_cmp, &u, &mut hsc, &mut x_next, &mut g_next);
-            g_cmp.copy_from_slice(&g_next);
             xe.copy_from_slice(&x_next);
             gt.extend_from_slice(&g_sim);
             ge.extend_from_slice(&g_emu);
