@@ -155,6 +155,48 @@ fn rotation_and_derivatives_of(q: [f64; 4], live: &[usize]) -> (M3, [M3; 4]) {
     (r, dr)
 }
 
+/// [`rotation_and_derivatives_of`] for a heading quaternion q = (w, 0, 0, z) with ∂R/∂w and
+/// ∂R/∂z (when `derivatives`; the others zero), bit for bit: the same operations on every
+/// entry the generic code computes from a non-zero value, and the entries it computes from zeros
+/// (exactly +0 for finite w and z) set to +0 without dividing, so 12 divisions instead of 27.
+/// `None` when |q|² is zero or not finite (the generic code's NaNs are not reproduced).
+#[inline]
+fn heading_rotation_and_derivatives(w: f64, z: f64, derivatives: bool) -> Option<(M3, [M3; 4])> {
+    let n = w * w + z * z;
+    if !(n.is_finite() && n > 0.0) {
+        return None;
+    }
+    let tw = 2.0 * w;
+    let a = w * w - z * z;
+    let (m01, m10, m22) = (0.0 + tw * -z, 0.0 + tw * z, a + (2.0 * z) * z + tw * 0.0);
+    let (r00, r01, r10, r22) = (a / n, m01 / n, m10 / n, m22 / n);
+    let r = [[r00, r01, 0.0], [r10, r00, 0.0], [0.0, 0.0, r22]];
+    let mut dr = [[[0.0; 3]; 3]; 4];
+    if derivatives {
+        // ∂M/∂w: 2w I + 2 [v]×; ∂M/∂z: −2z I + 2 (e_z vᵀ + v e_zᵀ) + 2w [e_z]×.
+        let d00 = tw + 0.0;
+        let (d01, d10, d22) = (0.0 + 2.0 * -z, 0.0 + 2.0 * z, tw + 2.0 * 0.0);
+        let t = tw;
+        let e00 = (d00 - t * r00) / n;
+        dr[0] = [
+            [e00, (d01 - t * r01) / n, 0.0],
+            [(d10 - t * r10) / n, e00, 0.0],
+            [0.0, 0.0, (d22 - t * r22) / n],
+        ];
+        let m2z = -2.0 * z;
+        let c00 = (m2z + 2.0 * 0.0) + tw * 0.0;
+        let (c01, c10, c22) = (0.0 + tw * -1.0, 0.0 + tw, (m2z + 2.0 * (z + z)) + tw * 0.0);
+        let t = 2.0 * z;
+        let f00 = (c00 - t * r00) / n;
+        dr[3] = [
+            [f00, (c01 - t * r01) / n, 0.0],
+            [(c10 - t * r10) / n, f00, 0.0],
+            [0.0, 0.0, (c22 - t * r22) / n],
+        ];
+    }
+    Some((r, dr))
+}
+
 /// The local frame of a 3D model whose pose (origin, orientation quaternion) is part of its
 /// state; e.g. the lunar lander (position, quaternion, velocity, angular velocity).
 ///
@@ -262,6 +304,16 @@ impl SpatialFrame {
             Attitude::Heading => Some(self.heading(s)),
         };
         let pose = self.pose_from(s, heading);
+        if let Some(([w, z], _)) = heading {
+            if let Some((r, dr)) = heading_rotation_and_derivatives(w, z, derivatives) {
+                return SpatialAt {
+                    pose,
+                    heading,
+                    r,
+                    dr: derivatives.then_some(dr),
+                };
+            }
+        }
         let (r, dr) = if derivatives {
             let (r, dr) = rotation_and_derivatives_of(pose.q, self.live_q());
             (r, Some(dr))
@@ -561,19 +613,21 @@ impl SpatialFrame {
 
 /// Adds `out_bar` to `inp_bar` at the variables `frame` does not map (they pass through).
 fn pass_untouched(frame: &SpatialFrame, inp_bar: &mut [f64], out_bar: &[f64]) {
-    const SMALL: usize = 256;
-    if inp_bar.len() <= SMALL {
-        let mut mapped = [false; SMALL];
+    if inp_bar.is_empty() {
+    } else if inp_bar.len() <= 64 {
+        // One bit per variable: building and reading it costs less than the state is long.
+        let mut mapped = 0u64;
         for (t, _) in frame.triples() {
-            t.iter().for_each(|&i| mapped[i] = true);
+            t.iter().for_each(|&i| mapped |= 1 << i);
         }
         for q in &frame.quaternions {
-            q.iter().for_each(|&i| mapped[i] = true);
+            q.iter().for_each(|&i| mapped |= 1 << i);
         }
-        for (i, b) in inp_bar.iter_mut().enumerate() {
-            if !mapped[i] {
-                *b += out_bar[i];
-            }
+        let mut free = !mapped & (u64::MAX >> (64 - inp_bar.len()));
+        while free != 0 {
+            let i = free.trailing_zeros() as usize;
+            inp_bar[i] += out_bar[i];
+            free &= free - 1;
         }
     } else {
         let mapped = |i: usize| {
@@ -611,6 +665,19 @@ fn quat_partials(map: FrameMap, q0: [f64; 4], a: [f64; 4], live: &[usize]) -> [[
         let n = q0.iter().map(|x| x * x).sum::<f64>();
         let p = quat_mul(quat_conj(q0), a);
         let f = [p[0] / n, p[1] / n, p[2] / n, p[3] / n];
+        let heading = live == [0, 3] && q0[1].to_bits() == 0 && q0[2].to_bits() == 0;
+        if heading && a.iter().all(|&x| x != 0.0 && x.is_finite()) {
+            // q₀ = (w, 0, 0, z), k = w and z: conj(e_w) ⊗ a is exactly a and conj(e_z) ⊗ a is
+            // exactly (a₃, a₂, −a₁, −a₀) when no component of a is zero (each adds only
+            // signed zeros to one ±a_c), so both share the four divisions a_c / n.
+            let g = [a[0] / n, a[1] / n, a[2] / n, a[3] / n];
+            let d3 = [g[3], g[2], -g[1], -g[0]];
+            for c in 0..4 {
+                out[0][c] = g[c] - 2.0 * q0[0] * f[c] / n;
+                out[3][c] = d3[c] - 2.0 * q0[3] * f[c] / n;
+            }
+            return out;
+        }
         for &k in live {
             let o = &mut out[k];
             let d = quat_mul(quat_conj(unit(k)), a);
@@ -624,4 +691,79 @@ fn quat_partials(map: FrameMap, q0: [f64; 4], a: [f64; 4], live: &[usize]) -> [[
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn bits<const N: usize>(m: &[[f64; N]]) -> Vec<u64> {
+        m.iter().flatten().map(|x| x.to_bits()).collect()
+    }
+
+    /// Heading quaternions as [`SpatialFrame::at`] reads them, (w, z)/√(w² + z²), with the
+    /// special values a state can hold: exact zeros of either sign, negative w, the identity.
+    fn headings(rng: &mut ChaCha8Rng) -> Vec<(f64, f64)> {
+        let mut out = vec![(1.0, 0.0), (1.0, -0.0), (0.0, 1.0), (-0.0, 1.0), (-1.0, 0.0)];
+        for i in 0..4000 {
+            let (mut w, mut z): (f64, f64) = (rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0));
+            match i % 6 {
+                0 => z = 0.0,
+                1 => w = -0.0,
+                2 => z = -z.abs(),
+                3 => w = -w.abs(),
+                _ => {}
+            }
+            let n = w.hypot(z);
+            out.push((w / n, z / n));
+        }
+        out
+    }
+
+    /// The heading fast path gives every bit the generic rotation and derivatives give.
+    #[test]
+    fn heading_rotation_matches_the_generic_code_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(31);
+        for (w, z) in headings(&mut rng) {
+            let q = [w, 0.0, 0.0, z];
+            let (r, dr) = rotation_and_derivatives_of(q, &[0, 3]);
+            let (fr, fdr) = heading_rotation_and_derivatives(w, z, true).expect("a unit heading");
+            assert_eq!(bits(&fr), bits(&r), "R at ({w:e}, {z:e})");
+            assert_eq!(bits(&fr), bits(&rotation(q)), "R alone at ({w:e}, {z:e})");
+            for k in 0..4 {
+                assert_eq!(bits(&fdr[k]), bits(&dr[k]), "dR/dq{k} at ({w:e}, {z:e})");
+            }
+            let (r2, _) = heading_rotation_and_derivatives(w, z, false).expect("a unit heading");
+            assert_eq!(bits(&r2), bits(&r));
+        }
+        assert!(heading_rotation_and_derivatives(0.0, 0.0, true).is_none());
+        assert!(heading_rotation_and_derivatives(f64::NAN, 1.0, false).is_none());
+    }
+
+    /// The heading fast path of [`quat_partials`] gives every bit the generic loop gives (which
+    /// it takes for any `live` other than w and z), for quaternions with and without zeros.
+    #[test]
+    fn heading_quaternion_partials_match_the_generic_code_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(32);
+        for (i, (w, z)) in headings(&mut rng).into_iter().enumerate() {
+            let q0 = [w, 0.0, 0.0, z];
+            let mut a: [f64; 4] = std::array::from_fn(|_| rng.random_range(-2.0..2.0));
+            if i % 7 == 0 {
+                a[i % 4] = 0.0;
+            }
+            for map in [FrameMap::ToLocal, FrameMap::DeltaToLocal, FrameMap::ToWorld] {
+                let fast = quat_partials(map, q0, a, &[0, 3]);
+                let generic = quat_partials(map, q0, a, &ALL_Q);
+                for k in [0, 3] {
+                    assert_eq!(
+                        bits(&[fast[k]]),
+                        bits(&[generic[k]]),
+                        "{map:?} k = {k} at q0 = {q0:?}, a = {a:?}"
+                    );
+                }
+            }
+        }
+    }
 }
