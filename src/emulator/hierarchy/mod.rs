@@ -94,7 +94,7 @@ pub const MASS_DIM: usize = 2 * N_POS;
 pub const REF_SEGMENT: usize = 2;
 /// Bumped whenever the hierarchy's sampling, transforms or training code changes meaning, so
 /// cached nets are retrained.
-pub const HIERARCHY_FORMAT: u32 = 5;
+pub const HIERARCHY_FORMAT: u32 = 6;
 /// Writes the global state (6 segment frames, 13 numbers each) of the mass state `x`.
 ///
 /// Quaternion signs: the reference segment's has w ≥ 0 and every other segment's the sign

@@ -82,6 +82,9 @@ pub struct Transforms {
     pub input_norm: Normalizer,
     /// Output normalization (identity when normalization is off).
     pub output_norm: Normalizer,
+    /// The inputs' normalization groups when normalized by groups (Appendix A; `None`: per
+    /// variable): the unit of [`Transforms::perturb`]'s noise.
+    pub input_groups: Option<Vec<usize>>,
 }
 
 impl Transforms {
@@ -101,6 +104,7 @@ impl Transforms {
             frame: config.frame.clone(),
             input_norm: Normalizer::identity(state_dim + control_dim),
             output_norm: Normalizer::identity(state_dim),
+            input_groups: config.input_groups.clone().filter(|_| config.normalize),
         })
     }
 
@@ -338,26 +342,64 @@ impl Transforms {
     /// 2020, "Learning to simulate complex physics with graph networks", §4: noise on the
     /// inputs so that the net learns to correct the errors its own rollouts make).
     ///
-    /// Each local state input l_k of each example moves by δ_k ~ N(0, (`scale` · sd_k)²),
-    /// sd_k the spread of that input over `ds` (constant inputs — the model's own local pose —
-    /// get none). With the state change predicted (T_y^Δ), the target is the change from the
-    /// *perturbed* state to the true next state, Δl_k − δ_k: in the local frame a state input
-    /// and its change are the same coordinates (points Rᵀ(p − o) and Rᵀ(p′ − p), vectors,
-    /// angles, quaternions q₀⁻¹ ⊗ q and q₀⁻¹ ⊗ Δq), so the correction is exact. Without T_y^Δ
-    /// the target stays the true next state. Controls are not perturbed. Works on the encoded
-    /// (normalized) set; draws every δ from `rng`.
+    /// Each local state input l_k of each example moves by δ_k ~ N(0, (`scale` · sd_k)²). The
+    /// spread sd_k is in the net's own normalization units: that input's spread over `ds` when
+    /// the inputs are normalized one by one, and its group's pooled spread when they are
+    /// normalized by groups ([`Transforms::input_groups`]), so that an input the data hold
+    /// (nearly) constant, such as an out-of-plane coordinate of a planar swimmer, still learns to
+    /// pull back errors of the size its group's errors have. The frame's own pose inputs, which
+    /// the local frame makes constant (a spatial frame's own origin and full attitude), get
+    /// none, nor does any constant input normalized alone. With the state change predicted
+    /// (T_y^Δ), the target is the change from the *perturbed* state to the true next state,
+    /// Δl_k − δ_k: in the local frame a state input and its change are the same coordinates
+    /// (points Rᵀ(p − o) and Rᵀ(p′ − p), vectors, angles, quaternions q₀⁻¹ ⊗ q and q₀⁻¹ ⊗ Δq),
+    /// so the correction is exact. Without T_y^Δ the target stays the true next state. Controls
+    /// are not perturbed. Works on the encoded (normalized) set; draws every δ from `rng`.
     pub fn perturb(&self, ds: &Dataset, scale: f64, rng: &mut rand_chacha::ChaCha8Rng) -> Dataset {
         use rand::Rng;
         let n = self.state_dim;
         let mut out = ds.clone();
         let rows = ds.len().max(1) as f64;
-        let sd: Vec<f64> = (0..n)
-            .map(|k| {
-                let col = ds.inputs.column(k);
-                let mean = col.sum() / rows;
-                (col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / rows).sqrt()
-            })
-            .collect();
+        let stats = |k: usize| {
+            let col = ds.inputs.column(k);
+            let mean = col.sum() / rows;
+            let var = col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / rows;
+            (mean, var.sqrt())
+        };
+        let mut sd: Vec<f64> = (0..n).map(|k| stats(k).1).collect();
+        if let Some(groups) = &self.input_groups {
+            let pose = self
+                .frame
+                .as_ref()
+                .map(LocalFrame::pose_indices)
+                .unwrap_or_default();
+            let pooled = |g: usize| {
+                let members: Vec<usize> = (0..n).filter(|&k| groups[k] == g).collect();
+                let mean = members.iter().map(|&k| stats(k).0).sum::<f64>() / members.len() as f64;
+                let var = members
+                    .iter()
+                    .map(|&k| {
+                        ds.inputs
+                            .column(k)
+                            .iter()
+                            .map(|v| (v - mean).powi(2))
+                            .sum::<f64>()
+                    })
+                    .sum::<f64>()
+                    / (rows * members.len() as f64);
+                var.sqrt()
+            };
+            let group_sd: std::collections::BTreeMap<usize, f64> =
+                groups[..n].iter().map(|&g| (g, pooled(g))).collect();
+            for (k, s) in sd.iter_mut().enumerate() {
+                let constant_pose = *s <= 1e-9 && pose.contains(&k);
+                *s = if constant_pose {
+                    0.0
+                } else {
+                    group_sd[&groups[k]]
+                };
+            }
+        }
         // A normalized input step δz is the local step δz σ_in, which is δz σ_in / σ_out of
         // normalized output.
         let gain: Vec<f64> = (0..n)
@@ -404,5 +446,92 @@ impl Transforms {
             targets.row_mut(r).assign(&ndarray::ArrayView1::from(&y));
         }
         Dataset::new(inputs, targets).expect("rows agree by construction")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::emulator::transform::SpatialFrame;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// A rigid body's 13 states (position, quaternion, velocity, angular velocity) and one
+    /// control, normalized by quantity groups, as an encoded set whose frame pose is constant
+    /// (its own origin and attitude) and whose lateral velocity (column 8) is constant too, as
+    /// a planar motion's out-of-plane coordinate is.
+    fn grouped(groups: bool) -> (Transforms, Dataset) {
+        let config = TransformConfig {
+            input_groups: groups.then(|| vec![0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4]),
+            ..TransformConfig::standard(Some(SpatialFrame::rigid_body(0, 3, 7, 10).into()))
+        };
+        let t = Transforms::unfitted(&config, 13, 1).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let rows = 20_000;
+        let mut inputs = Array2::zeros((rows, 14));
+        for mut z in inputs.rows_mut() {
+            z[3] = 1.0;
+            for k in [7, 9, 10, 11, 12, 13] {
+                z[k] = rng.random_range(-1.0..1.0) * if k == 9 { 3.0 } else { 1.0 };
+            }
+        }
+        let targets = Array2::from_shape_fn((rows, 13), |_| rng.random_range(-1.0..1.0));
+        (t, Dataset::new(inputs, targets).unwrap())
+    }
+
+    /// With group normalization every state input, a constant out-of-plane one included, moves
+    /// by the requested fraction of its group's pooled spread, except the frame's own constant
+    /// pose; each target moves back by its input's move; controls stay. Normalized one by one,
+    /// the constant input gets none (the per-variable rule, unchanged).
+    #[test]
+    fn grouped_noise_is_scaled_by_the_groups_spread() {
+        let (t, clean) = grouped(true);
+        let scale = 0.1;
+        let noisy = t.perturb(&clean, scale, &mut ChaCha8Rng::seed_from_u64(4));
+        let rows = clean.len() as f64;
+        let moved = |k: usize| -> Vec<f64> {
+            (0..clean.len())
+                .map(|r| noisy.inputs[[r, k]] - clean.inputs[[r, k]])
+                .collect()
+        };
+        let rms = |v: &[f64]| (v.iter().map(|d| d * d).sum::<f64>() / rows).sqrt();
+        for k in 0..7 {
+            assert!(moved(k).iter().all(|&d| d == 0.0), "pose input {k} moved");
+        }
+        // Group 2 (velocity): columns 7, 8, 9 with spreads 1/√3, 0 and √3 around mean 0; the
+        // pooled spread is √((1/3 + 0 + 3) / 3).
+        let pooled = ((1.0 / 3.0 + 3.0) / 3.0f64).sqrt();
+        for k in [7, 8, 9] {
+            let got = rms(&moved(k));
+            assert!(
+                (got / (scale * pooled) - 1.0).abs() < 0.03,
+                "input {k}: moved {got}, want {}",
+                scale * pooled
+            );
+        }
+        for r in 0..clean.len() {
+            for k in 0..13 {
+                let dz = noisy.inputs[[r, k]] - clean.inputs[[r, k]];
+                let dy = noisy.targets[[r, k]] - clean.targets[[r, k]];
+                assert!((dy + dz).abs() < 1e-12, "row {r} target {k}");
+            }
+            assert_eq!(
+                noisy.inputs[[r, 13]],
+                clean.inputs[[r, 13]],
+                "control moved"
+            );
+        }
+        let (t, clean) = grouped(false);
+        let noisy = t.perturb(&clean, scale, &mut ChaCha8Rng::seed_from_u64(4));
+        assert_eq!(noisy.inputs.column(8), clean.inputs.column(8));
+        assert!(noisy.inputs.column(9) != clean.inputs.column(9));
+        // The dolphin's global net is normalized by groups, so its noise is the groups'.
+        use crate::emulator::hierarchy::{global_transforms, GLOBAL_DIM};
+        const N_SEGMENTS: usize = 6;
+        let g = Transforms::unfitted(&global_transforms(), GLOBAL_DIM, N_SEGMENTS).unwrap();
+        assert_eq!(
+            g.input_groups.map(|v| v.len()),
+            Some(GLOBAL_DIM + N_SEGMENTS)
+        );
     }
 }

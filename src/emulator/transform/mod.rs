@@ -224,6 +224,15 @@ impl LocalFrame {
         }
     }
 
+    /// The state indices the frame's pose is read from (a planar frame's x, y, θ; a spatial
+    /// frame's origin and orientation quaternion).
+    pub fn pose_indices(&self) -> Vec<usize> {
+        match self {
+            Self::Planar(f) => vec![f.x, f.y, f.theta],
+            Self::Spatial(f) => f.origin.iter().chain(&f.orientation).copied().collect(),
+        }
+    }
+
     /// Checks indices against the state dimension.
     pub fn validate(&self, state_dim: usize) -> Result<(), EmulatorError> {
         match self {

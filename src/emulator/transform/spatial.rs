@@ -185,7 +185,7 @@ fn heading_rotation_and_derivatives(w: f64, z: f64, derivatives: bool) -> Option
         ];
         let m2z = -2.0 * z;
         let c00 = (m2z + 2.0 * 0.0) + tw * 0.0;
-        let (c01, c10, c22) = (0.0 + tw * -1.0, 0.0 + tw, (m2z + 2.0 * (z + z)) + tw * 0.0);
+        let (c01, c10, c22) = (0.0 + -tw, 0.0 + tw, (m2z + 2.0 * (z + z)) + tw * 0.0);
         let t = 2.0 * z;
         let f00 = (c00 - t * r00) / n;
         dr[3] = [
@@ -706,9 +706,16 @@ mod tests {
     /// Heading quaternions as [`SpatialFrame::at`] reads them, (w, z)/√(w² + z²), with the
     /// special values a state can hold: exact zeros of either sign, negative w, the identity.
     fn headings(rng: &mut ChaCha8Rng) -> Vec<(f64, f64)> {
-        let mut out = vec![(1.0, 0.0), (1.0, -0.0), (0.0, 1.0), (-0.0, 1.0), (-1.0, 0.0)];
+        let mut out = vec![
+            (1.0, 0.0),
+            (1.0, -0.0),
+            (0.0, 1.0),
+            (-0.0, 1.0),
+            (-1.0, 0.0),
+        ];
         for i in 0..4000 {
-            let (mut w, mut z): (f64, f64) = (rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0));
+            let (mut w, mut z): (f64, f64) =
+                (rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0));
             match i % 6 {
                 0 => z = 0.0,
                 1 => w = -0.0,
