@@ -797,3 +797,30 @@ fn emulate_writes_simulates_columns_one_row_per_super_step_and_reuses_the_cache(
         std::fs::read(d.path().join("emu2.csv")).unwrap()
     );
 }
+
+/// The five shipped experiments that build the dolphin hierarchy train it with the same
+/// settings, so that they share one cached set of nets (the nets Table 1 reports are the nets
+/// Fig. 13, the swim baselines, §5.3 and Table 2 use).
+#[test]
+fn every_experiment_builds_the_same_dolphin_nets() {
+    let table = |file: &str, path: &[&str]| -> toml::Value {
+        let text = std::fs::read_to_string(root().join("experiments").join(file)).unwrap();
+        let mut v: toml::Value = toml::from_str(&text).unwrap();
+        for key in path {
+            v = v.get(key).unwrap_or_else(|| panic!("{file}: no {key}")).clone();
+        }
+        v
+    };
+    let reference = table("na_table1_structure.toml", &["params", "dolphin"]);
+    for (file, path) in [
+        ("na_fig13_control.toml", &["params", "dolphin", "nets"][..]),
+        ("na_table2_speedup.toml", &["params", "dolphin", "nets"][..]),
+        ("na_baselines_swim.toml", &["params", "nets"][..]),
+        ("na_regularization.toml", &["params", "nets"][..]),
+    ] {
+        let nets = table(file, path);
+        for key in ["physical_dt", "global", "local", "training"] {
+            assert_eq!(nets.get(key), reference.get(key), "{file}: dolphin {key}");
+        }
+    }
+}
