@@ -807,7 +807,10 @@ fn every_experiment_builds_the_same_dolphin_nets() {
         let text = std::fs::read_to_string(root().join("experiments").join(file)).unwrap();
         let mut v: toml::Value = toml::from_str(&text).unwrap();
         for key in path {
-            v = v.get(key).unwrap_or_else(|| panic!("{file}: no {key}")).clone();
+            v = v
+                .get(key)
+                .unwrap_or_else(|| panic!("{file}: no {key}"))
+                .clone();
         }
         v
     };
