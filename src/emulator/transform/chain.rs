@@ -389,8 +389,9 @@ impl Transforms {
                     / (rows * members.len() as f64);
                 var.sqrt()
             };
+            let ids: std::collections::BTreeSet<usize> = groups[..n].iter().copied().collect();
             let group_sd: std::collections::BTreeMap<usize, f64> =
-                groups[..n].iter().map(|&g| (g, pooled(g))).collect();
+                ids.into_iter().map(|g| (g, pooled(g))).collect();
             for (k, s) in sd.iter_mut().enumerate() {
                 let constant_pose = *s <= 1e-9 && pose.contains(&k);
                 *s = if constant_pose {
