@@ -572,6 +572,13 @@ fn dolphin_metrics(min_seconds: f64) -> Vec<(String, f64)> {
             }
         }),
     ));
+    out.push((
+        format!(
+            "rollout.{}-50-{GLOBAL_DIM}.k8_window_grads_per_s",
+            GLOBAL_DIM + N_SEGMENTS
+        ),
+        rollout_grad_metric(&global, &g0, &u, min_seconds),
+    ));
     let locals: Vec<LocalNet> = (0..N_SEGMENTS)
         .map(|s| {
             let layout = LocalLayout::new(s);
@@ -628,6 +635,50 @@ fn dolphin_metrics(min_seconds: f64) -> Vec<(String, f64)> {
 
 /// Training and stepping throughput of the Table 1 network of `model` (random weights and data
 /// of the real shapes; the emulator uses the model's transforms).
+/// Gradients per second of the k-step rollout loss (k = 8) over 64 windows through `e` (its
+/// net and transforms), the loss `fine_tune` minimizes (issue 11): windows are the emulator's
+/// own rollouts from `s0` under per-step controls around `u`, with targets moved off them by a
+/// little, so every step's cotangent is nonzero. Counted in windows per second.
+pub fn rollout_grad_metric(e: &Emulator, s0: &[f64], u: &[f64], min_seconds: f64) -> f64 {
+    use crate::emulator::dataset::Windows;
+    use crate::emulator::rollout::RolloutLoss;
+    let (n, m, k, count) = (s0.len(), u.len(), 8, 64);
+    let (mut states, mut controls) = (vec![], vec![]);
+    let (mut sc, mut next) = (e.scratch(), vec![0.0; n]);
+    for r in 0..count {
+        let mut s = s0.to_vec();
+        states.extend_from_slice(&s);
+        for i in 0..k {
+            let ui: Vec<f64> = (0..m)
+                .map(|j| u[j] * (1.0 + 0.1 * (((r * 7 + i * 3 + j) % 11) as f64 - 5.0) / 5.0))
+                .collect();
+            e.predict(&s, &ui, &mut sc, &mut next);
+            s.copy_from_slice(&next);
+            states.extend(
+                s.iter()
+                    .enumerate()
+                    .map(|(v, x)| x + 1e-3 * (1.0 + (v % 3) as f64)),
+            );
+            controls.extend_from_slice(&ui);
+        }
+    }
+    let w = Windows {
+        k,
+        state_dim: n,
+        control_dim: m,
+        states,
+        controls,
+        episode: (0..count).collect(),
+        start_step: vec![0; count],
+    };
+    let loss = RolloutLoss::new(e.transforms(), &w, &vec![1.0; n]).expect("shapes agree");
+    let mut g = vec![0.0; e.mlp().n_weights()];
+    throughput(min_seconds, count as u64, || {
+        g.fill(0.0);
+        black_box(loss.value_grad(e.mlp(), &mut g));
+    })
+}
+
 fn emulator_metrics(
     model: NetModel,
     hidden: usize,
@@ -654,6 +705,10 @@ fn emulator_metrics(
         }
     });
     out.push((format!("emulator.{shape}.steps_per_s"), steps));
+    out.push((
+        format!("rollout.{shape}.k8_window_grads_per_s"),
+        rollout_grad_metric(&e, &s0, &u, min_seconds),
+    ));
     out
 }
 

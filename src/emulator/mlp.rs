@@ -288,6 +288,24 @@ impl Mlp {
         }
     }
 
+    /// Adds the weight gradients of `examples` examples to `grad_w`, in order, as one
+    /// [`Mlp::backward_from`] per example would (the same bits): rows of `x` (inputs), `hidden`
+    /// (activations), `hidden_bar` (h̄) and `y_bar` (output cotangents), each stored
+    /// contiguously row after row. Does not allocate.
+    pub fn weight_grad_many(
+        &self,
+        examples: usize,
+        (x, hidden, hidden_bar, y_bar): (&[f64], &[f64], &[f64], &[f64]),
+        grad_w: &mut [f64],
+    ) {
+        let (p, q, r) = (self.n_in, self.n_hidden, self.n_out);
+        assert!(x.len() >= examples * p && y_bar.len() >= examples * r);
+        assert!(hidden.len() >= examples * q && hidden_bar.len() >= examples * q);
+        assert_eq!(grad_w.len(), self.n_weights());
+        let (g1, gb1, g2, gb2) = self.split_mut(grad_w);
+        kernels::weight_grad_many(examples, x, hidden, hidden_bar, y_bar, g1, gb1, g2, gb2);
+    }
+
     /// Vector–Jacobian product to the inputs, x̄ = (∂N/∂x)ᵀ ȳ at `x` (runs its own forward pass).
     pub fn vjp_input(&self, x: &[f64], y_bar: &[f64], scratch: &mut MlpScratch, x_bar: &mut [f64]) {
         self.hidden_only(x, scratch);

@@ -849,6 +849,72 @@ mod tests {
         }
     }
 
+    /// The rollout loss adds its weight-gradient terms in one batch per chunk of windows: the
+    /// bits of adding each at once, during the backward pass through every window (the
+    /// oracle below, one [`step_vjp`] per step with the gradient), for windows filling one
+    /// chunk, several chunks, and a partial last chunk.
+    #[test]
+    fn rollout_loss_gradient_is_the_one_pass_at_a_time_sum_bit_for_bit() {
+        let (e, data) = emulator(true);
+        let sigma = rollout::change_spread(&data);
+        let inv_var: Vec<f64> = sigma.iter().map(|s| 1.0 / (s * s)).collect();
+        let mut net = e.mlp().clone();
+        net.weights_mut().iter_mut().for_each(|v| *v *= 0.3);
+        let (n, m) = (e.transforms().state_dim, e.transforms().control_dim);
+        for windows in [5, 16, 37] {
+            let w = body_windows(windows, 4, 2);
+            let loss = rollout::RolloutLoss::new(e.transforms(), &w, &sigma).unwrap();
+            let mut g = vec![0.0; net.n_weights()];
+            loss.value_grad(&net, &mut g);
+            let mut want = vec![0.0; net.n_weights()];
+            let mut scratch = Emulator::make_scratch(&net, n, m);
+            let scale = 1.0 / (w.len() * w.k * n) as f64;
+            for rows in (0..w.len()).collect::<Vec<_>>().chunks(16) {
+                let mut part = vec![0.0; net.n_weights()];
+                for &r in rows {
+                    let mut traj = vec![w.state(r, 0).to_vec()];
+                    for i in 0..w.k {
+                        let mut next = vec![0.0; n];
+                        predict_with(
+                            e.transforms(),
+                            &net,
+                            &traj[i],
+                            w.control(r, i),
+                            &mut scratch,
+                            &mut next,
+                        );
+                        traj.push(next);
+                    }
+                    let (mut next_bar, mut prev_bar, mut u_bar) =
+                        (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
+                    for i in (1..=w.k).rev() {
+                        for v in 0..n {
+                            next_bar[v] += 2.0 * (traj[i][v] - w.state(r, i)[v]) * inv_var[v];
+                        }
+                        prev_bar.fill(0.0);
+                        step_vjp(
+                            e.transforms(),
+                            &net,
+                            &traj[i - 1],
+                            w.control(r, i - 1),
+                            &next_bar,
+                            &mut scratch,
+                            &mut prev_bar,
+                            &mut u_bar,
+                            Some(&mut part),
+                        );
+                        std::mem::swap(&mut next_bar, &mut prev_bar);
+                    }
+                }
+                for (o, v) in want.iter_mut().zip(&part) {
+                    *o += scale * v;
+                }
+            }
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&g), bits(&want), "{windows} windows");
+        }
+    }
+
     #[test]
     fn rollout_fine_tuning_cuts_the_k_step_error_of_a_one_step_net() {
         // Tiny (5 hidden units) one-step nets of the planar body, trained by L-BFGS until the
@@ -1013,6 +1079,33 @@ mod tests {
             let fd = (problem.cost(&wp).unwrap() - problem.cost(&wm).unwrap()) / (2.0 * h);
             assert!((fd - g[k]).abs() < 1e-6 * (1.0 + fd.abs()), "w{k}");
         }
+    }
+
+    /// The training problem's cost and gradient come from one pass and are kept for the same
+    /// weights: the cost is [`mse`] bit for bit, the gradient the separate loss-gradient pass's,
+    /// whichever is asked first and after other weights were evaluated in between.
+    #[test]
+    fn training_problem_cost_and_gradient_are_the_separate_passes_bit_for_bit() {
+        let (e, data) = emulator(true);
+        let ds = e.transforms().encode(&data);
+        let net = e.mlp().clone();
+        let w = Array1::from(net.weights().to_vec());
+        let mut w2 = w.clone();
+        w2[3] += 0.01;
+        let mut raw = vec![0.0; net.n_weights()];
+        net.loss_grad(ds.inputs.view(), ds.targets.view(), &mut raw);
+        let scale = 2.0 / (ds.len() * net.n_out()) as f64;
+        let want_g: Vec<u64> = raw.iter().map(|v| (v * scale).to_bits()).collect();
+        let want_c = mse(&net, &ds).to_bits();
+        let bits = |g: &Array1<f64>| g.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let p = TrainingProblem::new(&net, &ds);
+        assert_eq!(p.cost(&w).unwrap().to_bits(), want_c);
+        assert_eq!(bits(&p.gradient(&w).unwrap()), want_g);
+        p.gradient(&w2).unwrap();
+        assert_eq!(bits(&p.gradient(&w).unwrap()), want_g);
+        assert_eq!(p.cost(&w).unwrap().to_bits(), want_c);
+        let q = p.clone();
+        assert_eq!(bits(&q.gradient(&w).unwrap()), want_g);
     }
 
     #[test]

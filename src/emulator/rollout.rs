@@ -25,8 +25,8 @@ use super::anchor::Anchor;
 use super::dataset::Windows;
 use super::mlp::Mlp;
 use super::train::{
-    minimize_early_stopping, mse, Dataset, FullBatchConfig, FullBatchMethod, TrainReport,
-    TrainingProblem,
+    minimize_early_stopping, mse, Dataset, Evaluated, FullBatchConfig, FullBatchMethod,
+    TrainReport, TrainingProblem,
 };
 use super::{
     predict_with, step_vjp_after_forward, Emulator, EmulatorError, Transforms, Transitions,
@@ -143,6 +143,13 @@ impl<'a> RolloutLoss<'a> {
         // backward pass.
         let (mut zs, mut ys, mut hs) = (vec![0.0; k * (n + m)], vec![0.0; k * n], vec![0.0; k * q]);
         let (mut next_bar, mut prev_bar, mut u_bar) = (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
+        // The backward passes' weight-gradient terms, kept in the order they are made and
+        // added at the end of the chunk ([`Mlp::weight_grad_many`]: the same sums, bit for bit,
+        // as adding each at once).
+        let (p, r_out) = (mlp.n_in(), mlp.n_out());
+        let cap = if want_grad { rows.len() * k } else { 0 };
+        let mut tape = TAPE.with_borrow_mut(std::mem::take);
+        tape.reset(cap, (p, q, r_out));
         let mut loss = 0.0;
         for r in rows {
             traj[..n].copy_from_slice(w.state(r, 0));
@@ -181,13 +188,57 @@ impl<'a> RolloutLoss<'a> {
                     &mut scratch,
                     &mut prev_bar,
                     &mut u_bar,
-                    Some(&mut grad),
+                    None,
                 );
+                let e = tape.len;
+                tape.x[e * p..(e + 1) * p].copy_from_slice(&scratch.z);
+                tape.h[e * q..(e + 1) * q].copy_from_slice(&scratch.mlp.hidden);
+                tape.hb[e * q..(e + 1) * q].copy_from_slice(&scratch.mlp.hidden_bar);
+                tape.yb[e * r_out..(e + 1) * r_out].copy_from_slice(&scratch.y_bar);
+                tape.len += 1;
                 std::mem::swap(&mut next_bar, &mut prev_bar);
             }
         }
+        if want_grad {
+            mlp.weight_grad_many(tape.len, (&tape.x, &tape.h, &tape.hb, &tape.yb), &mut grad);
+        }
+        TAPE.with_borrow_mut(|t| *t = tape);
         (loss, grad)
     }
+}
+
+/// The backward passes' inputs to the weight gradient, one row per pass, in order.
+#[derive(Debug, Default)]
+struct GradTape {
+    x: Vec<f64>,
+    h: Vec<f64>,
+    hb: Vec<f64>,
+    yb: Vec<f64>,
+    len: usize,
+}
+
+impl GradTape {
+    /// Empty, with room for `rows` passes of a (p, q, r) net (grown, never shrunk: a worker
+    /// thread's tape serves every chunk it takes).
+    fn reset(&mut self, rows: usize, (p, q, r): (usize, usize, usize)) {
+        for (v, width) in [
+            (&mut self.x, p),
+            (&mut self.h, q),
+            (&mut self.hb, q),
+            (&mut self.yb, r),
+        ] {
+            if v.len() < rows * width {
+                v.resize(rows * width, 0.0);
+            }
+        }
+        self.len = 0;
+    }
+}
+
+std::thread_local! {
+    /// Each thread's [`GradTape`], kept between chunks so that the rollout loss does not
+    /// allocate (and fault in) a fresh one per chunk.
+    static TAPE: std::cell::RefCell<GradTape> = std::cell::RefCell::new(GradTape::default());
 }
 
 /// The fine-tuning objective over flat weights: the one-step loss (eq. 5, as
@@ -203,9 +254,6 @@ pub struct FineTuneProblem<'a> {
     anchor: Option<&'a Anchor>,
     last: std::sync::Mutex<Option<Evaluated>>,
 }
-
-/// Weights with the cost and gradient evaluated there.
-type Evaluated = (Array1<f64>, f64, Array1<f64>);
 
 impl<'a> FineTuneProblem<'a> {
     /// The objective for nets shaped like `mlp`.
@@ -241,8 +289,8 @@ impl<'a> FineTuneProblem<'a> {
         let wp = Array1::from(net.weights().to_vec());
         let mut g = vec![0.0; net.n_weights()];
         let roll = self.rollout.value_grad(&net, &mut g);
-        let cost = self.one_step.cost(&wp)? + self.weight * roll;
-        let one = self.one_step.gradient(&wp)?;
+        let (one_cost, one) = self.one_step.cost_and_gradient(&wp);
+        let cost = one_cost + self.weight * roll;
         let mut grad = Array1::from_iter(one.iter().zip(&g).map(|(a, b)| a + self.weight * b));
         if let Some(a) = self.anchor {
             a.pull_back(&net, grad.as_slice_mut().expect("contiguous gradient"));

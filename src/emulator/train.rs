@@ -103,12 +103,29 @@ pub fn mse(mlp: &Mlp, data: &Dataset) -> f64 {
     2.0 * mlp.loss(data.inputs.view(), data.targets.view()) / denom
 }
 
-/// The full-batch training problem over the flattened weights, for argmin.
-#[derive(Debug, Clone)]
+/// Weights with the cost and gradient evaluated there.
+pub(crate) type Evaluated = (Array1<f64>, f64, Array1<f64>);
+
+/// The full-batch training problem over the flattened weights, for argmin. The line search
+/// asks for the cost and then the gradient at each trial point (and L-BFGS for the gradient
+/// again at the accepted one), so one pass computes both and keeps them for the next request
+/// at the same weights.
+#[derive(Debug)]
 pub struct TrainingProblem<'a> {
     shape: (usize, usize, usize),
     data: &'a Dataset,
     anchor: Option<&'a Anchor>,
+    last: std::sync::Mutex<Option<Evaluated>>,
+}
+
+impl Clone for TrainingProblem<'_> {
+    /// The same problem, with nothing evaluated yet.
+    fn clone(&self) -> Self {
+        Self {
+            last: std::sync::Mutex::new(None),
+            ..*self
+        }
+    }
 }
 
 impl<'a> TrainingProblem<'a> {
@@ -118,13 +135,18 @@ impl<'a> TrainingProblem<'a> {
             shape: (mlp.n_in(), mlp.n_hidden(), mlp.n_out()),
             data,
             anchor: None,
+            last: std::sync::Mutex::new(None),
         }
     }
 
     /// The same problem over nets that reproduce `anchor` exactly (the output bias follows
     /// the other weights, [`Anchor`]); `None` leaves it unanchored.
     pub fn anchored(self, anchor: Option<&'a Anchor>) -> Self {
-        Self { anchor, ..self }
+        Self {
+            anchor,
+            last: std::sync::Mutex::new(None),
+            ..self
+        }
     }
 
     fn net(&self, w: &Array1<f64>) -> Mlp {
@@ -142,11 +164,40 @@ impl<'a> TrainingProblem<'a> {
     }
 }
 
+impl TrainingProblem<'_> {
+    /// [`CostFunction::cost`] and [`Gradient::gradient`] at `w` from one pass over the data
+    /// (the same bits as the two calls, each of which makes its own forward pass).
+    pub fn cost_and_gradient(&self, w: &Array1<f64>) -> (f64, Array1<f64>) {
+        let mut last = self.last.lock().expect("no panics while held");
+        if let Some((lw, c, g)) = last.as_ref() {
+            if lw == w {
+                return (*c, g.clone());
+            }
+        }
+        let (c, g) = self.evaluate(w);
+        *last = Some((w.clone(), c, g.clone()));
+        (c, g)
+    }
+
+    fn evaluate(&self, w: &Array1<f64>) -> (f64, Array1<f64>) {
+        let net = self.net(w);
+        let mut g = vec![0.0; net.n_weights()];
+        let loss = net.loss_grad(self.data.inputs.view(), self.data.targets.view(), &mut g);
+        if let Some(a) = self.anchor {
+            a.pull_back(&net, &mut g);
+        }
+        let denom = (self.data.len() * net.n_out()).max(1) as f64;
+        let scale = 2.0 / denom;
+        let cost = 2.0 * loss / denom;
+        (cost, Array1::from_iter(g.into_iter().map(|v| v * scale)))
+    }
+}
+
 impl CostFunction for TrainingProblem<'_> {
     type Param = Array1<f64>;
     type Output = f64;
     fn cost(&self, w: &Self::Param) -> Result<f64, argmin::core::Error> {
-        Ok(mse(&self.net(w), self.data))
+        Ok(self.cost_and_gradient(w).0)
     }
 }
 
@@ -154,14 +205,7 @@ impl Gradient for TrainingProblem<'_> {
     type Param = Array1<f64>;
     type Gradient = Array1<f64>;
     fn gradient(&self, w: &Self::Param) -> Result<Self::Gradient, argmin::core::Error> {
-        let net = self.net(w);
-        let mut g = vec![0.0; net.n_weights()];
-        net.loss_grad(self.data.inputs.view(), self.data.targets.view(), &mut g);
-        if let Some(a) = self.anchor {
-            a.pull_back(&net, &mut g);
-        }
-        let scale = 2.0 / (self.data.len() * net.n_out()).max(1) as f64;
-        Ok(Array1::from_iter(g.into_iter().map(|v| v * scale)))
+        Ok(self.cost_and_gradient(w).1)
     }
 }
 
