@@ -858,7 +858,13 @@ mod tests {
         let (e, data) = emulator(true);
         let sigma = rollout::change_spread(&data);
         let inv_var: Vec<f64> = sigma.iter().map(|s| 1.0 / (s * s)).collect();
-        let mut net = e.mlp().clone();
+        // 20 hidden units, so that the output layer's gradient fills whole register tiles
+        // (3 rows × 16 columns) as well as edge ones.
+        let init = WeightInit::Uniform {
+            low: -1.0,
+            high: 1.0,
+        };
+        let mut net = Mlp::new(N + M, 20, N, init, &mut ChaCha8Rng::seed_from_u64(8));
         net.weights_mut().iter_mut().for_each(|v| *v *= 0.3);
         let (n, m) = (e.transforms().state_dim, e.transforms().control_dim);
         for windows in [5, 16, 37] {

@@ -366,7 +366,8 @@ impl Transforms {
             let var = col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / rows;
             (mean, var.sqrt())
         };
-        let mut sd: Vec<f64> = (0..n).map(|k| stats(k).1).collect();
+        let st: Vec<(f64, f64)> = (0..n).map(stats).collect();
+        let mut sd: Vec<f64> = st.iter().map(|&(_, s)| s).collect();
         if let Some(groups) = &self.input_groups {
             let pose = self
                 .frame
@@ -375,7 +376,7 @@ impl Transforms {
                 .unwrap_or_default();
             let pooled = |g: usize| {
                 let members: Vec<usize> = (0..n).filter(|&k| groups[k] == g).collect();
-                let mean = members.iter().map(|&k| stats(k).0).sum::<f64>() / members.len() as f64;
+                let mean = members.iter().map(|&k| st[k].0).sum::<f64>() / members.len() as f64;
                 let var = members
                     .iter()
                     .map(|&k| {
