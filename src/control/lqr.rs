@@ -29,10 +29,11 @@
 //! - M. da Silva, F. Durand, J. Popović, *Linear Bellman Combination for Control of Character
 //!   Animation*, SIGGRAPH 2009, §5.2 (eq. 12).
 
+use super::small::{copy_into, on_dims, SmallAlloc};
 use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
 use super::{ControlError, QuadraticCost, Rk4Map, StageDerivatives};
 use crate::physics::linearize::Linearize;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector, U1};
 
 /// A time-varying LQR tracking controller with its quadratic value function (eq. 12).
 #[derive(Debug, Clone, PartialEq)]
@@ -186,7 +187,7 @@ fn riccati(
     us: &[DVector<f64>],
     model: ValueModel,
     jacobians: &mut StepJacobians<'_>,
-    mut second: Option<&mut SecondDerivatives<'_>>,
+    second: Option<&mut SecondDerivatives<'_>>,
 ) -> Result<TrackingController, ControlError> {
     let horizon = us.len();
     if horizon == 0 {
@@ -213,9 +214,41 @@ fn riccati(
         }
     }
     cost.validate(n, m, horizon)?;
+    on_dims!(n, m, |nd, md| riccati_on(
+        nd, md, cost, xs, us, model, jacobians, second
+    ))
+}
 
-    let (mut a, mut b) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
-    let mut l = StageDerivatives::new(n, m);
+/// [`riccati`] on matrices of dimensions `Nd` × `Md` (fixed-size where [`super::small`] has
+/// the size): the inputs (A_k, B_k, the cost's derivatives) are copied in and the gains and
+/// value derivatives copied out, every product on the fixed-size matrices.
+#[allow(clippy::too_many_arguments)]
+fn riccati_on<Nd: Dim, Md: Dim>(
+    nd: Nd,
+    md: Md,
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    model: ValueModel,
+    jacobians: &mut StepJacobians<'_>,
+    mut second: Option<&mut SecondDerivatives<'_>>,
+) -> Result<TrackingController, ControlError>
+where
+    DefaultAllocator: SmallAlloc<Nd, Md>,
+{
+    let (n, m) = (nd.value(), md.value());
+    let horizon = us.len();
+    let nn = || OMatrix::<f64, Nd, Nd>::zeros_generic(nd, nd);
+    let nm = || OMatrix::<f64, Nd, Md>::zeros_generic(nd, md);
+    let mn = || OMatrix::<f64, Md, Nd>::zeros_generic(md, nd);
+    let mm = || OMatrix::<f64, Md, Md>::zeros_generic(md, md);
+    let vn = || OVector::<f64, Nd>::zeros_generic(nd, U1);
+    let vm = || OVector::<f64, Md>::zeros_generic(md, U1);
+    // The sources write heap matrices; they are copied into the fixed-size ones.
+    let (mut a_src, mut b_src) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
+    let mut l_src = StageDerivatives::new(n, m);
+    let (mut a, mut b) = (nn(), nm());
+    let (mut lx, mut lu, mut lxx, mut luu) = (vn(), vm(), nn(), mm());
     let mut fzz = match model {
         ValueModel::Lqr => Vec::new(),
         ValueModel::Ddp { .. } => vec![DMatrix::zeros(n + m, n + m); n],
@@ -224,50 +257,51 @@ fn riccati(
     let mut value_ref = vec![0.0; horizon + 1];
     let mut pv = vec![DVector::zeros(n); horizon + 1];
     let mut pm = vec![DMatrix::zeros(n, n); horizon + 1];
+    // p_{k+1} and P_{k+1}, then p_k and P_k.
+    let (mut p1, mut hess1, mut p, mut hess) = (vn(), nn(), vn(), nn());
     {
         let (p_n, hess_n) = (&mut pv[horizon], &mut pm[horizon]);
         cost.terminal_derivatives(&xs[horizon], p_n, hess_n);
         value_ref[horizon] = cost.terminal(&xs[horizon]);
+        copy_into(&mut p1, p_n);
+        copy_into(&mut hess1, hess_n);
     }
     // Scratch for the step: every product is written in place (`mul_to`, `transpose_to`), the
     // same kernels and summation order as the operator forms, so the loop does not allocate.
-    let (mut at, mut bt) = (DMatrix::zeros(n, n), DMatrix::zeros(m, n));
-    let (mut qx, mut qu) = (DVector::zeros(n), DVector::zeros(m));
-    let (mut tn, mut tm) = (DVector::zeros(n), DVector::zeros(m));
-    let (mut pa, mut qxx, mut tnn) = (
-        DMatrix::zeros(n, n),
-        DMatrix::zeros(n, n),
-        DMatrix::zeros(n, n),
-    );
-    let (mut quu, mut tmm, mut chol) = (
-        DMatrix::zeros(m, m),
-        DMatrix::zeros(m, m),
-        DMatrix::zeros(m, m),
-    );
-    let (mut qux, mut tmn) = (DMatrix::zeros(m, n), DMatrix::zeros(m, n));
-    let (mut gt, mut tnm) = (DMatrix::zeros(n, m), DMatrix::zeros(n, m));
+    let (mut at, mut bt) = (nn(), mn());
+    let (mut qx, mut qu) = (vn(), vm());
+    let (mut tn, mut tm) = (vn(), vm());
+    let (mut pa, mut qxx, mut tnn) = (nn(), nn(), nn());
+    let (mut quu, mut tmm, mut chol) = (mm(), mm(), mm());
+    let (mut qux, mut tmn) = (mn(), mn());
+    let (mut gt, mut tnm) = (nm(), nm());
+    let mut gain = mn();
     for k in (0..horizon).rev() {
-        jacobians(k, &xs[k], &us[k], &mut a, &mut b);
-        cost.running_derivatives(k, &xs[k], &us[k], &mut l);
-        let (done, next) = pm.split_at_mut(k + 1);
-        let (p1, hess1, hess) = (&pv[k + 1], &next[0], &mut done[k]);
+        jacobians(k, &xs[k], &us[k], &mut a_src, &mut b_src);
+        copy_into(&mut a, &a_src);
+        copy_into(&mut b, &b_src);
+        cost.running_derivatives(k, &xs[k], &us[k], &mut l_src);
+        copy_into(&mut lx, &l_src.lx);
+        copy_into(&mut lu, &l_src.lu);
+        copy_into(&mut lxx, &l_src.lxx);
+        copy_into(&mut luu, &l_src.luu);
         a.transpose_to(&mut at);
         b.transpose_to(&mut bt);
         // Q_x = l_x + Aᵀ p', Q_u = l_u + Bᵀ p'.
-        at.mul_to(p1, &mut tn);
-        qx.copy_from(&l.lx);
+        at.mul_to(&p1, &mut tn);
+        qx.copy_from(&lx);
         qx += &tn;
-        bt.mul_to(p1, &mut tm);
-        qu.copy_from(&l.lu);
+        bt.mul_to(&p1, &mut tm);
+        qu.copy_from(&lu);
         qu += &tm;
         // Q_xx = l_xx + Aᵀ (P' A), Q_uu = l_uu + (Bᵀ P') B, Q_ux = Bᵀ (P' A).
         hess1.mul_to(&a, &mut pa);
         at.mul_to(&pa, &mut tnn);
-        qxx.copy_from(&l.lxx);
+        qxx.copy_from(&lxx);
         qxx += &tnn;
-        bt.mul_to(hess1, &mut tmn);
+        bt.mul_to(&hess1, &mut tmn);
         tmn.mul_to(&b, &mut tmm);
-        quu.copy_from(&l.luu);
+        quu.copy_from(&luu);
         quu += &tmm;
         bt.mul_to(&pa, &mut qux);
         if let (ValueModel::Ddp { fd_step }, Some(second)) = (model, second.as_mut()) {
@@ -293,28 +327,33 @@ fn riccati(
         if !cholesky_in_place(&mut chol, m) {
             return Err(ControlError::NotPositiveDefinite { step: k });
         }
-        let gain = &mut gains[k];
         gain.copy_from(&qux);
         gain.neg_mut();
-        for j in 0..n {
-            cholesky_solve_in_place(&chol, m, gain.column_mut(j).as_mut_slice());
+        // Column by column (column-major storage).
+        for column in gain.as_mut_slice().chunks_exact_mut(m.max(1)) {
+            cholesky_solve_in_place(&chol, m, column);
         }
         // p = Q_x + Kᵀ Q_u.
         gain.transpose_to(&mut gt);
         gt.mul_to(&qu, &mut tn);
-        pv[k].copy_from(&qx);
-        pv[k] += &tn;
+        p.copy_from(&qx);
+        p += &tn;
         // P = Q_xx + (Kᵀ Q_uu) K + Kᵀ Q_ux + Q_uxᵀ K, summed in that order.
         gt.mul_to(&quu, &mut tnm);
-        tnm.mul_to(gain, &mut tnn);
+        tnm.mul_to(&gain, &mut tnn);
         hess.copy_from(&qxx);
-        *hess += &tnn;
+        hess += &tnn;
         gt.mul_to(&qux, &mut tnn);
-        *hess += &tnn;
+        hess += &tnn;
         qux.transpose_to(&mut tnm);
-        tnm.mul_to(gain, &mut tnn);
-        *hess += &tnn;
-        symmetrize(hess);
+        tnm.mul_to(&gain, &mut tnn);
+        hess += &tnn;
+        symmetrize(&mut hess);
+        copy_into(&mut gains[k], &gain);
+        copy_into(&mut pv[k], &p);
+        copy_into(&mut pm[k], &hess);
+        std::mem::swap(&mut p1, &mut p);
+        std::mem::swap(&mut hess1, &mut hess);
         value_ref[k] = cost.running(k, &xs[k], &us[k]) + value_ref[k + 1];
     }
     Ok(TrackingController {
@@ -432,6 +471,58 @@ mod tests {
                 (v - total).abs() < 1e-10 * total.abs().max(1.0),
                 "k0 = {k0}: {v} vs {total}"
             );
+        }
+    }
+
+    #[test]
+    fn fixed_size_recursion_is_the_dynamic_one_bit_for_bit() {
+        // The acrobot (4 × 1) runs on fixed-size matrices (`super::super::small`); the heap
+        // path must give the same gains and value functions, bit for bit, for both value models
+        // and with a running state cost.
+        use crate::control::StateCost;
+        use crate::physics::acrobot::Acrobot;
+        use nalgebra::Dyn;
+        let dt = 0.02;
+        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
+        let x0 = DVector::from_vec(vec![-1.2, 0.3, 0.5, -0.7]);
+        let us: Vec<DVector<f64>> = (0..60)
+            .map(|k| DVector::from_element(1, 4.0 * (k as f64 * dt * 5.0).sin()))
+            .collect();
+        let xs = map.rollout(&x0, &us).unwrap();
+        let q = DMatrix::from_fn(4, 4, |i, j| if i == j { 3.0 + i as f64 } else { 0.4 });
+        let mut cost =
+            QuadraticCost::effort(dt, 1, DMatrix::identity(4, 4) * 5.0, DVector::zeros(4));
+        cost.r *= 100.0;
+        cost.state = Some(StateCost {
+            weight: q,
+            reference: xs[..60].to_vec(),
+        });
+        let bits = |ctl: &TrackingController| -> Vec<u64> {
+            let matrices = ctl.gains.iter().chain(&ctl.value_hessian);
+            let vectors = ctl.value_gradient.iter();
+            matrices
+                .flat_map(|a| a.iter())
+                .chain(vectors.flat_map(|v| v.iter()))
+                .chain(&ctl.value_ref)
+                .map(|v| v.to_bits())
+                .collect()
+        };
+        for model in [ValueModel::Lqr, ValueModel::Ddp { fd_step: 1e-5 }] {
+            let fixed = track_with(&map, &cost, &xs, &us, model).unwrap();
+            let mut ws = map.workspace();
+            let mut ws2 = map.workspace();
+            let mut second = |x: &DVector<f64>, u: &DVector<f64>, h: f64, f: &mut [DMatrix<f64>]| {
+                map.second_derivatives(x, u, h, f, &mut ws2)
+            };
+            let second: Option<&mut SecondDerivatives<'_>> = match model {
+                ValueModel::Lqr => None,
+                ValueModel::Ddp { .. } => Some(&mut second),
+            };
+            let mut jac = |_: usize, x: &DVector<f64>, u: &DVector<f64>, a: &mut DMatrix<f64>,
+                           b: &mut DMatrix<f64>| map.jacobians(x, u, a, b, &mut ws);
+            let dynamic =
+                riccati_on(Dyn(4), Dyn(1), &cost, &xs, &us, model, &mut jac, second).unwrap();
+            assert_eq!(bits(&fixed), bits(&dynamic), "{model:?}");
         }
     }
 

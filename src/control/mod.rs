@@ -48,11 +48,12 @@ pub mod step_tracker;
 
 mod cost;
 mod rk4;
+pub(crate) mod small;
 
 pub use cost::{QuadraticCost, StageDerivatives, StateCost};
 pub use rk4::{Rk4Map, Rk4StepScratch, Rk4Workspace};
 
-use nalgebra::DMatrix;
+use nalgebra::{Dim, Matrix, RawStorage, RawStorageMut};
 
 /// Errors of the control module; each carries the offending value.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -127,7 +128,7 @@ pub(crate) fn check_dim(
 }
 
 /// Replaces a square matrix by ½(A + Aᵀ) in place.
-pub(crate) fn symmetrize(a: &mut DMatrix<f64>) {
+pub(crate) fn symmetrize<N: Dim, S: RawStorageMut<f64, N, N>>(a: &mut Matrix<f64, N, N, S>) {
     let n = a.nrows();
     for j in 0..n {
         for i in 0..j {
@@ -140,7 +141,10 @@ pub(crate) fn symmetrize(a: &mut DMatrix<f64>) {
 
 /// In-place Cholesky factorization of the leading `dim` × `dim` block of `a` (its lower
 /// triangle becomes L with A = L Lᵀ). Returns false when the block is not positive definite.
-pub(crate) fn cholesky_in_place(a: &mut DMatrix<f64>, dim: usize) -> bool {
+pub(crate) fn cholesky_in_place<R: Dim, C: Dim, S: RawStorageMut<f64, R, C>>(
+    a: &mut Matrix<f64, R, C, S>,
+    dim: usize,
+) -> bool {
     for j in 0..dim {
         let mut d = a[(j, j)];
         for k in 0..j {
@@ -163,7 +167,11 @@ pub(crate) fn cholesky_in_place(a: &mut DMatrix<f64>, dim: usize) -> bool {
 }
 
 /// Solves L Lᵀ y = b in place with the factor of [`cholesky_in_place`] (leading `dim` block).
-pub(crate) fn cholesky_solve_in_place(l: &DMatrix<f64>, dim: usize, b: &mut [f64]) {
+pub(crate) fn cholesky_solve_in_place<R: Dim, C: Dim, S: RawStorage<f64, R, C>>(
+    l: &Matrix<f64, R, C, S>,
+    dim: usize,
+    b: &mut [f64],
+) {
     for i in 0..dim {
         let mut s = b[i];
         for k in 0..i {
@@ -240,7 +248,7 @@ pub(crate) mod test_models {
 mod tests {
     use super::*;
     use crate::physics::acrobot::Acrobot;
-    use nalgebra::DVector;
+    use nalgebra::{DMatrix, DVector};
 
     #[test]
     fn cholesky_helpers_solve_spd_systems_and_reject_indefinite_ones() {

@@ -22,10 +22,11 @@
 //! - E. Hairer, S. P. Nørsett, G. Wanner, *Solving Ordinary Differential Equations I*,
 //!   Springer 1993, §II.1 (the classic Runge–Kutta method).
 
+use super::small::{copy_into, on_dims, SmallAlloc};
 use super::{symmetrize, ControlError};
 use crate::physics::linearize::Linearize;
 use crate::physics::{DifferentiableStep, Ode};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix};
 
 /// Scratch buffers of [`Rk4Map`]; make one with [`Rk4Map::workspace`].
 #[derive(Debug, Clone)]
@@ -34,15 +35,50 @@ pub struct Rk4Workspace {
     y: DVector<f64>,
     a: DMatrix<f64>,
     b: DMatrix<f64>,
-    dkx: [DMatrix<f64>; 4],
-    dku: [DMatrix<f64>; 4],
-    tmp: DMatrix<f64>,
+    /// The Jacobian chain for sizes without fixed-size matrices ([`super::small`]).
+    chain: Chain<Dyn, Dyn>,
     xp: DVector<f64>,
     up: DVector<f64>,
     fxp: DMatrix<f64>,
     fup: DMatrix<f64>,
     fxm: DMatrix<f64>,
     fum: DMatrix<f64>,
+}
+
+/// The matrices of [`Rk4Map::jacobians`]' chain for n states and m controls: a stage's
+/// Jacobians (A, B), ∂k_s/∂x and ∂k_s/∂u of the four stages, a product's scratch and the
+/// sums F_x, F_u. On the stack for fixed sizes.
+#[derive(Debug, Clone)]
+struct Chain<N: Dim, M: Dim>
+where
+    DefaultAllocator: SmallAlloc<N, M>,
+{
+    a: OMatrix<f64, N, N>,
+    b: OMatrix<f64, N, M>,
+    dkx: [OMatrix<f64, N, N>; 4],
+    dku: [OMatrix<f64, N, M>; 4],
+    tmp: OMatrix<f64, N, N>,
+    fx: OMatrix<f64, N, N>,
+    fu: OMatrix<f64, N, M>,
+}
+
+impl<N: Dim, M: Dim> Chain<N, M>
+where
+    DefaultAllocator: SmallAlloc<N, M>,
+{
+    fn new(n: N, m: M) -> Self {
+        let nn = || OMatrix::<f64, N, N>::zeros_generic(n, n);
+        let nm = || OMatrix::<f64, N, M>::zeros_generic(n, m);
+        Self {
+            a: nn(),
+            b: nm(),
+            dkx: [nn(), nn(), nn(), nn()],
+            dku: [nm(), nm(), nm(), nm()],
+            tmp: nn(),
+            fx: nn(),
+            fu: nm(),
+        }
+    }
 }
 
 /// The discrete-time map F(x, u): one classic RK4 step of `dt` of a continuous model, with the
@@ -85,9 +121,7 @@ impl<M: Ode> Rk4Map<M> {
             y: v(),
             a: nn(),
             b: nm(),
-            dkx: [nn(), nn(), nn(), nn()],
-            dku: [nm(), nm(), nm(), nm()],
-            tmp: nn(),
+            chain: Chain::new(Dyn(n), Dyn(m)),
             xp: v(),
             up: DVector::zeros(m),
             fxp: nn(),
@@ -157,7 +191,8 @@ impl<M: Ode> Rk4Map<M> {
 
 impl<M: Linearize> Rk4Map<M> {
     /// Writes the exact Jacobians F_x (n × n) and F_u (n × m) of the RK4 map at (x, u),
-    /// chained through the stage Jacobians (see the module docs). Does not allocate.
+    /// chained through the stage Jacobians (see the module docs). Does not allocate; on
+    /// fixed-size matrices where [`super::small`] has the size.
     pub fn jacobians(
         &self,
         x: &DVector<f64>,
@@ -166,6 +201,36 @@ impl<M: Linearize> Rk4Map<M> {
         fu: &mut DMatrix<f64>,
         ws: &mut Rk4Workspace,
     ) {
+        on_dims!(
+            x.len(),
+            u.len(),
+            |n, m| {
+                let mut chain = Chain::new(n, m);
+                self.chain(x, u, &mut chain, ws);
+                copy_into(fx, &chain.fx);
+                copy_into(fu, &chain.fu);
+            },
+            |_n, _m| {
+                let mut chain = std::mem::replace(&mut ws.chain, Chain::new(Dyn(0), Dyn(0)));
+                self.chain(x, u, &mut chain, ws);
+                copy_into(fx, &chain.fx);
+                copy_into(fu, &chain.fu);
+                ws.chain = chain;
+            }
+        )
+    }
+
+    /// The Jacobian chain of the module docs into `ch.fx`, `ch.fu`; the model's stage
+    /// Jacobians go through `ws.a`, `ws.b`.
+    fn chain<Nd: Dim, Md: Dim>(
+        &self,
+        x: &DVector<f64>,
+        u: &DVector<f64>,
+        ch: &mut Chain<Nd, Md>,
+        ws: &mut Rk4Workspace,
+    ) where
+        DefaultAllocator: SmallAlloc<Nd, Md>,
+    {
         let h = self.dt;
         let c = [0.0, 0.5 * h, 0.5 * h, h];
         for s in 0..4 {
@@ -178,29 +243,31 @@ impl<M: Linearize> Rk4Map<M> {
                 &mut ws.a,
                 &mut ws.b,
             );
+            copy_into(&mut ch.a, &ws.a);
+            copy_into(&mut ch.b, &ws.b);
             if s == 0 {
-                ws.dkx[0].copy_from(&ws.a);
-                ws.dku[0].copy_from(&ws.b);
+                ch.dkx[0].copy_from(&ch.a);
+                ch.dku[0].copy_from(&ch.b);
             } else {
                 // ∂k_s/∂x = A (I + c ∂k_{s−1}/∂x)
-                ws.tmp.copy_from(&ws.dkx[s - 1]);
-                ws.tmp *= c[s];
-                for i in 0..ws.tmp.nrows() {
-                    ws.tmp[(i, i)] += 1.0;
+                ch.tmp.copy_from(&ch.dkx[s - 1]);
+                ch.tmp *= c[s];
+                for i in 0..ch.tmp.nrows() {
+                    ch.tmp[(i, i)] += 1.0;
                 }
-                ws.a.mul_to(&ws.tmp, &mut ws.dkx[s]);
+                ch.a.mul_to(&ch.tmp, &mut ch.dkx[s]);
                 // ∂k_s/∂u = c A ∂k_{s−1}/∂u + B
-                let (prev, cur) = ws.dku.split_at_mut(s);
-                cur[0].copy_from(&ws.b);
-                cur[0].gemm(c[s], &ws.a, &prev[s - 1], 1.0);
+                let (prev, cur) = ch.dku.split_at_mut(s);
+                cur[0].copy_from(&ch.b);
+                cur[0].gemm(c[s], &ch.a, &prev[s - 1], 1.0);
             }
         }
         let w = h / 6.0;
-        fx.fill_with_identity();
-        fu.fill(0.0);
+        ch.fx.fill_with_identity();
+        ch.fu.fill(0.0);
         for (s, weight) in [w, 2.0 * w, 2.0 * w, w].into_iter().enumerate() {
-            fx.zip_apply(&ws.dkx[s], |a, b| *a += weight * b);
-            fu.zip_apply(&ws.dku[s], |a, b| *a += weight * b);
+            ch.fx.zip_apply(&ch.dkx[s], |a, b| *a += weight * b);
+            ch.fu.zip_apply(&ch.dku[s], |a, b| *a += weight * b);
         }
     }
 
@@ -348,6 +415,34 @@ mod tests {
         // Same scheme; only the summation order (one rounding) may differ.
         for (a, b) in out.iter().zip(&y) {
             assert!((a - b).abs() < 1e-14, "{out} vs {y:?}");
+        }
+    }
+
+    /// Bit patterns of a matrix's entries.
+    fn bits<R: Dim, C: Dim, S: nalgebra::RawStorage<f64, R, C>>(
+        a: &nalgebra::Matrix<f64, R, C, S>,
+    ) -> Vec<u64> {
+        a.iter().map(|v| v.to_bits()).collect()
+    }
+
+    #[test]
+    fn fixed_size_jacobian_chain_is_the_dynamic_one_bit_for_bit() {
+        // The acrobot (4 × 1) runs on fixed-size matrices; the heap path must give the same
+        // bits (`super::super::small`), including at large states and controls.
+        let map = Rk4Map::new(Acrobot::default(), 0.05).unwrap();
+        let mut ws = map.workspace();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let (mut fx, mut fu) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
+        let mut dynamic = Chain::new(Dyn(4), Dyn(1));
+        for scale in [0.1, 3.0, 300.0] {
+            for _ in 0..200 {
+                let x = random_vec(&mut rng, 4, scale);
+                let u = random_vec(&mut rng, 1, 5.0 * scale);
+                map.jacobians(&x, &u, &mut fx, &mut fu, &mut ws);
+                map.chain(&x, &u, &mut dynamic, &mut ws);
+                assert_eq!(bits(&fx), bits(&dynamic.fx), "F_x at {x}");
+                assert_eq!(bits(&fu), bits(&dynamic.fu), "F_u at {x}");
+            }
         }
     }
 
