@@ -511,15 +511,20 @@ mod tests {
             let fixed = track_with(&map, &cost, &xs, &us, model).unwrap();
             let mut ws = map.workspace();
             let mut ws2 = map.workspace();
-            let mut second = |x: &DVector<f64>, u: &DVector<f64>, h: f64, f: &mut [DMatrix<f64>]| {
-                map.second_derivatives(x, u, h, f, &mut ws2)
-            };
+            let mut second =
+                |x: &DVector<f64>, u: &DVector<f64>, h: f64, f: &mut [DMatrix<f64>]| {
+                    map.second_derivatives(x, u, h, f, &mut ws2)
+                };
             let second: Option<&mut SecondDerivatives<'_>> = match model {
                 ValueModel::Lqr => None,
                 ValueModel::Ddp { .. } => Some(&mut second),
             };
-            let mut jac = |_: usize, x: &DVector<f64>, u: &DVector<f64>, a: &mut DMatrix<f64>,
-                           b: &mut DMatrix<f64>| map.jacobians(x, u, a, b, &mut ws);
+            let mut jac =
+                |_: usize,
+                 x: &DVector<f64>,
+                 u: &DVector<f64>,
+                 a: &mut DMatrix<f64>,
+                 b: &mut DMatrix<f64>| map.jacobians(x, u, a, b, &mut ws);
             let dynamic =
                 riccati_on(Dyn(4), Dyn(1), &cost, &xs, &us, model, &mut jac, second).unwrap();
             assert_eq!(bits(&fixed), bits(&dynamic), "{model:?}");

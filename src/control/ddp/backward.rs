@@ -28,12 +28,16 @@
 //!   online trajectory optimization*, IROS 2012.
 
 use super::{box_qp, Buffers, DdpOptions, DdpVariant};
+use crate::control::small::{copy_into, on_dims, SmallAlloc};
 use crate::control::{
     cholesky_in_place, cholesky_solve_in_place, symmetrize, ControlError, QuadraticCost, Rk4Map,
     StageDerivatives,
 };
 use crate::physics::linearize::Linearize;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{
+    DMatrix, DVector, DefaultAllocator, Dim, Matrix, OMatrix, OVector, RawStorage, RawStorageMut,
+    U1,
+};
 
 /// Exact gradient ∂J/∂u_k of the total cost for the controls `us` from `x0` (adjoint method).
 pub fn cost_gradient<M: Linearize>(
@@ -68,7 +72,8 @@ pub(super) struct BackwardResult {
 }
 
 /// Backward pass at (xs, us) with regularization μ; `None` when Q_uu + μI is not positive
-/// definite at some step. Does not allocate.
+/// definite at some step. On fixed-size matrices where [`crate::control::small`] has the size
+/// (without heap allocation), else on heap matrices allocated once per pass.
 pub(super) fn backward(
     cost: &QuadraticCost,
     xs: &[DVector<f64>],
@@ -77,100 +82,207 @@ pub(super) fn backward(
     options: &DdpOptions,
     b: &mut Buffers,
 ) -> Option<BackwardResult> {
+    on_dims!(xs[0].len(), us[0].len(), |nd, md| backward_on(
+        nd, md, cost, xs, us, mu, options, b
+    ))
+}
+
+/// nalgebra's dot product of two dynamic-size vectors, in its summation order (eight partial
+/// sums over blocks of eight, then the rest in turn from the first), for any storage: the
+/// products Aᵀx of [`backward_on`] keep the bits of the heap matrices' `gemv_tr`, whose
+/// fixed-size dot products of 2 to 4 values add in another order.
+fn dot<D: Dim, S1, S2>(a: &Matrix<f64, D, U1, S1>, b: &Matrix<f64, D, U1, S2>) -> f64
+where
+    S1: RawStorage<f64, D>,
+    S2: RawStorage<f64, D>,
+{
+    let n = a.nrows();
+    let mut res = 0.0;
+    let mut acc = [0.0; 8];
+    let mut i = 0;
+    while n - i >= 8 {
+        for (l, acc) in acc.iter_mut().enumerate() {
+            *acc += a[i + l] * b[i + l];
+        }
+        i += 8;
+    }
+    for l in 0..4 {
+        res += acc[l] + acc[l + 4];
+    }
+    for k in i..n {
+        res += a[k] * b[k];
+    }
+    res
+}
+
+/// y ← α Aᵀx + βy with [`dot`] (β = 0: y is not read), as nalgebra's `gemv_tr`.
+fn gemv_tr<R: Dim, C: Dim, SY, SA, SX>(
+    y: &mut Matrix<f64, C, U1, SY>,
+    alpha: f64,
+    a: &Matrix<f64, R, C, SA>,
+    x: &Matrix<f64, R, U1, SX>,
+    beta: f64,
+) where
+    SY: RawStorageMut<f64, C>,
+    SA: RawStorage<f64, R, C>,
+    SX: RawStorage<f64, R>,
+{
+    for j in 0..a.ncols() {
+        let d = alpha * dot(&a.column(j), x);
+        y[j] = if beta == 0.0 { d } else { d + beta * y[j] };
+    }
+}
+
+/// C ← α AᵀB + βC column by column with [`gemv_tr`], as nalgebra's `gemm_tr`.
+fn gemm_tr<R: Dim, C1: Dim, C2: Dim, SC, SA, SB>(
+    c: &mut Matrix<f64, C1, C2, SC>,
+    alpha: f64,
+    a: &Matrix<f64, R, C1, SA>,
+    b: &Matrix<f64, R, C2, SB>,
+    beta: f64,
+) where
+    SC: RawStorageMut<f64, C1, C2>,
+    SA: RawStorage<f64, R, C1>,
+    SB: RawStorage<f64, R, C2>,
+{
+    for j in 0..c.ncols() {
+        gemv_tr(&mut c.column_mut(j), alpha, a, &b.column(j), beta);
+    }
+}
+
+/// [`backward`] on matrices of dimensions `Nd` × `Md`: the step's Jacobians and the cost's
+/// derivatives are copied in and the gains copied out; the bounded case's QP works on the heap
+/// buffers of `b`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn backward_on<Nd: Dim, Md: Dim>(
+    nd: Nd,
+    md: Md,
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+    mu: f64,
+    options: &DdpOptions,
+    b: &mut Buffers,
+) -> Option<BackwardResult>
+where
+    DefaultAllocator: SmallAlloc<Nd, Md>,
+{
     let horizon = us.len();
-    let n = xs[0].len();
-    let m = us[0].len();
+    let (n, m) = (nd.value(), md.value());
     let full = options.variant == DdpVariant::Full;
+    let nn = || OMatrix::<f64, Nd, Nd>::zeros_generic(nd, nd);
+    let nm = || OMatrix::<f64, Nd, Md>::zeros_generic(nd, md);
+    let mn = || OMatrix::<f64, Md, Nd>::zeros_generic(md, nd);
+    let mm = || OMatrix::<f64, Md, Md>::zeros_generic(md, md);
+    let vn = || OVector::<f64, Nd>::zeros_generic(nd, U1);
+    let vm = || OVector::<f64, Md>::zeros_generic(md, U1);
+    let (mut fx, mut fu) = (nn(), nm());
+    let (mut lx, mut lu, mut lxx, mut luu) = (vn(), vm(), nn(), mm());
+    let (mut vx, mut vxx, mut lam, mut lam_tmp) = (vn(), nn(), vn(), vn());
+    let (mut qx, mut qu, mut qxx, mut quu, mut qux, mut quu_reg) =
+        (vn(), vm(), nn(), mm(), mn(), mm());
+    let (mut vxx_fx, mut vxx_fu, mut gu, mut tm, mut tmn) = (nn(), nm(), vm(), vm(), mn());
+    let (mut kff, mut gain) = (vm(), mn());
     cost.terminal_derivatives(&xs[horizon], &mut b.vx, &mut b.vxx);
-    b.lam.copy_from(&b.vx);
+    copy_into(&mut vx, &b.vx);
+    copy_into(&mut vxx, &b.vxx);
+    lam.copy_from(&vx);
     let (mut dv1, mut dv2, mut g2) = (0.0, 0.0, 0.0);
     for k in (0..horizon).rev() {
-        let (fx, fu) = (&b.fx[k], &b.fu[k]);
+        copy_into(&mut fx, &b.fx[k]);
+        copy_into(&mut fu, &b.fu[k]);
         cost.running_derivatives(k, &xs[k], &us[k], &mut b.l);
+        copy_into(&mut lx, &b.l.lx);
+        copy_into(&mut lu, &b.l.lu);
+        copy_into(&mut lxx, &b.l.lxx);
+        copy_into(&mut luu, &b.l.luu);
         // Exact (adjoint) gradient, projected on the bounds.
-        b.gu.copy_from(&b.l.lu);
-        b.gu.gemv_tr(1.0, fu, &b.lam, 1.0);
+        gu.copy_from(&lu);
+        gemv_tr(&mut gu, 1.0, &fu, &lam, 1.0);
         if let Some(bounds) = &options.bounds {
-            for (i, g) in b.gu.iter_mut().enumerate() {
+            for (i, g) in gu.iter_mut().enumerate() {
                 let u = us[k][i];
                 if (u <= bounds.lower[i] && *g > 0.0) || (u >= bounds.upper[i] && *g < 0.0) {
                     *g = 0.0;
                 }
             }
         }
-        g2 += b.gu.norm_squared();
-        b.lam_tmp.copy_from(&b.l.lx);
-        b.lam_tmp.gemv_tr(1.0, fx, &b.lam, 1.0);
-        std::mem::swap(&mut b.lam, &mut b.lam_tmp);
+        // ‖g‖² as nalgebra's `norm_squared`: 0 + g·g.
+        g2 += 0.0 + dot(&gu, &gu);
+        lam_tmp.copy_from(&lx);
+        gemv_tr(&mut lam_tmp, 1.0, &fx, &lam, 1.0);
+        std::mem::swap(&mut lam, &mut lam_tmp);
 
         // Q function.
-        b.qx.copy_from(&b.l.lx);
-        b.qx.gemv_tr(1.0, fx, &b.vx, 1.0);
-        b.qu.copy_from(&b.l.lu);
-        b.qu.gemv_tr(1.0, fu, &b.vx, 1.0);
-        b.vxx.mul_to(fx, &mut b.vxx_fx);
-        b.vxx.mul_to(fu, &mut b.vxx_fu);
-        b.qxx.copy_from(&b.l.lxx);
-        b.qxx.gemm_tr(1.0, fx, &b.vxx_fx, 1.0);
-        b.quu.copy_from(&b.l.luu);
-        b.quu.gemm_tr(1.0, fu, &b.vxx_fu, 1.0);
-        b.qux.gemm_tr(1.0, fu, &b.vxx_fx, 0.0);
+        qx.copy_from(&lx);
+        gemv_tr(&mut qx, 1.0, &fx, &vx, 1.0);
+        qu.copy_from(&lu);
+        gemv_tr(&mut qu, 1.0, &fu, &vx, 1.0);
+        vxx.mul_to(&fx, &mut vxx_fx);
+        vxx.mul_to(&fu, &mut vxx_fu);
+        qxx.copy_from(&lxx);
+        gemm_tr(&mut qxx, 1.0, &fx, &vxx_fx, 1.0);
+        quu.copy_from(&luu);
+        gemm_tr(&mut quu, 1.0, &fu, &vxx_fu, 1.0);
+        gemm_tr(&mut qux, 1.0, &fu, &vxx_fx, 0.0);
         if full {
             for (a, hess) in b.fzz[k].iter().enumerate() {
-                let w = b.vx[a];
+                let w = vx[a];
                 for j in 0..n {
                     for i in 0..n {
-                        b.qxx[(i, j)] += w * hess[(i, j)];
+                        qxx[(i, j)] += w * hess[(i, j)];
                     }
                     for i in 0..m {
-                        b.qux[(i, j)] += w * hess[(n + i, j)];
+                        qux[(i, j)] += w * hess[(n + i, j)];
                     }
                 }
                 for j in 0..m {
                     for i in 0..m {
-                        b.quu[(i, j)] += w * hess[(n + i, n + j)];
+                        quu[(i, j)] += w * hess[(n + i, n + j)];
                     }
                 }
             }
         }
-        b.quu_reg.copy_from(&b.quu);
+        quu_reg.copy_from(&quu);
         for i in 0..m {
-            b.quu_reg[(i, i)] += mu;
+            quu_reg[(i, i)] += mu;
         }
 
         // Gains.
-        let (kff, gain) = (&mut b.kff[k], &mut b.gains[k]);
         match &options.bounds {
             None => {
-                if !cholesky_in_place(&mut b.quu_reg, m) {
+                if !cholesky_in_place(&mut quu_reg, m) {
                     return None;
                 }
                 for i in 0..m {
-                    kff[i] = -b.qu[i];
+                    kff[i] = -qu[i];
                 }
-                cholesky_solve_in_place(&b.quu_reg, m, kff.as_mut_slice());
-                gain.copy_from(&b.qux);
+                cholesky_solve_in_place(&quu_reg, m, kff.as_mut_slice());
+                gain.copy_from(&qux);
                 gain.neg_mut();
-                for j in 0..n {
-                    cholesky_solve_in_place(&b.quu_reg, m, gain.column_mut(j).as_mut_slice());
+                // Column by column (column-major storage).
+                for column in gain.as_mut_slice().chunks_exact_mut(m.max(1)) {
+                    cholesky_solve_in_place(&quu_reg, m, column);
                 }
             }
             Some(bounds) => {
+                copy_into(&mut b.quu_reg, &quu_reg);
+                copy_into(&mut b.qu, &qu);
                 b.lo.copy_from(&bounds.lower);
                 b.lo -= &us[k];
                 b.hi.copy_from(&bounds.upper);
                 b.hi -= &us[k];
                 // Warm start from the previous iteration's feedforward step.
-                if !box_qp(&b.quu_reg, &b.qu, &b.lo, &b.hi, kff, &mut b.qp) {
+                if !box_qp(&b.quu_reg, &b.qu, &b.lo, &b.hi, &b.kff[k], &mut b.qp) {
                     return None;
                 }
-                kff.copy_from(&b.qp.x);
+                copy_into(&mut kff, &b.qp.x);
                 gain.fill(0.0);
                 let nf = b.qp.free_index.len();
                 for j in 0..n {
                     b.qp.rhs.clear();
                     for &i in &b.qp.free_index {
-                        b.qp.rhs.push(-b.qux[(i, j)]);
+                        b.qp.rhs.push(-qux[(i, j)]);
                     }
                     cholesky_solve_in_place(&b.qp.factor, nf, &mut b.qp.rhs);
                     for (a, &i) in b.qp.free_index.iter().enumerate() {
@@ -179,21 +291,23 @@ pub(super) fn backward(
                 }
             }
         }
+        copy_into(&mut b.kff[k], &kff);
+        copy_into(&mut b.gains[k], &gain);
 
         // Expected reduction and value update.
-        b.tm.gemv(1.0, &b.quu, kff, 0.0);
-        dv1 += kff.dot(&b.qu);
-        dv2 += 0.5 * kff.dot(&b.tm);
-        b.vx.copy_from(&b.qx);
-        b.vx.gemv_tr(1.0, gain, &b.tm, 1.0);
-        b.vx.gemv_tr(1.0, gain, &b.qu, 1.0);
-        b.vx.gemv_tr(1.0, &b.qux, kff, 1.0);
-        b.tmn.gemm(1.0, &b.quu, gain, 0.0);
-        b.vxx.copy_from(&b.qxx);
-        b.vxx.gemm_tr(1.0, gain, &b.tmn, 1.0);
-        b.vxx.gemm_tr(1.0, gain, &b.qux, 1.0);
-        b.vxx.gemm_tr(1.0, &b.qux, gain, 1.0);
-        symmetrize(&mut b.vxx);
+        tm.gemv(1.0, &quu, &kff, 0.0);
+        dv1 += dot(&kff, &qu);
+        dv2 += 0.5 * dot(&kff, &tm);
+        vx.copy_from(&qx);
+        gemv_tr(&mut vx, 1.0, &gain, &tm, 1.0);
+        gemv_tr(&mut vx, 1.0, &gain, &qu, 1.0);
+        gemv_tr(&mut vx, 1.0, &qux, &kff, 1.0);
+        tmn.gemm(1.0, &quu, &gain, 0.0);
+        vxx.copy_from(&qxx);
+        gemm_tr(&mut vxx, 1.0, &gain, &tmn, 1.0);
+        gemm_tr(&mut vxx, 1.0, &gain, &qux, 1.0);
+        gemm_tr(&mut vxx, 1.0, &qux, &gain, 1.0);
+        symmetrize(&mut vxx);
     }
     Some(BackwardResult {
         dv1,

@@ -56,6 +56,8 @@ pub use box_qp::{box_qp, BoxQpWorkspace};
 use super::{ControlError, QuadraticCost, Rk4Map, Rk4Workspace, StageDerivatives};
 use crate::physics::linearize::Linearize;
 use backward::backward;
+#[cfg(test)]
+use backward::backward_on;
 use nalgebra::{DMatrix, DVector};
 
 /// Which DDP variant to run.
@@ -202,20 +204,9 @@ struct Buffers {
     u_new: Vec<DVector<f64>>,
     vx: DVector<f64>,
     vxx: DMatrix<f64>,
-    lam: DVector<f64>,
-    lam_tmp: DVector<f64>,
     l: StageDerivatives,
-    qx: DVector<f64>,
     qu: DVector<f64>,
-    qxx: DMatrix<f64>,
-    quu: DMatrix<f64>,
-    qux: DMatrix<f64>,
     quu_reg: DMatrix<f64>,
-    vxx_fx: DMatrix<f64>,
-    vxx_fu: DMatrix<f64>,
-    gu: DVector<f64>,
-    tm: DVector<f64>,
-    tmn: DMatrix<f64>,
     dx: DVector<f64>,
     lo: DVector<f64>,
     hi: DVector<f64>,
@@ -241,20 +232,9 @@ impl Buffers {
             u_new: vec![vm(); horizon],
             vx: vn(),
             vxx: DMatrix::zeros(n, n),
-            lam: vn(),
-            lam_tmp: vn(),
             l: StageDerivatives::new(n, m),
-            qx: vn(),
             qu: vm(),
-            qxx: DMatrix::zeros(n, n),
-            quu: DMatrix::zeros(m, m),
-            qux: DMatrix::zeros(m, n),
             quu_reg: DMatrix::zeros(m, m),
-            vxx_fx: DMatrix::zeros(n, n),
-            vxx_fu: DMatrix::zeros(n, m),
-            gu: vm(),
-            tm: vm(),
-            tmn: DMatrix::zeros(m, n),
             dx: vn(),
             lo: vm(),
             hi: vm(),
@@ -625,6 +605,65 @@ mod tests {
                 ((j0 - j) - expected).abs() / (alpha * alpha)
             })
             .collect()
+    }
+
+    #[test]
+    fn fixed_size_backward_pass_is_the_dynamic_one_bit_for_bit() {
+        // The acrobot (4 × 1) runs on fixed-size matrices (`crate::control::small`) with
+        // products in the heap path's summation order; gains, feedforward steps and the
+        // expected reductions must agree bit for bit, for both variants, with and without
+        // bounds (some controls clamped), regularized or not.
+        use nalgebra::Dyn;
+        let dt = 0.02;
+        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
+        let mut cost = swing_up_cost(dt);
+        cost.r *= 20.0;
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let us: Vec<DVector<f64>> = (0..60)
+            .map(|_| DVector::from_element(1, rng.random_range(-3.0..3.0)))
+            .collect();
+        let xs = map
+            .rollout(&DVector::from_vec(vec![-1.2, 0.3, 0.5, -0.4]), &us)
+            .unwrap();
+        let bits = |b: &Buffers, r: &backward::BackwardResult| -> Vec<u64> {
+            let gains = b.gains.iter().flat_map(|g| g.iter());
+            let kff = b.kff.iter().flat_map(|k| k.iter());
+            gains
+                .chain(kff)
+                .chain([&r.dv1, &r.dv2, &r.gradient_norm])
+                .map(|v| v.to_bits())
+                .collect()
+        };
+        for variant in [DdpVariant::Ilqr, DdpVariant::Full] {
+            for bound in [None, Some(2.0)] {
+                for mu in [0.0, 0.3] {
+                    let options = DdpOptions {
+                        variant,
+                        bounds: bound.map(|b| ControlBounds {
+                            lower: DVector::from_element(1, -b),
+                            upper: DVector::from_element(1, b),
+                        }),
+                        ..DdpOptions::default()
+                    };
+                    let full = variant == DdpVariant::Full;
+                    let run = |fixed: bool| {
+                        let mut b = Buffers::new(4, 1, us.len(), full, map.workspace());
+                        compute_derivatives(&map, &xs, &us, &options, &mut b);
+                        let r = if fixed {
+                            backward(&cost, &xs, &us, mu, &options, &mut b)
+                        } else {
+                            backward_on(Dyn(4), Dyn(1), &cost, &xs, &us, mu, &options, &mut b)
+                        };
+                        bits(&b, &r.expect("Q_uu positive definite"))
+                    };
+                    assert_eq!(
+                        run(true),
+                        run(false),
+                        "{variant:?}, bound {bound:?}, μ {mu}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
