@@ -84,12 +84,16 @@ fn sin_cos_reduced(x: f64) -> (f64, f64) {
     let z4 = z2 * z2;
     let s = rz.mul_add(estrin(&SIN, z, z2, z4), r);
     let c = z.mul_add(estrin(&COS, z, z2, z4), 1.0);
-    match (k as i64) & 3 {
-        0 => (s, c),
-        1 => (c, -s),
-        2 => (-s, -c),
-        _ => (-c, s),
-    }
+    // The quadrant q = k mod 4 picks and signs the pair without branches (the quadrant is
+    // data, and a mispredicted branch costs more than the selection): (s, c), (c, −s),
+    // (−s, −c), (−c, s) for q = 0 … 3, a sign flip being the sign bit's XOR (exactly `-x`).
+    let q = (k as i64) & 3;
+    let odd = q & 1 != 0;
+    let (a, b) = if odd { (c, s) } else { (s, c) };
+    let sign = |flip: bool| (flip as u64) << 63;
+    let sin = f64::from_bits(a.to_bits() ^ sign(q & 2 != 0));
+    let cos = f64::from_bits(b.to_bits() ^ sign((q + 1) & 2 != 0));
+    (sin, cos)
 }
 
 #[cfg(target_arch = "x86_64")]
