@@ -29,11 +29,11 @@
 //! - M. da Silva, F. Durand, J. Popović, *Linear Bellman Combination for Control of Character
 //!   Animation*, SIGGRAPH 2009, §5.2 (eq. 12).
 
-use super::small::{copy_into, on_dims, SmallAlloc};
+use super::small::{copy_into, on_dims, SmallAlloc, Zeros};
 use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
 use super::{ControlError, QuadraticCost, Rk4Map, StageDerivatives};
 use crate::physics::linearize::Linearize;
-use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, OMatrix, OVector, U1};
+use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim};
 
 /// A time-varying LQR tracking controller with its quadratic value function (eq. 12).
 #[derive(Debug, Clone, PartialEq)]
@@ -238,17 +238,12 @@ where
 {
     let (n, m) = (nd.value(), md.value());
     let horizon = us.len();
-    let nn = || OMatrix::<f64, Nd, Nd>::zeros_generic(nd, nd);
-    let nm = || OMatrix::<f64, Nd, Md>::zeros_generic(nd, md);
-    let mn = || OMatrix::<f64, Md, Nd>::zeros_generic(md, nd);
-    let mm = || OMatrix::<f64, Md, Md>::zeros_generic(md, md);
-    let vn = || OVector::<f64, Nd>::zeros_generic(nd, U1);
-    let vm = || OVector::<f64, Md>::zeros_generic(md, U1);
+    let z = Zeros { n: nd, m: md };
     // The sources write heap matrices; they are copied into the fixed-size ones.
     let (mut a_src, mut b_src) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
     let mut l_src = StageDerivatives::new(n, m);
-    let (mut a, mut b) = (nn(), nm());
-    let (mut lx, mut lu, mut lxx, mut luu) = (vn(), vm(), nn(), mm());
+    let (mut a, mut b) = (z.nn(), z.nm());
+    let (mut lx, mut lu, mut lxx, mut luu) = (z.vn(), z.vm(), z.nn(), z.mm());
     let mut fzz = match model {
         ValueModel::Lqr => Vec::new(),
         ValueModel::Ddp { .. } => vec![DMatrix::zeros(n + m, n + m); n],
@@ -258,7 +253,7 @@ where
     let mut pv = vec![DVector::zeros(n); horizon + 1];
     let mut pm = vec![DMatrix::zeros(n, n); horizon + 1];
     // p_{k+1} and P_{k+1}, then p_k and P_k.
-    let (mut p1, mut hess1, mut p, mut hess) = (vn(), nn(), vn(), nn());
+    let (mut p1, mut hess1, mut p, mut hess) = (z.vn(), z.nn(), z.vn(), z.nn());
     {
         let (p_n, hess_n) = (&mut pv[horizon], &mut pm[horizon]);
         cost.terminal_derivatives(&xs[horizon], p_n, hess_n);
@@ -268,14 +263,14 @@ where
     }
     // Scratch for the step: every product is written in place (`mul_to`, `transpose_to`), the
     // same kernels and summation order as the operator forms, so the loop does not allocate.
-    let (mut at, mut bt) = (nn(), mn());
-    let (mut qx, mut qu) = (vn(), vm());
-    let (mut tn, mut tm) = (vn(), vm());
-    let (mut pa, mut qxx, mut tnn) = (nn(), nn(), nn());
-    let (mut quu, mut tmm, mut chol) = (mm(), mm(), mm());
-    let (mut qux, mut tmn) = (mn(), mn());
-    let (mut gt, mut tnm) = (nm(), nm());
-    let mut gain = mn();
+    let (mut at, mut bt) = (z.nn(), z.mn());
+    let (mut qx, mut qu) = (z.vn(), z.vm());
+    let (mut tn, mut tm) = (z.vn(), z.vm());
+    let (mut pa, mut qxx, mut tnn) = (z.nn(), z.nn(), z.nn());
+    let (mut quu, mut tmm, mut chol) = (z.mm(), z.mm(), z.mm());
+    let (mut qux, mut tmn) = (z.mn(), z.mn());
+    let (mut gt, mut tnm) = (z.nm(), z.nm());
+    let mut gain = z.mn();
     for k in (0..horizon).rev() {
         jacobians(k, &xs[k], &us[k], &mut a_src, &mut b_src);
         copy_into(&mut a, &a_src);

@@ -22,7 +22,7 @@
 //! - E. Hairer, S. P. Nørsett, G. Wanner, *Solving Ordinary Differential Equations I*,
 //!   Springer 1993, §II.1 (the classic Runge–Kutta method).
 
-use super::small::{copy_into, on_dims, SmallAlloc};
+use super::small::{copy_into, on_dims, SmallAlloc, Zeros};
 use super::{symmetrize, ControlError};
 use crate::physics::linearize::Linearize;
 use crate::physics::{DifferentiableStep, Ode};
@@ -67,16 +67,15 @@ where
     DefaultAllocator: SmallAlloc<N, M>,
 {
     fn new(n: N, m: M) -> Self {
-        let nn = || OMatrix::<f64, N, N>::zeros_generic(n, n);
-        let nm = || OMatrix::<f64, N, M>::zeros_generic(n, m);
+        let z = Zeros { n, m };
         Self {
-            a: nn(),
-            b: nm(),
-            dkx: [nn(), nn(), nn(), nn()],
-            dku: [nm(), nm(), nm(), nm()],
-            tmp: nn(),
-            fx: nn(),
-            fu: nm(),
+            a: z.nn(),
+            b: z.nm(),
+            dkx: [z.nn(), z.nn(), z.nn(), z.nn()],
+            dku: [z.nm(), z.nm(), z.nm(), z.nm()],
+            tmp: z.nn(),
+            fx: z.nn(),
+            fu: z.nm(),
         }
     }
 }
@@ -204,30 +203,26 @@ impl<M: Linearize> Rk4Map<M> {
         on_dims!(
             x.len(),
             u.len(),
-            |n, m| {
-                let mut chain = Chain::new(n, m);
-                self.chain(x, u, &mut chain, ws);
-                copy_into(fx, &chain.fx);
-                copy_into(fu, &chain.fu);
-            },
+            |n, m| self.chain(x, u, &mut Chain::new(n, m), ws, fx, fu),
             |_n, _m| {
+                // The heap chain lives in the workspace; lent out for the call.
                 let mut chain = std::mem::replace(&mut ws.chain, Chain::new(Dyn(0), Dyn(0)));
-                self.chain(x, u, &mut chain, ws);
-                copy_into(fx, &chain.fx);
-                copy_into(fu, &chain.fu);
+                self.chain(x, u, &mut chain, ws, fx, fu);
                 ws.chain = chain;
             }
         )
     }
 
-    /// The Jacobian chain of the module docs into `ch.fx`, `ch.fu`; the model's stage
-    /// Jacobians go through `ws.a`, `ws.b`.
+    /// The Jacobian chain of the module docs on `ch`'s matrices, written to `fx`, `fu`; the
+    /// model's stage Jacobians go through `ws.a`, `ws.b`.
     fn chain<Nd: Dim, Md: Dim>(
         &self,
         x: &DVector<f64>,
         u: &DVector<f64>,
         ch: &mut Chain<Nd, Md>,
         ws: &mut Rk4Workspace,
+        fx: &mut DMatrix<f64>,
+        fu: &mut DMatrix<f64>,
     ) where
         DefaultAllocator: SmallAlloc<Nd, Md>,
     {
@@ -269,6 +264,8 @@ impl<M: Linearize> Rk4Map<M> {
             ch.fx.zip_apply(&ch.dkx[s], |a, b| *a += weight * b);
             ch.fu.zip_apply(&ch.dku[s], |a, b| *a += weight * b);
         }
+        copy_into(fx, &ch.fx);
+        copy_into(fu, &ch.fu);
     }
 
     /// Second derivatives of the map: `out[a]` (length n, each (n + m) × (n + m)) receives the
@@ -433,15 +430,16 @@ mod tests {
         let mut ws = map.workspace();
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let (mut fx, mut fu) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
+        let (mut dfx, mut dfu) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
         let mut dynamic = Chain::new(Dyn(4), Dyn(1));
         for scale in [0.1, 3.0, 300.0] {
             for _ in 0..200 {
                 let x = random_vec(&mut rng, 4, scale);
                 let u = random_vec(&mut rng, 1, 5.0 * scale);
                 map.jacobians(&x, &u, &mut fx, &mut fu, &mut ws);
-                map.chain(&x, &u, &mut dynamic, &mut ws);
-                assert_eq!(bits(&fx), bits(&dynamic.fx), "F_x at {x}");
-                assert_eq!(bits(&fu), bits(&dynamic.fu), "F_u at {x}");
+                map.chain(&x, &u, &mut dynamic, &mut ws, &mut dfx, &mut dfu);
+                assert_eq!(bits(&fx), bits(&dfx), "F_x at {x}");
+                assert_eq!(bits(&fu), bits(&dfu), "F_u at {x}");
             }
         }
     }

@@ -13,7 +13,7 @@
 //! takes that same kernel, so both give the same bits (tested per recursion).
 
 use nalgebra::allocator::Allocator;
-use nalgebra::{Dim, Matrix, RawStorage, RawStorageMut};
+use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, OVector, RawStorage, RawStorageMut, U1};
 
 /// The allocations an n-state, m-control recursion needs: n × n, n × m, m × n, m × m and
 /// vectors of n and m (a bound alias for `DefaultAllocator`).
@@ -76,5 +76,45 @@ pub(crate) fn copy_into<R: Dim, C: Dim, R2: Dim, C2: Dim, S, S2>(
             // SAFETY: (i, j) is within both shapes (asserted equal above).
             unsafe { *dst.get_unchecked_mut((i, j)) = *src.get_unchecked((i, j)) };
         }
+    }
+}
+
+/// Zero matrices and vectors of the shapes an n-state, m-control recursion uses (on the stack
+/// for fixed dimensions).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Zeros<N: Dim, M: Dim> {
+    /// n.
+    pub(crate) n: N,
+    /// m.
+    pub(crate) m: M,
+}
+
+impl<N: Dim, M: Dim> Zeros<N, M>
+where
+    DefaultAllocator: SmallAlloc<N, M>,
+{
+    /// n × n.
+    pub(crate) fn nn(self) -> OMatrix<f64, N, N> {
+        OMatrix::zeros_generic(self.n, self.n)
+    }
+    /// n × m.
+    pub(crate) fn nm(self) -> OMatrix<f64, N, M> {
+        OMatrix::zeros_generic(self.n, self.m)
+    }
+    /// m × n.
+    pub(crate) fn mn(self) -> OMatrix<f64, M, N> {
+        OMatrix::zeros_generic(self.m, self.n)
+    }
+    /// m × m.
+    pub(crate) fn mm(self) -> OMatrix<f64, M, M> {
+        OMatrix::zeros_generic(self.m, self.m)
+    }
+    /// n.
+    pub(crate) fn vn(self) -> OVector<f64, N> {
+        OVector::zeros_generic(self.n, U1)
+    }
+    /// m.
+    pub(crate) fn vm(self) -> OVector<f64, M> {
+        OVector::zeros_generic(self.m, U1)
     }
 }

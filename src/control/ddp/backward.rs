@@ -28,16 +28,13 @@
 //!   online trajectory optimization*, IROS 2012.
 
 use super::{box_qp, Buffers, DdpOptions, DdpVariant};
-use crate::control::small::{copy_into, on_dims, SmallAlloc};
+use crate::control::small::{copy_into, on_dims, SmallAlloc, Zeros};
 use crate::control::{
     cholesky_in_place, cholesky_solve_in_place, symmetrize, ControlError, QuadraticCost, Rk4Map,
     StageDerivatives,
 };
 use crate::physics::linearize::Linearize;
-use nalgebra::{
-    DMatrix, DVector, DefaultAllocator, Dim, Matrix, OMatrix, OVector, RawStorage, RawStorageMut,
-    U1,
-};
+use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, Matrix, RawStorage, RawStorageMut, U1};
 
 /// Exact gradient ∂J/∂u_k of the total cost for the controls `us` from `x0` (adjoint method).
 pub fn cost_gradient<M: Linearize>(
@@ -170,19 +167,15 @@ where
     let horizon = us.len();
     let (n, m) = (nd.value(), md.value());
     let full = options.variant == DdpVariant::Full;
-    let nn = || OMatrix::<f64, Nd, Nd>::zeros_generic(nd, nd);
-    let nm = || OMatrix::<f64, Nd, Md>::zeros_generic(nd, md);
-    let mn = || OMatrix::<f64, Md, Nd>::zeros_generic(md, nd);
-    let mm = || OMatrix::<f64, Md, Md>::zeros_generic(md, md);
-    let vn = || OVector::<f64, Nd>::zeros_generic(nd, U1);
-    let vm = || OVector::<f64, Md>::zeros_generic(md, U1);
-    let (mut fx, mut fu) = (nn(), nm());
-    let (mut lx, mut lu, mut lxx, mut luu) = (vn(), vm(), nn(), mm());
-    let (mut vx, mut vxx, mut lam, mut lam_tmp) = (vn(), nn(), vn(), vn());
+    let z = Zeros { n: nd, m: md };
+    let (mut fx, mut fu) = (z.nn(), z.nm());
+    let (mut lx, mut lu, mut lxx, mut luu) = (z.vn(), z.vm(), z.nn(), z.mm());
+    let (mut vx, mut vxx, mut lam, mut lam_tmp) = (z.vn(), z.nn(), z.vn(), z.vn());
     let (mut qx, mut qu, mut qxx, mut quu, mut qux, mut quu_reg) =
-        (vn(), vm(), nn(), mm(), mn(), mm());
-    let (mut vxx_fx, mut vxx_fu, mut gu, mut tm, mut tmn) = (nn(), nm(), vm(), vm(), mn());
-    let (mut kff, mut gain) = (vm(), mn());
+        (z.vn(), z.vm(), z.nn(), z.mm(), z.mn(), z.mm());
+    let (mut vxx_fx, mut vxx_fu, mut gu, mut tm, mut tmn) =
+        (z.nn(), z.nm(), z.vm(), z.vm(), z.mn());
+    let (mut kff, mut gain) = (z.vm(), z.mn());
     cost.terminal_derivatives(&xs[horizon], &mut b.vx, &mut b.vxx);
     copy_into(&mut vx, &b.vx);
     copy_into(&mut vxx, &b.vxx);
