@@ -157,7 +157,7 @@ mod tests {
         let mut args: Vec<f64> = (0..200_000)
             .map(|i| {
                 let scale = [1e-8, 1.0, 10.0, 1e3, 9e4][i % 5];
-                r.gen_range(-scale..scale)
+                r.random_range(-scale..scale)
             })
             .collect();
         // Around the quadrant boundaries, where the reduction cancels.
@@ -205,7 +205,7 @@ mod tests {
     fn the_fma_and_portable_copies_give_the_same_bits() {
         let mut r = rng(8);
         for _ in 0..20_000 {
-            let (a, b) = (r.gen_range(-100.0..100.0), r.gen_range(-1e4..1e4));
+            let (a, b) = (r.random_range(-100.0..100.0), r.random_range(-1e4..1e4));
             let p = portable(a, b);
             let f = sin_cos2(a, b);
             assert_eq!(
@@ -219,7 +219,7 @@ mod tests {
     fn odd_and_even() {
         let mut r = rng(9);
         for _ in 0..10_000 {
-            let x: f64 = r.gen_range(-50.0..50.0);
+            let x: f64 = r.random_range(-50.0..50.0);
             let ((s, c), (sn, cn)) = sin_cos2(x, -x);
             assert_eq!(sn, -s);
             assert_eq!(cn, c);

@@ -275,7 +275,7 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         for _ in 0..2000 {
             let w: Vec<f64> = (0..4)
-                .map(|i| 10f64.powf(rng.gen_range(-3.0..3.0)) / norm2[i])
+                .map(|i| 10f64.powf(rng.random_range(-3.0..3.0)) / norm2[i])
                 .collect();
             assert!(kappa(&w) >= b.condition_any_weighting, "{w:?}");
         }

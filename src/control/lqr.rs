@@ -471,22 +471,32 @@ mod tests {
 
     #[test]
     fn fixed_size_recursion_is_the_dynamic_one_bit_for_bit() {
-        // The acrobot (4 × 1) runs on fixed-size matrices (`super::super::small`); the heap
-        // path must give the same gains and value functions, bit for bit, for both value models
-        // and with a running state cost.
-        use crate::control::StateCost;
+        // The acrobot (4 × 1) and a damped pendulum (2 × 1) run on fixed-size matrices
+        // (`super::super::small`); the heap path must give the same gains and value functions,
+        // bit for bit, for both value models and with a running state cost.
+        use crate::control::test_models::DampedPendulum;
         use crate::physics::acrobot::Acrobot;
-        use nalgebra::Dyn;
         let dt = 0.02;
-        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
-        let x0 = DVector::from_vec(vec![-1.2, 0.3, 0.5, -0.7]);
+        recursion_bits_agree(
+            &Rk4Map::new(Acrobot::default(), dt).unwrap(),
+            &[-1.2, 0.3, 0.5, -0.7],
+        );
+        recursion_bits_agree(&Rk4Map::new(DampedPendulum, dt).unwrap(), &[2.5, -0.4]);
+    }
+
+    /// Asserts that [`track_with`] (fixed-size matrices for `map`'s dimensions) and the heap
+    /// recursion give the same bits along a driven rollout from `x0`.
+    fn recursion_bits_agree<M: Linearize>(map: &Rk4Map<M>, x0: &[f64]) {
+        use crate::control::StateCost;
+        use nalgebra::Dyn;
+        let (n, m, dt) = (map.state_dim(), map.control_dim(), map.dt);
         let us: Vec<DVector<f64>> = (0..60)
-            .map(|k| DVector::from_element(1, 4.0 * (k as f64 * dt * 5.0).sin()))
+            .map(|k| DVector::from_element(m, 4.0 * (k as f64 * dt * 5.0).sin()))
             .collect();
-        let xs = map.rollout(&x0, &us).unwrap();
-        let q = DMatrix::from_fn(4, 4, |i, j| if i == j { 3.0 + i as f64 } else { 0.4 });
+        let xs = map.rollout(&DVector::from_column_slice(x0), &us).unwrap();
+        let q = DMatrix::from_fn(n, n, |i, j| if i == j { 3.0 + i as f64 } else { 0.4 });
         let mut cost =
-            QuadraticCost::effort(dt, 1, DMatrix::identity(4, 4) * 5.0, DVector::zeros(4));
+            QuadraticCost::effort(dt, m, DMatrix::identity(n, n) * 5.0, DVector::zeros(n));
         cost.r *= 100.0;
         cost.state = Some(StateCost {
             weight: q,
@@ -503,7 +513,7 @@ mod tests {
                 .collect()
         };
         for model in [ValueModel::Lqr, ValueModel::Ddp { fd_step: 1e-5 }] {
-            let fixed = track_with(&map, &cost, &xs, &us, model).unwrap();
+            let fixed = track_with(map, &cost, &xs, &us, model).unwrap();
             let mut ws = map.workspace();
             let mut ws2 = map.workspace();
             let mut second =
@@ -521,8 +531,8 @@ mod tests {
                  a: &mut DMatrix<f64>,
                  b: &mut DMatrix<f64>| map.jacobians(x, u, a, b, &mut ws);
             let dynamic =
-                riccati_on(Dyn(4), Dyn(1), &cost, &xs, &us, model, &mut jac, second).unwrap();
-            assert_eq!(bits(&fixed), bits(&dynamic), "{model:?}");
+                riccati_on(Dyn(n), Dyn(m), &cost, &xs, &us, model, &mut jac, second).unwrap();
+            assert_eq!(bits(&fixed), bits(&dynamic), "n = {n}, {model:?}");
         }
     }
 

@@ -242,6 +242,47 @@ pub(crate) mod test_models {
             b.copy_from(&self.b);
         }
     }
+
+    /// A damped pendulum, θ̈ = −(g/l) sin θ − c θ̇ + u: a nonlinear model with two states and
+    /// one control (the 2 × 1 fixed-size arm of `super::small::on_dims`).
+    #[derive(Debug, Clone)]
+    pub struct DampedPendulum;
+
+    const G_OVER_L: f64 = 9.81;
+    const DAMPING: f64 = 0.3;
+
+    impl Model for DampedPendulum {
+        fn name(&self) -> &str {
+            "damped pendulum"
+        }
+        fn state_names(&self) -> Vec<String> {
+            vec!["theta".into(), "omega".into()]
+        }
+        fn control_names(&self) -> Vec<String> {
+            vec!["torque".into()]
+        }
+        fn parameters(&self) -> Vec<Parameter> {
+            vec![]
+        }
+        fn default_dt(&self) -> f64 {
+            0.05
+        }
+    }
+
+    impl Ode for DampedPendulum {
+        fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+            dx[0] = x[1];
+            dx[1] = -G_OVER_L * x[0].sin() - DAMPING * x[1] + u[0];
+        }
+    }
+
+    impl Linearize for DampedPendulum {
+        fn jacobians(&self, x: &[f64], _u: &[f64], a: &mut DMatrix<f64>, b: &mut DMatrix<f64>) {
+            a.as_mut_slice()
+                .copy_from_slice(&[0.0, -G_OVER_L * x[0].cos(), 1.0, -DAMPING]);
+            b.as_mut_slice().copy_from_slice(&[0.0, 1.0]);
+        }
+    }
 }
 
 #[cfg(test)]

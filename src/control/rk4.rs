@@ -393,7 +393,7 @@ impl<M: Linearize> DifferentiableStep for Rk4Map<M> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::test_models::random_vec;
+    use crate::control::test_models::{random_vec, DampedPendulum};
     use crate::physics::acrobot::Acrobot;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
@@ -424,18 +424,26 @@ mod tests {
 
     #[test]
     fn fixed_size_jacobian_chain_is_the_dynamic_one_bit_for_bit() {
-        // The acrobot (4 × 1) runs on fixed-size matrices; the heap path must give the same
-        // bits (`super::super::small`), including at large states and controls.
-        let map = Rk4Map::new(Acrobot::default(), 0.05).unwrap();
+        // The acrobot (4 × 1) and a damped pendulum (2 × 1) run on fixed-size matrices; the
+        // heap path must give the same bits (`super::super::small`), including at large states
+        // and controls.
+        chain_bits_agree(&Rk4Map::new(Acrobot::default(), 0.05).unwrap(), 5);
+        chain_bits_agree(&Rk4Map::new(DampedPendulum, 0.05).unwrap(), 6);
+    }
+
+    /// Asserts that `map`'s Jacobians (on fixed-size matrices for its dimensions) equal the
+    /// heap chain's bit for bit at 600 random states.
+    fn chain_bits_agree<M: Linearize>(map: &Rk4Map<M>, seed: u64) {
+        let (n, m) = (map.state_dim(), map.control_dim());
         let mut ws = map.workspace();
-        let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let (mut fx, mut fu) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
-        let (mut dfx, mut dfu) = (DMatrix::zeros(4, 4), DMatrix::zeros(4, 1));
-        let mut dynamic = Chain::new(Dyn(4), Dyn(1));
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let (mut fx, mut fu) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
+        let (mut dfx, mut dfu) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
+        let mut dynamic = Chain::new(Dyn(n), Dyn(m));
         for scale in [0.1, 3.0, 300.0] {
             for _ in 0..200 {
-                let x = random_vec(&mut rng, 4, scale);
-                let u = random_vec(&mut rng, 1, 5.0 * scale);
+                let x = random_vec(&mut rng, n, scale);
+                let u = random_vec(&mut rng, m, 5.0 * scale);
                 map.jacobians(&x, &u, &mut fx, &mut fu, &mut ws);
                 map.chain(&x, &u, &mut dynamic, &mut ws, &mut dfx, &mut dfu);
                 assert_eq!(bits(&fx), bits(&dfx), "F_x at {x}");

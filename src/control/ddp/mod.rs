@@ -609,22 +609,37 @@ mod tests {
 
     #[test]
     fn fixed_size_backward_pass_is_the_dynamic_one_bit_for_bit() {
-        // The acrobot (4 × 1) runs on fixed-size matrices (`crate::control::small`) with
-        // products in the heap path's summation order; gains, feedforward steps and the
-        // expected reductions must agree bit for bit, for both variants, with and without
-        // bounds (some controls clamped), regularized or not.
-        use nalgebra::Dyn;
+        // The acrobot (4 × 1) and a damped pendulum (2 × 1) run on fixed-size matrices
+        // (`crate::control::small`) with products in the heap path's summation order; gains,
+        // feedforward steps and the expected reductions must agree bit for bit, for both
+        // variants, with and without bounds (some controls clamped), regularized or not.
+        use crate::control::test_models::DampedPendulum;
         let dt = 0.02;
-        let map = Rk4Map::new(Acrobot::default(), dt).unwrap();
         let mut cost = swing_up_cost(dt);
         cost.r *= 20.0;
+        let acrobot = Rk4Map::new(Acrobot::default(), dt).unwrap();
+        backward_bits_agree(&acrobot, &cost, &[-1.2, 0.3, 0.5, -0.4]);
+        let pendulum = Rk4Map::new(DampedPendulum, dt).unwrap();
+        let mut cost = QuadraticCost::effort(
+            dt,
+            1,
+            DMatrix::from_diagonal(&DVector::from_vec(vec![100.0, 10.0])),
+            DVector::from_vec(vec![std::f64::consts::PI, 0.0]),
+        );
+        cost.r *= 20.0;
+        backward_bits_agree(&pendulum, &cost, &[0.3, -0.4]);
+    }
+
+    /// Asserts that [`backward`] (fixed-size matrices for `map`'s dimensions) and the heap
+    /// pass give the same bits along a random-control rollout from `x0`.
+    fn backward_bits_agree<M: Linearize>(map: &Rk4Map<M>, cost: &QuadraticCost, x0: &[f64]) {
+        use nalgebra::Dyn;
+        let (n, m) = (map.state_dim(), map.control_dim());
         let mut rng = ChaCha8Rng::seed_from_u64(9);
         let us: Vec<DVector<f64>> = (0..60)
-            .map(|_| DVector::from_element(1, rng.random_range(-3.0..3.0)))
+            .map(|_| DVector::from_fn(m, |_, _| rng.random_range(-3.0..3.0)))
             .collect();
-        let xs = map
-            .rollout(&DVector::from_vec(vec![-1.2, 0.3, 0.5, -0.4]), &us)
-            .unwrap();
+        let xs = map.rollout(&DVector::from_column_slice(x0), &us).unwrap();
         let bits = |b: &Buffers, r: &backward::BackwardResult| -> Vec<u64> {
             let gains = b.gains.iter().flat_map(|g| g.iter());
             let kff = b.kff.iter().flat_map(|k| k.iter());
@@ -640,26 +655,26 @@ mod tests {
                     let options = DdpOptions {
                         variant,
                         bounds: bound.map(|b| ControlBounds {
-                            lower: DVector::from_element(1, -b),
-                            upper: DVector::from_element(1, b),
+                            lower: DVector::from_element(m, -b),
+                            upper: DVector::from_element(m, b),
                         }),
                         ..DdpOptions::default()
                     };
                     let full = variant == DdpVariant::Full;
                     let run = |fixed: bool| {
-                        let mut b = Buffers::new(4, 1, us.len(), full, map.workspace());
-                        compute_derivatives(&map, &xs, &us, &options, &mut b);
+                        let mut b = Buffers::new(n, m, us.len(), full, map.workspace());
+                        compute_derivatives(map, &xs, &us, &options, &mut b);
                         let r = if fixed {
-                            backward(&cost, &xs, &us, mu, &options, &mut b)
+                            backward(cost, &xs, &us, mu, &options, &mut b)
                         } else {
-                            backward_on(Dyn(4), Dyn(1), &cost, &xs, &us, mu, &options, &mut b)
+                            backward_on(Dyn(n), Dyn(m), cost, &xs, &us, mu, &options, &mut b)
                         };
                         bits(&b, &r.expect("Q_uu positive definite"))
                     };
                     assert_eq!(
                         run(true),
                         run(false),
-                        "{variant:?}, bound {bound:?}, μ {mu}"
+                        "n = {n}, {variant:?}, bound {bound:?}, μ {mu}"
                     );
                 }
             }
