@@ -48,13 +48,13 @@ impl<T: ValueTracker + ?Sized> ValueTracker for &T {
 
 impl ValueTracker for crate::control::lqr::TrackingController {
     fn horizon(&self) -> usize {
-        self.u_ref.len()
+        crate::control::lqr::TrackingController::horizon(self)
     }
     fn state_dim(&self) -> usize {
-        self.x_ref.first().map_or(0, |x| x.len())
+        crate::control::lqr::TrackingController::state_dim(self)
     }
     fn control_dim(&self) -> usize {
-        self.u_ref.first().map_or(0, |u| u.len())
+        crate::control::lqr::TrackingController::control_dim(self)
     }
     fn policy_into(&self, x: &[f64], k: usize, u: &mut [f64]) {
         crate::control::lqr::TrackingController::policy_into(self, x, k, u)

@@ -31,31 +31,43 @@
 
 use super::small::{copy_into, on_dims, SmallAlloc, Zeros};
 use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
-use super::{ControlError, QuadraticCost, Rk4Map, StageDerivatives};
+use super::{ControlError, Knots, QuadraticCost, Rk4Map, StageDerivatives};
 use crate::physics::linearize::Linearize;
 use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim};
 
-/// A time-varying LQR tracking controller with its quadratic value function (eq. 12).
+/// A time-varying LQR tracking controller with its quadratic value function (eq. 12). The
+/// per-knot vectors and matrices are stored contiguously ([`Knots`]); knot k's are
+/// `x_ref.vector(k)`, `gains.matrix(k)` and so on.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackingController {
-    /// Reference states x̄_0..x̄_N.
-    pub x_ref: Vec<DVector<f64>>,
-    /// Reference controls ū_0..ū_{N−1}.
-    pub u_ref: Vec<DVector<f64>>,
+    /// Reference states x̄_0..x̄_N (n × 1 each).
+    pub x_ref: Knots,
+    /// Reference controls ū_0..ū_{N−1} (m × 1 each).
+    pub u_ref: Knots,
     /// Feedback gains K_0..K_{N−1} (m × n).
-    pub gains: Vec<DMatrix<f64>>,
+    pub gains: Knots,
     /// Remaining cost along the reference, v(x̄_k) for k = 0..N.
     pub value_ref: Vec<f64>,
-    /// Value gradients p_0..p_N.
-    pub value_gradient: Vec<DVector<f64>>,
-    /// Value Hessians P_0..P_N.
-    pub value_hessian: Vec<DMatrix<f64>>,
+    /// Value gradients p_0..p_N (n × 1 each).
+    pub value_gradient: Knots,
+    /// Value Hessians P_0..P_N (n × n).
+    pub value_hessian: Knots,
 }
 
 impl TrackingController {
     /// Horizon N (number of control steps).
     pub fn horizon(&self) -> usize {
         self.u_ref.len()
+    }
+
+    /// State dimension n.
+    pub fn state_dim(&self) -> usize {
+        self.x_ref.shape().0
+    }
+
+    /// Control dimension m.
+    pub fn control_dim(&self) -> usize {
+        self.u_ref.shape().0
     }
 
     /// u = ū_k + K_k (x − x̄_k) for k < N, written into `u`. Does not allocate.
@@ -65,11 +77,17 @@ impl TrackingController {
             "policy step {k} beyond horizon {}",
             self.horizon()
         );
-        let (xr, ur, gain) = (&self.x_ref[k], &self.u_ref[k], &self.gains[k]);
+        let (xr, ur, gain) = (
+            self.x_ref.slice(k),
+            self.u_ref.slice(k),
+            self.gains.slice(k),
+        );
+        let m = ur.len();
         for (i, ui) in u.iter_mut().enumerate() {
             let mut v = ur[i];
             for j in 0..x.len() {
-                v += gain[(i, j)] * (x[j] - xr[j]);
+                // K_k is column-major: K[(i, j)] is entry i + j m.
+                v += gain[i + j * m] * (x[j] - xr[j]);
             }
             *ui = v;
         }
@@ -77,7 +95,7 @@ impl TrackingController {
 
     /// u = ū_k + K_k (x − x̄_k) for k < N.
     pub fn policy(&self, x: &[f64], k: usize) -> DVector<f64> {
-        let mut u = DVector::zeros(self.u_ref[0].len());
+        let mut u = DVector::zeros(self.control_dim());
         self.policy_into(x, k, u.as_mut_slice());
         u
     }
@@ -85,16 +103,18 @@ impl TrackingController {
     /// v̂(x, k) = v(x̄_k) + p_kᵀ Δx + ½ Δxᵀ P_k Δx for k ≤ N. Does not allocate.
     pub fn value(&self, x: &[f64], k: usize) -> f64 {
         let (xr, p, hess) = (
-            &self.x_ref[k],
-            &self.value_gradient[k],
-            &self.value_hessian[k],
+            self.x_ref.slice(k),
+            self.value_gradient.slice(k),
+            self.value_hessian.slice(k),
         );
+        let n = xr.len();
         let mut v = self.value_ref[k];
         for j in 0..x.len() {
             let dj = x[j] - xr[j];
             v += p[j] * dj;
             for i in 0..x.len() {
-                v += 0.5 * (x[i] - xr[i]) * hess[(i, j)] * dj;
+                // P_k is column-major: P[(i, j)] is entry i + j n.
+                v += 0.5 * (x[i] - xr[i]) * hess[i + j * n] * dj;
             }
         }
         v
@@ -248,18 +268,20 @@ where
         ValueModel::Lqr => Vec::new(),
         ValueModel::Ddp { .. } => vec![DMatrix::zeros(n + m, n + m); n],
     };
-    let mut gains = vec![DMatrix::zeros(m, n); horizon];
+    let mut gains = Knots::zeros(horizon, m, n);
     let mut value_ref = vec![0.0; horizon + 1];
-    let mut pv = vec![DVector::zeros(n); horizon + 1];
-    let mut pm = vec![DMatrix::zeros(n, n); horizon + 1];
+    let mut pv = Knots::zeros(horizon + 1, n, 1);
+    let mut pm = Knots::zeros(horizon + 1, n, n);
     // p_{k+1} and P_{k+1}, then p_k and P_k.
     let (mut p1, mut hess1, mut p, mut hess) = (z.vn(), z.nn(), z.vn(), z.nn());
     {
-        let (p_n, hess_n) = (&mut pv[horizon], &mut pm[horizon]);
-        cost.terminal_derivatives(&xs[horizon], p_n, hess_n);
+        let (mut p_n, mut hess_n) = (DVector::zeros(n), DMatrix::zeros(n, n));
+        cost.terminal_derivatives(&xs[horizon], &mut p_n, &mut hess_n);
         value_ref[horizon] = cost.terminal(&xs[horizon]);
-        copy_into(&mut p1, p_n);
-        copy_into(&mut hess1, hess_n);
+        copy_into(&mut p1, &p_n);
+        copy_into(&mut hess1, &hess_n);
+        copy_into(&mut pv.matrix_mut(horizon), &p_n);
+        copy_into(&mut pm.matrix_mut(horizon), &hess_n);
     }
     // Scratch for the step: every product is written in place (`mul_to`, `transpose_to`), the
     // same kernels and summation order as the operator forms, so the loop does not allocate.
@@ -344,16 +366,16 @@ where
         tnm.mul_to(&gain, &mut tnn);
         hess += &tnn;
         symmetrize(&mut hess);
-        copy_into(&mut gains[k], &gain);
-        copy_into(&mut pv[k], &p);
-        copy_into(&mut pm[k], &hess);
+        copy_into(&mut gains.matrix_mut(k), &gain);
+        copy_into(&mut pv.matrix_mut(k), &p);
+        copy_into(&mut pm.matrix_mut(k), &hess);
         std::mem::swap(&mut p1, &mut p);
         std::mem::swap(&mut hess1, &mut hess);
         value_ref[k] = cost.running(k, &xs[k], &us[k]) + value_ref[k + 1];
     }
     Ok(TrackingController {
-        x_ref: xs.to_vec(),
-        u_ref: us.to_vec(),
+        x_ref: Knots::from_vectors(xs),
+        u_ref: Knots::from_vectors(us),
         gains,
         value_ref,
         value_gradient: pv,
@@ -414,26 +436,26 @@ mod tests {
         // P_N = 2 q_f; P = 2 q h + φ² P' − (φ γ P')² / (r h + γ² P'); K = −φ γ P' / (r h + γ² P').
         let (qd, rd) = (2.0 * q * h, r * h);
         let mut p = 2.0 * qf;
-        assert!((ctl.value_hessian[horizon][(0, 0)] - p).abs() < 1e-12);
+        assert!((ctl.value_hessian.matrix(horizon)[(0, 0)] - p).abs() < 1e-12);
         for k in (0..horizon).rev() {
             let s = rd + gamma * gamma * p;
             let gain = -phi * gamma * p / s;
             p = qd + phi * phi * p - (phi * gamma * p).powi(2) / s;
-            assert!((ctl.gains[k][(0, 0)] - gain).abs() < 1e-9 * gain.abs().max(1.0));
-            assert!((ctl.value_hessian[k][(0, 0)] - p).abs() < 1e-9 * p.max(1.0));
-            assert_eq!(ctl.value_gradient[k][0], 0.0);
+            assert!((ctl.gains.matrix(k)[(0, 0)] - gain).abs() < 1e-9 * gain.abs().max(1.0));
+            assert!((ctl.value_hessian.matrix(k)[(0, 0)] - p).abs() < 1e-9 * p.max(1.0));
+            assert_eq!(ctl.value_gradient.vector(k)[0], 0.0);
         }
         // Far from the end, P_k solves γ² P² + ((1 − φ²) r_d − q_d γ²) P − q_d r_d = 0.
         let bq = (1.0 - phi * phi) * rd - qd * gamma * gamma;
         let root = (-bq + (bq * bq + 4.0 * gamma * gamma * qd * rd).sqrt()) / (2.0 * gamma * gamma);
         assert!(
-            (ctl.value_hessian[0][(0, 0)] - root).abs() < 1e-8 * root,
+            (ctl.value_hessian.matrix(0)[(0, 0)] - root).abs() < 1e-8 * root,
             "{} vs {root}",
-            ctl.value_hessian[0][(0, 0)]
+            ctl.value_hessian.matrix(0)[(0, 0)]
         );
         // The value at x is ½ P_0 x², and the policy is K_0 x.
         assert!((ctl.value(&[0.3], 0) - 0.5 * root * 0.09).abs() < 1e-8);
-        assert!((ctl.policy(&[0.3], 0)[0] - 0.3 * ctl.gains[0][(0, 0)]).abs() < 1e-15);
+        assert!((ctl.policy(&[0.3], 0)[0] - 0.3 * ctl.gains.matrix(0)[(0, 0)]).abs() < 1e-15);
     }
 
     #[test]
@@ -503,11 +525,13 @@ mod tests {
             reference: xs[..60].to_vec(),
         });
         let bits = |ctl: &TrackingController| -> Vec<u64> {
-            let matrices = ctl.gains.iter().chain(&ctl.value_hessian);
-            let vectors = ctl.value_gradient.iter();
+            let matrices = ctl
+                .gains
+                .as_slice()
+                .iter()
+                .chain(ctl.value_hessian.as_slice());
             matrices
-                .flat_map(|a| a.iter())
-                .chain(vectors.flat_map(|v| v.iter()))
+                .chain(ctl.value_gradient.as_slice())
                 .chain(&ctl.value_ref)
                 .map(|v| v.to_bits())
                 .collect()
@@ -583,8 +607,8 @@ mod tests {
         assert_eq!(sol.regularization, 0.0);
         let (mut diff, mut scale, mut lqr_diff) = (0.0f64, 0.0f64, 0.0f64);
         for k in 0..150 {
-            diff = diff.max((&ddp.gains[k] - &sol.gains[k]).abs().max());
-            lqr_diff = lqr_diff.max((&ctl.gains[k] - &sol.gains[k]).abs().max());
+            diff = diff.max((ddp.gains.matrix(k) - &sol.gains[k]).abs().max());
+            lqr_diff = lqr_diff.max((ctl.gains.matrix(k) - &sol.gains[k]).abs().max());
             scale = scale.max(sol.gains[k].abs().max());
         }
         assert!(
@@ -617,7 +641,7 @@ mod tests {
             let jp = cost.total(&map.rollout(&xp, &sol.u).unwrap(), &sol.u);
             let jm = cost.total(&map.rollout(&xm, &sol.u).unwrap(), &sol.u);
             let fd = (jp - jm) / (2.0 * h);
-            let p = ctl.value_gradient[0][i];
+            let p = ctl.value_gradient.vector(0)[i];
             assert!(
                 (lam[i] - p).abs() < 1e-6 * p.abs().max(1.0),
                 "p_0[{i}] {p} vs λ {}",
@@ -667,7 +691,7 @@ mod tests {
             let u = if feedback {
                 ctl.policy(x.as_slice(), k)
             } else {
-                ctl.u_ref[k].clone()
+                ctl.u_ref.vector(k).clone_owned()
             };
             total += cost.running(k, &x, &u);
             map.step(&x, &u, &mut next, &mut ws);

@@ -25,7 +25,8 @@
 //!   (linear Bellman combination, eq. 12), for an RK4 map or any source of step Jacobians;
 //!   [`step_tracker`]: the same tracker along a tape learned through an emulator, linearized by
 //!   the emulator's exact Jacobians (value functions for linear Bellman combination of BPTT
-//!   controllers).
+//!   controllers). A tracker keeps its per-knot vectors and matrices in [`Knots`]: one
+//!   contiguous buffer each, not one heap matrix per knot.
 //!
 //! - [`objective`]: NeuroAnimator control-learning objectives (§4.2) as composable terms with
 //!   gradients; [`bptt`]: backpropagation through time through any
@@ -41,6 +42,7 @@
 pub mod bptt;
 pub mod conditioning;
 pub mod ddp;
+pub mod knots;
 pub mod lqr;
 pub mod objective;
 pub mod search;
@@ -51,6 +53,7 @@ mod rk4;
 pub(crate) mod small;
 
 pub use cost::{QuadraticCost, StageDerivatives, StateCost};
+pub use knots::Knots;
 pub use rk4::{Rk4Map, Rk4StepScratch, Rk4Workspace};
 
 use nalgebra::{Dim, Matrix, RawStorage, RawStorageMut};

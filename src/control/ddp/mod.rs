@@ -540,7 +540,10 @@ mod tests {
             for k in 0..horizon {
                 assert!((&sol.u[k] - &u_lqr[k]).amax() < 1e-9, "u[{k}]");
                 assert!((&sol.x[k + 1] - &x_lqr[k + 1]).amax() < 1e-9, "x[{k}]");
-                assert!((&sol.gains[k] - &ctl.gains[k]).amax() < 1e-9, "K[{k}]");
+                assert!(
+                    (&sol.gains[k] - ctl.gains.matrix(k)).amax() < 1e-9,
+                    "K[{k}]"
+                );
                 assert!(sol.feedforward[k].amax() < 1e-9);
             }
         }

@@ -1558,7 +1558,7 @@ mod tests {
         let ddp = p.trackers(&map, &sols, "ddp").unwrap();
         // Same references and remaining cost; the second-order terms change the gains.
         let gap = (0..lqr[0].gains.len())
-            .map(|k| (&lqr[0].gains[k] - &ddp[0].gains[k]).amax())
+            .map(|k| (lqr[0].gains.matrix(k) - ddp[0].gains.matrix(k)).amax())
             .fold(0.0, f64::max);
         assert!(gap > 1e-3, "gains differ by {gap}");
         let (a, b) = (lqr[0].value_ref[0], ddp[0].value_ref[0]);
