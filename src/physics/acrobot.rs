@@ -229,20 +229,20 @@ impl Acrobot {
         let dr_w2 = (2.0 * h * (w1 + w2), 0.0);
         // ∂M/∂θ2 θ̈ with ∂M11/∂θ2 = −2 m2 l1 l2 sin θ2 = −2h, ∂M12/∂θ2 = −h, ∂M22/∂θ2 = 0.
         let dm_a = (-2.0 * h * a1 - h * a2, -h * a1);
-        a.fill(0.0);
-        a[(0, 2)] = 1.0;
-        a[(1, 3)] = 1.0;
         let cols = [dr_t1, (dr_t2.0 - dm_a.0, dr_t2.1 - dm_a.1), dr_w1, dr_w2];
-        for (j, &(v1, v2)) in cols.iter().enumerate() {
-            let (d1, d2) = solve(v1, v2);
-            a[(2, j)] = d1;
-            a[(3, j)] = d2;
-        }
-        let (b1, b2) = solve(0.0, 1.0);
-        b[(0, 0)] = 0.0;
-        b[(1, 0)] = 0.0;
-        b[(2, 0)] = b1;
-        b[(3, 0)] = b2;
+        // Rows 2 and 3 of A, column by column, and of B.
+        let [(p0, q0), (p1, q1), (p2, q2), (p3, q3)] = cols.map(|(v1, v2)| solve(v1, v2));
+        let (pu, qu) = solve(0.0, 1.0);
+        // Column-major, written whole (no per-entry index arithmetic).
+        let a: &mut [f64; 16] = a.as_mut_slice().try_into().expect("A is 4 × 4");
+        *a = [
+            0.0, 0.0, p0, q0, //
+            0.0, 0.0, p1, q1, //
+            1.0, 0.0, p2, q2, //
+            0.0, 1.0, p3, q3,
+        ];
+        let b: &mut [f64; 4] = b.as_mut_slice().try_into().expect("B is 4 × 1");
+        *b = [0.0, 0.0, pu, qu];
     }
 }
 
