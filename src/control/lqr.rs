@@ -607,9 +607,9 @@ mod tests {
         assert_eq!(sol.regularization, 0.0);
         let (mut diff, mut scale, mut lqr_diff) = (0.0f64, 0.0f64, 0.0f64);
         for k in 0..150 {
-            diff = diff.max((ddp.gains.matrix(k) - &sol.gains[k]).abs().max());
-            lqr_diff = lqr_diff.max((ctl.gains.matrix(k) - &sol.gains[k]).abs().max());
-            scale = scale.max(sol.gains[k].abs().max());
+            diff = diff.max((ddp.gains.matrix(k) - sol.gains.matrix(k)).abs().max());
+            lqr_diff = lqr_diff.max((ctl.gains.matrix(k) - sol.gains.matrix(k)).abs().max());
+            scale = scale.max(sol.gains.matrix(k).abs().max());
         }
         assert!(
             diff < 1e-6 * scale,

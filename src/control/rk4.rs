@@ -26,7 +26,7 @@ use super::small::{copy_into, on_dims, SmallAlloc, Zeros};
 use super::{symmetrize, ControlError};
 use crate::physics::linearize::Linearize;
 use crate::physics::{DifferentiableStep, Ode};
-use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, Dyn, OMatrix};
+use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, Dyn, Matrix, OMatrix, RawStorageMut};
 
 /// Scratch buffers of [`Rk4Map`]; make one with [`Rk4Map::workspace`].
 #[derive(Debug, Clone)]
@@ -192,14 +192,17 @@ impl<M: Linearize> Rk4Map<M> {
     /// Writes the exact Jacobians F_x (n × n) and F_u (n × m) of the RK4 map at (x, u),
     /// chained through the stage Jacobians (see the module docs). Does not allocate; on
     /// fixed-size matrices where [`super::small`] has the size.
-    pub fn jacobians(
+    pub fn jacobians<Sx, Su>(
         &self,
         x: &DVector<f64>,
         u: &DVector<f64>,
-        fx: &mut DMatrix<f64>,
-        fu: &mut DMatrix<f64>,
+        fx: &mut Matrix<f64, Dyn, Dyn, Sx>,
+        fu: &mut Matrix<f64, Dyn, Dyn, Su>,
         ws: &mut Rk4Workspace,
-    ) {
+    ) where
+        Sx: RawStorageMut<f64, Dyn, Dyn>,
+        Su: RawStorageMut<f64, Dyn, Dyn>,
+    {
         on_dims!(
             x.len(),
             u.len(),
@@ -215,16 +218,19 @@ impl<M: Linearize> Rk4Map<M> {
 
     /// The Jacobian chain of the module docs on `ch`'s matrices, written to `fx`, `fu`; the
     /// model's stage Jacobians go through `ws.a`, `ws.b`.
-    fn chain<Nd: Dim, Md: Dim>(
+    #[allow(clippy::too_many_arguments)]
+    fn chain<Nd: Dim, Md: Dim, Sx, Su>(
         &self,
         x: &DVector<f64>,
         u: &DVector<f64>,
         ch: &mut Chain<Nd, Md>,
         ws: &mut Rk4Workspace,
-        fx: &mut DMatrix<f64>,
-        fu: &mut DMatrix<f64>,
+        fx: &mut Matrix<f64, Dyn, Dyn, Sx>,
+        fu: &mut Matrix<f64, Dyn, Dyn, Su>,
     ) where
         DefaultAllocator: SmallAlloc<Nd, Md>,
+        Sx: RawStorageMut<f64, Dyn, Dyn>,
+        Su: RawStorageMut<f64, Dyn, Dyn>,
     {
         let h = self.dt;
         let c = [0.0, 0.5 * h, 0.5 * h, h];

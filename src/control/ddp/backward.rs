@@ -182,8 +182,8 @@ where
     lam.copy_from(&vx);
     let (mut dv1, mut dv2, mut g2) = (0.0, 0.0, 0.0);
     for k in (0..horizon).rev() {
-        copy_into(&mut fx, &b.fx[k]);
-        copy_into(&mut fu, &b.fu[k]);
+        copy_into(&mut fx, &b.fx.matrix(k));
+        copy_into(&mut fu, &b.fu.matrix(k));
         cost.running_derivatives(k, &xs[k], &us[k], &mut b.l);
         copy_into(&mut lx, &b.l.lx);
         copy_into(&mut lu, &b.l.lu);
@@ -266,7 +266,8 @@ where
                 b.hi.copy_from(&bounds.upper);
                 b.hi -= &us[k];
                 // Warm start from the previous iteration's feedforward step.
-                if !box_qp(&b.quu_reg, &b.qu, &b.lo, &b.hi, &b.kff[k], &mut b.qp) {
+                b.warm.copy_from_slice(b.kff.slice(k));
+                if !box_qp(&b.quu_reg, &b.qu, &b.lo, &b.hi, &b.warm, &mut b.qp) {
                     return None;
                 }
                 copy_into(&mut kff, &b.qp.x);
@@ -284,8 +285,8 @@ where
                 }
             }
         }
-        copy_into(&mut b.kff[k], &kff);
-        copy_into(&mut b.gains[k], &gain);
+        copy_into(&mut b.kff.matrix_mut(k), &kff);
+        copy_into(&mut b.gains.matrix_mut(k), &gain);
 
         // Expected reduction and value update.
         tm.gemv(1.0, &quu, &kff, 0.0);

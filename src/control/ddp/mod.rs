@@ -53,7 +53,7 @@ mod box_qp;
 pub use backward::cost_gradient;
 pub use box_qp::{box_qp, BoxQpWorkspace};
 
-use super::{ControlError, QuadraticCost, Rk4Map, Rk4Workspace, StageDerivatives};
+use super::{ControlError, Knots, QuadraticCost, Rk4Map, Rk4Workspace, StageDerivatives};
 use crate::physics::linearize::Linearize;
 use backward::backward;
 #[cfg(test)]
@@ -171,9 +171,10 @@ pub struct DdpSolution {
     /// Optimized controls ū_0..ū_{N−1}.
     pub u: Vec<DVector<f64>>,
     /// Feedback gains K_0..K_{N−1} (m × n) of the last backward pass, at (x̄, ū).
-    pub gains: Vec<DMatrix<f64>>,
-    /// Feedforward steps k_0..k_{N−1} of the last backward pass (≈ 0 at convergence).
-    pub feedforward: Vec<DVector<f64>>,
+    pub gains: Knots,
+    /// Feedforward steps k_0..k_{N−1} (m × 1 each) of the last backward pass (≈ 0 at
+    /// convergence).
+    pub feedforward: Knots,
     /// Final cost J(x̄, ū).
     pub cost: f64,
     /// Projected gradient norm at the returned trajectory.
@@ -195,11 +196,13 @@ impl DdpSolution {
 
 /// Per-trajectory buffers of the solver, allocated once per [`solve`] call.
 struct Buffers {
-    fx: Vec<DMatrix<f64>>,
-    fu: Vec<DMatrix<f64>>,
+    fx: Knots,
+    fu: Knots,
     fzz: Vec<Vec<DMatrix<f64>>>,
-    kff: Vec<DVector<f64>>,
-    gains: Vec<DMatrix<f64>>,
+    kff: Knots,
+    /// Knot k's previous feedforward step, the bounded QP's warm start.
+    warm: DVector<f64>,
+    gains: Knots,
     x_new: Vec<DVector<f64>>,
     u_new: Vec<DVector<f64>>,
     vx: DVector<f64>,
@@ -219,15 +222,16 @@ impl Buffers {
         let vn = || DVector::zeros(n);
         let vm = || DVector::zeros(m);
         Self {
-            fx: vec![DMatrix::zeros(n, n); horizon],
-            fu: vec![DMatrix::zeros(n, m); horizon],
+            fx: Knots::zeros(horizon, n, n),
+            fu: Knots::zeros(horizon, n, m),
             fzz: if full {
                 vec![vec![DMatrix::zeros(n + m, n + m); n]; horizon]
             } else {
                 Vec::new()
             },
-            kff: vec![vm(); horizon],
-            gains: vec![DMatrix::zeros(m, n); horizon],
+            kff: Knots::zeros(horizon, m, 1),
+            warm: vm(),
+            gains: Knots::zeros(horizon, m, n),
             x_new: vec![vn(); horizon + 1],
             u_new: vec![vm(); horizon],
             vx: vn(),
@@ -263,8 +267,8 @@ fn forward<M: Linearize>(
         b.dx -= &xs[k];
         let u = &mut b.u_new[k];
         u.copy_from(&us[k]);
-        u.axpy(alpha, &b.kff[k], 1.0);
-        u.gemv(1.0, &b.gains[k], &b.dx, 1.0);
+        u.axpy(alpha, &b.kff.vector(k), 1.0);
+        u.gemv(1.0, &b.gains.matrix(k), &b.dx, 1.0);
         if let Some(bounds) = &options.bounds {
             for i in 0..u.len() {
                 u[i] = u[i].clamp(bounds.lower[i], bounds.upper[i]);
@@ -289,7 +293,8 @@ fn compute_derivatives<M: Linearize>(
     b: &mut Buffers,
 ) {
     for k in 0..us.len() {
-        map.jacobians(&xs[k], &us[k], &mut b.fx[k], &mut b.fu[k], &mut b.rk4);
+        let (fx, fu) = (&mut b.fx.matrix_mut(k), &mut b.fu.matrix_mut(k));
+        map.jacobians(&xs[k], &us[k], fx, fu, &mut b.rk4);
         if options.variant == DdpVariant::Full {
             map.second_derivatives(&xs[k], &us[k], options.fd_step, &mut b.fzz[k], &mut b.rk4);
         }
@@ -541,10 +546,10 @@ mod tests {
                 assert!((&sol.u[k] - &u_lqr[k]).amax() < 1e-9, "u[{k}]");
                 assert!((&sol.x[k + 1] - &x_lqr[k + 1]).amax() < 1e-9, "x[{k}]");
                 assert!(
-                    (&sol.gains[k] - ctl.gains.matrix(k)).amax() < 1e-9,
+                    (sol.gains.matrix(k) - ctl.gains.matrix(k)).amax() < 1e-9,
                     "K[{k}]"
                 );
-                assert!(sol.feedforward[k].amax() < 1e-9);
+                assert!(sol.feedforward.matrix(k).amax() < 1e-9);
             }
         }
     }
@@ -644,8 +649,8 @@ mod tests {
             .collect();
         let xs = map.rollout(&DVector::from_column_slice(x0), &us).unwrap();
         let bits = |b: &Buffers, r: &backward::BackwardResult| -> Vec<u64> {
-            let gains = b.gains.iter().flat_map(|g| g.iter());
-            let kff = b.kff.iter().flat_map(|k| k.iter());
+            let gains = b.gains.as_slice().iter();
+            let kff = b.kff.as_slice().iter();
             gains
                 .chain(kff)
                 .chain([&r.dv1, &r.dv2, &r.gradient_norm])
@@ -808,11 +813,11 @@ mod tests {
                 .filter(|&k| sol.u[k][0].abs() == bound)
                 .collect();
             assert!(!at_bound.is_empty(), "{variant:?}: the bound should bind");
-            assert!(at_bound.iter().any(|&k| sol.gains[k].amax() == 0.0));
+            assert!(at_bound.iter().any(|&k| sol.gains.matrix(k).amax() == 0.0));
             for k in 0..sol.u.len() {
                 if sol.u[k][0].abs() < bound {
                     assert!(
-                        sol.gains[k].amax() > 0.0,
+                        sol.gains.matrix(k).amax() > 0.0,
                         "{variant:?}: free step {k} has no feedback"
                     );
                 }
