@@ -218,7 +218,6 @@ impl<M: Linearize> Rk4Map<M> {
 
     /// The Jacobian chain of the module docs on `ch`'s matrices, written to `fx`, `fu`; the
     /// model's stage Jacobians go through `ws.a`, `ws.b`.
-    #[allow(clippy::too_many_arguments)]
     fn chain<Nd: Dim, Md: Dim, Sx, Su>(
         &self,
         x: &DVector<f64>,
