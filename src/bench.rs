@@ -135,8 +135,27 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             black_box(solve(&map, &cost, &x0, &u0, &one_iter).ok());
         });
         push("ddp.acrobot.iters_per_s", ddp_iters);
-        // Derived: microseconds per knot of one DDP iteration (the peers' unit).
+        // Derived: microseconds per knot of one DDP iteration (the peers' unit). This is a
+        // whole one-iteration `solve`: its first rollout and its stopping test's second
+        // linearization and backward pass are counted against the one iteration.
         push("ddp.acrobot.us_per_knot", 1e6 / (ddp_iters * steps as f64));
+        // The same problem solved for ten iterations (line searches included), the time per
+        // knot and iteration: the first rollout and the last stopping test spread over ten.
+        let ten = DdpOptions {
+            max_iterations: 10,
+            ..DdpOptions::default()
+        };
+        let done = solve(&map, &cost, &x0, &u0, &ten).map_or(0, |s| s.trace.len());
+        if done > 0 {
+            let solves = throughput(min_seconds, 1, || {
+                black_box(solve(&map, &cost, &x0, &u0, &ten).ok());
+            });
+            push("ddp.acrobot.solves10_per_s", solves);
+            push(
+                "ddp.acrobot.us_per_knot_iteration",
+                1e6 / (solves * (done * steps) as f64),
+            );
+        }
         let xs = map.rollout(&x0, &u0).expect("finite rollout");
         let lqr_passes = throughput(min_seconds, 1, || {
             black_box(track(&map, &cost, &xs, &u0).ok());

@@ -478,6 +478,14 @@ fn bench_json_is_one_object_of_named_numbers() {
             1e6 / (400.0 * f("ddp.acrobot.iters_per_s"))
         ) < 1e-9
     );
+    // Ten iterations of the same solve, per knot and iteration: the acrobot problem runs all
+    // ten (no early stop), and its first rollout and last stopping test are spread over ten.
+    assert!(
+        rel(
+            f("ddp.acrobot.us_per_knot_iteration"),
+            1e6 / (4000.0 * f("ddp.acrobot.solves10_per_s"))
+        ) < 1e-9
+    );
     assert!(
         rel(
             f("lqr.acrobot.us_per_step"),
