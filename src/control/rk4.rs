@@ -130,8 +130,52 @@ impl<M: Ode> Rk4Map<M> {
         }
     }
 
-    /// Writes F(x, u) into `out`. Does not allocate.
+    /// Writes F(x, u) into `out`. Does not allocate. For the state sizes of
+    /// [`super::small`] (4 and 2) the stages live in fixed-size arrays on the stack; the sums
+    /// are the same (`step_on_heap` is the same step on the workspace's vectors, tested).
     pub fn step(
+        &self,
+        x: &DVector<f64>,
+        u: &DVector<f64>,
+        out: &mut DVector<f64>,
+        ws: &mut Rk4Workspace,
+    ) {
+        match x.len() {
+            4 => self.step_fixed::<4>(x.as_slice(), u.as_slice(), out.as_mut_slice()),
+            2 => self.step_fixed::<2>(x.as_slice(), u.as_slice(), out.as_mut_slice()),
+            _ => self.step_on_heap(x, u, out, ws),
+        }
+    }
+
+    /// [`Rk4Map::step`] on stack arrays of N states: y_s = x + c_s k_{s−1} and
+    /// F = x + w k_0 + 2w k_1 + 2w k_2 + w k_3, summed in [`Rk4Map::step_on_heap`]'s order
+    /// (nalgebra's `axpy` with β = 1 computes a·x + y, one product and one sum per entry).
+    fn step_fixed<const N: usize>(&self, x: &[f64], u: &[f64], out: &mut [f64]) {
+        let x: [f64; N] = x.try_into().expect("state of N values");
+        let h = self.dt;
+        let c = [0.0, 0.5 * h, 0.5 * h, h];
+        let mut k = [[0.0; N]; 4];
+        for s in 0..4 {
+            let mut y = x;
+            if s > 0 {
+                for i in 0..N {
+                    y[i] += c[s] * k[s - 1][i];
+                }
+            }
+            self.model.derivative(&y, u, &mut k[s]);
+        }
+        let w = h / 6.0;
+        let mut f = x;
+        for (weight, ks) in [w, 2.0 * w, 2.0 * w, w].into_iter().zip(&k) {
+            for i in 0..N {
+                f[i] += weight * ks[i];
+            }
+        }
+        out.copy_from_slice(&f);
+    }
+
+    /// [`Rk4Map::step`] on the workspace's heap vectors (any state size).
+    fn step_on_heap(
         &self,
         x: &DVector<f64>,
         u: &DVector<f64>,
@@ -455,6 +499,29 @@ mod tests {
                 assert_eq!(bits(&fu), bits(&dfu), "F_u at {x}");
             }
         }
+    }
+
+    #[test]
+    fn fixed_size_step_is_the_heap_one_bit_for_bit() {
+        // The acrobot (4 states) and a damped pendulum (2) step on stack arrays; the heap
+        // vectors' step must give the same bits, at small and large states.
+        fn agree<M: Linearize>(map: &Rk4Map<M>, seed: u64) {
+            let (n, m) = (map.state_dim(), map.control_dim());
+            let mut ws = map.workspace();
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let (mut fixed, mut heap) = (DVector::zeros(n), DVector::zeros(n));
+            for scale in [0.1, 3.0, 300.0] {
+                for _ in 0..500 {
+                    let x = random_vec(&mut rng, n, scale);
+                    let u = random_vec(&mut rng, m, 5.0 * scale);
+                    map.step(&x, &u, &mut fixed, &mut ws);
+                    map.step_on_heap(&x, &u, &mut heap, &mut ws);
+                    assert_eq!(bits(&fixed), bits(&heap), "F at {x}");
+                }
+            }
+        }
+        agree(&Rk4Map::new(Acrobot::default(), 0.05).unwrap(), 12);
+        agree(&Rk4Map::new(DampedPendulum, 0.05).unwrap(), 13);
     }
 
     #[test]
