@@ -51,6 +51,7 @@ pub struct SpatialAt {
 }
 
 /// Hamilton product a ⊗ b of quaternions `[w, x, y, z]`.
+#[inline(always)]
 pub fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
     [
         a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
@@ -60,24 +61,26 @@ pub fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
     ]
 }
 
+#[inline(always)]
 fn quat_conj(a: [f64; 4]) -> [f64; 4] {
     [a[0], -a[1], -a[2], -a[3]]
 }
 
 type M3 = [[f64; 3]; 3];
 
-#[inline]
+#[inline(always)]
 fn mat_vec(m: &M3, v: [f64; 3]) -> [f64; 3] {
     let row = |i: usize| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2];
     [row(0), row(1), row(2)]
 }
 
-#[inline]
+#[inline(always)]
 fn mat_t_vec(m: &M3, v: [f64; 3]) -> [f64; 3] {
     let col = |j: usize| m[0][j] * v[0] + m[1][j] * v[1] + m[2][j] * v[2];
     [col(0), col(1), col(2)]
 }
 
+#[inline(always)]
 fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
@@ -403,31 +406,65 @@ impl SpatialFrame {
         self.apply_rotated(map, &at.pose, &at.r, inp, out);
     }
 
-    /// [`SpatialFrame::apply`] with R(q₀) given.
+    /// [`SpatialFrame::apply`] with R(q₀) given: one body ([`SpatialFrame::apply_body`]) with
+    /// the map as a constant, compiled with AVX where the processor has it (the same IEEE
+    /// operations either way, as in [`SpatialFrame::apply_vjp_rotated`]).
     fn apply_rotated(&self, map: FrameMap, pose: &Pose3, r: &M3, inp: &[f64], out: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx")]
+            fn avx(
+                f: &SpatialFrame,
+                map: FrameMap,
+                pose: &Pose3,
+                r: &M3,
+                inp: &[f64],
+                out: &mut [f64],
+            ) {
+                f.apply_dispatch(map, pose, r, inp, out);
+            }
+            if std::arch::is_x86_feature_detected!("avx") {
+                // SAFETY: the processor supports AVX (checked just above).
+                unsafe { avx(self, map, pose, r, inp, out) };
+                return;
+            }
+        }
+        self.apply_dispatch(map, pose, r, inp, out);
+    }
+
+    /// [`SpatialFrame::apply_body`] for `map` as constants.
+    #[inline(always)]
+    fn apply_dispatch(&self, map: FrameMap, pose: &Pose3, r: &M3, inp: &[f64], out: &mut [f64]) {
+        use FrameMap::*;
+        match map {
+            ToLocal => self.apply_body::<true, SHIFT_TO_LOCAL>(pose, r, inp, out),
+            ToWorld => self.apply_body::<false, SHIFT_TO_WORLD>(pose, r, inp, out),
+            DeltaToLocal => self.apply_body::<true, SHIFT_NONE>(pose, r, inp, out),
+            DeltaToWorld => self.apply_body::<false, SHIFT_NONE>(pose, r, inp, out),
+        }
+    }
+
+    /// The body of [`SpatialFrame::apply_rotated`] (`LOCAL` and `SHIFT` as in
+    /// [`SpatialFrame::vjp_body`]).
+    #[inline(always)]
+    fn apply_body<const LOCAL: bool, const SHIFT: u8>(
+        &self,
+        pose: &Pose3,
+        r: &M3,
+        inp: &[f64],
+        out: &mut [f64],
+    ) {
         out.copy_from_slice(inp);
-        let local = map.sign() < 0.0;
-        for (t, is_point) in self.triples() {
-            let mut v = t.map(|i| inp[i]);
-            if is_point && map == FrameMap::ToLocal {
-                v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
-            }
-            let mut o = if local {
-                mat_t_vec(r, v)
-            } else {
-                mat_vec(r, v)
-            };
-            if is_point && map == FrameMap::ToWorld {
-                o = [0, 1, 2].map(|k| o[k] + pose.origin[k]);
-            }
-            for k in 0..3 {
-                out[t[k]] = o[k];
-            }
+        for t in &self.points {
+            apply_triple::<LOCAL, SHIFT, true>(t, pose, r, inp, out);
+        }
+        for t in &self.vectors {
+            apply_triple::<LOCAL, SHIFT, false>(t, pose, r, inp, out);
         }
         let n = pose.q.iter().map(|a| a * a).sum::<f64>();
         for qi in &self.quaternions {
             let a = qi.map(|i| inp[i]);
-            let o = if local {
+            let o = if LOCAL {
                 quat_mul(quat_conj(pose.q), a).map(|x| x / n)
             } else {
                 quat_mul(pose.q, a)
@@ -540,7 +577,13 @@ impl SpatialFrame {
     }
 
     /// [`SpatialFrame::apply_vjp`] with R(q₀) and ∂R/∂q₀ₖ given, computing the quaternion
-    /// cotangent for the components k in `live` only.
+    /// cotangent for the components k in `live` only (all four, or w and z of a heading).
+    ///
+    /// One body ([`SpatialFrame::vjp_body`]) with the map and the live set as constants, so
+    /// that each case is straight-line code; on x86-64 processors with AVX it is compiled with
+    /// AVX enabled, which puts independent divisions in one 4-lane division. Every operation is
+    /// the same IEEE operation either way (none is fused), so the bits do not depend on the
+    /// path.
     #[allow(clippy::too_many_arguments)]
     fn apply_vjp_rotated(
         &self,
@@ -552,49 +595,101 @@ impl SpatialFrame {
         inp_bar: &mut [f64],
         pose_bar: &mut Pose3,
     ) {
+        let args = VjpArgs {
+            pose,
+            r,
+            dr,
+            inp,
+            out_bar,
+        };
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx")]
+            fn avx(
+                f: &SpatialFrame,
+                map: FrameMap,
+                live: &[usize],
+                a: &VjpArgs<'_>,
+                inp_bar: &mut [f64],
+                pose_bar: &mut Pose3,
+            ) {
+                f.vjp_dispatch(map, live, a, inp_bar, pose_bar);
+            }
+            if std::arch::is_x86_feature_detected!("avx") {
+                // SAFETY: the processor supports AVX (checked just above).
+                unsafe { avx(self, map, live, &args, inp_bar, pose_bar) };
+                return;
+            }
+        }
+        self.vjp_dispatch(map, live, &args, inp_bar, pose_bar);
+    }
+
+    /// [`SpatialFrame::vjp_body`] for `map` and `live` as constants.
+    #[inline(always)]
+    fn vjp_dispatch(
+        &self,
+        map: FrameMap,
+        live: &[usize],
+        a: &VjpArgs<'_>,
+        inp_bar: &mut [f64],
+        pose_bar: &mut Pose3,
+    ) {
+        use FrameMap::*;
+        let heading = live == [0, 3];
+        debug_assert!(heading || live == ALL_Q);
+        macro_rules! body {
+            ($local:expr, $shift:expr) => {
+                if heading {
+                    self.vjp_body::<$local, $shift, 2>([0, 3], a, inp_bar, pose_bar)
+                } else {
+                    self.vjp_body::<$local, $shift, 4>(ALL_Q, a, inp_bar, pose_bar)
+                }
+            };
+        }
+        match map {
+            ToLocal => body!(true, SHIFT_TO_LOCAL),
+            ToWorld => body!(false, SHIFT_TO_WORLD),
+            DeltaToLocal => body!(true, SHIFT_NONE),
+            DeltaToWorld => body!(false, SHIFT_NONE),
+        }
+    }
+
+    /// The body of [`SpatialFrame::apply_vjp_rotated`]: `LOCAL` for the maps that rotate by
+    /// Rᵀ (to local), `SHIFT` for how points move with the origin (none for state changes),
+    /// `live` the quaternion components whose cotangents are computed.
+    #[inline(always)]
+    fn vjp_body<const LOCAL: bool, const SHIFT: u8, const K: usize>(
+        &self,
+        live: [usize; K],
+        &VjpArgs {
+            pose,
+            r,
+            dr,
+            inp,
+            out_bar,
+        }: &VjpArgs<'_>,
+        inp_bar: &mut [f64],
+        pose_bar: &mut Pose3,
+    ) {
         // Variables the map does not touch pass their cotangent through. Indices are listed at
         // most once (`validate`), so when the map's count equals the length it touches all.
         let touched = 3 * (self.points.len() + self.vectors.len()) + 4 * self.quaternions.len();
         if touched < inp_bar.len() {
             pass_untouched(self, inp_bar, out_bar);
         }
-        let local = map.sign() < 0.0;
-        for (t, is_point) in self.triples() {
-            let mut v = t.map(|i| inp[i]);
-            if is_point && map == FrameMap::ToLocal {
-                v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
-            }
-            let g = t.map(|i| out_bar[i]);
-            let ib = if local {
-                mat_vec(r, g)
-            } else {
-                mat_t_vec(r, g)
-            };
-            for k in 0..3 {
-                inp_bar[t[k]] += ib[k];
-            }
-            for &k in live {
-                let term = if local {
-                    mat_t_vec(&dr[k], v)
-                } else {
-                    mat_vec(&dr[k], v)
-                };
-                pose_bar.q[k] += dot3(g, term);
-            }
-            if is_point {
-                match map {
-                    FrameMap::ToLocal => (0..3).for_each(|k| pose_bar.origin[k] -= ib[k]),
-                    FrameMap::ToWorld => (0..3).for_each(|k| pose_bar.origin[k] += g[k]),
-                    _ => {}
-                }
-            }
+        let rot = (r, dr, live);
+        for t in &self.points {
+            vjp_triple::<LOCAL, SHIFT, K, true>(t, pose, rot, inp, out_bar, inp_bar, pose_bar);
+        }
+        for t in &self.vectors {
+            vjp_triple::<LOCAL, SHIFT, K, false>(t, pose, rot, inp, out_bar, inp_bar, pose_bar);
         }
         let n = pose.q.iter().map(|a| a * a).sum::<f64>();
         for qi in &self.quaternions {
             let a = qi.map(|i| inp[i]);
             let g = qi.map(|i| out_bar[i]);
             // Transposes of left multiplication: L(q)ᵀ = L(q*).
-            let ib = if local {
+            let ib = if LOCAL {
                 quat_mul(pose.q, g).map(|x| x / n)
             } else {
                 quat_mul(quat_conj(pose.q), g)
@@ -602,8 +697,13 @@ impl SpatialFrame {
             for k in 0..4 {
                 inp_bar[qi[k]] += ib[k];
             }
-            let partials = quat_partials(map, pose.q, a, live);
-            for &k in live {
+            let map = if LOCAL {
+                FrameMap::ToLocal
+            } else {
+                FrameMap::ToWorld
+            };
+            let partials = quat_partials_body(map, pose.q, a, &live);
+            for k in live {
                 let dq = partials[k];
                 pose_bar.q[k] += (0..4).map(|c| dq[c] * g[c]).sum::<f64>();
             }
@@ -611,7 +711,92 @@ impl SpatialFrame {
     }
 }
 
+/// What [`SpatialFrame::vjp_body`] reads: the pose, R(q₀), ∂R/∂q₀ₖ, the map's input and the
+/// cotangent of its output.
+struct VjpArgs<'a> {
+    pose: &'a Pose3,
+    r: &'a M3,
+    dr: &'a [M3; 4],
+    inp: &'a [f64],
+    out_bar: &'a [f64],
+}
+
+/// [`SpatialFrame::vjp_body`]'s `SHIFT`: points are state changes (not shifted), mapped to
+/// local (p − o), or mapped to world (+ o).
+const SHIFT_NONE: u8 = 0;
+const SHIFT_TO_LOCAL: u8 = 1;
+const SHIFT_TO_WORLD: u8 = 2;
+
+/// One point (`POINT`) or vector triple `t` of [`SpatialFrame::apply_body`].
+#[inline(always)]
+fn apply_triple<const LOCAL: bool, const SHIFT: u8, const POINT: bool>(
+    t: &[usize; 3],
+    pose: &Pose3,
+    r: &M3,
+    inp: &[f64],
+    out: &mut [f64],
+) {
+    let mut v = t.map(|i| inp[i]);
+    if POINT && SHIFT == SHIFT_TO_LOCAL {
+        v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
+    }
+    let mut o = if LOCAL {
+        mat_t_vec(r, v)
+    } else {
+        mat_vec(r, v)
+    };
+    if POINT && SHIFT == SHIFT_TO_WORLD {
+        o = [0, 1, 2].map(|k| o[k] + pose.origin[k]);
+    }
+    for k in 0..3 {
+        out[t[k]] = o[k];
+    }
+}
+
+/// One point (`POINT`) or vector triple `t` of [`SpatialFrame::vjp_body`].
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn vjp_triple<const LOCAL: bool, const SHIFT: u8, const K: usize, const POINT: bool>(
+    t: &[usize; 3],
+    pose: &Pose3,
+    (r, dr, live): (&M3, &[M3; 4], [usize; K]),
+    inp: &[f64],
+    out_bar: &[f64],
+    inp_bar: &mut [f64],
+    pose_bar: &mut Pose3,
+) {
+    let mut v = t.map(|i| inp[i]);
+    if POINT && SHIFT == SHIFT_TO_LOCAL {
+        v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
+    }
+    let g = t.map(|i| out_bar[i]);
+    let ib = if LOCAL {
+        mat_vec(r, g)
+    } else {
+        mat_t_vec(r, g)
+    };
+    for k in 0..3 {
+        inp_bar[t[k]] += ib[k];
+    }
+    for k in live {
+        let term = if LOCAL {
+            mat_t_vec(&dr[k], v)
+        } else {
+            mat_vec(&dr[k], v)
+        };
+        pose_bar.q[k] += dot3(g, term);
+    }
+    if POINT {
+        match SHIFT {
+            SHIFT_TO_LOCAL => (0..3).for_each(|k| pose_bar.origin[k] -= ib[k]),
+            SHIFT_TO_WORLD => (0..3).for_each(|k| pose_bar.origin[k] += g[k]),
+            _ => {}
+        }
+    }
+}
+
 /// Adds `out_bar` to `inp_bar` at the variables `frame` does not map (they pass through).
+#[inline(always)]
 fn pass_untouched(frame: &SpatialFrame, inp_bar: &mut [f64], out_bar: &[f64]) {
     if inp_bar.is_empty() {
     } else if inp_bar.len() <= 64 {
@@ -721,6 +906,10 @@ mod tests {
         m.iter().flatten().map(|x| x.to_bits()).collect()
     }
 
+    fn vbits(v: &[f64]) -> Vec<u64> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
     /// The quaternion partials' AVX copy (runtime dispatch) gives every bit of the plain
     /// body, for general and heading quaternions, both maps, every live set the frames use,
     /// and components that are zero of either sign.
@@ -742,6 +931,77 @@ mod tests {
                         bits(&quat_partials(map, q, a, live)),
                         bits(&quat_partials_body(map, q, a, live)),
                         "{q:?} {a:?} {map:?} {live:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The frame maps and their vector–Jacobian products compiled with AVX (runtime dispatch)
+    /// give every bit of the plain bodies: every map, both live sets, rigid bodies with one or
+    /// two vectors, general and heading quaternions, and inputs with zeros of either sign.
+    #[test]
+    fn dispatched_frame_maps_match_the_plain_bodies_bit_for_bit() {
+        use FrameMap::*;
+        let mut rng = ChaCha8Rng::seed_from_u64(41);
+        let mut lander = SpatialFrame::rigid_body(0, 3, 7, 10);
+        lander.vectors.truncate(1);
+        let frames = [SpatialFrame::rigid_body(0, 3, 7, 10), lander];
+        for i in 0..4000 {
+            let f = &frames[i % 2];
+            let mut draw = |scale: f64| -> f64 {
+                match rng.random_range(0..12) {
+                    0 => 0.0,
+                    1 => -0.0,
+                    _ => rng.random_range(-scale..scale),
+                }
+            };
+            let s: Vec<f64> = (0..13).map(|_| draw(3.0)).collect();
+            let inp: Vec<f64> = (0..13).map(|_| draw(2.0)).collect();
+            let out_bar: Vec<f64> = (0..13).map(|_| draw(1.0)).collect();
+            let mut q: [f64; 4] = std::array::from_fn(|_| draw(1.0));
+            if i % 3 == 0 {
+                (q[1], q[2]) = (0.0, 0.0);
+            }
+            if q.iter().all(|&x| x == 0.0) {
+                q[0] = 1.0;
+            }
+            let pose = Pose3 {
+                origin: [s[0], s[1], s[2]],
+                q,
+            };
+            let (r, dr) = rotation_and_derivatives(q);
+            for map in [ToLocal, ToWorld, DeltaToLocal, DeltaToWorld] {
+                let (mut a, mut b) = (vec![0.0; 13], vec![0.0; 13]);
+                f.apply_rotated(map, &pose, &r, &inp, &mut a);
+                f.apply_dispatch(map, &pose, &r, &inp, &mut b);
+                assert_eq!(vbits(&a), vbits(&b), "apply {map:?} {q:?}");
+                for live in [&ALL_Q[..], &[0, 3][..]] {
+                    let (mut ia, mut ib) = (out_bar.clone(), out_bar.clone());
+                    let (mut pa, mut pb) = (Pose3::default(), Pose3::default());
+                    f.apply_vjp_rotated(
+                        map,
+                        &pose,
+                        (&r, &dr, live),
+                        &inp,
+                        &out_bar,
+                        &mut ia,
+                        &mut pa,
+                    );
+                    let args = VjpArgs {
+                        pose: &pose,
+                        r: &r,
+                        dr: &dr,
+                        inp: &inp,
+                        out_bar: &out_bar,
+                    };
+                    f.vjp_dispatch(map, live, &args, &mut ib, &mut pb);
+                    assert_eq!(vbits(&ia), vbits(&ib), "vjp {map:?} {q:?} {live:?}");
+                    let pose_bits = |p: &Pose3| [bits(&[p.origin]), bits(&[p.q])];
+                    assert_eq!(
+                        pose_bits(&pa),
+                        pose_bits(&pb),
+                        "pose {map:?} {q:?} {live:?}"
                     );
                 }
             }
