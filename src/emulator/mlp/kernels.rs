@@ -49,11 +49,13 @@ fn pad4(n: usize) -> usize {
 /// Four f64 lanes and the operations the kernels need. Implementations must evaluate each lane
 /// exactly as the scalar IEEE operation named (fused multiply–add rounded once).
 trait Lanes {
-    /// A group of four lanes.
+    /// A group of `WIDTH` lanes.
     type V: Copy;
-    /// All four lanes set to `x`.
+    /// Lanes per group: 4, or 8 for [`Avx512`].
+    const WIDTH: usize = 4;
+    /// All lanes set to `x`.
     fn splat(x: f64) -> Self::V;
-    /// The first four values of `p`.
+    /// The first `WIDTH` values of `p`.
     fn load(p: &[f64]) -> Self::V;
     /// `w * x + acc` lane by lane, rounded once.
     fn fma(w: Self::V, x: Self::V, acc: Self::V) -> Self::V;
@@ -70,7 +72,7 @@ trait Lanes {
     /// 2ⁿ from `k = n + 1.5·2⁵²` (the shifter's sum; −1022 ≤ n ≤ 1023): the bit pattern of k
     /// plus 1023, shifted into the exponent field.
     fn exp2_from_shifted(k: Self::V) -> Self::V;
-    /// Writes the lanes to the first four values of `out`.
+    /// Writes the lanes to the first `WIDTH` values of `out`.
     fn store(v: Self::V, out: &mut [f64]);
 }
 
@@ -190,6 +192,70 @@ impl Lanes for Avx2 {
     }
 }
 
+/// Lanes in AVX-512 registers, 8 to a group; only used from functions compiled with AVX-512F
+/// enabled, on processors that have it, for the single-example products of a [`Packed`] padded
+/// to 8 ([`Packed::new`]). The same IEEE operations lane by lane as [`Avx2`].
+#[cfg(target_arch = "x86_64")]
+struct Avx512;
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes for Avx512 {
+    type V = std::arch::x86_64::__m512d;
+    const WIDTH: usize = 8;
+    // SAFETY (every method): only reached from `#[target_feature(enable = "avx512f")]` code
+    // (see `dispatch_wide`), on processors that have it.
+    #[inline(always)]
+    fn splat(x: f64) -> Self::V {
+        unsafe { std::arch::x86_64::_mm512_set1_pd(x) }
+    }
+    #[inline(always)]
+    fn load(p: &[f64]) -> Self::V {
+        assert!(p.len() >= 8);
+        // SAFETY: eight values are in bounds (checked).
+        unsafe { std::arch::x86_64::_mm512_loadu_pd(p.as_ptr()) }
+    }
+    #[inline(always)]
+    fn fma(w: Self::V, x: Self::V, acc: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm512_fmadd_pd(w, x, acc) }
+    }
+    #[inline(always)]
+    fn add(a: Self::V, b: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm512_add_pd(a, b) }
+    }
+    #[inline(always)]
+    fn sub(a: Self::V, b: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm512_sub_pd(a, b) }
+    }
+    #[inline(always)]
+    fn mul(a: Self::V, b: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm512_mul_pd(a, b) }
+    }
+    #[inline(always)]
+    fn div(a: Self::V, b: Self::V) -> Self::V {
+        unsafe { std::arch::x86_64::_mm512_div_pd(a, b) }
+    }
+    #[inline(always)]
+    fn clamp(x: Self::V, lo: Self::V, hi: Self::V) -> Self::V {
+        // VMAXPD/VMINPD return the second operand when either is NaN, as AVX's do.
+        use std::arch::x86_64::{_mm512_max_pd, _mm512_min_pd};
+        unsafe { _mm512_min_pd(hi, _mm512_max_pd(lo, x)) }
+    }
+    #[inline(always)]
+    fn exp2_from_shifted(k: Self::V) -> Self::V {
+        use std::arch::x86_64::*;
+        unsafe {
+            let bits = _mm512_add_epi64(_mm512_castpd_si512(k), _mm512_set1_epi64(1023));
+            _mm512_castsi512_pd(_mm512_slli_epi64::<52>(bits))
+        }
+    }
+    #[inline(always)]
+    fn store(v: Self::V, out: &mut [f64]) {
+        assert!(out.len() >= 8);
+        // SAFETY: eight values are in bounds (checked).
+        unsafe { std::arch::x86_64::_mm512_storeu_pd(out.as_mut_ptr(), v) }
+    }
+}
+
 /// σ(z) = 1 / (1 + e^{−z}) on each lane (module docs): e^t for t = −z clamped to ±708 (beyond
 /// that σ is 0 or 1 to double precision), by t = n ln 2 + r with n = round(t / ln 2) (the
 /// 1.5·2⁵² shifter) and ln 2 in two parts, e^r by its Taylor series to degree 13 (the
@@ -252,6 +318,23 @@ pub(super) fn sigmoid_scalar(z: f64) -> f64 {
     sigmoid_lanes::<Portable>([z; 4])[0]
 }
 
+/// Whether the single-example products run on [`Avx512`] lanes: on x86-64 processors with
+/// AVX-512F, unless the environment variable `MOTIONLAB_NO_AVX512` is set (to compare the two
+/// paths; the results are the same bits either way).
+fn wide_lanes() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::sync::OnceLock;
+        static WIDE: OnceLock<bool> = OnceLock::new();
+        *WIDE.get_or_init(|| {
+            std::arch::is_x86_feature_detected!("avx512f")
+                && std::env::var_os("MOTIONLAB_NO_AVX512").is_none()
+        })
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// The weights of a p → q → r net in the layouts of the single-example kernels (module docs).
 #[derive(Debug, Clone)]
 pub(super) struct Packed {
@@ -266,6 +349,8 @@ pub(super) struct Packed {
     w2t: Vec<f64>,
     w2: Vec<f64>,
     w1: Vec<f64>,
+    /// Whether the strides are padded to 8 for [`Avx512`] lanes (else to 4).
+    wide: bool,
     /// b₁ and b₂, zero-padded to q̃ and r̃.
     b1: Vec<f64>,
     b2: Vec<f64>,
@@ -284,7 +369,15 @@ impl Packed {
         w2: &[f64],
         b2: &[f64],
     ) -> Self {
-        let (ps, qs, rs) = (pad4(p), pad4(q), pad4(r));
+        // AVX-512 halves the instructions of a pass but runs at a lower clock (this bench's
+        // `cpu.fma_f64.*` peaks: 45.7 against 24.6 GMAC/s, 7% below twice), so it pays where
+        // the passes are bound by instruction issue (short products, the sigmoid) more than by
+        // the latency of long multiply–add chains. Measured (issue 14, one core, interleaved):
+        // 17-50-13 13% and 70-40-24 8% faster, 84-50-78 6% slower; hence nets with more than
+        // 72 inputs or 64 outputs keep 4 lanes.
+        let wide = wide_lanes() && p <= 72 && r <= 64;
+        let pad = |n: usize| if wide { n.div_ceil(8) * 8 } else { pad4(n) };
+        let (ps, qs, rs) = (pad(p), pad(q), pad(r));
         let mut w1t = vec![0.0; p * qs];
         let mut w1p = vec![0.0; q * ps];
         for j in 0..q {
@@ -317,6 +410,7 @@ impl Packed {
             w2t,
             w2: w2p,
             w1: w1p,
+            wide,
             b1: padded(b1, qs),
             b2: padded(b2, rs),
             zeros: vec![0.0; qs.max(ps)],
@@ -337,29 +431,33 @@ fn columns<L: Lanes, const SIGMOID: bool>(
     n: usize,
     mut emit: impl FnMut(usize, f64),
 ) {
-    debug_assert!(stride.is_multiple_of(4) && n <= stride);
+    debug_assert!(stride.is_multiple_of(L::WIDTH) && n <= stride);
     assert!(a.len() >= x.len() * stride, "packed matrix too short");
     assert!(init.len() >= stride, "initial values too short");
     let mut j0 = 0;
     while j0 < n {
-        // Blocks of up to 32 lanes (8 groups), each lane a separate sum.
+        // Blocks of up to 32 lanes, each lane a separate sum. Whether a block sums in two
+        // chains depends on its width with the outputs padded to 4 (the order of the sums
+        // does not depend on the lanes' width).
         let w = (stride - j0).min(32);
+        let dual = dual_chains((pad4(n) - j0).min(32) / 4);
         let e = &mut emit;
-        match w / 4 {
-            8 => block::<L, SIGMOID, 8>(a, stride, j0, x, init, n, e),
-            7 => block::<L, SIGMOID, 7>(a, stride, j0, x, init, n, e),
-            6 => block::<L, SIGMOID, 6>(a, stride, j0, x, init, n, e),
-            5 => block::<L, SIGMOID, 5>(a, stride, j0, x, init, n, e),
-            4 => block::<L, SIGMOID, 4>(a, stride, j0, x, init, n, e),
-            3 => block::<L, SIGMOID, 3>(a, stride, j0, x, init, n, e),
-            2 => block::<L, SIGMOID, 2>(a, stride, j0, x, init, n, e),
-            _ => block::<L, SIGMOID, 1>(a, stride, j0, x, init, n, e),
+        match w / L::WIDTH {
+            8 => block::<L, SIGMOID, 8>(a, stride, j0, x, init, n, dual, e),
+            7 => block::<L, SIGMOID, 7>(a, stride, j0, x, init, n, dual, e),
+            6 => block::<L, SIGMOID, 6>(a, stride, j0, x, init, n, dual, e),
+            5 => block::<L, SIGMOID, 5>(a, stride, j0, x, init, n, dual, e),
+            4 => block::<L, SIGMOID, 4>(a, stride, j0, x, init, n, dual, e),
+            3 => block::<L, SIGMOID, 3>(a, stride, j0, x, init, n, dual, e),
+            2 => block::<L, SIGMOID, 2>(a, stride, j0, x, init, n, dual, e),
+            _ => block::<L, SIGMOID, 1>(a, stride, j0, x, init, n, dual, e),
         }
         j0 += w;
     }
 }
 
-/// Columns `j0 .. j0 + 4G` of [`columns`], accumulated in G groups of 4 independent lanes.
+/// Columns `j0 .. j0 + G·WIDTH` of [`columns`], accumulated in G groups of independent lanes,
+/// each summed in two chains when `dual`.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn block<L: Lanes, const SIGMOID: bool, const G: usize>(
@@ -369,13 +467,14 @@ fn block<L: Lanes, const SIGMOID: bool, const G: usize>(
     x: &[f64],
     init: &[f64],
     n: usize,
+    dual: bool,
     emit: &mut impl FnMut(usize, f64),
 ) {
     let mut acc = [L::splat(0.0); G];
     for (g, acc) in acc.iter_mut().enumerate() {
-        *acc = L::load(&init[j0 + 4 * g..]);
+        *acc = L::load(&init[j0 + L::WIDTH * g..]);
     }
-    if dual_chains(G) {
+    if dual {
         // Too few groups to hide the multiply–add latency: even k into `acc`, odd k into a
         // second set, added at the end.
         let mut odd = [L::splat(0.0); G];
@@ -403,9 +502,9 @@ fn block<L: Lanes, const SIGMOID: bool, const G: usize>(
         } else {
             *acc
         };
-        L::store(v, &mut sums[4 * g..]);
+        L::store(v, &mut sums[L::WIDTH * g..]);
     }
-    for (l, &v) in sums.iter().enumerate().take((4 * G).min(n - j0)) {
+    for (l, &v) in sums.iter().enumerate().take((L::WIDTH * G).min(n - j0)) {
         emit(j0 + l, v);
     }
 }
@@ -421,10 +520,10 @@ fn step<L: Lanes, const G: usize>(
     k: usize,
 ) {
     let start = k * stride + j0;
-    let row = &a[start..start + 4 * G];
+    let row = &a[start..start + L::WIDTH * G];
     let xv = L::splat(x[k]);
     for (g, acc) in acc.iter_mut().enumerate() {
-        *acc = L::fma(L::load(&row[4 * g..]), xv, *acc);
+        *acc = L::fma(L::load(&row[L::WIDTH * g..]), xv, *acc);
     }
 }
 
@@ -465,6 +564,45 @@ macro_rules! dispatch {
                 }
             }
             $generic::<Portable>($($arg),*)
+        }
+    };
+}
+
+/// [`dispatch`] for the single-example products of a [`Packed`] (`$pk`): on [`Avx512`] lanes,
+/// compiled with AVX-512F enabled, when the matrices are padded for them ([`wide_lanes`]), else
+/// as [`dispatch`].
+macro_rules! dispatch_wide {
+    ($name:ident, $generic:ident, ($pk:ident : $pkty:ty, $($arg:ident : $ty:ty),*)) => {
+        #[allow(clippy::too_many_arguments)]
+        pub(super) fn $name($pk: $pkty, $($arg: $ty),*) {
+            #[cfg(target_arch = "x86_64")]
+            {
+                /// The generic body on AVX-512 lanes, compiled with AVX-512F enabled.
+                #[target_feature(enable = "avx512f")]
+                #[allow(clippy::too_many_arguments)]
+                fn avx512($pk: $pkty, $($arg: $ty),*) {
+                    $generic::<Avx512>($pk, $($arg),*)
+                }
+                /// The generic body on AVX2 lanes, compiled with AVX2 and FMA enabled.
+                #[target_feature(enable = "avx2,fma")]
+                #[allow(clippy::too_many_arguments)]
+                fn avx2($pk: $pkty, $($arg: $ty),*) {
+                    $generic::<Avx2>($pk, $($arg),*)
+                }
+                if $pk.wide && std::arch::is_x86_feature_detected!("avx512f") {
+                    // SAFETY: the processor supports AVX-512F (checked just above).
+                    unsafe { avx512($pk, $($arg),*) };
+                    return;
+                }
+                if std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma")
+                {
+                    // SAFETY: the processor supports AVX2 and FMA (checked just above).
+                    unsafe { avx2($pk, $($arg),*) };
+                    return;
+                }
+            }
+            $generic::<Portable>($pk, $($arg),*)
         }
     };
 }
@@ -680,18 +818,18 @@ fn weight_grad_many_generic<L: Lanes>(
     rank1_many::<L>(g1, q, p, hb, x, examples);
 }
 
-dispatch!(hidden, hidden_generic, (pk: &Packed, x: &[f64], h: &mut [f64]));
-dispatch!(
+dispatch_wide!(hidden, hidden_generic, (pk: &Packed, x: &[f64], h: &mut [f64]));
+dispatch_wide!(
     forward,
     forward_generic,
     (pk: &Packed, x: &[f64], h: &mut [f64], y: &mut [f64])
 );
-dispatch!(
+dispatch_wide!(
     hidden_bar,
     hidden_bar_generic,
     (pk: &Packed, h: &[f64], y_bar: &[f64], hb: &mut [f64])
 );
-dispatch!(input_bar, input_bar_generic, (pk: &Packed, hb: &[f64], xb: &mut [f64]));
+dispatch_wide!(input_bar, input_bar_generic, (pk: &Packed, hb: &[f64], xb: &mut [f64]));
 dispatch!(
     weight_grad,
     weight_grad_generic,
