@@ -544,9 +544,9 @@ pub(super) fn output_has_dual_chains(stride: usize, j: usize) -> bool {
 /// `$name` runs `$generic` on AVX2 lanes, compiled with AVX2 and FMA enabled, when the
 /// processor has both, else on portable lanes.
 macro_rules! dispatch {
-    ($name:ident, $generic:ident, ($($arg:ident : $ty:ty),*)) => {
+    ($vis:vis $name:ident, $generic:ident, ($($arg:ident : $ty:ty),*)) => {
         #[allow(clippy::too_many_arguments)]
-        pub(super) fn $name($($arg: $ty),*) {
+        $vis fn $name($($arg: $ty),*) {
             #[cfg(target_arch = "x86_64")]
             {
                 /// The generic body on AVX2 lanes, compiled with AVX2 and FMA enabled.
@@ -583,26 +583,14 @@ macro_rules! dispatch_wide {
                 fn avx512($pk: $pkty, $($arg: $ty),*) {
                     $generic::<Avx512>($pk, $($arg),*)
                 }
-                /// The generic body on AVX2 lanes, compiled with AVX2 and FMA enabled.
-                #[target_feature(enable = "avx2,fma")]
-                #[allow(clippy::too_many_arguments)]
-                fn avx2($pk: $pkty, $($arg: $ty),*) {
-                    $generic::<Avx2>($pk, $($arg),*)
-                }
                 if $pk.wide && std::arch::is_x86_feature_detected!("avx512f") {
                     // SAFETY: the processor supports AVX-512F (checked just above).
                     unsafe { avx512($pk, $($arg),*) };
                     return;
                 }
-                if std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("fma")
-                {
-                    // SAFETY: the processor supports AVX2 and FMA (checked just above).
-                    unsafe { avx2($pk, $($arg),*) };
-                    return;
-                }
             }
-            $generic::<Portable>($pk, $($arg),*)
+            dispatch!(narrow, $generic, ($pk: $pkty, $($arg: $ty),*));
+            narrow($pk, $($arg),*)
         }
     };
 }
@@ -831,7 +819,7 @@ dispatch_wide!(
 );
 dispatch_wide!(input_bar, input_bar_generic, (pk: &Packed, hb: &[f64], xb: &mut [f64]));
 dispatch!(
-    weight_grad,
+    pub(super) weight_grad,
     weight_grad_generic,
     (
         x: &[f64],
@@ -844,9 +832,9 @@ dispatch!(
         gb2: &mut [f64]
     )
 );
-dispatch!(sigmoid_slice, sigmoid_slice_generic, (v: &mut [f64]));
+dispatch!(pub(super) sigmoid_slice, sigmoid_slice_generic, (v: &mut [f64]));
 dispatch!(
-    weight_grad_many,
+    pub(super) weight_grad_many,
     weight_grad_many_generic,
     (
         examples: usize,

@@ -937,9 +937,119 @@ mod tests {
         }
     }
 
+    /// [`SpatialFrame::apply_rotated`] written out as generic loops over the frame's triples,
+    /// the map matched inside them: the oracle of the operations and their order.
+    fn reference_apply(
+        f: &SpatialFrame,
+        map: FrameMap,
+        pose: &Pose3,
+        r: &M3,
+        inp: &[f64],
+    ) -> Vec<f64> {
+        let mut out = inp.to_vec();
+        let local = map.sign() < 0.0;
+        for (t, is_point) in f.triples() {
+            let mut v = t.map(|i| inp[i]);
+            if is_point && map == FrameMap::ToLocal {
+                v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
+            }
+            let mut o = if local {
+                mat_t_vec(r, v)
+            } else {
+                mat_vec(r, v)
+            };
+            if is_point && map == FrameMap::ToWorld {
+                o = [0, 1, 2].map(|k| o[k] + pose.origin[k]);
+            }
+            for k in 0..3 {
+                out[t[k]] = o[k];
+            }
+        }
+        let n = pose.q.iter().map(|a| a * a).sum::<f64>();
+        for qi in &f.quaternions {
+            let a = qi.map(|i| inp[i]);
+            let o = if local {
+                quat_mul(quat_conj(pose.q), a).map(|x| x / n)
+            } else {
+                quat_mul(pose.q, a)
+            };
+            for k in 0..4 {
+                out[qi[k]] = o[k];
+            }
+        }
+        out
+    }
+
+    /// [`SpatialFrame::apply_vjp_rotated`] written out the same way: adds to `inp_bar` and
+    /// `pose_bar`.
+    #[allow(clippy::too_many_arguments)]
+    fn reference_vjp(
+        f: &SpatialFrame,
+        map: FrameMap,
+        pose: &Pose3,
+        (r, dr, live): (&M3, &[M3; 4], &[usize]),
+        inp: &[f64],
+        out_bar: &[f64],
+        inp_bar: &mut [f64],
+        pose_bar: &mut Pose3,
+    ) {
+        pass_untouched(f, inp_bar, out_bar);
+        let local = map.sign() < 0.0;
+        for (t, is_point) in f.triples() {
+            let mut v = t.map(|i| inp[i]);
+            if is_point && map == FrameMap::ToLocal {
+                v = [0, 1, 2].map(|k| v[k] - pose.origin[k]);
+            }
+            let g = t.map(|i| out_bar[i]);
+            let ib = if local {
+                mat_vec(r, g)
+            } else {
+                mat_t_vec(r, g)
+            };
+            for k in 0..3 {
+                inp_bar[t[k]] += ib[k];
+            }
+            for &k in live {
+                let term = if local {
+                    mat_t_vec(&dr[k], v)
+                } else {
+                    mat_vec(&dr[k], v)
+                };
+                pose_bar.q[k] += dot3(g, term);
+            }
+            if is_point {
+                match map {
+                    FrameMap::ToLocal => (0..3).for_each(|k| pose_bar.origin[k] -= ib[k]),
+                    FrameMap::ToWorld => (0..3).for_each(|k| pose_bar.origin[k] += g[k]),
+                    _ => {}
+                }
+            }
+        }
+        let n = pose.q.iter().map(|a| a * a).sum::<f64>();
+        for qi in &f.quaternions {
+            let a = qi.map(|i| inp[i]);
+            let g = qi.map(|i| out_bar[i]);
+            let ib = if local {
+                quat_mul(pose.q, g).map(|x| x / n)
+            } else {
+                quat_mul(quat_conj(pose.q), g)
+            };
+            for k in 0..4 {
+                inp_bar[qi[k]] += ib[k];
+            }
+            let partials = quat_partials_body(map, pose.q, a, live);
+            for &k in live {
+                let dq = partials[k];
+                pose_bar.q[k] += (0..4).map(|c| dq[c] * g[c]).sum::<f64>();
+            }
+        }
+    }
+
     /// The frame maps and their vector–Jacobian products compiled with AVX (runtime dispatch)
-    /// give every bit of the plain bodies: every map, both live sets, rigid bodies with one or
-    /// two vectors, general and heading quaternions, and inputs with zeros of either sign.
+    /// give every bit of the plain bodies, and both give every bit of the written-out
+    /// reference loops (the same operations in the same order): every map, both live sets,
+    /// rigid bodies with one or two vectors, general and heading quaternions, and inputs with
+    /// zeros of either sign.
     #[test]
     fn dispatched_frame_maps_match_the_plain_bodies_bit_for_bit() {
         use FrameMap::*;
@@ -976,6 +1086,12 @@ mod tests {
                 f.apply_rotated(map, &pose, &r, &inp, &mut a);
                 f.apply_dispatch(map, &pose, &r, &inp, &mut b);
                 assert_eq!(vbits(&a), vbits(&b), "apply {map:?} {q:?}");
+                let reference = reference_apply(f, map, &pose, &r, &inp);
+                assert_eq!(
+                    vbits(&a),
+                    vbits(&reference),
+                    "apply {map:?} {q:?} reference"
+                );
                 for live in [&ALL_Q[..], &[0, 3][..]] {
                     let (mut ia, mut ib) = (out_bar.clone(), out_bar.clone());
                     let (mut pa, mut pb) = (Pose3::default(), Pose3::default());
@@ -1002,6 +1118,19 @@ mod tests {
                         pose_bits(&pa),
                         pose_bits(&pb),
                         "pose {map:?} {q:?} {live:?}"
+                    );
+                    let (mut ic, mut pc) = (out_bar.clone(), Pose3::default());
+                    let rot = (&r, &dr, live);
+                    reference_vjp(f, map, &pose, rot, &inp, &out_bar, &mut ic, &mut pc);
+                    assert_eq!(
+                        vbits(&ia),
+                        vbits(&ic),
+                        "vjp {map:?} {q:?} {live:?} reference"
+                    );
+                    assert_eq!(
+                        pose_bits(&pa),
+                        pose_bits(&pc),
+                        "pose {map:?} {q:?} {live:?} reference"
                     );
                 }
             }
