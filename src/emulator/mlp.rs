@@ -408,6 +408,12 @@ impl Mlp {
         let n = inputs.nrows();
         let nw = self.n_weights();
         let chunks = chunk_count(n);
+        let packed = self.batch_packed();
+        if let (1, Some(pk)) = (chunks, &packed) {
+            // One chunk (e.g. a mini-batch): its gradient is the total, written in place (the
+            // kernel adds each value to zero, as the sum over chunks below does).
+            return kernels::chunk_loss_grad(pk, inputs, targets, self.split_mut(grad));
+        }
         // Chunk gradients of one window at a time, summed in chunk order: the same sums as
         // over all chunks at once, without holding a gradient per chunk of a large batch.
         let width = GRAD_WINDOW.min(chunks);
@@ -419,7 +425,11 @@ impl Mlp {
             let count = GRAD_WINDOW.min(chunks - w0);
             let run = |(i, (g, l)): (usize, (&mut [f64], &mut f64))| {
                 let c = w0 + i;
-                *l = self.chunk_loss_grad(inputs.slice(chunk(c, n)), targets.slice(chunk(c, n)), g);
+                let (x, t) = (inputs.slice(chunk(c, n)), targets.slice(chunk(c, n)));
+                *l = match &packed {
+                    Some(pk) => kernels::chunk_loss_grad(pk, x, t, self.split_mut(g)),
+                    None => self.chunk_loss_grad_gemm(x, t, g),
+                };
             };
             if count == 1 {
                 // One chunk (e.g. a mini-batch): no hand-off to the thread pool.
@@ -446,10 +456,14 @@ impl Mlp {
     pub fn loss(&self, inputs: ArrayView2<'_, f64>, targets: ArrayView2<'_, f64>) -> f64 {
         assert_eq!(inputs.nrows(), targets.nrows());
         let n = inputs.nrows();
+        let packed = self.batch_packed();
         let parts: Vec<f64> = (0..chunk_count(n))
             .into_par_iter()
             .map(|c| {
                 let (x, t) = (inputs.slice(chunk(c, n)), targets.slice(chunk(c, n)));
+                if let Some(pk) = &packed {
+                    return kernels::chunk_loss(pk, x, t);
+                }
                 let h = self.hidden_batch(x);
                 let mut y = Array2::zeros((x.nrows(), self.n_out));
                 self.output_batch(h.view(), y.view_mut());
@@ -460,8 +474,21 @@ impl Mlp {
         parts.iter().sum()
     }
 
-    /// Loss of one chunk; its gradient overwrites `grad` (every value is written).
-    fn chunk_loss_grad(
+    /// The weights packed for the batch kernels ([`kernels::chunk_loss_grad`]), or `None` for
+    /// the shapes they do not take (a layer of one unit, or more than
+    /// [`kernels::MAX_DEPTH`] inputs, hidden units or outputs), which go through ndarray's
+    /// products ([`Mlp::chunk_loss_grad_gemm`]), the same bits either way.
+    fn batch_packed(&self) -> Option<kernels::BatchNet> {
+        let (p, q, r) = (self.n_in, self.n_hidden, self.n_out);
+        (q >= 2 && r >= 2 && p.max(q).max(r) <= kernels::MAX_DEPTH).then(|| {
+            let (w1, b1, w2, b2) = self.split(&self.weights);
+            kernels::BatchNet::new((p, q, r), w1, b1, w2, b2)
+        })
+    }
+
+    /// Loss of one chunk by ndarray's products; its gradient overwrites `grad` (every value is
+    /// written).
+    fn chunk_loss_grad_gemm(
         &self,
         x: ArrayView2<'_, f64>,
         t: ArrayView2<'_, f64>,
@@ -519,6 +546,108 @@ mod tests {
         let x = Array2::from_shape_fn((n, p), |_| rng.random_range(-2.0..2.0));
         let t = Array2::from_shape_fn((n, r), |_| rng.random_range(-1.0..1.0));
         (x, t)
+    }
+
+    /// The loss and gradient of a batch as the code before the batch kernels computed them:
+    /// ndarray's products per chunk, chunk gradients added to zero in order.
+    fn gemm_loss_grad(
+        mlp: &Mlp,
+        x: ArrayView2<'_, f64>,
+        t: ArrayView2<'_, f64>,
+    ) -> (f64, Vec<f64>) {
+        let n = x.nrows();
+        let mut grad = vec![0.0; mlp.n_weights()];
+        let mut part = vec![0.0; mlp.n_weights()];
+        let mut loss = 0.0;
+        for c in 0..chunk_count(n) {
+            loss += mlp.chunk_loss_grad_gemm(x.slice(chunk(c, n)), t.slice(chunk(c, n)), &mut part);
+            for (a, b) in grad.iter_mut().zip(&part) {
+                *a += b;
+            }
+        }
+        (loss, grad)
+    }
+
+    /// `Mlp::loss` as ndarray's products computed it.
+    fn gemm_loss(mlp: &Mlp, x: ArrayView2<'_, f64>, t: ArrayView2<'_, f64>) -> f64 {
+        let n = x.nrows();
+        (0..chunk_count(n))
+            .map(|c| {
+                let (x, t) = (x.slice(chunk(c, n)), t.slice(chunk(c, n)));
+                let h = mlp.hidden_batch(x);
+                let mut y = Array2::zeros((x.nrows(), mlp.n_out));
+                mlp.output_batch(h.view(), y.view_mut());
+                y -= &t;
+                0.5 * y.iter().map(|e| e * e).sum::<f64>()
+            })
+            .sum()
+    }
+
+    /// The batch kernels against ndarray's products (whose `matrixmultiply` sums each entry in
+    /// the same order), bit for bit: the nets of the experiments and small ones, one example,
+    /// mini-batches, one chunk, several chunks and a partial last one, inputs that are not
+    /// contiguous rows, on the dispatched lanes (AVX-512 here where the processor has it) and
+    /// on 4 lanes.
+    #[test]
+    fn batch_kernels_are_ndarray_products_bit_for_bit() {
+        #[cfg(target_arch = "x86_64")]
+        let fused = std::arch::is_x86_feature_detected!("fma");
+        #[cfg(not(target_arch = "x86_64"))]
+        let fused = true;
+        let shapes = [
+            (17, 50, 13),
+            (84, 50, 78),
+            (70, 40, 24),
+            (6, 20, 6),
+            (4, 6, 3),
+            (3, 2, 2),
+        ];
+        for (s, &(p, q, r)) in shapes.iter().enumerate() {
+            let mut rng = ChaCha8Rng::seed_from_u64(40 + s as u64);
+            let mlp = Mlp::new(p, q, r, WeightInit::FanIn, &mut rng);
+            for (b, &n) in [1, 2, 30, 128, 300].iter().enumerate() {
+                let (x, t) = random_batch(n, p, r, 100 * s as u64 + b as u64);
+                // The same inputs as a transposed array's view: rows that are not contiguous.
+                let xt = x.t().to_owned();
+                for x in [x.view(), xt.t()] {
+                    let (want_loss, want) = gemm_loss_grad(&mlp, x, t.view());
+                    let mut got = vec![f64::NAN; mlp.n_weights()];
+                    let got_loss = mlp.loss_grad(x, t.view(), &mut got);
+                    let what = format!("{p}-{q}-{r}, {n} rows");
+                    if fused {
+                        assert_eq!(got_loss.to_bits(), want_loss.to_bits(), "loss, {what}");
+                        let (g, w): (Vec<u64>, Vec<u64>) = got
+                            .iter()
+                            .zip(&want)
+                            .map(|(g, w)| (g.to_bits(), w.to_bits()))
+                            .unzip();
+                        assert_eq!(g, w, "gradient, {what}");
+                        let l = mlp.loss(x, t.view());
+                        assert_eq!(
+                            l.to_bits(),
+                            gemm_loss(&mlp, x, t.view()).to_bits(),
+                            "{what}"
+                        );
+                    } else {
+                        assert!((got_loss - want_loss).abs() <= 1e-12 * want_loss.abs().max(1.0));
+                    }
+                }
+                if fused && n <= BATCH_CHUNK {
+                    // Four lanes (AVX2 or portable) where the dispatch took AVX-512's eight.
+                    let (w1, b1, w2, b2) = mlp.split(&mlp.weights);
+                    let pk = kernels::BatchNet::with_lanes((p, q, r), (w1, b1, w2, b2), false);
+                    let mut got = vec![f64::NAN; mlp.n_weights()];
+                    let l =
+                        kernels::chunk_loss_grad(&pk, x.view(), t.view(), mlp.split_mut(&mut got));
+                    let (want_loss, want) = gemm_loss_grad(&mlp, x.view(), t.view());
+                    assert_eq!(l.to_bits(), want_loss.to_bits());
+                    assert!(got
+                        .iter()
+                        .zip(&want)
+                        .all(|(g, w)| g.to_bits() == w.to_bits()));
+                }
+            }
+        }
     }
 
     #[test]

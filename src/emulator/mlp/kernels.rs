@@ -595,6 +595,9 @@ macro_rules! dispatch_wide {
     };
 }
 
+mod batch;
+pub(super) use batch::{chunk_loss, chunk_loss_grad, BatchNet, MAX_DEPTH};
+
 /// Hidden activations h = σ(W₁ x + b₁).
 #[inline(always)]
 fn hidden_generic<L: Lanes>(pk: &Packed, x: &[f64], h: &mut [f64]) {

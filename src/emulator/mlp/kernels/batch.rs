@@ -1,0 +1,584 @@
+//! # Batch passes: a chunk's five products, one multiply–add chain per entry
+//!
+//! The loss gradient of a chunk of n examples (rows of X, n × p, and of the targets T) is five
+//! matrix products and three element-wise steps:
+//!
+//! ```text
+//! H  = σ(X W₁ᵀ + b₁)        n × q
+//! E  = H W₂ᵀ + b₂ − T       n × r     loss ½ Σ E²
+//! H̄  = (E W₂) ⊙ H ⊙ (1 − H)  n × q
+//! ∂W₁ = H̄ᵀ X,  ∂b₁ = Σ_τ H̄[τ]       ∂W₂ = Eᵀ H,  ∂b₂ = Σ_τ E[τ]
+//! ```
+//!
+//! Every entry of a product is one sum Σ_k a[i, k] b[k, j] taken from zero in ascending k, one
+//! fused multiply–add per term, the bias (where there is one) added after the sum. That is the
+//! order in which `matrixmultiply`'s `dgemm` (which ndarray's products call) sums each entry
+//! when k is at most its depth block [`MAX_DEPTH`], on every processor with fused multiply–add,
+//! so these passes are the same bits as the ndarray products they replace (tested against
+//! them). What is gone is its generality: it packs both operands into aligned panels on every
+//! call and allocates, and for the small products of a mini-batch that was about as much time
+//! as the arithmetic. Here the weights are packed once per gradient ([`BatchNet`]),
+//! the activations are written by one product in the layout the next one reads, the σ, bias
+//! and cotangent steps run on the lanes as each product's rows are finished, and the scratch
+//! is one buffer per thread.
+//!
+//! A product C = A B vectorizes across the columns of C: B's rows hold lane groups of W
+//! columns (W = 8 on AVX-512, 4 on AVX2), and a register tile of MR rows × NR groups of C
+//! takes, for each k, NR loads of B's row k and MR broadcasts of A's column k. A is read
+//! through strides, so H̄ᵀ and Eᵀ are never formed.
+
+use super::{sigmoid_lanes, wide_lanes, Lanes, Portable};
+#[cfg(target_arch = "x86_64")]
+use super::{Avx2, Avx512};
+use ndarray::ArrayView2;
+use std::cell::RefCell;
+
+/// The longest sum (inputs, hidden units, outputs, rows of a chunk) the batch passes take:
+/// `matrixmultiply` splits sums longer than its depth block (KC = 256 for f64) into partial
+/// sums, an order these passes do not reproduce.
+pub(in crate::emulator::mlp) const MAX_DEPTH: usize = 256;
+
+/// Values per 64-byte cache line. The buffers start on a line and every padded row is a whole
+/// number of lane groups, so no AVX-512 load or store of a lane group straddles two lines
+/// (measured: 12% of the 84-50-78 full-batch gradient), nor an AVX2 one.
+const LINE: usize = 8;
+
+/// The index of the first value of `v` on a cache line.
+fn line_offset(v: &[f64]) -> usize {
+    v.as_ptr().align_offset(64).min(LINE)
+}
+
+/// A p → q → r net's weights in the layouts the batch products read, each row padded with
+/// zeros to whole lane groups (8 lanes where the processor has AVX-512, else 4):
+///
+/// ```text
+/// w1t  p × q̃   W₁ᵀ   (B of H = X W₁ᵀ)
+/// w2t  q × r̃   W₂ᵀ   (B of E = H W₂ᵀ)
+/// w2   r × q̃   W₂    (B of H̄ = E W₂)
+/// b1   q̃,  b2  r̃
+/// ```
+///
+/// Packed once per gradient, in one allocation; every chunk reads it.
+#[derive(Debug, Clone)]
+pub(in crate::emulator::mlp) struct BatchNet {
+    p: usize,
+    q: usize,
+    r: usize,
+    /// Padded row lengths p̃, q̃, r̃.
+    ps: usize,
+    qs: usize,
+    rs: usize,
+    /// Whether the rows are padded for [`Avx512`] lanes.
+    wide: bool,
+    /// w1t, w2t, w2, b1, b2, one after the other from `data[start]`, the first value on a
+    /// cache line.
+    data: Vec<f64>,
+    start: usize,
+}
+
+impl BatchNet {
+    /// Packs W₁ (q × p, row-major), b₁, W₂ (r × q, row-major) and b₂.
+    pub(in crate::emulator::mlp) fn new(
+        (p, q, r): (usize, usize, usize),
+        w1: &[f64],
+        b1: &[f64],
+        w2: &[f64],
+        b2: &[f64],
+    ) -> Self {
+        Self::with_lanes((p, q, r), (w1, b1, w2, b2), wide_lanes())
+    }
+
+    /// [`BatchNet::new`] padded for 8 lanes (`wide`, only where the processor has AVX-512) or 4.
+    pub(in crate::emulator::mlp) fn with_lanes(
+        (p, q, r): (usize, usize, usize),
+        (w1, b1, w2, b2): (&[f64], &[f64], &[f64], &[f64]),
+        wide: bool,
+    ) -> Self {
+        let pad = |n: usize| n.div_ceil(if wide { 8 } else { 4 }) * if wide { 8 } else { 4 };
+        let (ps, qs, rs) = (pad(p), pad(q), pad(r));
+        let mut data = vec![0.0; p * qs + q * rs + r * qs + qs + rs + LINE];
+        let start = line_offset(&data);
+        let (w1t, rest) = data[start..].split_at_mut(p * qs);
+        let (w2t, rest) = rest.split_at_mut(q * rs);
+        let (w2p, rest) = rest.split_at_mut(r * qs);
+        let (b1p, b2p) = rest.split_at_mut(qs);
+        for (k, row) in w1t.chunks_exact_mut(qs).enumerate() {
+            for (d, s) in row.iter_mut().zip(w1[k..].iter().step_by(p)) {
+                *d = *s;
+            }
+        }
+        for (j, row) in w2t.chunks_exact_mut(rs).enumerate() {
+            for (d, s) in row.iter_mut().zip(w2[j..].iter().step_by(q)) {
+                *d = *s;
+            }
+        }
+        for (row, s) in w2p.chunks_exact_mut(qs).zip(w2.chunks_exact(q)) {
+            row[..q].copy_from_slice(s);
+        }
+        b1p[..q].copy_from_slice(b1);
+        b2p[..r].copy_from_slice(b2);
+        Self {
+            p,
+            q,
+            r,
+            ps,
+            qs,
+            rs,
+            wide,
+            start,
+            data,
+        }
+    }
+
+    /// (w1t, w2t, w2, b1, b2).
+    #[allow(clippy::type_complexity)]
+    fn parts(&self) -> (&[f64], &[f64], &[f64], &[f64], &[f64]) {
+        let (w1t, rest) = self.data[self.start..].split_at(self.p * self.qs);
+        let (w2t, rest) = rest.split_at(self.q * self.rs);
+        let (w2, rest) = rest.split_at(self.r * self.qs);
+        let (b1, b2) = rest.split_at(self.qs);
+        (w1t, w2t, w2, b1, b2)
+    }
+}
+
+/// c[i, ·] = Σ_k a[i·ars + k·acs] b[k·bs + ·] for i < m over the first `groups` lane groups of
+/// each row of B and C (row strides `bs`, `cs`): each entry summed from zero, k ascending, one
+/// fused multiply–add per term.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn product<L: Lanes>(
+    m: usize,
+    groups: usize,
+    k: usize,
+    (a, ars, acs): (&[f64], usize, usize),
+    (b, bs): (&[f64], usize),
+    (c, cs): (&mut [f64], usize),
+) {
+    let w = L::WIDTH;
+    if m == 0 || groups == 0 {
+        return;
+    }
+    assert!(groups * w <= bs.min(cs), "lane groups beyond a row");
+    assert!((m - 1) * cs + groups * w <= c.len(), "C too short");
+    if k == 0 {
+        for i in 0..m {
+            c[i * cs..i * cs + groups * w].fill(0.0);
+        }
+        return;
+    }
+    assert!((m - 1) * ars + (k - 1) * acs < a.len(), "A too short");
+    assert!((k - 1) * bs + groups * w <= b.len(), "B too short");
+    // Tiles of 16 accumulators on AVX-512 (32 registers), 12 on AVX2 (16 registers).
+    let nr_max = if w == 8 { 4 } else { 3 };
+    let mut g0 = 0;
+    while g0 < groups {
+        let nr = nr_max.min(groups - g0);
+        let b = &b[g0 * w..];
+        let (a, c) = ((a, ars, acs), (&mut c[g0 * w..], cs));
+        match nr {
+            4 => rows::<L, 4, 4>(m, k, a, (b, bs), c),
+            3 => rows::<L, 3, 4>(m, k, a, (b, bs), c),
+            2 => rows::<L, 2, 6>(m, k, a, (b, bs), c),
+            _ => rows::<L, 1, 8>(m, k, a, (b, bs), c),
+        }
+        g0 += nr;
+    }
+}
+
+/// The rows of [`product`] for NR lane groups: tiles of MR rows, then one tile of the rows
+/// left. The bounds were checked by [`product`].
+#[inline(always)]
+fn rows<L: Lanes, const NR: usize, const MR: usize>(
+    m: usize,
+    k: usize,
+    (a, ars, acs): (&[f64], usize, usize),
+    (b, bs): (&[f64], usize),
+    (c, cs): (&mut [f64], usize),
+) {
+    let mut i0 = 0;
+    while i0 < m {
+        let mr = MR.min(m - i0);
+        // SAFETY: `product` checked that rows i0 .. i0 + mr of A (k columns) and of C (NR
+        // groups), and k rows of B (NR groups from this offset), are in bounds.
+        unsafe {
+            let (ap, cp) = (a.as_ptr().add(i0 * ars), c.as_mut_ptr().add(i0 * cs));
+            let args = (k, ap, ars, acs, b.as_ptr(), bs, cp, cs);
+            match mr {
+                8 => tile::<L, 8, NR>(args),
+                7 => tile::<L, 7, NR>(args),
+                6 => tile::<L, 6, NR>(args),
+                5 => tile::<L, 5, NR>(args),
+                4 => tile::<L, 4, NR>(args),
+                3 => tile::<L, 3, NR>(args),
+                2 => tile::<L, 2, NR>(args),
+                _ => tile::<L, 1, NR>(args),
+            }
+        }
+        i0 += mr;
+    }
+}
+
+/// Arguments of one [`tile`]: depth, A (pointer, row and column strides), B (pointer, row
+/// stride), C (pointer, row stride).
+type TileArgs = (
+    usize,
+    *const f64,
+    usize,
+    usize,
+    *const f64,
+    usize,
+    *mut f64,
+    usize,
+);
+
+/// One MR × NR-group tile of C, its accumulators in registers over the whole sum.
+///
+/// # Safety
+/// A's entries (i·ars + k·acs) for i < MR, k < depth, B's (k·bs + l) and C's (i·cs + l) for
+/// l < NR·WIDTH must be in bounds.
+#[inline(always)]
+unsafe fn tile<L: Lanes, const MR: usize, const NR: usize>(
+    (k, a, ars, acs, b, bs, c, cs): TileArgs,
+) {
+    let w = L::WIDTH;
+    let mut acc = [[L::splat(0.0); NR]; MR];
+    let (mut a, mut b) = (a, b);
+    for _ in 0..k {
+        let mut bv = [L::splat(0.0); NR];
+        for (g, v) in bv.iter_mut().enumerate() {
+            *v = L::load(unsafe { std::slice::from_raw_parts(b.add(g * w), w) });
+        }
+        for (i, row) in acc.iter_mut().enumerate() {
+            let s = L::splat(unsafe { *a.add(i * ars) });
+            for (acc, &bv) in row.iter_mut().zip(&bv) {
+                *acc = L::fma(s, bv, *acc);
+            }
+        }
+        a = a.wrapping_add(acs);
+        b = b.wrapping_add(bs);
+    }
+    for (i, row) in acc.iter().enumerate() {
+        for (g, &v) in row.iter().enumerate() {
+            L::store(v, unsafe {
+                std::slice::from_raw_parts_mut(c.add(i * cs + g * w), w)
+            });
+        }
+    }
+}
+
+thread_local! {
+    /// Each thread's scratch for [`chunk_loss_grad`]: the chunk's padded inputs, activations,
+    /// errors, cotangents and gradient products.
+    static SCRATCH: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
+}
+
+/// The loss ½ Σ ‖N(x^τ) − t^τ‖² of a chunk (at most [`MAX_DEPTH`] rows of `x` and `t`, the
+/// net's sizes at most [`MAX_DEPTH`], at least 2 hidden units and 2 outputs) and its gradient,
+/// written into the four parts of the weight layout (every value overwritten), each value and
+/// the loss as 0 + v ([`plus_zero`]): the same bits as the ndarray products (module docs) added
+/// to zero, as [`super::super::Mlp::loss_grad`] adds its chunks.
+pub(in crate::emulator::mlp) fn chunk_loss_grad(
+    pk: &BatchNet,
+    x: ArrayView2<'_, f64>,
+    t: ArrayView2<'_, f64>,
+    (g1, gb1, g2, gb2): Grads<'_>,
+) -> f64 {
+    let n = x.nrows();
+    assert!(n <= MAX_DEPTH && pk.p.max(pk.q).max(pk.r) <= MAX_DEPTH);
+    assert!(
+        pk.q >= 2 && pk.r >= 2,
+        "bias sums of one unit are ordered differently"
+    );
+    assert_eq!((x.ncols(), t.ncols(), t.nrows()), (pk.p, pk.r, n));
+    assert_eq!((g1.len(), gb1.len()), (pk.q * pk.p, pk.q));
+    assert_eq!((g2.len(), gb2.len()), (pk.r * pk.q, pk.r));
+    let (ps, qs, rs) = (pk.ps, pk.qs, pk.rs);
+    let need = n * (ps + 2 * qs + rs) + pk.q * ps + pk.r * qs + qs + rs;
+    with_scratch(need, |scratch| {
+        let mut loss = 0.0;
+        run(pk, x, t, (g1, gb1, g2, gb2), scratch, &mut loss);
+        loss
+    })
+}
+
+/// The loss ½ Σ ‖N(x^τ) − t^τ‖² of a chunk ([`chunk_loss_grad`]'s conditions), the same bits
+/// as ndarray's products.
+pub(in crate::emulator::mlp) fn chunk_loss(
+    pk: &BatchNet,
+    x: ArrayView2<'_, f64>,
+    t: ArrayView2<'_, f64>,
+) -> f64 {
+    let n = x.nrows();
+    assert!(n <= MAX_DEPTH && pk.p.max(pk.q).max(pk.r) <= MAX_DEPTH);
+    assert_eq!((x.ncols(), t.ncols(), t.nrows()), (pk.p, pk.r, n));
+    with_scratch(n * (pk.ps + pk.qs + pk.rs), |scratch| {
+        let mut loss = 0.0;
+        run_loss(pk, x, t, scratch, &mut loss);
+        loss
+    })
+}
+
+/// `f` on this thread's scratch, `len` values from a cache line.
+fn with_scratch<T>(len: usize, f: impl FnOnce(&mut [f64]) -> T) -> T {
+    SCRATCH.with_borrow_mut(|scratch| {
+        if scratch.len() < len + LINE {
+            scratch.resize(len + LINE, 0.0);
+        }
+        let start = line_offset(scratch);
+        f(&mut scratch[start..start + len])
+    })
+}
+
+dispatch_wide!(
+    run_loss,
+    chunk_loss_generic,
+    (
+        pk: &BatchNet,
+        x: ArrayView2<'_, f64>,
+        t: ArrayView2<'_, f64>,
+        scratch: &mut [f64],
+        loss: &mut f64
+    )
+);
+
+dispatch_wide!(
+    run,
+    chunk_loss_grad_generic,
+    (
+        pk: &BatchNet,
+        x: ArrayView2<'_, f64>,
+        t: ArrayView2<'_, f64>,
+        grads: Grads<'_>,
+        scratch: &mut [f64],
+        loss: &mut f64
+    )
+);
+
+/// The four parts of a gradient in the weight layout: ∂W₁, ∂b₁, ∂W₂, ∂b₂.
+type Grads<'a> = (&'a mut [f64], &'a mut [f64], &'a mut [f64], &'a mut [f64]);
+
+/// The forward half of a chunk on lanes `L`: the padded inputs `xp` (n × p̃), activations
+/// `h` (n × q̃) and errors `e` (n × r̃), and the loss ½ Σ E², summed over the rows in order as
+/// `Iterator::sum` sums a row-major array.
+#[inline(always)]
+fn forward_generic<L: Lanes>(
+    pk: &BatchNet,
+    x: ArrayView2<'_, f64>,
+    t: ArrayView2<'_, f64>,
+    (xp, h, e): (&mut [f64], &mut [f64], &mut [f64]),
+) -> f64 {
+    let w = L::WIDTH;
+    let (p, q, r) = (pk.p, pk.q, pk.r);
+    let (ps, qs, rs) = (pk.ps, pk.qs, pk.rs);
+    let n = x.nrows();
+    let (w1t, w2t, _, b1, b2) = pk.parts();
+    // The inputs, zero-padded to whole lane groups (they are B of ∂W₁ = H̄ᵀ X).
+    for (row, xr) in xp.chunks_exact_mut(ps).zip(x.rows()) {
+        copy_row(&mut row[..p], xr.view());
+        row[p..].fill(0.0);
+    }
+    // H = σ(X W₁ᵀ + b₁): the sum, then the bias, then σ, on whole lane groups.
+    product::<L>(n, qs / w, p, (xp, ps, 1), (w1t, qs), (h, qs));
+    for row in h.chunks_exact_mut(qs) {
+        for (v, b) in row.chunks_exact_mut(w).zip(b1.chunks_exact(w)) {
+            L::store(sigmoid_lanes::<L>(L::add(L::load(v), L::load(b))), v);
+        }
+    }
+    // E = (H W₂ᵀ + b₂) − T.
+    product::<L>(n, rs / w, q, (h, qs, 1), (w2t, rs), (e, rs));
+    for (row, tr) in e.chunks_exact_mut(rs).zip(t.rows()) {
+        match tr.as_slice() {
+            Some(tr) => {
+                for ((v, b), t) in row.iter_mut().zip(b2).zip(tr) {
+                    *v = (*v + b) - t;
+                }
+            }
+            None => {
+                for ((v, b), t) in row.iter_mut().zip(b2).zip(tr) {
+                    *v = (*v + b) - t;
+                }
+            }
+        }
+    }
+    0.5 * e
+        .chunks_exact(rs)
+        .flat_map(|row| &row[..r])
+        .map(|v| v * v)
+        .sum::<f64>()
+}
+
+/// The loss of a chunk on lanes `L` (no gradient).
+#[inline(always)]
+fn chunk_loss_generic<L: Lanes>(
+    pk: &BatchNet,
+    x: ArrayView2<'_, f64>,
+    t: ArrayView2<'_, f64>,
+    scratch: &mut [f64],
+    loss: &mut f64,
+) {
+    let n = x.nrows();
+    let (xp, rest) = scratch.split_at_mut(n * pk.ps);
+    let (h, e) = rest.split_at_mut(n * pk.qs);
+    *loss = forward_generic::<L>(pk, x, t, (xp, h, &mut e[..n * pk.rs]));
+}
+
+/// The body of [`chunk_loss_grad`] on lanes `L` (the packing's width).
+#[inline(always)]
+fn chunk_loss_grad_generic<L: Lanes>(
+    pk: &BatchNet,
+    x: ArrayView2<'_, f64>,
+    t: ArrayView2<'_, f64>,
+    (g1, gb1, g2, gb2): Grads<'_>,
+    scratch: &mut [f64],
+    loss: &mut f64,
+) {
+    let w = L::WIDTH;
+    let (p, q, r) = (pk.p, pk.q, pk.r);
+    let (ps, qs, rs) = (pk.ps, pk.qs, pk.rs);
+    let n = x.nrows();
+    let (_, _, w2, _, _) = pk.parts();
+    let (xp, rest) = scratch.split_at_mut(n * ps);
+    let (h, rest) = rest.split_at_mut(n * qs);
+    let (e, rest) = rest.split_at_mut(n * rs);
+    let (hb, rest) = rest.split_at_mut(n * qs);
+    let (g1s, rest) = rest.split_at_mut(q * ps);
+    let (g2s, rest) = rest.split_at_mut(r * qs);
+    let (sb1, sb2) = rest.split_at_mut(qs);
+    *loss = 0.0 + forward_generic::<L>(pk, x, t, (xp, h, e));
+    // H̄ = (E W₂) ⊙ (H ⊙ (1 − H)).
+    product::<L>(n, qs / w, r, (e, rs, 1), (w2, qs), (hb, qs));
+    let one = L::splat(1.0);
+    for (row, hrow) in hb.chunks_exact_mut(qs).zip(h.chunks_exact(qs)) {
+        for (v, hv) in row.chunks_exact_mut(w).zip(hrow.chunks_exact(w)) {
+            let hv = L::load(hv);
+            L::store(L::mul(L::load(v), L::mul(hv, L::sub(one, hv))), v);
+        }
+    }
+    // ∂b₁ and ∂b₂: the rows added in order from zero.
+    sb1.fill(0.0);
+    sb2.fill(0.0);
+    for (hrow, erow) in hb.chunks_exact(qs).zip(e.chunks_exact(rs)) {
+        for (s, v) in sb1.chunks_exact_mut(w).zip(hrow.chunks_exact(w)) {
+            L::store(L::add(L::load(s), L::load(v)), s);
+        }
+        for (s, v) in sb2.chunks_exact_mut(w).zip(erow.chunks_exact(w)) {
+            L::store(L::add(L::load(s), L::load(v)), s);
+        }
+    }
+    plus_zero(gb1, &sb1[..q]);
+    plus_zero(gb2, &sb2[..r]);
+    // ∂W₁ = H̄ᵀ X and ∂W₂ = Eᵀ H: A read down the columns of H̄ and E.
+    product::<L>(q, ps / w, n, (hb, 1, qs), (xp, ps), (g1s, ps));
+    product::<L>(r, qs / w, n, (e, 1, rs), (h, qs), (g2s, qs));
+    for (g, s) in g1.chunks_exact_mut(p).zip(g1s.chunks_exact(ps)) {
+        plus_zero(g, &s[..p]);
+    }
+    for (g, s) in g2.chunks_exact_mut(q).zip(g2s.chunks_exact(qs)) {
+        plus_zero(g, &s[..q]);
+    }
+}
+
+/// `d` ← 0 + `s`, as the sums over chunks start from zero: the same values, but a sum that
+/// underflowed to −0 becomes +0, so that a gradient of one chunk is the same bits as a sum of
+/// chunk gradients.
+#[inline(always)]
+fn plus_zero(d: &mut [f64], s: &[f64]) {
+    for (d, s) in d.iter_mut().zip(s) {
+        *d = 0.0 + s;
+    }
+}
+
+/// `d` ← the values of `s` (a row of a matrix view, contiguous or not).
+#[inline(always)]
+fn copy_row(d: &mut [f64], s: ndarray::ArrayView1<'_, f64>) {
+    match s.as_slice() {
+        Some(s) => d.copy_from_slice(s),
+        None => {
+            for (d, s) in d.iter_mut().zip(s) {
+                *d = *s;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// Every tile shape and remainder of [`product`], on the dispatched and the portable
+    /// lanes, against the plain scalar recurrence (from zero, k ascending, one fma per term).
+    #[test]
+    fn products_are_the_scalar_chains_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for &(m, cols, k) in &[
+            (1, 4, 1),
+            (13, 16, 50),
+            (30, 56, 17),
+            (50, 24, 30),
+            (9, 40, 3),
+        ] {
+            let (ars, acs) = if rng.random::<bool>() { (k, 1) } else { (1, m) };
+            let a: Vec<f64> = (0..m * k).map(|_| rng.random_range(-2.0..2.0)).collect();
+            let b: Vec<f64> = (0..k * cols).map(|_| rng.random_range(-2.0..2.0)).collect();
+            let mut want = vec![0.0; m * cols];
+            for i in 0..m {
+                for j in 0..cols {
+                    let mut s = 0.0_f64;
+                    for kk in 0..k {
+                        s = a[i * ars + kk * acs].mul_add(b[kk * cols + j], s);
+                    }
+                    want[i * cols + j] = s;
+                }
+            }
+            let mut c = vec![f64::NAN; m * cols];
+            product::<Portable>(m, cols / 4, k, (&a, ars, acs), (&b, cols), (&mut c, cols));
+            assert_eq!(bits(&c), bits(&want), "portable {m} × {cols} × {k}");
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                #[target_feature(enable = "avx2,fma")]
+                fn avx2(
+                    m: usize,
+                    cols: usize,
+                    k: usize,
+                    a: &[f64],
+                    s: (usize, usize),
+                    b: &[f64],
+                ) -> Vec<f64> {
+                    let mut c = vec![f64::NAN; m * cols];
+                    product::<Avx2>(m, cols / 4, k, (a, s.0, s.1), (b, cols), (&mut c, cols));
+                    c
+                }
+                // SAFETY: the processor has AVX2 and FMA (checked just above).
+                let c = unsafe { avx2(m, cols, k, &a, (ars, acs), &b) };
+                assert_eq!(bits(&c), bits(&want), "AVX2 {m} × {cols} × {k}");
+            }
+            #[cfg(target_arch = "x86_64")]
+            if cols % 8 == 0 && std::arch::is_x86_feature_detected!("avx512f") {
+                #[target_feature(enable = "avx512f")]
+                fn avx512(
+                    m: usize,
+                    cols: usize,
+                    k: usize,
+                    a: &[f64],
+                    s: (usize, usize),
+                    b: &[f64],
+                ) -> Vec<f64> {
+                    let mut c = vec![f64::NAN; m * cols];
+                    product::<Avx512>(m, cols / 8, k, (a, s.0, s.1), (b, cols), (&mut c, cols));
+                    c
+                }
+                // SAFETY: the processor has AVX-512F (checked just above).
+                let c = unsafe { avx512(m, cols, k, &a, (ars, acs), &b) };
+                assert_eq!(bits(&c), bits(&want), "AVX-512 {m} × {cols} × {k}");
+            }
+        }
+    }
+
+    fn bits(v: &[f64]) -> Vec<u64> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+}
