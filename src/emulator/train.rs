@@ -603,10 +603,29 @@ impl MomentumState {
 
     /// δw ← −η ∇E + α δw; w ← w + δw.
     pub fn step(&mut self, weights: &mut [f64], grad: &[f64], learning_rate: f64, momentum: f64) {
-        for ((w, v), g) in weights.iter_mut().zip(&mut self.velocity).zip(grad) {
-            *v = -learning_rate * g + momentum * *v;
-            *w += *v;
+        /// The update, each value by two products and two sums (never fused, so the same bits
+        /// on every path).
+        #[inline(always)]
+        fn update(w: &mut [f64], v: &mut [f64], g: &[f64], learning_rate: f64, momentum: f64) {
+            for ((w, v), g) in w.iter_mut().zip(v).zip(g) {
+                *v = -learning_rate * g + momentum * *v;
+                *w += *v;
+            }
         }
+        /// [`update`] compiled for AVX2 (4 values a step where the baseline has 2).
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        fn update_avx2(w: &mut [f64], v: &mut [f64], g: &[f64], learning_rate: f64, momentum: f64) {
+            update(w, v, g, learning_rate, momentum)
+        }
+        let v = &mut self.velocity;
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2 (checked just above).
+            unsafe { update_avx2(weights, v, grad, learning_rate, momentum) };
+            return;
+        }
+        update(weights, v, grad, learning_rate, momentum)
     }
 }
 
