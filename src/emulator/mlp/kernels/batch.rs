@@ -236,10 +236,11 @@ fn product<L: Lanes>(
         let nr = nr_max.min(groups - g0);
         let b = &b[g0 * w..];
         let (a, c) = ((a, ars, acs), (&mut c[g0 * w..], cs));
-        match nr {
-            4 => rows::<L, 4, 4>(m, k, a, (b, bs), c),
-            3 => rows::<L, 3, 4>(m, k, a, (b, bs), c),
-            2 => rows::<L, 2, 6>(m, k, a, (b, bs), c),
+        match (nr, w) {
+            (4, _) => rows::<L, 4, 6>(m, k, a, (b, bs), c),
+            (3, 8) => rows::<L, 3, 8>(m, k, a, (b, bs), c),
+            (3, _) => rows::<L, 3, 4>(m, k, a, (b, bs), c),
+            (2, _) => rows::<L, 2, 6>(m, k, a, (b, bs), c),
             _ => rows::<L, 1, 8>(m, k, a, (b, bs), c),
         }
         g0 += nr;
