@@ -335,16 +335,37 @@ fn wide_lanes() -> bool {
     false
 }
 
-/// The weights of a p → q → r net in the layouts of the single-example kernels (module docs).
-#[derive(Debug, Clone)]
-pub(super) struct Packed {
+/// A p → q → r net's layer sizes, and each padded to whole lane groups.
+#[derive(Debug, Clone, Copy)]
+struct Dims {
     p: usize,
     q: usize,
     r: usize,
-    /// Padded strides p̃, q̃, r̃.
+    /// p̃, q̃, r̃: multiples of 8 (for [`Avx512`] lanes) or 4.
     ps: usize,
     qs: usize,
     rs: usize,
+}
+
+impl Dims {
+    /// The sizes, padded to multiples of 8 when `wide`, else of 4.
+    fn padded(p: usize, q: usize, r: usize, wide: bool) -> Self {
+        let pad = |n: usize| if wide { n.div_ceil(8) * 8 } else { pad4(n) };
+        Self {
+            p,
+            q,
+            r,
+            ps: pad(p),
+            qs: pad(q),
+            rs: pad(r),
+        }
+    }
+}
+
+/// The weights of a p → q → r net in the layouts of the single-example kernels (module docs).
+#[derive(Debug, Clone)]
+pub(super) struct Packed {
+    d: Dims,
     w1t: Vec<f64>,
     w2t: Vec<f64>,
     w2: Vec<f64>,
@@ -376,8 +397,8 @@ impl Packed {
         // 17-50-13 13% and 70-40-24 8% faster, 84-50-78 6% slower; hence nets with more than
         // 72 inputs or 64 outputs keep 4 lanes.
         let wide = wide_lanes() && p <= 72 && r <= 64;
-        let pad = |n: usize| if wide { n.div_ceil(8) * 8 } else { pad4(n) };
-        let (ps, qs, rs) = (pad(p), pad(q), pad(r));
+        let d = Dims::padded(p, q, r, wide);
+        let (ps, qs, rs) = (d.ps, d.qs, d.rs);
         let mut w1t = vec![0.0; p * qs];
         let mut w1p = vec![0.0; q * ps];
         for j in 0..q {
@@ -400,12 +421,7 @@ impl Packed {
             v
         };
         Self {
-            p,
-            q,
-            r,
-            ps,
-            qs,
-            rs,
+            d,
             w1t,
             w2t,
             w2: w2p,
@@ -601,22 +617,22 @@ pub(super) use batch::{chunk_loss, chunk_loss_grad, BatchNet, MAX_DEPTH};
 /// Hidden activations h = σ(W₁ x + b₁).
 #[inline(always)]
 fn hidden_generic<L: Lanes>(pk: &Packed, x: &[f64], h: &mut [f64]) {
-    debug_assert_eq!(x.len(), pk.p);
-    columns::<L, true>(&pk.w1t, pk.qs, x, &pk.b1, pk.q, |j, s| h[j] = s);
+    debug_assert_eq!(x.len(), pk.d.p);
+    columns::<L, true>(&pk.w1t, pk.d.qs, x, &pk.b1, pk.d.q, |j, s| h[j] = s);
 }
 
 /// Forward pass: h = σ(W₁ x + b₁), y = W₂ h + b₂.
 #[inline(always)]
 fn forward_generic<L: Lanes>(pk: &Packed, x: &[f64], h: &mut [f64], y: &mut [f64]) {
     hidden_generic::<L>(pk, x, h);
-    columns::<L, false>(&pk.w2t, pk.rs, h, &pk.b2, pk.r, |i, s| y[i] = s);
+    columns::<L, false>(&pk.w2t, pk.d.rs, h, &pk.b2, pk.d.r, |i, s| y[i] = s);
 }
 
 /// Hidden cotangent h̄ = (W₂ᵀ ȳ) ⊙ h ⊙ (1 − h).
 #[inline(always)]
 fn hidden_bar_generic<L: Lanes>(pk: &Packed, h: &[f64], y_bar: &[f64], hb: &mut [f64]) {
-    debug_assert_eq!(y_bar.len(), pk.r);
-    columns::<L, false>(&pk.w2, pk.qs, y_bar, &pk.zeros, pk.q, |j, s| {
+    debug_assert_eq!(y_bar.len(), pk.d.r);
+    columns::<L, false>(&pk.w2, pk.d.qs, y_bar, &pk.zeros, pk.d.q, |j, s| {
         let hj = h[j];
         hb[j] = s * hj * (1.0 - hj);
     });
@@ -625,7 +641,7 @@ fn hidden_bar_generic<L: Lanes>(pk: &Packed, h: &[f64], y_bar: &[f64], hb: &mut 
 /// Input cotangent x̄ = W₁ᵀ h̄.
 #[inline(always)]
 fn input_bar_generic<L: Lanes>(pk: &Packed, hb: &[f64], xb: &mut [f64]) {
-    columns::<L, false>(&pk.w1, pk.ps, hb, &pk.zeros, pk.p, |k, s| xb[k] = s);
+    columns::<L, false>(&pk.w1, pk.d.ps, hb, &pk.zeros, pk.d.p, |k, s| xb[k] = s);
 }
 
 /// Weight-gradient accumulation: ∂E/∂W₂ += ȳ hᵀ, ∂E/∂b₂ += ȳ, ∂E/∂W₁ += h̄ xᵀ, ∂E/∂b₁ += h̄

@@ -27,7 +27,7 @@
 //! takes, for each k, NR loads of B's row k and MR broadcasts of A's column k. A is read
 //! through strides, so H̄ᵀ and Eᵀ are never formed.
 
-use super::{sigmoid_lanes, wide_lanes, Lanes, Portable};
+use super::{sigmoid_lanes, wide_lanes, Dims, Lanes, Portable};
 #[cfg(target_arch = "x86_64")]
 use super::{Avx2, Avx512};
 use ndarray::ArrayView2;
@@ -61,13 +61,7 @@ fn line_offset(v: &[f64]) -> usize {
 /// Packed once per gradient, in one allocation; every chunk reads it.
 #[derive(Debug, Clone)]
 pub(in crate::emulator::mlp) struct BatchNet {
-    p: usize,
-    q: usize,
-    r: usize,
-    /// Padded row lengths p̃, q̃, r̃.
-    ps: usize,
-    qs: usize,
-    rs: usize,
+    d: Dims,
     /// Whether the rows are padded for [`Avx512`] lanes.
     wide: bool,
     /// w1t, w2t, w2, b1, b2, one after the other from `data[start]`, the first value on a
@@ -94,8 +88,8 @@ impl BatchNet {
         (w1, b1, w2, b2): (&[f64], &[f64], &[f64], &[f64]),
         wide: bool,
     ) -> Self {
-        let pad = |n: usize| n.div_ceil(if wide { 8 } else { 4 }) * if wide { 8 } else { 4 };
-        let (ps, qs, rs) = (pad(p), pad(q), pad(r));
+        let d = Dims::padded(p, q, r, wide);
+        let (qs, rs) = (d.qs, d.rs);
         let mut data = vec![0.0; p * qs + q * rs + r * qs + qs + rs + LINE];
         let start = line_offset(&data);
         let (w1t, rest) = data[start..].split_at_mut(p * qs);
@@ -110,12 +104,7 @@ impl BatchNet {
         b1p[..q].copy_from_slice(b1);
         b2p[..r].copy_from_slice(b2);
         Self {
-            p,
-            q,
-            r,
-            ps,
-            qs,
-            rs,
+            d,
             wide,
             start,
             data,
@@ -125,10 +114,10 @@ impl BatchNet {
     /// (w1t, w2t, w2, b1, b2).
     #[allow(clippy::type_complexity)]
     fn parts(&self) -> (&[f64], &[f64], &[f64], &[f64], &[f64]) {
-        let (w1t, rest) = self.data[self.start..].split_at(self.p * self.qs);
-        let (w2t, rest) = rest.split_at(self.q * self.rs);
-        let (w2, rest) = rest.split_at(self.r * self.qs);
-        let (b1, b2) = rest.split_at(self.qs);
+        let (w1t, rest) = self.data[self.start..].split_at(self.d.p * self.d.qs);
+        let (w2t, rest) = rest.split_at(self.d.q * self.d.rs);
+        let (w2, rest) = rest.split_at(self.d.r * self.d.qs);
+        let (b1, b2) = rest.split_at(self.d.qs);
         (w1t, w2t, w2, b1, b2)
     }
 }
@@ -346,16 +335,16 @@ pub(in crate::emulator::mlp) fn chunk_loss_grad(
     (g1, gb1, g2, gb2): Grads<'_>,
 ) -> f64 {
     let n = x.nrows();
-    assert!(n <= MAX_DEPTH && pk.p.max(pk.q).max(pk.r) <= MAX_DEPTH);
+    assert!(n <= MAX_DEPTH && pk.d.p.max(pk.d.q).max(pk.d.r) <= MAX_DEPTH);
     assert!(
-        pk.q >= 2 && pk.r >= 2,
+        pk.d.q >= 2 && pk.d.r >= 2,
         "bias sums of one unit are ordered differently"
     );
-    assert_eq!((x.ncols(), t.ncols(), t.nrows()), (pk.p, pk.r, n));
-    assert_eq!((g1.len(), gb1.len()), (pk.q * pk.p, pk.q));
-    assert_eq!((g2.len(), gb2.len()), (pk.r * pk.q, pk.r));
-    let (ps, qs, rs) = (pk.ps, pk.qs, pk.rs);
-    let need = n * (ps + 2 * qs + rs) + pk.q * ps + pk.r * qs + qs + rs;
+    assert_eq!((x.ncols(), t.ncols(), t.nrows()), (pk.d.p, pk.d.r, n));
+    assert_eq!((g1.len(), gb1.len()), (pk.d.q * pk.d.p, pk.d.q));
+    assert_eq!((g2.len(), gb2.len()), (pk.d.r * pk.d.q, pk.d.r));
+    let (ps, qs, rs) = (pk.d.ps, pk.d.qs, pk.d.rs);
+    let need = n * (ps + 2 * qs + rs) + pk.d.q * ps + pk.d.r * qs + qs + rs;
     with_scratch(need, |scratch| {
         let mut loss = 0.0;
         run(pk, x, t, (g1, gb1, g2, gb2), scratch, &mut loss);
@@ -371,9 +360,9 @@ pub(in crate::emulator::mlp) fn chunk_loss(
     t: ArrayView2<'_, f64>,
 ) -> f64 {
     let n = x.nrows();
-    assert!(n <= MAX_DEPTH && pk.p.max(pk.q).max(pk.r) <= MAX_DEPTH);
-    assert_eq!((x.ncols(), t.ncols(), t.nrows()), (pk.p, pk.r, n));
-    with_scratch(n * (pk.ps + pk.qs + pk.rs), |scratch| {
+    assert!(n <= MAX_DEPTH && pk.d.p.max(pk.d.q).max(pk.d.r) <= MAX_DEPTH);
+    assert_eq!((x.ncols(), t.ncols(), t.nrows()), (pk.d.p, pk.d.r, n));
+    with_scratch(n * (pk.d.ps + pk.d.qs + pk.d.rs), |scratch| {
         let mut loss = 0.0;
         run_loss(pk, x, t, scratch, &mut loss);
         loss
@@ -430,8 +419,8 @@ fn forward_generic<L: Lanes>(
     (xp, h, e): (&mut [f64], &mut [f64], &mut [f64]),
 ) -> f64 {
     let w = L::WIDTH;
-    let (p, q, r) = (pk.p, pk.q, pk.r);
-    let (ps, qs, rs) = (pk.ps, pk.qs, pk.rs);
+    let (p, q, r) = (pk.d.p, pk.d.q, pk.d.r);
+    let (ps, qs, rs) = (pk.d.ps, pk.d.qs, pk.d.rs);
     let n = x.nrows();
     let (w1t, w2t, _, b1, b2) = pk.parts();
     // The inputs, zero-padded to whole lane groups (they are B of ∂W₁ = H̄ᵀ X).
@@ -479,9 +468,9 @@ fn chunk_loss_generic<L: Lanes>(
     loss: &mut f64,
 ) {
     let n = x.nrows();
-    let (xp, rest) = scratch.split_at_mut(n * pk.ps);
-    let (h, e) = rest.split_at_mut(n * pk.qs);
-    *loss = forward_generic::<L>(pk, x, t, (xp, h, &mut e[..n * pk.rs]));
+    let (xp, rest) = scratch.split_at_mut(n * pk.d.ps);
+    let (h, e) = rest.split_at_mut(n * pk.d.qs);
+    *loss = forward_generic::<L>(pk, x, t, (xp, h, &mut e[..n * pk.d.rs]));
 }
 
 /// The body of [`chunk_loss_grad`] on lanes `L` (the packing's width).
@@ -495,8 +484,8 @@ fn chunk_loss_grad_generic<L: Lanes>(
     loss: &mut f64,
 ) {
     let w = L::WIDTH;
-    let (p, q, r) = (pk.p, pk.q, pk.r);
-    let (ps, qs, rs) = (pk.ps, pk.qs, pk.rs);
+    let (p, q, r) = (pk.d.p, pk.d.q, pk.d.r);
+    let (ps, qs, rs) = (pk.d.ps, pk.d.qs, pk.d.rs);
     let n = x.nrows();
     let (_, _, w2, _, _) = pk.parts();
     let (xp, rest) = scratch.split_at_mut(n * ps);
@@ -594,48 +583,52 @@ mod tests {
                     want[i * cols + j] = s;
                 }
             }
-            let mut c = vec![f64::NAN; m * cols];
-            product::<Portable>(m, cols / 4, k, (&a, ars, acs), (&b, cols), (&mut c, cols));
+            let c = run::<Portable>(m, cols, k, &a, (ars, acs), &b);
             assert_eq!(bits(&c), bits(&want), "portable {m} × {cols} × {k}");
             #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
             {
+                type Run = fn(usize, usize, usize, &[f64], (usize, usize), &[f64]) -> Vec<f64>;
                 #[target_feature(enable = "avx2,fma")]
                 fn avx2(
                     m: usize,
-                    cols: usize,
+                    n: usize,
                     k: usize,
                     a: &[f64],
                     s: (usize, usize),
                     b: &[f64],
                 ) -> Vec<f64> {
-                    let mut c = vec![f64::NAN; m * cols];
-                    product::<Avx2>(m, cols / 4, k, (a, s.0, s.1), (b, cols), (&mut c, cols));
-                    c
+                    run::<Avx2>(m, n, k, a, s, b)
                 }
-                // SAFETY: the processor has AVX2 and FMA (checked just above).
-                let c = unsafe { avx2(m, cols, k, &a, (ars, acs), &b) };
-                assert_eq!(bits(&c), bits(&want), "AVX2 {m} × {cols} × {k}");
-            }
-            #[cfg(target_arch = "x86_64")]
-            if cols % 8 == 0 && std::arch::is_x86_feature_detected!("avx512f") {
                 #[target_feature(enable = "avx512f")]
                 fn avx512(
                     m: usize,
-                    cols: usize,
+                    n: usize,
                     k: usize,
                     a: &[f64],
                     s: (usize, usize),
                     b: &[f64],
                 ) -> Vec<f64> {
-                    let mut c = vec![f64::NAN; m * cols];
-                    product::<Avx512>(m, cols / 8, k, (a, s.0, s.1), (b, cols), (&mut c, cols));
-                    c
+                    run::<Avx512>(m, n, k, a, s, b)
                 }
-                // SAFETY: the processor has AVX-512F (checked just above).
-                let c = unsafe { avx512(m, cols, k, &a, (ars, acs), &b) };
-                assert_eq!(bits(&c), bits(&want), "AVX-512 {m} × {cols} × {k}");
+                let fma = std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma");
+                let wide = cols % 8 == 0 && std::arch::is_x86_feature_detected!("avx512f");
+                // SAFETY (both): called only where the processor has the features (`fma`,
+                // `wide`).
+                let paths: [(&str, bool, Run); 2] = [
+                    ("AVX2", fma, |m, n, k, a, s, b| unsafe {
+                        avx2(m, n, k, a, s, b)
+                    }),
+                    ("AVX-512", wide, |m, n, k, a, s, b| unsafe {
+                        avx512(m, n, k, a, s, b)
+                    }),
+                ];
+                for (name, has, f) in paths {
+                    if has {
+                        let c = f(m, cols, k, &a, (ars, acs), &b);
+                        assert_eq!(bits(&c), bits(&want), "{name} {m} × {cols} × {k}");
+                    }
+                }
             }
         }
     }
@@ -654,6 +647,28 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// C = A B by [`product`] on lanes `L` (C with `cols` columns, NaN before).
+    #[inline(always)]
+    fn run<L: Lanes>(
+        m: usize,
+        cols: usize,
+        k: usize,
+        a: &[f64],
+        s: (usize, usize),
+        b: &[f64],
+    ) -> Vec<f64> {
+        let mut c = vec![f64::NAN; m * cols];
+        product::<L>(
+            m,
+            cols / L::WIDTH,
+            k,
+            (a, s.0, s.1),
+            (b, cols),
+            (&mut c, cols),
+        );
+        c
     }
 
     fn bits(v: &[f64]) -> Vec<u64> {
