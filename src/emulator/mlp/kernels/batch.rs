@@ -587,27 +587,14 @@ mod tests {
             assert_eq!(bits(&c), bits(&want), "portable {m} × {cols} × {k}");
             #[cfg(target_arch = "x86_64")]
             {
-                type Run = fn(usize, usize, usize, &[f64], (usize, usize), &[f64]) -> Vec<f64>;
+                type Args<'a> = (usize, usize, usize, &'a [f64], (usize, usize), &'a [f64]);
+                type Run = fn(Args<'_>) -> Vec<f64>;
                 #[target_feature(enable = "avx2,fma")]
-                fn avx2(
-                    m: usize,
-                    n: usize,
-                    k: usize,
-                    a: &[f64],
-                    s: (usize, usize),
-                    b: &[f64],
-                ) -> Vec<f64> {
+                fn avx2((m, n, k, a, s, b): Args<'_>) -> Vec<f64> {
                     run::<Avx2>(m, n, k, a, s, b)
                 }
                 #[target_feature(enable = "avx512f")]
-                fn avx512(
-                    m: usize,
-                    n: usize,
-                    k: usize,
-                    a: &[f64],
-                    s: (usize, usize),
-                    b: &[f64],
-                ) -> Vec<f64> {
+                fn avx512((m, n, k, a, s, b): Args<'_>) -> Vec<f64> {
                     run::<Avx512>(m, n, k, a, s, b)
                 }
                 let fma = std::arch::is_x86_feature_detected!("avx2")
@@ -616,16 +603,12 @@ mod tests {
                 // SAFETY (both): called only where the processor has the features (`fma`,
                 // `wide`).
                 let paths: [(&str, bool, Run); 2] = [
-                    ("AVX2", fma, |m, n, k, a, s, b| unsafe {
-                        avx2(m, n, k, a, s, b)
-                    }),
-                    ("AVX-512", wide, |m, n, k, a, s, b| unsafe {
-                        avx512(m, n, k, a, s, b)
-                    }),
+                    ("AVX2", fma, |args| unsafe { avx2(args) }),
+                    ("AVX-512", wide, |args| unsafe { avx512(args) }),
                 ];
                 for (name, has, f) in paths {
                     if has {
-                        let c = f(m, cols, k, &a, (ars, acs), &b);
+                        let c = f((m, cols, k, &a, (ars, acs), &b));
                         assert_eq!(bits(&c), bits(&want), "{name} {m} × {cols} × {k}");
                     }
                 }
