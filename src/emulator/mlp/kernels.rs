@@ -345,6 +345,8 @@ struct Dims {
     ps: usize,
     qs: usize,
     rs: usize,
+    /// Whether the sizes are padded to 8, for [`Avx512`] lanes (see `dispatch_wide`).
+    wide: bool,
 }
 
 impl Dims {
@@ -358,6 +360,7 @@ impl Dims {
             ps: pad(p),
             qs: pad(q),
             rs: pad(r),
+            wide,
         }
     }
 }
@@ -370,8 +373,6 @@ pub(super) struct Packed {
     w2t: Vec<f64>,
     w2: Vec<f64>,
     w1: Vec<f64>,
-    /// Whether the strides are padded to 8 for [`Avx512`] lanes (else to 4).
-    wide: bool,
     /// b₁ and b₂, zero-padded to q̃ and r̃.
     b1: Vec<f64>,
     b2: Vec<f64>,
@@ -426,7 +427,6 @@ impl Packed {
             w2t,
             w2: w2p,
             w1: w1p,
-            wide,
             b1: padded(b1, qs),
             b2: padded(b2, rs),
             zeros: vec![0.0; qs.max(ps)],
@@ -599,7 +599,7 @@ macro_rules! dispatch_wide {
                 fn avx512($pk: $pkty, $($arg: $ty),*) {
                     $generic::<Avx512>($pk, $($arg),*)
                 }
-                if $pk.wide && std::arch::is_x86_feature_detected!("avx512f") {
+                if $pk.d.wide && std::arch::is_x86_feature_detected!("avx512f") {
                     // SAFETY: the processor supports AVX-512F (checked just above).
                     unsafe { avx512($pk, $($arg),*) };
                     return;
