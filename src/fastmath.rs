@@ -20,6 +20,8 @@
 //! it is one instruction; elsewhere `mul_add` is libm's exact `fma`, slower but the same
 //! bits (a test checks the two copies agree).
 
+use crate::lanes::{Real, X4};
+
 /// |x| from which [`sin_cos`] hands over to libm (the three-part reduction stays exact
 /// enough well beyond this).
 pub const REDUCED_LIMIT: f64 = 1.0e5;
@@ -60,7 +62,8 @@ const COS: [f64; 8] = [
 /// Σ c_n zⁿ by Estrin's scheme (pairs, then pairs of pairs: a dependency chain of 3
 /// multiply–adds after z² and z⁴ instead of Horner's 7).
 #[inline(always)]
-fn estrin(c: &[f64; 8], z: f64, z2: f64, z4: f64) -> f64 {
+fn estrin<T: Real>(c: &[f64; 8], z: T, z2: T, z4: T) -> T {
+    let c = c.map(T::splat);
     let p01 = c[1].mul_add(z, c[0]);
     let p23 = c[3].mul_add(z, c[2]);
     let p45 = c[5].mul_add(z, c[4]);
@@ -70,29 +73,70 @@ fn estrin(c: &[f64; 8], z: f64, z2: f64, z4: f64) -> f64 {
     hi.mul_add(z4, lo)
 }
 
+/// Whether [`sin_cos_reduced`] computes x itself (else libm does).
 #[inline(always)]
-fn sin_cos_reduced(x: f64) -> (f64, f64) {
-    if x.is_nan() || x.abs() >= REDUCED_LIMIT {
-        return x.sin_cos();
-    }
-    let k = (x * std::f64::consts::FRAC_2_PI + ROUNDER) - ROUNDER;
-    let r = (-k).mul_add(PIO2_HI, x);
-    let r = (-k).mul_add(PIO2_MID, r);
-    let r = (-k).mul_add(PIO2_LO, r);
+fn in_reduced_range(x: f64) -> bool {
+    !x.is_nan() && x.abs() < REDUCED_LIMIT
+}
+
+/// Steps 1 and 2 of the module docs for x in the reduced range: the quadrant count k (an
+/// integer, as a double) and the polynomials' sin r, cos r.
+#[inline(always)]
+fn reduced_polynomials<T: Real>(x: T) -> (T, T, T) {
+    let c = T::splat;
+    let k = (x * c(std::f64::consts::FRAC_2_PI) + c(ROUNDER)) - c(ROUNDER);
+    let r = (-k).mul_add(c(PIO2_HI), x);
+    let r = (-k).mul_add(c(PIO2_MID), r);
+    let r = (-k).mul_add(c(PIO2_LO), r);
     let z = r * r;
     let (z2, rz) = (z * z, r * z);
     let z4 = z2 * z2;
     let s = rz.mul_add(estrin(&SIN, z, z2, z4), r);
-    let c = z.mul_add(estrin(&COS, z, z2, z4), 1.0);
-    // The quadrant q = k mod 4 picks and signs the pair without branches (the quadrant is
-    // data, and a mispredicted branch costs more than the selection): (s, c), (c, −s),
-    // (−s, −c), (−c, s) for q = 0 … 3, a sign flip being the sign bit's XOR (exactly `-x`).
+    let cos = z.mul_add(estrin(&COS, z, z2, z4), c(1.0));
+    (k, s, cos)
+}
+
+/// Step 3: the quadrant q = k mod 4 picks and signs the pair without branches (the quadrant
+/// is data, and a mispredicted branch costs more than the selection): (s, c), (c, −s),
+/// (−s, −c), (−c, s) for q = 0 … 3, a sign flip being the sign bit's XOR (exactly `-x`).
+#[inline(always)]
+fn quadrant(k: f64, s: f64, c: f64) -> (f64, f64) {
     let q = (k as i64) & 3;
     let odd = q & 1 != 0;
     let (a, b) = if odd { (c, s) } else { (s, c) };
     let sign = |flip: bool| (flip as u64) << 63;
     let sin = f64::from_bits(a.to_bits() ^ sign(q & 2 != 0));
     let cos = f64::from_bits(b.to_bits() ^ sign((q + 1) & 2 != 0));
+    (sin, cos)
+}
+
+#[inline(always)]
+fn sin_cos_reduced(x: f64) -> (f64, f64) {
+    if !in_reduced_range(x) {
+        return x.sin_cos();
+    }
+    let (k, s, c) = reduced_polynomials(x);
+    quadrant(k, s, c)
+}
+
+/// [`sin_cos`] of four angles in the lanes of an [`X4`], lane i bit for bit `sin_cos` of
+/// lane i: the reduction and polynomials run on the lanes (the same operations), the
+/// quadrant's selection lane by lane; if any lane is outside the reduced range every lane goes
+/// through the scalar function. Inline: compiled with FMA it takes the caller's features
+/// (`f64::mul_add` is one rounding either way).
+#[inline(always)]
+pub fn sin_cos_x4(x: X4) -> (X4, X4) {
+    let (mut sin, mut cos) = (X4::splat(0.0), X4::splat(0.0));
+    if x.0.iter().all(|&v| in_reduced_range(v)) {
+        let (k, s, c) = reduced_polynomials(x);
+        for i in 0..4 {
+            (sin.0[i], cos.0[i]) = quadrant(k.0[i], s.0[i], c.0[i]);
+        }
+    } else {
+        for i in 0..4 {
+            (sin.0[i], cos.0[i]) = sin_cos(x.0[i]);
+        }
+    }
     (sin, cos)
 }
 
@@ -127,6 +171,16 @@ pub fn sin_cos2(a: f64, b: f64) -> ((f64, f64), (f64, f64)) {
 /// The copy without the FMA instruction (libm's `fma` for every multiply–add).
 fn portable(a: f64, b: f64) -> ((f64, f64), (f64, f64)) {
     (sin_cos_reduced(a), sin_cos_reduced(b))
+}
+
+/// Whether the processor has AVX2 and FMA: code written over [`crate::lanes::X4`] is compiled
+/// a second time for them, where each lane operation is one 4-lane instruction. Same bits
+/// either way: Rust never fuses `a * b + c` into one multiply–add and the compiler never
+/// reassociates floating-point sums, so each operation is the same IEEE operation on either
+/// path (`f64::mul_add` is one rounding on both).
+#[cfg(target_arch = "x86_64")]
+pub fn has_avx2_fma() -> bool {
+    std::arch::is_x86_feature_detected!("avx2") && has_fma()
 }
 
 #[cfg(test)]
@@ -188,6 +242,33 @@ mod tests {
             );
         }
         assert!(worst > 0.0, "compared against libm itself?");
+    }
+
+    #[test]
+    fn four_lanes_are_the_scalar_function_bit_for_bit() {
+        let mut r = rng(8);
+        for round in 0..20_000 {
+            let scale = [1e-8, 1.0, 10.0, 1e3, 9e4][round % 5];
+            let mut x = X4([0.0; 4].map(|_| r.random_range(-scale..scale)));
+            if round % 97 == 0 {
+                // One lane outside the reduced range: every lane goes the scalar way.
+                x.0[round % 4] = [3e7, f64::NAN, f64::INFINITY][round % 3];
+            }
+            let (s, c) = sin_cos_x4(x);
+            for i in 0..4 {
+                let (ws, wc) = sin_cos(x.0[i]);
+                assert!(
+                    s.0[i].to_bits() == ws.to_bits() || (ws.is_nan() && s.0[i].is_nan()),
+                    "sin {:e}",
+                    x.0[i]
+                );
+                assert!(
+                    c.0[i].to_bits() == wc.to_bits() || (wc.is_nan() && c.0[i].is_nan()),
+                    "cos {:e}",
+                    x.0[i]
+                );
+            }
+        }
     }
 
     #[test]

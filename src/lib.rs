@@ -120,6 +120,7 @@ pub mod emulator;
 pub mod experiment;
 pub mod families;
 pub mod fastmath;
+pub mod lanes;
 pub mod linalg;
 pub mod physics;
 pub mod seed;

@@ -163,14 +163,25 @@ pub fn track_with<M: Linearize>(
         ValueModel::Lqr => None,
         ValueModel::Ddp { .. } => Some(&mut second),
     };
-    let mut ws = map.workspace();
+    check_trajectory((n, m), cost, xs, us)?;
+    // Every knot's (A_k, B_k) first: the knots are independent, and the map computes them
+    // four at a time where the model allows (`Rk4Map::jacobians_each`, the same bits).
+    let horizon = us.len();
+    let (mut ak, mut bk) = (Knots::zeros(horizon, n, n), Knots::zeros(horizon, n, m));
+    map.jacobians_each(xs, us, &mut map.workspace(), |k, a, b| {
+        ak.matrix_mut(k).copy_from(a);
+        bk.matrix_mut(k).copy_from(b);
+    });
     riccati(
         (n, m),
         cost,
         xs,
         us,
         model,
-        &mut |_, x, u, a, b| map.jacobians(x, u, a, b, &mut ws),
+        &mut |k, _, _, a, b| {
+            a.copy_from(&ak.matrix(k));
+            b.copy_from(&bk.matrix(k));
+        },
         second,
     )
 }
@@ -209,6 +220,20 @@ fn riccati(
     jacobians: &mut StepJacobians<'_>,
     second: Option<&mut SecondDerivatives<'_>>,
 ) -> Result<TrackingController, ControlError> {
+    check_trajectory((n, m), cost, xs, us)?;
+    on_dims!(n, m, |nd, md| riccati_on(
+        nd, md, cost, xs, us, model, jacobians, second
+    ))
+}
+
+/// The errors [`riccati`] reports before any work: an empty horizon, N + 1 states for N
+/// controls, each of its size, and a cost for these sizes and this horizon.
+fn check_trajectory(
+    (n, m): (usize, usize),
+    cost: &QuadraticCost,
+    xs: &[DVector<f64>],
+    us: &[DVector<f64>],
+) -> Result<(), ControlError> {
     let horizon = us.len();
     if horizon == 0 {
         return Err(ControlError::EmptyHorizon);
@@ -234,9 +259,7 @@ fn riccati(
         }
     }
     cost.validate(n, m, horizon)?;
-    on_dims!(n, m, |nd, md| riccati_on(
-        nd, md, cost, xs, us, model, jacobians, second
-    ))
+    Ok(())
 }
 
 /// [`riccati`] on matrices of dimensions `Nd` × `Md` (fixed-size where [`super::small`] has

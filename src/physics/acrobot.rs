@@ -17,6 +17,8 @@
 
 use super::linearize::Linearize;
 use super::{Model, Ode, Parameter};
+use crate::fastmath::sin_cos_x4;
+use crate::lanes::{Real, X4};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
@@ -48,37 +50,22 @@ impl Default for Acrobot {
     }
 }
 
-/// Sines and cosines of the joint angles and their sum ([`Acrobot::trig`]).
+/// Sines and cosines of the joint angles and their sum ([`Acrobot::trig`]), of one state or
+/// of four in lanes.
 #[derive(Debug, Clone, Copy)]
-struct Trig {
-    s1: f64,
-    c1: f64,
-    s2: f64,
-    c2: f64,
-    s12: f64,
-    c12: f64,
+struct Trig<T = f64> {
+    s1: T,
+    c1: T,
+    s2: T,
+    c2: T,
+    s12: T,
+    c12: T,
 }
 
-impl Acrobot {
-    /// Joint-space mass matrix as `[[M11, M12], [M12, M22]]`.
-    pub fn mass_matrix(&self, theta2: f64) -> [[f64; 2]; 2] {
-        self.mass_of(theta2.cos())
-    }
-
-    /// [`Acrobot::mass_matrix`] given cos θ2.
-    fn mass_of(&self, c2: f64) -> [[f64; 2]; 2] {
-        let Self { m1, m2, l1, l2, .. } = *self;
-        let m11 = (m1 + m2) * l1 * l1 + m2 * l2 * l2 + 2.0 * m2 * l1 * l2 * c2;
-        let m12 = m2 * l2 * l2 + m2 * l1 * l2 * c2;
-        let m22 = m2 * l2 * l2;
-        [[m11, m12], [m12, m22]]
-    }
-
-    /// sin and cos of θ1, θ2 and θ1 + θ2: both joint angles' pairs at once
-    /// ([`crate::fastmath::sin_cos2`]), the sum's by the angle-sum identities (shared by
-    /// [`Ode::derivative`] and the linearization, so their θ̈ agree bit for bit).
-    fn trig(t1: f64, t2: f64) -> Trig {
-        let ((s1, c1), (s2, c2)) = crate::fastmath::sin_cos2(t1, t2);
+impl<T: Real> Trig<T> {
+    /// The pairs of both angles, the sum's by the angle-sum identities.
+    #[inline(always)]
+    fn of(s1: T, c1: T, s2: T, c2: T) -> Self {
         Trig {
             s1,
             c1,
@@ -87,6 +74,34 @@ impl Acrobot {
             s12: s1 * c2 + c1 * s2,
             c12: c1 * c2 - s1 * s2,
         }
+    }
+}
+
+impl Acrobot {
+    /// Joint-space mass matrix as `[[M11, M12], [M12, M22]]`.
+    pub fn mass_matrix(&self, theta2: f64) -> [[f64; 2]; 2] {
+        self.mass_of(theta2.cos())
+    }
+
+    /// [`Acrobot::mass_matrix`] given cos θ2 (of one state, or of four in lanes). The products
+    /// of parameters are formed first, left to right, as the written-out formula evaluates.
+    #[inline(always)]
+    fn mass_of<T: Real>(&self, c2: T) -> [[T; 2]; 2] {
+        let Self { m1, m2, l1, l2, .. } = *self;
+        let c = T::splat;
+        let m11 = c((m1 + m2) * l1 * l1 + m2 * l2 * l2) + c(2.0 * m2 * l1 * l2) * c2;
+        let m12 = c(m2 * l2 * l2) + c(m2 * l1 * l2) * c2;
+        let m22 = c(m2 * l2 * l2);
+        [[m11, m12], [m12, m22]]
+    }
+
+    /// sin and cos of θ1, θ2 and θ1 + θ2: both joint angles' pairs at once
+    /// ([`crate::fastmath::sin_cos2`]), the sum's by the angle-sum identities (shared by
+    /// [`Ode::derivative`] and the linearization, so their θ̈ agree bit for bit).
+    #[inline(always)]
+    fn trig(t1: f64, t2: f64) -> Trig {
+        let ((s1, c1), (s2, c2)) = crate::fastmath::sin_cos2(t1, t2);
+        Trig::of(s1, c1, s2, c2)
     }
 
     /// Positions of the two masses (m).
@@ -178,6 +193,24 @@ impl Linearize for Acrobot {
     ) {
         self.linearize(x, u, Some(dx), a, b);
     }
+
+    #[inline(always)]
+    fn derivative_and_jacobians_x4(
+        &self,
+        x: &[X4],
+        u: &[X4],
+        dx: &mut [X4],
+        a: &mut [X4],
+        b: &mut [X4],
+    ) -> bool {
+        let ((s1, c1), (s2, c2)) = (sin_cos_x4(x[0]), sin_cos_x4(x[1]));
+        let (f, fa, fb) =
+            self.linearize_at([x[0], x[1], x[2], x[3]], u[0], Trig::of(s1, c1, s2, c2));
+        dx.copy_from_slice(&f);
+        a.copy_from_slice(&fa);
+        b.copy_from_slice(&fb);
+        true
+    }
 }
 
 impl Acrobot {
@@ -191,6 +224,22 @@ impl Acrobot {
         a: &mut DMatrix<f64>,
         b: &mut DMatrix<f64>,
     ) {
+        let trig = Self::trig(x[0], x[1]);
+        let (f, fa, fb) = self.linearize_at([x[0], x[1], x[2], x[3]], u[0], trig);
+        if let Some(dx) = dx {
+            dx.copy_from_slice(&f);
+        }
+        let a: &mut [f64; 16] = a.as_mut_slice().try_into().expect("A is 4 × 4");
+        *a = fa;
+        let b: &mut [f64; 4] = b.as_mut_slice().try_into().expect("B is 4 × 1");
+        *b = fb;
+    }
+
+    /// f(x, u), A (4 × 4, column-major) and B (4 × 1) at x = (θ1, θ2, ω1, ω2), u = τ, given
+    /// the angles' sines and cosines: the one body of the scalar linearization and of four
+    /// points in lanes ([`Real`]), so lane i of the latter is bit for bit the former at point i.
+    #[inline(always)]
+    fn linearize_at<T: Real>(&self, x: [T; 4], tau: T, trig: Trig<T>) -> ([T; 4], [T; 16], [T; 4]) {
         let Self {
             m1,
             m2,
@@ -198,7 +247,8 @@ impl Acrobot {
             l2,
             gravity: g,
         } = *self;
-        let (t1, t2, w1, w2) = (x[0], x[1], x[2], x[3]);
+        let c = T::splat;
+        let [_, _, w1, w2] = x;
         let Trig {
             s1,
             c1,
@@ -206,43 +256,47 @@ impl Acrobot {
             c2,
             s12,
             c12,
-        } = Self::trig(t1, t2);
+        } = trig;
         let [[m11, m12], [_, m22]] = self.mass_of(c2);
-        let h = m2 * l1 * l2 * s2;
-        let dh = m2 * l1 * l2 * c2; // ∂h/∂θ2
-        let g1 = (m1 + m2) * g * l1 * c1 + m2 * g * l2 * c12;
-        let g2 = m2 * g * l2 * c12;
-        let r1 = h * (2.0 * w1 * w2 + w2 * w2) - g1;
-        let r2 = -h * w1 * w1 - g2 + u[0];
+        let h = c(m2 * l1 * l2) * s2;
+        let dh = c(m2 * l1 * l2) * c2; // ∂h/∂θ2
+        let g1 = c((m1 + m2) * g * l1) * c1 + c(m2 * g * l2) * c12;
+        let g2 = c(m2 * g * l2) * c12;
+        let r1 = h * (c(2.0) * w1 * w2 + w2 * w2) - g1;
+        let r2 = -h * w1 * w1 - g2 + tau;
         let det = m11 * m22 - m12 * m12;
         // θ̈ = M⁻¹ r with M⁻¹ = [[m22, −m12], [−m12, m11]] / det.
-        let solve = |v1: f64, v2: f64| ((m22 * v1 - m12 * v2) / det, (m11 * v2 - m12 * v1) / det);
+        let solve = |v1: T, v2: T| ((m22 * v1 - m12 * v2) / det, (m11 * v2 - m12 * v1) / det);
         let (a1, a2) = solve(r1, r2);
-        if let Some(dx) = dx {
-            dx.copy_from_slice(&[w1, w2, a1, a2]);
-        }
         // ∂r/∂z for z = θ1, θ2, ω1, ω2.
-        let gs12 = m2 * g * l2 * s12;
-        let dr_t1 = ((m1 + m2) * g * l1 * s1 + gs12, gs12);
-        let dr_t2 = (dh * (2.0 * w1 * w2 + w2 * w2) + gs12, -dh * w1 * w1 + gs12);
-        let dr_w1 = (2.0 * h * w2, -2.0 * h * w1);
-        let dr_w2 = (2.0 * h * (w1 + w2), 0.0);
+        let gs12 = c(m2 * g * l2) * s12;
+        let dr_t1 = (c((m1 + m2) * g * l1) * s1 + gs12, gs12);
+        let dr_t2 = (
+            dh * (c(2.0) * w1 * w2 + w2 * w2) + gs12,
+            -dh * w1 * w1 + gs12,
+        );
+        let dr_w1 = (c(2.0) * h * w2, -c(2.0) * h * w1);
+        let dr_w2 = (c(2.0) * h * (w1 + w2), c(0.0));
         // ∂M/∂θ2 θ̈ with ∂M11/∂θ2 = −2 m2 l1 l2 sin θ2 = −2h, ∂M12/∂θ2 = −h, ∂M22/∂θ2 = 0.
-        let dm_a = (-2.0 * h * a1 - h * a2, -h * a1);
+        let dm_a = (-c(2.0) * h * a1 - h * a2, -h * a1);
         let cols = [dr_t1, (dr_t2.0 - dm_a.0, dr_t2.1 - dm_a.1), dr_w1, dr_w2];
         // Rows 2 and 3 of A, column by column, and of B.
-        let [(p0, q0), (p1, q1), (p2, q2), (p3, q3)] = cols.map(|(v1, v2)| solve(v1, v2));
-        let (pu, qu) = solve(0.0, 1.0);
-        // Column-major, written whole (no per-entry index arithmetic).
-        let a: &mut [f64; 16] = a.as_mut_slice().try_into().expect("A is 4 × 4");
-        *a = [
-            0.0, 0.0, p0, q0, //
-            0.0, 0.0, p1, q1, //
-            1.0, 0.0, p2, q2, //
-            0.0, 1.0, p3, q3,
-        ];
-        let b: &mut [f64; 4] = b.as_mut_slice().try_into().expect("B is 4 × 1");
-        *b = [0.0, 0.0, pu, qu];
+        let (p0, q0) = solve(cols[0].0, cols[0].1);
+        let (p1, q1) = solve(cols[1].0, cols[1].1);
+        let (p2, q2) = solve(cols[2].0, cols[2].1);
+        let (p3, q3) = solve(cols[3].0, cols[3].1);
+        let (pu, qu) = solve(c(0.0), c(1.0));
+        let (zero, one) = (c(0.0), c(1.0));
+        (
+            [w1, w2, a1, a2],
+            [
+                zero, zero, p0, q0, //
+                zero, zero, p1, q1, //
+                one, zero, p2, q2, //
+                zero, one, p3, q3,
+            ],
+            [zero, zero, pu, qu],
+        )
     }
 }
 

@@ -14,6 +14,7 @@
 //! [`super::acrobot::Acrobot`]) implement the trait directly, and tests compare the two.
 
 use super::{Model, Ode, Parameter};
+use crate::lanes::X4;
 use nalgebra::DMatrix;
 
 /// A continuous-time system whose Jacobians A = ∂f/∂x and B = ∂f/∂u are available.
@@ -37,6 +38,22 @@ pub trait Linearize: Ode {
     ) {
         self.derivative(x, u, dx);
         self.jacobians(x, u, a, b);
+    }
+
+    /// [`Linearize::derivative_and_jacobians`] at four points at once, point i in lane i of
+    /// every value ([`X4`]): `x` (d), `u` (m), `dx` (d), `a` (d × d) and `b` (d × m), the
+    /// matrices column-major. Lane i must be bit for bit the scalar method's value at point i.
+    /// Returns false, writing nothing, where the model has no lane form (the default); the
+    /// RK4 map's [`crate::control::Rk4Map::jacobians_each`] then goes point by point.
+    fn derivative_and_jacobians_x4(
+        &self,
+        _x: &[X4],
+        _u: &[X4],
+        _dx: &mut [X4],
+        _a: &mut [X4],
+        _b: &mut [X4],
+    ) -> bool {
+        false
     }
 }
 

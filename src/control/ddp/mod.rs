@@ -292,10 +292,13 @@ fn compute_derivatives<M: Linearize>(
     options: &DdpOptions,
     b: &mut Buffers,
 ) {
-    for k in 0..us.len() {
-        let (fx, fu) = (&mut b.fx.matrix_mut(k), &mut b.fu.matrix_mut(k));
-        map.jacobians(&xs[k], &us[k], fx, fu, &mut b.rk4);
-        if options.variant == DdpVariant::Full {
+    let (fxs, fus) = (&mut b.fx, &mut b.fu);
+    map.jacobians_each(xs, us, &mut b.rk4, |k, fx, fu| {
+        fxs.matrix_mut(k).copy_from(fx);
+        fus.matrix_mut(k).copy_from(fu);
+    });
+    if options.variant == DdpVariant::Full {
+        for k in 0..us.len() {
             map.second_derivatives(&xs[k], &us[k], options.fd_step, &mut b.fzz[k], &mut b.rk4);
         }
     }
