@@ -412,7 +412,11 @@ impl Mlp {
         if let (1, Some(pk)) = (chunks, &packed) {
             // One chunk (e.g. a mini-batch): its gradient is the total, written in place (the
             // kernel adds each value to zero, as the sum over chunks below does).
-            return kernels::chunk_loss_grad(pk, inputs, targets, self.split_mut(grad));
+            let loss = kernels::chunk_loss_grad(pk, inputs, targets, self.split_mut(grad));
+            if let Some(pk) = packed {
+                pk.recycle();
+            }
+            return loss;
         }
         // Chunk gradients of one window at a time, summed in chunk order: the same sums as
         // over all chunks at once, without holding a gradient per chunk of a large batch.
@@ -448,6 +452,9 @@ impl Mlp {
                 }
             }
         }
+        if let Some(pk) = packed {
+            pk.recycle();
+        }
         loss
     }
 
@@ -471,19 +478,22 @@ impl Mlp {
                 0.5 * y.iter().map(|e| e * e).sum::<f64>()
             })
             .collect();
+        if let Some(pk) = packed {
+            pk.recycle();
+        }
         parts.iter().sum()
     }
 
     /// The weights packed for the batch kernels ([`kernels::chunk_loss_grad`]), or `None` for
     /// the shapes they do not take (a layer of one unit, or more than
     /// [`kernels::MAX_DEPTH`] inputs, hidden units or outputs), which go through ndarray's
-    /// products ([`Mlp::chunk_loss_grad_gemm`]), the same bits either way.
+    /// products ([`Mlp::chunk_loss_grad_gemm`]), the same bits either way. Packed in this
+    /// thread's last packing's buffer where it fits ([`kernels::BatchNet::reused`]); give it back
+    /// with [`kernels::BatchNet::recycle`].
     fn batch_packed(&self) -> Option<kernels::BatchNet> {
         let (p, q, r) = (self.n_in, self.n_hidden, self.n_out);
-        (q >= 2 && r >= 2 && p.max(q).max(r) <= kernels::MAX_DEPTH).then(|| {
-            let (w1, b1, w2, b2) = self.split(&self.weights);
-            kernels::BatchNet::new((p, q, r), w1, b1, w2, b2)
-        })
+        (q >= 2 && r >= 2 && p.max(q).max(r) <= kernels::MAX_DEPTH)
+            .then(|| kernels::BatchNet::reused((p, q, r), self.split(&self.weights)))
     }
 
     /// Loss of one chunk by ndarray's products; its gradient overwrites `grad` (every value is
@@ -646,6 +656,35 @@ mod tests {
                         .zip(&want)
                         .all(|(g, w)| g.to_bits() == w.to_bits()));
                 }
+            }
+        }
+    }
+
+    /// A gradient (and a loss) packed in the buffer the thread's previous one gave back, of the
+    /// same shape with other weights or after another shape, is the same bits as ndarray's
+    /// products; the inputs' lengths leave 5 and 7 values after whole groups of 8 lanes (and 1
+    /// and 3 after groups of 4), so every copy of a row's tail is taken.
+    #[test]
+    fn reused_packing_gives_the_same_bits() {
+        #[cfg(target_arch = "x86_64")]
+        if !std::arch::is_x86_feature_detected!("fma") {
+            return;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(77);
+        let nets: Vec<Mlp> = [(13, 9, 5), (13, 9, 5), (15, 9, 5), (13, 9, 5)]
+            .iter()
+            .map(|&(p, q, r)| Mlp::new(p, q, r, WeightInit::FanIn, &mut rng))
+            .collect();
+        for round in 0..2u64 {
+            for (i, mlp) in nets.iter().enumerate() {
+                let (x, t) = random_batch(30, mlp.n_in, mlp.n_out, 10 * round + i as u64);
+                let (want_loss, want) = gemm_loss_grad(mlp, x.view(), t.view());
+                let mut got = vec![f64::NAN; mlp.n_weights()];
+                let loss = mlp.loss_grad(x.view(), t.view(), &mut got);
+                assert_eq!(loss.to_bits(), want_loss.to_bits(), "net {i}");
+                assert!(same_bits(&got, &want), "net {i}");
+                let l = mlp.loss(x.view(), t.view());
+                assert_eq!(l.to_bits(), gemm_loss(mlp, x.view(), t.view()).to_bits());
             }
         }
     }

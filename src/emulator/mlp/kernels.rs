@@ -336,7 +336,7 @@ fn wide_lanes() -> bool {
 }
 
 /// A p → q → r net's layer sizes, and each padded to whole lane groups.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Dims {
     p: usize,
     q: usize,
@@ -486,6 +486,8 @@ fn block<L: Lanes, const SIGMOID: bool, const G: usize>(
     dual: bool,
     emit: &mut impl FnMut(usize, f64),
 ) {
+    // What `step` reads without checks: the block's lanes within a row, every input's row.
+    assert!(j0 + L::WIDTH * G <= stride && a.len() >= x.len() * stride);
     let mut acc = [L::splat(0.0); G];
     for (g, acc) in acc.iter_mut().enumerate() {
         *acc = L::load(&init[j0 + L::WIDTH * g..]);
@@ -525,7 +527,10 @@ fn block<L: Lanes, const SIGMOID: bool, const G: usize>(
     }
 }
 
-/// One input k of a [`block`]: acc ← fma(a[k, j₀ ..], x[k], acc).
+/// One input k of a [`block`]: acc ← fma(a[k, j₀ ..], x[k], acc). The caller ([`block`])
+/// checked that j₀ + G·WIDTH ≤ `stride` and that `a` holds `stride` values for every input, so
+/// the row is read without checks (they were a third of the instructions of the loop over the
+/// inputs, which issue bounds where the chains are short).
 #[inline(always)]
 fn step<L: Lanes, const G: usize>(
     acc: &mut [L::V; G],
@@ -536,7 +541,9 @@ fn step<L: Lanes, const G: usize>(
     k: usize,
 ) {
     let start = k * stride + j0;
-    let row = &a[start..start + L::WIDTH * G];
+    debug_assert!(k < x.len() && j0 + L::WIDTH * G <= stride && a.len() >= x.len() * stride);
+    // SAFETY: k < x.len() (the caller's loops), so start + G·WIDTH ≤ (k + 1)·stride ≤ a.len().
+    let row = unsafe { a.get_unchecked(start..start + L::WIDTH * G) };
     let xv = L::splat(x[k]);
     for (g, acc) in acc.iter_mut().enumerate() {
         *acc = L::fma(L::load(&row[L::WIDTH * g..]), xv, *acc);
