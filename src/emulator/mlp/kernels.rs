@@ -529,8 +529,8 @@ fn block<L: Lanes, const SIGMOID: bool, const G: usize>(
 
 /// One input k of a [`block`]: acc ← fma(a[k, j₀ ..], x[k], acc). The caller ([`block`])
 /// checked that j₀ + G·WIDTH ≤ `stride` and that `a` holds `stride` values for every input, so
-/// the row is read without checks (they were a third of the instructions of the loop over the
-/// inputs, which issue bounds where the chains are short).
+/// the row is read without checks (the checks were about a third of the instructions of the
+/// loop over the inputs, whose multiply–add chains are short).
 #[inline(always)]
 fn step<L: Lanes, const G: usize>(
     acc: &mut [L::V; G],
