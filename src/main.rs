@@ -2,6 +2,7 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
+use motionlab::experiment::output::remove_stale_temps;
 use motionlab::experiment::report::write_report;
 use motionlab::experiment::resolve::{resolve, ResolveOptions, Resolved};
 use motionlab::experiment::runner::{merge, run, RunOptions};
@@ -297,6 +298,20 @@ fn spec_path(exp_dir: &Path, target: &str) -> Result<PathBuf> {
     Ok(p)
 }
 
+/// Removes what interrupted runs left half-written in the output folders (temporary files of
+/// atomic writes; see `remove_stale_temps`), saying which.
+fn remove_leftovers(opts: &RunOptions) -> Result<()> {
+    for root in [&opts.out, &opts.figures] {
+        for f in remove_stale_temps(root)? {
+            eprintln!(
+                "removed {} (a temporary file left by an interrupted run)",
+                f.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 fn check_jobs(o: &Outputs) -> Result<()> {
     if o.jobs == Some(0) {
         bail!("--jobs must be at least 1");
@@ -350,6 +365,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                 shard,
                 ..run_options(&outputs, false)
             };
+            remove_leftovers(&opts)?;
             let s = run(&res, &opts)?;
             let units = if resume || shard.is_some() {
                 format!(" ({} units run, {} resumed)", s.computed, s.reused)
@@ -372,6 +388,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             // The report covers every experiment file, as `reproduce` writes it; a bad file
             // stops everything before any work.
             let mut all = resolve_all(&exp_dir, outputs.quick, None)?;
+            remove_leftovers(&opts)?;
             let (s, merged) = merge(&file, &opts)?;
             eprintln!(
                 "{}: merged {} units, {} files in {:.2} s -> {}",
@@ -404,6 +421,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                 }
             }
             let opts = run_options(&outputs, true);
+            remove_leftovers(&opts)?;
             for r in all
                 .iter()
                 .filter(|r| only.is_empty() || only.contains(&r.id))

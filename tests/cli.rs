@@ -669,3 +669,48 @@ fn x_lbc_emulator_quick_compares_every_method_on_both_substrates() {
     assert!(figs.join("x_lbc_emulator_error.png").is_file());
     assert!(figs.join("x_lbc_emulator_lbc.gif").is_file());
 }
+
+/// A run first removes the temporary files an interrupted run left in its output folders
+/// (named for a process that is gone and idle for longer than a write takes), and says so;
+/// the files it then writes are whole.
+#[test]
+fn a_run_removes_what_an_interrupted_run_left_half_written() {
+    let dir = tempfile::tempdir().unwrap();
+    // No process has an id above Linux's largest (2²²).
+    let stale = [
+        dir.path()
+            .join("out/lbc_projection/.projection.tmp-4294967295.csv"),
+        dir.path()
+            .join("figs/.lbc_projection_minima.tmp-4294967295.png"),
+    ];
+    let old = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+    for f in &stale {
+        std::fs::create_dir_all(f.parent().unwrap()).unwrap();
+        std::fs::write(f, b"half").unwrap();
+        let file = std::fs::File::options().write(true).open(f).unwrap();
+        file.set_modified(old).unwrap();
+    }
+    let exp = root().join("experiments");
+    let out = motionlab(
+        dir.path(),
+        &[
+            "--experiments",
+            exp.to_str().unwrap(),
+            "run",
+            "lbc_projection",
+            "--quick",
+            "--out",
+            "out",
+            "--figures",
+            "figs",
+        ],
+    );
+    ok(&out);
+    let err = String::from_utf8_lossy(&out.stderr);
+    for f in &stale {
+        assert!(!f.exists(), "{} left", f.display());
+        let name = f.file_name().unwrap().to_string_lossy();
+        assert!(err.contains(&*name), "not reported: {name}\n{err}");
+    }
+    assert!(dir.path().join("out/lbc_projection/run.json").exists());
+}

@@ -366,11 +366,18 @@ pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), Error> {
         std::fs::create_dir_all(dir).map_err(io)?;
     }
     let tmp = temp_path(path);
-    let mut f = std::fs::File::create(&tmp).map_err(io)?;
-    f.write_all(bytes).map_err(io)?;
-    f.sync_all().map_err(io)?;
-    drop(f);
-    std::fs::rename(&tmp, path).map_err(io)
+    let written = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        // A disk that filled up, say: the partial temporary file goes too.
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written.map_err(io)
 }
 
 /// A temporary sibling of `path` that keeps its extension (`a.png` → `.a.tmp-PID.png`).
@@ -378,6 +385,93 @@ pub fn temp_path(path: &Path) -> PathBuf {
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("out");
     let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("tmp");
     path.with_file_name(format!(".{stem}.tmp-{}.{ext}", std::process::id()))
+}
+
+/// Puts the temporary file `tmp` that `made` wrote in its place, `path`, by a rename; when
+/// `made` failed, or the rename does, the temporary file is removed and the error returned.
+pub fn rename_into_place(tmp: &Path, path: &Path, made: Result<(), Error>) -> Result<(), Error> {
+    let placed = made.and_then(|()| {
+        std::fs::rename(tmp, path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    });
+    if placed.is_err() {
+        let _ = std::fs::remove_file(tmp);
+    }
+    placed
+}
+
+/// The process id in the name of a temporary file of [`temp_path`] (`.a.tmp-PID.png`), if
+/// the name is one.
+fn temp_owner(name: &str) -> Option<u32> {
+    let rest = name.strip_prefix('.')?;
+    let (_, after) = rest.rsplit_once(".tmp-")?;
+    let digits = after.split_once('.').map_or(after, |(d, _)| d);
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    digits.parse().ok()
+}
+
+/// Whether process `pid` is running on this machine: `Some` where the system says (Linux's
+/// `/proc`), `None` where it cannot tell.
+fn process_alive(pid: u32) -> Option<bool> {
+    if pid == std::process::id() {
+        return Some(true);
+    }
+    let proc = Path::new("/proc");
+    (cfg!(target_os = "linux") && proc.join("self").exists())
+        .then(|| proc.join(pid.to_string()).exists())
+}
+
+/// How long a temporary file must have gone unmodified before [`remove_stale_temps`] takes it
+/// for a leftover. One write takes well under a second; the margin covers shards of one sweep
+/// on other machines writing into a shared folder, whose processes this machine cannot see.
+pub const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(600);
+
+/// Removes the temporary files ([`temp_path`]) under `root` (it and three levels of folders
+/// below: `results/<id>/shards/<shard>/units`) that a run left when it was stopped mid-write
+/// (an atomic write's temporary file, never a final one); returns the files removed. A file
+/// counts as left over when nothing has written to it for [`STALE_AFTER`] and the process named
+/// in it is not running on this machine (or the system cannot say). A `root` that does not
+/// exist has none.
+pub fn remove_stale_temps(root: &Path) -> Result<Vec<PathBuf>, Error> {
+    fn sweep(dir: &Path, depth: usize, removed: &mut Vec<PathBuf>) -> Result<(), Error> {
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| Error::Io { path, source }
+        };
+        let entries = match std::fs::read_dir(dir) {
+            Ok(entries) => entries,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(io(dir)(e)),
+        };
+        let mut entries = entries.collect::<Result<Vec<_>, _>>().map_err(io(dir))?;
+        entries.sort_by_key(|e| e.file_name());
+        for entry in entries {
+            let path = entry.path();
+            // Not followed through links: only the run's own folders.
+            let kind = entry.file_type().map_err(io(&path))?;
+            if kind.is_dir() && depth > 0 {
+                sweep(&path, depth - 1, removed)?;
+            } else if kind.is_file() {
+                let owner = entry.file_name().to_str().and_then(temp_owner);
+                let idle = || {
+                    let modified = entry.metadata().and_then(|m| m.modified());
+                    modified.is_ok_and(|t| t.elapsed().is_ok_and(|age| age >= STALE_AFTER))
+                };
+                if owner.is_some_and(|pid| process_alive(pid) != Some(true)) && idle() {
+                    std::fs::remove_file(&path).map_err(io(&path))?;
+                    removed.push(path);
+                }
+            }
+        }
+        Ok(())
+    }
+    let mut removed = vec![];
+    sweep(root, 3, &mut removed)?;
+    Ok(removed)
 }
 
 /// Writes `<dir>/<name>.csv` and `<dir>/<name>.parquet`; returns both paths.
@@ -473,6 +567,75 @@ mod tests {
             })
             .count();
         assert_eq!(leftovers, 0);
+    }
+
+    /// A write that fails (here the rename: a folder holds the final name) reports the path
+    /// and leaves no temporary file.
+    #[test]
+    fn a_failed_write_leaves_no_temporary_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("t.csv");
+        std::fs::create_dir(&target).unwrap();
+        let err = atomic_write(&target, b"a,b\n").unwrap_err();
+        assert!(err.to_string().contains("t.csv"), "{err}");
+        let names: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, ["t.csv"]);
+    }
+
+    /// Temporary files of processes that no longer run are removed, in the folder and below
+    /// it; those of a running process (this one), final files and names that merely look alike
+    /// stay.
+    #[test]
+    fn stale_temporary_files_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let units = dir.path().join("exp").join("units");
+        std::fs::create_dir_all(&units).unwrap();
+        // No process has an id above Linux's largest (2²²): these owners do not run.
+        let dead = u32::MAX;
+        let stale = [
+            dir.path().join(format!(".fig.tmp-{dead}.png")),
+            units.join(format!(".u0.tmp-{dead}.json")),
+            dir.path().join(format!(".a.b.tmp-{dead}.csv")),
+        ];
+        let live = temp_path(&dir.path().join("t.csv"));
+        let kept = [
+            live.clone(),
+            dir.path().join("t.csv"),
+            dir.path().join(".t.tmp-x1.csv"),
+            dir.path().join(format!("t.tmp-{dead}.csv")),
+            dir.path().join(".t.tmp-.csv"),
+        ];
+        // Written just now: a run on another machine may still be writing it.
+        let recent = dir.path().join(format!(".new.tmp-{dead}.csv"));
+        let old = std::time::SystemTime::now() - STALE_AFTER - STALE_AFTER;
+        for f in stale.iter().chain(&kept) {
+            std::fs::write(f, b"x").unwrap();
+            let file = std::fs::File::options().write(true).open(f).unwrap();
+            file.set_modified(old).unwrap();
+        }
+        std::fs::write(&recent, b"x").unwrap();
+        let mut removed = remove_stale_temps(dir.path()).unwrap();
+        removed.sort();
+        let mut want = stale.to_vec();
+        want.sort();
+        assert_eq!(removed, want);
+        assert!(stale.iter().all(|f| !f.exists()));
+        let own = temp_owner(live.file_name().unwrap().to_str().unwrap());
+        assert_eq!(own, Some(std::process::id()));
+        assert!(
+            recent.exists(),
+            "a temporary file written just now was removed"
+        );
+        assert!(
+            kept.iter().all(|f| f.exists()),
+            "a file that is not stale was removed"
+        );
+        assert!(remove_stale_temps(&dir.path().join("none"))
+            .unwrap()
+            .is_empty());
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //!
 //! Fonts come from the `dejavu` crate (no system fontconfig needed).
 
-use super::output::temp_path;
+use super::output::{rename_into_place, temp_path};
 use super::Error;
 use plotters::coord::combinators::LogCoord;
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, ValueFormatter};
@@ -314,20 +314,13 @@ pub fn write_gif_atomically(
         })?;
     }
     let tmp = temp_path(gif);
-    {
+    let made = (|| {
         let root = BitMapBackend::gif(&tmp, size, delay_ms)
             .map_err(|x| perr(gif, x.to_string()))?
             .into_drawing_area();
-        if let Err(m) = draw(&root) {
-            drop(root);
-            let _ = std::fs::remove_file(&tmp);
-            return Err(perr(gif, m));
-        }
-    }
-    std::fs::rename(&tmp, gif).map_err(|x| Error::Io {
-        path: gif.to_path_buf(),
-        source: x,
-    })
+        draw(&root).map_err(|m| perr(gif, m))
+    })();
+    rename_into_place(&tmp, gif, made)
 }
 
 /// A plotters error on the figure `path` as an [`Error::Plot`].
@@ -364,17 +357,13 @@ pub fn write_png_svg(
     })?;
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
-    {
-        let tmp = temp_path(&png);
+    let tmp = temp_path(&png);
+    let made = (|| {
         let root = BitMapBackend::new(&tmp, size).into_drawing_area();
         drawing.draw_on(&root).map_err(|e| perr(&png, e))?;
-        root.present().map_err(|e| perr(&png, e.to_string()))?;
-        drop(root);
-        std::fs::rename(&tmp, &png).map_err(|e| Error::Io {
-            path: png.clone(),
-            source: e,
-        })?;
-    }
+        root.present().map_err(|e| perr(&png, e.to_string()))
+    })();
+    rename_into_place(&tmp, &png, made)?;
     let mut text = String::new();
     {
         let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
@@ -1068,6 +1057,34 @@ impl LegendSample {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A figure or animation whose drawing fails reports its path and leaves neither the
+    /// figure nor a temporary file behind.
+    #[test]
+    fn a_failed_drawing_leaves_no_file() {
+        struct Broken;
+        impl Drawing for Broken {
+            fn draw_on<DB: DrawingBackend>(
+                &self,
+                _: &DrawingArea<DB, Shift>,
+            ) -> Result<(), String> {
+                Err("no data".into())
+            }
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let err = write_png_svg(dir.path(), "f", (64, 48), &Broken).unwrap_err();
+        assert!(err.to_string().contains("f.png"), "{err}");
+        let gif = dir.path().join("g.gif");
+        let err = write_gif_atomically(&gif, (64, 48), 50, |root| {
+            root.fill(&WHITE).map_err(|e| e.to_string())?;
+            root.present().map_err(|e| e.to_string())?;
+            Err("second frame".into())
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("g.gif"), "{err}");
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert!(left.is_empty(), "{left:?}");
+    }
 
     #[test]
     fn every_axis_gets_at_least_four_round_labelled_ticks_log_axes_included() {
