@@ -70,7 +70,7 @@
 //!   - [`families::beyond`]: beyond the papers — `physics_validation` (integrator energy drift
 //!     and convergence orders) and `x_lbc_emulator` (linear Bellman combination of
 //!     controllers learned through a NeuroAnimator emulator).
-//! - [`bench`]: throughput of the hot loops (`motionlab bench`).
+//! - [`mod@bench`]: throughput of the hot loops (`motionlab bench`).
 //! - [`linalg`]: the one conversion point between ndarray and nalgebra types.
 //! - [`seed`]: deterministic seed splitting ([`seed::mix_seed`]), one random stream per job.
 //!

@@ -231,7 +231,7 @@ pub struct TrackerBlend<'a, T = crate::control::lqr::TrackingController> {
     pub lambda: f64,
     /// How to combine.
     pub mode: BlendMode,
-    /// Symmetric actuator limits |u_j| ≤ limits[j] applied to the blended control (the
+    /// Symmetric actuator limits |u_j| ≤ `limits[j]` applied to the blended control (the
     /// combined policy drives the same torque-limited character as its components).
     pub limits: Option<&'a [f64]>,
 }

@@ -209,7 +209,7 @@ pub fn passive_transitions(grid: &Grid2, sys: &dyn GridSystem, dt: f64, sigma: f
     }
 }
 
-/// Rewards z_t for t = 0..=steps (z[steps] = terminal) of the linearly-solvable problem.
+/// Rewards z_t for t = 0..=steps (`z[steps]` = terminal) of the linearly-solvable problem.
 pub fn solve_linear(
     p: &Transitions,
     state_cost: &[f64],

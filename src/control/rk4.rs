@@ -39,7 +39,7 @@ pub struct Rk4Workspace {
     y: DVector<f64>,
     a: DMatrix<f64>,
     b: DMatrix<f64>,
-    /// The Jacobian chain for sizes without fixed-size matrices ([`super::small`]).
+    /// The Jacobian chain for sizes without fixed-size matrices (`super::small`).
     chain: Chain<Dyn, Dyn>,
     xp: DVector<f64>,
     up: DVector<f64>,
@@ -135,7 +135,7 @@ impl<M: Ode> Rk4Map<M> {
     }
 
     /// Writes F(x, u) into `out`. Does not allocate. For the state sizes of
-    /// [`super::small`] (4 and 2) the stages live in fixed-size arrays on the stack; the sums
+    /// `super::small` (4 and 2) the stages live in fixed-size arrays on the stack; the sums
     /// are the same (`step_on_heap` is the same step on the workspace's vectors, tested).
     pub fn step(
         &self,
@@ -239,7 +239,7 @@ impl<M: Ode> Rk4Map<M> {
 impl<M: Linearize> Rk4Map<M> {
     /// Writes the exact Jacobians F_x (n × n) and F_u (n × m) of the RK4 map at (x, u),
     /// chained through the stage Jacobians (see the module docs). Does not allocate; on
-    /// fixed-size matrices where [`super::small`] has the size.
+    /// fixed-size matrices where `super::small` has the size.
     pub fn jacobians<Sx, Su>(
         &self,
         x: &DVector<f64>,
@@ -268,7 +268,7 @@ impl<M: Linearize> Rk4Map<M> {
     /// `out(k, F_x, F_u)` in order: bit for bit the values of [`Rk4Map::jacobians`] at each
     /// knot. The knots are independent: where the model has a lane form
     /// ([`Linearize::derivative_and_jacobians_x4`]), the sizes are fixed ones of
-    /// [`super::small`] and the processor has AVX2 and FMA, four knots run at once in the
+    /// `super::small` and the processor has AVX2 and FMA, four knots run at once in the
     /// lanes of [`X4`], each lane repeating the scalar chain's operations in its order (the
     /// acrobot's: 0.12–0.16 µs a knot, from 0.37–0.43 one at a time; README). The rest go one
     /// at a time.

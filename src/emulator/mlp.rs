@@ -21,7 +21,7 @@
 //! All weights live in one flat vector so that optimizers see a single parameter vector. The
 //! layout is `[W₁ (q×p, row-major), b₁ (q), W₂ (r×q, row-major), b₂ (r)]`; gradients use the same
 //! layout. The single-example passes (Appendix C) write into caller-provided scratch and never
-//! allocate; they run the kernels of [`kernels`] on a packed copy of the weights (transposed and
+//! allocate; they run the kernels of `kernels` on a packed copy of the weights (transposed and
 //! padded so that the products vectorize across outputs, each sum still taken in input order),
 //! built on first use and dropped whenever the weights are handed out mutably. The batch pass
 //! works on fixed chunks of [`BATCH_CHUNK`] rows with ordered reduction, so its result is

@@ -16,7 +16,7 @@
 //! - `--shard I/N` runs the units whose index is `I - 1` modulo `N` into
 //!   `<out>/<id>/shards/I-of-N/units/` and, when all are done, writes `shard.json` there (the
 //!   shard's number, the spec hash, the git revision, the resolve options and its units).
-//! - [`merge`] checks that the shards are one complete set (all of `1..=N`, none twice, same
+//! - [`merge`](super::runner::merge) checks that the shards are one complete set (all of `1..=N`, none twice, same
 //!   spec hash, revision and options, each with all its unit files) before writing anything,
 //!   then writes what the unsharded run writes, byte for byte (CSV and Parquet; `run.json`
 //!   records times).

@@ -7,7 +7,7 @@
 //! ([`random_controllers`]), and the library minimizes −objective (the paper maximizes).
 //!
 //! - Hill climbing ([`hill_climb`]): a search set of N controllers, I perturb–evaluate–insert
-//!   iterations evaluated in batches ([`crate::control::search::hill_climb`] explains why the
+//!   iterations evaluated in batches ([`mod@crate::control::search::hill_climb`] explains why the
 //!   result does not depend on the thread count, and that batch 1 is the paper's loop).
 //! - Simulated annealing ([`anneal`]): starts from the best of the same N random controllers
 //!   (same streams, so both methods spend the same evaluations) and cools geometrically from

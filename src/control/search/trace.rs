@@ -1,6 +1,6 @@
 //! The one trace, budget and bookkeeping every search shares.
 //!
-//! A search reports each objective evaluation and closes each iteration on a [`Tracker`]; the
+//! A search reports each objective evaluation and closes each iteration on a `Tracker`; the
 //! tracker counts, times, keeps the best point, logs every evaluation ([`Evaluation`]), writes
 //! one [`TraceRow`] per iteration and checks the [`Budget`] after it. What a search returns is
 //! a [`SearchResult`] over its point type (a box point `Vec<f64>`, a reflex controller, …).

@@ -582,7 +582,7 @@ fn mode(i: usize) -> BlendMode {
     }
 }
 
-/// Index in [`POLICIES`] of the policy of `m` (inverse of [`mode`] on its range).
+/// Index in `POLICIES` of the policy of `m` (inverse of [`mode`] on its range).
 fn mode_index(m: BlendMode) -> usize {
     (0..POLICIES.len())
         .find(|&i| mode(i) == m)
@@ -597,13 +597,13 @@ pub struct SweepCounts {
     pub starts: usize,
     /// Starts where both trackers fail.
     pub both_fail: usize,
-    /// Successes over the whole sweep, per policy (in [`POLICIES`] order).
+    /// Successes over the whole sweep, per policy (in `POLICIES` order).
     pub successes: Vec<usize>,
     /// Successes on the both-fail subset, per policy.
     pub rescued: Vec<usize>,
 }
 
-/// [`SweepCounts`] from per-start success flags `ok[start][policy]` (policies in [`POLICIES`]
+/// [`SweepCounts`] from per-start success flags `ok[start][policy]` (policies in `POLICIES`
 /// order).
 pub fn sweep_counts(ok: &[Vec<bool>]) -> SweepCounts {
     let np = ok.first().map_or(0, |r| r.len());
@@ -642,7 +642,7 @@ pub fn judge(c: &SweepCounts, same_family: bool, held_fraction: f64) -> (bool, b
     (held, partly)
 }
 
-/// Per-start success flags (in [`POLICIES`] order) of a long table's rows `(θ1, θ2, policy,
+/// Per-start success flags (in `POLICIES` order) of a long table's rows `(θ1, θ2, policy,
 /// success)`, starts in order of first appearance.
 fn start_flags(a: &[f64], b: &[f64], p: &[String], s: &[f64]) -> Vec<Vec<bool>> {
     let mut starts: Vec<(f64, f64)> = Vec::new();

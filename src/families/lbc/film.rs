@@ -38,7 +38,7 @@ pub fn equal_aspect(x: (f64, f64), y: (f64, f64), size: (u32, u32)) -> ((f64, f6
 }
 
 /// A panel `height` pixels high and as wide as `x` and `y` need at one scale (at least
-/// [`MIN_WIDTH`]), with those ranges widened by [`equal_aspect`] to fill it.
+/// `MIN_WIDTH`), with those ranges widened by [`equal_aspect`] to fill it.
 pub fn fitted(x: (f64, f64), y: (f64, f64), height: u32) -> ((u32, u32), (f64, f64), (f64, f64)) {
     let per_m = (height as f64 - PANEL_CHROME.1).max(1.0) / (y.1 - y.0);
     let width = ((x.1 - x.0) * per_m + PANEL_CHROME.0)
