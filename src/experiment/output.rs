@@ -369,15 +369,9 @@ pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), Error> {
     let written = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
+        f.sync_all()
     })();
-    if written.is_err() {
-        // A disk that filled up, say: the partial temporary file goes too.
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written.map_err(io)
+    rename_into_place(&tmp, path, written.map_err(io))
 }
 
 /// A temporary sibling of `path` that keeps its extension (`a.png` → `.a.tmp-PID.png`).
@@ -388,7 +382,8 @@ pub fn temp_path(path: &Path) -> PathBuf {
 }
 
 /// Puts the temporary file `tmp` that `made` wrote in its place, `path`, by a rename; when
-/// `made` failed, or the rename does, the temporary file is removed and the error returned.
+/// `made` failed (a disk that filled up, a figure that could not be drawn), or the rename does,
+/// the temporary file is removed and the error returned.
 pub fn rename_into_place(tmp: &Path, path: &Path, made: Result<(), Error>) -> Result<(), Error> {
     let placed = made.and_then(|()| {
         std::fs::rename(tmp, path).map_err(|source| Error::Io {
