@@ -425,8 +425,8 @@ fn process_alive(pid: u32) -> Option<bool> {
 /// on other machines writing into a shared folder, whose processes this machine cannot see.
 pub const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(600);
 
-/// Removes the temporary files ([`temp_path`]) under `root` (it and three levels of folders
-/// below: `results/<id>/shards/<shard>/units`) that a run left when it was stopped mid-write
+/// Removes the temporary files ([`temp_path`]) under `root` (it and four levels of folders
+/// below, down to a shard's units: `results/<id>/shards/<shard>/units`) that a run left when it was stopped mid-write
 /// (an atomic write's temporary file, never a final one); returns the files removed. A file
 /// counts as left over when nothing has written to it for [`STALE_AFTER`] and the process named
 /// in it is not running on this machine (or the system cannot say). A `root` that does not
@@ -465,7 +465,7 @@ pub fn remove_stale_temps(root: &Path) -> Result<Vec<PathBuf>, Error> {
         Ok(())
     }
     let mut removed = vec![];
-    sweep(root, 3, &mut removed)?;
+    sweep(root, 4, &mut removed)?;
     Ok(removed)
 }
 
@@ -587,12 +587,15 @@ mod tests {
     fn stale_temporary_files_are_removed() {
         let dir = tempfile::tempdir().unwrap();
         let units = dir.path().join("exp").join("units");
+        let shard_units = dir.path().join("exp/shards/1-of-2/units");
         std::fs::create_dir_all(&units).unwrap();
+        std::fs::create_dir_all(&shard_units).unwrap();
         // No process has an id above Linux's largest (2²²): these owners do not run.
         let dead = u32::MAX;
         let stale = [
             dir.path().join(format!(".fig.tmp-{dead}.png")),
             units.join(format!(".u0.tmp-{dead}.json")),
+            shard_units.join(format!(".u1.tmp-{dead}.json")),
             dir.path().join(format!(".a.b.tmp-{dead}.csv")),
         ];
         let live = temp_path(&dir.path().join("t.csv"));
