@@ -54,6 +54,17 @@ fn chunk(
     s![c * BATCH_CHUNK..n.min((c + 1) * BATCH_CHUNK), ..]
 }
 
+/// The rows of chunk c + 1 of a batch (inputs and targets), for chunk c's kernel to fetch into
+/// the cache while it computes ([`kernels::Ahead`]); nothing after the last chunk.
+fn next_chunk(c: usize, (x, t): (ArrayView2<'_, f64>, ArrayView2<'_, f64>)) -> kernels::Ahead {
+    let n = x.nrows();
+    if c + 1 < chunk_count(n) {
+        kernels::Ahead::rows(x.slice(chunk(c + 1, n)), t.slice(chunk(c + 1, n)))
+    } else {
+        kernels::Ahead::none()
+    }
+}
+
 /// The logistic sigmoid σ(z) = 1 / (1 + e^{−z}), evaluated as every pass of the net evaluates
 /// it (a vectorizable exponential within a few units in the last place; `kernels`' docs).
 #[inline]
@@ -412,7 +423,8 @@ impl Mlp {
         if let (1, Some(pk)) = (chunks, &packed) {
             // One chunk (e.g. a mini-batch): its gradient is the total, written in place (the
             // kernel adds each value to zero, as the sum over chunks below does).
-            let loss = kernels::chunk_loss_grad(pk, inputs, targets, self.split_mut(grad));
+            let (grads, ahead) = (self.split_mut(grad), kernels::Ahead::none());
+            let loss = kernels::chunk_loss_grad(pk, inputs, targets, grads, ahead);
             if let Some(pk) = packed {
                 pk.recycle();
             }
@@ -431,7 +443,10 @@ impl Mlp {
                 let c = w0 + i;
                 let (x, t) = (inputs.slice(chunk(c, n)), targets.slice(chunk(c, n)));
                 *l = match &packed {
-                    Some(pk) => kernels::chunk_loss_grad(pk, x, t, self.split_mut(g)),
+                    Some(pk) => {
+                        let ahead = next_chunk(c, (inputs, targets));
+                        kernels::chunk_loss_grad(pk, x, t, self.split_mut(g), ahead)
+                    }
                     None => self.chunk_loss_grad_gemm(x, t, g),
                 };
             };
@@ -469,7 +484,7 @@ impl Mlp {
             .map(|c| {
                 let (x, t) = (inputs.slice(chunk(c, n)), targets.slice(chunk(c, n)));
                 if let Some(pk) = &packed {
-                    return kernels::chunk_loss(pk, x, t);
+                    return kernels::chunk_loss(pk, x, t, next_chunk(c, (inputs, targets)));
                 }
                 let h = self.hidden_batch(x);
                 let mut y = Array2::zeros((x.nrows(), self.n_out));
@@ -647,8 +662,13 @@ mod tests {
                     let (w1, b1, w2, b2) = mlp.split(&mlp.weights);
                     let pk = kernels::BatchNet::with_lanes((p, q, r), (w1, b1, w2, b2), false);
                     let mut got = vec![f64::NAN; mlp.n_weights()];
-                    let l =
-                        kernels::chunk_loss_grad(&pk, x.view(), t.view(), mlp.split_mut(&mut got));
+                    let l = kernels::chunk_loss_grad(
+                        &pk,
+                        x.view(),
+                        t.view(),
+                        mlp.split_mut(&mut got),
+                        kernels::Ahead::none(),
+                    );
                     let (want_loss, want) = gemm_loss_grad(&mlp, x.view(), t.view());
                     assert_eq!(l.to_bits(), want_loss.to_bits());
                     assert!(got

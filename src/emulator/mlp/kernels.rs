@@ -619,7 +619,7 @@ macro_rules! dispatch_wide {
 }
 
 mod batch;
-pub(super) use batch::{chunk_loss, chunk_loss_grad, BatchNet, MAX_DEPTH};
+pub(super) use batch::{chunk_loss, chunk_loss_grad, Ahead, BatchNet, MAX_DEPTH};
 
 /// Hidden activations h = σ(W₁ x + b₁).
 #[inline(always)]
