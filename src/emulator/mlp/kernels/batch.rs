@@ -145,15 +145,24 @@ fn prefetch_l2(p: *const u8) {
 
 /// The register tiles [`product`] takes for `m` rows and `groups` lane groups of `w` lanes.
 fn tile_count(m: usize, groups: usize, w: usize) -> usize {
-    let nr_max = if w == 8 { 4 } else { 3 };
     let mut tiles = 0;
     let mut g0 = 0;
     while g0 < groups {
-        let nr = nr_max.min(groups - g0);
+        let nr = strip_groups(w).min(groups - g0);
         tiles += m.div_ceil(tile_rows(nr, w));
         g0 += nr;
     }
     tiles
+}
+
+/// NR, the most lane groups of `w` lanes in one of [`product`]'s tiles: 16 accumulators on
+/// AVX-512 (32 registers), 12 on AVX2 (16 registers).
+const fn strip_groups(w: usize) -> usize {
+    if w == 8 {
+        4
+    } else {
+        3
+    }
 }
 
 /// MR, the rows of [`product`]'s tiles of `nr` lane groups of `w` lanes.
@@ -358,11 +367,9 @@ fn product<L: Lanes>(
     }
     assert!((m - 1) * ars + (k - 1) * acs < a.len(), "A too short");
     assert!((k - 1) * bs + groups * w <= b.len(), "B too short");
-    // Tiles of 16 accumulators on AVX-512 (32 registers), 12 on AVX2 (16 registers).
-    let nr_max = if w == 8 { 4 } else { 3 };
     let mut g0 = 0;
     while g0 < groups {
-        let nr = nr_max.min(groups - g0);
+        let nr = strip_groups(w).min(groups - g0);
         let b = &b[g0 * w..];
         let (a, c) = ((a, ars, acs), (&mut c[g0 * w..], cs));
         // The rows of the tiles, MR, are `tile_rows(nr, w)` (which `tile_count` counts).
@@ -798,8 +805,9 @@ mod tests {
     }
 
     /// [`Ahead`] goes through every cache line that holds a value of the rows, once, inputs
-    /// first, and no other line; the pace spreads them over the tiles; and a prefetch of every
-    /// line leaves the gradient's bits as they were.
+    /// first, and no other line, and the pace spreads them over the tiles. (That the gradient
+    /// keeps its bits with the prefetch is `batch_kernels_are_ndarray_products_bit_for_bit`,
+    /// whose 300-row batches take three chunks.)
     #[test]
     fn the_next_chunk_is_fetched_line_by_line() {
         let data: Vec<f64> = (0..4000).map(|i| i as f64 * 0.25 - 300.0).collect();
