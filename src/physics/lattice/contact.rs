@@ -93,8 +93,18 @@ impl Floor {
 
     /// Friction coefficient for sliding in horizontal direction `s` (any length).
     pub fn coefficient(&self, s: [f64; 2]) -> f64 {
+        self.coefficient_with_norm(s, self.direction_norm())
+    }
+
+    /// |d|, the length of the preferred direction as given.
+    pub(super) fn direction_norm(&self) -> f64 {
         let [dx, dy] = self.preferred_direction;
-        let dn = (dx * dx + dy * dy).sqrt();
+        (dx * dx + dy * dy).sqrt()
+    }
+
+    /// [`Floor::coefficient`] with |d| computed beforehand ([`Floor::direction_norm`]).
+    pub(super) fn coefficient_with_norm(&self, s: [f64; 2], dn: f64) -> f64 {
+        let [dx, dy] = self.preferred_direction;
         let sn = (s[0] * s[0] + s[1] * s[1]).sqrt();
         if dn == 0.0 || sn == 0.0 {
             return self.friction;

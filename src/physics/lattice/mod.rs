@@ -208,34 +208,113 @@ impl LatticeModel {
     }
 
     /// Adds the spring forces (N) of state `x` with rest lengths `rest` to `f` (3 per mass).
+    ///
+    /// On x86-64, two springs at a time in the two lanes of SSE2 registers: each lane is the
+    /// same IEEE operations as [`LatticeModel::add_spring_forces_portable`], one spring at a
+    /// time, so the same bits (tested), but the square root and the four divisions of a
+    /// spring, which bound its cost, take two springs to an instruction.
     pub fn add_spring_forces(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            // SAFETY: every x86-64 processor has SSE2.
+            unsafe { self.spring_forces_sse2(x, rest, f) };
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        self.add_spring_forces_portable(x, rest, f);
+    }
+
+    /// [`LatticeModel::add_spring_forces`] one spring at a time.
+    pub fn add_spring_forces_portable(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
+        self.spring_forces_each(x, rest, f, 0);
+    }
+
+    /// The forces of springs `first..` one at a time.
+    fn spring_forces_each(&self, x: &[f64], rest: &[f64], f: &mut [f64], first: usize) {
         let n = self.lattice.n_masses();
         let (p, v) = x.split_at(3 * n);
         // Per-mass 3-vectors: one bounds check per mass access instead of one per coordinate.
         let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
         let f = f[..3 * n].as_chunks_mut::<3>().0;
-        for (s, &l0) in self.lattice.springs.iter().zip(rest) {
+        let springs = self.lattice.springs.iter().zip(rest).skip(first);
+        for (s, &l0) in springs {
             let (pa, pb, va, vb) = (p[s.a], p[s.b], v[s.a], v[s.b]);
             let d = [pa[0] - pb[0], pa[1] - pb[1], pa[2] - pb[2]];
             let dv = [va[0] - vb[0], va[1] - vb[1], va[2] - vb[2]];
             let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if len == 0.0 {
-                continue;
-            }
             let rate = (d[0] * dv[0] + d[1] * dv[1] + d[2] * dv[2]) / len;
             let tension = s.stiffness * (len - l0) + s.damping * rate;
-            let fk = d.map(|dk| tension * dk / len);
-            // Each coordinate is updated once on each end, so grouping the updates by end
-            // (rather than by coordinate) gives the same sums, also when a == b.
-            let fa = &mut f[s.a];
-            for k in 0..3 {
-                fa[k] -= fk[k];
-            }
-            let fb = &mut f[s.b];
-            for k in 0..3 {
-                fb[k] += fk[k];
-            }
+            add_spring_force(f, s, len, d.map(|dk| tension * dk / len));
         }
+    }
+
+    /// [`LatticeModel::add_spring_forces`] two springs at a time in SSE2 lanes (lane 0 the
+    /// first spring of a pair); an odd last spring one at a time.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "sse2")]
+    fn spring_forces_sse2(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
+        use std::arch::x86_64::*;
+        let n = self.lattice.n_masses();
+        let ns = self.lattice.springs.len().min(rest.len());
+        let (p, v) = x.split_at(3 * n);
+        let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
+        let ff = f[..3 * n].as_chunks_mut::<3>().0;
+        let (pairs, _) = self.lattice.springs[..ns].as_chunks::<2>();
+        let pair = |a: f64, b: f64| _mm_set_pd(b, a);
+        let (low, high) = (
+            |v| _mm_cvtsd_f64(v),
+            |v| _mm_cvtsd_f64(_mm_unpackhi_pd(v, v)),
+        );
+        for ([s, t], r) in pairs.iter().zip(rest.as_chunks::<2>().0) {
+            let (ps, pt, vs, vt) = (
+                (p[s.a], p[s.b]),
+                (p[t.a], p[t.b]),
+                (v[s.a], v[s.b]),
+                (v[t.a], v[t.b]),
+            );
+            let d = [0, 1, 2].map(|c| pair(ps.0[c] - ps.1[c], pt.0[c] - pt.1[c]));
+            let dv = [0, 1, 2].map(|c| pair(vs.0[c] - vs.1[c], vt.0[c] - vt.1[c]));
+            let len = _mm_sqrt_pd(_mm_add_pd(
+                _mm_add_pd(_mm_mul_pd(d[0], d[0]), _mm_mul_pd(d[1], d[1])),
+                _mm_mul_pd(d[2], d[2]),
+            ));
+            let rate = _mm_div_pd(
+                _mm_add_pd(
+                    _mm_add_pd(_mm_mul_pd(d[0], dv[0]), _mm_mul_pd(d[1], dv[1])),
+                    _mm_mul_pd(d[2], dv[2]),
+                ),
+                len,
+            );
+            let tension = _mm_add_pd(
+                _mm_mul_pd(
+                    pair(s.stiffness, t.stiffness),
+                    _mm_sub_pd(len, pair(r[0], r[1])),
+                ),
+                _mm_mul_pd(pair(s.damping, t.damping), rate),
+            );
+            let fk = d.map(|dk| _mm_div_pd(_mm_mul_pd(tension, dk), len));
+            add_spring_force(ff, s, low(len), fk.map(low));
+            add_spring_force(ff, t, high(len), fk.map(high));
+        }
+        self.spring_forces_each(x, rest, f, 2 * pairs.len());
+    }
+}
+
+/// Adds the force `fk` (N) of spring `s`, of length `len`, to its ends in `f`: −fk on the
+/// first, +fk on the second; nothing for a spring of zero length.
+#[inline(always)]
+fn add_spring_force(f: &mut [[f64; 3]], s: &Spring, len: f64, fk: [f64; 3]) {
+    if len == 0.0 {
+        return;
+    }
+    // Each coordinate is updated once on each end, so grouping the updates by end (rather
+    // than by coordinate) gives the same sums, also when a == b.
+    let fa = &mut f[s.a];
+    for c in 0..3 {
+        fa[c] -= fk[c];
+    }
+    let fb = &mut f[s.b];
+    for c in 0..3 {
+        fb[c] += fk[c];
     }
 }
 
@@ -381,6 +460,8 @@ impl Ode for LatticeModel {
         let (p, v) = x.split_at(3 * n);
         let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
         let masses = self.lattice.masses.iter();
+        // |d| of the friction's preferred direction, once per call where a mass is in contact.
+        let mut direction_norm = None;
         for (((m, f), p), v) in masses.zip(dv.as_chunks_mut::<3>().0).zip(p).zip(v) {
             f[2] -= m.mass * self.gravity;
             if self.in_contact(p[2], v[2]) {
@@ -392,13 +473,26 @@ impl Ode for LatticeModel {
                     -f[1] - m.mass * v[1] / fl.stick_time,
                 ];
                 let size = (want[0] * want[0] + want[1] * want[1]).sqrt();
-                let limit = fl.coefficient([-want[0], -want[1]]) * normal;
+                let dn = *direction_norm.get_or_insert_with(|| fl.direction_norm());
+                let limit = fl.coefficient_with_norm([-want[0], -want[1]], dn) * normal;
                 let scale = if size > limit { limit / size } else { 1.0 };
                 f[0] += want[0] * scale;
                 f[1] += want[1] * scale;
             }
-            for fk in f.iter_mut() {
-                *fk /= m.mass;
+        }
+        // Accelerations: each force divided by its mass, two masses (six values) at a time so
+        // that the divisions go two to an instruction.
+        let (pairs, last) = dv.as_chunks_mut::<6>();
+        let (mass_pairs, last_mass) = self.lattice.masses.as_chunks::<2>();
+        for (f, [m0, m1]) in pairs.iter_mut().zip(mass_pairs) {
+            let m = [m0.mass, m0.mass, m0.mass, m1.mass, m1.mass, m1.mass];
+            for (f, m) in f.iter_mut().zip(m) {
+                *f /= m;
+            }
+        }
+        if let Some(m) = last_mass.first() {
+            for f in last.iter_mut() {
+                *f /= m.mass;
             }
         }
     }
@@ -457,6 +551,138 @@ mod tests {
             .chunks(3)
             .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
             .fold(0.0, f64::max)
+    }
+
+    /// The three shipped lattices (28, 10 and 35 springs: pairs, and an odd last spring).
+    fn shipped() -> [LatticeModel; 3] {
+        [Lattice::cube(), Lattice::pyramid(), Lattice::chair()]
+            .map(|l| LatticeModel::new(l).unwrap().with_gravity(LOW_GRAVITY))
+    }
+
+    /// A random state of `model`: masses scattered about the rest shape, random velocities;
+    /// with `floor`, about half the masses resting on the floor (z = 0, v_z = 0).
+    fn random_state(model: &LatticeModel, rng: &mut ChaCha8Rng, floor: bool) -> Vec<f64> {
+        let n = model.lattice.n_masses();
+        let mut x = model.lattice.resting_state();
+        for v in x.iter_mut() {
+            *v += rng.random_range(-0.2..0.2);
+        }
+        if floor {
+            for i in (0..n).filter(|_| rng.random_bool(0.5)) {
+                (x[3 * i + 2], x[3 * n + 3 * i + 2]) = (0.0, 0.0);
+            }
+        }
+        x
+    }
+
+    #[test]
+    fn spring_forces_in_lanes_are_the_one_at_a_time_bits() {
+        let mut rng = ChaCha8Rng::seed_from_u64(41);
+        for model in shipped() {
+            let (n, ns) = (model.lattice.n_masses(), model.lattice.springs.len());
+            for trial in 0..300 {
+                let mut x = random_state(&model, &mut rng, false);
+                if trial % 3 == 0 {
+                    // Two masses at one point: the spring joining them has zero length.
+                    let (a, b) = (
+                        model.lattice.springs[trial % ns].a,
+                        model.lattice.springs[trial % ns].b,
+                    );
+                    for c in 0..3 {
+                        x[3 * b + c] = x[3 * a + c];
+                    }
+                }
+                // Rest lengths for every spring, or for all but the last (the rest unforced).
+                let count = if trial % 5 == 0 { ns - 1 } else { ns };
+                let rest: Vec<f64> = (0..count).map(|_| rng.random_range(0.2..1.5)).collect();
+                let start: Vec<f64> = (0..3 * n).map(|_| rng.random_range(-1.0..1.0)).collect();
+                let (mut lanes, mut each) = (start.clone(), start);
+                model.add_spring_forces(&x, &rest, &mut lanes);
+                model.add_spring_forces_portable(&x, &rest, &mut each);
+                let bits = |f: &[f64]| f.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    bits(&lanes),
+                    bits(&each),
+                    "{} trial {trial}",
+                    model.lattice.name
+                );
+                assert!(lanes.iter().all(|v| v.is_finite()));
+            }
+        }
+    }
+
+    /// The right-hand side as it was written before the divisions went in pairs: each mass's
+    /// gravity, contact and friction, then its three divisions by its mass, one mass at a
+    /// time, the friction coefficient from [`Floor::coefficient`].
+    fn derivative_one_mass_at_a_time(model: &LatticeModel, x: &[f64], dx: &mut [f64]) {
+        let n = model.lattice.n_masses();
+        let (dp, dv) = dx.split_at_mut(3 * n);
+        dp.copy_from_slice(&x[3 * n..]);
+        dv.fill(0.0);
+        model.add_spring_forces_portable(x, &model.rest_lengths, dv);
+        let fl = &model.floor;
+        for (i, m) in model.lattice.masses.iter().enumerate() {
+            let (p, v, f) = (
+                &x[3 * i..3 * i + 3],
+                &x[3 * n + 3 * i..3 * n + 3 * i + 3],
+                &mut dv[3 * i..3 * i + 3],
+            );
+            f[2] -= m.mass * model.gravity;
+            if model.in_contact(p[2], v[2]) {
+                let normal = (-f[2]).max(0.0);
+                f[2] += normal;
+                let want = [
+                    -f[0] - m.mass * v[0] / fl.stick_time,
+                    -f[1] - m.mass * v[1] / fl.stick_time,
+                ];
+                let size = (want[0] * want[0] + want[1] * want[1]).sqrt();
+                let limit = fl.coefficient([-want[0], -want[1]]) * normal;
+                let scale = if size > limit { limit / size } else { 1.0 };
+                f[0] += want[0] * scale;
+                f[1] += want[1] * scale;
+            }
+            for fk in f.iter_mut() {
+                *fk /= m.mass;
+            }
+        }
+    }
+
+    #[test]
+    fn derivative_is_the_one_mass_at_a_time_form_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(43);
+        for model in shipped() {
+            let directional = model.clone().with_floor(Floor {
+                preferred_friction: 2.5,
+                preferred_direction: [0.6, -1.3],
+                ..Floor::default()
+            });
+            for mut model in [model, directional.unwrap()] {
+                // Masses other than 1 kg, so that the divisions by mass are not exact.
+                for m in &mut model.lattice.masses {
+                    m.mass *= rng.random_range(0.3..3.0);
+                }
+                let n = model.lattice.n_masses();
+                let mut contacts = 0;
+                for trial in 0..300 {
+                    let x = random_state(&model, &mut rng, true);
+                    contacts += model.contacts(&x);
+                    let (mut got, mut want) = (vec![0.0; 6 * n], vec![0.0; 6 * n]);
+                    model.derivative(&x, &[], &mut got);
+                    derivative_one_mass_at_a_time(&model, &x, &mut want);
+                    let bits = |f: &[f64]| f.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(
+                        bits(&got),
+                        bits(&want),
+                        "{} trial {trial}",
+                        model.lattice.name
+                    );
+                }
+                assert!(
+                    contacts > 300,
+                    "the states must exercise the floor: {contacts}"
+                );
+            }
+        }
     }
 
     #[test]
