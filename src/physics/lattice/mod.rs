@@ -207,6 +207,36 @@ impl LatticeModel {
         z <= self.floor.contact_tolerance && vz.abs() <= self.floor.velocity_tolerance
     }
 
+    /// Adds gravity and, for a mass in contact, the floor's normal force and friction to the
+    /// force `f` (N) on a mass of `mass` kg at position `p` with velocity `v`. `direction_norm`
+    /// holds |d| of the preferred friction direction once a contact has needed it.
+    fn add_floor_force(
+        &self,
+        f: &mut [f64; 3],
+        mass: f64,
+        p: &[f64; 3],
+        v: &[f64; 3],
+        direction_norm: &mut Option<f64>,
+    ) {
+        let fl = &self.floor;
+        f[2] -= mass * self.gravity;
+        if self.in_contact(p[2], v[2]) {
+            let normal = (-f[2]).max(0.0);
+            f[2] += normal;
+            // Force that would stop the tangential motion within τ, clipped to Coulomb.
+            let want = [
+                -f[0] - mass * v[0] / fl.stick_time,
+                -f[1] - mass * v[1] / fl.stick_time,
+            ];
+            let size = (want[0] * want[0] + want[1] * want[1]).sqrt();
+            let dn = *direction_norm.get_or_insert_with(|| fl.direction_norm());
+            let limit = fl.coefficient_with_norm([-want[0], -want[1]], dn) * normal;
+            let scale = if size > limit { limit / size } else { 1.0 };
+            f[0] += want[0] * scale;
+            f[1] += want[1] * scale;
+        }
+    }
+
     /// Adds the spring forces (N) of state `x` with rest lengths `rest` to `f` (3 per mass).
     ///
     /// On x86-64, two springs at a time in the two lanes of SSE2 registers: each lane is the
@@ -456,29 +486,13 @@ impl Ode for LatticeModel {
         dp.copy_from_slice(&x[3 * n..]);
         dv.fill(0.0);
         self.add_spring_forces(x, rest, dv);
-        let fl = &self.floor;
         let (p, v) = x.split_at(3 * n);
         let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
         let masses = self.lattice.masses.iter();
         // |d| of the friction's preferred direction, once per call where a mass is in contact.
         let mut direction_norm = None;
         for (((m, f), p), v) in masses.zip(dv.as_chunks_mut::<3>().0).zip(p).zip(v) {
-            f[2] -= m.mass * self.gravity;
-            if self.in_contact(p[2], v[2]) {
-                let normal = (-f[2]).max(0.0);
-                f[2] += normal;
-                // Force that would stop the tangential motion within τ, clipped to Coulomb.
-                let want = [
-                    -f[0] - m.mass * v[0] / fl.stick_time,
-                    -f[1] - m.mass * v[1] / fl.stick_time,
-                ];
-                let size = (want[0] * want[0] + want[1] * want[1]).sqrt();
-                let dn = *direction_norm.get_or_insert_with(|| fl.direction_norm());
-                let limit = fl.coefficient_with_norm([-want[0], -want[1]], dn) * normal;
-                let scale = if size > limit { limit / size } else { 1.0 };
-                f[0] += want[0] * scale;
-                f[1] += want[1] * scale;
-            }
+            self.add_floor_force(f, m.mass, p, v, &mut direction_norm);
         }
         // Accelerations: each force divided by its mass, two masses (six values) at a time so
         // that the divisions go two to an instruction.
@@ -612,36 +626,20 @@ mod tests {
     }
 
     /// The right-hand side as it was written before the divisions went in pairs: each mass's
-    /// gravity, contact and friction, then its three divisions by its mass, one mass at a
-    /// time, the friction coefficient from [`Floor::coefficient`].
+    /// gravity, contact and friction (|d| of the friction direction computed for each mass),
+    /// then its three divisions by its mass, one mass at a time.
     fn derivative_one_mass_at_a_time(model: &LatticeModel, x: &[f64], dx: &mut [f64]) {
         let n = model.lattice.n_masses();
         let (dp, dv) = dx.split_at_mut(3 * n);
         dp.copy_from_slice(&x[3 * n..]);
         dv.fill(0.0);
         model.add_spring_forces_portable(x, &model.rest_lengths, dv);
-        let fl = &model.floor;
+        let (p, v) = x.split_at(3 * n);
+        let (p, v) = (p.as_chunks::<3>().0, v.as_chunks::<3>().0);
+        let f = dv.as_chunks_mut::<3>().0;
         for (i, m) in model.lattice.masses.iter().enumerate() {
-            let (p, v, f) = (
-                &x[3 * i..3 * i + 3],
-                &x[3 * n + 3 * i..3 * n + 3 * i + 3],
-                &mut dv[3 * i..3 * i + 3],
-            );
-            f[2] -= m.mass * model.gravity;
-            if model.in_contact(p[2], v[2]) {
-                let normal = (-f[2]).max(0.0);
-                f[2] += normal;
-                let want = [
-                    -f[0] - m.mass * v[0] / fl.stick_time,
-                    -f[1] - m.mass * v[1] / fl.stick_time,
-                ];
-                let size = (want[0] * want[0] + want[1] * want[1]).sqrt();
-                let limit = fl.coefficient([-want[0], -want[1]]) * normal;
-                let scale = if size > limit { limit / size } else { 1.0 };
-                f[0] += want[0] * scale;
-                f[1] += want[1] * scale;
-            }
-            for fk in f.iter_mut() {
+            model.add_floor_force(&mut f[i], m.mass, &p[i], &v[i], &mut None);
+            for fk in f[i].iter_mut() {
                 *fk /= m.mass;
             }
         }
