@@ -8,6 +8,9 @@
 //! reassociates floating-point operations. Compiled for AVX2 (as
 //! [`crate::control::Rk4Map::jacobians_each`] is, where the processor has it) each operation
 //! is one 4-lane instruction.
+//!
+//! [`Aligned`] stores `f64` values that lane groups load (the packed weights of the neural
+//! kernels) from the start of a cache line.
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
@@ -102,9 +105,70 @@ impl Real for X4 {
     }
 }
 
+/// One cache line of `f64` values: the unit of [`Aligned`]'s storage.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(C, align(64))]
+struct Line([f64; 8]);
+
+/// `f64` values stored from the start of a 64-byte cache line, read and written as a slice.
+/// A lane group of 4 (or 8) values that starts at a multiple of 4 (or 8) then lies within one
+/// cache line: a load of it never splits across two lines, which a `Vec<f64>` (aligned to 16
+/// bytes by the allocator) does not promise.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Aligned {
+    lines: Vec<Line>,
+    len: usize,
+}
+
+impl Aligned {
+    /// `len` zeros.
+    pub fn zeros(len: usize) -> Self {
+        Self {
+            lines: vec![Line::default(); len.div_ceil(8)],
+            len,
+        }
+    }
+}
+
+impl std::ops::Deref for Aligned {
+    type Target = [f64];
+    #[inline(always)]
+    fn deref(&self) -> &[f64] {
+        // SAFETY: `lines` holds len.div_ceil(8) lines of 8 contiguous f64 each (`repr(C)`), so
+        // its first `len` values are initialized f64s in one allocation, borrowed with `self`.
+        unsafe { std::slice::from_raw_parts(self.lines.as_ptr().cast::<f64>(), self.len) }
+    }
+}
+
+impl std::ops::DerefMut for Aligned {
+    #[inline(always)]
+    fn deref_mut(&mut self) -> &mut [f64] {
+        // SAFETY: as in `deref`, with the unique borrow of `self`.
+        unsafe { std::slice::from_raw_parts_mut(self.lines.as_mut_ptr().cast::<f64>(), self.len) }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn aligned_values_start_on_a_cache_line_and_keep_their_length_when_cloned() {
+        for len in [0, 1, 7, 8, 9, 52, 850] {
+            let mut a = Aligned::zeros(len);
+            assert_eq!(a.len(), len);
+            assert!(a.iter().all(|&v| v == 0.0));
+            for (i, v) in a.iter_mut().enumerate() {
+                *v = i as f64 + 0.5;
+            }
+            let b = a.clone();
+            for v in [&a, &b] {
+                assert_eq!(v.as_ptr() as usize % 64, 0, "length {len}");
+                assert_eq!(v.len(), len);
+                assert!(v.iter().enumerate().all(|(i, &x)| x == i as f64 + 0.5));
+            }
+        }
+    }
 
     #[test]
     fn each_lane_is_the_scalar_operation() {

@@ -30,6 +30,7 @@
 use super::{sigmoid_lanes, wide_lanes, Dims, Lanes, Portable};
 #[cfg(target_arch = "x86_64")]
 use super::{Avx2, Avx512};
+use crate::lanes::Aligned;
 use ndarray::ArrayView2;
 use std::cell::RefCell;
 
@@ -191,10 +192,8 @@ const fn tile_rows(nr: usize, w: usize) -> usize {
 #[derive(Debug, Clone)]
 pub(in crate::emulator::mlp) struct BatchNet {
     d: Dims,
-    /// w1t, w2t, w2, b1, b2, one after the other from `data[start]`, the first value on a
-    /// cache line.
-    data: Vec<f64>,
-    start: usize,
+    /// w1t, w2t, w2, b1, b2, one after the other, the first value on a cache line.
+    data: Aligned,
 }
 
 impl BatchNet {
@@ -206,9 +205,8 @@ impl BatchNet {
         wide: bool,
     ) -> Self {
         let d = Dims::padded(p, q, r, wide);
-        let data = vec![0.0; p * d.qs + q * d.rs + r * d.qs + d.qs + d.rs + LINE];
-        let start = line_offset(&data);
-        let mut net = Self { d, start, data };
+        let data = Aligned::zeros(p * d.qs + q * d.rs + r * d.qs + d.qs + d.rs);
+        let mut net = Self { d, data };
         net.fill(weights);
         net
     }
@@ -245,7 +243,7 @@ impl BatchNet {
         let Dims {
             p, q, r, qs, rs, ..
         } = self.d;
-        let (w1t, rest) = self.data[self.start..].split_at_mut(p * qs);
+        let (w1t, rest) = self.data.split_at_mut(p * qs);
         let (w2t, rest) = rest.split_at_mut(q * rs);
         let (w2p, rest) = rest.split_at_mut(r * qs);
         let (b1p, b2p) = rest.split_at_mut(qs);
@@ -261,7 +259,7 @@ impl BatchNet {
     /// (w1t, w2t, w2, b1, b2).
     #[allow(clippy::type_complexity)]
     fn parts(&self) -> (&[f64], &[f64], &[f64], &[f64], &[f64]) {
-        let (w1t, rest) = self.data[self.start..].split_at(self.d.p * self.d.qs);
+        let (w1t, rest) = self.data.split_at(self.d.p * self.d.qs);
         let (w2t, rest) = rest.split_at(self.d.q * self.d.rs);
         let (w2, rest) = rest.split_at(self.d.r * self.d.qs);
         let (b1, b2) = rest.split_at(self.d.qs);
