@@ -29,7 +29,8 @@
 //! padded with zeros to a multiple of 4 so that every lane group is full (padded lanes are
 //! computed and dropped), and each stored from the start of a cache line ([`Aligned`]), so
 //! that no lane group's load splits across two lines (with the allocator's 16-byte alignment,
-//! three 8-lane loads in four did, and the 17-50-13 forward pass took 1.6 times as long):
+//! every 8-lane load of an allocation that did not happen to start on a line did, and the
+//! 17-50-13 forward pass took about 1.6 times as long: 255 against 165 ns on AMD Zen 4):
 //!
 //! ```text
 //! w1t  p × q̃   W₁ᵀ: row k holds the weights of input k to every hidden unit  (forward, hidden)

@@ -245,7 +245,8 @@ impl LatticeModel {
     /// time, so the same bits (tested), but the square root and the four divisions of a
     /// spring, which bound its cost, take two (four) springs to an instruction. Four lanes
     /// pay where a 4-lane division costs what a 2-lane one does (AMD Zen 4: 4.7 cycles
-    /// each); where it costs twice as much (Intel Sapphire Rapids) they measured no faster.
+    /// each); where it costs twice as much (Intel Sapphire Rapids) an earlier version of
+    /// them measured no faster.
     pub fn add_spring_forces(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
         #[cfg(target_arch = "x86_64")]
         {
