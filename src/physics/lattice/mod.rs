@@ -243,10 +243,12 @@ impl LatticeModel {
     /// in AVX registers where the processor has AVX (runtime detection): each lane is the
     /// same IEEE operations as [`LatticeModel::add_spring_forces_portable`], one spring at a
     /// time, so the same bits (tested), but the square root and the four divisions of a
-    /// spring, which bound its cost, take two (four) springs to an instruction. Four lanes
-    /// pay where a 4-lane division costs what a 2-lane one does (AMD Zen 4: 4.7 cycles
-    /// each); where it costs twice as much (Intel Sapphire Rapids) an earlier version of
-    /// them measured no faster.
+    /// spring take two (four) springs to an instruction. Four lanes pay where a 4-lane
+    /// division costs what a 2-lane one does (AMD Zen 4: 4.7 cycles each); where it costs
+    /// twice as much (Intel Sapphire Rapids) an earlier four-lane version, which built its
+    /// lanes one value at a time, measured no faster. The AVX path reads and writes each
+    /// end's three coordinates as vectors (the cube's right-hand side: 200 → 157 ns, AMD
+    /// Zen 4).
     pub fn add_spring_forces(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
         #[cfg(target_arch = "x86_64")]
         {
@@ -341,6 +343,12 @@ impl LatticeModel {
 impl LatticeModel {
     /// [`LatticeModel::add_spring_forces`] four springs at a time in AVX lanes (lane i the
     /// i-th spring of a quad); the last springs, fewer than four, one at a time.
+    ///
+    /// Each end's 3-vector is read with one masked load and the four springs' differences
+    /// taken as vectors, then turned into one register per coordinate by a 4 × 4 transpose;
+    /// the forces go back the same way, each end updated by a 2-lane and a 1-lane
+    /// read–modify–write. Every value is the same IEEE operation on the same operands as one
+    /// spring at a time, so the same bits.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn spring_forces_avx(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
@@ -351,28 +359,41 @@ impl LatticeModel {
         let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
         let ff = f[..3 * n].as_chunks_mut::<3>().0;
         let (quads, _) = self.lattice.springs[..ns].as_chunks::<4>();
-        // The four springs' values of one expression, as one register (lane i: spring i);
-        // written out rather than through closures, which were not inlined (every lane set
-        // then went through the stack, at twice the time of the SSE2 pairs).
-        macro_rules! lanes {
-            ($q:ident, |$s:ident| $e:expr) => {{
-                let [$s, s1, s2, s3] = $q;
-                let l0 = $e;
-                let $s = s1;
-                let l1 = $e;
-                let $s = s2;
-                let l2 = $e;
-                let $s = s3;
-                _mm256_set_pd($e, l2, l1, l0)
-            }};
-        }
+        // Lanes 0–2 of a 3-vector, lane 3 zero; the masked lane is not read, so the last
+        // mass's velocity is read without reading past the state.
+        let three = _mm256_set_epi64x(0, -1, -1, -1);
+        // SAFETY (every load below): a `&[f64; 3]` holds the three values read.
+        let load = |e: &[f64; 3]| unsafe { _mm256_maskload_pd(e.as_ptr(), three) };
+        // Four 3-vectors (lane 3 ignored) as three registers of one coordinate each.
+        let coordinates = |r: [__m256d; 4]| {
+            let (xz01, yw01) = (
+                _mm256_unpacklo_pd(r[0], r[1]),
+                _mm256_unpackhi_pd(r[0], r[1]),
+            );
+            let (xz23, yw23) = (
+                _mm256_unpacklo_pd(r[2], r[3]),
+                _mm256_unpackhi_pd(r[2], r[3]),
+            );
+            [
+                _mm256_permute2f128_pd(xz01, xz23, 0x20),
+                _mm256_permute2f128_pd(yw01, yw23, 0x20),
+                _mm256_permute2f128_pd(xz01, xz23, 0x31),
+            ]
+        };
         for (q, r) in quads.iter().zip(rest.as_chunks::<4>().0) {
-            let mut d = [_mm256_setzero_pd(); 3];
-            let mut dv = [_mm256_setzero_pd(); 3];
-            for c in 0..3 {
-                d[c] = lanes!(q, |s| p[s.a][c] - p[s.b][c]);
-                dv[c] = lanes!(q, |s| v[s.a][c] - v[s.b][c]);
-            }
+            let [s0, s1, s2, s3] = q;
+            let d = coordinates([
+                _mm256_sub_pd(load(&p[s0.a]), load(&p[s0.b])),
+                _mm256_sub_pd(load(&p[s1.a]), load(&p[s1.b])),
+                _mm256_sub_pd(load(&p[s2.a]), load(&p[s2.b])),
+                _mm256_sub_pd(load(&p[s3.a]), load(&p[s3.b])),
+            ]);
+            let dv = coordinates([
+                _mm256_sub_pd(load(&v[s0.a]), load(&v[s0.b])),
+                _mm256_sub_pd(load(&v[s1.a]), load(&v[s1.b])),
+                _mm256_sub_pd(load(&v[s2.a]), load(&v[s2.b])),
+                _mm256_sub_pd(load(&v[s3.a]), load(&v[s3.b])),
+            ]);
             let len = _mm256_sqrt_pd(_mm256_add_pd(
                 _mm256_add_pd(_mm256_mul_pd(d[0], d[0]), _mm256_mul_pd(d[1], d[1])),
                 _mm256_mul_pd(d[2], d[2]),
@@ -384,23 +405,50 @@ impl LatticeModel {
                 ),
                 len,
             );
+            let stiffness = _mm256_set_pd(s3.stiffness, s2.stiffness, s1.stiffness, s0.stiffness);
+            let damping = _mm256_set_pd(s3.damping, s2.damping, s1.damping, s0.damping);
+            // SAFETY: four f64 values are read from a 4-value array.
+            let r = unsafe { _mm256_loadu_pd(r.as_ptr()) };
             let tension = _mm256_add_pd(
-                _mm256_mul_pd(
-                    lanes!(q, |s| s.stiffness),
-                    _mm256_sub_pd(len, _mm256_set_pd(r[3], r[2], r[1], r[0])),
-                ),
-                _mm256_mul_pd(lanes!(q, |s| s.damping), rate),
+                _mm256_mul_pd(stiffness, _mm256_sub_pd(len, r)),
+                _mm256_mul_pd(damping, rate),
             );
-            let mut out = [[0.0; 4]; 4];
-            for (c, o) in out.iter_mut().take(3).enumerate() {
-                let fk = _mm256_div_pd(_mm256_mul_pd(tension, d[c]), len);
-                // SAFETY: four f64 values are written to a 4-value array.
-                unsafe { _mm256_storeu_pd(o.as_mut_ptr(), fk) };
-            }
-            // SAFETY: as above.
-            unsafe { _mm256_storeu_pd(out[3].as_mut_ptr(), len) };
-            for (i, s) in q.iter().enumerate() {
-                add_spring_force(ff, s, out[3][i], [out[0][i], out[1][i], out[2][i]]);
+            let fk = d.map(|dk| _mm256_div_pd(_mm256_mul_pd(tension, dk), len));
+            // Back to one register per spring: (f_x, f_y, f_z, ·).
+            let (xy02, xy13) = (
+                _mm256_unpacklo_pd(fk[0], fk[1]),
+                _mm256_unpackhi_pd(fk[0], fk[1]),
+            );
+            let (z02, z13) = (
+                _mm256_unpacklo_pd(fk[2], fk[2]),
+                _mm256_unpackhi_pd(fk[2], fk[2]),
+            );
+            let each = [
+                _mm256_permute2f128_pd(xy02, z02, 0x20),
+                _mm256_permute2f128_pd(xy13, z13, 0x20),
+                _mm256_permute2f128_pd(xy02, z02, 0x31),
+                _mm256_permute2f128_pd(xy13, z13, 0x31),
+            ];
+            // Springs of zero length add nothing.
+            let zero = _mm256_movemask_pd(_mm256_cmp_pd(len, _mm256_setzero_pd(), _CMP_EQ_OQ));
+            for (i, (s, fk)) in q.iter().zip(each).enumerate() {
+                if zero & (1 << i) != 0 {
+                    continue;
+                }
+                let (xy, z) = (_mm256_castpd256_pd128(fk), _mm256_extractf128_pd(fk, 1));
+                // Each end as in `add_spring_force`: −fk on the first, then +fk on the second.
+                let fa = &mut ff[s.a];
+                // SAFETY: two f64 values are read and written in a 3-value array.
+                unsafe {
+                    _mm_storeu_pd(fa.as_mut_ptr(), _mm_sub_pd(_mm_loadu_pd(fa.as_ptr()), xy))
+                };
+                fa[2] -= _mm_cvtsd_f64(z);
+                let fb = &mut ff[s.b];
+                // SAFETY: as above.
+                unsafe {
+                    _mm_storeu_pd(fb.as_mut_ptr(), _mm_add_pd(_mm_loadu_pd(fb.as_ptr()), xy))
+                };
+                fb[2] += _mm_cvtsd_f64(z);
             }
         }
         self.spring_forces_each(x, rest, f, 4 * quads.len());
