@@ -364,36 +364,39 @@ impl LatticeModel {
         let three = _mm256_set_epi64x(0, -1, -1, -1);
         // SAFETY (every load below): a `&[f64; 3]` holds the three values read.
         let load = |e: &[f64; 3]| unsafe { _mm256_maskload_pd(e.as_ptr(), three) };
-        // Four 3-vectors (lane 3 ignored) as three registers of one coordinate each.
-        let coordinates = |r: [__m256d; 4]| {
-            let (xz01, yw01) = (
+        // The 4 × 4 transpose: lane j of register i becomes lane i of register j. It turns
+        // four springs' 3-vectors (lane 3 ignored) into one register per coordinate, and back.
+        let transpose = |r: [__m256d; 4]| {
+            let (even01, odd01) = (
                 _mm256_unpacklo_pd(r[0], r[1]),
                 _mm256_unpackhi_pd(r[0], r[1]),
             );
-            let (xz23, yw23) = (
+            let (even23, odd23) = (
                 _mm256_unpacklo_pd(r[2], r[3]),
                 _mm256_unpackhi_pd(r[2], r[3]),
             );
             [
-                _mm256_permute2f128_pd(xz01, xz23, 0x20),
-                _mm256_permute2f128_pd(yw01, yw23, 0x20),
-                _mm256_permute2f128_pd(xz01, xz23, 0x31),
+                _mm256_permute2f128_pd(even01, even23, 0x20),
+                _mm256_permute2f128_pd(odd01, odd23, 0x20),
+                _mm256_permute2f128_pd(even01, even23, 0x31),
+                _mm256_permute2f128_pd(odd01, odd23, 0x31),
             ]
         };
         for (q, r) in quads.iter().zip(rest.as_chunks::<4>().0) {
             let [s0, s1, s2, s3] = q;
-            let d = coordinates([
+            let [d0, d1, d2, _] = transpose([
                 _mm256_sub_pd(load(&p[s0.a]), load(&p[s0.b])),
                 _mm256_sub_pd(load(&p[s1.a]), load(&p[s1.b])),
                 _mm256_sub_pd(load(&p[s2.a]), load(&p[s2.b])),
                 _mm256_sub_pd(load(&p[s3.a]), load(&p[s3.b])),
             ]);
-            let dv = coordinates([
+            let [dv0, dv1, dv2, _] = transpose([
                 _mm256_sub_pd(load(&v[s0.a]), load(&v[s0.b])),
                 _mm256_sub_pd(load(&v[s1.a]), load(&v[s1.b])),
                 _mm256_sub_pd(load(&v[s2.a]), load(&v[s2.b])),
                 _mm256_sub_pd(load(&v[s3.a]), load(&v[s3.b])),
             ]);
+            let (d, dv) = ([d0, d1, d2], [dv0, dv1, dv2]);
             let len = _mm256_sqrt_pd(_mm256_add_pd(
                 _mm256_add_pd(_mm256_mul_pd(d[0], d[0]), _mm256_mul_pd(d[1], d[1])),
                 _mm256_mul_pd(d[2], d[2]),
@@ -414,21 +417,8 @@ impl LatticeModel {
                 _mm256_mul_pd(damping, rate),
             );
             let fk = d.map(|dk| _mm256_div_pd(_mm256_mul_pd(tension, dk), len));
-            // Back to one register per spring: (f_x, f_y, f_z, ·).
-            let (xy02, xy13) = (
-                _mm256_unpacklo_pd(fk[0], fk[1]),
-                _mm256_unpackhi_pd(fk[0], fk[1]),
-            );
-            let (z02, z13) = (
-                _mm256_unpacklo_pd(fk[2], fk[2]),
-                _mm256_unpackhi_pd(fk[2], fk[2]),
-            );
-            let each = [
-                _mm256_permute2f128_pd(xy02, z02, 0x20),
-                _mm256_permute2f128_pd(xy13, z13, 0x20),
-                _mm256_permute2f128_pd(xy02, z02, 0x31),
-                _mm256_permute2f128_pd(xy13, z13, 0x31),
-            ];
+            // Back to one register per spring: (f_x, f_y, f_z, f_z).
+            let each = transpose([fk[0], fk[1], fk[2], fk[2]]);
             // Springs of zero length add nothing.
             let zero = _mm256_movemask_pd(_mm256_cmp_pd(len, _mm256_setzero_pd(), _CMP_EQ_OQ));
             for (i, (s, fk)) in q.iter().zip(each).enumerate() {
