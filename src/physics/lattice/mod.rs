@@ -270,12 +270,26 @@ impl LatticeModel {
     }
 
     /// The forces of springs `first..` one at a time.
-    fn spring_forces_each(&self, x: &[f64], rest: &[f64], f: &mut [f64], first: usize) {
+    /// The positions and velocities of state `x` and the forces `f` as per-mass 3-vectors, for
+    /// the spring-force paths: one bounds check per mass access instead of one per coordinate.
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    fn per_mass<'x, 'f>(
+        &self,
+        x: &'x [f64],
+        f: &'f mut [f64],
+    ) -> (&'x [[f64; 3]], &'x [[f64; 3]], &'f mut [[f64; 3]]) {
         let n = self.lattice.n_masses();
         let (p, v) = x.split_at(3 * n);
-        // Per-mass 3-vectors: one bounds check per mass access instead of one per coordinate.
-        let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
-        let f = f[..3 * n].as_chunks_mut::<3>().0;
+        (
+            p.as_chunks::<3>().0,
+            v[..3 * n].as_chunks::<3>().0,
+            f[..3 * n].as_chunks_mut::<3>().0,
+        )
+    }
+
+    fn spring_forces_each(&self, x: &[f64], rest: &[f64], f: &mut [f64], first: usize) {
+        let (p, v, f) = self.per_mass(x, f);
         let springs = self.lattice.springs.iter().zip(rest).skip(first);
         for (s, &l0) in springs {
             let (pa, pb, va, vb) = (p[s.a], p[s.b], v[s.a], v[s.b]);
@@ -294,11 +308,8 @@ impl LatticeModel {
     #[target_feature(enable = "sse2")]
     fn spring_forces_sse2(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
         use std::arch::x86_64::*;
-        let n = self.lattice.n_masses();
         let ns = self.lattice.springs.len().min(rest.len());
-        let (p, v) = x.split_at(3 * n);
-        let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
-        let ff = f[..3 * n].as_chunks_mut::<3>().0;
+        let (p, v, ff) = self.per_mass(x, f);
         let (pairs, _) = self.lattice.springs[..ns].as_chunks::<2>();
         let pair = |a: f64, b: f64| _mm_set_pd(b, a);
         let (low, high) = (
@@ -338,9 +349,7 @@ impl LatticeModel {
         }
         self.spring_forces_each(x, rest, f, 2 * pairs.len());
     }
-}
 
-impl LatticeModel {
     /// [`LatticeModel::add_spring_forces`] four springs at a time in AVX lanes (lane i the
     /// i-th spring of a quad); the last springs, fewer than four, one at a time.
     ///
@@ -353,11 +362,8 @@ impl LatticeModel {
     #[target_feature(enable = "avx")]
     fn spring_forces_avx(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
         use std::arch::x86_64::*;
-        let n = self.lattice.n_masses();
         let ns = self.lattice.springs.len().min(rest.len());
-        let (p, v) = x.split_at(3 * n);
-        let (p, v) = (p.as_chunks::<3>().0, v[..3 * n].as_chunks::<3>().0);
-        let ff = f[..3 * n].as_chunks_mut::<3>().0;
+        let (p, v, ff) = self.per_mass(x, f);
         let (quads, _) = self.lattice.springs[..ns].as_chunks::<4>();
         // Lanes 0–2 of a 3-vector, lane 3 zero; the masked lane is not read, so the last
         // mass's velocity is read without reading past the state.
