@@ -346,10 +346,27 @@ fn product<L: Lanes>(
     m: usize,
     groups: usize,
     k: usize,
+    a: (&[f64], usize, usize),
+    b: (&[f64], usize),
+    c: (&mut [f64], usize),
+    ahead: &mut Ahead,
+) {
+    product_alongside::<L, ()>(m, groups, k, a, b, c, ahead, &mut ());
+}
+
+/// [`product`] with `side`'s work done a little at every depth step of every tile
+/// ([`Alongside`]).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn product_alongside<L: Lanes, S: Alongside>(
+    m: usize,
+    groups: usize,
+    k: usize,
     (a, ars, acs): (&[f64], usize, usize),
     (b, bs): (&[f64], usize),
     (c, cs): (&mut [f64], usize),
     ahead: &mut Ahead,
+    side: &mut S,
 ) {
     let w = L::WIDTH;
     if m == 0 || groups == 0 {
@@ -372,11 +389,11 @@ fn product<L: Lanes>(
         let (a, c) = ((a, ars, acs), (&mut c[g0 * w..], cs));
         // The rows of the tiles, MR, are `tile_rows(nr, w)` (which `tile_count` counts).
         match (nr, w) {
-            (4, _) => rows::<L, 4, 6>(m, k, a, (b, bs), c, ahead),
-            (3, 8) => rows::<L, 3, 8>(m, k, a, (b, bs), c, ahead),
-            (3, _) => rows::<L, 3, 4>(m, k, a, (b, bs), c, ahead),
-            (2, _) => rows::<L, 2, 6>(m, k, a, (b, bs), c, ahead),
-            _ => rows::<L, 1, 8>(m, k, a, (b, bs), c, ahead),
+            (4, _) => rows::<L, S, 4, 6>(m, k, a, (b, bs), c, ahead, side),
+            (3, 8) => rows::<L, S, 3, 8>(m, k, a, (b, bs), c, ahead, side),
+            (3, _) => rows::<L, S, 3, 4>(m, k, a, (b, bs), c, ahead, side),
+            (2, _) => rows::<L, S, 2, 6>(m, k, a, (b, bs), c, ahead, side),
+            _ => rows::<L, S, 1, 8>(m, k, a, (b, bs), c, ahead, side),
         }
         g0 += nr;
     }
@@ -385,13 +402,14 @@ fn product<L: Lanes>(
 /// The rows of [`product`] for NR lane groups: tiles of MR rows, then one tile of the rows
 /// left. The bounds were checked by [`product`].
 #[inline(always)]
-fn rows<L: Lanes, const NR: usize, const MR: usize>(
+fn rows<L: Lanes, S: Alongside, const NR: usize, const MR: usize>(
     m: usize,
     k: usize,
     (a, ars, acs): (&[f64], usize, usize),
     (b, bs): (&[f64], usize),
     (c, cs): (&mut [f64], usize),
     ahead: &mut Ahead,
+    side: &mut S,
 ) {
     let mut i0 = 0;
     while i0 < m {
@@ -403,14 +421,14 @@ fn rows<L: Lanes, const NR: usize, const MR: usize>(
             let (ap, cp) = (a.as_ptr().add(i0 * ars), c.as_mut_ptr().add(i0 * cs));
             let args = (k, ap, ars, acs, b.as_ptr(), bs, cp, cs);
             match mr {
-                8 => tile::<L, 8, NR>(args),
-                7 => tile::<L, 7, NR>(args),
-                6 => tile::<L, 6, NR>(args),
-                5 => tile::<L, 5, NR>(args),
-                4 => tile::<L, 4, NR>(args),
-                3 => tile::<L, 3, NR>(args),
-                2 => tile::<L, 2, NR>(args),
-                _ => tile::<L, 1, NR>(args),
+                8 => tile::<L, S, 8, NR>(args, side),
+                7 => tile::<L, S, 7, NR>(args, side),
+                6 => tile::<L, S, 6, NR>(args, side),
+                5 => tile::<L, S, 5, NR>(args, side),
+                4 => tile::<L, S, 4, NR>(args, side),
+                3 => tile::<L, S, 3, NR>(args, side),
+                2 => tile::<L, S, 2, NR>(args, side),
+                _ => tile::<L, S, 1, NR>(args, side),
             }
         }
         i0 += mr;
@@ -436,8 +454,9 @@ type TileArgs = (
 /// A's entries (i·ars + k·acs) for i < MR, k < depth, B's (k·bs + l) and C's (i·cs + l) for
 /// l < NR·WIDTH must be in bounds.
 #[inline(always)]
-unsafe fn tile<L: Lanes, const MR: usize, const NR: usize>(
+unsafe fn tile<L: Lanes, S: Alongside, const MR: usize, const NR: usize>(
     (k, a, ars, acs, b, bs, c, cs): TileArgs,
+    side: &mut S,
 ) {
     let w = L::WIDTH;
     let mut acc = [[L::splat(0.0); NR]; MR];
@@ -453,6 +472,7 @@ unsafe fn tile<L: Lanes, const MR: usize, const NR: usize>(
                 *acc = L::fma(s, bv, *acc);
             }
         }
+        side.step();
         a = a.wrapping_add(acs);
         b = b.wrapping_add(bs);
     }
@@ -461,6 +481,91 @@ unsafe fn tile<L: Lanes, const MR: usize, const NR: usize>(
             L::store(v, unsafe {
                 std::slice::from_raw_parts_mut(c.add(i * cs + g * w), w)
             });
+        }
+    }
+}
+
+/// Work done a little at each depth step of a [`product_alongside`]'s tiles: a chain of
+/// dependent operations (each waiting on the last) that the tile's independent multiply–adds
+/// hide, where alone it would wait on its own latency.
+trait Alongside {
+    /// One step's share of the work.
+    fn step(&mut self);
+}
+
+/// Nothing alongside.
+impl Alongside for () {
+    #[inline(always)]
+    fn step(&mut self) {}
+}
+
+/// The sum of squares of a chunk's errors, the first `r` values of each of the `n` rows of E
+/// (row stride `rs`), taken in row-major order one after the other from −0, as
+/// `Iterator::sum` takes them (so the same bits), `per` values at each step.
+///
+/// Alone, the 84-50-78 full batch's sum (19,968 additions per chunk of 256, each waiting on the
+/// last) was about a twentieth of the gradient's time; carried along the next product, the
+/// tiles' multiply–adds hide it.
+struct Squares<'a> {
+    e: &'a [f64],
+    /// Index of the next value, and the end of its row.
+    at: usize,
+    row_end: usize,
+    /// The padding skipped between rows (rs − r), the row length r and the end of E.
+    skip: usize,
+    r: usize,
+    end: usize,
+    /// Values per step.
+    per: usize,
+    sum: f64,
+}
+
+impl<'a> Squares<'a> {
+    /// The sum over `e` (n rows of stride `rs`, the first `r` of each), `per` values a step.
+    fn new(e: &'a [f64], n: usize, (r, rs): (usize, usize), per: usize) -> Self {
+        assert!(r <= rs && n * rs <= e.len());
+        Self {
+            e,
+            at: 0,
+            row_end: r,
+            skip: rs - r,
+            r,
+            end: n * rs,
+            per,
+            sum: -0.0,
+        }
+    }
+
+    /// One value, if any is left; whether one was.
+    #[inline(always)]
+    fn next(&mut self) -> bool {
+        if self.at >= self.end {
+            return false;
+        }
+        let v = self.e[self.at];
+        self.sum += v * v;
+        self.at += 1;
+        if self.at == self.row_end {
+            self.at += self.skip;
+            self.row_end = self.at + self.r;
+        }
+        true
+    }
+
+    /// The sum, after the values no step took.
+    fn finish(mut self) -> f64 {
+        while self.next() {}
+        self.sum
+    }
+}
+
+impl Alongside for Squares<'_> {
+    #[inline(always)]
+    fn step(&mut self) {
+        for _ in 0..self.per {
+            if !self.next() {
+                return;
+            }
         }
     }
 }
@@ -563,8 +668,7 @@ dispatch_wide!(
 type Grads<'a> = (&'a mut [f64], &'a mut [f64], &'a mut [f64], &'a mut [f64]);
 
 /// The forward half of a chunk on lanes `L`: the padded inputs `xp` (n × p̃), activations
-/// `h` (n × q̃) and errors `e` (n × r̃), and the loss ½ Σ E², summed over the rows in order as
-/// `Iterator::sum` sums a row-major array.
+/// `h` (n × q̃) and errors `e` (n × r̃).
 #[inline(always)]
 fn forward_generic<L: Lanes>(
     pk: &BatchNet,
@@ -572,9 +676,9 @@ fn forward_generic<L: Lanes>(
     t: ArrayView2<'_, f64>,
     (xp, h, e): (&mut [f64], &mut [f64], &mut [f64]),
     ahead: &mut Ahead,
-) -> f64 {
+) {
     let w = L::WIDTH;
-    let (p, q, r) = (pk.d.p, pk.d.q, pk.d.r);
+    let (p, q) = (pk.d.p, pk.d.q);
     let (ps, qs, rs) = (pk.d.ps, pk.d.qs, pk.d.rs);
     let n = x.nrows();
     let (w1t, w2t, _, b1, b2) = pk.parts();
@@ -606,6 +710,12 @@ fn forward_generic<L: Lanes>(
             None => error_row(row, b2, tr.iter()),
         }
     }
+}
+
+/// The loss ½ Σ E² of a chunk's errors `e` (n rows of stride r̃, the first r of each), the
+/// rows in order as `Iterator::sum` sums a row-major array.
+#[inline(always)]
+fn loss_of(e: &[f64], (r, rs): (usize, usize)) -> f64 {
     0.5 * e
         .chunks_exact(rs)
         .flat_map(|row| &row[..r])
@@ -627,7 +737,9 @@ fn chunk_loss_generic<L: Lanes>(
     ahead.pace(tile_count(n, d.qs / w, w) + tile_count(n, d.rs / w, w));
     let (xp, rest) = scratch.split_at_mut(n * d.ps);
     let (h, e) = rest.split_at_mut(n * d.qs);
-    *loss = forward_generic::<L>(pk, x, t, (xp, h, &mut e[..n * d.rs]), ahead);
+    let e = &mut e[..n * d.rs];
+    forward_generic::<L>(pk, x, t, (xp, h, e), ahead);
+    *loss = loss_of(e, (d.r, d.rs));
 }
 
 /// The body of [`chunk_loss_grad`] on lanes `L` (the packing's width).
@@ -659,9 +771,22 @@ fn chunk_loss_grad_generic<L: Lanes>(
     let (g1s, rest) = rest.split_at_mut(q * ps);
     let (g2s, rest) = rest.split_at_mut(r * qs);
     let (sb1, sb2) = rest.split_at_mut(qs);
-    *loss = 0.0 + forward_generic::<L>(pk, x, t, (xp, h, e), ahead);
-    // H̄ = (E W₂) ⊙ (H ⊙ (1 − H)).
-    product::<L>(n, qs / w, r, (e, rs, 1), (w2, qs), (hb, qs), ahead);
+    forward_generic::<L>(pk, x, t, (xp, h, e), ahead);
+    // H̄ = (E W₂) ⊙ (H ⊙ (1 − H)), the loss's sum of squares carried along E W₂'s tiles: a few
+    // values at each of their r depth steps, enough to take all n·r.
+    let steps = tile_count(n, qs / w, w) * r;
+    let mut squares = Squares::new(e, n, (r, rs), (n * r).div_ceil(steps));
+    product_alongside::<L, _>(
+        n,
+        qs / w,
+        r,
+        (e, rs, 1),
+        (w2, qs),
+        (hb, qs),
+        ahead,
+        &mut squares,
+    );
+    *loss = 0.0 + 0.5 * squares.finish();
     let one = L::splat(1.0);
     for (row, hrow) in hb.chunks_exact_mut(qs).zip(h.chunks_exact(qs)) {
         for (v, hv) in row.chunks_exact_mut(w).zip(hrow.chunks_exact(w)) {
@@ -895,6 +1020,40 @@ mod tests {
                     tile_count(m, groups, 8),
                     "{m} rows, {groups} groups of 8"
                 );
+            }
+        }
+    }
+
+    /// The sum of squares carried along a product is `Iterator::sum`'s, bit for bit, whatever
+    /// the values taken per step and however many steps there are: none, too few (the rest
+    /// taken by `finish`) or more than enough; rows with padding and without.
+    #[test]
+    fn squares_carried_along_are_the_iterator_sum_bit_for_bit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        for (n, r, rs) in [
+            (1, 2, 8),
+            (3, 13, 16),
+            (30, 78, 80),
+            (7, 8, 8),
+            (256, 78, 80),
+        ] {
+            let e: Vec<f64> = (0..n * rs).map(|_| rng.random_range(-3.0..3.0)).collect();
+            let want: f64 = e
+                .chunks_exact(rs)
+                .flat_map(|row| &row[..r])
+                .map(|v| v * v)
+                .sum();
+            for per in [1, 2, 3, 4, 7, 100] {
+                for steps in [0, 1, n * r / per / 2, n * r] {
+                    let mut sq = Squares::new(&e, n, (r, rs), per);
+                    (0..steps).for_each(|_| sq.step());
+                    let got = sq.finish();
+                    assert_eq!(
+                        got.to_bits(),
+                        want.to_bits(),
+                        "{n}×{r}/{rs}, {per} per step"
+                    );
+                }
             }
         }
     }
