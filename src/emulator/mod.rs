@@ -164,22 +164,57 @@ pub fn predict_with(
     step_through(t, mlp, s, u, (z, y, &mut m.hidden), t1, s_next);
 }
 
-/// One emulator step through transforms `t` and network `mlp`, writing the network's input z,
-/// output y and hidden activations h to the buffers given (a scratch, or a step of BPTT's
-/// tape) and using `tmp` (length n). Does not allocate.
-fn step_through(
-    t: &Transforms,
-    mlp: &Mlp,
-    s: &[f64],
-    u: &[f64],
-    (z, y, h): (&mut [f64], &mut [f64], &mut [f64]),
-    tmp: &mut [f64],
-    s_next: &mut [f64],
-) {
-    let at = t.frame_at(s, false);
-    t.encode_input_with(at.as_ref(), s, u, z);
-    mlp.forward_into(z, h, y);
-    t.decode_output_with(at.as_ref(), s, y, tmp, s_next);
+/// Defines `fn $name` whose body is compiled twice, as written and with AVX enabled, and runs
+/// the AVX copy on x86-64 processors that have it: the transforms around the network
+/// (normalization, frame maps) are short loops of divisions, products and sums that then take
+/// 4 lanes at a time, and the functions they call inline into one. The same IEEE operations on
+/// the same values either way (Rust fuses no operation it is not asked to), so the same bits;
+/// the network's own passes dispatch on their own.
+macro_rules! avx_dispatched {
+    ($(#[$m:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $body:block) => {
+        $(#[$m])*
+        #[allow(clippy::too_many_arguments)]
+        fn $name($($arg: $ty),*) {
+            #[inline(always)]
+            #[allow(clippy::too_many_arguments)]
+            fn body($($arg: $ty),*) $body
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx")]
+                #[allow(clippy::too_many_arguments)]
+                fn avx($($arg: $ty),*) {
+                    body($($arg),*)
+                }
+                if std::arch::is_x86_feature_detected!("avx") {
+                    // SAFETY: the processor supports AVX (checked just above).
+                    unsafe { avx($($arg),*) };
+                    return;
+                }
+            }
+            body($($arg),*)
+        }
+    };
+}
+
+avx_dispatched! {
+    /// One emulator step through transforms `t` and network `mlp`, writing the network's input
+    /// z, output y and hidden activations h to the buffers given (a scratch, or a step of BPTT's
+    /// tape) and using `tmp` (length n). Does not allocate.
+    fn step_through(
+        t: &Transforms,
+        mlp: &Mlp,
+        s: &[f64],
+        u: &[f64],
+        zyh: (&mut [f64], &mut [f64], &mut [f64]),
+        tmp: &mut [f64],
+        s_next: &mut [f64],
+    ) {
+        let (z, y, h) = zyh;
+        let at = t.frame_at(s, false);
+        t.encode_input_with(at.as_ref(), s, u, z);
+        mlp.forward_into(z, h, y);
+        t.decode_output_with(at.as_ref(), s, y, tmp, s_next);
+    }
 }
 
 /// A NeuroAnimator: transforms + network, one call = one super timestep Δt.
@@ -506,47 +541,49 @@ fn step_vjp_after_forward(
     scratch.mlp.hidden = h;
 }
 
-/// The backward half of [`step_vjp`] from the forward pass at (s, u) given as (network input
-/// z, output y, hidden activations h); uses the rest of `scratch` as buffers.
-#[allow(clippy::too_many_arguments)]
-fn vjp_from_forward(
-    t: &Transforms,
-    mlp: &Mlp,
-    s: &[f64],
-    (z, y, h): (&[f64], &[f64], &[f64]),
-    s_next_bar: &[f64],
-    scratch: &mut EmulatorScratch,
-    s_bar: &mut [f64],
-    u_bar: &mut [f64],
-    grad_w: Option<&mut [f64]>,
-) {
-    // The frame at s (with the rotation's derivatives) serves both transforms' products.
-    let at = t.frame_at(s, true);
-    t.decode_output_vjp_with(
-        at.as_ref(),
-        s,
-        y,
-        s_next_bar,
-        (&mut scratch.t1, &mut scratch.t2),
-        &mut scratch.y_bar,
-        s_bar,
-    );
-    mlp.backward_from(
-        z,
-        h,
-        &mut scratch.mlp.hidden_bar,
-        &scratch.y_bar,
-        grad_w,
-        Some(&mut scratch.z_bar),
-    );
-    t.encode_input_vjp_with(
-        at.as_ref(),
-        s,
-        &scratch.z_bar,
-        &mut scratch.t1,
-        s_bar,
-        u_bar,
-    );
+avx_dispatched! {
+    /// The backward half of [`step_vjp`] from the forward pass at (s, u) given as (network
+    /// input z, output y, hidden activations h); uses the rest of `scratch` as buffers.
+    fn vjp_from_forward(
+        t: &Transforms,
+        mlp: &Mlp,
+        s: &[f64],
+        zyh: (&[f64], &[f64], &[f64]),
+        s_next_bar: &[f64],
+        scratch: &mut EmulatorScratch,
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+        grad_w: Option<&mut [f64]>,
+    ) {
+        let (z, y, h) = zyh;
+        // The frame at s (with the rotation's derivatives) serves both transforms' products.
+        let at = t.frame_at(s, true);
+        t.decode_output_vjp_with(
+            at.as_ref(),
+            s,
+            y,
+            s_next_bar,
+            (&mut scratch.t1, &mut scratch.t2),
+            &mut scratch.y_bar,
+            s_bar,
+        );
+        mlp.backward_from(
+            z,
+            h,
+            &mut scratch.mlp.hidden_bar,
+            &scratch.y_bar,
+            grad_w,
+            Some(&mut scratch.z_bar),
+        );
+        t.encode_input_vjp_with(
+            at.as_ref(),
+            s,
+            &scratch.z_bar,
+            &mut scratch.t1,
+            s_bar,
+            u_bar,
+        );
+    }
 }
 
 #[cfg(test)]

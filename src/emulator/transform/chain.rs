@@ -142,7 +142,7 @@ impl Transforms {
     /// The local frame read from state `s` (none without a frame), to share between the maps
     /// of one step ([`Transforms::encode_input_with`] and the other `_with` methods); with the
     /// derivatives the vector–Jacobian products need when `derivatives`.
-    #[inline]
+    #[inline(always)]
     pub fn frame_at(&self, s: &[f64], derivatives: bool) -> Option<FrameAt> {
         self.frame.as_ref().map(|f| f.at(s, derivatives))
     }
@@ -154,6 +154,7 @@ impl Transforms {
 
     /// [`Transforms::encode_input`] with the frame read from `s` given
     /// ([`Transforms::frame_at`]).
+    #[inline]
     pub fn encode_input_with(&self, at: Option<&FrameAt>, s: &[f64], u: &[f64], z: &mut [f64]) {
         let n = self.state_dim;
         match (&self.frame, at) {
@@ -212,6 +213,7 @@ impl Transforms {
 
     /// [`Transforms::decode_output`] with the frame read from `s` given
     /// ([`Transforms::frame_at`]).
+    #[inline]
     pub fn decode_output_with(
         &self,
         at: Option<&FrameAt>,
@@ -256,6 +258,7 @@ impl Transforms {
 
     /// [`Transforms::encode_input_vjp`] with the frame read from `s` given
     /// ([`Transforms::frame_at`], best with derivatives).
+    #[inline]
     pub fn encode_input_vjp_with(
         &self,
         at: Option<&FrameAt>,
@@ -304,6 +307,7 @@ impl Transforms {
     /// [`Transforms::decode_output_vjp`] with the frame read from `s` given
     /// ([`Transforms::frame_at`], best with derivatives).
     #[allow(clippy::too_many_arguments)]
+    #[inline]
     pub fn decode_output_vjp_with(
         &self,
         at: Option<&FrameAt>,

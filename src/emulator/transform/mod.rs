@@ -157,7 +157,7 @@ pub enum FrameAt {
 impl LocalFrame {
     /// The frame read from the pose source `ps`, with what the vector–Jacobian products need
     /// when `derivatives` (the maps alone need less).
-    #[inline]
+    #[inline(always)]
     pub fn at(&self, ps: &[f64], derivatives: bool) -> FrameAt {
         match self {
             Self::Planar(f) => FrameAt::Planar(f.pose(ps)),
@@ -166,6 +166,7 @@ impl LocalFrame {
     }
 
     /// [`LocalFrame::apply_at`] at a frame read by [`LocalFrame::at`] from the pose source.
+    #[inline]
     pub fn apply_with(&self, map: FrameMap, at: &FrameAt, inp: &[f64], out: &mut [f64]) {
         match (self, at) {
             (Self::Planar(f), FrameAt::Planar(pose)) => f.apply(map, *pose, inp, out),
@@ -175,6 +176,7 @@ impl LocalFrame {
     }
 
     /// [`LocalFrame::apply_vjp_self`] at the frame read by [`LocalFrame::at`] from `s`.
+    #[inline]
     pub fn apply_vjp_self_with(
         &self,
         map: FrameMap,
@@ -200,6 +202,7 @@ impl LocalFrame {
 
     /// [`LocalFrame::apply_vjp_at`] at the frame read by [`LocalFrame::at`] from the pose
     /// source.
+    #[inline]
     pub fn apply_vjp_with(
         &self,
         map: FrameMap,

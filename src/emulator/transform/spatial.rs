@@ -163,7 +163,7 @@ fn rotation_and_derivatives_of(q: [f64; 4], live: &[usize]) -> (M3, [M3; 4]) {
 /// entry the generic code computes from a non-zero value, and the entries it computes from zeros
 /// (exactly +0 for finite w and z) set to +0 without dividing, so 12 divisions instead of 27.
 /// `None` when |q|² is zero or not finite (the generic code's NaNs are not reproduced).
-#[inline]
+#[inline(always)]
 fn heading_rotation_and_derivatives(w: f64, z: f64, derivatives: bool) -> Option<(M3, [M3; 4])> {
     let n = w * w + z * z;
     if !(n.is_finite() && n > 0.0) {
@@ -300,7 +300,7 @@ impl SpatialFrame {
 
     /// The frame read from state `s`: its pose and rotation, with the rotation's derivatives
     /// when `derivatives` (the vector–Jacobian products need them; the maps do not).
-    #[inline]
+    #[inline(always)]
     pub fn at(&self, s: &[f64], derivatives: bool) -> SpatialAt {
         let heading = match self.attitude {
             Attitude::Full => None,
