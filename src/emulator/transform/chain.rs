@@ -154,7 +154,7 @@ impl Transforms {
 
     /// [`Transforms::encode_input`] with the frame read from `s` given
     /// ([`Transforms::frame_at`]).
-    #[inline]
+    #[inline(always)]
     pub fn encode_input_with(&self, at: Option<&FrameAt>, s: &[f64], u: &[f64], z: &mut [f64]) {
         let n = self.state_dim;
         match (&self.frame, at) {
@@ -213,7 +213,7 @@ impl Transforms {
 
     /// [`Transforms::decode_output`] with the frame read from `s` given
     /// ([`Transforms::frame_at`]).
-    #[inline]
+    #[inline(always)]
     pub fn decode_output_with(
         &self,
         at: Option<&FrameAt>,
@@ -258,7 +258,7 @@ impl Transforms {
 
     /// [`Transforms::encode_input_vjp`] with the frame read from `s` given
     /// ([`Transforms::frame_at`], best with derivatives).
-    #[inline]
+    #[inline(always)]
     pub fn encode_input_vjp_with(
         &self,
         at: Option<&FrameAt>,
@@ -307,7 +307,7 @@ impl Transforms {
     /// [`Transforms::decode_output_vjp`] with the frame read from `s` given
     /// ([`Transforms::frame_at`], best with derivatives).
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    #[inline(always)]
     pub fn decode_output_vjp_with(
         &self,
         at: Option<&FrameAt>,

@@ -105,7 +105,7 @@ impl Normalizer {
     }
 
     /// Forward: z = (x − μ) / σ.
-    #[inline]
+    #[inline(always)]
     pub fn normalize(&self, x: &[f64], z: &mut [f64]) {
         for (((z, x), m), s) in z.iter_mut().zip(x).zip(&self.mean).zip(&self.std) {
             *z = (x - m) / s;
@@ -113,7 +113,7 @@ impl Normalizer {
     }
 
     /// Inverse: x = μ + σ z.
-    #[inline]
+    #[inline(always)]
     pub fn denormalize(&self, z: &[f64], x: &mut [f64]) {
         for (((x, z), m), s) in x.iter_mut().zip(z).zip(&self.mean).zip(&self.std) {
             *x = m + s * z;
@@ -121,7 +121,7 @@ impl Normalizer {
     }
 
     /// JVP and VJP of [`Normalizer::normalize`] (a diagonal map): `out = v / σ`.
-    #[inline]
+    #[inline(always)]
     pub fn normalize_tangent(&self, v: &[f64], out: &mut [f64]) {
         for ((o, v), s) in out.iter_mut().zip(v).zip(&self.std) {
             *o = v / s;
@@ -129,7 +129,7 @@ impl Normalizer {
     }
 
     /// JVP and VJP of [`Normalizer::denormalize`] (a diagonal map): `out = σ v`.
-    #[inline]
+    #[inline(always)]
     pub fn denormalize_tangent(&self, v: &[f64], out: &mut [f64]) {
         for ((o, v), s) in out.iter_mut().zip(v).zip(&self.std) {
             *o = v * s;
