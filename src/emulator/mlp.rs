@@ -609,7 +609,8 @@ mod tests {
     }
 
     /// The batch kernels against ndarray's products (whose `matrixmultiply` sums each entry in
-    /// the same order), bit for bit: the nets of the experiments and small ones, one example,
+    /// the same order), bit for bit: the nets of the experiments and small ones, no example
+    /// (a chunk of none, on 4 lanes: the loss +0 and a zero gradient), one example,
     /// mini-batches, one chunk, several chunks and a partial last one, inputs that are not
     /// contiguous rows, on the dispatched lanes (AVX-512 here where the processor has it) and
     /// on 4 lanes.
@@ -630,7 +631,7 @@ mod tests {
         for (s, &(p, q, r)) in shapes.iter().enumerate() {
             let mut rng = ChaCha8Rng::seed_from_u64(40 + s as u64);
             let mlp = Mlp::new(p, q, r, WeightInit::FanIn, &mut rng);
-            for (b, &n) in [1, 2, 30, 128, 300].iter().enumerate() {
+            for (b, &n) in [0, 1, 2, 30, 128, 300].iter().enumerate() {
                 let (x, t) = random_batch(n, p, r, 100 * s as u64 + b as u64);
                 // The same inputs as a transposed array's view: rows that are not contiguous.
                 let xt = x.t().to_owned();

@@ -775,7 +775,7 @@ fn chunk_loss_grad_generic<L: Lanes>(
     // H̄ = (E W₂) ⊙ (H ⊙ (1 − H)), the loss's sum of squares carried along E W₂'s tiles: a few
     // values at each of their r depth steps, enough to take all n·r.
     let steps = tile_count(n, qs / w, w) * r;
-    let mut squares = Squares::new(e, n, (r, rs), (n * r).div_ceil(steps));
+    let mut squares = Squares::new(e, n, (r, rs), (n * r).div_ceil(steps.max(1)));
     product_alongside::<L, _>(
         n,
         qs / w,
