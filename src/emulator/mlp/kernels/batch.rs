@@ -27,7 +27,7 @@
 //! takes, for each k, NR loads of B's row k and MR broadcasts of A's column k. A is read
 //! through strides, so H̄ᵀ and Eᵀ are never formed.
 
-use super::{sigmoid_lanes, wide_lanes, Dims, Lanes, Portable};
+use super::{sigmoid_groups, sigmoid_lanes, wide_lanes, Dims, Lanes, Portable};
 #[cfg(target_arch = "x86_64")]
 use super::{Avx2, Avx512};
 use crate::lanes::Aligned;
@@ -689,11 +689,7 @@ fn forward_generic<L: Lanes>(
     }
     // H = σ(X W₁ᵀ + b₁): the sum, then the bias, then σ, on whole lane groups.
     product::<L>(n, qs / w, p, (xp, ps, 1), (w1t, qs), (h, qs), ahead);
-    for row in h.chunks_exact_mut(qs) {
-        for (v, b) in row.chunks_exact_mut(w).zip(b1.chunks_exact(w)) {
-            L::store(sigmoid_lanes::<L>(L::add(L::load(v), L::load(b))), v);
-        }
-    }
+    bias_sigmoid::<L>(&mut h[..n * qs], &b1[..qs]);
     // E = (H W₂ᵀ + b₂) − T.
     product::<L>(n, rs / w, q, (h, qs, 1), (w2t, rs), (e, rs), ahead);
     /// A row of E: the sum, then the bias, then the target off.
@@ -709,6 +705,33 @@ fn forward_generic<L: Lanes>(
             Some(tr) => error_row(row, b2, tr.iter()),
             None => error_row(row, b2, tr.iter()),
         }
+    }
+}
+
+/// h ← σ(h + b) on rows of `b.len()` values (a multiple of the lane width), four lane groups
+/// at a time ([`sigmoid_groups`]; the same bits as one at a time).
+#[inline(always)]
+fn bias_sigmoid<L: Lanes>(h: &mut [f64], b: &[f64]) {
+    const G: usize = 4;
+    let w = L::WIDTH;
+    let per_row = b.len() / w;
+    debug_assert!(per_row > 0 && h.len().is_multiple_of(b.len()));
+    let bias = |g: usize| L::load(&b[(g % per_row) * w..]);
+    let mut blocks = h.chunks_exact_mut(G * w);
+    let mut g0 = 0;
+    for block in &mut blocks {
+        let mut z = [L::splat(0.0); G];
+        for (j, z) in z.iter_mut().enumerate() {
+            *z = L::add(L::load(&block[j * w..]), bias(g0 + j));
+        }
+        sigmoid_groups::<L, G>(&mut z);
+        for (j, z) in z.iter().enumerate() {
+            L::store(*z, &mut block[j * w..]);
+        }
+        g0 += G;
+    }
+    for (j, v) in blocks.into_remainder().chunks_exact_mut(w).enumerate() {
+        L::store(sigmoid_lanes::<L>(L::add(L::load(v), bias(g0 + j))), v);
     }
 }
 
