@@ -305,6 +305,14 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
 
     /// Emulates the motion under normalized knots `v` and returns J.
     pub fn rollout(&mut self, v: &[f64]) -> f64 {
+        self.simulate(v);
+        let (n, m) = (self.dynamics.state_dim(), self.knots.m);
+        self.objective.value(&self.states, &self.controls, n, m)
+    }
+
+    /// Emulates the motion under normalized knots `v` (the states, controls and tape of
+    /// [`Bptt::rollout`], without J).
+    fn simulate(&mut self, v: &[f64]) {
         let (n, m) = (self.dynamics.state_dim(), self.knots.m);
         let mut ku = std::mem::take(&mut self.knot_u);
         self.to_controls(v, &mut ku);
@@ -323,12 +331,12 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
                 &mut self.tape[i * tl..(i + 1) * tl],
             );
         }
-        self.objective.value(&self.states, &self.controls, n, m)
     }
 
     /// J and its gradient with respect to the normalized knots (written to `grad`).
     pub fn gradient(&mut self, v: &[f64], grad: &mut [f64]) -> f64 {
-        self.rollout(v);
+        // J comes with its partial derivatives below.
+        self.simulate(v);
         let (n, m) = (self.dynamics.state_dim(), self.knots.m);
         let j = self.objective.gradient(
             &self.states,
@@ -1206,6 +1214,36 @@ mod tests {
         let mut b = Bptt::new(&sys, &obj, knots, bounds, &[0.2, -0.1, 0.3]).unwrap();
         let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.3).sin() * 0.5).collect();
         fd_check(&mut b, &v, 1e-6);
+    }
+
+    /// The J that `gradient` returns (from the objective's gradient pass) is the J of
+    /// `rollout` bit for bit, and the gradient the same whether a rollout came before.
+    #[test]
+    fn gradient_returns_the_rollout_objective_bit_for_bit() {
+        let (e, obj, x0) = fixtures::lander_emulator();
+        let m = NetModel::Lander.control_dim();
+        let knots = Knots {
+            steps: 8,
+            per_actuator: 4,
+            m,
+        };
+        let bounds = Bounds {
+            low: vec![-0.5; m],
+            high: vec![0.5; m],
+        };
+        let mut b = Bptt::new(&e, &obj, knots, bounds, &x0).unwrap();
+        for k in 0..5 {
+            let v: Vec<f64> = (0..b.dim())
+                .map(|i| (i as f64 * 0.7 + k as f64).cos())
+                .collect();
+            let (mut g1, mut g2) = (vec![0.0; v.len()], vec![0.0; v.len()]);
+            let j1 = b.gradient(&v, &mut g1);
+            let j0 = b.rollout(&v);
+            let j2 = b.gradient(&v, &mut g2);
+            assert_eq!(j1.to_bits(), j0.to_bits(), "J at knots {k}");
+            assert_eq!(j2.to_bits(), j0.to_bits());
+            assert!(g1.iter().zip(&g2).all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
     }
 
     #[test]

@@ -196,10 +196,34 @@ macro_rules! avx_dispatched {
     };
 }
 
+/// One emulator step through transforms `t` and network `mlp`, writing the network's input
+/// z, output y and hidden activations h to the buffers given (a scratch, or a step of BPTT's
+/// tape), with `TAPE` what the frame keeps of itself to `frame_tape`
+/// ([`Transforms::frame_tape_len`] values, for [`vjp_from_forward`]), and using `tmp` (length
+/// n). Does not allocate.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn step_body<const TAPE: bool>(
+    t: &Transforms,
+    mlp: &Mlp,
+    s: &[f64],
+    u: &[f64],
+    (z, y, h): (&mut [f64], &mut [f64], &mut [f64]),
+    frame_tape: &mut [f64],
+    tmp: &mut [f64],
+    s_next: &mut [f64],
+) {
+    let at = t.frame_at(s, false);
+    if let (true, Some(f), Some(at)) = (TAPE, &t.frame, &at) {
+        f.write_tape(at, frame_tape);
+    }
+    t.encode_input_with(at.as_ref(), s, u, z);
+    mlp.forward_into(z, h, y);
+    t.decode_output_with(at.as_ref(), s, y, tmp, s_next);
+}
+
 avx_dispatched! {
-    /// One emulator step through transforms `t` and network `mlp`, writing the network's input
-    /// z, output y and hidden activations h to the buffers given (a scratch, or a step of BPTT's
-    /// tape) and using `tmp` (length n). Does not allocate.
+    /// [`step_body`] without a tape of the frame.
     fn step_through(
         t: &Transforms,
         mlp: &Mlp,
@@ -209,11 +233,24 @@ avx_dispatched! {
         tmp: &mut [f64],
         s_next: &mut [f64],
     ) {
-        let (z, y, h) = zyh;
-        let at = t.frame_at(s, false);
-        t.encode_input_with(at.as_ref(), s, u, z);
-        mlp.forward_into(z, h, y);
-        t.decode_output_with(at.as_ref(), s, y, tmp, s_next);
+        step_body::<false>(t, mlp, s, u, zyh, &mut [], tmp, s_next);
+    }
+}
+
+avx_dispatched! {
+    /// [`step_body`] keeping the frame's tape (a step of BPTT; a separate copy, so that the
+    /// plain step's code stays as it was).
+    fn step_through_taped(
+        t: &Transforms,
+        mlp: &Mlp,
+        s: &[f64],
+        u: &[f64],
+        zyh: (&mut [f64], &mut [f64], &mut [f64]),
+        frame_tape: &mut [f64],
+        tmp: &mut [f64],
+        s_next: &mut [f64],
+    ) {
+        step_body::<true>(t, mlp, s, u, zyh, frame_tape, tmp, s_next);
     }
 }
 
@@ -434,10 +471,11 @@ impl crate::physics::DifferentiableStep for Emulator {
             None,
         );
     }
-    /// The network input z, output y and hidden activations h of the step.
+    /// The network input z, output y and hidden activations h of the step, and what the frame
+    /// keeps of itself ([`Transforms::frame_tape_len`]).
     fn tape_len(&self) -> usize {
         let (n, m) = (self.transforms.state_dim, self.transforms.control_dim);
-        (n + m) + n + self.mlp.n_hidden()
+        (n + m) + n + self.mlp.n_hidden() + self.transforms.frame_tape_len()
     }
     fn step_taped(
         &self,
@@ -448,13 +486,15 @@ impl crate::physics::DifferentiableStep for Emulator {
         tape: &mut [f64],
     ) {
         let (z, rest) = tape.split_at_mut(self.transforms.state_dim + self.transforms.control_dim);
-        let (y, h) = rest.split_at_mut(self.transforms.state_dim);
-        step_through(
+        let (y, rest) = rest.split_at_mut(self.transforms.state_dim);
+        let (h, frame) = rest.split_at_mut(self.mlp.n_hidden());
+        step_through_taped(
             &self.transforms,
             &self.mlp,
             s,
             u,
             (z, y, h),
+            frame,
             &mut scratch.t1,
             s_next,
         );
@@ -472,13 +512,15 @@ impl crate::physics::DifferentiableStep for Emulator {
         let _ = u;
         let n = self.transforms.state_dim;
         let (z, rest) = tape.split_at(n + self.transforms.control_dim);
-        let (y, h) = rest.split_at(n);
+        let (y, rest) = rest.split_at(n);
+        let (h, frame) = rest.split_at(self.mlp.n_hidden());
         s_bar.fill(0.0);
         vjp_from_forward(
             &self.transforms,
             &self.mlp,
             s,
             (z, y, h),
+            Some(frame),
             s_next_bar,
             scratch,
             s_bar,
@@ -530,6 +572,7 @@ fn step_vjp_after_forward(
         mlp,
         s,
         (&z, &y, &h),
+        None,
         s_next_bar,
         scratch,
         s_bar,
@@ -543,12 +586,14 @@ fn step_vjp_after_forward(
 
 avx_dispatched! {
     /// The backward half of [`step_vjp`] from the forward pass at (s, u) given as (network
-    /// input z, output y, hidden activations h); uses the rest of `scratch` as buffers.
+    /// input z, output y, hidden activations h) and, when kept, the frame's tape
+    /// ([`step_through`]); uses the rest of `scratch` as buffers.
     fn vjp_from_forward(
         t: &Transforms,
         mlp: &Mlp,
         s: &[f64],
         zyh: (&[f64], &[f64], &[f64]),
+        frame_tape: Option<&[f64]>,
         s_next_bar: &[f64],
         scratch: &mut EmulatorScratch,
         s_bar: &mut [f64],
@@ -557,7 +602,10 @@ avx_dispatched! {
     ) {
         let (z, y, h) = zyh;
         // The frame at s (with the rotation's derivatives) serves both transforms' products.
-        let at = t.frame_at(s, true);
+        let at = match frame_tape {
+            Some(tape) => t.frame_at_taped(s, tape, true),
+            None => t.frame_at(s, true),
+        };
         t.decode_output_vjp_with(
             at.as_ref(),
             s,

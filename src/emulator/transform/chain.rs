@@ -147,6 +147,21 @@ impl Transforms {
         self.frame.as_ref().map(|f| f.at(s, derivatives))
     }
 
+    /// How many values of the frame read from a state a step keeps on a tape
+    /// ([`LocalFrame::tape_len`]; none without a frame).
+    pub fn frame_tape_len(&self) -> usize {
+        self.frame.as_ref().map_or(0, LocalFrame::tape_len)
+    }
+
+    /// [`Transforms::frame_at`] of the state `s` whose frame was kept in `tape`
+    /// ([`LocalFrame::write_tape`]): the same values.
+    #[inline(always)]
+    pub fn frame_at_taped(&self, s: &[f64], tape: &[f64], derivatives: bool) -> Option<FrameAt> {
+        self.frame
+            .as_ref()
+            .map(|f| f.at_taped(s, tape, derivatives))
+    }
+
     /// Network input z = T_x^σ(T_x'(s), u). Does not allocate.
     pub fn encode_input(&self, s: &[f64], u: &[f64], z: &mut [f64]) {
         self.encode_input_with(self.frame_at(s, false).as_ref(), s, u, z);

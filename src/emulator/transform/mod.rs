@@ -165,6 +165,34 @@ impl LocalFrame {
         }
     }
 
+    /// How many values [`LocalFrame::write_tape`] keeps of a frame read from a state (the
+    /// spatial heading's; none for the others).
+    pub fn tape_len(&self) -> usize {
+        match self {
+            Self::Planar(_) => 0,
+            Self::Spatial(f) => f.tape_len(),
+        }
+    }
+
+    /// Keeps in `tape` ([`LocalFrame::tape_len`] values) what [`LocalFrame::at_taped`] needs to
+    /// read the frame `at` again more cheaply.
+    #[inline(always)]
+    pub fn write_tape(&self, at: &FrameAt, tape: &mut [f64]) {
+        if let (Self::Spatial(f), FrameAt::Spatial(a)) = (self, at) {
+            f.write_tape(a, tape);
+        }
+    }
+
+    /// [`LocalFrame::at`] of the pose source `ps` whose frame [`LocalFrame::write_tape`] kept
+    /// in `tape`: the same values.
+    #[inline(always)]
+    pub fn at_taped(&self, ps: &[f64], tape: &[f64], derivatives: bool) -> FrameAt {
+        match self {
+            Self::Planar(f) => FrameAt::Planar(f.pose(ps)),
+            Self::Spatial(f) => FrameAt::Spatial(f.at_taped(ps, tape, derivatives)),
+        }
+    }
+
     /// [`LocalFrame::apply_at`] at a frame read by [`LocalFrame::at`] from the pose source.
     #[inline]
     pub fn apply_with(&self, map: FrameMap, at: &FrameAt, inp: &[f64], out: &mut [f64]) {

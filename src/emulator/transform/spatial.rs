@@ -262,6 +262,7 @@ impl SpatialFrame {
 
     /// The frame's heading quaternion read from a state: (w, z)/√(w² + z²) of the orientation
     /// quaternion, as the unit pair and its norm.
+    #[inline(always)]
     fn heading(&self, s: &[f64]) -> ([f64; 2], f64) {
         let (w, z) = (s[self.orientation[0]], s[self.orientation[3]]);
         let n = w.hypot(z);
@@ -278,6 +279,7 @@ impl SpatialFrame {
     }
 
     /// [`SpatialFrame::pose`] given the heading of `s` (for [`Attitude::Heading`]).
+    #[inline(always)]
     fn pose_from(&self, s: &[f64], heading: Option<([f64; 2], f64)>) -> Pose3 {
         let q = match (self.attitude, heading) {
             (Attitude::Heading, Some(([w, z], _))) => [w, 0.0, 0.0, z],
@@ -306,6 +308,46 @@ impl SpatialFrame {
             Attitude::Full => None,
             Attitude::Heading => Some(self.heading(s)),
         };
+        self.at_heading(s, heading, derivatives)
+    }
+
+    /// How many values [`SpatialFrame::write_tape`] keeps of a frame read from a state: the
+    /// heading's unit pair and norm for [`Attitude::Heading`], none for [`Attitude::Full`].
+    pub fn tape_len(&self) -> usize {
+        match self.attitude {
+            Attitude::Full => 0,
+            Attitude::Heading => 3,
+        }
+    }
+
+    /// Keeps what [`SpatialFrame::at_taped`] needs to read the frame `at` again without its
+    /// square root (`tape`: [`SpatialFrame::tape_len`] values).
+    #[inline(always)]
+    pub fn write_tape(&self, at: &SpatialAt, tape: &mut [f64]) {
+        if let Some(([w, z], n)) = at.heading {
+            tape[..3].copy_from_slice(&[w, z, n]);
+        }
+    }
+
+    /// [`SpatialFrame::at`] of the state `s` whose frame [`SpatialFrame::write_tape`] kept in
+    /// `tape`: the same values, the heading read from the tape instead of computed again.
+    #[inline(always)]
+    pub fn at_taped(&self, s: &[f64], tape: &[f64], derivatives: bool) -> SpatialAt {
+        let heading = match self.attitude {
+            Attitude::Full => None,
+            Attitude::Heading => Some(([tape[0], tape[1]], tape[2])),
+        };
+        self.at_heading(s, heading, derivatives)
+    }
+
+    /// [`SpatialFrame::at`] given the heading of `s` (for [`Attitude::Heading`]).
+    #[inline(always)]
+    fn at_heading(
+        &self,
+        s: &[f64],
+        heading: Option<([f64; 2], f64)>,
+        derivatives: bool,
+    ) -> SpatialAt {
         let pose = self.pose_from(s, heading);
         if let Some(([w, z], _)) = heading {
             if let Some((r, dr)) = heading_rotation_and_derivatives(w, z, derivatives) {
@@ -677,12 +719,16 @@ impl SpatialFrame {
         if touched < inp_bar.len() {
             pass_untouched(self, inp_bar, out_bar);
         }
+        // The pose cotangent is summed in a local copy (registers), in the same order, and
+        // stored once: read back from memory after each triple, its components waited on the
+        // stores just made.
+        let mut pb = *pose_bar;
         let rot = (r, dr, live);
         for t in &self.points {
-            vjp_triple::<LOCAL, SHIFT, K, true>(t, pose, rot, inp, out_bar, inp_bar, pose_bar);
+            vjp_triple::<LOCAL, SHIFT, K, true>(t, pose, rot, inp, out_bar, inp_bar, &mut pb);
         }
         for t in &self.vectors {
-            vjp_triple::<LOCAL, SHIFT, K, false>(t, pose, rot, inp, out_bar, inp_bar, pose_bar);
+            vjp_triple::<LOCAL, SHIFT, K, false>(t, pose, rot, inp, out_bar, inp_bar, &mut pb);
         }
         let n = pose.q.iter().map(|a| a * a).sum::<f64>();
         for qi in &self.quaternions {
@@ -705,9 +751,10 @@ impl SpatialFrame {
             let partials = quat_partials_body(map, pose.q, a, &live);
             for k in live {
                 let dq = partials[k];
-                pose_bar.q[k] += (0..4).map(|c| dq[c] * g[c]).sum::<f64>();
+                pb.q[k] += (0..4).map(|c| dq[c] * g[c]).sum::<f64>();
             }
         }
+        *pose_bar = pb;
     }
 }
 
@@ -1161,6 +1208,49 @@ mod tests {
             out.push((w / n, z / n));
         }
         out
+    }
+
+    /// A frame read again from its tape is the frame read from the state, every bit (with and
+    /// without the rotation's derivatives), for heading and full attitudes; the full attitude
+    /// keeps nothing.
+    #[test]
+    fn frame_read_from_its_tape_is_the_frame_read_from_the_state() {
+        let mut rng = ChaCha8Rng::seed_from_u64(33);
+        for attitude in [Attitude::Heading, Attitude::Full] {
+            let frame = SpatialFrame {
+                attitude,
+                ..SpatialFrame::rigid_body(0, 3, 7, 10)
+            };
+            assert_eq!(
+                frame.tape_len(),
+                if attitude == Attitude::Heading { 3 } else { 0 }
+            );
+            for (i, (w, z)) in headings(&mut rng).into_iter().enumerate().take(1500) {
+                let mut s: Vec<f64> = (0..13).map(|_| rng.random_range(-3.0..3.0)).collect();
+                // A tilted attitude whose twist is (w, z), not always unit.
+                let scale = if i % 3 == 0 {
+                    1.0
+                } else {
+                    rng.random_range(0.5..2.0)
+                };
+                (s[3], s[6]) = (w * scale, z * scale);
+                let mut tape = vec![f64::NAN; frame.tape_len()];
+                for derivatives in [false, true] {
+                    let at = frame.at(&s, derivatives);
+                    frame.write_tape(&at, &mut tape);
+                    assert_eq!(
+                        frame.at_taped(&s, &tape, derivatives),
+                        at,
+                        "{attitude:?} {s:?}"
+                    );
+                    let local = crate::emulator::transform::LocalFrame::Spatial(frame.clone());
+                    let at = local.at(&s, derivatives);
+                    let mut tape = vec![f64::NAN; local.tape_len()];
+                    local.write_tape(&at, &mut tape);
+                    assert_eq!(local.at_taped(&s, &tape, derivatives), at);
+                }
+            }
+        }
     }
 
     /// The heading fast path gives every bit the generic rotation and derivatives give.
