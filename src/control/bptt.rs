@@ -1221,16 +1221,7 @@ mod tests {
     #[test]
     fn gradient_returns_the_rollout_objective_bit_for_bit() {
         let (e, obj, x0) = fixtures::lander_emulator();
-        let m = NetModel::Lander.control_dim();
-        let knots = Knots {
-            steps: 8,
-            per_actuator: 4,
-            m,
-        };
-        let bounds = Bounds {
-            low: vec![-0.5; m],
-            high: vec![0.5; m],
-        };
+        let (knots, bounds) = lander_layout(8, 4);
         let mut b = Bptt::new(&e, &obj, knots, bounds, &x0).unwrap();
         for k in 0..5 {
             let v: Vec<f64> = (0..b.dim())
@@ -1246,20 +1237,26 @@ mod tests {
         }
     }
 
-    #[test]
-    fn bptt_gradient_matches_finite_differences_through_an_emulator_with_transforms() {
-        let (e, obj, x0) = fixtures::lander_emulator();
+    /// The lander's knots over `steps` steps, `per_actuator` each, in small boxes (which keep
+    /// the fixture's random net in its responsive range).
+    fn lander_layout(steps: usize, per_actuator: usize) -> (Knots, Bounds) {
         let m = NetModel::Lander.control_dim();
         let knots = Knots {
-            steps: 6,
-            per_actuator: 3,
+            steps,
+            per_actuator,
             m,
         };
-        // Small boxes keep the random net in its responsive range.
         let bounds = Bounds {
             low: vec![-0.5; m],
             high: vec![0.5; m],
         };
+        (knots, bounds)
+    }
+
+    #[test]
+    fn bptt_gradient_matches_finite_differences_through_an_emulator_with_transforms() {
+        let (e, obj, x0) = fixtures::lander_emulator();
+        let (knots, bounds) = lander_layout(6, 3);
         let mut b = Bptt::new(&e, &obj, knots, bounds, &x0).unwrap();
         let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.7).cos() * 0.6).collect();
         fd_check(&mut b, &v, 1e-5);
