@@ -161,7 +161,7 @@ pub fn predict_with(
     let EmulatorScratch {
         z, y, t1, mlp: m, ..
     } = scratch;
-    step_through(t, mlp, s, u, (z, y, &mut m.hidden), t1, s_next);
+    step_through(t, mlp, s, u, (z, y, &mut m.hidden), &mut [], t1, s_next);
 }
 
 /// Defines `fn $name` whose body is compiled twice, as written and with AVX enabled, and runs
@@ -196,51 +196,13 @@ macro_rules! avx_dispatched {
     };
 }
 
-/// One emulator step through transforms `t` and network `mlp`, writing the network's input
-/// z, output y and hidden activations h to the buffers given (a scratch, or a step of BPTT's
-/// tape), with `TAPE` what the frame keeps of itself to `frame_tape`
-/// ([`Transforms::frame_tape_len`] values, for [`vjp_from_forward`]), and using `tmp` (length
-/// n). Does not allocate.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn step_body<const TAPE: bool>(
-    t: &Transforms,
-    mlp: &Mlp,
-    s: &[f64],
-    u: &[f64],
-    (z, y, h): (&mut [f64], &mut [f64], &mut [f64]),
-    frame_tape: &mut [f64],
-    tmp: &mut [f64],
-    s_next: &mut [f64],
-) {
-    let at = t.frame_at(s, false);
-    if let (true, Some(f), Some(at)) = (TAPE, &t.frame, &at) {
-        f.write_tape(at, frame_tape);
-    }
-    t.encode_input_with(at.as_ref(), s, u, z);
-    mlp.forward_into(z, h, y);
-    t.decode_output_with(at.as_ref(), s, y, tmp, s_next);
-}
-
 avx_dispatched! {
-    /// [`step_body`] without a tape of the frame.
+    /// One emulator step through transforms `t` and network `mlp`, writing the network's input
+    /// z, output y and hidden activations h to the buffers given (a scratch, or a step of BPTT's
+    /// tape), what the frame keeps of itself to `frame_tape` when it is not empty
+    /// ([`Transforms::frame_tape_len`] values, for [`vjp_from_forward`]), and using `tmp`
+    /// (length n). Does not allocate.
     fn step_through(
-        t: &Transforms,
-        mlp: &Mlp,
-        s: &[f64],
-        u: &[f64],
-        zyh: (&mut [f64], &mut [f64], &mut [f64]),
-        tmp: &mut [f64],
-        s_next: &mut [f64],
-    ) {
-        step_body::<false>(t, mlp, s, u, zyh, &mut [], tmp, s_next);
-    }
-}
-
-avx_dispatched! {
-    /// [`step_body`] keeping the frame's tape (a step of BPTT; a separate copy, so that the
-    /// plain step's code stays as it was).
-    fn step_through_taped(
         t: &Transforms,
         mlp: &Mlp,
         s: &[f64],
@@ -250,7 +212,14 @@ avx_dispatched! {
         tmp: &mut [f64],
         s_next: &mut [f64],
     ) {
-        step_body::<true>(t, mlp, s, u, zyh, frame_tape, tmp, s_next);
+        let (z, y, h) = zyh;
+        let at = t.frame_at(s, false);
+        if let (Some(f), Some(at), false) = (&t.frame, &at, frame_tape.is_empty()) {
+            f.write_tape(at, frame_tape);
+        }
+        t.encode_input_with(at.as_ref(), s, u, z);
+        mlp.forward_into(z, h, y);
+        t.decode_output_with(at.as_ref(), s, y, tmp, s_next);
     }
 }
 
@@ -488,7 +457,7 @@ impl crate::physics::DifferentiableStep for Emulator {
         let (z, rest) = tape.split_at_mut(self.transforms.state_dim + self.transforms.control_dim);
         let (y, rest) = rest.split_at_mut(self.transforms.state_dim);
         let (h, frame) = rest.split_at_mut(self.mlp.n_hidden());
-        step_through_taped(
+        step_through(
             &self.transforms,
             &self.mlp,
             s,

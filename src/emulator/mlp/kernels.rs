@@ -267,54 +267,9 @@ impl Lanes for Avx512 {
 /// truncation is below 2⁻⁵⁵ of e^r for |r| ≤ ln 2 / 2), then 2ⁿ from the exponent bits.
 #[inline(always)]
 fn sigmoid_lanes<L: Lanes>(z: L::V) -> L::V {
-    let (k, r) = exp_reduce::<L>(z);
-    let mut p = L::splat(EXP_TAYLOR[0]);
-    for &c in &EXP_TAYLOR[1..] {
-        p = L::fma(p, r, L::splat(c));
-    }
-    sigmoid_finish::<L>(p, k)
-}
-
-/// 1/k! for k = 13, 12, …, 0: e^r's Taylor polynomial in Horner order ([`sigmoid_lanes`]).
-const EXP_TAYLOR: [f64; 14] = [
-    1.0 / 6_227_020_800.0,
-    1.0 / 479_001_600.0,
-    1.0 / 39_916_800.0,
-    1.0 / 3_628_800.0,
-    1.0 / 362_880.0,
-    1.0 / 40_320.0,
-    1.0 / 5_040.0,
-    1.0 / 720.0,
-    1.0 / 120.0,
-    1.0 / 24.0,
-    1.0 / 6.0,
-    0.5,
-    1.0,
-    1.0,
-];
-
-/// The first steps of [`sigmoid_lanes`]: t = −z clamped, and (k, r) with k = n + 1.5·2⁵² and
-/// t = n ln 2 + r.
-#[inline(always)]
-fn exp_reduce<L: Lanes>(z: L::V) -> (L::V, L::V) {
-    // The shifter 1.5 · 2⁵², and ln 2 = LN2_HI + LN2_LO with 32 significant bits in the first
-    // (fdlibm's split).
-    const SHIFT: f64 = 6755399441055744.0;
-    const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
-    const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
-    let t = L::clamp(L::sub(L::splat(0.0), z), L::splat(-708.0), L::splat(708.0));
-    let k = L::fma(t, L::splat(std::f64::consts::LOG2_E), L::splat(SHIFT));
-    let n = L::sub(k, L::splat(SHIFT));
-    let r = L::fma(n, L::splat(-LN2_HI), t);
-    (k, L::fma(n, L::splat(-LN2_LO), r))
-}
-
-/// The last steps of [`sigmoid_lanes`]: e^t = p · 2ⁿ from e^r's polynomial `p` and the shifted
-/// `k`, then 1 / (1 + e^t).
-#[inline(always)]
-fn sigmoid_finish<L: Lanes>(p: L::V, k: L::V) -> L::V {
-    let e = L::mul(p, L::exp2_from_shifted(k));
-    L::div(L::splat(1.0), L::add(L::splat(1.0), e))
+    let mut z = [z];
+    sigmoid_groups::<L, 1>(&mut z);
+    z[0]
 }
 
 /// [`sigmoid_lanes`] on `G` lane groups at once, each step taken for every group before the
@@ -324,19 +279,50 @@ fn sigmoid_finish<L: Lanes>(p: L::V, k: L::V) -> L::V {
 /// the batch forward pass's σ loop waited on each group's division).
 #[inline(always)]
 fn sigmoid_groups<L: Lanes, const G: usize>(z: &mut [L::V; G]) {
+    // The shifter 1.5 · 2⁵², and ln 2 = LN2_HI + LN2_LO with 32 significant bits in the first
+    // (fdlibm's split).
+    const SHIFT: f64 = 6755399441055744.0;
+    const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
+    // 1/k! for k = 13, 12, …, 0.
+    const C: [f64; 14] = [
+        1.0 / 6_227_020_800.0,
+        1.0 / 479_001_600.0,
+        1.0 / 39_916_800.0,
+        1.0 / 3_628_800.0,
+        1.0 / 362_880.0,
+        1.0 / 40_320.0,
+        1.0 / 5_040.0,
+        1.0 / 720.0,
+        1.0 / 120.0,
+        1.0 / 24.0,
+        1.0 / 6.0,
+        0.5,
+        1.0,
+        1.0,
+    ];
     let mut k = [L::splat(0.0); G];
     let mut r = [L::splat(0.0); G];
     for g in 0..G {
-        (k[g], r[g]) = exp_reduce::<L>(z[g]);
+        let t = L::clamp(
+            L::sub(L::splat(0.0), z[g]),
+            L::splat(-708.0),
+            L::splat(708.0),
+        );
+        k[g] = L::fma(t, L::splat(std::f64::consts::LOG2_E), L::splat(SHIFT));
+        let n = L::sub(k[g], L::splat(SHIFT));
+        let rg = L::fma(n, L::splat(-LN2_HI), t);
+        r[g] = L::fma(n, L::splat(-LN2_LO), rg);
     }
-    let mut p = [L::splat(EXP_TAYLOR[0]); G];
-    for &c in &EXP_TAYLOR[1..] {
+    let mut p = [L::splat(C[0]); G];
+    for &c in &C[1..] {
         for g in 0..G {
             p[g] = L::fma(p[g], r[g], L::splat(c));
         }
     }
     for g in 0..G {
-        z[g] = sigmoid_finish::<L>(p[g], k[g]);
+        let e = L::mul(p[g], L::exp2_from_shifted(k[g]));
+        z[g] = L::div(L::splat(1.0), L::add(L::splat(1.0), e));
     }
 }
 
@@ -1045,8 +1031,8 @@ mod tests {
         }
     }
 
-    /// σ taken on several lane groups in step gives each group's own σ bit for bit, NaN and
-    /// the saturated ends included.
+    /// σ taken on several lane groups in step gives each group's own σ (one group alone) bit
+    /// for bit, NaN and the saturated ends included.
     #[test]
     fn grouped_sigmoid_is_the_lane_sigmoid_bit_for_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(12);
