@@ -252,6 +252,9 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             push(&name, value);
         }
     }
+    for (name, value) in emulator_rollouts(min_seconds) {
+        push(&name, value);
+    }
     // The cube lattice under alternating scale_z reflexes (a squash-and-stretch hop): 1000
     // steps of 10 ms, switching every 0.25 s.
     let model = LatticeModel::new(Lattice::cube())
@@ -650,6 +653,63 @@ fn dolphin_metrics(min_seconds: f64) -> Vec<(String, f64)> {
         }),
     ));
     out
+}
+
+/// Emulator steps per second along dependent rollouts of 400 steps at batch 1 with a 17-50-13
+/// net (random weights, per-step controls in ±0.1), the way `../shared/peers/bench_rollout.py`
+/// times JAX's `lax.scan` (`jax_jit_scan_f64_b1`): each step reads the state the step before
+/// wrote, so a step's latency counts, where `emulator.<shape>.steps_per_s` steps from one state
+/// again and again (independent steps, which overlap in the core). Two problems: the lander's
+/// net with its transforms (`emulator.17-50-13.rollout_steps_per_s`) and the peer's own, a bare
+/// net predicting the state change (`emulator.17-50-13.bare.rollout_steps_per_s`).
+fn emulator_rollouts(min_seconds: f64) -> Vec<(String, f64)> {
+    use crate::emulator::transform::TransformConfig;
+    use rand::{Rng, SeedableRng};
+    const STEPS: usize = 400;
+    let model = NetModel::Lander;
+    let (n, m) = (model.state_dim(), model.control_dim());
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let mlp = Mlp::new(n + m, 50, n, WeightInit::FanIn, &mut rng);
+    let lander_transforms =
+        Transforms::unfitted(&model.transform_config(), n, m).expect("catalog transforms fit");
+    let lander = Emulator::new(lander_transforms, mlp.clone(), 0.5).expect("shapes agree");
+    let delta = TransformConfig {
+        delta: true,
+        ..TransformConfig::none()
+    };
+    let bare_transforms = Transforms::unfitted(&delta, n, m).expect("no frame to check");
+    let bare = Emulator::new(bare_transforms, mlp, 0.5).expect("shapes agree");
+    let lander_x0 = model.start_state(&mut rng);
+    let bare_x0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let controls: Vec<f64> = (0..STEPS * m)
+        .map(|_| rng.random_range(-0.1..0.1))
+        .collect();
+    let problems = [
+        ("emulator.17-50-13.rollout_steps_per_s", &lander, lander_x0),
+        ("emulator.17-50-13.bare.rollout_steps_per_s", &bare, bare_x0),
+    ];
+    problems
+        .into_iter()
+        .map(|(name, e, x0)| {
+            let (mut sc, mut s, mut next) = (e.scratch(), x0.clone(), vec![0.0; n]);
+            let mut rollout = |s: &mut Vec<f64>| {
+                s.copy_from_slice(&x0);
+                for u in controls.chunks_exact(m) {
+                    e.predict(s, u, &mut sc, &mut next);
+                    std::mem::swap(s, &mut next);
+                }
+                black_box(&s);
+            };
+            rollout(&mut s);
+            // A rollout that left the finite range would time NaN arithmetic, not the step.
+            assert!(
+                s.iter().all(|x| x.is_finite()),
+                "{name}: rollout not finite"
+            );
+            let steps = throughput(min_seconds, STEPS as u64, || rollout(&mut s));
+            (name.to_string(), steps)
+        })
+        .collect()
 }
 
 /// Training and stepping throughput of the Table 1 network of `model` (random weights and data

@@ -507,6 +507,13 @@ fn bench_json_is_one_object_of_named_numbers() {
         ) < 1e-9
     );
     assert!(obj.contains_key("bptt.17-50-13.bare.iters_per_s"));
+    // Dependent rollouts beside the independent steps, the lander's and the peer's bare net.
+    for key in [
+        "emulator.17-50-13.rollout_steps_per_s",
+        "emulator.17-50-13.bare.rollout_steps_per_s",
+    ] {
+        assert!(f(key) > 0.0, "{key}");
+    }
 }
 
 #[test]
