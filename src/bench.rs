@@ -321,6 +321,32 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
     out
 }
 
+/// The 17-50-13 net of the BPTT and rollout metrics, random weights drawn from `rng`.
+fn net_17_50_13(rng: &mut rand_chacha::ChaCha8Rng) -> Mlp {
+    Mlp::new(17, 50, 13, WeightInit::FanIn, rng)
+}
+
+/// `mlp` in the lander's transforms (heading frame, normalization, state change).
+fn lander_emulator(mlp: Mlp) -> Emulator {
+    let model = NetModel::Lander;
+    let (n, m) = (model.state_dim(), model.control_dim());
+    let transforms =
+        Transforms::unfitted(&model.transform_config(), n, m).expect("catalog transforms fit");
+    Emulator::new(transforms, mlp, 0.5).expect("shapes agree")
+}
+
+/// `mlp` bare, as the peers run it: predicting the state change of 13 states under 4 controls,
+/// no frame, no normalization.
+fn bare_emulator(mlp: Mlp) -> Emulator {
+    use crate::emulator::transform::TransformConfig;
+    let config = TransformConfig {
+        delta: true,
+        ..TransformConfig::none()
+    };
+    let transforms = Transforms::unfitted(&config, 13, 4).expect("no frame to check");
+    Emulator::new(transforms, mlp, 0.5).expect("shapes agree")
+}
+
 /// BPTT iterations per second on the lander's Table 1 network shape (17-50-13, random weights,
 /// its transforms): a 40-step emulated rollout and the full gradient with respect to the 80
 /// control knots, under a soft-landing objective.
@@ -331,10 +357,7 @@ fn bptt_lander(min_seconds: f64) -> f64 {
     let model = NetModel::Lander;
     let (n, m) = (model.state_dim(), model.control_dim());
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
-    let mlp = Mlp::new(n + m, 50, n, WeightInit::FanIn, &mut rng);
-    let transforms =
-        Transforms::unfitted(&model.transform_config(), n, m).expect("catalog transforms fit");
-    let e = Emulator::new(transforms, mlp, 0.5).expect("shapes agree");
+    let e = lander_emulator(net_17_50_13(&mut rng));
     let x0 = crate::physics::lander::Lander::upright_at_rest([10.0, -5.0, 60.0]);
     let target = crate::physics::lander::Lander::upright_at_rest([0.0, 0.0, 1.5]);
     let obj = Objective::default()
@@ -371,17 +394,10 @@ fn bptt_lander(min_seconds: f64) -> f64 {
 fn bptt_bare(min_seconds: f64) -> f64 {
     use crate::control::bptt::{Bounds, Bptt, Knots};
     use crate::control::objective::{ControlEffort, FinalState, Objective};
-    use crate::emulator::transform::TransformConfig;
     use rand::{Rng, SeedableRng};
     let (n, m, steps) = (13, 4, 40);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
-    let mlp = Mlp::new(n + m, 50, n, WeightInit::FanIn, &mut rng);
-    let config = TransformConfig {
-        delta: true,
-        ..TransformConfig::none()
-    };
-    let transforms = Transforms::unfitted(&config, n, m).expect("no frame to check");
-    let e = Emulator::new(transforms, mlp, 0.5).expect("shapes agree");
+    let e = bare_emulator(net_17_50_13(&mut rng));
     let x0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
     let target: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
     let obj = Objective::default()
@@ -663,22 +679,13 @@ fn dolphin_metrics(min_seconds: f64) -> Vec<(String, f64)> {
 /// net with its transforms (`emulator.17-50-13.rollout_steps_per_s`) and the peer's own, a bare
 /// net predicting the state change (`emulator.17-50-13.bare.rollout_steps_per_s`).
 fn emulator_rollouts(min_seconds: f64) -> Vec<(String, f64)> {
-    use crate::emulator::transform::TransformConfig;
     use rand::{Rng, SeedableRng};
     const STEPS: usize = 400;
     let model = NetModel::Lander;
     let (n, m) = (model.state_dim(), model.control_dim());
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-    let mlp = Mlp::new(n + m, 50, n, WeightInit::FanIn, &mut rng);
-    let lander_transforms =
-        Transforms::unfitted(&model.transform_config(), n, m).expect("catalog transforms fit");
-    let lander = Emulator::new(lander_transforms, mlp.clone(), 0.5).expect("shapes agree");
-    let delta = TransformConfig {
-        delta: true,
-        ..TransformConfig::none()
-    };
-    let bare_transforms = Transforms::unfitted(&delta, n, m).expect("no frame to check");
-    let bare = Emulator::new(bare_transforms, mlp, 0.5).expect("shapes agree");
+    let mlp = net_17_50_13(&mut rng);
+    let (lander, bare) = (lander_emulator(mlp.clone()), bare_emulator(mlp));
     let lander_x0 = model.start_state(&mut rng);
     let bare_x0: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
     let controls: Vec<f64> = (0..STEPS * m)
