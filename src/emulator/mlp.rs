@@ -960,6 +960,10 @@ mod tests {
             (84, 50, 78),
             (70, 40, 24),
             (9, 33, 17),
+            // The hidden layer just filling the forward pass's lane buffer (61 units padded to
+            // 64), and just beyond it (65 units: the one-value-at-a-time path).
+            (12, 61, 6),
+            (3, 65, 2),
         ];
         for (s, &(p, q, r)) in shapes.iter().enumerate() {
             let mut rng = ChaCha8Rng::seed_from_u64(100 + s as u64);

@@ -463,10 +463,54 @@ impl Packed {
     }
 }
 
-/// `emit(l, s)` for l < n with s = init[l] + Σ_k a[k, l] x[k], or σ(s) when `SIGMOID`, each
-/// sum one fused multiply–add per k in order k = 0, 1, …: the columns of `a` (rows of `stride`
-/// values, stride a multiple of 4 and at least n) against `x`, from `init` (at least `stride`
-/// values). σ acts on whole lane groups ([`sigmoid_lanes`]).
+/// Where [`columns`] puts a block's sums: `put(j0, v)` gets the block's G lane groups, for
+/// outputs j0 .. j0 + G·WIDTH (those at n and beyond are padding).
+trait Sink<L: Lanes> {
+    fn put<const G: usize>(&mut self, j0: usize, v: &[L::V; G]);
+}
+
+/// A sink that calls `f(l, s)` for each output l < `n`, one value at a time.
+struct Emit<F> {
+    n: usize,
+    f: F,
+}
+
+impl<L: Lanes, F: FnMut(usize, f64)> Sink<L> for Emit<F> {
+    #[inline(always)]
+    fn put<const G: usize>(&mut self, j0: usize, v: &[L::V; G]) {
+        let mut sums = [0.0; 32];
+        for (g, v) in v.iter().enumerate() {
+            L::store(*v, &mut sums[L::WIDTH * g..]);
+        }
+        for (l, &s) in sums
+            .iter()
+            .enumerate()
+            .take((L::WIDTH * G).min(self.n - j0))
+        {
+            (self.f)(j0 + l, s);
+        }
+    }
+}
+
+/// A sink that stores each lane group whole at its place in a buffer of at least `stride`
+/// values (padding lanes included): no value goes through memory one at a time, so the next
+/// product's broadcasts read what the lane stores wrote.
+struct Lanewise<'a>(&'a mut [f64]);
+
+impl<L: Lanes> Sink<L> for Lanewise<'_> {
+    #[inline(always)]
+    fn put<const G: usize>(&mut self, j0: usize, v: &[L::V; G]) {
+        for (g, v) in v.iter().enumerate() {
+            L::store(*v, &mut self.0[j0 + L::WIDTH * g..]);
+        }
+    }
+}
+
+/// Output l < n gets s = init[l] + Σ_k a[k, l] x[k], or σ(s) when `SIGMOID`, each sum one fused
+/// multiply–add per k in order k = 0, 1, …: the columns of `a` (rows of `stride` values,
+/// stride a multiple of 4 and at least n) against `x`, from `init` (at least `stride` values).
+/// σ acts on whole lane groups ([`sigmoid_lanes`]). The sums go to `sink`, a block of lane
+/// groups at a time.
 #[inline(always)]
 fn columns<L: Lanes, const SIGMOID: bool>(
     a: &[f64],
@@ -474,7 +518,7 @@ fn columns<L: Lanes, const SIGMOID: bool>(
     x: &[f64],
     init: &[f64],
     n: usize,
-    mut emit: impl FnMut(usize, f64),
+    sink: &mut impl Sink<L>,
 ) {
     debug_assert!(stride.is_multiple_of(L::WIDTH) && n <= stride);
     assert!(a.len() >= x.len() * stride, "packed matrix too short");
@@ -486,35 +530,27 @@ fn columns<L: Lanes, const SIGMOID: bool>(
         // does not depend on the lanes' width).
         let w = (stride - j0).min(32);
         let dual = dual_chains((pad4(n) - j0).min(32) / 4);
-        let e = &mut emit;
+        let args = (a, stride, j0, x, init, dual);
         match w / L::WIDTH {
-            8 => block::<L, SIGMOID, 8>(a, stride, j0, x, init, n, dual, e),
-            7 => block::<L, SIGMOID, 7>(a, stride, j0, x, init, n, dual, e),
-            6 => block::<L, SIGMOID, 6>(a, stride, j0, x, init, n, dual, e),
-            5 => block::<L, SIGMOID, 5>(a, stride, j0, x, init, n, dual, e),
-            4 => block::<L, SIGMOID, 4>(a, stride, j0, x, init, n, dual, e),
-            3 => block::<L, SIGMOID, 3>(a, stride, j0, x, init, n, dual, e),
-            2 => block::<L, SIGMOID, 2>(a, stride, j0, x, init, n, dual, e),
-            _ => block::<L, SIGMOID, 1>(a, stride, j0, x, init, n, dual, e),
+            8 => sink.put(j0, &block::<L, SIGMOID, 8>(args)),
+            7 => sink.put(j0, &block::<L, SIGMOID, 7>(args)),
+            6 => sink.put(j0, &block::<L, SIGMOID, 6>(args)),
+            5 => sink.put(j0, &block::<L, SIGMOID, 5>(args)),
+            4 => sink.put(j0, &block::<L, SIGMOID, 4>(args)),
+            3 => sink.put(j0, &block::<L, SIGMOID, 3>(args)),
+            2 => sink.put(j0, &block::<L, SIGMOID, 2>(args)),
+            _ => sink.put(j0, &block::<L, SIGMOID, 1>(args)),
         }
         j0 += w;
     }
 }
 
-/// Columns `j0 .. j0 + G·WIDTH` of [`columns`], accumulated in G groups of independent lanes,
-/// each summed in two chains when `dual`.
+/// Columns `j0 .. j0 + G·WIDTH` of [`columns`] (`a`, `stride`, `j0`, `x`, `init`, `dual`),
+/// accumulated in G groups of independent lanes, each summed in two chains when `dual`.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn block<L: Lanes, const SIGMOID: bool, const G: usize>(
-    a: &[f64],
-    stride: usize,
-    j0: usize,
-    x: &[f64],
-    init: &[f64],
-    n: usize,
-    dual: bool,
-    emit: &mut impl FnMut(usize, f64),
-) {
+    (a, stride, j0, x, init, dual): (&[f64], usize, usize, &[f64], &[f64], bool),
+) -> [L::V; G] {
     // What `step` reads without checks: the block's lanes within a row, every input's row.
     assert!(j0 + L::WIDTH * G <= stride && a.len() >= x.len() * stride);
     let mut acc = [L::splat(0.0); G];
@@ -542,18 +578,12 @@ fn block<L: Lanes, const SIGMOID: bool, const G: usize>(
             step::<L, G>(&mut acc, a, stride, j0, x, k);
         }
     }
-    let mut sums = [0.0; 32];
-    for (g, acc) in acc.iter().enumerate() {
-        let v = if SIGMOID {
-            sigmoid_lanes::<L>(*acc)
-        } else {
-            *acc
-        };
-        L::store(v, &mut sums[L::WIDTH * g..]);
+    if SIGMOID {
+        for acc in acc.iter_mut() {
+            *acc = sigmoid_lanes::<L>(*acc);
+        }
     }
-    for (l, &v) in sums.iter().enumerate().take((L::WIDTH * G).min(n - j0)) {
-        emit(j0 + l, v);
-    }
+    acc
 }
 
 /// One input k of a [`block`]: acc ← fma(a[k, j₀ ..], x[k], acc). The caller ([`block`])
@@ -654,30 +684,95 @@ pub(super) use batch::{chunk_loss, chunk_loss_grad, Ahead, BatchNet, MAX_DEPTH};
 #[inline(always)]
 fn hidden_generic<L: Lanes>(pk: &Packed, x: &[f64], h: &mut [f64]) {
     debug_assert_eq!(x.len(), pk.d.p);
-    columns::<L, true>(&pk.w1t, pk.d.qs, x, &pk.b1, pk.d.q, |j, s| h[j] = s);
+    let mut sink = Emit {
+        n: pk.d.q,
+        f: |j, s| h[j] = s,
+    };
+    columns::<L, true>(&pk.w1t, pk.d.qs, x, &pk.b1, pk.d.q, &mut sink);
+}
+
+/// The most hidden units (padded) whose values the forward pass hands from one product to the
+/// next in a [`LaneBuf`] on the stack rather than one at a time ([`forward_generic`]); larger
+/// nets take the other way (the same bits either way).
+const LANE_BUF: usize = 64;
+
+/// [`LANE_BUF`] values from the start of a cache line, so that no lane group's load or store
+/// splits across two.
+#[repr(C, align(64))]
+struct LaneBuf([f64; LANE_BUF]);
+
+impl LaneBuf {
+    fn zeros() -> Self {
+        Self([0.0; LANE_BUF])
+    }
+}
+
+/// `d` ← `s` (of the same length), a lane group at a time and the rest one by one.
+#[inline(always)]
+fn copy_lanes<L: Lanes>(s: &[f64], d: &mut [f64]) {
+    assert_eq!(s.len(), d.len());
+    let mut dc = d.chunks_exact_mut(L::WIDTH);
+    let mut sc = s.chunks_exact(L::WIDTH);
+    for (d, s) in (&mut dc).zip(&mut sc) {
+        L::store(L::load(s), d);
+    }
+    for (d, s) in dc.into_remainder().iter_mut().zip(sc.remainder()) {
+        *d = *s;
+    }
 }
 
 /// Forward pass: h = σ(W₁ x + b₁), y = W₂ h + b₂.
+///
+/// Where the hidden layer fits a [`LaneBuf`] and the outputs one block of [`columns`] (32
+/// lanes), the hidden lane groups are stored whole there and the output product broadcasts
+/// from it; `h` gets a copy. Emitted one value at a time instead (as [`hidden_generic`] does),
+/// each value goes through a store and a load to a scalar buffer and another store before the
+/// output product reads it. Measured on AMD Zen 4 (issue 14): the lander's emulator step took
+/// 7–8% longer that way (232 against 216 ns, medians of 12 interleaved rounds), on 8 lanes or
+/// on 4; the forward pass timed alone, passes independent of each other, took as long either
+/// way, so what it saves is latency on the step's chain. With more outputs (84-50-78's 78, three
+/// blocks) the buffer measured 2% slower, for a reason not established, so those nets do not
+/// take it.
 #[inline(always)]
 fn forward_generic<L: Lanes>(pk: &Packed, x: &[f64], h: &mut [f64], y: &mut [f64]) {
-    hidden_generic::<L>(pk, x, h);
-    columns::<L, false>(&pk.w2t, pk.d.rs, h, &pk.b2, pk.d.r, |i, s| y[i] = s);
+    let d = pk.d;
+    let mut out = Emit {
+        n: d.r,
+        f: |i, s| y[i] = s,
+    };
+    if d.qs <= LANE_BUF && d.rs <= 32 {
+        let mut hl = LaneBuf::zeros();
+        columns::<L, true>(&pk.w1t, d.qs, x, &pk.b1, d.q, &mut Lanewise(&mut hl.0));
+        columns::<L, false>(&pk.w2t, d.rs, &hl.0[..d.q], &pk.b2, d.r, &mut out);
+        copy_lanes::<L>(&hl.0[..d.q], h);
+    } else {
+        hidden_generic::<L>(pk, x, h);
+        columns::<L, false>(&pk.w2t, d.rs, h, &pk.b2, d.r, &mut out);
+    }
 }
 
 /// Hidden cotangent h̄ = (W₂ᵀ ȳ) ⊙ h ⊙ (1 − h).
 #[inline(always)]
 fn hidden_bar_generic<L: Lanes>(pk: &Packed, h: &[f64], y_bar: &[f64], hb: &mut [f64]) {
     debug_assert_eq!(y_bar.len(), pk.d.r);
-    columns::<L, false>(&pk.w2, pk.d.qs, y_bar, &pk.zeros, pk.d.q, |j, s| {
-        let hj = h[j];
-        hb[j] = s * hj * (1.0 - hj);
-    });
+    let mut sink = Emit {
+        n: pk.d.q,
+        f: |j, s| {
+            let hj = h[j];
+            hb[j] = s * hj * (1.0 - hj);
+        },
+    };
+    columns::<L, false>(&pk.w2, pk.d.qs, y_bar, &pk.zeros, pk.d.q, &mut sink);
 }
 
 /// Input cotangent x̄ = W₁ᵀ h̄.
 #[inline(always)]
 fn input_bar_generic<L: Lanes>(pk: &Packed, hb: &[f64], xb: &mut [f64]) {
-    columns::<L, false>(&pk.w1, pk.d.ps, hb, &pk.zeros, pk.d.p, |k, s| xb[k] = s);
+    let mut sink = Emit {
+        n: pk.d.p,
+        f: |k, s| xb[k] = s,
+    };
+    columns::<L, false>(&pk.w1, pk.d.ps, hb, &pk.zeros, pk.d.p, &mut sink);
 }
 
 /// Weight-gradient accumulation: ∂E/∂W₂ += ȳ hᵀ, ∂E/∂b₂ += ȳ, ∂E/∂W₁ += h̄ xᵀ, ∂E/∂b₁ += h̄
