@@ -270,8 +270,8 @@ impl<M: Linearize> Rk4Map<M> {
     /// ([`Linearize::derivative_and_jacobians_x4`]), the sizes are fixed ones of
     /// `super::small` and the processor has AVX2 and FMA, four knots run at once in the
     /// lanes of [`X4`], each lane repeating the scalar chain's operations in its order (the
-    /// acrobot's: 0.12–0.16 µs a knot, from 0.37–0.43 one at a time; PERFORMANCE.md). The rest go one
-    /// at a time.
+    /// acrobot's: 0.12–0.16 µs a knot, from 0.37–0.43 one at a time; PERFORMANCE.md). The
+    /// rest go one at a time.
     pub fn jacobians_each(
         &self,
         xs: &[DVector<f64>],
