@@ -135,10 +135,15 @@ impl Bounds {
     /// Control values from normalized values `v` of consecutive actuators (value i belongs to
     /// actuator i mod m): u_i = c_j + h_j v_i with [`Bounds::affine`] of j.
     pub fn denormalize(&self, v: &[f64], u: &mut [f64]) {
+        // Actuator by actuator down the knots: the same c_j + h_j v_i as value by value, without
+        // an integer division and the bounds' tests per value.
         let m = self.low.len();
-        for (i, (u, v)) in u.iter_mut().zip(v).enumerate() {
-            let (c, h) = self.affine(i % m);
-            *u = c + h * v;
+        let n = u.len().min(v.len());
+        for j in 0..m {
+            let (c, h) = self.affine(j);
+            for i in (j..n).step_by(m) {
+                u[i] = c + h * v[i];
+            }
         }
     }
     /// Projects a normalized value of actuator j onto its box.
@@ -375,8 +380,11 @@ impl<'a, D: DifferentiableStep> Bptt<'a, D> {
             }
         }
         self.knots.reduce(&self.u_bar, grad);
-        for (i, g) in grad.iter_mut().enumerate() {
-            *g *= self.bounds.affine(i % m).1;
+        for j in 0..m {
+            let h = self.bounds.affine(j).1;
+            for g in grad.iter_mut().skip(j).step_by(m) {
+                *g *= h;
+            }
         }
     }
 
@@ -1178,6 +1186,24 @@ mod tests {
                 "knot {i}: fd {fd} vs bptt {}",
                 g[i]
             );
+        }
+    }
+
+    /// [`Bounds::denormalize`] (actuator by actuator) is c_j + h_j v_i value by value, every
+    /// bit, for bounded and unbounded actuators and a length that is not a whole number of
+    /// knots.
+    #[test]
+    fn denormalize_is_the_affine_map_value_by_value() {
+        let bounds = Bounds {
+            low: vec![-2.0, f64::NEG_INFINITY, 0.3],
+            high: vec![5.0, 1.0, 0.7],
+        };
+        let v: Vec<f64> = (0..17).map(|i| (i as f64 * 0.37).sin() * 1.3).collect();
+        let mut u = vec![f64::NAN; v.len()];
+        bounds.denormalize(&v, &mut u);
+        for (i, (u, v)) in u.iter().zip(&v).enumerate() {
+            let (c, h) = bounds.affine(i % 3);
+            assert_eq!(u.to_bits(), (c + h * v).to_bits(), "value {i}");
         }
     }
 
