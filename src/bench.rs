@@ -8,7 +8,7 @@ use crate::bellman::projection::{project, GaussianReward};
 use crate::control::search::init_rng;
 use crate::emulator::catalog::NetModel;
 use crate::emulator::mlp::{Mlp, WeightInit};
-use crate::emulator::train::MomentumState;
+use crate::emulator::train::{Dataset, MomentumBatches, MomentumState};
 use crate::emulator::{Emulator, Transforms};
 use crate::physics::acrobot::Acrobot;
 use crate::physics::lattice::{Lattice, LatticeModel, LatticeSim, LOW_GRAVITY};
@@ -531,7 +531,8 @@ fn bptt_dolphin(min_seconds: f64) -> f64 {
 }
 
 /// Mini-batch (30, momentum) training and full-gradient throughput of an `n_in`-`hidden`-`n_out`
-/// net on `examples` random examples.
+/// net on `examples` random examples. The mini-batches are shuffled and gathered, the way
+/// [`crate::emulator::train::train_momentum`] takes them.
 fn mlp_training_metrics(
     n_in: usize,
     hidden: usize,
@@ -539,25 +540,43 @@ fn mlp_training_metrics(
     examples: usize,
     min_seconds: f64,
 ) -> (Mlp, Vec<(String, f64)>) {
+    use rand::seq::SliceRandom;
     use rand::{Rng, SeedableRng};
     let shape = format!("{n_in}-{hidden}-{n_out}");
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
     let mut mlp = Mlp::new(n_in, hidden, n_out, WeightInit::FanIn, &mut rng);
     let x = ndarray::Array2::from_shape_fn((examples, n_in), |_| rng.random_range(-1.0..1.0));
     let y = ndarray::Array2::from_shape_fn((examples, n_out), |_| rng.random_range(-1.0..1.0));
-    let mut grad = vec![0.0; mlp.n_weights()];
+    let data = Dataset::new(x, y).expect("as many targets as inputs");
     let mut state = MomentumState::new(mlp.n_weights());
+    // Mini-batches of 30 in a shuffled order, each gathered from the training set and stepped
+    // by `train_momentum`'s own update (as NumPy's epoch in `compare.py` gathers X[idx]).
     let batch = 30;
+    let mut order: Vec<usize> = (0..examples).collect();
+    order.shuffle(&mut rng);
+    let mut batches = MomentumBatches::new(&mlp, &data, batch);
     let per_call = 600.min(examples / batch * batch);
+    let mut next = 0;
     let train = throughput(min_seconds, per_call as u64, || {
-        for b in 0..per_call / batch {
-            let rows = ndarray::s![b * batch..(b + 1) * batch, ..];
-            mlp.loss_grad(x.slice(rows), y.slice(rows), &mut grad);
-            state.step(mlp.weights_mut(), &grad, 1e-4, 0.9);
+        for _ in 0..per_call / batch {
+            if next + batch > examples {
+                next = 0;
+            }
+            // This batch, and the next one (fetched while this one computes).
+            let after = next + batch;
+            let ahead = if after + batch <= examples {
+                &order[after..after + batch]
+            } else {
+                &order[..batch]
+            };
+            let rows = (&order[next..after], ahead);
+            batches.step(&mut mlp, &data, rows, &mut state, (1e-3, 0.9), None);
+            next = after;
         }
     });
+    let mut grad = vec![0.0; mlp.n_weights()];
     let full = throughput(min_seconds, 1, || {
-        black_box(mlp.loss_grad(x.view(), y.view(), &mut grad));
+        black_box(mlp.loss_grad(data.inputs.view(), data.targets.view(), &mut grad));
     });
     let macs = (2 * n_in * hidden + 3 * hidden * n_out) as f64;
     (

@@ -31,7 +31,7 @@ use argmin::core::{
 use argmin::solver::conjugategradient::{beta::PolakRibiere, NonlinearConjugateGradient};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;
-use ndarray::{Array1, Array2, Axis};
+use ndarray::{Array1, Array2};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -70,9 +70,14 @@ impl Dataset {
 
     /// The examples at `rows`, in that order.
     pub fn select(&self, rows: &[usize]) -> Self {
+        let gather = |a: &Array2<f64>| {
+            let mut out = Array2::zeros((rows.len(), a.ncols()));
+            gather_rows(a, rows, &mut out);
+            out
+        };
         Self {
-            inputs: self.inputs.select(Axis(0), rows),
-            targets: self.targets.select(Axis(0), rows),
+            inputs: gather(&self.inputs),
+            targets: gather(&self.targets),
         }
     }
 
@@ -94,6 +99,34 @@ impl Dataset {
         idx.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
         let k = ((held_out_fraction * n as f64).round() as usize).clamp(1, n - 1);
         Ok((self.select(&idx[k..]), self.select(&idx[..k])))
+    }
+}
+
+/// Brings row `i` of `a` (row-major) into the L2 cache, a line at a time (nothing for another
+/// layout, or past the end).
+fn prefetch_row(a: &Array2<f64>, i: usize) {
+    if let (Some(all), true) = (a.as_slice(), i < a.nrows()) {
+        let row = &all[i * a.ncols()..(i + 1) * a.ncols()];
+        for k in (0..row.len()).step_by(8) {
+            crate::lanes::prefetch_l2(row[k..].as_ptr().cast());
+        }
+        if let Some(last) = row.last() {
+            crate::lanes::prefetch_l2((last as *const f64).cast());
+        }
+    }
+}
+
+/// Copies rows `rows` of `src`, in that order, into the first `rows.len()` rows of `dst` (as
+/// many columns): the values ndarray's `select` gives, without the new array it allocates and
+/// appends to one row at a time. Measured (issue 14, one core): `select` took about a tenth
+/// of a 70-40-24 net's momentum training (980 against 885 ns per example and epoch).
+pub(crate) fn gather_rows(src: &Array2<f64>, rows: &[usize], dst: &mut Array2<f64>) {
+    assert!(rows.len() <= dst.nrows() && src.ncols() == dst.ncols());
+    for (mut d, &i) in dst.rows_mut().into_iter().zip(rows) {
+        match (d.as_slice_mut(), src.row(i).to_slice()) {
+            (Some(d), Some(s)) => d.copy_from_slice(s),
+            (_, _) => d.assign(&src.row(i)),
+        }
     }
 }
 
@@ -586,6 +619,64 @@ impl Default for MomentumConfig {
     }
 }
 
+/// One mini-batch update of [`train_momentum`] at a time, with the buffers it reuses: the
+/// batch's inputs and targets (gathered from the training set) and the gradient.
+#[derive(Debug, Clone)]
+pub struct MomentumBatches {
+    inputs: Array2<f64>,
+    targets: Array2<f64>,
+    grad: Vec<f64>,
+}
+
+impl MomentumBatches {
+    /// Buffers for batches of at most `batch_size` examples of `train` for `mlp`.
+    pub fn new(mlp: &Mlp, train: &Dataset, batch_size: usize) -> Self {
+        let rows = batch_size.min(train.len());
+        Self {
+            inputs: Array2::zeros((rows, train.inputs.ncols())),
+            targets: Array2::zeros((rows, train.targets.ncols())),
+            grad: vec![0.0; mlp.n_weights()],
+        }
+    }
+
+    /// One update (eqs. 7–8) on the examples `rows` of `train` (at most the batch size given
+    /// to [`MomentumBatches::new`]): the gradient of their mean squared error per output, pulled
+    /// back through `anchor` if any, a momentum step of `state` with (learning rate, momentum)
+    /// `rates`, and the anchor's projection. The examples `next` (the next batch's, or none)
+    /// are fetched into the cache while this one computes: shuffled rows of a large training
+    /// set are scattered over memory. Measured on the 84-50-78 net with 64,000 examples (issue
+    /// 14, one core): 40.9 µs a step in shuffled order without the fetch, 37.8 in order, 36.8
+    /// shuffled with it.
+    pub fn step(
+        &mut self,
+        mlp: &mut Mlp,
+        train: &Dataset,
+        (rows, next): (&[usize], &[usize]),
+        state: &mut MomentumState,
+        (learning_rate, momentum): (f64, f64),
+        anchor: Option<&Anchor>,
+    ) {
+        gather_rows(&train.inputs, rows, &mut self.inputs);
+        gather_rows(&train.targets, rows, &mut self.targets);
+        for &i in next {
+            prefetch_row(&train.inputs, i);
+            prefetch_row(&train.targets, i);
+        }
+        let used = ndarray::s![..rows.len(), ..];
+        let grad = &mut self.grad;
+        mlp.loss_grad(self.inputs.slice(used), self.targets.slice(used), grad);
+        let scale = 2.0 / (rows.len() * mlp.n_out()) as f64;
+        grad.iter_mut().for_each(|g| *g *= scale);
+        if let Some(a) = anchor {
+            a.pull_back(mlp, grad);
+        }
+        state.step(mlp.weights_mut(), grad, learning_rate, momentum);
+        if let Some(a) = anchor {
+            a.project(mlp);
+        }
+    }
+}
+
 /// Momentum optimizer state: the last update δw (eqs. 7–8).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MomentumState {
@@ -672,28 +763,15 @@ pub fn train_momentum(
     }];
     stopper.observe(0, trace[0].held_out_error, mlp.weights());
     let mut order: Vec<usize> = (0..train.len()).collect();
-    let mut grad = vec![0.0; mlp.n_weights()];
+    let mut batches = MomentumBatches::new(mlp, train, config.batch_size);
     let mut stop = StopReason::MaxIterations;
     for epoch in 1..=config.max_epochs {
         order.shuffle(&mut rng);
-        for batch in order.chunks(config.batch_size) {
-            let x = train.inputs.select(Axis(0), batch);
-            let t = train.targets.select(Axis(0), batch);
-            mlp.loss_grad(x.view(), t.view(), &mut grad);
-            let scale = 2.0 / (batch.len() * mlp.n_out()) as f64;
-            grad.iter_mut().for_each(|g| *g *= scale);
-            if let Some(a) = anchor {
-                a.pull_back(mlp, &mut grad);
-            }
-            state.step(
-                mlp.weights_mut(),
-                &grad,
-                config.learning_rate,
-                config.momentum,
-            );
-            if let Some(a) = anchor {
-                a.project(mlp);
-            }
+        let rates = (config.learning_rate, config.momentum);
+        let mut chunks = order.chunks(config.batch_size).peekable();
+        while let Some(batch) = chunks.next() {
+            let next = chunks.peek().copied().unwrap_or(&[]);
+            batches.step(mlp, train, (batch, next), &mut state, rates, anchor);
         }
         let point = TracePoint {
             iteration: epoch,
@@ -723,6 +801,33 @@ pub fn train_momentum(
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    /// [`gather_rows`] and [`Dataset::select`] give ndarray's `select`, every value, for
+    /// rows in any order (repeats included), from row-major and column-major sources.
+    #[test]
+    fn gathered_rows_are_ndarrays_selection() {
+        use ndarray::ShapeBuilder;
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let a = Array2::from_shape_fn((23, 7), |_| rng.random_range(-1.0..1.0));
+        let mut f = Array2::zeros((23, 7).f()); // the same values, column-major
+        f.assign(&a);
+        assert!(f.as_slice().is_none() && f == a);
+        let rows = [5, 0, 22, 5, 13, 1];
+        for src in [&a, &f] {
+            let mut dst = Array2::from_elem((rows.len() + 2, 7), f64::NAN);
+            gather_rows(src, &rows, &mut dst);
+            let want = src.select(ndarray::Axis(0), &rows);
+            assert_eq!(dst.slice(ndarray::s![..rows.len(), ..]), want);
+            assert!(
+                dst.row(rows.len()).iter().all(|v| v.is_nan()),
+                "rows past the batch untouched"
+            );
+        }
+        let d = Dataset::new(a.clone(), f.clone() * 2.0).unwrap();
+        let s = d.select(&rows);
+        assert_eq!(s.inputs, a.select(ndarray::Axis(0), &rows));
+        assert_eq!(s.targets, (f * 2.0).select(ndarray::Axis(0), &rows));
+    }
 
     /// The dispatched momentum step (AVX2 where the processor has it) against the update
     /// written out one weight at a time: the same bits, on a length with a partial last group.

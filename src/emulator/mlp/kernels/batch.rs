@@ -108,7 +108,7 @@ impl Ahead {
     fn fetch(&mut self) {
         for _ in 0..self.per {
             match self.next_line() {
-                Some(line) => prefetch_l2(line),
+                Some(line) => crate::lanes::prefetch_l2(line),
                 None => return,
             }
         }
@@ -127,21 +127,6 @@ impl Ahead {
         }
         None
     }
-}
-
-/// A hint to bring the cache line at `p` into the L2 cache (nothing where there is no such
-/// instruction).
-#[inline(always)]
-fn prefetch_l2(p: *const u8) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch reads nothing into the program and does not fault, whatever the
-    // address.
-    unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T1};
-        _mm_prefetch::<_MM_HINT_T1>(p.cast());
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = p;
 }
 
 /// The register tiles [`product`] takes for `m` rows and `groups` lane groups of `w` lanes.
