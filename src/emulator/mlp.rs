@@ -299,6 +299,35 @@ impl Mlp {
         }
     }
 
+    /// [`Mlp::forward_into`] of `examples` examples at once, the same bits as one call per
+    /// example: rows of `x` (inputs), `hidden` and `y` (outputs), each stored contiguously row
+    /// after row. A tile of examples takes each loaded row of weights for all of them, as a
+    /// matrix product does (the k-step rollout loss runs every window of a chunk at once). Does
+    /// not allocate.
+    pub fn forward_many(&self, examples: usize, x: &[f64], hidden: &mut [f64], y: &mut [f64]) {
+        let (p, q, r) = (self.n_in, self.n_hidden, self.n_out);
+        assert!(x.len() >= examples * p && hidden.len() >= examples * q);
+        assert!(y.len() >= examples * r);
+        kernels::forward_many(self.packed(), examples, x, hidden, y);
+    }
+
+    /// [`Mlp::backward_from`] without the weight gradient, of `examples` examples at once (the
+    /// same bits as one call per example): from rows of `hidden` (the forward passes'
+    /// activations) and `y_bar` (output cotangents), writes rows of `hidden_bar` (h̄) and
+    /// `x_bar` (input cotangents). Does not allocate.
+    pub fn backward_many(
+        &self,
+        examples: usize,
+        (hidden, y_bar): (&[f64], &[f64]),
+        hidden_bar: &mut [f64],
+        x_bar: &mut [f64],
+    ) {
+        let (p, q, r) = (self.n_in, self.n_hidden, self.n_out);
+        assert!(hidden.len() >= examples * q && hidden_bar.len() >= examples * q);
+        assert!(y_bar.len() >= examples * r && x_bar.len() >= examples * p);
+        kernels::backward_many(self.packed(), examples, (hidden, y_bar), hidden_bar, x_bar);
+    }
+
     /// Adds the weight gradients of `examples` examples to `grad_w`, in order, as one
     /// [`Mlp::backward_from`] per example would (the same bits): rows of `x` (inputs), `hidden`
     /// (activations), `hidden_bar` (h̄) and `y_bar` (output cotangents), each stored
@@ -998,6 +1027,72 @@ mod tests {
                     let mut xb2 = vec![0.0; p];
                     m.vjp_input(&x, &yb, &mut sc, &mut xb2);
                     assert!(same_bits(&xb0, &xb2), "{p}-{q}-{r} vjp_input");
+                }
+            }
+        }
+    }
+
+    /// The many-example passes are one single-example pass per example, bit for bit, on every
+    /// tile shape and remainder (1 to 17 examples), for nets on both lane widths (84-50-78 keeps
+    /// 4 lanes), outputs summed in one chain and in two, and rows that end inside a lane group.
+    #[test]
+    fn many_example_passes_are_the_single_example_passes_bit_for_bit() {
+        let shapes = [
+            (1, 1, 1),
+            (4, 6, 3),
+            (17, 50, 13),
+            (84, 50, 78),
+            (70, 40, 24),
+            (52, 40, 30),
+            (58, 40, 12),
+            (9, 33, 17),
+            (3, 65, 2),
+        ];
+        for (s, &(p, q, r)) in shapes.iter().enumerate() {
+            let mut rng = ChaCha8Rng::seed_from_u64(300 + s as u64);
+            let init = WeightInit::Uniform {
+                low: -2.0,
+                high: 2.0,
+            };
+            let m = Mlp::new(p, q, r, init, &mut rng);
+            for examples in (1..=17).chain([40]) {
+                let x: Vec<f64> = (0..examples * p)
+                    .map(|_| rng.random_range(-3.0..3.0))
+                    .collect();
+                let yb: Vec<f64> = (0..examples * r)
+                    .map(|_| rng.random_range(-2.0..2.0))
+                    .collect();
+                // One value past the rows, which no pass may write.
+                let (mut h, mut y) = (
+                    vec![f64::NAN; examples * q + 1],
+                    vec![9.0; examples * r + 1],
+                );
+                m.forward_many(examples, &x, &mut h, &mut y);
+                let (mut hb, mut xb) = (
+                    vec![5.0; examples * q + 1],
+                    vec![f64::NAN; examples * p + 1],
+                );
+                m.backward_many(examples, (&h, &yb), &mut hb, &mut xb);
+                assert!(h[examples * q].is_nan() && y[examples * r] == 9.0);
+                assert!(hb[examples * q] == 5.0 && xb[examples * p].is_nan());
+                let mut sc = m.scratch();
+                for e in 0..examples {
+                    let (xe, ybe) = (&x[e * p..(e + 1) * p], &yb[e * r..(e + 1) * r]);
+                    let mut y1 = vec![0.0; r];
+                    m.forward(xe, &mut sc, &mut y1);
+                    let at = format!("{p}-{q}-{r}, example {e} of {examples}");
+                    assert!(same_bits(&y1, &y[e * r..(e + 1) * r]), "{at}: output");
+                    assert!(
+                        same_bits(&sc.hidden, &h[e * q..(e + 1) * q]),
+                        "{at}: hidden"
+                    );
+                    let mut xb1 = vec![0.0; p];
+                    m.backward(xe, &mut sc, ybe, None, Some(&mut xb1));
+                    assert!(
+                        same_bits(&sc.hidden_bar, &hb[e * q..(e + 1) * q]),
+                        "{at}: h̄"
+                    );
+                    assert!(same_bits(&xb1, &xb[e * p..(e + 1) * p]), "{at}: x̄");
                 }
             }
         }

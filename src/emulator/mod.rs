@@ -603,6 +603,198 @@ avx_dispatched! {
     }
 }
 
+/// The buffers of [`steps_many`] and [`vjps_many`] for a chunk of `rows` rollouts of one net
+/// (each a row of the chunk; the network's values of each step are kept by the caller).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct ManyScratch {
+    /// The frame read from each row's state.
+    ats: Vec<Option<transform::FrameAt>>,
+    /// Output cotangents, hidden cotangents and input cotangents, a row each.
+    y_bar: Vec<f64>,
+    h_bar: Vec<f64>,
+    z_bar: Vec<f64>,
+    /// Temporaries of one row (n values each) and the control cotangent (m).
+    t1: Vec<f64>,
+    t2: Vec<f64>,
+    u_bar: Vec<f64>,
+}
+
+impl ManyScratch {
+    /// Sized for `rows` rows of transforms `t` and network `mlp` (grown, never shrunk).
+    pub(crate) fn reset(&mut self, t: &Transforms, mlp: &Mlp, rows: usize) {
+        let (n, m, q) = (t.state_dim, t.control_dim, mlp.n_hidden());
+        self.ats.resize(rows, None);
+        for (v, len) in [
+            (&mut self.y_bar, rows * n),
+            (&mut self.h_bar, rows * q),
+            (&mut self.z_bar, rows * (n + m)),
+            (&mut self.t1, n),
+            (&mut self.t2, n),
+            (&mut self.u_bar, m),
+        ] {
+            if v.len() < len {
+                v.resize(len, 0.0);
+            }
+        }
+    }
+
+    /// Row i's hidden cotangent h̄ (q values) after [`vjps_many`].
+    pub(crate) fn hidden_bar(&self, i: usize, q: usize) -> &[f64] {
+        &self.h_bar[i * q..(i + 1) * q]
+    }
+
+    /// Row i's output cotangent ȳ (n values) after [`vjps_many`].
+    pub(crate) fn output_bar(&self, i: usize, n: usize) -> &[f64] {
+        &self.y_bar[i * n..(i + 1) * n]
+    }
+}
+
+/// One emulator step of many rollouts at once, the same bits as one [`predict_with`] per row:
+/// row i of `s_next` (n values) from state row i of `s` and control row i of `u` (m), with the
+/// network's input, hidden activations and output written to rows of `z`, `h` and `y`. The
+/// network's passes take all rows together ([`Mlp::forward_many`]); the transforms go row by
+/// row. Does not allocate once `scratch` has room ([`ManyScratch::reset`]).
+pub(crate) fn steps_many(
+    t: &Transforms,
+    mlp: &Mlp,
+    (s, u): (&[f64], &[f64]),
+    (z, h, y): (&mut [f64], &mut [f64], &mut [f64]),
+    scratch: &mut ManyScratch,
+    s_next: &mut [f64],
+) {
+    let rows = s.len() / t.state_dim.max(1);
+    let ats = &mut scratch.ats[..rows];
+    encode_rows(t, s, u, ats, z);
+    mlp.forward_many(rows, z, h, y);
+    decode_rows(t, ats, s, y, &mut scratch.t1, s_next);
+}
+
+/// The vector–Jacobian products of many steps at once after [`steps_many`] (its states `s`,
+/// hidden activations `h` and outputs `y`), the same bits as one [`step_vjp_after_forward`]
+/// per row without a weight gradient: adds (∂s'/∂s)ᵀ s̄' of row i (s̄' row i of `s_next_bar`)
+/// to row i of `s_bar`, and leaves the rows' ȳ and h̄ in `scratch` for the weight gradient
+/// ([`Mlp::weight_grad_many`]); the control cotangents are dropped.
+pub(crate) fn vjps_many(
+    t: &Transforms,
+    mlp: &Mlp,
+    (s, h, y): (&[f64], &[f64], &[f64]),
+    s_next_bar: &[f64],
+    scratch: &mut ManyScratch,
+    s_bar: &mut [f64],
+) {
+    let rows = s.len() / t.state_dim.max(1);
+    let ManyScratch {
+        ats,
+        y_bar,
+        h_bar,
+        z_bar,
+        t1,
+        t2,
+        u_bar,
+    } = scratch;
+    let ats = &mut ats[..rows];
+    decode_vjp_rows(t, s, y, s_next_bar, t1, t2, ats, y_bar, s_bar);
+    mlp.backward_many(rows, (h, y_bar), h_bar, z_bar);
+    encode_vjp_rows(t, ats, s, z_bar, t1, s_bar, u_bar);
+}
+
+avx_dispatched! {
+    /// The transforms before the network ([`step_through`]) for each row of `s` and `u`: the
+    /// frame read from the state to `ats`, the network input to a row of `z`.
+    fn encode_rows(
+        t: &Transforms,
+        s: &[f64],
+        u: &[f64],
+        ats: &mut [Option<transform::FrameAt>],
+        z: &mut [f64],
+    ) {
+        let (n, m) = (t.state_dim, t.control_dim);
+        for (i, at) in ats.iter_mut().enumerate() {
+            let si = &s[i * n..(i + 1) * n];
+            *at = t.frame_at(si, false);
+            let zi = &mut z[i * (n + m)..(i + 1) * (n + m)];
+            t.encode_input_with(at.as_ref(), si, &u[i * m..(i + 1) * m], zi);
+        }
+    }
+}
+
+avx_dispatched! {
+    /// The transforms after the network ([`step_through`]) for each row: the next state from
+    /// the network's output, at the frame read before.
+    fn decode_rows(
+        t: &Transforms,
+        ats: &[Option<transform::FrameAt>],
+        s: &[f64],
+        y: &[f64],
+        tmp: &mut [f64],
+        s_next: &mut [f64],
+    ) {
+        let n = t.state_dim;
+        for (i, at) in ats.iter().enumerate() {
+            let (si, yi) = (&s[i * n..(i + 1) * n], &y[i * n..(i + 1) * n]);
+            t.decode_output_with(at.as_ref(), si, yi, tmp, &mut s_next[i * n..(i + 1) * n]);
+        }
+    }
+}
+
+avx_dispatched! {
+    /// The output transforms' products of [`vjp_from_forward`] for each row: ȳ, the state's
+    /// share of s̄ added, and the frame (with the rotation's derivatives) kept in `ats`.
+    fn decode_vjp_rows(
+        t: &Transforms,
+        s: &[f64],
+        y: &[f64],
+        s_next_bar: &[f64],
+        t1: &mut [f64],
+        t2: &mut [f64],
+        ats: &mut [Option<transform::FrameAt>],
+        y_bar: &mut [f64],
+        s_bar: &mut [f64],
+    ) {
+        let n = t.state_dim;
+        for (i, at) in ats.iter_mut().enumerate() {
+            let row = i * n..(i + 1) * n;
+            let si = &s[row.clone()];
+            *at = t.frame_at(si, true);
+            t.decode_output_vjp_with(
+                at.as_ref(),
+                si,
+                &y[row.clone()],
+                &s_next_bar[row.clone()],
+                (&mut *t1, &mut *t2),
+                &mut y_bar[row.clone()],
+                &mut s_bar[row],
+            );
+        }
+    }
+}
+
+avx_dispatched! {
+    /// The input transforms' products of [`vjp_from_forward`] for each row: the state's share
+    /// of z̄ added to its row of s̄ (the control's to `u_bar`, overwritten row after row).
+    fn encode_vjp_rows(
+        t: &Transforms,
+        ats: &[Option<transform::FrameAt>],
+        s: &[f64],
+        z_bar: &[f64],
+        tmp: &mut [f64],
+        s_bar: &mut [f64],
+        u_bar: &mut [f64],
+    ) {
+        let (n, m) = (t.state_dim, t.control_dim);
+        for (i, at) in ats.iter().enumerate() {
+            t.encode_input_vjp_with(
+                at.as_ref(),
+                &s[i * n..(i + 1) * n],
+                &z_bar[i * (n + m)..(i + 1) * (n + m)],
+                tmp,
+                &mut s_bar[i * n..(i + 1) * n],
+                u_bar,
+            );
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::mlp::WeightInit;
@@ -903,15 +1095,16 @@ mod tests {
         }
     }
 
-    /// The rollout loss adds its weight-gradient terms in one batch per chunk of windows: the
-    /// bits of adding each at once, during the backward pass through every window (the
-    /// oracle below, one [`step_vjp`] per step with the gradient), for windows filling one
-    /// chunk, several chunks, and a partial last chunk.
+    /// The rollout loss runs the windows of a chunk through each step together and adds its
+    /// weight-gradient terms in one batch per chunk: the bits of running each window alone and
+    /// adding each term at once, during the backward pass through every window (the oracle
+    /// below, one [`predict_with`] and one [`step_vjp`] per step), for the loss and its
+    /// gradient, for windows filling one chunk, several chunks, and a partial last chunk,
+    /// through a planar frame and a spatial one (with and without the heading attitude, the
+    /// dolphin's frames).
     #[test]
-    fn rollout_loss_gradient_is_the_one_pass_at_a_time_sum_bit_for_bit() {
-        let (e, data) = emulator(true);
-        let sigma = rollout::change_spread(&data);
-        let inv_var: Vec<f64> = sigma.iter().map(|s| 1.0 / (s * s)).collect();
+    fn rollout_loss_and_gradient_are_the_one_window_at_a_time_sums_bit_for_bit() {
+        let (planar, data) = emulator(true);
         // 20 hidden units, so that the output layer's gradient fills whole register tiles
         // (3 rows × 16 columns) as well as edge ones.
         let init = WeightInit::Uniform {
@@ -920,58 +1113,121 @@ mod tests {
         };
         let mut net = Mlp::new(N + M, 20, N, init, &mut ChaCha8Rng::seed_from_u64(8));
         net.weights_mut().iter_mut().for_each(|v| *v *= 0.3);
-        let (n, m) = (e.transforms().state_dim, e.transforms().control_dim);
-        for windows in [5, 16, 37] {
-            let w = body_windows(windows, 4, 2);
-            let loss = rollout::RolloutLoss::new(e.transforms(), &w, &sigma).unwrap();
-            let mut g = vec![0.0; net.n_weights()];
-            loss.value_grad(&net, &mut g);
-            let mut want = vec![0.0; net.n_weights()];
-            let mut scratch = Emulator::make_scratch(&net, n, m);
-            let scale = 1.0 / (w.len() * w.k * n) as f64;
-            for rows in (0..w.len()).collect::<Vec<_>>().chunks(16) {
-                let mut part = vec![0.0; net.n_weights()];
-                for &r in rows {
-                    let mut traj = vec![w.state(r, 0).to_vec()];
-                    for i in 0..w.k {
-                        let mut next = vec![0.0; n];
-                        predict_with(
-                            e.transforms(),
-                            &net,
-                            &traj[i],
-                            w.control(r, i),
-                            &mut scratch,
-                            &mut next,
-                        );
-                        traj.push(next);
-                    }
-                    let (mut next_bar, mut prev_bar, mut u_bar) =
-                        (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
-                    for i in (1..=w.k).rev() {
-                        for v in 0..n {
-                            next_bar[v] += 2.0 * (traj[i][v] - w.state(r, i)[v]) * inv_var[v];
-                        }
-                        prev_bar.fill(0.0);
-                        step_vjp(
-                            e.transforms(),
-                            &net,
-                            &traj[i - 1],
-                            w.control(r, i - 1),
-                            &next_bar,
-                            &mut scratch,
-                            &mut prev_bar,
-                            &mut u_bar,
-                            Some(&mut part),
-                        );
-                        std::mem::swap(&mut next_bar, &mut prev_bar);
-                    }
-                }
-                for (o, v) in want.iter_mut().zip(&part) {
-                    *o += scale * v;
+        let planar_sigma = rollout::change_spread(&data);
+        let (spatial, sdata) = spatial_emulator(true);
+        let mut heading = transform::SpatialFrame::rigid_body(0, 3, 7, 10);
+        heading.attitude = transform::Attitude::Heading;
+        let heading_t = Transforms {
+            frame: Some(heading.into()),
+            ..spatial.transforms().clone()
+        };
+        let spatial_sigma = rollout::change_spread(&sdata);
+        let mut snet = spatial.mlp().clone();
+        snet.weights_mut().iter_mut().for_each(|v| *v *= 0.3);
+        // Windows of the 3D body: random states near its data's (not a simulation: the loss
+        // and its gradient are defined for any targets).
+        let spatial_windows = |count: usize, k: usize| {
+            let mut rng = ChaCha8Rng::seed_from_u64(40 + count as u64);
+            let mut states = Vec::new();
+            for _ in 0..count * (k + 1) {
+                let r = rng.random_range(0..sdata.states.nrows());
+                for v in sdata.states.row(r) {
+                    states.push(v + rng.random_range(-0.05..0.05));
                 }
             }
-            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&g), bits(&want), "{windows} windows");
+            let controls = (0..count * k * 2)
+                .map(|_| rng.random_range(-1.0..1.0))
+                .collect();
+            dataset::Windows {
+                k,
+                state_dim: 13,
+                control_dim: 2,
+                states,
+                controls,
+                episode: vec![0; count],
+                start_step: vec![0; count],
+            }
+        };
+        let cases: Vec<(&str, &Transforms, &Mlp, &[f64], Vec<dataset::Windows>)> = vec![
+            (
+                "planar",
+                planar.transforms(),
+                &net,
+                &planar_sigma,
+                [5, 16, 37].map(|c| body_windows(c, 4, 2)).to_vec(),
+            ),
+            (
+                "spatial",
+                spatial.transforms(),
+                &snet,
+                &spatial_sigma,
+                [7, 33].map(|c| spatial_windows(c, 3)).to_vec(),
+            ),
+            (
+                "spatial heading",
+                &heading_t,
+                &snet,
+                &spatial_sigma,
+                [17].map(|c| spatial_windows(c, 5)).to_vec(),
+            ),
+        ];
+        for (name, t, net, sigma, windows) in cases {
+            let inv_var: Vec<f64> = sigma.iter().map(|s| 1.0 / (s * s)).collect();
+            let (n, m) = (t.state_dim, t.control_dim);
+            for w in &windows {
+                let loss = rollout::RolloutLoss::new(t, w, sigma).unwrap();
+                let mut g = vec![0.0; net.n_weights()];
+                let value = loss.value_grad(net, &mut g);
+                assert!(value.is_finite() && value > 0.0);
+                let mut want = vec![0.0; net.n_weights()];
+                let mut total = 0.0;
+                let mut scratch = Emulator::make_scratch(net, n, m);
+                let scale = 1.0 / (w.len() * w.k * n) as f64;
+                for rows in (0..w.len()).collect::<Vec<_>>().chunks(16) {
+                    let mut part = vec![0.0; net.n_weights()];
+                    let mut part_loss = 0.0;
+                    for &r in rows {
+                        let mut traj = vec![w.state(r, 0).to_vec()];
+                        for i in 0..w.k {
+                            let mut next = vec![0.0; n];
+                            let u = w.control(r, i);
+                            predict_with(t, net, &traj[i], u, &mut scratch, &mut next);
+                            for v in 0..n {
+                                part_loss += (next[v] - w.state(r, i + 1)[v]).powi(2) * inv_var[v];
+                            }
+                            traj.push(next);
+                        }
+                        let (mut next_bar, mut prev_bar, mut u_bar) =
+                            (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
+                        for i in (1..=w.k).rev() {
+                            for v in 0..n {
+                                next_bar[v] += 2.0 * (traj[i][v] - w.state(r, i)[v]) * inv_var[v];
+                            }
+                            prev_bar.fill(0.0);
+                            step_vjp(
+                                t,
+                                net,
+                                &traj[i - 1],
+                                w.control(r, i - 1),
+                                &next_bar,
+                                &mut scratch,
+                                &mut prev_bar,
+                                &mut u_bar,
+                                Some(&mut part),
+                            );
+                            std::mem::swap(&mut next_bar, &mut prev_bar);
+                        }
+                    }
+                    total += part_loss;
+                    for (o, v) in want.iter_mut().zip(&part) {
+                        *o += scale * v;
+                    }
+                }
+                let at = format!("{name}, {} windows", w.len());
+                assert_eq!(value.to_bits(), (scale * total).to_bits(), "{at}: loss");
+                assert_eq!(loss.value(net).to_bits(), value.to_bits(), "{at}: value");
+                assert!(same_bits(&g, &want), "{at}: gradient");
+            }
         }
     }
 

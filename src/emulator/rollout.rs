@@ -28,9 +28,7 @@ use super::train::{
     minimize_early_stopping, mse, Dataset, Evaluated, FullBatchConfig, FullBatchMethod,
     TrainReport, TrainingProblem,
 };
-use super::{
-    predict_with, step_vjp_after_forward, Emulator, EmulatorError, Transforms, Transitions,
-};
+use super::{steps_many, vjps_many, Emulator, EmulatorError, ManyScratch, Transforms, Transitions};
 use argmin::core::{CostFunction, Gradient};
 use ndarray::Array1;
 use rayon::prelude::*;
@@ -133,76 +131,96 @@ impl<'a> RolloutLoss<'a> {
     }
 
     /// Unscaled loss and gradient sums over windows `rows`.
+    ///
+    /// The windows of the chunk go through each step together ([`steps_many`], [`vjps_many`]:
+    /// the network's passes take them all at once, the transforms one by one), and every sum
+    /// is kept in the order of one window after the other (the loss's terms window by window,
+    /// step by step; the weight-gradient terms window by window, last step first), so the
+    /// results are the same bits as running the windows one at a time.
     fn chunk(&self, mlp: &Mlp, rows: std::ops::Range<usize>, want_grad: bool) -> (f64, Vec<f64>) {
         let (t, w) = (self.transforms, self.windows);
         let (n, m, k, q) = (w.state_dim, w.control_dim, w.k, mlp.n_hidden());
-        let mut scratch = Emulator::make_scratch(mlp, n, m);
+        let (b, p) = (rows.len(), n + m);
+        let mut many = ManyScratch::default();
+        many.reset(t, mlp, b);
         let mut grad = vec![0.0; if want_grad { mlp.n_weights() } else { 0 }];
-        let mut traj = vec![0.0; (k + 1) * n];
-        // Each step's forward pass (network input, output, hidden activations), kept for the
-        // backward pass.
-        let (mut zs, mut ys, mut hs) = (vec![0.0; k * (n + m)], vec![0.0; k * n], vec![0.0; k * q]);
-        let (mut next_bar, mut prev_bar, mut u_bar) = (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
-        // The backward passes' weight-gradient terms, kept in the order they are made and
-        // added at the end of the chunk ([`Mlp::weight_grad_many`]: the same sums, bit for bit,
-        // as adding each at once).
-        let (p, r_out) = (mlp.n_in(), mlp.n_out());
-        let cap = if want_grad { rows.len() * k } else { 0 };
-        let mut tape = TAPE.with_borrow_mut(std::mem::take);
-        tape.reset(cap, (p, q, r_out));
+        // States, step-major: the b windows' states at step i are rows i·b … (i + 1)·b − 1.
+        let mut traj = vec![0.0; (k + 1) * b * n];
+        // Each step's network input, hidden activations and output, step-major, kept for the
+        // backward pass; the step's controls.
+        let (mut zs, mut hs, mut ys) = (
+            vec![0.0; k * b * p],
+            vec![0.0; k * b * q],
+            vec![0.0; k * b * n],
+        );
+        let mut us = vec![0.0; b * m];
+        for (wi, r) in rows.clone().enumerate() {
+            traj[wi * n..(wi + 1) * n].copy_from_slice(w.state(r, 0));
+        }
+        for i in 0..k {
+            for (wi, r) in rows.clone().enumerate() {
+                us[wi * m..(wi + 1) * m].copy_from_slice(w.control(r, i));
+            }
+            let (done, rest) = traj.split_at_mut((i + 1) * b * n);
+            let at = |width: usize| i * b * width..(i + 1) * b * width;
+            steps_many(
+                t,
+                mlp,
+                (&done[i * b * n..], &us),
+                (&mut zs[at(p)], &mut hs[at(q)], &mut ys[at(n)]),
+                &mut many,
+                &mut rest[..b * n],
+            );
+        }
         let mut loss = 0.0;
-        for r in rows {
-            traj[..n].copy_from_slice(w.state(r, 0));
+        for (wi, r) in rows.clone().enumerate() {
             for i in 0..k {
-                let (done, rest) = traj.split_at_mut((i + 1) * n);
-                let s_next = &mut rest[..n];
-                let u = w.control(r, i);
-                predict_with(t, mlp, &done[i * n..], u, &mut scratch, s_next);
-                zs[i * (n + m)..(i + 1) * (n + m)].copy_from_slice(&scratch.z);
-                ys[i * n..(i + 1) * n].copy_from_slice(&scratch.y);
-                hs[i * q..(i + 1) * q].copy_from_slice(&scratch.mlp.hidden);
-                let truth = w.state(r, i + 1);
+                let (s_next, truth) = (&traj[((i + 1) * b + wi) * n..][..n], w.state(r, i + 1));
                 for v in 0..n {
                     loss += (s_next[v] - truth[v]).powi(2) * self.inv_var[v];
                 }
             }
-            if !want_grad {
-                continue;
-            }
-            next_bar.fill(0.0);
-            for i in (1..=k).rev() {
-                let (s_hat, truth) = (&traj[i * n..(i + 1) * n], w.state(r, i));
-                for v in 0..n {
-                    next_bar[v] += 2.0 * (s_hat[v] - truth[v]) * self.inv_var[v];
-                }
-                let j = i - 1;
-                scratch.z.copy_from_slice(&zs[j * (n + m)..i * (n + m)]);
-                scratch.y.copy_from_slice(&ys[j * n..i * n]);
-                scratch.mlp.hidden.copy_from_slice(&hs[j * q..i * q]);
-                prev_bar.fill(0.0);
-                step_vjp_after_forward(
-                    t,
-                    mlp,
-                    &traj[j * n..i * n],
-                    &next_bar,
-                    &mut scratch,
-                    &mut prev_bar,
-                    &mut u_bar,
-                    None,
-                );
-                let e = tape.len;
-                tape.x[e * p..(e + 1) * p].copy_from_slice(&scratch.z);
-                tape.h[e * q..(e + 1) * q].copy_from_slice(&scratch.mlp.hidden);
-                tape.hb[e * q..(e + 1) * q].copy_from_slice(&scratch.mlp.hidden_bar);
-                tape.yb[e * r_out..(e + 1) * r_out].copy_from_slice(&scratch.y_bar);
-                tape.len += 1;
-                std::mem::swap(&mut next_bar, &mut prev_bar);
-            }
         }
         if want_grad {
+            // The cotangents of each window's state at the step being undone, and of the
+            // step before.
+            let (mut next_bar, mut prev_bar) = (vec![0.0; b * n], vec![0.0; b * n]);
+            // The backward passes' weight-gradient terms, in the order of one window after
+            // the other, each from its last step back ([`Mlp::weight_grad_many`]: the same
+            // sums, bit for bit, as adding each at once).
+            let r_out = mlp.n_out();
+            let mut tape = TAPE.with_borrow_mut(std::mem::take);
+            tape.reset(b * k, (p, q, r_out));
+            for i in (1..=k).rev() {
+                for (wi, r) in rows.clone().enumerate() {
+                    let (s_hat, truth) = (&traj[(i * b + wi) * n..][..n], w.state(r, i));
+                    let bar = &mut next_bar[wi * n..(wi + 1) * n];
+                    for v in 0..n {
+                        bar[v] += 2.0 * (s_hat[v] - truth[v]) * self.inv_var[v];
+                    }
+                }
+                let j = i - 1;
+                let (sj, hj, yj) = (
+                    &traj[j * b * n..i * b * n],
+                    &hs[j * b * q..i * b * q],
+                    &ys[j * b * n..i * b * n],
+                );
+                prev_bar.fill(0.0);
+                vjps_many(t, mlp, (sj, hj, yj), &next_bar, &mut many, &mut prev_bar);
+                for wi in 0..b {
+                    let e = wi * k + (k - i);
+                    let row = j * b + wi;
+                    tape.x[e * p..(e + 1) * p].copy_from_slice(&zs[row * p..(row + 1) * p]);
+                    tape.h[e * q..(e + 1) * q].copy_from_slice(&hs[row * q..(row + 1) * q]);
+                    tape.hb[e * q..(e + 1) * q].copy_from_slice(many.hidden_bar(wi, q));
+                    tape.yb[e * r_out..(e + 1) * r_out].copy_from_slice(many.output_bar(wi, r_out));
+                }
+                std::mem::swap(&mut next_bar, &mut prev_bar);
+            }
+            tape.len = b * k;
             mlp.weight_grad_many(tape.len, (&tape.x, &tape.h, &tape.hb, &tape.yb), &mut grad);
+            TAPE.with_borrow_mut(|t| *t = tape);
         }
-        TAPE.with_borrow_mut(|t| *t = tape);
         (loss, grad)
     }
 }

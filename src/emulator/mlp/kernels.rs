@@ -679,6 +679,8 @@ macro_rules! dispatch_wide {
 
 mod batch;
 pub(super) use batch::{chunk_loss, chunk_loss_grad, Ahead, BatchNet, MAX_DEPTH};
+mod many;
+pub(super) use many::{backward_many, forward_many};
 
 /// Hidden activations h = σ(W₁ x + b₁).
 #[inline(always)]
@@ -816,8 +818,14 @@ fn weight_grad_generic<L: Lanes>(
 /// `rows`, and of `vecs`, stride `cols`), g[i, ·] += coef[e, i] · vecs[e, ·] over the `rows` ×
 /// `cols` matrix `g`, each entry by one fused multiply–add per example, examples in turn: the
 /// same operations, in the same order per entry, as one `rank1` call per example (so the same
-/// bits), with the entries of a tile (3 rows × 16 columns) held in registers across the
-/// examples instead of loaded and stored once per example.
+/// bits), with the entries of a tile (up to 3 rows × 3 lane groups) held in registers across
+/// the examples instead of loaded and stored once per example.
+///
+/// The columns past the last whole lane group (fewer than 4) take lanes across 4 rows instead
+/// (the coefficients of consecutive rows are consecutive), with the same chain per entry
+/// (multiplication commutes, so fma(coef, vec, g) either way). Tiles are at most 9
+/// accumulators: with AVX2's 16 registers, 12 (3 rows × 4 groups) left one on the stack, and
+/// the loop waited on it; and one entry at a time, each chain waits on its own latency.
 #[inline(always)]
 fn rank1_many<L: Lanes>(
     g: &mut [f64],
@@ -827,102 +835,149 @@ fn rank1_many<L: Lanes>(
     vecs: &[f64],
     examples: usize,
 ) {
-    const RB: usize = 3;
-    const CB: usize = 4;
+    assert!(g.len() >= rows * cols);
+    assert!(coef.len() >= examples * rows && vecs.len() >= examples * cols);
+    let args = (rows, cols, coef, vecs, examples);
     let groups = cols / 4;
     let mut i0 = 0;
     while i0 < rows {
-        let rb = RB.min(rows - i0);
+        let rb = 3.min(rows - i0);
         let mut c0 = 0;
         while c0 < groups {
-            let cb = CB.min(groups - c0);
-            if rb == RB && cb == CB {
-                // 12 accumulators named one by one, so that they stay in registers.
-                let at = |a: usize, c: usize| (i0 + a) * cols + (c0 + c) * 4;
-                let (mut a00, mut a01, mut a02, mut a03) = (
-                    L::load(&g[at(0, 0)..]),
-                    L::load(&g[at(0, 1)..]),
-                    L::load(&g[at(0, 2)..]),
-                    L::load(&g[at(0, 3)..]),
-                );
-                let (mut a10, mut a11, mut a12, mut a13) = (
-                    L::load(&g[at(1, 0)..]),
-                    L::load(&g[at(1, 1)..]),
-                    L::load(&g[at(1, 2)..]),
-                    L::load(&g[at(1, 3)..]),
-                );
-                let (mut a20, mut a21, mut a22, mut a23) = (
-                    L::load(&g[at(2, 0)..]),
-                    L::load(&g[at(2, 1)..]),
-                    L::load(&g[at(2, 2)..]),
-                    L::load(&g[at(2, 3)..]),
-                );
-                for (x, c) in vecs
-                    .chunks_exact(cols)
-                    .zip(coef.chunks_exact(rows))
-                    .take(examples)
-                {
-                    let x = &x[c0 * 4..c0 * 4 + 16];
-                    let (x0, x1, x2, x3) = (
-                        L::load(&x[0..]),
-                        L::load(&x[4..]),
-                        L::load(&x[8..]),
-                        L::load(&x[12..]),
-                    );
-                    let c = &c[i0..i0 + 3];
-                    let s0 = L::splat(c[0]);
-                    a00 = L::fma(s0, x0, a00);
-                    a01 = L::fma(s0, x1, a01);
-                    a02 = L::fma(s0, x2, a02);
-                    a03 = L::fma(s0, x3, a03);
-                    let s1 = L::splat(c[1]);
-                    a10 = L::fma(s1, x0, a10);
-                    a11 = L::fma(s1, x1, a11);
-                    a12 = L::fma(s1, x2, a12);
-                    a13 = L::fma(s1, x3, a13);
-                    let s2 = L::splat(c[2]);
-                    a20 = L::fma(s2, x0, a20);
-                    a21 = L::fma(s2, x1, a21);
-                    a22 = L::fma(s2, x2, a22);
-                    a23 = L::fma(s2, x3, a23);
-                }
-                for (a, row) in [
-                    [a00, a01, a02, a03],
-                    [a10, a11, a12, a13],
-                    [a20, a21, a22, a23],
-                ]
-                .into_iter()
-                .enumerate()
-                {
-                    for (c, v) in row.into_iter().enumerate() {
-                        L::store(v, &mut g[at(a, c)..]);
-                    }
-                }
-            } else {
-                for a in 0..rb {
-                    for c in 0..cb {
-                        let at = (i0 + a) * cols + (c0 + c) * 4;
-                        let mut v = L::load(&g[at..]);
-                        for e in 0..examples {
-                            let s = L::splat(coef[e * rows + i0 + a]);
-                            v = L::fma(s, L::load(&vecs[e * cols + (c0 + c) * 4..]), v);
-                        }
-                        L::store(v, &mut g[at..]);
-                    }
-                }
+            let cb = 3.min(groups - c0);
+            match (rb, cb) {
+                (3, 3) => rank1_tile::<L, 3, 3>(g, args, i0, c0),
+                (3, 2) => rank1_tile::<L, 3, 2>(g, args, i0, c0),
+                (3, _) => rank1_tile::<L, 3, 1>(g, args, i0, c0),
+                (2, 3) => rank1_tile::<L, 2, 3>(g, args, i0, c0),
+                (2, 2) => rank1_tile::<L, 2, 2>(g, args, i0, c0),
+                (2, _) => rank1_tile::<L, 2, 1>(g, args, i0, c0),
+                (_, 3) => rank1_tile::<L, 1, 3>(g, args, i0, c0),
+                (_, 2) => rank1_tile::<L, 1, 2>(g, args, i0, c0),
+                _ => rank1_tile::<L, 1, 1>(g, args, i0, c0),
             }
             c0 += cb;
         }
-        for a in 0..rb {
-            for j in groups * 4..cols {
-                let mut v = g[(i0 + a) * cols + j];
-                for e in 0..examples {
-                    v = coef[e * rows + i0 + a].mul_add(vecs[e * cols + j], v);
-                }
-                g[(i0 + a) * cols + j] = v;
+        i0 += rb;
+    }
+    let j0 = groups * 4;
+    if j0 == cols {
+        return;
+    }
+    // The last columns, 4 rows to a lane group.
+    let rows4 = rows / 4 * 4;
+    let mut i0 = 0;
+    while i0 < rows4 {
+        let rb = 3.min((rows4 - i0) / 4);
+        match (cols - j0, rb) {
+            (3, 3) => rank1_tail::<L, 3, 3>(g, args, i0, j0),
+            (3, 2) => rank1_tail::<L, 3, 2>(g, args, i0, j0),
+            (3, _) => rank1_tail::<L, 3, 1>(g, args, i0, j0),
+            (2, 3) => rank1_tail::<L, 2, 3>(g, args, i0, j0),
+            (2, 2) => rank1_tail::<L, 2, 2>(g, args, i0, j0),
+            (2, _) => rank1_tail::<L, 2, 1>(g, args, i0, j0),
+            (_, 3) => rank1_tail::<L, 1, 3>(g, args, i0, j0),
+            (_, 2) => rank1_tail::<L, 1, 2>(g, args, i0, j0),
+            _ => rank1_tail::<L, 1, 1>(g, args, i0, j0),
+        }
+        i0 += 4 * rb;
+    }
+    // Fewer than 4 rows left in those columns: one entry at a time.
+    for i in rows4..rows {
+        for j in j0..cols {
+            let mut v = g[i * cols + j];
+            for e in 0..examples {
+                v = coef[e * rows + i].mul_add(vecs[e * cols + j], v);
+            }
+            g[i * cols + j] = v;
+        }
+    }
+}
+
+/// [`rank1_many`]'s arguments after g: rows, cols, coef, vecs, examples.
+type Rank1<'a> = (usize, usize, &'a [f64], &'a [f64], usize);
+
+/// The entries of rows i0 .. i0 + RB and lane groups c0 .. c0 + CB of [`rank1_many`], in
+/// registers over every example.
+#[inline(always)]
+fn rank1_tile<L: Lanes, const RB: usize, const CB: usize>(
+    g: &mut [f64],
+    (rows, cols, coef, vecs, examples): Rank1<'_>,
+    i0: usize,
+    c0: usize,
+) {
+    let at = |a: usize, c: usize| (i0 + a) * cols + (c0 + c) * 4;
+    let mut acc = [[L::splat(0.0); CB]; RB];
+    for (a, row) in acc.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = L::load(&g[at(a, c)..]);
+        }
+    }
+    for (x, k) in vecs
+        .chunks_exact(cols)
+        .zip(coef.chunks_exact(rows))
+        .take(examples)
+    {
+        let mut xv = [L::splat(0.0); CB];
+        for (c, v) in xv.iter_mut().enumerate() {
+            *v = L::load(&x[(c0 + c) * 4..]);
+        }
+        for (a, row) in acc.iter_mut().enumerate() {
+            let s = L::splat(k[i0 + a]);
+            for (v, &x) in row.iter_mut().zip(&xv) {
+                *v = L::fma(s, x, *v);
             }
         }
-        i0 += rb;
+    }
+    for (a, row) in acc.iter().enumerate() {
+        for (c, &v) in row.iter().enumerate() {
+            L::store(v, &mut g[at(a, c)..]);
+        }
+    }
+}
+
+/// The entries of columns j0 .. j0 + NC (past the last whole lane group) and rows i0 .. i0 +
+/// 4·RB of [`rank1_many`], each lane group holding one column of 4 consecutive rows.
+#[inline(always)]
+fn rank1_tail<L: Lanes, const NC: usize, const RB: usize>(
+    g: &mut [f64],
+    (rows, cols, coef, vecs, examples): Rank1<'_>,
+    i0: usize,
+    j0: usize,
+) {
+    let mut acc = [[L::splat(0.0); RB]; NC];
+    let mut lanes = [0.0; 4];
+    for (c, row) in acc.iter_mut().enumerate() {
+        for (b, v) in row.iter_mut().enumerate() {
+            for (l, x) in lanes.iter_mut().enumerate() {
+                *x = g[(i0 + 4 * b + l) * cols + j0 + c];
+            }
+            *v = L::load(&lanes);
+        }
+    }
+    for (x, k) in vecs
+        .chunks_exact(cols)
+        .zip(coef.chunks_exact(rows))
+        .take(examples)
+    {
+        let mut kv = [L::splat(0.0); RB];
+        for (b, v) in kv.iter_mut().enumerate() {
+            *v = L::load(&k[i0 + 4 * b..]);
+        }
+        for (c, row) in acc.iter_mut().enumerate() {
+            let s = L::splat(x[j0 + c]);
+            for (v, &k) in row.iter_mut().zip(&kv) {
+                *v = L::fma(k, s, *v);
+            }
+        }
+    }
+    for (c, row) in acc.iter().enumerate() {
+        for (b, &v) in row.iter().enumerate() {
+            L::store(v, &mut lanes);
+            for (l, x) in lanes.iter().enumerate() {
+                g[(i0 + 4 * b + l) * cols + j0 + c] = *x;
+            }
+        }
     }
 }
 
@@ -1067,7 +1122,7 @@ mod tests {
 
     /// Many examples' weight gradients added at once give the bits of one [`weight_grad`] call
     /// per example in turn, on both paths, for shapes with and without remainders (rows not a
-    /// multiple of the 3-row tiles, columns not of 4 or 16) and any example count.
+    /// multiple of the 3-row tiles or of 4, columns not of 4 or 12) and any example count.
     #[test]
     fn batched_weight_gradients_match_one_example_at_a_time_bit_for_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(13);
@@ -1078,6 +1133,10 @@ mod tests {
             (70, 40, 24),
             (6, 20, 6),
             (9, 1, 1),
+            // Columns past the last lane group (3 and 2 of them) over rows in groups of 4 and
+            // rows left over.
+            (15, 7, 13),
+            (58, 42, 30),
         ] {
             for examples in [0, 1, 7, 128] {
                 let mut draw = |n: usize| -> Vec<f64> {
