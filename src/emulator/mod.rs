@@ -623,7 +623,9 @@ impl ManyScratch {
     /// Sized for `rows` rows of transforms `t` and network `mlp` (grown, never shrunk).
     pub(crate) fn reset(&mut self, t: &Transforms, mlp: &Mlp, rows: usize) {
         let (n, m, q) = (t.state_dim, t.control_dim, mlp.n_hidden());
-        self.ats.resize(rows, None);
+        if self.ats.len() < rows {
+            self.ats.resize(rows, None);
+        }
         for (v, len) in [
             (&mut self.y_bar, rows * n),
             (&mut self.h_bar, rows * q),
@@ -662,11 +664,12 @@ pub(crate) fn steps_many(
     scratch: &mut ManyScratch,
     s_next: &mut [f64],
 ) {
-    let rows = s.len() / t.state_dim.max(1);
+    let n = t.state_dim;
+    let rows = s.len() / n.max(1);
     let ats = &mut scratch.ats[..rows];
     encode_rows(t, s, u, ats, z);
     mlp.forward_many(rows, z, h, y);
-    decode_rows(t, ats, s, y, &mut scratch.t1, s_next);
+    decode_rows(t, ats, s, y, &mut scratch.t1[..n], s_next);
 }
 
 /// The vector–Jacobian products of many steps at once after [`steps_many`] (its states `s`,
@@ -682,7 +685,8 @@ pub(crate) fn vjps_many(
     scratch: &mut ManyScratch,
     s_bar: &mut [f64],
 ) {
-    let rows = s.len() / t.state_dim.max(1);
+    let (n, m) = (t.state_dim, t.control_dim);
+    let rows = s.len() / n.max(1);
     let ManyScratch {
         ats,
         y_bar,
@@ -692,7 +696,16 @@ pub(crate) fn vjps_many(
         t2,
         u_bar,
     } = scratch;
-    let ats = &mut ats[..rows];
+    // Every buffer cut to its length: the transforms read some lengths from their buffers,
+    // and a thread's scratch may have served a larger net before.
+    let (ats, t1, t2, u_bar) = (
+        &mut ats[..rows],
+        &mut t1[..n],
+        &mut t2[..n],
+        &mut u_bar[..m],
+    );
+    let (y_bar, h_bar) = (&mut y_bar[..rows * n], &mut h_bar[..rows * mlp.n_hidden()]);
+    let z_bar = &mut z_bar[..rows * (n + m)];
     decode_vjp_rows(t, s, y, s_next_bar, t1, t2, ats, y_bar, s_bar);
     mlp.backward_many(rows, (h, y_bar), h_bar, z_bar);
     encode_vjp_rows(t, ats, s, z_bar, t1, s_bar, u_bar);
@@ -1148,20 +1161,22 @@ mod tests {
                 start_step: vec![0; count],
             }
         };
+        // The larger body first, on one thread: the smaller then runs in buffers a larger
+        // net's chunks left behind (each thread keeps its own).
         let cases: Vec<(&str, &Transforms, &Mlp, &[f64], Vec<dataset::Windows>)> = vec![
-            (
-                "planar",
-                planar.transforms(),
-                &net,
-                &planar_sigma,
-                [5, 16, 37].map(|c| body_windows(c, 4, 2)).to_vec(),
-            ),
             (
                 "spatial",
                 spatial.transforms(),
                 &snet,
                 &spatial_sigma,
                 [7, 33].map(|c| spatial_windows(c, 3)).to_vec(),
+            ),
+            (
+                "planar",
+                planar.transforms(),
+                &net,
+                &planar_sigma,
+                [5, 16, 37].map(|c| body_windows(c, 4, 2)).to_vec(),
             ),
             (
                 "spatial heading",
@@ -1171,64 +1186,72 @@ mod tests {
                 [17].map(|c| spatial_windows(c, 5)).to_vec(),
             ),
         ];
-        for (name, t, net, sigma, windows) in cases {
-            let inv_var: Vec<f64> = sigma.iter().map(|s| 1.0 / (s * s)).collect();
-            let (n, m) = (t.state_dim, t.control_dim);
-            for w in &windows {
-                let loss = rollout::RolloutLoss::new(t, w, sigma).unwrap();
-                let mut g = vec![0.0; net.n_weights()];
-                let value = loss.value_grad(net, &mut g);
-                assert!(value.is_finite() && value > 0.0);
-                let mut want = vec![0.0; net.n_weights()];
-                let mut total = 0.0;
-                let mut scratch = Emulator::make_scratch(net, n, m);
-                let scale = 1.0 / (w.len() * w.k * n) as f64;
-                for rows in (0..w.len()).collect::<Vec<_>>().chunks(16) {
-                    let mut part = vec![0.0; net.n_weights()];
-                    let mut part_loss = 0.0;
-                    for &r in rows {
-                        let mut traj = vec![w.state(r, 0).to_vec()];
-                        for i in 0..w.k {
-                            let mut next = vec![0.0; n];
-                            let u = w.control(r, i);
-                            predict_with(t, net, &traj[i], u, &mut scratch, &mut next);
-                            for v in 0..n {
-                                part_loss += (next[v] - w.state(r, i + 1)[v]).powi(2) * inv_var[v];
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            for (name, t, net, sigma, windows) in cases {
+                let inv_var: Vec<f64> = sigma.iter().map(|s| 1.0 / (s * s)).collect();
+                let (n, m) = (t.state_dim, t.control_dim);
+                for w in &windows {
+                    let loss = rollout::RolloutLoss::new(t, w, sigma).unwrap();
+                    let mut g = vec![0.0; net.n_weights()];
+                    let value = loss.value_grad(net, &mut g);
+                    assert!(value.is_finite() && value > 0.0);
+                    let mut want = vec![0.0; net.n_weights()];
+                    let mut total = 0.0;
+                    let mut scratch = Emulator::make_scratch(net, n, m);
+                    let scale = 1.0 / (w.len() * w.k * n) as f64;
+                    for rows in (0..w.len()).collect::<Vec<_>>().chunks(16) {
+                        let mut part = vec![0.0; net.n_weights()];
+                        let mut part_loss = 0.0;
+                        for &r in rows {
+                            let mut traj = vec![w.state(r, 0).to_vec()];
+                            for i in 0..w.k {
+                                let mut next = vec![0.0; n];
+                                let u = w.control(r, i);
+                                predict_with(t, net, &traj[i], u, &mut scratch, &mut next);
+                                for v in 0..n {
+                                    part_loss +=
+                                        (next[v] - w.state(r, i + 1)[v]).powi(2) * inv_var[v];
+                                }
+                                traj.push(next);
                             }
-                            traj.push(next);
+                            let (mut next_bar, mut prev_bar, mut u_bar) =
+                                (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
+                            for i in (1..=w.k).rev() {
+                                for v in 0..n {
+                                    next_bar[v] +=
+                                        2.0 * (traj[i][v] - w.state(r, i)[v]) * inv_var[v];
+                                }
+                                prev_bar.fill(0.0);
+                                step_vjp(
+                                    t,
+                                    net,
+                                    &traj[i - 1],
+                                    w.control(r, i - 1),
+                                    &next_bar,
+                                    &mut scratch,
+                                    &mut prev_bar,
+                                    &mut u_bar,
+                                    Some(&mut part),
+                                );
+                                std::mem::swap(&mut next_bar, &mut prev_bar);
+                            }
                         }
-                        let (mut next_bar, mut prev_bar, mut u_bar) =
-                            (vec![0.0; n], vec![0.0; n], vec![0.0; m]);
-                        for i in (1..=w.k).rev() {
-                            for v in 0..n {
-                                next_bar[v] += 2.0 * (traj[i][v] - w.state(r, i)[v]) * inv_var[v];
-                            }
-                            prev_bar.fill(0.0);
-                            step_vjp(
-                                t,
-                                net,
-                                &traj[i - 1],
-                                w.control(r, i - 1),
-                                &next_bar,
-                                &mut scratch,
-                                &mut prev_bar,
-                                &mut u_bar,
-                                Some(&mut part),
-                            );
-                            std::mem::swap(&mut next_bar, &mut prev_bar);
+                        total += part_loss;
+                        for (o, v) in want.iter_mut().zip(&part) {
+                            *o += scale * v;
                         }
                     }
-                    total += part_loss;
-                    for (o, v) in want.iter_mut().zip(&part) {
-                        *o += scale * v;
-                    }
+                    let at = format!("{name}, {} windows", w.len());
+                    assert_eq!(value.to_bits(), (scale * total).to_bits(), "{at}: loss");
+                    assert_eq!(loss.value(net).to_bits(), value.to_bits(), "{at}: value");
+                    assert!(same_bits(&g, &want), "{at}: gradient");
                 }
-                let at = format!("{name}, {} windows", w.len());
-                assert_eq!(value.to_bits(), (scale * total).to_bits(), "{at}: loss");
-                assert_eq!(loss.value(net).to_bits(), value.to_bits(), "{at}: value");
-                assert!(same_bits(&g, &want), "{at}: gradient");
             }
-        }
+        });
     }
 
     #[test]

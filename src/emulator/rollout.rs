@@ -141,19 +141,19 @@ impl<'a> RolloutLoss<'a> {
         let (t, w) = (self.transforms, self.windows);
         let (n, m, k, q) = (w.state_dim, w.control_dim, w.k, mlp.n_hidden());
         let (b, p) = (rows.len(), n + m);
-        let mut many = ManyScratch::default();
-        many.reset(t, mlp, b);
         let mut grad = vec![0.0; if want_grad { mlp.n_weights() } else { 0 }];
-        // States, step-major: the b windows' states at step i are rows i·b … (i + 1)·b − 1.
-        let mut traj = vec![0.0; (k + 1) * b * n];
-        // Each step's network input, hidden activations and output, step-major, kept for the
-        // backward pass; the step's controls.
-        let (mut zs, mut hs, mut ys) = (
-            vec![0.0; k * b * p],
-            vec![0.0; k * b * q],
-            vec![0.0; k * b * n],
-        );
-        let mut us = vec![0.0; b * m];
+        let mut bufs = BUFFERS.with_borrow_mut(std::mem::take);
+        bufs.reset(t, mlp, (b, k));
+        let ChunkBuffers {
+            traj,
+            zs,
+            hs,
+            ys,
+            us,
+            next_bar,
+            prev_bar,
+            many,
+        } = &mut bufs;
         for (wi, r) in rows.clone().enumerate() {
             traj[wi * n..(wi + 1) * n].copy_from_slice(w.state(r, 0));
         }
@@ -166,28 +166,31 @@ impl<'a> RolloutLoss<'a> {
             steps_many(
                 t,
                 mlp,
-                (&done[i * b * n..], &us),
+                (&done[i * b * n..], &us[..b * m]),
                 (&mut zs[at(p)], &mut hs[at(q)], &mut ys[at(n)]),
-                &mut many,
+                many,
                 &mut rest[..b * n],
             );
         }
+        // The loss's terms window by window, step by step, in one chain (held in a register:
+        // as a `+=` into a local it was kept on the stack, each addition waiting on a store).
         let mut loss = 0.0;
         for (wi, r) in rows.clone().enumerate() {
             for i in 0..k {
                 let (s_next, truth) = (&traj[((i + 1) * b + wi) * n..][..n], w.state(r, i + 1));
-                for v in 0..n {
-                    loss += (s_next[v] - truth[v]).powi(2) * self.inv_var[v];
-                }
+                loss = s_next
+                    .iter()
+                    .zip(truth)
+                    .zip(&self.inv_var)
+                    .fold(loss, |l, ((s, t), iv)| l + (s - t).powi(2) * iv);
             }
         }
         if want_grad {
-            // The cotangents of each window's state at the step being undone, and of the
-            // step before.
-            let (mut next_bar, mut prev_bar) = (vec![0.0; b * n], vec![0.0; b * n]);
-            // The backward passes' weight-gradient terms, in the order of one window after
-            // the other, each from its last step back ([`Mlp::weight_grad_many`]: the same
-            // sums, bit for bit, as adding each at once).
+            // The cotangents of each window's state at the step being undone (`next_bar`) and
+            // at the step before. The backward passes' weight-gradient terms go on the tape in
+            // the order of one window after the other, each from its last step back
+            // ([`Mlp::weight_grad_many`]: the same sums, bit for bit, as adding each at once).
+            next_bar[..b * n].fill(0.0);
             let r_out = mlp.n_out();
             let mut tape = TAPE.with_borrow_mut(std::mem::take);
             tape.reset(b * k, (p, q, r_out));
@@ -205,8 +208,15 @@ impl<'a> RolloutLoss<'a> {
                     &hs[j * b * q..i * b * q],
                     &ys[j * b * n..i * b * n],
                 );
-                prev_bar.fill(0.0);
-                vjps_many(t, mlp, (sj, hj, yj), &next_bar, &mut many, &mut prev_bar);
+                prev_bar[..b * n].fill(0.0);
+                vjps_many(
+                    t,
+                    mlp,
+                    (sj, hj, yj),
+                    &next_bar[..b * n],
+                    many,
+                    &mut prev_bar[..b * n],
+                );
                 for wi in 0..b {
                     let e = wi * k + (k - i);
                     let row = j * b + wi;
@@ -215,13 +225,53 @@ impl<'a> RolloutLoss<'a> {
                     tape.hb[e * q..(e + 1) * q].copy_from_slice(many.hidden_bar(wi, q));
                     tape.yb[e * r_out..(e + 1) * r_out].copy_from_slice(many.output_bar(wi, r_out));
                 }
-                std::mem::swap(&mut next_bar, &mut prev_bar);
+                std::mem::swap(next_bar, prev_bar);
             }
             tape.len = b * k;
             mlp.weight_grad_many(tape.len, (&tape.x, &tape.h, &tape.hb, &tape.yb), &mut grad);
             TAPE.with_borrow_mut(|t| *t = tape);
         }
+        BUFFERS.with_borrow_mut(|t| *t = bufs);
         (loss, grad)
+    }
+}
+
+/// A chunk's rollouts, step-major (the b windows' values at step i are rows i·b … (i + 1)·b − 1):
+/// the states (k + 1 steps), each step's network input, hidden activations and output (kept
+/// for the backward pass), one step's controls, the state cotangents of two steps, and the
+/// buffers of [`steps_many`] and [`vjps_many`].
+#[derive(Debug, Default)]
+struct ChunkBuffers {
+    traj: Vec<f64>,
+    zs: Vec<f64>,
+    hs: Vec<f64>,
+    ys: Vec<f64>,
+    us: Vec<f64>,
+    next_bar: Vec<f64>,
+    prev_bar: Vec<f64>,
+    many: ManyScratch,
+}
+
+impl ChunkBuffers {
+    /// Room for `b` windows of `k` steps of transforms `t` and net `mlp` (grown, never shrunk:
+    /// a worker thread's buffers serve every chunk it takes; every value a chunk reads it
+    /// writes first).
+    fn reset(&mut self, t: &Transforms, mlp: &Mlp, (b, k): (usize, usize)) {
+        let (n, m, q) = (t.state_dim, t.control_dim, mlp.n_hidden());
+        for (v, len) in [
+            (&mut self.traj, (k + 1) * b * n),
+            (&mut self.zs, k * b * (n + m)),
+            (&mut self.hs, k * b * q),
+            (&mut self.ys, k * b * n),
+            (&mut self.us, b * m),
+            (&mut self.next_bar, b * n),
+            (&mut self.prev_bar, b * n),
+        ] {
+            if v.len() < len {
+                v.resize(len, 0.0);
+            }
+        }
+        self.many.reset(t, mlp, b);
     }
 }
 
@@ -257,6 +307,9 @@ std::thread_local! {
     /// Each thread's [`GradTape`], kept between chunks so that the rollout loss does not
     /// allocate (and fault in) a fresh one per chunk.
     static TAPE: std::cell::RefCell<GradTape> = std::cell::RefCell::new(GradTape::default());
+    /// Each thread's [`ChunkBuffers`], for the same reason.
+    static BUFFERS: std::cell::RefCell<ChunkBuffers> =
+        std::cell::RefCell::new(ChunkBuffers::default());
 }
 
 /// The fine-tuning objective over flat weights: the one-step loss (eq. 5, as
