@@ -1034,12 +1034,18 @@ mod tests {
 
     /// The many-example passes are one single-example pass per example, bit for bit, on every
     /// tile shape and remainder (1 to 17 examples), for nets on both lane widths (84-50-78 keeps
-    /// 4 lanes), outputs summed in one chain and in two, and rows that end inside a lane group.
+    /// 4 lanes), outputs summed in one chain and in two, and rows that end inside a lane group:
+    /// every net shape the rollout loss fine-tunes (the pendulums, truck, lander and the
+    /// dolphin's global net), the dolphin's local nets, and others.
     #[test]
     fn many_example_passes_are_the_single_example_passes_bit_for_bit() {
         let shapes = [
             (1, 1, 1),
             (4, 6, 3),
+            (6, 20, 6),
+            (9, 20, 6),
+            (12, 20, 6),
+            (8, 40, 6),
             (17, 50, 13),
             (84, 50, 78),
             (70, 40, 24),

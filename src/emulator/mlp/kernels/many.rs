@@ -11,7 +11,8 @@
 //! starts from its bias (or zero) and adds one fused multiply–add per input in ascending order,
 //! in two chains (even and odd inputs, added at the end) exactly where [`super::columns`] uses
 //! two (the same blocks of 32 lanes decide it). So every value is the same bits as one pass
-//! per example, whatever the tile; tests check that on every shape the experiments use.
+//! per example, whatever the tile; tests check that on every net shape the rollout loss
+//! fine-tunes, and others.
 
 use super::{dual_chains, pad4, sigmoid_lanes, Lanes, Packed, Portable};
 #[cfg(target_arch = "x86_64")]
