@@ -142,7 +142,7 @@ fn tile_count(m: usize, groups: usize, w: usize) -> usize {
 }
 
 /// NR, the most lane groups of `w` lanes in one of [`product`]'s tiles: 16 accumulators on
-/// AVX-512 (32 registers), 12 on AVX2 (16 registers).
+/// AVX-512 (32 registers), at most 10 on AVX2 (16 registers; [`tile_rows`]).
 const fn strip_groups(w: usize) -> usize {
     if w == 8 {
         4
@@ -152,12 +152,19 @@ const fn strip_groups(w: usize) -> usize {
 }
 
 /// MR, the rows of [`product`]'s tiles of `nr` lane groups of `w` lanes.
+///
+/// On 4 lanes (AVX2's 16 registers) a tile keeps at most 10 accumulators: with 12 (4 × 3 and
+/// 6 × 2), LLVM kept one on the stack, stored and reloaded at every depth step, and that
+/// accumulator's chain (a store-to-load forward and a multiply–add each step) held the whole
+/// tile to about half the core's multiply–add rate (measured on AMD Zen 3, which has no
+/// AVX-512).
 const fn tile_rows(nr: usize, w: usize) -> usize {
     match (nr, w) {
         (4, _) => 6,
         (3, 8) => 8,
-        (3, _) => 4,
-        (2, _) => 6,
+        (3, _) => 3,
+        (2, 8) => 6,
+        (2, _) => 5,
         _ => 8,
     }
 }
@@ -376,8 +383,9 @@ fn product_alongside<L: Lanes, S: Alongside>(
         match (nr, w) {
             (4, _) => rows::<L, S, 4, 6>(m, k, a, (b, bs), c, ahead, side),
             (3, 8) => rows::<L, S, 3, 8>(m, k, a, (b, bs), c, ahead, side),
-            (3, _) => rows::<L, S, 3, 4>(m, k, a, (b, bs), c, ahead, side),
-            (2, _) => rows::<L, S, 2, 6>(m, k, a, (b, bs), c, ahead, side),
+            (3, _) => rows::<L, S, 3, 3>(m, k, a, (b, bs), c, ahead, side),
+            (2, 8) => rows::<L, S, 2, 6>(m, k, a, (b, bs), c, ahead, side),
+            (2, _) => rows::<L, S, 2, 5>(m, k, a, (b, bs), c, ahead, side),
             _ => rows::<L, S, 1, 8>(m, k, a, (b, bs), c, ahead, side),
         }
         g0 += nr;
@@ -488,58 +496,50 @@ impl Alongside for () {
 /// (row stride `rs`), taken in row-major order one after the other from −0, as
 /// `Iterator::sum` takes them (so the same bits), `per` values at each step.
 ///
+/// The rows are taken whole, their padding included, which must be zeros (±0, as the products
+/// leave it): a square of zero is +0, and adding +0 to a sum changes nothing but a −0 start,
+/// which the next value's square replaces just the same (a row starts with one of its own
+/// values). One bound and one index a value, where skipping each row's padding took two more
+/// tests and three more values held in registers: on AVX2's 16 registers those were
+/// reloaded from the stack at every step of the product they ride along (measured on AMD Zen 3).
+///
 /// Alone, the 84-50-78 full batch's sum (19,968 additions per chunk of 256, each waiting on the
 /// last) was about a twentieth of the gradient's time; carried along the next product, the
 /// tiles' multiply–adds hide it.
 struct Squares<'a> {
+    /// The n rows of E whole (padding included).
     e: &'a [f64],
-    /// Index of the next value, and the end of its row.
+    /// Index of the next value.
     at: usize,
-    row_end: usize,
-    /// The padding skipped between rows (rs − r), the row length r and the end of E.
-    skip: usize,
-    r: usize,
-    end: usize,
     /// Values per step.
     per: usize,
     sum: f64,
 }
 
 impl<'a> Squares<'a> {
-    /// The sum over `e` (n rows of stride `rs`, the first `r` of each), `per` values a step.
+    /// The sum over `e` (n rows of stride `rs`, the first `r` of each, the rest zeros), `per`
+    /// values a step.
     fn new(e: &'a [f64], n: usize, (r, rs): (usize, usize), per: usize) -> Self {
         assert!(r <= rs && n * rs <= e.len());
+        let e = &e[..n * rs];
+        debug_assert!(
+            e.chunks_exact(rs.max(1))
+                .all(|row| row[r..].iter().all(|v| *v == 0.0)),
+            "padding that is not zero"
+        );
         Self {
             e,
             at: 0,
-            row_end: r,
-            skip: rs - r,
-            r,
-            end: n * rs,
             per,
             sum: -0.0,
         }
     }
 
-    /// One value, if any is left; whether one was.
-    #[inline(always)]
-    fn next(&mut self) -> bool {
-        if self.at >= self.end {
-            return false;
-        }
-        let v = self.e[self.at];
-        self.sum += v * v;
-        self.at += 1;
-        if self.at == self.row_end {
-            self.at += self.skip;
-            self.row_end = self.at + self.r;
-        }
-        true
-    }
-
     /// The sum, after the values no step took.
     fn finish(mut self) -> f64 {
-        while self.next() {}
+        for v in &self.e[self.at.min(self.e.len())..] {
+            self.sum += v * v;
+        }
         self.sum
     }
 }
@@ -547,10 +547,20 @@ impl<'a> Squares<'a> {
 impl Alongside for Squares<'_> {
     #[inline(always)]
     fn step(&mut self) {
-        for _ in 0..self.per {
-            if !self.next() {
-                return;
+        if self.per == 1 {
+            // One value a step (AVX2's smaller tiles take more steps): no inner loop.
+            if let Some(v) = self.e.get(self.at) {
+                self.sum += v * v;
+                self.at += 1;
             }
+            return;
+        }
+        let (from, to) = (self.at, (self.at + self.per).min(self.e.len()));
+        if from < to {
+            for v in &self.e[from..to] {
+                self.sum += v * v;
+            }
+            self.at = to;
         }
     }
 }
@@ -693,30 +703,48 @@ fn forward_generic<L: Lanes>(
     }
 }
 
-/// h ← σ(h + b) on rows of `b.len()` values (a multiple of the lane width), four lane groups
-/// at a time ([`sigmoid_groups`]; the same bits as one at a time).
+/// h ← σ(h + b) on rows of `b.len()` values (a multiple of the lane width), several lane
+/// groups at a time ([`sigmoid_groups`]; the same bits as one at a time): four on AVX-512,
+/// six on 4 lanes. σ's polynomial is a chain of 13 multiply–adds per group; AMD Zen 3 runs
+/// two 4-lane multiply–adds a cycle, each ready 4 cycles later, so four chains kept its units
+/// half idle (the loop, about 200 instructions, is too long for the next block's chains to
+/// start early). Six measured faster on Zen 3 (mini-batch steps, 17-50-13).
 #[inline(always)]
 fn bias_sigmoid<L: Lanes>(h: &mut [f64], b: &[f64]) {
-    const G: usize = 4;
+    if L::WIDTH == 8 {
+        bias_sigmoid_groups::<L, 4>(h, b)
+    } else {
+        bias_sigmoid_groups::<L, 6>(h, b)
+    }
+}
+
+/// [`bias_sigmoid`], G lane groups at a time.
+#[inline(always)]
+fn bias_sigmoid_groups<L: Lanes, const G: usize>(h: &mut [f64], b: &[f64]) {
     let w = L::WIDTH;
     let per_row = b.len() / w;
     debug_assert!(per_row > 0 && h.len().is_multiple_of(b.len()));
-    let bias = |g: usize| L::load(&b[(g % per_row) * w..]);
+    // The bias group of each lane group, counted along the rows (a remainder of the group's
+    // index took an integer division per group).
+    let mut g = 0;
+    let mut bias = || {
+        let v = L::load(&b[g * w..]);
+        g = if g + 1 == per_row { 0 } else { g + 1 };
+        v
+    };
     let mut blocks = h.chunks_exact_mut(G * w);
-    let mut g0 = 0;
     for block in &mut blocks {
         let mut z = [L::splat(0.0); G];
         for (j, z) in z.iter_mut().enumerate() {
-            *z = L::add(L::load(&block[j * w..]), bias(g0 + j));
+            *z = L::add(L::load(&block[j * w..]), bias());
         }
         sigmoid_groups::<L, G>(&mut z);
         for (j, z) in z.iter().enumerate() {
             L::store(*z, &mut block[j * w..]);
         }
-        g0 += G;
     }
-    for (j, v) in blocks.into_remainder().chunks_exact_mut(w).enumerate() {
-        L::store(sigmoid_lanes::<L>(L::add(L::load(v), bias(g0 + j))), v);
+    for v in blocks.into_remainder().chunks_exact_mut(w) {
+        L::store(sigmoid_lanes::<L>(L::add(L::load(v), bias())), v);
     }
 }
 
@@ -1032,9 +1060,10 @@ mod tests {
         }
     }
 
-    /// The sum of squares carried along a product is `Iterator::sum`'s, bit for bit, whatever
-    /// the values taken per step and however many steps there are: none, too few (the rest
-    /// taken by `finish`) or more than enough; rows with padding and without.
+    /// The sum of squares carried along a product is `Iterator::sum`'s over the rows' first r
+    /// values, bit for bit, whatever the values taken per step and however many steps there
+    /// are: none, too few (the rest taken by `finish`) or more than enough; rows with padding
+    /// (zeros, +0 and −0) and without.
     #[test]
     fn squares_carried_along_are_the_iterator_sum_bit_for_bit() {
         let mut rng = ChaCha8Rng::seed_from_u64(9);
@@ -1045,7 +1074,22 @@ mod tests {
             (7, 8, 8),
             (256, 78, 80),
         ] {
-            let e: Vec<f64> = (0..n * rs).map(|_| rng.random_range(-3.0..3.0)).collect();
+            // The padding zeros, as the products leave it, one of them −0; the first value −0
+            // once (a −0 start that a +0 square would keep).
+            let mut e: Vec<f64> = (0..n * rs)
+                .map(|i| {
+                    if i % rs < r {
+                        rng.random_range(-3.0..3.0)
+                    } else if i % 3 == 0 {
+                        -0.0
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            if r == 2 {
+                e[0] = -0.0;
+            }
             let want: f64 = e
                 .chunks_exact(rs)
                 .flat_map(|row| &row[..r])
