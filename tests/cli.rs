@@ -5,7 +5,7 @@ use crate::util::*;
 
 #[test]
 fn physics_validation_quick_writes_promised_outputs() {
-    let d = run_quick("physics_validation", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/physics_validation");
     assert_eq!(
         header(&out.join("energy_drift.csv")),
@@ -57,7 +57,7 @@ fn physics_validation_quick_writes_promised_outputs() {
 
 #[test]
 fn lbc_projection_quick_writes_promised_outputs_and_two_minima_when_far() {
-    let d = run_quick("lbc_projection", "1");
+    let d = quick_reproduction();
     let out = d.path().join("out/lbc_projection");
     assert!(header(&out.join("weights.csv")).starts_with("spacing,component,weight"));
     let minima = std::fs::read_to_string(out.join("minima.csv")).unwrap();
@@ -83,7 +83,7 @@ fn lbc_projection_quick_writes_promised_outputs_and_two_minima_when_far() {
 
 #[test]
 fn lbc_grid_quick_combination_is_exact_and_naive_is_worse() {
-    let d = run_quick("lbc_grid_optimality", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/lbc_grid_optimality");
     let text = std::fs::read_to_string(out.join("optimality.csv")).unwrap();
     assert!(text.starts_with("comparison,max_abs_diff"), "{text}");
@@ -111,7 +111,7 @@ fn lbc_grid_quick_combination_is_exact_and_naive_is_worse() {
 
 #[test]
 fn lbc_acrobot_quick_lbc_beats_the_naive_blend() {
-    let d = run_quick("lbc_acrobot_swingup", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/lbc_acrobot_swingup");
     let text = std::fs::read_to_string(out.join("final.csv")).unwrap();
     assert!(
@@ -160,7 +160,7 @@ fn lbc_acrobot_quick_lbc_beats_the_naive_blend() {
 
 #[test]
 fn lbc_diver_and_push_quick_runs_write_promised_outputs() {
-    let d = run_quick("lbc_diver_interpolation", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/lbc_diver_interpolation");
     assert!(
         header(&out.join("interpolation.csv")).starts_with("desired_angle,method,reached_angle")
@@ -175,7 +175,6 @@ fn lbc_diver_and_push_quick_runs_write_promised_outputs() {
         .path()
         .join("figs/lbc_diver_interpolation_entry.png")
         .exists());
-    let d = run_quick("lbc_diver_coordination", "2");
     let out = d.path().join("out/lbc_diver_coordination");
     assert!(header(&out.join("coordination.csv"))
         .starts_with("initial_omega,method,entry_error,objective"));
@@ -183,7 +182,6 @@ fn lbc_diver_and_push_quick_runs_write_promised_outputs() {
         .path()
         .join("figs/lbc_diver_coordination_entry.png")
         .exists());
-    let d = run_quick("lbc_push_recovery", "2");
     let out = d.path().join("out/lbc_push_recovery");
     assert!(header(&out.join("weights.csv")).starts_with("t,alpha_forward,alpha_backward"));
     assert!(
@@ -277,29 +275,22 @@ fn sweep_rows_carry_their_parameter_values() {
 
 #[test]
 fn reproduce_quick_writes_report_with_every_experiment() {
-    let dir = tempfile::tempdir().unwrap();
-    let exp = root().join("experiments");
-    ok(&motionlab(
-        dir.path(),
-        &[
-            "--experiments",
-            exp.to_str().unwrap(),
-            "reproduce",
-            "--quick",
-            "--out",
-            "out",
-            "--figures",
-            "figs",
-        ],
-    ));
-    let report = std::fs::read_to_string(dir.path().join("out/REPORT.md")).unwrap();
-    for id in [
-        "physics_validation",
-        "lbc_projection",
-        "lbc_grid_optimality",
-    ] {
-        assert!(report.contains(&format!("## {id}")), "{report}");
+    let d = quick_reproduction();
+    let report = std::fs::read_to_string(d.path().join("out/REPORT.md")).unwrap();
+    let mut ids = 0;
+    for e in std::fs::read_dir(root().join("experiments")).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "toml") {
+            let id = p.file_stem().unwrap().to_str().unwrap().to_string();
+            assert!(report.contains(&format!("## {id}")), "{id}: {report}");
+            assert!(
+                d.path().join("out").join(&id).join("run.json").is_file(),
+                "{id}"
+            );
+            ids += 1;
+        }
     }
+    assert_eq!(ids, 20, "the shipped experiments");
     assert!(report.contains("**Paper:**") && report.contains("**Verdict:"));
     assert!(
         report.contains("../figs/lbc_projection_cost.png"),
@@ -617,7 +608,7 @@ fn quick_and_ad_hoc_runs_leave_the_committed_results_untouched() {
 
 #[test]
 fn x_lbc_emulator_quick_compares_every_method_on_both_substrates() {
-    let d = run_quick("x_lbc_emulator", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/x_lbc_emulator");
     assert_eq!(
         header(&out.join("targets.csv")),

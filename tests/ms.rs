@@ -13,7 +13,7 @@ fn nonempty(p: &std::path::Path) {
 
 #[test]
 fn ms_lattices_quick_writes_rest_lengths_and_figures() {
-    let d = run_quick("ms_lattices", "1");
+    let d = quick_reproduction();
     let out = d.path().join("out/ms_lattices");
     assert!(header(&out.join("rest_lengths.csv"))
         .starts_with("lattice,reflex,reflex_name,alpha,spring,a,b,rest_length"));
@@ -35,7 +35,7 @@ fn ms_lattices_quick_writes_rest_lengths_and_figures() {
 }
 
 fn check_motion(id: &str, first_term: &str) {
-    let d = run_quick(id, "2");
+    let d = quick_reproduction();
     let out = d.path().join(format!("out/{id}"));
     assert_eq!(
         header(&out.join("controller.csv")),
@@ -91,7 +91,7 @@ fn ms_table_pirouette_quick_writes_promised_outputs() {
 
 #[test]
 fn ms_fig6_learning_plot_quick_writes_both_methods() {
-    let d = run_quick("ms_fig6_learning_plot", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/ms_fig6_learning_plot");
     assert_eq!(
         header(&out.join("learning.csv")),

@@ -3,9 +3,9 @@
 
 use crate::util::*;
 
-fn figure_exists(d: &tempfile::TempDir, stem: &str) {
+fn figure_exists(d: impl AsRef<std::path::Path>, stem: &str) {
     for ext in ["png", "svg"] {
-        let p = d.path().join(format!("figs/{stem}.{ext}"));
+        let p = d.as_ref().join(format!("figs/{stem}.{ext}"));
         assert!(
             p.metadata().map(|m| m.len() > 1000).unwrap_or(false),
             "{}",
@@ -25,8 +25,16 @@ fn rows(path: &std::path::Path) -> Vec<Vec<String>> {
 
 #[test]
 fn na_table1_quick_trains_every_net_and_caches_it() {
-    let d = run_quick("na_table1_structure", "2");
+    // With one thread, against the shared quick reproduction's two: the training curves, and
+    // so the nets, do not depend on the thread count.
+    let d = run_quick("na_table1_structure", "1");
     let out = d.path().join("out/na_table1_structure");
+    let shared = quick_reproduction().path().join("out/na_table1_structure");
+    assert!(
+        std::fs::read(out.join("training.csv")).unwrap()
+            == std::fs::read(shared.join("training.csv")).unwrap(),
+        "training.csv depends on the thread count"
+    );
     assert!(header(&out.join("structure.csv"))
         .starts_with("net,inputs,hidden,outputs,examples,train_error,heldout_error,train_s"));
     assert!(header(&out.join("structure.csv"))
@@ -164,7 +172,7 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
 
 #[test]
 fn na_table2_quick_emulators_are_faster_than_simulation() {
-    let d = run_quick("na_table2_speedup", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/na_table2_speedup");
     assert!(header(&out.join("speedup.csv"))
         .starts_with("model,emulator,physical_s,emulator_s,speedup"));
@@ -240,7 +248,7 @@ fn na_table2_quick_emulators_are_faster_than_simulation() {
 
 #[test]
 fn na_fig12_quick_writes_error_curves() {
-    let d = run_quick("na_fig12_error", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/na_fig12_error");
     assert_eq!(header(&out.join("error.csv")), "variant,emulator,t,error");
     let r = rows(&out.join("error.csv"));
@@ -287,16 +295,13 @@ fn na_fig12_quick_writes_error_curves() {
 
 #[test]
 fn na_tables_other_than_timings_are_identical_for_any_thread_count() {
-    for (id, csv) in [
-        ("na_fig12_error", "error.csv"),
-        ("na_table1_structure", "training.csv"),
-    ] {
-        let run = |jobs: &str| {
-            let dir = run_quick(id, jobs);
-            std::fs::read(dir.path().join("out").join(id).join(csv)).unwrap()
-        };
+    // Table 1's training curves are compared in its own test.
+    for (id, csv) in [("na_fig12_error", "error.csv")] {
+        // The shared quick reproduction ran with --jobs 2.
+        let read =
+            |dir: &std::path::Path| std::fs::read(dir.join("out").join(id).join(csv)).unwrap();
         assert!(
-            run("1") == run("2"),
+            read(run_quick(id, "1").path()) == read(quick_reproduction().path()),
             "{id}: {csv} depends on the thread count"
         );
     }
@@ -304,7 +309,7 @@ fn na_tables_other_than_timings_are_identical_for_any_thread_count() {
 
 #[test]
 fn na_fig14_quick_momentum_beats_plain_descent() {
-    let d = run_quick("na_fig14_momentum", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/na_fig14_momentum");
     assert_eq!(
         header(&out.join("objective.csv")),
@@ -390,7 +395,7 @@ fn na_fig14_quick_momentum_beats_plain_descent() {
 
 #[test]
 fn na_fig13_quick_learns_controls_for_every_task() {
-    let d = run_quick("na_fig13_control", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/na_fig13_control");
     assert_eq!(
         header(&out.join("objective.csv")),
@@ -617,7 +622,7 @@ fn na_fig13_quick_learns_controls_for_every_task() {
 
 #[test]
 fn na_regularization_quick_regularizing_keeps_the_dolphin_in_shape() {
-    let d = run_quick("na_regularization", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/na_regularization");
     assert_eq!(
         header(&out.join("shape_error.csv")),
@@ -647,7 +652,7 @@ fn na_regularization_quick_regularizing_keeps_the_dolphin_in_shape() {
 
 #[test]
 fn na_baselines_swim_quick_traces_every_method_on_its_substrates() {
-    let d = run_quick("na_baselines_swim", "2");
+    let d = quick_reproduction();
     let out = d.path().join("out/na_baselines_swim");
     assert!(header(&out.join("baselines.csv"))
         .starts_with("method,substrate,iteration,evaluations,seconds,objective"));

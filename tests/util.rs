@@ -1,7 +1,9 @@
 //! Helpers: run the binary, read files.
 
+use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::Output;
+use std::sync::OnceLock;
 
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -78,4 +80,68 @@ pub fn run_quick(id: &str, jobs: &str) -> tempfile::TempDir {
         ],
     ));
     dir
+}
+
+/// The folder of [`quick_reproduction`]: `out/` and `figs/` of one `reproduce --quick`.
+pub struct Shared {
+    dir: PathBuf,
+    /// Held while the test binary runs, so a second `cargo test` waits rather than sharing it.
+    _lock: File,
+}
+
+impl Shared {
+    pub fn path(&self) -> &Path {
+        &self.dir
+    }
+}
+
+impl AsRef<Path> for Shared {
+    fn as_ref(&self) -> &Path {
+        &self.dir
+    }
+}
+
+/// One `reproduce --quick --jobs 2` of every shipped experiment, the main job as users run it,
+/// made once per test binary and read by every test that checks one experiment's quick outputs
+/// (`out/<id>/`, `figs/<id>_*`). Each of those used to run its experiment again on its own,
+/// which doubled the suite's time. The folder, `target/tmp/quick-reproduction`, is replaced by
+/// the next test run and kept until then for a look at the quick outputs. A failed run fails
+/// every test that reads it, with its output, without running it again.
+pub fn quick_reproduction() -> &'static Shared {
+    static RUN: OnceLock<Result<Shared, String>> = OnceLock::new();
+    let run = RUN.get_or_init(|| {
+        let tmp = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+        let lock = File::create(tmp.join("quick-reproduction.lock")).map_err(|e| e.to_string())?;
+        lock.lock().map_err(|e| e.to_string())?;
+        let dir = tmp.join("quick-reproduction");
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).map_err(|e| e.to_string())?;
+        }
+        std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+        let exp = root().join("experiments");
+        let out = motionlab(
+            &dir,
+            &[
+                "--experiments",
+                exp.to_str().unwrap(),
+                "reproduce",
+                "--quick",
+                "--jobs",
+                "2",
+                "--out",
+                "out",
+                "--figures",
+                "figs",
+            ],
+        );
+        if !out.status.success() {
+            return Err(format!(
+                "reproduce --quick failed:\nstdout: {}\nstderr: {}",
+                String::from_utf8_lossy(&out.stdout),
+                String::from_utf8_lossy(&out.stderr)
+            ));
+        }
+        Ok(Shared { dir, _lock: lock })
+    });
+    run.as_ref().unwrap_or_else(|e| panic!("{e}"))
 }
