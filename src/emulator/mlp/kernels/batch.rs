@@ -134,7 +134,7 @@ fn tile_count(m: usize, groups: usize, w: usize) -> usize {
     let mut tiles = 0;
     let mut g0 = 0;
     while g0 < groups {
-        let nr = strip_groups(w).min(groups - g0);
+        let nr = strip_width(groups, g0, w);
         tiles += m.div_ceil(tile_rows(nr, w));
         g0 += nr;
     }
@@ -148,6 +148,23 @@ const fn strip_groups(w: usize) -> usize {
         4
     } else {
         3
+    }
+}
+
+/// The lane groups of [`product`]'s strip from group `g0` of `groups` groups of `w` lanes: NR
+/// ([`strip_groups`]) or what is left, except that on 4 lanes the last four groups of a
+/// product wider than four go as two strips of two, so that it does not end in a strip of one
+/// group (13 groups, the 50 hidden units of every Table 1 net, as 3, 3, 3, 2, 2 instead of
+/// 3, 3, 3, 3, 1). The strips' widths do not change any entry's chain, only which tile
+/// computes it.
+const fn strip_width(groups: usize, g0: usize, w: usize) -> usize {
+    let (nr, left) = (strip_groups(w), groups - g0);
+    if w != 8 && left == nr + 1 && g0 > 0 {
+        2
+    } else if left < nr {
+        left
+    } else {
+        nr
     }
 }
 
@@ -376,7 +393,7 @@ fn product_alongside<L: Lanes, S: Alongside>(
     assert!((k - 1) * bs + groups * w <= b.len(), "B too short");
     let mut g0 = 0;
     while g0 < groups {
-        let nr = strip_groups(w).min(groups - g0);
+        let nr = strip_width(groups, g0, w);
         let b = &b[g0 * w..];
         let (a, c) = ((a, ars, acs), (&mut c[g0 * w..], cs));
         // The rows of the tiles, MR, are `tile_rows(nr, w)` (which `tile_count` counts).
@@ -917,6 +934,7 @@ mod tests {
             (30, 56, 17),
             (50, 24, 30),
             (9, 40, 3),
+            (7, 52, 5),
         ] {
             let (ars, acs) = if rng.random::<bool>() { (k, 1) } else { (1, m) };
             let a: Vec<f64> = (0..m * k).map(|_| rng.random_range(-2.0..2.0)).collect();
@@ -961,6 +979,38 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// A product's strips cover its groups in order, each at most NR wide, and on 4 lanes one
+    /// wider than four groups never ends in a strip of one (13 groups as 3, 3, 3, 2, 2).
+    #[test]
+    fn strips_cover_the_groups_without_a_last_strip_of_one_on_four_lanes() {
+        let strips = |groups: usize, w: usize| {
+            let (mut g0, mut out) = (0, vec![]);
+            while g0 < groups {
+                let nr = strip_width(groups, g0, w);
+                assert!(
+                    (1..=strip_groups(w)).contains(&nr),
+                    "{groups} groups of {w}"
+                );
+                out.push(nr);
+                g0 += nr;
+            }
+            assert_eq!(g0, groups);
+            out
+        };
+        assert_eq!(strips(13, 4), [3, 3, 3, 2, 2]);
+        assert_eq!(strips(4, 4), [3, 1]);
+        assert_eq!(strips(7, 4), [3, 2, 2]);
+        assert_eq!(strips(21, 4), [3; 7]);
+        assert_eq!(strips(13, 8), [4, 4, 4, 1]);
+        for groups in 5..40 {
+            assert_ne!(
+                strips(groups, 4).last(),
+                Some(&1),
+                "{groups} groups of 4 lanes"
+            );
         }
     }
 
