@@ -687,13 +687,18 @@ impl Family for NaBaselines {
                 })
                 .collect()
         };
+        // The first two panels draw the same series in the same colours, so the key is drawn
+        // once, in the wall-clock panel: in the iteration panel every corner's key box hid part
+        // of a curve (hill_climbing (simulator) around iterations 10-40).
+        let mut by_iteration = series(&|r| it[r] + 1.0, false);
+        by_iteration.iter_mut().for_each(|s| s.label.clear());
         let mut panels = vec![
             Panel {
-                title: "dolphin swim: objective vs iterations".into(),
+                title: "dolphin swim: objective vs iterations (key: next panel)".into(),
                 x_label: "iteration + 1 (log)".into(),
                 y_label: "best objective J (effort - distance in m)".into(),
                 log_x: true,
-                series: series(&|r| it[r] + 1.0, false),
+                series: by_iteration,
                 ..Panel::default()
             },
             Panel {
