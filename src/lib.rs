@@ -45,8 +45,8 @@
 //!   Gaussian terminal reward onto component rewards (A w = b, analytic inner products),
 //!   [`bellman::combine`] computes the blend weights α in log space, [`bellman::grid_dp`]
 //!   solves 2-D problems on a grid (linearly-solvable and ordinary Bellman backups);
-//!   [`bellman::tracker::ValueTracker`] is the value-function contract DDP/LQR and
-//!   emulator-derived trackers share.
+//!   it combines anything implementing [`control::tracker::ValueTracker`], the
+//!   value-function contract DDP/LQR and emulator-derived trackers share.
 //! - [`experiment`]: the harness — experiments as data: TOML specs, validation with
 //!   file/line/key errors, sweeps, the runner (CSV + Parquet, atomic writes, `run.json`),
 //!   figures and `REPORT.md`; the [`experiment::Experiment`] / [`experiment::Job`] traits a
@@ -86,7 +86,7 @@
 //! | `diver`, `push_recovery` | [`physics::diver`], [`physics::push`] | planar articulated trees ([`physics::planar`]) |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
 //! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
-//! | LQR trackers of emulator tapes | [`control::step_tracker`], [`bellman::tracker`] | LBC §5.2 on NeuroAnimator BPTT tapes |
+//! | LQR trackers of emulator tapes | [`control::step_tracker`], [`control::tracker`] | LBC §5.2 on NeuroAnimator BPTT tapes |
 //! | hierarchical dolphin emulator, regularization | [`emulator::hierarchy`] | NeuroAnimator §3.3, §5.3 |
 //! | BPTT control learning, plain / momentum descent | [`control::bptt`], [`control::objective`] | NeuroAnimator §4, eq. 11–15 |
 //! | simulated annealing, parallel hill climbing (any proposal operator), Nelder–Mead | [`control::search`] | NeuroAnimator §6 baselines; mass-spring Fig. 4, 6 |
@@ -122,6 +122,7 @@ pub mod families;
 pub mod fastmath;
 pub mod lanes;
 pub mod linalg;
+pub mod params;
 pub mod physics;
 pub mod seed;
 pub mod synthesis;

@@ -8,6 +8,7 @@ use motionlab::experiment::resolve::{resolve, ResolveOptions, Resolved};
 use motionlab::experiment::runner::{merge, run, RunOptions};
 use motionlab::experiment::shard::Shard;
 use motionlab::experiment::spec::SpecFile;
+use motionlab::families;
 use motionlab::families::na::table1_structure::{
     table1_emulator, Params as Table1Params, EMULATOR_NAMES,
 };
@@ -235,6 +236,7 @@ fn resolve_all(dir: &Path, quick: bool, seeds: Option<usize>) -> Result<Vec<Reso
                 seeds,
                 ..Default::default()
             },
+            &families::registry(),
         )?);
     }
     Ok(all)
@@ -359,6 +361,7 @@ fn dispatch(cli: Cli) -> Result<()> {
                     sets,
                     seeds,
                 },
+                &families::registry(),
             )?;
             let opts = RunOptions {
                 resume,
@@ -389,7 +392,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             // stops everything before any work.
             let mut all = resolve_all(&exp_dir, outputs.quick, None)?;
             remove_leftovers(&opts)?;
-            let (s, merged) = merge(&file, &opts)?;
+            let (s, merged) = merge(&file, &opts, &families::registry())?;
             eprintln!(
                 "{}: merged {} units, {} files in {:.2} s -> {}",
                 s.id,

@@ -721,8 +721,8 @@ impl StepRule {
     }
 
     /// Checks the settings; `key` names the spec key in messages.
-    pub fn validate(&self, key: &str) -> Result<(), crate::experiment::resolve::ParamError> {
-        use crate::experiment::resolve::ensure;
+    pub fn validate(&self, key: &str) -> Result<(), crate::params::ParamError> {
+        use crate::params::ensure;
         match *self {
             Self::Fixed => Ok(()),
             Self::Reestimate { every } => {

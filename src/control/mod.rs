@@ -47,6 +47,7 @@ pub mod lqr;
 pub mod objective;
 pub mod search;
 pub mod step_tracker;
+pub mod tracker;
 
 mod cost;
 mod rk4;

@@ -60,8 +60,8 @@ pub struct DaggerSettings {
 
 impl DaggerSettings {
     /// Checks the settings; `key` names the spec table in messages.
-    pub fn validate(&self, key: &str) -> Result<(), crate::experiment::resolve::ParamError> {
-        use crate::experiment::resolve::ensure;
+    pub fn validate(&self, key: &str) -> Result<(), crate::params::ParamError> {
+        use crate::params::ensure;
         let k = |s: &str| format!("{key}.{s}");
         ensure(self.rounds >= 1, &k("rounds"), "must be >= 1")?;
         ensure(

@@ -12,11 +12,12 @@
 //!    units for `--resume`, runs `--shard I/N` and merges shards, [`seeds`] aggregates seeds;
 //! 4. [`report`]: `REPORT.md`, each family's section read back from its CSVs.
 //!
-//! This module is the harness only; the families live in [`crate::families`], one folder per
-//! paper, and [`crate::families::families`] lists them. Families never write files themselves:
-//! jobs return tables, figure functions receive them. To add an experiment family, implement
-//! [`Experiment`] (and [`Job`] for its parameters) in a new file there and list it in
-//! [`crate::families`].
+//! This module is the harness only: it runs whatever [`Registry`] it is handed and names no
+//! family. The families live in [`crate::families`], one folder per paper, and
+//! [`crate::families::registry`] lists them; `main.rs` hands that registry to [`resolve::resolve`]
+//! and [`runner::merge`]. Families never write files themselves: jobs return tables, figure
+//! functions receive them. To add an experiment family, implement [`Experiment`] (and [`Job`]
+//! for its parameters) in a new file there and list it in [`crate::families`].
 
 pub mod output;
 pub mod plot;
@@ -144,6 +145,30 @@ impl<F: Family> Experiment for F {
 
     fn report(&self, dir: &Path) -> Result<report::Findings, Error> {
         Family::report(self, dir)
+    }
+}
+
+/// The experiment families the harness can run, handed to it from the top (`main.rs`, or a
+/// library user with families of their own): the harness never names a family.
+#[derive(Clone, Copy)]
+pub struct Registry {
+    families: &'static [&'static dyn Experiment],
+}
+
+impl Registry {
+    /// A registry of `families`, listed in that order in unknown-family errors.
+    pub const fn new(families: &'static [&'static dyn Experiment]) -> Self {
+        Self { families }
+    }
+
+    /// Every family.
+    pub fn families(&self) -> &'static [&'static dyn Experiment] {
+        self.families
+    }
+
+    /// The family called `kind`.
+    pub fn find(&self, kind: &str) -> Option<&'static dyn Experiment> {
+        self.families.iter().copied().find(|f| f.kind() == kind)
     }
 }
 

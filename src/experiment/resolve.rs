@@ -3,65 +3,11 @@
 
 use super::spec::{backticked, SpecError, SpecFile};
 use super::{Experiment, Job};
-use crate::families;
+use super::Registry;
 use serde::de::DeserializeOwned;
-use std::fmt::Display;
 use std::path::PathBuf;
 
-/// A parameter problem found by a family, at a dotted key inside `[params]`.
-#[derive(Debug, Clone, thiserror::Error, PartialEq)]
-#[error("`{key}`: {message}")]
-pub struct ParamError {
-    /// Dotted key inside `[params]`, e.g. `dts[2]`.
-    pub key: String,
-    /// What is wrong.
-    pub message: String,
-}
-
-impl ParamError {
-    /// A new error at `key`.
-    pub fn new(key: impl Into<String>, message: impl Display) -> Self {
-        Self {
-            key: key.into(),
-            message: message.to_string(),
-        }
-    }
-
-    /// The same error with its key under `prefix` (`training.patience` → `dolphin.training.patience`).
-    pub fn prefixed(self, prefix: &str) -> Self {
-        Self {
-            key: format!("{prefix}.{}", self.key),
-            message: self.message,
-        }
-    }
-}
-
-/// Fails with `message` at `key` unless `ok`.
-pub fn ensure(ok: bool, key: &str, message: impl Display) -> Result<(), ParamError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(ParamError::new(key, message))
-    }
-}
-
-/// A finite value > 0.
-pub fn positive(key: &str, v: f64) -> Result<(), ParamError> {
-    ensure(
-        v.is_finite() && v > 0.0,
-        key,
-        format!("must be > 0, got {v}"),
-    )
-}
-
-/// Every element finite and > 0, and at least one.
-pub fn all_positive(key: &str, vs: &[f64]) -> Result<(), ParamError> {
-    ensure(!vs.is_empty(), key, "must not be empty")?;
-    for (i, &v) in vs.iter().enumerate() {
-        positive(&format!("{key}[{i}]"), v)?;
-    }
-    Ok(())
-}
+pub use crate::params::{all_positive, ensure, positive, ParamError};
 
 /// Deserializes a family's parameters, naming the key of any unknown field, missing field or
 /// wrong type.
@@ -263,11 +209,15 @@ fn parse_value(text: &str) -> toml::Value {
 }
 
 /// Resolves a parsed experiment file: the family exists, overrides apply, every sweep point's
-/// parameters are valid. Nothing is run or written.
-pub fn resolve(file: &SpecFile, opts: &ResolveOptions) -> Result<Resolved, SpecError> {
+/// parameters are valid. Nothing is run or written. The family is looked up in `registry`.
+pub fn resolve(
+    file: &SpecFile,
+    opts: &ResolveOptions,
+    registry: &Registry,
+) -> Result<Resolved, SpecError> {
     let raw = &file.raw;
-    let family = families::family(&raw.experiment).ok_or_else(|| {
-        let known: Vec<&str> = families::families().iter().map(|f| f.kind()).collect();
+    let family = registry.find(&raw.experiment).ok_or_else(|| {
+        let known: Vec<&str> = registry.families().iter().map(|f| f.kind()).collect();
         file.error_at(
             "experiment",
             format!(

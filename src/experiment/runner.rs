@@ -14,7 +14,7 @@ use super::shard::{
     load_unit, read_shards, save_unit, unit_key, unit_path, Shard, ShardRecord, SHARD_RECORD,
 };
 use super::spec::SpecFile;
-use super::{Error, RunContext};
+use super::{Error, Registry, RunContext};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -198,9 +198,13 @@ pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
 /// Merges the shards in `<out>/<id>/shards/` (see [`super::shard::read_shards`]) into the tables,
 /// figures and `run.json` of the unsharded run; returns them and the experiment as the shards
 /// resolved it.
-pub fn merge(file: &SpecFile, opts: &RunOptions) -> Result<(RunSummary, Resolved), Error> {
+pub fn merge(
+    file: &SpecFile,
+    opts: &RunOptions,
+    registry: &Registry,
+) -> Result<(RunSummary, Resolved), Error> {
     let t0 = Instant::now();
-    let m = read_shards(file, &opts.out)?;
+    let m = read_shards(file, &opts.out, registry)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.jobs.max(1))
         .build()

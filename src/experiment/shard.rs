@@ -24,7 +24,7 @@
 use super::output::{atomic_write, ColumnData, Table, Tables};
 use super::resolve::{resolve, ResolveOptions, Resolved, Unit};
 use super::spec::SpecFile;
-use super::Error;
+use super::{Error, Registry};
 use crate::emulator::cache::fnv1a;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -254,7 +254,11 @@ fn refuse(dir: &Path, msg: impl std::fmt::Display) -> Error {
 /// (nothing is written) when one is missing, unfinished or duplicated, when they disagree on
 /// the number of shards, spec hash, revision or options, when the spec now resolves to another
 /// hash, or when a unit file is missing or corrupt.
-pub fn read_shards(file: &SpecFile, out: &Path) -> Result<MergedShards, Error> {
+pub fn read_shards(
+    file: &SpecFile,
+    out: &Path,
+    registry: &Registry,
+) -> Result<MergedShards, Error> {
     let dir = out.join(&file.raw.id).join("shards");
     let entries = std::fs::read_dir(&dir).map_err(|e| {
         refuse(
@@ -368,7 +372,7 @@ pub fn read_shards(file: &SpecFile, out: &Path) -> Result<MergedShards, Error> {
             format!("missing shard(s) {} of {n}", missing.join(", ")),
         ));
     }
-    let res = resolve(file, &first.options())?;
+    let res = resolve(file, &first.options(), registry)?;
     if res.spec_hash() != first.spec_hash {
         return Err(refuse(
             &dir,

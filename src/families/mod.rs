@@ -36,7 +36,7 @@
 //! papers, ids `x_*`) named after the id, its `mod` line in that folder's `mod.rs`, and one line
 //! in `FAMILIES` below (listed by [`families`]).
 
-use crate::experiment::Experiment;
+use crate::experiment::{Experiment, Registry};
 
 pub mod beyond;
 pub mod lbc;
@@ -65,6 +65,12 @@ static FAMILIES: &[&dyn Experiment] = &[
     &beyond::x_lbc_emulator::XLbcEmulator,
 ];
 
+/// Every family as the registry the harness runs from (`main.rs` hands it to
+/// [`crate::experiment::resolve::resolve`]).
+pub fn registry() -> Registry {
+    Registry::new(FAMILIES)
+}
+
 /// All families.
 pub fn families() -> &'static [&'static dyn Experiment] {
     FAMILIES
@@ -72,5 +78,5 @@ pub fn families() -> &'static [&'static dyn Experiment] {
 
 /// The family called `kind`.
 pub fn family(kind: &str) -> Option<&'static dyn Experiment> {
-    FAMILIES.iter().copied().find(|f| f.kind() == kind)
+    registry().find(kind)
 }

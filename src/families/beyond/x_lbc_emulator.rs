@@ -39,7 +39,7 @@
 
 use crate::bellman::combine::{normalized_entropy, BlendMode, CombineError, TrackerBlend};
 use crate::bellman::projection::{project, GaussianReward};
-use crate::bellman::tracker::ValueTracker;
+use crate::control::tracker::ValueTracker;
 use crate::control::bptt::{learn_with, Bptt, Descent, Knots, Schedule, StepRule};
 use crate::control::step_tracker::{AffineControls, StepTracker};
 use crate::control::QuadraticCost;

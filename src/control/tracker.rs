@@ -10,7 +10,7 @@
 //!   learned by backpropagation through time through a NeuroAnimator emulator, linearized by
 //!   the emulator's own exact Jacobians (one control step per emulator super-step).
 //!
-//! [`super::combine::TrackerBlend`] combines any implementors (also mixed, through
+//! [`crate::bellman::combine::TrackerBlend`] combines any implementors (also mixed, through
 //! `&dyn ValueTracker`) without knowing where they came from.
 
 /// A time-varying feedback policy with its value function: what linear Bellman combination

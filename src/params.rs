@@ -1,0 +1,64 @@
+//! # Settings validation
+//!
+//! The small vocabulary every layer uses to check its own settings: a [`ParamError`] names the
+//! dotted key and says what is wrong with its value, and [`ensure`], [`positive`] and
+//! [`all_positive`] build one. A solver's or trainer's `validate` returns these errors; the
+//! harness ([`crate::experiment`]) places them in the experiment file (file, line, key).
+//! This module depends on nothing else in the crate.
+
+use std::fmt::Display;
+
+/// A parameter problem found by a family, at a dotted key inside `[params]`.
+#[derive(Debug, Clone, thiserror::Error, PartialEq)]
+#[error("`{key}`: {message}")]
+pub struct ParamError {
+    /// Dotted key inside `[params]`, e.g. `dts[2]`.
+    pub key: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl ParamError {
+    /// A new error at `key`.
+    pub fn new(key: impl Into<String>, message: impl Display) -> Self {
+        Self {
+            key: key.into(),
+            message: message.to_string(),
+        }
+    }
+
+    /// The same error with its key under `prefix` (`training.patience` → `dolphin.training.patience`).
+    pub fn prefixed(self, prefix: &str) -> Self {
+        Self {
+            key: format!("{prefix}.{}", self.key),
+            message: self.message,
+        }
+    }
+}
+
+/// Fails with `message` at `key` unless `ok`.
+pub fn ensure(ok: bool, key: &str, message: impl Display) -> Result<(), ParamError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ParamError::new(key, message))
+    }
+}
+
+/// A finite value > 0.
+pub fn positive(key: &str, v: f64) -> Result<(), ParamError> {
+    ensure(
+        v.is_finite() && v > 0.0,
+        key,
+        format!("must be > 0, got {v}"),
+    )
+}
+
+/// Every element finite and > 0, and at least one.
+pub fn all_positive(key: &str, vs: &[f64]) -> Result<(), ParamError> {
+    ensure(!vs.is_empty(), key, "must not be empty")?;
+    for (i, &v) in vs.iter().enumerate() {
+        positive(&format!("{key}[{i}]"), v)?;
+    }
+    Ok(())
+}
