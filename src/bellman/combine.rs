@@ -201,6 +201,88 @@ mod tests {
         blend_controls(&[0.25, 0.75], &[&[4.0, 0.0], &[0.0, 8.0]], &mut out);
         assert_eq!(out, [1.0, 6.0]);
     }
+
+    #[test]
+    fn an_emulator_tracker_and_a_ddp_tracker_combine_through_one_blend() {
+        use crate::control::bptt::fixtures::lander_emulator;
+        use crate::control::lqr::track;
+        use crate::control::step_tracker::tests::{cost, lander_affine, rollout};
+        use crate::control::step_tracker::StepTracker;
+        use crate::control::test_models::LinearOde;
+        use crate::control::{Rk4Map, StateCost};
+        use nalgebra::{DMatrix, DVector};
+        // An emulator-derived tracker (13 states, 4 controls) and an LQR/DDP tracker of a linear
+        // ODE of the same dimensions, over the same horizon.
+        let (e, _, x0) = lander_emulator();
+        let step = lander_affine(&e);
+        let horizon = 6;
+        let us: Vec<DVector<f64>> = (0..horizon)
+            .map(|_| DVector::from_element(4, 0.1))
+            .collect();
+        let xs = rollout(&step, &x0, &us);
+        let c = cost(0.5, 13, 4, 0.02, 0.05, xs[horizon].clone());
+        let emu = StepTracker::build(&step, &c, &xs, &us, 0.5).unwrap();
+        let ode = LinearOde {
+            a: DMatrix::from_fn(13, 13, |i, j| if j == (i + 1) % 13 { 0.1 } else { 0.0 }),
+            b: DMatrix::from_fn(13, 4, |i, j| if i % 4 == j { 1.0 } else { 0.0 }),
+        };
+        let map = Rk4Map::new(ode, 0.5).unwrap();
+        let mut c2 = c.clone();
+        c2.state = Some(StateCost {
+            weight: DMatrix::identity(13, 13) * 0.01,
+            reference: vec![xs[0].clone()],
+        });
+        let xs2 = map.rollout(&xs[0], &us).unwrap();
+        c2.x_final = &xs2[horizon] + DVector::from_element(13, 0.5);
+        let ddp = track(&map, &c2, &xs2, &us).unwrap();
+        let parts: [&dyn ValueTracker; 2] = [&emu, &ddp];
+        let x: Vec<f64> = xs[2]
+            .iter()
+            .zip(xs2[2].iter())
+            .map(|(a, b)| 0.5 * (a + b))
+            .collect();
+        let (mut u, mut alpha, mut ui) = ([0.0; 4], [0.0; 2], [0.0; 4]);
+        let (mut u1, mut u2) = ([0.0; 4], [0.0; 4]);
+        emu.policy_into(&x, 2, &mut u1);
+        ddp.policy_into(&x, 2, &mut u2);
+        let (w, lambda) = ([0.7, 0.4], 3.0);
+        let mut expect = [0.0; 2];
+        blend_weights(
+            &w,
+            &[emu.value(&x, 2), ddp.value(&x, 2)],
+            lambda,
+            &mut expect,
+        )
+        .unwrap();
+        assert!(expect[0] > 1e-3 && expect[1] > 1e-3, "{expect:?}");
+        for (mode, a) in [
+            (BlendMode::Lbc, expect),
+            (BlendMode::Naive, [w[0] / 1.1, w[1] / 1.1]),
+            (BlendMode::Single(1), [0.0, 1.0]),
+        ] {
+            let blend = TrackerBlend {
+                trackers: &parts,
+                weights: w.to_vec(),
+                lambda,
+                mode,
+                limits: None,
+            };
+            blend.control(&x, 2, &mut u, &mut alpha, &mut ui).unwrap();
+            for j in 0..4 {
+                let want = a[0] * u1[j] + a[1] * u2[j];
+                assert!(
+                    (u[j] - want).abs() < 1e-12 * want.abs().max(1.0),
+                    "{mode:?}"
+                );
+            }
+            for i in 0..2 {
+                assert!(
+                    (alpha[i] - a[i]).abs() < 1e-12,
+                    "{mode:?}: {alpha:?} vs {a:?}"
+                );
+            }
+        }
+    }
 }
 
 /// How the component controllers of a [`TrackerBlend`] are combined.
@@ -303,86 +385,4 @@ pub fn normalized_entropy(alpha: &[f64]) -> f64 {
         .sum();
     // + 0.0 turns the −0 of a single full weight into 0.
     h / (alpha.len() as f64).ln() + 0.0
-
-    #[test]
-    fn an_emulator_tracker_and_a_ddp_tracker_combine_through_one_blend() {
-        use crate::control::bptt::fixtures::lander_emulator;
-        use crate::control::lqr::track;
-        use crate::control::step_tracker::tests::{cost, lander_affine, rollout};
-        use crate::control::step_tracker::StepTracker;
-        use crate::control::test_models::LinearOde;
-        use crate::control::{Rk4Map, StateCost};
-        use nalgebra::{DMatrix, DVector};
-        // An emulator-derived tracker (13 states, 4 controls) and an LQR/DDP tracker of a linear
-        // ODE of the same dimensions, over the same horizon.
-        let (e, _, x0) = lander_emulator();
-        let step = lander_affine(&e);
-        let horizon = 6;
-        let us: Vec<DVector<f64>> = (0..horizon)
-            .map(|_| DVector::from_element(4, 0.1))
-            .collect();
-        let xs = rollout(&step, &x0, &us);
-        let c = cost(0.5, 13, 4, 0.02, 0.05, xs[horizon].clone());
-        let emu = StepTracker::build(&step, &c, &xs, &us, 0.5).unwrap();
-        let ode = LinearOde {
-            a: DMatrix::from_fn(13, 13, |i, j| if j == (i + 1) % 13 { 0.1 } else { 0.0 }),
-            b: DMatrix::from_fn(13, 4, |i, j| if i % 4 == j { 1.0 } else { 0.0 }),
-        };
-        let map = Rk4Map::new(ode, 0.5).unwrap();
-        let mut c2 = c.clone();
-        c2.state = Some(StateCost {
-            weight: DMatrix::identity(13, 13) * 0.01,
-            reference: vec![xs[0].clone()],
-        });
-        let xs2 = map.rollout(&xs[0], &us).unwrap();
-        c2.x_final = &xs2[horizon] + DVector::from_element(13, 0.5);
-        let ddp = track(&map, &c2, &xs2, &us).unwrap();
-        let parts: [&dyn ValueTracker; 2] = [&emu, &ddp];
-        let x: Vec<f64> = xs[2]
-            .iter()
-            .zip(xs2[2].iter())
-            .map(|(a, b)| 0.5 * (a + b))
-            .collect();
-        let (mut u, mut alpha, mut ui) = ([0.0; 4], [0.0; 2], [0.0; 4]);
-        let (mut u1, mut u2) = ([0.0; 4], [0.0; 4]);
-        emu.policy_into(&x, 2, &mut u1);
-        ddp.policy_into(&x, 2, &mut u2);
-        let (w, lambda) = ([0.7, 0.4], 3.0);
-        let mut expect = [0.0; 2];
-        blend_weights(
-            &w,
-            &[emu.value(&x, 2), ddp.value(&x, 2)],
-            lambda,
-            &mut expect,
-        )
-        .unwrap();
-        assert!(expect[0] > 1e-3 && expect[1] > 1e-3, "{expect:?}");
-        for (mode, a) in [
-            (BlendMode::Lbc, expect),
-            (BlendMode::Naive, [w[0] / 1.1, w[1] / 1.1]),
-            (BlendMode::Single(1), [0.0, 1.0]),
-        ] {
-            let blend = TrackerBlend {
-                trackers: &parts,
-                weights: w.to_vec(),
-                lambda,
-                mode,
-                limits: None,
-            };
-            blend.control(&x, 2, &mut u, &mut alpha, &mut ui).unwrap();
-            for j in 0..4 {
-                let want = a[0] * u1[j] + a[1] * u2[j];
-                assert!(
-                    (u[j] - want).abs() < 1e-12 * want.abs().max(1.0),
-                    "{mode:?}"
-                );
-            }
-            for i in 0..2 {
-                assert!(
-                    (alpha[i] - a[i]).abs() < 1e-12,
-                    "{mode:?}: {alpha:?} vs {a:?}"
-                );
-            }
-        }
-    }
 }
