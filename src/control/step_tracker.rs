@@ -194,9 +194,6 @@ impl ValueTracker for StepTracker {
 pub(crate) mod tests {
     use super::*;
     use crate::control::bptt::fixtures::{lander_emulator, linear};
-    use crate::control::lqr::track;
-    use crate::control::test_models::LinearOde;
-    use crate::control::{Rk4Map, StateCost};
     use nalgebra::DMatrix;
 
     /// Central differences of `step` in each state and control component.
