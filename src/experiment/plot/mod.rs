@@ -1,0 +1,200 @@
+//! Figures: multi-panel line and scatter charts written as PNG and SVG.
+//!
+//! Log axes use plotters' logarithmic coordinates (points ≤ 0 are skipped there). The y-axis description is written horizontally above
+//! the plotting area: plotters draws it unrotated in PNG output (plotters issue 655), which
+//! would overlap the tick labels.
+//!
+//! Fonts come from the `dejavu` crate (no system fontconfig needed).
+//!
+//! The figure description (series, panels, heat maps, figures) is here; `style` holds the
+//! colours and fonts, `sink` writes figures and animations to files, `axes` the ticks and
+//! their labels, `chart` draws line, scatter and bar panels, `legend` places and samples
+//! their keys, `heatmap` draws heat maps.
+
+mod axes;
+mod chart;
+mod heatmap;
+mod legend;
+mod sink;
+mod style;
+
+pub use axes::axis_ticks;
+pub(crate) use axes::tick;
+pub use legend::{emptiest_corner, LegendSample};
+pub use sink::{perr, write_gif_atomically, write_png_svg, Drawing, FigureSink};
+pub use style::{diverging, ensure_fonts, viridis, PALETTE};
+
+/// How a series is drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Mark {
+    /// A polyline.
+    Line,
+    /// A dashed polyline.
+    Dashed,
+    /// Dots.
+    Points,
+    /// A polyline with dots at the data.
+    LinePoints,
+    /// A filled bar per point, from the bottom of the y axis up to y, `half_width` x units to
+    /// either side of x (bar charts; works on log axes).
+    Bars {
+        /// Half the bar width in x units.
+        half_width: f64,
+    },
+}
+
+/// One data series.
+#[derive(Debug, Clone)]
+pub struct Series {
+    /// Legend label (empty: not in the legend).
+    pub label: String,
+    /// Data points (non-finite ones are skipped).
+    pub points: Vec<(f64, f64)>,
+    /// How to draw it.
+    pub mark: Mark,
+    /// Index into the palette.
+    pub color: usize,
+    /// Text written at each point (above a bar, beside a dot), aligned with `points`; empty:
+    /// none.
+    pub point_labels: Vec<String>,
+}
+
+impl Series {
+    /// A line series.
+    pub fn line(label: impl Into<String>, points: Vec<(f64, f64)>, color: usize) -> Self {
+        Self {
+            label: label.into(),
+            points,
+            mark: Mark::Line,
+            color,
+            point_labels: Vec::new(),
+        }
+    }
+    /// The same series with a text at each point (e.g. a bar's value written on it).
+    pub fn labelled(mut self, labels: Vec<String>) -> Self {
+        self.point_labels = labels;
+        self
+    }
+    /// The same series drawn with another mark.
+    pub fn mark(mut self, mark: Mark) -> Self {
+        self.mark = mark;
+        self
+    }
+}
+
+/// One chart panel.
+#[derive(Debug, Clone, Default)]
+pub struct Panel {
+    /// Title above the panel.
+    pub title: String,
+    /// x-axis description with unit.
+    pub x_label: String,
+    /// y-axis description with unit.
+    pub y_label: String,
+    /// Logarithmic x axis.
+    pub log_x: bool,
+    /// Logarithmic y axis.
+    pub log_y: bool,
+    /// The series.
+    pub series: Vec<Series>,
+    /// Fixed y range (in data units), else fitted.
+    pub y_range: Option<(f64, f64)>,
+    /// Fixed x range (in data units), else fitted.
+    pub x_range: Option<(f64, f64)>,
+    /// Where the legend goes.
+    pub legend: Legend,
+    /// Category names for integer x positions 0, 1, … (a categorical x axis); empty: numeric.
+    pub x_categories: Vec<String>,
+    /// Whether x counts something (an index): ticks between whole numbers get no label.
+    pub x_integer: bool,
+}
+
+/// Corner of the legend box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Legend {
+    /// The corner whose legend-sized box covers the fewest drawn data (default; ties go to
+    /// upper right, upper left, lower right, lower left in that order).
+    #[default]
+    Auto,
+    /// Upper right.
+    UpperRight,
+    /// Upper left.
+    UpperLeft,
+    /// Lower right.
+    LowerRight,
+    /// Lower left.
+    LowerLeft,
+}
+
+/// A heat map of values on a regular grid, with a colour bar.
+#[derive(Debug, Clone, Default)]
+pub struct Heatmap {
+    /// Title above the panel.
+    pub title: String,
+    /// x-axis description with unit.
+    pub x_label: String,
+    /// y-axis description with unit.
+    pub y_label: String,
+    /// Centre of the first and last column.
+    pub x_range: (f64, f64),
+    /// Centre of the first and last row.
+    pub y_range: (f64, f64),
+    /// Columns.
+    pub nx: usize,
+    /// Rows.
+    pub ny: usize,
+    /// Values, row-major with x fastest (`values[j * nx + i]`); non-finite cells are grey.
+    pub values: Vec<f64>,
+    /// What the colour means, with unit.
+    pub value_label: String,
+    /// Diverging colours centred on zero (for signed differences).
+    pub diverging: bool,
+    /// Fixed colour range (values outside are clamped), else fitted to the data.
+    pub range: Option<(f64, f64)>,
+}
+
+/// A figure: panels laid out in a grid.
+#[derive(Debug, Clone)]
+pub struct Figure {
+    /// Heat-map panels, drawn after the line panels.
+    pub heatmaps: Vec<Heatmap>,
+    /// Panels, row-major.
+    pub panels: Vec<Panel>,
+    /// Panels per row.
+    pub columns: usize,
+    /// Size of one panel in pixels.
+    pub panel_size: (u32, u32),
+}
+
+impl Figure {
+    /// A figure of the given panels, `columns` per row, 640×440 each.
+    pub fn grid(panels: Vec<Panel>, columns: usize) -> Self {
+        Self {
+            heatmaps: Vec::new(),
+            panels,
+            columns: columns.max(1),
+            panel_size: (640, 440),
+        }
+    }
+
+    /// A figure of heat maps, `columns` per row.
+    pub fn heatmaps(maps: Vec<Heatmap>, columns: usize) -> Self {
+        Self {
+            heatmaps: maps,
+            panels: Vec::new(),
+            columns: columns.max(1),
+            panel_size: (560, 440),
+        }
+    }
+
+    fn count(&self) -> usize {
+        self.panels.len() + self.heatmaps.len()
+    }
+
+    /// Size in pixels: the panel size times the grid.
+    fn size(&self) -> (u32, u32) {
+        let rows = self.count().div_ceil(self.columns) as u32;
+        let cols = self.columns.min(self.count()).max(1) as u32;
+        (self.panel_size.0 * cols, self.panel_size.1 * rows.max(1))
+    }
+}

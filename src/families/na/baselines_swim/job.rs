@@ -1,0 +1,314 @@
+//! The job: from one random start, the BPTT runs and the gradient-free searches on the
+//! emulator and the simulator (and on the DAgger net, if asked), each run's best knots
+//! evaluated on both substrates.
+
+use super::settings::SearchBudget;
+use super::{Params, DAGGER_SUBSTRATE, SEARCHES};
+use crate::control::bptt::{Bptt, Descent};
+use crate::control::search::{
+    anneal, bptt_search, hill_climb, nelder_mead, time_to_target, BpttProblem, Budget, ClimbConfig,
+    ReplayProblem, SearchProblem, SearchResult, SimplexConfig,
+};
+use crate::emulator::hierarchy::{self, global_state};
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::{other, Error, Job, RunContext};
+use crate::families::na::table1_structure::build_dolphin_emulator;
+use crate::row;
+use crate::seed::mix_seed;
+use rand::Rng;
+
+/// One finished run.
+struct Run {
+    method: &'static str,
+    substrate: &'static str,
+    result: SearchResult,
+}
+
+impl Params {
+    /// A gradient-free search on one problem.
+    fn search<P: SearchProblem>(
+        &self,
+        method: &str,
+        problem: &P,
+        v0: &[f64],
+        budget: &SearchBudget,
+        seed: u64,
+    ) -> Result<SearchResult, Error> {
+        let b = budget.budget();
+        let r = match method {
+            "annealing" => anneal(
+                problem,
+                v0,
+                &self.annealing.config(budget.evaluations),
+                seed,
+                &b,
+            ),
+            "simplex" => {
+                let s = &self.simplex;
+                let cfg = SimplexConfig {
+                    step: s.step,
+                    sd_tolerance: s.sd_tolerance,
+                    penalty: s.penalty,
+                    restarts: s.restarts,
+                };
+                nelder_mead(problem, v0, &cfg, &b)
+            }
+            _ => {
+                let h = &self.hill_climbing;
+                let cfg = ClimbConfig {
+                    batch: h.batch,
+                    step: h.step,
+                    shrink: h.shrink,
+                    grow: h.grow,
+                };
+                hill_climb(problem, v0, &cfg, seed, &b)
+            }
+        };
+        r.map_err(other)
+    }
+}
+
+impl Params {
+    /// The two BPTT runs (momentum, plain) through `problem`'s net from `v0`, with the step
+    /// scale λ measured there first (its cost charged to both); `substrate` names the net
+    /// (`emulator`: the Table 1 net, whose stages keep their plain names).
+    fn bptt_runs(
+        &self,
+        ctx: &RunContext,
+        problem: &BpttProblem<'_, crate::emulator::Emulator>,
+        v0: &[f64],
+        substrate: &'static str,
+    ) -> Result<Vec<Run>, Error> {
+        let label = |name: &str| {
+            if substrate == "emulator" {
+                name.to_string()
+            } else {
+                format!("{name} ({substrate})")
+            }
+        };
+        let (lambda, spent) = ctx.stage(&label("curvature"), || {
+            problem.curvature(v0, self.curvature_iterations)
+        });
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return Err(other(format!(
+                "dolphin ({substrate}): step scale λ = {lambda}"
+            )));
+        }
+        let b = &self.bptt;
+        let mut runs = vec![];
+        for (method, descent) in [
+            (
+                "bptt_momentum",
+                Descent::Momentum {
+                    eta: b.eta,
+                    alpha: b.alpha,
+                },
+            ),
+            ("bptt_plain", Descent::Plain { eta: b.plain_eta }),
+        ] {
+            let (result, _) = ctx
+                .stage(&label(method), || {
+                    bptt_search(
+                        problem,
+                        v0,
+                        descent,
+                        lambda,
+                        &Budget::iterations(b.iterations),
+                        spent,
+                    )
+                })
+                .map_err(other)?;
+            runs.push(Run {
+                method,
+                substrate,
+                result,
+            });
+        }
+        Ok(runs)
+    }
+}
+
+fn opt(v: Option<f64>) -> f64 {
+    v.unwrap_or(f64::NAN)
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let spec = self.nets.spec(ctx.seed, self.steps, self.example_scale);
+        let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
+        let body = built.emulator.dolphin().clone();
+        let global = built.emulator.global();
+        let swim = &self.swim;
+        let objective = swim.objective();
+        let knots = swim.knot_layout();
+        let (x0, g0) = swim.start(&body);
+        let bptt = Bptt::new(global, &objective, knots, swim.bounds(), &g0).map_err(other)?;
+        // The initial knots of na_fig13_control's dolphin.
+        let mut rng = ctx.rng(400);
+        let v0: Vec<f64> = (0..knots.len())
+            .map(|_| self.init_spread * (2.0 * rng.random::<f64>() - 1.0))
+            .collect();
+        let emulator = BpttProblem::new(&bptt);
+        let simulator = ReplayProblem::new(
+            &bptt,
+            || Box::new(hierarchy::simulator(&body)) as Box<dyn crate::physics::Dynamics>,
+            &x0,
+            self.nets.physical_dt,
+            self.steps,
+            Box::new(|x: &[f64], out: &mut [f64]| global_state(&body, x, out)),
+        )
+        .map_err(other)?;
+
+        let mut runs: Vec<Run> = vec![];
+        runs.extend(self.bptt_runs(ctx, &emulator, &v0, "emulator")?);
+        let pb = ctx.progress(2 * SEARCHES.len() as u64, "gradient-free searches");
+        for (k, method) in SEARCHES.into_iter().enumerate() {
+            let seed = mix_seed(ctx.seed, 410 + k as u64);
+            let result = ctx.stage(&format!("{method} emulator"), || {
+                self.search(method, &emulator, &v0, &self.budget.emulator, seed)
+            })?;
+            runs.push(Run {
+                method,
+                substrate: "emulator",
+                result,
+            });
+            pb.inc(1);
+            let result = ctx.stage(&format!("{method} simulator"), || {
+                self.search(method, &simulator, &v0, &self.budget.simulator, seed)
+            })?;
+            runs.push(Run {
+                method,
+                substrate: "simulator",
+                result,
+            });
+            pb.inc(1);
+        }
+        pb.finish_and_clear();
+
+        // The same runs on the dolphin's last-round DAgger net (ours), from the same start.
+        let dagger_net = match &self.dagger {
+            Some(d) => Some(self.fig13(d).dolphin_dagger_net(ctx)?),
+            None => None,
+        };
+        let dagger_bptt = match &dagger_net {
+            Some(net) => {
+                Some(Bptt::new(net, &objective, knots, swim.bounds(), &g0).map_err(other)?)
+            }
+            None => None,
+        };
+        if let Some(b) = &dagger_bptt {
+            let problem = BpttProblem::new(b);
+            runs.extend(self.bptt_runs(ctx, &problem, &v0, DAGGER_SUBSTRATE)?);
+            for (k, method) in SEARCHES.into_iter().enumerate() {
+                let seed = mix_seed(ctx.seed, 410 + k as u64);
+                let result = ctx.stage(&format!("{method} ({DAGGER_SUBSTRATE})"), || {
+                    self.search(method, &problem, &v0, &self.budget.emulator, seed)
+                })?;
+                runs.push(Run {
+                    method,
+                    substrate: DAGGER_SUBSTRATE,
+                    result,
+                });
+            }
+        }
+
+        let mut baselines = Table::new(&[
+            "method",
+            "substrate",
+            "iteration",
+            "evaluations",
+            "seconds",
+            "objective",
+            "gradients",
+            "current",
+        ]);
+        for r in &runs {
+            for t in &r.result.trace {
+                baselines.push(row![
+                    r.method,
+                    r.substrate,
+                    t.iteration,
+                    t.evaluations,
+                    t.seconds,
+                    t.best,
+                    t.gradients,
+                    t.current
+                ]);
+            }
+        }
+        // Every run's best knots on both substrates.
+        let on_both = |v: &[f64]| -> (f64, f64, f64, f64) {
+            if v.iter().any(|x| !x.is_finite()) {
+                return (f64::NAN, f64::NAN, f64::NAN, f64::NAN);
+            }
+            let (je, de) = emulator.with_bptt(|b| {
+                let j = b.rollout(v);
+                (j, swim.distance(b.states()))
+            });
+            let sim = simulator.rollout(v);
+            (je, sim.objective, de, swim.distance(&sim.states))
+        };
+        let evaluated: Vec<(f64, f64, f64, f64)> =
+            runs.iter().map(|r| on_both(&r.result.best)).collect();
+        let momentum = runs
+            .iter()
+            .position(|r| r.method == "bptt_momentum")
+            .expect("the momentum run is first");
+        let targets = (evaluated[momentum].0, evaluated[momentum].1);
+        // On the DAgger net: its own momentum run's best J there.
+        let dagger_target = runs
+            .iter()
+            .find(|r| r.method == "bptt_momentum" && r.substrate == DAGGER_SUBSTRATE)
+            .map_or(f64::NAN, |r| r.result.best_value);
+        let mut final_t = Table::new(&[
+            "method",
+            "substrate",
+            "iterations",
+            "evaluations",
+            "seconds",
+            "objective_substrate",
+            "objective_emulator",
+            "objective_simulator",
+            "distance_emulator_m",
+            "distance_simulator_m",
+            "target",
+            "iterations_to_bptt",
+            "evaluations_to_bptt",
+            "seconds_to_bptt",
+            "best_iteration",
+        ]);
+        for (r, &(je, js, de, ds)) in runs.iter().zip(&evaluated) {
+            let target = match r.substrate {
+                "emulator" => targets.0,
+                DAGGER_SUBSTRATE => dagger_target,
+                _ => targets.1,
+            };
+            let trace = &r.result.trace;
+            let last = trace.last().expect("a search has iteration 0");
+            let reached = time_to_target(trace, target);
+            let own = time_to_target(trace, r.result.best_value);
+            final_t.push(row![
+                r.method,
+                r.substrate,
+                last.iteration,
+                last.evaluations,
+                last.seconds,
+                r.result.best_value,
+                je,
+                js,
+                de,
+                ds,
+                target,
+                opt(reached.map(|x| x.iteration as f64)),
+                opt(reached.map(|x| x.evaluations as f64)),
+                opt(reached.map(|x| x.seconds)),
+                opt(own.map(|x| x.iteration as f64))
+            ]);
+        }
+        Ok(Tables::from([("baselines", baselines), ("final", final_t)]))
+    }
+}

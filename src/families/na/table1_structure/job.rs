@@ -1,0 +1,331 @@
+//! The job: train every Table 1 net (side by side), measure its rollouts against the
+//! simulator and its neutral-control drift from the control tasks' starts, and tabulate it all.
+
+use super::nets::{build_dolphin_emulator, build_emulators, build_spec};
+use super::{position_part, DriftTask, Params};
+use crate::emulator::catalog::{anchor_of, rollout_error, BuildSpec};
+use crate::emulator::hierarchy::{
+    global_heldout_errors, hierarchy_rollout_error, DolphinEmulator, HierarchySpec,
+};
+use crate::emulator::mlp::Mlp;
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::{other, Error, Job, RunContext};
+use crate::row;
+
+/// Quantity and component of each of a segment's 13 global-state numbers (`global_error.csv`).
+const GLOBAL_OUTPUTS: [(&str, &str); 13] = [
+    ("centroid", "x"),
+    ("centroid", "y"),
+    ("centroid", "z"),
+    ("orientation", "w"),
+    ("orientation", "x"),
+    ("orientation", "y"),
+    ("orientation", "z"),
+    ("velocity", "x"),
+    ("velocity", "y"),
+    ("velocity", "z"),
+    ("angular_velocity", "x"),
+    ("angular_velocity", "y"),
+    ("angular_velocity", "z"),
+];
+
+/// Position part at the end of `steps` emulator steps and of the simulator over the same time,
+/// from `start` under the constant control `u`: (emulator, simulator, start) positions.
+fn catalog_drift(
+    e: &crate::emulator::Emulator,
+    spec: &BuildSpec,
+    start: &[f64],
+    u: &[f64],
+    steps: usize,
+) -> Result<[Vec<f64>; 3], Error> {
+    let m = spec.net.model;
+    let (mut xe, mut xs, mut next) = (start.to_vec(), start.to_vec(), start.to_vec());
+    let mut sc = e.scratch();
+    let mut sim = m.simulator();
+    for k in 0..steps {
+        e.predict(&xe, u, &mut sc, &mut next);
+        xe.copy_from_slice(&next);
+        for _ in 0..spec.steps {
+            sim.step(&mut xs, u, spec.net.physical_dt);
+        }
+        let t = (k + 1) as f64 * spec.super_dt();
+        crate::physics::check_finite(m.name(), k + 1, t, &xs).map_err(other)?;
+    }
+    let p = position_part(m);
+    Ok([
+        xe[p.clone()].to_vec(),
+        xs[p.clone()].to_vec(),
+        start[p].to_vec(),
+    ])
+}
+
+/// As [`catalog_drift`] for the dolphin's global net from the rest shape at rest, the position
+/// being the mean segment centroid.
+fn dolphin_drift(
+    e: &DolphinEmulator,
+    spec: &HierarchySpec,
+    u: &[f64],
+    steps: usize,
+) -> Result<[Vec<f64>; 3], Error> {
+    use crate::emulator::hierarchy::{global_state, simulator, FRAME_DIM, GLOBAL_DIM};
+    use crate::physics::Dynamics;
+    let d = e.dolphin();
+    let mean = |g: &[f64]| -> Vec<f64> {
+        (0..3)
+            .map(|c| (0..6).map(|s| g[FRAME_DIM * s + c]).sum::<f64>() / 6.0)
+            .collect()
+    };
+    let x0 = d.rest_state();
+    let mut g = vec![0.0; GLOBAL_DIM];
+    global_state(d, &x0, &mut g);
+    let start = mean(&g);
+    let (mut next, mut sc) = (g.clone(), e.global().scratch());
+    let (mut sim, mut xs) = (simulator(d), x0);
+    for k in 0..steps {
+        e.global().predict(&g, u, &mut sc, &mut next);
+        g.copy_from_slice(&next);
+        for _ in 0..spec.steps {
+            sim.step(&mut xs, u, spec.physical_dt);
+        }
+        let t = (k + 1) as f64 * spec.super_dt();
+        crate::physics::check_finite("dolphin", k + 1, t, &xs).map_err(other)?;
+    }
+    let emu = mean(&g);
+    global_state(d, &xs, &mut g);
+    Ok([emu, mean(&g), start])
+}
+
+/// Fresh episodes per net for the multi-step fidelity columns.
+pub const ROLLOUT_EPISODES: usize = 32;
+/// Super-steps per rollout: the 40 of the Fig. 13 control tasks.
+pub const ROLLOUT_STEPS: usize = 40;
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let mut structure = Table::new(&[
+            "net",
+            "inputs",
+            "hidden",
+            "outputs",
+            "examples",
+            "train_error",
+            "heldout_error",
+            "train_s",
+            "weights",
+            "examples_per_weight",
+            "stop",
+            "cached",
+            "rollout40_error_mean",
+            "rollout40_error_final",
+            "anchored",
+        ]);
+        let mut training = Table::new(&["net", "iteration", "train_error", "heldout_error"]);
+        let mut rollout = Table::new(&["net", "step", "error"]);
+        // The k-step rollout fine-tuning (training.rollout_k): one-step loss + rollout_weight x
+        // k-step rollout loss, on the training and held-out examples and windows.
+        let mut rollout_training = Table::new(&["net", "iteration", "train_loss", "heldout_loss"]);
+        let mut global_error = Table::new(&[
+            "segment",
+            "quantity",
+            "component",
+            "heldout_mse",
+            "target_variance",
+        ]);
+        let mut drift = Table::new(&[
+            "net",
+            "task",
+            "horizon_s",
+            "emulator_drift",
+            "simulator_drift",
+            "gap",
+            "tolerance",
+            "at_anchor",
+        ]);
+        let dist = |a: &[f64], b: &[f64]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        // at_anchor: the start and control encode to the net's anchor (NetSpec::anchor), so
+        // the emulator's first step is exact by construction, not by fit.
+        let mut push_drift =
+            |t: &DriftTask, horizon_s: f64, [e, s, x0]: [Vec<f64>; 3], at_anchor: bool| {
+                drift.push(row![
+                    t.net.as_str(),
+                    t.task.as_str(),
+                    horizon_s,
+                    dist(&e, &x0),
+                    dist(&s, &x0),
+                    dist(&e, &s),
+                    t.tolerance,
+                    i64::from(at_anchor)
+                ]);
+            };
+        let pb = ctx.progress(self.nets.len() as u64, "training emulators");
+        let specs: Vec<BuildSpec> = self
+            .nets
+            .iter()
+            .map(|net| {
+                build_spec(
+                    ctx.seed,
+                    net,
+                    self.steps,
+                    self.example_scale,
+                    &self.training,
+                )
+            })
+            .collect();
+        let built = ctx.stage("train emulators (side by side)", || build_emulators(&specs))?;
+        for ((net, spec), t) in self.nets.iter().zip(&specs).zip(built) {
+            let name = net.model.name();
+            let m = net.model;
+            let (n_in, n_out) = (m.state_dim() + m.control_dim(), m.state_dim());
+            let w = Mlp::weight_count(n_in, net.hidden, n_out);
+            let errors = ctx.stage(&format!("rollouts {name}"), || {
+                rollout_error(&t.emulator, &spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other)
+            })?;
+            for (k, e) in errors.iter().enumerate() {
+                rollout.push(row![name, (k + 1) as i64, *e]);
+            }
+            for task in self.drift.iter().filter(|d| d.net == name) {
+                let u = if task.control.is_empty() {
+                    vec![0.0; m.control_dim()]
+                } else {
+                    task.control.clone()
+                };
+                let ends = catalog_drift(&t.emulator, &spec, &task.start, &u, ROLLOUT_STEPS)?;
+                let tf = t.emulator.transforms();
+                let at_anchor = anchor_of(spec, tf).is_some_and(|a| a.covers(tf, &task.start, &u));
+                push_drift(
+                    task,
+                    ROLLOUT_STEPS as f64 * spec.super_dt(),
+                    ends,
+                    at_anchor,
+                );
+            }
+            let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+            structure.push(row![
+                name,
+                n_in as i64,
+                net.hidden as i64,
+                n_out as i64,
+                spec.net.examples as i64,
+                t.train_error,
+                t.heldout_error,
+                t.train_s,
+                w as i64,
+                spec.net.examples as f64 / w as f64,
+                t.stop.as_str(),
+                i64::from(t.from_cache),
+                mean,
+                errors[errors.len() - 1],
+                i64::from(net.anchor)
+            ]);
+            for p in &t.trace {
+                training.push(row![
+                    name,
+                    p.iteration as i64,
+                    p.train_error,
+                    p.held_out_error
+                ]);
+            }
+            for p in &t.rollout_trace {
+                rollout_training.push(row![
+                    name,
+                    p.iteration as i64,
+                    p.train_error,
+                    p.held_out_error
+                ]);
+            }
+            pb.inc(1);
+        }
+        if let Some(d) = &self.dolphin {
+            let spec = d.spec(ctx.seed, self.steps, self.example_scale);
+            let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
+            let (global_err, composed_err) = ctx.stage("rollouts dolphin", || {
+                hierarchy_rollout_error(&built.emulator, &spec, ROLLOUT_EPISODES, ROLLOUT_STEPS)
+                    .map_err(other)
+            })?;
+            for (name, errors) in [("dolphin_global", &global_err), ("dolphin", &composed_err)] {
+                for (k, e) in errors.iter().enumerate() {
+                    rollout.push(row![name, (k + 1) as i64, *e]);
+                }
+            }
+            let per_output = ctx.stage("dolphin global error by output", || {
+                global_heldout_errors(&built.emulator, &spec).map_err(other)
+            })?;
+            for (j, (e, v)) in per_output.iter().enumerate() {
+                let (quantity, component) = GLOBAL_OUTPUTS[j % 13];
+                global_error.push(row![(j / 13) as i64, quantity, component, *e, *v]);
+            }
+            for task in self.drift.iter().filter(|d| d.net == "dolphin") {
+                let u = if task.control.is_empty() {
+                    vec![0.0; 6]
+                } else {
+                    task.control.clone()
+                };
+                let ends = dolphin_drift(&built.emulator, &spec, &u, ROLLOUT_STEPS)?;
+                push_drift(task, ROLLOUT_STEPS as f64 * spec.super_dt(), ends, false);
+            }
+            let summary = |e: &[f64]| (e.iter().sum::<f64>() / e.len() as f64, e[e.len() - 1]);
+            for n in &built.nets {
+                // The global net's own rollout; the local nets act only composed, so their rows
+                // carry the composed hierarchy's mass-state rollout.
+                let (mean, last) = if n.name == "dolphin_global" {
+                    summary(&global_err)
+                } else {
+                    summary(&composed_err)
+                };
+                let w = Mlp::weight_count(n.inputs, n.hidden, n.outputs);
+                structure.push(row![
+                    n.name.as_str(),
+                    n.inputs as i64,
+                    n.hidden as i64,
+                    n.outputs as i64,
+                    n.examples as i64,
+                    n.train_error,
+                    n.heldout_error,
+                    n.train_s,
+                    w as i64,
+                    n.examples as f64 / w as f64,
+                    n.stop.as_str(),
+                    i64::from(n.from_cache),
+                    mean,
+                    last,
+                    0_i64
+                ]);
+                for p in &n.trace {
+                    training.push(row![
+                        n.name.as_str(),
+                        p.iteration as i64,
+                        p.train_error,
+                        p.held_out_error
+                    ]);
+                }
+                for p in &n.rollout_trace {
+                    rollout_training.push(row![
+                        n.name.as_str(),
+                        p.iteration as i64,
+                        p.train_error,
+                        p.held_out_error
+                    ]);
+                }
+            }
+        }
+        pb.finish_and_clear();
+        Ok(Tables::from([
+            ("structure", structure),
+            ("training", training),
+            ("rollout", rollout),
+            ("drift", drift),
+            ("rollout_training", rollout_training),
+            ("global_error", global_error),
+        ]))
+    }
+}

@@ -1,0 +1,284 @@
+//! `na_table1_structure` (NeuroAnimator §3.5–3.6, Table 1): train every emulator network of
+//! Table 1 (the dolphin as a global net and six local nets, [`crate::emulator::hierarchy`]) on data sampled as in §3.4 — small nets by
+//! full-batch conjugate gradient, large ones by momentum mini-batches, both stopping early on a
+//! held-out set — and report the shapes, the example counts and the errors reached.
+//!
+//! Errors are mean squared errors per output in the normalized network space (Fig. 6c), where
+//! 1.0 is the error of always predicting the mean state change; so they compare across models.
+//! Networks come from the trained-emulator cache ([`crate::emulator::cache`]) when an identical
+//! one was trained before (`train_s` then repeats the original training time).
+//!
+//! Tables: `structure` (net, inputs, hidden, outputs, examples, train_error, heldout_error,
+//! train_s, weights, examples_per_weight, stop, cached, rollout40_error_mean,
+//! rollout40_error_final), `training` (net, iteration, train_error, heldout_error), `rollout`
+//! (net, step, error; the dolphin as `dolphin_global`, its global net alone, and `dolphin`, the
+//! composed hierarchy) and `drift` (net, task, horizon_s, emulator_drift, simulator_drift, gap,
+//! tolerance: neutral-control drift from the control tasks' starts, [`DriftTask`]) and
+//! `rollout_training` (net, iteration, train_loss, heldout_loss: the k-step rollout
+//! fine-tuning, [`crate::emulator::rollout`], when `training.rollout_k` is set; the `stop`
+//! column then ends with `; rollout: <its stop reason>`), and for the dolphin `global_error`
+//! (segment, quantity, component, heldout_mse, target_variance: the global net's held-out
+//! one-step error per output, whose mean is its `heldout_error`, and the variance of that
+//! output's target).
+//!
+//! Here: the parameters and their validation, and the family; `nets` builds the Table 1
+//! networks (also for the other NeuroAnimator experiments and `motionlab emulate`), `job` trains
+//! them and measures them, `figures` and `report` present the results.
+
+mod figures;
+mod job;
+mod nets;
+mod report;
+
+pub use job::{ROLLOUT_EPISODES, ROLLOUT_STEPS};
+pub use nets::{
+    build_dolphin_emulator, build_emulator, build_emulators, build_spec, table1_emulator,
+    Table1Emulator, EMULATOR_NAMES,
+};
+
+use crate::emulator::cache::fnv1a;
+use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
+use crate::emulator::hierarchy::{HierarchyNet, HierarchySpec};
+use crate::experiment::output::Tables;
+use crate::experiment::plot::FigureSink;
+use crate::experiment::report::Findings;
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{Error, Family};
+use crate::seed::mix_seed;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The family.
+pub struct NaStructure;
+
+/// Parameters of `na_table1_structure`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// Physical steps per emulator step n (the paper's N50: 50).
+    pub steps: usize,
+    /// Multiplies every net's example count (1 = Table 1; quick runs use less).
+    pub example_scale: f64,
+    /// The networks.
+    pub nets: Vec<NetSpec>,
+    /// Training settings.
+    pub training: TrainSettings,
+    /// The hierarchical dolphin (a global net and six local nets), if built.
+    #[serde(default)]
+    pub dolphin: Option<DolphinNets>,
+    /// Neutral-control drift checks from the control tasks' starts (`drift.csv`).
+    #[serde(default)]
+    pub drift: Vec<DriftTask>,
+}
+
+/// A drift check: from a control task's start, `ROLLOUT_STEPS` super-steps of a neutral control
+/// held on the emulator and on the simulator; the position part of the state (pendulum: the
+/// three joint angles; truck: x, y; lander: x, y, z; dolphin: the mean segment centroid) must
+/// end within `tolerance` of the simulator's.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriftTask {
+    /// The net: a catalog model name or `dolphin` (the hierarchy's global net).
+    pub net: String,
+    /// The control task whose start it is.
+    pub task: String,
+    /// The start state (catalog nets; the dolphin starts from its rest shape at rest).
+    #[serde(default)]
+    pub start: Vec<f64>,
+    /// The neutral control held throughout (empty: all zero).
+    #[serde(default)]
+    pub control: Vec<f64>,
+    /// Largest emulator-vs-simulator gap of the position part at the end (ours: the task's
+    /// final position tolerance).
+    pub tolerance: f64,
+}
+
+/// Indices of the position part of a catalog model's state, for the drift checks.
+pub fn position_part(m: NetModel) -> std::ops::Range<usize> {
+    match m {
+        NetModel::Truck => 0..2,
+        _ => 0..3,
+    }
+}
+
+/// The dolphin hierarchy of Table 1 as experiment files give it (§3.3).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DolphinNets {
+    /// The global net (Table 1: 50 hidden units, 64,000 examples).
+    pub global: HierarchyNet,
+    /// Each of the six local nets (Table 1: 40 hidden units, 32,000 examples).
+    pub local: HierarchyNet,
+    /// Physical step δt of the dolphin simulator (s).
+    pub physical_dt: f64,
+    /// Training settings of the dolphin nets.
+    pub training: TrainSettings,
+}
+
+impl DolphinNets {
+    /// Checks the settings; `key` prefixes the keys in messages.
+    pub fn validate(&self, key: &str, scale: f64) -> Result<(), ParamError> {
+        for (name, n) in [("global", &self.global), ("local", &self.local)] {
+            ensure(
+                n.hidden >= 1,
+                &format!("{key}.{name}.hidden"),
+                "must be >= 1",
+            )?;
+            ensure(
+                (n.examples as f64 * scale).round() >= 10.0,
+                &format!("{key}.{name}.examples"),
+                "need at least 10 examples after example_scale",
+            )?;
+            ensure(
+                n.max_epochs.is_none_or(|e| e >= 1),
+                &format!("{key}.{name}.max_epochs"),
+                "must be >= 1",
+            )?;
+        }
+        ensure(
+            self.physical_dt > 0.0 && self.physical_dt <= 0.004,
+            &format!("{key}.physical_dt"),
+            "must be in (0, 0.004] s: the dolphin's semi-implicit Euler step is stable up to about 0.006 s",
+        )?;
+        validate_training(&self.training).map_err(|e| e.prefixed(key))
+    }
+
+    /// The build spec at n = `steps` physical steps per emulator step.
+    pub fn spec(&self, seed: u64, steps: usize, example_scale: f64) -> HierarchySpec {
+        let scaled = |n: &HierarchyNet| HierarchyNet {
+            examples: (n.examples as f64 * example_scale).round() as usize,
+            ..*n
+        };
+        HierarchySpec {
+            global: scaled(&self.global),
+            local: scaled(&self.local),
+            physical_dt: self.physical_dt,
+            steps,
+            settings: self.training,
+            seed: mix_seed(seed, fnv1a(format!("dolphin-n{steps}").as_bytes())),
+        }
+    }
+}
+
+/// Checks the shared training settings.
+pub fn validate_training(t: &TrainSettings) -> Result<(), ParamError> {
+    ensure(
+        t.held_out_fraction > 0.0 && t.held_out_fraction <= 1.0,
+        "training.held_out_fraction",
+        "must be in (0, 1]",
+    )?;
+    ensure(t.cg_max_iters >= 1, "training.cg_max_iters", "must be >= 1")?;
+    ensure(t.max_epochs >= 1, "training.max_epochs", "must be >= 1")?;
+    ensure(t.patience >= 1, "training.patience", "must be >= 1")?;
+    ensure(
+        (0.0..1.0).contains(&t.min_improvement),
+        "training.min_improvement",
+        "must be in [0, 1)",
+    )?;
+    positive("training.learning_rate", t.learning_rate)?;
+    ensure(
+        (0.0..1.0).contains(&t.momentum),
+        "training.momentum",
+        "must be in [0, 1)",
+    )?;
+    ensure(t.batch_size >= 1, "training.batch_size", "must be >= 1")?;
+    ensure(
+        t.input_noise >= 0.0 && t.input_noise.is_finite(),
+        "training.input_noise",
+        "must be >= 0",
+    )?;
+    if t.rollout_k > 0 {
+        positive("training.rollout_weight", t.rollout_weight)?;
+        ensure(
+            t.rollout_iters >= 1,
+            "training.rollout_iters",
+            "must be >= 1 when rollout_k is set",
+        )?;
+    }
+    Ok(())
+}
+
+/// Checks a list of nets.
+pub fn validate_nets(nets: &[NetSpec], scale: f64) -> Result<(), ParamError> {
+    ensure(!nets.is_empty(), "nets", "need at least one net")?;
+    positive("example_scale", scale)?;
+    for (i, n) in nets.iter().enumerate() {
+        ensure(n.hidden >= 1, &format!("nets[{i}].hidden"), "must be >= 1")?;
+        positive(&format!("nets[{i}].physical_dt"), n.physical_dt)?;
+        if let Some(v) = n.input_noise {
+            ensure(
+                v >= 0.0 && v.is_finite(),
+                &format!("nets[{i}].input_noise"),
+                "must be >= 0",
+            )?;
+        }
+        ensure(
+            (n.examples as f64 * scale).round() >= 10.0,
+            &format!("nets[{i}].examples"),
+            "need at least 10 examples after example_scale",
+        )?;
+    }
+    Ok(())
+}
+
+impl Validate for Params {
+    fn validate(&self) -> Result<(), ParamError> {
+        ensure(self.steps >= 1, "steps", "must be >= 1")?;
+        validate_nets(&self.nets, self.example_scale)?;
+        if let Some(d) = &self.dolphin {
+            d.validate("dolphin", self.example_scale)?;
+        }
+        for (i, t) in self.drift.iter().enumerate() {
+            let key = format!("drift[{i}]");
+            positive(&format!("{key}.tolerance"), t.tolerance)?;
+            if t.net == "dolphin" {
+                ensure(
+                    self.dolphin.is_some(),
+                    &format!("{key}.net"),
+                    "the dolphin drift check needs [params.dolphin]",
+                )?;
+                ensure(
+                    t.control.is_empty() || t.control.len() == 6,
+                    &format!("{key}.control"),
+                    "needs 6 muscle values (or none)",
+                )?;
+                continue;
+            }
+            let m = self
+                .nets
+                .iter()
+                .find(|n| n.model.name() == t.net)
+                .map(|n| n.model);
+            ensure(
+                m.is_some(),
+                &format!("{key}.net"),
+                "must name a net of `nets` or `dolphin`",
+            )?;
+            let m = m.expect("checked");
+            ensure(
+                t.start.len() == m.state_dim(),
+                &format!("{key}.start"),
+                &format!("needs {} values", m.state_dim()),
+            )?;
+            ensure(
+                t.control.is_empty() || t.control.len() == m.control_dim(),
+                &format!("{key}.control"),
+                &format!("needs {} values (or none)", m.control_dim()),
+            )?;
+        }
+        validate_training(&self.training)
+    }
+}
+
+impl Family for NaStructure {
+    const KIND: &'static str = "na_table1_structure";
+    type Params = Params;
+
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+        figures::draw(fig, tables)
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        report::findings(dir)
+    }
+}

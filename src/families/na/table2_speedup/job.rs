@@ -1,0 +1,306 @@
+//! The job: train (or load) each emulator, time it against its physical simulator over the
+//! same simulated time, at the training step and at equal accuracy, and tabulate the speedups
+//! with their breakdown.
+
+use super::timing::{hold, time_dolphin, time_emulator, time_physical};
+use super::{Params, DOLPHIN_EXPLICIT, DOLPHIN_IMPLICIT};
+use crate::emulator::catalog::{NetModel, RolloutReference};
+use crate::emulator::dataset::ControlSignal;
+use crate::emulator::hierarchy;
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::{other, Error, Job, RunContext};
+use crate::families::na::equal_accuracy::match_substeps;
+use crate::families::na::table1_structure::{
+    build_dolphin_emulator, build_emulator, build_spec, ROLLOUT_EPISODES, ROLLOUT_STEPS,
+};
+use crate::physics::dolphin::ImplicitDolphin;
+use crate::physics::Dynamics;
+use crate::row;
+
+/// A row's cost breakdown: speedup = physical_s / emulator_s = n × ratio.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Breakdown {
+    /// Seconds per physical step.
+    pub physical_step_s: f64,
+    /// Seconds per emulator (super-)step.
+    pub emulator_step_s: f64,
+    /// Physical steps per emulator step.
+    pub n: i64,
+    /// Physical step cost / emulator step cost.
+    pub ratio: f64,
+}
+
+/// The breakdown of `physical_s` for `physical_steps` steps against `emulator_s` for
+/// `emulator_steps` steps covering the same simulated time.
+pub fn breakdown(
+    physical_s: f64,
+    physical_steps: usize,
+    emulator_s: f64,
+    emulator_steps: usize,
+) -> Breakdown {
+    let physical_step_s = physical_s / physical_steps as f64;
+    let emulator_step_s = emulator_s / emulator_steps as f64;
+    Breakdown {
+        physical_step_s,
+        emulator_step_s,
+        n: (physical_steps / emulator_steps) as i64,
+        ratio: physical_step_s / emulator_step_s,
+    }
+}
+
+/// One `speedup` row (the timings with their breakdown).
+#[allow(clippy::too_many_arguments)]
+fn push_speedup(
+    table: &mut Table,
+    model: &str,
+    emulator: &str,
+    integrator: &str,
+    dt: f64,
+    (physical_s, physical_steps): (f64, usize),
+    (emulator_s, emulator_steps): (f64, usize),
+) {
+    let b = breakdown(physical_s, physical_steps, emulator_s, emulator_steps);
+    table.push(row![
+        model,
+        emulator,
+        physical_s,
+        emulator_s,
+        physical_s / emulator_s,
+        physical_steps as i64,
+        emulator_steps as i64,
+        b.physical_step_s,
+        b.emulator_step_s,
+        b.n,
+        b.ratio,
+        integrator,
+        dt
+    ]);
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let mut table = Table::new(&[
+            "model",
+            "emulator",
+            "physical_s",
+            "emulator_s",
+            "speedup",
+            "physical_steps",
+            "emulator_steps",
+            "physical_step_s",
+            "emulator_step_s",
+            "n",
+            "step_cost_ratio",
+            "physical_integrator",
+            "physical_dt",
+        ]);
+        let mut equal = Table::new(&[
+            "model",
+            "emulator",
+            "emulator_error",
+            "substeps",
+            "matched_dt",
+            "matched_error",
+            "coarser_error",
+            "physical_steps",
+            "emulator_steps",
+            "physical_s",
+            "emulator_s",
+            "speedup",
+        ]);
+        let steps = self.physical_steps;
+        for (i, tm) in self.models.iter().enumerate() {
+            let model: NetModel = tm.net.model;
+            let dt = tm.net.physical_dt;
+            let mut rng = ctx.rng(100 + i as u64);
+            let x0 = model.start_state(&mut rng);
+            let m = model.control_dim();
+            let signal = ControlSignal::sample(
+                model.control_process(),
+                &model.control_limits(),
+                steps as f64 * dt,
+                &mut rng,
+            );
+            let mut u = vec![0.0; steps * m];
+            for k in 0..steps {
+                signal.at(k as f64 * dt, &mut u[k * m..(k + 1) * m]);
+            }
+            let mut sim = model.simulator();
+            let physical_s = ctx.stage(&format!("time {} physical", model.name()), || {
+                time_physical(sim.as_mut(), &x0, &u, dt, steps, self.repeats)
+            });
+            for &n in &tm.emulators {
+                let spec = build_spec(ctx.seed, &tm.net, n, self.example_scale, &self.training);
+                let trained = ctx.stage(&format!("train {} N{n}", model.name()), || {
+                    build_emulator(&spec)
+                })?;
+                let k_steps = steps / n;
+                let mut ue = vec![0.0; k_steps * m];
+                for k in 0..k_steps {
+                    ue[k * m..(k + 1) * m].copy_from_slice(&u[k * n * m..(k * n + 1) * m]);
+                }
+                let emulator_s = ctx.stage(&format!("time {} N{n}", model.name()), || {
+                    time_emulator(&trained.emulator, &x0, &ue, k_steps, self.repeats)
+                });
+                let label = format!("N{n}");
+                push_speedup(
+                    &mut table,
+                    model.name(),
+                    &label,
+                    "RK4",
+                    dt,
+                    (physical_s, steps),
+                    (emulator_s, k_steps),
+                );
+                // Equal accuracy: the largest step Δt / j as accurate as the emulator.
+                let reference = ctx
+                    .stage(&format!("reference rollouts {} N{n}", model.name()), || {
+                        RolloutReference::sample(&spec, ROLLOUT_EPISODES, ROLLOUT_STEPS)
+                    })
+                    .map_err(other)?;
+                let emulator_error = reference.emulator_error(&trained.emulator);
+                let matched = ctx.stage(&format!("match {} N{n}", model.name()), || {
+                    match_substeps(emulator_error, n, |j| reference.physical_error(j))
+                });
+                let Some(matched) = matched else {
+                    return Err(other(format!(
+                        "{} N{n}: no physical step matches the emulator's error {emulator_error}",
+                        model.name()
+                    )));
+                };
+                let j = matched.substeps;
+                let matched_dt = spec.super_dt() / j as f64;
+                let uj = hold(&ue, m, j);
+                let matched_s =
+                    ctx.stage(&format!("time {} at {matched_dt} s", model.name()), || {
+                        time_physical(
+                            sim.as_mut(),
+                            &x0,
+                            &uj,
+                            matched_dt,
+                            k_steps * j,
+                            self.repeats,
+                        )
+                    });
+                equal.push(row![
+                    model.name(),
+                    label.as_str(),
+                    emulator_error,
+                    j as i64,
+                    matched_dt,
+                    matched.error,
+                    matched.coarser_error,
+                    (k_steps * j) as i64,
+                    k_steps as i64,
+                    matched_s,
+                    emulator_s,
+                    matched_s / emulator_s
+                ]);
+            }
+        }
+        if let Some(d) = &self.dolphin {
+            let spec = d.nets.spec(ctx.seed, d.steps, self.example_scale);
+            let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
+            let dolphin = built.emulator.dolphin().clone();
+            let dt = d.nets.physical_dt;
+            let mut rng = ctx.rng(200);
+            let x0 = hierarchy::start_state(&dolphin, &mut rng);
+            let m = Dynamics::control_dim(&built.emulator);
+            let signal = ControlSignal::sample(
+                hierarchy::control_process(),
+                &hierarchy::control_limits(),
+                steps as f64 * dt,
+                &mut rng,
+            );
+            let mut u = vec![0.0; steps * m];
+            for k in 0..steps {
+                signal.at(k as f64 * dt, &mut u[k * m..(k + 1) * m]);
+            }
+            let mut sim = hierarchy::simulator(&dolphin);
+            let physical_s = ctx.stage("time dolphin physical", || {
+                time_physical(&mut sim, &x0, &u, dt, steps, self.repeats)
+            });
+            let n = d.steps;
+            let k_steps = steps / n;
+            let mut ue = vec![0.0; k_steps * m];
+            for k in 0..k_steps {
+                ue[k * m..(k + 1) * m].copy_from_slice(&u[k * n * m..(k * n + 1) * m]);
+            }
+            let mut reg = d.regularization.bind(&dolphin).map_err(other)?;
+            for (label, reg_steps) in [
+                (format!("N{n}"), 0),
+                (format!("N{n}_reg"), d.regularization_steps),
+            ] {
+                let emulator_s = ctx.stage(&format!("time dolphin {label}"), || {
+                    time_dolphin(&built.emulator, &mut reg, reg_steps, &x0, &ue, self.repeats)
+                });
+                push_speedup(
+                    &mut table,
+                    "dolphin",
+                    &label,
+                    DOLPHIN_EXPLICIT,
+                    dt,
+                    (physical_s, steps),
+                    (emulator_s, k_steps),
+                );
+                if reg_steps > 0 {
+                    continue;
+                }
+                // The implicit integrator at the paper's step over the same simulated time,
+                // against the plain N50 (controls held over each implicit step as sampled).
+                let Some(h) = d.implicit_dt else { continue };
+                let per_super = (n as f64 * dt / h).round() as usize;
+                let implicit_steps = k_steps * per_super;
+                let mut ui = vec![0.0; implicit_steps * m];
+                for k in 0..implicit_steps {
+                    signal.at(k as f64 * h, &mut ui[k * m..(k + 1) * m]);
+                }
+                let mut imp = ImplicitDolphin::new(dolphin.clone());
+                let implicit_s = ctx.stage("time dolphin implicit", || {
+                    time_physical(&mut imp, &x0, &ui, h, implicit_steps, self.repeats)
+                });
+                push_speedup(
+                    &mut table,
+                    "dolphin",
+                    &label,
+                    DOLPHIN_IMPLICIT,
+                    h,
+                    (implicit_s, implicit_steps),
+                    (emulator_s, k_steps),
+                );
+            }
+        }
+        Ok(Tables::from([
+            ("speedup", table),
+            ("equal_accuracy", equal),
+        ]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn speedup_is_n_times_the_step_cost_ratio() {
+        for (ps, pn, es, en) in [
+            (0.0134, 20000, 1.21e-4, 400),
+            (0.0027, 20000, 5.9e-4, 400),
+            (0.21, 4000, 0.0118, 400),
+            (3.3e-3, 77, 1.7e-2, 7),
+        ] {
+            let b = breakdown(ps, pn, es, en);
+            let speedup = ps / es;
+            assert_eq!(b.n, (pn / en) as i64);
+            assert!(
+                (b.n as f64 * b.ratio - speedup).abs() <= 1e-12 * speedup,
+                "{b:?} vs {speedup}"
+            );
+            assert!((b.physical_step_s * pn as f64 - ps).abs() <= 1e-15 * ps);
+        }
+    }
+}

@@ -1,0 +1,169 @@
+//! The report: Table 2 as measured beside the paper's step cost ratios, the equal-accuracy
+//! comparison, and the verdict rule (N100 at least 50x, every rigid-body N50 at least 10x).
+
+use super::DOLPHIN_IMPLICIT;
+use crate::experiment::output::{df_f64, df_str, read_csv};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::Error;
+use std::path::Path;
+
+/// The paper's step cost ratio for a Table 2 cell: (physical s / 20,000) / (emulator s / (20,000 / n)).
+fn paper_ratio(model: &str, emulator: &str) -> Option<f64> {
+    let (physical, emulator_s, n) = match (model, emulator) {
+        ("pendulum_passive", "N25") => (4.70, 0.10, 25.0),
+        ("pendulum_passive", "N50") => (4.70, 0.05, 50.0),
+        ("pendulum_passive", "N100") => (4.70, 0.02, 100.0),
+        ("pendulum_active", "N25") => (4.52, 0.12, 25.0),
+        ("pendulum_active", "N50") => (4.52, 0.06, 50.0),
+        ("pendulum_active", "N100") => (4.52, 0.03, 100.0),
+        ("truck", "N50") => (4.88, 0.07, 50.0),
+        ("lander", "N50") => (6.44, 0.12, 50.0),
+        ("dolphin", "N50") => (63.0, 0.95, 50.0),
+        ("dolphin", "N50_reg") => (63.0, 2.48, 50.0),
+        _ => return None,
+    };
+    Some(physical / (emulator_s * n))
+}
+
+/// The findings from the run folder `dir`.
+pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
+    let df = read_csv(&dir.join("speedup.csv"))?;
+    let (model, emu, integ) = (
+        df_str(&df, "model")?,
+        df_str(&df, "emulator")?,
+        df_str(&df, "physical_integrator")?,
+    );
+    let (phys, es, sp) = (
+        df_f64(&df, "physical_s")?,
+        df_f64(&df, "emulator_s")?,
+        df_f64(&df, "speedup")?,
+    );
+    let (ps, esr, n, ratio, pdt) = (
+        df_f64(&df, "physical_step_s")?,
+        df_f64(&df, "emulator_step_s")?,
+        df_f64(&df, "n")?,
+        df_f64(&df, "step_cost_ratio")?,
+        df_f64(&df, "physical_dt")?,
+    );
+    let mut md = String::from(
+            "| model | physical integrator, δt (s) | emulator | physical s | emulator s | speedup | = n | × step cost ratio | paper's ratio | physical step s | emulator step s |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        );
+    for r in 0..model.len() {
+        let paper = paper_ratio(&model[r], &emu[r]).map_or("—".to_string(), sig);
+        md.push_str(&format!(
+            "| {} | {}, {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            model[r],
+            integ[r],
+            pdt[r],
+            emu[r],
+            sig(phys[r]),
+            sig(es[r]),
+            sig(sp[r]),
+            n[r],
+            sig(ratio[r]),
+            paper,
+            sig(ps[r]),
+            sig(esr[r])
+        ));
+    }
+    let explicit = |r: usize| integ[r] != DOLPHIN_IMPLICIT;
+    let n100: Vec<f64> = (0..model.len())
+        .filter(|&r| emu[r] == "N100")
+        .map(|r| sp[r])
+        .collect();
+    let n50_min = (0..model.len())
+        .filter(|&r| emu[r] == "N50" && model[r] != "dolphin")
+        .map(|r| sp[r])
+        .fold(f64::INFINITY, f64::min);
+    // Paper: N100 50-100x "and more"; every emulator an order of magnitude or more.
+    let n100_ok = !n100.is_empty() && n100.iter().all(|&s| s >= 50.0);
+    let n50_ok = n50_min >= 10.0;
+    let dolphin = |e: &str, implicit: bool| {
+        (0..model.len()).find(|&r| model[r] == "dolphin" && emu[r] == e && explicit(r) != implicit)
+    };
+    let dolphin_text = match (dolphin("N50", false), dolphin("N50_reg", false)) {
+            (Some(a), Some(b)) => format!(
+                " Dolphin: N50 {}x, N50 with regularization {}x over our semi-implicit Euler at δt = {} s (paper: 66x and 25x over its [18]).",
+                sig(sp[a]),
+                sig(sp[b]),
+                pdt[a]
+            ),
+            _ => " Dolphin rows not built.".into(),
+        };
+    let implicit_text = match dolphin("N50", true) {
+            Some(r) => format!(
+                " Against the implicit (backward Euler) integrator at the paper's δt = {} s, one step costs {} s ({}x an N50 step), n = {}, so N50 is {}x faster (paper: 63.0 s / 0.95 s = 66x).",
+                pdt[r],
+                sig(ps[r]),
+                sig(ratio[r]),
+                n[r],
+                sig(sp[r])
+            ),
+            None => String::new(),
+        };
+    let mut equal_text = String::new();
+    let eq_path = dir.join("equal_accuracy.csv");
+    if eq_path.exists() {
+        let eq = read_csv(&eq_path)?;
+        let (em, ee) = (df_str(&eq, "model")?, df_str(&eq, "emulator")?);
+        let (err, j, mdt, merr, cerr, eps, ees, esp) = (
+            df_f64(&eq, "emulator_error")?,
+            df_f64(&eq, "substeps")?,
+            df_f64(&eq, "matched_dt")?,
+            df_f64(&eq, "matched_error")?,
+            df_f64(&eq, "coarser_error")?,
+            df_f64(&eq, "physical_s")?,
+            df_f64(&eq, "emulator_s")?,
+            df_f64(&eq, "speedup")?,
+        );
+        md.push_str("\n**Equal accuracy** (data, not part of the verdict): error = mean over 40 super-steps of the per-step mean squared state error in units of each variable's spread (Table 1's `rollout40_error_mean`), against the simulator at the training δt; the physical step is the largest Δt/j (j = 1 … n) whose error is at most the emulator's.\n\n| model | emulator | emulator error | j | matched δt (s) | its error | error at Δt/(j−1) | physical s | emulator s | speedup |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+        for r in 0..em.len() {
+            md.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                em[r],
+                ee[r],
+                sig(err[r]),
+                j[r],
+                sig(mdt[r]),
+                sig(merr[r]),
+                if cerr[r].is_nan() {
+                    "— (j = 1)".to_string()
+                } else {
+                    sig(cerr[r])
+                },
+                sig(eps[r]),
+                sig(ees[r]),
+                sig(esp[r])
+            ));
+        }
+        let at_one = (0..em.len()).filter(|&r| j[r] == 1.0).count();
+        equal_text = format!(
+                " At equal accuracy the speedups are {} ({} of {} emulators are matched by one physical step per super-step, so their equal-accuracy speedup is only the step cost ratio, an upper bound on the emulator's advantage).",
+                esp.iter().map(|s| sig(*s)).collect::<Vec<_>>().join(", "),
+                at_one,
+                em.len()
+            );
+    }
+    let pend: Vec<f64> = (0..model.len())
+        .filter(|&r| model[r].starts_with("pendulum"))
+        .map(|r| ratio[r])
+        .collect();
+    let pend_lo = sig(pend.iter().copied().fold(f64::INFINITY, f64::min));
+    let pend_hi = sig(pend.iter().copied().fold(f64::NEG_INFINITY, f64::max));
+    let ratio_of = |m: &str| {
+        (0..model.len())
+            .find(|&r| model[r] == m)
+            .map_or("—".to_string(), |r| sig(ratio[r]))
+    };
+    let (truck_ratio, lander_ratio) = (ratio_of("truck"), ratio_of("lander"));
+    let verdict = Verdict::from_checks(&[n100_ok, n50_ok]);
+    Ok(Findings {
+            ours: md,
+            verdict,
+            why: format!(
+                "N100 speedups {} (paper: 50-100x and more); the slowest rigid-body N50 speedup is {} (paper: one to two orders of magnitude); speedup = n x step cost ratio (physical step s / emulator step s); the paper's ratios, from its Table 2, are 1.1-2.4 (0.5 with regularization), ours {pend_lo}-{pend_hi} for the pendulums, {truck_ratio} for the truck, {lander_ratio} for the lander (a 13-variable rigid body: one RK4 step costs less than a 17-50-13 net).{dolphin_text}{implicit_text}{equal_text}",
+                n100.iter().map(|s| sig(*s)).collect::<Vec<_>>().join(", "),
+                sig(n50_min)
+            ),
+        })
+}
