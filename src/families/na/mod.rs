@@ -1,6 +1,7 @@
 //! NeuroAnimator (Grzeszczuk, Terzopoulos, Hinton 1998), experiment ids `na_*`.
 
 pub mod baselines_swim;
+pub mod control_task;
 pub mod equal_accuracy;
 pub mod fig12_error;
 pub mod fig13_control;

@@ -146,8 +146,8 @@ impl Params {
         let (n, m) = (model.state_dim(), model.control_dim());
         let objective = task.objective();
         let knots = Knots {
-            steps: task.horizon,
-            per_actuator: task.knots,
+            steps: task.task.horizon,
+            per_actuator: task.task.knots,
             m,
         };
         let mut bptt = Bptt::new(net, &objective, knots, task.bounds(), x0).map_err(other)?;
@@ -161,15 +161,15 @@ impl Params {
             &mut bptt,
             &v0,
             &schedule,
-            task.iterations,
+            task.task.iterations,
             &mut |e, _, st| {
-                if to_goal.is_none() && task.final_error(&st[task.horizon * n..]) <= 1.0 {
+                if to_goal.is_none() && task.final_error(&st[task.task.horizon * n..]) <= 1.0 {
                     to_goal = Some(e.iteration);
                 }
                 false
             },
         );
-        let emu_final = &best.states[task.horizon * n..];
+        let emu_final = &best.states[task.task.horizon * n..];
         let mut sim = model.simulator();
         let rep = replay(
             sim.as_mut(),
@@ -182,7 +182,7 @@ impl Params {
         let simulator_spread = self.open_loop_spread(task, x0, &best.controls, emu_final, seed);
         Ok(Round {
             emulator_error: task.final_error(emu_final),
-            simulator_error: task.final_error(&rep.states[task.horizon * n..]),
+            simulator_error: task.final_error(&rep.states[task.task.horizon * n..]),
             simulator_spread,
             iterations: run.trace.last().map_or(0, |t| t.iteration),
             to_goal,
@@ -224,7 +224,7 @@ impl Params {
                 self.steps,
                 emu_final,
             );
-            let err = task.final_error(&r.states[task.horizon * n..]);
+            let err = task.final_error(&r.states[task.task.horizon * n..]);
             (lo, hi) = (lo.min(err), hi.max(err));
         }
         hi - lo
@@ -296,16 +296,16 @@ impl Params {
                 physical_dt: task.net.physical_dt,
                 substeps: self.steps,
             };
-            let held_u: Vec<f64> = (0..task.horizon)
+            let held_u: Vec<f64> = (0..task.task.horizon)
                 .flat_map(|_| neutral.iter().copied())
                 .collect();
             let sim_drift = plan.rollout(sim.as_mut(), &held_u).map_err(other)?;
             let (mut xe, mut next, mut sc) = (x0.to_vec(), vec![0.0; n], net.scratch());
-            for _ in 0..task.horizon {
+            for _ in 0..task.task.horizon {
                 net.predict(&xe, &neutral, &mut sc, &mut next);
                 xe.copy_from_slice(&next);
             }
-            let xs = &sim_drift[task.horizon * n..];
+            let xs = &sim_drift[task.task.horizon * n..];
             let p = position_part(model);
             let dist =
                 |a: &[f64], b: &[f64]| p.clone().map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();

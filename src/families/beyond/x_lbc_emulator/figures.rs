@@ -1,0 +1,151 @@
+//! Figures of `x_lbc_emulator`: `error` (final error per desired target and method, on the
+//! simulator and the emulator) and the animated GIF of LBC's landing.
+
+use super::METHODS;
+use crate::emulator::catalog::NetModel;
+use crate::experiment::output::Tables;
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::report::sig;
+use crate::experiment::Error;
+use crate::families::na::fig13_control::anim::{write_animation, Scene, Track, SIMULATOR};
+use plotters::style::RGBColor;
+use std::path::PathBuf;
+
+/// Colours of the methods in the figure (palette indices).
+fn method_color(method: &str) -> usize {
+    METHODS.iter().position(|m| *m == method).unwrap_or(0)
+}
+
+/// Every figure of the experiment ([`crate::experiment::Family::figures`]).
+pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let t = tables.require("targets")?;
+    let (d, meth, es, ee) = (
+        t.f64s("desired_target"),
+        t.strs("method"),
+        t.f64s("final_error_simulator"),
+        t.f64s("final_error_emulator"),
+    );
+    let (lo, hi) = d
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    let panel = |title: &str, ys: &[f64]| {
+        let mut series: Vec<Series> = METHODS
+            .iter()
+            .map(|&mm| {
+                let pts = (0..d.len())
+                    .filter(|&r| meth[r] == mm)
+                    .map(|r| (d[r], ys[r].max(1e-3)))
+                    .collect();
+                let mark = if mm.starts_with("open_loop") || mm == "bptt" {
+                    Mark::Dashed
+                } else {
+                    Mark::LinePoints
+                };
+                Series::line(mm, pts, method_color(mm)).mark(mark)
+            })
+            .collect();
+        series.push(
+            Series::line("tolerance (error 1)", vec![(lo, 1.0), (hi, 1.0)], 9).mark(Mark::Dashed),
+        );
+        Panel {
+            title: title.into(),
+            x_label: "desired landing target x (m)".into(),
+            y_label: "final error (RMS of (s - s_d)/tolerance)".into(),
+            log_y: true,
+            series,
+            ..Panel::default()
+        }
+    };
+    // Tall panels: the nine-entry legend then fits above the data (the plot raises the
+    // top of the y range for it) instead of covering it.
+    let mut files = fig.draw(
+        "error",
+        &Figure {
+            panel_size: (640, 640),
+            ..Figure::grid(
+                vec![
+                    panel("on the physical simulator", &es),
+                    panel("on the emulator", &ee),
+                ],
+                2,
+            )
+        },
+    )?;
+    files.extend(animation(fig, tables)?);
+    Ok(files)
+}
+
+/// GIF of the LBC motion on the simulator at the in-between target nearest the middle, with
+/// BPTT's re-optimized open-loop replay beside it.
+fn animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let (Some(tr), Some(rule)) = (tables.get("trajectory"), tables.get("rule")) else {
+        return Ok(Vec::new());
+    };
+    let (rk, rv) = (rule.strs("setting"), rule.f64s("value"));
+    let get = |k: &str| rk.iter().position(|s| s == k).map_or(f64::NAN, |i| rv[i]);
+    let (c1, c2, dt) = (get("component1"), get("component2"), get("super_step_s"));
+    let (d, meth) = (tr.f64s("desired_target"), tr.strs("method"));
+    let mid = 0.5 * (c1 + c2);
+    let Some(&pick) = d
+        .iter()
+        .filter(|&&x| x > c1 && x < c2)
+        .min_by(|a, b| (*a - mid).abs().total_cmp(&(*b - mid).abs()))
+    else {
+        return Ok(Vec::new());
+    };
+    // The model whose state names the table has (results before the names: s0, s1, ...).
+    let (model, names) = [NetModel::Lander, NetModel::Truck]
+        .into_iter()
+        .map(|m| (m, m.state_names()))
+        .find(|(_, names)| names.iter().all(|c| tr.column(c).is_some()))
+        .unwrap_or_else(|| {
+            let width = (0..)
+                .take_while(|k| tr.column(&format!("s{k}")).is_some())
+                .count();
+            let model = if width == NetModel::Lander.state_dim() {
+                NetModel::Lander
+            } else {
+                NetModel::Truck
+            };
+            (model, (0..width).map(|k| format!("s{k}")).collect())
+        });
+    let cols: Vec<Vec<f64>> = names.iter().map(|c| tr.f64s(c)).collect();
+    let track = |mm: &str| -> Vec<Vec<f64>> {
+        (0..d.len())
+            .filter(|&r| d[r] == pick && meth[r] == mm)
+            .map(|r| cols.iter().map(|c| c[r]).collect())
+            .collect()
+    };
+    let lbc = track("lbc");
+    let g = tables.require("goal")?;
+    let gd = g.f64s("desired_target");
+    let Some(gr) = gd.iter().position(|&x| x == pick) else {
+        return Ok(Vec::new());
+    };
+    let goal: Vec<f64> = names.iter().map(|c| g.f64s(c)[gr]).collect();
+    let tracks = vec![
+        Track {
+            label: "LBC of the two emulator-derived trackers".into(),
+            color: RGBColor(200, 60, 30),
+            states: lbc,
+        },
+        Track {
+            label: "BPTT re-optimized, open-loop replay".into(),
+            color: SIMULATOR,
+            states: track("bptt"),
+        },
+    ];
+    let (p, _) = write_animation(
+        &fig.dir,
+        &format!("{}_lbc", fig.id),
+        &Scene::for_model(model),
+        &format!("lander: LBC to x = {} m on the simulator", sig(pick)),
+        "simulator: LBC closed loop (red), re-optimized BPTT tape open loop (grey), goal (green)",
+        dt,
+        &goal,
+        &tracks,
+    )?;
+    Ok(vec![p])
+}

@@ -1,0 +1,277 @@
+//! Figures of `na_fig13_control`: `control` (objectives and two state variables over time),
+//! `spectrum`, and the animated GIFs of every task and of the dolphin.
+
+use super::anim::{write_animation, Scene, Track, EMULATOR, SIMULATOR};
+use super::{dagger, dolphin_dagger};
+use crate::emulator::catalog::NetModel;
+use crate::experiment::output::{unique, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::{other, Error};
+use crate::physics::dolphin::{Dolphin, N_POS};
+use rayon::prelude::*;
+use std::path::PathBuf;
+
+/// Every figure of the experiment ([`crate::experiment::Family::figures`]).
+pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let t = tables.require("objective")?;
+    let (task, it, obj) = (t.strs("task"), t.f64s("iteration"), t.f64s("objective"));
+    let tr = tables.require("trajectory")?;
+    let (ttask, tt, src, s0) = (tr.strs("task"), tr.f64s("t"), tr.strs("source"), {
+        tr.f64s("s0")
+    });
+    let s1 = tr.f64s("s1");
+    let goal = tables.require("goal")?;
+    let (goal_task, goal_model) = (goal.strs("task"), goal.strs("model"));
+    let (goal_s0, goal_s1) = (goal.f64s("s0"), goal.f64s("s1"));
+    let mut panels = vec![];
+    for name in unique(&task) {
+        let pts = (0..task.len())
+            .filter(|&r| task[r] == name)
+            .map(|r| (it[r], obj[r]))
+            .collect();
+        panels.push(Panel {
+            title: format!("{name}: objective"),
+            x_label: "iteration".into(),
+            y_label: "objective J".into(),
+            // The swim objective is a reward (negative): linear axis.
+            log_y: name != "dolphin",
+            series: vec![Series::line("momentum descent", pts, 0)],
+            ..Panel::default()
+        });
+        // The plotted variables by their `describe` names, and the goal's row.
+        let goal_row = (0..goal_task.len()).find(|&r| goal_task[r] == name);
+        let physics = goal_row.and_then(|r| {
+            crate::emulator::catalog::NetModel::ALL
+                .iter()
+                .find(|m| m.name() == goal_model[r])
+                .map(|m| m.physics_name())
+        });
+        let state_names = physics
+            .and_then(crate::physics::model_by_name)
+            .map(|m| m.state_names())
+            .unwrap_or_default();
+        let names = match (state_names.first(), state_names.get(1)) {
+            (Some(a), Some(b)) if name != "dolphin" => (a.clone(), b.clone()),
+            _ => ("x".to_string(), "y".to_string()),
+        };
+        let names = (names.0.as_str(), names.1.as_str());
+        let unit = if physics.is_some_and(|p| p.starts_with("pendulum")) {
+            "rad"
+        } else {
+            "m"
+        };
+        let mut series: Vec<Series> = ["emulator", "simulator"]
+            .iter()
+            .enumerate()
+            .flat_map(|(c, s)| {
+                let sel = |v: &[f64]| -> Vec<(f64, f64)> {
+                    (0..ttask.len())
+                        .filter(|&r| ttask[r] == name && src[r] == *s)
+                        .map(|r| (tt[r], v[r]))
+                        .collect()
+                };
+                let mark = if c == 0 { Mark::Line } else { Mark::Dashed };
+                [
+                    Series::line(format!("{} {s}", names.0), sel(&s0), 0).mark(mark),
+                    Series::line(format!("{} {s}", names.1), sel(&s1), 1).mark(mark),
+                ]
+            })
+            .collect();
+        // The goal of each plotted variable as a dotted line in its colour (the dolphin's
+        // is a distance to beat, not a state: none).
+        let t_end = (0..ttask.len())
+            .filter(|&r| ttask[r] == name)
+            .map(|r| tt[r])
+            .fold(0.0, f64::max);
+        if let Some(g) = goal_row.filter(|_| name != "dolphin") {
+            for (k, (v, label)) in [(goal_s0[g], names.0), (goal_s1[g], names.1)]
+                .into_iter()
+                .enumerate()
+            {
+                if v.is_finite() {
+                    let dots = (0..=40).map(|i| (t_end * i as f64 / 40.0, v)).collect();
+                    series.push(Series::line(format!("{label} goal"), dots, k).mark(Mark::Points));
+                }
+            }
+        }
+        panels.push(Panel {
+            title: if name == "dolphin" {
+                "dolphin: mean centroid x, y".into()
+            } else {
+                format!("{name}: learned motion ({}, {})", names.0, names.1)
+            },
+            x_label: "time (s)".into(),
+            y_label: format!("{}, {} ({unit})", names.0, names.1),
+            series,
+            ..Panel::default()
+        });
+    }
+    let mut files = fig.draw("control", &Figure::grid(panels, 2))?;
+    files.extend(spectrum_figure(fig, tables)?);
+    files.extend(animations(fig, tables)?);
+    files.extend(dolphin_animation(fig, tables)?);
+    files.extend(dagger::figure(fig, tables)?);
+    files.extend(dolphin_dagger::figure(fig, tables)?);
+    Ok(files)
+}
+
+/// Figure `spectrum`: per task, the terminal Gauss-Newton eigenvalues at the start knots
+/// through the emulator and through the physics (log y; eigenvalues below 1e-14 of the
+/// largest, the null space and rounding, are left out; the legend says how many are drawn).
+fn spectrum_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let Some(sp) = tables.get("spectrum") else {
+        return Ok(vec![]);
+    };
+    let (st, sub, idx, ev) = (
+        sp.strs("task"),
+        sp.strs("substrate"),
+        sp.f64s("index"),
+        sp.f64s("eigenvalue"),
+    );
+    let series_of = |name: &str, c: usize, s: &str| {
+        let rows: Vec<usize> = (0..st.len())
+            .filter(|&r| st[r] == name && sub[r] == s)
+            .collect();
+        let top = rows.iter().map(|&r| ev[r]).fold(0.0, f64::max);
+        let total = rows.len();
+        let pts: Vec<(f64, f64)> = rows
+            .into_iter()
+            .filter(|&r| ev[r] > 1e-14 * top)
+            .map(|r| (idx[r], ev[r]))
+            .collect();
+        let label = format!(
+            "through the {s} ({} of {total} above 1e-14 of the largest)",
+            pts.len()
+        );
+        let mark = if c == 0 { Mark::Line } else { Mark::Dashed };
+        Series::line(label, pts, c).mark(mark)
+    };
+    let panels: Vec<Panel> = unique(&st)
+        .into_iter()
+        .map(|name| Panel {
+            title: format!("{name}: terminal Gauss-Newton spectrum at the start"),
+            x_label: "eigenvalue index (largest first)".into(),
+            y_label: "eigenvalue of J^T W J (1)".into(),
+            log_y: true,
+            x_integer: true,
+            series: vec![
+                series_of(&name, 0, "emulator"),
+                series_of(&name, 1, "physics"),
+            ],
+            ..Panel::default()
+        })
+        .collect();
+    if panels.is_empty() {
+        return Ok(vec![]);
+    }
+    fig.draw("spectrum", &Figure::grid(panels, 3))
+}
+
+/// One animated GIF per task (see [`anim`]): the emulator-driven motion and its
+/// simulator replay, from the `trajectory` table, over the goal from the `goal` table.
+/// `<id>_dolphin.gif` from the `dolphin_motion` table, when it has rows.
+fn dolphin_animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let Some(t) = tables.get("dolphin_motion").filter(|t| !t.is_empty()) else {
+        return Ok(vec![]);
+    };
+    let (src, tt) = (t.strs("source"), t.f64s("t"));
+    let cols: Vec<Vec<f64>> = (0..N_POS).map(|k| t.f64s(&format!("p{k}"))).collect();
+    let track = |name: &str| -> Vec<Vec<f64>> {
+        (0..src.len())
+            .filter(|&r| src[r] == name)
+            .map(|r| (0..N_POS).map(|k| cols[k][r]).collect())
+            .collect()
+    };
+    let emu_rows: Vec<usize> = (0..src.len()).filter(|&r| src[r] == "emulator").collect();
+    let step = match emu_rows.as_slice() {
+        [a, b, ..] => tt[*b] - tt[*a],
+        _ => 1.0,
+    };
+    let tracks = vec![
+        Track {
+            label: "simulator replay".into(),
+            color: SIMULATOR,
+            states: track("simulator"),
+        },
+        Track {
+            label: "emulator (global + local nets)".into(),
+            color: EMULATOR,
+            states: track("emulator"),
+        },
+    ];
+    let (p, _) = write_animation(
+        &fig.dir,
+        &format!("{}_dolphin", fig.id),
+        &Scene::Dolphin(Box::new(Dolphin::default())),
+        "dolphin: swim forward",
+        "learned muscle controls: hierarchical emulator (purple), simulator replay (grey)",
+        step,
+        &[],
+        &tracks,
+    )?;
+    Ok(vec![p])
+}
+
+fn animations(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let g = tables.require("goal")?;
+    let tr = tables.require("trajectory")?;
+    let (gtask, gmodel) = (g.strs("task"), g.strs("model"));
+    let (ttask, tt, src) = (tr.strs("task"), tr.f64s("t"), tr.strs("source"));
+    let width = (0..)
+        .take_while(|k| tr.column(&format!("s{k}")).is_some())
+        .count();
+    let (gs, ts): (Vec<Vec<f64>>, Vec<Vec<f64>>) = (0..width)
+        .map(|k| (g.f64s(&format!("s{k}")), tr.f64s(&format!("s{k}"))))
+        .unzip();
+    let jobs: Vec<(usize, NetModel)> = (0..gtask.len())
+        .map(|r| {
+            NetModel::ALL
+                .into_iter()
+                .find(|m| m.name() == gmodel[r])
+                .filter(|m| m.state_dim() <= width)
+                .map(|m| (r, m))
+                .ok_or_else(|| other(format!("goal: unknown model {}", gmodel[r])))
+        })
+        .collect::<Result<_, _>>()?;
+    jobs.par_iter()
+        .map(|&(r, model)| {
+            let (name, n) = (&gtask[r], model.state_dim());
+            let goal: Vec<f64> = (0..n).map(|k| gs[k][r]).collect();
+            let rows = |s: &str| -> Vec<usize> {
+                (0..ttask.len())
+                    .filter(|&i| &ttask[i] == name && src[i] == s)
+                    .collect()
+            };
+            let emu = rows("emulator");
+            let step = match emu.as_slice() {
+                [a, b, ..] => tt[*b] - tt[*a],
+                _ => 1.0,
+            };
+            let tracks: Vec<Track> = [
+                ("simulator replay", SIMULATOR, rows("simulator")),
+                ("emulator", EMULATOR, emu),
+            ]
+            .into_iter()
+            .map(|(label, color, rows)| Track {
+                label: label.into(),
+                color,
+                states: rows
+                    .iter()
+                    .map(|&i| (0..n).map(|k| ts[k][i]).collect())
+                    .collect(),
+            })
+            .collect();
+            write_animation(
+                &fig.dir,
+                &format!("{}_{name}", fig.id),
+                &Scene::for_model(model),
+                name,
+                "learned controls: emulator (purple), simulator replay (grey), goal (green)",
+                step,
+                &goal,
+                &tracks,
+            )
+            .map(|(p, _)| p)
+        })
+        .collect()
+}

@@ -1,0 +1,371 @@
+//! The job of `na_fig13_control`: every task's emulator trained, its controls learned and
+//! replayed on the simulator, and the step-size sweep; [`learn_best`] scores a run.
+
+use super::conditioning::{
+    record_spectrum, PhysicsTables, BEST_WEIGHTS_COLUMNS, CONDITIONING_COLUMNS,
+};
+use super::{dagger, dolphin_dagger, Params, Sweep, Task};
+use crate::control::bptt::{
+    learn_with, replay, Bptt, Descent, DifferentiableStep, Knots, Learned, Schedule, StepRule,
+};
+use crate::control::conditioning::{terminal_spectrum, weighting_bound};
+use crate::emulator::catalog::{BuildSpec, NetModel};
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::{other, Error, Job, RunContext};
+use crate::families::na::table1_structure::{build_emulators, build_spec};
+use crate::physics::dolphin::N_POS;
+use crate::physics::lander::Lander;
+use crate::row;
+
+/// Columns of the `sweep` and `physics_sweep` tables: `rollout_error` is the final error on
+/// the substrate learned through (emulator or differentiable physics), `simulator_error` the
+/// same controls replayed on the simulator; both at the run's best-so-far iterate.
+const SWEEP_COLUMNS: [&str; 12] = [
+    "task",
+    "rule",
+    "eta",
+    "alpha",
+    "iterations",
+    "evaluations",
+    "iterations_to_goal",
+    "evaluations_to_goal",
+    "best_iteration",
+    "best_objective",
+    "rollout_error",
+    "simulator_error",
+];
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let mut objective_t = Table::new(&["task", "iteration", "objective"]);
+        let mut final_t = Table::new(&[
+            "task",
+            "emulator_error",
+            "simulator_error",
+            "best_iteration",
+        ]);
+        let mut sweep_t = Table::new(&SWEEP_COLUMNS);
+        let mut physics_t = Table::new(&SWEEP_COLUMNS);
+        // The headline through the physics under the best-conditioned final-state weights
+        // (ours; `best_weights*.csv`), where conditioning.csv does not rule them out.
+        let mut best_t = Table::new(&SWEEP_COLUMNS);
+        let mut best_tol_t = Table::new(&BEST_WEIGHTS_COLUMNS);
+        let mut best_emulator_t = Table::new(&SWEEP_COLUMNS);
+        // The terminal Gauss-Newton spectrum at the start knots on both substrates
+        // (src/control/conditioning.rs): why fixed-step descent is slow.
+        let mut cond_t = Table::new(&CONDITIONING_COLUMNS);
+        let mut spectrum_t = Table::new(&["task", "substrate", "index", "eigenvalue"]);
+        let mut dagger_t = Table::new(&dagger::COLUMNS);
+        let width = self
+            .tasks
+            .iter()
+            .map(|t| t.net.model.state_dim())
+            .max()
+            .unwrap_or(0);
+        let mut cols: Vec<String> = ["task", "step", "t", "source"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        cols.extend((0..width).map(|k| format!("s{k}")));
+        let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
+        let mut trajectory = Table::new(&col_refs);
+        let mut goal_cols = vec!["task", "model"];
+        goal_cols.extend_from_slice(&col_refs[4..]);
+        let mut goal = Table::new(&goal_cols);
+        // The generic state columns (one table holds tasks of different models) by name.
+        let mut states_t = Table::new(&["task", "column", "name"]);
+        for task in &self.tasks {
+            for (k, name) in task.net.model.state_names().into_iter().enumerate() {
+                states_t.push(row![task.name.as_str(), format!("s{k}"), name]);
+            }
+        }
+        let specs: Vec<BuildSpec> = self
+            .tasks
+            .iter()
+            .map(|task| {
+                build_spec(
+                    ctx.seed,
+                    &task.net,
+                    self.steps,
+                    self.example_scale,
+                    &self.training,
+                )
+            })
+            .collect();
+        let built = ctx.stage(
+            &format!("train N{} emulators (side by side)", self.steps),
+            || build_emulators(&specs),
+        )?;
+        for ((task, spec), trained) in self.tasks.iter().zip(&specs).zip(built) {
+            let model = task.net.model;
+            let (n, m) = (model.state_dim(), model.control_dim());
+            let objective = task.objective();
+            let knots = Knots {
+                steps: task.task.horizon,
+                per_actuator: task.task.knots,
+                m,
+            };
+            let mut x0 = task.task.start.clone();
+            if model == NetModel::Lander {
+                Lander::default().normalize_state(&mut x0);
+            }
+            let mut bptt = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0)
+                .map_err(other)?;
+            let rest = task.rest_control();
+            let init: Vec<f64> = (0..knots.len()).map(|i| rest[i % m]).collect();
+            let v0 = bptt.from_controls(&init);
+            let lambda = bptt.curvature(&v0, self.curvature_iterations);
+            if !(lambda.is_finite() && lambda > 0.0) {
+                return Err(other(format!("{}: step scale λ = {lambda}", task.name)));
+            }
+            let curvature = objective
+                .gauss_newton()
+                .ok_or_else(|| other(format!("{}: objective without curvature", task.name)))?;
+            let spectrum = terminal_spectrum(&mut bptt, &v0, &curvature, task.final_dof());
+            let bound = weighting_bound(&task.final_rows(&mut bptt, &v0));
+            record_spectrum(
+                task,
+                "emulator",
+                (&spectrum, &bound),
+                lambda,
+                (&mut cond_t, &mut spectrum_t),
+            );
+            let schedule = self.schedule(task.eta, task.alpha, task.step_rule, lambda);
+            let (r, best) = ctx.stage(&format!("learn {}", task.name), || {
+                learn_best(
+                    &mut bptt,
+                    &v0,
+                    &schedule,
+                    task.task.iterations,
+                    &mut |_, _, _| false,
+                )
+            });
+            for t in &r.trace {
+                objective_t.push(row![task.name.as_str(), t.iteration as i64, t.objective]);
+            }
+            let mut sim = model.simulator();
+            let dt_phys = task.net.physical_dt;
+            if let Some(sw) = &self.sweep {
+                ctx.stage(&format!("sweep {}", task.name), || {
+                    self.sweep_task(task, sw, &mut bptt, &v0, lambda, &x0, &mut sweep_t)
+                });
+            }
+            if let Some(sw) = &self.physics_sweep {
+                let best_tolerance = ctx.stage(&format!("physics sweep {}", task.name), || {
+                    let tables = PhysicsTables {
+                        sweep: &mut physics_t,
+                        conditioning: &mut cond_t,
+                        spectrum: &mut spectrum_t,
+                        best_sweep: &mut best_t,
+                        best_weights: &mut best_tol_t,
+                    };
+                    self.physics_sweep_task(task, sw, &objective, knots, &x0, tables)
+                })?;
+                // The same headline through the Table 1 net under the best weights (the
+                // spec's reading: data beside the physics' run).
+                if let Some(tolerance) = best_tolerance {
+                    let mut best = task.clone();
+                    best.task.final_tolerance = tolerance;
+                    let objective = best.objective();
+                    let mut b = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0)
+                        .map_err(other)?;
+                    let lambda = b.curvature(&v0, self.curvature_iterations);
+                    let headline = task.headline_sweep(sw.iterations);
+                    let table = &mut best_emulator_t;
+                    self.sweep_task(task, &headline, &mut b, &v0, lambda, &x0, table);
+                }
+            }
+            if let Some(d) = &self.dagger {
+                self.run_dagger(ctx, d, task, &spec, &trained, &x0, &mut dagger_t)?;
+            }
+            let emu_final = &best.states[task.task.horizon * n..];
+            let rep = replay(
+                sim.as_mut(),
+                &x0,
+                &best.controls,
+                dt_phys,
+                self.steps,
+                emu_final,
+            );
+            let sim_final = &rep.states[task.task.horizon * n..];
+            final_t.push(row![
+                task.name.as_str(),
+                task.final_error(emu_final),
+                task.final_error(sim_final),
+                r.best_iteration as i64
+            ]);
+            let mut row = row![task.name.as_str(), model.name()];
+            row.extend(
+                (0..width).map(|k| task.task.target.get(k).copied().unwrap_or(f64::NAN).into()),
+            );
+            goal.push(row);
+            let dt = task.net.physical_dt * self.steps as f64;
+            for (source, states) in [("emulator", &best.states), ("simulator", &rep.states)] {
+                for (i, s) in states.chunks_exact(n).enumerate() {
+                    let mut row = row![task.name.as_str(), i as i64, i as f64 * dt, source];
+                    row.extend((0..width).map(|k| s.get(k).copied().unwrap_or(f64::NAN).into()));
+                    trajectory.push(row);
+                }
+            }
+        }
+        let mut swim_t = Table::new(&["source", "distance_m", "effort", "periodicity", "period_s"]);
+        let mut motion_cols = vec!["source".to_string(), "step".into(), "t".into()];
+        motion_cols.extend((0..N_POS).map(|k| format!("p{k}")));
+        let motion_refs: Vec<&str> = motion_cols.iter().map(String::as_str).collect();
+        let mut motion_t = Table::new(&motion_refs);
+        let mut restarts_t = Table::new(&[
+            "restart",
+            "scale",
+            "initial_objective",
+            "best_iteration",
+            "best_objective",
+            "distance_emulator_m",
+            "distance_simulator_m",
+        ]);
+        let mut dolphin_dagger_t = Table::new(&dolphin_dagger::COLUMNS);
+        if let Some(d) = &self.dolphin {
+            self.run_dolphin(
+                ctx,
+                d,
+                width,
+                &mut restarts_t,
+                &mut objective_t,
+                &mut final_t,
+                &mut trajectory,
+                &mut swim_t,
+                &mut motion_t,
+                &mut dolphin_dagger_t,
+            )?;
+        }
+        Ok(Tables::from([
+            ("dolphin_motion", motion_t),
+            ("sweep", sweep_t),
+            ("physics_sweep", physics_t),
+            ("best_weights", best_tol_t),
+            ("best_weights_sweep", best_t),
+            ("best_weights_emulator_sweep", best_emulator_t),
+            ("conditioning", cond_t),
+            ("spectrum", spectrum_t),
+            ("dagger", dagger_t),
+            ("dolphin_restarts", restarts_t),
+            ("dolphin_dagger", dolphin_dagger_t),
+            ("swim", swim_t),
+            ("objective", objective_t),
+            ("final", final_t),
+            ("trajectory", trajectory),
+            ("goal", goal),
+            ("states", states_t),
+        ]))
+    }
+}
+
+/// Runs [`learn_with`] and rolls the best-so-far iterate out again: the run and the best
+/// iterate's rollout (its states and controls), which is what every task scores.
+pub fn learn_best<D: DifferentiableStep>(
+    bptt: &mut Bptt<'_, D>,
+    v0: &[f64],
+    schedule: &Schedule,
+    iterations: usize,
+    stop: &mut dyn FnMut(&crate::control::bptt::IterationTrace, &[f64], &[f64]) -> bool,
+) -> (Learned, BestRollout) {
+    let r = learn_with(bptt, v0, schedule, iterations, stop);
+    bptt.rollout(&r.best_knots);
+    let best = BestRollout {
+        states: bptt.states().to_vec(),
+        controls: bptt.controls().to_vec(),
+    };
+    (r, best)
+}
+
+/// The rollout of a run's best iterate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BestRollout {
+    /// Emulated states s_0 … s_M.
+    pub states: Vec<f64>,
+    /// Per-step controls (control units).
+    pub controls: Vec<f64>,
+}
+
+impl Params {
+    /// Every rule × η of `sw` for `task` through `bptt` (start `v0`, initial λ), each run
+    /// stopped at the goal; the best iterate replayed on the simulator; one row each.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn sweep_task<D: DifferentiableStep>(
+        &self,
+        task: &Task,
+        sw: &Sweep,
+        bptt: &mut Bptt<'_, D>,
+        v0: &[f64],
+        lambda: f64,
+        x0: &[f64],
+        table: &mut Table,
+    ) {
+        let n = task.net.model.state_dim();
+        let mut sim = task.net.model.simulator();
+        for rule in &sw.rules {
+            // Levenberg–Marquardt uses neither η nor α: one run, both reported as NaN.
+            let lm = matches!(rule, StepRule::LevenbergMarquardt { .. });
+            let etas = if lm { &sw.eta[..1] } else { &sw.eta[..] };
+            for &eta in etas {
+                let schedule = self.schedule(eta, sw.alpha, *rule, lambda);
+                let (eta, alpha) = if lm {
+                    (f64::NAN, f64::NAN)
+                } else {
+                    (eta, sw.alpha)
+                };
+                let mut hit: Option<(usize, usize)> = None;
+                let (run, b) = learn_best(bptt, v0, &schedule, sw.iterations, &mut |e, _, st| {
+                    let reached = task.final_error(&st[task.task.horizon * n..]) <= 1.0;
+                    if reached {
+                        hit = Some((e.iteration, e.evaluations));
+                    }
+                    reached
+                });
+                let last = run.trace.last().expect("iteration 0 is traced");
+                let end = &b.states[task.task.horizon * n..];
+                let rep = replay(
+                    sim.as_mut(),
+                    x0,
+                    &b.controls,
+                    task.net.physical_dt,
+                    self.steps,
+                    end,
+                );
+                let to = |k: Option<usize>| k.map_or(f64::NAN, |k| k as f64);
+                table.push(row![
+                    task.name.as_str(),
+                    rule.name(),
+                    eta,
+                    alpha,
+                    last.iteration as i64,
+                    last.evaluations as i64,
+                    to(hit.map(|h| h.0)),
+                    to(hit.map(|h| h.1)),
+                    run.best_iteration as i64,
+                    run.best_objective(),
+                    task.final_error(end),
+                    task.final_error(&rep.states[task.task.horizon * n..])
+                ]);
+            }
+        }
+    }
+
+    /// The schedule of η, α (plain descent when α = 0), `rule` and initial λ.
+    pub(super) fn schedule(&self, eta: f64, alpha: f64, rule: StepRule, lambda: f64) -> Schedule {
+        let descent = if alpha > 0.0 {
+            Descent::Momentum { eta, alpha }
+        } else {
+            Descent::Plain { eta }
+        };
+        Schedule {
+            descent,
+            rule,
+            scale: lambda,
+            curvature_iterations: self.curvature_iterations,
+        }
+    }
+}

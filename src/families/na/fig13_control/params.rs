@@ -1,0 +1,193 @@
+//! Parameters of `na_fig13_control` ([`Params`]): the tasks, the step-size sweeps, the dolphin
+//! swim task, and their validation.
+
+use super::{dagger, dolphin_dagger, Task};
+use crate::control::bptt::StepRule;
+use crate::emulator::catalog::{NetSpec, TrainSettings};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::families::na::swim::SwimTask;
+use crate::families::na::table1_structure::{validate_nets, validate_training, DolphinNets};
+use serde::{Deserialize, Serialize};
+
+/// The step-size sweep beside the headline runs: every task (dolphin excluded) learned with
+/// every η and step rule at momentum α, each run stopped at its goal (emulator final error
+/// ≤ 1) or after `iterations`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Sweep {
+    /// Learning rates η (units of 1/λ).
+    pub eta: Vec<f64>,
+    /// Momentum α.
+    pub alpha: f64,
+    /// Iteration budget per run.
+    pub iterations: usize,
+    /// Step rules.
+    pub rules: Vec<StepRule>,
+}
+
+impl Sweep {
+    fn validate(&self, key: &str) -> Result<(), ParamError> {
+        let k = |s: &str| format!("{key}.{s}");
+        ensure(!self.eta.is_empty(), &k("eta"), "needs at least one rate")?;
+        for (i, e) in self.eta.iter().enumerate() {
+            positive(&k(&format!("eta[{i}]")), *e)?;
+        }
+        ensure(
+            (0.0..1.0).contains(&self.alpha),
+            &k("alpha"),
+            "must be in [0, 1)",
+        )?;
+        ensure(self.iterations >= 1, &k("iterations"), "must be >= 1")?;
+        ensure(
+            !self.rules.is_empty(),
+            &k("rules"),
+            "needs at least one rule",
+        )?;
+        for (i, r) in self.rules.iter().enumerate() {
+            r.validate(&k(&format!("rules[{i}]")))?;
+        }
+        Ok(())
+    }
+}
+
+/// Parameters of `na_fig13_control`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// Physical steps per emulator step n (N50: 50).
+    pub steps: usize,
+    /// Power iterations for the step scale λ.
+    pub curvature_iterations: usize,
+    /// Multiplies every net's example count.
+    pub example_scale: f64,
+    /// The tasks.
+    pub tasks: Vec<Task>,
+    /// Training settings.
+    pub training: TrainSettings,
+    /// The dolphin swim task (Fig. 13d), if run.
+    #[serde(default)]
+    pub dolphin: Option<DolphinControl>,
+    /// The step-size sweep, if run.
+    #[serde(default)]
+    pub sweep: Option<Sweep>,
+    /// The same kind of sweep learned through the physical model itself (its RK4 step with
+    /// finite-difference Jacobians, `steps` RK4 steps per emulator step), if run: whether
+    /// descent reaches the goal without the emulator.
+    #[serde(default)]
+    pub physics_sweep: Option<Sweep>,
+    /// The DAgger stage (ours, issue 11; [`dagger`]), if run.
+    #[serde(default)]
+    pub dagger: Option<dagger::DaggerControl>,
+}
+
+/// The dolphin swim task of Fig. 13(d) ([`crate::families::na::swim`]).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DolphinControl {
+    /// The hierarchy (as in `na_table1_structure`).
+    pub nets: DolphinNets,
+    /// The task.
+    pub swim: SwimTask,
+    /// Descent iterations.
+    pub iterations: usize,
+    /// Learning rate η (units of 1/λ).
+    pub eta: f64,
+    /// Momentum α (0: plain descent).
+    pub alpha: f64,
+    /// Half-width of the uniform random initial knots (muscle units): J's gradient vanishes
+    /// at exactly zero activation, where the forward distance is even in u, so starts near
+    /// zero see almost no gradient; 1 = the full range.
+    pub init_spread: f64,
+    /// Random starts (seeded streams 400, 401, …); the run with the lowest best-so-far
+    /// emulator J is scored.
+    #[serde(default = "one")]
+    pub restarts: usize,
+    /// How the step scale evolves (default `fixed`).
+    #[serde(default)]
+    pub step_rule: StepRule,
+    /// DAgger of the global net (ours, issue 11; [`dolphin_dagger`]), if run.
+    #[serde(default)]
+    pub dagger: Option<dolphin_dagger::DolphinDagger>,
+}
+
+fn one() -> usize {
+    1
+}
+
+impl Validate for Params {
+    fn validate(&self) -> Result<(), ParamError> {
+        ensure(self.steps >= 1, "steps", "must be >= 1")?;
+        ensure(
+            self.curvature_iterations >= 1,
+            "curvature_iterations",
+            "must be >= 1",
+        )?;
+        ensure(!self.tasks.is_empty(), "tasks", "need at least one task")?;
+        for (i, t) in self.tasks.iter().enumerate() {
+            let key = |k: &str| format!("tasks[{i}].{k}");
+            let n = t.net.model.state_dim();
+            ensure(
+                t.net.model.control_dim() > 0,
+                &key("net.model"),
+                "needs a controlled model",
+            )?;
+            t.task
+                .validate(n)
+                .map_err(|e| e.prefixed(&format!("tasks[{i}]")))?;
+            ensure(
+                t.limit_fraction > 0.0 && t.limit_fraction <= 1.0,
+                &key("limit_fraction"),
+                "must be in (0, 1]",
+            )?;
+            ensure(
+                t.task.final_tolerance.iter().all(|&x| x >= 0.0)
+                    && t.task.final_tolerance.iter().any(|&x| x > 0.0),
+                &key("final_tolerance"),
+                "must be >= 0 with at least one > 0",
+            )?;
+            ensure(t.task.effort_mu >= 0.0, &key("effort_mu"), "must be >= 0")?;
+            positive(&key("eta"), t.eta)?;
+            ensure(
+                (0.0..1.0).contains(&t.alpha),
+                &key("alpha"),
+                "must be in [0, 1)",
+            )?;
+            t.step_rule.validate(&key("step_rule"))?;
+        }
+        for (key, sw) in [
+            ("sweep", &self.sweep),
+            ("physics_sweep", &self.physics_sweep),
+        ] {
+            if let Some(sw) = sw {
+                sw.validate(key)?;
+            }
+        }
+        if let Some(d) = &self.dagger {
+            d.validate(self)?;
+        }
+        let nets: Vec<NetSpec> = self.tasks.iter().map(|t| t.net.clone()).collect();
+        validate_nets(&nets, self.example_scale)?;
+        if let Some(d) = &self.dolphin {
+            d.nets.validate("dolphin.nets", self.example_scale)?;
+            d.swim.validate("dolphin.swim")?;
+            ensure(d.iterations >= 1, "dolphin.iterations", "must be >= 1")?;
+            positive("dolphin.eta", d.eta)?;
+            ensure(
+                (0.0..1.0).contains(&d.alpha),
+                "dolphin.alpha",
+                "must be in [0, 1)",
+            )?;
+            ensure(
+                (0.0..=1.0).contains(&d.init_spread),
+                "dolphin.init_spread",
+                "must be in [0, 1]",
+            )?;
+            ensure(d.restarts >= 1, "dolphin.restarts", "must be >= 1")?;
+            d.step_rule.validate("dolphin.step_rule")?;
+            if let Some(dd) = &d.dagger {
+                dd.validate("dolphin.dagger")?;
+            }
+        }
+        validate_training(&self.training)
+    }
+}

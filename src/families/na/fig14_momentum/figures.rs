@@ -1,0 +1,112 @@
+//! Figure `objective` of `na_fig14_momentum`: momentum against plain descent, the same through
+//! the DAgger net, and the plain learning-rate sweep.
+
+use crate::experiment::output::Tables;
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::Error;
+use std::path::PathBuf;
+
+/// Every figure of the experiment ([`crate::experiment::Family::figures`]).
+pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let t = tables.require("objective")?;
+    let runs = tables.require("runs")?;
+    let (meth, eta, it, obj) = (
+        t.strs("method"),
+        t.f64s("eta"),
+        t.f64s("iteration"),
+        t.f64s("objective"),
+    );
+    let plain_eta = runs
+        .strs("method")
+        .iter()
+        .zip(runs.f64s("eta"))
+        .filter(|(m, _)| m.as_str() == "plain")
+        .map(|(_, e)| e)
+        .collect::<Vec<_>>();
+    let pick = |mm: &str, e: f64| -> Vec<(f64, f64)> {
+        (0..meth.len())
+            .filter(|&r| meth[r] == mm && eta[r] == e)
+            .map(|r| (it[r], obj[r]))
+            .collect()
+    };
+    let mom_eta = (0..meth.len())
+        .find(|&r| meth[r] == "momentum")
+        .map(|r| eta[r]);
+    let mut main = vec![];
+    if let Some(e) = mom_eta {
+        main.push(Series::line(
+            format!("momentum (eta {e})"),
+            pick("momentum", e),
+            0,
+        ));
+    }
+    // The plain rate of the comparison is the one nearest 1.0.
+    if let Some(&e) = plain_eta
+        .iter()
+        .min_by(|a, b| (*a - 1.0).abs().total_cmp(&(*b - 1.0).abs()))
+    {
+        main.push(Series::line(format!("plain (eta {e})"), pick("plain", e), 1).mark(Mark::Dashed));
+    }
+    // The same two runs through the lander's DAgger net (ours), a panel of their own (the
+    // curves lie almost on the Table 1 net's), same colours and line styles.
+    let mut dagger = vec![];
+    if let Some(dt) = tables.get("dagger_objective").filter(|t| !t.is_empty()) {
+        let (dm, de, di, dobj) = (
+            dt.strs("method"),
+            dt.f64s("eta"),
+            dt.f64s("iteration"),
+            dt.f64s("objective"),
+        );
+        for (c, (mm, mark)) in [("momentum", Mark::Line), ("plain", Mark::Dashed)]
+            .into_iter()
+            .enumerate()
+        {
+            let Some(e) = (0..dm.len()).find(|&r| dm[r] == mm).map(|r| de[r]) else {
+                continue;
+            };
+            let pts = (0..dm.len())
+                .filter(|&r| dm[r] == mm && de[r] == e)
+                .map(|r| (di[r], dobj[r]))
+                .collect();
+            dagger.push(Series::line(format!("{mm} (eta {e}), DAgger net"), pts, c).mark(mark));
+        }
+    }
+    let sweep = plain_eta
+        .iter()
+        .enumerate()
+        .map(|(i, &e)| Series::line(format!("eta {e}"), pick("plain", e), i))
+        .collect();
+    let mut panels = vec![
+        Panel {
+            title: "lander soft landing: momentum vs plain descent".into(),
+            x_label: "iteration".into(),
+            y_label: "objective J".into(),
+            log_y: true,
+            series: main,
+            ..Panel::default()
+        },
+        Panel {
+            title: "plain descent, learning-rate sweep".into(),
+            x_label: "iteration".into(),
+            y_label: "objective J".into(),
+            log_y: true,
+            series: sweep,
+            ..Panel::default()
+        },
+    ];
+    if !dagger.is_empty() {
+        panels.insert(
+            1,
+            Panel {
+                title: "the same through the lander's DAgger net (ours)".into(),
+                x_label: "iteration".into(),
+                y_label: "objective J".into(),
+                log_y: true,
+                series: dagger,
+                ..Panel::default()
+            },
+        );
+    }
+    let cols = panels.len();
+    fig.draw("objective", &Figure::grid(panels, cols))
+}

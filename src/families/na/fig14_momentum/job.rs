@@ -1,0 +1,456 @@
+//! The job of `na_fig14_momentum`: the lander net trained, every descent learned through it and
+//! replayed on the simulator, and the same through the DAgger nets and to convergence.
+
+use super::{DaggerNet, Params};
+use crate::control::bptt::{
+    learn_until, replay, Bounds, Bptt, Descent, IterationTrace, Knots, Learned, Replay,
+};
+use crate::control::objective::Objective;
+use crate::emulator::catalog::NetModel;
+use crate::emulator::Emulator;
+use crate::experiment::output::{Cell, Table, Tables};
+use crate::experiment::{other, Error, Job, RunContext};
+use crate::families::na::fig13_control::dagger::{ChainLearner, Round};
+use crate::families::na::table1_structure::{build_emulator, build_spec};
+use crate::physics::lander::{Lander, VEL};
+use crate::physics::Dynamics;
+use crate::row;
+
+/// Columns of `converged.csv`: those of `dagger.csv`, the iterations run and whether J
+/// converged by the rule (1) or the cap ended the run (0).
+pub fn converged_columns() -> Vec<&'static str> {
+    DAGGER_COLUMNS
+        .iter()
+        .copied()
+        .chain(["iterations", "converged"])
+        .collect()
+}
+
+/// Columns of `dagger.csv`.
+pub const DAGGER_COLUMNS: [&str; 16] = [
+    "net",
+    "round",
+    "method",
+    "eta",
+    "alpha",
+    "scale",
+    "initial_objective",
+    "final_objective",
+    "min_objective",
+    "emulator_landing_error",
+    "simulator_landing_error",
+    "emulator_final_speed",
+    "simulator_final_speed",
+    "final_gap",
+    "emulator_final_error",
+    "simulator_final_error",
+];
+
+fn method(d: &Descent) -> &'static str {
+    match d {
+        Descent::Plain { .. } => "plain",
+        Descent::Momentum { .. } => "momentum",
+    }
+}
+
+fn distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f64>()
+        .sqrt()
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let spec = build_spec(
+            ctx.seed,
+            &self.net,
+            self.steps,
+            self.example_scale,
+            &self.training,
+        );
+        let trained = ctx.stage("train lander N50", || build_emulator(&spec))?;
+        let model = NetModel::Lander;
+        let n = model.state_dim();
+        let objective = self.objective();
+        let x0 = self.start_state();
+        let mut problem = self.problem(ctx, &trained.emulator, &objective, &x0)?;
+        let scale = problem.scale;
+        let mut objective_t = Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
+        let mut gradient_t = Table::new(&["method", "eta", "alpha", "iteration", "grad_norm"]);
+        let mut runs_cols = vec!["method", "eta", "alpha"];
+        runs_cols.extend_from_slice(&DAGGER_COLUMNS[5..14]);
+        let mut runs = Table::new(&runs_cols);
+        let mut trajectory = Table::new(&[
+            "method", "eta", "step", "t", "source", "x", "y", "z", "vz", "tilt",
+        ]);
+        let mut dagger_t = Table::new(&DAGGER_COLUMNS);
+        let mut dagger_objective =
+            Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
+        let mut converged_t = Table::new(&converged_columns());
+        let compared = self.compared();
+        let descents = self.descents();
+        let pb = ctx.progress(descents.len() as u64, "control learning");
+        let mut sim = model.simulator();
+        for d in &descents {
+            let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, "");
+            for t in &r.trace {
+                objective_t.push(row![
+                    method(d),
+                    d.eta(),
+                    d.alpha(),
+                    t.iteration as i64,
+                    t.objective
+                ]);
+                gradient_t.push(row![
+                    method(d),
+                    d.eta(),
+                    d.alpha(),
+                    t.iteration as i64,
+                    t.grad_norm
+                ]);
+            }
+            let dt = self.net.physical_dt * self.steps as f64;
+            for (source, states) in [("emulator", &r.states), ("simulator", &rep.states)] {
+                for (i, s) in states.chunks_exact(n).enumerate() {
+                    let axis = Lander::thrust_axis(s);
+                    trajectory.push(row![
+                        method(d),
+                        d.eta(),
+                        i as i64,
+                        i as f64 * dt,
+                        source,
+                        s[0],
+                        s[1],
+                        s[2],
+                        s[VEL + 2],
+                        axis.z.clamp(-1.0, 1.0).acos()
+                    ]);
+                }
+            }
+            let scores = self.scores(scale, &r, &rep);
+            let mut run = row![method(d), d.eta(), d.alpha()];
+            run.extend(scores.iter().cloned());
+            runs.push(run);
+            if let (Some(dn), true) = (&self.dagger, compared.contains(d)) {
+                dagger_t.push(self.dagger_row("table1", 0, d, scores, &r, &rep, dn));
+            }
+            pb.inc(1);
+        }
+        pb.finish_and_clear();
+        self.converged_rows(
+            ctx,
+            &mut problem,
+            sim.as_mut(),
+            &x0,
+            ("table1", 0),
+            &mut converged_t,
+        );
+        if let Some(dn) = &self.dagger {
+            // The lander's final-round DAgger net of na_fig13_control (cached: only its
+            // rounds' learning and replays run again).
+            let (f13, control) = self.fig13(dn);
+            let mut rounds = Table::new(&crate::families::na::fig13_control::dagger::COLUMNS);
+            let net = f13.run_dagger(
+                ctx,
+                &control,
+                &f13.tasks[0],
+                &spec,
+                &trained,
+                &x0,
+                &mut rounds,
+            )?;
+            let mut problem = self.problem(ctx, &net, &objective, &x0)?;
+            for d in &compared {
+                let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, "DAgger net ");
+                for t in &r.trace {
+                    dagger_objective.push(row![
+                        method(d),
+                        d.eta(),
+                        d.alpha(),
+                        t.iteration as i64,
+                        t.objective
+                    ]);
+                }
+                let scores = self.scores(problem.scale, &r, &rep);
+                let round = dn.settings.rounds as i64;
+                dagger_t.push(self.dagger_row("dagger", round, d, scores, &r, &rep, dn));
+            }
+            let round = dn.settings.rounds as i64;
+            let at = ("dagger", round);
+            self.converged_rows(ctx, &mut problem, sim.as_mut(), &x0, at, &mut converged_t);
+        }
+        let mut chain_rounds = Table::new(&crate::families::na::fig13_control::dagger::COLUMNS);
+        if let Some(md) = &self.momentum_dagger {
+            let dn = self.momentum_chain(md);
+            let (f13, control) = self.fig13(&dn);
+            let mut task = f13.tasks[0].clone();
+            task.name = "lander_momentum".into();
+            let momentum = Descent::Momentum {
+                eta: self.momentum_eta,
+                alpha: self.momentum_alpha,
+            };
+            let mut chain_sim = model.simulator();
+            let mut learn = |net: &Emulator, seed: u64| -> Result<Round, Error> {
+                let mut p = self.problem(ctx, net, &objective, &x0)?;
+                let (r, rep) = self.descend(
+                    ctx,
+                    &mut p,
+                    &momentum,
+                    chain_sim.as_mut(),
+                    &x0,
+                    "momentum DAgger ",
+                );
+                let emu_final = &r.states[self.task.horizon * n..];
+                Ok(Round {
+                    emulator_error: task.final_error(emu_final),
+                    simulator_error: task.final_error(&rep.states[self.task.horizon * n..]),
+                    simulator_spread: f13.open_loop_spread(
+                        &task,
+                        &x0,
+                        &r.controls,
+                        emu_final,
+                        seed,
+                    ),
+                    iterations: r.trace.last().map_or(0, |t| t.iteration),
+                    to_goal: None,
+                    best_iteration: r.trace.len().saturating_sub(1),
+                    controls: r.controls,
+                })
+            };
+            let key = serde_json::json!({
+                "learner": "na_fig14_momentum momentum descent from hover",
+                "momentum_eta": self.momentum_eta,
+                "momentum_alpha": self.momentum_alpha,
+                "iterations": self.task.iterations,
+                "touchdown_states": self.touchdown_states,
+                "touchdown_tolerance": self.touchdown_tolerance,
+                "effort_mu": self.task.effort_mu,
+                "curvature_iterations": self.curvature_iterations,
+            });
+            let net = f13.run_dagger_with(
+                ctx,
+                &control,
+                &task,
+                &spec,
+                &trained,
+                &x0,
+                &mut chain_rounds,
+                Some(ChainLearner {
+                    key,
+                    learn: &mut learn,
+                }),
+            )?;
+            let mut problem = self.problem(ctx, &net, &objective, &x0)?;
+            for d in &compared {
+                let label = "momentum-DAgger net ";
+                let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, label);
+                let scores = self.scores(problem.scale, &r, &rep);
+                let round = md.settings.rounds as i64;
+                dagger_t.push(self.dagger_row("momentum_dagger", round, d, scores, &r, &rep, &dn));
+            }
+            let at = ("momentum_dagger", md.settings.rounds as i64);
+            self.converged_rows(ctx, &mut problem, sim.as_mut(), &x0, at, &mut converged_t);
+        }
+        Ok(Tables::from([
+            ("objective", objective_t),
+            ("gradient", gradient_t),
+            ("runs", runs),
+            ("trajectory", trajectory),
+            ("dagger", dagger_t),
+            ("dagger_objective", dagger_objective),
+            ("momentum_dagger_rounds", chain_rounds),
+            ("converged", converged_t),
+        ]))
+    }
+}
+
+/// One net's landing problem from hover: BPTT through the net, the hover knots, λ there.
+struct Problem<'a> {
+    bptt: Bptt<'a, Emulator>,
+    v0: Vec<f64>,
+    scale: f64,
+}
+
+impl Params {
+    /// The landing problem through `emu` from hover, λ measured there.
+    fn problem<'a>(
+        &self,
+        ctx: &RunContext,
+        emu: &'a Emulator,
+        objective: &'a Objective,
+        x0: &[f64],
+    ) -> Result<Problem<'a>, Error> {
+        let model = NetModel::Lander;
+        let m = model.control_dim();
+        let limits = model.control_limits();
+        let knots = Knots {
+            steps: self.task.horizon,
+            per_actuator: self.task.knots,
+            m,
+        };
+        let bounds = Bounds {
+            low: limits.low.clone(),
+            high: limits.high.clone(),
+        };
+        let mut bptt = Bptt::new(emu, objective, knots, bounds, x0).map_err(other)?;
+        let l = Lander::default();
+        let hover: Vec<f64> = (0..knots.len())
+            .map(|i| if i % m == 0 { l.mass * l.gravity } else { 0.0 })
+            .collect();
+        let v0 = bptt.from_controls(&hover);
+        let scale = ctx.stage("curvature", || {
+            bptt.curvature(&v0, self.curvature_iterations)
+        });
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(other(format!("step scale λ = {scale} at hover")));
+        }
+        Ok(Problem { bptt, v0, scale })
+    }
+
+    /// The two runs of the paper's comparison: momentum and plain descent at `plain_eta`.
+    fn compared(&self) -> Vec<Descent> {
+        vec![
+            Descent::Momentum {
+                eta: self.momentum_eta,
+                alpha: self.momentum_alpha,
+            },
+            Descent::Plain {
+                eta: self.plain_eta,
+            },
+        ]
+    }
+
+    /// Learns with `d` through the problem's net for `iterations` and replays the learned
+    /// controls on `sim`.
+    fn descend(
+        &self,
+        ctx: &RunContext,
+        p: &mut Problem<'_>,
+        d: &Descent,
+        sim: &mut dyn Dynamics,
+        x0: &[f64],
+        label: &str,
+    ) -> (Learned, Replay) {
+        self.descend_until(
+            ctx,
+            p,
+            d,
+            sim,
+            x0,
+            label,
+            self.task.iterations,
+            &mut |_, _| false,
+        )
+    }
+
+    /// [`Self::descend`] for at most `iterations`, ended early by `stop` ([`learn_until`]).
+    #[allow(clippy::too_many_arguments)]
+    fn descend_until(
+        &self,
+        ctx: &RunContext,
+        p: &mut Problem<'_>,
+        d: &Descent,
+        sim: &mut dyn Dynamics,
+        x0: &[f64],
+        label: &str,
+        iterations: usize,
+        stop: &mut dyn FnMut(&IterationTrace, &[f64]) -> bool,
+    ) -> (Learned, Replay) {
+        let r: Learned = ctx.stage(&format!("{label}{} eta {}", method(d), d.eta()), || {
+            learn_until(&mut p.bptt, &p.v0, *d, p.scale, iterations, stop)
+        });
+        let emu_final = &r.states[self.task.horizon * NetModel::Lander.state_dim()..];
+        let rep = replay(
+            sim,
+            x0,
+            &r.controls,
+            self.net.physical_dt,
+            self.steps,
+            emu_final,
+        );
+        (r, rep)
+    }
+
+    /// The `runs` columns from `scale` to `final_gap` of one descent and its replay.
+    fn scores(&self, scale: f64, r: &Learned, rep: &Replay) -> Vec<Cell> {
+        let n = NetModel::Lander.state_dim();
+        let emu_final = &r.states[self.task.horizon * n..];
+        let sim_final = &rep.states[self.task.horizon * n..];
+        let objs: Vec<f64> = r.trace.iter().map(|t| t.objective).collect();
+        row![
+            scale,
+            objs[0],
+            r.final_objective(),
+            objs.iter().copied().fold(f64::INFINITY, f64::min),
+            distance(&emu_final[..3], &self.task.target[..3]),
+            distance(&sim_final[..3], &self.task.target[..3]),
+            distance(&emu_final[VEL..VEL + 3], &[0.0; 3]),
+            distance(&sim_final[VEL..VEL + 3], &[0.0; 3]),
+            rep.final_gap
+        ]
+    }
+
+    /// `converged.csv` rows of the compared descents through problem `p` (net `net` of
+    /// round `round`), when `[params.converged]` is set.
+    #[allow(clippy::too_many_arguments)]
+    fn converged_rows(
+        &self,
+        ctx: &RunContext,
+        p: &mut Problem<'_>,
+        sim: &mut dyn Dynamics,
+        x0: &[f64],
+        (net, round): (&str, i64),
+        table: &mut Table,
+    ) {
+        let (Some(c), Some(dn)) = (&self.converged, &self.dagger) else {
+            return;
+        };
+        for d in &self.compared() {
+            let mut rule = c.rule();
+            let mut converged = false;
+            let mut stop = |t: &IterationTrace, v: &[f64]| {
+                converged = rule(t, v);
+                converged
+            };
+            let label = format!("{net} net to convergence: ");
+            let (r, rep) =
+                self.descend_until(ctx, p, d, sim, x0, &label, c.max_iterations, &mut stop);
+            let scores = self.scores(p.scale, &r, &rep);
+            let mut out = self.dagger_row(net, round, d, scores, &r, &rep, dn);
+            out.extend(row![
+                r.trace.last().map_or(0, |t| t.iteration) as i64,
+                i64::from(converged)
+            ]);
+            table.push(out);
+        }
+    }
+
+    /// A `dagger.csv` row: the net, its round, the descent, its scores and final errors.
+    #[allow(clippy::too_many_arguments)]
+    fn dagger_row(
+        &self,
+        net: &str,
+        round: i64,
+        d: &Descent,
+        scores: Vec<Cell>,
+        r: &Learned,
+        rep: &Replay,
+        dn: &DaggerNet,
+    ) -> Vec<Cell> {
+        let n = NetModel::Lander.state_dim();
+        let task = self.dagger_task(dn);
+        let mut out = row![net, round, method(d), d.eta(), d.alpha()];
+        out.extend(scores);
+        out.extend(row![
+            task.final_error(&r.states[self.task.horizon * n..]),
+            task.final_error(&rep.states[self.task.horizon * n..])
+        ]);
+        out
+    }
+}

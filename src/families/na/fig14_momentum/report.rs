@@ -1,0 +1,329 @@
+//! Report of `na_fig14_momentum`: the verdict rules (momentum against plain descent, and through
+//! the DAgger nets), the tables, and the sentences on the DAgger nets and the run to convergence.
+
+use crate::experiment::output::{df_f64, df_str, read_csv};
+use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::{other, Error};
+use std::path::Path;
+
+/// The DAgger verdict's partly-held bar (m, ours; the spec states the rule): the norm of the
+/// position tolerances (1, 1, 0.5) m.
+pub const LANDING_DISTANCE: f64 = 1.5;
+
+/// Whether a plain-descent trace converges: it ends below half its start and has not climbed
+/// back above 1.5 × its minimum.
+pub fn converges(trace: &[f64]) -> bool {
+    let (first, last) = (trace[0], trace[trace.len() - 1]);
+    let min = trace.iter().copied().fold(f64::INFINITY, f64::min);
+    last.is_finite() && last < 0.5 * first && last <= 1.5 * min
+}
+
+/// First iteration at which a trace is at or below `level` (None if never).
+pub fn iterations_to(trace: &[f64], level: f64) -> Option<usize> {
+    trace.iter().position(|&v| v <= level)
+}
+
+/// Traces per (method, eta) in first-seen order.
+fn traces(method: &[String], eta: &[f64], obj: &[f64]) -> Vec<(String, f64, Vec<f64>)> {
+    let mut out: Vec<(String, f64, Vec<f64>)> = vec![];
+    for r in 0..method.len() {
+        match out.iter_mut().find(|o| o.0 == method[r] && o.1 == eta[r]) {
+            Some(o) => o.2.push(obj[r]),
+            None => out.push((method[r].clone(), eta[r], vec![obj[r]])),
+        }
+    }
+    out
+}
+
+/// The findings ([`crate::experiment::Family::report`]).
+pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
+    let df = read_csv(&dir.join("objective.csv"))?;
+    let tr = traces(
+        &df_str(&df, "method")?,
+        &df_f64(&df, "eta")?,
+        &df_f64(&df, "objective")?,
+    );
+    let runs = read_csv(&dir.join("runs.csv"))?;
+    let (rm, re) = (df_str(&runs, "method")?, df_f64(&runs, "eta")?);
+    let (emu_err, sim_err, gap, lam) = (
+        df_f64(&runs, "emulator_landing_error")?,
+        df_f64(&runs, "simulator_landing_error")?,
+        df_f64(&runs, "final_gap")?,
+        df_f64(&runs, "scale")?,
+    );
+    let mom = tr
+        .iter()
+        .find(|t| t.0 == "momentum")
+        .ok_or_else(|| other("no momentum run"))?;
+    let plain: Vec<&(String, f64, Vec<f64>)> = tr.iter().filter(|t| t.0 == "plain").collect();
+    let base = plain
+        .iter()
+        .min_by(|a, b| (a.1 - 1.0).abs().total_cmp(&(b.1 - 1.0).abs()))
+        .ok_or_else(|| other("no plain run"))?;
+    let mut md = String::from(
+        "| method | eta | J start | J end | landing error emulator (m) | landing error simulator (m) | final gap |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for r in 0..rm.len() {
+        let t = tr.iter().find(|t| t.0 == rm[r] && t.1 == re[r]);
+        let (a, b) = t.map_or((f64::NAN, f64::NAN), |t| (t.2[0], t.2[t.2.len() - 1]));
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            rm[r],
+            re[r],
+            sig(a),
+            sig(b),
+            sig(emu_err[r]),
+            sig(sim_err[r]),
+            sig(gap[r])
+        ));
+    }
+    let mom_row = rm.iter().position(|m| m == "momentum");
+    let plain_end = base.2[base.2.len() - 1];
+    let mom_end = mom.2[mom.2.len() - 1];
+    let k_plain = base.2.len() - 1;
+    let k_mom = iterations_to(&mom.2, plain_end);
+    let faster = mom_end < plain_end && k_mom.is_some_and(|k| 2 * k <= k_plain);
+    let converging: Vec<f64> = plain
+        .iter()
+        .filter(|t| converges(&t.2))
+        .map(|t| t.1)
+        .collect();
+    let largest = converging.iter().copied().fold(f64::NAN, f64::max);
+    let diverging: Vec<f64> = plain
+        .iter()
+        .filter(|t| !converges(&t.2))
+        .map(|t| t.1)
+        .collect();
+    let base_converges = converges(&base.2);
+    // The paper's second claim: the plain rate of the comparison is the largest that
+    // converges, i.e. the next rate tried above it does not.
+    let base_is_limit = base_converges
+        && plain
+            .iter()
+            .filter(|t| t.1 > base.1)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .is_some_and(|t| !converges(&t.2));
+    let verdict = Verdict::graded(faster && base_is_limit, faster && base_converges);
+    // Momentum's J 20 iterations before its end (its pace when it stops).
+    let tail_start = mom.2[mom.2.len().saturating_sub(21)];
+    let fall = 100.0 * (1.0 - mom_end / tail_start);
+    let (dagger_md, dagger_why) = dagger_summary(dir)?.unwrap_or_default();
+    md.push_str(&dagger_md);
+    Ok(Findings {
+        ours: md,
+        verdict,
+        why: format!(
+            "Momentum (eta {}) ends at J = {} vs plain (eta {}) J = {} after {k_plain} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2). Held needs momentum to reach plain's final J in at most half the iterations and the next plain rate tried above eta {} not to converge (the paper's 'largest rate that converges', read as the stability limit; rates further up that converge again are listed above, not counted); partly: only the first. Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim. Over its last 20 iterations momentum's J fell {}% ({} -> {}){}.",
+            mom.1,
+            sig(mom_end),
+            base.1,
+            sig(plain_end),
+            k_mom.map_or("never".to_string(), |k| k.to_string()),
+            converging,
+            diverging,
+            sig(largest),
+            sig(lam.first().copied().unwrap_or(f64::NAN)),
+            base.1,
+            sig(mom_row.map_or(f64::NAN, |r| sim_err[r])),
+            sig(mom_row.map_or(f64::NAN, |r| emu_err[r])),
+            sig(mom_row.map_or(f64::NAN, |r| gap[r])),
+            sig(fall),
+            sig(tail_start),
+            sig(mom_end),
+            if fall > 1.0 {
+                ": it had not converged when it stopped, the slow pace of fixed-step descent that the task's terminal Gauss-Newton spectrum predicts (na_fig13_control's conditioning.csv and figure spectrum, the same lander task)"
+            } else {
+                ""
+            }
+        ) + &dagger_why
+            + &converged_summary(dir)?,
+    })
+}
+
+/// The report's sentence on `converged.csv` (empty when absent): per net, where momentum's
+/// and plain descent's controls run to convergence end on the emulator and the simulator.
+fn converged_summary(dir: &Path) -> Result<String, Error> {
+    let Ok(df) = read_csv(&dir.join("converged.csv")) else {
+        return Ok(String::new());
+    };
+    let (net, method) = (df_str(&df, "net")?, df_str(&df, "method")?);
+    if net.is_empty() {
+        return Ok(String::new());
+    }
+    let (iters, conv, emu, sim, land, j) = (
+        df_f64(&df, "iterations")?,
+        df_f64(&df, "converged")?,
+        df_f64(&df, "emulator_final_error")?,
+        df_f64(&df, "simulator_final_error")?,
+        df_f64(&df, "simulator_landing_error")?,
+        df_f64(&df, "final_objective")?,
+    );
+    let mut parts = vec![];
+    let mut within = vec![];
+    for r in 0..net.len() {
+        parts.push(format!(
+            "through the {} net {} runs {} iterations ({}) to J = {}, final error {} on the net and {} on the simulator ({} m from the target)",
+            net[r],
+            method[r],
+            iters[r],
+            if conv[r] > 0.5 { "converged" } else { "the cap" },
+            sig(j[r]),
+            sig(emu[r]),
+            sig(sim[r]),
+            sig(land[r])
+        ));
+        if method[r] == "momentum" && sim[r] <= 1.0 {
+            within.push(net[r].clone());
+        }
+    }
+    Ok(format!(
+        " Run to convergence (ours; converged.csv, stop rule in the spec, added after an exploratory run, no verdict rests on it): {}. Momentum's converged controls end within tolerance on the simulator through {}.",
+        parts.join("; "),
+        if within.is_empty() {
+            "none of the nets".to_string()
+        } else {
+            format!("the {} net(s)", within.join(", "))
+        }
+    ))
+}
+
+/// The report's DAgger paragraph, table and verdict sentence (rule in the spec): `None` when
+/// there is no `dagger.csv` or it is empty.
+fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
+    let Ok(df) = read_csv(&dir.join("dagger.csv")) else {
+        return Ok(None);
+    };
+    let net = df_str(&df, "net")?;
+    if net.is_empty() {
+        return Ok(None);
+    }
+    let (round, meth, eta) = (
+        df_f64(&df, "round")?,
+        df_str(&df, "method")?,
+        df_f64(&df, "eta")?,
+    );
+    let col = |c: &str| df_f64(&df, c);
+    let (j0, j1, emu_d, sim_d, emu_e, sim_e, gap) = (
+        col("initial_objective")?,
+        col("final_objective")?,
+        col("emulator_landing_error")?,
+        col("simulator_landing_error")?,
+        col("emulator_final_error")?,
+        col("simulator_final_error")?,
+        col("final_gap")?,
+    );
+    let mut md = String::from(
+        "\nThe same comparison through the lander's final-round DAgger net of `na_fig13_control` (ours, `dagger.csv`; aggregated on Fig. 13's lander task, whose start, target and tolerances are this experiment's; lambda re-measured at hover on that net; net `table1`: the Table 1 net's runs, for the before/after; net `momentum_dagger`: the last net of the chain whose learner is the momentum descent itself, `momentum_dagger_rounds.csv`), every run's controls replayed on the simulator. Final error = RMS over the 13 state variables of (s_M - s_d)/tolerance (<= 1: within tolerance); landing distance = |p_M - p_d| (m):\n\n| net | round | method | eta | J start | J end | landing distance, net (m) | landing distance, simulator (m) | final error, net | final error, simulator | final gap |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for r in 0..net.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            net[r],
+            round[r],
+            meth[r],
+            eta[r],
+            sig(j0[r]),
+            sig(j1[r]),
+            sig(emu_d[r]),
+            sig(sim_d[r]),
+            sig(emu_e[r]),
+            sig(sim_e[r]),
+            sig(gap[r])
+        ));
+    }
+    let find = |n: &str, m: &str| (0..net.len()).find(|&r| net[r] == n && meth[r] == m);
+    let (Some(dm), Some(dp)) = (find("dagger", "momentum"), find("dagger", "plain")) else {
+        return Ok(Some((md, " No DAgger-net runs in dagger.csv.".into())));
+    };
+    let before = find("table1", "momentum");
+    let obj = read_csv(&dir.join("dagger_objective.csv"))?;
+    let tr = traces(
+        &df_str(&obj, "method")?,
+        &df_f64(&obj, "eta")?,
+        &df_f64(&obj, "objective")?,
+    );
+    let k_mom = tr
+        .iter()
+        .find(|t| t.0 == "momentum")
+        .and_then(|t| iterations_to(&t.2, j1[dp]));
+    let held = sim_e[dm] <= 1.0;
+    let partly = sim_d[dm] <= LANDING_DISTANCE;
+    let v = Verdict::graded(held, partly);
+    // The chain whose learner is the momentum descent itself (rule in the spec).
+    let chain = match (
+        find("momentum_dagger", "momentum"),
+        find("momentum_dagger", "plain"),
+    ) {
+        (Some(cm), Some(cp)) => {
+            let v = Verdict::graded(sim_e[cm] <= 1.0, sim_d[cm] <= LANDING_DISTANCE);
+            // The chain's rounds: the learner's final error on its net and on the simulator.
+            let by_round = match read_csv(&dir.join("momentum_dagger_rounds.csv")) {
+                Ok(rd) => {
+                    let (e, s) = (
+                        df_f64(&rd, "final_error_emulator")?,
+                        df_f64(&rd, "final_error_simulator")?,
+                    );
+                    let f = |v: &[f64]| v.iter().map(|&x| sig(x)).collect::<Vec<_>>().join(" -> ");
+                    let short = if e.last().is_some_and(|&x| x > 1.0) {
+                        " (at the last round above 1 on the net itself: the descent stops short of the goal on the substrate it learns through, so no accuracy of the net would bring its controls within tolerance)"
+                    } else {
+                        ""
+                    };
+                    format!(
+                        " By round, the chain's momentum controls end with final error {} on the simulator and {} on the net learned through{short}.",
+                        f(&s),
+                        f(&e)
+                    )
+                }
+                Err(_) => String::new(),
+            };
+            format!(
+                " Through the round-{} net of a DAgger chain whose learner is this momentum descent itself (ours; aggregated on the states its controls visit, from the Table 1 net): momentum ends at J = {} (plain: {}); replayed on the simulator its controls land {} m from the target with final error {} (plain's {} m, {}).{by_round} Fig. 14 through the momentum-DAgger net (ours; the same rule): {}.",
+                round[cm],
+                sig(j1[cm]),
+                sig(j1[cp]),
+                sig(sim_d[cm]),
+                sig(sim_e[cm]),
+                sig(sim_d[cp]),
+                sig(sim_e[cp]),
+                v.label()
+            )
+        }
+        _ => String::new(),
+    };
+    Ok(Some((
+        md,
+        format!(
+            " Through the lander's round-{} DAgger net (ours; Fig. 13's, aggregated on Fig. 13's lander task, same start and target): momentum (eta {}) ends at J = {} vs plain (eta {}) J = {}, reaching plain's final J at iteration {}; replayed on the simulator, momentum's controls land {} m from the target with final error {} (Table 1 net: {} m, {}), plain's {} m with {}. Fig. 14 through the DAgger net (ours; rule fixed in the spec: held when momentum's simulator final error <= 1, partly when its simulator landing distance <= {} m): {}.",
+            round[dm],
+            eta[dm],
+            sig(j1[dm]),
+            eta[dp],
+            sig(j1[dp]),
+            k_mom.map_or("never".to_string(), |k| k.to_string()),
+            sig(sim_d[dm]),
+            sig(sim_e[dm]),
+            sig(before.map_or(f64::NAN, |r| sim_d[r])),
+            sig(before.map_or(f64::NAN, |r| sim_e[r])),
+            sig(sim_d[dp]),
+            sig(sim_e[dp]),
+            LANDING_DISTANCE,
+            v.label()
+        ) + &chain,
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn convergence_rules() {
+        assert!(converges(&[10.0, 5.0, 2.0, 1.0]));
+        assert!(!converges(&[10.0, 5.0, 2.0, 4.0]));
+        assert!(!converges(&[10.0, 9.0, 8.0]));
+        assert!(!converges(&[10.0, f64::NAN]));
+        assert_eq!(iterations_to(&[5.0, 3.0, 1.0], 3.0), Some(1));
+        assert_eq!(iterations_to(&[5.0, 4.0], 3.0), None);
+    }
+}
