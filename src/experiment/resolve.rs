@@ -26,6 +26,21 @@ pub fn parse_params<P: DeserializeOwned>(value: &toml::Value) -> Result<P, Param
             }
             _ => path,
         };
+        // An error inside a flattened struct names its own key in front of the message
+        // (`` `horizon`: invalid type… ``, see `families::na::control_task::keyed`): join it to
+        // the enclosing path so the error points at the key.
+        if let Some((inner, rest)) = msg
+            .strip_prefix('`')
+            .and_then(|m| m.split_once("`: "))
+            .filter(|(inner, _)| !inner.is_empty() && !inner.contains(' '))
+        {
+            let key = if key.is_empty() {
+                inner.to_string()
+            } else {
+                format!("{key}.{inner}")
+            };
+            return ParamError::new(key, rest);
+        }
         ParamError::new(key, msg)
     })
 }

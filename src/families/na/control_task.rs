@@ -62,8 +62,9 @@ impl ControlTask {
 /// outside `serde_path_to_error`'s tracking, so a wrong-typed `horizon = "x"` would come back
 /// with the enclosing table's path alone. This tracks the path inside the flattened struct and
 /// puts it in front of the message (`` `horizon`: invalid type: … ``); errors at the struct
-/// itself (`missing field `horizon``) pass unchanged. The [`ParamError`] key of such an error is
-/// the enclosing table's (empty at the top of `[params]`, `tasks[0]` in a task).
+/// itself (`missing field `horizon``) pass unchanged. `parse_params`
+/// ([`crate::experiment::resolve::parse_params`]) joins that key to the enclosing table's path,
+/// so the [`ParamError`] names `horizon` (or `tasks[0].horizon`) as for any other key.
 pub fn keyed<'de, D, T>(deserializer: D) -> Result<T, D::Error>
 where
     D: Deserializer<'de>,
@@ -142,17 +143,16 @@ mod tests {
         assert_eq!(e.key, "knots", "{e}");
     }
 
-    /// A wrong type inside the flattened task: the message names the key ([`super::keyed`]);
-    /// the error's key is the enclosing table's.
+    /// A wrong type inside the flattened task names its key ([`super::keyed`], joined to the
+    /// enclosing path by `parse_params`).
     #[test]
     fn a_wrong_type_of_a_flattened_key_names_it_in_the_message() {
         let mut raw = params("experiments/na_fig14_momentum.toml");
         raw.insert("horizon".into(), toml::Value::String("x".into()));
         let e = parse_params::<fig14_momentum::Params>(&toml::Value::Table(raw)).unwrap_err();
-        assert_eq!(e.key, "", "{e}");
+        assert_eq!(e.key, "horizon", "{e}");
         assert!(
-            e.message
-                .starts_with("`horizon`: invalid type: string \"x\""),
+            e.message.starts_with("invalid type: string \"x\""),
             "{e}"
         );
 
@@ -160,15 +160,16 @@ mod tests {
         let start = raw["start"].as_array_mut().unwrap();
         start[1] = toml::Value::String("a".into());
         let e = parse_params::<fig14_momentum::Params>(&toml::Value::Table(raw)).unwrap_err();
-        assert!(e.message.starts_with("`start[1]`: invalid type"), "{e}");
+        assert_eq!(e.key, "start[1]", "{e}");
+        assert!(e.message.starts_with("invalid type"), "{e}");
 
         let mut raw = params("experiments/na_fig13_control.toml");
         let tasks = raw["tasks"].as_array_mut().unwrap();
         let task = tasks[0].as_table_mut().unwrap();
         task.insert("effort_mu".into(), toml::Value::String("x".into()));
         let e = parse_params::<fig13_control::Params>(&toml::Value::Table(raw)).unwrap_err();
-        assert_eq!(e.key, "tasks[0]", "{e}");
-        assert!(e.message.starts_with("`effort_mu`: invalid type"), "{e}");
+        assert_eq!(e.key, "tasks[0].effort_mu", "{e}");
+        assert!(e.message.starts_with("invalid type"), "{e}");
     }
 
     /// The experiments' own keys, beside the flattened ones, keep their full path.
