@@ -1,0 +1,240 @@
+//! The figures: final poses and filmstrip from the test start (Fig. 7), the showcase GIF, the
+//! sweep heat maps and the λ sweep.
+
+use super::setup::POLICIES;
+use crate::experiment::output::Tables;
+use crate::experiment::plot::{Figure, FigureSink, Heatmap, Mark, Panel, Series};
+use crate::experiment::Error;
+use crate::families::lbc::film;
+use crate::physics::acrobot::Acrobot;
+use std::path::PathBuf;
+
+/// Fig. 7 as a filmstrip: one row per policy from the test start, the acrobot's pose every
+/// `FRAME_DT` seconds left to right (frames `FRAME_GAP` m apart), the bar marked at each frame.
+fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])) -> Figure {
+    const FRAME_DT: f64 = 0.5;
+    const FRAME_GAP: f64 = 4.5;
+    let t_end = t
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    let frames = (t_end / FRAME_DT).floor() as usize + 1;
+    let mut panels = Vec::new();
+    for (c, name) in POLICIES.iter().enumerate() {
+        let rows: Vec<usize> = (0..p.len()).filter(|&r| p[r] == *name).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let mut series = Vec::new();
+        let mut bars = Vec::new();
+        for k in 0..frames {
+            let tk = k as f64 * FRAME_DT;
+            let Some(r) = film::nearest(&rows, t, tk) else {
+                continue;
+            };
+            let off = k as f64 * FRAME_GAP;
+            let label = if k == 0 {
+                format!("{name}: pose every {FRAME_DT} s, t = 0 to {t_end} s left to right")
+            } else {
+                String::new()
+            };
+            series.push(
+                Series::line(label, film::acrobot_pose(acro, off, a1[r], a2[r]), c)
+                    .mark(Mark::LinePoints),
+            );
+            bars.push((off, 0.0));
+        }
+        series.push(Series::line("bar (pivot)", bars, 7).mark(Mark::Points));
+        panels.push(Panel {
+            title: format!("{name} from the test start (handstand: both links straight up, 2 m)"),
+            x_label: format!("x (m), frames {FRAME_GAP} m apart"),
+            y_label: "height above the bar (m)".into(),
+            series,
+            x_range: Some((-2.4, (frames as f64 - 0.5) * FRAME_GAP)),
+            y_range: Some((-2.3, 3.6)),
+            ..Default::default()
+        });
+    }
+    let mut f = Figure::grid(panels, 1);
+    f.panel_size = ((frames as u32 * 150).max(900), 300);
+    f
+}
+
+/// Fig. 7 (final poses, filmstrip, the showcase GIF), the sweep heat maps and the λ sweep.
+pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let traj = tables.require("trajectories")?;
+    let (p, t, a1, a2, al, ah) = (
+        traj.strs("policy"),
+        traj.f64s("t"),
+        traj.f64s("theta1"),
+        traj.f64s("theta2"),
+        traj.f64s("alpha1"),
+        traj.f64s("alpha_entropy"),
+    );
+    let acro = Acrobot::default();
+    // Final poses.
+    let mut series = vec![
+        Series::line("handstand", vec![(0.0, 0.0), (0.0, 1.0), (0.0, 2.0)], 7).mark(Mark::Dashed),
+    ];
+    let mut angle_series = Vec::new();
+    for (c, name) in POLICIES.iter().enumerate() {
+        let rows: Vec<usize> = (0..p.len()).filter(|&r| p[r] == *name).collect();
+        let Some(&last) = rows.last() else { continue };
+        let [p1, p2] = acro.positions(&[a1[last], a2[last], 0.0, 0.0]);
+        series.push(
+            Series::line(*name, vec![(0.0, 0.0), (p1[0], p1[1]), (p2[0], p2[1])], c)
+                .mark(Mark::LinePoints),
+        );
+        angle_series.push(Series::line(
+            *name,
+            rows.iter().map(|&r| (t[r], a1[r])).collect(),
+            c,
+        ));
+    }
+    let pose = Panel {
+        title: "final poses from the test start".into(),
+        x_label: "x (m)".into(),
+        y_label: "height above the bar (m)".into(),
+        series,
+        x_range: Some((-2.2, 2.2)),
+        y_range: Some((-2.2, 2.2)),
+        ..Default::default()
+    };
+    let lbc_rows: Vec<usize> = (0..p.len())
+        .filter(|&r| p[r] == "lbc" && al[r].is_finite())
+        .collect();
+    let angles = Panel {
+        title: "shoulder angle theta1 (handstand: pi/2)".into(),
+        x_label: "time (s)".into(),
+        y_label: "theta1 (rad)".into(),
+        series: angle_series,
+        ..Default::default()
+    };
+    let weights = Panel {
+        title: "LBC: weight of tracker 1 and entropy of alpha".into(),
+        x_label: "time (s)".into(),
+        y_label: "alpha_1, H(alpha) / ln 2".into(),
+        series: vec![
+            Series::line(
+                "alpha_1",
+                lbc_rows.iter().map(|&r| (t[r], al[r])).collect(),
+                3,
+            ),
+            Series::line(
+                "entropy",
+                lbc_rows.iter().map(|&r| (t[r], ah[r])).collect(),
+                5,
+            )
+            .mark(Mark::Dashed),
+        ],
+        y_range: Some((-0.05, 1.05)),
+        ..Default::default()
+    };
+    let mut files = fig.draw("final_pose", &Figure::grid(vec![pose, angles, weights], 3))?;
+    files.extend(fig.draw("filmstrip", &filmstrip(&acro, (&p, &t, &a1, &a2)))?);
+    // The showcase GIF: the trackers and LBC from a start where both trackers fail.
+    if let Some(sc) = tables.get("showcase") {
+        let (sp, s1, s2, sr, st, sa1, sa2) = (
+            sc.strs("policy"),
+            sc.f64s("theta1_deg"),
+            sc.f64s("theta2_deg"),
+            sc.f64s("rescued"),
+            sc.f64s("t"),
+            sc.f64s("theta1"),
+            sc.f64s("theta2"),
+        );
+        let rows: Vec<Vec<usize>> = POLICIES
+            .iter()
+            .map(|name| (0..sp.len()).filter(|&r| sp[r] == *name).collect())
+            .collect();
+        let motions: Vec<film::Motion> = POLICIES
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !rows[*i].is_empty())
+            .map(|(i, name)| film::Motion {
+                label: (*name).into(),
+                color: i,
+                rows: &rows[i],
+            })
+            .collect();
+        if let Some(&r0) = motions.first().and_then(|m| m.rows.first()) {
+            let caption = if sr[r0] == 1.0 {
+                format!(
+                    "From ({}, {}) deg at rest: both trackers fail, LBC swings up",
+                    s1[r0], s2[r0]
+                )
+            } else {
+                format!("From the test start ({}, {}) deg at rest", s1[r0], s2[r0])
+            };
+            let frames = film::acrobot_frames(&acro, &motions, (&st, &sa1, &sa2), 4.5, &caption);
+            files.push(fig.gif("swingup", &frames, film::GIF_DELAY_CS)?);
+        }
+    }
+    // Sweep heat maps.
+    const CLAMP: f64 = 3.0;
+    let sw = tables.require("sweep")?;
+    let (s1, s2, sp, sd) = (
+        sw.f64s("theta1_deg"),
+        sw.f64s("theta2_deg"),
+        sw.strs("policy"),
+        sw.f64s("final_distance"),
+    );
+    let mut maps = Vec::new();
+    for name in POLICIES {
+        let rows: Vec<usize> = (0..sp.len()).filter(|&r| sp[r] == name).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let nx = rows
+            .iter()
+            .take_while(|&&r| s2[r] == s2[rows[0]])
+            .count()
+            .max(1);
+        let ny = rows.len() / nx;
+        maps.push(Heatmap {
+            title: format!("{name}: final distance to handstand (capped at {CLAMP})"),
+            x_label: "start theta1 (deg)".into(),
+            y_label: "start theta2 (deg)".into(),
+            x_range: (s1[rows[0]], s1[rows[nx - 1]]),
+            y_range: (s2[rows[0]], s2[rows[rows.len() - 1]]),
+            nx,
+            ny,
+            values: rows.iter().map(|&r| sd[r].min(CLAMP)).collect(),
+            value_label: "distance".into(),
+            diverging: false,
+            range: Some((0.0, CLAMP)),
+        });
+    }
+    files.extend(fig.draw("sweep", &Figure::heatmaps(maps, 3))?);
+    // λ sweep.
+    let ls = tables.require("lambda_sweep")?;
+    let (l, succ, resc, nf, hs) = (
+        ls.f64s("lambda"),
+        ls.f64s("sweep_successes"),
+        ls.f64s("both_fail_successes"),
+        ls.f64s("both_fail_starts"),
+        ls.f64s("sweep_mean_entropy"),
+    );
+    if !l.is_empty() {
+        let pts = |v: &[f64]| l.iter().zip(v).map(|(&a, &b)| (a, b)).collect();
+        let frac: Vec<f64> = resc.iter().zip(&nf).map(|(r, n)| r / n.max(1.0)).collect();
+        let starts = sw.len() as f64 / POLICIES.len() as f64;
+        let cover: Vec<f64> = succ.iter().map(|s| s / starts.max(1.0)).collect();
+        let panel = Panel {
+            title: "LBC vs temperature lambda over the start sweep".into(),
+            x_label: "lambda".into(),
+            y_label: "fraction / normalized entropy".into(),
+            log_x: true,
+            series: vec![
+                Series::line("success, all starts", pts(&cover), 0).mark(Mark::LinePoints),
+                Series::line("success, both trackers fail", pts(&frac), 1).mark(Mark::LinePoints),
+                Series::line("mean entropy of alpha", pts(&hs), 2).mark(Mark::Dashed),
+            ],
+            y_range: Some((-0.05, 1.05)),
+            ..Default::default()
+        };
+        files.extend(fig.draw("lambda", &Figure::grid(vec![panel], 1))?);
+    }
+    Ok(files)
+}

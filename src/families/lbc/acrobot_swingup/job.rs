@@ -1,0 +1,365 @@
+//! The job: swing-ups, trackers, the test start, the start-state and λ sweeps, the value
+//! models compared and the showcase, as tables.
+
+use super::setup::{
+    cheapest, distance_to_handstand, first_swing_sign, first_torque_sign, mode, mode_index,
+    radians, tape_correlation, Rollout, POLICIES,
+};
+use super::verdict::sweep_counts;
+use super::Params;
+use crate::bellman::combine::BlendMode;
+use crate::control::ddp::DdpSolution;
+use crate::control::Rk4Map;
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::{other, Error, Job, RunContext};
+use crate::families::lbc::rule_table;
+use crate::physics::acrobot::Acrobot;
+use crate::row;
+use rayon::prelude::*;
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let map = Rk4Map::new(Acrobot::default(), self.dt).map_err(other)?;
+        let (cands, best) = ctx.stage("ddp", || self.swing_ups(&map))?;
+        let sols: Vec<&DdpSolution> = best.iter().map(|&b| &cands[b].sol).collect();
+        // The verdict's trackers (the spec's value model) and the other model's, for the
+        // comparison; DDP's Q_uu need not be positive definite, so the other may be missing.
+        let (trackers, alt) = ctx.stage("lqr", || -> Result<_, Error> {
+            let main = self.trackers(&map, &sols, &self.value_model)?;
+            let alt = self.trackers(&map, &sols, self.other_model()).ok();
+            Ok((main, alt))
+        })?;
+        let mut candidates = Table::new(&[
+            "start",
+            "guess",
+            "iterations",
+            "cost",
+            "final_distance",
+            "first_swing_sign",
+            "first_torque_sign",
+            "kept",
+            "termination",
+        ]);
+        for (i, c) in cands.iter().enumerate() {
+            candidates.push(row![
+                c.start + 1,
+                c.guess.as_str(),
+                c.sol.trace.len(),
+                c.sol.cost,
+                distance_to_handstand(c.sol.x[c.sol.u.len()].as_slice()),
+                first_swing_sign(&c.sol.x),
+                first_torque_sign(&c.sol.u),
+                best.contains(&i) as i64,
+                format!("{:?}", c.sol.termination)
+            ]);
+        }
+        let mut swingups = Table::new(&[
+            "start",
+            "theta1_deg",
+            "theta2_deg",
+            "iterations",
+            "cost",
+            "final_distance",
+            "termination",
+            "guess",
+            "first_swing_sign",
+            "first_torque_sign",
+            "cost_ratio",
+            "tape_correlation",
+            "same_family",
+            "max_abs_torque",
+            "lowest_cost_any_family",
+        ]);
+        let mut trace = Table::new(&[
+            "start",
+            "iteration",
+            "cost",
+            "regularization",
+            "step",
+            "gradient_norm",
+            "accepted",
+        ]);
+        let lowest: Vec<f64> = cheapest(&cands, self.starts.len(), |_| true)
+            .iter()
+            .map(|b| b.map_or(f64::NAN, |i| cands[i].sol.cost))
+            .collect();
+        let min_cost = sols.iter().map(|s| s.cost).fold(f64::INFINITY, f64::min);
+        let swing = |s: &DdpSolution| first_swing_sign(&s.x);
+        let same_family = sols
+            .iter()
+            .all(|s| swing(s) == swing(sols[0]) && swing(s) != 0)
+            && sols
+                .iter()
+                .all(|s| s.cost <= self.max_cost_ratio * min_cost);
+        for (i, (s, sol)) in self.starts.iter().zip(&sols).enumerate() {
+            swingups.push(row![
+                i + 1,
+                s[0],
+                s[1],
+                sol.trace.len(),
+                sol.cost,
+                distance_to_handstand(sol.x[sol.u.len()].as_slice()),
+                format!("{:?}", sol.termination),
+                cands[best[i]].guess.as_str(),
+                swing(sol),
+                first_torque_sign(&sol.u),
+                sol.cost / min_cost,
+                tape_correlation(&sols[0].u, &sol.u),
+                same_family as i64,
+                sol.u.iter().fold(0.0, |m: f64, u| m.max(u[0].abs())),
+                lowest[i]
+            ]);
+            for r in &sol.trace {
+                trace.push(row![
+                    i + 1,
+                    r.iteration,
+                    r.cost,
+                    r.regularization,
+                    r.step,
+                    r.gradient_norm,
+                    r.accepted as i64
+                ]);
+            }
+        }
+        let limits = [self.torque_limit];
+        let blend = |m: BlendMode, lambda: f64| self.blend(&trackers, &limits, m, lambda);
+        let lambda = self.lambda();
+        // The test start.
+        let x0 = radians(&self.test_start);
+        let mut fin = Table::new(&[
+            "policy",
+            "final_distance",
+            "control_cost",
+            "final_theta1",
+            "final_theta2",
+            "max_abs_torque",
+            "mean_entropy",
+        ]);
+        let mut traj = Table::new(&[
+            "policy",
+            "t",
+            "theta1",
+            "theta2",
+            "omega1",
+            "omega2",
+            "u",
+            "alpha1",
+            "alpha_entropy",
+        ]);
+        ctx.stage("test start", || -> Result<(), Error> {
+            for (i, name) in POLICIES.iter().enumerate() {
+                let r = self.run_policy(&map, &blend(mode(i), lambda), &x0)?;
+                let xn = &r.xs[r.xs.len() - 1];
+                fin.push(row![
+                    *name,
+                    r.final_distance(),
+                    r.control_cost,
+                    xn[0],
+                    xn[1],
+                    r.max_abs_torque(),
+                    r.mean_entropy()
+                ]);
+                for (k, x) in r.xs.iter().enumerate() {
+                    let (u, a, h) = if k < r.us.len() {
+                        (r.us[k], r.alpha1[k], r.entropy[k])
+                    } else {
+                        (f64::NAN, f64::NAN, f64::NAN)
+                    };
+                    traj.push(row![
+                        *name,
+                        k as f64 * self.dt,
+                        x[0],
+                        x[1],
+                        x[2],
+                        x[3],
+                        u,
+                        a,
+                        h
+                    ]);
+                }
+            }
+            Ok(())
+        })?;
+        // Sweep over start states: every policy at the spec's λ, and LBC at each swept λ.
+        let n = self.sweep_points;
+        let lin = |r: [f64; 2], i: usize| {
+            if n == 1 {
+                0.5 * (r[0] + r[1])
+            } else {
+                r[0] + (r[1] - r[0]) * i as f64 / (n - 1) as f64
+            }
+        };
+        let grid: Vec<(f64, f64)> = (0..n)
+            .flat_map(|j| {
+                (0..n).map(move |i| (lin(self.sweep_theta1, i), lin(self.sweep_theta2, j)))
+            })
+            .collect();
+        type Outcome = (f64, f64, f64, f64);
+        let summary = |r: &Rollout| -> Outcome {
+            (
+                r.final_distance(),
+                r.control_cost,
+                r.max_abs_torque(),
+                r.mean_entropy(),
+            )
+        };
+        let pb = ctx.progress(grid.len() as u64, "start-state sweep");
+        type Row = (Vec<Outcome>, Vec<Outcome>, Vec<Outcome>);
+        let rows: Vec<Result<Row, Error>> = ctx.stage("sweep", || {
+            grid.par_iter()
+                .map(|&(a, b)| {
+                    let x0 = radians(&[a, b, 0.0, 0.0]);
+                    let policies = (0..POLICIES.len())
+                        .map(|i| {
+                            Ok(summary(&self.run_policy(
+                                &map,
+                                &blend(mode(i), lambda),
+                                &x0,
+                            )?))
+                        })
+                        .collect::<Result<Vec<_>, Error>>()?;
+                    let lambdas = self
+                        .lambda_sweep
+                        .iter()
+                        .map(|&l| {
+                            Ok(summary(&self.run_policy(
+                                &map,
+                                &blend(BlendMode::Lbc, l),
+                                &x0,
+                            )?))
+                        })
+                        .collect::<Result<Vec<_>, Error>>()?;
+                    // The same policies with the other value model's trackers.
+                    let others = match &alt {
+                        Some(ts) => (0..POLICIES.len())
+                            .map(|i| {
+                                Ok(summary(&self.run_policy(
+                                    &map,
+                                    &self.blend(ts, &limits, mode(i), lambda),
+                                    &x0,
+                                )?))
+                            })
+                            .collect::<Result<Vec<_>, Error>>()?,
+                        None => Vec::new(),
+                    };
+                    pb.inc(1);
+                    Ok((policies, lambdas, others))
+                })
+                .collect()
+        });
+        pb.finish_and_clear();
+        let rows: Vec<Row> = rows.into_iter().collect::<Result<_, _>>()?;
+        let mut sweep = Table::new(&[
+            "theta1_deg",
+            "theta2_deg",
+            "policy",
+            "final_distance",
+            "control_cost",
+            "success",
+            "max_abs_torque",
+            "mean_entropy",
+        ]);
+        let ok = |d: f64| d < self.success_distance;
+        let mut models = Table::new(&[
+            "value_model",
+            "theta1_deg",
+            "theta2_deg",
+            "policy",
+            "final_distance",
+            "success",
+        ]);
+        for (&(a, b), (r, _, o)) in grid.iter().zip(&rows) {
+            for (name, &(d, c, m, h)) in POLICIES.iter().zip(r) {
+                sweep.push(row![a, b, *name, d, c, ok(d) as i64, m, h]);
+            }
+            for (model, outs) in [(self.value_model.as_str(), r), (self.other_model(), o)] {
+                for (name, &(d, ..)) in POLICIES.iter().zip(outs) {
+                    models.push(row![model, a, b, *name, d, ok(d) as i64]);
+                }
+            }
+        }
+        // The showcase (GIF): tracker 1, tracker 2 and LBC from the first start LBC rescues
+        // (both trackers fail there), else from the test start.
+        let rescued = rows
+            .iter()
+            .position(|(r, ..)| !ok(r[0].0) && !ok(r[1].0) && ok(r[mode_index(BlendMode::Lbc)].0));
+        let show = rescued.map_or(self.test_start, |i| [grid[i].0, grid[i].1, 0.0, 0.0]);
+        let mut showcase = Table::new(&[
+            "policy",
+            "theta1_deg",
+            "theta2_deg",
+            "rescued",
+            "t",
+            "theta1",
+            "theta2",
+        ]);
+        for i in [0, 1, mode_index(BlendMode::Lbc)] {
+            let r = self.run_policy(&map, &blend(mode(i), lambda), &radians(&show))?;
+            for (k, x) in r.xs.iter().enumerate() {
+                showcase.push(row![
+                    POLICIES[i],
+                    show[0],
+                    show[1],
+                    rescued.is_some() as i64,
+                    k as f64 * self.dt,
+                    x[0],
+                    x[1]
+                ]);
+            }
+        }
+        // The λ sweep: LBC at the test start and over the sweep, the both-fail subset included.
+        let mut lam = Table::new(&[
+            "lambda",
+            "test_final_distance",
+            "test_mean_entropy",
+            "sweep_successes",
+            "both_fail_successes",
+            "both_fail_starts",
+            "sweep_mean_entropy",
+        ]);
+        for (li, &l) in self.lambda_sweep.iter().enumerate() {
+            let r = self.run_policy(&map, &blend(BlendMode::Lbc, l), &x0)?;
+            let flags: Vec<Vec<bool>> = rows
+                .iter()
+                .map(|(p, ls, _)| vec![ok(p[0].0), ok(p[1].0), ok(ls[li].0)])
+                .collect();
+            let c = sweep_counts(&flags);
+            let h: f64 = rows.iter().map(|(_, ls, _)| ls[li].3).sum::<f64>() / rows.len() as f64;
+            lam.push(row![
+                l,
+                r.final_distance(),
+                r.mean_entropy(),
+                c.successes[2],
+                c.rescued[2],
+                c.both_fail,
+                h
+            ]);
+        }
+        let rule = rule_table(&[
+            ("lambda", lambda),
+            ("torque_noise", self.torque_noise),
+            ("torque_limit", self.torque_limit),
+            ("success_distance", self.success_distance),
+            ("held_fraction", self.held_fraction),
+            ("max_cost_ratio", self.max_cost_ratio),
+            ("value_model_ddp", (self.value_model == "ddp") as u8 as f64),
+            ("other_value_model_built", alt.is_some() as u8 as f64),
+        ]);
+        Ok(Tables::from([
+            ("final", fin),
+            ("trajectories", traj),
+            ("swingups", swingups),
+            ("swingup_candidates", candidates),
+            ("ddp_trace", trace),
+            ("sweep", sweep),
+            ("lambda_sweep", lam),
+            ("value_model", models),
+            ("showcase", showcase),
+            ("rule", rule),
+        ]))
+    }
+}

@@ -1,0 +1,274 @@
+//! `lbc_diver_coordination`: its parameters, the objective comparison and the job (three dives
+//! combined with w = 1 vs the single tracker, from take-off rates beyond the components).
+
+use super::{entry, wrap, DiveRun, DiveSettings, DDP_VALUE_STEP};
+use crate::bellman::combine::{BlendMode, TrackerBlend};
+use crate::control::lqr::{track_with, TrackingController, ValueModel};
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::plot::FigureSink;
+use crate::experiment::report::Findings;
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{Error, Family, Job, RunContext};
+use crate::families::lbc::rule_table;
+use crate::row;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The coordination family.
+pub struct LbcDiverCoordination;
+
+/// Parameters of `lbc_diver_coordination`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoordinationParams {
+    /// Dive settings.
+    pub dive: DiveSettings,
+    /// Take-off angular velocities of the component dives (rad/s).
+    pub omegas: Vec<f64>,
+    /// Which component is the single tracker compared against (0-based).
+    pub single: usize,
+    /// Take-off angular velocities tested (rad/s).
+    pub tests: Vec<f64>,
+    /// A dive enters vertically when |entry angle| is at most this (rad).
+    pub entry_tolerance: f64,
+    /// Objectives differ when they differ by more than this fraction of the smaller one.
+    pub objective_tolerance: f64,
+    /// Temperatures λ of the λ sweep (the noise model's λ is the one judged).
+    pub lambda_sweep: Vec<f64>,
+}
+
+impl Validate for CoordinationParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        self.dive
+            .validate()
+            .map_err(|e| ParamError::new(format!("dive.{}", e.key), e.message))?;
+        ensure(self.omegas.len() >= 2, "omegas", "need at least two dives")?;
+        ensure(
+            self.single < self.omegas.len(),
+            "single",
+            "must index `omegas`",
+        )?;
+        ensure(!self.tests.is_empty(), "tests", "must not be empty")?;
+        positive("entry_tolerance", self.entry_tolerance)?;
+        positive("objective_tolerance", self.objective_tolerance)?;
+        for (i, l) in self.lambda_sweep.iter().enumerate() {
+            positive(&format!("lambda_sweep[{i}]"), *l)?;
+        }
+        Ok(())
+    }
+}
+
+/// Compares two objectives with a relative tolerance: "better" when `a` is lower than `b` by
+/// more than `tol` of the smaller, "worse" when higher by as much, else "tie". A diverged
+/// (infinite) objective loses to a finite one; two infinite ones tie.
+pub fn compare_objectives(a: f64, b: f64, tol: f64) -> &'static str {
+    if !a.is_finite() || !b.is_finite() {
+        return match (a.is_finite(), b.is_finite()) {
+            (true, false) => "better",
+            (false, true) => "worse",
+            _ => "tie",
+        };
+    }
+    let margin = tol * a.abs().min(b.abs());
+    if a < b - margin {
+        "better"
+    } else if a > b + margin {
+        "worse"
+    } else {
+        "tie"
+    }
+}
+
+impl Job for CoordinationParams {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let d = &self.dive;
+        let cases: Vec<(f64, f64)> = self.omegas.iter().map(|&w| (w, 0.0)).collect();
+        let (sols, trackers, examples) = d.optimize_all(ctx, &cases)?;
+        let cost = d.cost(0.0);
+        // The same dives tracked with DDP's value function (second-order dynamics terms).
+        let map = d.map()?;
+        // With the second-order terms Q_uu need not be positive definite away from a converged
+        // optimum (e.g. at the quick budgets); then the comparison is left out.
+        let ddp_trackers: Option<Vec<TrackingController>> = ctx.stage("ddp value", || {
+            sols.par_iter()
+                .map(|s| {
+                    track_with(
+                        &map,
+                        &cost,
+                        &s.x,
+                        &s.u,
+                        ValueModel::Ddp {
+                            fd_step: DDP_VALUE_STEP,
+                        },
+                    )
+                    .ok()
+                })
+                .collect::<Option<Vec<_>>>()
+        });
+        let ones = vec![1.0; trackers.len()];
+        let limits = d.torque_limits;
+        let blend_of = |ddp: bool, mode: BlendMode, lambda: f64| TrackerBlend {
+            trackers: match (&ddp_trackers, ddp) {
+                (Some(t), true) => t,
+                _ => &trackers,
+            },
+            weights: ones.clone(),
+            lambda,
+            limits: Some(&limits),
+            mode,
+        };
+        let blend = |mode: BlendMode, lambda: f64| TrackerBlend {
+            trackers: &trackers,
+            weights: ones.clone(),
+            lambda,
+            limits: Some(&limits),
+            mode,
+        };
+        let objective = |r: &DiveRun| match &r.final_state {
+            Some(x) => r.running + cost.terminal(x),
+            None => f64::INFINITY,
+        };
+        type Out = (
+            Vec<(&'static str, f64, f64, f64, f64)>,
+            Vec<(f64, f64, f64)>,
+            Vec<(&'static str, f64, f64, f64)>,
+        );
+        let rows: Vec<Result<Out, Error>> = ctx.stage("coordinate", || {
+            self.tests
+                .par_iter()
+                .map(|&w| {
+                    let x0 = d.takeoff(w);
+                    let mut out = Vec::new();
+                    for (name, mode) in [
+                        ("lbc", BlendMode::Lbc),
+                        ("single", BlendMode::Single(self.single)),
+                    ] {
+                        let r = d.execute(&blend(mode, d.lambda()), &x0)?;
+                        out.push((
+                            name,
+                            wrap(entry(&r.final_state)).abs(),
+                            objective(&r),
+                            r.mean_entropy,
+                            r.max_torque_fraction,
+                        ));
+                    }
+                    let sweep = self
+                        .lambda_sweep
+                        .iter()
+                        .map(|&l| {
+                            let r = d.execute(&blend(BlendMode::Lbc, l), &x0)?;
+                            Ok((
+                                wrap(entry(&r.final_state)).abs(),
+                                objective(&r),
+                                r.mean_entropy,
+                            ))
+                        })
+                        .collect::<Result<Vec<_>, Error>>()?;
+                    let mut ddp = Vec::new();
+                    let models = if ddp_trackers.is_some() { 2 } else { 0 };
+                    for (name, mode) in [
+                        ("lbc", BlendMode::Lbc),
+                        ("single", BlendMode::Single(self.single)),
+                    ]
+                    .into_iter()
+                    .take(models)
+                    {
+                        let r = d.execute(&blend_of(true, mode, d.lambda()), &x0)?;
+                        ddp.push((
+                            name,
+                            wrap(entry(&r.final_state)).abs(),
+                            objective(&r),
+                            r.mean_entropy,
+                        ));
+                    }
+                    Ok((out, sweep, ddp))
+                })
+                .collect()
+        });
+        let mut table = Table::new(&[
+            "initial_omega",
+            "method",
+            "entry_error",
+            "objective",
+            "mean_entropy",
+            "max_torque_fraction",
+            "objective_outcome",
+        ]);
+        let mut lam = Table::new(&[
+            "lambda",
+            "initial_omega",
+            "entry_error",
+            "objective",
+            "mean_entropy",
+            "objective_outcome",
+        ]);
+        let mut values = Table::new(&[
+            "initial_omega",
+            "value_function",
+            "method",
+            "entry_error",
+            "objective",
+            "mean_entropy",
+        ]);
+        for (&w, r) in self.tests.iter().zip(rows) {
+            let (out, sweep, ddp) = r?;
+            for &(m, e, j, h, _) in &out {
+                values.push(row![w, "lqr", m, e, j, h]);
+            }
+            for &(m, e, j, h) in &ddp {
+                values.push(row![w, "ddp", m, e, j, h]);
+            }
+            let (jl, js) = (out[0].2, out[1].2);
+            for &(m, e, j, h, t) in &out {
+                let outcome = if m == "lbc" {
+                    compare_objectives(jl, js, self.objective_tolerance)
+                } else {
+                    compare_objectives(js, jl, self.objective_tolerance)
+                };
+                table.push(row![w, m, e, j, h, t, outcome]);
+            }
+            for (&l, &(e, j, h)) in self.lambda_sweep.iter().zip(&sweep) {
+                lam.push(row![
+                    l,
+                    w,
+                    e,
+                    j,
+                    h,
+                    compare_objectives(j, js, self.objective_tolerance)
+                ]);
+            }
+        }
+        let rule = rule_table(&[
+            ("lambda", d.lambda()),
+            ("torque_noise", d.torque_noise),
+            ("entry_tolerance", self.entry_tolerance),
+            ("objective_tolerance", self.objective_tolerance),
+            ("ddp_value_built", ddp_trackers.is_some() as u8 as f64),
+        ]);
+        Ok(Tables::from([
+            ("coordination", table),
+            ("dives", examples),
+            ("lambda_sweep", lam),
+            ("value_comparison", values),
+            ("rule", rule),
+        ]))
+    }
+}
+
+impl Family for LbcDiverCoordination {
+    const KIND: &'static str = "lbc_diver_coordination";
+    type Params = CoordinationParams;
+
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+        super::figures::coordination(fig, tables)
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        super::report::coordination(dir)
+    }
+}

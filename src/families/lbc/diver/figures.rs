@@ -1,0 +1,132 @@
+//! The figures of both dive families.
+
+use super::interpolation::{MOTION_COLUMNS, MOTION_DIVES};
+use crate::experiment::output::Tables;
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::Error;
+use crate::families::lbc::film;
+use crate::physics::diver::diver;
+use std::path::PathBuf;
+
+/// Per-method column of rows `m == name` as (x, y) points.
+fn method_points(x: &[f64], m: &[String], y: &[f64], name: &str) -> Vec<(f64, f64)> {
+    (0..x.len())
+        .filter(|&r| m[r] == name)
+        .map(|r| (x[r], y[r]))
+        .collect()
+}
+
+/// The interpolation's figures: entry angles and objectives over the desired entry, the dives.
+pub(super) fn interpolation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let t = tables.require("interpolation")?;
+    let (g, m, a, e) = (
+        t.f64s("desired_angle"),
+        t.strs("method"),
+        t.f64s("reached_angle"),
+        t.f64s("excess_objective"),
+    );
+    let lo = g.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = g.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let mut series = vec![Series::line("desired", vec![(lo, lo), (hi, hi)], 7).mark(Mark::Dashed)];
+    let mut excess = Vec::new();
+    for (c, name) in ["lbc", "naive", "direct"].iter().enumerate() {
+        series.push(Series::line(*name, method_points(&g, &m, &a, name), c).mark(Mark::LinePoints));
+        if *name != "direct" {
+            excess.push(
+                Series::line(*name, method_points(&g, &m, &e, name), c).mark(Mark::LinePoints),
+            );
+        }
+    }
+    let panels = vec![
+        Panel {
+            title: "diver: entry angle reached vs desired".into(),
+            x_label: "desired entry angle (rad from vertical)".into(),
+            y_label: "reached entry angle (rad)".into(),
+            series,
+            ..Default::default()
+        },
+        Panel {
+            title: "objective with the reconstructed cost, excess over direct DDP".into(),
+            x_label: "desired entry angle (rad from vertical)".into(),
+            y_label: "(J - J*) / J*".into(),
+            series: excess,
+            ..Default::default()
+        },
+    ];
+    let mut files = fig.draw("entry", &Figure::grid(panels, 2))?;
+    // Filmstrip and GIF of the component dives, the naive average and LBC.
+    if let Some(mt) = tables.get("motion") {
+        let (names, t) = (mt.strs("dive"), mt.f64s("t"));
+        let cols: Vec<Vec<f64>> = MOTION_COLUMNS[2..].iter().map(|c| mt.f64s(c)).collect();
+        let q: Vec<Vec<f64>> = (0..t.len())
+            .map(|r| cols.iter().map(|c| c[r]).collect())
+            .collect();
+        let dives: Vec<film::Dive> = MOTION_DIVES
+            .iter()
+            .enumerate()
+            .map(|(c, name)| {
+                let rows: Vec<usize> = (0..names.len()).filter(|&r| names[r] == *name).collect();
+                film::Dive {
+                    label: match *name {
+                        "naive" | "lbc" => format!("{name}, weights for vertical"),
+                        other => format!("{other} component"),
+                    },
+                    color: c,
+                    t: rows.iter().map(|&r| t[r]).collect(),
+                    q: rows.iter().map(|&r| q[r].as_slice()).collect(),
+                }
+            })
+            .filter(|d| !d.t.is_empty())
+            .collect();
+        if !dives.is_empty() {
+            let tree = diver();
+            files.extend(fig.draw("filmstrip", &film::diver_filmstrip(&tree, &dives, 0.2, 1.6))?);
+            let frames = film::diver_frames(
+                &tree,
+                &dives,
+                2.0,
+                "One take-off; naive and LBC weights projected for vertical",
+            );
+            files.push(fig.gif("dives", &frames, film::GIF_DELAY_CS)?);
+        }
+    }
+    Ok(files)
+}
+
+/// The coordination's figure: entry errors and objectives over the take-off rate.
+pub(super) fn coordination(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let t = tables.require("coordination")?;
+    let (w, m, e, j) = (
+        t.f64s("initial_omega"),
+        t.strs("method"),
+        t.f64s("entry_error"),
+        t.f64s("objective"),
+    );
+    let series = |col: &[f64]| -> Vec<Series> {
+        ["lbc", "single"]
+            .iter()
+            .enumerate()
+            .map(|(c, name)| {
+                Series::line(*name, method_points(&w, &m, col, name), c).mark(Mark::LinePoints)
+            })
+            .collect()
+    };
+    let panels = vec![
+        Panel {
+            title: "entry error vs take-off angular velocity".into(),
+            x_label: "initial angular velocity (rad/s)".into(),
+            y_label: "|entry angle| (rad)".into(),
+            series: series(&e),
+            ..Default::default()
+        },
+        Panel {
+            title: "objective of the executed dive".into(),
+            x_label: "initial angular velocity (rad/s)".into(),
+            y_label: "objective".into(),
+            series: series(&j),
+            log_y: true,
+            ..Default::default()
+        },
+    ];
+    fig.draw("entry", &Figure::grid(panels, 2))
+}

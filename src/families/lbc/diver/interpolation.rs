@@ -1,0 +1,330 @@
+//! `lbc_diver_interpolation`: its parameters, the projected weights and reconstructed cost of a
+//! desired entry, and the job (LBC, naive and direct dives per desired entry, the λ sweep, the
+//! dives' motion).
+
+use super::{entry, DiveSettings, ReconstructedCost};
+use crate::bellman::combine::{BlendMode, TrackerBlend};
+use crate::bellman::projection::{project, GaussianReward};
+use crate::control::ddp::DdpSolution;
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::plot::FigureSink;
+use crate::experiment::report::Findings;
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
+use crate::families::lbc::{film, rule_table};
+use crate::row;
+use nalgebra::DVector;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The interpolation family.
+pub struct LbcDiverInterpolation;
+
+/// Parameters of `lbc_diver_interpolation`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InterpolationParams {
+    /// Dive settings.
+    pub dive: DiveSettings,
+    /// Take-off angular velocity of both dives (rad/s).
+    pub omega: f64,
+    /// Target offset δ: the dives aim at −δ (under-rotating) and +δ (over-rotating) (rad).
+    pub offset: f64,
+    /// Desired entry angles (rad), strictly between −δ and δ (at ±δ the weights are (1, 0):
+    /// a component, not an interpolation); 0 (vertical, the paper's claim) must be among them.
+    pub desired: Vec<f64>,
+    /// Outer iterations of the direct DDP dive for the reconstructed cost.
+    pub direct_outer_iterations: usize,
+    /// A dive reaches the desired entry when |reached − desired| is at most this (rad).
+    pub entry_tolerance: f64,
+    /// LBC beats the naive average on the objective when its mean excess over the direct DDP
+    /// optimum (relative to that optimum) is lower by more than this.
+    pub objective_tolerance: f64,
+    /// Temperatures λ of the λ sweep (the noise model's λ is the one judged).
+    pub lambda_sweep: Vec<f64>,
+}
+
+impl Validate for InterpolationParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        self.dive
+            .validate()
+            .map_err(|e| ParamError::new(format!("dive.{}", e.key), e.message))?;
+        positive("offset", self.offset)?;
+        ensure(self.omega.is_finite(), "omega", "must be finite")?;
+        ensure(!self.desired.is_empty(), "desired", "must not be empty")?;
+        for (i, g) in self.desired.iter().enumerate() {
+            ensure(
+                g.abs() < self.offset,
+                &format!("desired[{i}]"),
+                "must lie strictly between -offset and offset (at ±offset the weights are (1, 0))",
+            )?;
+        }
+        ensure(
+            self.desired.contains(&0.0),
+            "desired",
+            "must contain 0 (the vertical entry of the paper's claim)",
+        )?;
+        ensure(
+            self.direct_outer_iterations >= 1,
+            "direct_outer_iterations",
+            "must be at least 1",
+        )?;
+        positive("entry_tolerance", self.entry_tolerance)?;
+        positive("objective_tolerance", self.objective_tolerance)?;
+        for (i, l) in self.lambda_sweep.iter().enumerate() {
+            positive(&format!("lambda_sweep[{i}]"), *l)?;
+        }
+        Ok(())
+    }
+}
+
+/// One interpolation row before it becomes a table row.
+struct InterpRow {
+    method: &'static str,
+    reached: f64,
+    objective: f64,
+    entropy: f64,
+    torque: f64,
+}
+
+impl InterpolationParams {
+    /// Projected weights for desired entry `g` at temperature `lambda`, and the projection.
+    pub(super) fn weights(&self, g: f64, lambda: f64) -> Result<(Vec<f64>, f64), Error> {
+        let q = self.dive.torso_weight / lambda;
+        let comps: Vec<GaussianReward> = [-self.offset, self.offset]
+            .iter()
+            .map(|&o| GaussianReward::isotropic(&[o], q))
+            .collect();
+        let p = project(&comps, &GaussianReward::isotropic(&[g], q)).map_err(other)?;
+        Ok((p.weights, p.relative_residual))
+    }
+
+    fn reconstructed(&self, w: &[f64], lambda: f64) -> ReconstructedCost {
+        ReconstructedCost {
+            q: self.dive.torso_weight,
+            centers: [-self.offset, self.offset]
+                .iter()
+                .map(|&o| DiveSettings::target_torso(o))
+                .collect(),
+            weights: w.to_vec(),
+            lambda,
+        }
+    }
+}
+
+impl Job for InterpolationParams {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let d = &self.dive;
+        let lambda = d.lambda();
+        let cases = [(self.omega, -self.offset), (self.omega, self.offset)];
+        let (sols, trackers, examples) = d.optimize_all(ctx, &cases)?;
+        let x0 = d.takeoff(self.omega);
+        let limits = d.torque_limits;
+        let blend = |w: &[f64], mode: BlendMode, lambda: f64| TrackerBlend {
+            trackers: &trackers,
+            weights: w.to_vec(),
+            lambda,
+            limits: Some(&limits),
+            mode,
+        };
+        // Initial guesses of the direct dive: the average tape and a component's tape.
+        let average: Vec<DVector<f64>> = sols[0]
+            .u
+            .iter()
+            .zip(&sols[1].u)
+            .map(|(a, b)| (a + b) * 0.5)
+            .collect();
+        let tapes: [(&str, &[DVector<f64>]); 2] = [
+            ("under-rotating tape", &sols[0].u),
+            ("over-rotating tape", &sols[1].u),
+        ];
+        type RowOut = (Vec<InterpRow>, Vec<f64>, f64, f64, usize, String);
+        let pb = ctx.progress(self.desired.len() as u64, "interpolations");
+        let rows: Vec<Result<RowOut, Error>> = ctx.stage("interpolate", || {
+            self.desired
+                .par_iter()
+                .map(|&g| {
+                    let (w, residual) = self.weights(g, lambda)?;
+                    let rec = self.reconstructed(&w, lambda);
+                    let mut out = Vec::new();
+                    for (name, mode) in [("lbc", BlendMode::Lbc), ("naive", BlendMode::Naive)] {
+                        let r = d.execute(&blend(&w, mode, lambda), &x0)?;
+                        out.push(InterpRow {
+                            method: name,
+                            reached: entry(&r.final_state),
+                            objective: d.reconstructed_objective(&rec, r.running, &r.final_state),
+                            entropy: r.mean_entropy,
+                            torque: r.max_torque_fraction,
+                        });
+                    }
+                    // Ground truth: the best direct DDP dive from the average tape and from
+                    // the tape of the more heavily weighted component.
+                    let heavier = tapes[(w[1] > w[0]) as usize];
+                    let mut best: Option<(f64, DdpSolution, usize, &str)> = None;
+                    for (label, u0) in [("average tape", average.as_slice()), heavier] {
+                        let (s, it) = d.direct(&x0, &rec, u0, self.direct_outer_iterations)?;
+                        let run =
+                            s.u.iter()
+                                .enumerate()
+                                .map(|(k, u)| d.cost(0.0).running(k, &s.x[k], u))
+                                .sum::<f64>();
+                        let j = d.reconstructed_objective(&rec, run, &Some(s.x[s.u.len()].clone()));
+                        if best.as_ref().is_none_or(|b| j < b.0) {
+                            best = Some((j, s, it, label));
+                        }
+                    }
+                    let (j, s, it, label) = best.expect("two guesses");
+                    out.push(InterpRow {
+                        method: "direct",
+                        reached: entry(&Some(s.x[s.u.len()].clone())),
+                        objective: j,
+                        entropy: f64::NAN,
+                        torque: d.torque_fraction(&s.u),
+                    });
+                    let minimum = rec.minimum() - DiveSettings::target_torso(0.0);
+                    pb.inc(1);
+                    Ok((out, w, residual, minimum, it, label.to_string()))
+                })
+                .collect()
+        });
+        pb.finish_and_clear();
+        let mut table = Table::new(&[
+            "desired_angle",
+            "method",
+            "reached_angle",
+            "weight1",
+            "weight2",
+            "objective",
+            "excess_objective",
+            "mean_entropy",
+            "max_torque_fraction",
+        ]);
+        let mut proj = Table::new(&[
+            "desired_angle",
+            "weight1",
+            "weight2",
+            "weight_sum",
+            "relative_residual",
+            "reconstructed_minimum",
+            "direct_outer_iterations",
+            "direct_start",
+        ]);
+        for (&g, r) in self.desired.iter().zip(rows) {
+            let (out, w, residual, minimum, it, label) = r?;
+            let best = out
+                .iter()
+                .find(|r| r.method == "direct")
+                .map_or(f64::NAN, |r| r.objective);
+            for r in &out {
+                table.push(row![
+                    g,
+                    r.method,
+                    r.reached,
+                    w[0],
+                    w[1],
+                    r.objective,
+                    (r.objective - best) / best.abs(),
+                    r.entropy,
+                    r.torque
+                ]);
+            }
+            proj.push(row![
+                g,
+                w[0],
+                w[1],
+                w[0] + w[1],
+                residual,
+                minimum,
+                it,
+                label
+            ]);
+        }
+        // λ sweep of LBC (weights re-projected at each λ, as the blend and projection agree).
+        let mut lam = Table::new(&[
+            "lambda",
+            "desired_angle",
+            "reached_angle",
+            "mean_entropy",
+            "weight1",
+            "weight2",
+        ]);
+        for &l in &self.lambda_sweep {
+            for &g in &self.desired {
+                let (w, _) = self.weights(g, l)?;
+                let r = d.execute(&blend(&w, BlendMode::Lbc, l), &x0)?;
+                lam.push(row![
+                    l,
+                    g,
+                    entry(&r.final_state),
+                    r.mean_entropy,
+                    w[0],
+                    w[1]
+                ]);
+            }
+        }
+        // The filmstrip's dives: the two components and, with the weights projected for the
+        // vertical entry, the naive average and LBC (every executed state).
+        let (w0, _) = self.weights(0.0, lambda)?;
+        let mut motion = Table::new(&MOTION_COLUMNS);
+        for (name, mode) in MOTION_DIVES.iter().zip([
+            BlendMode::Single(0),
+            BlendMode::Single(1),
+            BlendMode::Naive,
+            BlendMode::Lbc,
+        ]) {
+            let r = d.execute(&blend(&w0, mode, lambda), &x0)?;
+            for (k, x) in r.states.iter().enumerate() {
+                let mut cells = vec![(*name).into(), (k as f64 * d.dt).into()];
+                cells.extend(x.iter().take(film::DIVER_COORDS).map(|&v| v.into()));
+                motion.push(cells);
+            }
+        }
+        let spacing = 2.0 * self.offset;
+        let rule = rule_table(&[
+            ("lambda", lambda),
+            ("torque_noise", d.torque_noise),
+            ("entry_tolerance", self.entry_tolerance),
+            ("objective_tolerance", self.objective_tolerance),
+            (
+                "q_spacing2_over_lambda",
+                d.torso_weight * spacing * spacing / lambda,
+            ),
+        ]);
+        Ok(Tables::from([
+            ("interpolation", table),
+            ("dives", examples),
+            ("projection", proj),
+            ("lambda_sweep", lam),
+            ("motion", motion),
+            ("rule", rule),
+        ]))
+    }
+}
+
+/// Columns of the interpolation's `motion` table: the dive, the time and the diver's
+/// generalized coordinates (hip position, torso angle, joint angles).
+pub(super) const MOTION_COLUMNS: [&str; 2 + film::DIVER_COORDS] = [
+    "dive", "t", "x", "y", "torso", "neck", "shoulder", "elbow", "hip", "knee", "ankle",
+];
+
+/// The dives of the `motion` table: the components, and the naive average and LBC with the
+/// weights projected for the vertical entry.
+pub(super) const MOTION_DIVES: [&str; 4] = ["under-rotating", "over-rotating", "naive", "lbc"];
+
+impl Family for LbcDiverInterpolation {
+    const KIND: &'static str = "lbc_diver_interpolation";
+    type Params = InterpolationParams;
+
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+        super::figures::interpolation(fig, tables)
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        super::report::interpolation(dir)
+    }
+}

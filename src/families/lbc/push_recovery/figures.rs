@@ -1,0 +1,120 @@
+//! The figure: blend weights, tug forces and poses over time (Fig. 9).
+
+use crate::experiment::output::Tables;
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::Error;
+use std::f64::consts::FRAC_PI_2;
+use std::path::PathBuf;
+
+/// The setting `key` of the run's `rule` table, if it has one.
+fn rule_setting(tables: &Tables, key: &str) -> Option<f64> {
+    let rule = tables.get("rule")?;
+    let (k, v) = (rule.strs("setting"), rule.f64s("value"));
+    k.iter().position(|s| s == key).map(|i| v[i])
+}
+
+/// Fig. 9: the blend weights under the tugs (scripted, mirrored, none), the forces and the poses.
+pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let w = tables.require("weights")?;
+    let (t, a, f, hx) = (
+        w.f64s("t"),
+        w.f64s("alpha_forward"),
+        w.f64s("force_x"),
+        w.f64s("hand_x"),
+    );
+    let (am, ab) = (
+        w.f64s("alpha_forward_mirrored"),
+        w.f64s("alpha_forward_baseline"),
+    );
+    let fmax = f.iter().fold(1e-9f64, |m, v| m.max(v.abs()));
+    let mut panels = vec![
+        Panel {
+            title: "LBC blend weight under tugs on the hand".into(),
+            x_label: "time (s)".into(),
+            y_label: "weight".into(),
+            series: vec![
+                Series::line(
+                    "alpha forward reach",
+                    t.iter().zip(&a).map(|(&x, &y)| (x, y)).collect(),
+                    0,
+                ),
+                Series::line(
+                    format!("tug force / {fmax:.0} N (scaled to 0..1)"),
+                    t.iter()
+                        .zip(&f)
+                        .map(|(&x, &y)| (x, 0.5 + 0.5 * y / fmax))
+                        .collect(),
+                    3,
+                ),
+                Series::line(
+                    "alpha forward, mirrored tugs",
+                    t.iter().zip(&am).map(|(&x, &y)| (x, y)).collect(),
+                    1,
+                )
+                .mark(Mark::Dashed),
+                Series::line(
+                    "alpha forward, no tugs",
+                    t.iter().zip(&ab).map(|(&x, &y)| (x, y)).collect(),
+                    7,
+                )
+                .mark(Mark::Dashed),
+            ],
+            y_range: Some((-0.05, 1.05)),
+            ..Default::default()
+        },
+        Panel {
+            title: "hand position".into(),
+            x_label: "time (s)".into(),
+            y_label: "hand x (m, + is forward)".into(),
+            series: vec![Series::line(
+                "hand x",
+                t.iter().zip(&hx).map(|(&x, &y)| (x, y)).collect(),
+                2,
+            )],
+            ..Default::default()
+        },
+    ];
+    // The body's lean (+ forward) with LBC and with no reach, and the fall angle.
+    let lean = |b: &[f64]| -> Vec<(f64, f64)> {
+        t.iter().zip(b).map(|(&x, &y)| (x, FRAC_PI_2 - y)).collect()
+    };
+    let mut series = vec![Series::line(
+        "LBC, tugs as scripted",
+        lean(&w.f64s("body_angle")),
+        0,
+    )];
+    series.push(
+        Series::line(
+            "LBC, mirrored tugs",
+            lean(&w.f64s("body_angle_mirrored")),
+            1,
+        )
+        .mark(Mark::Dashed),
+    );
+    if w.column("body_angle_no_reach").is_some() {
+        series.push(Series::line(
+            "no reach (arm held), tugs as scripted",
+            lean(&w.f64s("body_angle_no_reach")),
+            3,
+        ));
+    }
+    if let Some(fall) = rule_setting(tables, "fall_angle") {
+        let (t0, t1) = (
+            t.first().copied().unwrap_or(0.0),
+            t.last().copied().unwrap_or(1.0),
+        );
+        for (sgn, label) in [(1.0, "fall angle"), (-1.0, "")] {
+            series.push(
+                Series::line(label, vec![(t0, sgn * fall), (t1, sgn * fall)], 7).mark(Mark::Dashed),
+            );
+        }
+    }
+    panels.push(Panel {
+        title: "body lean from upright".into(),
+        x_label: "time (s)".into(),
+        y_label: "lean (rad, + is forward)".into(),
+        series,
+        ..Default::default()
+    });
+    fig.draw("weights", &Figure::grid(panels, 1))
+}

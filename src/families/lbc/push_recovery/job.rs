@@ -1,0 +1,332 @@
+//! The job: the DDP reaches and their trackers, the closed loops of the walled scene under the
+//! tugs (scripted, mirrored, none; with and without a reach) and the λ sweep, as tables.
+
+use super::measures::{largest_lean, mirror_gap, swings, window_gap, window_range};
+use super::Params;
+use crate::bellman::combine::{normalized_entropy, BlendMode, TrackerBlend};
+use crate::control::ddp::{solve, ControlBounds, DdpOptions, Termination};
+use crate::control::lqr::{track, TrackingController};
+use crate::control::{QuadraticCost, Rk4Map, StateCost};
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::{other, Error, Job, RunContext};
+use crate::families::lbc::rule_table;
+use crate::physics::integrate::Integrator;
+use crate::physics::linearize::FiniteDifference;
+use crate::physics::push::{push_figure, PushScene};
+use crate::physics::IntegratorKind;
+use crate::row;
+use nalgebra::{DMatrix, DVector};
+use std::f64::consts::{FRAC_PI_2, PI};
+
+impl Params {
+    pub(super) fn steps(&self) -> usize {
+        (self.horizon / self.dt).round() as usize
+    }
+
+    /// Upright body, arm hanging.
+    pub(super) fn start(&self) -> DVector<f64> {
+        DVector::from_vec(vec![FRAC_PI_2, -PI, 0.0, 0.0, 0.0, 0.0])
+    }
+
+    /// The hold pose in front (`forward`) or behind, in unwrapped joint angles from the start.
+    fn target(&self, forward: bool) -> DVector<f64> {
+        let (body, arm_abs) = if forward {
+            (FRAC_PI_2 - self.lean, 0.0)
+        } else {
+            (FRAC_PI_2 + self.lean, -PI)
+        };
+        DVector::from_vec(vec![body, arm_abs - body, 0.0, 0.0, 0.0, 0.0])
+    }
+
+    pub(super) fn cost(&self, forward: bool) -> QuadraticCost {
+        QuadraticCost {
+            dt: self.dt,
+            r: DMatrix::identity(3, 3) * self.control_weight,
+            state: self.hold_weights.map(|w| StateCost {
+                weight: DMatrix::from_diagonal(&DVector::from_row_slice(&w)),
+                reference: vec![self.target(forward)],
+            }),
+            q_final: DMatrix::from_diagonal(&DVector::from_row_slice(&self.terminal_weights)),
+            x_final: self.target(forward),
+        }
+    }
+
+    /// λ = σ² R of the stated motor noise (R = `control_weight` I).
+    pub fn lambda(&self) -> f64 {
+        self.torque_noise * self.torque_noise * self.control_weight
+    }
+
+    fn options(&self) -> DdpOptions {
+        let l = DVector::from_row_slice(&self.torque_limits);
+        DdpOptions {
+            max_iterations: self.max_iterations,
+            bounds: Some(ControlBounds {
+                lower: -l.clone(),
+                upper: l,
+            }),
+            ..DdpOptions::default()
+        }
+    }
+
+    /// The forward and backward reaches (DDP, then LQR), with their table rows.
+    pub(super) fn reaches(&self) -> Result<(Vec<TrackingController>, Table), Error> {
+        let mut torque_only = push_figure();
+        torque_only.forces.clear();
+        let map = Rk4Map::new(FiniteDifference::new(torque_only), self.dt).map_err(other)?;
+        let x0 = self.start();
+        let mut reaches = Table::new(&[
+            "reach",
+            "iterations",
+            "cost",
+            "final_error",
+            "termination",
+            "gradient_norm",
+        ]);
+        let mut trackers = Vec::new();
+        for (name, fwd) in [("forward", true), ("backward", false)] {
+            let cost = self.cost(fwd);
+            let u0 = vec![DVector::zeros(3); self.steps()];
+            let sol = solve(&map, &cost, &x0, &u0, &self.options()).map_err(other)?;
+            if sol.termination == Termination::MaxIterations
+                || sol.termination == Termination::RegularizationLimit
+            {
+                return Err(other(format!(
+                    "the {name} reach did not converge ({:?} after {} iterations, gradient {:e}): raise max_iterations",
+                    sol.termination,
+                    sol.trace.len(),
+                    sol.gradient_norm
+                )));
+            }
+            let err = (&sol.x[sol.u.len()] - &cost.x_final).norm();
+            reaches.push(row![
+                name,
+                sol.trace.len(),
+                sol.cost,
+                err,
+                format!("{:?}", sol.termination),
+                sol.gradient_norm
+            ]);
+            trackers.push(track(&map, &cost, &sol.x, &sol.u).map_err(other)?);
+        }
+        Ok((trackers, reaches))
+    }
+
+    /// The closed loop at temperature `lambda` under the tugs scaled by `sign` (1: as scripted,
+    /// −1: mirrored, 0: none): per step (α_forward, α_backward, force, body angle, absolute
+    /// arm angle, hand x, wall force).
+    pub(super) fn closed_loop(
+        &self,
+        trackers: &[TrackingController],
+        sign: f64,
+        lambda: f64,
+    ) -> Result<Vec<[f64; 7]>, Error> {
+        let blend = TrackerBlend {
+            trackers,
+            weights: vec![1.0, 1.0],
+            lambda,
+            limits: Some(&self.torque_limits),
+            mode: BlendMode::Lbc,
+        };
+        let mut ui = [0.0; 3];
+        self.rollout(sign, |x, k, u, alpha| {
+            blend.control(x, k, u, alpha, &mut ui).map_err(other)
+        })
+    }
+
+    /// The premise's test: the same tugs with no reach. The arm is held at its start pose and
+    /// the ankle pushes the body back to upright (stiff PD, both torque-limited, gains ours:
+    /// the ankle saturates at 0.05 rad of lean, well inside the 0.11 rad it can hold against
+    /// gravity). Returns the body angle per step.
+    pub(super) fn no_reach(&self, sign: f64) -> Result<Vec<f64>, Error> {
+        let x0 = self.start();
+        let (kp_ankle, kd_ankle) = (
+            self.torque_limits[0] / 0.05,
+            0.2 * self.torque_limits[0] / 0.05,
+        );
+        let (kp_arm, kd_arm) = (300.0, 30.0);
+        let run = self.rollout(sign, |x, _, u, alpha| {
+            u[0] = -kp_ankle * (x[0] - x0[0]) - kd_ankle * x[3];
+            u[1] = -kp_arm * (x[1] - x0[1]) - kd_arm * x[4];
+            u[2] = -kp_arm * (x[2] - x0[2]) - kd_arm * x[5];
+            for (v, l) in u.iter_mut().zip(&self.torque_limits) {
+                *v = v.clamp(-l, *l);
+            }
+            alpha.fill(f64::NAN);
+            Ok(())
+        })?;
+        Ok(run.iter().map(|v| v[3]).collect())
+    }
+
+    /// Largest lean from upright (rad) of the premise's runs, as scripted and mirrored.
+    pub fn no_reach_lean(&self) -> Result<f64, Error> {
+        Ok(largest_lean(&[self.no_reach(1.0)?, self.no_reach(-1.0)?]))
+    }
+
+    /// Simulates the figure between the walls under the tugs scaled by `sign` with
+    /// `policy(x, k, u, alpha)` writing the three motor torques (and the blend weights, if any)
+    /// once per control step; a body that leans a right angle has hit the floor and stays
+    /// there (the model has no floor contact of its own). Per step: (α_forward, α_backward,
+    /// tug force, body angle, absolute arm angle, hand x, wall force on the hand).
+    pub(super) fn rollout(
+        &self,
+        sign: f64,
+        mut policy: impl FnMut(&[f64], usize, &mut [f64], &mut [f64]) -> Result<(), Error>,
+    ) -> Result<Vec<[f64; 7]>, Error> {
+        let scene = PushScene::new(self.walls);
+        let mut rk4 = Integrator::new(IntegratorKind::Rk4, 6);
+        let h = self.dt / self.substeps as f64;
+        let mut x = [0.0; 6];
+        x.copy_from_slice(self.start().as_slice());
+        let (mut u, mut alpha) = ([0.0; 3], [0.0; 2]);
+        let mut full_u = [0.0; 5];
+        let mut out = Vec::with_capacity(self.steps());
+        for k in 0..self.steps() {
+            let t = k as f64 * self.dt;
+            policy(&x, k, &mut u, &mut alpha)?;
+            let f = sign * self.force_at(t);
+            full_u[..3].copy_from_slice(&u);
+            full_u[3] = f;
+            let (hand, v) = scene.hand(&x);
+            out.push([
+                alpha[0],
+                alpha[1],
+                f,
+                x[0],
+                x[0] + x[1],
+                hand[0],
+                self.walls.force(hand[0], v[0]),
+            ]);
+            // A body that has fallen to the floor (lean of a right angle) lies there.
+            if (x[0] - FRAC_PI_2).abs() < FRAC_PI_2 {
+                for _ in 0..self.substeps {
+                    rk4.step(&scene, &mut x, &full_u, h);
+                }
+                if (x[0] - FRAC_PI_2).abs() >= FRAC_PI_2 {
+                    x[0] = if x[0] < FRAC_PI_2 { 0.0 } else { PI };
+                    x[3..].fill(0.0);
+                }
+            }
+            crate::physics::check_finite("push_recovery", k, t + self.dt, &x)?;
+        }
+        Ok(out)
+    }
+
+    fn force_at(&self, t: f64) -> f64 {
+        self.tugs
+            .iter()
+            .filter(|g| t >= g.start && t < g.start + g.duration)
+            .map(|g| g.force)
+            .sum()
+    }
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let (trackers, reaches) = ctx.stage("ddp + lqr", || self.reaches())?;
+        let (tugged, mirrored, baseline) = ctx.stage("tugs", || -> Result<_, Error> {
+            Ok((
+                self.closed_loop(&trackers, 1.0, self.lambda())?,
+                self.closed_loop(&trackers, -1.0, self.lambda())?,
+                self.closed_loop(&trackers, 0.0, self.lambda())?,
+            ))
+        })?;
+        let mut table = Table::new(&[
+            "t",
+            "alpha_forward",
+            "alpha_backward",
+            "force_x",
+            "body_angle",
+            "arm_angle",
+            "hand_x",
+            "alpha_forward_mirrored",
+            "alpha_forward_baseline",
+            "body_angle_mirrored",
+            "wall_force",
+            "body_angle_no_reach",
+        ]);
+        // The premise's runs (no reach), as scripted and mirrored.
+        let no_reach = ctx.stage("no reach", || -> Result<_, Error> {
+            Ok([self.no_reach(1.0)?, self.no_reach(-1.0)?])
+        })?;
+        for (k, ((a, m), b)) in tugged.iter().zip(&mirrored).zip(&baseline).enumerate() {
+            table.push(row![
+                k as f64 * self.dt,
+                a[0],
+                a[1],
+                a[2],
+                a[3],
+                a[4],
+                a[5],
+                m[0],
+                b[0],
+                m[3],
+                a[6],
+                no_reach[0][k]
+            ]);
+        }
+        // The same checks at each swept λ (not judged).
+        let mut lam = Table::new(&[
+            "lambda",
+            "swings",
+            "settle_gap",
+            "mirror_gap",
+            "mean_entropy",
+            "max_lean",
+            "settle_range",
+        ]);
+        ctx.stage("lambda sweep", || -> Result<(), Error> {
+            for &l in &self.lambda_sweep {
+                let runs = [1.0, -1.0, 0.0]
+                    .map(|sign| self.closed_loop(&trackers, sign, l))
+                    .into_iter()
+                    .collect::<Result<Vec<_>, _>>()?;
+                let col = |r: &[[f64; 7]], i: usize| r.iter().map(|v| v[i]).collect::<Vec<f64>>();
+                let t: Vec<f64> = (0..runs[0].len()).map(|k| k as f64 * self.dt).collect();
+                let a = col(&runs[0], 0);
+                let h = runs[0]
+                    .iter()
+                    .map(|v| normalized_entropy(&v[..2]))
+                    .sum::<f64>()
+                    / runs[0].len().max(1) as f64;
+                let lean = runs[..2]
+                    .iter()
+                    .flat_map(|r| r.iter().map(|v| (v[3] - FRAC_PI_2).abs()))
+                    .fold(0.0, f64::max);
+                lam.push(row![
+                    l,
+                    swings(&t, &a, self.settle_window[0]) as i64,
+                    window_gap(&t, &a, &col(&runs[2], 0), self.settle_window),
+                    mirror_gap(&a, &col(&runs[1], 0)),
+                    h,
+                    lean,
+                    window_range(&t, &a, self.settle_window)
+                ]);
+            }
+            Ok(())
+        })?;
+        let rule = rule_table(&[
+            ("lambda", self.lambda()),
+            ("torque_noise", self.torque_noise),
+            ("min_swings", self.min_swings as f64),
+            ("settle_start", self.settle_window[0]),
+            ("settle_end", self.settle_window[1]),
+            ("settle_tolerance", self.settle_tolerance),
+            ("mirror_tolerance", self.mirror_tolerance),
+            ("fall_angle", self.fall_angle),
+            ("horizon", self.horizon),
+            ("no_reach_lean", largest_lean(&no_reach)),
+            ("walls_distance", self.walls.distance),
+            ("rest_rate", self.rest_rate),
+        ]);
+        Ok(Tables::from([
+            ("weights", table),
+            ("reaches", reaches),
+            ("lambda_sweep", lam),
+            ("rule", rule),
+        ]))
+    }
+}
