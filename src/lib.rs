@@ -50,10 +50,12 @@
 //! - [`experiment`]: the harness — experiments as data: TOML specs, validation with
 //!   file/line/key errors, sweeps, the runner (CSV + Parquet, atomic writes, `run.json`),
 //!   figures and `REPORT.md`; the [`experiment::Experiment`] / [`experiment::Job`] traits a
-//!   family implements.
-//! - [`families`]: the experiment families, one folder per paper, one file per experiment id
-//!   (without the paper prefix) with its figures and report section beside it, and the list of
-//!   families ([`families::families`]; an id → file table is in the module doc).
+//!   family implements. It runs whatever [`experiment::Registry`] it is handed and names no
+//!   family.
+//! - [`families`]: the experiment families, one folder per paper, one file (or folder: params,
+//!   job, figures, report) per experiment id (without the paper prefix), and the registry of
+//!   families `main.rs` hands to the harness ([`families::registry`]; an id → file table is in
+//!   the module doc).
 //!   - [`families::na`]: NeuroAnimator — the Table 1 nets and their training
 //!     ([`families::na::table1_structure`], which also builds the cached emulators the other
 //!     `na_*` families use), Table 2 speedups, §5.3 regularization, Fig. 12 error, Fig. 13
@@ -65,7 +67,7 @@
 //!     ([`families::ms::motion`]) and the Fig. 6 learning plot, and 3-D lattice drawing
 //!     ([`families::ms::lattice_draw`]).
 //!   - [`families::lbc`]: linear Bellman combination — reward projection, grid optimality, the
-//!     acrobot swing-up, the diver's interpolation and coordination (one file,
+//!     acrobot swing-up, the diver's interpolation and coordination (one folder,
 //!     [`families::lbc::diver`]) and push recovery.
 //!   - [`families::beyond`]: beyond the papers — `physics_validation` (integrator energy drift
 //!     and convergence orders) and `x_lbc_emulator` (linear Bellman combination of
@@ -73,6 +75,14 @@
 //! - [`mod@bench`]: throughput of the hot loops (`motionlab bench`).
 //! - [`linalg`]: the one conversion point between ndarray and nalgebra types.
 //! - [`seed`]: deterministic seed splitting ([`seed::mix_seed`]), one random stream per job.
+//! - [`params`]: the settings-validation vocabulary every layer uses ([`params::ParamError`]
+//!   names the key and says what is wrong; [`params::ensure`]); it imports nothing else of the
+//!   crate, so solvers check their own settings without knowing the harness.
+//!
+//! Imports go downwards only: [`physics`] at the bottom; [`emulator`], [`control`] (whose
+//! tracker contract [`bellman`] combines) and [`synthesis`] above it; the harness
+//! ([`experiment`]) above those, knowing no family; [`families`] above the harness; `main.rs`
+//! on top, handing the harness the registry.
 //!
 //! ## Models and algorithms
 //!

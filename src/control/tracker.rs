@@ -10,8 +10,9 @@
 //!   learned by backpropagation through time through a NeuroAnimator emulator, linearized by
 //!   the emulator's own exact Jacobians (one control step per emulator super-step).
 //!
-//! [`crate::bellman::combine::TrackerBlend`] combines any implementors (also mixed, through
-//! `&dyn ValueTracker`) without knowing where they came from.
+//! Linear Bellman combination (`bellman::combine::TrackerBlend`) combines any implementors
+//! (also mixed, through `&dyn ValueTracker`) without knowing where they came from; the
+//! contract lives here, beside the trackers, so control knows nothing of its combiner.
 
 /// A time-varying feedback policy with its value function: what linear Bellman combination
 /// needs of a component controller.

@@ -3,7 +3,8 @@
 //! A *family* is the code that runs one kind of experiment: its typed parameters (a
 //! [`crate::experiment::Job`]), its figures and its `REPORT.md` section — a
 //! [`crate::experiment::Family`], and through it an [`Experiment`]. Experiment files name it in
-//! `experiment = "…"`; the harness ([`crate::experiment`]) finds it in [`families`]. Each
+//! `experiment = "…"`; the harness ([`crate::experiment`]) finds it in the [`registry`] that
+//! `main.rs` hands it (the harness itself names no family). Each
 //! paper has a folder, and each file is named after the experiment id it runs, without the
 //! paper prefix:
 //!
@@ -34,7 +35,7 @@
 //!
 //! To add an experiment: a file in the paper's folder (`beyond/` for experiments beyond the
 //! papers, ids `x_*`) named after the id, its `mod` line in that folder's `mod.rs`, and one line
-//! in `FAMILIES` below (listed by [`families`]).
+//! in `FAMILIES` below (listed by [`families`] and [`registry`]).
 
 use crate::experiment::{Experiment, Registry};
 
