@@ -8,7 +8,7 @@ use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::Emulator;
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::families::na::control_task::{keyed, ControlTask};
-use crate::families::na::fig13_control::Task;
+use crate::families::na::fig13_control::{Formulation, Task};
 use crate::families::na::table1_structure::{validate_nets, validate_training};
 use crate::physics::lander::Lander;
 use nalgebra::{DMatrix, DVector};
@@ -120,6 +120,7 @@ impl Params {
             eta: 1.0,
             alpha: 0.0,
             step_rule: self.step_rule,
+            formulation: Formulation::Paper,
         }
     }
 

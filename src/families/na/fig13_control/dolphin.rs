@@ -1,7 +1,7 @@
 //! The dolphin swim task of Fig. 13(d) in the job: the swim learned through the global net from
 //! seeded random starts, replayed on the simulator beside a hand-made travelling wave.
 
-use super::{learn_best, BestRollout, DolphinControl, Params};
+use super::{Formulation, learn_best, BestRollout, DolphinControl, Params};
 use crate::control::bptt::{Bptt, Learned};
 use crate::emulator::hierarchy::{FRAME_DIM, GLOBAL_DIM};
 use crate::experiment::output::Table;
@@ -156,7 +156,8 @@ impl Params {
             "dolphin",
             (ref_d - emu_d).max(0.0),
             (ref_d - sim_d).max(0.0),
-            r.best_iteration as i64
+            r.best_iteration as i64,
+            Formulation::Paper.name()
         ]);
         // Trajectory: the mean segment centroid (s0, s1, s2 = x, y, z).
         for (source, globals) in [("emulator", &best.states), ("simulator", &sim_globals)] {

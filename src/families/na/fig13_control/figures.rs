@@ -223,7 +223,20 @@ fn animations(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> 
     let (gs, ts): (Vec<Vec<f64>>, Vec<Vec<f64>>) = (0..width)
         .map(|k| (g.f64s(&format!("s{k}")), tr.f64s(&format!("s{k}"))))
         .unzip();
+    // A GIF for each task of the paper's formulation (one of ours is a second line in the
+    // tables and the control figure, not animated).
+    let ours: Vec<String> = match tables.get("final") {
+        Some(f) if f.column("formulation").is_some() => {
+            let (t, form) = (f.strs("task"), f.strs("formulation"));
+            (0..t.len())
+                .filter(|&r| form[r] == "ours")
+                .map(|r| t[r].clone())
+                .collect()
+        }
+        _ => vec![],
+    };
     let jobs: Vec<(usize, NetModel)> = (0..gtask.len())
+        .filter(|&r| !ours.contains(&gtask[r]))
         .map(|r| {
             NetModel::ALL
                 .into_iter()

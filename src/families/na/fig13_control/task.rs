@@ -30,6 +30,40 @@ pub struct Task {
     /// How the step scale evolves ([`StepRule`]; default `fixed`, the paper's).
     #[serde(default)]
     pub step_rule: StepRule,
+    /// Whose formulation the task is: `paper` (default; the headline counts it) or `ours`
+    /// (an earlier formulation of this project kept beside the paper's as a second line, so a
+    /// change is visible; reported, never counted in the headline, no DAgger chain). Left out
+    /// of the serialized task when `paper`, so the DAgger nets' cache keys of the paper's tasks
+    /// are those of the tasks before the field existed.
+    #[serde(default, skip_serializing_if = "Formulation::is_paper")]
+    pub formulation: Formulation,
+}
+
+/// Whose task formulation a [`Task`] follows.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Formulation {
+    /// The paper's (horizon, targets, units as the paper gives them; our rule where it is
+    /// silent, written in the spec): the headline's tasks.
+    #[default]
+    Paper,
+    /// One of ours that departs from the paper, kept as a second line for comparison.
+    Ours,
+}
+
+impl Formulation {
+    /// Whether it is the paper's.
+    pub fn is_paper(&self) -> bool {
+        *self == Formulation::Paper
+    }
+
+    /// The name in `final.csv`'s `formulation` column.
+    pub fn name(self) -> &'static str {
+        match self {
+            Formulation::Paper => "paper",
+            Formulation::Ours => "ours",
+        }
+    }
 }
 
 impl Task {
@@ -127,5 +161,52 @@ impl Task {
             .map(|i| w[i] * (s[i] - self.task.target[i]) * (s[i] - self.task.target[i]))
             .sum();
         (sum / k as f64).sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::resolve::parse_params;
+    use crate::experiment::spec::SpecFile;
+
+    /// The spec's tasks: the paper's formulation by default, our earlier one only where the
+    /// file says `formulation = "ours"`; a paper task serializes as before the field existed
+    /// (the DAgger nets' cache keys), one of ours names its formulation.
+    #[test]
+    fn formulation_defaults_to_the_papers_and_is_serialized_only_when_ours() {
+        let file = SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml"))
+            .unwrap();
+        let p: super::super::Params =
+            parse_params(&toml::Value::Table(file.raw.params.clone())).unwrap();
+        let names: Vec<(&str, Formulation)> = p
+            .tasks
+            .iter()
+            .map(|t| (t.name.as_str(), t.formulation))
+            .collect();
+        assert_eq!(
+            names,
+            [
+                ("pendulum", Formulation::Paper),
+                ("truck", Formulation::Paper),
+                ("lander", Formulation::Paper),
+                ("pendulum_4s", Formulation::Ours),
+            ]
+        );
+        // The paper's pendulum animates 20 s (200 N50 steps of 0.1 s), ours 4 s.
+        let seconds = |t: &Task| t.task.horizon as f64 * t.net.physical_dt * p.steps as f64;
+        assert!((seconds(&p.tasks[0]) - 20.0).abs() < 1e-9);
+        assert!((seconds(&p.tasks[3]) - 4.0).abs() < 1e-9);
+        let paper = serde_json::to_value(&p.tasks[0]).unwrap();
+        assert!(paper.get("formulation").is_none(), "{paper}");
+        let ours = serde_json::to_value(&p.tasks[3]).unwrap();
+        assert_eq!(ours["formulation"], "ours");
+        let mut raw = file.raw.params.clone();
+        raw["tasks"].as_array_mut().unwrap()[0]
+            .as_table_mut()
+            .unwrap()
+            .insert("formulation".into(), toml::Value::String("mine".into()));
+        let e = parse_params::<super::super::Params>(&toml::Value::Table(raw)).unwrap_err();
+        assert_eq!(e.key, "tasks[0].formulation", "{e}");
     }
 }

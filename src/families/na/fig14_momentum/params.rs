@@ -8,7 +8,7 @@ use crate::emulator::dagger::DaggerSettings;
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::families::na::control_task::{keyed, ControlTask};
 use crate::families::na::fig13_control::dagger::DaggerControl;
-use crate::families::na::fig13_control::Task;
+use crate::families::na::fig13_control::{Formulation, Task};
 use crate::families::na::table1_structure::{validate_nets, validate_training};
 use crate::physics::lander::{Lander, VEL};
 use serde::{Deserialize, Serialize};
@@ -227,6 +227,7 @@ impl Params {
             eta: self.momentum_eta,
             alpha: self.momentum_alpha,
             step_rule: StepRule::Fixed,
+            formulation: Formulation::Paper,
         }
     }
 
