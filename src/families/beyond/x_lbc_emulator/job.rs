@@ -56,8 +56,7 @@ impl Params {
         let x0 = self.start_state();
         let t0 = Instant::now();
         let mut bptt = Bptt::new(emu, &objective, knots, task.bounds(), &x0).map_err(other)?;
-        let rest = task.rest_control();
-        let init: Vec<f64> = (0..knots.len()).map(|i| rest[i % m]).collect();
+        let init = task.initial_knots();
         let v0 = bptt.from_controls(&init);
         let schedule = Schedule {
             descent: Descent::Plain { eta: 1.0 },

@@ -121,6 +121,7 @@ impl Params {
             alpha: 0.0,
             step_rule: self.step_rule,
             formulation: Formulation::Paper,
+            initial_knots: None,
         }
     }
 

@@ -126,8 +126,7 @@ impl Params {
                 substeps: p.steps,
             };
             let mut bptt = Bptt::new(&step, objective, knots, task.bounds(), x0).map_err(other)?;
-            let rest = task.rest_control();
-            let init: Vec<f64> = (0..knots.len()).map(|i| rest[i % knots.m]).collect();
+            let init = task.initial_knots();
             let v0 = bptt.from_controls(&init);
             let lambda = bptt.curvature(&v0, p.curvature_iterations);
             if !(lambda.is_finite() && lambda > 0.0) {

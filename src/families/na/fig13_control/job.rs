@@ -116,8 +116,7 @@ impl Job for Params {
             }
             let mut bptt = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0)
                 .map_err(other)?;
-            let rest = task.rest_control();
-            let init: Vec<f64> = (0..knots.len()).map(|i| rest[i % m]).collect();
+            let init = task.initial_knots();
             let v0 = bptt.from_controls(&init);
             let lambda = bptt.curvature(&v0, self.curvature_iterations);
             if !(lambda.is_finite() && lambda > 0.0) {

@@ -153,6 +153,8 @@ impl Validate for Params {
                 "must be in [0, 1)",
             )?;
             t.step_rule.validate(&key("step_rule"))?;
+            t.validate_initial_knots()
+                .map_err(|e| e.prefixed(&format!("tasks[{i}]")))?;
         }
         for (key, sw) in [
             ("sweep", &self.sweep),

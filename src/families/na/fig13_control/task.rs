@@ -37,6 +37,11 @@ pub struct Task {
     /// are those of the tasks before the field existed.
     #[serde(default, skip_serializing_if = "Formulation::is_paper")]
     pub formulation: Formulation,
+    /// The controls descent starts from, per actuator `knots` values in control units (the
+    /// spec says by which rule); absent: the rest control ([`Task::rest_control`]) throughout.
+    /// Left out of the serialized task when absent (cache keys as before the field existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub initial_knots: Option<Vec<Vec<f64>>>,
 }
 
 /// Whose task formulation a [`Task`] follows.
@@ -89,6 +94,51 @@ impl Task {
         u
     }
 
+    /// The knot values descent starts from (control units, knot k of actuator j at
+    /// `k * m + j`): the spec's `initial_knots`, or the rest control at every knot.
+    pub fn initial_knots(&self) -> Vec<f64> {
+        let m = self.net.model.control_dim();
+        let k = self.task.knots;
+        match &self.initial_knots {
+            Some(per_actuator) => (0..k * m).map(|i| per_actuator[i % m][i / m]).collect(),
+            None => {
+                let rest = self.rest_control();
+                (0..k * m).map(|i| rest[i % m]).collect()
+            }
+        }
+    }
+
+    /// Checks `initial_knots`: one row per actuator of `knots` finite values within the
+    /// task's control box (key `initial_knots`, the caller prefixes it).
+    pub fn validate_initial_knots(&self) -> Result<(), crate::params::ParamError> {
+        use crate::params::ensure;
+        let Some(rows) = &self.initial_knots else {
+            return Ok(());
+        };
+        let m = self.net.model.control_dim();
+        ensure(
+            rows.len() == m,
+            "initial_knots",
+            format!("needs one row per actuator ({m})"),
+        )?;
+        let b = self.bounds();
+        for (j, row) in rows.iter().enumerate() {
+            let key = format!("initial_knots[{j}]");
+            ensure(
+                row.len() == self.task.knots,
+                &key,
+                format!("needs {} values (knots)", self.task.knots),
+            )?;
+            ensure(
+                row.iter()
+                    .all(|u| u.is_finite() && *u >= b.low[j] && *u <= b.high[j]),
+                &key,
+                format!("must be finite and within [{}, {}]", b.low[j], b.high[j]),
+            )?;
+        }
+        Ok(())
+    }
+
     fn weights(&self) -> Vec<f64> {
         self.task
             .final_tolerance
@@ -119,9 +169,9 @@ impl Task {
     /// Independent final-state variables the objective weighs (the rank its terminal
     /// Gauss-Newton matrix can have).
     pub fn final_dof(&self) -> usize {
-        let n = self.net.model.state_dim();
-        // The lander's unit quaternion has 3 degrees of freedom, not 4.
-        n - usize::from(self.net.model == NetModel::Lander)
+        // The weighted variables, less the lander's quaternion scalar part (its unit quaternion
+        // has 3 degrees of freedom, not 4): a variable with tolerance 0 is not weighed.
+        self.independent_final_vars().len()
     }
 
     /// The weighted final-state variables that are independent: all with a tolerance but
@@ -191,6 +241,7 @@ mod tests {
                 ("truck", Formulation::Paper),
                 ("lander", Formulation::Paper),
                 ("pendulum_4s", Formulation::Ours),
+                ("truck_rest", Formulation::Ours),
             ]
         );
         // The paper's pendulum animates 20 s (200 N50 steps of 0.1 s), ours 4 s.
@@ -208,5 +259,42 @@ mod tests {
             .insert("formulation".into(), toml::Value::String("mine".into()));
         let e = parse_params::<super::super::Params>(&toml::Value::Table(raw)).unwrap_err();
         assert_eq!(e.key, "tasks[0].formulation", "{e}");
+    }
+
+    /// The truck's drive-then-brake start (the spec's rule): +a for the first half of the
+    /// knots, -a for the second, steering 0, laid out knot by knot; `initial_knots` rows are
+    /// checked against the actuators, the knots and the box; a task without them starts at rest.
+    #[test]
+    fn initial_knots_are_laid_out_by_knot_and_checked_against_the_box() {
+        let file = SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml"))
+            .unwrap();
+        let p: super::super::Params =
+            parse_params(&toml::Value::Table(file.raw.params.clone())).unwrap();
+        let truck = p.tasks.iter().find(|t| t.name == "truck").unwrap();
+        let v = truck.initial_knots();
+        assert_eq!(v.len(), 2 * truck.task.knots);
+        // 100 a covers the start's 17 m to the target and ends at rest.
+        let a = v[0];
+        let dist = (truck.task.start[0].powi(2) + truck.task.start[1].powi(2)).sqrt();
+        assert!((100.0 * a - dist).abs() < 0.01 * dist, "{a} vs {dist}");
+        for k in 0..truck.task.knots {
+            let want = if k < truck.task.knots / 2 { a } else { -a };
+            assert_eq!((v[2 * k], v[2 * k + 1]), (want, 0.0), "knot {k}");
+        }
+        assert_eq!(v.iter().sum::<f64>(), 0.0);
+        // The paper's target: position and heading only.
+        assert_eq!(truck.final_dof(), 3);
+        let rest = p.tasks.iter().find(|t| t.name == "truck_rest").unwrap();
+        assert!(rest.initial_knots().iter().all(|&u| u == 0.0));
+        assert_eq!(rest.final_dof(), 6);
+        let mut bad = truck.clone();
+        bad.initial_knots.as_mut().unwrap().pop();
+        assert_eq!(bad.validate_initial_knots().unwrap_err().key, "initial_knots");
+        let mut bad = truck.clone();
+        bad.initial_knots.as_mut().unwrap()[1].push(0.0);
+        assert_eq!(bad.validate_initial_knots().unwrap_err().key, "initial_knots[1]");
+        let mut bad = truck.clone();
+        bad.initial_knots.as_mut().unwrap()[1][3] = 0.6; // steering box +-0.5 rad
+        assert_eq!(bad.validate_initial_knots().unwrap_err().key, "initial_knots[1]");
     }
 }

@@ -228,6 +228,7 @@ impl Params {
             alpha: self.momentum_alpha,
             step_rule: StepRule::Fixed,
             formulation: Formulation::Paper,
+            initial_knots: None,
         }
     }
 
