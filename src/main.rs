@@ -321,10 +321,27 @@ fn check_jobs(o: &Outputs) -> Result<()> {
     Ok(())
 }
 
+/// Writes a line to standard output. A closed pipe (`motionlab list | head -1`) comes back as
+/// an io error of kind `BrokenPipe`, which [`main`] treats as a normal end.
+fn say(line: impl std::fmt::Display) -> Result<()> {
+    writeln!(std::io::stdout().lock(), "{line}")?;
+    Ok(())
+}
+
+/// Whether `e` is standard output's reader having gone away.
+fn broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match dispatch(cli) {
         Ok(()) => ExitCode::SUCCESS,
+        // The reader of our output stopped reading: not an error of ours.
+        Err(e) if broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
@@ -338,7 +355,10 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::List => {
             for f in spec_files(&exp_dir)? {
                 let s = SpecFile::load(&f)?;
-                println!("{:<26} {:<28} {}", s.raw.id, s.raw.paper_item, s.raw.title);
+                say(format!(
+                    "{:<26} {:<28} {}",
+                    s.raw.id, s.raw.paper_item, s.raw.title
+                ))?;
             }
             Ok(())
         }
@@ -443,7 +463,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Describe { model } => {
             let m =
                 physics::model_by_name(&model).ok_or_else(|| anyhow!("unknown model {model}"))?;
-            println!("{}", serde_json::to_string_pretty(&physics::describe(&*m))?);
+            say(serde_json::to_string_pretty(&physics::describe(&*m))?)?;
             Ok(())
         }
         Command::Simulate {
@@ -485,10 +505,10 @@ fn dispatch(cli: Cli) -> Result<()> {
             }
             let m = motionlab::bench::metrics(seconds);
             if json {
-                println!("{}", motionlab::bench::to_json(&m));
+                say(motionlab::bench::to_json(&m))?;
             } else {
                 for x in &m {
-                    println!("{:<45} {:>14.1}", x.name, x.value);
+                    say(format!("{:<45} {:>14.1}", x.name, x.value))?;
                 }
             }
             Ok(())

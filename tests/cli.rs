@@ -712,3 +712,57 @@ fn a_run_removes_what_an_interrupted_run_left_half_written() {
     }
     assert!(dir.path().join("out/lbc_projection/run.json").exists());
 }
+
+/// `motionlab list | head -1`: the reader closes the pipe before `list` writes; that is a normal
+/// end (exit 0, no panic), not a crash with a backtrace.
+#[test]
+fn a_closed_output_pipe_is_a_normal_end() {
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_motionlab"))
+        .arg("list")
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Close the read end at once: `list` reads 20 experiment files before its first line.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{:?}: {stderr}", out.status);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+/// An experiment file whose id is a path is refused with file, line and key before any work,
+/// and nothing is written outside `--out`.
+#[test]
+fn an_id_that_is_a_path_is_refused_before_any_work() {
+    let d = tempfile::tempdir().unwrap();
+    let spec = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("experiments/physics_validation.toml"),
+    )
+    .unwrap()
+    .replace("id = \"physics_validation\"", "id = \"../escaped\"");
+    let f = d.path().join("bad.toml");
+    std::fs::write(&f, spec).unwrap();
+    let out = motionlab(
+        d.path(),
+        &[
+            "run",
+            f.to_str().unwrap(),
+            "--quick",
+            "--out",
+            "out/results",
+            "--figures",
+            "out/figs",
+        ],
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("bad.toml") && stderr.contains("`id`"),
+        "{stderr}"
+    );
+    assert!(!d.path().join("out/escaped").exists());
+    assert!(!d.path().join("escaped").exists());
+}

@@ -115,11 +115,24 @@ impl SpecFile {
             };
             err(line, key, msg)
         })?;
-        Ok(Self {
+        let spec = Self {
             path: path.to_path_buf(),
             raw,
             doc,
-        })
+        };
+        // The id names the experiment's output folders (`<out>/<id>/`, `<figures>/<id>_*`): a
+        // path (`../x`, `/tmp/x`), `.` or an empty id would write outside them or into their
+        // root.
+        if !is_valid_id(&spec.raw.id) {
+            return Err(spec.error_at(
+                "id",
+                format!(
+                    "must be a non-empty name of lowercase letters, digits and _ (it names the output folder), got {:?}",
+                    spec.raw.id
+                ),
+            ));
+        }
+        Ok(spec)
     }
 
     /// 1-based line of the dotted key `path` (e.g. `params.dts` or `params.dts[2]`), if present.
@@ -226,9 +239,33 @@ fn split_key(key: &str) -> Vec<KeyPart> {
     out
 }
 
+/// Whether `id` is an experiment id: non-empty, of `a-z`, `0-9` and `_` only.
+pub fn is_valid_id(id: &str) -> bool {
+    !id.is_empty()
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_')
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An id that is a path, `.`, empty or not lowercase is refused with file, line and key,
+    /// before anything runs (it would name folders outside `--out` / `--figures`).
+    #[test]
+    fn an_id_that_is_not_a_plain_name_is_refused_at_its_line() {
+        for bad in ["../x", "/tmp/x", ".", "", "a/b", "X", "na-fig", "a b"] {
+            let text = GOOD.replace("id = \"x\"", &format!("id = {bad:?}"));
+            let e = SpecFile::parse(Path::new("a.toml"), text).unwrap_err();
+            assert_eq!((e.key.as_str(), e.line), ("id", Some(1)), "{bad:?}: {e}");
+            assert!(e.message.contains("lowercase"), "{e}");
+        }
+        for good in ["x", "na_fig13_control", "x_lbc_emulator", "a1"] {
+            let text = GOOD.replace("id = \"x\"", &format!("id = {good:?}"));
+            assert!(SpecFile::parse(Path::new("a.toml"), text).is_ok(), "{good}");
+        }
+    }
 
     const GOOD: &str = "id = \"x\"\nexperiment = \"physics_validation\"\ntitle = \"t\"\npaper_item = \"p\"\nseed = 3\n\n[params]\ndts = [0.1, 0.2]\nduration = 1.0\n";
 
