@@ -299,7 +299,14 @@ pub(crate) mod tests {
     }
 
     /// Quadratic cost with effort weight `r`, terminal weight `qf` on every state, target `x_t`.
-    pub(crate) fn cost(dt: f64, n: usize, m: usize, r: f64, qf: f64, x_t: DVector<f64>) -> QuadraticCost {
+    pub(crate) fn cost(
+        dt: f64,
+        n: usize,
+        m: usize,
+        r: f64,
+        qf: f64,
+        x_t: DVector<f64>,
+    ) -> QuadraticCost {
         QuadraticCost {
             dt,
             r: DMatrix::identity(m, m) * r,
@@ -309,7 +316,11 @@ pub(crate) mod tests {
         }
     }
 
-    pub(crate) fn rollout<D: DifferentiableStep>(d: &D, x0: &[f64], us: &[DVector<f64>]) -> Vec<DVector<f64>> {
+    pub(crate) fn rollout<D: DifferentiableStep>(
+        d: &D,
+        x0: &[f64],
+        us: &[DVector<f64>],
+    ) -> Vec<DVector<f64>> {
         let mut sc = d.scratch();
         let mut xs = vec![DVector::from_column_slice(x0)];
         let mut next = vec![0.0; x0.len()];

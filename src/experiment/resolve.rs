@@ -2,8 +2,8 @@
 //! every point's parameters checked by its family before any work is done.
 
 use super::spec::{backticked, SpecError, SpecFile};
-use super::{Experiment, Job};
 use super::Registry;
+use super::{Experiment, Job};
 use serde::de::DeserializeOwned;
 use std::path::PathBuf;
 

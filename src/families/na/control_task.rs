@@ -151,10 +151,7 @@ mod tests {
         raw.insert("horizon".into(), toml::Value::String("x".into()));
         let e = parse_params::<fig14_momentum::Params>(&toml::Value::Table(raw)).unwrap_err();
         assert_eq!(e.key, "horizon", "{e}");
-        assert!(
-            e.message.starts_with("invalid type: string \"x\""),
-            "{e}"
-        );
+        assert!(e.message.starts_with("invalid type: string \"x\""), "{e}");
 
         let mut raw = params("experiments/na_fig14_momentum.toml");
         let start = raw["start"].as_array_mut().unwrap();

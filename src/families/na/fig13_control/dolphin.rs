@@ -1,7 +1,7 @@
 //! The dolphin swim task of Fig. 13(d) in the job: the swim learned through the global net from
 //! seeded random starts, replayed on the simulator beside a hand-made travelling wave.
 
-use super::{Formulation, learn_best, BestRollout, DolphinControl, Params};
+use super::{learn_best, BestRollout, DolphinControl, Formulation, Params};
 use crate::control::bptt::{Bptt, Learned};
 use crate::emulator::hierarchy::{FRAME_DIM, GLOBAL_DIM};
 use crate::experiment::output::Table;

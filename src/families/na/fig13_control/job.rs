@@ -181,7 +181,10 @@ impl Job for Params {
             }
             // DAgger refines the nets of the paper's tasks; a formulation of ours kept for
             // comparison gets the headline and the sweeps only.
-            if let Some(d) = self.dagger.as_ref().filter(|_| task.formulation == Formulation::Paper)
+            if let Some(d) = self
+                .dagger
+                .as_ref()
+                .filter(|_| task.formulation == Formulation::Paper)
             {
                 self.run_dagger(ctx, d, task, &spec, &trained, &x0, &mut dagger_t)?;
             }

@@ -225,8 +225,8 @@ mod tests {
     /// (the DAgger nets' cache keys), one of ours names its formulation.
     #[test]
     fn formulation_defaults_to_the_papers_and_is_serialized_only_when_ours() {
-        let file = SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml"))
-            .unwrap();
+        let file =
+            SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml")).unwrap();
         let p: super::super::Params =
             parse_params(&toml::Value::Table(file.raw.params.clone())).unwrap();
         let names: Vec<(&str, Formulation)> = p
@@ -266,8 +266,8 @@ mod tests {
     /// checked against the actuators, the knots and the box; a task without them starts at rest.
     #[test]
     fn initial_knots_are_laid_out_by_knot_and_checked_against_the_box() {
-        let file = SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml"))
-            .unwrap();
+        let file =
+            SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml")).unwrap();
         let p: super::super::Params =
             parse_params(&toml::Value::Table(file.raw.params.clone())).unwrap();
         let truck = p.tasks.iter().find(|t| t.name == "truck").unwrap();
@@ -288,12 +288,21 @@ mod tests {
         assert_eq!(rest.final_dof(), 6);
         let mut bad = truck.clone();
         bad.initial_knots.as_mut().unwrap().pop();
-        assert_eq!(bad.validate_initial_knots().unwrap_err().key, "initial_knots");
+        assert_eq!(
+            bad.validate_initial_knots().unwrap_err().key,
+            "initial_knots"
+        );
         let mut bad = truck.clone();
         bad.initial_knots.as_mut().unwrap()[1].push(0.0);
-        assert_eq!(bad.validate_initial_knots().unwrap_err().key, "initial_knots[1]");
+        assert_eq!(
+            bad.validate_initial_knots().unwrap_err().key,
+            "initial_knots[1]"
+        );
         let mut bad = truck.clone();
         bad.initial_knots.as_mut().unwrap()[1][3] = 0.6; // steering box +-0.5 rad
-        assert_eq!(bad.validate_initial_knots().unwrap_err().key, "initial_knots[1]");
+        assert_eq!(
+            bad.validate_initial_knots().unwrap_err().key,
+            "initial_knots[1]"
+        );
     }
 }
