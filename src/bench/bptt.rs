@@ -29,10 +29,7 @@ pub(super) fn bptt_lander(min_seconds: f64) -> f64 {
             weights: vec![1.0; n],
         });
     let limits = model.control_limits();
-    let bounds = Bounds {
-        low: limits.low,
-        high: limits.high,
-    };
+    let bounds = Bounds::new(limits.low, limits.high);
     let knots = Knots {
         steps: 40,
         per_actuator: 20,
@@ -68,10 +65,7 @@ pub(super) fn bptt_bare(min_seconds: f64) -> f64 {
             target,
             weights: vec![1.0; n],
         });
-    let bounds = Bounds {
-        low: vec![-1.0; m],
-        high: vec![1.0; m],
-    };
+    let bounds = Bounds::new(vec![-1.0; m], vec![1.0; m]);
     let knots = Knots {
         steps,
         per_actuator: steps,

@@ -537,10 +537,7 @@ mod tests {
             per_actuator: 4,
             m: 2,
         };
-        let bounds = Bounds {
-            low: vec![-3.0, -3.0],
-            high: vec![3.0, 3.0],
-        };
+        let bounds = Bounds::new(vec![-3.0, -3.0], vec![3.0, 3.0]);
         let mut b = Bptt::new(&sys, &obj, knots, bounds, &[0.0; 3]).unwrap();
         let v0 = vec![0.0; b.dim()];
         let lambda = b.curvature(&v0, 50);
@@ -576,10 +573,7 @@ mod tests {
             m: 2,
         };
         // Wide bounds: the unconstrained optimum is inside, so LM reaches a zero gradient.
-        let wide = Bounds {
-            low: vec![-50.0, -50.0],
-            high: vec![50.0, 50.0],
-        };
+        let wide = Bounds::new(vec![-50.0, -50.0], vec![50.0, 50.0]);
         let mut b = Bptt::new(&sys, &obj, knots, wide, &[0.0; 3]).unwrap();
         let v0 = vec![0.0; b.dim()];
         let lm = learn_with(
@@ -602,10 +596,7 @@ mod tests {
         let fixed = learn(&mut b, &v0, MOMENTUM, lambda, 100);
         assert!(lm.final_objective() <= fixed.final_objective() + 1e-9);
         // Tight bounds: the iterates stay in the box and J never rises.
-        let tight = Bounds {
-            low: vec![-0.5, -0.3],
-            high: vec![0.5, 0.3],
-        };
+        let tight = Bounds::new(vec![-0.5, -0.3], vec![0.5, 0.3]);
         let mut b = Bptt::new(&sys, &obj, knots, tight, &[0.0; 3]).unwrap();
         let r = learn_with(
             &mut b,

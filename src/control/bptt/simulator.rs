@@ -63,10 +63,7 @@ mod tests {
             per_actuator: 2,
             m: 2,
         };
-        let bounds = Bounds {
-            low: vec![-1.0, -2.0],
-            high: vec![1.0, 0.5],
-        };
+        let bounds = Bounds::new(vec![-1.0, -2.0], vec![1.0, 0.5]);
         let mut b = Bptt::new(&sys, &obj, knots, bounds.clone(), &[0.0; 3]).unwrap();
         let v0 = vec![0.0; b.dim()];
         let lambda = b.curvature(&v0, 30);

@@ -142,10 +142,7 @@ mod tests {
             target: vec![0.0; 6],
             weights: vec![1.0, 1.0, 10.0, 1.0, 1.0, 1.0],
         });
-        let bounds = Bounds {
-            low: vec![-3.0, -0.5],
-            high: vec![3.0, 0.5],
-        };
+        let bounds = Bounds::new(vec![-3.0, -0.5], vec![3.0, 0.5]);
         let x0 = [-2.0, 1.0, 0.3, 1.0, 0.0, 0.0];
         let mut b = Bptt::new(&truck, &obj, knots, bounds, &x0).unwrap();
         let v: Vec<f64> = (0..b.dim()).map(|i| 0.5 * (i as f64 * 0.7).cos()).collect();

@@ -406,13 +406,32 @@ mod tests {
             per_actuator: 4,
             m: 2,
         };
-        let bounds = Bounds {
-            low: vec![-1.0, f64::NEG_INFINITY],
-            high: vec![3.0, f64::INFINITY],
-        };
-        let mut b = Bptt::new(&sys, &obj, knots, bounds, &[0.2, -0.1, 0.3]).unwrap();
+        let bounds = Bounds::new(vec![-1.0, f64::NEG_INFINITY], vec![3.0, f64::INFINITY]);
+        let mut b = Bptt::new(&sys, &obj, knots, bounds.clone(), &[0.2, -0.1, 0.3]).unwrap();
         let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.3).sin() * 0.5).collect();
         fd_check(&mut b, &v, 1e-6);
+        // Gains on the actuators (issue 54's control units): the gradient is still J's over
+        // the gained variables, and equals the unit-gain gradient times each actuator's gain
+        // at the same controls.
+        let gained = bounds.with_gain(vec![7.0, 0.25]);
+        let mut g = Bptt::new(&sys, &obj, knots, gained, &[0.2, -0.1, 0.3]).unwrap();
+        let w: Vec<f64> = v
+            .iter()
+            .enumerate()
+            .map(|(i, x)| x / [7.0, 0.25][i % 2])
+            .collect();
+        fd_check(&mut g, &w, 1e-6);
+        let (mut g0, mut g1) = (vec![0.0; v.len()], vec![0.0; v.len()]);
+        let j0 = b.gradient(&v, &mut g0);
+        let j1 = g.gradient(&w, &mut g1);
+        assert!((j0 - j1).abs() <= 1e-12 * j0.abs().max(1.0), "{j0} vs {j1}");
+        for (i, (a, c)) in g0.iter().zip(&g1).enumerate() {
+            let want = a * [7.0, 0.25][i % 2];
+            assert!(
+                (c - want).abs() <= 1e-9 * want.abs().max(1e-9),
+                "{i}: {c} vs {want}"
+            );
+        }
     }
 
     /// The J that `gradient` returns (from the objective's gradient pass) is the J of
@@ -445,10 +464,7 @@ mod tests {
             per_actuator,
             m,
         };
-        let bounds = Bounds {
-            low: vec![-0.5; m],
-            high: vec![0.5; m],
-        };
+        let bounds = Bounds::new(vec![-0.5; m], vec![0.5; m]);
         (knots, bounds)
     }
 
@@ -492,10 +508,7 @@ mod tests {
             per_actuator: 2,
             m,
         };
-        let bounds = Bounds {
-            low: vec![-1.0; m],
-            high: vec![1.0; m],
-        };
+        let bounds = Bounds::new(vec![-1.0; m], vec![1.0; m]);
         let mut b = Bptt::new(&e, &obj, knots, bounds, &g0).unwrap();
         let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.9).sin() * 0.5).collect();
         fd_check(&mut b, &v, 1e-5);
@@ -527,10 +540,7 @@ mod tests {
             per_actuator: 3,
             m: 1,
         };
-        let bounds = Bounds {
-            low: vec![-4.0],
-            high: vec![4.0],
-        };
+        let bounds = Bounds::new(vec![-4.0], vec![4.0]);
         let mut b = Bptt::new(&map, &obj, knots, bounds, &x0).unwrap();
         let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.8).sin() * 0.6).collect();
         fd_check(&mut b, &v, 1e-6);
@@ -557,10 +567,7 @@ mod tests {
             per_actuator: 2,
             m: 3,
         };
-        let bounds = Bounds {
-            low: vec![-2.0; 3],
-            high: vec![2.0; 3],
-        };
+        let bounds = Bounds::new(vec![-2.0; 3], vec![2.0; 3]);
         let mut b = Bptt::new(&map, &obj, knots, bounds, &x0).unwrap();
         let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.6).cos() * 0.5).collect();
         fd_check(&mut b, &v, 1e-5);
@@ -575,10 +582,7 @@ mod tests {
             per_actuator: 4,
             m: 2,
         };
-        let bounds = Bounds {
-            low: vec![-3.0, -1.0],
-            high: vec![3.0, 2.0],
-        };
+        let bounds = Bounds::new(vec![-3.0, -1.0], vec![3.0, 2.0]);
         let mut b = Bptt::new(&sys, &obj, knots, bounds, &[0.2, 0.0, -0.1]).unwrap();
         let d = b.dim();
         let v: Vec<f64> = (0..d).map(|i| 0.4 * (i as f64 * 0.9).sin()).collect();

@@ -32,14 +32,15 @@ use std::time::Instant;
 /// unbounded on a side (as [`Bounds::project`]).
 fn knot_box(knots: Knots, bounds: &Bounds) -> SearchBox {
     let m = knots.m;
+    // The box of each normalized knot value: [-1, 1] for a bounded actuator of unit gain,
+    // scaled by its gain otherwise (the ends `Bounds::project` clamps to).
     let (low, high) = (0..knots.len())
         .map(|i| {
-            let (lo, hi) = (bounds.low[i % m], bounds.high[i % m]);
-            if lo.is_finite() && hi.is_finite() {
-                (-1.0, 1.0)
-            } else {
-                (lo, hi)
-            }
+            let j = i % m;
+            (
+                bounds.project(j, f64::NEG_INFINITY),
+                bounds.project(j, f64::INFINITY),
+            )
         })
         .unzip();
     SearchBox { low, high }
@@ -413,10 +414,7 @@ mod tests {
     fn bptt_problem_is_the_bptt_rollout_and_gradient() {
         let (sys, obj) = (linear(), objective());
         // One bounded actuator, one unbounded: box [−1, 1] and (−∞, ∞).
-        let bounds = Bounds {
-            low: vec![-1.0, f64::NEG_INFINITY],
-            high: vec![3.0, f64::INFINITY],
-        };
+        let bounds = Bounds::new(vec![-1.0, f64::NEG_INFINITY], vec![3.0, f64::INFINITY]);
         let mut b = Bptt::new(&sys, &obj, knots(), bounds, &[0.2, -0.1, 0.3]).unwrap();
         let p = BpttProblem::new(&b);
         assert_eq!(p.dim(), 8);
@@ -439,10 +437,7 @@ mod tests {
     #[test]
     fn replay_problem_matches_the_bptt_rollout_on_the_same_system_and_maps_states() {
         let (sys, obj) = (linear(), objective());
-        let bounds = Bounds {
-            low: vec![-1.0, -2.0],
-            high: vec![1.0, 0.5],
-        };
+        let bounds = Bounds::new(vec![-1.0, -2.0], vec![1.0, 0.5]);
         let x0 = [0.2, -0.1, 0.3];
         let mut b = Bptt::new(&sys, &obj, knots(), bounds, &x0).unwrap();
         let identity: StateMap = Box::new(|x, s| s.copy_from_slice(x));
@@ -498,10 +493,7 @@ mod tests {
             per_actuator: 3,
             m,
         };
-        let bounds = Bounds {
-            low: vec![-0.5; m],
-            high: vec![0.5; m],
-        };
+        let bounds = Bounds::new(vec![-0.5; m], vec![0.5; m]);
         let mut b = Bptt::new(&e, &obj, knots, bounds, &x0).unwrap();
         let p = BpttProblem::new(&b);
         let v0 = vec![0.0; p.dim()];

@@ -119,6 +119,26 @@ mod tests {
         assert!(json.get("task").is_none(), "no `task` key in params_json");
     }
 
+    /// Fig. 14's lander is Fig. 13's paper lander (issue 54): its DAgger task serializes
+    /// exactly as Fig. 13's lander task, so the two share the DAgger chain's cache key.
+    #[test]
+    fn fig14s_lander_is_fig13s_paper_lander() {
+        let p14: fig14_momentum::Params = parse_params(&toml::Value::Table(params(
+            "experiments/na_fig14_momentum.toml",
+        )))
+        .unwrap();
+        let p13: fig13_control::Params = parse_params(&toml::Value::Table(params(
+            "experiments/na_fig13_control.toml",
+        )))
+        .unwrap();
+        let lander = p13.tasks.iter().find(|t| t.name == "lander").unwrap();
+        let d = p14.dagger.as_ref().unwrap();
+        assert_eq!(
+            serde_json::to_value(p14.dagger_task(d)).unwrap(),
+            serde_json::to_value(lander).unwrap()
+        );
+    }
+
     #[test]
     fn unknown_keys_are_rejected_by_name_beside_a_flattened_task() {
         let mut raw = params("experiments/na_fig14_momentum.toml");

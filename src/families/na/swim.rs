@@ -94,10 +94,7 @@ impl SwimTask {
     /// Muscle bounds [−1, 1].
     pub fn bounds(&self) -> Bounds {
         let l = hierarchy::control_limits();
-        Bounds {
-            low: l.low,
-            high: l.high,
-        }
+        Bounds::new(l.low, l.high)
     }
 
     /// The start: the rest shape at rest, heading +x (mass state and global state).

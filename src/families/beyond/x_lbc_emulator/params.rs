@@ -122,6 +122,9 @@ impl Params {
             step_rule: self.step_rule,
             formulation: Formulation::Paper,
             initial_knots: None,
+            control_units: Default::default(),
+            final_weights: Default::default(),
+            calibration: None,
         }
     }
 

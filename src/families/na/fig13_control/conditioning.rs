@@ -210,3 +210,111 @@ impl Params {
         }
     }
 }
+
+/// Columns of `conditioning_ladder.csv` (ours, issue 54): per task of the paper's formulation
+/// that has a formulation of ours on the same net, the terminal Gauss-Newton condition through
+/// that net at the initial knots as the paper's changes are applied to ours one at a time
+/// ([`ladder`]): rung 0 is ours, the last rung the paper's task; `change` names what the rung
+/// changed, `dof` the independent weighted final-state variables, and `iterations_per_decade`
+/// the headline's pace along the slowest direction at that condition (the task's eta and
+/// alpha, lambda at the largest eigenvalue).
+pub const LADDER_COLUMNS: [&str; 7] = [
+    "task",
+    "rung",
+    "change",
+    "dof",
+    "condition",
+    "eta",
+    "iterations_per_decade",
+];
+
+/// The rungs from `ours` to `paper` (same net): each changes one thing of ours to the paper's,
+/// in a fixed order (horizon and knots, start, initial controls, target set and tolerances,
+/// control units, final-state weights), skipping what does not differ. Returns (change, task)
+/// per rung, ours first.
+pub(super) fn ladder(ours: &Task, paper: &Task) -> Vec<(&'static str, Task)> {
+    let mut t = ours.clone();
+    t.name = paper.name.clone();
+    t.formulation = paper.formulation;
+    t.calibration = None;
+    let mut rungs = vec![("ours", t.clone())];
+    type Apply = fn(&mut Task, &Task) -> bool;
+    let steps: [(&str, Apply); 6] = [
+        ("horizon and knots", |t, p| {
+            let differs = (t.task.horizon, t.task.knots) != (p.task.horizon, p.task.knots);
+            t.task.horizon = p.task.horizon;
+            t.task.knots = p.task.knots;
+            differs
+        }),
+        ("start state", |t, p| {
+            let differs = t.task.start != p.task.start;
+            t.task.start = p.task.start.clone();
+            differs
+        }),
+        ("initial controls", |t, p| {
+            let differs = t.initial_knots != p.initial_knots;
+            t.initial_knots = p.initial_knots.clone();
+            differs
+        }),
+        ("target set and tolerances", |t, p| {
+            let differs =
+                t.task.target != p.task.target || t.task.final_tolerance != p.task.final_tolerance;
+            t.task.target = p.task.target.clone();
+            t.task.final_tolerance = p.task.final_tolerance.clone();
+            differs
+        }),
+        ("control units", |t, p| {
+            let differs = t.control_units != p.control_units;
+            t.control_units = p.control_units;
+            differs
+        }),
+        ("final-state weights", |t, p| {
+            let differs = t.final_weights != p.final_weights;
+            t.final_weights = p.final_weights;
+            differs
+        }),
+    ];
+    for (change, apply) in steps {
+        if apply(&mut t, paper) {
+            rungs.push((change, t.clone()));
+        }
+    }
+    rungs
+}
+
+/// Rows of `conditioning_ladder.csv` for the rungs of [`ladder`] through `step` (the nets'
+/// shared Table 1 emulator) from `x0` (each rung's start, normalized as the task's).
+pub(super) fn record_ladder<D: crate::control::bptt::DifferentiableStep>(
+    step: &D,
+    rungs: &[(&'static str, Task)],
+    start: impl Fn(&Task) -> Vec<f64>,
+    table: &mut Table,
+) -> Result<(), Error> {
+    for (i, (change, rung)) in rungs.iter().enumerate() {
+        let x0 = start(rung);
+        let t = rung.calibrated(step, &x0).map_err(other)?;
+        let objective = t.objective();
+        let m = t.net.model.control_dim();
+        let knots = Knots {
+            steps: t.task.horizon,
+            per_actuator: t.task.knots,
+            m,
+        };
+        let mut bptt = Bptt::new(step, &objective, knots, t.bounds(), &x0).map_err(other)?;
+        let v0 = bptt.from_controls(&t.initial_knots());
+        let curvature = objective
+            .gauss_newton()
+            .ok_or_else(|| other(format!("{}: objective without curvature", t.name)))?;
+        let spec = terminal_spectrum(&mut bptt, &v0, &curvature, t.final_dof());
+        table.push(row![
+            t.name.as_str(),
+            i as i64,
+            *change,
+            spec.dof as i64,
+            spec.condition(),
+            t.eta,
+            iterations_per_decade(t.eta / spec.condition(), t.alpha)
+        ]);
+    }
+    Ok(())
+}

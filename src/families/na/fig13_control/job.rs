@@ -2,7 +2,8 @@
 //! replayed on the simulator, and the step-size sweep; [`learn_best`] scores a run.
 
 use super::conditioning::{
-    record_spectrum, PhysicsTables, BEST_WEIGHTS_COLUMNS, CONDITIONING_COLUMNS,
+    ladder, record_ladder, record_spectrum, PhysicsTables, BEST_WEIGHTS_COLUMNS,
+    CONDITIONING_COLUMNS, LADDER_COLUMNS,
 };
 use super::{dagger, dolphin_dagger, Formulation, Params, Sweep, Task};
 use crate::control::bptt::{
@@ -61,6 +62,11 @@ impl Job for Params {
         let mut cond_t = Table::new(&CONDITIONING_COLUMNS);
         let mut spectrum_t = Table::new(&["task", "substrate", "index", "eigenvalue"]);
         let mut dagger_t = Table::new(&dagger::COLUMNS);
+        // Per task, the actuator gains and final-state weights its objective and bounds use
+        // ([`Task::calibrated`]): kind `gain` (index = actuator) or `weight` (index = state
+        // variable).
+        let mut calibration_t = Table::new(&["task", "kind", "index", "value"]);
+        let mut ladder_t = Table::new(&LADDER_COLUMNS);
         let width = self
             .tasks
             .iter()
@@ -104,7 +110,6 @@ impl Job for Params {
         for ((task, spec), trained) in self.tasks.iter().zip(&specs).zip(built) {
             let model = task.net.model;
             let (n, m) = (model.state_dim(), model.control_dim());
-            let objective = task.objective();
             let knots = Knots {
                 steps: task.task.horizon,
                 per_actuator: task.task.knots,
@@ -114,6 +119,37 @@ impl Job for Params {
             if model == NetModel::Lander {
                 Lander::default().normalize_state(&mut x0);
             }
+            // The task's actuator gains and final-state weights, measured once at its initial
+            // knots through its Table 1 net and then fixed for every run of the task (the
+            // physics sweep and the DAgger rounds included).
+            // A formulation of ours beside the paper's on the same net: the conditioning as
+            // the paper's changes are applied to ours one at a time.
+            if task.formulation == Formulation::Ours {
+                if let Some(paper) = self
+                    .tasks
+                    .iter()
+                    .find(|p| p.formulation == Formulation::Paper && p.net == task.net)
+                {
+                    let start = |t: &Task| {
+                        let mut x = t.task.start.clone();
+                        if model == NetModel::Lander {
+                            Lander::default().normalize_state(&mut x);
+                        }
+                        x
+                    };
+                    let rungs = ladder(task, paper);
+                    record_ladder(&trained.emulator, &rungs, start, &mut ladder_t)?;
+                }
+            }
+            let task = &task.calibrated(&trained.emulator, &x0).map_err(other)?;
+            let c = task.calibration.as_ref().expect("calibrated");
+            for (j, g) in c.gains.iter().enumerate() {
+                calibration_t.push(row![task.name.as_str(), "gain", j as i64, *g]);
+            }
+            for (k, w) in c.weights.iter().enumerate() {
+                calibration_t.push(row![task.name.as_str(), "weight", k as i64, *w]);
+            }
+            let objective = task.objective();
             let mut bptt = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0)
                 .map_err(other)?;
             let init = task.initial_knots();
@@ -256,6 +292,8 @@ impl Job for Params {
             ("best_weights_sweep", best_t),
             ("best_weights_emulator_sweep", best_emulator_t),
             ("conditioning", cond_t),
+            ("calibration", calibration_t),
+            ("conditioning_ladder", ladder_t),
             ("spectrum", spectrum_t),
             ("dagger", dagger_t),
             ("dolphin_restarts", restarts_t),

@@ -47,7 +47,7 @@ mod task;
 pub use conditioning::{BEST_WEIGHTS_COLUMNS, CONDITIONING_COLUMNS};
 pub use job::{learn_best, BestRollout};
 pub use params::{DolphinControl, Params, Sweep};
-pub use task::{Formulation, Task};
+pub use task::{Calibration, ControlUnits, FinalWeights, Formulation, Task};
 
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;

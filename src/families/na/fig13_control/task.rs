@@ -42,6 +42,73 @@ pub struct Task {
     /// Left out of the serialized task when absent (cache keys as before the field existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub initial_knots: Option<Vec<Vec<f64>>>,
+    /// The optimizer's unit of each actuator ([`ControlUnits`]; default `box`). Left out of the
+    /// serialized task when `box` (cache keys as before the field existed).
+    #[serde(default, skip_serializing_if = "ControlUnits::is_box")]
+    pub control_units: ControlUnits,
+    /// The final-state term's weights ([`FinalWeights`]; default `tolerance`). Left out of the
+    /// serialized task when `tolerance` (cache keys as before the field existed).
+    #[serde(default, skip_serializing_if = "FinalWeights::is_tolerance")]
+    pub final_weights: FinalWeights,
+    /// The actuator gains and final-state weights [`Task::calibrated`] measured (none until
+    /// then: unit gains, 1/σ² weights). Never read from or written to a spec.
+    #[serde(skip)]
+    pub calibration: Option<Calibration>,
+}
+
+/// The optimizer's unit of each actuator: what one unit of a normalized knot value is.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ControlUnits {
+    /// The half-width of the actuator's box (ours until issue 54).
+    #[default]
+    Box,
+    /// Box units times a gain per actuator chosen so every actuator's knots move the weighted
+    /// final state equally at the initial knots: g_j = sqrt(max_i t_i / t_j), t_j the trace of
+    /// actuator j's block of the terminal Gauss-Newton matrix J^T W J (W the 1/σ² weights)
+    /// through the net the task learns through (ours, issue 54; for actuators of different
+    /// physical units, e.g. the truck's m/s² and rad, where the paper's own unit, a rate of
+    /// turning, is not our model's control).
+    EqualSensitivity,
+}
+
+impl ControlUnits {
+    /// Whether it is `box`.
+    pub fn is_box(&self) -> bool {
+        *self == ControlUnits::Box
+    }
+}
+
+/// The weights of the final-state term ½ Σ_k w_k (s_{M,k} − s_{d,k})².
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FinalWeights {
+    /// w_k = 1/σ_k², σ_k the tolerance (ours until issue 54).
+    #[default]
+    Tolerance,
+    /// Each weighted variable weighs by its sensitivity to the knots: w_k = c/|∂s_{M,k}/∂v|²
+    /// at the initial knots (after the actuator gains), so each moves the objective comparably
+    /// (the terminal Gauss-Newton matrix's diagonal in final-state space is constant); c sets
+    /// its largest eigenvalue to that of the 1/σ² weights, so the effort term weighs as much
+    /// against the fastest direction as before. The variables weighted are still those with a
+    /// tolerance, and success is still judged by the tolerances (ours, issue 54).
+    Sensitivity,
+}
+
+impl FinalWeights {
+    /// Whether it is `tolerance`.
+    pub fn is_tolerance(&self) -> bool {
+        *self == FinalWeights::Tolerance
+    }
+}
+
+/// What [`Task::calibrated`] measured at the initial knots.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Calibration {
+    /// Gain per actuator ([`ControlUnits`]).
+    pub gains: Vec<f64>,
+    /// Weight per state variable ([`FinalWeights`]; 0 where not weighted).
+    pub weights: Vec<f64>,
 }
 
 /// Whose task formulation a [`Task`] follows.
@@ -81,7 +148,97 @@ impl Task {
             low[j] = c - self.limit_fraction * h;
             high[j] = c + self.limit_fraction * h;
         }
-        Bounds { low, high }
+        let bounds = Bounds::new(low, high);
+        match &self.calibration {
+            Some(c) => bounds.with_gain(c.gains.clone()),
+            None => bounds,
+        }
+    }
+
+    /// The task with its [`Calibration`] measured at the initial knots through `step` (the net
+    /// it learns through) from `x0`: the actuator gains of its [`ControlUnits`], then the
+    /// final-state weights of its [`FinalWeights`] under those gains. A task of box units and
+    /// tolerance weights gets unit gains and its 1/σ² weights (the same objective and bounds as
+    /// without one).
+    pub fn calibrated<D: DifferentiableStep>(&self, step: &D, x0: &[f64]) -> Result<Task, String> {
+        use crate::control::bptt::Knots;
+        let mut t = self.clone();
+        t.calibration = None;
+        let m = t.net.model.control_dim();
+        let knots = Knots {
+            steps: t.task.horizon,
+            per_actuator: t.task.knots,
+            m,
+        };
+        let tol = t.weights();
+        let vars = t.independent_final_vars();
+        let rows = |task: &Task| -> Result<Vec<Vec<f64>>, String> {
+            let objective = task.objective();
+            let mut b =
+                Bptt::new(step, &objective, knots, task.bounds(), x0).map_err(|e| e.to_string())?;
+            let v0 = b.from_controls(&task.initial_knots());
+            Ok(task.final_rows(&mut b, &v0))
+        };
+        let mut gains = vec![1.0; m];
+        if t.control_units == ControlUnits::EqualSensitivity {
+            let r = rows(&t)?;
+            let trace: Vec<f64> = (0..m)
+                .map(|j| {
+                    r.iter()
+                        .zip(&vars)
+                        .map(|(row, &k)| {
+                            tol[k] * row.iter().skip(j).step_by(m).map(|x| x * x).sum::<f64>()
+                        })
+                        .sum()
+                })
+                .collect();
+            let top = trace.iter().copied().fold(0.0, f64::max);
+            if !(top > 0.0 && top.is_finite()) || trace.iter().any(|&x| !(x > 0.0)) {
+                return Err(format!(
+                    "{}: an actuator moves no weighted final-state variable at the initial knots (traces {trace:?}); equal_sensitivity units need every actuator to",
+                    t.name
+                ));
+            }
+            gains = trace.iter().map(|&x| (top / x).sqrt()).collect();
+        }
+        t.calibration = Some(Calibration {
+            gains: gains.clone(),
+            weights: tol.clone(),
+        });
+        if t.final_weights == FinalWeights::Sensitivity {
+            let r = rows(&t)?;
+            let mut w = vec![0.0; tol.len()];
+            for (row, &k) in r.iter().zip(&vars) {
+                let s: f64 = row.iter().map(|x| x * x).sum();
+                if !(s > 0.0 && s.is_finite()) {
+                    return Err(format!(
+                        "{}: state variable {k} does not move with the knots at the initial knots; sensitivity weights need every weighted variable to",
+                        t.name
+                    ));
+                }
+                w[k] = 1.0 / s;
+            }
+            // The lander's quaternion scalar part (weighted but not independent) keeps the
+            // mean of the vector part's weights.
+            for k in 0..w.len() {
+                if tol[k] > 0.0 && !vars.contains(&k) {
+                    let q: Vec<f64> = vars
+                        .iter()
+                        .filter(|&&i| (4..7).contains(&i))
+                        .map(|&i| w[i])
+                        .collect();
+                    w[k] = if q.is_empty() {
+                        0.0
+                    } else {
+                        q.iter().sum::<f64>() / q.len() as f64
+                    };
+                }
+            }
+            let c = largest_eigenvalue(&r, &vars, &tol) / largest_eigenvalue(&r, &vars, &w);
+            w.iter_mut().for_each(|x| *x *= c);
+            t.calibration = Some(Calibration { gains, weights: w });
+        }
+        Ok(t)
     }
 
     /// Initial (and effort reference) control: zero, or hover thrust for the lander.
@@ -139,6 +296,15 @@ impl Task {
         Ok(())
     }
 
+    /// The objective's final-state weights: the calibration's, else 1/σ².
+    fn objective_weights(&self) -> Vec<f64> {
+        match &self.calibration {
+            Some(c) => c.weights.clone(),
+            None => self.weights(),
+        }
+    }
+
+    /// 1/σ² per state variable (0 where σ = 0): the weights success is judged by.
     fn weights(&self) -> Vec<f64> {
         self.task
             .final_tolerance
@@ -162,7 +328,7 @@ impl Task {
             .with(FinalState {
                 mu: 1.0,
                 target: self.task.target.clone(),
-                weights: self.weights(),
+                weights: self.objective_weights(),
             })
     }
 
@@ -212,6 +378,21 @@ impl Task {
             .sum();
         (sum / k as f64).sqrt()
     }
+}
+
+/// Largest eigenvalue of K = Σ_k w_k r_k r_kᵀ's final-state form R W Rᵀ (rows `rows` of the
+/// variables `vars`, weights indexed by state variable).
+fn largest_eigenvalue(rows: &[Vec<f64>], vars: &[usize], w: &[f64]) -> f64 {
+    let r = rows.len();
+    let k = nalgebra::DMatrix::from_fn(r, r, |a, b| {
+        let d: f64 = rows[a].iter().zip(&rows[b]).map(|(x, y)| x * y).sum();
+        (w[vars[a]] * w[vars[b]]).sqrt() * d
+    });
+    k.symmetric_eigen()
+        .eigenvalues
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 #[cfg(test)]
@@ -304,5 +485,147 @@ mod tests {
             bad.validate_initial_knots().unwrap_err().key,
             "initial_knots[1]"
         );
+    }
+
+    /// The spec's paper tasks of issue 54: the truck and the lander learn in equal-sensitivity
+    /// units under sensitivity weights, the lander's final state is the paper's target set
+    /// (position, attitude, descent velocity: 7 independent variables) from an upright, still
+    /// start; our earlier lander stays as `lander_13`, box units, 1/σ² weights, all 13.
+    #[test]
+    fn the_truck_and_the_lander_state_the_papers_targets_units_and_weights() {
+        let file =
+            SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml")).unwrap();
+        let p: super::super::Params =
+            parse_params(&toml::Value::Table(file.raw.params.clone())).unwrap();
+        let get = |n: &str| p.tasks.iter().find(|t| t.name == n).unwrap().clone();
+        for name in ["truck", "lander"] {
+            let t = get(name);
+            assert_eq!(t.control_units, ControlUnits::EqualSensitivity, "{name}");
+            assert_eq!(t.final_weights, FinalWeights::Sensitivity, "{name}");
+            let json = serde_json::to_value(&t).unwrap();
+            assert_eq!(json["control_units"], "equal_sensitivity");
+            assert_eq!(json["final_weights"], "sensitivity");
+        }
+        let lander = get("lander");
+        assert_eq!(lander.independent_final_vars(), [0, 1, 2, 4, 5, 6, 9]);
+        assert_eq!(
+            &lander.task.start[3..],
+            &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        );
+        let ours = get("lander_13");
+        assert_eq!(ours.formulation, Formulation::Ours);
+        assert_eq!(ours.final_dof(), 12);
+        let json = serde_json::to_value(&ours).unwrap();
+        assert!(json.get("control_units").is_none() && json.get("final_weights").is_none());
+        assert!(get("pendulum").control_units.is_box());
+    }
+
+    /// [`Task::calibrated`] through the truck's physics: equal-sensitivity gains make every
+    /// actuator's trace of Jᵀ W J (1/σ² weights) the same, the largest actuator keeping gain
+    /// 1; sensitivity weights make the diagonal of the final-state form R W Rᵀ constant with
+    /// the 1/σ² weights' largest eigenvalue; a task of box units and tolerance weights keeps
+    /// unit gains and 1/σ²; a start where the steering moves nothing is refused.
+    #[test]
+    fn calibration_equalizes_the_actuators_and_the_weighted_variables() {
+        use crate::control::bptt::{Knots, Substepped};
+        use crate::control::Rk4Map;
+        use crate::physics::linearize::FiniteDifference;
+        use crate::physics::truck::Truck;
+        let file =
+            SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml")).unwrap();
+        let p: super::super::Params =
+            parse_params(&toml::Value::Table(file.raw.params.clone())).unwrap();
+        let truck = p.tasks.iter().find(|t| t.name == "truck").unwrap().clone();
+        let step = Substepped {
+            inner: Rk4Map::new(FiniteDifference::new(Truck::default()), 0.01).unwrap(),
+            substeps: p.steps,
+        };
+        let x0 = truck.task.start.clone();
+        let rows_of = |t: &Task| {
+            let objective = t.objective();
+            let knots = Knots {
+                steps: t.task.horizon,
+                per_actuator: t.task.knots,
+                m: 2,
+            };
+            let mut b = Bptt::new(&step, &objective, knots, t.bounds(), &x0).unwrap();
+            let v0 = b.from_controls(&t.initial_knots());
+            t.final_rows(&mut b, &v0)
+        };
+        let tol = truck.weights();
+        let vars = truck.independent_final_vars();
+        let c = truck.calibrated(&step, &x0).unwrap();
+        let cal = c.calibration.clone().unwrap();
+        let rows = rows_of(&c);
+        let trace = |j: usize| -> f64 {
+            rows.iter()
+                .zip(&vars)
+                .map(|(r, &k)| tol[k] * r.iter().skip(j).step_by(2).map(|x| x * x).sum::<f64>())
+                .sum()
+        };
+        assert!(
+            (trace(0) - trace(1)).abs() < 1e-9 * trace(0),
+            "{} vs {}",
+            trace(0),
+            trace(1)
+        );
+        assert!(cal.gains.iter().any(|&g| g == 1.0) && cal.gains.iter().all(|&g| g >= 1.0));
+        assert!(
+            cal.gains[1] > 5.0,
+            "steering moves the final state far less per box unit"
+        );
+        let diag: Vec<f64> = rows
+            .iter()
+            .zip(&vars)
+            .map(|(r, &k)| cal.weights[k] * r.iter().map(|x| x * x).sum::<f64>())
+            .collect();
+        for d in &diag {
+            assert!((d - diag[0]).abs() < 1e-9 * diag[0], "{diag:?}");
+        }
+        let top_tol = largest_eigenvalue(&rows, &vars, &tol);
+        let top = largest_eigenvalue(&rows, &vars, &cal.weights);
+        assert!((top - top_tol).abs() < 1e-9 * top_tol, "{top} vs {top_tol}");
+        assert!(cal.weights[3..].iter().all(|&w| w == 0.0));
+        // Box units and tolerance weights: the task as it was.
+        let mut plain = truck.clone();
+        plain.control_units = ControlUnits::Box;
+        plain.final_weights = FinalWeights::Tolerance;
+        let pc = plain.calibrated(&step, &x0).unwrap();
+        assert_eq!(pc.calibration.as_ref().unwrap().gains, vec![1.0, 1.0]);
+        assert_eq!(pc.calibration.as_ref().unwrap().weights, tol);
+        assert_eq!(pc.bounds(), plain.bounds());
+        // Parked with zero controls the steering moves nothing: no gain equalizes that.
+        let mut parked = truck.clone();
+        parked.initial_knots = None;
+        let e = parked.calibrated(&step, &x0).unwrap_err();
+        assert!(e.contains("moves no weighted final-state variable"), "{e}");
+    }
+
+    /// The ladder from our truck (from rest, six variables, box units, 1/σ²) to the paper's:
+    /// one rung per change that differs, in the fixed order, the last rung the paper's task.
+    #[test]
+    fn the_ladder_applies_the_papers_changes_one_at_a_time() {
+        let file =
+            SpecFile::load(std::path::Path::new("experiments/na_fig13_control.toml")).unwrap();
+        let p: super::super::Params =
+            parse_params(&toml::Value::Table(file.raw.params.clone())).unwrap();
+        let get = |n: &str| p.tasks.iter().find(|t| t.name == n).unwrap().clone();
+        let rungs = super::super::conditioning::ladder(&get("truck_rest"), &get("truck"));
+        let names: Vec<&str> = rungs.iter().map(|(c, _)| *c).collect();
+        assert_eq!(
+            names,
+            [
+                "ours",
+                "initial controls",
+                "target set and tolerances",
+                "control units",
+                "final-state weights"
+            ]
+        );
+        let last = serde_json::to_value(&rungs.last().unwrap().1).unwrap();
+        assert_eq!(last, serde_json::to_value(get("truck")).unwrap());
+        let rungs = super::super::conditioning::ladder(&get("pendulum_4s"), &get("pendulum"));
+        let names: Vec<&str> = rungs.iter().map(|(c, _)| *c).collect();
+        assert_eq!(names, ["ours", "horizon and knots"]);
     }
 }

@@ -77,9 +77,18 @@ impl Job for Params {
         let trained = ctx.stage("train lander N50", || build_emulator(&spec))?;
         let model = NetModel::Lander;
         let n = model.state_dim();
-        let objective = self.objective();
         let x0 = self.start_state();
-        let mut problem = self.problem(ctx, &trained.emulator, &objective, &x0)?;
+        // The actuator gains and final-state weights of the task's units and weights, measured
+        // once at hover through the Table 1 net and fixed for every net (as na_fig13_control).
+        let calibration = self
+            .lander_task(self.task.iterations)
+            .calibrated(&trained.emulator, &x0)
+            .map_err(other)?
+            .calibration
+            .expect("calibrated");
+        let gains = calibration.gains.clone();
+        let objective = self.objective_with(Some(&calibration));
+        let mut problem = self.problem(ctx, &trained.emulator, &objective, &x0, &gains)?;
         let scale = problem.scale;
         let mut objective_t = Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
         let mut gradient_t = Table::new(&["method", "eta", "alpha", "iteration", "grad_norm"]);
@@ -93,6 +102,10 @@ impl Job for Params {
         let mut dagger_objective =
             Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
         let mut converged_t = Table::new(&converged_columns());
+        // Every descent of the sweep with the knots clipped to the boxes (as the runs above)
+        // and without (ours, issue 54): whether plain descent above its stability limit
+        // diverges once the boxes no longer hide it.
+        let mut unclipped_t = Table::new(&UNCLIPPED_COLUMNS);
         let compared = self.compared();
         let descents = self.descents();
         let pb = ctx.progress(descents.len() as u64, "control learning");
@@ -133,6 +146,7 @@ impl Job for Params {
                     ]);
                 }
             }
+            unclipped_t.push(unclipped_row(d, true, &r));
             let scores = self.scores(scale, &r, &rep);
             let mut run = row![method(d), d.eta(), d.alpha()];
             run.extend(scores.iter().cloned());
@@ -143,6 +157,12 @@ impl Job for Params {
             pb.inc(1);
         }
         pb.finish_and_clear();
+        let mut free =
+            self.problem_clipped(ctx, &trained.emulator, &objective, &x0, (false, &gains))?;
+        for d in &descents {
+            let (r, _) = self.descend(ctx, &mut free, d, sim.as_mut(), &x0, "unclipped ");
+            unclipped_t.push(unclipped_row(d, false, &r));
+        }
         self.converged_rows(
             ctx,
             &mut problem,
@@ -165,7 +185,7 @@ impl Job for Params {
                 &x0,
                 &mut rounds,
             )?;
-            let mut problem = self.problem(ctx, &net, &objective, &x0)?;
+            let mut problem = self.problem(ctx, &net, &objective, &x0, &gains)?;
             for d in &compared {
                 let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, "DAgger net ");
                 for t in &r.trace {
@@ -197,7 +217,7 @@ impl Job for Params {
             };
             let mut chain_sim = model.simulator();
             let mut learn = |net: &Emulator, seed: u64| -> Result<Round, Error> {
-                let mut p = self.problem(ctx, net, &objective, &x0)?;
+                let mut p = self.problem(ctx, net, &objective, &x0, &gains)?;
                 let (r, rep) = self.descend(
                     ctx,
                     &mut p,
@@ -246,7 +266,7 @@ impl Job for Params {
                     learn: &mut learn,
                 }),
             )?;
-            let mut problem = self.problem(ctx, &net, &objective, &x0)?;
+            let mut problem = self.problem(ctx, &net, &objective, &x0, &gains)?;
             for d in &compared {
                 let label = "momentum-DAgger net ";
                 let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, label);
@@ -266,8 +286,60 @@ impl Job for Params {
             ("dagger_objective", dagger_objective),
             ("momentum_dagger_rounds", chain_rounds),
             ("converged", converged_t),
+            ("unclipped", unclipped_t),
         ]))
     }
+}
+
+/// Columns of `unclipped.csv` (ours, issue 54): per descent (method, eta in units of 1/lambda,
+/// alpha) with its knots clipped to the actuators' boxes or not (`clipped`, 1 or 0), the objective at
+/// the start, at the last iteration, its least and its largest over the run, and whether it
+/// diverged (1 or 0): the last objective not finite or above the start's (the rule, ours, fixed before
+/// any run of it). On a quadratic with largest Hessian eigenvalue lambda, plain descent with
+/// step eta/lambda converges iff eta < 2 and the heavy ball with momentum alpha iff
+/// eta < 2 (1 + alpha).
+pub const UNCLIPPED_COLUMNS: [&str; 9] = [
+    "method",
+    "eta",
+    "alpha",
+    "clipped",
+    "initial_objective",
+    "final_objective",
+    "min_objective",
+    "max_objective",
+    "diverged",
+];
+
+/// The `unclipped.csv` row of run `r` of descent `d`.
+fn unclipped_row(d: &Descent, clipped: bool, r: &Learned) -> Vec<Cell> {
+    let js: Vec<f64> = r.trace.iter().map(|t| t.objective).collect();
+    let first = js.first().copied().unwrap_or(f64::NAN);
+    let last = js.last().copied().unwrap_or(f64::NAN);
+    // NaN counts as the largest (a run that blew up).
+    let max = js.iter().copied().fold(f64::NEG_INFINITY, |a, b| {
+        if b.is_nan() {
+            f64::NAN
+        } else {
+            a.max(b)
+        }
+    });
+    let min = js
+        .iter()
+        .copied()
+        .filter(|x| !x.is_nan())
+        .fold(f64::INFINITY, f64::min);
+    let diverged = !last.is_finite() || last > first;
+    row![
+        method(d),
+        d.eta(),
+        d.alpha(),
+        i64::from(clipped),
+        first,
+        last,
+        min,
+        max,
+        i64::from(diverged)
+    ]
 }
 
 /// One net's landing problem from hover: BPTT through the net, the hover knots, λ there.
@@ -285,6 +357,19 @@ impl Params {
         emu: &'a Emulator,
         objective: &'a Objective,
         x0: &[f64],
+        gains: &[f64],
+    ) -> Result<Problem<'a>, Error> {
+        self.problem_clipped(ctx, emu, objective, x0, (true, gains))
+    }
+
+    /// [`Self::problem`], its knots clipped to the actuators' boxes or (`clip` false) not.
+    fn problem_clipped<'a>(
+        &self,
+        ctx: &RunContext,
+        emu: &'a Emulator,
+        objective: &'a Objective,
+        x0: &[f64],
+        (clip, gains): (bool, &[f64]),
     ) -> Result<Problem<'a>, Error> {
         let model = NetModel::Lander;
         let m = model.control_dim();
@@ -294,10 +379,11 @@ impl Params {
             per_actuator: self.task.knots,
             m,
         };
-        let bounds = Bounds {
-            low: limits.low.clone(),
-            high: limits.high.clone(),
-        };
+        let mut bounds =
+            Bounds::new(limits.low.clone(), limits.high.clone()).with_gain(gains.to_vec());
+        if !clip {
+            bounds = bounds.without_clipping();
+        }
         let mut bptt = Bptt::new(emu, objective, knots, bounds, x0).map_err(other)?;
         let l = Lander::default();
         let hover: Vec<f64> = (0..knots.len())

@@ -39,7 +39,7 @@
 //! hover on that net, and both runs' controls are replayed on the simulator. `dagger`
 //! (net, round, method, eta, alpha, the `runs` columns from scale to final_gap,
 //! emulator_final_error, simulator_final_error): the Table 1 net's two runs (round 0) and the
-//! DAgger net's; final error = RMS over the 13 state variables of (s_M − s_d)/σ (Fig. 13's
+//! DAgger net's; final error = RMS over the weighted state variables of (s_M − s_d)/σ (Fig. 13's
 //! measure, ≤ 1: within tolerance). `dagger_objective` (method, eta, alpha, iteration,
 //! objective): the DAgger-net curves.
 

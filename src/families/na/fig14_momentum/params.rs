@@ -8,7 +8,9 @@ use crate::emulator::dagger::DaggerSettings;
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::families::na::control_task::{keyed, ControlTask};
 use crate::families::na::fig13_control::dagger::DaggerControl;
-use crate::families::na::fig13_control::{Formulation, Task};
+use crate::families::na::fig13_control::{
+    Calibration, ControlUnits, FinalWeights, Formulation, Task,
+};
 use crate::families::na::table1_structure::{validate_nets, validate_training};
 use crate::physics::lander::{Lander, VEL};
 use serde::{Deserialize, Serialize};
@@ -56,6 +58,14 @@ pub struct Params {
     /// (ours), if run.
     #[serde(default)]
     pub converged: Option<Converged>,
+    /// The optimizer's unit of each actuator, as na_fig13_control's lander ([`ControlUnits`];
+    /// default `box`; left out of the serialized parameters when `box`).
+    #[serde(default, skip_serializing_if = "ControlUnits::is_box")]
+    pub control_units: ControlUnits,
+    /// The final-state term's weights, as na_fig13_control's lander ([`FinalWeights`];
+    /// default `tolerance`; left out of the serialized parameters when `tolerance`).
+    #[serde(default, skip_serializing_if = "FinalWeights::is_tolerance")]
+    pub final_weights: FinalWeights,
 }
 
 /// `[params.converged]` (ours): beside the paper's budget, the compared descents (same η, α,
@@ -176,6 +186,12 @@ impl Validate for Params {
 impl Params {
     /// The landing objective (see the module docs).
     pub fn objective(&self) -> Objective {
+        self.objective_with(None)
+    }
+
+    /// The landing objective with the final-state weights of `calibration` (the 1/σ² weights
+    /// of the tolerances when `None`).
+    pub fn objective_with(&self, calibration: Option<&Calibration>) -> Objective {
         let model = NetModel::Lander;
         let (n, m) = (model.state_dim(), model.control_dim());
         let limits = model.control_limits();
@@ -185,12 +201,15 @@ impl Params {
         let scale = (0..m)
             .map(|j| 0.5 * (limits.high[j] - limits.low[j]))
             .collect();
-        let weights = self
-            .task
-            .final_tolerance
-            .iter()
-            .map(|&t| if t > 0.0 { 1.0 / (t * t) } else { 0.0 })
-            .collect();
+        let weights = match calibration {
+            Some(c) => c.weights.clone(),
+            None => self
+                .task
+                .final_tolerance
+                .iter()
+                .map(|&t| if t > 0.0 { 1.0 / (t * t) } else { 0.0 })
+                .collect(),
+        };
         let mut vz = vec![0.0; n];
         vz[VEL + 2] = 1.0 / (self.touchdown_tolerance * self.touchdown_tolerance);
         Objective::default()
@@ -216,11 +235,16 @@ impl Params {
     /// Fig. 13's lander task as this spec states it (same start, target, tolerances, horizon,
     /// knots, effort weight and net; the DAgger learner's budget `d.iterations`).
     pub fn dagger_task(&self, d: &DaggerNet) -> Task {
+        self.lander_task(d.iterations)
+    }
+
+    /// Fig. 13's lander task as this spec states it, with a budget of `iterations`.
+    pub fn lander_task(&self, iterations: usize) -> Task {
         Task {
             name: "lander".into(),
             net: self.net.clone(),
             task: ControlTask {
-                iterations: d.iterations,
+                iterations,
                 ..self.task.clone()
             },
             limit_fraction: 1.0,
@@ -229,6 +253,9 @@ impl Params {
             step_rule: StepRule::Fixed,
             formulation: Formulation::Paper,
             initial_knots: None,
+            control_units: self.control_units,
+            final_weights: self.final_weights,
+            calibration: None,
         }
     }
 

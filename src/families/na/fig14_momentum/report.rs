@@ -136,8 +136,46 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
                 ""
             }
         ) + &dagger_why
-            + &converged_summary(dir)?,
+            + &converged_summary(dir)?
+            + &unclipped_summary(dir)?,
     })
+}
+
+/// The report's sentence on `unclipped.csv` (empty when absent): which plain rates diverge with
+/// and without the boxes clipping the knots, against the quadratic's limit eta < 2.
+fn unclipped_summary(dir: &Path) -> Result<String, Error> {
+    let path = dir.join("unclipped.csv");
+    if !path.exists() {
+        return Ok(String::new());
+    }
+    let df = read_csv(&path)?;
+    let (method, eta) = (df_str(&df, "method")?, df_f64(&df, "eta")?);
+    let (clipped, diverged) = (df_f64(&df, "clipped")?, df_f64(&df, "diverged")?);
+    let list = |clip: f64, div: f64| -> Vec<String> {
+        (0..method.len())
+            .filter(|&r| method[r] == "plain" && clipped[r] == clip && diverged[r] == div)
+            .map(|r| sig(eta[r]))
+            .collect()
+    };
+    let (free_div, free_ok) = (list(0.0, 1.0), list(0.0, 0.0));
+    let (box_div, box_ok) = (list(1.0, 1.0), list(1.0, 0.0));
+    // Does the unclipped sweep show the stability limit: every rate >= 2 diverging and every
+    // rate < 2 not?
+    let consistent = (0..method.len())
+        .filter(|&r| method[r] == "plain" && clipped[r] == 0.0)
+        .all(|r| (eta[r] >= 2.0) == (diverged[r] == 1.0));
+    Ok(format!(
+        " Step units (ours, `unclipped.csv`): our eta is the step in units of 1/lambda, so on a quadratic plain descent converges iff eta < 2 and the heavy ball iff eta < 2 (1 + alpha); the paper's 'largest learning rate that would converge' is that limit read on its own scale. With the knots clipped to the actuators' boxes (the runs above), plain descent diverges (last J above the start's) at eta {:?} and not at {:?}; unclipped, at eta {:?} and not at {:?}{}.",
+        box_div,
+        box_ok,
+        free_div,
+        free_ok,
+        if consistent {
+            ": exactly the quadratic's limit"
+        } else {
+            ": not exactly the quadratic's limit (J is not quadratic, and lambda is measured at the start only)"
+        }
+    ))
 }
 
 /// The report's sentence on `converged.csv` (empty when absent): per net, where momentum's
@@ -213,7 +251,7 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
         col("final_gap")?,
     );
     let mut md = String::from(
-        "\nThe same comparison through the lander's final-round DAgger net of `na_fig13_control` (ours, `dagger.csv`; aggregated on Fig. 13's lander task, whose start, target and tolerances are this experiment's; lambda re-measured at hover on that net; net `table1`: the Table 1 net's runs, for the before/after; net `momentum_dagger`: the last net of the chain whose learner is the momentum descent itself, `momentum_dagger_rounds.csv`), every run's controls replayed on the simulator. Final error = RMS over the 13 state variables of (s_M - s_d)/tolerance (<= 1: within tolerance); landing distance = |p_M - p_d| (m):\n\n| net | round | method | eta | J start | J end | landing distance, net (m) | landing distance, simulator (m) | final error, net | final error, simulator | final gap |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        "\nThe same comparison through the lander's final-round DAgger net of `na_fig13_control` (ours, `dagger.csv`; aggregated on Fig. 13's lander task, whose start, target and tolerances are this experiment's; lambda re-measured at hover on that net; net `table1`: the Table 1 net's runs, for the before/after; net `momentum_dagger`: the last net of the chain whose learner is the momentum descent itself, `momentum_dagger_rounds.csv`), every run's controls replayed on the simulator. Final error = RMS over the weighted state variables of (s_M - s_d)/tolerance (<= 1: within tolerance); landing distance = |p_M - p_d| (m):\n\n| net | round | method | eta | J start | J end | landing distance, net (m) | landing distance, simulator (m) | final error, net | final error, simulator | final gap |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
     for r in 0..net.len() {
         md.push_str(&format!(
