@@ -100,7 +100,12 @@ impl Bounds {
             gain.iter().all(|g| g.is_finite() && *g > 0.0),
             "gains must be positive and finite: {gain:?}"
         );
-        self.gain = gain;
+        // Unit gains are stored as none, so a box with unit gains equals the plain box.
+        self.gain = if gain.iter().all(|&g| g == 1.0) {
+            Vec::new()
+        } else {
+            gain
+        };
         self
     }
     /// Gain g_j of actuator j.
@@ -203,6 +208,7 @@ mod tests {
         assert!(((0.2 - c) / h * 16.0 * 0.5 - 0.2).abs() < 1e-12);
         assert_eq!(plain.gain(1), 1.0);
         assert_eq!(gained.gain(1), 16.0);
+        assert_eq!(plain.clone().with_gain(vec![1.0; 3]), plain);
         // Without clipping the map is the same and the box is no longer enforced.
         let free = gained.clone().without_clipping();
         assert_eq!(free.affine(1), gained.affine(1));

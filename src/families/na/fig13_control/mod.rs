@@ -6,7 +6,13 @@
 //!   so the controller must swing to build momentum (the paper: 20 iterations);
 //! - **truck** (drive acceleration, steering): park at a position and heading (15), descent
 //!   starting from a drive-then-brake (`initial_knots`; at rest the steering moves nothing);
-//! - **lander** (thrust, 3 attitude torques): come to rest upright at a target on the ground.
+//! - **lander** (thrust, 3 attitude torques): land softly at the pad, level (the paper's target
+//!   set: position, attitude, descent velocity), from upright and still 60 m up beside it.
+//!
+//! The truck and the lander learn in equal-sensitivity control units under sensitivity weights
+//! ([`ControlUnits`], [`FinalWeights`]), measured once per task through its Table 1 net
+//! ([`Task::calibrated`]; `calibration.csv`); `conditioning_ladder.csv` shows the conditioning
+//! from each formulation of ours to the paper's, one change at a time.
 //!
 //! Each task runs the paper's 20 s of animation (the pendulum 200 N50 steps of 0.1 s, the truck
 //! and the lander 40 of 0.5 s) unless its `formulation` is `ours`: an earlier formulation of

@@ -423,6 +423,7 @@ mod tests {
                 ("lander", Formulation::Paper),
                 ("pendulum_4s", Formulation::Ours),
                 ("truck_rest", Formulation::Ours),
+                ("lander_13", Formulation::Ours),
             ]
         );
         // The paper's pendulum animates 20 s (200 N50 steps of 0.1 s), ours 4 s.

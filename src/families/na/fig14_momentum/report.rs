@@ -151,6 +151,15 @@ fn unclipped_summary(dir: &Path) -> Result<String, Error> {
     let df = read_csv(&path)?;
     let (method, eta) = (df_str(&df, "method")?, df_f64(&df, "eta")?);
     let (clipped, diverged) = (df_f64(&df, "clipped")?, df_f64(&df, "diverged")?);
+    let (first, peak) = (
+        df_f64(&df, "initial_objective")?,
+        df_f64(&df, "max_objective")?,
+    );
+    // The largest J over each unclipped plain run, as a multiple of the start's.
+    let peaks: Vec<String> = (0..method.len())
+        .filter(|&r| method[r] == "plain" && clipped[r] == 0.0)
+        .map(|r| format!("eta {}: {}x", sig(eta[r]), sig(peak[r] / first[r])))
+        .collect();
     let list = |clip: f64, div: f64| -> Vec<String> {
         (0..method.len())
             .filter(|&r| method[r] == "plain" && clipped[r] == clip && diverged[r] == div)
@@ -165,7 +174,7 @@ fn unclipped_summary(dir: &Path) -> Result<String, Error> {
         .filter(|&r| method[r] == "plain" && clipped[r] == 0.0)
         .all(|r| (eta[r] >= 2.0) == (diverged[r] == 1.0));
     Ok(format!(
-        " Step units (ours, `unclipped.csv`): our eta is the step in units of 1/lambda, so on a quadratic plain descent converges iff eta < 2 and the heavy ball iff eta < 2 (1 + alpha); the paper's 'largest learning rate that would converge' is that limit read on its own scale. With the knots clipped to the actuators' boxes (the runs above), plain descent diverges (last J above the start's) at eta {:?} and not at {:?}; unclipped, at eta {:?} and not at {:?}{}.",
+        " Step units (ours, `unclipped.csv`): our eta is the step in units of 1/lambda, so on a quadratic plain descent converges iff eta < 2 and the heavy ball iff eta < 2 (1 + alpha); the paper's 'largest learning rate that would converge' is that limit read on its own scale. With the knots clipped to the actuators' boxes (the runs above), plain descent diverges (last J above the start's) at eta {:?} and not at {:?}; unclipped, at eta {:?} and not at {:?}{}. The largest J of each unclipped plain run against its start's ({}): a run may climb far above its start and come back down, the emulator's sigmoid units saturating for controls far outside the boxes it was trained in, so the rule reads the last iterate only.",
         box_div,
         box_ok,
         free_div,
@@ -174,7 +183,8 @@ fn unclipped_summary(dir: &Path) -> Result<String, Error> {
             ": exactly the quadratic's limit"
         } else {
             ": not exactly the quadratic's limit (J is not quadratic, and lambda is measured at the start only)"
-        }
+        },
+        peaks.join(", ")
     ))
 }
 
