@@ -558,7 +558,8 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         assert_eq!(mine.len().to_string(), c[3], "{c:?}");
         let found: f64 = mine[0][5].parse().unwrap();
         let (eq, any): (f64, f64) = (c[10].parse().unwrap(), c[11].parse().unwrap());
-        assert!(any <= found && found <= eq, "{c:?}: {found}");
+        // (Within rounding of equilibrated when the search finds nothing better.)
+        assert!(any <= found && found <= eq * (1.0 + 1e-9), "{c:?}: {found}");
         assert!(bs.iter().any(|b| b[0] == c[0] && b[1] == "fixed"), "{c:?}");
     }
     // The calibration (issue 54): the truck's and the lander's gains put the most sensitive
