@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use motionlab::experiment::output::remove_stale_temps;
 use motionlab::experiment::report::write_report;
 use motionlab::experiment::resolve::{resolve, ResolveOptions, Resolved};
-use motionlab::experiment::runner::{merge, run, RunOptions};
+use motionlab::experiment::runner::{merge, run, RunOptions, MAX_JOBS};
 use motionlab::experiment::shard::Shard;
 use motionlab::experiment::spec::SpecFile;
 use motionlab::families;
@@ -47,7 +47,7 @@ struct Outputs {
     /// with --quick, `runs/paper_figures` for `run`.
     #[arg(long, value_name = "DIR")]
     figures: Option<PathBuf>,
-    /// Worker threads (results are identical for any value). Default: all cores.
+    /// Worker threads (results are identical for any value), 1 to 1024. Default: all cores.
     #[arg(long, value_name = "N")]
     jobs: Option<usize>,
     /// Scale budgets down so each experiment finishes in seconds (applies each file's [quick]).
@@ -74,7 +74,8 @@ enum Command {
         sets: Vec<String>,
         /// Run every sweep point with K seeds (the spec's seed, +1, …, +K-1): tables get a
         /// leading `seed` column, each seed's tables go to <OUT>/<id>/seeds/<seed>/ as well, and
-        /// seed_summary.csv and the report give mean and spread over seeds.
+        /// seed_summary.csv and the report give mean and spread over seeds. K is at most 1000;
+        /// a sweep has at most 10000 points, and points times seeds at most 100000.
         #[arg(long, value_name = "K")]
         seeds: Option<usize>,
         /// Run only the units (sweep points times seeds) whose index is I-1 modulo N, into
@@ -105,7 +106,8 @@ enum Command {
         #[arg(long, value_delimiter = ',', value_name = "ID,...")]
         only: Vec<String>,
         /// Run every experiment with K seeds, as `run --seeds K`; each section then reports the
-        /// first seed, the verdict of every seed and the mean and spread over seeds.
+        /// first seed, the verdict of every seed and the mean and spread over seeds (K at most
+        /// 1000).
         #[arg(long, value_name = "K")]
         seeds: Option<usize>,
     },
@@ -318,7 +320,25 @@ fn check_jobs(o: &Outputs) -> Result<()> {
     if o.jobs == Some(0) {
         bail!("--jobs must be at least 1");
     }
+    if let Some(n) = o.jobs.filter(|&n| n > MAX_JOBS) {
+        bail!("--jobs must be at most {MAX_JOBS}, got {n}");
+    }
     Ok(())
+}
+
+/// The error and its causes, joined by ": ", leaving out a cause that the text before it
+/// already states (an io error's "(os error N)" would otherwise come twice).
+fn error_text(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain().map(|c| c.to_string()) {
+        if text.is_empty() {
+            text = cause;
+        } else if !text.contains(&cause) {
+            text.push_str(": ");
+            text.push_str(&cause);
+        }
+    }
+    text
 }
 
 /// Writes a line to standard output. A closed pipe (`motionlab list | head -1`) comes back as
@@ -343,7 +363,7 @@ fn main() -> ExitCode {
         // The reader of our output stopped reading: not an error of ours.
         Err(e) if broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", error_text(&e));
             ExitCode::FAILURE
         }
     }

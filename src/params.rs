@@ -62,3 +62,23 @@ pub fn all_positive(key: &str, vs: &[f64]) -> Result<(), ParamError> {
     }
     Ok(())
 }
+
+/// No value listed twice: a repeated entry of a list the experiment runs one by one (time
+/// steps, models, spacings) would only repeat its rows. The error names the second occurrence.
+pub fn distinct<T: PartialEq + std::fmt::Debug>(key: &str, values: &[T]) -> Result<(), ParamError> {
+    for (i, v) in values.iter().enumerate() {
+        if let Some(j) = values[..i].iter().position(|w| w == v) {
+            return Err(ParamError::new(
+                format!("{key}[{i}]"),
+                format!("{v:?} is listed twice (also at {key}[{j}]); it would only repeat rows"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A count no larger than `max` (a stated limit, so that a typo such as `1e10` is refused
+/// before anything is allocated).
+pub fn at_most(key: &str, v: usize, max: usize) -> Result<(), ParamError> {
+    ensure(v <= max, key, format!("must be at most {max}, got {v}"))
+}

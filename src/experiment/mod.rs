@@ -52,6 +52,16 @@ pub enum Error {
         /// The cause.
         source: std::io::Error,
     },
+    /// A result table that is not whole (a row cut short, a cell that is not a number).
+    #[error("{}:{line}: {message}", path.display())]
+    Table {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
     /// polars failed to build, write or read a table.
     #[error("table: {0}")]
     Polars(String),

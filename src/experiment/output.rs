@@ -525,13 +525,165 @@ pub fn unique(v: &[String]) -> Vec<String> {
     out
 }
 
-/// Reads a CSV written by [`write_table`] into a polars data frame.
+/// Reads a CSV written by [`write_table`] into a polars data frame, strictly: a table that is
+/// not whole (see [`check_csv`]) is an error naming the file and line, never a frame with
+/// missing or made-up values.
 pub fn read_csv(path: &Path) -> Result<DataFrame, Error> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    check_csv(path, &text, &numeric_columns(path))?;
     CsvReadOptions::default()
         .with_has_header(true)
         .try_into_reader_with_file_path(Some(path.to_path_buf()))
         .and_then(|r| r.finish())
         .map_err(|e| Error::Polars(format!("{}: {e}", path.display())))
+}
+
+/// Which columns of the CSV at `path` hold numbers, by the Parquet file [`write_table`] wrote
+/// beside it (`name` → whether numeric); empty when there is none to read.
+fn numeric_columns(path: &Path) -> Vec<(String, bool)> {
+    let Ok(file) = std::fs::File::open(path.with_extension("parquet")) else {
+        return Vec::new();
+    };
+    match ParquetReader::new(file).schema() {
+        Ok(schema) => schema
+            .iter()
+            .map(|(name, field)| (name.to_string(), field.dtype.is_numeric()))
+            .collect(),
+        Err(_) => Vec::new(),
+    }
+}
+
+/// The records of CSV `text` (RFC 4180 quoting, as polars writes it): each with the 1-based
+/// line it starts on and its fields (unquoted text, whether it was quoted); an error names
+/// the line of a quote left open.
+fn csv_records(path: &Path, text: &str) -> Result<Vec<(usize, Vec<(String, bool)>)>, Error> {
+    let mut records = Vec::new();
+    let (mut line, mut start) = (1, 1);
+    let mut fields: Vec<(String, bool)> = Vec::new();
+    let (mut field, mut quoted, mut in_quotes) = (String::new(), false, false);
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        match c {
+            '"' if in_quotes && chars.peek() == Some(&'"') => {
+                chars.next();
+                field.push('"');
+            }
+            '"' if in_quotes => in_quotes = false,
+            '"' if field.is_empty() && !quoted => (in_quotes, quoted) = (true, true),
+            '\n' if !in_quotes => {
+                if field.ends_with('\r') && !quoted {
+                    field.pop();
+                }
+                fields.push((std::mem::take(&mut field), quoted));
+                records.push((start, std::mem::take(&mut fields)));
+                quoted = false;
+                line += 1;
+                start = line;
+            }
+            ',' if !in_quotes => {
+                fields.push((std::mem::take(&mut field), quoted));
+                quoted = false;
+            }
+            c => {
+                if c == '\n' {
+                    line += 1;
+                }
+                field.push(c);
+            }
+        }
+    }
+    if in_quotes {
+        return Err(malformed(
+            path,
+            start,
+            "a quoted field is not closed (the file is cut short)",
+        ));
+    }
+    if !field.is_empty() || quoted || !fields.is_empty() {
+        fields.push((field, quoted));
+        records.push((start, fields));
+    }
+    Ok(records)
+}
+
+fn malformed(path: &Path, line: usize, what: impl std::fmt::Display) -> Error {
+    Error::Table {
+        path: path.to_path_buf(),
+        line,
+        message: what.to_string(),
+    }
+}
+
+/// Checks that CSV `text` from `path` is a whole table as [`write_table`] writes it: a
+/// header, every row with as many fields as the header, a line end after the last row (a
+/// file cut short mid-row has none), and in every numeric column a number in every row.
+/// `numeric` gives the numeric columns by name (from the Parquet file beside it); a column it
+/// does not name counts as numeric when most of its cells are numbers. An error names the
+/// file and the line.
+pub fn check_csv(path: &Path, text: &str, numeric: &[(String, bool)]) -> Result<(), Error> {
+    if text.is_empty() {
+        return Err(malformed(path, 1, "the file is empty (no header)"));
+    }
+    let records = csv_records(path, text)?;
+    let Some(((_, header), rows)) = records.split_first() else {
+        return Err(malformed(path, 1, "the file is empty (no header)"));
+    };
+    for (line, fields) in rows {
+        if fields.len() != header.len() {
+            return Err(malformed(
+                path,
+                *line,
+                format!(
+                    "{} fields where the header has {} (a row cut short or run together)",
+                    fields.len(),
+                    header.len()
+                ),
+            ));
+        }
+    }
+    let lines = text.lines().count();
+    if !text.ends_with('\n') {
+        return Err(malformed(
+            path,
+            lines,
+            "the last row has no line end (the file is cut short)",
+        ));
+    }
+    let is_number = |s: &str| s.trim().parse::<f64>().is_ok();
+    for (c, (name, _)) in header.iter().enumerate() {
+        let declared = numeric.iter().find(|(n, _)| n == name).map(|(_, k)| *k);
+        let is_numeric = declared.unwrap_or_else(|| {
+            2 * rows
+                .iter()
+                .filter(|(_, f)| !f[c].1 && is_number(&f[c].0))
+                .count()
+                > rows.len()
+        });
+        if !is_numeric {
+            continue;
+        }
+        for (line, fields) in rows {
+            let (cell, _) = &fields[c];
+            if cell.is_empty() {
+                return Err(malformed(
+                    path,
+                    *line,
+                    format!("column `{name}`: empty cell where a number belongs"),
+                ));
+            }
+            if !is_number(cell) {
+                return Err(malformed(
+                    path,
+                    *line,
+                    format!("column `{name}`: not a number: {cell:?}"),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

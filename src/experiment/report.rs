@@ -118,7 +118,11 @@ pub fn relative(from: &Path, to: &Path) -> PathBuf {
 }
 
 /// Writes `<out>/REPORT.md` for the given experiments from whatever results exist in `out`.
+/// Results that exist but cannot be read (a table cut short, a cell that is not a number) are
+/// marked "error" in the report, which is still written, and then returned as the error, each
+/// naming its file and line: a verdict is never computed from a partial table.
 pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<PathBuf, Error> {
+    let mut unreadable: Vec<String> = Vec::new();
     let mut md = String::new();
     let threads = rayon::current_num_threads();
     let _ = writeln!(md, "# motionlab reproduction report\n");
@@ -157,14 +161,17 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
                         f.ours.trim_end(),
                         f.verdict.label(),
                         f.why,
-                        seeds_section(r, &dir, &seeds)
+                        seeds_section(r, &dir, &seeds, &mut unreadable)
                     ),
                 ),
-                Err(e) => (
-                    "error".into(),
-                    String::new(),
-                    format!("Could not read the results: {e}\n"),
-                ),
+                Err(e) => {
+                    unreadable.push(format!("{}: {e}", r.id));
+                    (
+                        "error".into(),
+                        String::new(),
+                        format!("Could not read the results: {e}\n"),
+                    )
+                }
             }
         } else {
             ("not run".into(), String::new(), "Not run yet.\n".into())
@@ -215,6 +222,13 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
     md.push_str(&sections);
     let path = out.join("REPORT.md");
     atomic_write(&path, md.as_bytes())?;
+    if !unreadable.is_empty() {
+        return Err(Error::Other(format!(
+            "{} written, but results could not be read (marked \"error\" there): {}",
+            path.display(),
+            unreadable.join("; ")
+        )));
+    }
     Ok(path)
 }
 
@@ -235,7 +249,7 @@ fn run_seeds(dir: &Path) -> Vec<u64> {
 
 /// With swept seeds: the verdict of each seed (its section computed from its own tables in
 /// `seeds/<seed>/`) and the mean and spread over seeds of `seed_summary.csv`; empty otherwise.
-fn seeds_section(r: &Resolved, dir: &Path, seeds: &[u64]) -> String {
+fn seeds_section(r: &Resolved, dir: &Path, seeds: &[u64], unreadable: &mut Vec<String>) -> String {
     if seeds.is_empty() {
         return String::new();
     }
@@ -243,7 +257,10 @@ fn seeds_section(r: &Resolved, dir: &Path, seeds: &[u64]) -> String {
     for s in seeds {
         let label = match r.family.report(&dir.join("seeds").join(s.to_string())) {
             Ok(f) => f.verdict.label().to_string(),
-            Err(_) => "could not be read".to_string(),
+            Err(e) => {
+                unreadable.push(format!("{} seed {s}: {e}", r.id));
+                "could not be read".to_string()
+            }
         };
         match counts.iter_mut().find(|(l, _)| *l == label) {
             Some((_, n)) => *n += 1,
@@ -261,6 +278,7 @@ fn seeds_section(r: &Resolved, dir: &Path, seeds: &[u64]) -> String {
     match super::seeds::summary_markdown(dir) {
         Ok(t) => md.push_str(&t),
         Err(e) => {
+            unreadable.push(format!("{} seed summary: {e}", r.id));
             let _ = writeln!(md, "Could not read the seed summary: {e}");
         }
     }
@@ -364,21 +382,27 @@ fn sentence_end(text: &str) -> Option<usize> {
         .map(|i| i + 1)
 }
 
-/// The last commit that changed the code ([`super::runner::CODE_PATHS`]), in a git checkout.
+/// The last commit that changed the code ([`super::runner::CODE_PATHS`]) as of the revision
+/// the binary was built from (embedded at build time by `build.rs`); `None` when it was built
+/// outside a git checkout.
 pub fn code_revision() -> Option<String> {
-    let out = std::process::Command::new("git")
-        .args(["log", "-1", "--format=%H", "--"])
-        .args(super::runner::CODE_PATHS)
-        .stderr(std::process::Stdio::null())
-        .output()
-        .ok()?;
-    let rev = String::from_utf8_lossy(&out.stdout).trim().to_string();
-    (out.status.success() && !rev.is_empty()).then_some(rev)
+    option_env!("MOTIONLAB_CODE_REVISION")
+        .filter(|r| !r.is_empty() && *r != "unknown")
+        .map(str::to_string)
 }
 
-/// Whether commit `ancestor` is `rev` or one of its ancestors (git merge-base --is-ancestor).
+/// Whether commit `ancestor` is `rev` or one of its ancestors: at once for the revision the
+/// binary was built from (which contains its [`code_revision`]), else as `git merge-base
+/// --is-ancestor` says in the checkout the binary was built from.
 fn git_is_ancestor(ancestor: &str, rev: &str) -> bool {
+    if ancestor == rev
+        || (Some(ancestor) == code_revision().as_deref()
+            && Some(rev) == super::runner::git_revision().as_deref())
+    {
+        return true;
+    }
     std::process::Command::new("git")
+        .args(["-C", env!("CARGO_MANIFEST_DIR")])
         .args(["merge-base", "--is-ancestor", ancestor, rev])
         .stderr(std::process::Stdio::null())
         .status()

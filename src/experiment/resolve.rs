@@ -7,7 +7,17 @@ use super::{Experiment, Job};
 use serde::de::DeserializeOwned;
 use std::path::PathBuf;
 
-pub use crate::params::{all_positive, ensure, positive, ParamError};
+pub use crate::params::{all_positive, at_most, distinct, ensure, positive, ParamError};
+
+/// The most seeds a run may sweep (`--seeds K`, or a `seeds = [...]` sweep axis).
+pub const MAX_SEEDS: usize = 1_000;
+
+/// The most points a sweep may have (the product of its axes' lengths).
+pub const MAX_SWEEP_POINTS: usize = 10_000;
+
+/// The most runs (sweep points times seeds) one experiment may have: each keeps its results in
+/// memory until the tables are written.
+pub const MAX_UNITS: usize = 100_000;
 
 /// Deserializes a family's parameters, naming the key of any unknown field, missing field or
 /// wrong type.
@@ -17,6 +27,14 @@ pub fn parse_params<P: DeserializeOwned>(value: &toml::Value) -> Result<P, Param
         let path = if path == "." { String::new() } else { path };
         let msg = e.inner().to_string();
         let key = match backticked(&msg) {
+            // The path of an unknown field already ends in it (the key that failed to
+            // deserialize); that of a missing field is the table that lacks it.
+            Some(field)
+                if msg.starts_with("unknown field")
+                    && (path == field || path.ends_with(&format!(".{field}"))) =>
+            {
+                path
+            }
             Some(field) if msg.starts_with("unknown field") || msg.starts_with("missing field") => {
                 if path.is_empty() {
                     field
@@ -71,7 +89,8 @@ pub struct ResolveOptions {
     /// `KEY=VALUE` overrides of `[params]` keys (or `seed`); VALUE is a TOML value, or a bare
     /// string.
     pub sets: Vec<String>,
-    /// `--seeds K`: run every sweep point with the K seeds `seed, seed + 1, …, seed + K - 1`.
+    /// `--seeds K`: run every sweep point with the K seeds `seed, seed + 1, …, seed + K - 1`
+    /// (K at most [`MAX_SEEDS`]).
     pub seeds: Option<usize>,
 }
 
@@ -224,7 +243,10 @@ fn parse_value(text: &str) -> toml::Value {
 }
 
 /// Resolves a parsed experiment file: the family exists, overrides apply, every sweep point's
-/// parameters are valid. Nothing is run or written. The family is looked up in `registry`.
+/// parameters are valid, with `[quick]` applied and without (so that a mistake in either table
+/// is found whichever mode runs), sweep values are distinct and the run is within
+/// [`MAX_SEEDS`], [`MAX_SWEEP_POINTS`] and [`MAX_UNITS`]. Nothing is run or written. The family
+/// is looked up in `registry`.
 pub fn resolve(
     file: &SpecFile,
     opts: &ResolveOptions,
@@ -242,10 +264,6 @@ pub fn resolve(
             ),
         )
     })?;
-    let mut params = raw.params.clone();
-    if opts.quick {
-        merge(&mut params, &raw.quick);
-    }
     let mut seed = raw.seed;
     if let Some(s) = opts.seed {
         seed = s;
@@ -253,11 +271,18 @@ pub fn resolve(
     let mut sweep = raw.sweep.clone();
     let seeds_axis = sweep.remove("seeds");
     let mut seed_overridden = opts.seed.is_some();
-    let mut set_keys = Vec::new();
+    // `(as given, key inside [params], value)` of each `--set`.
+    let mut sets: Vec<(String, String, toml::Value)> = Vec::new();
     let set_err = |key: &str, message: String| SpecError {
         path: PathBuf::from("--set"),
         line: None,
         key: key.to_string(),
+        message,
+    };
+    let flag_err = |flag: &str, message: String| SpecError {
+        path: PathBuf::from(flag),
+        line: None,
+        key: flag.trim_start_matches('-').to_string(),
         message,
     };
     for s in &opts.sets {
@@ -274,10 +299,20 @@ pub fn resolve(
             continue;
         }
         let key = k.strip_prefix("params.").unwrap_or(k);
-        set_path(&mut params, key, parse_value(v.trim())).map_err(|m| set_err(k, m))?;
         sweep.remove(key);
-        set_keys.push(key.to_string());
+        sets.push((k.to_string(), key.to_string(), parse_value(v.trim())));
     }
+    // `[params]`, with `[quick]` over it in quick mode, then the `--set` overrides.
+    let params_for = |quick: bool| -> Result<toml::Table, SpecError> {
+        let mut params = raw.params.clone();
+        if quick {
+            merge(&mut params, &raw.quick);
+        }
+        for (given, key, value) in &sets {
+            set_path(&mut params, key, value.clone()).map_err(|m| set_err(given, m))?;
+        }
+        Ok(params)
+    };
     // Seeds: an explicit seed override drops a `seeds` axis, as overriding a swept key does.
     let seeds = match (seeds_axis.filter(|_| !seed_overridden), opts.seeds) {
         (Some(_), Some(_)) => {
@@ -287,34 +322,45 @@ pub fn resolve(
             ))
         }
         (Some(axis), None) => Some(seed_list(file, &axis)?),
-        (None, Some(0)) => {
-            return Err(SpecError {
-                path: PathBuf::from("--seeds"),
-                line: None,
-                key: "seeds".into(),
-                message: "must be at least 1".into(),
-            })
+        (None, Some(0)) => return Err(flag_err("--seeds", "must be at least 1".into())),
+        (None, Some(k)) if k > MAX_SEEDS => {
+            return Err(flag_err(
+                "--seeds",
+                format!("must be at most {MAX_SEEDS}, got {k}"),
+            ))
         }
         (None, Some(k)) => Some(
             (0..k as u64)
                 .map(|i| seed.checked_add(i).filter(|&s| i64::try_from(s).is_ok()))
                 .collect::<Option<Vec<u64>>>()
-                .ok_or_else(|| SpecError {
-                    path: PathBuf::from("--seeds"),
-                    line: None,
-                    key: "seeds".into(),
-                    message: format!(
-                        "seeds {seed} to {seed} + {k} - 1 pass 2^63 (the `seed` column is i64)"
-                    ),
+                .ok_or_else(|| {
+                    flag_err(
+                        "--seeds",
+                        format!(
+                            "seeds {seed} to {seed} + {k} - 1 pass 2^63 (the `seed` column is i64)"
+                        ),
+                    )
                 })?,
         ),
         (None, None) => None,
     };
-    // Sweep axes.
+    // Sweep axes: non-empty arrays of distinct values.
     let mut axes: Vec<(String, Vec<toml::Value>)> = Vec::new();
     for (k, v) in &sweep {
         match v {
-            toml::Value::Array(a) if !a.is_empty() => axes.push((k.clone(), a.clone())),
+            toml::Value::Array(a) if !a.is_empty() => {
+                for (i, x) in a.iter().enumerate() {
+                    if let Some(j) = a[..i].iter().position(|y| same_value(x, y)) {
+                        return Err(file.error_at(
+                            &format!("sweep.{k}[{i}]"),
+                            format!(
+                                "{x} is listed twice (also at sweep.{k}[{j}]); it would only repeat rows"
+                            ),
+                        ));
+                    }
+                }
+                axes.push((k.clone(), a.clone()))
+            }
             _ => {
                 return Err(file.error_at(
                     &format!("sweep.{k}"),
@@ -323,7 +369,35 @@ pub fn resolve(
             }
         }
     }
-    let locate = |pe: ParamError, axis_index: &[usize]| -> SpecError {
+    // Sizes, before anything is allocated for them.
+    let total = axes
+        .iter()
+        .try_fold(1usize, |n, (_, v)| n.checked_mul(v.len()))
+        .filter(|&n| n <= MAX_SWEEP_POINTS)
+        .ok_or_else(|| {
+            let lens: Vec<String> = axes.iter().map(|(_, v)| v.len().to_string()).collect();
+            file.error_at(
+                "sweep",
+                format!(
+                    "{} sweep points are more than {MAX_SWEEP_POINTS}, the most a run may have",
+                    lens.join(" x ")
+                ),
+            )
+        })?;
+    let n_seeds = seeds.as_ref().map_or(1, |s| s.len());
+    if total * n_seeds > MAX_UNITS {
+        let message = format!(
+            "{total} sweep points x {n_seeds} seeds = {} runs are more than {MAX_UNITS}, the most a run may have",
+            total * n_seeds
+        );
+        return Err(match opts.seeds {
+            Some(_) => flag_err("--seeds", message),
+            None => file.error_at("sweep", message),
+        });
+    }
+    // Where a family's error belongs: a sweep value, a `--set`, `[quick]` (in quick mode) or
+    // `[params]`.
+    let locate = |pe: ParamError, axis_index: &[usize], quick: bool| -> SpecError {
         let root = pe.key.split(['.', '[']).next().unwrap_or("").to_string();
         if let Some(pos) = axes.iter().position(|(k, _)| *k == pe.key || *k == root) {
             return file.error_at(
@@ -331,35 +405,61 @@ pub fn resolve(
                 pe.message,
             );
         }
-        if set_keys.iter().any(|k| *k == pe.key || *k == root) {
-            return set_err(&pe.key, pe.message);
+        // The last `--set` that wrote the key, a table around it or a key inside it.
+        if let Some((given, key, _)) = sets
+            .iter()
+            .rev()
+            .find(|(_, key, _)| nested(&pe.key, key) || nested(key, &pe.key))
+        {
+            let shown = if nested(&pe.key, key) { &pe.key } else { given };
+            return set_err(shown, pe.message);
         }
-        if opts.quick && raw.quick.contains_key(&root) {
+        if quick && raw.quick.contains_key(&root) {
             return file.error_at(&format!("quick.{}", pe.key), pe.message);
         }
         file.error_at(&format!("params.{}", pe.key), pe.message)
     };
-    let total: usize = axes.iter().map(|(_, v)| v.len()).product();
+    // Every point in the mode asked for; then, so that neither table hides a mistake until
+    // the other mode runs, every point in the other mode, whose errors say which mode.
     let mut points = Vec::with_capacity(total);
-    for flat in 0..total {
-        // Row-major: the last axis varies fastest.
-        let mut idx = vec![0; axes.len()];
-        let mut rem = flat;
-        for (a, (_, vals)) in axes.iter().enumerate().rev() {
-            idx[a] = rem % vals.len();
-            rem /= vals.len();
+    for quick in [opts.quick, !opts.quick] {
+        let params = params_for(quick)?;
+        for flat in 0..total {
+            // Row-major: the last axis varies fastest.
+            let mut idx = vec![0; axes.len()];
+            let mut rem = flat;
+            for (a, (_, vals)) in axes.iter().enumerate().rev() {
+                idx[a] = rem % vals.len();
+                rem /= vals.len();
+            }
+            let mut p = params.clone();
+            let mut values = Vec::new();
+            for (a, (k, vals)) in axes.iter().enumerate() {
+                let v = vals[idx[a]].clone();
+                set_path(&mut p, k, v.clone())
+                    .map_err(|m| file.error_at(&format!("sweep.{k}"), m))?;
+                values.push((k.clone(), v));
+            }
+            match family.resolve(&toml::Value::Table(p)) {
+                Ok(job) if quick == opts.quick => points.push(SweepPoint { values, job }),
+                Ok(_) => {}
+                Err(e) => {
+                    let mut err = locate(e, &idx, quick);
+                    if quick != opts.quick && !err.key.starts_with("quick.") {
+                        err.message = format!(
+                            "{} ({})",
+                            err.message,
+                            if quick {
+                                "with [quick] applied, as --quick runs it"
+                            } else {
+                                "without [quick], as a full run runs it"
+                            }
+                        );
+                    }
+                    return Err(err);
+                }
+            }
         }
-        let mut p = params.clone();
-        let mut values = Vec::new();
-        for (a, (k, vals)) in axes.iter().enumerate() {
-            let v = vals[idx[a]].clone();
-            set_path(&mut p, k, v.clone()).map_err(|m| file.error_at(&format!("sweep.{k}"), m))?;
-            values.push((k.clone(), v));
-        }
-        let job = family
-            .resolve(&toml::Value::Table(p))
-            .map_err(|e| locate(e, &idx))?;
-        points.push(SweepPoint { values, job });
     }
     Ok(Resolved {
         id: raw.id.clone(),
@@ -376,6 +476,22 @@ pub fn resolve(
     })
 }
 
+/// Whether dotted key `inner` is `outer` or lies inside it (`a.b` and `a.b[2]` lie in `a`).
+fn nested(inner: &str, outer: &str) -> bool {
+    inner
+        .strip_prefix(outer)
+        .is_some_and(|rest| rest.is_empty() || rest.starts_with(['.', '[']))
+}
+
+/// Whether two sweep values are the same value (an integer and a float of equal value are).
+fn same_value(a: &toml::Value, b: &toml::Value) -> bool {
+    match (a, b) {
+        (toml::Value::Integer(i), toml::Value::Float(f))
+        | (toml::Value::Float(f), toml::Value::Integer(i)) => *i as f64 == *f,
+        _ => a == b,
+    }
+}
+
 /// The seeds of a `seeds = [...]` sweep axis: distinct non-negative integers.
 fn seed_list(file: &SpecFile, axis: &toml::Value) -> Result<Vec<u64>, SpecError> {
     let values = match axis {
@@ -387,6 +503,15 @@ fn seed_list(file: &SpecFile, axis: &toml::Value) -> Result<Vec<u64>, SpecError>
             ))
         }
     };
+    if values.len() > MAX_SEEDS {
+        return Err(file.error_at(
+            "sweep.seeds",
+            format!(
+                "{} seeds are more than {MAX_SEEDS}, the most a run may have",
+                values.len()
+            ),
+        ));
+    }
     let mut seeds = Vec::with_capacity(values.len());
     for (i, v) in values.iter().enumerate() {
         let s = v

@@ -1,7 +1,8 @@
 //! Runs a resolved experiment: every unit (sweep point, times seed when seeds are swept) on a
 //! rayon pool of `jobs` threads, tables prefixed with the unit's seed and sweep values and
 //! concatenated in unit order, written as CSV + Parquet, figures, and `run.json` (id, seed,
-//! resolved spec, crate version, git revision and whether the code had uncommitted changes,
+//! resolved spec, crate version, the git revision the binary was built from and whether its
+//! code had uncommitted changes then,
 //! threads, seconds per stage). A sweep's units are also kept one file each for `--resume`;
 //! `--shard I/N` runs a share of the units and [`merge`] joins the shares (see
 //! [`super::shard`]).
@@ -52,31 +53,34 @@ pub struct RunSummary {
     pub reused: usize,
 }
 
-/// The git revision of the working directory, when it is a git checkout.
+/// The most worker threads a run may use (`--jobs`): more than any machine's cores, and few
+/// enough that creating them takes no time.
+pub const MAX_JOBS: usize = 1024;
+
+/// A value `build.rs` embedded, `None` where it could not tell (`unknown`).
+fn embedded(value: Option<&'static str>) -> Option<&'static str> {
+    value.filter(|v| !v.is_empty() && *v != "unknown")
+}
+
+/// The git revision the binary was built from (embedded at build time by `build.rs`, so the
+/// same binary names the same revision in any working directory); `None` when it was built
+/// outside a git checkout.
 pub fn git_revision() -> Option<String> {
-    let out = std::process::Command::new("git")
-        .args(["rev-parse", "HEAD"])
-        .stderr(std::process::Stdio::null())
-        .output()
-        .ok()?;
-    out.status
-        .success()
-        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+    embedded(option_env!("MOTIONLAB_GIT_REVISION")).map(str::to_string)
 }
 
 /// The paths whose changes change results: the code, the experiment files and the build.
 pub const CODE_PATHS: [&str; 4] = ["src", "experiments", "Cargo.toml", "Cargo.lock"];
 
-/// Whether the checkout has uncommitted changes to [`CODE_PATHS`] (`None` outside a git
-/// checkout).
+/// Whether the source the binary was built from had uncommitted changes at build time (to
+/// what is compiled in: `src`, `build.rs`, `Cargo.toml`, `Cargo.lock`; embedded by
+/// `build.rs`); `None` when it was built outside a git checkout.
 pub fn git_dirty() -> Option<bool> {
-    let out = std::process::Command::new("git")
-        .args(["status", "--porcelain", "--"])
-        .args(CODE_PATHS)
-        .stderr(std::process::Stdio::null())
-        .output()
-        .ok()?;
-    out.status.success().then(|| !out.stdout.is_empty())
+    match embedded(option_env!("MOTIONLAB_GIT_DIRTY")) {
+        Some("true") => Some(true),
+        Some("false") => Some(false),
+        _ => None,
+    }
 }
 
 /// Runs the experiment's units (or, with [`RunOptions::shard`], only the shard's), then writes
@@ -84,6 +88,7 @@ pub fn git_dirty() -> Option<bool> {
 /// [`super::shard`]).
 pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
     let t0 = Instant::now();
+    check_jobs(opts.jobs)?;
     // Nets used before this run (another experiment's) are not this run's.
     let _ = crate::emulator::cache::take_usage();
     let pool = rayon::ThreadPoolBuilder::new()
@@ -204,6 +209,7 @@ pub fn merge(
     registry: &Registry,
 ) -> Result<(RunSummary, Resolved), Error> {
     let t0 = Instant::now();
+    check_jobs(opts.jobs)?;
     let m = read_shards(file, &opts.out, registry)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.jobs.max(1))
@@ -226,6 +232,16 @@ pub fn merge(
     let mut s = finish(&m.resolved, opts, tables, &ctx, provenance, &pool, t0)?;
     s.reused = n;
     Ok((s, m.resolved))
+}
+
+/// At most [`MAX_JOBS`] worker threads.
+fn check_jobs(jobs: usize) -> Result<(), Error> {
+    if jobs > MAX_JOBS {
+        return Err(Error::Other(format!(
+            "jobs: must be at most {MAX_JOBS}, got {jobs}"
+        )));
+    }
+    Ok(())
 }
 
 /// Runs one unit: its point's job with its seed; tables prefixed with its seed (when seeds are

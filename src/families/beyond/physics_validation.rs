@@ -10,7 +10,7 @@
 use crate::experiment::output::{unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{all_positive, ensure, positive, ParamError, Validate};
+use crate::experiment::resolve::{all_positive, distinct, ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::physics::acrobot::Acrobot;
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
@@ -128,9 +128,13 @@ impl Validate for Params {
                 "the adaptive rk45 is studied against `tolerances`, not time steps",
             )?;
         }
+        distinct("models", &self.models)?;
+        distinct("integrators", &self.integrators)?;
         all_positive("dts", &self.dts)?;
+        distinct("dts", &self.dts)?;
         positive("duration", self.duration)?;
         all_positive("tolerances", &self.tolerances)?;
+        distinct("tolerances", &self.tolerances)?;
         positive("atol_ratio", self.atol_ratio)?;
         positive("adaptive_interval", self.adaptive_interval)?;
         positive("passive_duration", self.passive_duration)?;

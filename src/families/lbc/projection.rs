@@ -13,7 +13,9 @@ use crate::bellman::projection::{combined_reward, project, GaussianReward};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::resolve::{all_positive, ensure, positive, ParamError, Validate};
+use crate::experiment::resolve::{
+    all_positive, at_most, distinct, ensure, positive, ParamError, Validate,
+};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::row;
 use nalgebra::DVector;
@@ -35,12 +37,16 @@ pub struct Params {
     pub spacings: Vec<f64>,
     /// Desired minimum as a fraction of the spacing (0 = on component 1, 1 = on component 2).
     pub targets: Vec<f64>,
-    /// Points sampled along the first axis for the cost curves.
+    /// Points sampled along the first axis for the cost curves (at most [`MAX_SAMPLES`]).
     pub samples: usize,
     /// Margin beyond the components sampled on each side, in units of 1/√scale.
     #[serde(default = "default_margin")]
     pub margin: f64,
 }
+
+/// The most points `samples` may ask for: a million points of a cost curve are far more than
+/// a figure shows, and a typo (`1e10`) is refused before 80 GB are asked for.
+pub const MAX_SAMPLES: usize = 1_000_000;
 
 fn default_margin() -> f64 {
     3.0
@@ -52,11 +58,14 @@ impl Validate for Params {
         ensure(self.dimension <= 64, "dimension", "must be at most 64")?;
         positive("scale", self.scale)?;
         all_positive("spacings", &self.spacings)?;
+        distinct("spacings", &self.spacings)?;
         ensure(!self.targets.is_empty(), "targets", "must not be empty")?;
         for (i, t) in self.targets.iter().enumerate() {
             ensure(t.is_finite(), &format!("targets[{i}]"), "must be finite")?;
         }
+        distinct("targets", &self.targets)?;
         ensure(self.samples >= 3, "samples", "must be at least 3")?;
+        at_most("samples", self.samples, MAX_SAMPLES)?;
         positive("margin", self.margin)
     }
 }

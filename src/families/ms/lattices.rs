@@ -10,7 +10,7 @@ use super::lattice_draw::{draw_panels, LatticePanel, Scene};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::{Findings, Verdict};
-use crate::experiment::resolve::{ensure, ParamError, Validate};
+use crate::experiment::resolve::{distinct, ensure, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::lattice::Lattice;
 use crate::physics::reflex::{deform, Reflex, ReflexGains};
@@ -46,6 +46,7 @@ pub fn lattice_by_name(name: &str) -> Option<Lattice> {
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         ensure(!self.lattices.is_empty(), "lattices", "need at least one")?;
+        distinct("lattices", &self.lattices)?;
         for (i, l) in self.lattices.iter().enumerate() {
             ensure(
                 lattice_by_name(l).is_some(),

@@ -45,7 +45,7 @@ pub use verdict::{judge, sweep_counts, SweepCounts};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
-use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -171,6 +171,7 @@ impl Validate for Params {
         for (i, l) in self.lambda_sweep.iter().enumerate() {
             positive(&format!("lambda_sweep[{i}]"), *l)?;
         }
+        distinct("lambda_sweep", &self.lambda_sweep)?;
         ensure(
             self.max_cost_ratio >= 1.0,
             "max_cost_ratio",

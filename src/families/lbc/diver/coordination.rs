@@ -7,7 +7,7 @@ use crate::control::lqr::{track_with, TrackingController, ValueModel};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
-use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::families::lbc::rule_table;
 use crate::row;
@@ -55,6 +55,7 @@ impl Validate for CoordinationParams {
         for (i, l) in self.lambda_sweep.iter().enumerate() {
             positive(&format!("lambda_sweep[{i}]"), *l)?;
         }
+        distinct("lambda_sweep", &self.lambda_sweep)?;
         Ok(())
     }
 }

@@ -9,7 +9,7 @@ use crate::control::ddp::DdpSolution;
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
-use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::lbc::{film, rule_table};
 use crate::row;
@@ -75,6 +75,7 @@ impl Validate for InterpolationParams {
         for (i, l) in self.lambda_sweep.iter().enumerate() {
             positive(&format!("lambda_sweep[{i}]"), *l)?;
         }
+        distinct("lambda_sweep", &self.lambda_sweep)?;
         Ok(())
     }
 }

@@ -41,7 +41,7 @@ pub use measures::{mirror_gap, swings, window_gap, window_range};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
-use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family};
 use crate::physics::push::Walls;
 use serde::{Deserialize, Serialize};
@@ -160,6 +160,7 @@ impl Validate for Params {
         for (i, l) in self.lambda_sweep.iter().enumerate() {
             positive(&format!("lambda_sweep[{i}]"), *l)?;
         }
+        distinct("lambda_sweep", &self.lambda_sweep)?;
         if let Some(w) = &self.hold_weights {
             for (i, v) in w.iter().enumerate() {
                 ensure(
