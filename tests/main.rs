@@ -7,3 +7,4 @@ mod na;
 mod shard;
 mod spec_errors;
 mod util;
+mod verbs;
