@@ -52,10 +52,8 @@ impl Controls {
     /// Reads and checks the schedule in `path` for a model with controls `names`; every error
     /// names the file, and the line and column where there is one.
     pub fn load(path: &Path, names: &[String]) -> Result<Self, Error> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| other(format!("--controls: {}: {e}", path.display())))?;
         Self::parse(&text, path, names)
     }
 
@@ -147,8 +145,8 @@ impl Controls {
             for (&i, v) in idx.iter().zip(&row) {
                 if v.abs() > MAX_CONTROL {
                     return Err(other(format!(
-                        "{file}:{ln}: column `{}`: {v} is beyond the limit of ±{MAX_CONTROL:e} on \
-                         any control",
+                        "{file}:{ln}: column `{}`: {v:?} is beyond the limit of ±{MAX_CONTROL:e} \
+                         on any control",
                         cols[i]
                     )));
                 }
@@ -193,7 +191,7 @@ pub fn check_run(
     }
     if let Some(i) = state.iter().position(|v| !v.is_finite()) {
         return Err(other(format!(
-            "--state: {} (value {}) is {}, not a finite number",
+            "--state: {} (value {}) is {:?}, not a finite number",
             state_names[i],
             i + 1,
             state[i]
@@ -201,16 +199,18 @@ pub fn check_run(
     }
     if !(duration.is_finite() && duration > 0.0) {
         return Err(other(format!(
-            "--duration must be > 0 and finite, got {duration}"
+            "--duration must be > 0 and finite, got {duration:?}"
         )));
     }
     if !(dt.is_finite() && dt > 0.0) {
-        return Err(other(format!("{dt_flag} must be > 0 and finite, got {dt}")));
+        return Err(other(format!(
+            "{dt_flag} must be > 0 and finite, got {dt:?}"
+        )));
     }
     let steps = (duration / dt).round();
     if !(steps <= MAX_STEPS as f64) {
         return Err(other(format!(
-            "--duration {duration} s at {dt_flag} = {dt} s is {steps:e} steps, more than the \
+            "--duration {duration:?} s at {dt_flag} = {dt:?} s is {steps:e} steps, more than the \
              limit of {MAX_STEPS} steps per run; shorten --duration{}",
             if dt_flag == "--dt" {
                 " or lengthen --dt"
@@ -222,18 +222,28 @@ pub fn check_run(
     Ok(steps as usize)
 }
 
+/// A write error to `target` (`None`: standard output): on standard output the io error itself
+/// (its kind tells a closed pipe), on a file a message naming it.
+fn write_error(target: Option<&Path>, source: std::io::Error) -> Error {
+    match target {
+        None => Error::Io {
+            path: PathBuf::from("standard output"),
+            source,
+        },
+        Some(path) => other(format!("--out: {}: {source}", path.display())),
+    }
+}
+
 /// Rows of a CSV going out one at a time (see [`write_csv`]).
 pub struct CsvRows<'a> {
     w: &'a mut dyn Write,
-    target: &'a Path,
+    /// The output file, `None` for standard output.
+    target: Option<&'a Path>,
 }
 
 impl CsvRows<'_> {
     fn io(&self, source: std::io::Error) -> Error {
-        Error::Io {
-            path: self.target.to_path_buf(),
-            source,
-        }
+        write_error(self.target, source)
     }
 
     /// Writes the header `t,<names>`.
@@ -271,20 +281,17 @@ pub fn write_csv(
 ) -> Result<(), Error> {
     match out {
         None => {
-            let target = Path::new("standard output");
             let mut w = std::io::BufWriter::new(std::io::stdout().lock());
-            let mut rows = CsvRows { w: &mut w, target };
+            let mut rows = CsvRows {
+                w: &mut w,
+                target: None,
+            };
             body(&mut rows)?;
-            w.flush().map_err(|source| Error::Io {
-                path: target.to_path_buf(),
-                source,
-            })
+            let flushed = w.flush();
+            flushed.map_err(|e| write_error(None, e))
         }
         Some(path) => {
-            let io = |source| Error::Io {
-                path: path.to_path_buf(),
-                source,
-            };
+            let io = |e| write_error(Some(path), e);
             if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
                 std::fs::create_dir_all(dir).map_err(io)?;
             }
@@ -294,7 +301,7 @@ pub fn write_csv(
                 let mut w = std::io::BufWriter::new(f);
                 body(&mut CsvRows {
                     w: &mut w,
-                    target: path,
+                    target: Some(path),
                 })?;
                 let f = w.into_inner().map_err(|e| io(e.into_error()))?;
                 f.sync_all().map_err(io)
@@ -446,7 +453,7 @@ mod tests {
         let mut w: Vec<u8> = Vec::new();
         body(&mut CsvRows {
             w: &mut w,
-            target: Path::new("memory"),
+            target: None,
         })
         .unwrap();
         String::from_utf8(w).unwrap()
@@ -558,7 +565,7 @@ mod tests {
         let (mut seen, x0) = (0, [0.3, -0.2, 0.1, 0.0, 0.5, -1.0]);
         let mut rows = CsvRows {
             w: &mut w,
-            target: Path::new("standard output"),
+            target: None,
         };
         let e = sim
             .try_rollout(
