@@ -73,6 +73,9 @@
 //!     and convergence orders) and `x_lbc_emulator` (linear Bellman combination of
 //!     controllers learned through a NeuroAnimator emulator).
 //! - [`mod@bench`]: throughput of the hot loops (`motionlab bench`).
+//! - [`verbs`]: `motionlab simulate` and `emulate` — their inputs checked before any work
+//!   ([`verbs::check_run`], [`verbs::Controls`], [`verbs::MAX_STEPS`]) and their rows streamed
+//!   as computed; above [`families`] (it steps a Table 1 emulator), below `main.rs`.
 //! - [`linalg`]: the one conversion point between ndarray and nalgebra types.
 //! - [`seed`]: deterministic seed splitting ([`seed::mix_seed`]), one random stream per job.
 //! - [`params`]: the settings-validation vocabulary every layer uses ([`params::ParamError`]
@@ -136,3 +139,4 @@ pub mod params;
 pub mod physics;
 pub mod seed;
 pub mod synthesis;
+pub mod verbs;

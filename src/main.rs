@@ -10,9 +10,10 @@ use motionlab::experiment::shard::Shard;
 use motionlab::experiment::spec::SpecFile;
 use motionlab::families;
 use motionlab::families::na::table1_structure::{
-    table1_emulator, Params as Table1Params, EMULATOR_NAMES,
+    build_spec, table1_emulator, Params as Table1Params, EMULATOR_NAMES,
 };
 use motionlab::physics::{self, IntegratorKind, Model, Ode};
+use motionlab::verbs::{self, Controls};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -118,6 +119,11 @@ enum Command {
         model: String,
     },
     /// Simulate a model from a start state and write the trajectory as CSV (t, state...).
+    ///
+    /// Every input is checked before any work: the start state (finite, one value per state
+    /// variable), the controls file, --duration and --dt (positive, finite) and the number of
+    /// steps, duration / dt, at most 10000000 (MAX_STEPS). Rows are written as they are
+    /// computed; with --out, to a temporary file renamed into place when the run succeeds.
     Simulate {
         /// Model name.
         #[arg(value_parser = clap::builder::PossibleValuesParser::new(physics::MODEL_NAMES))]
@@ -130,11 +136,13 @@ enum Command {
             required = true
         )]
         state: Vec<f64>,
-        /// Controls: CSV with column `t` and one column per control, held piecewise-constant
-        /// (each row from its t until the next row's t; the first row also before its t).
+        /// Controls: CSV with column `t` and one column per control (every control of the
+        /// model, each once; a UTF-8 byte-order mark is fine), held piecewise-constant (each row
+        /// from its t until the next row's t; the first row also before its t). Values must be
+        /// finite and at most 1e6 in magnitude (MAX_CONTROL).
         #[arg(long, value_name = "FILE.csv")]
         controls: Option<PathBuf>,
-        /// Simulated time in seconds.
+        /// Simulated time in seconds: at most 10000000 (MAX_STEPS) steps of --dt.
         #[arg(long)]
         duration: f64,
         /// Time step in seconds (default: the model's dt).
@@ -152,6 +160,10 @@ enum Command {
     /// by row. The net is built as `na_table1_structure` builds it (its experiment file gives
     /// size, data, training and seed): loaded from the emulator cache (target/motionlab-cache or
     /// $MOTIONLAB_CACHE), or trained now when no experiment has trained it yet.
+    ///
+    /// Its inputs are checked as `simulate` checks them, before the net is loaded or trained:
+    /// the start state, the controls file and --duration, at most 10000000 (MAX_STEPS)
+    /// super-steps. Rows are written as they are computed.
     Emulate {
         /// Table 1 net: pendulum_passive, pendulum_active, pendulum_ext, truck, lander, dolphin.
         #[arg(value_parser = clap::builder::PossibleValuesParser::new(EMULATOR_NAMES))]
@@ -169,10 +181,12 @@ enum Command {
             required = true
         )]
         state: Vec<f64>,
-        /// Controls: the same CSV as `simulate`'s, read at each super-step's start and held.
+        /// Controls: the same CSV as `simulate`'s, read at each super-step's start and held
+        /// (every control of the model, each once; finite, at most 1e6 in magnitude).
         #[arg(long, value_name = "FILE.csv")]
         controls: Option<PathBuf>,
-        /// Emulated time in seconds (rounded to whole super-steps).
+        /// Emulated time in seconds (rounded to whole super-steps; at most 10000000 of them,
+        /// MAX_STEPS).
         #[arg(long)]
         duration: f64,
         /// Output CSV (default: standard output).
@@ -536,98 +550,6 @@ fn dispatch(cli: Cli) -> Result<()> {
     }
 }
 
-/// Control schedule from a CSV: rows (t, u), held piecewise-constant.
-struct Schedule {
-    times: Vec<f64>,
-    values: Vec<Vec<f64>>,
-}
-
-impl Schedule {
-    fn load(path: &Path, names: &[String]) -> Result<Self> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| !l.trim().is_empty());
-        let (_, header) = lines
-            .next()
-            .ok_or_else(|| anyhow!("{}: empty file", path.display()))?;
-        let cols: Vec<&str> = header.split(',').map(|s| s.trim()).collect();
-        let t_col = cols
-            .iter()
-            .position(|c| *c == "t")
-            .ok_or_else(|| anyhow!("{}:1: no column `t`", path.display()))?;
-        for c in &cols {
-            if *c != "t" && !names.iter().any(|n| n == c) {
-                bail!(
-                    "{}:1: unknown control column `{c}` (controls: {})",
-                    path.display(),
-                    names.join(", ")
-                );
-            }
-        }
-        let idx: Vec<Option<usize>> = names
-            .iter()
-            .map(|n| cols.iter().position(|c| c == n))
-            .collect();
-        let (mut times, mut values) = (Vec::new(), Vec::new());
-        for (ln, line) in lines {
-            let cells: Vec<&str> = line.split(',').map(|s| s.trim()).collect();
-            if cells.len() != cols.len() {
-                bail!(
-                    "{}:{}: expected {} values, got {}",
-                    path.display(),
-                    ln + 1,
-                    cols.len(),
-                    cells.len()
-                );
-            }
-            let num = |i: usize| -> Result<f64> {
-                let v: f64 = cells[i].parse().map_err(|_| {
-                    anyhow!(
-                        "{}:{}: column `{}`: not a number: {}",
-                        path.display(),
-                        ln + 1,
-                        cols[i],
-                        cells[i]
-                    )
-                })?;
-                if !v.is_finite() {
-                    bail!(
-                        "{}:{}: column `{}`: not finite",
-                        path.display(),
-                        ln + 1,
-                        cols[i]
-                    );
-                }
-                Ok(v)
-            };
-            let t = num(t_col)?;
-            if let Some(&last) = times.last() {
-                if t <= last {
-                    bail!("{}:{}: times must increase", path.display(), ln + 1);
-                }
-            }
-            times.push(t);
-            values.push(
-                idx.iter()
-                    .map(|i| i.map_or(Ok(0.0), num))
-                    .collect::<Result<Vec<f64>>>()?,
-            );
-        }
-        if times.is_empty() {
-            bail!("{}: no rows", path.display());
-        }
-        Ok(Self { times, values })
-    }
-
-    fn at(&self, t: f64) -> &[f64] {
-        let k = self.times.partition_point(|&s| s <= t + 1e-12);
-        &self.values[k.saturating_sub(1)]
-    }
-}
-
 fn emulate(
     experiments: &Path,
     (net, steps, quick): (&str, usize, bool),
@@ -639,10 +561,7 @@ fn emulate(
     if steps == 0 {
         bail!("--steps must be >= 1");
     }
-    if !(duration.is_finite() && duration > 0.0) {
-        bail!("--duration must be > 0");
-    }
-    // The physical model first: a wrong --state or --controls fails before any training.
+    // Every input is checked as `simulate` checks it, before the net is loaded or trained.
     let physics_name = match net {
         "dolphin" => "dolphin",
         other => motionlab::emulator::catalog::NetModel::ALL
@@ -654,18 +573,6 @@ fn emulate(
     let m = physics::model_by_name(physics_name)
         .ok_or_else(|| anyhow!("unknown model {physics_name}"))?;
     let names = m.state_names();
-    if state.len() != names.len() {
-        bail!(
-            "--state: {net} emulates {physics_name}, which has {} state variables ({}), got {}",
-            names.len(),
-            names.join(", "),
-            state.len()
-        );
-    }
-    let schedule = match controls {
-        Some(p) => Some(Schedule::load(p, &m.control_names())?),
-        None => None,
-    };
     let path = experiments.join("na_table1_structure.toml");
     let file = SpecFile::load(&path)?;
     let mut table = file.raw.params.clone();
@@ -677,36 +584,48 @@ fn emulate(
         .map_err(|e| anyhow!("{}: [params]: {e}", path.display()))?;
     motionlab::experiment::resolve::Validate::validate(&params)
         .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let label = format!("{net} emulates {physics_name}, which");
+    let super_dt = table1_super_dt(&params, file.raw.seed, net, steps)?;
+    let check = |dt: f64| {
+        verbs::check_run(&label, &names, state, duration, "the emulator's step", dt)
+            .map(|n| n.max(1))
+    };
+    check(super_dt)?;
+    let schedule = match controls {
+        Some(p) => Some(Controls::load(p, &m.control_names())?),
+        None => None,
+    };
     eprintln!("{net} N{steps}: loading from the emulator cache, or training (may take minutes)…");
     let e = table1_emulator(&params, file.raw.seed, net, steps)?;
-    let n = ((duration / e.dt()).round() as usize).max(1);
-    let mut csv = String::from("t");
-    for name in &names {
-        csv.push(',');
-        csv.push_str(name);
-    }
-    csv.push('\n');
-    e.rollout(
-        state,
-        n,
-        |t, u| {
-            if let Some(s) = &schedule {
-                u.copy_from_slice(s.at(t));
-            }
-        },
-        |t, x| {
-            csv.push_str(&format!("{t}"));
-            for v in x {
-                csv.push_str(&format!(",{v}"));
-            }
-            csv.push('\n');
-        },
-    )?;
-    match out {
-        Some(p) => motionlab::experiment::output::atomic_write(p, csv.as_bytes())?,
-        None => std::io::stdout().write_all(csv.as_bytes())?,
-    }
+    let n = check(e.dt())?;
+    verbs::write_csv(out, |rows| {
+        rows.header(&names)?;
+        verbs::emulate_rows(&e, state, n, schedule.as_ref(), rows)
+    })?;
     Ok(())
+}
+
+/// The super-step Δt = N δt of Table 1's net `net` at N = `steps`, as [`table1_emulator`] will
+/// build it, known before the net is loaded or trained.
+fn table1_super_dt(params: &Table1Params, seed: u64, net: &str, steps: usize) -> Result<f64> {
+    if net == "dolphin" {
+        let d = params
+            .dolphin
+            .as_ref()
+            .ok_or_else(|| anyhow!("the Table 1 spec has no [params.dolphin]"))?;
+        return Ok(d.spec(seed, steps, params.example_scale).super_dt());
+    }
+    let spec = params
+        .nets
+        .iter()
+        .find(|n| n.model.name() == net)
+        .ok_or_else(|| {
+            anyhow!(
+                "no net `{net}` in the Table 1 spec (nets: {})",
+                EMULATOR_NAMES.join(", ")
+            )
+        })?;
+    Ok(build_spec(seed, spec, steps, params.example_scale, &params.training).super_dt())
 }
 
 fn simulate(
@@ -721,58 +640,21 @@ fn simulate(
     let m: Box<dyn Ode> =
         physics::model_by_name(model).ok_or_else(|| anyhow!("unknown model {model}"))?;
     let names = m.state_names();
-    if state.len() != names.len() {
-        bail!(
-            "--state: {model} has {} state variables ({}), got {}",
-            names.len(),
-            names.join(", "),
-            state.len()
-        );
-    }
-    if !(duration.is_finite() && duration > 0.0) {
-        bail!("--duration must be > 0");
-    }
     let dt = dt.unwrap_or_else(|| m.default_dt());
-    if !(dt.is_finite() && dt > 0.0) {
-        bail!("--dt must be > 0");
-    }
+    let steps = verbs::check_run(model, &names, state, duration, "--dt", dt)?;
     let kind = IntegratorKind::from_name(integrator).ok_or_else(|| {
         anyhow!(
             "--integrator: unknown `{integrator}` (euler, semi_implicit_euler, rk4, dopri5, rk45)"
         )
     })?;
     let schedule = match controls {
-        Some(p) => Some(Schedule::load(p, &m.control_names())?),
+        Some(p) => Some(Controls::load(p, &m.control_names())?),
         None => None,
     };
-    let steps = (duration / dt).round() as usize;
-    let mut csv = String::from("t");
-    for n in &names {
-        csv.push(',');
-        csv.push_str(n);
-    }
-    csv.push('\n');
     let mut sim = physics::Simulator::new(m, kind);
-    sim.rollout(
-        state,
-        dt,
-        steps,
-        |_, t, _, u| {
-            if let Some(s) = &schedule {
-                u.copy_from_slice(s.at(t));
-            }
-        },
-        |_, t, x| {
-            csv.push_str(&format!("{t}"));
-            for v in x {
-                csv.push_str(&format!(",{v}"));
-            }
-            csv.push('\n');
-        },
-    )?;
-    match out {
-        Some(p) => motionlab::experiment::output::atomic_write(p, csv.as_bytes())?,
-        None => std::io::stdout().write_all(csv.as_bytes())?,
-    }
+    verbs::write_csv(out, |rows| {
+        rows.header(&names)?;
+        verbs::simulate_rows(&mut sim, state, dt, steps, schedule.as_ref(), rows)
+    })?;
     Ok(())
 }

@@ -8,3 +8,4 @@ mod na;
 mod shard;
 mod spec_errors;
 mod util;
+mod verbs;

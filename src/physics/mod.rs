@@ -204,19 +204,35 @@ impl<M: Ode> Simulator<M> {
         x0: &[f64],
         dt: f64,
         steps: usize,
-        mut control: impl FnMut(usize, f64, &[f64], &mut [f64]),
+        control: impl FnMut(usize, f64, &[f64], &mut [f64]),
         mut observe: impl FnMut(usize, f64, &[f64]),
     ) -> Result<Vec<f64>, BlowUp> {
+        self.try_rollout(x0, dt, steps, control, |k, t, x| {
+            observe(k, t, x);
+            Ok(())
+        })
+    }
+
+    /// [`Simulator::rollout`] with an observer that may fail (a writer whose reader went away):
+    /// its first error stops the rollout and is returned; a blow-up comes back as `E`.
+    pub fn try_rollout<E: From<BlowUp>>(
+        &mut self,
+        x0: &[f64],
+        dt: f64,
+        steps: usize,
+        mut control: impl FnMut(usize, f64, &[f64], &mut [f64]),
+        mut observe: impl FnMut(usize, f64, &[f64]) -> Result<(), E>,
+    ) -> Result<Vec<f64>, E> {
         let mut x = x0.to_vec();
         let mut u = vec![0.0; self.model.control_dim()];
-        observe(0, 0.0, &x);
+        observe(0, 0.0, &x)?;
         for k in 0..steps {
             let t = k as f64 * dt;
             control(k, t, &x, &mut u);
             self.step(&mut x, &u, dt);
             let t1 = (k + 1) as f64 * dt;
             check_finite(self.model.name(), k, t1, &x)?;
-            observe(k + 1, t1, &x);
+            observe(k + 1, t1, &x)?;
         }
         Ok(x)
     }
