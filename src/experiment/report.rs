@@ -117,8 +117,13 @@ pub fn relative(from: &Path, to: &Path) -> PathBuf {
     r
 }
 
-/// Writes `<out>/REPORT.md` for the given experiments from whatever results exist in `out`.
+/// Writes `<out>/REPORT.md` for the given experiments from whatever results exist in `out`;
+/// refuses, writing nothing, when an experiment's folder holds a run that did not finish
+/// ([`super::folder::check_complete`]).
 pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<PathBuf, Error> {
+    for r in specs {
+        super::folder::check_complete(&out.join(&r.id))?;
+    }
     let mut md = String::new();
     let threads = rayon::current_num_threads();
     let _ = writeln!(md, "# motionlab reproduction report\n");
