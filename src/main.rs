@@ -2,6 +2,7 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
+use motionlab::experiment::folder::check_complete;
 use motionlab::experiment::output::remove_stale_temps;
 use motionlab::experiment::report::write_report;
 use motionlab::experiment::resolve::{resolve, ResolveOptions, Resolved};
@@ -61,6 +62,11 @@ enum Command {
     /// One line per experiment: id, paper item, title.
     List,
     /// Run one experiment by id or path to its TOML file.
+    ///
+    /// Holds <OUT>/<id>/.motionlab.lock while it writes (a shard: its shard folder's), and
+    /// refuses while another run holds it; marks <OUT>/<id>/INCOMPLETE until run.json is
+    /// written, and `reproduce`, `merge` and the report refuse a folder so marked until it is
+    /// rerun.
     Run {
         /// Experiment id (e.g. physics_validation) or path to a .toml file.
         target: String,
@@ -316,18 +322,32 @@ fn spec_path(exp_dir: &Path, target: &str) -> Result<PathBuf> {
     Ok(p)
 }
 
-/// Removes what interrupted runs left half-written in the output folders (temporary files of
-/// atomic writes; see `remove_stale_temps`), saying which.
-fn remove_leftovers(opts: &RunOptions) -> Result<()> {
-    for root in [&opts.out, &opts.figures] {
-        for f in remove_stale_temps(root)? {
-            eprintln!(
-                "removed {} (a temporary file left by an interrupted run)",
-                f.display()
-            );
-        }
+/// Removes what interrupted runs left half-written in the output folders of the experiments
+/// `ids` (temporary files of atomic writes; see `remove_stale_temps`), saying which.
+fn remove_leftovers(opts: &RunOptions, ids: &[String]) -> Result<()> {
+    for f in remove_stale_temps(&opts.out, &opts.figures, ids)? {
+        eprintln!(
+            "removed {} (a temporary file left by an interrupted run)",
+            f.display()
+        );
     }
     Ok(())
+}
+
+/// Refuses, before any work, when the folder of one of `ids` in `out` holds a run that did not
+/// finish (its `INCOMPLETE` marker): the report would read it.
+fn refuse_incomplete<'a>(out: &Path, ids: impl IntoIterator<Item = &'a String>) -> Result<()> {
+    for id in ids {
+        check_complete(&out.join(id))?;
+    }
+    Ok(())
+}
+
+/// Says on stderr what a run did besides its results (a lock taken over, old seeds removed).
+fn say_notes(notes: &[String]) {
+    for n in notes {
+        eprintln!("{n}");
+    }
 }
 
 fn check_jobs(o: &Outputs) -> Result<()> {
@@ -422,8 +442,9 @@ fn dispatch(cli: Cli) -> Result<()> {
                 shard,
                 ..run_options(&outputs, false)
             };
-            remove_leftovers(&opts)?;
+            remove_leftovers(&opts, std::slice::from_ref(&res.id))?;
             let s = run(&res, &opts)?;
+            say_notes(&s.notes);
             let units = if resume || shard.is_some() {
                 format!(" ({} units run, {} resumed)", s.computed, s.reused)
             } else {
@@ -445,8 +466,13 @@ fn dispatch(cli: Cli) -> Result<()> {
             // The report covers every experiment file, as `reproduce` writes it; a bad file
             // stops everything before any work.
             let mut all = resolve_all(&exp_dir, outputs.quick, None)?;
-            remove_leftovers(&opts)?;
+            let others = all.iter().map(|r| &r.id).filter(|id| **id != file.raw.id);
+            refuse_incomplete(&opts.out, others)?;
+            let mut ids: Vec<String> = all.iter().map(|r| r.id.clone()).collect();
+            ids.push(file.raw.id.clone());
+            remove_leftovers(&opts, &ids)?;
             let (s, merged) = merge(&file, &opts, &families::registry())?;
+            say_notes(&s.notes);
             eprintln!(
                 "{}: merged {} units, {} files in {:.2} s -> {}",
                 s.id,
@@ -478,12 +504,20 @@ fn dispatch(cli: Cli) -> Result<()> {
                 }
             }
             let opts = run_options(&outputs, true);
-            remove_leftovers(&opts)?;
+            // The report reads the experiments not rerun as they are.
+            let kept = all
+                .iter()
+                .map(|r| &r.id)
+                .filter(|id| !only.is_empty() && !only.contains(id));
+            refuse_incomplete(&opts.out, kept)?;
+            let ids: Vec<String> = all.iter().map(|r| r.id.clone()).collect();
+            remove_leftovers(&opts, &ids)?;
             for r in all
                 .iter()
                 .filter(|r| only.is_empty() || only.contains(&r.id))
             {
                 let s = run(r, &opts).with_context(|| format!("experiment {}", r.id))?;
+                say_notes(&s.notes);
                 eprintln!("{:<26} {:>8.2} s  {} files", s.id, s.seconds, s.files.len());
             }
             let report = write_report(&opts.out, &opts.figures, &all)?;

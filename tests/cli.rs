@@ -677,9 +677,9 @@ fn a_run_removes_what_an_interrupted_run_left_half_written() {
     // No process has an id above Linux's largest (2²²).
     let stale = [
         dir.path()
-            .join("out/lbc_projection/.projection.tmp-4294967295.csv"),
+            .join("out/lbc_projection/.motionlab-tmp-4294967295-projection.csv"),
         dir.path()
-            .join("figs/.lbc_projection_minima.tmp-4294967295.png"),
+            .join("figs/.motionlab-tmp-4294967295-lbc_projection_minima.png"),
     ];
     let old = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
     for f in &stale {

@@ -19,6 +19,7 @@
 //! functions receive them. To add an experiment family, implement [`Experiment`] (and [`Job`]
 //! for its parameters) in a new file there and list it in [`crate::families`].
 
+pub mod folder;
 pub mod output;
 pub mod plot;
 pub mod report;

@@ -374,11 +374,15 @@ pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), Error> {
     rename_into_place(&tmp, path, written.map_err(io))
 }
 
-/// A temporary sibling of `path` that keeps its extension (`a.png` → `.a.tmp-PID.png`).
+/// The prefix of the name of every temporary file this program writes ([`temp_path`]); the
+/// clean-up of [`remove_stale_temps`] touches no other name.
+pub const TEMP_PREFIX: &str = ".motionlab-tmp-";
+
+/// A temporary sibling of `path` that keeps its name, and so its extension, behind this
+/// program's prefix and process id (`a.png` → `.motionlab-tmp-PID-a.png`).
 pub fn temp_path(path: &Path) -> PathBuf {
-    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("out");
-    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("tmp");
-    path.with_file_name(format!(".{stem}.tmp-{}.{ext}", std::process::id()))
+    let name = path.file_name().and_then(|s| s.to_str()).unwrap_or("out");
+    path.with_file_name(format!("{TEMP_PREFIX}{}-{name}", std::process::id()))
 }
 
 /// Puts the temporary file `tmp` that `made` wrote in its place, `path`, by a rename; when
@@ -397,21 +401,20 @@ pub fn rename_into_place(tmp: &Path, path: &Path, made: Result<(), Error>) -> Re
     placed
 }
 
-/// The process id in the name of a temporary file of [`temp_path`] (`.a.tmp-PID.png`), if
-/// the name is one.
-fn temp_owner(name: &str) -> Option<u32> {
-    let rest = name.strip_prefix('.')?;
-    let (_, after) = rest.rsplit_once(".tmp-")?;
-    let digits = after.split_once('.').map_or(after, |(d, _)| d);
-    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+/// The process id and the final file name in the name of a temporary file of [`temp_path`]
+/// (`.motionlab-tmp-PID-a.png` → `(PID, "a.png")`), if the name is one.
+fn temp_owner(name: &str) -> Option<(u32, &str)> {
+    let rest = name.strip_prefix(TEMP_PREFIX)?;
+    let (digits, target) = rest.split_once('-')?;
+    if digits.is_empty() || target.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
-    digits.parse().ok()
+    Some((digits.parse().ok()?, target))
 }
 
 /// Whether process `pid` is running on this machine: `Some` where the system says (Linux's
 /// `/proc`), `None` where it cannot tell.
-fn process_alive(pid: u32) -> Option<bool> {
+pub fn process_alive(pid: u32) -> Option<bool> {
     if pid == std::process::id() {
         return Some(true);
     }
@@ -425,48 +428,129 @@ fn process_alive(pid: u32) -> Option<bool> {
 /// on other machines writing into a shared folder, whose processes this machine cannot see.
 pub const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(600);
 
-/// Removes the temporary files ([`temp_path`]) under `root` (it and four levels of folders
-/// below, down to a shard's units: `results/<id>/shards/<shard>/units`) that a run left when it was stopped mid-write
-/// (an atomic write's temporary file, never a final one); returns the files removed. A file
-/// counts as left over when nothing has written to it for [`STALE_AFTER`] and the process named
-/// in it is not running on this machine (or the system cannot say). A `root` that does not
-/// exist has none.
-pub fn remove_stale_temps(root: &Path) -> Result<Vec<PathBuf>, Error> {
-    fn sweep(dir: &Path, depth: usize, removed: &mut Vec<PathBuf>) -> Result<(), Error> {
-        let io = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| Error::Io { path, source }
-        };
-        let entries = match std::fs::read_dir(dir) {
-            Ok(entries) => entries,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-            Err(e) => return Err(io(dir)(e)),
-        };
-        let mut entries = entries.collect::<Result<Vec<_>, _>>().map_err(io(dir))?;
-        entries.sort_by_key(|e| e.file_name());
-        for entry in entries {
-            let path = entry.path();
-            // Not followed through links: only the run's own folders.
-            let kind = entry.file_type().map_err(io(&path))?;
-            if kind.is_dir() && depth > 0 {
-                sweep(&path, depth - 1, removed)?;
-            } else if kind.is_file() {
-                let owner = entry.file_name().to_str().and_then(temp_owner);
-                let idle = || {
-                    let modified = entry.metadata().and_then(|m| m.modified());
-                    modified.is_ok_and(|t| t.elapsed().is_ok_and(|age| age >= STALE_AFTER))
-                };
-                if owner.is_some_and(|pid| process_alive(pid) != Some(true)) && idle() {
-                    std::fs::remove_file(&path).map_err(io(&path))?;
-                    removed.push(path);
-                }
-            }
-        }
-        Ok(())
-    }
+/// Removes the temporary files ([`temp_path`]) that runs stopped mid-write left (an atomic
+/// write's temporary file, never a final one) in the folders this program writes, and only
+/// there: `<out>/<id>/` of each experiment id in `ids` with the folders a run makes in it
+/// (`units/`, `seeds/<seed>/`, `shards/<I-of-N>/` and its `units/`), the report's in `out`
+/// itself, and the figures' (`<id>_…`) in `figures`; returns the files removed. Only names with
+/// this program's prefix ([`TEMP_PREFIX`]) count, and one counts as left over when nothing has
+/// written to it for [`STALE_AFTER`] and the process named in it is not running on this machine
+/// (or the system cannot say). Folders that do not exist have none; other folders and files
+/// (a user's `photos/.IMG_0001.tmp-424242.jpg`) are never touched.
+pub fn remove_stale_temps(
+    out: &Path,
+    figures: &Path,
+    ids: &[String],
+) -> Result<Vec<PathBuf>, Error> {
     let mut removed = vec![];
-    sweep(root, 4, &mut removed)?;
+    sweep_temps(out, &|t| t == "REPORT.md", &mut removed)?;
+    let of_an_id = |t: &str| {
+        ids.iter().any(|id| {
+            t.strip_prefix(id.as_str())
+                .is_some_and(|r| r.starts_with('_'))
+        })
+    };
+    sweep_temps(figures, &of_an_id, &mut removed)?;
+    for id in ids {
+        for dir in experiment_folders(&out.join(id))? {
+            sweep_temps(&dir, &|_| true, &mut removed)?;
+        }
+    }
     Ok(removed)
+}
+
+/// The folder of an experiment and the folders a run makes in it: `units/`, `seeds/<seed>/`,
+/// `shards/<I-of-N>/` and `shards/<I-of-N>/units/` (those that exist; links not followed).
+pub fn experiment_folders(dir: &Path) -> Result<Vec<PathBuf>, Error> {
+    let seed = |n: &str| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit());
+    let shard = |n: &str| {
+        n.split_once("-of-")
+            .is_some_and(|(i, k)| seed(i) && seed(k))
+    };
+    if !dir.is_dir() {
+        return Ok(vec![]);
+    }
+    let mut all = vec![dir.to_path_buf()];
+    all.extend(subfolders(dir, &|n| n == "units")?);
+    for seeds in subfolders(dir, &|n| n == "seeds")? {
+        all.extend(subfolders(&seeds, &seed)?);
+    }
+    for shards in subfolders(dir, &|n| n == "shards")? {
+        for one in subfolders(&shards, &shard)? {
+            all.extend(subfolders(&one, &|n| n == "units")?);
+            all.push(one);
+        }
+    }
+    Ok(all)
+}
+
+/// The folders (not links) in `dir` whose names `keep`, sorted; none when `dir` does not exist.
+fn subfolders(dir: &Path, keep: &dyn Fn(&str) -> bool) -> Result<Vec<PathBuf>, Error> {
+    let mut out = vec![];
+    for entry in entries(dir)? {
+        let kind = entry.file_type().map_err(|source| Error::Io {
+            path: entry.path(),
+            source,
+        })?;
+        if kind.is_dir() && entry.file_name().to_str().is_some_and(keep) {
+            out.push(entry.path());
+        }
+    }
+    Ok(out)
+}
+
+/// The entries of `dir`, sorted by name; none when it does not exist or is not a folder.
+fn entries(dir: &Path) -> Result<Vec<std::fs::DirEntry>, Error> {
+    let io = |source| Error::Io {
+        path: dir.to_path_buf(),
+        source,
+    };
+    let entries = match std::fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e)
+            if matches!(
+                e.kind(),
+                std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory
+            ) =>
+        {
+            return Ok(vec![])
+        }
+        Err(e) => return Err(io(e)),
+    };
+    let mut entries = entries.collect::<Result<Vec<_>, _>>().map_err(io)?;
+    entries.sort_by_key(|e| e.file_name());
+    Ok(entries)
+}
+
+/// Removes the stale temporary files directly in `dir` (not below) whose final name `want`s.
+fn sweep_temps(
+    dir: &Path,
+    want: &dyn Fn(&str) -> bool,
+    removed: &mut Vec<PathBuf>,
+) -> Result<(), Error> {
+    for entry in entries(dir)? {
+        let path = entry.path();
+        let io = |source| Error::Io {
+            path: path.clone(),
+            source,
+        };
+        if !entry.file_type().map_err(io)?.is_file() {
+            continue;
+        }
+        let name = entry.file_name();
+        let Some((pid, target)) = name.to_str().and_then(temp_owner) else {
+            continue;
+        };
+        let idle = || {
+            let modified = entry.metadata().and_then(|m| m.modified());
+            modified.is_ok_and(|t| t.elapsed().is_ok_and(|age| age >= STALE_AFTER))
+        };
+        if want(target) && process_alive(pid) != Some(true) && idle() {
+            std::fs::remove_file(&path).map_err(io)?;
+            removed.push(path);
+        }
+    }
+    Ok(())
 }
 
 /// Writes `<dir>/<name>.csv` and `<dir>/<name>.parquet`; returns both paths.
@@ -710,7 +794,7 @@ mod tests {
                     .unwrap()
                     .file_name()
                     .to_string_lossy()
-                    .contains(".tmp-")
+                    .starts_with(TEMP_PREFIX)
             })
             .count();
         assert_eq!(leftovers, 0);
@@ -732,34 +816,59 @@ mod tests {
         assert_eq!(names, ["t.csv"]);
     }
 
-    /// Temporary files of processes that no longer run are removed, in the folder and below
-    /// it; those of a running process (this one), final files and names that merely look alike
-    /// stay.
+    /// Temporary files of processes that no longer run are removed from an experiment's folder
+    /// and the folders a run makes in it, the report's from the results root and the figures'
+    /// from the figures folder; those of a running process (this one), final files, names that
+    /// merely look alike, a user's files of the old `.<name>.tmp-<pid>.<ext>` shape and anything
+    /// in folders that are not an experiment's stay.
     #[test]
     fn stale_temporary_files_are_removed() {
         let dir = tempfile::tempdir().unwrap();
-        let units = dir.path().join("exp").join("units");
-        let shard_units = dir.path().join("exp/shards/1-of-2/units");
-        std::fs::create_dir_all(&units).unwrap();
-        std::fs::create_dir_all(&shard_units).unwrap();
+        let (out, figs) = (dir.path().join("out"), dir.path().join("figs"));
+        let exp = out.join("exp");
+        let units = exp.join("units");
+        let seed = exp.join("seeds/3");
+        let shard = exp.join("shards/1-of-2");
+        let shard_units = shard.join("units");
+        let photos = out.join("photos");
+        let mine = exp.join("mine");
+        for d in [&units, &seed, &shard_units, &photos, &mine, &figs] {
+            std::fs::create_dir_all(d).unwrap();
+        }
         // No process has an id above Linux's largest (2²²): these owners do not run.
         let dead = u32::MAX;
+        let ours = |d: &Path, name: &str| d.join(format!("{TEMP_PREFIX}{dead}-{name}"));
         let stale = [
-            dir.path().join(format!(".fig.tmp-{dead}.png")),
-            units.join(format!(".u0.tmp-{dead}.json")),
-            shard_units.join(format!(".u1.tmp-{dead}.json")),
-            dir.path().join(format!(".a.b.tmp-{dead}.csv")),
+            ours(&figs, "exp_fig.png"),
+            ours(&out, "REPORT.md"),
+            ours(&exp, "a.b.csv"),
+            ours(&units, "u0.json"),
+            ours(&seed, "t.parquet"),
+            ours(&shard, "shard.json"),
+            ours(&shard_units, "u1.json"),
         ];
-        let live = temp_path(&dir.path().join("t.csv"));
+        let live = temp_path(&exp.join("t.csv"));
         let kept = [
             live.clone(),
-            dir.path().join("t.csv"),
-            dir.path().join(".t.tmp-x1.csv"),
-            dir.path().join(format!("t.tmp-{dead}.csv")),
-            dir.path().join(".t.tmp-.csv"),
+            exp.join("t.csv"),
+            exp.join(format!("{TEMP_PREFIX}x1-t.csv")),
+            exp.join(format!("{TEMP_PREFIX}-t.csv")),
+            exp.join(format!("{TEMP_PREFIX}{dead}-")),
+            exp.join(format!("motionlab-tmp-{dead}-t.csv")),
+            // A user's files of the old temporary shape, anywhere.
+            out.join(".IMG_0001.tmp-424242.jpg"),
+            exp.join(format!(".IMG_0001.tmp-{dead}.jpg")),
+            photos.join(".IMG_0001.tmp-424242.jpg"),
+            figs.join(format!(".exp_fig.tmp-{dead}.png")),
+            // Our prefix, but not in a folder of ours or not for a file of ours.
+            ours(&photos, "x.csv"),
+            ours(&mine, "x.csv"),
+            ours(&out, "t.csv"),
+            ours(&figs, "other_fig.png"),
+            ours(&figs, "expfig.png"),
         ];
         // Written just now: a run on another machine may still be writing it.
-        let recent = dir.path().join(format!(".new.tmp-{dead}.csv"));
+        let recent = ours(&exp, "new.csv");
         let old = std::time::SystemTime::now() - STALE_AFTER - STALE_AFTER;
         for f in stale.iter().chain(&kept) {
             std::fs::write(f, b"x").unwrap();
@@ -767,25 +876,36 @@ mod tests {
             file.set_modified(old).unwrap();
         }
         std::fs::write(&recent, b"x").unwrap();
-        let mut removed = remove_stale_temps(dir.path()).unwrap();
+        let ids = ["exp".to_string()];
+        let mut removed = remove_stale_temps(&out, &figs, &ids).unwrap();
         removed.sort();
         let mut want = stale.to_vec();
         want.sort();
         assert_eq!(removed, want);
         assert!(stale.iter().all(|f| !f.exists()));
         let own = temp_owner(live.file_name().unwrap().to_str().unwrap());
-        assert_eq!(own, Some(std::process::id()));
+        assert_eq!(own, Some((std::process::id(), "t.csv")));
         assert!(
             recent.exists(),
             "a temporary file written just now was removed"
         );
-        assert!(
-            kept.iter().all(|f| f.exists()),
-            "a file that is not stale was removed"
-        );
-        assert!(remove_stale_temps(&dir.path().join("none"))
-            .unwrap()
-            .is_empty());
+        for f in &kept {
+            assert!(f.exists(), "{} was removed", f.display());
+        }
+        let none = dir.path().join("none");
+        assert!(remove_stale_temps(&none, &none, &ids).unwrap().is_empty());
+    }
+
+    /// A temporary file keeps the final name's extension (plotters picks the format by it) and
+    /// carries the program's prefix.
+    #[test]
+    fn temporary_names_carry_the_prefix_and_the_extension() {
+        let t = temp_path(Path::new("figs/exp_fig.png"));
+        assert_eq!(t.parent(), Some(Path::new("figs")));
+        assert_eq!(t.extension().unwrap(), "png");
+        let name = t.file_name().unwrap().to_str().unwrap();
+        assert!(name.starts_with(TEMP_PREFIX), "{name}");
+        assert_eq!(temp_owner(name), Some((std::process::id(), "exp_fig.png")));
     }
 
     #[test]

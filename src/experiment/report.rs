@@ -118,10 +118,15 @@ pub fn relative(from: &Path, to: &Path) -> PathBuf {
 }
 
 /// Writes `<out>/REPORT.md` for the given experiments from whatever results exist in `out`.
-/// Results that exist but cannot be read (a table cut short, a cell that is not a number) are
-/// marked "error" in the report, which is still written, and then returned as the error, each
-/// naming its file and line: a verdict is never computed from a partial table.
+/// Refuses, writing nothing, when an experiment's folder holds a run that did not finish
+/// ([`super::folder::check_complete`]). Results that exist but cannot be read (a table cut
+/// short, a cell that is not a number) are marked "error" in the report, which is still
+/// written, and then returned as the error, each naming its file and line: a verdict is never
+/// computed from a partial table.
 pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<PathBuf, Error> {
+    for r in specs {
+        super::folder::check_complete(&out.join(&r.id))?;
+    }
     let mut unreadable: Vec<String> = Vec::new();
     let mut md = String::new();
     let threads = rayon::current_num_threads();

@@ -7,6 +7,7 @@
 //! `--shard I/N` runs a share of the units and [`merge`] joins the shares (see
 //! [`super::shard`]).
 
+use super::folder::{mark_complete, mark_incomplete, FolderLock};
 use super::output::{atomic_write, write_table, Cell, Table, Tables};
 use super::plot::FigureSink;
 use super::resolve::{Resolved, Unit};
@@ -51,6 +52,9 @@ pub struct RunSummary {
     pub computed: usize,
     /// Units loaded from their stored results (`--resume`, `merge`).
     pub reused: usize,
+    /// What the run did besides its results that its user should hear of (a lock taken over,
+    /// an earlier run's seeds removed), one line each.
+    pub notes: Vec<String>,
 }
 
 /// The most worker threads a run may use (`--jobs`): more than any machine's cores, and few
@@ -85,17 +89,22 @@ pub fn git_dirty() -> Option<bool> {
 
 /// Runs the experiment's units (or, with [`RunOptions::shard`], only the shard's), then writes
 /// tables, figures and `run.json` (a shard writes its units and `shard.json` instead; see
-/// [`super::shard`]).
+/// [`super::shard`]). Holds the lock of the folder it writes (`<out>/<id>/`, a shard's own
+/// folder) throughout, and refuses when another run holds it ([`super::folder`]).
 pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
     let t0 = Instant::now();
     check_jobs(opts.jobs)?;
+    let dir = opts.out.join(&res.id);
+    let (_lock, lock_note) = FolderLock::acquire(&match opts.shard {
+        Some(sh) => dir.join("shards").join(sh.dir_name()),
+        None => dir.clone(),
+    })?;
     // Nets used before this run (another experiment's) are not this run's.
     let _ = crate::emulator::cache::take_usage();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.jobs.max(1))
         .build()
         .map_err(|e| Error::Other(format!("thread pool: {e}")))?;
-    let dir = opts.out.join(&res.id);
     let units = res.units();
     let revision = git_revision();
     let dirty = git_dirty();
@@ -186,6 +195,7 @@ pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
             seconds: t0.elapsed().as_secs_f64(),
             computed,
             reused,
+            notes: lock_note.into_iter().collect(),
         });
     }
     let tables = results.into_iter().map(|(_, _, (t, _))| t).collect();
@@ -197,12 +207,15 @@ pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
     let mut s = finish(res, opts, tables, &ctx, provenance, &pool, t0)?;
     s.computed = computed;
     s.reused = reused;
+    if let Some(note) = lock_note {
+        s.notes.insert(0, note);
+    }
     Ok(s)
 }
 
 /// Merges the shards in `<out>/<id>/shards/` (see [`super::shard::read_shards`]) into the tables,
 /// figures and `run.json` of the unsharded run; returns them and the experiment as the shards
-/// resolved it.
+/// resolved it. Holds the lock of `<out>/<id>/` while it writes ([`super::folder`]).
 pub fn merge(
     file: &SpecFile,
     opts: &RunOptions,
@@ -211,6 +224,7 @@ pub fn merge(
     let t0 = Instant::now();
     check_jobs(opts.jobs)?;
     let m = read_shards(file, &opts.out, registry)?;
+    let (_lock, lock_note) = FolderLock::acquire(&opts.out.join(&m.resolved.id))?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.jobs.max(1))
         .build()
@@ -231,6 +245,9 @@ pub fn merge(
     let n = tables.len();
     let mut s = finish(&m.resolved, opts, tables, &ctx, provenance, &pool, t0)?;
     s.reused = n;
+    if let Some(note) = lock_note {
+        s.notes.insert(0, note);
+    }
     Ok((s, m.resolved))
 }
 
@@ -294,7 +311,10 @@ struct Provenance {
 }
 
 /// Concatenates the units' tables (in unit order), writes them, the per-seed tables and seed
-/// summary when seeds are swept, figures and `run.json`.
+/// summary when seeds are swept, figures and `run.json`: between the folder's `INCOMPLETE`
+/// marker, written first, and its removal, last ([`super::folder`]). The tables, summary and
+/// figure of seeds an earlier run had and this one has not are removed
+/// ([`seeds::remove_stale_outputs`]).
 fn finish(
     res: &Resolved,
     opts: &RunOptions,
@@ -316,6 +336,21 @@ fn finish(
         }
     }
     let dir = opts.out.join(&res.id);
+    mark_incomplete(&dir)?;
+    let mut notes = Vec::new();
+    let keep = res.seeds.clone().unwrap_or_default();
+    let stale = seeds::remove_stale_outputs(&dir, &opts.figures, &res.id, &keep)?;
+    if !stale.is_empty() {
+        let named: Vec<String> = stale
+            .iter()
+            .filter(|p| !p.parent().is_some_and(|d| stale.iter().any(|s| s == d)))
+            .map(|p| rel_name(&opts.out, &opts.figures, p))
+            .collect();
+        notes.push(format!(
+            "removed {} (an earlier run's results of seeds this run does not have)",
+            named.join(", ")
+        ));
+    }
     let mut files = Vec::new();
     let tables = Tables(merged);
     // With swept seeds, figures (like the report) show the first seed.
@@ -388,6 +423,7 @@ fn finish(
     let text = serde_json::to_string_pretty(&meta).map_err(|e| Error::Other(e.to_string()))?;
     atomic_write(&run_json, text.as_bytes())?;
     files.push(run_json);
+    mark_complete(&dir)?;
     Ok(RunSummary {
         id: res.id.clone(),
         dir,
@@ -395,6 +431,7 @@ fn finish(
         seconds,
         computed: 0,
         reused: 0,
+        notes,
     })
 }
 

@@ -19,13 +19,89 @@ use super::plot::{Figure, Mark, Panel, Series};
 use super::report::sig;
 use super::Error;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Tables longer than this (rows per seed) are left out of `seed_summary.csv` (ours).
 pub const MAX_ROWS_PER_SEED: usize = 100;
 
 /// The name of the summary table.
 pub const SUMMARY: &str = "seed_summary";
+
+/// Removes what an earlier run over seeds wrote into the experiment folder `dir` (and
+/// `figures`) that the run now writing it does not: the folders `seeds/<seed>/` of seeds not in
+/// `keep` (their tables, `.csv` and `.parquet`, and the folder when nothing else is in it) and,
+/// when `keep` is empty (a run without seeds), `seed_summary.csv`, `seed_summary.parquet`,
+/// the figure `<id>_seeds` (`.png`, `.svg`) and the `seeds/` folder when it is left empty. Other
+/// files stay. Returns what was removed, folders last.
+pub fn remove_stale_outputs(
+    dir: &Path,
+    figures: &Path,
+    id: &str,
+    keep: &[u64],
+) -> Result<Vec<PathBuf>, Error> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| Error::Io { path, source }
+    };
+    let mut removed = Vec::new();
+    let mut remove = |f: PathBuf| -> Result<(), Error> {
+        match std::fs::remove_file(&f) {
+            Ok(()) => {
+                removed.push(f);
+                Ok(())
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+            Err(e) => Err(io(&f)(e)),
+        }
+    };
+    let root = dir.join("seeds");
+    let mut emptied = Vec::new();
+    for folder in super::output::experiment_folders(dir)? {
+        let Some(seed) = folder
+            .strip_prefix(&root)
+            .ok()
+            .and_then(|s| s.to_str())
+            .and_then(|s| s.parse::<u64>().ok())
+        else {
+            continue;
+        };
+        if keep.contains(&seed) {
+            continue;
+        }
+        let mut paths = std::fs::read_dir(&folder)
+            .and_then(|es| {
+                es.map(|e| e.map(|e| e.path()))
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .map_err(io(&folder))?;
+        paths.sort();
+        for path in paths {
+            let table = path
+                .extension()
+                .is_some_and(|e| e == "csv" || e == "parquet");
+            if table && path.is_file() {
+                remove(path)?;
+            }
+        }
+        emptied.push(folder);
+    }
+    if keep.is_empty() {
+        for ext in ["csv", "parquet"] {
+            remove(dir.join(format!("{SUMMARY}.{ext}")))?;
+        }
+        for ext in ["png", "svg"] {
+            remove(figures.join(format!("{id}_seeds.{ext}")))?;
+        }
+        emptied.push(root);
+    }
+    for folder in emptied {
+        // Only when nothing else is in it.
+        if std::fs::remove_dir(&folder).is_ok() {
+            removed.push(folder);
+        }
+    }
+    Ok(removed)
+}
 
 /// The rows of one seed, without the `seed` column.
 pub fn one_seed(tables: &Tables, seed: u64) -> Tables {
@@ -329,6 +405,53 @@ pub fn summary_markdown(dir: &Path) -> Result<String, Error> {
 mod tests {
     use super::*;
     use crate::row;
+
+    /// A rerun with other seeds removes the tables of the seeds it has not; one without seeds
+    /// removes every seed's tables, the summary and the seeds figure; other files stay.
+    #[test]
+    fn outputs_of_seeds_a_run_does_not_have_are_removed() {
+        let d = tempfile::tempdir().unwrap();
+        let (dir, figs) = (d.path().join("out/exp"), d.path().join("figs"));
+        for s in ["3", "5", "7"] {
+            std::fs::create_dir_all(dir.join("seeds").join(s)).unwrap();
+            for f in ["t.csv", "t.parquet"] {
+                std::fs::write(dir.join("seeds").join(s).join(f), "x").unwrap();
+            }
+        }
+        std::fs::create_dir_all(&figs).unwrap();
+        let made = [
+            dir.join("seed_summary.csv"),
+            dir.join("seed_summary.parquet"),
+            figs.join("exp_seeds.png"),
+            figs.join("exp_seeds.svg"),
+        ];
+        let kept = [
+            dir.join("t.csv"),
+            dir.join("seeds/7/notes.txt"),
+            dir.join("seeds/notes.txt"),
+            figs.join("exp_other.png"),
+            figs.join("other_seeds.png"),
+        ];
+        for f in made.iter().chain(&kept) {
+            std::fs::write(f, "x").unwrap();
+        }
+        let removed = remove_stale_outputs(&dir, &figs, "exp", &[3, 5]).unwrap();
+        assert_eq!(
+            removed,
+            [dir.join("seeds/7/t.csv"), dir.join("seeds/7/t.parquet")]
+        );
+        assert!(made.iter().all(|f| f.exists()));
+        let removed = remove_stale_outputs(&dir, &figs, "exp", &[]).unwrap();
+        for f in made {
+            assert!(!f.exists() && removed.contains(&f), "{}", f.display());
+        }
+        for s in ["3", "5"] {
+            assert!(!dir.join("seeds").join(s).exists());
+        }
+        for f in &kept {
+            assert!(f.exists(), "{} was removed", f.display());
+        }
+    }
 
     #[test]
     fn summary_aggregates_aligned_rows_over_seeds() {
