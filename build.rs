@@ -59,8 +59,10 @@ fn main() {
         let path = |args: &[&str]| git(&dir, args).map(|p| dir.join(p));
         let mut watched = vec![];
         if let Some(git_dir) = path(&["rev-parse", "--git-dir"]) {
+            // Not the index: staging changes neither the revision nor whether the compiled
+            // sources differ from it (a change to them reruns this script through `src`), and
+            // any `git status` rewrites the index, which would rebuild the crate each time.
             watched.push(git_dir.join("HEAD"));
-            watched.push(git_dir.join("index"));
         }
         if let Some(common) = path(&["rev-parse", "--git-common-dir"]) {
             if let Some(head_ref) = git(&dir, &["symbolic-ref", "-q", "HEAD"]) {
