@@ -10,20 +10,6 @@ use std::process::Output;
 /// No process has an id above Linux's largest (2²²): a file named for it has no live owner.
 const DEAD: u32 = u32::MAX;
 
-fn fails(out: &Output) -> String {
-    assert!(
-        !out.status.success(),
-        "motionlab should have failed:\nstderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn stderr(out: &Output) -> String {
-    ok(out);
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
 /// `motionlab [--experiments <exp>] <args> --quick --out out --figures <figs>` in `dir`.
 fn cli(dir: &Path, exp: Option<&Path>, args: &[&str], figs: &str) -> Output {
     let mut a: Vec<&str> = Vec::new();

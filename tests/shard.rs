@@ -6,20 +6,6 @@ use crate::util::*;
 use std::path::Path;
 use std::process::Output;
 
-fn fails(out: &Output) -> String {
-    assert!(
-        !out.status.success(),
-        "motionlab should have failed:\nstderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn stderr(out: &Output) -> String {
-    ok(out);
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
 /// `lbc_projection` with a three-point sweep, written to `s.toml` in `dir`.
 fn sweep_spec(dir: &Path, extra: &str) {
     let text = format!(

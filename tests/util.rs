@@ -145,3 +145,19 @@ pub fn quick_reproduction() -> &'static Shared {
     });
     run.as_ref().unwrap_or_else(|e| panic!("{e}"))
 }
+
+/// The stderr of a run that must have failed (panics with it when the run succeeded).
+pub fn fails(out: &Output) -> String {
+    assert!(
+        !out.status.success(),
+        "motionlab should have failed:\nstderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// The stderr of a run that must have succeeded.
+pub fn stderr(out: &Output) -> String {
+    ok(out);
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
