@@ -159,16 +159,6 @@ fn a_run_that_fails_part_way_leaves_a_folder_that_reproduce_and_merge_refuse() {
     assert!(dir.join("out/REPORT.md").is_file());
 }
 
-/// This machine's host name as the lock file records it.
-fn host() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .ok()
-        .or_else(|| std::env::var("HOSTNAME").ok())
-        .map(|h| h.trim().to_string())
-        .filter(|h| !h.is_empty())
-        .unwrap_or_else(|| "unknown".into())
-}
-
 /// Item 4: while another run (here this test's process) holds an experiment folder, a second
 /// run into it refuses before any work, naming the folder and the holder; a lock left by a run
 /// that no longer runs is taken over, saying so; a run releases its lock when it ends, also
@@ -181,7 +171,11 @@ fn a_second_run_into_a_folder_in_use_is_refused() {
     let folder = dir.join("out/lbc_projection");
     let lock = folder.join(".motionlab.lock");
     std::fs::create_dir_all(&folder).unwrap();
-    let held = format!("pid {} host {}\n", std::process::id(), host());
+    let held = format!(
+        "pid {} host {}\n",
+        std::process::id(),
+        motionlab::experiment::folder::host_name()
+    );
     std::fs::write(&lock, &held).unwrap();
     let run = |figs: &str| cli(dir, Some(&exp), &["run", "lbc_projection"], figs);
     let e = fails(&run("figs"));
@@ -207,7 +201,14 @@ fn a_second_run_into_a_folder_in_use_is_refused() {
     let e = fails(&cli(dir, Some(&exp), &["merge", "lbc_projection"], "figs"));
     assert!(e.contains("another motionlab run"), "{e}");
     // The holder is gone (a killed run): its lock is taken over.
-    std::fs::write(&lock, format!("pid {DEAD} host {}\n", host())).unwrap();
+    std::fs::write(
+        &lock,
+        format!(
+            "pid {DEAD} host {}\n",
+            motionlab::experiment::folder::host_name()
+        ),
+    )
+    .unwrap();
     let e = stderr(&run("figs"));
     assert!(
         e.contains("took over") && e.contains(&DEAD.to_string()),

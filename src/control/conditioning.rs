@@ -121,6 +121,19 @@ pub fn weighting_bound(rows: &[Vec<f64>]) -> WeightingBound {
     }
 }
 
+/// The largest eigenvalue of W^½ K W^½, K the Gram matrix of the Jacobian rows `rows` and
+/// `w` one weight per row: the largest terminal Gauss-Newton eigenvalue under those weights.
+pub fn largest_weighted_eigenvalue(rows: &[Vec<f64>], w: &[f64]) -> f64 {
+    let k = gram(rows);
+    let r = k.nrows();
+    nalgebra::DMatrix::from_fn(r, r, |i, j| k[(i, j)] * (w[i] * w[j]).sqrt())
+        .symmetric_eigen()
+        .eigenvalues
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
 /// The Gram matrix K_ij = J_i · J_j of Jacobian rows.
 fn gram(rows: &[Vec<f64>]) -> nalgebra::DMatrix<f64> {
     let r = rows.len();

@@ -28,7 +28,7 @@ pub const INCOMPLETE: &str = "INCOMPLETE";
 
 /// This machine's host name (Linux's `/proc/sys/kernel/hostname`, else `$HOSTNAME`, else
 /// `unknown`).
-fn host_name() -> String {
+pub fn host_name() -> String {
     std::fs::read_to_string("/proc/sys/kernel/hostname")
         .ok()
         .or_else(|| std::env::var("HOSTNAME").ok())

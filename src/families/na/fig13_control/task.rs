@@ -3,6 +3,7 @@
 
 use super::Sweep;
 use crate::control::bptt::{Bounds, Bptt, DifferentiableStep, StepRule};
+use crate::control::conditioning::largest_weighted_eigenvalue;
 use crate::control::objective::{ControlEffort, FinalState, Objective};
 use crate::emulator::catalog::{NetModel, NetSpec};
 use crate::families::na::control_task::{keyed, ControlTask};
@@ -206,6 +207,14 @@ impl Task {
             weights: tol.clone(),
         });
         if t.final_weights == FinalWeights::Sensitivity {
+            // Only independent variables can be weighed by their own sensitivity (the lander's
+            // quaternion scalar part follows the vector part's).
+            if let Some(k) = (0..tol.len()).find(|&k| tol[k] > 0.0 && !vars.contains(&k)) {
+                return Err(format!(
+                    "{}: sensitivity weights weigh independent variables only; state variable {k} has a tolerance but follows the others (give it tolerance 0)",
+                    t.name
+                ));
+            }
             let r = rows(&t)?;
             let mut w = vec![0.0; tol.len()];
             for (row, &k) in r.iter().zip(&vars) {
@@ -218,23 +227,9 @@ impl Task {
                 }
                 w[k] = 1.0 / s;
             }
-            // The lander's quaternion scalar part (weighted but not independent) keeps the
-            // mean of the vector part's weights.
-            for k in 0..w.len() {
-                if tol[k] > 0.0 && !vars.contains(&k) {
-                    let q: Vec<f64> = vars
-                        .iter()
-                        .filter(|&&i| (4..7).contains(&i))
-                        .map(|&i| w[i])
-                        .collect();
-                    w[k] = if q.is_empty() {
-                        0.0
-                    } else {
-                        q.iter().sum::<f64>() / q.len() as f64
-                    };
-                }
-            }
-            let c = largest_eigenvalue(&r, &vars, &tol) / largest_eigenvalue(&r, &vars, &w);
+            let at = |w: &[f64]| -> Vec<f64> { vars.iter().map(|&k| w[k]).collect() };
+            let c = largest_weighted_eigenvalue(&r, &at(&tol))
+                / largest_weighted_eigenvalue(&r, &at(&w));
             w.iter_mut().for_each(|x| *x *= c);
             t.calibration = Some(Calibration { gains, weights: w });
         }
@@ -378,21 +373,6 @@ impl Task {
             .sum();
         (sum / k as f64).sqrt()
     }
-}
-
-/// Largest eigenvalue of K = Σ_k w_k r_k r_kᵀ's final-state form R W Rᵀ (rows `rows` of the
-/// variables `vars`, weights indexed by state variable).
-fn largest_eigenvalue(rows: &[Vec<f64>], vars: &[usize], w: &[f64]) -> f64 {
-    let r = rows.len();
-    let k = nalgebra::DMatrix::from_fn(r, r, |a, b| {
-        let d: f64 = rows[a].iter().zip(&rows[b]).map(|(x, y)| x * y).sum();
-        (w[vars[a]] * w[vars[b]]).sqrt() * d
-    });
-    k.symmetric_eigen()
-        .eigenvalues
-        .iter()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 #[cfg(test)]
@@ -583,8 +563,9 @@ mod tests {
         for d in &diag {
             assert!((d - diag[0]).abs() < 1e-9 * diag[0], "{diag:?}");
         }
-        let top_tol = largest_eigenvalue(&rows, &vars, &tol);
-        let top = largest_eigenvalue(&rows, &vars, &cal.weights);
+        let at = |w: &[f64]| -> Vec<f64> { vars.iter().map(|&k| w[k]).collect() };
+        let top_tol = largest_weighted_eigenvalue(&rows, &at(&tol));
+        let top = largest_weighted_eigenvalue(&rows, &at(&cal.weights));
         assert!((top - top_tol).abs() < 1e-9 * top_tol, "{top} vs {top_tol}");
         assert!(cal.weights[3..].iter().all(|&w| w == 0.0));
         // Box units and tolerance weights: the task as it was.
