@@ -322,7 +322,7 @@ impl EmulatorCache {
         let model = spec.net.model;
         let (n, m) = (model.state_dim(), model.control_dim());
         let rec = read_record(path, &key.to_string(), [n + m, spec.net.hidden, n])?;
-        let mut t = Transforms::unfitted(&model.transform_config(), n, m).ok()?;
+        let mut t = Transforms::unfitted(&spec.net.transform_config(), n, m).ok()?;
         t.input_norm = rec.input_norm;
         t.output_norm = rec.output_norm;
         let emulator = Emulator::new(t, rec.mlp, rec.dt).ok()?;
@@ -408,6 +408,7 @@ mod tests {
                 physical_dt: 0.01,
                 input_noise: None,
                 anchor: false,
+                normalization: Default::default(),
             },
             steps: 10,
             settings: TrainSettings {

@@ -306,6 +306,50 @@ impl NetModel {
         }
     }
 
+    /// Normalization groups of the network's inputs ([local state, controls]) and outputs
+    /// (state change) under `norm` (Appendix A); `None` for per-variable normalization.
+    /// [`Normalization::Quantities`]: one group per physical quantity (the pendulums' angles,
+    /// angular velocities, torques, link forces; the truck's position, heading, velocity, yaw
+    /// rate, drive, steering; the lander's position, attitude quaternion, velocity, body rates,
+    /// thrust, torques), as the dolphin's nets. [`Normalization::StateControl`]: Appendix A's
+    /// letter, one group for the state, one for the controls, one for the external forces.
+    pub fn groups(self, norm: Normalization) -> Option<(Vec<usize>, Vec<usize>)> {
+        let n = self.state_dim();
+        let (state, controls): (Vec<usize>, Vec<usize>) = match norm {
+            Normalization::Variable => return None,
+            Normalization::StateControl => (
+                vec![0; n],
+                match self {
+                    Self::PendulumExt => vec![1, 1, 1, 2, 2, 2],
+                    _ => vec![1; self.control_dim()],
+                },
+            ),
+            Normalization::Quantities => match self {
+                Self::PendulumPassive => (vec![0, 0, 0, 1, 1, 1], vec![]),
+                Self::PendulumActive => (vec![0, 0, 0, 1, 1, 1], vec![2, 2, 2]),
+                Self::PendulumExt => (vec![0, 0, 0, 1, 1, 1], vec![2, 2, 2, 3, 3, 3]),
+                Self::Truck => (vec![0, 0, 1, 2, 2, 3], vec![4, 5]),
+                Self::Lander => (
+                    vec![0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 3, 3, 3],
+                    vec![4, 5, 5, 5],
+                ),
+            },
+        };
+        let inputs = state.iter().chain(&controls).copied().collect();
+        Some((inputs, state))
+    }
+
+    /// The transforms of §3.2–3.3 with the normalization `norm`: state change and normalization
+    /// for all; the local frame for the truck (planar) and the lander (spatial).
+    pub fn transform_config_with(self, norm: Normalization) -> TransformConfig {
+        let mut c = self.transform_config();
+        if let Some((inputs, outputs)) = self.groups(norm) {
+            c.input_groups = Some(inputs);
+            c.output_groups = Some(outputs);
+        }
+        c
+    }
+
     /// The transforms of §3.2–3.3: state change and per-variable normalization for all; the
     /// local frame for the truck (planar) and the lander (spatial).
     pub fn transform_config(self) -> TransformConfig {
@@ -339,6 +383,39 @@ pub enum TrainMethod {
     Momentum,
 }
 
+/// How a net's inputs and outputs are normalized (NeuroAnimator Appendix A; see
+/// [`NetModel::groups`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Normalization {
+    /// Each variable its own mean and deviation (ours, the catalog nets' first setting).
+    #[default]
+    Variable,
+    /// One group per physical quantity, as the dolphin's nets (our reading of Appendix A).
+    Quantities,
+    /// Appendix A's letter: one group for all state variables, one for the controls, one for
+    /// the external forces.
+    StateControl,
+}
+
+impl Normalization {
+    /// Every normalization, in `normalization.csv` order.
+    pub const ALL: [Normalization; 3] = [Self::Variable, Self::Quantities, Self::StateControl];
+
+    /// Its name in experiment files and tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Variable => "variable",
+            Self::Quantities => "quantities",
+            Self::StateControl => "state_control",
+        }
+    }
+
+    fn is_variable(&self) -> bool {
+        *self == Self::Variable
+    }
+}
+
 /// One emulator network to build: model, super timestep, size, data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -362,6 +439,17 @@ pub struct NetSpec {
     /// False (the default, left out of cache keys) is the paper's free net.
     #[serde(default, skip_serializing_if = "is_false")]
     pub anchor: bool,
+    /// Normalization of its inputs and outputs ([`Normalization`]); per variable (the default)
+    /// is left out of cache keys.
+    #[serde(default, skip_serializing_if = "Normalization::is_variable")]
+    pub normalization: Normalization,
+}
+
+impl NetSpec {
+    /// The transforms this net is built with: its model's, normalized as `normalization` says.
+    pub fn transform_config(&self) -> TransformConfig {
+        self.model.transform_config_with(self.normalization)
+    }
 }
 
 fn is_false(v: &bool) -> bool {
@@ -788,7 +876,7 @@ pub fn training_data(spec: &BuildSpec) -> Result<TrainingData, BuildError> {
         &mut stream(2),
     )?
     .transitions;
-    let transforms = Transforms::fit(&model.transform_config(), &train)?;
+    let transforms = Transforms::fit(&spec.net.transform_config(), &train)?;
     let (clean_ds, held_ds) = (transforms.encode(&train), transforms.encode(&held));
     let train_ds = noisy(
         &transforms,
@@ -941,6 +1029,7 @@ mod tests {
                 physical_dt: 0.01,
                 input_noise: None,
                 anchor: false,
+                normalization: Default::default(),
             },
             steps,
             settings: TrainSettings {
@@ -1044,6 +1133,78 @@ mod tests {
                 assert_eq!(data.next_states[[r, k]], 0.0, "row {r}");
             }
         }
+    }
+
+    /// Every normalization's groups cover the net's inputs and outputs; quantity groups share
+    /// one mean and deviation within a group and differ from per-variable statistics where a
+    /// group pools variables; per variable is left out of the serialized spec (so the cache
+    /// keys of the nets built before the field existed do not change).
+    #[test]
+    fn normalization_groups_cover_the_nets_and_pool_their_members() {
+        for model in NetModel::ALL {
+            let (n, m) = (model.state_dim(), model.control_dim());
+            assert!(model.groups(Normalization::Variable).is_none());
+            for norm in [Normalization::Quantities, Normalization::StateControl] {
+                let (inputs, outputs) = model.groups(norm).expect("grouped");
+                assert_eq!(
+                    (inputs.len(), outputs.len()),
+                    (n + m, n),
+                    "{model:?} {norm:?}"
+                );
+                assert_eq!(&inputs[..n], &outputs[..], "{model:?} {norm:?}");
+                // Controls never share a group with the state.
+                assert!(inputs[n..].iter().all(|g| !outputs.contains(g)));
+            }
+        }
+        let model = NetModel::Lander;
+        let spec = |normalization| BuildSpec {
+            net: NetSpec {
+                model,
+                hidden: 4,
+                examples: 200,
+                method: TrainMethod::Lbfgs,
+                physical_dt: 0.01,
+                input_noise: None,
+                anchor: false,
+                normalization,
+            },
+            steps: 5,
+            settings: TrainSettings {
+                held_out_fraction: 0.25,
+                cg_max_iters: 1,
+                max_epochs: 1,
+                patience: 1,
+                min_improvement: 0.001,
+                learning_rate: 0.05,
+                momentum: 0.9,
+                batch_size: 30,
+                input_noise: 0.0,
+                rollout_k: 0,
+                rollout_weight: 0.0,
+                rollout_iters: 0,
+            },
+            seed: 3,
+        };
+        let json = serde_json::to_string(&spec(Normalization::Variable).net).unwrap();
+        assert!(!json.contains("normalization"), "{json}");
+        let t = training_data(&spec(Normalization::Quantities))
+            .unwrap()
+            .transforms;
+        let per_var = training_data(&spec(Normalization::Variable))
+            .unwrap()
+            .transforms;
+        let (inputs, _) = model.groups(Normalization::Quantities).unwrap();
+        for (a, b) in (0..inputs.len()).flat_map(|a| (0..inputs.len()).map(move |b| (a, b))) {
+            if inputs[a] == inputs[b] {
+                assert_eq!(t.input_norm.std[a], t.input_norm.std[b], "inputs {a}, {b}");
+                assert_eq!(
+                    t.input_norm.mean[a], t.input_norm.mean[b],
+                    "inputs {a}, {b}"
+                );
+            }
+        }
+        // The velocity group (world velocity in the heading frame: 7..10) pools three spreads.
+        assert!((7..10).any(|k| t.input_norm.std[k] != per_var.input_norm.std[k]));
     }
 
     #[test]

@@ -533,6 +533,7 @@ mod tests {
                 physical_dt: 0.002,
                 input_noise: None,
                 anchor: false,
+                normalization: Default::default(),
             },
             steps: 25,
             settings: TrainSettings {

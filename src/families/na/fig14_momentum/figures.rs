@@ -107,6 +107,47 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             },
         );
     }
-    let cols = panels.len();
+    // The same sweep with the knots free of the actuators' boxes (ours, issue 54: the boxes
+    // can hide divergence above the stability limit), the start's J drawn as the rule's line.
+    if let Some(ut) = tables.get("unclipped_objective").filter(|t| !t.is_empty()) {
+        let (um, ue, ui, uo) = (
+            ut.strs("method"),
+            ut.f64s("eta"),
+            ut.f64s("iteration"),
+            ut.f64s("objective"),
+        );
+        let mut series: Vec<Series> = plain_eta
+            .iter()
+            .enumerate()
+            .map(|(i, &e)| {
+                let pts = (0..um.len())
+                    .filter(|&r| um[r] == "plain" && ue[r] == e)
+                    .map(|r| (ui[r], uo[r]))
+                    .collect();
+                Series::line(format!("eta {e}"), pts, i)
+            })
+            .collect();
+        let start = (0..um.len()).find(|&r| ui[r] == 0.0).map(|r| uo[r]);
+        let last = ui.iter().copied().fold(0.0, f64::max);
+        if let Some(j0) = start {
+            series.push(
+                Series::line(
+                    "start's J (diverged if the last J ends above)".to_string(),
+                    vec![(0.0, j0), (last, j0)],
+                    plain_eta.len(),
+                )
+                .mark(Mark::Dashed),
+            );
+        }
+        panels.push(Panel {
+            title: "plain descent, knots not clipped to the boxes (ours)".into(),
+            x_label: "iteration".into(),
+            y_label: "objective J".into(),
+            log_y: true,
+            series,
+            ..Panel::default()
+        });
+    }
+    let cols = panels.len().min(2);
     fig.draw("objective", &Figure::grid(panels, cols))
 }

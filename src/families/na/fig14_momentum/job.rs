@@ -106,6 +106,9 @@ impl Job for Params {
         // and without (ours, issue 54): whether plain descent above its stability limit
         // diverges once the boxes no longer hide it.
         let mut unclipped_t = Table::new(&UNCLIPPED_COLUMNS);
+        // The unclipped descents' objective per iteration (the figure's unclipped panel).
+        let mut unclipped_objective =
+            Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
         let compared = self.compared();
         let descents = self.descents();
         let pb = ctx.progress(descents.len() as u64, "control learning");
@@ -162,6 +165,15 @@ impl Job for Params {
         for d in &descents {
             let (r, _) = self.descend(ctx, &mut free, d, sim.as_mut(), &x0, "unclipped ");
             unclipped_t.push(unclipped_row(d, false, &r));
+            for t in &r.trace {
+                unclipped_objective.push(row![
+                    method(d),
+                    d.eta(),
+                    d.alpha(),
+                    t.iteration as i64,
+                    t.objective
+                ]);
+            }
         }
         self.converged_rows(
             ctx,
@@ -287,6 +299,7 @@ impl Job for Params {
             ("momentum_dagger_rounds", chain_rounds),
             ("converged", converged_t),
             ("unclipped", unclipped_t),
+            ("unclipped_objective", unclipped_objective),
         ]))
     }
 }

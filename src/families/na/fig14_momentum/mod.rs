@@ -31,6 +31,9 @@
 //! the physical simulator; the gap is |s_emulated − s_simulated| at the end. `trajectory`
 //! (method, eta, step, t, source, x, y, z, vz, tilt): every run's states at the emulator step
 //! times, emulated and simulated (tilt: angle of the thrust axis from vertical, rad).
+//! `unclipped` (job.rs, `UNCLIPPED_COLUMNS`) and `unclipped_objective` (method, eta, alpha,
+//! iteration, objective): every descent again with its knots free of the actuators' boxes
+//! (ours, issue 54), drawn as the figure's last panel.
 //!
 //! **Through the DAgger net (ours, issue 11).** With `[params.dagger]`, momentum and plain
 //! descent (same η, α, iterations) also learn through the lander's final-round DAgger net of

@@ -245,6 +245,7 @@ impl Job for Params {
             }
             pb.inc(1);
         }
+        let normalization = self.normalization_table(ctx, &specs)?;
         if let Some(d) = &self.dolphin {
             let spec = d.spec(ctx.seed, self.steps, self.example_scale);
             let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
@@ -326,6 +327,65 @@ impl Job for Params {
             ("drift", drift),
             ("rollout_training", rollout_training),
             ("global_error", global_error),
+            ("normalization", normalization),
         ]))
+    }
+}
+
+impl Params {
+    /// `normalization.csv`: every catalog net of `specs` built under each of
+    /// `self.normalizations` (the ones not already built, side by side, cached) and rolled out
+    /// beside the simulator as `rollout.csv` is.
+    fn normalization_table(&self, ctx: &RunContext, specs: &[BuildSpec]) -> Result<Table, Error> {
+        let mut table = Table::new(&[
+            "net",
+            "normalization",
+            "in_spec",
+            "rollout1_error",
+            "rollout40_error_mean",
+            "rollout40_error_final",
+            "train_s",
+            "cached",
+        ]);
+        if self.normalizations.is_empty() {
+            return Ok(table);
+        }
+        let variants: Vec<BuildSpec> = specs
+            .iter()
+            .flat_map(|s| {
+                self.normalizations.iter().map(move |&n| {
+                    let mut v = s.clone();
+                    v.net.normalization = n;
+                    v
+                })
+            })
+            .collect();
+        let built = ctx.stage("train normalization variants (side by side)", || {
+            build_emulators(&variants)
+        })?;
+        for (spec, t) in variants.iter().zip(&built) {
+            let errors = ctx.stage(
+                &format!(
+                    "rollouts {} ({})",
+                    spec.net.model.name(),
+                    spec.net.normalization.name()
+                ),
+                || rollout_error(&t.emulator, spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other),
+            )?;
+            let in_spec = specs
+                .iter()
+                .any(|s| s.net.model == spec.net.model && s.net == spec.net);
+            table.push(row![
+                spec.net.model.name(),
+                spec.net.normalization.name(),
+                i64::from(in_spec),
+                errors[0],
+                errors.iter().sum::<f64>() / errors.len() as f64,
+                errors[errors.len() - 1],
+                t.train_s,
+                i64::from(t.from_cache)
+            ]);
+        }
+        Ok(table)
     }
 }

@@ -19,7 +19,10 @@
 //! column then ends with `; rollout: <its stop reason>`), and for the dolphin `global_error`
 //! (segment, quantity, component, heldout_mse, target_variance: the global net's held-out
 //! one-step error per output, whose mean is its `heldout_error`, and the variance of that
-//! output's target).
+//! output's target), and when `normalizations` is set `normalization` (net, normalization,
+//! in_spec, rollout1_error, rollout40_error_mean, rollout40_error_final, train_s, cached: every
+//! catalog net built under each normalization and rolled out as in `rollout`; in_spec = 1 on the
+//! net's own, [`normalization_pick`] the rule that chose it).
 //!
 //! Here: the parameters and their validation, and the family; `nets` builds the Table 1
 //! networks (also for the other NeuroAnimator experiments and `motionlab emulate`), `job` trains
@@ -37,7 +40,7 @@ pub use nets::{
 };
 
 use crate::emulator::cache::fnv1a;
-use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
+use crate::emulator::catalog::{NetModel, NetSpec, Normalization, TrainSettings};
 use crate::emulator::hierarchy::{HierarchyNet, HierarchySpec};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
@@ -69,6 +72,40 @@ pub struct Params {
     /// Neutral-control drift checks from the control tasks' starts (`drift.csv`).
     #[serde(default)]
     pub drift: Vec<DriftTask>,
+    /// Normalizations (Appendix A) under which every catalog net is also built and rolled out
+    /// (`normalization.csv`; the net's own is reused): how each net's `normalization` was
+    /// chosen, [`normalization_pick`]. Empty: no comparison.
+    #[serde(default)]
+    pub normalizations: Vec<Normalization>,
+}
+
+/// Relative margin within which a grouped normalization is preferred to a lower-error one
+/// (ours; `experiments/na_table1_structure.toml` states the rule).
+pub const NORMALIZATION_MARGIN: f64 = 0.10;
+
+/// The normalization the spec's rule picks from `(normalization, mean 40-step rollout error)`
+/// rows of one net: among those within [`NORMALIZATION_MARGIN`] of the lowest error, the first
+/// in the order quantity groups, Appendix A's state/control groups, per variable (Appendix A
+/// prescribes groups). `None` when no row has a finite error.
+pub fn normalization_pick(rows: &[(Normalization, f64)]) -> Option<Normalization> {
+    let best = rows
+        .iter()
+        .map(|r| r.1)
+        .filter(|e| e.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    if !best.is_finite() {
+        return None;
+    }
+    [
+        Normalization::Quantities,
+        Normalization::StateControl,
+        Normalization::Variable,
+    ]
+    .into_iter()
+    .find(|n| {
+        rows.iter()
+            .any(|r| r.0 == *n && r.1 <= best * (1.0 + NORMALIZATION_MARGIN))
+    })
 }
 
 /// A drift check: from a control task's start, `ROLLOUT_STEPS` super-steps of a neutral control
@@ -266,6 +303,13 @@ impl Validate for Params {
                 &format!("needs {} values (or none)", m.control_dim()),
             )?;
         }
+        for (i, n) in self.normalizations.iter().enumerate() {
+            ensure(
+                !self.normalizations[..i].contains(n),
+                &format!("normalizations[{i}]"),
+                "is listed twice",
+            )?;
+        }
         validate_training(&self.training)
     }
 }
@@ -280,5 +324,84 @@ impl Family for NaStructure {
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
         report::findings(dir)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use Normalization::{Quantities, StateControl, Variable};
+
+    /// The spec's rule: groups win within 10% of the lowest mean 40-step error, quantity groups
+    /// first; per variable only when every grouping is clearly worse; no pick without a finite
+    /// error.
+    #[test]
+    fn normalization_pick_prefers_groups_within_the_margin() {
+        let pick = |v: f64, q: f64, s: f64| {
+            normalization_pick(&[(Variable, v), (Quantities, q), (StateControl, s)])
+        };
+        assert_eq!(pick(1.0, 1.09, 2.0), Some(Quantities));
+        assert_eq!(pick(1.0, 1.2, 1.05), Some(StateControl));
+        assert_eq!(pick(1.0, 1.2, 1.3), Some(Variable));
+        assert_eq!(pick(1.5, 1.0, 1.0), Some(Quantities));
+        assert_eq!(pick(1.0, f64::NAN, 5.0), Some(Variable));
+        assert_eq!(pick(f64::NAN, f64::NAN, f64::INFINITY), None);
+    }
+
+    /// Every net of the shipped spec carries the normalization the rule picked from the
+    /// committed comparison, and every NeuroAnimator spec builds each model with the same one
+    /// (so they share the cached net).
+    #[test]
+    fn shipped_nets_carry_the_rules_pick() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let csv = root.join("results/na_table1_structure/normalization.csv");
+        let text = std::fs::read_to_string(&csv).expect("committed normalization.csv");
+        let mut rows: Vec<(String, Normalization, f64, bool)> = Vec::new();
+        for line in text.lines().skip(1) {
+            let f: Vec<&str> = line.split(',').collect();
+            let norm = Normalization::ALL
+                .into_iter()
+                .find(|n| n.name() == f[1])
+                .expect("known normalization");
+            rows.push((f[0].to_string(), norm, f[4].parse().unwrap(), f[2] == "1"));
+        }
+        assert!(!rows.is_empty());
+        let spec =
+            std::fs::read_to_string(root.join("experiments/na_table1_structure.toml")).unwrap();
+        let value: toml::Value = toml::from_str(&spec).unwrap();
+        let nets: Vec<NetSpec> = value["params"]["nets"]
+            .clone()
+            .try_into()
+            .expect("nets parse");
+        for net in &nets {
+            let these: Vec<(Normalization, f64)> = rows
+                .iter()
+                .filter(|r| r.0 == net.model.name())
+                .map(|r| (r.1, r.2))
+                .collect();
+            assert_eq!(
+                normalization_pick(&these),
+                Some(net.normalization),
+                "{}",
+                net.model.name()
+            );
+        }
+        for entry in std::fs::read_dir(root.join("experiments")).unwrap() {
+            let path = entry.unwrap().path();
+            let text = std::fs::read_to_string(&path).unwrap();
+            for net in &nets {
+                let needle = format!("model = \"{}\"", net.model.name());
+                for line in text.lines().filter(|l| l.contains(&needle)) {
+                    let want = format!("normalization = \"{}\"", net.normalization.name());
+                    let grouped = net.normalization != Normalization::Variable;
+                    assert_eq!(
+                        line.contains(&want) || (!grouped && !line.contains("normalization")),
+                        true,
+                        "{}: {line}",
+                        path.display()
+                    );
+                }
+            }
+        }
     }
 }

@@ -1,6 +1,7 @@
 //! The report: Table 1 as measured, the drift checks and the dolphin's global-net error by
 //! segment, and the verdict rule (learned, not overfitted, faithful over 40 super-steps).
 
+use crate::emulator::catalog::Normalization;
 use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::Error;
@@ -88,6 +89,10 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
             ));
         }
     }
+    let norm_path = dir.join("normalization.csv");
+    if norm_path.exists() {
+        md.push_str(&normalization_section(&norm_path)?);
+    }
     let ge_path = dir.join("global_error.csv");
     if ge_path.exists() {
         let df = read_csv(&ge_path)?;
@@ -129,4 +134,88 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
                 net.len()
             ),
         })
+}
+
+/// The normalization comparison (`normalization.csv`): every catalog net under each
+/// normalization, and whether the net's own is the one the spec's rule picks
+/// ([`super::normalization_pick`]).
+fn normalization_section(path: &Path) -> Result<String, Error> {
+    let df = read_csv(path)?;
+    let (net, norm) = (df_str(&df, "net")?, df_str(&df, "normalization")?);
+    if net.is_empty() {
+        return Ok(String::new());
+    }
+    let in_spec = df_f64(&df, "in_spec")?;
+    let (one, mean, last) = (
+        df_f64(&df, "rollout1_error")?,
+        df_f64(&df, "rollout40_error_mean")?,
+        df_f64(&df, "rollout40_error_final")?,
+    );
+    fn label(n: &str) -> &str {
+        match n {
+            "variable" => "per variable",
+            "quantities" => "by physical quantity",
+            "state_control" => "state / control / force (Appendix A's letter)",
+            other => other,
+        }
+    }
+    let mut md = String::from("\nNormalization (Appendix A; `normalization.csv`): every catalog net also built under each normalization, same data, seed and training, and rolled out beside the simulator as above. Rule (ours, in the spec before the comparison's first run): among the normalizations whose mean 40-step rollout error is within 10% of the lowest, the first of by quantity, Appendix A's state/control, per variable.\n\n| net | normalization | used by the nets above | 1-step rollout error | 40-step rollout error, mean / final |\n| --- | --- | --- | --- | --- |\n");
+    let mut nets: Vec<&str> = Vec::new();
+    for r in 0..net.len() {
+        if !nets.contains(&net[r].as_str()) {
+            nets.push(&net[r]);
+        }
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} / {} |\n",
+            net[r],
+            label(&norm[r]),
+            if in_spec[r] > 0.5 { "yes" } else { "no" },
+            sig(one[r]),
+            sig(mean[r]),
+            sig(last[r])
+        ));
+    }
+    let parse = |n: &str| Normalization::ALL.into_iter().find(|x| x.name() == n);
+    let mut agree = Vec::new();
+    let mut disagree = Vec::new();
+    for n in nets {
+        let rows: Vec<(Normalization, f64)> = (0..net.len())
+            .filter(|&r| net[r] == n)
+            .filter_map(|r| parse(&norm[r]).map(|x| (x, mean[r])))
+            .collect();
+        let pick = super::normalization_pick(&rows);
+        let used = (0..net.len())
+            .find(|&r| net[r] == n && in_spec[r] > 0.5)
+            .and_then(|r| parse(&norm[r]));
+        let text = format!(
+            "{n}: {}",
+            pick.map_or("none (no finite error)", |p| label(p.name()))
+        );
+        if pick.is_some() && pick == used {
+            agree.push(text);
+        } else {
+            disagree.push(format!(
+                "{text}, but the spec uses {}",
+                used.map_or("none", |u| label(u.name()))
+            ));
+        }
+    }
+    md.push_str(&format!(
+        "\nThe rule picks, per net: {}.",
+        agree
+            .iter()
+            .chain(&disagree)
+            .cloned()
+            .collect::<Vec<_>>()
+            .join("; ")
+    ));
+    if disagree.is_empty() {
+        md.push_str(" Every net above is built with its pick.\n");
+    } else {
+        md.push_str(&format!(
+            " **{} net(s) are not built with the rule's pick** (the spec needs updating).\n",
+            disagree.len()
+        ));
+    }
+    Ok(md)
 }
