@@ -133,9 +133,23 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
     }
     figure_exists(&d, "na_table1_structure_training");
     figure_exists(&d, "na_table1_structure_rollout");
-    // The networks were cached in the working directory; a rerun loads them.
+    // Every catalog net under each of the three normalizations, its own marked in_spec.
+    let norm = rows(&out.join("normalization.csv"));
+    assert_eq!(norm.len(), 15);
+    for net in [
+        "pendulum_passive",
+        "pendulum_active",
+        "pendulum_ext",
+        "lander",
+        "truck",
+    ] {
+        let own: Vec<_> = norm.iter().filter(|c| c[0] == net && c[2] == "1").collect();
+        assert_eq!(own.len(), 1, "{net}");
+    }
+    // The networks were cached in the working directory; a rerun loads them: the 12 Table 1
+    // nets and the 10 other normalizations of the 5 catalog nets.
     let cache = d.path().join("target/motionlab-cache");
-    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 12);
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 22);
     ok(&motionlab(
         d.path(),
         &[
@@ -155,7 +169,8 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
         assert_eq!(a[..7], b[..7], "cached nets give the same errors");
         assert_eq!(b[11], "1", "{b:?} was retrained");
     }
-    // run.json says what the wall time includes: 12 nets trained, then 12 loaded.
+    // run.json says what the wall time includes: 12 nets and 10 other normalizations trained
+    // (each counted once), then all 22 loaded.
     let nets = |dir: &str| -> serde_json::Value {
         let p = d.path().join(dir).join("na_table1_structure/run.json");
         let v: serde_json::Value =
@@ -163,10 +178,10 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
         v["emulator_nets"].clone()
     };
     let (first, second) = (nets("out"), nets("out2"));
-    assert_eq!(first["trained"], 12, "{first}");
+    assert_eq!(first["trained"], 22, "{first}");
     assert_eq!(first["loaded_from_cache"], 0, "{first}");
     assert_eq!(second["trained"], 0, "{second}");
-    assert_eq!(second["loaded_from_cache"], 12, "{second}");
+    assert_eq!(second["loaded_from_cache"], 22, "{second}");
     assert!(second["cached_training_seconds"].as_f64().unwrap() > 0.0);
 }
 

@@ -388,6 +388,9 @@ mod tests {
         }
         for entry in std::fs::read_dir(root.join("experiments")).unwrap() {
             let path = entry.unwrap().path();
+            if path.extension().and_then(|e| e.to_str()) != Some("toml") {
+                continue;
+            }
             let text = std::fs::read_to_string(&path).unwrap();
             for net in &nets {
                 let needle = format!("model = \"{}\"", net.model.name());
