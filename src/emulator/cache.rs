@@ -411,20 +411,7 @@ mod tests {
                 normalization: Default::default(),
             },
             steps: 10,
-            settings: TrainSettings {
-                held_out_fraction: 0.25,
-                cg_max_iters: 20,
-                max_epochs: 10,
-                patience: 5,
-                min_improvement: 1e-3,
-                learning_rate: 0.05,
-                momentum: 0.9,
-                batch_size: 30,
-                input_noise: 0.0,
-                rollout_k: 0,
-                rollout_weight: 0.0,
-                rollout_iters: 0,
-            },
+            settings: TrainSettings::for_tests(20, 10, 5),
             seed: 7,
         }
     }

@@ -416,6 +416,28 @@ impl Normalization {
     }
 }
 
+#[cfg(test)]
+impl TrainSettings {
+    /// Test settings: plain one-step training (no noise, no rollout fine-tuning) with the
+    /// given iteration limits and patience, the other settings at the specs' values.
+    pub(crate) fn for_tests(cg_max_iters: u64, max_epochs: usize, patience: usize) -> Self {
+        Self {
+            held_out_fraction: 0.25,
+            cg_max_iters,
+            max_epochs,
+            patience,
+            min_improvement: 0.001,
+            learning_rate: 0.05,
+            momentum: 0.9,
+            batch_size: 30,
+            input_noise: 0.0,
+            rollout_k: 0,
+            rollout_weight: 0.0,
+            rollout_iters: 0,
+        }
+    }
+}
+
 /// One emulator network to build: model, super timestep, size, data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -1169,20 +1191,7 @@ mod tests {
                 normalization,
             },
             steps: 5,
-            settings: TrainSettings {
-                held_out_fraction: 0.25,
-                cg_max_iters: 1,
-                max_epochs: 1,
-                patience: 1,
-                min_improvement: 0.001,
-                learning_rate: 0.05,
-                momentum: 0.9,
-                batch_size: 30,
-                input_noise: 0.0,
-                rollout_k: 0,
-                rollout_weight: 0.0,
-                rollout_iters: 0,
-            },
+            settings: TrainSettings::for_tests(1, 1, 1),
             seed: 3,
         };
         let json = serde_json::to_string(&spec(Normalization::Variable).net).unwrap();

@@ -111,20 +111,7 @@ mod fixtures {
             },
             physical_dt: 0.002,
             steps: 10,
-            settings: TrainSettings {
-                held_out_fraction: 0.25,
-                cg_max_iters: 5,
-                max_epochs: 2,
-                patience: 3,
-                min_improvement: 0.001,
-                learning_rate: 0.05,
-                momentum: 0.9,
-                batch_size: 30,
-                input_noise: 0.0,
-                rollout_k: 0,
-                rollout_weight: 0.0,
-                rollout_iters: 0,
-            },
+            settings: TrainSettings::for_tests(5, 2, 3),
             seed: 3,
         }
     }
