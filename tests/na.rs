@@ -684,6 +684,7 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         ("truck", 15),
         ("lander", 15),
         ("dolphin", 20),
+        ("dolphin_4s", 20),
         ("pendulum_4s", 20),
         ("truck_rest", 15),
         ("lander_13", 15),
@@ -699,10 +700,11 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         assert!(best < js[0], "{task}: no descent {js:?}");
     }
     let f = rows(&out.join("final.csv"));
-    assert_eq!(f.len(), 7);
+    assert_eq!(f.len(), 8);
     // Our earlier formulations are labelled as ours; every other line is the paper's.
     for c in &f {
-        let ours = ["pendulum_4s", "truck_rest", "lander_13"].contains(&c[0].as_str());
+        let ours =
+            ["pendulum_4s", "truck_rest", "lander_13", "dolphin_4s"].contains(&c[0].as_str());
         let want = if ours { "ours" } else { "paper" };
         assert_eq!(c[4], want, "{c:?}");
     }

@@ -138,6 +138,7 @@ impl Params {
                     rollout_k: d.rollout_k,
                     rollout_weight: d.rollout_weight,
                 }),
+                ours_swim: None,
             }),
             sweep: None,
             physics_sweep: None,

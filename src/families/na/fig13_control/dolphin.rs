@@ -159,6 +159,37 @@ impl Params {
             r.best_iteration as i64,
             Formulation::Paper.name()
         ]);
+        if let Some(ours) = &d.ours_swim {
+            // Our earlier swim (4 s), learned the same way through the same global net, scored
+            // against the hand-made wave over its own horizon (ours, not counted).
+            let d4 = DolphinControl {
+                swim: ours.clone(),
+                dagger: None,
+                ours_swim: None,
+                ..d.clone()
+            };
+            let (r4, best4) =
+                self.learn_swim(ctx, &d4, built.emulator.global(), &body, "_4s", None)?;
+            for t in &r4.trace {
+                objective_t.push(row!["dolphin_4s", t.iteration as i64, t.objective]);
+            }
+            let (x4, _) = ours.start(&body);
+            let (_, sim4) = ours
+                .simulate(&body, &x4, &best4.controls, dt, n)
+                .map_err(other)?;
+            let k4 = ours.knot_layout();
+            let mut ref4 = vec![0.0; k4.steps * k4.m];
+            k4.expand(&ours.reference_knots(dt * n as f64), &mut ref4);
+            let (_, ref4_globals) = ours.simulate(&body, &x4, &ref4, dt, n).map_err(other)?;
+            let wave = ours.distance(&ref4_globals);
+            final_t.push(row![
+                "dolphin_4s",
+                (wave - ours.distance(&best4.states)).max(0.0),
+                (wave - ours.distance(&sim4)).max(0.0),
+                r4.best_iteration as i64,
+                Formulation::Ours.name()
+            ]);
+        }
         // Trajectory: the mean segment centroid (s0, s1, s2 = x, y, z).
         for (source, globals) in [("emulator", &best.states), ("simulator", &sim_globals)] {
             for (i, g) in globals.chunks_exact(GLOBAL_DIM).enumerate() {

@@ -108,6 +108,10 @@ pub struct DolphinControl {
     /// DAgger of the global net (ours, issue 11; [`dolphin_dagger`]), if run.
     #[serde(default)]
     pub dagger: Option<dolphin_dagger::DolphinDagger>,
+    /// An earlier swim task of ours learned the same way beside the paper's (issue 54: the
+    /// 4 s swim, `dolphin_4s` in final.csv, formulation `ours`, not counted), if set.
+    #[serde(default)]
+    pub ours_swim: Option<SwimTask>,
 }
 
 fn one() -> usize {
@@ -172,6 +176,9 @@ impl Validate for Params {
         if let Some(d) = &self.dolphin {
             d.nets.validate("dolphin.nets", self.example_scale)?;
             d.swim.validate("dolphin.swim")?;
+            if let Some(o) = &d.ours_swim {
+                o.validate("dolphin.ours_swim")?;
+            }
             ensure(d.iterations >= 1, "dolphin.iterations", "must be >= 1")?;
             positive("dolphin.eta", d.eta)?;
             ensure(
