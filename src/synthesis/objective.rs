@@ -273,7 +273,7 @@ impl<'a> Context<'a> {
                 let n = norm(direction);
                 ((c1[0] - c0[0]) * direction[0] + (c1[1] - c0[1]) * direction[1]) / n
             }
-            Term::HorizontalDistance => (c1[0] - c0[0]).hypot(c1[1] - c0[1]),
+            Term::HorizontalDistance => crate::portable::hypot(c1[0] - c0[0], c1[1] - c0[1]),
             Term::MaxHeight => {
                 self.com
                     .iter()
@@ -309,7 +309,7 @@ impl<'a> Context<'a> {
             } => {
                 let i = orientation.axis();
                 let start = self.rot[0].column(i).into_owned();
-                let cos_max = max_angle_deg.to_radians().cos();
+                let cos_max = crate::portable::cos(max_angle_deg.to_radians());
                 let lost = |r: &Matrix3<f64>| r.column(i).dot(&start) < cos_max;
                 let any = if *at_end_only {
                     lost(&self.rot[self.rot.len() - 1])
