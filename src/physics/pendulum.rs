@@ -221,7 +221,7 @@ impl Ode for Pendulum3 {
         // sin and cos of each absolute angle once; those of the differences by the angle
         // identities sin(φ_i − φ_j) = s_i c_j − c_i s_j, cos(φ_i − φ_j) = c_i c_j + s_i s_j
         // (exactly odd and even in the swap of i and j).
-        let sc = phi.map(f64::sin_cos);
+        let sc = phi.map(crate::portable::sin_cos);
         let sin_diff = |i: usize, j: usize| sc[i].0 * sc[j].1 - sc[i].1 * sc[j].0;
         let cos_diff = |i: usize, j: usize| sc[i].1 * sc[j].1 + sc[i].0 * sc[j].0;
         let m = Self::mass_of(&d, &a, cos_diff);
