@@ -137,6 +137,7 @@ pub mod lanes;
 pub mod linalg;
 pub mod params;
 pub mod physics;
+pub mod portable;
 pub mod seed;
 pub mod synthesis;
 pub mod verbs;

@@ -71,7 +71,7 @@ pub fn blend_weights(
     }
     let mut s = 0.0;
     for i in 0..n {
-        alpha[i] = weights[i] * (-values[i] / lambda - m).exp();
+        alpha[i] = weights[i] * crate::portable::exp(-values[i] / lambda - m);
         s += alpha[i];
     }
     if s <= 0.0 || !s.is_finite() {
@@ -80,7 +80,7 @@ pub fn blend_weights(
     for a in alpha.iter_mut() {
         *a /= s;
     }
-    Ok(-lambda * (m + s.ln()))
+    Ok(-lambda * (m + crate::portable::ln(s)))
 }
 
 /// The combined value −λ log Σ_i w_i e^{−v_i/λ}.
@@ -381,8 +381,8 @@ pub fn normalized_entropy(alpha: &[f64]) -> f64 {
     let h: f64 = alpha
         .iter()
         .filter(|&&a| a > 0.0)
-        .map(|&a| -a * a.ln())
+        .map(|&a| -a * crate::portable::ln(a))
         .sum();
     // + 0.0 turns the −0 of a single full weight into 0.
-    h / (alpha.len() as f64).ln() + 0.0
+    h / crate::portable::ln(alpha.len() as f64) + 0.0
 }

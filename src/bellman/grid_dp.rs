@@ -221,7 +221,7 @@ pub fn solve_linear(
     let n = terminal_reward.len();
     let decay: Vec<f64> = state_cost
         .iter()
-        .map(|q| (-q * dt / lambda).exp())
+        .map(|q| crate::portable::exp(-q * dt / lambda))
         .collect();
     let mut z = vec![vec![0.0; n]; steps + 1];
     z[steps].copy_from_slice(terminal_reward);
@@ -286,7 +286,7 @@ pub fn evaluate_mixture(
             let mut cost = state_cost[s] * dt;
             for (k, &(c, pr)) in probs.iter().enumerate() {
                 if pi[k] > 0.0 {
-                    cost += lambda * pi[k] * (pi[k] / pr).ln() + pi[k] * next[c];
+                    cost += lambda * pi[k] * crate::portable::ln(pi[k] / pr) + pi[k] * next[c];
                 }
             }
             head[t][s] = cost;

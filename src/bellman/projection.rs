@@ -73,7 +73,7 @@ impl GaussianReward {
 
     /// The reward h(x) = exp(−g(x)).
     pub fn reward(&self, x: &DVector<f64>) -> f64 {
-        (-self.cost(x)).exp()
+        crate::portable::exp(-self.cost(x))
     }
 
     fn dim(&self) -> usize {
@@ -91,7 +91,10 @@ pub fn inner_product(a: &GaussianReward, b: &GaussianReward) -> Option<f64> {
     // Qa (Qa+Qb)^{-1} Qb (a-b)
     let y = chol.solve(&(&b.q * &diff));
     let expo = (diff.transpose() * &a.q * y)[0];
-    Some(std::f64::consts::PI.powf(d as f64 / 2.0) / det.sqrt() * (-expo).exp())
+    Some(
+        crate::portable::powf(std::f64::consts::PI, d as f64 / 2.0) / det.sqrt()
+            * crate::portable::exp(-expo),
+    )
 }
 
 /// Result of projecting a desired reward onto component rewards.
@@ -178,7 +181,7 @@ pub fn combined_reward(components: &[GaussianReward], weights: &[f64], x: &DVect
 pub fn reconstructed_cost(components: &[GaussianReward], weights: &[f64], x: &DVector<f64>) -> f64 {
     let r = combined_reward(components, weights, x);
     if r > 0.0 {
-        -r.ln()
+        -crate::portable::ln(r)
     } else {
         f64::INFINITY
     }

@@ -182,7 +182,7 @@ pub fn best_weighting(rows: &[Vec<f64>]) -> Option<(Vec<f64>, f64)> {
             self.base
                 .iter()
                 .zip(x)
-                .map(|(b, x)| b * 10f64.powf(*x))
+                .map(|(b, x)| b * crate::portable::powf(10.0, *x))
                 .collect()
         }
     }
@@ -191,7 +191,7 @@ pub fn best_weighting(rows: &[Vec<f64>]) -> Option<(Vec<f64>, f64)> {
             &self.bx
         }
         fn evaluate(&self, x: &[f64]) -> f64 {
-            weighted_condition(&self.k, &self.weights(x)).ln()
+            crate::portable::ln(weighted_condition(&self.k, &self.weights(x)))
         }
     }
     let problem = LogCondition {
@@ -208,7 +208,10 @@ pub fn best_weighting(rows: &[Vec<f64>]) -> Option<(Vec<f64>, f64)> {
     let k = &problem.k;
     let m = nalgebra::DMatrix::from_fn(r, r, |i, j| k[(i, j)] * (w[i] * w[j]).sqrt());
     let top = m.symmetric_eigenvalues().max();
-    Some((w.iter().map(|w| w / top).collect(), found.best_value.exp()))
+    Some((
+        w.iter().map(|w| w / top).collect(),
+        crate::portable::exp(found.best_value),
+    ))
 }
 
 /// Per-iteration contraction ρ of heavy-ball descent (momentum `alpha`, 0 for plain) along a
@@ -233,7 +236,7 @@ pub fn iterations_per_decade(h: f64, alpha: f64) -> f64 {
     if rho >= 1.0 {
         f64::INFINITY
     } else {
-        std::f64::consts::LN_10 / -rho.ln()
+        std::f64::consts::LN_10 / -crate::portable::ln(rho)
     }
 }
 

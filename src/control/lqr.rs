@@ -32,6 +32,7 @@
 use super::small::{copy_into, on_dims, SmallAlloc, Zeros};
 use super::{cholesky_in_place, cholesky_solve_in_place, symmetrize};
 use super::{ControlError, Knots, QuadraticCost, Rk4Map, StageDerivatives};
+use crate::linalg;
 use crate::physics::linearize::Linearize;
 use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim};
 
@@ -328,22 +329,22 @@ where
         a.transpose_to(&mut at);
         b.transpose_to(&mut bt);
         // Q_x = l_x + Aᵀ p', Q_u = l_u + Bᵀ p'.
-        at.mul_to(&p1, &mut tn);
+        linalg::mul_to(&at, &p1, &mut tn);
         qx.copy_from(&lx);
         qx += &tn;
-        bt.mul_to(&p1, &mut tm);
+        linalg::mul_to(&bt, &p1, &mut tm);
         qu.copy_from(&lu);
         qu += &tm;
         // Q_xx = l_xx + Aᵀ (P' A), Q_uu = l_uu + (Bᵀ P') B, Q_ux = Bᵀ (P' A).
-        hess1.mul_to(&a, &mut pa);
-        at.mul_to(&pa, &mut tnn);
+        linalg::mul_to(&hess1, &a, &mut pa);
+        linalg::mul_to(&at, &pa, &mut tnn);
         qxx.copy_from(&lxx);
         qxx += &tnn;
-        bt.mul_to(&hess1, &mut tmn);
-        tmn.mul_to(&b, &mut tmm);
+        linalg::mul_to(&bt, &hess1, &mut tmn);
+        linalg::mul_to(&tmn, &b, &mut tmm);
         quu.copy_from(&luu);
         quu += &tmm;
-        bt.mul_to(&pa, &mut qux);
+        linalg::mul_to(&bt, &pa, &mut qux);
         if let (ValueModel::Ddp { fd_step }, Some(second)) = (model, second.as_mut()) {
             second(&xs[k], &us[k], fd_step, &mut fzz);
             for (c, h) in fzz.iter().enumerate() {
@@ -375,18 +376,18 @@ where
         }
         // p = Q_x + Kᵀ Q_u.
         gain.transpose_to(&mut gt);
-        gt.mul_to(&qu, &mut tn);
+        linalg::mul_to(&gt, &qu, &mut tn);
         p.copy_from(&qx);
         p += &tn;
         // P = Q_xx + (Kᵀ Q_uu) K + Kᵀ Q_ux + Q_uxᵀ K, summed in that order.
-        gt.mul_to(&quu, &mut tnm);
-        tnm.mul_to(&gain, &mut tnn);
+        linalg::mul_to(&gt, &quu, &mut tnm);
+        linalg::mul_to(&tnm, &gain, &mut tnn);
         hess.copy_from(&qxx);
         hess += &tnn;
-        gt.mul_to(&qux, &mut tnn);
+        linalg::mul_to(&gt, &qux, &mut tnn);
         hess += &tnn;
         qux.transpose_to(&mut tnm);
-        tnm.mul_to(&gain, &mut tnn);
+        linalg::mul_to(&tnm, &gain, &mut tnn);
         hess += &tnn;
         symmetrize(&mut hess);
         copy_into(&mut gains.matrix_mut(k), &gain);

@@ -25,6 +25,7 @@
 use super::small::{copy_into, on_dims, SmallAlloc, Zeros};
 use super::{symmetrize, ControlError};
 use crate::lanes::X4;
+use crate::linalg;
 use crate::physics::linearize::Linearize;
 use crate::physics::{DifferentiableStep, Ode};
 use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, Dyn, Matrix, OMatrix, RawStorageMut};
@@ -504,11 +505,11 @@ impl<M: Linearize> Rk4Map<M> {
                 for i in 0..ch.tmp.nrows() {
                     ch.tmp[(i, i)] += 1.0;
                 }
-                ch.a.mul_to(&ch.tmp, &mut ch.dkx[s]);
+                linalg::mul_to(&ch.a, &ch.tmp, &mut ch.dkx[s]);
                 // ∂k_s/∂u = c A ∂k_{s−1}/∂u + B
                 let (prev, cur) = ch.dku.split_at_mut(s);
                 cur[0].copy_from(&ch.b);
-                cur[0].gemm(c[s], &ch.a, &prev[s - 1], 1.0);
+                linalg::gemm(&mut cur[0], c[s], &ch.a, &prev[s - 1], 1.0);
             }
         }
         let w = h / 6.0;

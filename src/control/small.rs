@@ -6,11 +6,10 @@
 //! fixed-size matrices (`Const<n>`, loops the compiler unrolls, no heap) for the sizes
 //! [`on_dims!`] lists, and on heap matrices (`Dyn`) for any other size.
 //!
-//! The two are the same arithmetic: nalgebra multiplies matrices of any dimension type
-//! column by column through the same matrix–vector kernel, except that a product whose four
-//! dimensions all exceed 5 and are dynamic goes to `matrixmultiply` (whose summation order
-//! differs). Every size listed for fixed-size matrices is at most 5, where the dynamic path
-//! takes that same kernel, so both give the same bits (tested per recursion).
+//! The two are the same arithmetic: the recursions multiply through [`crate::linalg::gemm`],
+//! nalgebra's column-by-column kernel for any dimension type and size (nalgebra itself would
+//! hand a dynamic product whose four dimensions all exceed 5 to `matrixmultiply`, whose kernel
+//! and rounding depend on the processor), so both give the same bits (tested per recursion).
 
 use nalgebra::allocator::Allocator;
 use nalgebra::{DefaultAllocator, Dim, Matrix, OMatrix, OVector, RawStorage, RawStorageMut, U1};

@@ -80,7 +80,7 @@ impl<T: Real> Trig<T> {
 impl Acrobot {
     /// Joint-space mass matrix as `[[M11, M12], [M12, M22]]`.
     pub fn mass_matrix(&self, theta2: f64) -> [[f64; 2]; 2] {
-        self.mass_of(theta2.cos())
+        self.mass_of(crate::portable::cos(theta2))
     }
 
     /// [`Acrobot::mass_matrix`] given cos θ2 (of one state, or of four in lanes). The products
@@ -106,9 +106,18 @@ impl Acrobot {
 
     /// Positions of the two masses (m).
     pub fn positions(&self, x: &[f64]) -> [[f64; 2]; 2] {
-        let p1 = [self.l1 * x[0].cos(), self.l1 * x[0].sin()];
+        let p1 = [
+            self.l1 * crate::portable::cos(x[0]),
+            self.l1 * crate::portable::sin(x[0]),
+        ];
         let a = x[0] + x[1];
-        [p1, [p1[0] + self.l2 * a.cos(), p1[1] + self.l2 * a.sin()]]
+        [
+            p1,
+            [
+                p1[0] + self.l2 * crate::portable::cos(a),
+                p1[1] + self.l2 * crate::portable::sin(a),
+            ],
+        ]
     }
 }
 

@@ -58,7 +58,7 @@ pub fn entry_angle(tree: &PlanarTree, q: &[f64]) -> f64 {
     let feet = tree.point(q, FOOT, tree.links[FOOT].length);
     let (dx, dy) = (hands[0] - feet[0], hands[1] - feet[1]);
     // Straight down is (0, −1); angle of (dx, dy) relative to it, counter-clockwise.
-    dx.atan2(-dy)
+    crate::portable::atan2(dx, -dy)
 }
 
 #[cfg(test)]

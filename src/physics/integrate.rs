@@ -392,7 +392,7 @@ impl Integrator {
             let factor = if err == 0.0 {
                 5.0
             } else if err.is_finite() {
-                (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
+                (0.9 * crate::portable::powf(err, -0.2)).clamp(0.2, 5.0)
             } else {
                 0.2
             };

@@ -119,7 +119,7 @@ impl Pendulum3 {
 
     fn absolute_mass_matrix(&self, phi: &[f64; 3]) -> Matrix3<f64> {
         let (d, a, _) = self.coefficients();
-        Self::mass_of(&d, &a, |i, j| (phi[i] - phi[j]).cos())
+        Self::mass_of(&d, &a, |i, j| crate::portable::cos(phi[i] - phi[j]))
     }
 
     /// M(φ) from the coefficients and cos(φ_i − φ_j) (`cos_diff`, symmetric in i and j).
@@ -149,8 +149,8 @@ impl Pendulum3 {
         let mut p = [[0.0; 2]; 4];
         for i in 0..3 {
             p[i + 1] = [
-                p[i][0] + self.links[i].length * phi[i].sin(),
-                p[i][1] - self.links[i].length * phi[i].cos(),
+                p[i][0] + self.links[i].length * crate::portable::sin(phi[i]),
+                p[i][1] - self.links[i].length * crate::portable::cos(phi[i]),
             ];
         }
         p
@@ -162,7 +162,7 @@ impl Pendulum3 {
         let w = Self::absolute(&x[3..6]);
         let mut v = self.links[i].com * w[i];
         for k in 0..i {
-            v += self.links[k].length * (phi[i] - phi[k]).cos() * w[k];
+            v += self.links[k].length * crate::portable::cos(phi[i] - phi[k]) * w[k];
         }
         v
     }
@@ -221,7 +221,7 @@ impl Ode for Pendulum3 {
         // sin and cos of each absolute angle once; those of the differences by the angle
         // identities sin(φ_i − φ_j) = s_i c_j − c_i s_j, cos(φ_i − φ_j) = c_i c_j + s_i s_j
         // (exactly odd and even in the swap of i and j).
-        let sc = phi.map(f64::sin_cos);
+        let sc = phi.map(crate::portable::sin_cos);
         let sin_diff = |i: usize, j: usize| sc[i].0 * sc[j].1 - sc[i].1 * sc[j].0;
         let cos_diff = |i: usize, j: usize| sc[i].1 * sc[j].1 + sc[i].0 * sc[j].0;
         let m = Self::mass_of(&d, &a, cos_diff);
@@ -272,7 +272,7 @@ impl Ode for Pendulum3 {
         let phi = Self::absolute(x);
         let w = Vector3::from(Self::absolute(&x[3..6]));
         let ke = 0.5 * (w.transpose() * self.absolute_mass_matrix(&phi) * w)[0];
-        let pe: f64 = (0..3).map(|i| -g[i] * phi[i].cos()).sum();
+        let pe: f64 = (0..3).map(|i| -g[i] * crate::portable::cos(phi[i])).sum();
         Some(ke + pe)
     }
 }

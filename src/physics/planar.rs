@@ -149,7 +149,7 @@ impl PlanarTree {
                 }
                 Some(p) => {
                     k.phi[i] = k.phi[p] + q[c];
-                    let (s, co) = k.phi[p].sin_cos();
+                    let (s, co) = crate::portable::sin_cos(k.phi[p]);
                     k.joint[i] = [k.joint[p][0] + l.attach * co, k.joint[p][1] + l.attach * s];
                 }
             }
@@ -172,7 +172,7 @@ impl PlanarTree {
     /// Position of the point at distance `r` along link `i` (m).
     pub fn point(&self, q: &[f64], i: usize, r: f64) -> [f64; 2] {
         let k = self.kinematics(q);
-        let (s, c) = k.phi[i].sin_cos();
+        let (s, c) = crate::portable::sin_cos(k.phi[i]);
         [k.joint[i][0] + r * c, k.joint[i][1] + r * s]
     }
 
@@ -184,7 +184,7 @@ impl PlanarTree {
         let kin = self.kinematics(q);
         let mut jac = [[0.0; MAX_DOF]; 2];
         self.point_jacobian(&kin, qd, i, r, &mut jac);
-        let (s, c) = kin.phi[i].sin_cos();
+        let (s, c) = crate::portable::sin_cos(kin.phi[i]);
         let p = [kin.joint[i][0] + r * c, kin.joint[i][1] + r * s];
         let v = [
             jac[0][..n].iter().zip(qd).map(|(a, b)| a * b).sum(),
@@ -254,7 +254,7 @@ impl PlanarTree {
         }
         let mut bias = [0.0; 2];
         self.path(i, r, |k, lever| {
-            let (s, c) = kin.phi[k].sin_cos();
+            let (s, c) = crate::portable::sin_cos(kin.phi[k]);
             // d/dφ_k of lever·e(φ_k) is lever·(−sin, cos); φ_k depends on every link on its path.
             for m in 0..self.links.len() {
                 if self.on_path(m, k) {

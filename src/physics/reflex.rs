@@ -153,7 +153,7 @@ pub fn deform(
                     r[cc] *= f;
                 }
                 ReflexKind::Twist => {
-                    let (s, co) = (gains.twist * alpha * rho).sin_cos();
+                    let (s, co) = crate::portable::sin_cos(gains.twist * alpha * rho);
                     let (rb, rc) = (r[b], r[cc]);
                     r[b] = co * rb - s * rc;
                     r[cc] = s * rb + co * rc;

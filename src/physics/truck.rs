@@ -134,7 +134,7 @@ impl Truck {
 
     /// Body-frame velocities (forward u, leftward v) of the centre of mass (m/s).
     pub fn body_velocity(x: &[f64]) -> (f64, f64) {
-        let (s, c) = x[2].sin_cos();
+        let (s, c) = crate::portable::sin_cos(x[2]);
         (c * x[3] + s * x[4], -s * x[3] + c * x[4])
     }
 
@@ -146,15 +146,17 @@ impl Truck {
     /// Rear-axle position (m): the point that follows the kinematic circle of radius
     /// L / tan δ when rolling slowly.
     pub fn rear_axle_position(&self, x: &[f64]) -> [f64; 2] {
-        let (s, c) = x[2].sin_cos();
+        let (s, c) = crate::portable::sin_cos(x[2]);
         [x[0] - self.rear_axle * c, x[1] - self.rear_axle * s]
     }
 
     fn lateral_force(&self, stiffness: f64, load: f64, v_long: f64, v_lat: f64) -> f64 {
-        let alpha = (v_lat / (v_long * v_long + self.slip_speed * self.slip_speed).sqrt()).atan();
+        let alpha = crate::portable::atan(
+            v_lat / (v_long * v_long + self.slip_speed * self.slip_speed).sqrt(),
+        );
         let limit = self.friction * load;
         if limit > 0.0 {
-            -limit * (stiffness * alpha / limit).tanh()
+            -limit * crate::portable::tanh(stiffness * alpha / limit)
         } else {
             0.0
         }
@@ -165,7 +167,7 @@ impl Truck {
     pub fn tyre_forces(&self, x: &[f64], delta: f64) -> TyreForces {
         let (u, v) = Self::body_velocity(x);
         let r = x[5];
-        let (sd, cd) = delta.sin_cos();
+        let (sd, cd) = crate::portable::sin_cos(delta);
         let vf = v + self.front_axle * r;
         let f_long = u * cd + vf * sd;
         let f_lat = -u * sd + vf * cd;
@@ -268,11 +270,11 @@ impl Ode for Truck {
     fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
         let accel = u[0].clamp(-self.max_accel, self.max_accel);
         let delta = self.steer_angle(u[1]);
-        let (s, c) = x[2].sin_cos();
+        let (s, c) = crate::portable::sin_cos(x[2]);
         let (vu, vv) = Self::body_velocity(x);
         let tyres = self.tyre_forces(x, delta);
-        let (sd, cd) = delta.sin_cos();
-        let speed = x[3].hypot(x[4]);
+        let (sd, cd) = crate::portable::sin_cos(delta);
+        let speed = crate::portable::hypot(x[3], x[4]);
         let fx = self.mass * accel
             - self.rolling_resistance * vu
             - tyres.front_lateral * sd
@@ -490,7 +492,7 @@ mod tests {
         let de = (e(h) - e(-h)) / (2.0 * h);
         let tyres = t.tyre_forces(&x, u[1]);
         let (vu, _) = Truck::body_velocity(&x);
-        let speed = x[3].hypot(x[4]);
+        let speed = crate::portable::hypot(x[3], x[4]);
         let tyre_power = tyres.front_lateral * tyres.front_slip_velocity
             + tyres.rear_lateral * tyres.rear_slip_velocity;
         assert!(tyre_power < 0.0);

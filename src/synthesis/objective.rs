@@ -30,7 +30,7 @@
 
 use super::controller::Trajectory;
 use super::SynthesisError;
-use nalgebra::{Matrix3, Rotation3, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// Which body axis an orientation term watches.
@@ -273,7 +273,7 @@ impl<'a> Context<'a> {
                 let n = norm(direction);
                 ((c1[0] - c0[0]) * direction[0] + (c1[1] - c0[1]) * direction[1]) / n
             }
-            Term::HorizontalDistance => (c1[0] - c0[0]).hypot(c1[1] - c0[1]),
+            Term::HorizontalDistance => crate::portable::hypot(c1[0] - c0[0], c1[1] - c0[1]),
             Term::MaxHeight => {
                 self.com
                     .iter()
@@ -291,10 +291,7 @@ impl<'a> Context<'a> {
                 let total: f64 = self
                     .rot
                     .windows(2)
-                    .map(|w| {
-                        let d = Rotation3::from_matrix_unchecked(w[1] * w[0].transpose());
-                        d.scaled_axis().dot(&a)
-                    })
+                    .map(|w| scaled_axis(&(w[1] * w[0].transpose())).dot(&a))
                     .sum();
                 if *absolute {
                     total.abs()
@@ -309,7 +306,7 @@ impl<'a> Context<'a> {
             } => {
                 let i = orientation.axis();
                 let start = self.rot[0].column(i).into_owned();
-                let cos_max = max_angle_deg.to_radians().cos();
+                let cos_max = crate::portable::cos(max_angle_deg.to_radians());
                 let lost = |r: &Matrix3<f64>| r.column(i).dot(&start) < cos_max;
                 let any = if *at_end_only {
                     lost(&self.rot[self.rot.len() - 1])
@@ -376,9 +373,47 @@ impl<'a> Context<'a> {
     }
 }
 
+/// The axis × angle vector of the rotation matrix `m`: θ = atan2(|v|, tr m − 1) with v the
+/// skew part (m₃₂ − m₂₃, m₁₃ − m₃₁, m₂₁ − m₁₂) = 2 sin θ · axis, axis = v / |v| (zero below
+/// nalgebra's ε). nalgebra's `scaled_axis` takes θ from libm's `acos` (processor-dependent
+/// last bits, and inaccurate for the small angles between frames); this is
+/// [`crate::portable::atan2`].
+fn scaled_axis(m: &Matrix3<f64>) -> Vector3<f64> {
+    let v = Vector3::new(
+        m[(2, 1)] - m[(1, 2)],
+        m[(0, 2)] - m[(2, 0)],
+        m[(1, 0)] - m[(0, 1)],
+    );
+    let n = v.norm();
+    if n <= f64::EPSILON {
+        return Vector3::zeros();
+    }
+    let angle = crate::portable::atan2(n, m.trace() - 1.0);
+    v * (angle / n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scaled_axis_is_nalgebras() {
+        for (k, rv) in [
+            [0.3, -0.2, 0.1],
+            [1e-4, 2e-5, -3e-5],
+            [0.0, 2.5, 0.4],
+            [0.0; 3],
+        ]
+        .iter()
+        .enumerate()
+        {
+            let r = nalgebra::Rotation3::new(Vector3::from(*rv));
+            let ours = scaled_axis(r.matrix());
+            let tol = if k == 1 { 1e-12 } else { 1e-14 };
+            assert!((ours - r.scaled_axis()).norm() <= tol, "{rv:?}: {ours}");
+            assert!((ours - Vector3::from(*rv)).norm() <= 1e-14, "{rv:?}");
+        }
+    }
     use crate::physics::lattice::Lattice;
     use crate::synthesis::controller::Frame;
 
@@ -392,7 +427,7 @@ mod tests {
             .iter()
             .map(|&t| {
                 let (dx, rv) = motion(t);
-                let r = Rotation3::new(Vector3::from(rv));
+                let r = nalgebra::Rotation3::new(Vector3::from(rv));
                 Frame {
                     t,
                     positions: rest

@@ -60,7 +60,7 @@ pub const ADJUST_FRACTION: f64 = 0.1;
 
 /// A reflex coefficient from the arcsine distribution on [−1, 1] (favours the extremes).
 pub fn random_alpha<R: Rng + ?Sized>(rng: &mut R) -> f64 {
-    -(PI * rng.random::<f64>()).cos()
+    -crate::portable::cos(PI * rng.random::<f64>())
 }
 
 /// A random regime for period `period`.

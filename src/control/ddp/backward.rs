@@ -33,6 +33,7 @@ use crate::control::{
     cholesky_in_place, cholesky_solve_in_place, symmetrize, ControlError, QuadraticCost, Rk4Map,
     StageDerivatives,
 };
+use crate::linalg;
 use crate::physics::linearize::Linearize;
 use nalgebra::{DMatrix, DVector, DefaultAllocator, Dim, Matrix, RawStorage, RawStorageMut, U1};
 
@@ -211,8 +212,8 @@ where
         gemv_tr(&mut qx, 1.0, &fx, &vx, 1.0);
         qu.copy_from(&lu);
         gemv_tr(&mut qu, 1.0, &fu, &vx, 1.0);
-        vxx.mul_to(&fx, &mut vxx_fx);
-        vxx.mul_to(&fu, &mut vxx_fu);
+        linalg::mul_to(&vxx, &fx, &mut vxx_fx);
+        linalg::mul_to(&vxx, &fu, &mut vxx_fu);
         qxx.copy_from(&lxx);
         gemm_tr(&mut qxx, 1.0, &fx, &vxx_fx, 1.0);
         quu.copy_from(&luu);
@@ -296,7 +297,7 @@ where
         gemv_tr(&mut vx, 1.0, &gain, &tm, 1.0);
         gemv_tr(&mut vx, 1.0, &gain, &qu, 1.0);
         gemv_tr(&mut vx, 1.0, &qux, &kff, 1.0);
-        tmn.gemm(1.0, &quu, &gain, 0.0);
+        linalg::gemm(&mut tmn, 1.0, &quu, &gain, 0.0);
         vxx.copy_from(&qxx);
         gemm_tr(&mut vxx, 1.0, &gain, &tmn, 1.0);
         gemm_tr(&mut vxx, 1.0, &gain, &qux, 1.0);

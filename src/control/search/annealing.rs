@@ -90,7 +90,7 @@ impl Geometric {
 
     /// `scale` · x_k (k ≥ 1), computed as (scale · start) · ratio^((k − 1) / span).
     pub fn at(&self, scale: f64, k: usize) -> f64 {
-        scale * self.start * self.ratio.powf((k - 1) as f64 / self.span)
+        scale * self.start * crate::portable::powf(self.ratio, (k - 1) as f64 / self.span)
     }
 
     fn validate(&self, what: &'static str) -> Result<(), ControlError> {
@@ -164,7 +164,7 @@ where
         let fy = rank_value(objective(&y));
         tr.evaluated(&y, fy);
         let u: f64 = rng.random();
-        if fy <= fx || u < (-(fy - fx) / cfg.temperature.at(spread, k)).exp() {
+        if fy <= fx || u < crate::portable::exp(-(fy - fx) / cfg.temperature.at(spread, k)) {
             x = y;
             fx = fy;
         }

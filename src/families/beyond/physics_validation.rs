@@ -184,7 +184,7 @@ pub fn fitted_order(dts: &[f64], drifts: &[f64], floor: f64) -> (f64, usize) {
         .iter()
         .zip(drifts)
         .filter(|(_, &d)| d.is_finite() && d > floor)
-        .map(|(&h, &d)| (h.ln(), d.ln()))
+        .map(|(&h, &d)| (crate::portable::ln(h), crate::portable::ln(d)))
         .collect();
     let n = pts.len();
     if n < 2 {

@@ -138,7 +138,7 @@ impl Params {
 
 impl GridSystem for Params {
     fn accel(&self, x: [f64; 2]) -> f64 {
-        -self.gravity_over_length * x[0].sin() - self.damping * x[1]
+        -self.gravity_over_length * crate::portable::sin(x[0]) - self.damping * x[1]
     }
     fn state_cost(&self, x: [f64; 2]) -> f64 {
         self.state_cost * x[1] * x[1]
@@ -194,18 +194,21 @@ impl Job for Params {
             let z: Vec<Vec<Vec<f64>>> = g
                 .iter()
                 .map(|gi| {
-                    let h: Vec<f64> = gi.iter().map(|v| (-v / lam).exp()).collect();
+                    let h: Vec<f64> = gi.iter().map(|v| crate::portable::exp(-v / lam)).collect();
                     let out = solve_linear(&p, &q, &h, self.dt, lam, steps);
                     pb.inc(1);
                     out
                 })
                 .collect();
-            let h: Vec<f64> = g_comb.iter().map(|v| (-v / lam).exp()).collect();
+            let h: Vec<f64> = g_comb
+                .iter()
+                .map(|v| crate::portable::exp(-v / lam))
+                .collect();
             let zd = solve_linear(&p, &q, &h, self.dt, lam, steps);
             pb.inc(1);
             (z, zd)
         });
-        let v = |zz: f64| -lam * zz.ln();
+        let v = |zz: f64| -lam * crate::portable::ln(zz);
         // LBC value: −λ log Σ w_i z_i, every time step.
         let (lbc_max, lbc_mean) = diff_stats((0..=steps).flat_map(|t| {
             let z = &z;

@@ -144,7 +144,11 @@ impl Job for Params {
                         let x = lo + (hi - lo) * k as f64 / (self.samples - 1) as f64;
                         let pt = self.point(x);
                         let r = combined_reward(&comps, &p.weights, &pt);
-                        let g = if r > 0.0 { -r.ln() } else { f64::INFINITY };
+                        let g = if r > 0.0 {
+                            -crate::portable::ln(r)
+                        } else {
+                            f64::INFINITY
+                        };
                         cost.push(row![s, f, x, desired.cost(&pt), g, desired.reward(&pt), r]);
                         xs.push(x);
                         ys.push(g);

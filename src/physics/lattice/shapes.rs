@@ -11,7 +11,7 @@
 //!   Models*, The Visual Computer 13(1), 1997 (MERL TR95-01).
 
 use super::LatticeError;
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// A point mass of a lattice.
@@ -250,7 +250,7 @@ impl Lattice {
     /// `velocity` (m/s).
     pub fn placed_state(&self, rotation: [f64; 3], height: f64, velocity: [f64; 3]) -> Vec<f64> {
         let n = self.n_masses();
-        let rot = Rotation3::new(Vector3::from(rotation));
+        let rot = axis_angle_rotation(rotation);
         let c = Vector3::from(self.center_of_mass(&self.rest_positions()));
         let rotated: Vec<Vector3<f64>> = self
             .masses
@@ -272,6 +272,30 @@ impl Lattice {
     pub fn resting_state(&self) -> Vec<f64> {
         self.placed_state([0.0; 3], 0.0, [0.0; 3])
     }
+}
+
+/// The rotation by the axis × angle vector `v` (Rodrigues' formula as nalgebra's
+/// `Rotation3::new` writes it, with [`crate::portable::sin_cos`]: the same bits everywhere).
+fn axis_angle_rotation(v: [f64; 3]) -> Matrix3<f64> {
+    let angle = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if angle == 0.0 {
+        return Matrix3::identity();
+    }
+    let (ux, uy, uz) = (v[0] / angle, v[1] / angle, v[2] / angle);
+    let (sqx, sqy, sqz) = (ux * ux, uy * uy, uz * uz);
+    let (sin, cos) = crate::portable::sin_cos(angle);
+    let one_m_cos = 1.0 - cos;
+    Matrix3::new(
+        sqx + (1.0 - sqx) * cos,
+        ux * uy * one_m_cos - uz * sin,
+        ux * uz * one_m_cos + uy * sin,
+        ux * uy * one_m_cos + uz * sin,
+        sqy + (1.0 - sqy) * cos,
+        uy * uz * one_m_cos - ux * sin,
+        ux * uz * one_m_cos - uy * sin,
+        uy * uz * one_m_cos + ux * sin,
+        sqz + (1.0 - sqz) * cos,
+    )
 }
 
 /// Distances |p_a − p_b| for each spring.

@@ -197,7 +197,12 @@ impl Params {
 
     fn sinusoid(&self, g: &[f64; 3]) -> Vec<DVector<f64>> {
         (0..self.steps())
-            .map(|k| DVector::from_element(1, g[0] * (k as f64 * self.dt * g[1] + g[2]).sin()))
+            .map(|k| {
+                DVector::from_element(
+                    1,
+                    g[0] * crate::portable::sin(k as f64 * self.dt * g[1] + g[2]),
+                )
+            })
             .collect()
     }
 
