@@ -143,12 +143,20 @@ impl NetModel {
 
     /// The physical model's parameters as JSON (part of the emulator cache key).
     pub fn physics_json(self) -> serde_json::Value {
-        match self {
+        let parameters = match self {
             Self::Truck => serde_json::to_value(Truck::default()),
             Self::Lander => serde_json::to_value(Lander::default()),
             _ => serde_json::to_value(self.pendulum().expect("a pendulum")),
         }
-        .unwrap_or_default()
+        .unwrap_or_default();
+        match self {
+            // The lander's simulator calls no library function whose bits depend on the
+            // processor; the truck's and the pendulum's trigonometry went through the C library
+            // until 2026-11-28 (issue 60, `crate::portable` since), so their nets are keyed by
+            // the arithmetic too and retrain with the new bits.
+            Self::Lander => parameters,
+            _ => serde_json::json!({ "parameters": parameters, "arithmetic": "portable" }),
+        }
     }
 
     /// A fingerprint of the sampling recipe (control limits and process, episode length,
