@@ -351,8 +351,14 @@ pub fn figure(
         Series::line("hand-made 1 Hz wave (simulator)", line(reference), 2),
         Series::line("half the wave (the bar)", line(HALF_WAVE * reference), 7).mark(Mark::Points),
     ];
+    // The swim's duration: the last time of the headline swim's motion (the same task).
+    let horizon = tables
+        .get("dolphin_motion")
+        .map(|m| m.f64s("t").into_iter().fold(0.0, f64::max))
+        .filter(|h| *h > 0.0);
+    let over = horizon.map_or(String::new(), |h| format!(" in {h} s"));
     let panel = Panel {
-        title: "Dolphin DAgger (ours): distance swum in 4 s, by round".into(),
+        title: format!("Dolphin DAgger (ours): distance swum{over}, by round"),
         x_label: "DAgger round (0: the Table 1 global net)".into(),
         y_label: "forward distance of the mean segment centroid (m)".into(),
         series,
