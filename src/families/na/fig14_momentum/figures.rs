@@ -1,21 +1,31 @@
 //! Figure `objective` of `na_fig14_momentum`: momentum against plain descent, the same through
 //! the DAgger net, and the plain learning-rate sweep.
 
-use crate::experiment::output::Tables;
+use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::Error;
 use std::path::PathBuf;
 
-/// Every figure of the experiment ([`crate::experiment::Family::figures`]).
-pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let t = tables.require("objective")?;
-    let runs = tables.require("runs")?;
-    let (meth, eta, it, obj) = (
+/// The (iteration, objective) points of descent `method` at rate `eta` in a table with columns
+/// method, eta, iteration, objective (`objective`, `dagger_objective`, `unclipped_objective`).
+fn curve(t: &Table, method: &str, eta: f64) -> Vec<(f64, f64)> {
+    let (m, e, i, o) = (
         t.strs("method"),
         t.f64s("eta"),
         t.f64s("iteration"),
         t.f64s("objective"),
     );
+    (0..m.len())
+        .filter(|&r| m[r] == method && e[r] == eta)
+        .map(|r| (i[r], o[r]))
+        .collect()
+}
+
+/// Every figure of the experiment ([`crate::experiment::Family::figures`]).
+pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let t = tables.require("objective")?;
+    let runs = tables.require("runs")?;
+    let (meth, eta) = (t.strs("method"), t.f64s("eta"));
     let plain_eta = runs
         .strs("method")
         .iter()
@@ -23,12 +33,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         .filter(|(m, _)| m.as_str() == "plain")
         .map(|(_, e)| e)
         .collect::<Vec<_>>();
-    let pick = |mm: &str, e: f64| -> Vec<(f64, f64)> {
-        (0..meth.len())
-            .filter(|&r| meth[r] == mm && eta[r] == e)
-            .map(|r| (it[r], obj[r]))
-            .collect()
-    };
+    let pick = |mm: &str, e: f64| curve(t, mm, e);
     let mom_eta = (0..meth.len())
         .find(|&r| meth[r] == "momentum")
         .map(|r| eta[r]);
@@ -51,12 +56,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     // curves lie almost on the Table 1 net's), same colours and line styles.
     let mut dagger = vec![];
     if let Some(dt) = tables.get("dagger_objective").filter(|t| !t.is_empty()) {
-        let (dm, de, di, dobj) = (
-            dt.strs("method"),
-            dt.f64s("eta"),
-            dt.f64s("iteration"),
-            dt.f64s("objective"),
-        );
+        let (dm, de) = (dt.strs("method"), dt.f64s("eta"));
         for (c, (mm, mark)) in [("momentum", Mark::Line), ("plain", Mark::Dashed)]
             .into_iter()
             .enumerate()
@@ -64,10 +64,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             let Some(e) = (0..dm.len()).find(|&r| dm[r] == mm).map(|r| de[r]) else {
                 continue;
             };
-            let pts = (0..dm.len())
-                .filter(|&r| dm[r] == mm && de[r] == e)
-                .map(|r| (di[r], dobj[r]))
-                .collect();
+            let pts = curve(dt, mm, e);
             dagger.push(Series::line(format!("{mm} (eta {e}), DAgger net"), pts, c).mark(mark));
         }
     }
@@ -110,24 +107,13 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     // The same sweep with the knots free of the actuators' boxes (ours, issue 54: the boxes
     // can hide divergence above the stability limit), the start's J drawn as the rule's line.
     if let Some(ut) = tables.get("unclipped_objective").filter(|t| !t.is_empty()) {
-        let (um, ue, ui, uo) = (
-            ut.strs("method"),
-            ut.f64s("eta"),
-            ut.f64s("iteration"),
-            ut.f64s("objective"),
-        );
         let mut series: Vec<Series> = plain_eta
             .iter()
             .enumerate()
-            .map(|(i, &e)| {
-                let pts = (0..um.len())
-                    .filter(|&r| um[r] == "plain" && ue[r] == e)
-                    .map(|r| (ui[r], uo[r]))
-                    .collect();
-                Series::line(format!("eta {e}"), pts, i)
-            })
+            .map(|(i, &e)| Series::line(format!("eta {e}"), curve(ut, "plain", e), i))
             .collect();
-        let start = (0..um.len()).find(|&r| ui[r] == 0.0).map(|r| uo[r]);
+        let (ui, uo) = (ut.f64s("iteration"), ut.f64s("objective"));
+        let start = (0..ui.len()).find(|&r| ui[r] == 0.0).map(|r| uo[r]);
         let last = ui.iter().copied().fold(0.0, f64::max);
         if let Some(j0) = start {
             series.push(

@@ -372,9 +372,7 @@ impl Params {
                 ),
                 || rollout_error(&t.emulator, spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other),
             )?;
-            let in_spec = specs
-                .iter()
-                .any(|s| s.net.model == spec.net.model && s.net == spec.net);
+            let in_spec = specs.iter().any(|s| s.net == spec.net);
             table.push(row![
                 spec.net.model.name(),
                 spec.net.normalization.name(),
