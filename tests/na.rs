@@ -444,6 +444,30 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         header(&out.join("final.csv")),
         "task,emulator_error,simulator_error,best_iteration,formulation"
     );
+    // The headline over net seeds (issue 54): the paper's three tasks through this run's net
+    // (seed 1, the same numbers as final.csv) and through the net of quick's further seed 2.
+    assert_eq!(
+        header(&out.join("net_seeds.csv")),
+        "task,net_seed,emulator_error,simulator_error,best_iteration,at_goal"
+    );
+    let seeds = rows(&out.join("net_seeds.csv"));
+    let fin = rows(&out.join("final.csv"));
+    assert_eq!(seeds.len(), 6, "{seeds:?}");
+    for task in ["pendulum", "truck", "lander"] {
+        let of = |seed: &str| seeds.iter().find(|c| c[0] == task && c[1] == seed).unwrap();
+        let own = fin.iter().find(|c| c[0] == task).unwrap();
+        assert_eq!(
+            of("1")[2..5],
+            own[1..4],
+            "{task}: seed 1 is final.csv's row"
+        );
+        assert_ne!(of("2")[2], own[1], "{task}: seed 2 is another net");
+        for c in [of("1"), of("2")] {
+            let (e, s): (f64, f64) = (c[2].parse().unwrap(), c[3].parse().unwrap());
+            assert!(e.is_finite() && s.is_finite(), "{c:?}");
+            assert_eq!(c[5] == "1", e <= 1.0 && s <= 1.0, "{c:?}");
+        }
+    }
     // The sweep beside the headline: 6 tasks (the paper's pendulum, truck and lander, and our
     // earlier 4 s pendulum, truck from rest and 13-variable lander) x (1 eta x 3 step rules +
     // Levenberg-Marquardt) (quick), and the physics sweep 6 tasks x (2 rules + LM); iterations

@@ -143,6 +143,7 @@ impl Params {
             sweep: None,
             physics_sweep: None,
             dagger: None,
+            net_seeds: vec![],
         }
     }
 }

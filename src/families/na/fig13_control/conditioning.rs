@@ -283,15 +283,14 @@ pub(super) fn ladder(ours: &Task, paper: &Task) -> Vec<(&'static str, Task)> {
 }
 
 /// Rows of `conditioning_ladder.csv` for the rungs of [`ladder`] through `step` (the nets'
-/// shared Table 1 emulator) from `x0` (each rung's start, normalized as the task's).
+/// shared Table 1 emulator), each from its own [`Task::start_state`].
 pub(super) fn record_ladder<D: crate::control::bptt::DifferentiableStep>(
     step: &D,
     rungs: &[(&'static str, Task)],
-    start: impl Fn(&Task) -> Vec<f64>,
     table: &mut Table,
 ) -> Result<(), Error> {
     for (i, (change, rung)) in rungs.iter().enumerate() {
-        let x0 = start(rung);
+        let x0 = rung.start_state();
         let t = rung.calibrated(step, &x0).map_err(other)?;
         let objective = t.objective();
         let m = t.net.model.control_dim();

@@ -112,6 +112,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     files.extend(dolphin_animation(fig, tables)?);
     files.extend(dagger::figure(fig, tables)?);
     files.extend(dolphin_dagger::figure(fig, tables)?);
+    files.extend(super::seeds::figure(fig, tables)?);
     Ok(files)
 }
 

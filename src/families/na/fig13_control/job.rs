@@ -5,17 +5,17 @@ use super::conditioning::{
     ladder, record_ladder, record_spectrum, PhysicsTables, BEST_WEIGHTS_COLUMNS,
     CONDITIONING_COLUMNS, LADDER_COLUMNS,
 };
+use super::seeds::{HeadlineRun, SEEDS_COLUMNS};
 use super::{dagger, dolphin_dagger, Formulation, Params, Sweep, Task};
 use crate::control::bptt::{
     learn_with, replay, Bptt, Descent, DifferentiableStep, Knots, Learned, Schedule, StepRule,
 };
 use crate::control::conditioning::{terminal_spectrum, weighting_bound};
-use crate::emulator::catalog::{BuildSpec, NetModel};
+use crate::emulator::catalog::BuildSpec;
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
 use crate::physics::dolphin::N_POS;
-use crate::physics::lander::Lander;
 use crate::row;
 
 /// Columns of the `sweep` and `physics_sweep` tables: `rollout_error` is the final error on
@@ -67,6 +67,8 @@ impl Job for Params {
         // variable).
         let mut calibration_t = Table::new(&["task", "kind", "index", "value"]);
         let mut ladder_t = Table::new(&LADDER_COLUMNS);
+        // The headline of the paper's tasks per Table 1 net seed (seeds.rs), this run's first.
+        let mut seeds_t = Table::new(&SEEDS_COLUMNS);
         let width = self
             .tasks
             .iter()
@@ -115,10 +117,7 @@ impl Job for Params {
                 per_actuator: task.task.knots,
                 m,
             };
-            let mut x0 = task.task.start.clone();
-            if model == NetModel::Lander {
-                Lander::default().normalize_state(&mut x0);
-            }
+            let x0 = task.start_state();
             // The task's actuator gains and final-state weights, measured once at its initial
             // knots through its Table 1 net and then fixed for every run of the task (the
             // physics sweep and the DAgger rounds included).
@@ -130,15 +129,8 @@ impl Job for Params {
                     .iter()
                     .find(|p| p.formulation == Formulation::Paper && p.net == task.net)
                 {
-                    let start = |t: &Task| {
-                        let mut x = t.task.start.clone();
-                        if model == NetModel::Lander {
-                            Lander::default().normalize_state(&mut x);
-                        }
-                        x
-                    };
                     let rungs = ladder(task, paper);
-                    record_ladder(&trained.emulator, &rungs, start, &mut ladder_t)?;
+                    record_ladder(&trained.emulator, &rungs, &mut ladder_t)?;
                 }
             }
             let task = &task.calibrated(&trained.emulator, &x0).map_err(other)?;
@@ -234,13 +226,21 @@ impl Job for Params {
                 emu_final,
             );
             let sim_final = &rep.states[task.task.horizon * n..];
+            let run = HeadlineRun {
+                emulator_error: task.final_error(emu_final),
+                simulator_error: task.final_error(sim_final),
+                best_iteration: r.best_iteration,
+            };
             final_t.push(row![
                 task.name.as_str(),
-                task.final_error(emu_final),
-                task.final_error(sim_final),
+                run.emulator_error,
+                run.simulator_error,
                 r.best_iteration as i64,
                 task.formulation.name()
             ]);
+            if task.formulation == Formulation::Paper {
+                run.push(&mut seeds_t, &task.name, ctx.seed);
+            }
             let mut row = row![task.name.as_str(), model.name()];
             row.extend(
                 (0..width).map(|k| task.task.target.get(k).copied().unwrap_or(f64::NAN).into()),
@@ -255,6 +255,7 @@ impl Job for Params {
                 }
             }
         }
+        self.run_seeds(ctx, &mut seeds_t)?;
         let mut swim_t = Table::new(&["source", "distance_m", "effort", "periodicity", "period_s"]);
         let mut motion_cols = vec!["source".to_string(), "step".into(), "t".into()];
         motion_cols.extend((0..N_POS).map(|k| format!("p{k}")));
@@ -301,6 +302,7 @@ impl Job for Params {
             ("swim", swim_t),
             ("objective", objective_t),
             ("final", final_t),
+            ("net_seeds", seeds_t),
             ("trajectory", trajectory),
             ("goal", goal),
             ("states", states_t),

@@ -48,6 +48,7 @@ pub mod frames;
 mod job;
 mod params;
 mod report;
+pub mod seeds;
 mod task;
 
 pub use conditioning::{BEST_WEIGHTS_COLUMNS, CONDITIONING_COLUMNS};

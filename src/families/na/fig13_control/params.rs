@@ -78,6 +78,14 @@ pub struct Params {
     /// The DAgger stage (ours, issue 11; [`dagger`]), if run.
     #[serde(default)]
     pub dagger: Option<dagger::DaggerControl>,
+    /// Further Table 1 net seeds (ours, issue 54; [`super::seeds`]): the headline of every
+    /// task of the paper's formulation (the dolphin aside) is learned again through the net
+    /// `na_table1_structure` trains under each seed, and the verdict counts a task at its goal
+    /// when a strict majority of its seeds (the run's own and these) reach it. The run's own
+    /// seed and repeats are skipped; empty: the run's own net only. At most
+    /// [`super::seeds::MAX_NET_SEEDS`].
+    #[serde(default)]
+    pub net_seeds: Vec<u64>,
 }
 
 /// The dolphin swim task of Fig. 13(d) ([`crate::families::na::swim`]).
@@ -171,6 +179,14 @@ impl Validate for Params {
         if let Some(d) = &self.dagger {
             d.validate(self)?;
         }
+        ensure(
+            self.net_seeds.len() <= super::seeds::MAX_NET_SEEDS,
+            "net_seeds",
+            &format!(
+                "at most {} seeds (each trains one net per task)",
+                super::seeds::MAX_NET_SEEDS
+            ),
+        )?;
         let nets: Vec<NetSpec> = self.tasks.iter().map(|t| t.net.clone()).collect();
         validate_nets(&nets, self.example_scale)?;
         if let Some(d) = &self.dolphin {

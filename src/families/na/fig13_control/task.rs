@@ -236,6 +236,16 @@ impl Task {
         Ok(t)
     }
 
+    /// The start state descent and the simulator replay begin from: the spec's `start`, the
+    /// lander's attitude quaternion normalized.
+    pub fn start_state(&self) -> Vec<f64> {
+        let mut x = self.task.start.clone();
+        if self.net.model == NetModel::Lander {
+            Lander::default().normalize_state(&mut x);
+        }
+        x
+    }
+
     /// Initial (and effort reference) control: zero, or hover thrust for the lander.
     pub fn rest_control(&self) -> Vec<f64> {
         let mut u = vec![0.0; self.net.model.control_dim()];

@@ -279,6 +279,7 @@ impl Params {
             sweep: None,
             physics_sweep: None,
             dagger: Some(control.clone()),
+            net_seeds: vec![],
         };
         (p, control)
     }

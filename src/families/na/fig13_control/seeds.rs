@@ -1,0 +1,297 @@
+//! The headline over several Table 1 net seeds (issue 54, ours): one trained net per task is
+//! one draw of the training's randomness, and whether a net carries its learned controls to the
+//! goal on the simulator turned on that draw (two `reproduce` runs whose nets differ only by
+//! retraining noise gave 2 of 4 and 0 of 4). So every task of the paper's formulation (the
+//! dolphin aside) is learned again, by the same headline (momentum η 1.5, α 0.5, λ at the
+//! start, the paper's iteration count), through the net `na_table1_structure` trains under
+//! each further seed ([`Params::net_seeds`]), each net calibrated as the run's own
+//! ([`Task::calibrated`]), and its controls replayed on the simulator. `net_seeds.csv`: one row per
+//! task and net seed, the run's own seed included.
+//!
+//! The verdict's rule ([`majority_at_goal`], written before the first run with several seeds):
+//! a task reaches its goal when a strict majority of its net seeds reach it on the emulator
+//! and on the simulator.
+
+use super::{Formulation, Params, Task};
+use crate::control::bptt::{replay, Bptt, Knots};
+use crate::emulator::catalog::BuildSpec;
+use crate::emulator::Emulator;
+use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::report::sig;
+use crate::experiment::{other, Error, RunContext};
+use crate::families::na::table1_structure::{build_emulators, build_spec};
+use crate::row;
+use std::path::{Path, PathBuf};
+
+/// Columns of `net_seeds.csv`: `at_goal` is 1 when both final errors are at most 1.
+pub const SEEDS_COLUMNS: [&str; 6] = [
+    "task",
+    "net_seed",
+    "emulator_error",
+    "simulator_error",
+    "best_iteration",
+    "at_goal",
+];
+
+/// The most net seeds a run may ask for (each trains one net per task).
+pub const MAX_NET_SEEDS: usize = 16;
+
+/// One headline run: the final errors on the emulator and on the simulator replay, and the
+/// best iteration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeadlineRun {
+    /// Final error of the best iterate's emulator rollout.
+    pub emulator_error: f64,
+    /// Final error of the same controls replayed on the simulator.
+    pub simulator_error: f64,
+    /// Iteration of the best iterate.
+    pub best_iteration: usize,
+}
+
+impl HeadlineRun {
+    /// Both final errors within tolerance.
+    pub fn at_goal(&self) -> bool {
+        self.emulator_error <= 1.0 && self.simulator_error <= 1.0
+    }
+
+    /// The row of `net_seeds.csv` for `task` through the net of `seed`.
+    pub fn push(&self, table: &mut Table, task: &str, seed: u64) {
+        table.push(row![
+            task,
+            seed as i64,
+            self.emulator_error,
+            self.simulator_error,
+            self.best_iteration as i64,
+            i64::from(self.at_goal())
+        ]);
+    }
+}
+
+impl Params {
+    /// The seeds beyond the run's own (`own`), in the spec's order, without repeats.
+    pub(super) fn further_net_seeds(&self, own: u64) -> Vec<u64> {
+        let mut out: Vec<u64> = Vec::new();
+        for &s in &self.net_seeds {
+            if s != own && !out.contains(&s) {
+                out.push(s);
+            }
+        }
+        out
+    }
+
+    /// The headline of `task` (uncalibrated) through `net`: calibrated there, learned by the
+    /// task's own η, α and step rule for its iteration count, scored at the best iterate.
+    pub(super) fn headline_run(&self, task: &Task, net: &Emulator) -> Result<HeadlineRun, Error> {
+        let x0 = task.start_state();
+        let task = task.calibrated(net, &x0).map_err(other)?;
+        let model = task.net.model;
+        let n = model.state_dim();
+        let knots = Knots {
+            steps: task.task.horizon,
+            per_actuator: task.task.knots,
+            m: model.control_dim(),
+        };
+        let objective = task.objective();
+        let mut bptt = Bptt::new(net, &objective, knots, task.bounds(), &x0).map_err(other)?;
+        let v0 = bptt.from_controls(&task.initial_knots());
+        let lambda = bptt.curvature(&v0, self.curvature_iterations);
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return Err(other(format!("{}: step scale λ = {lambda}", task.name)));
+        }
+        let schedule = self.schedule(task.eta, task.alpha, task.step_rule, lambda);
+        let (r, best) = super::learn_best(
+            &mut bptt,
+            &v0,
+            &schedule,
+            task.task.iterations,
+            &mut |_, _, _| false,
+        );
+        let emu_final = &best.states[task.task.horizon * n..];
+        let mut sim = model.simulator();
+        let rep = replay(
+            sim.as_mut(),
+            &x0,
+            &best.controls,
+            task.net.physical_dt,
+            self.steps,
+            emu_final,
+        );
+        Ok(HeadlineRun {
+            emulator_error: task.final_error(emu_final),
+            simulator_error: task.final_error(&rep.states[task.task.horizon * n..]),
+            best_iteration: r.best_iteration,
+        })
+    }
+
+    /// Every task of the paper's formulation learned through the nets of the further seeds
+    /// (trained side by side, or loaded from the cache), one row each in `table`.
+    pub(super) fn run_seeds(&self, ctx: &RunContext, table: &mut Table) -> Result<(), Error> {
+        let seeds = self.further_net_seeds(ctx.seed);
+        let tasks: Vec<&Task> = self
+            .tasks
+            .iter()
+            .filter(|t| t.formulation == Formulation::Paper)
+            .collect();
+        let runs: Vec<(&Task, u64)> = seeds
+            .iter()
+            .flat_map(|&s| tasks.iter().map(move |&t| (t, s)))
+            .collect();
+        if runs.is_empty() {
+            return Ok(());
+        }
+        let specs: Vec<BuildSpec> = runs
+            .iter()
+            .map(|(t, s)| build_spec(*s, &t.net, self.steps, self.example_scale, &self.training))
+            .collect();
+        let built = ctx.stage(
+            &format!(
+                "train N{} emulators of {} further seeds",
+                self.steps,
+                seeds.len()
+            ),
+            || build_emulators(&specs),
+        )?;
+        for ((task, seed), trained) in runs.iter().zip(&built) {
+            let run = ctx.stage(&format!("learn {} (net seed {seed})", task.name), || {
+                self.headline_run(task, &trained.emulator)
+            })?;
+            run.push(table, &task.name, *seed);
+        }
+        Ok(())
+    }
+}
+
+/// Whether a strict majority of `at_goal` (one flag per net seed) is set: the rule by which
+/// the verdict counts a task as reaching its goal when `net_seeds.csv` has several seeds for it.
+pub fn majority_at_goal(at_goal: &[bool]) -> bool {
+    2 * at_goal.iter().filter(|&&b| b).count() > at_goal.len()
+}
+
+/// Per task of `net_seeds.csv` in `dir` (first-seen order): its name, how many net seeds reach the
+/// goal, and how many were run. `None` when the run wrote no such table.
+pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<(String, usize, usize)>>, Error> {
+    let Ok(df) = read_csv(&dir.join("net_seeds.csv")) else {
+        return Ok(None);
+    };
+    let (task, goal) = (df_str(&df, "task")?, df_f64(&df, "at_goal")?);
+    let mut out: Vec<(String, usize, usize)> = Vec::new();
+    for (t, g) in task.iter().zip(&goal) {
+        let i = match out.iter().position(|(name, _, _)| name == t) {
+            Some(i) => i,
+            None => {
+                out.push((t.clone(), 0, 0));
+                out.len() - 1
+            }
+        };
+        out[i].1 += usize::from(*g == 1.0);
+        out[i].2 += 1;
+    }
+    Ok(Some(out))
+}
+
+/// The report's table of `net_seeds.csv` in `dir` (empty when the run has none): every task and
+/// net seed with both final errors and whether it reached the goal.
+pub(super) fn table_md(dir: &Path) -> Result<String, Error> {
+    let Ok(df) = read_csv(&dir.join("net_seeds.csv")) else {
+        return Ok(String::new());
+    };
+    let (task, seed) = (df_str(&df, "task")?, df_f64(&df, "net_seed")?);
+    let (emu, sim) = (
+        df_f64(&df, "emulator_error")?,
+        df_f64(&df, "simulator_error")?,
+    );
+    let it = df_f64(&df, "best_iteration")?;
+    if task.is_empty() {
+        return Ok(String::new());
+    }
+    let mut md = String::from(
+        "\nThe headline per Table 1 net seed (ours, `net_seeds.csv`; the same task, optimizer and iteration count through the net trained under each seed, each calibrated through its own net; final error <= 1 is within tolerance):\n\n| task | net seed | best iteration | final error, emulator | final error, simulator | at the goal on both |\n| --- | --- | --- | --- | --- | --- |\n",
+    );
+    let mut order: Vec<usize> = (0..task.len()).collect();
+    let first = |r: usize| task.iter().position(|t| *t == task[r]).unwrap_or(r);
+    order.sort_by(|&a, &b| first(a).cmp(&first(b)).then(seed[a].total_cmp(&seed[b])));
+    for r in order {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            task[r],
+            seed[r],
+            it[r],
+            sig(emu[r]),
+            sig(sim[r]),
+            if emu[r] <= 1.0 && sim[r] <= 1.0 {
+                "yes"
+            } else {
+                "no"
+            }
+        ));
+    }
+    Ok(md)
+}
+
+/// Figure `net_seeds`: per task of `net_seeds`, every net seed's final error on the emulator
+/// (x) against its controls' on the simulator (y), log-log, each dot labelled with its seed;
+/// dashed lines at 1 bound the goal (lower left: within tolerance on both).
+pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let Some(t) = tables.get("net_seeds").filter(|t| !t.is_empty()) else {
+        return Ok(vec![]);
+    };
+    let (task, seed) = (t.strs("task"), t.f64s("net_seed"));
+    let (emu, sim) = (t.f64s("emulator_error"), t.f64s("simulator_error"));
+    let all = emu
+        .iter()
+        .chain(&sim)
+        .copied()
+        .filter(|x| x.is_finite() && *x > 0.0);
+    let (lo, hi) = all.fold((1.0f64, 1.0f64), |(a, b), x| (a.min(x), b.max(x)));
+    let (lo, hi) = (lo / 1.5, hi * 1.5);
+    let mut series: Vec<Series> = unique(&task)
+        .into_iter()
+        .enumerate()
+        .map(|(c, name)| {
+            let rows: Vec<usize> = (0..task.len()).filter(|&r| task[r] == name).collect();
+            let at = rows
+                .iter()
+                .filter(|&&r| emu[r] <= 1.0 && sim[r] <= 1.0)
+                .count();
+            Series::line(
+                format!("{name} ({at} of {} seeds at the goal)", rows.len()),
+                rows.iter().map(|&r| (emu[r], sim[r])).collect(),
+                c,
+            )
+            .mark(Mark::Points)
+            .labelled(rows.iter().map(|&r| format!("{}", seed[r])).collect())
+        })
+        .collect();
+    series.push(
+        Series::line("tolerance (final error 1)", vec![(1.0, lo), (1.0, hi)], 7).mark(Mark::Dashed),
+    );
+    series.push(Series::line("", vec![(lo, 1.0), (hi, 1.0)], 7).mark(Mark::Dashed));
+    let panel = Panel {
+        title: "Headline per Table 1 net seed (dots labelled by seed)".into(),
+        x_label: "final error through the emulator (1 = tolerance)".into(),
+        y_label: "final error replayed on the simulator (1 = tolerance)".into(),
+        log_x: true,
+        log_y: true,
+        x_range: Some((lo, hi)),
+        y_range: Some((lo, hi)),
+        series,
+        ..Panel::default()
+    };
+    fig.draw("net_seeds", &Figure::grid(vec![panel], 1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_strict_majority_of_seeds_is_needed() {
+        assert!(majority_at_goal(&[true, true, true, false, false]));
+        assert!(!majority_at_goal(&[true, true, false, false, false]));
+        assert!(!majority_at_goal(&[true, false]));
+        assert!(majority_at_goal(&[true]));
+        assert!(!majority_at_goal(&[false]));
+        assert!(!majority_at_goal(&[]));
+    }
+}
