@@ -182,6 +182,24 @@ fn lbc_diver_and_push_quick_runs_write_promised_outputs() {
         .path()
         .join("figs/lbc_diver_coordination_entry.png")
         .exists());
+    // Fig. 8 as the paper shows it: the final pose of LBC and of the single tracker at every
+    // take-off rate, its entry error the coordination table's.
+    assert_eq!(
+        header(&out.join("poses.csv")),
+        "initial_omega,method,entry_error,x,y,torso,neck,shoulder,elbow,hip,knee,ankle"
+    );
+    let poses = std::fs::read_to_string(out.join("poses.csv")).unwrap();
+    let coordination = std::fs::read_to_string(out.join("coordination.csv")).unwrap();
+    let first3 = |l: &str| l.split(',').take(3).collect::<Vec<_>>().join(",");
+    let (p, c): (Vec<String>, Vec<String>) = (
+        poses.lines().skip(1).map(first3).collect(),
+        coordination.lines().skip(1).map(first3).collect(),
+    );
+    assert_eq!(p, c);
+    assert!(d
+        .path()
+        .join("figs/lbc_diver_coordination_poses.png")
+        .exists());
     let out = d.path().join("out/lbc_push_recovery");
     assert!(header(&out.join("weights.csv")).starts_with("t,alpha_forward,alpha_backward"));
     assert!(

@@ -335,6 +335,101 @@ pub fn diver_filmstrip(tree: &PlanarTree, dives: &[Dive], frame_dt: f64, gap: f6
     f
 }
 
+/// One final pose of a row of [`diver_pose_rows`]: the pose's coordinates and its caption.
+pub struct Pose<'a> {
+    /// Generalized coordinates ([`DIVER_COORDS`] values; NaN: none, the cell stays empty).
+    pub q: &'a [f64],
+    /// Caption written above the pose.
+    pub caption: String,
+}
+
+/// Rows of final poses (one panel per row, e.g. per method), the k-th pose of every row `gap`
+/// metres right of the (k−1)-th with its hip at x = k·gap, true heights above the take-off
+/// hip, each with its feet-to-hands line (dashed) and caption; every panel on the same scale.
+pub fn diver_pose_rows(tree: &PlanarTree, rows: &[(String, usize, Vec<Pose>)], gap: f64) -> Figure {
+    let bodies: Vec<Vec<Option<[Vec<(f64, f64)>; 4]>>> = rows
+        .iter()
+        .map(|(_, _, poses)| {
+            poses
+                .iter()
+                .enumerate()
+                .map(|(k, p)| {
+                    p.q.iter()
+                        .all(|v| v.is_finite())
+                        .then(|| diver_body(tree, p.q, (k as f64 * gap - p.q[0], 0.0)))
+                })
+                .collect()
+        })
+        .collect();
+    let pts = bodies
+        .iter()
+        .flatten()
+        .flatten()
+        .flat_map(|b| b.iter().flatten());
+    let (lo, hi) = pts.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+        (a.min(p.1), b.max(p.1))
+    });
+    let (lo, hi) = if lo <= hi { (lo, hi) } else { (-1.0, 1.0) };
+    let n = rows.iter().map(|r| r.2.len()).max().unwrap_or(1).max(1);
+    let (size, xr, yr) = fitted(
+        (-0.5 * gap, (n as f64 - 0.5) * gap),
+        (lo - 0.2, hi + 1.0),
+        420,
+    );
+    let panels = rows
+        .iter()
+        .zip(&bodies)
+        .map(|((title, color, poses), bodies)| {
+            let mut series = Vec::new();
+            for (k, (p, body)) in poses.iter().zip(bodies).enumerate() {
+                let Some(body) = body else { continue };
+                let top = body
+                    .iter()
+                    .flatten()
+                    .map(|q| q.1)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                let first = series.is_empty();
+                series.extend(diver_series(
+                    body.clone(),
+                    "",
+                    if first { "torso (hip to neck)" } else { "" },
+                    *color,
+                ));
+                series.push(
+                    Series::line(
+                        if first {
+                            "feet-to-hands line (the entry angle's)"
+                        } else {
+                            ""
+                        },
+                        entry_line(body),
+                        ENTRY,
+                    )
+                    .mark(Mark::Dashed),
+                );
+                series.push(
+                    Series::line("", vec![(k as f64 * gap, top + 0.15)], *color)
+                        .mark(Mark::Points)
+                        .labelled(vec![p.caption.clone()]),
+                );
+            }
+            Panel {
+                title: title.clone(),
+                x_label: format!("x (m), poses {gap} m apart"),
+                y_label: "height above the take-off hip (m)".into(),
+                series,
+                x_range: Some(xr),
+                y_range: Some(yr),
+                legend: Legend::UpperRight,
+                ..Default::default()
+            }
+        })
+        .collect();
+    let mut f = Figure::grid(panels, 1);
+    f.panel_size = size;
+    f
+}
+
 /// GIF frames of dives side by side (`gap` metres apart plus their forward drift), the torso
 /// in grey, the water line, the entry line and angle on the held last frames; `caption` and
 /// the time head every frame.

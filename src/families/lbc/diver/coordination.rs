@@ -9,7 +9,7 @@ use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
 use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family, Job, RunContext};
-use crate::families::lbc::rule_table;
+use crate::families::lbc::{film, rule_table};
 use crate::row;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -138,6 +138,7 @@ impl Job for CoordinationParams {
             Vec<(&'static str, f64, f64, f64, f64)>,
             Vec<(f64, f64, f64)>,
             Vec<(&'static str, f64, f64, f64)>,
+            Vec<Vec<f64>>,
         );
         let rows: Vec<Result<Out, Error>> = ctx.stage("coordinate", || {
             self.tests
@@ -145,11 +146,18 @@ impl Job for CoordinationParams {
                 .map(|&w| {
                     let x0 = d.takeoff(w);
                     let mut out = Vec::new();
+                    // The last executed pose of each (Fig. 8 shows final poses); a diverged
+                    // loop's is NaN.
+                    let mut poses = Vec::new();
                     for (name, mode) in [
                         ("lbc", BlendMode::Lbc),
                         ("single", BlendMode::Single(self.single)),
                     ] {
                         let r = d.execute(&blend(mode, d.lambda()), &x0)?;
+                        poses.push(match &r.final_state {
+                            Some(x) => x.iter().take(film::DIVER_COORDS).copied().collect(),
+                            None => vec![f64::NAN; film::DIVER_COORDS],
+                        });
                         out.push((
                             name,
                             wrap(entry(&r.final_state)).abs(),
@@ -187,7 +195,7 @@ impl Job for CoordinationParams {
                             r.mean_entropy,
                         ));
                     }
-                    Ok((out, sweep, ddp))
+                    Ok((out, sweep, ddp, poses))
                 })
                 .collect()
         });
@@ -216,8 +224,14 @@ impl Job for CoordinationParams {
             "objective",
             "mean_entropy",
         ]);
+        let mut poses_t = Table::new(&POSE_COLUMNS);
         for (&w, r) in self.tests.iter().zip(rows) {
-            let (out, sweep, ddp) = r?;
+            let (out, sweep, ddp, poses) = r?;
+            for (&(m, e, ..), q) in out.iter().zip(&poses) {
+                let mut cells = row![w, m, e];
+                cells.extend(q.iter().map(|&v| v.into()));
+                poses_t.push(cells);
+            }
             for &(m, e, j, h, _) in &out {
                 values.push(row![w, "lqr", m, e, j, h]);
             }
@@ -256,10 +270,28 @@ impl Job for CoordinationParams {
             ("dives", examples),
             ("lambda_sweep", lam),
             ("value_comparison", values),
+            ("poses", poses_t),
             ("rule", rule),
         ]))
     }
 }
+
+/// Columns of the coordination's `poses` table: per take-off rate and method, the entry error
+/// and the final pose's generalized coordinates (the interpolation's `motion` columns).
+pub(super) const POSE_COLUMNS: [&str; 3 + film::DIVER_COORDS] = [
+    "initial_omega",
+    "method",
+    "entry_error",
+    "x",
+    "y",
+    "torso",
+    "neck",
+    "shoulder",
+    "elbow",
+    "hip",
+    "knee",
+    "ankle",
+];
 
 impl Family for LbcDiverCoordination {
     const KIND: &'static str = "lbc_diver_coordination";

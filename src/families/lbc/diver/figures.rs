@@ -1,5 +1,6 @@
 //! The figures of both dive families.
 
+use super::coordination::POSE_COLUMNS;
 use super::interpolation::{MOTION_COLUMNS, MOTION_DIVES};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
@@ -128,5 +129,47 @@ pub(super) fn coordination(fig: &FigureSink, tables: &Tables) -> Result<Vec<Path
             ..Default::default()
         },
     ];
-    fig.draw("entry", &Figure::grid(panels, 2))
+    let mut files = fig.draw("entry", &Figure::grid(panels, 2))?;
+    files.extend(coordination_poses(fig, tables)?);
+    Ok(files)
+}
+
+/// Figure `poses` (Fig. 8 as the paper shows it): the final pose at every take-off rate, LBC
+/// above the single tracker, each captioned with its rate and entry error.
+fn coordination_poses(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let Some(t) = tables.get("poses").filter(|t| !t.is_empty()) else {
+        return Ok(vec![]);
+    };
+    let (w, m, e) = (
+        t.f64s("initial_omega"),
+        t.strs("method"),
+        t.f64s("entry_error"),
+    );
+    let cols: Vec<Vec<f64>> = POSE_COLUMNS[3..].iter().map(|c| t.f64s(c)).collect();
+    let q: Vec<Vec<f64>> = (0..w.len())
+        .map(|r| cols.iter().map(|c| c[r]).collect())
+        .collect();
+    let rows: Vec<(String, usize, Vec<film::Pose>)> = [
+        ("lbc", "LBC of the three dive trackers (w = 1)"),
+        ("single", "the single tracker of the 1 rad/s dive"),
+    ]
+    .iter()
+    .enumerate()
+    .map(|(c, (name, title))| {
+        let poses = (0..w.len())
+            .filter(|&r| m[r] == *name)
+            .map(|r| film::Pose {
+                q: &q[r],
+                caption: format!("{} rad/s: {:.2} rad", w[r], e[r]),
+            })
+            .collect();
+        (
+            format!("{title}: final pose per take-off rate (caption: |entry angle|)"),
+            c,
+            poses,
+        )
+    })
+    .collect();
+    let tree = diver();
+    fig.draw("poses", &film::diver_pose_rows(&tree, &rows, 2.0))
 }
