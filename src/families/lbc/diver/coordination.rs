@@ -87,8 +87,10 @@ impl Job for CoordinationParams {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let d = &self.dive;
         let cases: Vec<(f64, f64)> = self.omegas.iter().map(|&w| (w, 0.0)).collect();
+        // The §6.1 average term where the spec turns it on (off by default here).
+        let averaged = self.dive.averaged(ctx, &cases)?;
+        let d = &averaged;
         let (sols, trackers, examples) = d.optimize_all(ctx, &cases)?;
         let cost = d.cost(0.0);
         // The same dives tracked with DDP's value function (second-order dynamics terms).

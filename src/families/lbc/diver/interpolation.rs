@@ -2,10 +2,11 @@
 //! desired entry, and the job (LBC, naive and direct dives per desired entry, the λ sweep, the
 //! dives' motion).
 
-use super::{entry, DiveSettings, ReconstructedCost};
+use super::{angle_deviation, entry, mean_trajectory, DiveSettings, ReconstructedCost};
 use crate::bellman::combine::{BlendMode, TrackerBlend};
 use crate::bellman::projection::{project, GaussianReward};
 use crate::control::ddp::DdpSolution;
+use crate::control::lqr::TrackingController;
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
@@ -43,6 +44,12 @@ pub struct InterpolationParams {
     pub objective_tolerance: f64,
     /// Temperatures λ of the λ sweep (the noise model's λ is the one judged).
     pub lambda_sweep: Vec<f64>,
+    /// Scales of the §6.1 average term tried (`DiveSettings::average_scale`): 0 (off) and each
+    /// of these are in `average_term.csv`; every other table uses the largest of them at which
+    /// both component dives still enter within `entry_tolerance` of their own targets (0 when
+    /// none does). Empty: the term stays off.
+    #[serde(default)]
+    pub average_scales: Vec<f64>,
 }
 
 impl Validate for InterpolationParams {
@@ -76,6 +83,19 @@ impl Validate for InterpolationParams {
             positive(&format!("lambda_sweep[{i}]"), *l)?;
         }
         distinct("lambda_sweep", &self.lambda_sweep)?;
+        for (i, a) in self.average_scales.iter().enumerate() {
+            ensure(
+                a.is_finite() && *a > 0.0,
+                &format!("average_scales[{i}]"),
+                "must be finite and > 0 (scale 0, the term off, is always run)",
+            )?;
+        }
+        distinct("average_scales", &self.average_scales)?;
+        ensure(
+            self.dive.average_scale == 0.0,
+            "dive.average_scale",
+            "must be 0 here: this experiment chooses its scale from average_scales",
+        )?;
         Ok(())
     }
 }
@@ -114,16 +134,126 @@ impl InterpolationParams {
     }
 }
 
+/// Columns of `average_term.csv`: per scale of the §6.1 term (0: off), the two component dives
+/// (`method` component, `desired_angle` their target, `mean_entropy` NaN) and LBC and the naive
+/// blend at every desired entry; `angle_deviation` is the RMS over the dive's steps and its
+/// torso and joint angles of the executed dive minus the components' average trajectory (rad),
+/// how far the dive strays from the examples' average.
+pub(super) const AVERAGE_COLUMNS: [&str; 7] = [
+    "average_scale",
+    "desired_angle",
+    "method",
+    "reached_angle",
+    "entry_error",
+    "mean_entropy",
+    "angle_deviation",
+];
+
+impl InterpolationParams {
+    /// `average_term.csv`: per (settings, their component dives and trackers) of `runs`, the
+    /// components and LBC and the naive blend with the projected weights at every desired
+    /// entry, from the same take-off.
+    fn average_effect(
+        &self,
+        runs: &[(&DiveSettings, &[DdpSolution], &[TrackingController])],
+        x_bar: &[DVector<f64>],
+    ) -> Result<Table, Error> {
+        let mut table = Table::new(&AVERAGE_COLUMNS);
+        for (d, sols, trackers) in runs {
+            for (s, target) in sols.iter().zip([-self.offset, self.offset]) {
+                let reached = component_entry(s);
+                table.push(row![
+                    d.average_scale,
+                    target,
+                    "component",
+                    reached,
+                    (reached - target).abs(),
+                    f64::NAN,
+                    angle_deviation(&s.x, x_bar)
+                ]);
+            }
+            let (lambda, x0) = (d.lambda(), d.takeoff(self.omega));
+            for &g in &self.desired {
+                let (w, _) = self.weights(g, lambda)?;
+                for (name, mode) in [("lbc", BlendMode::Lbc), ("naive", BlendMode::Naive)] {
+                    let blend = TrackerBlend {
+                        trackers,
+                        weights: w.clone(),
+                        lambda,
+                        limits: Some(&d.torque_limits),
+                        mode,
+                    };
+                    let r = d.execute(&blend, &x0)?;
+                    let reached = entry(&r.final_state);
+                    table.push(row![
+                        d.average_scale,
+                        g,
+                        name,
+                        reached,
+                        (reached - g).abs(),
+                        r.mean_entropy,
+                        angle_deviation(&r.states, x_bar)
+                    ]);
+                }
+            }
+        }
+        Ok(table)
+    }
+}
+
+/// Entry angle of an optimized dive's final state (rad).
+fn component_entry(s: &DdpSolution) -> f64 {
+    entry(&s.x.last().cloned())
+}
+
 impl Job for InterpolationParams {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).unwrap_or_default()
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let d = &self.dive;
-        let lambda = d.lambda();
         let cases = [(self.omega, -self.offset), (self.omega, self.offset)];
-        let (sols, trackers, examples) = d.optimize_all(ctx, &cases)?;
+        // The §6.1 average term: the components without it, their average trajectory x̄, the
+        // components re-optimized with it at every scale of `average_scales`, and the largest
+        // scale at which both still reach their own targets (the paper's examples do).
+        let base = self.dive.clone();
+        let plain = base.optimize_all(ctx, &cases)?;
+        let x_bar = std::sync::Arc::new(mean_trajectory(&plain.0, base.steps()));
+        let mut scaled = Vec::new();
+        for &a in &self.average_scales {
+            let mut on = self.dive.clone();
+            on.average_scale = a;
+            on.average = Some(x_bar.clone());
+            let out = on.optimize_all(ctx, &cases)?;
+            scaled.push((on, out));
+        }
+        let mut runs = vec![(&base, plain.0.as_slice(), plain.1.as_slice())];
+        runs.extend(
+            scaled
+                .iter()
+                .map(|(d, o)| (d, o.0.as_slice(), o.1.as_slice())),
+        );
+        let average_t = self.average_effect(&runs, &x_bar)?;
+        let reaches = |sols: &[DdpSolution]| {
+            sols.iter()
+                .zip([-self.offset, self.offset])
+                .all(|(s, t)| (component_entry(s) - t).abs() <= self.entry_tolerance)
+        };
+        let chosen = scaled
+            .iter()
+            .enumerate()
+            .filter(|(_, (d, o))| d.average_scale > 0.0 && reaches(&o.0))
+            .max_by(|a, b| a.1 .0.average_scale.total_cmp(&b.1 .0.average_scale))
+            .map(|(i, _)| i);
+        let (d, (sols, trackers, examples)) = match chosen {
+            Some(i) => {
+                let (on, out) = scaled.swap_remove(i);
+                (on, out)
+            }
+            None => (base, plain),
+        };
+        let d = &d;
+        let lambda = d.lambda();
         let x0 = d.takeoff(self.omega);
         let limits = d.torque_limits;
         let blend = |w: &[f64], mode: BlendMode, lambda: f64| TrackerBlend {
@@ -291,6 +421,7 @@ impl Job for InterpolationParams {
             ("torque_noise", d.torque_noise),
             ("entry_tolerance", self.entry_tolerance),
             ("objective_tolerance", self.objective_tolerance),
+            ("average_scale", d.average_scale),
             (
                 "q_spacing2_over_lambda",
                 d.torso_weight * spacing * spacing / lambda,
@@ -302,6 +433,7 @@ impl Job for InterpolationParams {
             ("projection", proj),
             ("lambda_sweep", lam),
             ("motion", motion),
+            ("average_term", average_t),
             ("rule", rule),
         ]))
     }

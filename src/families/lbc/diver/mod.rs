@@ -40,7 +40,7 @@ pub use interpolation::{InterpolationParams, LbcDiverInterpolation};
 use crate::bellman::combine::{blend_weights, normalized_entropy, TrackerBlend};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
 use crate::control::lqr::{track, TrackingController};
-use crate::control::{QuadraticCost, Rk4Map};
+use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::Table;
 use crate::experiment::resolve::{ensure, positive, ParamError};
 use crate::experiment::{other, Error, RunContext};
@@ -84,6 +84,18 @@ pub struct DiveSettings {
     pub torque_limits: [f64; 6],
     /// Intensity σ of the white joint-torque noise (N·m·√s); λ = σ² R (eq. 8: noise λR⁻¹).
     pub torque_noise: f64,
+    /// The §6.1 running term (LBC paper: "we found it important to include a term in the
+    /// integrated cost of the objective which penalized deviations from some form of average
+    /// trajectory"): (x − x̄(t))ᵀ Q (x − x̄(t)) in every dive's running cost, x̄ the mean state
+    /// of the component dives at each step (optimized first without the term), Q the terminal
+    /// weights' angle block (torso and joints) × `average_scale` / `horizon`, so that at scale
+    /// 1 a deviation held over the whole flight costs what it costs at entry (our rule; the
+    /// paper gives no Q). 0 (the default): off.
+    #[serde(default)]
+    pub average_scale: f64,
+    /// x̄ once [`DiveSettings::averaged`] has computed it (one state per step k < N).
+    #[serde(skip)]
+    average: Option<std::sync::Arc<Vec<DVector<f64>>>>,
 }
 
 /// A closed-loop dive under a blended policy.
@@ -122,6 +134,11 @@ impl DiveSettings {
         for (i, l) in self.torque_limits.iter().enumerate() {
             positive(&format!("torque_limits[{i}]"), *l)?;
         }
+        ensure(
+            self.average_scale.is_finite() && self.average_scale >= 0.0,
+            "average_scale",
+            "must be finite and >= 0",
+        )?;
         ensure(
             self.max_iterations >= 1,
             "max_iterations",
@@ -174,11 +191,36 @@ impl DiveSettings {
         DMatrix::from_diagonal(&DVector::from_vec(d))
     }
 
+    /// The §6.1 running weight Q: the terminal angle weights × `average_scale` / horizon.
+    fn average_weight(&self) -> DMatrix<f64> {
+        let mut d = vec![0.0; 18];
+        d[TORSO] = self.torso_weight;
+        for v in &mut d[3..9] {
+            *v = self.joint_weight;
+        }
+        DMatrix::from_diagonal(&DVector::from_vec(d)) * (self.average_scale / self.horizon)
+    }
+
+    /// These settings with the §6.1 average trajectory of the dives of `cases` (each optimized
+    /// without the term): their mean state at each step. Unchanged when `average_scale` is 0.
+    fn averaged(&self, ctx: &RunContext, cases: &[(f64, f64)]) -> Result<DiveSettings, Error> {
+        let mut d = self.clone();
+        d.average = None;
+        if self.average_scale > 0.0 {
+            let (sols, _, _) = d.optimize_all(ctx, cases)?;
+            d.average = Some(std::sync::Arc::new(mean_trajectory(&sols, self.steps())));
+        }
+        Ok(d)
+    }
+
     fn cost(&self, offset: f64) -> QuadraticCost {
         QuadraticCost {
             dt: self.dt,
             r: DMatrix::identity(6, 6) * self.control_weight,
-            state: None,
+            state: self.average.as_ref().map(|a| StateCost {
+                weight: self.average_weight(),
+                reference: a.to_vec(),
+            }),
             q_final: self.q_final(self.torso_weight),
             x_final: self.target(offset),
         }
@@ -314,6 +356,27 @@ impl DiveSettings {
         run.final_state = Some(x);
         Ok(run)
     }
+}
+
+/// The mean of the solutions' states at each step k < `steps` (the §6.1 average trajectory).
+fn mean_trajectory(sols: &[DdpSolution], steps: usize) -> Vec<DVector<f64>> {
+    let scale = 1.0 / sols.len().max(1) as f64;
+    (0..steps)
+        .map(|k| sols.iter().map(|s| &s.x[k]).sum::<DVector<f64>>() * scale)
+        .collect()
+}
+
+/// RMS over the steps k < x̄'s length and the angle coordinates (torso and joints) of
+/// `states` minus the average trajectory `average`.
+fn angle_deviation(states: &[DVector<f64>], average: &[DVector<f64>]) -> f64 {
+    let (mut sum, mut count) = (0.0, 0usize);
+    for (x, a) in states.iter().zip(average) {
+        for i in TORSO..9 {
+            sum += (x[i] - a[i]).powi(2);
+            count += 1;
+        }
+    }
+    (sum / count.max(1) as f64).sqrt()
 }
 
 /// Entry angle of a final state relative to vertical (rad); NaN when the dive diverged.
@@ -462,7 +525,32 @@ mod tests {
             max_iterations: 15,
             torque_limits: [40.0, 140.0, 100.0, 300.0, 300.0, 200.0],
             torque_noise: 10.0,
+            average_scale: 0.0,
+            average: None,
         }
+    }
+
+    #[test]
+    fn the_average_term_pulls_the_component_dives_toward_their_average() {
+        // §6.1: with the running penalty on deviation from the components' average
+        // trajectory, each re-optimized component dive stays closer to that average.
+        let ctx = RunContext::new(1, true, false);
+        let cases = [(1.0, -0.6), (1.0, 0.6)];
+        let mut d = settings();
+        d.average_scale = 4.0;
+        let (plain, _, _) = d.optimize_all(&ctx, &cases).unwrap();
+        let averaged = d.averaged(&ctx, &cases).unwrap();
+        let x_bar = averaged.average.clone().expect("the scale is on");
+        assert_eq!(x_bar.len(), d.steps());
+        assert_eq!(*x_bar, mean_trajectory(&plain, d.steps()));
+        let (pulled, _, _) = averaged.optimize_all(&ctx, &cases).unwrap();
+        for (a, b) in plain.iter().zip(&pulled) {
+            let (before, after) = (angle_deviation(&a.x, &x_bar), angle_deviation(&b.x, &x_bar));
+            assert!(after < 0.9 * before, "{before} -> {after}");
+        }
+        // Off by default: no average, the cost without a state term.
+        let off = settings().averaged(&ctx, &cases).unwrap();
+        assert!(off.average.is_none() && off.cost(0.0).state.is_none());
     }
 
     #[test]
@@ -561,8 +649,15 @@ mod tests {
             entry_tolerance: 0.05,
             objective_tolerance: 0.02,
             lambda_sweep: vec![],
+            average_scales: vec![],
         };
         let e = p.validate().unwrap_err();
         assert_eq!(e.key, "desired[2]");
+        let p = InterpolationParams {
+            desired: vec![0.0],
+            average_scales: vec![0.1, 0.0],
+            ..p
+        };
+        assert_eq!(p.validate().unwrap_err().key, "average_scales[1]");
     }
 }
