@@ -40,7 +40,7 @@ mod setup;
 mod verdict;
 
 pub use setup::{distance_to_handstand, first_swing_sign, first_torque_sign, tape_correlation};
-pub use verdict::{judge, sweep_counts, SweepCounts};
+pub use verdict::{judge, sweep_counts, SweepCounts, PARTLY_FRACTION};
 
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
@@ -377,7 +377,7 @@ mod tests {
         let e = bad.validate().unwrap_err();
         assert!(format!("{e}").contains("value_model"), "{e}");
         assert_eq!(params().other_model(), "ddp");
-        // The rule: held, partly (one rescue), and not held.
+        // The rule: held, partly (a quarter rescued, as many as naive), and not held.
         let counts = |successes: Vec<usize>, rescued: Vec<usize>| SweepCounts {
             starts: 10,
             both_fail: 4,

@@ -81,6 +81,42 @@ pub fn compare_objectives(a: f64, b: f64, tol: f64) -> &'static str {
     }
 }
 
+/// How much worse than the single tracker's LBC's objective may be at any take-off rate for
+/// "partly" (ours, issue 56, 2026-11-28): by at most this fraction of the smaller objective.
+pub const PARTLY_WORSE_MARGIN: f64 = 0.05;
+
+/// What the coordination rule reads, over the take-off rates compared.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CoordinationCounts {
+    /// Take-off rates with both an LBC and a single-tracker dive.
+    pub rates: usize,
+    /// Rates where LBC's objective is better beyond the spec's tolerance.
+    pub better: usize,
+    /// Rates where it is worse beyond the spec's tolerance.
+    pub worse: usize,
+    /// Rates where it is worse by more than [`PARTLY_WORSE_MARGIN`].
+    pub much_worse: usize,
+    /// Rates from which LBC enters vertically.
+    pub lbc_vertical: usize,
+    /// Rates from which the single tracker enters vertically.
+    pub single_vertical: usize,
+}
+
+/// The spec's rule: (held, partly). Held: LBC's objective never worse than the single
+/// tracker's beyond the tolerance and better on at least half the rates, and LBC vertical from
+/// more rates than the single tracker (or from all). Partly (rewritten 2026-11-28 after seeing
+/// the committed results, issue 56; it was "more better than worse objectives, or more vertical
+/// entries"): one of held's two parts (better on at least half the rates; more vertical entries,
+/// or all) and nothing against the other: LBC's objective nowhere worse by more than
+/// [`PARTLY_WORSE_MARGIN`], and LBC vertical from at least as many rates as the single tracker.
+pub fn coordination_rule(c: &CoordinationCounts) -> (bool, bool) {
+    let objective = 2 * c.better >= c.rates && c.rates > 0;
+    let vertical = c.lbc_vertical > c.single_vertical || c.lbc_vertical == c.rates;
+    let held = c.worse == 0 && objective && vertical;
+    let uncontradicted = c.much_worse == 0 && c.lbc_vertical >= c.single_vertical;
+    (held, uncontradicted && (objective || vertical))
+}
+
 impl Job for CoordinationParams {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).unwrap_or_default()
@@ -305,5 +341,60 @@ impl Family for LbcDiverCoordination {
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
         super::report::coordination(dir)
+    }
+}
+
+#[cfg(test)]
+mod rule_tests {
+    use super::*;
+
+    fn counts(
+        better: usize,
+        worse: usize,
+        much_worse: usize,
+        lv: usize,
+        sv: usize,
+    ) -> CoordinationCounts {
+        CoordinationCounts {
+            rates: 8,
+            better,
+            worse,
+            much_worse,
+            lbc_vertical: lv,
+            single_vertical: sv,
+        }
+    }
+
+    #[test]
+    fn lbc_much_worse_at_some_rates_is_not_partly_held() {
+        // The committed table: better at 3 rates, worse at 2 (by 10% and 19%), vertical from
+        // 5 rates each; more better than worse is no longer enough.
+        assert_eq!(coordination_rule(&counts(3, 2, 2, 5, 5)), (false, false));
+        // Better at half the rates but 19% worse at one: not partly.
+        assert_eq!(coordination_rule(&counts(4, 1, 1, 5, 5)), (false, false));
+        // More vertical entries but far worse objectives somewhere: not partly.
+        assert_eq!(coordination_rule(&counts(1, 1, 1, 6, 5)), (false, false));
+        // Better objectives but fewer vertical entries: not partly.
+        assert_eq!(coordination_rule(&counts(5, 0, 0, 4, 5)), (false, false));
+    }
+
+    #[test]
+    fn one_part_uncontradicted_is_partly_and_both_held() {
+        // Better at half the rates, worse only within the margin, vertical as often.
+        assert_eq!(coordination_rule(&counts(4, 1, 0, 5, 5)), (false, true));
+        // More vertical entries, objectives worse nowhere by much.
+        assert_eq!(coordination_rule(&counts(2, 1, 0, 6, 5)), (false, true));
+        assert_eq!(coordination_rule(&counts(4, 0, 0, 6, 5)), (true, true));
+        assert_eq!(coordination_rule(&counts(8, 0, 0, 8, 8)), (true, true));
+    }
+
+    #[test]
+    fn much_worse_is_worse_beyond_the_partly_margin() {
+        // The committed 0.55 rad/s dive: LBC 1571 vs single 1322 (19% worse).
+        assert_eq!(
+            compare_objectives(1571.4, 1321.7, PARTLY_WORSE_MARGIN),
+            "worse"
+        );
+        assert_eq!(compare_objectives(1.04, 1.0, PARTLY_WORSE_MARGIN), "tie");
     }
 }

@@ -34,7 +34,10 @@ mod figures;
 mod interpolation;
 mod report;
 
-pub use coordination::{compare_objectives, CoordinationParams, LbcDiverCoordination};
+pub use coordination::{
+    compare_objectives, coordination_rule, CoordinationCounts, CoordinationParams,
+    LbcDiverCoordination, PARTLY_WORSE_MARGIN,
+};
 pub use interpolation::{InterpolationParams, LbcDiverInterpolation};
 
 use crate::bellman::combine::{blend_weights, normalized_entropy, TrackerBlend};
