@@ -123,54 +123,85 @@ pub(crate) fn with_level<T>(cap: Level, f: impl FnOnce() -> T) -> T {
     out
 }
 
+/// Bits of [`flags`]: set once the others are known, then what the level allows.
+const KNOWN: u8 = 1;
+const AVX: u8 = 2;
+const AVX2: u8 = 4;
+const FMA: u8 = 8;
+const AVX512F: u8 = 16;
+
+/// What the dispatched copies may use, computed on the first call ([`level`] and the
+/// processor's features) and then one relaxed load: the kernels ask at every call, and a call
+/// to [`level`] there (a `OnceLock` behind a function call) measured 5–10% of a small net's
+/// emulator step.
+static FLAGS: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
+
+/// The feature bits `level` allows on this processor.
+#[cold]
+fn flags_for(level: Level) -> u8 {
+    let mut f = KNOWN;
+    #[cfg(target_arch = "x86_64")]
+    {
+        let on = |b: bool, bit: u8| if b { bit } else { 0 };
+        if level >= Level::Avx2 {
+            f |= on(std::arch::is_x86_feature_detected!("avx"), AVX);
+            f |= on(std::arch::is_x86_feature_detected!("avx2"), AVX2);
+            f |= on(std::arch::is_x86_feature_detected!("fma"), FMA);
+        }
+        if level >= Level::Avx512 {
+            f |= on(std::arch::is_x86_feature_detected!("avx512f"), AVX512F);
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = level;
+    f
+}
+
+/// The feature bits of the current level ([`FLAGS`]).
+#[inline(always)]
+fn flags() -> u8 {
+    use std::sync::atomic::Ordering::Relaxed;
+    #[cfg(test)]
+    if FORCED.get().is_some() {
+        return flags_for(level());
+    }
+    let f = FLAGS.load(Relaxed);
+    if f & KNOWN != 0 {
+        return f;
+    }
+    let f = flags_for(level());
+    FLAGS.store(f, Relaxed);
+    f
+}
+
 /// Whether the AVX copies may run: the level allows it and the processor has AVX.
 #[inline]
 pub fn avx() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        level() >= Level::Avx2 && std::arch::is_x86_feature_detected!("avx")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
+    flags() & AVX != 0
 }
 
 /// Whether the AVX2 copies may run.
 #[inline]
 pub fn avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        level() >= Level::Avx2 && std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
+    flags() & AVX2 != 0
 }
 
 /// Whether the copies with the FMA instruction may run.
 #[inline]
 pub fn fma() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        level() >= Level::Avx2 && std::arch::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
+    flags() & FMA != 0
 }
 
 /// Whether the copies with AVX2 and FMA may run.
 #[inline]
 pub fn avx2_fma() -> bool {
-    avx2() && fma()
+    flags() & (AVX2 | FMA) == AVX2 | FMA
 }
 
 /// Whether the AVX-512F copies may run.
 #[inline]
 pub fn avx512f() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        level() >= Level::Avx512 && std::arch::is_x86_feature_detected!("avx512f")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
+    flags() & AVX512F != 0
 }
 
 /// The levels this processor can run, lowest first (for tests that compare every path).
