@@ -148,7 +148,7 @@ unsafe fn sin_cos2_fma(a: f64, b: f64) -> ((f64, f64), (f64, f64)) {
 
 #[cfg(target_arch = "x86_64")]
 fn has_fma() -> bool {
-    std::arch::is_x86_feature_detected!("fma")
+    crate::simd::fma()
 }
 
 /// (sin x, cos x), within 1 ulp of libm's (module docs).
@@ -180,7 +180,7 @@ fn portable(a: f64, b: f64) -> ((f64, f64), (f64, f64)) {
 /// path (`f64::mul_add` is one rounding on both).
 #[cfg(target_arch = "x86_64")]
 pub fn has_avx2_fma() -> bool {
-    std::arch::is_x86_feature_detected!("avx2") && has_fma()
+    crate::simd::avx2_fma()
 }
 
 #[cfg(test)]

@@ -139,5 +139,6 @@ pub mod params;
 pub mod physics;
 pub mod portable;
 pub mod seed;
+pub mod simd;
 pub mod synthesis;
 pub mod verbs;

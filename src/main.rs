@@ -29,6 +29,10 @@ use std::time::Instant;
 /// Only a full-scale `reproduce` writes to `results/` and `paper_figures/` by default (the
 /// committed outputs); `--quick` runs default to `quick/results/` and `quick/paper_figures/`,
 /// and `run` to `runs/results/` and `runs/paper_figures/`.
+///
+/// Environment: `MOTIONLAB_CACHE=DIR` holds the trained emulators (default
+/// `target/motionlab-cache`); `MOTIONLAB_SIMD=scalar|avx2|avx512` caps the vector instructions
+/// the dispatched kernels use (every level gives the same bits; for comparing them).
 #[derive(Parser)]
 #[command(name = "motionlab", version, about, long_about)]
 struct Cli {
@@ -392,6 +396,13 @@ fn broken_pipe(e: &anyhow::Error) -> bool {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // The vector-instruction cap, read once at start-up: an unknown value is an error here
+    // rather than a warning in the middle of a run.
+    if let Err(e) = motionlab::simd::requested() {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
+    let _ = motionlab::simd::level();
     match dispatch(cli) {
         Ok(()) => ExitCode::SUCCESS,
         // The reader of our output stopped reading: not an error of ours.

@@ -18,7 +18,9 @@
 //!   (from it; under 3 ulp);
 //! - [`hypot`]: √(x² + y²), rescaled by a power of two out of overflow and underflow;
 //! - [`powf`]: exp(y ln x) (about 2 + 2 |y ln x| ulp; used only for step-size rules and
-//!   search scales).
+//!   search scales);
+//! - [`standard_normal`]: `rand_distr`'s ziggurat with [`exp`] and [`ln`] (its draws bit
+//!   for bit, tested).
 //!
 //! Tests compare every function with the platform's over wide ranges of arguments.
 //!
@@ -32,6 +34,9 @@
 //! > notice is preserved.
 
 pub use crate::fastmath::sin_cos;
+
+mod normal;
+pub use normal::standard_normal;
 
 /// sin x ([`sin_cos`]'s first half).
 #[inline]

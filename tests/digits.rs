@@ -2,7 +2,9 @@
 //! every model that feeds a verdict, of one DDP iteration and one LQR tracker of the diver, of
 //! the Bellman combination and of the portable elementary functions, against constants
 //! recorded on 2026-11-28 (on a Zen 3 with AVX2 + FMA, and the same with glibc forced onto its
-//! generic code and `matrixmultiply` onto its plain kernel: PERFORMANCE.md, 2026-11-28).
+//! generic code and `matrixmultiply` onto its plain kernel: PERFORMANCE.md, 2026-11-28); and of
+//! tiny emulators trained by each method and rolled out (recorded on 2026-11-29 on the same
+//! machine, the same with `MOTIONLAB_SIMD=scalar` and `avx2`).
 //!
 //! A failure on a machine where the rest of the suite passes means some operation on that
 //! path picks its implementation by processor (a libm call, a dispatched matrix kernel):
@@ -13,6 +15,9 @@ use motionlab::bellman::combine::{blend_weights, normalized_entropy};
 use motionlab::control::ddp::{solve, ControlBounds, DdpOptions};
 use motionlab::control::lqr::track;
 use motionlab::control::{QuadraticCost, Rk4Map};
+use motionlab::emulator::catalog::{
+    train_emulator, BuildSpec, NetModel, NetSpec, TrainMethod, TrainSettings,
+};
 use motionlab::physics::lattice::{Floor, Lattice, LatticeModel};
 use motionlab::physics::linearize::FiniteDifference;
 use motionlab::physics::{
@@ -20,6 +25,7 @@ use motionlab::physics::{
 };
 use motionlab::portable;
 use nalgebra::{DMatrix, DVector};
+use rand::SeedableRng;
 
 /// FNV-1a over the bits of a sequence of doubles.
 #[derive(Clone, Copy)]
@@ -263,6 +269,100 @@ fn bellman_combination_and_portable_functions_keep_their_bits() {
         &[
             ("bellman", 0xc847e1b27af1a25a),
             ("portable", 0x36d05a7346521db0),
+        ],
+    );
+}
+
+/// A tiny emulator of `model` trained by `method` (a few iterations on a few hundred
+/// examples): sampling (start states, control processes, the frame transforms), weight
+/// initialization, the batch and single-example kernels, the trainers and, with `rollout`, the
+/// k-step fine-tuning; `noise` exercises the normal draws of the input noise.
+fn tiny_spec(model: NetModel, method: TrainMethod, noise: f64, rollout: bool) -> BuildSpec {
+    BuildSpec {
+        net: NetSpec {
+            model,
+            hidden: 12,
+            examples: 300,
+            method,
+            physical_dt: 0.01,
+            input_noise: None,
+            anchor: false,
+            normalization: Default::default(),
+        },
+        steps: 10,
+        settings: TrainSettings {
+            held_out_fraction: 0.25,
+            cg_max_iters: 25,
+            max_epochs: 4,
+            patience: 100,
+            min_improvement: 1e-4,
+            learning_rate: 0.05,
+            momentum: 0.9,
+            batch_size: 30,
+            input_noise: noise,
+            rollout_k: if rollout { 3 } else { 0 },
+            rollout_weight: if rollout { 1.0 } else { 0.0 },
+            rollout_iters: if rollout { 5 } else { 0 },
+        },
+        seed: 60,
+    }
+}
+
+#[test]
+fn tiny_emulators_train_and_roll_out_with_their_bits() {
+    let cases = [
+        (
+            "truck_lbfgs_rollout",
+            NetModel::Truck,
+            TrainMethod::Lbfgs,
+            0.0,
+            true,
+        ),
+        ("lander_cg", NetModel::Lander, TrainMethod::Cg, 0.0, false),
+        (
+            "pendulum_active_momentum_noise",
+            NetModel::PendulumActive,
+            TrainMethod::Momentum,
+            0.05,
+            false,
+        ),
+    ];
+    let mut got = Vec::new();
+    for (name, model, method, noise, rollout) in cases {
+        let trained = train_emulator(&tiny_spec(model, method, noise, rollout)).unwrap();
+        let e = &trained.emulator;
+        let mut h = Fnv::new();
+        h.all(e.mlp().weights());
+        h.add(trained.train_error);
+        h.add(trained.heldout_error);
+        let weights = h.0;
+        // 40 super-steps from a drawn start under a pattern of controls within the limits.
+        let mut x = model.start_state(&mut rand_chacha::ChaCha8Rng::seed_from_u64(7));
+        let limits = model.control_limits();
+        let (mut next, mut scratch) = (vec![0.0; x.len()], e.scratch());
+        let mut u = vec![0.0; model.control_dim()];
+        let mut h = Fnv::new();
+        for k in 0..40 {
+            for (j, u) in u.iter_mut().enumerate() {
+                let (lo, hi) = (limits.low[j], limits.high[j]);
+                *u = lo + (hi - lo) * (0.5 + 0.5 * pattern(k, j, 1.0));
+            }
+            e.predict(&x, &u, &mut scratch, &mut next);
+            x.copy_from_slice(&next);
+            h.all(&x);
+        }
+        got.push((format!("{name}_weights"), weights));
+        got.push((format!("{name}_rollout"), h.0));
+    }
+    check(
+        &got,
+        &[
+            ("truck_lbfgs_rollout_weights", 0x20ed63c4ca66c0db),
+            ("truck_lbfgs_rollout_rollout", 0x1bc5fe08089d2063),
+            ("lander_cg_weights", 0x318a553211446432),
+            ("lander_cg_rollout", 0xc72c7b6bcc4ff478),
+            ("pendulum_active_momentum_noise_weights", 0x7a6a44e2c619ed88),
+            ("pendulum_active_momentum_noise_rollout", 0x85469bfe15217eb7),
         ],
     );
 }

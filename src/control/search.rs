@@ -76,7 +76,6 @@ pub use trace::{
 use super::ControlError;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 use trace::Tracker;
 
 /// A proposal operator: how a gradient-free search draws a neighbour of a point of type `T`.
@@ -192,10 +191,9 @@ impl SearchBox {
 /// the projection onto the box; σ is the `scale`.
 impl Perturb<Vec<f64>> for SearchBox {
     fn perturb(&self, rng: &mut ChaCha8Rng, x: &Vec<f64>, scale: f64) -> Vec<f64> {
-        use rand::Rng;
         let mut y = x.clone();
         for (i, y) in y.iter_mut().enumerate() {
-            let z: f64 = rng.sample(StandardNormal);
+            let z = crate::portable::standard_normal(rng);
             *y += scale * self.half_width(i) * z;
         }
         self.project(&mut y);

@@ -203,15 +203,17 @@ impl NetModel {
                 } else {
                     rng.random_range(-3.0..8.0)
                 };
-                vec![x, y, th, v * th.cos(), v * th.sin(), 0.0]
+                let (s, c) = crate::portable::sin_cos(th);
+                vec![x, y, th, v * c, v * s, 0.0]
             }
             Self::Lander => {
                 let yaw = rng.random_range(-PI..PI);
                 let axis_angle: f64 = rng.random_range(-PI..PI);
                 let tilt = rng.random_range(0.0..0.4);
-                let axis = Vector3::new(axis_angle.cos(), axis_angle.sin(), 0.0);
-                let q = UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), tilt)
-                    * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw);
+                let (s, c) = crate::portable::sin_cos(axis_angle);
+                let axis = Vector3::new(c, s, 0.0);
+                let q = axis_angle_quaternion(&nalgebra::Unit::new_normalize(axis), tilt)
+                    * axis_angle_quaternion(&Vector3::z_axis(), yaw);
                 let q = q.quaternion();
                 let mut s = vec![
                     rng.random_range(-50.0..50.0),
@@ -1023,6 +1025,13 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
         from_cache: false,
         rollout_trace,
     })
+}
+
+/// nalgebra's `UnitQuaternion::from_axis_angle` (cos ½θ, sin ½θ · axis) with the sine and
+/// cosine of [`crate::portable`] instead of the C library's (issue 60).
+fn axis_angle_quaternion(axis: &nalgebra::Unit<Vector3<f64>>, angle: f64) -> UnitQuaternion<f64> {
+    let (s, c) = crate::portable::sin_cos(angle / 2.0);
+    UnitQuaternion::new_unchecked(nalgebra::Quaternion::from_parts(c, axis.into_inner() * s))
 }
 
 #[cfg(test)]

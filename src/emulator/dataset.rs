@@ -214,7 +214,7 @@ impl ControlSignal {
                         } else {
                             0.0
                         };
-                        (mid + half * (amp * arg.sin() + eps)).clamp(low, high)
+                        (mid + half * (amp * crate::portable::sin(arg) + eps)).clamp(low, high)
                     }
                 });
             }
@@ -248,7 +248,11 @@ impl ControlSignal {
         }
         let b = &self.values[(k + 1) * self.channels..(k + 2) * self.channels];
         let (t0, t1) = (self.times[k], self.times[k + 1]);
-        let w = 0.5 - 0.5 * (std::f64::consts::PI * ((t - t0) / (t1 - t0)).clamp(0.0, 1.0)).cos();
+        let w = 0.5
+            - 0.5
+                * crate::portable::cos(
+                    std::f64::consts::PI * ((t - t0) / (t1 - t0)).clamp(0.0, 1.0),
+                );
         for ((o, a), b) in u.iter_mut().zip(a).zip(b) {
             *o = a + w * (b - a);
         }

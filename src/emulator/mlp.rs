@@ -27,7 +27,6 @@
 //! works on fixed chunks of [`BATCH_CHUNK`] rows with ordered reduction, so its result is
 //! bit-identical for any number of rayon threads.
 
-use ndarray::linalg::general_mat_mul;
 use ndarray::{s, Array2, ArrayView1, ArrayView2, ArrayViewMut2, Axis};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -420,7 +419,7 @@ impl Mlp {
         let (w1, b1, _, _) = self.views();
         let mut h = Array2::zeros((x.nrows(), self.n_hidden));
         h.rows_mut().into_iter().for_each(|mut row| row.assign(&b1));
-        general_mat_mul(1.0, &x, &w1.t(), 1.0, &mut h);
+        kernels::general_product(x, w1.t(), h.view_mut(), true);
         kernels::sigmoid_slice(h.as_slice_mut().expect("a new array is contiguous"));
         h
     }
@@ -428,7 +427,7 @@ impl Mlp {
     fn output_batch(&self, h: ArrayView2<'_, f64>, mut y: ArrayViewMut2<'_, f64>) {
         let (_, _, w2, b2) = self.views();
         y.rows_mut().into_iter().for_each(|mut row| row.assign(&b2));
-        general_mat_mul(1.0, &h, &w2.t(), 1.0, &mut y);
+        kernels::general_product(h, w2.t(), y, true);
     }
 
     /// Sum of squared errors ½ Σ_τ ‖N(x^τ) − y^τ‖² over a batch and its gradient with respect
@@ -556,15 +555,16 @@ impl Mlp {
         e -= &t;
         let loss = 0.5 * e.iter().map(|v| v * v).sum::<f64>();
         // Hidden cotangent: (E W₂) ⊙ h ⊙ (1 − h).
-        let mut hb = e.dot(&w2);
+        let mut hb = Array2::zeros((x.nrows(), q));
+        kernels::general_product(e.view(), w2, hb.view_mut(), false);
         hb.zip_mut_with(&h, |a, &h| *a *= h * (1.0 - h));
         {
-            // β = 0: the products overwrite g1 and g2 without reading them.
+            // Not `add`: the products overwrite g1 and g2 without reading them.
             let (g1, gb1, g2, gb2) = self.split_mut(grad);
-            let mut g1 = ArrayViewMut2::from_shape((q, self.n_in), g1).expect("shape");
-            general_mat_mul(1.0, &hb.t(), &x, 0.0, &mut g1);
-            let mut g2 = ArrayViewMut2::from_shape((r, q), g2).expect("shape");
-            general_mat_mul(1.0, &e.t(), &h, 0.0, &mut g2);
+            let g1 = ArrayViewMut2::from_shape((q, self.n_in), g1).expect("shape");
+            kernels::general_product(hb.t(), x, g1, false);
+            let g2 = ArrayViewMut2::from_shape((r, q), g2).expect("shape");
+            kernels::general_product(e.t(), h.view(), g2, false);
             for (g, s) in gb1.iter_mut().zip(hb.sum_axis(Axis(0))) {
                 *g = s;
             }
@@ -645,9 +645,9 @@ mod tests {
     /// on 4 lanes.
     #[test]
     fn batch_kernels_are_ndarray_products_bit_for_bit() {
-        #[cfg(target_arch = "x86_64")]
-        let fused = std::arch::is_x86_feature_detected!("fma");
-        #[cfg(not(target_arch = "x86_64"))]
+        // The reference's products are `kernels::general_product`, the same order on every
+        // processor (`general_product_is_matrixmultiply_with_fma_bit_for_bit` ties it to
+        // ndarray's where `matrixmultiply` takes its FMA kernel).
         let fused = true;
         let shapes = [
             (17, 50, 13),
@@ -716,10 +716,6 @@ mod tests {
     /// and 3 after groups of 4), so every copy of a row's tail is taken.
     #[test]
     fn reused_packing_gives_the_same_bits() {
-        #[cfg(target_arch = "x86_64")]
-        if !std::arch::is_x86_feature_detected!("fma") {
-            return;
-        }
         let mut rng = ChaCha8Rng::seed_from_u64(77);
         let nets: Vec<Mlp> = [(13, 9, 5), (13, 9, 5), (15, 9, 5), (13, 9, 5)]
             .iter()
@@ -919,15 +915,16 @@ mod tests {
             m.output_batch(h.view(), e.view_mut());
             e -= &t;
             let loss = 0.5 * e.iter().map(|v| v * v).sum::<f64>();
-            let mut hb = e.dot(&w2);
+            let mut hb = Array2::zeros((x.nrows(), q));
+            kernels::general_product(e.view(), w2, hb.view_mut(), false);
             hb.zip_mut_with(&h, |a, &h| *a *= h * (1.0 - h));
             let mut grad = vec![0.0; m.n_weights()];
             {
                 let (g1, gb1, g2, gb2) = m.split_mut(&mut grad);
-                let mut g1 = ArrayViewMut2::from_shape((q, m.n_in), g1).expect("shape");
-                general_mat_mul(1.0, &hb.t(), &x, 0.0, &mut g1);
-                let mut g2 = ArrayViewMut2::from_shape((r, q), g2).expect("shape");
-                general_mat_mul(1.0, &e.t(), &h, 0.0, &mut g2);
+                let g1 = ArrayViewMut2::from_shape((q, m.n_in), g1).expect("shape");
+                kernels::general_product(hb.t(), x, g1, false);
+                let g2 = ArrayViewMut2::from_shape((r, q), g2).expect("shape");
+                kernels::general_product(e.t(), h.view(), g2, false);
                 for (g, s) in gb1.iter_mut().zip(hb.sum_axis(Axis(0))) {
                     *g = s;
                 }
@@ -971,6 +968,146 @@ mod tests {
             let l2 = m.loss_grad(x.view(), t.view(), &mut g1);
             assert_eq!(l0.to_bits(), l2.to_bits());
             assert!(same_bits(&g0, &g1));
+        }
+    }
+
+    /// Every dispatched kernel of the perceptron, run under each level this processor has
+    /// (`crate::simd::with_level`: portable lanes with libm's `fma`, AVX2 + FMA, AVX-512),
+    /// gives the bits of the portable path: single-example passes and their batched forms,
+    /// the weight gradients, σ, the batch loss and gradient of one chunk (register-tiled
+    /// kernels, and the general products for a net with one hidden unit and one with more
+    /// than 256 inputs), the general product itself and the momentum step. Each level packs
+    /// its own copy of the weights (8-lane padding under AVX-512).
+    #[test]
+    fn every_dispatched_kernel_gives_the_portable_bits_at_every_level() {
+        use crate::simd::{available, with_level, Level};
+        let shapes = [
+            (17, 50, 13),
+            (84, 50, 78),
+            (70, 40, 24),
+            (6, 20, 6),
+            (3, 5, 2),
+            (5, 1, 3),
+            (300, 6, 4),
+        ];
+        let run = |level: Level| -> Vec<u64> {
+            with_level(level, || {
+                let mut out = Vec::new();
+                let mut put = |v: &[f64]| out.extend(v.iter().map(|x| x.to_bits()));
+                for (s, &(p, q, r)) in shapes.iter().enumerate() {
+                    let mut rng = ChaCha8Rng::seed_from_u64(600 + s as u64);
+                    let weights = Mlp::new(p, q, r, WeightInit::FanIn, &mut rng).weights;
+                    // A fresh net: its packing is made under this level.
+                    let m = Mlp::from_weights(p, q, r, weights);
+                    let (x, t) = random_batch(100, p, r, 700 + s as u64);
+                    let xs = x.as_slice().unwrap();
+                    let mut sc = m.scratch();
+                    let (mut y, mut xb) = (vec![0.0; r], vec![0.0; p]);
+                    let mut g = vec![0.0; m.n_weights()];
+                    for e in 0..5 {
+                        let xe = &xs[e * p..(e + 1) * p];
+                        m.forward(xe, &mut sc, &mut y);
+                        put(&y);
+                        put(&sc.hidden);
+                        m.backward(
+                            xe,
+                            &mut sc,
+                            &t.as_slice().unwrap()[..r],
+                            Some(&mut g),
+                            Some(&mut xb),
+                        );
+                        put(&xb);
+                        put(&g);
+                    }
+                    let n = 7;
+                    let (mut h, mut ym) = (vec![0.0; n * q], vec![0.0; n * r]);
+                    m.forward_many(n, &xs[..n * p], &mut h, &mut ym);
+                    let (mut hb, mut xbm) = (vec![0.0; n * q], vec![0.0; n * p]);
+                    m.backward_many(n, (&h, &ym), &mut hb, &mut xbm);
+                    m.weight_grad_many(n, (&xs[..n * p], &h, &hb, &ym), &mut g);
+                    put(&ym);
+                    put(&xbm);
+                    put(&g);
+                    // One chunk: computed on this thread.
+                    let loss = m.loss_grad(x.view(), t.view(), &mut g);
+                    put(&[loss]);
+                    put(&g);
+                    let mut z: Vec<f64> = (0..37).map(|i| (i as f64 - 18.0) * 3.1).collect();
+                    kernels::sigmoid_slice(&mut z);
+                    put(&z);
+                    let mut c = Array2::from_elem((100, r), 0.5);
+                    kernels::general_product(
+                        x.view(),
+                        x.t().slice(s![.., ..r]),
+                        c.view_mut(),
+                        true,
+                    );
+                    put(c.as_slice().unwrap());
+                    let mut w = m.weights.clone();
+                    let mut mom = crate::emulator::train::MomentumState::new(w.len());
+                    mom.step(&mut w, &g, 0.05, 0.9);
+                    mom.step(&mut w, &g, 0.05, 0.9);
+                    put(&w);
+                }
+                out
+            })
+        };
+        let portable = run(Level::Scalar);
+        for level in available() {
+            assert!(
+                run(level) == portable,
+                "{level:?} against the portable path"
+            );
+        }
+    }
+
+    /// [`kernels::general_product`] is what ndarray's `general_mat_mul` computes where
+    /// `matrixmultiply` takes its AVX2 + FMA kernel (this processor's path when the cached nets
+    /// were trained), bit for bit: with and without adding to C, A and B transposed or not,
+    /// inner dimensions up to and beyond its depth block of 256, widths that are not whole
+    /// lane groups, a single row or column. Skipped where the processor lacks AVX2 or FMA
+    /// (`matrixmultiply` then multiplies and adds separately).
+    #[test]
+    fn general_product_is_matrixmultiply_with_fma_bit_for_bit() {
+        #[cfg(target_arch = "x86_64")]
+        if !(std::arch::is_x86_feature_detected!("fma")
+            && std::arch::is_x86_feature_detected!("avx2"))
+        {
+            return;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(61);
+        for &(m, k, n) in &[
+            (1, 1, 1),
+            (5, 3, 1),
+            (1, 7, 6),
+            (30, 17, 50),
+            (128, 50, 13),
+            (13, 128, 50),
+            (9, 256, 7),
+            (11, 257, 6),
+            (7, 600, 5),
+            (300, 84, 78),
+        ] {
+            let mut draw =
+                |r: usize, c: usize| Array2::from_shape_fn((r, c), |_| rng.random_range(-2.0..2.0));
+            let (a, b, at, bt, c0) = (draw(m, k), draw(k, n), draw(k, m), draw(n, k), draw(m, n));
+            for add in [false, true] {
+                for (a, b) in [
+                    (a.view(), b.view()),
+                    (at.t(), b.view()),
+                    (a.view(), bt.t()),
+                    (at.t(), bt.t()),
+                ] {
+                    let (mut want, mut got) = (c0.clone(), c0.clone());
+                    let beta = if add { 1.0 } else { 0.0 };
+                    ndarray::linalg::general_mat_mul(1.0, &a, &b, beta, &mut want);
+                    kernels::general_product(a, b, got.view_mut(), add);
+                    assert!(
+                        same_bits(want.as_slice().unwrap(), got.as_slice().unwrap()),
+                        "{m} × {k} × {n}, add {add}"
+                    );
+                }
+            }
         }
     }
 

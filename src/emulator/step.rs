@@ -53,7 +53,7 @@ macro_rules! avx_dispatched {
                 fn avx($($arg: $ty),*) {
                     body($($arg),*)
                 }
-                if std::arch::is_x86_feature_detected!("avx") {
+                if $crate::simd::avx() {
                     // SAFETY: the processor supports AVX (checked just above).
                     unsafe { avx($($arg),*) };
                     return;

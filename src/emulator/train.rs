@@ -711,7 +711,7 @@ impl MomentumState {
         }
         let v = &mut self.velocity;
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
+        if crate::simd::avx2() {
             // SAFETY: the processor has AVX2 (checked just above).
             unsafe { update_avx2(weights, v, grad, learning_rate, momentum) };
             return;

@@ -303,7 +303,7 @@ impl Integrator {
             ) -> f64 {
                 it.dopri_body(model, x, u, h, want_error)
             }
-            if std::arch::is_x86_feature_detected!("avx2") {
+            if crate::simd::avx2() {
                 // SAFETY: the processor supports AVX2 (checked just above).
                 return unsafe { avx2(self, model, x, u, h, want_error) };
             }

@@ -348,20 +348,10 @@ pub(super) fn sigmoid_scalar(z: f64) -> f64 {
 }
 
 /// Whether the single-example products run on [`Avx512`] lanes: on x86-64 processors with
-/// AVX-512F, unless the environment variable `MOTIONLAB_NO_AVX512` is set (to compare the two
-/// paths; the results are the same bits either way).
+/// AVX-512F, unless [`crate::simd`]'s switch (`MOTIONLAB_SIMD=avx2` or `scalar`, or
+/// `MOTIONLAB_NO_AVX512`) caps the level (to compare the paths; the same bits either way).
 fn wide_lanes() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::sync::OnceLock;
-        static WIDE: OnceLock<bool> = OnceLock::new();
-        *WIDE.get_or_init(|| {
-            std::arch::is_x86_feature_detected!("avx512f")
-                && std::env::var_os("MOTIONLAB_NO_AVX512").is_none()
-        })
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
+    crate::simd::avx512f()
 }
 
 /// A p → q → r net's layer sizes, and each padded to whole lane groups.
@@ -624,7 +614,8 @@ pub(super) fn output_has_dual_chains(stride: usize, j: usize) -> bool {
 }
 
 /// `$name` runs `$generic` on AVX2 lanes, compiled with AVX2 and FMA enabled, when the
-/// processor has both, else on portable lanes.
+/// processor has both and [`crate::simd`] allows them, else on portable lanes (the same bits:
+/// without the FMA instruction each [`f64::mul_add`] is libm's exact `fma`, slower).
 macro_rules! dispatch {
     ($vis:vis $name:ident, $generic:ident, ($($arg:ident : $ty:ty),*)) => {
         #[allow(clippy::too_many_arguments)]
@@ -637,9 +628,7 @@ macro_rules! dispatch {
                 fn avx2($($arg: $ty),*) {
                     $generic::<Avx2>($($arg),*)
                 }
-                if std::arch::is_x86_feature_detected!("avx2")
-                    && std::arch::is_x86_feature_detected!("fma")
-                {
+                if crate::simd::avx2_fma() {
                     // SAFETY: the processor supports AVX2 and FMA (checked just above).
                     unsafe { avx2($($arg),*) };
                     return;
@@ -665,7 +654,7 @@ macro_rules! dispatch_wide {
                 fn avx512($pk: $pkty, $($arg: $ty),*) {
                     $generic::<Avx512>($pk, $($arg),*)
                 }
-                if $pk.d.wide && std::arch::is_x86_feature_detected!("avx512f") {
+                if $pk.d.wide && crate::simd::avx512f() {
                     // SAFETY: the processor supports AVX-512F (checked just above).
                     unsafe { avx512($pk, $($arg),*) };
                     return;
@@ -678,7 +667,7 @@ macro_rules! dispatch_wide {
 }
 
 mod batch;
-pub(super) use batch::{chunk_loss, chunk_loss_grad, Ahead, BatchNet, MAX_DEPTH};
+pub(super) use batch::{chunk_loss, chunk_loss_grad, general_product, Ahead, BatchNet, MAX_DEPTH};
 mod many;
 pub(super) use many::{backward_many, forward_many};
 

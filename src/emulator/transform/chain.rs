@@ -375,7 +375,6 @@ impl Transforms {
     /// so the correction is exact. Without T_y^Δ the target stays the true next state. Controls
     /// are not perturbed. Works on the encoded (normalized) set; draws every δ from `rng`.
     pub fn perturb(&self, ds: &Dataset, scale: f64, rng: &mut rand_chacha::ChaCha8Rng) -> Dataset {
-        use rand::Rng;
         let n = self.state_dim;
         let mut out = ds.clone();
         let rows = ds.len().max(1) as f64;
@@ -440,7 +439,7 @@ impl Transforms {
         {
             for k in 0..n {
                 if sd[k] > 1e-9 {
-                    let d = scale * sd[k] * rng.sample::<f64, _>(rand_distr::StandardNormal);
+                    let d = scale * sd[k] * crate::portable::standard_normal(rng);
                     z[k] += d;
                     y[k] -= gain[k] * d;
                 }

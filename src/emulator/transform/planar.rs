@@ -93,7 +93,7 @@ impl PlanarFrame {
     pub fn apply(&self, map: FrameMap, pose: Pose2, inp: &[f64], out: &mut [f64]) {
         out.copy_from_slice(inp);
         let phi = map.sign() * pose.theta;
-        let (sn, c) = phi.sin_cos();
+        let (sn, c) = crate::portable::sin_cos(phi);
         let rot = |a: f64, b: f64| (c * a - sn * b, sn * a + c * b);
         for &(i, j) in &self.points {
             let (a, b) = match map {
@@ -157,7 +157,7 @@ impl PlanarFrame {
     ) {
         d_out.copy_from_slice(d_inp);
         let sign = map.sign();
-        let (sn, c) = (sign * pose.theta).sin_cos();
+        let (sn, c) = crate::portable::sin_cos(sign * pose.theta);
         let rot = |a: f64, b: f64| (c * a - sn * b, sn * a + c * b);
         for (i, j, is_point, (va, vb)) in self.rotated_inputs(map, pose, inp) {
             let (ra, rb) = rot(va, vb);
@@ -199,7 +199,7 @@ impl PlanarFrame {
         let n = inp.len();
         let mut touched_theta = 0.0;
         let sign = map.sign();
-        let (sn, c) = (sign * pose.theta).sin_cos();
+        let (sn, c) = crate::portable::sin_cos(sign * pose.theta);
         let rot = |a: f64, b: f64| (c * a - sn * b, sn * a + c * b);
         let rot_t = |a: f64, b: f64| (c * a + sn * b, -sn * a + c * b);
         // Pass-through variables (angles included) first: identity.

@@ -465,7 +465,7 @@ impl SpatialFrame {
             ) {
                 f.apply_dispatch(map, pose, r, inp, out);
             }
-            if std::arch::is_x86_feature_detected!("avx") {
+            if crate::simd::avx() {
                 // SAFETY: the processor supports AVX (checked just above).
                 unsafe { avx(self, map, pose, r, inp, out) };
                 return;
@@ -657,7 +657,7 @@ impl SpatialFrame {
             ) {
                 f.vjp_dispatch(map, live, a, inp_bar, pose_bar);
             }
-            if std::arch::is_x86_feature_detected!("avx") {
+            if crate::simd::avx() {
                 // SAFETY: the processor supports AVX (checked just above).
                 unsafe { avx(self, map, live, &args, inp_bar, pose_bar) };
                 return;
@@ -895,7 +895,7 @@ fn quat_partials(map: FrameMap, q0: [f64; 4], a: [f64; 4], live: &[usize]) -> [[
         fn avx(map: FrameMap, q0: [f64; 4], a: [f64; 4], live: &[usize]) -> [[f64; 4]; 4] {
             quat_partials_body(map, q0, a, live)
         }
-        if std::arch::is_x86_feature_detected!("avx") {
+        if crate::simd::avx() {
             // SAFETY: the processor supports AVX (checked just above).
             return unsafe { avx(map, q0, a, live) };
         }

@@ -117,7 +117,7 @@ impl SwimTask {
                 .unwrap_or(0);
             let t = i as f64 * super_dt;
             for s in 0..m {
-                v[k * m + s] = (TAU * t - (30f64).to_radians() * s as f64).sin();
+                v[k * m + s] = crate::portable::sin(TAU * t - (30f64).to_radians() * s as f64);
             }
         }
         v

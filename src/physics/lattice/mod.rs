@@ -252,7 +252,7 @@ impl LatticeModel {
     pub fn add_spring_forces(&self, x: &[f64], rest: &[f64], f: &mut [f64]) {
         #[cfg(target_arch = "x86_64")]
         {
-            if std::arch::is_x86_feature_detected!("avx") {
+            if crate::simd::avx() {
                 // SAFETY: the processor has AVX (checked just above).
                 unsafe { self.spring_forces_avx(x, rest, f) };
             } else {

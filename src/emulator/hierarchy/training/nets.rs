@@ -15,7 +15,7 @@ use crate::emulator::transform::Normalizer;
 use crate::emulator::{Emulator, Transforms, Transitions};
 use crate::physics::dolphin::{Dolphin, N_SEGMENTS};
 use ndarray::Array2;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -208,7 +208,7 @@ fn local_perturbed(
     let mut delta = vec![0.0; seen];
     for (mut z, mut y) in inp.rows_mut().into_iter().zip(out.rows_mut()) {
         for (c, d) in delta.iter_mut().enumerate() {
-            *d = scale * sd[c] * rng.sample::<f64, _>(rand_distr::StandardNormal);
+            *d = scale * sd[c] * crate::portable::standard_normal(rng);
             z[c] += *d;
         }
         for (t, &c) in source.iter().enumerate() {

@@ -285,7 +285,7 @@ fn transpose(s: &[f64], (rows, cols): (usize, usize), d: &mut [f64], ds: usize) 
     assert!(cols == 0 || d.len() >= (cols - 1) * ds + rows);
     let (mut r4, mut c4) = (0, 0);
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
+    if crate::simd::avx2() {
         (r4, c4) = (rows / 4 * 4, cols / 4 * 4);
         // SAFETY: the processor has AVX2 (checked just above); the blocks read rows < r4 ≤
         // rows and columns < c4 ≤ cols of `s`, and write d[c·ds + r] for the same r and c,
@@ -674,6 +674,82 @@ dispatch_wide!(
         scratch: &mut [f64],
         loss: &mut f64,
         ahead: &mut Ahead
+    )
+);
+
+/// C ← A B, or C ← C + A B when `add`, for matrices of any shapes and strides (m × k times
+/// k × n), each entry summed as `matrixmultiply`'s FMA kernel sums it (what ndarray's
+/// `general_mat_mul` gave on a processor with FMA, the path the cached nets were trained on):
+/// from zero, k ascending, one fused multiply–add per term, in blocks of [`MAX_DEPTH`] terms,
+/// each block's sum added to C (the first one written instead where not `add`). The order is
+/// fixed by the shapes, so the same bits on every processor (unlike `matrixmultiply`'s, whose
+/// kernel is picked at run time: plain multiplies and adds without FMA), at the cost of libm's
+/// exact `fma` per term where the processor has no FMA (or [`crate::simd`] forbids it). The
+/// products of [`product`] on 4 lanes, A and B copied first into contiguous rows.
+pub(in crate::emulator::mlp) fn general_product(
+    a: ArrayView2<'_, f64>,
+    b: ArrayView2<'_, f64>,
+    mut c: ndarray::ArrayViewMut2<'_, f64>,
+    add: bool,
+) {
+    let (m, k) = a.dim();
+    let n = b.ncols();
+    assert_eq!(b.nrows(), k, "inner dimensions");
+    assert_eq!(c.dim(), (m, n), "C's shape");
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k == 0 {
+        if !add {
+            c.fill(0.0);
+        }
+        return;
+    }
+    let ns = n.div_ceil(4) * 4;
+    let mut ap = Vec::with_capacity(m * k);
+    for row in a.rows() {
+        ap.extend(row.iter());
+    }
+    let mut bp = vec![0.0; k * ns];
+    for (d, row) in bp.chunks_exact_mut(ns).zip(b.rows()) {
+        for (d, s) in d.iter_mut().zip(row) {
+            *d = *s;
+        }
+    }
+    let mut sums = vec![0.0; m * ns];
+    for (block, k0) in (0..k).step_by(MAX_DEPTH).enumerate() {
+        let depth = MAX_DEPTH.min(k - k0);
+        let args = (m, ns / 4, depth);
+        general_product_lanes(args, (&ap[k0..], k), (&bp[k0 * ns..], ns), &mut sums);
+        for (row, s) in c.rows_mut().into_iter().zip(sums.chunks_exact(ns)) {
+            for (v, s) in row.into_iter().zip(s) {
+                *v = if block == 0 && !add { *s } else { *v + s };
+            }
+        }
+    }
+}
+
+/// One depth block of [`general_product`]: `sums` (m rows of `bs` values) ← A B for A's
+/// rows of stride `ars` and B's rows of stride `bs`, `groups` lane groups of 4.
+#[inline(always)]
+fn general_product_generic<L: Lanes>(
+    (m, groups, k): (usize, usize, usize),
+    (a, ars): (&[f64], usize),
+    (b, bs): (&[f64], usize),
+    sums: &mut [f64],
+) {
+    let mut ahead = Ahead::none();
+    product::<L>(m, groups, k, (a, ars, 1), (b, bs), (sums, bs), &mut ahead);
+}
+
+dispatch!(
+    general_product_lanes,
+    general_product_generic,
+    (
+        shape: (usize, usize, usize),
+        a: (&[f64], usize),
+        b: (&[f64], usize),
+        sums: &mut [f64]
     )
 );
 

@@ -145,7 +145,11 @@ impl Job for Params {
                         s[1],
                         s[2],
                         s[VEL + 2],
-                        axis.z.clamp(-1.0, 1.0).acos()
+                        {
+                            // acos z as atan2(√(1 − z²), z), in portable arithmetic.
+                            let z = axis.z.clamp(-1.0, 1.0);
+                            crate::portable::atan2(((1.0 - z) * (1.0 + z)).sqrt(), z)
+                        }
                     ]);
                 }
             }
