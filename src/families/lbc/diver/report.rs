@@ -97,6 +97,7 @@ pub(super) fn interpolation(dir: &Path) -> Result<Findings, Error> {
             ));
         }
     }
+    md.push_str(&average_term(dir, setting("average_scale"), tol_entry)?);
     Ok(Findings {
         ours: md,
         // The premise: one component under-rotates and the other over-rotates, each by
@@ -112,6 +113,51 @@ pub(super) fn interpolation(dir: &Path) -> Result<Findings, Error> {
             sig(ne)
         ),
     })
+}
+
+/// The §6.1 average-trajectory term's table (from `average_term.csv`): per scale, the
+/// components' worst entry error and, at the vertical target, where LBC and the naive blend
+/// enter and how far LBC's dive strays from the components' average trajectory.
+fn average_term(dir: &Path, chosen: f64, tol_entry: f64) -> Result<String, Error> {
+    let path = dir.join("average_term.csv");
+    if !path.exists() {
+        return Ok(String::new());
+    }
+    let df = read_csv(&path)?;
+    let (s, g, m, a, e, dev) = (
+        df_f64(&df, "average_scale")?,
+        df_f64(&df, "desired_angle")?,
+        df_str(&df, "method")?,
+        df_f64(&df, "reached_angle")?,
+        df_f64(&df, "entry_error")?,
+        df_f64(&df, "angle_deviation")?,
+    );
+    let mut md = format!(
+        "\nThe §6.1 average-trajectory term (each component re-optimized with the running cost scale·(x−x̄)ᵀQ(x−x̄), x̄ the components' mean trajectory without it). Rule (fixed in the spec before the sweep): the tables above use the largest scale at which both components still enter within {} rad of their targets; chosen: {}.\n\n| scale | worst component entry error (rad) | LBC vertical entry (rad) | naive vertical entry (rad) | LBC RMS deviation from x̄ (rad) |\n| --- | --- | --- | --- | --- |\n",
+        sig(tol_entry),
+        sig(chosen)
+    );
+    let mut scales = s.clone();
+    scales.dedup();
+    for &sc in &scales {
+        let s = &s;
+        let rows = || (0..s.len()).filter(move |&r| s[r] == sc);
+        let worst = rows()
+            .filter(|&r| m[r] == "component")
+            .map(|r| e[r])
+            .fold(f64::NEG_INFINITY, f64::max);
+        let find = |name: &str| rows().find(|&r| m[r] == name && g[r] == 0.0);
+        let (l, v) = (find("lbc"), find("naive"));
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} |\n",
+            sig(sc),
+            sig(worst),
+            l.map_or("–".into(), |r| sig(a[r])),
+            v.map_or("–".into(), |r| sig(a[r])),
+            l.map_or("–".into(), |r| sig(dev[r]))
+        ));
+    }
+    Ok(md)
 }
 
 /// The coordination's report section and verdict.
