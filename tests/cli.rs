@@ -56,6 +56,41 @@ fn physics_validation_quick_writes_promised_outputs() {
 }
 
 #[test]
+fn every_figure_and_animation_is_in_the_report_with_a_caption() {
+    let d = quick_reproduction();
+    let report = std::fs::read_to_string(d.path().join("out/REPORT.md")).unwrap();
+    assert!(
+        !report.contains(motionlab::experiment::report::NO_CAPTION),
+        "a figure without a caption: {}",
+        report
+            .lines()
+            .filter(|l| l.contains(motionlab::experiment::report::NO_CAPTION))
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    let mut n = 0;
+    for e in std::fs::read_dir(d.path().join("figs")).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().into_owned();
+        if name.ends_with(".png") || name.ends_with(".gif") {
+            assert!(
+                report.contains(&format!("/{name})")),
+                "{name} is not in REPORT.md"
+            );
+            n += 1;
+        }
+    }
+    assert!(n > 40, "only {n} figures");
+    for term in [
+        "Glossary",
+        "NeuroAnimator",
+        "Linear Bellman Combination",
+        "Mass-Spring",
+    ] {
+        assert!(report.contains(term), "the report does not name {term}");
+    }
+}
+
+#[test]
 fn lbc_projection_quick_writes_promised_outputs_and_two_minima_when_far() {
     let d = quick_reproduction();
     let out = d.path().join("out/lbc_projection");

@@ -107,6 +107,12 @@ pub trait Experiment: Sync {
     fn seed_metrics(&self) -> &'static [seeds::SeedMetric] {
         &[]
     }
+    /// One-line captions of the figures and animations it draws, by name (the file name
+    /// `<id>_<name>.png|gif` without the id and extension); the report prints each under its
+    /// figure.
+    fn captions(&self) -> &'static [(&'static str, &'static str)] {
+        &[]
+    }
 }
 
 /// What a family file implements: its name, its typed parameters (which run as the [`Job`])
@@ -127,6 +133,9 @@ pub trait Family: Sync {
     /// Results plotted over seeds (mean and spread) in the `<id>_seeds` figure when seeds are
     /// swept (`--seeds K` or a `seeds` sweep axis); none by default.
     const SEED_METRICS: &'static [seeds::SeedMetric] = &[];
+    /// One-line captions of its figures and animations, by name (`<id>_<name>.png|gif`
+    /// without the id and extension), printed under each in the report.
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[];
 }
 
 impl<F: Family> Experiment for F {
@@ -136,6 +145,10 @@ impl<F: Family> Experiment for F {
 
     fn seed_metrics(&self) -> &'static [seeds::SeedMetric] {
         F::SEED_METRICS
+    }
+
+    fn captions(&self) -> &'static [(&'static str, &'static str)] {
+        F::CAPTIONS
     }
 
     fn is_beyond(&self) -> bool {

@@ -12,10 +12,15 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
+/// Draws panel `p` on `area`, every text and margin `scale` times its size at a 640-pixel
+/// panel (the figure's width decides it, [`font_scale`], so tick labels stay readable when a
+/// wide figure is shown at report width).
 pub(super) fn draw_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     p: &Panel,
+    scale: f64,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let px = |v: f64| (v * scale).round() as i32;
     // Data in plot coordinates (log10 where the axis is logarithmic) for the ranges.
     let data: Vec<Vec<(f64, f64)>> = p
         .series
@@ -61,13 +66,13 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
     };
     let area = area.titled(
         &p.title,
-        ("sans-serif", 20).into_font().style(FontStyle::Bold),
+        ("sans-serif", px(20.0)).into_font().style(FontStyle::Bold),
     )?;
-    let (label_strip, plot_area) = area.split_vertically(22);
+    let (label_strip, plot_area) = area.split_vertically(px(22.0));
     label_strip.draw(&Text::new(
         format!("↑ {}", p.y_label),
-        (12, 4),
-        ("sans-serif", 15).into_font().color(&BLACK),
+        (px(12.0), px(4.0)),
+        ("sans-serif", px(15.0)).into_font().color(&BLACK),
     ))?;
     // The legend's corner, chosen before drawing; where every corner would cover data and the
     // y range is ours to choose, the top is raised to leave room for it.
@@ -80,21 +85,21 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
     let mut corner = p.legend;
     if corner == Legend::Auto && !labels.is_empty() {
         let (w, h) = plot_area.dim_in_pixel();
-        let px = ((w as i32 - 82).max(50), (h as i32 - 62).max(50));
+        let plot_px = ((w as i32 - px(82.0)).max(50), (h as i32 - px(62.0)).max(50));
         let size = (
-            labels.iter().copied().max().unwrap_or(0) as i32 * 8 + 40,
-            labels.len() as i32 * 19 + 10,
+            labels.iter().copied().max().unwrap_or(0) as i32 * px(8.0) + px(40.0),
+            labels.len() as i32 * px(19.0) + px(10.0),
         );
         let place = |yr: (f64, f64)| {
-            let cover = covered_pixels(p, &data, (xr, yr), px);
-            emptiest_corner(((0, 0), px), size, &cover)
+            let cover = covered_pixels(p, &data, (xr, yr), plot_px);
+            emptiest_corner(((0, 0), plot_px), size, &cover)
         };
         let (c, n) = place(yr);
         corner = c;
-        if n > 0 && p.y_range.is_none() && size.1 + 12 < px.1 / 2 {
+        if n > 0 && p.y_range.is_none() && size.1 + 12 < plot_px.1 / 2 {
             let (t0, t1) = (tr(yr.0, p.log_y), tr(yr.1, p.log_y));
             if let (Some(t0), Some(t1)) = (t0, t1) {
-                let t1 = t0 + (t1 - t0) * px.1 as f64 / (px.1 - size.1 - 12) as f64;
+                let t1 = t0 + (t1 - t0) * plot_px.1 as f64 / (plot_px.1 - size.1 - 12) as f64;
                 let raised = (yr.0, if p.log_y { 10f64.powf(t1) } else { t1 });
                 let (c2, n2) = place(raised);
                 if n2 < n {
@@ -105,7 +110,9 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
     }
     let builder = || {
         let mut b = ChartBuilder::on(&plot_area);
-        b.margin(10).x_label_area_size(42).y_label_area_size(62);
+        b.margin(px(10.0))
+            .x_label_area_size(px(42.0))
+            .y_label_area_size(px(62.0));
         b
     };
     let snap = (
@@ -133,7 +140,7 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
             )?,
             p,
             data,
-            (snap, sci, corner),
+            (snap, sci, corner, scale),
         ),
         (true, false) => finish(
             builder().build_cartesian_2d(
@@ -142,7 +149,7 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
             )?,
             p,
             data,
-            (snap, sci, corner),
+            (snap, sci, corner, scale),
         ),
         (false, true) => finish(
             builder().build_cartesian_2d(
@@ -151,7 +158,7 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
             )?,
             p,
             data,
-            (snap, sci, corner),
+            (snap, sci, corner, scale),
         ),
         (true, true) => finish(
             builder().build_cartesian_2d(
@@ -160,7 +167,7 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
             )?,
             p,
             data,
-            (snap, sci, corner),
+            (snap, sci, corner, scale),
         ),
     }
 }
@@ -169,13 +176,14 @@ fn finish<'a, DB, X, Y>(
     mut chart: ChartContext<'a, DB, Cartesian2d<X, Y>>,
     p: &Panel,
     data: Vec<Vec<(f64, f64)>>,
-    (snap, sci, corner): ((f64, f64), (bool, bool), Legend),
+    (snap, sci, corner, scale): ((f64, f64), (bool, bool), Legend, f64),
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
 where
     DB: DrawingBackend + 'a,
     X: Ranged<ValueType = f64> + ValueFormatter<f64>,
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
+    let px = |v: f64| (v * scale).round() as i32;
     chart
         .configure_mesh()
         .x_desc(p.x_label.as_str())
@@ -193,20 +201,22 @@ where
             }
         })
         .y_label_formatter(&|v| tick_as(*v, snap.1, sci.1))
-        .label_style(("sans-serif", 13))
-        .axis_desc_style(("sans-serif", 15))
+        .label_style(("sans-serif", px(13.0)))
+        .axis_desc_style(("sans-serif", px(15.0)))
         .bold_line_style(RGBColor(225, 225, 225))
         .light_line_style(RGBColor(235, 235, 235))
         .draw()?;
     let mut any_label = false;
-    for (s, pts) in p.series.iter().zip(data) {
+    let marks = p.series_marks();
+    let (width, dot) = (px(2.0).max(1) as u32, px(3.0).max(2) as u32);
+    for ((s, pts), &mark) in p.series.iter().zip(data).zip(&marks) {
         let color = PALETTE[s.color % PALETTE.len()];
-        let style = ShapeStyle::from(&color).stroke_width(2);
-        if s.mark == Mark::LinePoints {
-            chart.draw_series(pts.iter().map(|&q| Circle::new(q, 3, color.filled())))?;
+        let style = ShapeStyle::from(&color).stroke_width(width);
+        if mark == Mark::LinePoints {
+            chart.draw_series(pts.iter().map(|&q| Circle::new(q, dot, color.filled())))?;
         }
         if !s.point_labels.is_empty() {
-            let font = ("sans-serif", 12)
+            let font = ("sans-serif", px(12.0))
                 .into_font()
                 .color(&BLACK)
                 .pos(Pos::new(HPos::Center, VPos::Bottom));
@@ -220,12 +230,19 @@ where
                     }),
             )?;
         }
-        let anno = match s.mark {
+        let dash = |d: u32| (d as f64 * scale).round().max(1.0) as u32;
+        let anno = match mark {
             Mark::Line | Mark::LinePoints => chart.draw_series(LineSeries::new(pts, style))?,
-            Mark::Dashed => chart.draw_series(DashedLineSeries::new(pts, 8, 5, style))?,
-            Mark::Points => {
-                chart.draw_series(pts.iter().map(|&q| Circle::new(q, 2, color.filled())))?
+            Mark::Dashed => {
+                chart.draw_series(DashedLineSeries::new(pts, dash(8), dash(5), style))?
             }
+            Mark::Pattern { dash: d, gap } => {
+                chart.draw_series(DashedLineSeries::new(pts, dash(d), dash(gap), style))?
+            }
+            Mark::Points => chart.draw_series(
+                pts.iter()
+                    .map(|&q| Circle::new(q, (dot - 1).max(2), color.filled())),
+            )?,
             Mark::Bars { half_width } => {
                 let bottom = chart.y_range().start;
                 chart.draw_series(pts.iter().map(|&(x, y)| {
@@ -238,7 +255,7 @@ where
         };
         if !s.label.is_empty() {
             any_label = true;
-            let sample = LegendSample::of(s.mark);
+            let sample = LegendSample::of(mark);
             anno.label(s.label.clone()).legend(move |(x, y)| {
                 // One element type for every mark: unused parts are empty or transparent.
                 let piece = |k: usize| sample.pieces.get(k).cloned().unwrap_or_default();
@@ -246,6 +263,8 @@ where
                 EmptyElement::at((x, y))
                     + PathElement::new(piece(0), color.stroke_width(3))
                     + PathElement::new(piece(1), color.stroke_width(3))
+                    + PathElement::new(piece(2), color.stroke_width(3))
+                    + PathElement::new(piece(3), color.stroke_width(3))
                     + Circle::new(
                         (9, 0),
                         sample.dot.unwrap_or(0),
@@ -271,7 +290,7 @@ where
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))
             .border_style(RGBColor(180, 180, 180))
-            .label_font(("sans-serif", 13))
+            .label_font(("sans-serif", px(13.0)))
             .position(match corner {
                 Legend::Auto | Legend::UpperRight => SeriesLabelPosition::UpperRight,
                 Legend::UpperLeft => SeriesLabelPosition::UpperLeft,

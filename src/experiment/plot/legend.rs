@@ -105,6 +105,16 @@ impl LegendSample {
         let (pieces, dot, bar) = match mark {
             Mark::Line => (vec![line(0, 18)], None, None),
             Mark::Dashed => (vec![line(0, 6), line(12, 18)], None, None),
+            Mark::Pattern { dash, gap } => {
+                // The pattern over 24 pixels (strokes shortened to at most 8 so it shows).
+                let (d, g) = (dash.clamp(1, 8) as i32, gap.clamp(1, 8) as i32);
+                let pieces = (0..)
+                    .map(|k| k * (d + g))
+                    .take_while(|&a| a < 24)
+                    .map(|a| line(a, (a + d).min(24)))
+                    .collect();
+                (pieces, None, None)
+            }
             Mark::Points => (vec![], Some(3), None),
             Mark::LinePoints => (vec![line(0, 18)], Some(3), None),
             Mark::Bars { .. } => (vec![], None, Some([(0, -5), (18, 5)])),
@@ -124,6 +134,10 @@ mod tests {
         assert_eq!(line.pieces.len(), 1);
         assert_eq!(dashed.pieces.len(), 2, "a dashed series shows a gap");
         assert_ne!(line, dashed);
+        let dots = LegendSample::of(Mark::Pattern { dash: 3, gap: 4 });
+        let long = LegendSample::of(Mark::Pattern { dash: 12, gap: 6 });
+        assert!(dots.pieces.len() > long.pieces.len() && long.pieces.len() >= 2);
+        assert_ne!(dots, dashed);
         assert!(LegendSample::of(Mark::Points).pieces.is_empty());
         assert!(LegendSample::of(Mark::Points).dot.is_some());
         let lp = LegendSample::of(Mark::LinePoints);

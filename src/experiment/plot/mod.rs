@@ -31,6 +31,14 @@ pub enum Mark {
     Line,
     /// A dashed polyline.
     Dashed,
+    /// A polyline dashed in `dash`-pixel strokes with `gap`-pixel gaps (what a plain line
+    /// becomes beside others of its panel; see [`Panel::series_marks`]).
+    Pattern {
+        /// Stroke length in pixels.
+        dash: u32,
+        /// Gap length in pixels.
+        gap: u32,
+    },
     /// Dots.
     Points,
     /// A polyline with dots at the data.
@@ -107,6 +115,29 @@ pub struct Panel {
     pub x_categories: Vec<String>,
     /// Whether x counts something (an index): ticks between whole numbers get no label.
     pub x_integer: bool,
+}
+
+impl Panel {
+    /// How each series is drawn: as its `mark`, except that where a panel has two or more
+    /// labelled plain lines, each plain line after the first colour is dashed by its colour
+    /// index (long dashes, dots, short dashes in turn), so series differ by stroke as well as
+    /// by colour (a reader who cannot tell the colours apart, or prints in grey, still can).
+    pub fn series_marks(&self) -> Vec<Mark> {
+        let lines = self
+            .series
+            .iter()
+            .filter(|s| s.mark == Mark::Line && !s.label.is_empty())
+            .count();
+        self.series
+            .iter()
+            .map(|s| match (s.mark, lines >= 2, s.color % 4) {
+                (Mark::Line, true, 1) => Mark::Pattern { dash: 12, gap: 6 },
+                (Mark::Line, true, 2) => Mark::Pattern { dash: 3, gap: 4 },
+                (Mark::Line, true, 3) => Mark::Pattern { dash: 7, gap: 3 },
+                (m, _, _) => m,
+            })
+            .collect()
+    }
 }
 
 /// Corner of the legend box.
@@ -196,5 +227,43 @@ impl Figure {
         let rows = self.count().div_ceil(self.columns) as u32;
         let cols = self.columns.min(self.count()).max(1) as u32;
         (self.panel_size.0 * cols, self.panel_size.1 * rows.max(1))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lines_beside_others_differ_by_stroke_as_well_as_colour() {
+        let pts = vec![(0.0, 0.0), (1.0, 1.0)];
+        let mut p = Panel {
+            series: vec![Series::line("a", pts.clone(), 0)],
+            ..Panel::default()
+        };
+        // A lone line stays solid.
+        assert_eq!(p.series_marks(), vec![Mark::Line]);
+        p.series
+            .extend((1..4).map(|c| Series::line(format!("s{c}"), pts.clone(), c)));
+        p.series
+            .push(Series::line("ref", pts.clone(), 5).mark(Mark::Dashed));
+        let marks = p.series_marks();
+        // The four lines are drawn four ways; a series with its own mark keeps it.
+        for i in 0..4 {
+            for j in 0..i {
+                assert_ne!(marks[i], marks[j], "{marks:?}");
+            }
+        }
+        assert_eq!(marks[4], Mark::Dashed);
+    }
+
+    #[test]
+    fn wide_figures_draw_larger_text() {
+        assert_eq!(sink::font_scale(640), 1.0);
+        assert_eq!(sink::font_scale(1300), 1.0);
+        // A tick label (13 pixels at scale 1) is at least 1% of any figure's width.
+        for w in [640, 1300, 1920, 3840] {
+            assert!(13.0 * sink::font_scale(w) >= 0.01 * w as f64 - 1e-9, "{w}");
+        }
     }
 }

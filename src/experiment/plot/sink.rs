@@ -125,12 +125,20 @@ pub fn write_png_svg(
     Ok(vec![png, svg])
 }
 
+/// How much larger than at a 640-pixel panel every text is drawn in a figure `width` pixels
+/// wide: 1 up to 1300 pixels, then in proportion, so a tick label (13 pixels at scale 1) stays
+/// at least 1% of the figure's width when the figure is shown scaled to a report's width.
+pub fn font_scale(width: u32) -> f64 {
+    (width as f64 / 1300.0).max(1.0)
+}
+
 fn render<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> Result<(), String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let rows = fig.count().div_ceil(fig.columns);
     let areas = root.split_evenly((rows.max(1), fig.columns.min(fig.count()).max(1)));
+    let scale = font_scale(root.dim_in_pixel().0);
     for (panel, area) in fig.panels.iter().zip(areas.iter()) {
-        draw_panel(area, panel).map_err(|e| e.to_string())?;
+        draw_panel(area, panel, scale).map_err(|e| e.to_string())?;
     }
     for (map, area) in fig.heatmaps.iter().zip(areas.iter().skip(fig.panels.len())) {
         draw_heatmap(area, map).map_err(|e| e.to_string())?;

@@ -364,7 +364,7 @@ impl Family for LbcProjection {
             ours: md,
             verdict,
             why: format!(
-                "closest spacing: {first} minimum(s); farthest spacing: {last} minimum(s) (paper: one near the target when close, two when far apart)."
+                "closest spacing: {first} minimum(s); farthest spacing: {last} minimum(s) (paper: one near the target when close, two when far apart). Rule: held when the closest spacing gives one minimum and the farthest two, else not held."
             ),
         })
     }

@@ -55,6 +55,12 @@ fn curve(method: &str, m: &[String], it: &[f64], obj: &[f64], best: &[f64]) -> C
 
 impl Family for MsLearning {
     const KIND: &'static str = "ms_learning";
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "learning",
+            "every evaluation's objective over the hill-climbing iterations with the best so far (the paper's Fig. 6), beside simulated annealing with the same budget.",
+        ),
+    ];
     type Params = LearningJob;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
@@ -130,7 +136,7 @@ impl Family for MsLearning {
             ours: md,
             verdict,
             why: format!(
-                "Hill climbing made {}% of its total gain in the first fifth of the iterations (fast, then slow: {}); {}% of its evaluations in the last fifth were worse than the best random controller (many stay poor: {}); simulated annealing with the same budget ended at {} vs {}.",
+                "Hill climbing made {}% of its total gain in the first fifth of the iterations (fast, then slow: {}); {}% of its evaluations in the last fifth were worse than the best random controller (many stay poor: {}); simulated annealing with the same budget ended at {} vs {}. Rule (thresholds ours): held when both checks pass, fast then slow (at least 60% of hill climbing's gain in the first fifth of the iterations, and some gain) and many stay poor (at least 20% of the last fifth's evaluations worse than the best random controller); partly when one does.",
                 sig(100.0 * frac(&h)),
                 fast_then_slow,
                 sig(100.0 * h.poor_late),

@@ -61,6 +61,20 @@ fn com(p: &[[f64; 3]]) -> [f64; 3] {
 
 impl Family for MsMotion {
     const KIND: &'static str = "ms_motion";
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "filmstrip",
+            "the best controller found by parallel hill climbing: the lattice every few tenths of a second (time above each frame, with the reflex acting then), its centre-of-mass path in red and the face in front at t = 0 in orange.",
+        ),
+        (
+            "search",
+            "the search: each evaluation's objective (blow-ups excluded) and the best so far vs iteration, hill climbing beside simulated annealing with the same budget.",
+        ),
+        (
+            "motion",
+            "the best controller's motion in real time, time on every frame.",
+        ),
+    ];
     type Params = MotionJob;
     const SEED_METRICS: &'static [SeedMetric] = &[
         SeedMetric {
@@ -253,7 +267,7 @@ impl Family for MsMotion {
                 (
                     v,
                     format!(
-                        "The spider travels {} m along +x (1 m = its base width), stays upright: {}, leaves the ground: {}.",
+                        "The spider travels {} m along +x (1 m = its base width), stays upright: {}, leaves the ground: {}. Rule (thresholds ours): held needs more than 1 m along +x, upright and off the ground at least once; partly more than 0.3 m upright.",
                         sig(d),
                         upright,
                         airborne
@@ -272,7 +286,7 @@ impl Family for MsMotion {
                 (
                     v,
                     format!(
-                        "Backward rotation {} turns while moving {} m forward; on the ground at T: {}; no rolling/turning beyond 45°: {}.",
+                        "Backward rotation {} turns while moving {} m forward; on the ground at T: {}; no rolling/turning beyond 45°: {}. Rule (thresholds ours): held needs at least 0.9 of a backward turn while moving forward, on the ground at T, with no rolling or turning beyond 45°; partly half a backward turn while moving forward.",
                         sig(r / (2.0 * PI)),
                         sig(d),
                         ground,
@@ -290,7 +304,7 @@ impl Family for MsMotion {
                 (
                     v,
                     format!(
-                        "The table turns {}° about the vertical, stays upright: {}, jumps: {}, on the ground at T: {}, drifts {} m.",
+                        "The table turns {}° about the vertical, stays upright: {}, jumps: {}, on the ground at T: {}, drifts {} m. Rule (thresholds ours): held needs at least 180° about the vertical, upright, a jump and on the ground at T; partly 45° upright.",
                         sig(r.to_degrees()),
                         upright,
                         airborne,

@@ -266,6 +266,16 @@ fn mean_errors(variant: &[String], emu: &[String], err: &[f64]) -> Vec<(String, 
 }
 
 impl Family for NaError {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "error",
+            "mean absolute state error of the N25, N50 and N100 emulators against the simulator vs time over 30 trials, passive and active pendulum (the paper's Fig. 12).",
+        ),
+        (
+            "capacity",
+            "the same error averaged over time vs the emulator's hidden units (examples per weight kept): each emulator at every capacity tried.",
+        ),
+    ];
     const KIND: &'static str = "na_fig12_error";
     type Params = Params;
 

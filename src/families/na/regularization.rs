@@ -267,6 +267,12 @@ fn push_curve(t: &mut Table, name: &str, curve: &[f64], big_dt: f64) {
 }
 
 impl Family for NaRegularization {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "shape_error",
+            "the dolphin hierarchy's shape error (RMS spring-length deviation) over 60 s beside the simulator's, with 0, 1 and 5 regularization steps per emulation step and 25 every fifth step.",
+        ),
+    ];
     const KIND: &'static str = "na_regularization";
     type Params = Params;
 
@@ -349,7 +355,7 @@ impl Family for NaRegularization {
                 (
                     verdict,
                     format!(
-                        "Without regularization the final shape error is {} ({}x the simulator's {}); `{}` brings the mean shape error from {} to {}; its roughness {} vs {} for `{}` (same budget, rarely). Drift without regularization: {drift}; fixed by a few steps per emulation step: {fixes}; smoother than rare bursts: {smoother}.",
+                        "Without regularization the final shape error is {} ({}x the simulator's {}); `{}` brings the mean shape error from {} to {}; its roughness {} vs {} for `{}` (same budget, rarely). Drift without regularization: {drift}; fixed by a few steps per emulation step: {fixes}; smoother than rare bursts: {smoother}. Rule (thresholds ours): held when both checks pass, drift (final shape error without regularization above twice the simulator's) fixed by a few steps per emulation step (mean shape error below 0.7 of the unregularized one), and smoother than the same budget spent rarely (lower roughness); partly when one does.",
                         sig(final_e[z]),
                         sig(final_e[z] / final_e[s]),
                         sig(final_e[s]),

@@ -239,6 +239,12 @@ pub const METHODS: [&str; 5] = [
 ];
 
 impl Family for NaBaselines {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "objective",
+            "the dolphin swim's objective J (best so far) vs iteration and vs seconds: BPTT with momentum beside simulated annealing and the simplex method, on the emulator and (where run) the DAgger net.",
+        ),
+    ];
     const KIND: &'static str = "na_baselines_swim";
     type Params = Params;
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {

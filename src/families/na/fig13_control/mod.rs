@@ -66,6 +66,44 @@ use std::path::{Path, PathBuf};
 pub struct NaControl;
 
 impl Family for NaControl {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "control",
+            "the learned controls and states of each Fig. 13 task: emulator-driven motion beside its simulator replay and the goal.",
+        ),
+        (
+            "spectrum",
+            "eigenvalues of the terminal Gauss-Newton matrix over the knots at the start, through the emulator and the physics (log scale): the spread decides how many fixed-step iterations descent needs.",
+        ),
+        (
+            "dagger",
+            "final error (log scale) vs DAgger round, on the net and on the simulator replay, per task; 1 is the tolerance.",
+        ),
+        (
+            "dolphin_dagger",
+            "the dolphin's learned swim distance vs DAgger round on the net and on the simulator, beside the hand-made wave's distance and half of it.",
+        ),
+        (
+            "net_seeds",
+            "final error on the emulator and on the simulator replay of the paper's pendulum, truck and lander tasks through Table 1 nets trained under five seeds; 1 is the tolerance.",
+        ),
+        (
+            "pendulum",
+            "the pendulum's learned swing-up: emulator-driven motion (purple), its simulator replay (grey), the goal pose (green).",
+        ),
+        (
+            "truck",
+            "the truck's learned parking: emulator-driven motion (purple), its simulator replay (grey), the goal (green).",
+        ),
+        (
+            "lander",
+            "the lander's learned landing: emulator-driven motion (purple), its simulator replay (grey), the pad (green).",
+        ),
+        (
+            "dolphin",
+            "the dolphin's learned swim: emulator-driven motion (purple) and its simulator replay (grey).",
+        ),
+    ];
     const KIND: &'static str = "na_fig13_control";
     type Params = Params;
 

@@ -65,6 +65,12 @@ use std::path::{Path, PathBuf};
 pub struct NaMomentum;
 
 impl Family for NaMomentum {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "objective",
+            "the lander's objective J (log scale) vs iteration: momentum (η 1.5, α 0.5) beside plain descent at each η, with the knots clipped to their boxes and without.",
+        ),
+    ];
     const KIND: &'static str = "na_fig14_momentum";
     type Params = Params;
 

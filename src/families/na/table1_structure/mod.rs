@@ -315,6 +315,16 @@ impl Validate for Params {
 }
 
 impl Family for NaStructure {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "training",
+            "each Table 1 net's one-step MSE per output (normalized) on its training and held-out sets vs iteration (conjugate gradient, L-BFGS) or epoch (momentum), over the first training stage; the table's errors are after the whole training.",
+        ),
+        (
+            "rollout",
+            "each net's mean squared error (over the state variance) against the simulator over 40 super-steps on fresh episodes.",
+        ),
+    ];
     const KIND: &'static str = "na_table1_structure";
     type Params = Params;
 

@@ -174,6 +174,12 @@ pub fn validate_regularizer(key: &str, r: &Regularizer) -> Result<(), ParamError
 }
 
 impl Family for NaSpeedup {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "speedup",
+            "speedup of each emulator over the physical simulator (log scale): seconds for the same simulated time, per model and super-step size.",
+        ),
+    ];
     const KIND: &'static str = "na_table2_speedup";
     type Params = Params;
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {

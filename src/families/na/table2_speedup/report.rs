@@ -161,7 +161,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
             ours: md,
             verdict,
             why: format!(
-                "N100 speedups {} (paper: 50-100x and more); the slowest rigid-body N50 speedup is {} (paper: one to two orders of magnitude); speedup = n x step cost ratio (physical step s / emulator step s); the paper's ratios, from its Table 2, are 1.1-2.4 (0.5 with regularization), ours {pend_lo}-{pend_hi} for the pendulums, {truck_ratio} for the truck, {lander_ratio} for the lander (a 13-variable rigid body: one RK4 step costs less than a 17-50-13 net).{dolphin_text}{implicit_text}{equal_text}",
+                "N100 speedups {} (paper: 50-100x and more); the slowest rigid-body N50 speedup is {} (paper: one to two orders of magnitude); speedup = n x step cost ratio (physical step s / emulator step s); the paper's ratios, from its Table 2, are 1.1-2.4 (0.5 with regularization), ours {pend_lo}-{pend_hi} for the pendulums, {truck_ratio} for the truck, {lander_ratio} for the lander (a 13-variable rigid body: one RK4 step costs less than a 17-50-13 net).{dolphin_text}{implicit_text}{equal_text} Rule (thresholds ours, from the paper's words): held when every N100 speedup is at least 50 and the slowest rigid-body N50 speedup at least 10; partly when one of the two holds.",
                 n100.iter().map(|s| sig(*s)).collect::<Vec<_>>().join(", "),
                 sig(n50_min)
             ),
