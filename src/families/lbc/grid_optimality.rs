@@ -367,6 +367,16 @@ impl Job for Params {
 }
 
 impl Family for LbcGrid {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "value",
+            "the damped pendulum's optimal value at t = 0 over the grid (direct solution), LBC's value and the naive blend's minus it, and the same for the ordinary (min over controls) backup.",
+        ),
+        (
+            "policy",
+            "the optimal control over the grid at t = 0 (direct solution) and LBC's and the naive blend's differences from it.",
+        ),
+    ];
     const KIND: &'static str = "lbc_grid_optimality";
     // An implementation check (LBC against the linearly-solvable direct solution), listed and
     // counted with the checks in the report's summary, not among the reproductions (issue 56).

@@ -178,6 +178,16 @@ impl Job for Params {
 }
 
 impl Family for LbcProjection {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "cost",
+            "the desired terminal cost and its reconstruction from the projected weights along the first axis, one panel per spacing of the two components.",
+        ),
+        (
+            "weights",
+            "the projected blend weights vs the spacing between the component minima.",
+        ),
+    ];
     const CHECK: bool = true;
     const KIND: &'static str = "lbc_projection";
     type Params = Params;

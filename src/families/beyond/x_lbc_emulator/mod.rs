@@ -66,6 +66,16 @@ const METHODS: [&str; 8] = [
 ];
 
 impl Family for XLbcEmulator {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "error",
+            "final error vs the desired landing x, on the physical simulator and on the emulator, for LBC, the naive blend, each tracker, each open-loop tape and BPTT re-optimized; 1 is the tolerance.",
+        ),
+        (
+            "lbc",
+            "LBC's landing on the simulator at the in-between target nearest the middle, in real time.",
+        ),
+    ];
     const KIND: &'static str = "x_lbc_emulator";
     type Params = Params;
     const BEYOND: bool = true;

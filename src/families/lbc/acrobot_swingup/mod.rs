@@ -197,6 +197,28 @@ impl Validate for Params {
 }
 
 impl Family for LbcAcrobot {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "filmstrip",
+            "each policy's acrobot pose every 0.5 s from the test start (the paper's Fig. 7): tracker 1, tracker 2, the naive blend, LBC and the naive sum, frames spaced along x for reading.",
+        ),
+        (
+            "final_pose",
+            "from the test start: the final poses, the shoulder angle over time and LBC's weight of tracker 1 with the entropy of α.",
+        ),
+        (
+            "sweep",
+            "final distance to the handstand from each start of the sweep (shoulder and elbow start angles), per policy: darker is closer.",
+        ),
+        (
+            "lambda",
+            "LBC over its temperature λ across the start sweep: success on all starts and on those where both trackers fail, and the mean entropy of α.",
+        ),
+        (
+            "swingup",
+            "tracker 1, tracker 2 and LBC side by side from the first sweep start where both trackers fail and LBC succeeds (else the test start), in real time.",
+        ),
+    ];
     const KIND: &'static str = "lbc_acrobot_swingup";
     type Params = Params;
 

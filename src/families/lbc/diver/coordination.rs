@@ -332,6 +332,16 @@ pub(super) const POSE_COLUMNS: [&str; 3 + film::DIVER_COORDS] = [
 ];
 
 impl Family for LbcDiverCoordination {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "entry",
+            "entry error and objective vs take-off angular velocity, LBC of three trackers against the single 1 rad/s tracker.",
+        ),
+        (
+            "poses",
+            "the final pose (entry) at each take-off rate, LBC above the single tracker (the paper's Fig. 8).",
+        ),
+    ];
     const KIND: &'static str = "lbc_diver_coordination";
     type Params = CoordinationParams;
 

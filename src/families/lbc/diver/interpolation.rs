@@ -450,6 +450,20 @@ pub(super) const MOTION_COLUMNS: [&str; 2 + film::DIVER_COORDS] = [
 pub(super) const MOTION_DIVES: [&str; 4] = ["under-rotating", "over-rotating", "naive", "lbc"];
 
 impl Family for LbcDiverInterpolation {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "entry",
+            "the entry angle reached vs the desired one by LBC, the naive blend and a direct DDP dive, and each one's excess objective over the direct optimum of the reconstructed cost.",
+        ),
+        (
+            "filmstrip",
+            "the two component dives and, with the weights projected for a vertical entry, the naive blend and LBC: the pose every 0.2 s, the torso in grey, the feet-to-hands line at entry.",
+        ),
+        (
+            "dives",
+            "the four dives of the filmstrip side by side in real time.",
+        ),
+    ];
     const KIND: &'static str = "lbc_diver_interpolation";
     type Params = InterpolationParams;
 

@@ -201,6 +201,12 @@ impl Validate for Params {
 }
 
 impl Family for LbcPush {
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "weights",
+            "under scripted tugs on the hand: LBC's blend weight of the forward reach, the hand's position, and the body's lean with LBC and with no reach beside the fall angle.",
+        ),
+    ];
     const KIND: &'static str = "lbc_push_recovery";
     type Params = Params;
 
