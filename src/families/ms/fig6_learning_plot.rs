@@ -7,10 +7,10 @@
 //! seconds, best_objective). Figure: `<id>_learning.png/svg`, the scatter of every evaluation
 //! with best-so-far lines.
 
-use super::search::{learning_panel, LearningJob};
+use super::search::{learning_panel_on, LearningJob};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
-use crate::experiment::plot::Figure;
 use crate::experiment::plot::FigureSink;
+use crate::experiment::plot::{Figure, Mark, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::{Error, Family};
 use crate::row;
@@ -77,13 +77,30 @@ impl Family for MsLearning {
             out
         };
         let (h, s) = (split("hill_climbing"), split("simulated_annealing"));
-        let panel = learning_panel(
-            "learning plot: poodle somersault (Fig. 6)",
-            &[("hill climbing", &h), ("simulated annealing", &s)],
-            "iteration (0: initial random controllers)",
+        // Hill climbing's scatter alone, as the paper's Fig. 6, with annealing's best so far
+        // beside it; annealing's own scatter in a second panel on the same axes.
+        let x_label = "iteration (0: initial random controllers)";
+        let both = [("hill climbing", &h), ("simulated annealing", &s)];
+        let mut hill = learning_panel_on(
+            "hill climbing (the paper's Fig. 6): poodle somersault",
+            &both[..1],
+            x_label,
+            &both,
         );
-        let mut fig6 = Figure::grid(vec![panel], 1);
-        fig6.panel_size = (960, 560);
+        let anneal = learning_panel_on(
+            "simulated annealing, same budget",
+            &both[1..],
+            x_label,
+            &both,
+        );
+        if let Some(best) = anneal.series.last() {
+            hill.series.push(
+                Series::line("simulated annealing: best so far", best.points.clone(), 3)
+                    .mark(Mark::Dashed),
+            );
+        }
+        let mut fig6 = Figure::grid(vec![hill, anneal], 1);
+        fig6.panel_size = (960, 480);
         fig.draw("learning", &fig6)
     }
 

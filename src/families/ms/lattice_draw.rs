@@ -146,7 +146,9 @@ fn draw_scale_bar<DB: DrawingBackend>(
     .map_err(e)?;
     area.draw(&Text::new(
         "1 m",
-        ((a.0 + b.0) / 2 - 10, (a.1 + b.1) / 2 - 18),
+        // Below the bar: the bodies stand above the floor, so a label above it would sit on
+        // the body in the first frame.
+        ((a.0 + b.0) / 2 - 10, (a.1 + b.1) / 2 + 5),
         ("sans-serif", 13).into_font().color(&BLACK),
     ))
     .map_err(e)

@@ -10,8 +10,8 @@ use super::lattice_draw::{draw_panels, front_face, write_gif, LatticePanel, Scen
 use super::lattices::springs_of;
 use super::search::{learning_panel, MotionJob};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
-use crate::experiment::plot::Figure;
 use crate::experiment::plot::FigureSink;
+use crate::experiment::plot::{Figure, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::seeds::SeedMetric;
 use crate::experiment::{Error, Family};
@@ -68,11 +68,15 @@ impl Family for MsMotion {
         ),
         (
             "search",
-            "the search: each evaluation's objective (blow-ups excluded) and the best so far vs iteration, hill climbing beside simulated annealing with the same budget.",
+            "hill climbing's search: every evaluation's objective and the best so far vs iteration (blow-ups left out, counted on the axis).",
         ),
         (
             "motion",
             "the best controller's motion in real time, time on every frame.",
+        ),
+        (
+            "heading",
+            "how the body turns: the heading of the face in front at t = 0 about the vertical (a pirouette turns it) and its pitch about the sideways axis (a somersault turns it), unwrapped, vs time.",
         ),
     ];
     type Params = MotionJob;
@@ -154,8 +158,8 @@ impl Family for MsMotion {
             &format!("{}_filmstrip", fig.id),
             &panels,
             &springs,
-            4,
-            (360, 300),
+            2,
+            (720, 250),
             true,
             &scene,
         )?);
@@ -194,6 +198,7 @@ impl Family for MsMotion {
                 ..scene.clone()
             },
         )?);
+        files.extend(fig.draw("heading", &heading_figure(&frames, &scene.marked))?);
         let search = tables.require("search")?;
         files.extend(fig.draw(
             "search",
@@ -320,4 +325,45 @@ impl Family for MsMotion {
             why,
         })
     }
+}
+
+/// The body's turning over time: the direction from the centre of mass to the centroid of the
+/// `marked` masses (the face in front at t = 0), as a heading about the vertical (atan2 of its
+/// y and x parts) and a pitch about the sideways y axis (atan2 of its z and x parts), each
+/// unwrapped, in degrees.
+fn heading_figure(frames: &[(f64, usize, Vec<[f64; 3]>)], marked: &[usize]) -> Figure {
+    let (mut heading, mut pitch) = (Vec::new(), Vec::new());
+    let (mut last_h, mut last_p): (Option<f64>, Option<f64>) = (None, None);
+    let unwrap = |last: &mut Option<f64>, a: f64| {
+        let v = match *last {
+            Some(l) => l + (a - l + PI).rem_euclid(2.0 * PI) - PI,
+            None => a,
+        };
+        *last = Some(v);
+        v
+    };
+    for (t, _, pos) in frames {
+        let c = com(pos);
+        let n = marked.len().max(1) as f64;
+        let mut f = [0.0; 3];
+        for &i in marked {
+            for k in 0..3 {
+                f[k] += pos[i][k] / n;
+            }
+        }
+        let d = [f[0] - c[0], f[1] - c[1], f[2] - c[2]];
+        heading.push((*t, unwrap(&mut last_h, d[1].atan2(d[0])).to_degrees()));
+        pitch.push((*t, unwrap(&mut last_p, d[2].atan2(d[0])).to_degrees()));
+    }
+    let panel = Panel {
+        title: "turning of the face in front at t = 0".into(),
+        x_label: "time (s)".into(),
+        y_label: "angle (degrees, unwrapped)".into(),
+        series: vec![
+            Series::line("heading about the vertical", heading, 0),
+            Series::line("pitch about the sideways axis", pitch, 1),
+        ],
+        ..Panel::default()
+    };
+    Figure::grid(vec![panel], 1)
 }

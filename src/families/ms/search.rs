@@ -33,6 +33,7 @@ use crate::synthesis::controller::{Controller, SimSetup};
 use crate::synthesis::objective::{Objective, Orientation, Term, Weighted};
 use crate::synthesis::search::{anneal, hill_climb, learning_curve, AnnealConfig, HillClimbConfig};
 use crate::synthesis::Problem;
+use crate::synthesis::BLOWUP_OBJECTIVE;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -451,27 +452,48 @@ impl Job for LearningJob {
 }
 
 /// The search-trace panel: every evaluation's objective and the best so far, per method.
-/// The y axis starts at the 2nd percentile of the evaluations, so the rare blow-ups (a
-/// diverged simulation scores -1e6) do not flatten the curves; the title says how many
-/// evaluations lie below the axis.
+/// Blow-ups (a diverged simulation scores [`BLOWUP_OBJECTIVE`]) are left out and counted in
+/// the axis label; the y axis starts at the 2nd percentile of the other evaluations, so the
+/// rare very poor ones do not flatten the curves, and the label says how many lie below it.
 pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &str) -> Panel {
-    let mut all: Vec<f64> = tables
-        .iter()
-        .flat_map(|(_, t)| t.f64s("objective"))
-        .filter(|v| v.is_finite())
-        .collect();
-    all.sort_by(f64::total_cmp);
-    let lo = all.get(all.len() / 50).copied().unwrap_or(0.0);
-    let hi = all.last().copied().unwrap_or(1.0);
+    learning_panel_on(title, tables, x_label, tables)
+}
+
+/// [`learning_panel`] with the y axis fitted to the evaluations of `axis_from` (panels side by
+/// side on one scale).
+pub(super) fn learning_panel_on(
+    title: &str,
+    tables: &[(&str, &Table)],
+    x_label: &str,
+    axis_from: &[(&str, &Table)],
+) -> Panel {
+    let drawn = |v: &f64| v.is_finite() && *v != BLOWUP_OBJECTIVE;
+    let objectives = |ts: &[(&str, &Table)]| -> Vec<f64> {
+        ts.iter().flat_map(|(_, t)| t.f64s("objective")).collect()
+    };
+    let mut axis: Vec<f64> = objectives(axis_from).into_iter().filter(drawn).collect();
+    axis.sort_by(f64::total_cmp);
+    let lo = axis.get(axis.len() / 50).copied().unwrap_or(0.0);
+    let hi = axis.last().copied().unwrap_or(1.0);
     let pad = 0.05 * (hi - lo).max(1e-9);
-    let clipped = all.iter().filter(|&&v| v < lo - pad).count();
-    let y_label = if clipped > 0 {
-        format!(
-            "objective ({clipped} of {} evaluations, blow-ups among them, lie below the axis)",
-            all.len()
-        )
+    let own = objectives(tables);
+    let blowups = own.iter().filter(|&&v| v == BLOWUP_OBJECTIVE).count();
+    let all: Vec<f64> = own.into_iter().filter(drawn).collect();
+    let below = all.iter().filter(|&&v| v < lo - pad).count();
+    let total = all.len() + blowups;
+    let mut notes = Vec::new();
+    if blowups > 0 {
+        notes.push(format!(
+            "{blowups} of {total} evaluations blew up, not drawn"
+        ));
+    }
+    if below > 0 {
+        notes.push(format!("{below} more lie below the axis"));
+    }
+    let y_label = if notes.is_empty() {
+        "objective (larger is better)".to_string()
     } else {
-        "objective".to_string()
+        format!("objective (larger is better; {})", notes.join("; "))
     };
     let mut series = Vec::new();
     for (k, (name, t)) in tables.iter().enumerate() {
@@ -480,14 +502,22 @@ pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &s
         series.push(
             Series::line(
                 format!("{name}: every evaluation"),
-                it.iter().zip(&obj).map(|(&a, &b)| (a, b)).collect(),
+                it.iter()
+                    .zip(&obj)
+                    .filter(|(_, v)| drawn(v))
+                    .map(|(&a, &b)| (a, b))
+                    .collect(),
                 2 * k + 1,
             )
             .mark(Mark::Points),
         );
         series.push(Series::line(
             format!("{name}: best so far"),
-            it.iter().zip(&best).map(|(&a, &b)| (a, b)).collect(),
+            it.iter()
+                .zip(&best)
+                .filter(|(_, v)| drawn(v))
+                .map(|(&a, &b)| (a, b))
+                .collect(),
             2 * k,
         ));
     }

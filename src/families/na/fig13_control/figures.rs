@@ -1,4 +1,4 @@
-//! Figures of `na_fig13_control`: `control` (objectives and two state variables over time),
+//! Figures of `na_fig13_control`: `control` (objectives, and every goal variable's deviation from the goal in tolerances over time),
 //! `spectrum`, and the animated GIFs of every task and of the dolphin.
 
 use super::anim::{write_animation, Scene, Track, EMULATOR, SIMULATOR};
@@ -11,18 +11,25 @@ use crate::physics::dolphin::{Dolphin, N_POS};
 use rayon::prelude::*;
 use std::path::PathBuf;
 
+/// How far from zero the normalized deviations of figure `control` are drawn: beyond this
+/// they are clamped (the start is far from the goal; what matters is the end).
+const DEVIATION_CLAMP: f64 = 5.0;
+
 /// Every figure of the experiment ([`crate::experiment::Family::figures`]).
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let t = tables.require("objective")?;
     let (task, it, obj) = (t.strs("task"), t.f64s("iteration"), t.f64s("objective"));
     let tr = tables.require("trajectory")?;
-    let (ttask, tt, src, s0) = (tr.strs("task"), tr.f64s("t"), tr.strs("source"), {
-        tr.f64s("s0")
-    });
-    let s1 = tr.f64s("s1");
+    let (ttask, tt, src) = (tr.strs("task"), tr.f64s("t"), tr.strs("source"));
     let goal = tables.require("goal")?;
-    let (goal_task, goal_model) = (goal.strs("task"), goal.strs("model"));
-    let (goal_s0, goal_s1) = (goal.f64s("s0"), goal.f64s("s1"));
+    let goal_task = goal.strs("task");
+    let st = tables.require("states")?;
+    let (st_task, st_col, st_name, st_tol) = (
+        st.strs("task"),
+        st.strs("column"),
+        st.strs("name"),
+        st.f64s("tolerance"),
+    );
     let mut panels = vec![];
     for name in unique(&task) {
         let pts = (0..task.len())
@@ -38,75 +45,86 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             series: vec![Series::line("momentum descent", pts, 0)],
             ..Panel::default()
         });
-        // The plotted variables by their `describe` names, and the goal's row.
-        let goal_row = (0..goal_task.len()).find(|&r| goal_task[r] == name);
-        let physics = goal_row.and_then(|r| {
-            crate::emulator::catalog::NetModel::ALL
-                .iter()
-                .find(|m| m.name() == goal_model[r])
-                .map(|m| m.physics_name())
-        });
-        let state_names = physics
-            .and_then(crate::physics::model_by_name)
-            .map(|m| m.state_names())
-            .unwrap_or_default();
-        let names = match (state_names.first(), state_names.get(1)) {
-            (Some(a), Some(b)) if name != "dolphin" => (a.clone(), b.clone()),
-            _ => ("x".to_string(), "y".to_string()),
+        let rows_of = |s: &str| -> Vec<usize> {
+            (0..ttask.len())
+                .filter(|&r| ttask[r] == name && src[r] == s)
+                .collect()
         };
-        let names = (names.0.as_str(), names.1.as_str());
-        let unit = if physics.is_some_and(|p| p.starts_with("pendulum")) {
-            "rad"
-        } else {
-            "m"
-        };
-        let mut series: Vec<Series> = ["emulator", "simulator"]
-            .iter()
-            .enumerate()
-            .flat_map(|(c, s)| {
-                let sel = |v: &[f64]| -> Vec<(f64, f64)> {
-                    (0..ttask.len())
-                        .filter(|&r| ttask[r] == name && src[r] == *s)
-                        .map(|r| (tt[r], v[r]))
-                        .collect()
-                };
-                let mark = if c == 0 { Mark::Line } else { Mark::Dashed };
-                [
-                    Series::line(format!("{} {s}", names.0), sel(&s0), 0).mark(mark),
-                    Series::line(format!("{} {s}", names.1), sel(&s1), 1).mark(mark),
-                ]
-            })
-            .collect();
-        // The goal of each plotted variable as a dotted line in its colour (the dolphin's
-        // is a distance to beat, not a state: none).
-        let t_end = (0..ttask.len())
-            .filter(|&r| ttask[r] == name)
-            .map(|r| tt[r])
-            .fold(0.0, f64::max);
-        if let Some(g) = goal_row.filter(|_| name != "dolphin") {
-            for (k, (v, label)) in [(goal_s0[g], names.0), (goal_s1[g], names.1)]
-                .into_iter()
-                .enumerate()
-            {
-                if v.is_finite() {
-                    let dots = (0..=40).map(|i| (t_end * i as f64 / 40.0, v)).collect();
-                    series.push(Series::line(format!("{label} goal"), dots, k).mark(Mark::Points));
-                }
+        if name == "dolphin" || name.starts_with("dolphin_") {
+            // The swim's goal is a distance to beat, not a state: its mean centroid.
+            let (x, y) = (tr.f64s("s0"), tr.f64s("s1"));
+            for s in ["emulator", "simulator"] {
+                let rows = rows_of(s);
+                let series = [(&x, "x"), (&y, "y")]
+                    .into_iter()
+                    .enumerate()
+                    .map(|(k, (v, var))| {
+                        let pts = rows.iter().map(|&r| (tt[r], v[r])).collect();
+                        Series::line(format!("centroid {var}"), pts, k)
+                    })
+                    .collect();
+                panels.push(Panel {
+                    title: format!("{name}: mean centroid, {s}"),
+                    x_label: "time (s)".into(),
+                    y_label: "x, y (m)".into(),
+                    series,
+                    ..Panel::default()
+                });
             }
+            continue;
         }
-        panels.push(Panel {
-            title: if name == "dolphin" {
-                "dolphin: mean centroid x, y".into()
-            } else {
-                format!("{name}: learned motion ({}, {})", names.0, names.1)
-            },
-            x_label: "time (s)".into(),
-            y_label: format!("{}, {} ({unit})", names.0, names.1),
-            series,
-            ..Panel::default()
-        });
+        // Every variable of the goal: (s_k - goal_k) / tolerance_k over time.
+        let g = (0..goal_task.len()).find(|&r| goal_task[r] == name);
+        let goal_vars: Vec<(String, String, f64)> = (0..st_task.len())
+            .filter(|&r| st_task[r] == name && st_tol[r] > 0.0)
+            .map(|r| (st_col[r].clone(), st_name[r].clone(), st_tol[r]))
+            .collect();
+        for (c, s) in ["emulator", "simulator"].iter().enumerate() {
+            let rows = rows_of(s);
+            let t_end = rows.iter().map(|&r| tt[r]).fold(0.0, f64::max);
+            let mut series: Vec<Series> = Vec::new();
+            for (k, (col, var, tol)) in goal_vars.iter().enumerate() {
+                let Some(g) = g.filter(|_| tr.column(col).is_some()) else {
+                    continue;
+                };
+                let (target, v) = (goal.f64s(col)[g], tr.f64s(col));
+                let pts = rows
+                    .iter()
+                    .map(|&r| {
+                        let d = (v[r] - target) / tol;
+                        (tt[r], d.clamp(-DEVIATION_CLAMP, DEVIATION_CLAMP))
+                    })
+                    .collect();
+                series.push(Series::line(var.clone(), pts, k));
+            }
+            for b in [-1.0, 1.0] {
+                series.push(
+                    Series::line(
+                        if b > 0.0 { "tolerance (±1)" } else { "" },
+                        vec![(0.0, b), (t_end, b)],
+                        7,
+                    )
+                    .mark(Mark::Dashed),
+                );
+            }
+            panels.push(Panel {
+                title: format!(
+                    "{name}: {}",
+                    if c == 0 {
+                        "emulator-driven motion"
+                    } else {
+                        "the same controls on the simulator"
+                    }
+                ),
+                x_label: "time (s)".into(),
+                y_label: format!("(state − goal) / tolerance, clamped at ±{DEVIATION_CLAMP}"),
+                series,
+                y_range: Some((-DEVIATION_CLAMP - 0.3, DEVIATION_CLAMP + 0.3)),
+                ..Panel::default()
+            });
+        }
     }
-    let mut files = fig.draw("control", &Figure::grid(panels, 2))?;
+    let mut files = fig.draw("control", &Figure::grid(panels, 3))?;
     files.extend(spectrum_figure(fig, tables)?);
     files.extend(animations(fig, tables)?);
     files.extend(dolphin_animation(fig, tables)?);

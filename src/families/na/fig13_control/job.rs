@@ -86,10 +86,12 @@ impl Job for Params {
         goal_cols.extend_from_slice(&col_refs[4..]);
         let mut goal = Table::new(&goal_cols);
         // The generic state columns (one table holds tasks of different models) by name.
-        let mut states_t = Table::new(&["task", "column", "name"]);
+        // Each variable's final-state tolerance (0: not part of the goal).
+        let mut states_t = Table::new(&["task", "column", "name", "tolerance"]);
         for task in &self.tasks {
             for (k, name) in task.net.model.state_names().into_iter().enumerate() {
-                states_t.push(row![task.name.as_str(), format!("s{k}"), name]);
+                let tol = task.task.final_tolerance.get(k).copied().unwrap_or(0.0);
+                states_t.push(row![task.name.as_str(), format!("s{k}"), name, tol]);
             }
         }
         let specs: Vec<BuildSpec> = self

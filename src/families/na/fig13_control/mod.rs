@@ -69,7 +69,7 @@ impl Family for NaControl {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
         (
             "control",
-            "the learned controls and states of each Fig. 13 task: emulator-driven motion beside its simulator replay and the goal.",
+            "per task: its objective over the iterations, then each goal variable's deviation from the goal in units of its tolerance along the emulator-driven motion and along the same controls on the simulator, with the ±1 tolerance band (the dolphin: its mean centroid).",
         ),
         (
             "spectrum",

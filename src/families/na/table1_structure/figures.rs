@@ -16,6 +16,13 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
         t.f64s("heldout_error"),
     );
     let names = unique(&net);
+    // The table's errors, after the whole training (rollout fine-tuning included).
+    let st = tables.require("structure")?;
+    let (st_net, st_tr, st_ho) = (
+        st.strs("net"),
+        st.f64s("train_error"),
+        st.f64s("heldout_error"),
+    );
     let panels = names
         .iter()
         .map(|name| {
@@ -25,15 +32,29 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
                     .map(|r| (it[r], v[r]))
                     .collect()
             };
+            let (train, held) = (pick(&tr), pick(&ho));
+            let x_end = train.iter().map(|p| p.0).fold(0.0, f64::max);
+            let mut series = vec![
+                Series::line("train (noisy inputs where set)", train, 0),
+                Series::line("held-out", held, 1).mark(Mark::Dashed),
+            ];
+            if let Some(r) = st_net.iter().position(|n| n == name) {
+                for (label, v, c, dash) in [
+                    ("train, final (Table 1)", st_tr[r], 2, 3),
+                    ("held-out, final (Table 1)", st_ho[r], 3, 10),
+                ] {
+                    series.push(
+                        Series::line(label, vec![(0.0, v), (x_end, v)], c)
+                            .mark(Mark::Pattern { dash, gap: 4 }),
+                    );
+                }
+            }
             Panel {
-                title: name.clone(),
-                x_label: "iteration (CG) or epoch (momentum)".into(),
+                title: format!("{name}: first training stage"),
+                x_label: "iteration (CG, L-BFGS) or epoch (momentum)".into(),
                 y_label: "MSE per output (normalized)".into(),
                 log_y: true,
-                series: vec![
-                    Series::line("train", pick(&tr), 0),
-                    Series::line("held-out", pick(&ho), 1).mark(Mark::Dashed),
-                ],
+                series,
                 ..Panel::default()
             }
         })
