@@ -117,11 +117,16 @@ pub struct Panel {
     pub x_integer: bool,
 }
 
+/// The strokes (dash, gap in pixels) of plain lines with colour indices 1 to 7 beside others
+/// (index 0 stays solid): see [`Panel::series_marks`].
+const LINE_PATTERNS: [(u32, u32); 7] = [(12, 6), (3, 4), (7, 3), (20, 4), (2, 8), (10, 2), (5, 10)];
+
 impl Panel {
     /// How each series is drawn: as its `mark`, except that where a panel has two or more
-    /// labelled plain lines, each plain line after the first colour is dashed by its colour
-    /// index (long dashes, dots, short dashes in turn), so series differ by stroke as well as
-    /// by colour (a reader who cannot tell the colours apart, or prints in grey, still can).
+    /// labelled plain lines, each plain line is stroked by its colour index (solid, long
+    /// dashes, dots, short dashes and four more patterns, eight in all, as many as the palette
+    /// has distinct hues before grey), so series differ by stroke as well as by colour (a
+    /// reader who cannot tell the colours apart, or prints in grey, still can).
     pub fn series_marks(&self) -> Vec<Mark> {
         let lines = self
             .series
@@ -130,11 +135,15 @@ impl Panel {
             .count();
         self.series
             .iter()
-            .map(|s| match (s.mark, lines >= 2, s.color % 4) {
-                (Mark::Line, true, 1) => Mark::Pattern { dash: 12, gap: 6 },
-                (Mark::Line, true, 2) => Mark::Pattern { dash: 3, gap: 4 },
-                (Mark::Line, true, 3) => Mark::Pattern { dash: 7, gap: 3 },
-                (m, _, _) => m,
+            .map(|s| match (s.mark, lines >= 2) {
+                (Mark::Line, true) => match s.color % 8 {
+                    0 => Mark::Line,
+                    k => {
+                        let (dash, gap) = LINE_PATTERNS[k - 1];
+                        Mark::Pattern { dash, gap }
+                    }
+                },
+                (m, _) => m,
             })
             .collect()
     }
@@ -244,17 +253,17 @@ mod tests {
         // A lone line stays solid.
         assert_eq!(p.series_marks(), vec![Mark::Line]);
         p.series
-            .extend((1..4).map(|c| Series::line(format!("s{c}"), pts.clone(), c)));
+            .extend((1..8).map(|c| Series::line(format!("s{c}"), pts.clone(), c)));
         p.series
             .push(Series::line("ref", pts.clone(), 5).mark(Mark::Dashed));
         let marks = p.series_marks();
-        // The four lines are drawn four ways; a series with its own mark keeps it.
-        for i in 0..4 {
+        // Eight lines are drawn eight ways; a series with its own mark keeps it.
+        for i in 0..8 {
             for j in 0..i {
                 assert_ne!(marks[i], marks[j], "{marks:?}");
             }
         }
-        assert_eq!(marks[4], Mark::Dashed);
+        assert_eq!(marks[8], Mark::Dashed);
     }
 
     #[test]
