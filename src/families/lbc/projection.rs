@@ -185,7 +185,7 @@ impl Family for LbcProjection {
         ),
         (
             "weights",
-            "the projected blend weights vs the spacing between the component minima.",
+            "the projected blend weights vs the spacing between the component minima (targets up to the midpoint; the others mirror them), and their sum, which the paper reads as the basis's quality (1: perfect).",
         ),
     ];
     const CHECK: bool = true;
@@ -257,14 +257,19 @@ impl Family for LbcProjection {
         let mut files = fig.draw("cost", &Figure::grid(panels, cols))?;
         // Weights vs spacing for each target.
         let w = tables.require("weights")?;
-        let (ws, wc, ww, wt) = (
+        let (ws, wc, ww, wt, wsum) = (
             w.f64s("spacing"),
             w.f64s("component"),
             w.f64s("weight"),
             w.f64s("target"),
+            w.f64s("weight_sum"),
         );
+        // A target t and its mirror 1 - t swap w1 and w2: drawing both would lay each line
+        // exactly on another, so the weights panel draws the targets up to the midpoint.
+        let shown: Vec<f64> = targets.iter().copied().filter(|&t| t <= 0.5).collect();
+        let mirrored = targets.iter().any(|&t| t > 0.5);
         let mut series = Vec::new();
-        for (k, &t) in targets.iter().enumerate() {
+        for (k, &t) in shown.iter().enumerate() {
             for c in [1.0, 2.0] {
                 let pts = (0..ws.len())
                     .filter(|&r| wt[r] == t && wc[r] == c)
@@ -279,13 +284,50 @@ impl Family for LbcProjection {
             }
         }
         let panel = Panel {
-            title: "projected blend weights vs component spacing".into(),
-            x_label: "spacing between component minima".into(),
+            title: if mirrored {
+                "projected weights vs spacing (a target t > 0.5 mirrors 1 - t: w1, w2 swap)".into()
+            } else {
+                "projected blend weights vs component spacing".into()
+            },
+            x_label: "spacing between the component minima (state units)".into(),
             y_label: "weight w_i".into(),
             series,
             ..Default::default()
         };
-        files.extend(fig.draw("weights", &Figure::grid(vec![panel], 1))?);
+        // The paper's diagnostic: weights far from summing to one signal a poor basis.
+        let mut sums: Vec<Series> = shown
+            .iter()
+            .enumerate()
+            .map(|(k, &t)| {
+                let pts = (0..ws.len())
+                    .filter(|&r| wt[r] == t && wc[r] == 1.0)
+                    .map(|r| (ws[r], wsum[r]))
+                    .collect();
+                Series::line(format!("w1 + w2 (target {t})"), pts, k).mark(Mark::LinePoints)
+            })
+            .collect();
+        let (lo, hi) = (
+            ws.iter().copied().fold(f64::INFINITY, f64::min),
+            ws.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        );
+        if lo.is_finite() {
+            sums.push(
+                Series::line(
+                    "1 (weights of a perfect basis)",
+                    vec![(lo, 1.0), (hi, 1.0)],
+                    7,
+                )
+                .mark(Mark::Dashed),
+            );
+        }
+        let sum_panel = Panel {
+            title: "sum of the projected weights vs spacing".into(),
+            x_label: "spacing between the component minima (state units)".into(),
+            y_label: "w1 + w2".into(),
+            series: sums,
+            ..Default::default()
+        };
+        files.extend(fig.draw("weights", &Figure::grid(vec![panel, sum_panel], 2))?);
         Ok(files)
     }
 
