@@ -119,7 +119,13 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
         if p.log_x { 0.0 } else { xr.1 - xr.0 },
         if p.log_y { 0.0 } else { yr.1 - yr.0 },
     );
-    let xt = if p.x_categories.is_empty() {
+    let xt = if !p.x_ticks.is_empty() {
+        p.x_ticks
+            .iter()
+            .map(|t| t.0)
+            .filter(|v| (xr.0.min(xr.1)..=xr.0.max(xr.1)).contains(v))
+            .collect()
+    } else if p.x_categories.is_empty() {
         axis_ticks(xr.0, xr.1, p.log_x)
     } else {
         (0..p.x_categories.len())
@@ -129,7 +135,7 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
     };
     let yt = axis_ticks(yr.0, yr.1, p.log_y);
     let sci = (
-        p.x_categories.is_empty() && needs_sci(&xt, snap.0),
+        p.x_categories.is_empty() && p.x_ticks.is_empty() && needs_sci(&xt, snap.0),
         needs_sci(&yt, snap.1),
     );
     match (p.log_x, p.log_y) {
@@ -188,7 +194,13 @@ where
         .configure_mesh()
         .x_desc(p.x_label.as_str())
         .x_label_formatter(&|v| {
-            if p.x_integer && v.fract() != 0.0 {
+            if !p.x_ticks.is_empty() {
+                let tol = 1e-9 * (snap.0.abs() + 1.0);
+                p.x_ticks
+                    .iter()
+                    .find(|t| (t.0 - v).abs() <= tol)
+                    .map_or(String::new(), |t| t.1.clone())
+            } else if p.x_integer && v.fract() != 0.0 {
                 String::new()
             } else if p.x_categories.is_empty() {
                 tick_as(*v, snap.0, sci.0)

@@ -115,6 +115,9 @@ pub struct Panel {
     pub x_categories: Vec<String>,
     /// Whether x counts something (an index): ticks between whole numbers get no label.
     pub x_integer: bool,
+    /// Ticks at these x positions with these labels instead of numbers (e.g. a filmstrip's
+    /// frames, each labelled with its time); empty: numeric ticks.
+    pub x_ticks: Vec<(f64, String)>,
 }
 
 /// The strokes (dash, gap in pixels) of plain lines with colour indices 1 to 7 beside others

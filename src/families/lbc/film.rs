@@ -290,8 +290,10 @@ pub fn diver_filmstrip(tree: &PlanarTree, dives: &[Dive], frame_dt: f64, gap: f6
         .iter()
         .map(|d| {
             let mut series = vec![water_series(xr.0, xr.1, y_water, t_end)];
+            let mut ticks = Vec::new();
             for k in 0..frames {
                 let tk = (k as f64 * frame_dt).min(t_end);
+                ticks.push((k as f64 * gap, format!("{tk:.1} s")));
                 let Some(q) = d.at(tk) else { continue };
                 let body = diver_body(tree, q, (k as f64 * gap - d.start_x(), 0.0));
                 let first = k == 0;
@@ -320,11 +322,14 @@ pub fn diver_filmstrip(tree: &PlanarTree, dives: &[Dive], frame_dt: f64, gap: f6
                     "{}: pose every {frame_dt} s, t = 0 to {t_end:.2} s left to right",
                     d.label
                 ),
-                x_label: format!("x (m), frames {gap} m apart plus the forward drift"),
+                x_label: format!(
+                    "time of each frame (s); frames drawn {gap} m apart plus the forward drift, to the scale of the height axis"
+                ),
                 y_label: "height above the take-off hip (m)".into(),
                 series,
                 x_range: Some(xr),
                 y_range: Some(yr),
+                x_ticks: ticks,
                 legend: Legend::UpperRight,
                 ..Default::default()
             }

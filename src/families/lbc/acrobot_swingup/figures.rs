@@ -28,6 +28,7 @@ fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])
         }
         let mut series = Vec::new();
         let mut bars = Vec::new();
+        let mut ticks = Vec::new();
         for k in 0..frames {
             let tk = k as f64 * FRAME_DT;
             let Some(r) = film::nearest(&rows, t, tk) else {
@@ -44,15 +45,19 @@ fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])
                     .mark(Mark::LinePoints),
             );
             bars.push((off, 0.0));
+            ticks.push((off, format!("{tk:.1} s")));
         }
         series.push(Series::line("bar (pivot)", bars, 7).mark(Mark::Points));
         panels.push(Panel {
             title: format!("{name} from the test start (handstand: both links straight up, 2 m)"),
-            x_label: format!("x (m), frames {FRAME_GAP} m apart"),
+            x_label: format!(
+                "time of each frame (s); frames drawn {FRAME_GAP} m apart, to the scale of the height axis"
+            ),
             y_label: "height above the bar (m)".into(),
             series,
             x_range: Some((-2.4, (frames as f64 - 0.5) * FRAME_GAP)),
             y_range: Some((-2.3, 3.6)),
+            x_ticks: std::mem::take(&mut ticks),
             ..Default::default()
         });
     }
