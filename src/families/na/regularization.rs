@@ -280,6 +280,29 @@ impl Family for NaRegularization {
         let t = tables.require("shape_error")?;
         let (name, time, err) = (t.strs("schedule"), t.f64s("t"), t.f64s("shape_error"));
         let names = unique(&name);
+        // Each schedule in words, from the cost table's steps and spacing.
+        let cost = tables.require("cost")?;
+        let (cn, cs, ce) = (
+            cost.strs("schedule"),
+            cost.f64s("reg_steps"),
+            cost.f64s("every"),
+        );
+        let words = |nm: &str| -> String {
+            match cn.iter().position(|c| c == nm) {
+                _ if nm == "simulator" => "physical simulator".into(),
+                Some(r) if cs[r] == 0.0 => "emulator, no regularization".into(),
+                Some(r) if ce[r] <= 1.0 => format!(
+                    "emulator, {} regularization step{} after every step",
+                    cs[r],
+                    if cs[r] == 1.0 { "" } else { "s" }
+                ),
+                Some(r) => format!(
+                    "emulator, {} regularization steps after every {}th step",
+                    cs[r], ce[r]
+                ),
+                None => nm.to_string(),
+            }
+        };
         let series = names
             .iter()
             .enumerate()
@@ -289,7 +312,7 @@ impl Family for NaRegularization {
                     .filter(|&r| &name[r] == nm && time[r] > 0.0)
                     .map(|r| (time[r], err[r]))
                     .collect();
-                let s = Series::line(nm.clone(), pts, i);
+                let s = Series::line(words(nm), pts, i);
                 if nm == "simulator" {
                     s.mark(Mark::Dashed)
                 } else {
