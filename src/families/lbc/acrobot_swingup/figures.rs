@@ -36,7 +36,10 @@ fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])
             };
             let off = k as f64 * FRAME_GAP;
             let label = if k == 0 {
-                format!("{name}: pose every {FRAME_DT} s, t = 0 to {t_end} s left to right")
+                format!(
+                    "{}: pose every {FRAME_DT} s, t = 0 to {t_end} s left to right",
+                    words(name)
+                )
             } else {
                 String::new()
             };
@@ -49,7 +52,10 @@ fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])
         }
         series.push(Series::line("bar (pivot)", bars, 7).mark(Mark::Points));
         panels.push(Panel {
-            title: format!("{name} from the test start (handstand: both links straight up, 2 m)"),
+            title: format!(
+                "{} from the test start (handstand: both links straight up, 2 m)",
+                words(name)
+            ),
             x_label: format!(
                 "time of each frame (s); frames drawn {FRAME_GAP} m apart, to the scale of the height axis"
             ),
@@ -64,6 +70,18 @@ fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])
     let mut f = Figure::grid(panels, 1);
     f.panel_size = ((frames as u32 * 150).max(900), 300);
     f
+}
+
+/// A policy's name in words, for legends and titles (the CSVs keep the identifiers).
+fn words(policy: &str) -> &str {
+    match policy {
+        "tracker1" => "tracker 1",
+        "tracker2" => "tracker 2",
+        "naive" => "naive blend",
+        "lbc" => "LBC",
+        "naive_sum" => "naive sum",
+        other => other,
+    }
 }
 
 /// Fig. 7 (final poses, filmstrip, the showcase GIF), the sweep heat maps and the λ sweep.
@@ -83,16 +101,27 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         Series::line("handstand", vec![(0.0, 0.0), (0.0, 1.0), (0.0, 2.0)], 7).mark(Mark::Dashed),
     ];
     let mut angle_series = Vec::new();
+    // Final poses drawn so far (name, elbow and tip): a pose that lands on an earlier one says
+    // so in its label, since it is drawn exactly over it.
+    let mut drawn: Vec<(&str, [f64; 2], [f64; 2])> = Vec::new();
     for (c, name) in POLICIES.iter().enumerate() {
         let rows: Vec<usize> = (0..p.len()).filter(|&r| p[r] == *name).collect();
         let Some(&last) = rows.last() else { continue };
         let [p1, p2] = acro.positions(&[a1[last], a2[last], 0.0, 0.0]);
+        let same = drawn.iter().find(|(_, q1, q2)| {
+            (0..2).all(|k| (q1[k] - p1[k]).abs() < 1e-3 && (q2[k] - p2[k]).abs() < 1e-3)
+        });
+        let label = match same {
+            Some((other, _, _)) => format!("{} (the same pose as {})", words(name), words(other)),
+            None => words(name).to_string(),
+        };
+        drawn.push((name, p1, p2));
         series.push(
-            Series::line(*name, vec![(0.0, 0.0), (p1[0], p1[1]), (p2[0], p2[1])], c)
+            Series::line(label, vec![(0.0, 0.0), (p1[0], p1[1]), (p2[0], p2[1])], c)
                 .mark(Mark::LinePoints),
         );
         angle_series.push(Series::line(
-            *name,
+            words(name),
             rows.iter().map(|&r| (t[r], a1[r])).collect(),
             c,
         ));
@@ -102,7 +131,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         x_label: "x (m)".into(),
         y_label: "height above the bar (m)".into(),
         series,
-        x_range: Some((-2.2, 2.2)),
+        // Equal metres on both axes: the plotting area of a 640 x 440 panel is about
+        // 558 x 350 pixels.
+        x_range: Some((-3.5, 3.5)),
         y_range: Some((-2.2, 2.2)),
         ..Default::default()
     };
@@ -158,7 +189,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             .enumerate()
             .filter(|(i, _)| !rows[*i].is_empty())
             .map(|(i, name)| film::Motion {
-                label: (*name).into(),
+                label: words(name).into(),
                 color: i,
                 rows: &rows[i],
             })
@@ -198,7 +229,10 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             .max(1);
         let ny = rows.len() / nx;
         maps.push(Heatmap {
-            title: format!("{name}: final distance to handstand (capped at {CLAMP})"),
+            title: format!(
+                "{}: final distance to handstand (capped at {CLAMP})",
+                words(name)
+            ),
             x_label: "start theta1 (deg)".into(),
             y_label: "start theta2 (deg)".into(),
             x_range: (s1[rows[0]], s1[rows[nx - 1]]),
