@@ -16,21 +16,42 @@ fn method_color(method: &str) -> usize {
     METHODS.iter().position(|m| *m == method).unwrap_or(0)
 }
 
+/// A method's name in words, for the legend (the CSVs keep the identifiers).
+fn words(method: &str) -> &str {
+    match method {
+        "lbc" => "LBC",
+        "naive" => "naive blend",
+        "tracker1" => "tracker 1 alone",
+        "tracker2" => "tracker 2 alone",
+        "open_loop1" => "tape 1, open loop",
+        "open_loop2" => "tape 2, open loop",
+        "bptt" => "BPTT re-optimized, open loop",
+        "bptt_tracked" => "BPTT re-optimized, tracked",
+        other => other,
+    }
+}
+
 /// Every figure of the experiment ([`crate::experiment::Family::figures`]).
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let t = tables.require("targets")?;
-    let (d, meth, es, ee) = (
+    let (d, meth, es, ee, ax) = (
         t.f64s("desired_target"),
         t.strs("method"),
         t.f64s("final_error_simulator"),
         t.f64s("final_error_emulator"),
+        t.f64s("final_axis_value"),
     );
+    // The verdict's third measure: how far along x from the desired target the simulator
+    // landing ends (m).
+    let miss: Vec<f64> = (0..d.len()).map(|r| (ax[r] - d[r]).abs()).collect();
     let (lo, hi) = d
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
             (a.min(x), b.max(x))
         });
-    let panel = |title: &str, ys: &[f64]| {
+    // Every method a plain line: the panel strokes each by its colour (eight strokes for the
+    // eight methods), so none hides another by colour alone.
+    let panel = |title: &str, ys: &[f64], y_label: &str, line: (&str, f64)| {
         let mut series: Vec<Series> = METHODS
             .iter()
             .map(|&mm| {
@@ -38,26 +59,20 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                     .filter(|&r| meth[r] == mm)
                     .map(|r| (d[r], ys[r].max(1e-3)))
                     .collect();
-                let mark = if mm.starts_with("open_loop") || mm == "bptt" {
-                    Mark::Dashed
-                } else {
-                    Mark::LinePoints
-                };
-                Series::line(mm, pts, method_color(mm)).mark(mark)
+                Series::line(words(mm), pts, method_color(mm))
             })
             .collect();
-        series.push(
-            Series::line("tolerance (error 1)", vec![(lo, 1.0), (hi, 1.0)], 9).mark(Mark::Dashed),
-        );
+        series.push(Series::line(line.0, vec![(lo, line.1), (hi, line.1)], 9).mark(Mark::Dashed));
         Panel {
             title: title.into(),
             x_label: "desired landing target x (m)".into(),
-            y_label: "final error (RMS of (s - s_d)/tolerance)".into(),
+            y_label: y_label.into(),
             log_y: true,
             series,
             ..Panel::default()
         }
     };
+    let error_label = "final error (RMS of (s - s_d)/tolerance)";
     // Tall panels: the nine-entry legend then fits above the data (the plot raises the
     // top of the y range for it) instead of covering it.
     let mut files = fig.draw(
@@ -66,10 +81,26 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             panel_size: (640, 640),
             ..Figure::grid(
                 vec![
-                    panel("on the physical simulator", &es),
-                    panel("on the emulator", &ee),
+                    panel(
+                        "on the physical simulator",
+                        &es,
+                        error_label,
+                        ("tolerance (error 1)", 1.0),
+                    ),
+                    panel(
+                        "on the emulator",
+                        &ee,
+                        error_label,
+                        ("tolerance (error 1)", 1.0),
+                    ),
+                    panel(
+                        "landing x on the simulator: distance from the desired x",
+                        &miss,
+                        "|x_final - x_desired| (m)",
+                        ("1 m", 1.0),
+                    ),
                 ],
-                2,
+                3,
             )
         },
     )?;

@@ -69,7 +69,7 @@ impl Family for XLbcEmulator {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
         (
             "error",
-            "final error vs the desired landing x, on the physical simulator and on the emulator, for LBC, the naive blend, each tracker, each open-loop tape and BPTT re-optimized; 1 is the tolerance.",
+            "final error vs the desired landing x, on the physical simulator and on the emulator, for LBC, the naive blend, each tracker, each open-loop tape and BPTT re-optimized (1 is the tolerance), and on the simulator how far along x from the desired target each lands (the verdict's third measure).",
         ),
         (
             "lbc",
