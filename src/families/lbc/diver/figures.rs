@@ -104,20 +104,50 @@ pub(super) fn coordination(fig: &FigureSink, tables: &Tables) -> Result<Vec<Path
         t.f64s("objective"),
     );
     let series = |col: &[f64]| -> Vec<Series> {
-        ["lbc", "single"]
-            .iter()
-            .enumerate()
-            .map(|(c, name)| {
-                Series::line(*name, method_points(&w, &m, col, name), c).mark(Mark::LinePoints)
+        [
+            ("lbc", "LBC of three trackers"),
+            ("single", "single 1 rad/s tracker"),
+        ]
+        .iter()
+        .enumerate()
+        .map(|(c, (name, words))| {
+            Series::line(*words, method_points(&w, &m, col, name), c).mark(if c == 0 {
+                Mark::LinePoints
+            } else {
+                Mark::Dashed
             })
-            .collect()
+        })
+        .collect()
     };
+    // The verdict's vertical-entry tolerance, from the run's rule table.
+    let tolerance = tables.get("rule").and_then(|r| {
+        let (k, v) = (r.strs("setting"), r.f64s("value"));
+        k.iter().position(|s| s == "entry_tolerance").map(|i| v[i])
+    });
+    let mut entry_series = series(&e);
+    let (lo, hi) = w
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    if let Some(tol) = tolerance.filter(|_| lo.is_finite()) {
+        entry_series.push(
+            Series::line(
+                format!("vertical-entry tolerance ({tol} rad)"),
+                vec![(lo, tol), (hi, tol)],
+                7,
+            )
+            .mark(Mark::Pattern { dash: 3, gap: 4 }),
+        );
+    }
     let panels = vec![
         Panel {
             title: "entry error vs take-off angular velocity".into(),
             x_label: "initial angular velocity (rad/s)".into(),
-            y_label: "|entry angle| (rad)".into(),
-            series: series(&e),
+            y_label: "|entry angle| (rad, log scale)".into(),
+            series: entry_series,
+            // One far miss would flatten the rest on a linear axis.
+            log_y: true,
             ..Default::default()
         },
         Panel {
