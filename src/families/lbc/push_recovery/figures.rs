@@ -26,7 +26,24 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         w.f64s("alpha_forward_mirrored"),
         w.f64s("alpha_forward_baseline"),
     );
-    let fmax = f.iter().fold(1e-9f64, |m, v| m.max(v.abs()));
+    let (t0, t1) = (
+        t.first().copied().unwrap_or(0.0),
+        t.last().copied().unwrap_or(1.0),
+    );
+    // The walls the reaches end on, in the hand's frame (x = ± the wall distance).
+    let mut hand = vec![Series::line(
+        "hand x",
+        t.iter().zip(&hx).map(|(&x, &y)| (x, y)).collect(),
+        2,
+    )];
+    if let Some(d) = rule_setting(tables, "walls_distance") {
+        for (sgn, label) in [(1.0, "walls (the hand's reach stops there)"), (-1.0, "")] {
+            hand.push(
+                Series::line(label, vec![(t0, sgn * d), (t1, sgn * d)], 5)
+                    .mark(Mark::Pattern { dash: 10, gap: 4 }),
+            );
+        }
+    }
     let mut panels = vec![
         Panel {
             title: "LBC blend weight under tugs on the hand".into(),
@@ -37,14 +54,6 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                     "alpha forward reach",
                     t.iter().zip(&a).map(|(&x, &y)| (x, y)).collect(),
                     0,
-                ),
-                Series::line(
-                    format!("tug force / {fmax:.0} N (scaled to 0..1)"),
-                    t.iter()
-                        .zip(&f)
-                        .map(|(&x, &y)| (x, 0.5 + 0.5 * y / fmax))
-                        .collect(),
-                    3,
                 ),
                 Series::line(
                     "alpha forward, mirrored tugs",
@@ -63,14 +72,21 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             ..Default::default()
         },
         Panel {
+            title: "the scripted tugs on the hand".into(),
+            x_label: "time (s)".into(),
+            y_label: "tug force (N, + pulls forward)".into(),
+            series: vec![Series::line(
+                "tug force, as scripted",
+                t.iter().zip(&f).map(|(&x, &y)| (x, y)).collect(),
+                3,
+            )],
+            ..Default::default()
+        },
+        Panel {
             title: "hand position".into(),
             x_label: "time (s)".into(),
             y_label: "hand x (m, + is forward)".into(),
-            series: vec![Series::line(
-                "hand x",
-                t.iter().zip(&hx).map(|(&x, &y)| (x, y)).collect(),
-                2,
-            )],
+            series: hand,
             ..Default::default()
         },
     ];
@@ -99,10 +115,6 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         ));
     }
     if let Some(fall) = rule_setting(tables, "fall_angle") {
-        let (t0, t1) = (
-            t.first().copied().unwrap_or(0.0),
-            t.last().copied().unwrap_or(1.0),
-        );
         for (sgn, label) in [(1.0, "fall angle"), (-1.0, "")] {
             series.push(
                 Series::line(label, vec![(t0, sgn * fall), (t1, sgn * fall)], 7).mark(Mark::Dashed),
