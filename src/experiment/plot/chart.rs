@@ -64,9 +64,16 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
         Some(r) => r,
         None => span(data.iter().flatten().map(|q| q.1).collect(), p.log_y),
     };
+    // The title at the scaled size, or smaller where that would not fit the panel's width
+    // (a bold sans-serif character is about 0.6 of the font size wide).
+    let chars = p.title.chars().count().max(1) as f64;
+    let fit = (0.95 * area.dim_in_pixel().0 as f64 / (0.6 * chars)).floor();
+    let title_size = (px(20.0) as f64).min(fit).max(10.0);
     let area = area.titled(
         &p.title,
-        ("sans-serif", px(20.0)).into_font().style(FontStyle::Bold),
+        ("sans-serif", title_size)
+            .into_font()
+            .style(FontStyle::Bold),
     )?;
     let (label_strip, plot_area) = area.split_vertically(px(22.0));
     label_strip.draw(&Text::new(

@@ -494,18 +494,26 @@ impl Family for PhysicsValidation {
                         )
                     })
                     .collect();
-                // The start state, read from the first row of this start (t = 0).
-                let x0: Vec<String> = rows
+                // The start state, read from the first row of this start (t = 0): its angles,
+                // and its rates where any is not zero.
+                let x0: Vec<f64> = rows
                     .first()
-                    .map(|&r| {
-                        names
-                            .iter()
-                            .map(|n| format!("{:.2}", t.f64s(n)[r]))
-                            .collect()
-                    })
+                    .map(|&r| names.iter().map(|n| t.f64s(n)[r]).collect())
                     .unwrap_or_default();
+                let list = |v: &[f64]| {
+                    v.iter()
+                        .map(|x| format!("{x:.2}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                let (q0, v0) = x0.split_at(nq.min(x0.len()));
+                let start = if v0.iter().all(|&v| v == 0.0) {
+                    format!("q = ({}) rad at rest", list(q0))
+                } else {
+                    format!("q = ({}) rad, q' = ({}) rad/s", list(q0), list(v0))
+                };
                 panels.push(Panel {
-                    title: format!("{m}: passive motion from ({})", x0.join(", ")),
+                    title: format!("{m}: passive motion from {start}"),
                     x_label: "time (s)".into(),
                     y_label: "joint angle (rad)".into(),
                     series,
