@@ -441,7 +441,10 @@ pub fn headline(why: &str) -> String {
     let mut why = why.trim();
     let skipped = |t: &str| {
         let l = t.to_ascii_lowercase();
-        l.starts_with("paper:") || l.starts_with("rule") || l.starts_with("held needs")
+        l.starts_with("paper:")
+            || l.starts_with("rule")
+            || l.starts_with("held needs")
+            || l.starts_with("premise")
     };
     while skipped(why) {
         match sentence_end(why) {
@@ -453,10 +456,14 @@ pub fn headline(why: &str) -> String {
     if first.chars().count() <= 220 {
         return first.to_string();
     }
+    // Cut after the last whole clause that fits: at "; ", else at ", ", else before " (".
     let head: String = first.chars().take(219).collect();
-    match head.rfind("; ") {
-        Some(i) if i > 60 => format!("{}.", &head[..i]),
-        _ => format!("{}…", head.trim_end()),
+    match ["; ", ", ", " ("]
+        .iter()
+        .find_map(|b| head.rfind(b).filter(|&i| i > 60))
+    {
+        Some(i) => format!("{}.", head[..i].trim_end_matches(['.', ':'])),
+        None => format!("{}…", head.trim_end()),
     }
 }
 
@@ -666,8 +673,20 @@ mod tests {
             headline("paper: it swings, then settles (Fig. 9). Held needs all four. Ours."),
             "Ours."
         );
-        // A rule alone stays (there is nothing else to say).
+        // A rule alone stays (there is nothing else to say); a premise is skipped too.
         assert_eq!(headline("Rule: held needs x."), "Rule: held needs x.");
+        assert_eq!(headline("Premise (else not): y. Ours: z."), "Ours: z.");
+        // Without a "; " the cut falls at the last ", " that fits.
+        let commas = format!(
+            "{}, {}, {}.",
+            "a".repeat(100),
+            "b".repeat(100),
+            "c".repeat(100)
+        );
+        assert_eq!(
+            headline(&commas),
+            format!("{}, {}.", "a".repeat(100), "b".repeat(100))
+        );
         let long = "x".repeat(400);
         assert!(headline(&long).chars().count() <= 220);
         // A long sentence is cut after its last whole clause that fits, without an ellipsis.
