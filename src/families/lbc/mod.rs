@@ -183,7 +183,7 @@ pub(crate) fn entropy_section(
         ));
     } else {
         md.push_str(&format!(
-            "\nIn {} of the {lbc} LBC runs ({}) α stays at the fixed weights throughout: there LBC equals {fixed_blend} by construction, and any difference between their outcomes is below what the tolerance on α allows.\n",
+            "\nIn {} of the {lbc} LBC runs ({}) α stays at the fixed weights throughout: there LBC equals {fixed_blend} by construction (to the tolerance on α above).\n",
             fixed.len(),
             fixed.join(", ")
         ));
