@@ -29,3 +29,236 @@ pub(crate) fn rule_table(settings: &[(&str, f64)]) -> Table {
     }
     rule
 }
+
+/// Columns of every LBC family's `entropy.csv` (issue 56 item 3): per main LBC run (`run` names
+/// it: a desired angle, a start, a take-off rate…) and `method` (lbc, and the fixed-weight
+/// blend beside it), at each control step `t` (s): `entropy`, the normalized entropy of the
+/// blend weights α ([`normalized_entropy`](crate::bellman::combine::normalized_entropy): 1 for
+/// uniform α, 0 for one component), and `alpha_deviation`, max_i |α_i − ŵ_i| with ŵ the fixed
+/// weights normalized to sum 1 (what the naive blend uses).
+pub(crate) const ENTROPY_COLUMNS: [&str; 5] = ["run", "method", "t", "entropy", "alpha_deviation"];
+
+/// Ours: α "stays at the fixed weights" in a run when `alpha_deviation` ≤ this at every step;
+/// there LBC's control is the fixed-weight average's (to this precision in α) by construction.
+pub(crate) const FIXED_ALPHA_TOLERANCE: f64 = 1e-3;
+
+/// max_i |α_i − w_i / Σw| (NaN when Σw is not positive).
+pub(crate) fn alpha_deviation(alpha: &[f64], weights: &[f64]) -> f64 {
+    let s: f64 = weights.iter().sum();
+    if !(s > 0.0) {
+        return f64::NAN;
+    }
+    alpha
+        .iter()
+        .zip(weights)
+        .map(|(a, w)| (a - w / s).abs())
+        .fold(0.0, f64::max)
+}
+
+/// Appends one run's per-step entropies and α deviations (step k at t = k·dt) to `table`
+/// (columns [`ENTROPY_COLUMNS`]).
+pub(crate) fn push_entropy(
+    table: &mut Table,
+    run: &str,
+    method: &str,
+    dt: f64,
+    entropy: &[f64],
+    deviation: &[f64],
+) {
+    for (k, (h, d)) in entropy.iter().zip(deviation).enumerate() {
+        table.push(row![run, method, k as f64 * dt, *h, *d]);
+    }
+}
+
+/// Whether α stayed at the fixed weights throughout: every deviation finite and at most `tol`
+/// (an empty run never did).
+pub(crate) fn stays_fixed(deviations: &[f64], tol: f64) -> bool {
+    !deviations.is_empty() && deviations.iter().all(|d| *d <= tol)
+}
+
+/// One (run, method) of `entropy.csv`, summarized.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct EntropySummary {
+    /// The run's name.
+    pub run: String,
+    /// The method.
+    pub method: String,
+    /// Smallest, mean and largest normalized entropy of α over the steps.
+    pub min: f64,
+    /// Mean over the steps.
+    pub mean: f64,
+    /// Largest.
+    pub max: f64,
+    /// Largest α deviation from the fixed weights.
+    pub max_deviation: f64,
+    /// Whether α stayed at the fixed weights ([`stays_fixed`] with [`FIXED_ALPHA_TOLERANCE`]).
+    pub fixed: bool,
+}
+
+/// The (run, method) summaries of the rows of an `entropy.csv`, in order of first appearance.
+pub(crate) fn summarize_entropy(
+    run: &[String],
+    method: &[String],
+    entropy: &[f64],
+    deviation: &[f64],
+) -> Vec<EntropySummary> {
+    let mut keys: Vec<(&str, &str)> = Vec::new();
+    for (r, m) in run.iter().zip(method) {
+        if !keys.contains(&(r.as_str(), m.as_str())) {
+            keys.push((r, m));
+        }
+    }
+    keys.into_iter()
+        .map(|(r, m)| {
+            let rows: Vec<usize> = (0..run.len())
+                .filter(|&i| run[i] == r && method[i] == m)
+                .collect();
+            let h: Vec<f64> = rows.iter().map(|&i| entropy[i]).collect();
+            let d: Vec<f64> = rows.iter().map(|&i| deviation[i]).collect();
+            EntropySummary {
+                run: r.to_string(),
+                method: m.to_string(),
+                min: h.iter().copied().fold(f64::INFINITY, f64::min),
+                mean: h.iter().sum::<f64>() / h.len().max(1) as f64,
+                max: h.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                max_deviation: d.iter().copied().fold(0.0, |a, b| {
+                    if b.is_nan() || a.is_nan() {
+                        f64::NAN
+                    } else {
+                        a.max(b)
+                    }
+                }),
+                fixed: stays_fixed(&d, FIXED_ALPHA_TOLERANCE),
+            }
+        })
+        .collect()
+}
+
+/// The report paragraph on α's entropy over time (from `entropy.csv` in `dir`; empty when the
+/// file is absent): a table per LBC run and, where α stayed at the fixed weights, the statement
+/// that LBC equals `fixed_blend` there by construction. `one_means` says what entropy 1 means in
+/// the family.
+pub(crate) fn entropy_section(
+    dir: &Path,
+    one_means: &str,
+    fixed_blend: &str,
+) -> Result<String, Error> {
+    let path = dir.join("entropy.csv");
+    if !path.exists() {
+        return Ok(String::new());
+    }
+    let df = read_csv(&path)?;
+    let s = summarize_entropy(
+        &df_str(&df, "run")?,
+        &df_str(&df, "method")?,
+        &df_f64(&df, "entropy")?,
+        &df_f64(&df, "alpha_deviation")?,
+    );
+    let sig = crate::experiment::report::sig;
+    let mut md = format!(
+        "\nα's normalized entropy over time (`entropy.csv`, every control step; {one_means}). α stays at the fixed weights when max_i |α_i − ŵ_i| ≤ {} at every step (ours; ŵ the fixed weights normalized).\n\n| run | method | entropy min | mean | max | max \\|α − ŵ\\| | α stays at the fixed weights |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+        sig(FIXED_ALPHA_TOLERANCE)
+    );
+    for e in &s {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            e.run,
+            e.method,
+            sig(e.min),
+            sig(e.mean),
+            sig(e.max),
+            sig(e.max_deviation),
+            if e.fixed { "yes" } else { "no" }
+        ));
+    }
+    let fixed: Vec<&str> = s
+        .iter()
+        .filter(|e| e.method == "lbc" && e.fixed)
+        .map(|e| e.run.as_str())
+        .collect();
+    let lbc = s.iter().filter(|e| e.method == "lbc").count();
+    if fixed.is_empty() {
+        md.push_str(&format!(
+            "\nα leaves the fixed weights at some step in every LBC run here ({lbc}).\n"
+        ));
+    } else {
+        md.push_str(&format!(
+            "\nIn {} of the {lbc} LBC runs ({}) α stays at the fixed weights throughout: there LBC equals {fixed_blend} by construction (to the tolerance on α above).\n",
+            fixed.len(),
+            fixed.join(", ")
+        ));
+    }
+    Ok(md)
+}
+
+/// A figure of α's normalized entropy against time, one series per LBC run of the `entropy`
+/// table (colour and line style both tell them apart); nothing when the table is absent.
+pub(crate) fn entropy_figure(
+    fig: &crate::experiment::plot::FigureSink,
+    tables: &crate::experiment::output::Tables,
+    title: &str,
+) -> Result<Vec<std::path::PathBuf>, Error> {
+    use crate::experiment::plot::{Figure, Mark, Panel, Series};
+    let Some(t) = tables.get("entropy") else {
+        return Ok(Vec::new());
+    };
+    let (run, method, time, h) = (
+        t.strs("run"),
+        t.strs("method"),
+        t.f64s("t"),
+        t.f64s("entropy"),
+    );
+    let mut runs: Vec<&str> = Vec::new();
+    for (r, m) in run.iter().zip(&method) {
+        if m == "lbc" && !runs.contains(&r.as_str()) {
+            runs.push(r);
+        }
+    }
+    let marks = [Mark::Line, Mark::Dashed, Mark::LinePoints, Mark::Points];
+    let series = runs
+        .iter()
+        .enumerate()
+        .map(|(c, r)| {
+            let pts = (0..run.len())
+                .filter(|&i| run[i] == *r && method[i] == "lbc")
+                .map(|i| (time[i], h[i]))
+                .collect();
+            Series::line(format!("lbc, {r}"), pts, c).mark(marks[c % marks.len()])
+        })
+        .collect();
+    let panel = Panel {
+        title: title.into(),
+        x_label: "time (s)".into(),
+        y_label: "normalized entropy of α (1 = uniform)".into(),
+        series,
+        y_range: Some((0.0, 1.05)),
+        ..Default::default()
+    };
+    fig.draw("entropy", &Figure::grid(vec![panel], 1))
+}
+
+#[cfg(test)]
+mod entropy_tests {
+    use super::*;
+
+    #[test]
+    fn alpha_stays_fixed_only_within_the_tolerance_at_every_step() {
+        assert_eq!(alpha_deviation(&[0.5, 0.5], &[1.0, 1.0]), 0.0);
+        assert!((alpha_deviation(&[0.7, 0.3], &[2.0, 2.0]) - 0.2).abs() < 1e-12);
+        assert!(alpha_deviation(&[0.5, 0.5], &[0.0, 0.0]).is_nan());
+        assert!(stays_fixed(&[0.0, 5e-4, 1e-3], 1e-3));
+        assert!(!stays_fixed(&[0.0, 2e-3], 1e-3));
+        assert!(!stays_fixed(&[0.0, f64::NAN], 1e-3));
+        assert!(!stays_fixed(&[], 1e-3));
+        let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+        let sum = summarize_entropy(
+            &s(&["a", "a", "b", "b"]),
+            &s(&["lbc", "lbc", "lbc", "lbc"]),
+            &[1.0, 0.8, 1.0, 1.0],
+            &[0.0, 0.1, 0.0, 1e-4],
+        );
+        assert_eq!(sum.len(), 2);
+        assert!(!sum[0].fixed && sum[1].fixed);
+        assert!((sum[0].mean - 0.9).abs() < 1e-12 && sum[0].min == 0.8);
+    }
+}

@@ -105,6 +105,11 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         },
     )?;
     files.extend(animation(fig, tables)?);
+    files.extend(crate::families::lbc::entropy_figure(
+        fig,
+        tables,
+        "LBC of the emulator-learned landings: entropy of α over time",
+    )?);
     Ok(files)
 }
 

@@ -10,7 +10,7 @@ use crate::control::tracker::ValueTracker;
 use crate::emulator::Emulator;
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::families::lbc::rule_table;
+use crate::families::lbc::{alpha_deviation, push_entropy, rule_table, ENTROPY_COLUMNS};
 use crate::families::na::table1_structure::{build_emulator, build_spec};
 use crate::physics::DifferentiableStep;
 use crate::row;
@@ -147,7 +147,7 @@ impl Params {
 /// is set and the run stops with an error, which the caller records as a failed run.
 fn blend_policy<'a>(
     blend: &'a TrackerBlend<'a, StepTracker>,
-    alpha_log: &'a mut Vec<f64>,
+    alpha_log: &'a mut Vec<(f64, f64)>,
     undefined: &'a std::cell::Cell<bool>,
 ) -> impl FnMut(&[f64], usize, &mut [f64]) -> Result<(), Error> + 'a {
     let n = blend.trackers.len();
@@ -160,12 +160,14 @@ fn blend_policy<'a>(
             }
             other(format!("super-step {k}: {e}"))
         })?;
-        // Entropy is defined for α ≥ 0; extrapolating weights (one w_i < 0) give NaN.
-        alpha_log.push(if alpha.iter().all(|&a| a > -1e-12) {
+        // Entropy is defined for α ≥ 0; extrapolating weights (one w_i < 0) give NaN. Beside
+        // it, α's distance from the fixed weights normalized.
+        let h = if alpha.iter().all(|&a| a > -1e-12) {
             normalized_entropy(&alpha).max(0.0)
         } else {
             f64::NAN
-        });
+        };
+        alpha_log.push((h, alpha_deviation(&alpha, &blend.weights)));
         Ok(())
     }
 }
@@ -232,6 +234,7 @@ impl Job for Params {
         debug_assert_eq!(cols.len(), 4 + n);
         let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
         let mut trajectory = Table::new(&col_refs);
+        let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
         let mut goal_cols = vec!["desired_target"];
         goal_cols.extend_from_slice(&col_refs[4..]);
         let mut goal_t = Table::new(&goal_cols);
@@ -371,8 +374,13 @@ impl Job for Params {
                     let mean_entropy = if entropy.is_empty() {
                         f64::NAN
                     } else {
-                        entropy.iter().sum::<f64>() / entropy.len() as f64
+                        entropy.iter().map(|e| e.0).sum::<f64>() / entropy.len() as f64
                     };
+                    if matches!(method, "lbc" | "naive") {
+                        let (h, dev): (Vec<f64>, Vec<f64>) = entropy.iter().copied().unzip();
+                        let run = format!("desired {d} m");
+                        push_entropy(&mut entropy_t, &run, method, dt, &h, &dev);
+                    }
                     targets_t.push(row![
                         d,
                         method,
@@ -410,6 +418,7 @@ impl Job for Params {
             ("components", components_t),
             ("trajectory", trajectory),
             ("goal", goal_t),
+            ("entropy", entropy_t),
             ("rule", rule),
         ]))
     }

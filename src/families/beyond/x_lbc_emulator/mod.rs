@@ -67,6 +67,7 @@ const METHODS: [&str; 8] = [
 
 impl Family for XLbcEmulator {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        ("entropy", "the normalized entropy of LBC's weights α at every control step (1: uniform, 0: one controller takes over), per run; where α stays at the fixed weights LBC is the naive blend by construction."),
         (
             "error",
             "final error vs the desired landing x, on the physical simulator and on the emulator, for LBC, the naive blend, each tracker, each open-loop tape and BPTT re-optimized (1 is the tolerance), and on the simulator how far along x from the desired target each lands (the verdict's third measure).",

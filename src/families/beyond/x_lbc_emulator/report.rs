@@ -5,7 +5,7 @@ use super::METHODS;
 use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::Error;
-use crate::families::lbc::rule_settings;
+use crate::families::lbc::{entropy_section, rule_settings};
 use std::path::Path;
 
 /// What the rule reads over the desired targets strictly between the components.
@@ -159,6 +159,11 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             sig(mean(&errs(mm)))
         ));
     }
+    md.push_str(&entropy_section(
+        dir,
+        "1 = uniform α; the projected weights are uniform only at the midpoint target, so elsewhere the naive blend's constant entropy is below 1, and beyond the components a negative weight leaves it undefined (NaN)",
+        "the naive blend with the same projected weights",
+    )?);
     Ok(Findings {
         ours: md,
         verdict,

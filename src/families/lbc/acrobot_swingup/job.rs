@@ -5,14 +5,14 @@ use super::setup::{
     cheapest, distance_to_handstand, first_swing_sign, first_torque_sign, mode, mode_index,
     radians, tape_correlation, Rollout, POLICIES,
 };
-use super::verdict::sweep_counts;
+use super::verdict::{choose_scale, sweep_counts};
 use super::Params;
 use crate::bellman::combine::BlendMode;
 use crate::control::ddp::DdpSolution;
 use crate::control::Rk4Map;
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::families::lbc::rule_table;
+use crate::families::lbc::{push_entropy, rule_table, ENTROPY_COLUMNS};
 use crate::physics::acrobot::Acrobot;
 use crate::row;
 use rayon::prelude::*;
@@ -26,13 +26,44 @@ impl Job for Params {
         let map = Rk4Map::new(Acrobot::default(), self.dt).map_err(other)?;
         let (cands, best) = ctx.stage("ddp", || self.swing_ups(&map))?;
         let sols: Vec<&DdpSolution> = best.iter().map(|&b| &cands[b].sol).collect();
-        // The verdict's trackers (the spec's value model) and the other model's, for the
-        // comparison; DDP's Q_uu need not be positive definite, so the other may be missing.
-        let (trackers, alt) = ctx.stage("lqr", || -> Result<_, Error> {
-            let main = self.trackers(&map, &sols, &self.value_model)?;
-            let alt = self.trackers(&map, &sols, self.other_model()).ok();
-            Ok((main, alt))
+        // The trackers' setting (issue 56): the first scale of their LQR terminal weights at
+        // which each tracker alone fails from the test start (the paper's premise); every
+        // policy from the test start at every scale tried, for the table.
+        let lambda = self.lambda();
+        let limits = [self.torque_limit];
+        let scales = self.scales();
+        let (scale_rows, pick, trackers, alt) = ctx.stage("lqr", || -> Result<_, Error> {
+            let x0 = radians(&self.test_start);
+            let (mut rows, mut sets) = (Vec::new(), Vec::new());
+            for &s in &scales {
+                let ts = self.trackers(&map, &sols, &self.value_model, s)?;
+                let d = (0..POLICIES.len())
+                    .map(|i| {
+                        let b = self.blend(&ts, &limits, mode(i), lambda);
+                        Ok(self.run_policy(&map, &b, &x0)?.final_distance())
+                    })
+                    .collect::<Result<Vec<f64>, Error>>()?;
+                rows.push((s, d));
+                sets.push(ts);
+            }
+            let trials: Vec<(f64, f64, f64)> = rows.iter().map(|(s, d)| (*s, d[0], d[1])).collect();
+            let pick = choose_scale(&trials, self.success_distance);
+            let main = sets.swap_remove(pick.unwrap_or(0));
+            // The other value model at the same scale, for the comparison; DDP's Q_uu need not
+            // be positive definite, so it may be missing.
+            let alt = self
+                .trackers(&map, &sols, self.other_model(), scales[pick.unwrap_or(0)])
+                .ok();
+            Ok((rows, pick, main, alt))
         })?;
+        let scale = scales[pick.unwrap_or(0)];
+        let mut scale_t = Table::new(&SCALE_COLUMNS);
+        for (i, (s, d)) in scale_rows.iter().enumerate() {
+            let fails = !(d[0] < self.success_distance) && !(d[1] < self.success_distance);
+            for (name, &di) in POLICIES.iter().zip(d) {
+                scale_t.push(row![*s, *name, di, fails as i64, (pick == Some(i)) as i64]);
+            }
+        }
         let mut candidates = Table::new(&[
             "start",
             "guess",
@@ -125,9 +156,7 @@ impl Job for Params {
                 ]);
             }
         }
-        let limits = [self.torque_limit];
         let blend = |m: BlendMode, lambda: f64| self.blend(&trackers, &limits, m, lambda);
-        let lambda = self.lambda();
         // The test start.
         let x0 = radians(&self.test_start);
         let mut fin = Table::new(&[
@@ -150,9 +179,22 @@ impl Job for Params {
             "alpha1",
             "alpha_entropy",
         ]);
+        let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
         ctx.stage("test start", || -> Result<(), Error> {
             for (i, name) in POLICIES.iter().enumerate() {
                 let r = self.run_policy(&map, &blend(mode(i), lambda), &x0)?;
+                // α over time of LBC and of the fixed-weight average (the sum's α is the raw
+                // weights, not a distribution).
+                if matches!(mode(i), BlendMode::Lbc | BlendMode::Naive) {
+                    push_entropy(
+                        &mut entropy_t,
+                        "test start",
+                        name,
+                        self.dt,
+                        &r.entropy,
+                        &r.alpha_deviation,
+                    );
+                }
                 let xn = &r.xs[r.xs.len() - 1];
                 fin.push(row![
                     *name,
@@ -348,6 +390,8 @@ impl Job for Params {
             ("max_cost_ratio", self.max_cost_ratio),
             ("value_model_ddp", (self.value_model == "ddp") as u8 as f64),
             ("other_value_model_built", alt.is_some() as u8 as f64),
+            ("tracker_weight_scale", scale),
+            ("scale_premise_found", pick.is_some() as u8 as f64),
         ]);
         Ok(Tables::from([
             ("final", fin),
@@ -359,7 +403,20 @@ impl Job for Params {
             ("lambda_sweep", lam),
             ("value_model", models),
             ("showcase", showcase),
+            ("tracker_scales", scale_t),
+            ("entropy", entropy_t),
             ("rule", rule),
         ]))
     }
 }
+
+/// Columns of `tracker_scales.csv`: per tracker weight scale tried and policy, the final
+/// distance to the handstand from the test start; `each_tracker_fails` (both trackers' rows
+/// not below the success distance) and `chosen` (the scale the run uses) repeat per scale.
+pub(super) const SCALE_COLUMNS: [&str; 5] = [
+    "tracker_weight_scale",
+    "policy",
+    "final_distance",
+    "each_tracker_fails",
+    "chosen",
+];

@@ -40,7 +40,9 @@ mod setup;
 mod verdict;
 
 pub use setup::{distance_to_handstand, first_swing_sign, first_torque_sign, tape_correlation};
-pub use verdict::{judge, sweep_counts, SweepCounts, PARTLY_FRACTION};
+pub use verdict::{
+    choose_scale, judge, judge_test_start, sweep_counts, SweepCounts, PARTLY_FRACTION,
+};
 
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
@@ -110,6 +112,13 @@ pub struct Params {
     /// is run over the same sweep for comparison.
     #[serde(default = "default_value_model")]
     pub value_model: String,
+    /// Scales of the trackers' LQR terminal weights tried, in the order listed (issue 56): the
+    /// trackers' gains and value functions come from the LQR recursion with Q_f × scale (the
+    /// swing-ups themselves keep `terminal_weights`); the run uses the first scale at which
+    /// each tracker alone fails from the test start ([`choose_scale`]), or the first listed
+    /// when none does (premise not reproduced). Empty: scale 1 alone, as before.
+    #[serde(default)]
+    pub tracker_weight_scales: Vec<f64>,
 }
 
 fn default_value_model() -> String {
@@ -189,6 +198,10 @@ impl Validate for Params {
             "value_model",
             format!("unknown value model `{}` (lqr, ddp)", self.value_model),
         )?;
+        for (i, v) in self.tracker_weight_scales.iter().enumerate() {
+            positive(&format!("tracker_weight_scales[{i}]"), *v)?;
+        }
+        distinct("tracker_weight_scales", &self.tracker_weight_scales)?;
         for v in self.starts.iter().flatten().chain(&self.test_start) {
             ensure(v.is_finite(), "starts", "must be finite")?;
         }
@@ -263,6 +276,7 @@ mod tests {
             sweep_theta2: [-40.0, 20.0],
             sweep_points: 1,
             value_model: "lqr".into(),
+            tracker_weight_scales: vec![],
         }
     }
 
@@ -316,7 +330,7 @@ mod tests {
         let (p, cands, kept) = solved();
         let map = Rk4Map::new(Acrobot::default(), p.dt).unwrap();
         let sols: Vec<&DdpSolution> = kept.iter().map(|&k| &cands[k].sol).collect();
-        let trackers = p.trackers(&map, &sols, "lqr").unwrap();
+        let trackers = p.trackers(&map, &sols, "lqr", 1.0).unwrap();
         let limits = [p.torque_limit];
         let mut saturated = 0;
         for start in [
@@ -348,7 +362,7 @@ mod tests {
         let (p, cands, kept) = solved();
         let map = Rk4Map::new(Acrobot::default(), p.dt).unwrap();
         let sols: Vec<&DdpSolution> = kept.iter().map(|&k| &cands[k].sol).collect();
-        let trackers = p.trackers(&map, &sols, "lqr").unwrap();
+        let trackers = p.trackers(&map, &sols, "lqr", 1.0).unwrap();
         let limits = [p.torque_limit];
         let x0 = radians(&p.test_start);
         let run = |m: BlendMode, lambda: f64| {
@@ -385,8 +399,8 @@ mod tests {
         let (p, cands, kept) = solved();
         let map = Rk4Map::new(Acrobot::default(), p.dt).unwrap();
         let sols: Vec<&DdpSolution> = kept.iter().map(|&k| &cands[k].sol).collect();
-        let lqr = p.trackers(&map, &sols, "lqr").unwrap();
-        let ddp = p.trackers(&map, &sols, "ddp").unwrap();
+        let lqr = p.trackers(&map, &sols, "lqr", 1.0).unwrap();
+        let ddp = p.trackers(&map, &sols, "ddp", 1.0).unwrap();
         // Same references and remaining cost; the second-order terms change the gains.
         let gap = (0..lqr[0].gains.len())
             .map(|k| (lqr[0].gains.matrix(k) - ddp[0].gains.matrix(k)).amax())
@@ -443,5 +457,62 @@ mod tests {
         p.lambda_sweep = vec![1.0, -1.0];
         let e = p.validate().unwrap_err();
         assert!(format!("{e}").contains("lambda_sweep[1]"), "{e}");
+        // Tracker weight scales: positive, finite, distinct; left out, scale 1 alone.
+        for (bad, key) in [
+            (vec![1.0, 0.0], "tracker_weight_scales[1]"),
+            (vec![f64::NAN], "tracker_weight_scales[0]"),
+            (vec![1.0, f64::INFINITY], "tracker_weight_scales[1]"),
+            (vec![1.0, 0.1, 1.0], "tracker_weight_scales[2]"),
+        ] {
+            let p = Params {
+                tracker_weight_scales: bad,
+                ..params()
+            };
+            let e = p.validate().unwrap_err();
+            assert_eq!(e.key, key, "{e}");
+        }
+        let p = Params {
+            tracker_weight_scales: vec![1.0, 0.1, 0.01],
+            ..params()
+        };
+        assert!(p.validate().is_ok());
+        assert_eq!(params().scales(), vec![1.0]);
+        let json = serde_json::to_value(params()).unwrap();
+        let mut obj = json.as_object().unwrap().clone();
+        obj.remove("tracker_weight_scales");
+        let back: Params = serde_json::from_value(obj.into()).unwrap();
+        assert!(back.tracker_weight_scales.is_empty());
+    }
+
+    #[test]
+    fn the_scale_rule_takes_the_first_scale_where_each_tracker_fails_from_the_test_start() {
+        let s = 0.3;
+        // (scale, tracker 1 distance, tracker 2 distance)
+        let trials = [
+            (1.0, 0.5, 0.05),
+            (0.1, 0.4, 0.3),
+            (0.01, f64::INFINITY, 2.0),
+        ];
+        // At 0.1 tracker 2 ends exactly at the success distance: a failure (success is <).
+        assert_eq!(choose_scale(&trials, s), Some(1));
+        assert_eq!(choose_scale(&trials[2..], s), Some(0));
+        // A diverged tracker (NaN or infinite distance) fails.
+        assert_eq!(choose_scale(&[(1.0, f64::NAN, 0.5)], s), Some(0));
+        // One tracker succeeds at every scale: premise not reproduced.
+        assert_eq!(choose_scale(&[(1.0, 0.5, 0.05), (0.1, 0.1, 0.9)], s), None);
+        assert_eq!(choose_scale(&[], s), None);
+    }
+
+    #[test]
+    fn the_test_start_claim_needs_lbc_to_succeed_and_beat_both_naive_blends() {
+        let s = 0.3;
+        assert!(judge_test_start(0.1, 0.5, 0.4, s));
+        // LBC succeeds but the naive sum is closer: no.
+        assert!(!judge_test_start(0.2, 0.5, 0.1, s));
+        // LBC closest but not a success: no.
+        assert!(!judge_test_start(0.35, 0.5, 0.9, s));
+        // A diverged LBC fails; a diverged naive blend is beaten.
+        assert!(!judge_test_start(f64::INFINITY, 0.5, 0.9, s));
+        assert!(judge_test_start(0.1, f64::INFINITY, f64::NAN, s));
     }
 }

@@ -7,6 +7,7 @@ use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution, DdpVari
 use crate::control::lqr::{track_with, TrackingController, ValueModel};
 use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::{other, Error};
+use crate::families::lbc::alpha_deviation;
 use crate::physics::acrobot::Acrobot;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -77,6 +78,8 @@ pub(super) struct Rollout {
     pub(super) us: Vec<f64>,
     pub(super) alpha1: Vec<f64>,
     pub(super) entropy: Vec<f64>,
+    /// max_i |α_i − ŵ_i| at each step (ŵ the fixed weights normalized).
+    pub(super) alpha_deviation: Vec<f64>,
     pub(super) control_cost: f64,
     /// Step at which the closed loop diverged (non-finite state), if it did.
     pub(super) diverged: Option<usize>,
@@ -165,14 +168,26 @@ impl Params {
         VALUE_MODELS[(self.value_model == VALUE_MODELS[0]) as usize]
     }
 
-    /// Trackers of `sols` under the value model `name`.
+    /// The tracker weight scales tried: `tracker_weight_scales`, or 1 alone when empty.
+    pub(super) fn scales(&self) -> Vec<f64> {
+        if self.tracker_weight_scales.is_empty() {
+            vec![1.0]
+        } else {
+            self.tracker_weight_scales.clone()
+        }
+    }
+
+    /// Trackers of `sols` under the value model `name`, from the LQR recursion with the
+    /// terminal weights × `scale`.
     pub(super) fn trackers(
         &self,
         map: &Rk4Map<Acrobot>,
         sols: &[&DdpSolution],
         name: &str,
+        scale: f64,
     ) -> Result<Vec<TrackingController>, Error> {
-        let cost = self.cost();
+        let mut cost = self.cost();
+        cost.q_final *= scale;
         sols.iter()
             .map(|s| track_with(map, &cost, &s.x, &s.u, self.model(name)).map_err(other))
             .collect()
@@ -293,6 +308,7 @@ impl Params {
             us: Vec::with_capacity(steps),
             alpha1: Vec::with_capacity(steps),
             entropy: Vec::with_capacity(steps),
+            alpha_deviation: Vec::with_capacity(steps),
             control_cost: 0.0,
             diverged: None,
         };
@@ -316,6 +332,8 @@ impl Params {
             out.us.push(u[0]);
             out.alpha1.push(alpha[0]);
             out.entropy.push(normalized_entropy(&alpha));
+            out.alpha_deviation
+                .push(alpha_deviation(&alpha, &blend.weights));
             out.xs.push(x.clone());
         }
         Ok(out)

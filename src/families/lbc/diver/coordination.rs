@@ -9,7 +9,7 @@ use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
 use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family, Job, RunContext};
-use crate::families::lbc::{film, rule_table};
+use crate::families::lbc::{film, push_entropy, rule_table, ENTROPY_COLUMNS};
 use crate::row;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -177,6 +177,7 @@ impl Job for CoordinationParams {
             Vec<(f64, f64, f64)>,
             Vec<(&'static str, f64, f64, f64)>,
             Vec<Vec<f64>>,
+            (Vec<f64>, Vec<f64>),
         );
         let rows: Vec<Result<Out, Error>> = ctx.stage("coordinate", || {
             self.tests
@@ -187,6 +188,7 @@ impl Job for CoordinationParams {
                     // The last executed pose of each (Fig. 8 shows final poses); a diverged
                     // loop's is NaN.
                     let mut poses = Vec::new();
+                    let mut steps = (Vec::new(), Vec::new());
                     for (name, mode) in [
                         ("lbc", BlendMode::Lbc),
                         ("single", BlendMode::Single(self.single)),
@@ -203,6 +205,9 @@ impl Job for CoordinationParams {
                             r.mean_entropy,
                             r.max_torque_fraction,
                         ));
+                        if name == "lbc" {
+                            steps = (r.entropy, r.alpha_deviation);
+                        }
                     }
                     let sweep = self
                         .lambda_sweep
@@ -233,7 +238,7 @@ impl Job for CoordinationParams {
                             r.mean_entropy,
                         ));
                     }
-                    Ok((out, sweep, ddp, poses))
+                    Ok((out, sweep, ddp, poses, steps))
                 })
                 .collect()
         });
@@ -263,8 +268,11 @@ impl Job for CoordinationParams {
             "mean_entropy",
         ]);
         let mut poses_t = Table::new(&POSE_COLUMNS);
+        let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
         for (&w, r) in self.tests.iter().zip(rows) {
-            let (out, sweep, ddp, poses) = r?;
+            let (out, sweep, ddp, poses, steps) = r?;
+            let run = format!("omega {w} rad/s");
+            push_entropy(&mut entropy_t, &run, "lbc", d.dt, &steps.0, &steps.1);
             for (&(m, e, ..), q) in out.iter().zip(&poses) {
                 let mut cells = row![w, m, e];
                 cells.extend(q.iter().map(|&v| v.into()));
@@ -309,6 +317,7 @@ impl Job for CoordinationParams {
             ("lambda_sweep", lam),
             ("value_comparison", values),
             ("poses", poses_t),
+            ("entropy", entropy_t),
             ("rule", rule),
         ]))
     }
@@ -333,6 +342,7 @@ pub(super) const POSE_COLUMNS: [&str; 3 + film::DIVER_COORDS] = [
 
 impl Family for LbcDiverCoordination {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        ("entropy", "the normalized entropy of LBC's weights α at every control step (1: uniform, 0: one controller takes over), per run; where α stays at the fixed weights LBC is the naive blend by construction."),
         (
             "entry",
             "entry error and objective vs take-off angular velocity, LBC of three trackers against the single 1 rad/s tracker.",

@@ -91,6 +91,11 @@ pub(super) fn interpolation(fig: &FigureSink, tables: &Tables) -> Result<Vec<Pat
             files.push(fig.gif("dives", &frames, film::GIF_DELAY_CS)?);
         }
     }
+    files.extend(crate::families::lbc::entropy_figure(
+        fig,
+        tables,
+        "diver interpolation: entropy of LBC's weights α over the dive",
+    )?);
     Ok(files)
 }
 
@@ -161,6 +166,11 @@ pub(super) fn coordination(fig: &FigureSink, tables: &Tables) -> Result<Vec<Path
     ];
     let mut files = fig.draw("entry", &Figure::grid(panels, 2))?;
     files.extend(coordination_poses(fig, tables)?);
+    files.extend(crate::families::lbc::entropy_figure(
+        fig,
+        tables,
+        "diver coordination: entropy of LBC's weights α over the dive",
+    )?);
     Ok(files)
 }
 

@@ -12,7 +12,7 @@ use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
 use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
-use crate::families::lbc::{film, rule_table};
+use crate::families::lbc::{film, push_entropy, rule_table, ENTROPY_COLUMNS};
 use crate::row;
 use nalgebra::DVector;
 use rayon::prelude::*;
@@ -31,7 +31,16 @@ pub struct InterpolationParams {
     /// Take-off angular velocity of both dives (rad/s).
     pub omega: f64,
     /// Target offset δ: the dives aim at −δ (under-rotating) and +δ (over-rotating) (rad).
+    /// Used when `offsets` is empty (then it must be given); with `offsets` it must be left
+    /// out (0): the run sets it to the offset the search chooses.
+    #[serde(default)]
     pub offset: f64,
+    /// The offset search (issue 56 item 1): offsets δ tried in ascending order, each building
+    /// the components exactly as a run at that offset does (average-term scale chosen by its
+    /// own rule); the run judges LBC at the first offset where the premise holds
+    /// ([`choose_offset`]), and stops searching there. Empty: only `offset`, as before.
+    #[serde(default)]
+    pub offsets: Vec<f64>,
     /// Desired entry angles (rad), strictly between −δ and δ (at ±δ the weights are (1, 0):
     /// a component, not an interpolation); 0 (vertical, the paper's claim) must be among them.
     pub desired: Vec<f64>,
@@ -57,14 +66,31 @@ impl Validate for InterpolationParams {
         self.dive
             .validate()
             .map_err(|e| ParamError::new(format!("dive.{}", e.key), e.message))?;
-        positive("offset", self.offset)?;
+        if self.offsets.is_empty() {
+            positive("offset", self.offset)?;
+        } else {
+            ensure(
+                self.offset == 0.0,
+                "offset",
+                "must be left out when offsets is given (the search sets it)",
+            )?;
+            for (i, o) in self.offsets.iter().enumerate() {
+                positive(&format!("offsets[{i}]"), *o)?;
+                ensure(
+                    i == 0 || *o > self.offsets[i - 1],
+                    &format!("offsets[{i}]"),
+                    "must be larger than the offset before it (ascending, distinct)",
+                )?;
+            }
+        }
+        let smallest = self.tried_offsets()[0];
         ensure(self.omega.is_finite(), "omega", "must be finite")?;
         ensure(!self.desired.is_empty(), "desired", "must not be empty")?;
         for (i, g) in self.desired.iter().enumerate() {
             ensure(
-                g.abs() < self.offset,
+                g.abs() < smallest,
                 &format!("desired[{i}]"),
-                "must lie strictly between -offset and offset (at ±offset the weights are (1, 0))",
+                "must lie strictly between -offset and offset, for the smallest offset tried (at ±offset the weights are (1, 0))",
             )?;
         }
         ensure(
@@ -107,6 +133,9 @@ struct InterpRow {
     objective: f64,
     entropy: f64,
     torque: f64,
+    /// Normalized entropy of α and its deviation from the fixed weights at each step (empty
+    /// for the direct dive).
+    steps: (Vec<f64>, Vec<f64>),
 }
 
 impl InterpolationParams {
@@ -201,21 +230,97 @@ impl InterpolationParams {
     }
 }
 
-/// Entry angle of an optimized dive's final state (rad).
-fn component_entry(s: &DdpSolution) -> f64 {
-    entry(&s.x.last().cloned())
+/// The component dives at one offset, built as the run builds them: without the §6.1 term,
+/// with it at every scale of `average_scales`, and the chosen scale's dives and trackers.
+struct Components {
+    /// The dive settings at the chosen average-term scale.
+    d: DiveSettings,
+    /// The component dives (under-rotating, over-rotating).
+    sols: Vec<DdpSolution>,
+    /// Their trackers.
+    trackers: Vec<TrackingController>,
+    /// The `dives` table.
+    examples: Table,
+    /// The `average_term` table.
+    average_t: Table,
 }
 
-impl Job for InterpolationParams {
-    fn params_json(&self) -> serde_json::Value {
-        serde_json::to_value(self).unwrap_or_default()
+/// One offset of the offset search: the components' entry angles and, with the weights
+/// projected for the vertical entry, where the naive blend and LBC enter (rad from vertical).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OffsetTrial {
+    /// The offset δ (rad).
+    pub offset: f64,
+    /// The §6.1 average-term scale chosen at this offset (0: off).
+    pub average_scale: f64,
+    /// Entry angle of the under-rotating component.
+    pub under_entry: f64,
+    /// Entry angle of the over-rotating component.
+    pub over_entry: f64,
+    /// Entry angle of the naive blend with the weights projected for vertical.
+    pub naive_entry: f64,
+    /// Entry angle of LBC with the same weights.
+    pub lbc_entry: f64,
+}
+
+impl OffsetTrial {
+    /// The figure's premise at this offset (ours, written in the spec): the under-rotating
+    /// component enters short of vertical and the over-rotating one past it, each by more than
+    /// `tol`, and the naive blend with the projected weights misses vertical by more than `tol`
+    /// (a diverged naive dive, NaN, misses).
+    pub fn premise_holds(&self, tol: f64) -> bool {
+        self.under_entry < -tol && self.over_entry > tol && !(self.naive_entry.abs() <= tol)
+    }
+}
+
+/// The offset search's rule: the index of the trial with the smallest offset whose premise
+/// holds ([`OffsetTrial::premise_holds`]); `None` when no trial's does (premise not
+/// reproduced).
+pub fn choose_offset(trials: &[OffsetTrial], tol: f64) -> Option<usize> {
+    trials
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| t.premise_holds(tol))
+        .min_by(|a, b| a.1.offset.total_cmp(&b.1.offset))
+        .map(|(i, _)| i)
+}
+
+/// Columns of `offsets.csv`: one row per offset tried, in the order tried.
+pub(super) const OFFSET_COLUMNS: [&str; 7] = [
+    "offset",
+    "average_scale",
+    "under_entry",
+    "over_entry",
+    "naive_vertical_entry",
+    "lbc_vertical_entry",
+    "premise_holds",
+];
+
+impl InterpolationParams {
+    /// The offsets the search tries: `offsets`, or `offset` alone when it is empty.
+    pub fn tried_offsets(&self) -> Vec<f64> {
+        if self.offsets.is_empty() {
+            vec![self.offset]
+        } else {
+            self.offsets.clone()
+        }
     }
 
-    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+    /// These parameters at offset `o` (no search).
+    fn at(&self, o: f64) -> InterpolationParams {
+        InterpolationParams {
+            offset: o,
+            offsets: Vec::new(),
+            ..self.clone()
+        }
+    }
+
+    /// The components at `self.offset`: the dives without the §6.1 term, their average
+    /// trajectory x̄, the dives re-optimized with the term at every scale of
+    /// `average_scales`, and the largest scale at which both still reach their own targets
+    /// (the paper's examples do).
+    fn components(&self, ctx: &RunContext) -> Result<Components, Error> {
         let cases = [(self.omega, -self.offset), (self.omega, self.offset)];
-        // The §6.1 average term: the components without it, their average trajectory x̄, the
-        // components re-optimized with it at every scale of `average_scales`, and the largest
-        // scale at which both still reach their own targets (the paper's examples do).
         let base = self.dive.clone();
         let plain = base.optimize_all(ctx, &cases)?;
         let x_bar = std::sync::Arc::new(mean_trajectory(&plain.0, base.steps()));
@@ -246,12 +351,102 @@ impl Job for InterpolationParams {
             .max_by(|a, b| a.1 .0.average_scale.total_cmp(&b.1 .0.average_scale))
             .map(|(i, _)| i);
         let (d, (sols, trackers, examples)) = match chosen {
-            Some(i) => {
-                let (on, out) = scaled.swap_remove(i);
-                (on, out)
-            }
+            Some(i) => scaled.swap_remove(i),
             None => (base, plain),
         };
+        Ok(Components {
+            d,
+            sols,
+            trackers,
+            examples,
+            average_t,
+        })
+    }
+
+    /// The offset trial of components `c` built at `self.offset`.
+    fn trial(&self, c: &Components) -> Result<OffsetTrial, Error> {
+        let (d, lambda) = (&c.d, c.d.lambda());
+        let (w, _) = self.weights(0.0, lambda)?;
+        let x0 = d.takeoff(self.omega);
+        let mut vertical = [f64::NAN; 2];
+        for (v, mode) in vertical.iter_mut().zip([BlendMode::Naive, BlendMode::Lbc]) {
+            let blend = TrackerBlend {
+                trackers: &c.trackers,
+                weights: w.clone(),
+                lambda,
+                limits: Some(&d.torque_limits),
+                mode,
+            };
+            *v = entry(&d.execute(&blend, &x0)?.final_state);
+        }
+        Ok(OffsetTrial {
+            offset: self.offset,
+            average_scale: d.average_scale,
+            under_entry: component_entry(&c.sols[0]),
+            over_entry: component_entry(&c.sols[1]),
+            naive_entry: vertical[0],
+            lbc_entry: vertical[1],
+        })
+    }
+}
+
+/// Entry angle of an optimized dive's final state (rad).
+fn component_entry(s: &DdpSolution) -> f64 {
+    entry(&s.x.last().cloned())
+}
+
+impl Job for InterpolationParams {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        // The offset search: ascending offsets, each built as a run at that offset builds its
+        // components; stop at the first whose premise holds. With none, the tables use the
+        // largest offset tried and the verdict is "premise not reproduced".
+        let mut trials = Vec::new();
+        let mut built = None;
+        for o in self.tried_offsets() {
+            let p = self.at(o);
+            let c = p.components(ctx)?;
+            let t = p.trial(&c)?;
+            trials.push(t);
+            built = Some((p, c));
+            if t.premise_holds(self.entry_tolerance) {
+                break;
+            }
+        }
+        let (p, c) = built.expect("validation: at least one offset");
+        let mut offsets_t = Table::new(&OFFSET_COLUMNS);
+        for t in &trials {
+            offsets_t.push(row![
+                t.offset,
+                t.average_scale,
+                t.under_entry,
+                t.over_entry,
+                t.naive_entry,
+                t.lbc_entry,
+                t.premise_holds(self.entry_tolerance) as usize
+            ]);
+        }
+        let found = choose_offset(&trials, self.entry_tolerance).is_some();
+        let mut tables = p.judge(ctx, c, found)?;
+        tables.insert("offsets", offsets_t);
+        Ok(tables)
+    }
+}
+
+impl InterpolationParams {
+    /// Everything the run judges at `self.offset`, from the components `c` built there;
+    /// `found`: whether the offset search found an offset whose premise holds.
+    fn judge(&self, ctx: &RunContext, c: Components, found: bool) -> Result<Tables, Error> {
+        let Components {
+            d,
+            sols,
+            trackers,
+            examples,
+            average_t,
+        } = c;
         let d = &d;
         let lambda = d.lambda();
         let x0 = d.takeoff(self.omega);
@@ -291,6 +486,7 @@ impl Job for InterpolationParams {
                             objective: d.reconstructed_objective(&rec, r.running, &r.final_state),
                             entropy: r.mean_entropy,
                             torque: r.max_torque_fraction,
+                            steps: (r.entropy, r.alpha_deviation),
                         });
                     }
                     // Ground truth: the best direct DDP dive from the average tape and from
@@ -316,6 +512,7 @@ impl Job for InterpolationParams {
                         objective: j,
                         entropy: f64::NAN,
                         torque: d.torque_fraction(&s.u),
+                        steps: (Vec::new(), Vec::new()),
                     });
                     let minimum = rec.minimum() - DiveSettings::target_torso(0.0);
                     pb.inc(1);
@@ -345,8 +542,13 @@ impl Job for InterpolationParams {
             "direct_outer_iterations",
             "direct_start",
         ]);
+        let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
         for (&g, r) in self.desired.iter().zip(rows) {
             let (out, w, residual, minimum, it, label) = r?;
+            for r in out.iter().filter(|r| r.method != "direct") {
+                let run = format!("desired {g} rad");
+                push_entropy(&mut entropy_t, &run, r.method, d.dt, &r.steps.0, &r.steps.1);
+            }
             let best = out
                 .iter()
                 .find(|r| r.method == "direct")
@@ -422,6 +624,8 @@ impl Job for InterpolationParams {
             ("entry_tolerance", self.entry_tolerance),
             ("objective_tolerance", self.objective_tolerance),
             ("average_scale", d.average_scale),
+            ("offset", self.offset),
+            ("offset_premise_found", found as u8 as f64),
             (
                 "q_spacing2_over_lambda",
                 d.torso_weight * spacing * spacing / lambda,
@@ -434,6 +638,7 @@ impl Job for InterpolationParams {
             ("lambda_sweep", lam),
             ("motion", motion),
             ("average_term", average_t),
+            ("entropy", entropy_t),
             ("rule", rule),
         ]))
     }
@@ -451,6 +656,7 @@ pub(super) const MOTION_DIVES: [&str; 4] = ["under-rotating", "over-rotating", "
 
 impl Family for LbcDiverInterpolation {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        ("entropy", "the normalized entropy of LBC's weights α at every control step (1: uniform, 0: one controller takes over), per run; where α stays at the fixed weights LBC is the naive blend by construction."),
         (
             "entry",
             "the entry angle reached vs the desired one by LBC, the naive blend and a direct DDP dive, and each one's excess objective over the direct optimum of the reconstructed cost.",

@@ -38,7 +38,7 @@ pub use coordination::{
     compare_objectives, coordination_rule, CoordinationCounts, CoordinationParams,
     LbcDiverCoordination, PARTLY_WORSE_MARGIN,
 };
-pub use interpolation::{InterpolationParams, LbcDiverInterpolation};
+pub use interpolation::{choose_offset, InterpolationParams, LbcDiverInterpolation, OffsetTrial};
 
 use crate::bellman::combine::{blend_weights, normalized_entropy, TrackerBlend};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
@@ -47,6 +47,7 @@ use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::Table;
 use crate::experiment::resolve::{ensure, positive, ParamError};
 use crate::experiment::{other, Error, RunContext};
+use crate::families::lbc::alpha_deviation;
 use crate::physics::diver::{diver, entry_angle};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::planar::PlanarTree;
@@ -110,6 +111,10 @@ pub struct DiveRun {
     pub running: f64,
     /// Mean normalized entropy of α over the dive.
     pub mean_entropy: f64,
+    /// Normalized entropy of α at each control step.
+    pub entropy: Vec<f64>,
+    /// max_i |α_i − ŵ_i| at each control step, ŵ the blend's fixed weights normalized.
+    pub alpha_deviation: Vec<f64>,
     /// Largest |u_j| / limit_j over the dive (at most 1: the limits are enforced).
     pub max_torque_fraction: f64,
     /// Executed states (every step), for filmstrips.
@@ -330,6 +335,8 @@ impl DiveSettings {
             final_state: None,
             running: 0.0,
             mean_entropy: 0.0,
+            entropy: Vec::with_capacity(self.steps()),
+            alpha_deviation: Vec::with_capacity(self.steps()),
             max_torque_fraction: 0.0,
             states: vec![x0.clone()],
         };
@@ -344,7 +351,11 @@ impl DiveSettings {
             }
             uu.copy_from_slice(&u);
             run.running += cost.running(k, &x, &uu);
-            run.mean_entropy += normalized_entropy(&alpha) / steps as f64;
+            let h = normalized_entropy(&alpha);
+            run.mean_entropy += h / steps as f64;
+            run.entropy.push(h);
+            run.alpha_deviation
+                .push(alpha_deviation(&alpha, &blend.weights));
             for (v, l) in u.iter().zip(&self.torque_limits) {
                 run.max_torque_fraction = run.max_torque_fraction.max(v.abs() / l);
             }
@@ -647,6 +658,7 @@ mod tests {
             dive: settings(),
             omega: 1.0,
             offset: 0.6,
+            offsets: vec![],
             desired: vec![-0.3, 0.0, 0.6],
             direct_outer_iterations: 5,
             entry_tolerance: 0.05,
@@ -662,5 +674,75 @@ mod tests {
             ..p
         };
         assert_eq!(p.validate().unwrap_err().key, "average_scales[1]");
+        // The offset search: ascending, distinct, positive, finite; `offset` left out with it;
+        // desired angles inside the smallest offset.
+        let p = InterpolationParams {
+            average_scales: vec![],
+            desired: vec![-0.3, 0.0, 0.3],
+            ..p
+        };
+        assert!(p.validate().is_ok());
+        let with = |offset: f64, offsets: Vec<f64>| InterpolationParams {
+            offset,
+            offsets,
+            ..p.clone()
+        };
+        assert!(with(0.0, vec![0.6, 0.8, 1.5]).validate().is_ok());
+        assert_eq!(
+            with(0.6, vec![0.6, 0.8]).validate().unwrap_err().key,
+            "offset"
+        );
+        assert_eq!(with(0.0, vec![]).validate().unwrap_err().key, "offset");
+        for bad in [
+            vec![0.6, 0.6],
+            vec![0.8, 0.6],
+            vec![0.6, f64::NAN],
+            vec![0.6, f64::INFINITY],
+        ] {
+            assert_eq!(with(0.0, bad).validate().unwrap_err().key, "offsets[1]");
+        }
+        assert_eq!(
+            with(0.0, vec![-0.6]).validate().unwrap_err().key,
+            "offsets[0]"
+        );
+        assert_eq!(
+            with(0.0, vec![0.3, 0.6]).validate().unwrap_err().key,
+            "desired[0]"
+        );
+        // An old spec (no `offsets`) still parses.
+        let json = serde_json::to_value(&p).unwrap();
+        let mut obj = json.as_object().unwrap().clone();
+        obj.remove("offsets");
+        let back: InterpolationParams = serde_json::from_value(obj.into()).unwrap();
+        assert!(back.offsets.is_empty() && back.offset == 0.6);
+    }
+
+    #[test]
+    fn the_offset_search_takes_the_smallest_offset_whose_naive_blend_misses() {
+        let t = |offset: f64, naive: f64| OffsetTrial {
+            offset,
+            average_scale: 0.0,
+            under_entry: -offset,
+            over_entry: offset,
+            naive_entry: naive,
+            lbc_entry: 0.0,
+        };
+        let tol = 0.05;
+        // Naive vertical at 0.6 and 0.8, off by more than tol from 1.0 on: 1.0.
+        let trials = [t(0.6, 0.01), t(0.8, -0.05), t(1.0, 0.07), t(1.2, -0.2)];
+        assert_eq!(choose_offset(&trials, tol), Some(2));
+        // Order of the list does not matter: the smallest offset wins.
+        let shuffled = [t(1.2, -0.2), t(1.0, 0.07), t(0.6, 0.01)];
+        assert_eq!(choose_offset(&shuffled, tol), Some(1));
+        // A diverged naive dive misses.
+        assert_eq!(choose_offset(&[t(0.6, f64::NAN)], tol), Some(0));
+        // None misses: premise not reproduced.
+        assert_eq!(choose_offset(&[t(0.6, 0.0), t(1.5, 0.05)], tol), None);
+        assert_eq!(choose_offset(&[], tol), None);
+        // Components that do not straddle vertical by more than tol: no premise.
+        let mut c = t(0.8, 0.3);
+        c.under_entry = -0.04;
+        assert!(!c.premise_holds(tol));
+        assert_eq!(choose_offset(&[c], tol), None);
     }
 }

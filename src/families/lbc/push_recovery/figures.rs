@@ -128,5 +128,11 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         series,
         ..Default::default()
     });
-    fig.draw("weights", &Figure::grid(panels, 1))
+    let mut files = fig.draw("weights", &Figure::grid(panels, 1))?;
+    files.extend(crate::families::lbc::entropy_figure(
+        fig,
+        tables,
+        "push recovery: entropy of LBC's weights α over time",
+    )?);
+    Ok(files)
 }

@@ -2,14 +2,14 @@
 //! tugs (scripted, mirrored, none; with and without a reach) and the λ sweep, as tables.
 
 use super::measures::{largest_lean, mirror_gap, swings, window_gap, window_range};
-use super::Params;
+use super::{choose_reach_scale, Params, COMMITTED};
 use crate::bellman::combine::{normalized_entropy, BlendMode, TrackerBlend};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, Termination};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::families::lbc::rule_table;
+use crate::families::lbc::{alpha_deviation, push_entropy, rule_table, ENTROPY_COLUMNS};
 use crate::physics::integrate::Integrator;
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::push::{push_figure, PushScene};
@@ -19,6 +19,55 @@ use nalgebra::{DMatrix, DVector};
 use std::f64::consts::{FRAC_PI_2, PI};
 
 impl Params {
+    /// These parameters with the reaches' state weights (terminal and hold) × `scale`, and no
+    /// scale search.
+    pub(super) fn scaled(&self, scale: f64) -> Params {
+        let mut p = self.clone();
+        p.reach_scales.clear();
+        for w in &mut p.terminal_weights {
+            *w *= scale;
+        }
+        if let Some(h) = &mut p.hold_weights {
+            for w in h.iter_mut() {
+                *w *= scale;
+            }
+        }
+        p
+    }
+
+    /// The reach-scale search: per scale tried (`reach_scales`, or 1 alone), the largest
+    /// weight of either reach under LBC with the first tug alone before the second tug starts;
+    /// the index the rule picks.
+    fn reach_scale_trials(&self) -> Result<(Vec<(f64, f64)>, Option<usize>), Error> {
+        let scales = if self.reach_scales.is_empty() {
+            vec![1.0]
+        } else {
+            self.reach_scales.clone()
+        };
+        let mut tugs = self.tugs.clone();
+        tugs.sort_by(|a, b| a.start.total_cmp(&b.start));
+        let next = tugs.get(1).map_or(self.horizon, |g| g.start);
+        let mut trials = Vec::new();
+        for s in scales {
+            let mut q = self.scaled(s);
+            q.tugs = tugs[..tugs.len().min(1)].to_vec();
+            // A reach that does not converge at this scale cannot be used: committed (NaN).
+            let w = match q.reaches() {
+                Ok((trackers, _)) => q
+                    .closed_loop(&trackers, 1.0, q.lambda())?
+                    .iter()
+                    .enumerate()
+                    .filter(|(k, _)| (*k as f64 * q.dt) < next)
+                    .map(|(_, r)| r[0].max(r[1]))
+                    .fold(0.0, f64::max),
+                Err(_) => f64::NAN,
+            };
+            trials.push((s, w));
+        }
+        let pick = choose_reach_scale(&trials, COMMITTED);
+        Ok((trials, pick))
+    }
+
     pub(super) fn steps(&self) -> usize {
         (self.horizon / self.dt).round() as usize
     }
@@ -226,6 +275,39 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        // The reach scale (issue 56): the first whose weights, with the first tug alone, have
+        // not committed before the second tug; every table below uses it.
+        let (trials, pick) = ctx.stage("reach scales", || self.reach_scale_trials())?;
+        let scale = trials[pick.unwrap_or(0)].0;
+        let mut scales_t = Table::new(&[
+            "reach_scale",
+            "max_weight_before_second_tug",
+            "committed",
+            "chosen",
+        ]);
+        for (i, &(s, w)) in trials.iter().enumerate() {
+            scales_t.push(row![
+                s,
+                w,
+                !(w < COMMITTED) as i64,
+                (pick == Some(i)) as i64
+            ]);
+        }
+        let scaled = self.scaled(scale);
+        scaled.judge(ctx, scales_t, scale, pick.is_some())
+    }
+}
+
+impl Params {
+    /// Everything the run judges, with these parameters' reaches; `scales_t` the reach-scale
+    /// search's table, `scale` the scale chosen, `found` whether the rule found one.
+    fn judge(
+        &self,
+        ctx: &RunContext,
+        scales_t: Table,
+        scale: f64,
+        found: bool,
+    ) -> Result<Tables, Error> {
         let (trackers, reaches) = ctx.stage("ddp + lqr", || self.reaches())?;
         let (tugged, mirrored, baseline) = ctx.stage("tugs", || -> Result<_, Error> {
             Ok((
@@ -234,6 +316,20 @@ impl Job for Params {
                 self.closed_loop(&trackers, 0.0, self.lambda())?,
             ))
         })?;
+        // α's entropy over time of the three LBC runs (w = (1, 1): ŵ = (1/2, 1/2)).
+        let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
+        for (run, r) in [
+            ("tugged", &tugged),
+            ("mirrored", &mirrored),
+            ("no tugs", &baseline),
+        ] {
+            let h: Vec<f64> = r.iter().map(|v| normalized_entropy(&v[..2])).collect();
+            let d: Vec<f64> = r
+                .iter()
+                .map(|v| alpha_deviation(&v[..2], &[1.0, 1.0]))
+                .collect();
+            push_entropy(&mut entropy_t, run, "lbc", self.dt, &h, &d);
+        }
         let mut table = Table::new(&[
             "t",
             "alpha_forward",
@@ -321,11 +417,15 @@ impl Job for Params {
             ("no_reach_lean", largest_lean(&no_reach)),
             ("walls_distance", self.walls.distance),
             ("rest_rate", self.rest_rate),
+            ("reach_scale", scale),
+            ("reach_premise_found", found as u8 as f64),
         ]);
         Ok(Tables::from([
             ("weights", table),
             ("reaches", reaches),
             ("lambda_sweep", lam),
+            ("reach_scales", scales_t),
+            ("entropy", entropy_t),
             ("rule", rule),
         ]))
     }

@@ -110,6 +110,26 @@ pub struct Params {
     /// RK4 steps per control step in the closed loops (the hand–wall contact is stiff).
     #[serde(default = "default_substeps")]
     pub substeps: usize,
+    /// Scales of the reaches' state weights (`terminal_weights` and `hold_weights` × scale:
+    /// a slower, less decisive reach as the scale falls) tried in the listed order (issue 56):
+    /// the run uses the first at which, with the first tug alone, LBC's weights have not
+    /// committed (both below [`COMMITTED`]) before the second tug starts
+    /// ([`choose_reach_scale`]); the first listed when none (premise not reproduced). Empty:
+    /// scale 1 alone, as before.
+    #[serde(default)]
+    pub reach_scales: Vec<f64>,
+}
+
+/// A weight has committed to one reach once it exceeds this (the side threshold of
+/// [`swings`]: above 0.75 is a side).
+pub const COMMITTED: f64 = 0.75;
+
+/// The reach-scale rule (ours, written in the spec before the run): of the trials
+/// `(scale, largest weight of either reach before the second tug)` in the order tried, the
+/// index of the first whose weight stayed below `threshold` (NaN: committed); `None` when the
+/// weights committed at every scale.
+pub fn choose_reach_scale(trials: &[(f64, f64)], threshold: f64) -> Option<usize> {
+    trials.iter().position(|&(_, w)| w < threshold)
 }
 
 fn default_substeps() -> usize {
@@ -183,6 +203,15 @@ impl Validate for Params {
             "substeps",
             "must be in 1..=1000",
         )?;
+        for (i, v) in self.reach_scales.iter().enumerate() {
+            positive(&format!("reach_scales[{i}]"), *v)?;
+        }
+        distinct("reach_scales", &self.reach_scales)?;
+        ensure(
+            self.reach_scales.is_empty() || self.tugs.len() >= 2,
+            "reach_scales",
+            "the reach-scale rule needs at least two tugs (it watches the weights until the second)",
+        )?;
         for (i, t) in self.tugs.iter().enumerate() {
             ensure(
                 t.start >= 0.0 && t.start.is_finite(),
@@ -202,6 +231,7 @@ impl Validate for Params {
 
 impl Family for LbcPush {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        ("entropy", "the normalized entropy of LBC's weights α at every control step (1: uniform, 0: one controller takes over), per run; where α stays at the fixed weights LBC is the naive blend by construction."),
         (
             "weights",
             "under scripted tugs on the hand: LBC's blend weight of the forward reach, the hand's position, and the body's lean with LBC and with no reach beside the fall angle.",
@@ -260,6 +290,54 @@ mod tests {
             p.tugs.iter().all(|g| Some(g.force.abs()) == toppling),
             "{toppling:?}"
         );
+    }
+
+    #[test]
+    fn the_reach_scale_is_the_first_whose_weights_have_not_committed_by_the_second_tug() {
+        let trials = [(1.0, 1.0), (0.3, 0.8), (0.1, 0.74), (0.03, 0.6)];
+        assert_eq!(choose_reach_scale(&trials, COMMITTED), Some(2));
+        // Exactly at the threshold is committed; NaN is committed.
+        assert_eq!(
+            choose_reach_scale(&[(1.0, 0.75), (0.5, f64::NAN)], COMMITTED),
+            None
+        );
+        assert_eq!(choose_reach_scale(&[], COMMITTED), None);
+    }
+
+    #[test]
+    fn reach_scales_validate_and_default_to_none() {
+        let p = spec_params();
+        for (bad, key) in [
+            (vec![1.0, 0.0], "reach_scales[1]"),
+            (vec![f64::NAN], "reach_scales[0]"),
+            (vec![1.0, f64::INFINITY], "reach_scales[1]"),
+            (vec![0.5, 0.5], "reach_scales[1]"),
+        ] {
+            let q = Params {
+                reach_scales: bad,
+                ..p.clone()
+            };
+            assert_eq!(q.validate().unwrap_err().key, key);
+        }
+        let q = Params {
+            reach_scales: vec![1.0, 0.5],
+            tugs: p.tugs[..1].to_vec(),
+            ..p.clone()
+        };
+        assert_eq!(q.validate().unwrap_err().key, "reach_scales");
+        let json = serde_json::to_value(&p).unwrap();
+        let mut obj = json.as_object().unwrap().clone();
+        obj.remove("reach_scales");
+        let back: Params = serde_json::from_value(obj.into()).unwrap();
+        assert!(back.reach_scales.is_empty());
+        // The scale multiplies every state weight of the reaches, and nothing else.
+        let s = p.scaled(0.5);
+        assert_eq!(s.terminal_weights[0], 0.5 * p.terminal_weights[0]);
+        assert_eq!(
+            s.hold_weights.map(|w| w[1]),
+            p.hold_weights.map(|w| 0.5 * w[1])
+        );
+        assert!(s.reach_scales.is_empty() && s.control_weight == p.control_weight);
     }
 
     #[test]

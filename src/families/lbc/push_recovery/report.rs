@@ -1,10 +1,11 @@
 //! The report section and verdict, read back from the CSVs.
 
 use super::measures::{mirror_gap, swings, window_gap, window_range};
+use super::COMMITTED;
 use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::Error;
-use crate::families::lbc::rule_settings;
+use crate::families::lbc::{entropy_section, rule_settings};
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
@@ -169,16 +170,23 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             }
         ));
     }
+    let (scales_md, found) = reach_scales(dir, setting("reach_scale"))?;
+    md.push_str(&scales_md);
+    md.push_str(&entropy_section(
+        dir,
+        "the fixed weights are w = (1, 1), so their entropy is 1: uniform α",
+        "the fixed average of the two reaches",
+    )?);
     let verdict = Verdict::graded(
         swung && from_tugs && settled && mirrored && stood,
         swung && mirrored,
     )
-    .given(premise);
+    .given(premise && found);
     Ok(Findings {
         ours: md,
         verdict,
         why: format!(
-            "paper: the blend weight swings as the arm is tugged back and forth, then settles (Fig. 9). {}Held needs all five checks; partly needs the swings with mirrored choices. Premise (else \"premise not reproduced\"): without a reach the same tugs lean the body beyond the fall angle.",
+            "paper: the blend weight swings as the arm is tugged back and forth, then settles (Fig. 9). {}Held needs all five checks; partly needs the swings with mirrored choices. Premise (else \"premise not reproduced\"): without a reach the same tugs lean the body beyond the fall angle, and at the reach scale the spec's rule chose LBC's weights have not committed (both below {}) before the second tug ({}).",
             if premise {
                 format!(
                     "Ours: the weight swings {} times under the tugs (held and partly need {}; the no-tug baseline {}), keeps one reach over the window (range {}), mirrors (gap {}); with LBC the body leans at most {} rad and is at rest{}, while without a reach the same tugs topple it ({} rad). ",
@@ -197,7 +205,46 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
                     sig(no_reach),
                     sig(fall)
                 )
-            }
+            },
+            sig(COMMITTED),
+            if found { "found" } else { "not found at any scale tried" }
         ),
     })
+}
+
+/// The reach-scale search's table (from `reach_scales.csv`, absent in old results) and whether
+/// the rule found a scale (old results: not asked, true).
+fn reach_scales(dir: &Path, chosen: f64) -> Result<(String, bool), Error> {
+    let path = dir.join("reach_scales.csv");
+    if !path.exists() {
+        return Ok((String::new(), true));
+    }
+    let df = read_csv(&path)?;
+    let (s, w, c) = (
+        df_f64(&df, "reach_scale")?,
+        df_f64(&df, "max_weight_before_second_tug")?,
+        df_f64(&df, "committed")?,
+    );
+    let mut md = format!(
+        "\nReach scale (rule fixed in the spec before the run: the reaches' state weights × scale, scales in the listed order; the first at which, with the first tug alone, neither reach's weight exceeds {} before the second tug starts; every table here uses it):\n\n| scale | largest weight before the second tug | committed |\n| --- | --- | --- |\n",
+        sig(COMMITTED)
+    );
+    for r in 0..s.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} |\n",
+            sig(s[r]),
+            sig(w[r]),
+            if c[r] == 1.0 { "yes" } else { "no" }
+        ));
+    }
+    let found = c.iter().any(|&v| v == 0.0);
+    md.push_str(&if found {
+        format!("\nChosen: scale {}.\n", sig(chosen))
+    } else {
+        format!(
+            "\nThe weights commit before the second tug at every scale tried: premise not reproduced; the tables use scale {}.\n",
+            sig(chosen)
+        )
+    });
+    Ok((md, found))
 }
