@@ -7,7 +7,7 @@ pub mod grid_optimality;
 pub mod projection;
 pub mod push_recovery;
 
-use crate::experiment::output::{df_f64, df_str, read_csv, Table};
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::Error;
 use crate::row;
 use std::path::Path;
@@ -18,6 +18,14 @@ pub(crate) fn rule_settings(dir: &Path) -> Result<impl Fn(&str) -> f64, Error> {
     let rule = read_csv(&dir.join("rule.csv"))?;
     let (rk, rv) = (df_str(&rule, "setting")?, df_f64(&rule, "value")?);
     Ok(move |k: &str| rk.iter().position(|s| s == k).map_or(f64::NAN, |i| rv[i]))
+}
+
+/// The setting `key` of a run's in-memory `rule` table (what [`rule_settings`] reads from the
+/// CSV), for figures; `None` without the table or the key.
+pub(crate) fn rule_setting(tables: &Tables, key: &str) -> Option<f64> {
+    let rule = tables.get("rule")?;
+    let (k, v) = (rule.strs("setting"), rule.f64s("value"));
+    k.iter().position(|s| s == key).map(|i| v[i])
 }
 
 /// The `rule` table (columns setting, value) that [`rule_settings`] reads back: the verdict's

@@ -125,10 +125,7 @@ pub(super) fn coordination(fig: &FigureSink, tables: &Tables) -> Result<Vec<Path
         .collect()
     };
     // The verdict's vertical-entry tolerance, from the run's rule table.
-    let tolerance = tables.get("rule").and_then(|r| {
-        let (k, v) = (r.strs("setting"), r.f64s("value"));
-        k.iter().position(|s| s == "entry_tolerance").map(|i| v[i])
-    });
+    let tolerance = crate::families::lbc::rule_setting(tables, "entry_tolerance");
     let mut entry_series = series(&e);
     let (lo, hi) = w
         .iter()

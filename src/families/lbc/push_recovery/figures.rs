@@ -3,15 +3,9 @@
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::Error;
+use crate::families::lbc::rule_setting;
 use std::f64::consts::FRAC_PI_2;
 use std::path::PathBuf;
-
-/// The setting `key` of the run's `rule` table, if it has one.
-fn rule_setting(tables: &Tables, key: &str) -> Option<f64> {
-    let rule = tables.get("rule")?;
-    let (k, v) = (rule.strs("setting"), rule.f64s("value"));
-    k.iter().position(|s| s == key).map(|i| v[i])
-}
 
 /// Fig. 9: the blend weights under the tugs (scripted, mirrored, none), the forces and the poses.
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
