@@ -28,6 +28,8 @@
 //! | `ms_lattices` | `ms_lattices` | [`ms::lattices`] |
 //! | `ms_spider_leap`, `ms_poodle_somersault`, `ms_table_pirouette` | `ms_motion` | [`ms::motion`] (one family, three experiment files) |
 //! | `ms_fig6_learning_plot` | `ms_learning` | [`ms::fig6_learning_plot`] |
+//! | `ms_representation` | `ms_representation` | [`ms::representation`] |
+//! | `ms_search_settings` | `ms_search_settings` | [`ms::settings`] (a sweep over set size, mix and seeds) |
 //!
 //! Helpers shared by several families of one paper sit beside them under a descriptive name:
 //! [`na::swim`] (the dolphin swim task of `na_fig13_control` and `na_baselines_swim`),
@@ -59,6 +61,8 @@ static FAMILIES: &[&dyn Experiment] = &[
     &ms::lattices::MsLattices,
     &ms::motion::MsMotion,
     &ms::fig6_learning_plot::MsLearning,
+    &ms::representation::MsRepresentation,
+    &ms::settings::MsSearchSettings,
     &na::fig14_momentum::NaMomentum,
     &na::fig13_control::NaControl,
     &na::regularization::NaRegularization,

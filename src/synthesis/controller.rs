@@ -260,6 +260,22 @@ pub fn regime_rest_lengths(
 pub fn simulate(setup: &SimSetup, c: &Controller) -> Result<Trajectory, SynthesisError> {
     c.validate()?;
     let rest = regime_rest_lengths(&setup.model, c)?;
+    simulate_with_rest(setup, c, &rest)
+}
+
+/// Simulates `setup` switching by `c`'s regime times and period, with regime i's spring rest
+/// lengths `rest[i]` (its reflex numbers and coefficients are not used).
+pub fn simulate_with_rest(
+    setup: &SimSetup,
+    c: &Controller,
+    rest: &[Vec<f64>],
+) -> Result<Trajectory, SynthesisError> {
+    if rest.len() != c.regimes.len() {
+        return Err(SynthesisError::Invalid(
+            "rest-length sets",
+            rest.len() as f64,
+        ));
+    }
     let schedule = c.schedule(setup.horizon);
     let mut sim = LatticeSim::new(setup.model.clone())
         .with_tolerances(setup.rtol, setup.atol)

@@ -16,6 +16,7 @@
 //!   Models*, The Visual Computer 13(1), 1997 (MERL TR95-01).
 
 pub mod controller;
+pub mod free;
 pub mod objective;
 pub mod perturb;
 pub mod search;
@@ -65,7 +66,12 @@ impl Problem {
     /// The objective value of `c` (larger is better); [`BLOWUP_OBJECTIVE`] when the
     /// simulation fails.
     pub fn evaluate(&self, c: &Controller) -> f64 {
-        match simulate(&self.setup, c) {
+        self.score(simulate(&self.setup, c))
+    }
+
+    /// The objective value of a simulation's outcome; [`BLOWUP_OBJECTIVE`] when it failed.
+    pub fn score(&self, outcome: Result<Trajectory, SynthesisError>) -> f64 {
+        match outcome {
             Ok(tr) => {
                 let v = self.objective.total(&tr);
                 if v.is_finite() {

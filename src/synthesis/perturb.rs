@@ -9,11 +9,14 @@
 //! (−0.1, 0.1) ("a random factor less than 10%"), clamped back into range.
 //!
 //! The kinds and probabilities of Table 2 are [`PERTURBATIONS`]; [`perturb`] draws one kind
-//! and applies it.
+//! and applies it. Other probabilities are spec keys ([`PerturbationMix`], [`MixSpec`]), and
+//! [`apply_to`] perturbs any regime type that has a time, a coefficient and an actuation
+//! ([`PerturbRegime`]: a reflex number, or `ms_representation`'s free rest lengths).
 
 use super::controller::{Controller, Regime};
 use crate::physics::reflex::Reflex;
 use rand::Rng;
+use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
 /// A kind of perturbation of Table 2.
@@ -80,17 +83,191 @@ pub fn random_controller<R: Rng + ?Sized>(rng: &mut R, regimes: usize, period: f
     }
 }
 
+/// Perturbation probabilities, one per kind of Table 2 (the spec's `perturbations` keys);
+/// [`PerturbationMix::TABLE_2`] is the paper's.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PerturbationMix {
+    /// Pick a new reflex number (or rest-length vector) for one regime.
+    pub new_reflex_one: f64,
+    /// Pick a new reflex number (or rest-length vector) for every regime.
+    pub new_reflex_all: f64,
+    /// Pick a new reflex coefficient for one regime.
+    pub new_alpha_one: f64,
+    /// Pick a new reflex coefficient for every regime.
+    pub new_alpha_all: f64,
+    /// Adjust a reflex coefficient for one regime.
+    pub adjust_alpha_one: f64,
+    /// Adjust a reflex coefficient for every regime.
+    pub adjust_alpha_all: f64,
+    /// Pick a new regime time for one regime.
+    pub new_time_one: f64,
+    /// Pick a new regime time for every regime.
+    pub new_time_all: f64,
+    /// Adjust a regime time for one regime.
+    pub adjust_time_one: f64,
+    /// Adjust a regime time for every regime.
+    pub adjust_time_all: f64,
+}
+
+impl Default for PerturbationMix {
+    fn default() -> Self {
+        Self::TABLE_2
+    }
+}
+
+impl PerturbationMix {
+    /// Table 2 of the paper.
+    pub const TABLE_2: Self = Self {
+        new_reflex_one: 0.32,
+        new_reflex_all: 0.08,
+        new_alpha_one: 0.10,
+        new_alpha_all: 0.02,
+        adjust_alpha_one: 0.22,
+        adjust_alpha_all: 0.06,
+        new_time_one: 0.05,
+        new_time_all: 0.01,
+        adjust_time_one: 0.11,
+        adjust_time_all: 0.03,
+    };
+
+    /// Table 2 without the small adjustments: each "adjust" probability moved to the "pick a
+    /// new value" of the same quantity and reach (ours, for `ms_search_settings`).
+    pub const NEW_VALUES_ONLY: Self = Self {
+        new_reflex_one: 0.32,
+        new_reflex_all: 0.08,
+        new_alpha_one: 0.32,
+        new_alpha_all: 0.08,
+        adjust_alpha_one: 0.0,
+        adjust_alpha_all: 0.0,
+        new_time_one: 0.16,
+        new_time_all: 0.04,
+        adjust_time_one: 0.0,
+        adjust_time_all: 0.0,
+    };
+
+    /// Table 2 without the disruptive "every regime" kinds: each one's probability moved to
+    /// its "one regime" kind (ours, for `ms_search_settings`).
+    pub const ONE_REGIME_ONLY: Self = Self {
+        new_reflex_one: 0.40,
+        new_reflex_all: 0.0,
+        new_alpha_one: 0.12,
+        new_alpha_all: 0.0,
+        adjust_alpha_one: 0.28,
+        adjust_alpha_all: 0.0,
+        new_time_one: 0.06,
+        new_time_all: 0.0,
+        adjust_time_one: 0.14,
+        adjust_time_all: 0.0,
+    };
+
+    /// The named mixes a spec may give as `perturbations = "<name>"`.
+    pub const NAMED: [(&'static str, Self); 3] = [
+        ("table2", Self::TABLE_2),
+        ("new_values_only", Self::NEW_VALUES_ONLY),
+        ("one_regime_only", Self::ONE_REGIME_ONLY),
+    ];
+
+    /// The mix called `name` ([`Self::NAMED`]).
+    pub fn named(name: &str) -> Option<Self> {
+        Self::NAMED
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, m)| *m)
+    }
+
+    /// Every kind with its probability, in the order of Table 2.
+    pub fn probabilities(&self) -> [(Perturbation, f64); 10] {
+        use Perturbation::*;
+        [
+            (NewReflexOne, self.new_reflex_one),
+            (NewReflexAll, self.new_reflex_all),
+            (NewAlphaOne, self.new_alpha_one),
+            (NewAlphaAll, self.new_alpha_all),
+            (AdjustAlphaOne, self.adjust_alpha_one),
+            (AdjustAlphaAll, self.adjust_alpha_all),
+            (NewTimeOne, self.new_time_one),
+            (NewTimeAll, self.new_time_all),
+            (AdjustTimeOne, self.adjust_time_one),
+            (AdjustTimeAll, self.adjust_time_all),
+        ]
+    }
+
+    /// Each probability finite and in [0, 1], summing to 1 within 1e-9.
+    pub fn check(&self) -> Result<(), String> {
+        let p = self.probabilities();
+        if let Some((k, v)) = p
+            .iter()
+            .find(|(_, v)| !(v.is_finite() && (0.0..=1.0).contains(v)))
+        {
+            return Err(format!(
+                "probability of {k:?} is {v}; each must lie in [0, 1]"
+            ));
+        }
+        let sum: f64 = p.iter().map(|(_, v)| v).sum();
+        if (sum - 1.0).abs() > 1e-9 {
+            return Err(format!("the probabilities sum to {sum}, not 1"));
+        }
+        Ok(())
+    }
+
+    /// Draws a perturbation kind with these probabilities.
+    pub fn draw<R: Rng + ?Sized>(&self, rng: &mut R) -> Perturbation {
+        let u: f64 = rng.random();
+        let mut acc = 0.0;
+        let p = self.probabilities();
+        for &(k, q) in &p {
+            acc += q;
+            if u < acc {
+                return k;
+            }
+        }
+        // Rounding left u above the sum: the last kind with a non-zero probability.
+        p.iter()
+            .rev()
+            .find(|(_, q)| *q > 0.0)
+            .map_or(p[p.len() - 1].0, |(k, _)| *k)
+    }
+}
+
+/// The perturbation probabilities of a spec: a named mix ([`PerturbationMix::NAMED`]) or
+/// the ten probabilities given one by one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum MixSpec {
+    /// `perturbations = "table2"` (or another name of [`PerturbationMix::NAMED`]).
+    Named(String),
+    /// `[params.perturbations]` with the ten probabilities.
+    Explicit(PerturbationMix),
+}
+
+impl Default for MixSpec {
+    fn default() -> Self {
+        MixSpec::Named("table2".into())
+    }
+}
+
+impl MixSpec {
+    /// The probabilities, or why they are not valid.
+    pub fn mix(&self) -> Result<PerturbationMix, String> {
+        let m = match self {
+            MixSpec::Named(n) => PerturbationMix::named(n).ok_or_else(|| {
+                let names: Vec<&str> = PerturbationMix::NAMED.iter().map(|(n, _)| *n).collect();
+                format!(
+                    "unknown mix `{n}` (named mixes: {}; or give the ten probabilities)",
+                    names.join(", ")
+                )
+            })?,
+            MixSpec::Explicit(m) => *m,
+        };
+        m.check()?;
+        Ok(m)
+    }
+}
+
 /// Draws a perturbation kind with the probabilities of Table 2.
 pub fn draw_kind<R: Rng + ?Sized>(rng: &mut R) -> Perturbation {
-    let u: f64 = rng.random();
-    let mut acc = 0.0;
-    for &(k, p) in &PERTURBATIONS {
-        acc += p;
-        if u < acc {
-            return k;
-        }
-    }
-    PERTURBATIONS[PERTURBATIONS.len() - 1].0
+    PerturbationMix::TABLE_2.draw(rng)
 }
 
 fn adjust<R: Rng + ?Sized>(rng: &mut R, v: f64, lo: f64, hi: f64) -> f64 {
@@ -98,11 +275,39 @@ fn adjust<R: Rng + ?Sized>(rng: &mut R, v: f64, lo: f64, hi: f64) -> f64 {
     (v * f).clamp(lo, hi)
 }
 
-/// Applies perturbation `kind` to `c` in place.
-pub fn apply<R: Rng + ?Sized>(rng: &mut R, c: &mut Controller, kind: Perturbation) {
+/// What the perturbations of Table 2 change in a regime: its time, its coefficient and its
+/// actuation (a reflex number; in the free representation of `ms_representation`, a vector of
+/// rest lengths).
+pub trait PerturbRegime {
+    /// The regime time t_i (s).
+    fn time_mut(&mut self) -> &mut f64;
+    /// The coefficient α_i ∈ [−1, 1].
+    fn alpha_mut(&mut self) -> &mut f64;
+    /// "Pick a new reflex": draws a new actuation.
+    fn redraw_actuation<R: Rng + ?Sized>(&mut self, rng: &mut R);
+}
+
+impl PerturbRegime for Regime {
+    fn time_mut(&mut self) -> &mut f64 {
+        &mut self.time
+    }
+    fn alpha_mut(&mut self) -> &mut f64 {
+        &mut self.alpha
+    }
+    fn redraw_actuation<R: Rng + ?Sized>(&mut self, rng: &mut R) {
+        self.reflex = rng.random_range(0..Reflex::COUNT);
+    }
+}
+
+/// Applies perturbation `kind` to the regimes of a controller with period `period`.
+pub fn apply_to<R: Rng + ?Sized, G: PerturbRegime>(
+    rng: &mut R,
+    period: f64,
+    regimes: &mut [G],
+    kind: Perturbation,
+) {
     use Perturbation::*;
-    let period = c.period;
-    let n = c.regimes.len();
+    let n = regimes.len();
     if n == 0 {
         return;
     }
@@ -116,20 +321,40 @@ pub fn apply<R: Rng + ?Sized>(rng: &mut R, c: &mut Controller, kind: Perturbatio
         (0..n).collect()
     };
     for i in targets {
-        let r = &mut c.regimes[i];
+        let r = &mut regimes[i];
         match kind {
-            NewReflexOne | NewReflexAll => r.reflex = rng.random_range(0..Reflex::COUNT),
-            NewAlphaOne | NewAlphaAll => r.alpha = random_alpha(rng),
-            AdjustAlphaOne | AdjustAlphaAll => r.alpha = adjust(rng, r.alpha, -1.0, 1.0),
-            NewTimeOne | NewTimeAll => r.time = rng.random::<f64>() * period,
-            AdjustTimeOne | AdjustTimeAll => r.time = adjust(rng, r.time, 0.0, period),
+            NewReflexOne | NewReflexAll => r.redraw_actuation(rng),
+            NewAlphaOne | NewAlphaAll => *r.alpha_mut() = random_alpha(rng),
+            AdjustAlphaOne | AdjustAlphaAll => {
+                let a = *r.alpha_mut();
+                *r.alpha_mut() = adjust(rng, a, -1.0, 1.0)
+            }
+            NewTimeOne | NewTimeAll => *r.time_mut() = rng.random::<f64>() * period,
+            AdjustTimeOne | AdjustTimeAll => {
+                let t = *r.time_mut();
+                *r.time_mut() = adjust(rng, t, 0.0, period)
+            }
         }
     }
 }
 
+/// Applies perturbation `kind` to `c` in place.
+pub fn apply<R: Rng + ?Sized>(rng: &mut R, c: &mut Controller, kind: Perturbation) {
+    apply_to(rng, c.period, &mut c.regimes, kind);
+}
+
 /// A perturbed copy of `c` (kind drawn from Table 2) and the kind applied.
 pub fn perturb<R: Rng + ?Sized>(rng: &mut R, c: &Controller) -> (Controller, Perturbation) {
-    let kind = draw_kind(rng);
+    perturb_with(rng, c, &PerturbationMix::TABLE_2)
+}
+
+/// A perturbed copy of `c` (kind drawn from `mix`) and the kind applied.
+pub fn perturb_with<R: Rng + ?Sized>(
+    rng: &mut R,
+    c: &Controller,
+    mix: &PerturbationMix,
+) -> (Controller, Perturbation) {
+    let kind = mix.draw(rng);
     let mut out = c.clone();
     apply(rng, &mut out, kind);
     (out, kind)
@@ -140,6 +365,60 @@ mod tests {
     use super::*;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn named_mixes_are_valid_and_table2_is_the_constant() {
+        assert_eq!(PerturbationMix::TABLE_2.probabilities(), PERTURBATIONS);
+        for (name, m) in PerturbationMix::NAMED {
+            m.check().unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(MixSpec::Named(name.into()).mix().unwrap(), m);
+        }
+        assert!(MixSpec::Named("fast".into()).mix().is_err());
+        let bad = PerturbationMix {
+            new_reflex_one: 0.5,
+            ..PerturbationMix::TABLE_2
+        };
+        assert!(bad.check().unwrap_err().contains("sum"));
+        let neg = PerturbationMix {
+            new_reflex_one: -0.1,
+            new_reflex_all: 0.5,
+            ..PerturbationMix::TABLE_2
+        };
+        assert!(neg.check().is_err());
+        // A spec gives either a name or the ten probabilities.
+        #[derive(Deserialize)]
+        struct S {
+            perturbations: MixSpec,
+        }
+        let s: S = toml::from_str("perturbations = \"one_regime_only\"").unwrap();
+        assert_eq!(
+            s.perturbations.mix().unwrap(),
+            PerturbationMix::ONE_REGIME_ONLY
+        );
+        let text = "[perturbations]\nnew_reflex_one = 1.0\nnew_reflex_all = 0.0\nnew_alpha_one = 0.0\nnew_alpha_all = 0.0\nadjust_alpha_one = 0.0\nadjust_alpha_all = 0.0\nnew_time_one = 0.0\nnew_time_all = 0.0\nadjust_time_one = 0.0\nadjust_time_all = 0.0\n";
+        let s: S = toml::from_str(text).unwrap();
+        let m = s.perturbations.mix().unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        assert!((0..1000).all(|_| m.draw(&mut rng) == Perturbation::NewReflexOne));
+    }
+
+    #[test]
+    fn a_mix_draws_its_kinds_only_and_table2_draws_as_before() {
+        let mut a = ChaCha8Rng::seed_from_u64(5);
+        let mut b = ChaCha8Rng::seed_from_u64(5);
+        for _ in 0..10_000 {
+            assert_eq!(draw_kind(&mut a), PerturbationMix::TABLE_2.draw(&mut b));
+        }
+        let m = PerturbationMix::NEW_VALUES_ONLY;
+        let zero: Vec<Perturbation> = m
+            .probabilities()
+            .iter()
+            .filter(|(_, p)| *p == 0.0)
+            .map(|(k, _)| *k)
+            .collect();
+        assert_eq!(zero.len(), 4);
+        assert!((0..20_000).all(|_| !zero.contains(&m.draw(&mut a))));
+    }
 
     #[test]
     fn probabilities_sum_to_one() {

@@ -18,7 +18,8 @@
 //! iteration number (0 for the initial set, then 1 … I) and the objective, larger is better.
 
 use super::controller::Controller;
-use super::perturb::{perturb, random_controller};
+use super::free::{random_free_controllers, FreeController, FreePerturbation};
+use super::perturb::{perturb_with, random_controller, PerturbationMix};
 use crate::control::search::{
     anneal_from, climb_from, init_rng, AnnealingConfig, Budget, ClimbConfig, Evaluation, Geometric,
     Perturb, SearchResult, TraceRow,
@@ -26,14 +27,17 @@ use crate::control::search::{
 use crate::control::ControlError;
 use rand_chacha::ChaCha8Rng;
 
-/// The perturbation mix of Table 2 as a search operator (its size is fixed: the step size a
-/// search passes is ignored).
+/// The perturbation mix (Table 2 by default) as a search operator (its size is fixed: the
+/// step size a search passes is ignored).
 #[derive(Debug, Clone, Copy, Default)]
-pub struct ReflexPerturbation;
+pub struct ReflexPerturbation {
+    /// The kinds' probabilities.
+    pub mix: PerturbationMix,
+}
 
 impl Perturb<Controller> for ReflexPerturbation {
     fn perturb(&self, rng: &mut ChaCha8Rng, c: &Controller, _scale: f64) -> Controller {
-        perturb(rng, c).0
+        perturb_with(rng, c, &self.mix).0
     }
 }
 
@@ -58,6 +62,8 @@ pub struct HillClimbConfig {
     pub regimes: usize,
     /// Period t_per (s).
     pub period: f64,
+    /// Perturbation probabilities (Table 2 in the paper).
+    pub mix: PerturbationMix,
 }
 
 /// Settings of simulated annealing.
@@ -75,6 +81,8 @@ pub struct AnnealConfig {
     pub regimes: usize,
     /// Period t_per (s).
     pub period: f64,
+    /// Perturbation probabilities (Table 2 in the paper).
+    pub mix: PerturbationMix,
 }
 
 /// Parallel hill climbing maximizing `evaluate`; `progress(done)` is called after each batch
@@ -90,11 +98,60 @@ where
 {
     let n = cfg.set_size.max(1);
     let starts = random_controllers(n, cfg.regimes, cfg.period, seed);
+    climb_set(
+        evaluate,
+        &ReflexPerturbation { mix: cfg.mix },
+        starts,
+        cfg,
+        seed,
+        progress,
+    )
+}
+
+/// Parallel hill climbing of free rest-length controllers ([`super::free`]) with the same set,
+/// iterations, batches and perturbation mix as [`hill_climb`]; `springs` entries per vector.
+pub fn hill_climb_free<F>(
+    evaluate: &F,
+    cfg: &HillClimbConfig,
+    springs: usize,
+    seed: u64,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<SearchResult<FreeController>, ControlError>
+where
+    F: Fn(&FreeController) -> f64 + Sync,
+{
+    let n = cfg.set_size.max(1);
+    let starts = random_free_controllers(n, cfg.regimes, cfg.period, springs, seed);
+    climb_set(
+        evaluate,
+        &FreePerturbation { mix: cfg.mix },
+        starts,
+        cfg,
+        seed,
+        progress,
+    )
+}
+
+/// The hill climb of [`hill_climb`] from a given initial set, maximizing `evaluate`.
+fn climb_set<T, F, P>(
+    evaluate: &F,
+    operator: &P,
+    starts: Vec<T>,
+    cfg: &HillClimbConfig,
+    seed: u64,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<SearchResult<T>, ControlError>
+where
+    T: Clone + Send + Sync,
+    F: Fn(&T) -> f64 + Sync,
+    P: Perturb<T>,
+{
+    let n = starts.len();
     let budget = Budget::evaluations(n + cfg.iterations);
     let observe = |row: &TraceRow| progress(row.evaluations.saturating_sub(n));
     climb_from(
-        &|c: &Controller| -evaluate(c),
-        &ReflexPerturbation,
+        &|c: &T| -evaluate(c),
+        operator,
         starts,
         &ClimbConfig::fixed_step(cfg.batch.max(1)),
         seed,
@@ -123,7 +180,7 @@ where
     let observe = |row: &TraceRow| progress(row.evaluations.saturating_sub(n));
     anneal_from(
         &|c: &Controller| -evaluate(c),
-        &ReflexPerturbation,
+        &ReflexPerturbation { mix: cfg.mix },
         starts,
         &settings,
         seed,
@@ -135,7 +192,7 @@ where
 /// The evaluations of a controller search in the paper's terms: `iteration` 0 for the initial
 /// set, then the iteration (proposal) number 1 … I; `value` the objective and `best` the best
 /// objective so far (larger is better).
-pub fn learning_curve(r: &SearchResult<Controller>) -> Vec<Evaluation> {
+pub fn learning_curve<T>(r: &SearchResult<T>) -> Vec<Evaluation> {
     let initial = r.evaluations.iter().filter(|e| e.iteration == 0).count();
     r.evaluations
         .iter()
@@ -181,6 +238,7 @@ mod tests {
                 batch,
                 regimes: 3,
                 period: 1.0,
+                mix: PerturbationMix::TABLE_2,
             };
             let run = |threads| in_pool(threads, || hill_climb(&toy, &cfg, 42, &|_| {}).unwrap());
             let (a, b) = (run(1), run(2));
@@ -212,6 +270,7 @@ mod tests {
             end_temperature: 0.005,
             regimes: 3,
             period: 1.0,
+            mix: PerturbationMix::TABLE_2,
         };
         let a = anneal(&toy, &cfg, 9, &|_| {}).unwrap();
         let b = in_pool(2, || anneal(&toy, &cfg, 9, &|_| {}).unwrap());
@@ -226,6 +285,39 @@ mod tests {
     }
 
     #[test]
+    fn a_shorter_climb_is_a_prefix_of_a_longer_one() {
+        // `ms_search_settings` reads the iteration count off one long run's best-so-far curve:
+        // that is valid only if a run of I iterations equals the first I of a longer run.
+        let cfg = |iterations| HillClimbConfig {
+            set_size: 12,
+            iterations,
+            batch: 8,
+            regimes: 3,
+            period: 1.0,
+            mix: PerturbationMix::ONE_REGIME_ONLY,
+        };
+        let short = learning_curve(&hill_climb(&toy, &cfg(37), 5, &|_| {}).unwrap());
+        let long = learning_curve(&hill_climb(&toy, &cfg(200), 5, &|_| {}).unwrap());
+        assert_eq!(short.len(), 12 + 37);
+        assert_eq!(short[..], long[..short.len()]);
+        // The free representation's climb too.
+        let free = |c: &FreeController| {
+            c.regimes
+                .iter()
+                .map(|r| r.alpha * r.vector[0] - (r.time - 0.5).abs())
+                .sum::<f64>()
+        };
+        let fs = hill_climb_free(&free, &cfg(37), 4, 5, &|_| {}).unwrap();
+        let fl = hill_climb_free(&free, &cfg(200), 4, 5, &|_| {}).unwrap();
+        let (cs, cl) = (learning_curve(&fs), learning_curve(&fl));
+        assert_eq!(cs[..], cl[..cs.len()]);
+        assert!(
+            -fl.best_value > cl[11].best + 0.5,
+            "the free climb improves"
+        );
+    }
+
+    #[test]
     fn progress_counts_iterations_after_the_initial_set() {
         let cfg = HillClimbConfig {
             set_size: 4,
@@ -233,6 +325,7 @@ mod tests {
             batch: 4,
             regimes: 2,
             period: 1.0,
+            mix: PerturbationMix::TABLE_2,
         };
         let seen = std::sync::Mutex::new(Vec::new());
         hill_climb(&toy, &cfg, 1, &|done| seen.lock().unwrap().push(done)).unwrap();

@@ -4,7 +4,9 @@ pub mod fig6_learning_plot;
 pub mod lattice_draw;
 pub mod lattices;
 pub mod motion;
+pub mod representation;
 pub mod search;
+pub mod settings;
 
 // The moved search jobs still call `super::other`, as written before the move, so that the
 // concurrent search refactor merges cleanly; new code imports `crate::experiment::other`.

@@ -31,6 +31,7 @@ use crate::physics::reflex::Reflex;
 use crate::row;
 use crate::synthesis::controller::{Controller, SimSetup};
 use crate::synthesis::objective::{Objective, Orientation, Term, Weighted};
+use crate::synthesis::perturb::{MixSpec, PerturbationMix};
 use crate::synthesis::search::{anneal, hill_climb, learning_curve, AnnealConfig, HillClimbConfig};
 use crate::synthesis::Problem;
 use crate::synthesis::BLOWUP_OBJECTIVE;
@@ -110,10 +111,16 @@ pub struct Params {
     /// Simulated annealing settings (`ms_learning` only).
     #[serde(default)]
     pub anneal: Option<AnnealParams>,
+    /// The perturbation probabilities: a named mix (`"table2"`, the paper's and the default;
+    /// `"new_values_only"`; `"one_regime_only"`) or a table of the ten probabilities
+    /// ([`PerturbationMix`]).
+    #[serde(default)]
+    pub perturbations: MixSpec,
 }
 
 impl Params {
-    fn check(&self) -> Result<(), ParamError> {
+    /// Checks every parameter (the lattice exists, ranges, the objective, the mix).
+    pub fn check(&self) -> Result<(), ParamError> {
         let lattice = lattice_by_name(&self.lattice).ok_or_else(|| {
             ParamError::new(
                 "lattice",
@@ -157,6 +164,9 @@ impl Params {
         self.objective
             .validate(&lattice.rest_positions())
             .map_err(|e| ParamError::new("objective", e))?;
+        self.perturbations
+            .mix()
+            .map_err(|e| ParamError::new("perturbations", e))?;
         if let Some(a) = &self.anneal {
             positive("anneal.start_temperature", a.start_temperature)?;
             positive("anneal.end_temperature", a.end_temperature)?;
@@ -185,17 +195,26 @@ impl Params {
         })
     }
 
-    fn period(&self) -> f64 {
+    /// The period t_per, at most the horizon.
+    pub fn period(&self) -> f64 {
         self.period.min(self.horizon)
     }
 
-    fn hill_config(&self) -> HillClimbConfig {
+    /// The perturbation probabilities (Table 2 unless the spec says otherwise; checked by
+    /// validation).
+    pub fn mix(&self) -> PerturbationMix {
+        self.perturbations.mix().unwrap_or_default()
+    }
+
+    /// The hill-climbing settings of these parameters.
+    pub fn hill_config(&self) -> HillClimbConfig {
         HillClimbConfig {
             set_size: self.set_size,
             iterations: self.iterations,
             batch: self.batch,
             regimes: self.regimes,
             period: self.period(),
+            mix: self.mix(),
         }
     }
 }
@@ -406,6 +425,7 @@ impl Job for LearningJob {
             end_temperature: a.end_temperature,
             regimes: p.regimes,
             period: p.period(),
+            mix: p.mix(),
         };
         let pb_h = ctx.progress(p.iterations as u64, "hill climbing");
         let pb_a = ctx.progress(p.iterations as u64, "simulated annealing");
