@@ -11,7 +11,7 @@ use super::lattices::springs_of;
 use super::search::{learning_panel, MotionJob};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::FigureSink;
-use crate::experiment::plot::{Figure, Panel, Series};
+use crate::experiment::plot::{Figure, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::seeds::SeedMetric;
 use crate::experiment::{Error, Family};
@@ -76,7 +76,7 @@ impl Family for MsMotion {
         ),
         (
             "heading",
-            "how the body turns: the heading of the face in front at t = 0 about the vertical (a pirouette turns it) and its pitch about the sideways axis (a somersault turns it), unwrapped, vs time.",
+            "how the body turns: the heading of the face in front at t = 0 about the vertical (a pirouette turns it) and its pitch about the sideways axis (a somersault turns it), unwrapped, vs time, with the verdict's bars dashed; for the leap also the centre of mass's travel along +x with its 1 m and 0.3 m bars.",
         ),
     ];
     type Params = MotionJob;
@@ -198,7 +198,11 @@ impl Family for MsMotion {
                 ..scene.clone()
             },
         )?);
-        files.extend(fig.draw("heading", &heading_figure(&frames, &scene.marked))?);
+        let motion_id = motion.first().map_or("", String::as_str);
+        files.extend(fig.draw(
+            "heading",
+            &heading_figure(&frames, &scene.marked, motion_id),
+        )?);
         let search = tables.require("search")?;
         files.extend(fig.draw(
             "search",
@@ -331,7 +335,14 @@ impl Family for MsMotion {
 /// `marked` masses (the face in front at t = 0), as a heading about the vertical (atan2 of its
 /// y and x parts) and a pitch about the sideways y axis (atan2 of its z and x parts), each
 /// unwrapped, in degrees.
-fn heading_figure(frames: &[(f64, usize, Vec<[f64; 3]>)], marked: &[usize]) -> Figure {
+/// The verdict's bars are drawn on it: the pirouette's 180° (held) and 45° (partly) about the
+/// vertical, the somersault's 0.9 and 0.5 of a backward turn, and for the leap a second panel of
+/// the centre of mass's travel along +x with its 1 m (held) and 0.3 m (partly).
+fn heading_figure(
+    frames: &[(f64, usize, Vec<[f64; 3]>)],
+    marked: &[usize],
+    motion: &str,
+) -> Figure {
     let (mut heading, mut pitch) = (Vec::new(), Vec::new());
     let (mut last_h, mut last_p): (Option<f64>, Option<f64>) = (None, None);
     let unwrap = |last: &mut Option<f64>, a: f64| {
@@ -355,15 +366,59 @@ fn heading_figure(frames: &[(f64, usize, Vec<[f64; 3]>)], marked: &[usize]) -> F
         heading.push((*t, unwrap(&mut last_h, d[1].atan2(d[0])).to_degrees()));
         pitch.push((*t, unwrap(&mut last_p, d[2].atan2(d[0])).to_degrees()));
     }
-    let panel = Panel {
+    let t_end = frames.last().map_or(1.0, |f| f.0);
+    let bar = |label: String, y: f64, color: usize| {
+        Series::line(label, vec![(0.0, y), (t_end, y)], color).mark(Mark::Dashed)
+    };
+    let mut series = vec![
+        Series::line("heading about the vertical", heading.clone(), 0),
+        Series::line("pitch about the sideways axis", pitch, 1),
+    ];
+    match motion {
+        "pirouette" => {
+            // The rule judges |turn|: the bars on the side the heading ends.
+            let sign = heading
+                .last()
+                .map_or(1.0, |h| if h.1 < 0.0 { -1.0 } else { 1.0 });
+            series.push(bar(
+                "held bar: 180° about the vertical".into(),
+                sign * 180.0,
+                2,
+            ));
+            series.push(bar("partly bar: 45°".into(), sign * 45.0, 3));
+        }
+        "somersault" => {
+            series.push(bar(
+                "held bar: 0.9 of a backward turn (324°)".into(),
+                0.9 * 360.0,
+                2,
+            ));
+            series.push(bar("partly bar: half a turn (180°)".into(), 180.0, 3));
+        }
+        _ => {}
+    }
+    let mut panels = vec![Panel {
         title: "turning of the face in front at t = 0".into(),
         x_label: "time (s)".into(),
         y_label: "angle (degrees, unwrapped)".into(),
-        series: vec![
-            Series::line("heading about the vertical", heading, 0),
-            Series::line("pitch about the sideways axis", pitch, 1),
-        ],
+        series,
         ..Panel::default()
-    };
-    Figure::grid(vec![panel], 1)
+    }];
+    if motion == "leap" {
+        let x0 = frames.first().map_or(0.0, |f| com(&f.2)[0]);
+        let travel: Vec<(f64, f64)> = frames.iter().map(|f| (f.0, com(&f.2)[0] - x0)).collect();
+        panels.push(Panel {
+            title: "travel of the centre of mass".into(),
+            x_label: "time (s)".into(),
+            y_label: "distance along +x (m)".into(),
+            series: vec![
+                Series::line("centre of mass along +x", travel, 0),
+                bar("held bar: 1 m".into(), 1.0, 2),
+                bar("partly bar: 0.3 m".into(), 0.3, 3),
+            ],
+            ..Panel::default()
+        });
+    }
+    let cols = panels.len();
+    Figure::grid(panels, cols)
 }

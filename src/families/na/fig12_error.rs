@@ -354,7 +354,38 @@ impl Family for NaError {
                             .collect();
                         Series::line(format!("{h} hidden"), pts, i).mark(Mark::LinePoints)
                     })
-                    .collect();
+                    .collect::<Vec<Series>>();
+                // The verdict's limits: each N at its best capacity tried, within 1.5x (held)
+                // or 3x (partly) of the smallest such error.
+                let mut best_per_n: Vec<(f64, f64)> = vec![];
+                for r in (0..cv.len()).filter(|&r| cv[r] == v) {
+                    if let Ok(n) = ce[r].trim_start_matches('N').parse::<f64>() {
+                        match best_per_n.iter_mut().find(|b| b.0 == n) {
+                            Some(b) => b.1 = b.1.min(cm[r]),
+                            None => best_per_n.push((n, cm[r])),
+                        }
+                    }
+                }
+                let smallest = best_per_n.iter().map(|b| b.1).fold(f64::INFINITY, f64::min);
+                let (x0, x1) = best_per_n
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |a, b| {
+                        (a.0.min(b.0), a.1.max(b.0))
+                    });
+                let mut series = series;
+                if smallest.is_finite() && x1 > x0 {
+                    let k = series.len();
+                    for (f, what) in [(1.5, "held"), (3.0, "partly")] {
+                        series.push(
+                            Series::line(
+                                format!("{what} limit: {f} x the smallest best-capacity error"),
+                                vec![(x0, f * smallest), (x1, f * smallest)],
+                                k + usize::from(f > 2.0),
+                            )
+                            .mark(Mark::Dashed),
+                        );
+                    }
+                }
                 panels.push(Panel {
                     title: format!("{v} pendulum: capacity"),
                     x_label: "physical steps per emulator step N".into(),

@@ -50,7 +50,25 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         .iter()
         .min_by(|a, b| (*a - 1.0).abs().total_cmp(&(*b - 1.0).abs()))
     {
-        main.push(Series::line(format!("plain (eta {e})"), pick("plain", e), 1).mark(Mark::Dashed));
+        let plain = pick("plain", e);
+        // The verdict's bar: momentum must reach plain's final J within half the iterations.
+        if let (Some(&(x_end, j_end)), Some(&(x0, _))) = (plain.last(), plain.first()) {
+            let hi = main
+                .iter()
+                .chain(std::iter::once(&Series::line("", plain.clone(), 1)))
+                .flat_map(|s| s.points.iter().map(|p| p.1))
+                .filter(|v| v.is_finite() && *v > 0.0)
+                .fold(j_end, f64::max);
+            main.push(
+                Series::line(
+                    "held bar: plain's final J, reached within half the iterations",
+                    vec![(x0, j_end), (0.5 * x_end, j_end), (0.5 * x_end, hi)],
+                    2,
+                )
+                .mark(Mark::Dashed),
+            );
+        }
+        main.push(Series::line(format!("plain (eta {e})"), plain, 1).mark(Mark::Dashed));
     }
     // The same two runs through the lander's DAgger net (ours), a panel of their own (the
     // curves lie almost on the Table 1 net's), same colours and line styles.
