@@ -240,6 +240,7 @@ pub struct SeedMetric {
 /// are the sweep axes. `None` when no metric has values.
 pub fn seed_figure(tables: &Tables, axes: &[String], metrics: &[SeedMetric]) -> Option<Figure> {
     let mut panels = Vec::new();
+    let (mut longest, mut count) = (0usize, 0usize);
     for m in metrics {
         let Some(t) = tables.get(m.table) else {
             continue;
@@ -266,9 +267,10 @@ pub fn seed_figure(tables: &Tables, axes: &[String], metrics: &[SeedMetric]) -> 
                     continue;
                 }
             }
+            // Values only, in the table's column order (the axis title names the keys).
             let label = cols
                 .iter()
-                .map(|(n, c)| format!("{n}={}", cell_text(c, i)))
+                .map(|(_, c)| cell_text(c, i))
                 .collect::<Vec<_>>()
                 .join(", ");
             let label = if label.is_empty() {
@@ -319,12 +321,21 @@ pub fn seed_figure(tables: &Tables, axes: &[String], metrics: &[SeedMetric]) -> 
             series.push(Series::line(label, r, 2).mark(Mark::Dashed));
         }
         let seeds = points.iter().map(|(_, v)| v.len()).max().unwrap_or(0);
+        longest = longest.max(
+            points
+                .iter()
+                .map(|(l, _)| l.chars().count())
+                .max()
+                .unwrap_or(0),
+        );
+        count = count.max(points.len());
+        let keys: Vec<&str> = cols.iter().map(|(n, _)| n.as_str()).collect();
         panels.push(Panel {
             title: format!("{} over {seeds} seeds", m.label),
-            x_label: if axes.is_empty() {
+            x_label: if keys.is_empty() {
                 "sweep point".into()
             } else {
-                format!("sweep point ({})", axes.join(", "))
+                format!("sweep point ({})", keys.join(", "))
             },
             y_label: m.label.to_string(),
             x_range: Some((-0.5, points.len() as f64 - 0.5)),
@@ -336,8 +347,17 @@ pub fn seed_figure(tables: &Tables, axes: &[String], metrics: &[SeedMetric]) -> 
     if panels.is_empty() {
         return None;
     }
-    let columns = panels.len().min(2);
-    Some(Figure::grid(panels, columns))
+    // Panels side by side while every point's label fits its slot (about 7 px a character at
+    // the tick font); else one panel per row, wide enough for the labels.
+    let slot = |width: usize| width.saturating_sub(100) / count.max(1);
+    let need = 7 * longest + 12;
+    if slot(640) >= need {
+        let columns = panels.len().min(2);
+        return Some(Figure::grid(panels, columns));
+    }
+    let mut fig = Figure::grid(panels, 1);
+    fig.panel_size.0 = (100 + need * count.max(1)).clamp(640, 2400) as u32;
+    Some(fig)
 }
 
 /// Lines of `seed_summary.csv` shown in the report (the rest stay in the file).
@@ -505,7 +525,8 @@ mod tests {
             "a metric without a table draws nothing"
         );
         let p = &fig.panels[0];
-        assert_eq!(p.x_categories, ["regimes=2", "regimes=4", "regimes=6"]);
+        assert_eq!(p.x_categories, ["2", "4", "6"]);
+        assert_eq!(p.x_label, "sweep point (regimes)");
         let dots = &p.series[0].points;
         assert_eq!(
             dots.len(),

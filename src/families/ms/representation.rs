@@ -344,7 +344,7 @@ impl Family for MsRepresentation {
     type Params = RepresentationParams;
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[(
         "search",
-        "hill climbing with the 12 canonical reflexes and with free rest lengths, same search and budget: the best objective so far against evaluations, median over the seeds (solid) with the lowest and highest seed (thin dashed).",
+        "hill climbing with the 12 canonical reflexes and with free rest lengths, same search and budget: the best objective so far against evaluations, median over the seeds (solid or long dashes) with the lowest and highest seed (dotted, same colour).",
     )];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
@@ -385,7 +385,9 @@ impl Family for MsRepresentation {
                         } else {
                             String::new()
                         };
-                        series.push(Series::line(lab, pts, k).mark(Mark::Dashed));
+                        series.push(
+                            Series::line(lab, pts, k).mark(Mark::Pattern { dash: 2, gap: 5 }),
+                        );
                     }
                 }
                 Panel {
