@@ -288,6 +288,7 @@ fn tiny_spec(model: NetModel, method: TrainMethod, noise: f64, rollout: bool) ->
             input_noise: None,
             anchor: false,
             normalization: Default::default(),
+            transforms: Default::default(),
         },
         steps: 10,
         settings: TrainSettings {

@@ -1000,3 +1000,49 @@ fn every_experiment_builds_the_same_dolphin_nets() {
         }
     }
 }
+
+#[test]
+fn na_transforms_ablation_quick_builds_every_variant_and_learns_through_each() {
+    let d = quick_reproduction();
+    let out = d.path().join("out/na_transforms_ablation");
+    assert_eq!(
+        header(&out.join("nets.csv")),
+        "task,variant,inputs,hidden,outputs,examples,weights,train_s,stop,cached,failed"
+    );
+    assert_eq!(
+        header(&out.join("errors.csv")),
+        "task,variant,rollout1_error,rollout40_error_mean,rollout40_error_final,drift_emulator_m,drift_simulator_m,drift_gap_m"
+    );
+    assert_eq!(
+        header(&out.join("control.csv")),
+        "task,variant,iterations,best_iteration,j_start,j_best,emulator_error,simulator_error,at_goal"
+    );
+    let nets = rows(&out.join("nets.csv"));
+    assert_eq!(nets.len(), 2 * 4, "truck and lander, four variants each");
+    for task in ["truck", "lander"] {
+        let variants: Vec<&str> = nets
+            .iter()
+            .filter(|r| r[0] == task)
+            .map(|r| r[1].as_str())
+            .collect();
+        assert_eq!(variants, ["plain", "delta", "delta_frame", "full"]);
+    }
+    // Every variant that trained has its errors and a learned control replayed.
+    let trained = nets.iter().filter(|r| r[10] == "0").count();
+    assert_eq!(rows(&out.join("errors.csv")).len(), trained);
+    assert_eq!(rows(&out.join("control.csv")).len(), trained);
+    for r in rows(&out.join("errors.csv")) {
+        assert!(
+            r[2..].iter().all(|x| x.parse::<f64>().unwrap() >= 0.0),
+            "{r:?}"
+        );
+    }
+    figure_exists(&d, "na_transforms_ablation_rollout");
+    figure_exists(&d, "na_transforms_ablation_summary");
+    let f = motionlab::families::family("na_transforms_ablation")
+        .unwrap()
+        .report(&out)
+        .unwrap();
+    assert!(f.ours.contains("+ local frame"), "{}", f.ours);
+    assert!(f.why.contains("Rule"), "{}", f.why);
+}

@@ -411,6 +411,7 @@ mod tests {
                 input_noise: None,
                 anchor: false,
                 normalization: Default::default(),
+                transforms: Default::default(),
             },
             steps: 10,
             settings: TrainSettings::for_tests(20, 10, 5),
@@ -450,6 +451,13 @@ mod tests {
             BuildSpec {
                 net: NetSpec {
                     hidden: 7,
+                    ..s.net.clone()
+                },
+                ..s.clone()
+            },
+            BuildSpec {
+                net: NetSpec {
+                    transforms: crate::emulator::catalog::TransformSet::Plain,
                     ..s.net.clone()
                 },
                 ..s.clone()

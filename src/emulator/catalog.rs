@@ -475,12 +475,67 @@ pub struct NetSpec {
     /// is left out of cache keys.
     #[serde(default, skip_serializing_if = "Normalization::is_variable")]
     pub normalization: Normalization,
+    /// Which transforms of §3.2 wrap the net ([`TransformSet`]); `full` (the default, the
+    /// model's chain) is left out of cache keys.
+    #[serde(default, skip_serializing_if = "TransformSet::is_full")]
+    pub transforms: TransformSet,
 }
 
 impl NetSpec {
-    /// The transforms this net is built with: its model's, normalized as `normalization` says.
+    /// The transforms this net is built with: its model's, normalized as `normalization` says,
+    /// or the reduced chain `transforms` names.
     pub fn transform_config(&self) -> TransformConfig {
-        self.model.transform_config_with(self.normalization)
+        let mut c = self.model.transform_config_with(self.normalization);
+        match self.transforms {
+            TransformSet::Full => {}
+            TransformSet::Plain => c = TransformConfig::none(),
+            TransformSet::Delta => {
+                c = TransformConfig::none();
+                c.delta = true;
+            }
+            TransformSet::DeltaFrame => {
+                c.normalize = false;
+                c.input_groups = None;
+                c.output_groups = None;
+            }
+        }
+        c
+    }
+}
+
+/// Which of NeuroAnimator's §3.2 transforms wrap a net (Fig. 6): the operators added one at a
+/// time, as `na_transforms_ablation` compares them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TransformSet {
+    /// The model's whole chain: state change T^Δ, the local frame T' where the model has one,
+    /// normalization T^σ as the net's `normalization` says.
+    #[default]
+    Full,
+    /// No transform: the bare net maps [s, u] to the next state s'.
+    Plain,
+    /// The net predicts the state change (T^Δ), in world coordinates, unnormalized.
+    Delta,
+    /// State change and the model's local frame (T^Δ, T'), unnormalized.
+    DeltaFrame,
+}
+
+impl TransformSet {
+    /// Every set, operators added in the order of §3.2.
+    pub const ALL: [TransformSet; 4] = [Self::Plain, Self::Delta, Self::DeltaFrame, Self::Full];
+
+    /// Its name in experiment files and tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Full => "full",
+            Self::Plain => "plain",
+            Self::Delta => "delta",
+            Self::DeltaFrame => "delta_frame",
+        }
+    }
+
+    fn is_full(&self) -> bool {
+        *self == Self::Full
     }
 }
 
@@ -1069,6 +1124,7 @@ mod tests {
                 input_noise: None,
                 anchor: false,
                 normalization: Default::default(),
+                transforms: Default::default(),
             },
             steps,
             settings: TrainSettings {
@@ -1206,6 +1262,7 @@ mod tests {
                 input_noise: None,
                 anchor: false,
                 normalization,
+                transforms: Default::default(),
             },
             steps: 5,
             settings: TrainSettings::for_tests(1, 1, 1),

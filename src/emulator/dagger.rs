@@ -534,6 +534,7 @@ mod tests {
                 input_noise: None,
                 anchor: false,
                 normalization: Default::default(),
+                transforms: Default::default(),
             },
             steps: 25,
             settings: TrainSettings {

@@ -25,6 +25,7 @@
 //! | `na_fig13_control` | `na_fig13_control` | [`na::fig13_control`] (+ its GIFs: `fig13_control/anim*`) |
 //! | `na_fig14_momentum` | `na_fig14_momentum` | [`na::fig14_momentum`] |
 //! | `na_baselines_swim` | `na_baselines_swim` | [`na::baselines_swim`] |
+//! | `na_transforms_ablation` | `na_transforms_ablation` | [`na::transforms_ablation`] |
 //! | `ms_lattices` | `ms_lattices` | [`ms::lattices`] |
 //! | `ms_spider_leap`, `ms_poodle_somersault`, `ms_table_pirouette` | `ms_motion` | [`ms::motion`] (one family, three experiment files) |
 //! | `ms_fig6_learning_plot` | `ms_learning` | [`ms::fig6_learning_plot`] |
@@ -67,6 +68,7 @@ static FAMILIES: &[&dyn Experiment] = &[
     &na::fig13_control::NaControl,
     &na::regularization::NaRegularization,
     &na::baselines_swim::NaBaselines,
+    &na::transforms_ablation::NaTransforms,
     &beyond::x_lbc_emulator::XLbcEmulator,
 ];
 

@@ -136,37 +136,7 @@ impl Validate for Params {
         )?;
         ensure(!self.tasks.is_empty(), "tasks", "need at least one task")?;
         for (i, t) in self.tasks.iter().enumerate() {
-            let key = |k: &str| format!("tasks[{i}].{k}");
-            let n = t.net.model.state_dim();
-            ensure(
-                t.net.model.control_dim() > 0,
-                &key("net.model"),
-                "needs a controlled model",
-            )?;
-            t.task
-                .validate(n)
-                .map_err(|e| e.prefixed(&format!("tasks[{i}]")))?;
-            ensure(
-                t.limit_fraction > 0.0 && t.limit_fraction <= 1.0,
-                &key("limit_fraction"),
-                "must be in (0, 1]",
-            )?;
-            ensure(
-                t.task.final_tolerance.iter().all(|&x| x >= 0.0)
-                    && t.task.final_tolerance.iter().any(|&x| x > 0.0),
-                &key("final_tolerance"),
-                "must be >= 0 with at least one > 0",
-            )?;
-            ensure(t.task.effort_mu >= 0.0, &key("effort_mu"), "must be >= 0")?;
-            positive(&key("eta"), t.eta)?;
-            ensure(
-                (0.0..1.0).contains(&t.alpha),
-                &key("alpha"),
-                "must be in [0, 1)",
-            )?;
-            t.step_rule.validate(&key("step_rule"))?;
-            t.validate_initial_knots()
-                .map_err(|e| e.prefixed(&format!("tasks[{i}]")))?;
+            t.validate_at(i)?;
         }
         for (key, sw) in [
             ("sweep", &self.sweep),

@@ -7,6 +7,7 @@ use crate::control::conditioning::largest_weighted_eigenvalue;
 use crate::control::objective::{ControlEffort, FinalState, Objective};
 use crate::emulator::catalog::{NetModel, NetSpec};
 use crate::families::na::control_task::{keyed, ControlTask};
+use crate::params::{ensure, positive};
 use crate::physics::lander::Lander;
 use serde::{Deserialize, Serialize};
 
@@ -234,6 +235,45 @@ impl Task {
             t.calibration = Some(Calibration { gains, weights: w });
         }
         Ok(t)
+    }
+
+    /// The checks of a task listed as `tasks[i]` of a spec (keys named so): a controlled model,
+    /// the shared [`ControlTask`] checks, limit fraction in (0, 1], tolerances >= 0 with one
+    /// > 0, effort >= 0, η > 0, α in [0, 1), the step rule and the initial knots.
+    pub fn validate_at(&self, i: usize) -> Result<(), crate::params::ParamError> {
+        let t = self;
+        let key = |k: &str| format!("tasks[{i}].{k}");
+        let n = t.net.model.state_dim();
+        ensure(
+            t.net.model.control_dim() > 0,
+            &key("net.model"),
+            "needs a controlled model",
+        )?;
+        t.task
+            .validate(n)
+            .map_err(|e| e.prefixed(&format!("tasks[{i}]")))?;
+        ensure(
+            t.limit_fraction > 0.0 && t.limit_fraction <= 1.0,
+            &key("limit_fraction"),
+            "must be in (0, 1]",
+        )?;
+        ensure(
+            t.task.final_tolerance.iter().all(|&x| x >= 0.0)
+                && t.task.final_tolerance.iter().any(|&x| x > 0.0),
+            &key("final_tolerance"),
+            "must be >= 0 with at least one > 0",
+        )?;
+        ensure(t.task.effort_mu >= 0.0, &key("effort_mu"), "must be >= 0")?;
+        positive(&key("eta"), t.eta)?;
+        ensure(
+            (0.0..1.0).contains(&t.alpha),
+            &key("alpha"),
+            "must be in [0, 1)",
+        )?;
+        t.step_rule.validate(&key("step_rule"))?;
+        t.validate_initial_knots()
+            .map_err(|e| e.prefixed(&format!("tasks[{i}]")))?;
+        Ok(())
     }
 
     /// The start state descent and the simulator replay begin from: the spec's `start`, the
