@@ -529,41 +529,46 @@ impl Family for NaTransforms {
         let (et, ev) = (e.strs("task"), e.strs("variant"));
         let (ct, cv) = (c.strs("task"), c.strs("variant"));
         let x_of = |v: &str| variants.iter().position(|x| x == v).unwrap_or(0) as f64;
-        let metric =
-            |title: &str, y: &str, ts: &[String], vs: &[String], col: Vec<f64>, tol: bool| {
-                let mut series: Vec<Series> = tasks
-                    .iter()
-                    .enumerate()
-                    .map(|(k, t)| {
-                        let pts = (0..ts.len())
-                            .filter(|&i| &ts[i] == t)
-                            .map(|i| (x_of(&vs[i]), col[i]))
-                            .filter(|p| p.1 > 0.0 && p.1.is_finite())
-                            .collect();
-                        Series::line(t.clone(), pts, k).mark(Mark::LinePoints)
-                    })
-                    .collect();
-                if tol {
-                    series.push(
-                        Series::line(
-                            "tolerance (1)",
-                            vec![(-0.2, 1.0), (variants.len() as f64 - 0.8, 1.0)],
-                            tasks.len(),
-                        )
-                        .mark(Mark::Dashed),
-                    );
-                }
-                Panel {
-                    title: title.into(),
-                    x_label: "transforms (operators added left to right)".into(),
-                    y_label: y.into(),
-                    log_y: true,
-                    series,
-                    x_categories: variants.iter().map(|v| words(v).to_string()).collect(),
-                    x_range: Some((-0.5, variants.len() as f64 - 0.5)),
-                    ..Panel::default()
-                }
-            };
+        let metric = |title: &str,
+                      y: &str,
+                      ts: &[String],
+                      vs: &[String],
+                      col: Vec<f64>,
+                      tol: bool,
+                      floor: f64| {
+            let mut series: Vec<Series> = tasks
+                .iter()
+                .enumerate()
+                .map(|(k, t)| {
+                    let pts = (0..ts.len())
+                        .filter(|&i| &ts[i] == t)
+                        .map(|i| (x_of(&vs[i]), col[i].max(floor)))
+                        .filter(|p| p.1 > 0.0 && p.1.is_finite())
+                        .collect();
+                    Series::line(t.clone(), pts, k)
+                })
+                .collect();
+            if tol {
+                series.push(
+                    Series::line(
+                        "tolerance (1)",
+                        vec![(-0.2, 1.0), (variants.len() as f64 - 0.8, 1.0)],
+                        tasks.len(),
+                    )
+                    .mark(Mark::Dashed),
+                );
+            }
+            Panel {
+                title: title.into(),
+                x_label: "transforms (operators added left to right)".into(),
+                y_label: y.into(),
+                log_y: true,
+                series,
+                x_categories: variants.iter().map(|v| words(v).to_string()).collect(),
+                x_range: Some((-0.5, variants.len() as f64 - 0.5)),
+                ..Panel::default()
+            }
+        };
         let panels = vec![
             metric(
                 "one-step error",
@@ -572,6 +577,7 @@ impl Family for NaTransforms {
                 &ev,
                 e.f64s("rollout1_error"),
                 false,
+                0.0,
             ),
             metric(
                 "40-step rollout error (mean)",
@@ -580,14 +586,16 @@ impl Family for NaTransforms {
                 &ev,
                 e.f64s("rollout40_error_mean"),
                 false,
+                0.0,
             ),
             metric(
                 "zero-control drift from the Fig. 13 start",
-                "emulator - simulator end position (m)",
+                "emulator - simulator end position (m; below 1 mm drawn at 1 mm)",
                 &et,
                 &ev,
                 e.f64s("drift_gap_m"),
                 false,
+                1e-3,
             ),
             metric(
                 "Fig. 13 control replayed on the simulator",
@@ -596,6 +604,7 @@ impl Family for NaTransforms {
                 &cv,
                 c.f64s("simulator_error"),
                 true,
+                0.0,
             ),
         ];
         let mut f = Figure::grid(panels, 2);
