@@ -21,7 +21,7 @@
 //! median final best within half the evaluations (free at least twice as slow). Held: both
 //! motions; partly: one; did not hold: none.
 
-use super::search::{measures, Params};
+use super::search::{measure_values, Params};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, Panel, Series};
 use crate::experiment::plot::{FigureSink, Mark};
@@ -30,7 +30,6 @@ use crate::experiment::resolve::{ensure, ParamError, Validate};
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
 use crate::seed::mix_seed;
-use crate::synthesis::objective::{Objective, Weighted};
 use crate::synthesis::search::{hill_climb, hill_climb_free, learning_curve};
 use crate::synthesis::BLOWUP_OBJECTIVE;
 use serde::{Deserialize, Serialize};
@@ -140,13 +139,6 @@ impl Job for RepresentationParams {
             let problem = p.problem()?;
             let cfg = p.hill_config();
             let springs = problem.setup.model.lattice.springs.len();
-            let mobj = Objective {
-                terms: measures()
-                    .into_iter()
-                    .map(|(_, term)| Weighted { weight: 1.0, term })
-                    .collect(),
-                ..problem.objective.clone()
-            };
             for rep in REPRESENTATIONS {
                 // The best controller over the seeds: its trajectory gives the measures.
                 let mut best: Option<(f64, crate::synthesis::controller::Trajectory)> = None;
@@ -209,8 +201,8 @@ impl Job for RepresentationParams {
                     }
                 }
                 if let Some((_, tr)) = best {
-                    for ((m, _), v) in measures().iter().zip(mobj.values(&tr)) {
-                        meas.push(row![name.as_str(), rep, *m, v]);
+                    for (m, v) in measure_values(&problem.objective, &tr) {
+                        meas.push(row![name.as_str(), rep, m, v]);
                     }
                 }
             }

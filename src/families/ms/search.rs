@@ -257,6 +257,26 @@ pub fn measures() -> Vec<(&'static str, Term)> {
     ]
 }
 
+/// The [`measures`] of trajectory `tr` (unit weights; contact height and body frame of
+/// `objective`), by name.
+pub fn measure_values(
+    objective: &Objective,
+    tr: &crate::synthesis::controller::Trajectory,
+) -> Vec<(&'static str, f64)> {
+    let m = measures();
+    let mobj = Objective {
+        terms: m
+            .iter()
+            .map(|(_, term)| Weighted {
+                weight: 1.0,
+                term: term.clone(),
+            })
+            .collect(),
+        ..objective.clone()
+    };
+    m.iter().map(|(n, _)| *n).zip(mobj.values(tr)).collect()
+}
+
 /// `ms_motion` parameters (no annealing).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(transparent)]
@@ -335,16 +355,9 @@ impl Job for MotionJob {
             total += w.weight * v;
         }
         best.push(row!["total", total, total]);
-        let mobj = Objective {
-            terms: measures()
-                .into_iter()
-                .map(|(_, term)| Weighted { weight: 1.0, term })
-                .collect(),
-            ..problem.objective.clone()
-        };
         let mut meas = Table::new(&["measure", "value"]);
-        for ((name, _), v) in measures().iter().zip(mobj.values(&tr)) {
-            meas.push(row![*name, v]);
+        for (name, v) in measure_values(&problem.objective, &tr) {
+            meas.push(row![name, v]);
         }
         let init_best = learning_curve(&res)
             .iter()

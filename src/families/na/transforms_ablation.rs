@@ -33,7 +33,6 @@
 //! with a final error (1 = tolerance) below half of the control learned through `plain`. Held:
 //! every check of every task; partly: at least half of them; did not hold: fewer.
 
-use crate::control::bptt::{replay, Bptt, Descent, Knots, Schedule};
 use crate::emulator::catalog::{rollout_error, BuildSpec, NetModel, TrainSettings, TransformSet};
 use crate::emulator::Emulator;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
@@ -41,7 +40,7 @@ use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
-use crate::families::na::fig13_control::{learn_best, Formulation, Task};
+use crate::families::na::fig13_control::{learn_and_replay, Formulation, Task};
 use crate::families::na::table1_structure::{
     build_emulator, build_spec, position_part, validate_nets, validate_training,
 };
@@ -224,12 +223,6 @@ impl Job for Params {
             let cal = task
                 .calibrated(&full_net.emulator, &x0)
                 .map_err(|e| other(format!("{}: {e}", task.name)))?;
-            let objective = cal.objective();
-            let knots = Knots {
-                steps: task.task.horizon,
-                per_actuator: task.task.knots,
-                m,
-            };
             for ((&v, spec), b) in self.variants.iter().zip(&specs).zip(&built) {
                 let (inputs, hidden) = (n + m, spec.net.hidden);
                 let weights = crate::emulator::mlp::Mlp::weight_count(inputs, hidden, n);
@@ -287,74 +280,34 @@ impl Job for Params {
                     gap
                 ]);
                 // Fig. 13's control through this variant, replayed on the simulator.
-                let mut bptt = Bptt::new(e, &objective, knots, cal.bounds(), &x0).map_err(other)?;
-                let v0 = bptt.from_controls(&cal.initial_knots());
-                let lambda = bptt.curvature(&v0, self.curvature_iterations);
-                let (r, best) = if lambda.is_finite() && lambda > 0.0 {
-                    let schedule = Schedule {
-                        descent: if task.alpha > 0.0 {
-                            Descent::Momentum {
-                                eta: task.eta,
-                                alpha: task.alpha,
-                            }
-                        } else {
-                            Descent::Plain { eta: task.eta }
-                        },
-                        rule: task.step_rule,
-                        scale: lambda,
-                        curvature_iterations: self.curvature_iterations,
-                    };
-                    ctx.stage(&format!("learn {} {}", task.name, v.name()), || {
-                        learn_best(
-                            &mut bptt,
-                            &v0,
-                            &schedule,
-                            task.task.iterations,
-                            &mut |_, _, _| false,
-                        )
-                    })
-                } else {
-                    // No finite step scale: nothing is learned (the controls stay the start's).
-                    learn_best(
-                        &mut bptt,
-                        &v0,
-                        &Schedule {
-                            descent: Descent::Plain { eta: 0.0 },
-                            rule: task.step_rule,
-                            scale: 1.0,
-                            curvature_iterations: self.curvature_iterations,
-                        },
-                        0,
-                        &mut |_, _, _| false,
-                    )
-                };
-                let emu_final = &best.states[task.task.horizon * n..];
-                let mut sim = model.simulator();
-                let rep = replay(
-                    sim.as_mut(),
-                    &x0,
-                    &best.controls,
-                    task.net.physical_dt,
-                    self.steps,
-                    emu_final,
-                );
-                let sim_final = &rep.states[task.task.horizon * n..];
-                let (ee, se) = (cal.final_error(emu_final), cal.final_error(sim_final));
-                control.push(row![
-                    task.name.as_str(),
-                    v.name(),
-                    task.task.iterations,
-                    r.best_iteration,
-                    r.trace.first().map_or(f64::NAN, |t| t.objective),
-                    r.trace
-                        .iter()
-                        .map(|t| t.objective)
-                        .filter(|j| j.is_finite())
-                        .fold(f64::INFINITY, f64::min),
-                    ee,
-                    se,
-                    i64::from(ee <= 1.0 && se <= 1.0)
-                ]);
+                let learned = ctx.stage(&format!("learn {} {}", task.name, v.name()), || {
+                    learn_and_replay(&cal, e, self.steps, self.curvature_iterations)
+                })?;
+                match learned {
+                    Some((run, r)) => control.push(row![
+                        task.name.as_str(),
+                        v.name(),
+                        task.task.iterations,
+                        run.best_iteration,
+                        r.trace.first().map_or(f64::NAN, |t| t.objective),
+                        r.best_objective(),
+                        run.emulator_error,
+                        run.simulator_error,
+                        i64::from(run.at_goal())
+                    ]),
+                    // No finite step scale through this net: nothing learned.
+                    None => control.push(row![
+                        task.name.as_str(),
+                        v.name(),
+                        task.task.iterations,
+                        0_i64,
+                        f64::NAN,
+                        f64::NAN,
+                        f64::NAN,
+                        f64::NAN,
+                        0_i64
+                    ]),
+                }
                 pb.inc(1);
             }
         }

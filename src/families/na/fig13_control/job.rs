@@ -312,6 +312,71 @@ impl Job for Params {
     }
 }
 
+/// The headline of a calibrated `task` through `net` (N`steps` emulator): its descent (the
+/// task's η, α and step rule, λ from `curvature_iterations` power iterations at the initial
+/// knots) for its iteration count, scored at the best iterate on the emulator and with the same
+/// controls replayed on the simulator. `None` when λ is not finite and positive (nothing can
+/// be learned at a fixed step then).
+pub fn learn_and_replay(
+    task: &Task,
+    net: &crate::emulator::Emulator,
+    steps: usize,
+    curvature_iterations: usize,
+) -> Result<Option<(HeadlineRun, Learned)>, Error> {
+    let x0 = task.start_state();
+    let model = task.net.model;
+    let n = model.state_dim();
+    let knots = Knots {
+        steps: task.task.horizon,
+        per_actuator: task.task.knots,
+        m: model.control_dim(),
+    };
+    let objective = task.objective();
+    let mut bptt = Bptt::new(net, &objective, knots, task.bounds(), &x0).map_err(other)?;
+    let v0 = bptt.from_controls(&task.initial_knots());
+    let lambda = bptt.curvature(&v0, curvature_iterations);
+    if !(lambda.is_finite() && lambda > 0.0) {
+        return Ok(None);
+    }
+    let descent = if task.alpha > 0.0 {
+        Descent::Momentum {
+            eta: task.eta,
+            alpha: task.alpha,
+        }
+    } else {
+        Descent::Plain { eta: task.eta }
+    };
+    let schedule = Schedule {
+        descent,
+        rule: task.step_rule,
+        scale: lambda,
+        curvature_iterations,
+    };
+    let (r, best) = learn_best(
+        &mut bptt,
+        &v0,
+        &schedule,
+        task.task.iterations,
+        &mut |_, _, _| false,
+    );
+    let emu_final = &best.states[task.task.horizon * n..];
+    let mut sim = model.simulator();
+    let rep = replay(
+        sim.as_mut(),
+        &x0,
+        &best.controls,
+        task.net.physical_dt,
+        steps,
+        emu_final,
+    );
+    let run = HeadlineRun {
+        emulator_error: task.final_error(emu_final),
+        simulator_error: task.final_error(&rep.states[task.task.horizon * n..]),
+        best_iteration: r.best_iteration,
+    };
+    Ok(Some((run, r)))
+}
+
 /// Runs [`learn_with`] and rolls the best-so-far iterate out again: the run and the best
 /// iterate's rollout (its states and controls), which is what every task scores.
 pub fn learn_best<D: DifferentiableStep>(

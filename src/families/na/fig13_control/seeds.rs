@@ -13,7 +13,6 @@
 //! and on the simulator.
 
 use super::{Formulation, Params, Task};
-use crate::control::bptt::{replay, Bptt, Knots};
 use crate::emulator::catalog::BuildSpec;
 use crate::emulator::Emulator;
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
@@ -85,43 +84,9 @@ impl Params {
     pub(super) fn headline_run(&self, task: &Task, net: &Emulator) -> Result<HeadlineRun, Error> {
         let x0 = task.start_state();
         let task = task.calibrated(net, &x0).map_err(other)?;
-        let model = task.net.model;
-        let n = model.state_dim();
-        let knots = Knots {
-            steps: task.task.horizon,
-            per_actuator: task.task.knots,
-            m: model.control_dim(),
-        };
-        let objective = task.objective();
-        let mut bptt = Bptt::new(net, &objective, knots, task.bounds(), &x0).map_err(other)?;
-        let v0 = bptt.from_controls(&task.initial_knots());
-        let lambda = bptt.curvature(&v0, self.curvature_iterations);
-        if !(lambda.is_finite() && lambda > 0.0) {
-            return Err(other(format!("{}: step scale λ = {lambda}", task.name)));
-        }
-        let schedule = self.schedule(task.eta, task.alpha, task.step_rule, lambda);
-        let (r, best) = super::learn_best(
-            &mut bptt,
-            &v0,
-            &schedule,
-            task.task.iterations,
-            &mut |_, _, _| false,
-        );
-        let emu_final = &best.states[task.task.horizon * n..];
-        let mut sim = model.simulator();
-        let rep = replay(
-            sim.as_mut(),
-            &x0,
-            &best.controls,
-            task.net.physical_dt,
-            self.steps,
-            emu_final,
-        );
-        Ok(HeadlineRun {
-            emulator_error: task.final_error(emu_final),
-            simulator_error: task.final_error(&rep.states[task.task.horizon * n..]),
-            best_iteration: r.best_iteration,
-        })
+        let (run, _) = super::learn_and_replay(&task, net, self.steps, self.curvature_iterations)?
+            .ok_or_else(|| other(format!("{}: no finite step scale λ", task.name)))?;
+        Ok(run)
     }
 
     /// Every task of the paper's formulation learned through the nets of the further seeds
