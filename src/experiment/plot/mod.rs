@@ -139,16 +139,25 @@ impl Panel {
         self.series
             .iter()
             .map(|s| match (s.mark, lines >= 2) {
-                (Mark::Line, true) => match s.color % 8 {
-                    0 => Mark::Line,
-                    k => {
-                        let (dash, gap) = LINE_PATTERNS[k - 1];
-                        Mark::Pattern { dash, gap }
-                    }
-                },
+                (Mark::Line, true) => Mark::stroke_of(s.color),
                 (m, _) => m,
             })
             .collect()
+    }
+}
+
+impl Mark {
+    /// The stroke a plain line of colour index `color` gets beside other labelled lines
+    /// ([`Panel::series_marks`]): for a panel whose lines carry no labels of their own (a
+    /// second panel in the colours of a first) to match it.
+    pub fn stroke_of(color: usize) -> Mark {
+        match color % 8 {
+            0 => Mark::Line,
+            k => {
+                let (dash, gap) = LINE_PATTERNS[k - 1];
+                Mark::Pattern { dash, gap }
+            }
+        }
     }
 }
 

@@ -41,7 +41,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             x_label: "iteration".into(),
             y_label: "objective J".into(),
             // The swim objective is a reward (negative): linear axis.
-            log_y: name != "dolphin",
+            log_y: !(name == "dolphin" || name.starts_with("dolphin_")),
             series: vec![Series::line("momentum descent", pts, 0)],
             ..Panel::default()
         });
@@ -53,8 +53,12 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         if name == "dolphin" || name.starts_with("dolphin_") {
             // The swim's goal is a distance to beat, not a state: its mean centroid.
             let (x, y) = (tr.f64s("s0"), tr.f64s("s1"));
+            // Only the swim whose motion the run keeps (`trajectory` has no rows of the others).
             for s in ["emulator", "simulator"] {
                 let rows = rows_of(s);
+                if rows.is_empty() {
+                    continue;
+                }
                 let series = [(&x, "x"), (&y, "y")]
                     .into_iter()
                     .enumerate()
@@ -95,12 +99,18 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                         (tt[r], d.clamp(-DEVIATION_CLAMP, DEVIATION_CLAMP))
                     })
                     .collect();
-                series.push(Series::line(var.clone(), pts, k));
+                // One legend per row: the simulator's panel uses the emulator's colours.
+                let label = if c == 0 { var.clone() } else { String::new() };
+                series.push(Series::line(label, pts, k).mark(Mark::stroke_of(k)));
             }
             for b in [-1.0, 1.0] {
                 series.push(
                     Series::line(
-                        if b > 0.0 { "tolerance (±1)" } else { "" },
+                        if b > 0.0 && c == 0 {
+                            "tolerance (±1)"
+                        } else {
+                            ""
+                        },
                         vec![(0.0, b), (t_end, b)],
                         7,
                     )
@@ -113,7 +123,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                     if c == 0 {
                         "emulator-driven motion"
                     } else {
-                        "the same controls on the simulator"
+                        "the same controls on the simulator (colours as left)"
                     }
                 ),
                 x_label: "time (s)".into(),
