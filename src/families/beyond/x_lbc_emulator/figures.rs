@@ -51,7 +51,8 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         });
     // Every method a plain line: the panel strokes each by its colour (eight strokes for the
     // eight methods), so none hides another by colour alone.
-    let panel = |title: &str, ys: &[f64], y_label: &str, line: (&str, f64)| {
+    // The methods' legend once, in the first panel; the others stroke each method the same.
+    let panel = |title: &str, ys: &[f64], y_label: &str, line: (&str, f64), legend: bool| {
         let mut series: Vec<Series> = METHODS
             .iter()
             .map(|&mm| {
@@ -59,7 +60,13 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                     .filter(|&r| meth[r] == mm)
                     .map(|r| (d[r], ys[r].max(1e-3)))
                     .collect();
-                Series::line(words(mm), pts, method_color(mm))
+                let c = method_color(mm);
+                let label = if legend {
+                    words(mm).to_string()
+                } else {
+                    String::new()
+                };
+                Series::line(label, pts, c).mark(Mark::stroke_of(c))
             })
             .collect();
         series.push(Series::line(line.0, vec![(lo, line.1), (hi, line.1)], 9).mark(Mark::Dashed));
@@ -86,18 +93,21 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                         &es,
                         error_label,
                         ("tolerance (error 1)", 1.0),
+                        true,
                     ),
                     panel(
-                        "on the emulator",
+                        "on the emulator (lines as on the left)",
                         &ee,
                         error_label,
                         ("tolerance (error 1)", 1.0),
+                        false,
                     ),
                     panel(
-                        "landing x on the simulator: distance from the desired x",
+                        "simulator landing: distance from the desired x (lines as on the left)",
                         &miss,
                         "|x_final - x_desired| (m)",
                         ("1 m", 1.0),
+                        false,
                     ),
                 ],
                 3,
