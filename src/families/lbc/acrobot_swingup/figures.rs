@@ -135,6 +135,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         // 558 x 350 pixels.
         x_range: Some((-3.5, 3.5)),
         y_range: Some((-2.2, 2.2)),
+        // The legend in the upper left, where the automatic corner put it over a pose: the
+        // final poses end near the handstand (straight up) or hang below the bar.
+        legend: crate::experiment::plot::Legend::UpperLeft,
         ..Default::default()
     };
     let lbc_rows: Vec<usize> = (0..p.len())
