@@ -41,6 +41,14 @@ pub struct InterpolationParams {
     /// ([`choose_offset`]), and stops searching there. Empty: only `offset`, as before.
     #[serde(default)]
     pub offsets: Vec<f64>,
+    /// LBC §4.1: "the quadratic cost functions should share the same scale factor which is
+    /// inversely proportional to the square of the distance between each minimum point". On:
+    /// at offset δ the dives' torso terminal weight (and the projection's and reconstructed
+    /// cost's scale) is `dive.torso_weight` × (δ₀/δ)², δ₀ the first offset tried, so
+    /// `dive.torso_weight` is the weight at δ₀. Off (the default, the first offset search's
+    /// rule): the same weight at every offset.
+    #[serde(default)]
+    pub scale_torso_weight: bool,
     /// Desired entry angles (rad), strictly between −δ and δ (at ±δ the weights are (1, 0):
     /// a component, not an interpolation); 0 (vertical, the paper's claim) must be among them.
     pub desired: Vec<f64>,
@@ -253,6 +261,8 @@ pub struct OffsetTrial {
     pub offset: f64,
     /// The §6.1 average-term scale chosen at this offset (0: off).
     pub average_scale: f64,
+    /// The torso terminal weight at this offset (1/rad²).
+    pub torso_weight: f64,
     /// Entry angle of the under-rotating component.
     pub under_entry: f64,
     /// Entry angle of the over-rotating component.
@@ -286,7 +296,7 @@ pub fn choose_offset(trials: &[OffsetTrial], tol: f64) -> Option<usize> {
 }
 
 /// Columns of `offsets.csv`: one row per offset tried, in the order tried.
-pub(super) const OFFSET_COLUMNS: [&str; 7] = [
+pub(super) const OFFSET_COLUMNS: [&str; 8] = [
     "offset",
     "average_scale",
     "under_entry",
@@ -294,6 +304,7 @@ pub(super) const OFFSET_COLUMNS: [&str; 7] = [
     "naive_vertical_entry",
     "lbc_vertical_entry",
     "premise_holds",
+    "torso_weight",
 ];
 
 impl InterpolationParams {
@@ -307,10 +318,16 @@ impl InterpolationParams {
     }
 
     /// These parameters at offset `o` (no search).
-    fn at(&self, o: f64) -> InterpolationParams {
+    pub(super) fn at(&self, o: f64) -> InterpolationParams {
+        let mut dive = self.dive.clone();
+        if self.scale_torso_weight {
+            let d0 = self.tried_offsets()[0];
+            dive.torso_weight *= (d0 / o).powi(2);
+        }
         InterpolationParams {
             offset: o,
             offsets: Vec::new(),
+            dive,
             ..self.clone()
         }
     }
@@ -382,6 +399,7 @@ impl InterpolationParams {
         Ok(OffsetTrial {
             offset: self.offset,
             average_scale: d.average_scale,
+            torso_weight: d.torso_weight,
             under_entry: component_entry(&c.sols[0]),
             over_entry: component_entry(&c.sols[1]),
             naive_entry: vertical[0],
@@ -426,7 +444,8 @@ impl Job for InterpolationParams {
                 t.over_entry,
                 t.naive_entry,
                 t.lbc_entry,
-                t.premise_holds(self.entry_tolerance) as usize
+                t.premise_holds(self.entry_tolerance) as usize,
+                t.torso_weight
             ]);
         }
         let found = choose_offset(&trials, self.entry_tolerance).is_some();

@@ -659,6 +659,7 @@ mod tests {
             omega: 1.0,
             offset: 0.6,
             offsets: vec![],
+            scale_torso_weight: false,
             desired: vec![-0.3, 0.0, 0.6],
             direct_outer_iterations: 5,
             entry_tolerance: 0.05,
@@ -668,6 +669,21 @@ mod tests {
         };
         let e = p.validate().unwrap_err();
         assert_eq!(e.key, "desired[2]");
+        // LBC §4.1's scale ∝ 1/spacing²: with the rule on, the torso weight at twice the
+        // first offset is a quarter of the given one; off, it stays.
+        let search = InterpolationParams {
+            offsets: vec![0.6, 1.2],
+            offset: 0.0,
+            ..p.clone()
+        };
+        let w = search.dive.torso_weight;
+        assert_eq!(search.at(1.2).dive.torso_weight, w);
+        let scaled = InterpolationParams {
+            scale_torso_weight: true,
+            ..search
+        };
+        assert!((scaled.at(1.2).dive.torso_weight - w / 4.0).abs() < 1e-15);
+        assert_eq!(scaled.at(0.6).dive.torso_weight, w);
         let p = InterpolationParams {
             desired: vec![0.0],
             average_scales: vec![0.1, 0.0],
@@ -722,6 +738,7 @@ mod tests {
         let t = |offset: f64, naive: f64| OffsetTrial {
             offset,
             average_scale: 0.0,
+            torso_weight: 0.625,
             under_entry: -offset,
             over_entry: offset,
             naive_entry: naive,
