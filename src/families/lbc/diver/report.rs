@@ -150,20 +150,23 @@ fn offsets(dir: &Path, chosen: f64, tol: f64) -> Result<(String, String), Error>
         df_f64(&df, "lbc_vertical_entry")?,
         df_f64(&df, "premise_holds")?,
     );
+    // The torso terminal weight at each offset (results before the column: not shown).
+    let weight = df_f64(&df, "torso_weight").ok();
     let mut md = format!(
-        "\nThe offset search (rule fixed in the spec before the run: components at ±δ for δ in ascending order, each built as a run at δ builds them, §6.1 scale chosen by its rule; the first δ where the components straddle vertical by more than {t} rad each and the naive blend with the weights projected for vertical misses vertical by more than {t} rad is judged, and the search stops there):\n\n| δ (rad) | §6.1 scale | under-rotating entry | over-rotating entry | naive vertical entry | LBC vertical entry | premise holds |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+        "\nThe offset search (rule fixed in the spec before the run: components at ±δ for δ in ascending order, each built as a run at δ builds them, §6.1 scale chosen by its rule; the first δ where the components straddle vertical by more than {t} rad each and the naive blend with the weights projected for vertical misses vertical by more than {t} rad is judged, and the search stops there):\n\n| δ (rad) | §6.1 scale | under-rotating entry | over-rotating entry | naive vertical entry | LBC vertical entry | premise holds | torso terminal weight (1/rad²) |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
         t = sig(tol)
     );
     for r in 0..o.len() {
         md.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
             sig(o[r]),
             sig(sc[r]),
             sig(u[r]),
             sig(v[r]),
             sig(n[r]),
             sig(l[r]),
-            if p[r] == 1.0 { "yes" } else { "no" }
+            if p[r] == 1.0 { "yes" } else { "no" },
+            weight.as_ref().map_or("–".into(), |w| sig(w[r]))
         ));
     }
     let hit = (0..o.len()).find(|&r| p[r] == 1.0);
