@@ -134,11 +134,11 @@ fn ms_representation_quick_compares_both_representations_over_seeds() {
     let out = d.path().join("out/ms_representation");
     assert_eq!(
         header(&out.join("curves.csv")),
-        "motion,representation,seed,evaluations,best"
+        "motion,representation,search,evaluations,best"
     );
     assert_eq!(
         header(&out.join("runs.csv")),
-        "motion,representation,seed,evaluations,blowups,initial_best,best_objective,seconds"
+        "motion,representation,search,evaluations,blowups,initial_best,best_objective,seconds"
     );
     assert_eq!(
         header(&out.join("measures.csv")),
@@ -219,5 +219,44 @@ fn ms_search_settings_quick_runs_the_shipped_sweep_with_seeds() {
         f.verdict,
         motionlab::experiment::report::Verdict::NotAssessed,
         "three seeds and the paper's setting are there: the rule judges"
+    );
+}
+
+#[test]
+fn ms_representation_quick_sweeps_over_harness_seeds() {
+    // The representation comparison as a sweep of the harness (`--seeds 2`): each seed's
+    // tables in seeds/<seed>/, the spread over seeds in seed_summary.csv.
+    let dir = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "--experiments",
+            exp.to_str().unwrap(),
+            "run",
+            "ms_representation",
+            "--quick",
+            "--seeds",
+            "2",
+            "--out",
+            "out",
+            "--figures",
+            "figs",
+        ],
+    ));
+    let out = dir.path().join("out/ms_representation");
+    assert!(header(&out.join("runs.csv")).starts_with("seed,motion,representation,"));
+    for seed in ["22", "23"] {
+        assert!(
+            out.join("seeds").join(seed).join("runs.csv").exists(),
+            "{seed}"
+        );
+    }
+    let spread = std::fs::read_to_string(out.join("seed_summary.csv")).unwrap();
+    assert!(
+        spread
+            .lines()
+            .any(|l| l.starts_with("runs,") && l.contains(",best_objective,")),
+        "{spread}"
     );
 }

@@ -1046,3 +1046,34 @@ fn na_transforms_ablation_quick_builds_every_variant_and_learns_through_each() {
     assert!(f.ours.contains("+ local frame"), "{}", f.ours);
     assert!(f.why.contains("Rule"), "{}", f.why);
 }
+
+#[test]
+fn na_transforms_ablation_quick_sweeps_the_variants() {
+    // A sweep of the ablation: the variant list swept as a spec key (`--set`), two seeds.
+    let dir = tempfile::tempdir().unwrap();
+    let exp = root().join("experiments");
+    ok(&motionlab(
+        dir.path(),
+        &[
+            "--experiments",
+            exp.to_str().unwrap(),
+            "run",
+            "na_transforms_ablation",
+            "--quick",
+            "--set",
+            "variants=[\"delta_frame\", \"full\"]",
+            "--seeds",
+            "2",
+            "--out",
+            "out",
+            "--figures",
+            "figs",
+        ],
+    ));
+    let out = dir.path().join("out/na_transforms_ablation");
+    let nets = std::fs::read_to_string(out.join("nets.csv")).unwrap();
+    // 2 seeds x 2 tasks x 2 variants.
+    assert_eq!(nets.lines().count(), 1 + 8, "{nets}");
+    assert!(!nets.contains(",plain,"));
+    assert!(out.join("seed_summary.csv").exists());
+}

@@ -8,8 +8,9 @@
 //! ([`crate::synthesis::free`]): the same search set, iterations, batches, perturbation mix and
 //! seeds (seed k of both representations is `mix_seed(seed, k)`).
 //!
-//! Tables: `curves` (motion, representation, seed, evaluations, best: the best objective so far,
-//! every `curve_every` evaluations and at the end), `runs` (motion, representation, seed,
+//! Tables: `curves` (motion, representation, search, evaluations, best: the best objective so
+//! far, every `curve_every` evaluations and at the end; `search` k is the k-th independent
+//! search, seeded `mix_seed(seed, k)`), `runs` (motion, representation, search,
 //! evaluations, blowups, initial_best, best_objective, seconds) and `measures` (motion,
 //! representation, measure, value: [`super::search::measures`] of each representation's best
 //! controller over the seeds). Figure `<id>_search.png/svg`: median best-so-far over the seeds
@@ -116,11 +117,11 @@ impl Job for RepresentationParams {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut curves = Table::new(&["motion", "representation", "seed", "evaluations", "best"]);
+        let mut curves = Table::new(&["motion", "representation", "search", "evaluations", "best"]);
         let mut runs = Table::new(&[
             "motion",
             "representation",
-            "seed",
+            "search",
             "evaluations",
             "blowups",
             "initial_best",
@@ -278,7 +279,7 @@ impl MotionJudgement {
 pub fn judge(curves: &Table) -> Vec<MotionJudgement> {
     let (m, r) = (curves.strs("motion"), curves.strs("representation"));
     let (s, n, b) = (
-        curves.f64s("seed"),
+        curves.f64s("search"),
         curves.f64s("evaluations"),
         curves.f64s("best"),
     );
@@ -342,7 +343,7 @@ impl Family for MsRepresentation {
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let c = tables.require("curves")?;
         let (m, r) = (c.strs("motion"), c.strs("representation"));
-        let (s, n, b) = (c.f64s("seed"), c.f64s("evaluations"), c.f64s("best"));
+        let (s, n, b) = (c.f64s("search"), c.f64s("evaluations"), c.f64s("best"));
         let mut names: Vec<String> = Vec::new();
         for x in &m {
             if !names.contains(x) {
@@ -398,7 +399,7 @@ impl Family for MsRepresentation {
         let c = read_csv(&dir.join("curves.csv"))?;
         let (m, r) = (df_str(&c, "motion")?, df_str(&c, "representation")?);
         let (s, n, b) = (
-            df_f64(&c, "seed")?,
+            df_f64(&c, "search")?,
             df_f64(&c, "evaluations")?,
             df_f64(&c, "best")?,
         );
