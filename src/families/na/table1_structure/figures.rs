@@ -49,6 +49,15 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
                     );
                 }
             }
+            // The verdict's bar on the final held-out error (ours): below 0.05.
+            series.push(
+                Series::line(
+                    "rule: held-out below 0.05",
+                    vec![(0.0, 0.05), (x_end, 0.05)],
+                    7,
+                )
+                .mark(Mark::Dashed),
+            );
             Panel {
                 title: format!("{name}: first training stage"),
                 x_label: "iteration (CG, L-BFGS) or epoch (momentum)".into(),

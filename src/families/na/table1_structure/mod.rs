@@ -318,7 +318,7 @@ impl Family for NaStructure {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
         (
             "training",
-            "each Table 1 net's one-step MSE per output (normalized) on its training and held-out sets vs iteration (conjugate gradient, L-BFGS) or epoch (momentum) over the first training stage, with the table's final errors (after the rollout fine-tuning) as dotted lines; the training error is measured on inputs with the spec's input noise (all nets but the truck's), which is why it can lie above the clean held-out error.",
+            "each Table 1 net's one-step MSE per output (normalized) on its training and held-out sets vs iteration (conjugate gradient, L-BFGS) or epoch (momentum) over the first training stage, with the table's final errors (after the rollout fine-tuning) as dotted lines; the training error is measured on inputs with the spec's input noise (all nets but the truck's), which is why it can lie above the clean held-out error; the grey dashed line is the verdict's 0.05 bar on the final held-out error.",
         ),
         (
             "rollout",
