@@ -383,6 +383,19 @@ impl Family for MsRepresentation {
                         );
                     }
                 }
+                // The rule's bar: free's median final, to be reached by the reflexes' median
+                // within half the evaluations.
+                let free = median_curve(&m, &r, &s, &n, &b, name, REPRESENTATIONS[1]);
+                if let Some(&(n_end, f_end, _, _)) = free.last() {
+                    series.push(
+                        Series::line(
+                            "rule: free's median final, reached by half the evaluations",
+                            vec![(0.0, f_end), (0.5 * n_end, f_end)],
+                            7,
+                        )
+                        .mark(Mark::Dashed),
+                    );
+                }
                 Panel {
                     title: title_of(name),
                     x_label: "evaluations".into(),
