@@ -485,7 +485,7 @@ mod tests {
             let t = cache.get_or_train(&changed).unwrap();
             assert!(!t.from_cache);
         }
-        assert_eq!(std::fs::read_dir(cache.dir).unwrap().count(), 6);
+        assert_eq!(std::fs::read_dir(cache.dir).unwrap().count(), 7);
     }
 
     #[test]
