@@ -118,7 +118,7 @@ enum Command {
         only: Vec<String>,
         /// Run every experiment with K seeds, as `run --seeds K`; each section then reports the
         /// first seed, the verdict of every seed and the mean and spread over seeds (K at most
-        /// 1000).
+        /// 1000). An experiment whose file sweeps its own `seeds` keeps those.
         #[arg(long, value_name = "K")]
         seeds: Option<usize>,
     },
@@ -250,16 +250,20 @@ fn spec_files(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// Every experiment file of `dir`, resolved (quick or not, with `--seeds`), in report order.
+/// Every experiment file of `dir`, resolved (quick or not, with `--seeds`), in report order. An
+/// experiment whose file sweeps its own `seeds` axis keeps it under `--seeds` (its seeds are
+/// part of its design, as `ms_search_settings`'s are); `run` on such a file with `--seeds` is
+/// refused instead, naming both.
 fn resolve_all(dir: &Path, quick: bool, seeds: Option<usize>) -> Result<Vec<Resolved>> {
     let mut all = Vec::new();
     for f in spec_files(dir)? {
         let file = SpecFile::load(&f)?;
+        let own_seeds = file.raw.sweep.contains_key("seeds");
         all.push(resolve(
             &file,
             &ResolveOptions {
                 quick,
-                seeds,
+                seeds: seeds.filter(|_| !own_seeds),
                 ..Default::default()
             },
             &families::registry(),
