@@ -220,6 +220,14 @@ fn ms_search_settings_quick_runs_the_shipped_sweep_with_seeds() {
         motionlab::experiment::report::Verdict::NotAssessed,
         "three seeds and the paper's setting are there: the rule judges"
     );
+    // The report judges the setting over every seed (SEEDS_POOLED), not the first seed alone.
+    let report = std::fs::read_to_string(d.path().join("out/REPORT.md")).unwrap();
+    let row = report
+        .lines()
+        .find(|l| l.starts_with("| [`ms_search_settings`]"))
+        .unwrap();
+    assert!(!row.contains("not assessed"), "{row}");
+    assert!(report.contains("judged together above"), "{report}");
 }
 
 #[test]

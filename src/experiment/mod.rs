@@ -107,6 +107,10 @@ pub trait Experiment: Sync {
     fn seed_metrics(&self) -> &'static [seeds::SeedMetric] {
         &[]
     }
+    /// Whether its verdict is a judgement over seeds (see [`Family::SEEDS_POOLED`]).
+    fn seeds_pooled(&self) -> bool {
+        false
+    }
     /// One-line captions of the figures and animations it draws, by name (the file name
     /// `<id>_<name>.png|gif` without the id and extension); the report prints each under its
     /// figure.
@@ -133,6 +137,10 @@ pub trait Family: Sync {
     /// Results plotted over seeds (mean and spread) in the `<id>_seeds` figure when seeds are
     /// swept (`--seeds K` or a `seeds` sweep axis); none by default.
     const SEED_METRICS: &'static [seeds::SeedMetric] = &[];
+    /// Its verdict is a judgement over seeds (e.g. a setting's mean against the seed spread):
+    /// with swept seeds its report reads the experiment's folder, every seed's rows at once,
+    /// instead of the first seed's, and the report gives no verdict per seed.
+    const SEEDS_POOLED: bool = false;
     /// One-line captions of its figures and animations, by name (`<id>_<name>.png|gif`
     /// without the id and extension), printed under each in the report.
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[];
@@ -145,6 +153,10 @@ impl<F: Family> Experiment for F {
 
     fn seed_metrics(&self) -> &'static [seeds::SeedMetric] {
         F::SEED_METRICS
+    }
+
+    fn seeds_pooled(&self) -> bool {
+        F::SEEDS_POOLED
     }
 
     fn captions(&self) -> &'static [(&'static str, &'static str)] {

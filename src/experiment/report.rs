@@ -152,15 +152,20 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         let dir = out.join(&r.id);
         let (verdict, headline, body) = if dir.join("run.json").exists() {
             let seeds = run_seeds(&dir);
-            // With swept seeds the section reads the first seed's tables, then the spread.
-            let first = seeds.first().map(|s| dir.join("seeds").join(s.to_string()));
+            // With swept seeds the section reads the first seed's tables, then the spread; a
+            // family judging over seeds reads them all.
+            let pooled = r.family.seeds_pooled();
+            let first = seeds
+                .first()
+                .filter(|_| !pooled)
+                .map(|s| dir.join("seeds").join(s.to_string()));
             match r.family.report(first.as_deref().unwrap_or(&dir)) {
                 Ok(f) => (
                     f.verdict.label().to_string(),
                     headline(&f.why),
                     format!(
                         "{}{}\n\n**Verdict: {}.** {}\n{}",
-                        match seeds.first() {
+                        match seeds.first().filter(|_| !pooled) {
                             Some(s) => format!(
                                 "*Seed {s}, the first of {} (the verdict of each seed and the \
                                  spread over seeds follow).*\n\n",
@@ -306,6 +311,25 @@ fn run_seeds(dir: &Path) -> Vec<u64> {
 fn seeds_section(r: &Resolved, dir: &Path, seeds: &[u64], unreadable: &mut Vec<String>) -> String {
     if seeds.is_empty() {
         return String::new();
+    }
+    if r.family.seeds_pooled() {
+        // The verdict above is over the seeds: their spread only.
+        let mut md = format!(
+            "\n**Seeds** ({}), judged together above.\n\n",
+            seeds
+                .iter()
+                .map(|s| s.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        match super::seeds::summary_markdown(dir) {
+            Ok(t) => md.push_str(&t),
+            Err(e) => {
+                unreadable.push(format!("{} seed summary: {e}", r.id));
+                let _ = writeln!(md, "Could not read the seed summary: {e}");
+            }
+        }
+        return md;
     }
     let mut counts: Vec<(String, usize)> = Vec::new();
     for s in seeds {

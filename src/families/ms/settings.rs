@@ -249,6 +249,8 @@ pub fn verdict_of(s: &[Setting]) -> Verdict {
 impl Family for MsSearchSettings {
     const KIND: &'static str = "ms_search_settings";
     type Params = SettingsParams;
+    // The rule compares each setting's mean over the seeds with the seed spread.
+    const SEEDS_POOLED: bool = true;
     const SEED_METRICS: &'static [SeedMetric] = &[
         SeedMetric {
             table: "summary",
