@@ -337,7 +337,7 @@ impl Family for MsRepresentation {
     type Params = RepresentationParams;
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[(
         "search",
-        "hill climbing with the 12 canonical reflexes and with free rest lengths, same search and budget: the best objective so far against evaluations, median over the seeds (solid or long dashes) with the lowest and highest seed (dotted, same colour).",
+        "hill climbing with the 12 canonical reflexes and with free rest lengths, same search and budget: the best objective so far against evaluations, median over the seeds (solid or long dashes) with the lowest and highest seed (thin dots for the reflexes, short dashes for free rest lengths, same colours).",
     )];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
@@ -378,9 +378,10 @@ impl Family for MsRepresentation {
                         } else {
                             String::new()
                         };
-                        series.push(
-                            Series::line(lab, pts, k).mark(Mark::Pattern { dash: 2, gap: 5 }),
-                        );
+                        series.push(Series::line(lab, pts, k).mark(Mark::Pattern {
+                            dash: 2 + 4 * k as u32,
+                            gap: 5,
+                        }));
                     }
                 }
                 // The rule's bar: free's median final, to be reached by the reflexes' median
