@@ -234,24 +234,7 @@ fn ms_search_settings_quick_runs_the_shipped_sweep_with_seeds() {
 fn ms_representation_quick_sweeps_over_harness_seeds() {
     // The representation comparison as a sweep of the harness (`--seeds 2`): each seed's
     // tables in seeds/<seed>/, the spread over seeds in seed_summary.csv.
-    let dir = tempfile::tempdir().unwrap();
-    let exp = root().join("experiments");
-    ok(&motionlab(
-        dir.path(),
-        &[
-            "--experiments",
-            exp.to_str().unwrap(),
-            "run",
-            "ms_representation",
-            "--quick",
-            "--seeds",
-            "2",
-            "--out",
-            "out",
-            "--figures",
-            "figs",
-        ],
-    ));
+    let dir = run_quick_with("ms_representation", &["--seeds", "2"]);
     let out = dir.path().join("out/ms_representation");
     assert!(header(&out.join("runs.csv")).starts_with("seed,motion,representation,"));
     for seed in ["22", "23"] {

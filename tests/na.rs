@@ -1050,26 +1050,15 @@ fn na_transforms_ablation_quick_builds_every_variant_and_learns_through_each() {
 #[test]
 fn na_transforms_ablation_quick_sweeps_the_variants() {
     // A sweep of the ablation: the variant list swept as a spec key (`--set`), two seeds.
-    let dir = tempfile::tempdir().unwrap();
-    let exp = root().join("experiments");
-    ok(&motionlab(
-        dir.path(),
+    let dir = run_quick_with(
+        "na_transforms_ablation",
         &[
-            "--experiments",
-            exp.to_str().unwrap(),
-            "run",
-            "na_transforms_ablation",
-            "--quick",
             "--set",
             "variants=[\"delta_frame\", \"full\"]",
             "--seeds",
             "2",
-            "--out",
-            "out",
-            "--figures",
-            "figs",
         ],
-    ));
+    );
     let out = dir.path().join("out/na_transforms_ablation");
     let nets = std::fs::read_to_string(out.join("nets.csv")).unwrap();
     // 2 seeds x 2 tasks x 2 variants.

@@ -61,24 +61,27 @@ pub fn files_with_ext(dir: &Path, ext: &str) -> Vec<(String, Vec<u8>)> {
 /// Runs the shipped experiment `id` in quick mode in a fresh temp dir (outputs in `out/` and
 /// `figs/` there) with `--jobs jobs`.
 pub fn run_quick(id: &str, jobs: &str) -> tempfile::TempDir {
+    run_quick_with(id, &["--jobs", jobs])
+}
+
+/// `motionlab run <id> --quick` with `extra` arguments (e.g. `--seeds 2`, `--set k=v`) into
+/// `out/` and `figs/` of a fresh temporary folder.
+pub fn run_quick_with(id: &str, extra: &[&str]) -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     let exp = root().join("experiments");
-    ok(&motionlab(
-        dir.path(),
-        &[
-            "--experiments",
-            exp.to_str().unwrap(),
-            "run",
-            id,
-            "--quick",
-            "--jobs",
-            jobs,
-            "--out",
-            "out",
-            "--figures",
-            "figs",
-        ],
-    ));
+    let mut args = vec![
+        "--experiments",
+        exp.to_str().unwrap(),
+        "run",
+        id,
+        "--quick",
+        "--out",
+        "out",
+        "--figures",
+        "figs",
+    ];
+    args.extend_from_slice(extra);
+    ok(&motionlab(dir.path(), &args));
     dir
 }
 

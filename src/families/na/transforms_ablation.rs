@@ -226,25 +226,10 @@ impl Job for Params {
             for ((&v, spec), b) in self.variants.iter().zip(&specs).zip(&built) {
                 let (inputs, hidden) = (n + m, spec.net.hidden);
                 let weights = crate::emulator::mlp::Mlp::weight_count(inputs, hidden, n);
-                let trained = match b {
-                    Ok(t) => t,
-                    Err(e) => {
-                        nets.push(row![
-                            task.name.as_str(),
-                            v.name(),
-                            inputs,
-                            hidden,
-                            n,
-                            spec.net.examples,
-                            weights,
-                            f64::NAN,
-                            format!("failed: {e}"),
-                            0_i64,
-                            1_i64
-                        ]);
-                        pb.inc(1);
-                        continue;
-                    }
+                // (train_s, stop, cached, failed) of the net's row.
+                let (train_s, stop, cached, failed) = match b {
+                    Ok(t) => (t.train_s, t.stop.clone(), i64::from(t.from_cache), 0_i64),
+                    Err(e) => (f64::NAN, format!("failed: {e}"), 0, 1),
                 };
                 nets.push(row![
                     task.name.as_str(),
@@ -254,11 +239,15 @@ impl Job for Params {
                     n,
                     spec.net.examples,
                     weights,
-                    trained.train_s,
-                    trained.stop.as_str(),
-                    i64::from(trained.from_cache),
-                    0_i64
+                    train_s,
+                    stop.as_str(),
+                    cached,
+                    failed
                 ]);
+                let Ok(trained) = b else {
+                    pb.inc(1);
+                    continue;
+                };
                 let e = &trained.emulator;
                 let errs = ctx
                     .stage(&format!("rollouts {} {}", task.name, v.name()), || {
