@@ -355,7 +355,7 @@ fn reproduce_quick_writes_report_with_every_experiment() {
             ids += 1;
         }
     }
-    assert_eq!(ids, 23, "the shipped experiments");
+    assert_eq!(ids, 24, "the shipped experiments");
     assert!(report.contains("**Paper:**") && report.contains("**Verdict:"));
     assert!(
         report.contains("../figs/lbc_projection_cost.png"),
@@ -789,7 +789,7 @@ fn a_closed_output_pipe_is_a_normal_end() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Close the read end at once: `list` reads 23 experiment files before its first line.
+    // Close the read end at once: `list` reads 24 experiment files before its first line.
     drop(child.stdout.take());
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -1066,3 +1066,56 @@ fn na_transforms_ablation_quick_sweeps_the_variants() {
     assert!(!nets.contains(",plain,"));
     assert!(out.join("seed_summary.csv").exists());
 }
+
+#[test]
+fn na_training_methods_quick_runs_every_method_and_the_examples_sweep() {
+    let d = quick_reproduction();
+    let out = d.path().join("out/na_training_methods");
+    assert_eq!(
+        header(&out.join("curves.csv")),
+        "net,method,init,iteration,passes,seconds,train_error,held_out_error"
+    );
+    assert_eq!(
+        header(&out.join("methods.csv")),
+        "net,method,init,target_factor,target,passes_to_target,seconds_to_target,best_held_out_error,final_train_error,passes,seconds,seconds_per_pass,stop"
+    );
+    assert_eq!(
+        header(&out.join("examples.csv")),
+        "net,init,examples_per_weight,examples,weights,train_error,test_error,test_train_ratio,rule_ratio,iterations,stop"
+    );
+    let methods = rows(&out.join("methods.csv"));
+    // Two nets x three methods x one init in quick mode.
+    assert_eq!(methods.len(), 6, "{methods:?}");
+    for r in &methods {
+        let passes: f64 = r[9].parse().unwrap();
+        let budget = if r[0] == "lander" { 15.0 } else { 30.0 };
+        assert!(passes <= budget && passes >= 0.6 * budget, "{r:?}");
+        let best: f64 = r[7].parse().unwrap();
+        assert!(best.is_finite() && best > 0.0, "{r:?}");
+    }
+    // Each method's curve starts at the initial net, the same for every method of a net.
+    let curves = rows(&out.join("curves.csv"));
+    for net in ["pendulum_active", "lander"] {
+        let starts: Vec<&str> = curves
+            .iter()
+            .filter(|r| r[0] == net && r[3] == "0")
+            .map(|r| r[7].as_str())
+            .collect();
+        assert_eq!(starts.len(), 3, "{net}");
+        assert!(starts.iter().all(|s| *s == starts[0]), "{net}: {starts:?}");
+    }
+    let examples = rows(&out.join("examples.csv"));
+    assert_eq!(examples.len(), 3, "three ratios in quick mode");
+    // With half an example per weight the net fits its few examples better than new ones.
+    let few = examples.iter().find(|r| r[2] == "0.5").unwrap();
+    let (train, test): (f64, f64) = (few[5].parse().unwrap(), few[6].parse().unwrap());
+    assert!(test > train, "{few:?}");
+    figure_exists(&d, "na_training_methods_curves");
+    figure_exists(&d, "na_training_methods_examples");
+    let f = motionlab::families::family("na_training_methods")
+        .unwrap()
+        .report(&out)
+        .unwrap();
+    assert!(f.ours.contains("conjugate gradient"), "{}", f.ours);
+    assert!(f.why.contains("Rule"), "{}", f.why);
+}

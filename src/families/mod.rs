@@ -26,6 +26,7 @@
 //! | `na_fig14_momentum` | `na_fig14_momentum` | [`na::fig14_momentum`] |
 //! | `na_baselines_swim` | `na_baselines_swim` | [`na::baselines_swim`] |
 //! | `na_transforms_ablation` | `na_transforms_ablation` | [`na::transforms_ablation`] |
+//! | `na_training_methods` | `na_training_methods` | [`na::training_methods`] |
 //! | `ms_lattices` | `ms_lattices` | [`ms::lattices`] |
 //! | `ms_spider_leap`, `ms_poodle_somersault`, `ms_table_pirouette` | `ms_motion` | [`ms::motion`] (one family, three experiment files) |
 //! | `ms_fig6_learning_plot` | `ms_learning` | [`ms::fig6_learning_plot`] |
@@ -69,6 +70,7 @@ static FAMILIES: &[&dyn Experiment] = &[
     &na::regularization::NaRegularization,
     &na::baselines_swim::NaBaselines,
     &na::transforms_ablation::NaTransforms,
+    &na::training_methods::NaTrainingMethods,
     &beyond::x_lbc_emulator::XLbcEmulator,
 ];
 

@@ -10,6 +10,7 @@ pub mod regularization;
 pub mod swim;
 pub mod table1_structure;
 pub mod table2_speedup;
+pub mod training_methods;
 pub mod transforms_ablation;
 
 // The moved search jobs still call `super::other`, as written before the move, so that the
