@@ -231,7 +231,12 @@ pub fn write_record(path: &Path, key: &str, rec: &NetRecord) -> Result<(), Build
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| fail(e.to_string()))?;
     }
-    let tmp = path.with_extension(format!("json.tmp{}", std::process::id()));
+    // A temporary name of this call's own: two threads of one run may train and store the
+    // same net at once (two experiments that need it, side by side under `--jobs`); with a name
+    // per process the second rename found the file already moved and failed the run.
+    static WRITES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = WRITES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = path.with_extension(format!("json.tmp{}-{n}", std::process::id()));
     std::fs::write(&tmp, text).map_err(|e| fail(e.to_string()))?;
     std::fs::rename(&tmp, path).map_err(|e| fail(e.to_string()))?;
     note_use(path, true, rec.train_s);
