@@ -1119,3 +1119,18 @@ fn na_training_methods_quick_runs_every_method_and_the_examples_sweep() {
     assert!(f.ours.contains("conjugate gradient"), "{}", f.ours);
     assert!(f.why.contains("Rule"), "{}", f.why);
 }
+
+#[test]
+fn na_training_methods_quick_sweeps_the_methods() {
+    // A sweep of the ablation: the method list swept as a spec key (`--set`), two seeds.
+    let dir = run_quick_with(
+        "na_training_methods",
+        &["--set", "methods=[\"cg\", \"momentum\"]", "--seeds", "2"],
+    );
+    let out = dir.path().join("out/na_training_methods");
+    let methods = std::fs::read_to_string(out.join("methods.csv")).unwrap();
+    // 2 seeds x 2 nets x 2 methods x 1 init.
+    assert_eq!(methods.lines().count(), 1 + 8, "{methods}");
+    assert!(!methods.contains(",lbfgs,"));
+    assert!(out.join("seed_summary.csv").exists());
+}

@@ -1182,7 +1182,7 @@ mod tests {
         use rand::Rng;
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         let x = ndarray::Array2::from_shape_fn((120, 3), |_| rng.random_range(-1.0..1.0));
-        let y = x.map_axis(ndarray::Axis(1), |r| (r[0] * 2.0).sin() + r[1] * r[2]);
+        let y = x.map_axis(ndarray::Axis(1), |r| (r[0] * 2.0_f64).sin() + r[1] * r[2]);
         let y = y.insert_axis(ndarray::Axis(1));
         let data = Dataset::new(x, y).unwrap();
         let (train, held) = data.split(0.25, 1).unwrap();
