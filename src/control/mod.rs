@@ -46,6 +46,7 @@ pub mod knots;
 pub mod lqr;
 pub mod objective;
 pub mod search;
+pub mod simbicon;
 pub mod step_tracker;
 pub mod tracker;
 

@@ -20,6 +20,7 @@
 //! [`push::push_figure`] of the push-recovery experiment.
 
 pub mod acrobot;
+pub mod biped;
 pub mod differentiable;
 pub mod diver;
 pub mod dolphin;
@@ -270,6 +271,7 @@ pub const MODEL_NAMES: &[&str] = &[
     "pendulum3_passive",
     "pendulum3_ext",
     "acrobot",
+    "biped",
     "diver",
     "push_recovery",
     "truck",
@@ -285,6 +287,7 @@ pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
         "pendulum3_passive" => Box::new(Pendulum3::new(PendulumVariant::Passive)),
         "pendulum3_ext" => Box::new(Pendulum3::new(PendulumVariant::ExtForce)),
         "acrobot" => Box::new(acrobot::Acrobot::default()),
+        "biped" => Box::new(biped::Biped::default()),
         "diver" => Box::new(diver::diver()),
         "push_recovery" => Box::new(push::push_figure()),
         "truck" => Box::new(truck::Truck::default()),
