@@ -337,7 +337,7 @@ impl Biped {
         let lean = self.stance_lean();
         let (h, _) = self.terrain.height_slope(x);
         s[0] = x;
-        s[1] = h + self.leg_length() * lean.cos() + lift;
+        s[1] = h + self.leg_length() * crate::portable::cos(lean) + lift;
         s[2] = half_pi; // torso up
                         // Thighs down (relative to the torso, −π), leaning back by `lean`.
         s[3] = -std::f64::consts::PI - lean;
@@ -353,9 +353,11 @@ impl Biped {
         self.tree.links[link::LEFT_THIGH].length + self.tree.links[link::LEFT_SHIN].length
     }
 
-    /// The backward lean of a standing leg that puts the middle of the sole under the hip (rad).
+    /// The backward lean of a standing leg that puts the middle of the sole under the hip (rad):
+    /// asin(offset / leg), through the portable arctangent (the same bits on every machine).
     pub fn stance_lean(&self) -> f64 {
-        ((FOOT_TOE - FOOT_HEEL) / 2.0 / self.leg_length()).asin()
+        let s = (FOOT_TOE - FOOT_HEEL) / 2.0 / self.leg_length();
+        crate::portable::atan(s / (1.0 - s * s).sqrt())
     }
 }
 
