@@ -175,7 +175,7 @@ impl Simbicon {
             None => {
                 // The swing heel strikes when it reaches the ground.
                 let heel = if self.left_stance() { 2 } else { 0 };
-                let p = biped.contact_points(&x[..DOF])[heel];
+                let p = biped.contact_point(&x[..DOF], heel);
                 p[1] <= biped.terrain.height_slope(p[0]).0
             }
         };
@@ -197,7 +197,7 @@ impl Simbicon {
         let (st, sw) = if left { (1, 4) } else { (4, 1) };
         let pd = |target: f64, angle: f64, rate: f64| g.kp * (target - angle) - g.kd * rate;
         let heel = if left { 0 } else { 2 };
-        let heel_x = biped.contact_points(&x[..DOF])[heel][0];
+        let heel_x = biped.contact_point(&x[..DOF], heel)[0];
         let (d, v) = (x[0] - heel_x, x[DOF]);
         let hip_target =
             (t.swing_hip + t.c_d * d + t.c_v * v).clamp(g.hip_target.0, g.hip_target.1);

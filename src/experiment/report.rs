@@ -491,6 +491,16 @@ pub fn headline(why: &str) -> String {
     }
 }
 
+/// A check's outcome in a report sentence: "yes", "no", or "not measured" where the data
+/// to judge it are missing.
+pub fn yes_no(check: Option<bool>) -> &'static str {
+    match check {
+        Some(true) => "yes",
+        Some(false) => "no",
+        None => "not measured",
+    }
+}
+
 /// Where the first sentence of `text` ends (just after its full stop): at ". " followed by a
 /// capital letter, so "0.5 s", "e.g. x" and "(Fig. 9)" do not end one.
 fn sentence_end(text: &str) -> Option<usize> {

@@ -310,11 +310,13 @@ impl Biped {
 
     /// The contact points' positions (m): left heel, left toe, right heel, right toe.
     pub fn contact_points(&self, q: &[f64]) -> [[f64; 2]; 4] {
-        let mut out = [[0.0; 2]; 4];
-        for (o, f) in out.iter_mut().zip(&self.tree.forces) {
-            *o = self.tree.point(q, f.link, f.offset);
-        }
-        out
+        std::array::from_fn(|k| self.contact_point(q, k))
+    }
+
+    /// Contact point `k` (0-3, in [`Biped::contact_points`]' order) at configuration `q` (m).
+    pub fn contact_point(&self, q: &[f64], k: usize) -> [f64; 2] {
+        let f = &self.tree.forces[k];
+        self.tree.point(q, f.link, f.offset)
     }
 
     /// The ground's forces on the four contact points (N), in the order of

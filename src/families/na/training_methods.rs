@@ -55,7 +55,7 @@ use crate::emulator::train::{
 };
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, yes_no as yes, Findings, Verdict};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::na::table1_structure::{build_spec, validate_nets, validate_training};
@@ -280,6 +280,17 @@ struct MethodRun {
     stop: String,
 }
 
+impl MethodRun {
+    /// The lowest finite held-out error of the run (+∞ if none).
+    fn best(&self) -> f64 {
+        self.curve
+            .iter()
+            .map(|p| p.3)
+            .filter(|e| e.is_finite())
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
 /// Trains `mlp` by `method` for `passes` data passes, recording the curve.
 fn run_method(
     mut mlp: Mlp,
@@ -467,37 +478,30 @@ impl Job for Params {
                 n.passes
             ]);
             // Every (init, method) run; run one at a time so the seconds are not shared.
-            let jobs: Vec<(usize, TrainMethod)> = (1..=self.inits)
-                .flat_map(|k| self.methods.iter().map(move |&m| (k, m)))
-                .collect();
-            let mut done = Vec::with_capacity(jobs.len());
-            for &(k, m) in &jobs {
-                let mlp = initial_net(spec.seed, k, shape);
-                let shuffle = mix_seed(spec.seed, 2000 + k as u64);
-                let r = ctx.stage(&format!("{} {} init {k}", n.name, method_name(m)), || {
-                    run_method(mlp, train, held, m, &s, n.passes, shuffle)
-                })?;
-                pb.inc(1);
-                done.push(r);
-            }
+            // Init by init, each method in turn: one run at a time, so the seconds are not
+            // shared; the target needs every method of the init.
             for k in 1..=self.inits {
-                let of_init: Vec<(TrainMethod, &MethodRun)> = jobs
-                    .iter()
-                    .zip(&done)
-                    .filter(|((kk, _), _)| *kk == k)
-                    .map(|((_, m), r)| (*m, r))
-                    .collect();
+                let mut of_init = Vec::with_capacity(self.methods.len());
+                for &m in &self.methods {
+                    let mlp = initial_net(spec.seed, k, shape);
+                    let shuffle = mix_seed(spec.seed, 2000 + k as u64);
+                    let r = ctx
+                        .stage(&format!("{} {} init {k}", n.name, method_name(m)), || {
+                            run_method(mlp, train, held, m, &s, n.passes, shuffle)
+                        })?;
+                    pb.inc(1);
+                    of_init.push((m, r));
+                }
                 let lowest = of_init
                     .iter()
-                    .flat_map(|(_, r)| r.curve.iter().map(|p| p.3))
-                    .filter(|e| e.is_finite())
+                    .map(|(_, r)| r.best())
                     .fold(f64::INFINITY, f64::min);
                 let target = self.target_factor * lowest;
-                for (m, r) in of_init {
+                for (m, r) in &of_init {
                     for (i, p) in r.curve.iter().enumerate() {
                         curves.push(row![
                             n.name.as_str(),
-                            method_name(m),
+                            method_name(*m),
                             k,
                             i,
                             p.0,
@@ -509,12 +513,6 @@ impl Job for Params {
                     let pts: Vec<(f64, f64, f64)> =
                         r.curve.iter().map(|p| (p.0 as f64, p.1, p.3)).collect();
                     let reach = first_reach(&pts, target);
-                    let best = r
-                        .curve
-                        .iter()
-                        .map(|p| p.3)
-                        .filter(|e| e.is_finite())
-                        .fold(f64::INFINITY, f64::min);
                     let last = r
                         .curve
                         .last()
@@ -522,13 +520,13 @@ impl Job for Params {
                         .unwrap_or((0, 0.0, f64::NAN, f64::NAN));
                     methods.push(row![
                         n.name.as_str(),
-                        method_name(m),
+                        method_name(*m),
                         k,
                         self.target_factor,
                         target,
                         reach.map_or(f64::NAN, |x| x.0),
                         reach.map_or(f64::NAN, |x| x.1),
-                        best,
+                        r.best(),
                         last.2,
                         last.0,
                         last.1,
@@ -1056,11 +1054,6 @@ impl Family for NaTrainingMethods {
         let triples: Vec<(f64, f64, f64)> = med.iter().map(|r| (r.0, r.1, r.2)).collect();
         let (premise, c, d) = examples_checks(&triples, rule_ratio);
         let verdict = verdict_of([a, b, c, d], premise);
-        let yes = |b: Option<bool>| match b {
-            Some(true) => "yes",
-            Some(false) => "no",
-            None => "not measured",
-        };
         let at = med.iter().find(|r| r.0 == rule_ratio);
         // The small net's best held-out error of a method, median over inits.
         let best_of = |method: &str| {

@@ -37,7 +37,7 @@ use crate::emulator::catalog::{rollout_error, BuildSpec, NetModel, TrainSettings
 use crate::emulator::Emulator;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, yes_no as yes, Findings, Verdict};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::na::fig13_control::{learn_and_replay, Formulation, Task};
@@ -603,11 +603,6 @@ impl Family for NaTransforms {
         let rows = task_rows(dir)?;
         let verdict = verdict_of(&rows);
         let mut parts = Vec::new();
-        let yes = |b: Option<bool>| match b {
-            Some(true) => "yes",
-            Some(false) => "no",
-            None => "not measured",
-        };
         for t in &rows {
             let e = |v| t.get(v).map_or(f64::NAN, |r| r.0);
             let s = |v| t.get(v).map_or(f64::NAN, |r| r.1);
