@@ -117,6 +117,81 @@ fn lbc_projection_quick_writes_promised_outputs_and_two_minima_when_far() {
 }
 
 #[test]
+fn lbc_dive_disturbance_quick_pushes_both_controllers_with_the_same_forces() {
+    let d = quick_reproduction();
+    let out = d.path().join("out/lbc_dive_disturbance");
+    assert_eq!(
+        header(&out.join("disturbance.csv")),
+        "controller,force_scale,effort,deviation,final_error,trial,entry_change,max_torque_fraction"
+    );
+    let text = std::fs::read_to_string(out.join("disturbance.csv")).unwrap();
+    let rows: Vec<Vec<String>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    // Two controllers: the unpushed dive, then 2 quick trials at each of 2 scales.
+    assert_eq!(rows.len(), 2 * (1 + 2 * 2), "{text}");
+    for r in &rows {
+        let v: Vec<f64> = r[1..].iter().map(|x| x.parse().unwrap()).collect();
+        assert!(v.iter().all(|x| x.is_finite()), "{r:?}");
+        // Unpushed rows deviate by nothing; the torque limits hold.
+        if v[0] == 0.0 {
+            assert_eq!((v[2], v[5]), (0.0, 0.0), "{r:?}");
+        }
+        assert!(v[6] <= 1.0 + 1e-12, "{r:?}");
+    }
+    // Pushed dives differ from the unpushed ones.
+    assert!(rows
+        .iter()
+        .any(|r| r[1] != "0" && r[3].parse::<f64>().unwrap() > 0.0));
+    assert!(d
+        .path()
+        .join("figs/lbc_dive_disturbance_measures.png")
+        .exists());
+    assert!(d
+        .path()
+        .join("figs/lbc_dive_disturbance_dives.gif")
+        .exists());
+}
+
+#[test]
+fn lbc_walking_quick_writes_the_promised_tables_and_a_blend_between_the_walkers() {
+    let d = quick_reproduction();
+    let out = d.path().join("out/lbc_walking");
+    assert_eq!(
+        header(&out.join("walks.csv")),
+        "terrain,controller,distance_m,fell,mean_speed_m_s,steps,fell_at_s,lambda"
+    );
+    assert!(
+        header(&out.join("weights.csv")).starts_with("terrain,t,x,slope_deg,alpha_flat,alpha_hill")
+    );
+    let walks = std::fs::read_to_string(out.join("walks.csv")).unwrap();
+    // Every controller on every terrain.
+    assert_eq!(walks.lines().count(), 1 + 3 * 4, "{walks}");
+    let weights = std::fs::read_to_string(out.join("weights.csv")).unwrap();
+    for l in weights.lines().skip(1) {
+        let f: Vec<f64> = l
+            .split(',')
+            .skip(4)
+            .take(2)
+            .map(|v| v.parse().unwrap())
+            .collect();
+        assert!(
+            (f[0] + f[1] - 1.0).abs() < 1e-12 && (0.0..=1.0).contains(&f[1]),
+            "{l}"
+        );
+    }
+    // The incline's rows carry its slope.
+    assert!(weights
+        .lines()
+        .filter(|l| l.starts_with("incline,"))
+        .all(|l| (l.split(',').nth(3).unwrap().parse::<f64>().unwrap() - 10.0).abs() < 1e-9));
+    assert!(d.path().join("figs/lbc_walking_weights.png").exists());
+    assert!(d.path().join("figs/lbc_walking_track.gif").exists());
+}
+
+#[test]
 fn lbc_grid_quick_combination_is_exact_and_naive_is_worse() {
     let d = quick_reproduction();
     let out = d.path().join("out/lbc_grid_optimality");
@@ -355,7 +430,7 @@ fn reproduce_quick_writes_report_with_every_experiment() {
             ids += 1;
         }
     }
-    assert_eq!(ids, 24, "the shipped experiments");
+    assert_eq!(ids, 26, "the shipped experiments");
     assert!(report.contains("**Paper:**") && report.contains("**Verdict:"));
     assert!(
         report.contains("../figs/lbc_projection_cost.png"),
@@ -789,7 +864,7 @@ fn a_closed_output_pipe_is_a_normal_end() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Close the read end at once: `list` reads 24 experiment files before its first line.
+    // Close the read end at once: `list` reads 26 experiment files before its first line.
     drop(child.stdout.take());
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -1018,8 +1018,12 @@ fn na_transforms_ablation_quick_builds_every_variant_and_learns_through_each() {
         "task,variant,iterations,best_iteration,j_start,j_best,emulator_error,simulator_error,at_goal"
     );
     let nets = rows(&out.join("nets.csv"));
-    assert_eq!(nets.len(), 2 * 4, "truck and lander, four variants each");
-    for task in ["truck", "lander"] {
+    assert_eq!(
+        nets.len(),
+        3 * 4,
+        "truck, lander and the dolphin's global net, four variants each"
+    );
+    for task in ["truck", "lander", "dolphin"] {
         let variants: Vec<&str> = nets
             .iter()
             .filter(|r| r[0] == task)
@@ -1061,8 +1065,8 @@ fn na_transforms_ablation_quick_sweeps_the_variants() {
     );
     let out = dir.path().join("out/na_transforms_ablation");
     let nets = std::fs::read_to_string(out.join("nets.csv")).unwrap();
-    // 2 seeds x 2 tasks x 2 variants.
-    assert_eq!(nets.lines().count(), 1 + 8, "{nets}");
+    // 2 seeds x 3 tasks (truck, lander, the dolphin's global net) x 2 variants.
+    assert_eq!(nets.lines().count(), 1 + 12, "{nets}");
     assert!(!nets.contains(",plain,"));
     assert!(out.join("seed_summary.csv").exists());
 }

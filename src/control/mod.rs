@@ -42,6 +42,7 @@
 pub mod bptt;
 pub mod conditioning;
 pub mod ddp;
+pub mod gait_value;
 pub mod knots;
 pub mod lqr;
 pub mod objective;

@@ -485,21 +485,8 @@ impl NetSpec {
     /// The transforms this net is built with: its model's, normalized as `normalization` says,
     /// or the reduced chain `transforms` names.
     pub fn transform_config(&self) -> TransformConfig {
-        let mut c = self.model.transform_config_with(self.normalization);
-        match self.transforms {
-            TransformSet::Full => {}
-            TransformSet::Plain => c = TransformConfig::none(),
-            TransformSet::Delta => {
-                c = TransformConfig::none();
-                c.delta = true;
-            }
-            TransformSet::DeltaFrame => {
-                c.normalize = false;
-                c.input_groups = None;
-                c.output_groups = None;
-            }
-        }
-        c
+        self.transforms
+            .reduce(self.model.transform_config_with(self.normalization))
     }
 }
 
@@ -534,8 +521,27 @@ impl TransformSet {
         }
     }
 
-    fn is_full(&self) -> bool {
+    /// Whether it is the whole chain (the default, left out of cache keys).
+    pub fn is_full(&self) -> bool {
         *self == Self::Full
+    }
+
+    /// The chain `full` (a model's whole chain) reduced to this set's operators.
+    pub fn reduce(self, full: TransformConfig) -> TransformConfig {
+        match self {
+            Self::Full => full,
+            Self::Plain => TransformConfig::none(),
+            Self::Delta => TransformConfig {
+                delta: true,
+                ..TransformConfig::none()
+            },
+            Self::DeltaFrame => TransformConfig {
+                normalize: false,
+                input_groups: None,
+                output_groups: None,
+                ..full
+            },
+        }
     }
 }
 

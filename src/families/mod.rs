@@ -17,7 +17,9 @@
 //! | `lbc_acrobot_swingup` | `lbc_acrobot_swingup` | [`lbc::acrobot_swingup`] |
 //! | `lbc_diver_interpolation` | `lbc_diver_interpolation` | [`lbc::diver`] (both dive families) |
 //! | `lbc_diver_coordination` | `lbc_diver_coordination` | [`lbc::diver`] |
+//! | `lbc_dive_disturbance` | `lbc_dive_disturbance` | [`lbc::diver`] (`disturbance.rs`) |
 //! | `lbc_push_recovery` | `lbc_push_recovery` | [`lbc::push_recovery`] |
+//! | `lbc_walking` | `lbc_walking` | [`lbc::walking`] (+ its gaits' value functions: [`crate::control::gait_value`]) |
 //! | `na_table1_structure` | `na_table1_structure` | [`na::table1_structure`] |
 //! | `na_table2_speedup` | `na_table2_speedup` | [`na::table2_speedup`] |
 //! | `na_regularization` | `na_regularization` | [`na::regularization`] |
@@ -56,7 +58,9 @@ static FAMILIES: &[&dyn Experiment] = &[
     &lbc::acrobot_swingup::LbcAcrobot,
     &lbc::diver::LbcDiverInterpolation,
     &lbc::diver::LbcDiverCoordination,
+    &lbc::diver::LbcDiveDisturbance,
     &lbc::push_recovery::LbcPush,
+    &lbc::walking::LbcWalking,
     &na::table1_structure::NaStructure,
     &na::table2_speedup::NaSpeedup,
     &na::fig12_error::NaError,

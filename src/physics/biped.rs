@@ -96,7 +96,8 @@ impl Terrain {
                 smoothing_m,
             } => {
                 // h = tan θ · s(x − start), s(z) = (z + √(z² + w²))/2 − w/2: a smooth max(0, z)
-                // that is 0 far before the corner, z − w/2 ... far after; w = smoothing_m.
+                // shifted down by w/2, so −w/2 far before the corner (level there) and z − w/2
+                // far after; w = smoothing_m.
                 let t = Self::tan(degrees);
                 let (z, w) = (x - start_m, smoothing_m.max(1e-9));
                 let r = (z * z + w * w).sqrt();

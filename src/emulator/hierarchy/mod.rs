@@ -70,11 +70,13 @@ mod training;
 
 pub use regularize::{BoundRegularizer, Regularizer, Schedule};
 pub use training::{
-    build_dolphin, control_limits, control_process, global_heldout_errors, global_training_data,
-    global_transitions, head, hierarchy_rollout_error, net_name, sample_dolphin, simulator,
-    start_state, train_hierarchy, BuiltDolphin, HierarchyNet, HierarchySpec, NetReport, EPISODE_S,
+    build_dolphin, build_global, control_limits, control_process, global_heldout_errors,
+    global_training_data, global_transitions, head, hierarchy_rollout_error, net_name,
+    sample_dolphin, simulator, start_state, train_hierarchy, BuiltDolphin, HierarchyNet,
+    HierarchySpec, NetReport, EPISODE_S,
 };
 
+use super::catalog::TransformSet;
 use super::mlp::{Mlp, MlpScratch};
 use super::transform::{Attitude, Normalizer, SpatialFrame};
 use super::{Emulator, EmulatorScratch, TransformConfig};
@@ -130,6 +132,11 @@ pub fn global_state_after(d: &Dolphin, x1: &[f64], prev: &[f64], out: &mut [f64]
 /// centroid, quaternion, velocity and angular velocity, and normalization by quantity groups
 /// ([`global_groups`]).
 pub fn global_transforms() -> TransformConfig {
+    global_transforms_of(TransformSet::Full)
+}
+
+/// The global net's chain reduced to the operators of `set` ([`TransformSet::reduce`]).
+pub fn global_transforms_of(set: TransformSet) -> TransformConfig {
     let base = FRAME_DIM * REF_SEGMENT;
     let tri = |a: usize| [a, a + 1, a + 2];
     // The swimmer is neutrally buoyant: no direction is special, the whole attitude goes.
@@ -149,11 +156,11 @@ pub fn global_transforms() -> TransformConfig {
             .collect(),
     };
     let (input_groups, output_groups) = global_groups();
-    TransformConfig {
+    set.reduce(TransformConfig {
         input_groups: Some(input_groups),
         output_groups: Some(output_groups),
         ..TransformConfig::standard(Some(frame.into()))
-    }
+    })
 }
 
 /// Normalization groups of the global net by physical quantity (Appendix A normalizes groups
@@ -430,6 +437,11 @@ impl DolphinEmulator {
             locals,
             scratch: Some(Box::new(scratch)),
         }
+    }
+
+    /// The same hierarchy with `global` in place of its global net (the local nets kept).
+    pub fn with_global(&self, global: Emulator) -> Self {
+        Self::new(self.dolphin.clone(), global, self.locals.clone())
     }
 
     /// The dolphin it emulates.

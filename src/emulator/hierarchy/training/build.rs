@@ -2,9 +2,10 @@
 //! keys and paths, the nets' shapes, the composed emulator and the per-net records.
 
 use super::super::{
-    global_transforms, DolphinEmulator, LocalLayout, LocalNet, GLOBAL_DIM, HIERARCHY_FORMAT,
+    global_transforms, global_transforms_of, DolphinEmulator, LocalLayout, LocalNet, GLOBAL_DIM,
+    HIERARCHY_FORMAT,
 };
-use super::nets::train_hierarchy;
+use super::nets::{train_global_only, train_hierarchy};
 use super::sampling::{control_process, start_state, CHUNK, EPISODE_S};
 use super::HierarchySpec;
 use crate::emulator::cache::{fnv1a, read_record, write_record, EmulatorCache, NetRecord};
@@ -81,7 +82,11 @@ pub(in crate::emulator::hierarchy) fn cache_key(
             "process": control_process(),
             "episode": EPISODE_S,
             "chunk": CHUNK,
-            "transforms": format!("{:?}", global_transforms()),
+            "transforms": format!("{:?}", if k == 0 {
+                global_transforms_of(spec.global_transforms)
+            } else {
+                global_transforms()
+            }),
             "starts": starts,
         },
     })
@@ -111,7 +116,11 @@ pub(in crate::emulator::hierarchy) fn global_emulator(
     spec: &HierarchySpec,
     g: NetRecord,
 ) -> Result<Emulator, BuildError> {
-    let mut t = Transforms::unfitted(&global_transforms(), GLOBAL_DIM, N_SEGMENTS)?;
+    let mut t = Transforms::unfitted(
+        &global_transforms_of(spec.global_transforms),
+        GLOBAL_DIM,
+        N_SEGMENTS,
+    )?;
     t.input_norm = g.input_norm;
     t.output_norm = g.output_norm;
     Ok(Emulator::new(t, g.mlp, spec.super_dt())?)
@@ -201,6 +210,28 @@ pub fn build_dolphin(
     })
 }
 
+/// The global net of `spec` alone, wrapped in `spec.global_transforms`, from `cache` or trained
+/// now (and stored): what `na_transforms_ablation` composes with the whole chain's local nets.
+/// With the whole chain it is [`build_dolphin`]'s global net (the same cache entry).
+pub fn build_global(
+    spec: &HierarchySpec,
+    cache: &EmulatorCache,
+) -> Result<(Emulator, NetReport), BuildError> {
+    let d = Dolphin::default();
+    let key = cache_key(spec, &d, 0);
+    let path = cache_path(cache, spec, &key, 0);
+    let (rec, from_cache) = match read_record(&path, &key, shape(spec, 0)) {
+        Some(r) => (r, true),
+        None => {
+            let r = train_global_only(&d, spec)?;
+            write_record(&path, &key, &r)?;
+            (r, false)
+        }
+    };
+    let report = report(0, spec, &rec, from_cache);
+    Ok((global_emulator(spec, rec)?, report))
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::fixtures::spec;
@@ -241,5 +272,54 @@ mod tests {
             (mean - reported).abs() <= 1e-9 * reported,
             "{mean} vs {reported}"
         );
+    }
+
+    #[test]
+    fn a_global_net_alone_is_the_hierarchys_and_its_variants_cache_apart() {
+        use crate::emulator::catalog::TransformSet;
+        let dir = tempfile::tempdir().unwrap();
+        let cache = EmulatorCache::new(dir.path());
+        let sp = spec(60);
+        let whole = build_dolphin(&sp, &cache).unwrap();
+        let d = Dolphin::default();
+        let mut g = vec![0.0; GLOBAL_DIM];
+        crate::emulator::hierarchy::global_state(
+            &d,
+            &start_state(&d, &mut ChaCha8Rng::seed_from_u64(2)),
+            &mut g,
+        );
+        let u = [0.2; N_SEGMENTS];
+        let next = |e: &Emulator| {
+            let mut out = vec![0.0; GLOBAL_DIM];
+            e.predict(&g, &u, &mut e.scratch(), &mut out);
+            out
+        };
+        let reference = next(whole.emulator.global());
+        // The whole chain's global net alone: the hierarchy's cache entry.
+        let (cached, rep) = build_global(&sp, &cache).unwrap();
+        assert!(rep.from_cache);
+        assert_eq!(next(&cached), reference);
+        // Trained alone in an empty cache: the same examples, weights and training, bit for bit.
+        let other = tempfile::tempdir().unwrap();
+        let (alone, rep) = build_global(&sp, &EmulatorCache::new(other.path())).unwrap();
+        assert!(!rep.from_cache);
+        assert_eq!(next(&alone), reference);
+        // A reduced chain is another net under its own key; the second build loads it.
+        let plain = HierarchySpec {
+            global_transforms: TransformSet::Plain,
+            ..sp.clone()
+        };
+        let (p1, r1) = build_global(&plain, &cache).unwrap();
+        let (p2, r2) = build_global(&plain, &cache).unwrap();
+        assert!(!r1.from_cache && r2.from_cache);
+        assert_eq!(next(&p1), next(&p2));
+        assert_ne!(next(&p1), reference);
+        assert!(next(&p1).iter().all(|v| v.is_finite()));
+        // The whole hierarchy is still the cached one (no entry was overwritten).
+        assert!(build_dolphin(&sp, &cache)
+            .unwrap()
+            .nets
+            .iter()
+            .all(|n| n.from_cache));
     }
 }

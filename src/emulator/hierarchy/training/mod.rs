@@ -23,7 +23,7 @@ mod fidelity;
 mod nets;
 mod sampling;
 
-pub use build::{build_dolphin, net_name, BuiltDolphin, NetReport};
+pub use build::{build_dolphin, build_global, net_name, BuiltDolphin, NetReport};
 pub(super) use build::{cache_key, global_emulator, shape};
 pub use fidelity::{global_heldout_errors, hierarchy_rollout_error};
 pub use nets::{global_training_data, train_hierarchy};
@@ -32,7 +32,7 @@ pub use sampling::{
     start_state, EPISODE_S,
 };
 
-use crate::emulator::catalog::{TrainMethod, TrainSettings};
+use crate::emulator::catalog::{TrainMethod, TrainSettings, TransformSet};
 use serde::{Deserialize, Serialize};
 
 /// Size and data of one net of the hierarchy.
@@ -77,6 +77,11 @@ pub struct HierarchySpec {
     pub settings: TrainSettings,
     /// Seed of sampling, initialization and shuffles.
     pub seed: u64,
+    /// Which of §3.2's transforms wrap the global net (`na_transforms_ablation`); the whole
+    /// chain (the default) is left out of cache keys. Only [`build_global`] trains a global net
+    /// with another set; the local nets never depend on it.
+    #[serde(default, skip_serializing_if = "TransformSet::is_full")]
+    pub global_transforms: TransformSet,
 }
 
 impl HierarchySpec {
@@ -113,6 +118,7 @@ mod fixtures {
             steps: 10,
             settings: TrainSettings::for_tests(5, 2, 3),
             seed: 3,
+            global_transforms: TransformSet::Full,
         }
     }
 }

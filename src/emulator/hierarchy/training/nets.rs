@@ -1,7 +1,7 @@
 //! Training the seven nets ([`train_hierarchy`]): the global net's one-step data and
 //! rollout fine-tuning, the local nets' teacher-forced data with their noise injection.
 
-use super::super::{global_transforms, Frame, LocalLayout, GLOBAL_DIM};
+use super::super::{global_transforms_of, Frame, LocalLayout, GLOBAL_DIM};
 use super::sampling::{global_rollout_windows, global_transitions, sample_dolphin};
 use super::HierarchySpec;
 use crate::emulator::cache::NetRecord;
@@ -72,7 +72,7 @@ fn global_data(
     held: &Transitions,
 ) -> Result<TrainingData, BuildError> {
     let (gt, gh) = (global_transitions(d, train), global_transitions(d, held));
-    let transforms = Transforms::fit(&global_transforms(), &gt)?;
+    let transforms = Transforms::fit(&global_transforms_of(spec.global_transforms), &gt)?;
     let (clean_ds, held_ds) = (transforms.encode(&gt), transforms.encode(&gh));
     let train_ds = noisy(
         &transforms,
@@ -122,58 +122,81 @@ pub fn train_hierarchy(d: &Dolphin, spec: &HierarchySpec) -> Result<Vec<NetRecor
     let mix = |k: u64| crate::seed::mix_seed(spec.seed, k);
     let (train, held) = sample_spec(d, spec)?;
     let sampling_s = t0.elapsed().as_secs_f64();
-    let s = &spec.settings;
     let jobs: Vec<usize> = (0..=N_SEGMENTS).collect();
     let recs: Vec<NetRecord> = jobs
         .par_iter()
         .map(|&k| -> Result<NetRecord, BuildError> {
             let t1 = Instant::now();
-            let mut rng = ChaCha8Rng::seed_from_u64(mix(10 + k as u64));
+            let rng = ChaCha8Rng::seed_from_u64(mix(10 + k as u64));
             if k == 0 {
-                let data = global_data(d, spec, &train, &held)?;
-                let mut mlp = Mlp::new(
-                    GLOBAL_DIM + N_SEGMENTS,
-                    spec.global.hidden,
-                    GLOBAL_DIM,
-                    WeightInit::FanIn,
-                    &mut rng,
-                );
-                let rep = train_mlp(
-                    &mut mlp,
-                    &data.train_ds,
-                    &data.held_ds,
-                    spec.global.method,
-                    &spec.global.settings(s),
-                    mix(20),
-                    None,
-                )?;
-                let mut emulator = Emulator::new(data.transforms.clone(), mlp, spec.super_dt())?;
-                let mut stop = stop_name(&rep.stop);
-                let rollout_trace = if s.rollout_k > 0 {
-                    let windows = global_rollout_windows(d, spec)?;
-                    rollout_phase(&mut emulator, &data, &windows, s, None, &mut stop)?
-                } else {
-                    Vec::new()
-                };
-                let mlp = emulator.mlp().clone();
-                Ok(NetRecord {
-                    train_error: mse(&mlp, &data.clean_ds),
-                    heldout_error: mse(&mlp, &data.held_ds),
-                    mlp,
-                    input_norm: data.transforms.input_norm,
-                    output_norm: data.transforms.output_norm,
-                    dt: spec.super_dt(),
-                    train_s: sampling_s + t1.elapsed().as_secs_f64(),
-                    stop,
-                    trace: rep.trace,
-                    rollout_trace,
-                })
+                train_global(d, spec, &train, &held, sampling_s, rng)
             } else {
                 train_local(d, spec, LocalLayout::new(k - 1), &train, &held, rng, t1)
             }
         })
         .collect::<Result<_, _>>()?;
     Ok(recs)
+}
+
+/// Samples the data and trains the global net alone, wrapped in `spec.global_transforms`: the
+/// same examples, initial weights and training as [`train_hierarchy`]'s global net.
+pub fn train_global_only(d: &Dolphin, spec: &HierarchySpec) -> Result<NetRecord, BuildError> {
+    let t0 = Instant::now();
+    let (train, held) = sample_spec(d, spec)?;
+    let rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 10));
+    train_global(d, spec, &train, &held, t0.elapsed().as_secs_f64(), rng)
+}
+
+/// The global net on the sampled transitions: one-step training, then the k-step rollout
+/// fine-tuning when the settings ask for it; `sampling_s` is added to its training time.
+fn train_global(
+    d: &Dolphin,
+    spec: &HierarchySpec,
+    train: &Transitions,
+    held: &Transitions,
+    sampling_s: f64,
+    mut rng: ChaCha8Rng,
+) -> Result<NetRecord, BuildError> {
+    let t1 = Instant::now();
+    let s = &spec.settings;
+    let data = global_data(d, spec, train, held)?;
+    let mut mlp = Mlp::new(
+        GLOBAL_DIM + N_SEGMENTS,
+        spec.global.hidden,
+        GLOBAL_DIM,
+        WeightInit::FanIn,
+        &mut rng,
+    );
+    let rep = train_mlp(
+        &mut mlp,
+        &data.train_ds,
+        &data.held_ds,
+        spec.global.method,
+        &spec.global.settings(s),
+        crate::seed::mix_seed(spec.seed, 20),
+        None,
+    )?;
+    let mut emulator = Emulator::new(data.transforms.clone(), mlp, spec.super_dt())?;
+    let mut stop = stop_name(&rep.stop);
+    let rollout_trace = if s.rollout_k > 0 {
+        let windows = global_rollout_windows(d, spec)?;
+        rollout_phase(&mut emulator, &data, &windows, s, None, &mut stop)?
+    } else {
+        Vec::new()
+    };
+    let mlp = emulator.mlp().clone();
+    Ok(NetRecord {
+        train_error: mse(&mlp, &data.clean_ds),
+        heldout_error: mse(&mlp, &data.held_ds),
+        mlp,
+        input_norm: data.transforms.input_norm,
+        output_norm: data.transforms.output_norm,
+        dt: spec.super_dt(),
+        train_s: sampling_s + t1.elapsed().as_secs_f64(),
+        stop,
+        trace: rep.trace,
+        rollout_trace,
+    })
 }
 
 /// Noise injection for a local net (as [`Transforms::perturb`] for the global net, issue 11
@@ -286,7 +309,7 @@ mod tests {
     use super::*;
     use crate::emulator::catalog::TrainMethod;
     use crate::emulator::hierarchy::training::simulator;
-    use crate::emulator::hierarchy::{global_state, FRAME_DIM};
+    use crate::emulator::hierarchy::{global_state, global_transforms, FRAME_DIM};
     use crate::physics::Dynamics;
     use nalgebra::Vector3;
 

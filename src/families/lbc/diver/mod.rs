@@ -30,6 +30,7 @@
 //! the reconstructed cost); `interpolation`, `coordination`, `figures` and `report` hold the rest.
 
 mod coordination;
+mod disturbance;
 mod figures;
 mod interpolation;
 mod report;
@@ -38,6 +39,7 @@ pub use coordination::{
     compare_objectives, coordination_rule, CoordinationCounts, CoordinationParams,
     LbcDiverCoordination, PARTLY_WORSE_MARGIN,
 };
+pub use disturbance::{disturbance_checks, DisturbanceParams, LbcDiveDisturbance};
 pub use interpolation::{choose_offset, InterpolationParams, LbcDiverInterpolation, OffsetTrial};
 
 use crate::bellman::combine::{blend_weights, normalized_entropy, TrackerBlend};

@@ -12,70 +12,74 @@ use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
 use crate::row;
 use rand::Rng;
 
-impl Params {
-    /// The swim learned through `global` as the headline learns it: `d.restarts` seeded random
-    /// starts (streams 400, 401, …), each `d.iterations` descent steps from its own step scale;
-    /// the run with the lowest best-so-far emulator J is chosen (the simulator distances of the
-    /// others are reported, never used to choose). Returns the chosen run and its best rollout;
-    /// with `restarts_t`, pushes one `dolphin_restarts` row per start (each start's knots
-    /// replayed on the simulator). `label` names the net in progress messages.
-    pub(super) fn learn_swim(
-        &self,
-        ctx: &RunContext,
-        d: &DolphinControl,
-        global: &crate::emulator::Emulator,
-        body: &Dolphin,
-        label: &str,
-        mut restarts_t: Option<&mut Table>,
-    ) -> Result<(Learned, BestRollout), Error> {
-        let swim = &d.swim;
-        let knots = swim.knot_layout();
-        let (x0, g0) = swim.start(body);
-        let objective = swim.objective();
-        let mut bptt = Bptt::new(global, &objective, knots, swim.bounds(), &g0).map_err(other)?;
-        let (dt, n) = (d.nets.physical_dt, self.steps);
-        let mut chosen: Option<(Learned, BestRollout)> = None;
-        for restart in 0..d.restarts {
-            let mut rng = ctx.rng(400 + restart as u64);
-            let v0: Vec<f64> = (0..knots.len())
-                .map(|_| d.init_spread * (2.0 * rng.random::<f64>() - 1.0))
-                .collect();
-            let lambda = bptt.curvature(&v0, self.curvature_iterations);
-            if !(lambda.is_finite() && lambda > 0.0) {
-                return Err(other(format!(
-                    "dolphin{label} restart {restart}: step scale λ = {lambda}"
-                )));
-            }
-            let schedule = self.schedule(d.eta, d.alpha, d.step_rule, lambda);
-            let (r, best) = ctx.stage(&format!("learn dolphin{label}, start {restart}"), || {
-                learn_best(&mut bptt, &v0, &schedule, d.iterations, &mut |_, _, _| {
-                    false
-                })
-            });
-            if let Some(t) = restarts_t.as_deref_mut() {
-                let (_, sim_g) = swim
-                    .simulate(body, &x0, &best.controls, dt, n)
-                    .map_err(other)?;
-                t.push(row![
-                    restart as i64,
-                    lambda,
-                    r.trace[0].objective,
-                    r.best_iteration as i64,
-                    r.best_objective(),
-                    swim.distance(&best.states),
-                    swim.distance(&sim_g)
-                ]);
-            }
-            if chosen
-                .as_ref()
-                .is_none_or(|(c, _)| r.best_objective() < c.best_objective())
-            {
-                chosen = Some((r, best));
-            }
+/// The swim learned through `global` as Fig. 13's headline learns it: `d.restarts` seeded random
+/// starts (streams 400, 401, …), each `d.iterations` descent steps (η, α of `d`, λ measured
+/// by `curvature_iterations` power iterations at the start) through `steps`-step super-steps;
+/// the run with the lowest best-so-far emulator J is chosen (the simulator distances of the
+/// others are reported, never used to choose). Returns the chosen run and its best rollout;
+/// with `restarts_t`, pushes one `dolphin_restarts` row per start (each start's knots replayed
+/// on the simulator). `label` names the net in progress messages.
+#[allow(clippy::too_many_arguments)]
+pub fn learn_swim(
+    ctx: &RunContext,
+    d: &DolphinControl,
+    global: &crate::emulator::Emulator,
+    body: &Dolphin,
+    steps: usize,
+    curvature_iterations: usize,
+    label: &str,
+    mut restarts_t: Option<&mut Table>,
+) -> Result<(Learned, BestRollout), Error> {
+    let swim = &d.swim;
+    let knots = swim.knot_layout();
+    let (x0, g0) = swim.start(body);
+    let objective = swim.objective();
+    let mut bptt = Bptt::new(global, &objective, knots, swim.bounds(), &g0).map_err(other)?;
+    let (dt, n) = (d.nets.physical_dt, steps);
+    let mut chosen: Option<(Learned, BestRollout)> = None;
+    for restart in 0..d.restarts {
+        let mut rng = ctx.rng(400 + restart as u64);
+        let v0: Vec<f64> = (0..knots.len())
+            .map(|_| d.init_spread * (2.0 * rng.random::<f64>() - 1.0))
+            .collect();
+        let lambda = bptt.curvature(&v0, curvature_iterations);
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return Err(other(format!(
+                "dolphin{label} restart {restart}: step scale λ = {lambda}"
+            )));
         }
-        chosen.ok_or_else(|| other("dolphin: no restarts"))
+        let schedule =
+            super::job::schedule(d.eta, d.alpha, d.step_rule, lambda, curvature_iterations);
+        let (r, best) = ctx.stage(&format!("learn dolphin{label}, start {restart}"), || {
+            learn_best(&mut bptt, &v0, &schedule, d.iterations, &mut |_, _, _| {
+                false
+            })
+        });
+        if let Some(t) = restarts_t.as_deref_mut() {
+            let (_, sim_g) = swim
+                .simulate(body, &x0, &best.controls, dt, n)
+                .map_err(other)?;
+            t.push(row![
+                restart as i64,
+                lambda,
+                r.trace[0].objective,
+                r.best_iteration as i64,
+                r.best_objective(),
+                swim.distance(&best.states),
+                swim.distance(&sim_g)
+            ]);
+        }
+        if chosen
+            .as_ref()
+            .is_none_or(|(c, _)| r.best_objective() < c.best_objective())
+        {
+            chosen = Some((r, best));
+        }
     }
+    chosen.ok_or_else(|| other("dolphin: no restarts"))
+}
 
+impl Params {
     /// Learns the swim through the global net; replays on the simulator and the reference wave.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn run_dolphin(
@@ -98,8 +102,16 @@ impl Params {
         let knots = swim.knot_layout();
         let (x0, _) = swim.start(&body);
         let (dt, n) = (d.nets.physical_dt, self.steps);
-        let (r, best) =
-            self.learn_swim(ctx, d, built.emulator.global(), &body, "", Some(restarts_t))?;
+        let (r, best) = learn_swim(
+            ctx,
+            d,
+            built.emulator.global(),
+            &body,
+            self.steps,
+            self.curvature_iterations,
+            "",
+            Some(restarts_t),
+        )?;
         for t in &r.trace {
             objective_t.push(row!["dolphin", t.iteration as i64, t.objective]);
         }
@@ -168,8 +180,16 @@ impl Params {
                 ours_swim: None,
                 ..d.clone()
             };
-            let (r4, best4) =
-                self.learn_swim(ctx, &d4, built.emulator.global(), &body, "_4s", None)?;
+            let (r4, best4) = learn_swim(
+                ctx,
+                &d4,
+                built.emulator.global(),
+                &body,
+                self.steps,
+                self.curvature_iterations,
+                "_4s",
+                None,
+            )?;
             for t in &r4.trace {
                 objective_t.push(row!["dolphin_4s", t.iteration as i64, t.objective]);
             }

@@ -136,7 +136,16 @@ impl Params {
         let start = centroid(&g0);
         for round in 0..=dd.settings.rounds {
             let label = format!(" (DAgger round {round})");
-            let (r, best) = self.learn_swim(ctx, d, &net, body, &label, None)?;
+            let (r, best) = super::learn_swim(
+                ctx,
+                d,
+                &net,
+                body,
+                self.steps,
+                self.curvature_iterations,
+                &label,
+                None,
+            )?;
             let (_, sim_g) = swim
                 .simulate(body, &x0, &best.controls, dt, n)
                 .map_err(other)?;

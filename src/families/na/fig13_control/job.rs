@@ -470,16 +470,28 @@ impl Params {
 
     /// The schedule of η, α (plain descent when α = 0), `rule` and initial λ.
     pub(super) fn schedule(&self, eta: f64, alpha: f64, rule: StepRule, lambda: f64) -> Schedule {
-        let descent = if alpha > 0.0 {
-            Descent::Momentum { eta, alpha }
-        } else {
-            Descent::Plain { eta }
-        };
-        Schedule {
-            descent,
-            rule,
-            scale: lambda,
-            curvature_iterations: self.curvature_iterations,
-        }
+        schedule(eta, alpha, rule, lambda, self.curvature_iterations)
+    }
+}
+
+/// The schedule of η, α (plain descent when α = 0), `rule`, initial λ and the power iterations
+/// of its re-estimates.
+pub(super) fn schedule(
+    eta: f64,
+    alpha: f64,
+    rule: StepRule,
+    lambda: f64,
+    curvature_iterations: usize,
+) -> Schedule {
+    let descent = if alpha > 0.0 {
+        Descent::Momentum { eta, alpha }
+    } else {
+        Descent::Plain { eta }
+    };
+    Schedule {
+        descent,
+        rule,
+        scale: lambda,
+        curvature_iterations,
     }
 }

@@ -52,6 +52,7 @@ pub mod seeds;
 mod task;
 
 pub use conditioning::{BEST_WEIGHTS_COLUMNS, CONDITIONING_COLUMNS};
+pub use dolphin::learn_swim;
 pub use job::{learn_and_replay, learn_best, BestRollout};
 pub use params::{DolphinControl, Params, Sweep};
 pub use task::{Calibration, ControlUnits, FinalWeights, Formulation, Task};

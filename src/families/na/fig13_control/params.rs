@@ -126,6 +126,36 @@ fn one() -> usize {
     1
 }
 
+impl DolphinControl {
+    /// Checks it as the table `key` of a spec whose nets scale by `example_scale`.
+    pub fn validate(&self, key: &str, example_scale: f64) -> Result<(), ParamError> {
+        let k = |f: &str| format!("{key}.{f}");
+        self.nets.validate(&k("nets"), example_scale)?;
+        self.swim.validate(&k("swim"))?;
+        if let Some(o) = &self.ours_swim {
+            o.validate(&k("ours_swim"))?;
+        }
+        ensure(self.iterations >= 1, &k("iterations"), "must be >= 1")?;
+        positive(&k("eta"), self.eta)?;
+        ensure(
+            (0.0..1.0).contains(&self.alpha),
+            &k("alpha"),
+            "must be in [0, 1)",
+        )?;
+        ensure(
+            (0.0..=1.0).contains(&self.init_spread),
+            &k("init_spread"),
+            "must be in [0, 1]",
+        )?;
+        ensure(self.restarts >= 1, &k("restarts"), "must be >= 1")?;
+        self.step_rule.validate(&k("step_rule"))?;
+        if let Some(dd) = &self.dagger {
+            dd.validate(&k("dagger"))?;
+        }
+        Ok(())
+    }
+}
+
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         ensure(self.steps >= 1, "steps", "must be >= 1")?;
@@ -160,28 +190,7 @@ impl Validate for Params {
         let nets: Vec<NetSpec> = self.tasks.iter().map(|t| t.net.clone()).collect();
         validate_nets(&nets, self.example_scale)?;
         if let Some(d) = &self.dolphin {
-            d.nets.validate("dolphin.nets", self.example_scale)?;
-            d.swim.validate("dolphin.swim")?;
-            if let Some(o) = &d.ours_swim {
-                o.validate("dolphin.ours_swim")?;
-            }
-            ensure(d.iterations >= 1, "dolphin.iterations", "must be >= 1")?;
-            positive("dolphin.eta", d.eta)?;
-            ensure(
-                (0.0..1.0).contains(&d.alpha),
-                "dolphin.alpha",
-                "must be in [0, 1)",
-            )?;
-            ensure(
-                (0.0..=1.0).contains(&d.init_spread),
-                "dolphin.init_spread",
-                "must be in [0, 1]",
-            )?;
-            ensure(d.restarts >= 1, "dolphin.restarts", "must be >= 1")?;
-            d.step_rule.validate("dolphin.step_rule")?;
-            if let Some(dd) = &d.dagger {
-                dd.validate("dolphin.dagger")?;
-            }
+            d.validate("dolphin", self.example_scale)?;
         }
         validate_training(&self.training)
     }

@@ -61,7 +61,7 @@ fn catalog_drift(
 
 /// As [`catalog_drift`] for the dolphin's global net from the rest shape at rest, the position
 /// being the mean segment centroid.
-fn dolphin_drift(
+pub(crate) fn dolphin_drift(
     e: &DolphinEmulator,
     spec: &HierarchySpec,
     u: &[f64],

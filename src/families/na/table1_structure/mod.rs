@@ -33,6 +33,7 @@ mod job;
 mod nets;
 mod report;
 
+pub(crate) use job::dolphin_drift;
 pub use job::{ROLLOUT_EPISODES, ROLLOUT_STEPS};
 pub use nets::{
     build_dolphin_emulator, build_emulator, build_emulators, build_spec, table1_emulator,
@@ -193,6 +194,7 @@ impl DolphinNets {
             steps,
             settings: self.training,
             seed: mix_seed(seed, fnv1a(format!("dolphin-n{steps}").as_bytes())),
+            global_transforms: crate::emulator::catalog::TransformSet::Full,
         }
     }
 }

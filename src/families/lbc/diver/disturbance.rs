@@ -1,0 +1,741 @@
+//! `lbc_dive_disturbance` (LBC §6.1): linear Bellman combination of the dive controllers against
+//! a stiff proportional-derivative dive controller under random pushes.
+//!
+//! The paper: "An important aspect of linear Bellman combination is that it uses less control
+//! than standard proportional derivative control … we added random forces to the diver. Using
+//! linear Bellman combination, one can see the effects of this added force and watch how the
+//! control compensates for it. With a standard proportional-derivative dive controller, the
+//! effects of the applied disturbances are not immediately visible, although the final outcome
+//! is altered. With PD control, disturbances are invisible even when the applied forces are
+//! scaled by a factor of four."
+//!
+//! - **LBC**: the three vertical dives of `lbc_diver_coordination` (take-off rates `omegas`,
+//!   torque-limited DDP, LQR trackers), combined with w = 1 at the noise model's λ.
+//! - **PD** (Wooten-style, ours): every joint servoed to the reference dive's joint angle and
+//!   rate at each instant (the `reference` component's DDP dive), no feedforward, gains
+//!   kp_j = limit_j / `pd.angle_at_limit` (the full torque at that error) and
+//!   kd_j = kp_j · `pd.damping_s`, torques clamped to the limits.
+//! - **Pushes**: `pushes.count` forces on the torso's centre of mass per trial, each
+//!   `pushes.duration` s long at a uniform time in `pushes.window`, of magnitude
+//!   `pushes.force_n` × U(0.5, 1) in a uniform direction (stream 100 + trial), scaled by each
+//!   of `force_scales`; the same pushes for both controllers.
+//! - **Closed loop**: both controllers evaluated every `substeps`-th of the dive's step (the
+//!   stiff PD needs it), RK4 on the diver with one force point.
+//!
+//! `disturbance.csv`: controller, force_scale, effort, deviation, final_error, trial,
+//! entry_change, max_torque_fraction. Effort = ∫ ½ uᵀRu dt (R the dives' control weight);
+//! deviation = RMS over the flight of the torso and joint angles' difference from the same
+//! controller's unpushed dive (rad: how visibly the motion reacts); final_error = |entry angle|
+//! from vertical (rad); entry_change = |entry angle − the unpushed dive's| (rad: whether the
+//! outcome is altered). Force scale 0 is each controller's unpushed dive (trial 0).
+
+use super::{DiveSettings, TORSO};
+use crate::bellman::combine::{BlendMode, TrackerBlend};
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, yes_no, Findings, Verdict};
+use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::{other, Error, Family, Job, RunContext};
+use crate::families::lbc::{film, rule_settings, rule_table};
+use crate::physics::diver::{diver, entry_angle};
+use crate::physics::planar::ForcePoint;
+use crate::physics::{Dynamics, IntegratorKind, Simulator};
+use crate::row;
+use nalgebra::DVector;
+use rand::Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The family.
+pub struct LbcDiveDisturbance;
+
+/// The PD controller's gains (ours).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PdGains {
+    /// Joint error at which the PD reaches its torque limit (rad).
+    pub angle_at_limit: f64,
+    /// kd / kp (s).
+    pub damping_s: f64,
+}
+
+/// The random pushes.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Pushes {
+    /// Pushes per trial.
+    pub count: usize,
+    /// Seconds each lasts.
+    pub duration: f64,
+    /// Largest force (N) at scale 1.
+    pub force_n: f64,
+    /// Start times are uniform in [window[0], window[1]] s.
+    pub window: [f64; 2],
+}
+
+/// The verdict's thresholds (ours).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DisturbanceRule {
+    /// LBC's motion reacts visibly: its mean deviation at scale 1 at least this multiple of
+    /// the PD's.
+    pub visible_ratio: f64,
+    /// The PD's outcome is altered: its mean entry change at the largest scale at least this
+    /// (rad).
+    pub outcome_change: f64,
+    /// The pushes are felt (premise): LBC's mean deviation at scale 1 at least this (rad).
+    pub felt: f64,
+}
+
+/// Parameters of `lbc_dive_disturbance`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DisturbanceParams {
+    /// Dive settings (`lbc_diver_coordination`'s).
+    pub dive: DiveSettings,
+    /// Take-off rates of the combined dives (rad/s).
+    pub omegas: Vec<f64>,
+    /// Which dive the PD tracks (0-based into `omegas`); every trial takes off at its rate.
+    pub reference: usize,
+    /// The PD's gains.
+    pub pd: PdGains,
+    /// The pushes.
+    pub pushes: Pushes,
+    /// Force scales (the paper's 1 and 4).
+    pub force_scales: Vec<f64>,
+    /// Trials (push sets) per scale.
+    pub trials: usize,
+    /// Closed-loop evaluations per dive step.
+    pub substeps: usize,
+    /// The verdict's thresholds.
+    pub rule: DisturbanceRule,
+}
+
+impl Validate for DisturbanceParams {
+    fn validate(&self) -> Result<(), ParamError> {
+        self.dive
+            .validate()
+            .map_err(|e| ParamError::new(format!("dive.{}", e.key), e.message))?;
+        ensure(self.omegas.len() >= 2, "omegas", "need at least two dives")?;
+        ensure(
+            self.reference < self.omegas.len(),
+            "reference",
+            "must index `omegas`",
+        )?;
+        positive("pd.angle_at_limit", self.pd.angle_at_limit)?;
+        positive("pd.damping_s", self.pd.damping_s)?;
+        let p = &self.pushes;
+        ensure(
+            (1..=100).contains(&p.count),
+            "pushes.count",
+            "must be 1 to 100",
+        )?;
+        positive("pushes.duration", p.duration)?;
+        positive("pushes.force_n", p.force_n)?;
+        ensure(
+            p.window[0] >= 0.0 && p.window[1] > p.window[0] && p.window[1] <= self.dive.horizon,
+            "pushes.window",
+            "must be an interval within the flight",
+        )?;
+        ensure(
+            !self.force_scales.is_empty()
+                && self.force_scales.iter().all(|s| s.is_finite() && *s > 0.0),
+            "force_scales",
+            "positive scales",
+        )?;
+        ensure(
+            (1..=1000).contains(&self.trials),
+            "trials",
+            "must be 1 to 1000",
+        )?;
+        ensure(
+            (1..=1000).contains(&self.substeps),
+            "substeps",
+            "must be 1 to 1000",
+        )?;
+        positive("rule.visible_ratio", self.rule.visible_ratio)?;
+        positive("rule.outcome_change", self.rule.outcome_change)?;
+        positive("rule.felt", self.rule.felt)?;
+        Ok(())
+    }
+}
+
+/// One push: (start s, duration s, force x N, force y N).
+type Push = (f64, f64, f64, f64);
+
+/// The pushes of trial `trial` at scale 1 (stream 100 + trial).
+fn pushes_of(ctx: &RunContext, p: &Pushes, trial: usize) -> Vec<Push> {
+    let mut rng = ctx.rng(100 + trial as u64);
+    (0..p.count)
+        .map(|_| {
+            let t = p.window[0] + (p.window[1] - p.window[0]) * rng.random::<f64>();
+            let mag = p.force_n * (0.5 + 0.5 * rng.random::<f64>());
+            let (s, c) = crate::portable::sin_cos(std::f64::consts::TAU * rng.random::<f64>());
+            (t, p.duration, mag * c, mag * s)
+        })
+        .collect()
+}
+
+/// Who controls the dive.
+enum Controller<'a> {
+    Lbc(&'a TrackerBlend<'a>),
+    /// Reference angles and rates per dive step, kp and kd per joint.
+    Pd(&'a [DVector<f64>], [f64; 6], [f64; 6]),
+}
+
+/// A dive: the state at every dive step, ∫½uᵀRu dt and the largest torque fraction.
+struct Flight {
+    states: Vec<Vec<f64>>,
+    effort: f64,
+    max_torque_fraction: f64,
+}
+
+/// The closed-loop dive from `x0` under `ctl` with `pushes` scaled by `scale` (module docs).
+fn fly(
+    d: &DiveSettings,
+    ctl: &Controller,
+    x0: &DVector<f64>,
+    pushes: &[Push],
+    scale: f64,
+    substeps: usize,
+) -> Result<Flight, Error> {
+    let mut tree = diver();
+    tree.forces = vec![ForcePoint {
+        link: 0,
+        offset: tree.links[0].com,
+    }];
+    let mut sim = Simulator::new(tree, IntegratorKind::Rk4);
+    let (steps, h) = (d.steps(), d.dt / substeps as f64);
+    let mut x: Vec<f64> = x0.iter().copied().collect();
+    let mut u = [0.0; 8];
+    let (mut tq, mut alpha, mut ui) = ([0.0; 6], vec![0.0; 8], [0.0; 6]);
+    let mut out = Flight {
+        states: vec![x.clone()],
+        effort: 0.0,
+        max_torque_fraction: 0.0,
+    };
+    for k in 0..steps {
+        for s in 0..substeps {
+            let t = (k as f64 + s as f64 / substeps as f64) * d.dt;
+            match ctl {
+                Controller::Lbc(b) => {
+                    alpha.resize(b.trackers.len(), 0.0);
+                    b.control(&x, k, &mut tq, &mut alpha, &mut ui)
+                        .map_err(|e| other(format!("LBC at step {k}: {e:?}")))?;
+                }
+                Controller::Pd(r, kp, kd) => {
+                    let f = s as f64 / substeps as f64;
+                    let (a, b) = (&r[k], &r[(k + 1).min(r.len() - 1)]);
+                    for j in 0..6 {
+                        let (qi, vi) = (3 + j, 12 + j);
+                        let q_ref = a[qi] + f * (b[qi] - a[qi]);
+                        let v_ref = a[vi] + f * (b[vi] - a[vi]);
+                        tq[j] = (kp[j] * (q_ref - x[qi]) - kd[j] * (x[vi] - v_ref))
+                            .clamp(-d.torque_limits[j], d.torque_limits[j]);
+                    }
+                }
+            }
+            u[..6].copy_from_slice(&tq);
+            let (mut fx, mut fy) = (0.0, 0.0);
+            for &(t0, dur, px, py) in pushes {
+                if t >= t0 && t < t0 + dur {
+                    fx += scale * px;
+                    fy += scale * py;
+                }
+            }
+            u[6] = fx;
+            u[7] = fy;
+            for (j, v) in tq.iter().enumerate() {
+                out.effort += h * 0.5 * d.control_weight * v * v;
+                out.max_torque_fraction = out.max_torque_fraction.max(v.abs() / d.torque_limits[j]);
+            }
+            sim.step(&mut x, &u, h);
+        }
+        crate::physics::check_finite("diver", k + 1, (k + 1) as f64 * d.dt, &x).map_err(other)?;
+        out.states.push(x.clone());
+    }
+    Ok(out)
+}
+
+/// RMS over the flight of the torso and joint angles of `a` minus `b` (rad).
+fn deviation(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
+    let (mut s, mut n) = (0.0, 0usize);
+    for (x, y) in a.iter().zip(b) {
+        for i in TORSO..9 {
+            s += (x[i] - y[i]).powi(2);
+            n += 1;
+        }
+    }
+    (s / n.max(1) as f64).sqrt()
+}
+
+impl Job for DisturbanceParams {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let d = &self.dive;
+        let cases: Vec<(f64, f64)> = self.omegas.iter().map(|&w| (w, 0.0)).collect();
+        let (sols, trackers, examples) = d.optimize_all(ctx, &cases)?;
+        let limits = d.torque_limits;
+        let blend = TrackerBlend {
+            trackers: &trackers,
+            weights: vec![1.0; trackers.len()],
+            lambda: d.lambda(),
+            limits: Some(&limits),
+            mode: BlendMode::Lbc,
+        };
+        let reference = &sols[self.reference].x;
+        let kp: [f64; 6] = std::array::from_fn(|j| limits[j] / self.pd.angle_at_limit);
+        let kd: [f64; 6] = std::array::from_fn(|j| kp[j] * self.pd.damping_s);
+        let x0 = d.takeoff(self.omegas[self.reference]);
+        let lbc = Controller::Lbc(&blend);
+        let pd = Controller::Pd(reference, kp, kd);
+        let ctls: [(&str, &Controller); 2] = [("lbc", &lbc), ("pd", &pd)];
+        let tree = diver();
+        let entry = |f: &Flight| entry_angle(&tree, &f.states[f.states.len() - 1][..9]);
+        let base: Vec<Flight> = ctls
+            .iter()
+            .map(|(_, c)| fly(d, c, &x0, &[], 0.0, self.substeps))
+            .collect::<Result<_, _>>()?;
+        let jobs: Vec<(usize, usize, usize)> = (0..ctls.len())
+            .flat_map(|c| {
+                (0..self.force_scales.len())
+                    .flat_map(move |s| (0..self.trials).map(move |t| (c, s, t)))
+            })
+            .collect();
+        let flights: Vec<Flight> = ctx.stage("pushed dives", || {
+            jobs.par_iter()
+                .map(|&(c, s, t)| {
+                    let pushes = pushes_of(ctx, &self.pushes, t);
+                    fly(
+                        d,
+                        ctls[c].1,
+                        &x0,
+                        &pushes,
+                        self.force_scales[s],
+                        self.substeps,
+                    )
+                })
+                .collect::<Result<_, _>>()
+        })?;
+        let mut table = Table::new(&[
+            "controller",
+            "force_scale",
+            "effort",
+            "deviation",
+            "final_error",
+            "trial",
+            "entry_change",
+            "max_torque_fraction",
+        ]);
+        for (c, (name, _)) in ctls.iter().enumerate() {
+            let b = &base[c];
+            table.push(row![
+                *name,
+                0.0,
+                b.effort,
+                0.0,
+                entry(b).abs(),
+                0_i64,
+                0.0,
+                b.max_torque_fraction
+            ]);
+        }
+        for (&(c, s, t), f) in jobs.iter().zip(&flights) {
+            let b = &base[c];
+            table.push(row![
+                ctls[c].0,
+                self.force_scales[s],
+                f.effort,
+                deviation(&f.states, &b.states),
+                entry(f).abs(),
+                t as i64,
+                (entry(f) - entry(b)).abs(),
+                f.max_torque_fraction
+            ]);
+        }
+        // Motion of both controllers, unpushed and under trial 0's pushes at every scale, for
+        // the figure and the GIF.
+        let mut cols = vec!["controller".to_string(), "force_scale".into(), "t".into()];
+        cols.extend((0..9).map(|i| format!("q{i}")));
+        let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
+        let mut motion = Table::new(&cols);
+        for (c, (name, _)) in ctls.iter().enumerate() {
+            let mut runs: Vec<(f64, &Flight)> = vec![(0.0, &base[c])];
+            for (s, &scale) in self.force_scales.iter().enumerate() {
+                let i = jobs.iter().position(|&j| j == (c, s, 0)).expect("trial 0");
+                runs.push((scale, &flights[i]));
+            }
+            for (scale, f) in runs {
+                for (k, x) in f.states.iter().enumerate() {
+                    let mut r = row![*name, scale, k as f64 * d.dt];
+                    r.extend(x[..9].iter().map(|&v| v.into()));
+                    motion.push(r);
+                }
+            }
+        }
+        let mut pushes = Table::new(&["trial", "start_s", "duration_s", "force_x_n", "force_y_n"]);
+        for t in 0..self.trials {
+            for (t0, dur, fx, fy) in pushes_of(ctx, &self.pushes, t) {
+                pushes.push(row![t as i64, t0, dur, fx, fy]);
+            }
+        }
+        let r = &self.rule;
+        let rule = rule_table(&[
+            ("visible_ratio", r.visible_ratio),
+            ("outcome_change", r.outcome_change),
+            ("felt", r.felt),
+            ("lambda", d.lambda()),
+            ("angle_at_limit", self.pd.angle_at_limit),
+            (
+                "largest_scale",
+                self.force_scales.iter().cloned().fold(0.0, f64::max),
+            ),
+        ]);
+        Ok(Tables::from([
+            ("disturbance", table),
+            ("dives", examples),
+            ("motion", motion),
+            ("pushes", pushes),
+            ("rule", rule),
+        ]))
+    }
+}
+
+/// Means over trials of (effort, deviation, final_error, entry_change) per (controller, scale).
+fn means(dir: &Path) -> Result<Vec<(String, f64, [f64; 4])>, Error> {
+    let t = read_csv(&dir.join("disturbance.csv"))?;
+    let (c, s) = (df_str(&t, "controller")?, df_f64(&t, "force_scale")?);
+    let cols = [
+        df_f64(&t, "effort")?,
+        df_f64(&t, "deviation")?,
+        df_f64(&t, "final_error")?,
+        df_f64(&t, "entry_change")?,
+    ];
+    let mut out: Vec<(String, f64, [f64; 4], usize)> = Vec::new();
+    for i in 0..c.len() {
+        match out.iter_mut().find(|o| o.0 == c[i] && o.1 == s[i]) {
+            Some(o) => {
+                for k in 0..4 {
+                    o.2[k] += cols[k][i];
+                }
+                o.3 += 1;
+            }
+            None => out.push((c[i].clone(), s[i], std::array::from_fn(|k| cols[k][i]), 1)),
+        }
+    }
+    Ok(out
+        .into_iter()
+        .map(|(c, s, v, n)| (c, s, v.map(|x| x / n as f64)))
+        .collect())
+}
+
+/// The rule's checks from the means: (premise: the pushes are felt by LBC; a: LBC uses less
+/// control than PD, unpushed and at scale 1; b: LBC's motion reacts at least `visible_ratio`
+/// times PD's at scale 1; c: PD's deviation at the largest scale stays below LBC's at scale 1
+/// while PD's outcome moves by at least `outcome_change`).
+pub fn disturbance_checks(
+    m: &[(String, f64, [f64; 4])],
+    largest: f64,
+    visible_ratio: f64,
+    outcome_change: f64,
+    felt: f64,
+) -> Option<(bool, bool, bool, bool)> {
+    let get = |c: &str, s: f64| m.iter().find(|o| o.0 == c && o.1 == s).map(|o| o.2);
+    let (l0, p0, l1, p1, pl) = (
+        get("lbc", 0.0)?,
+        get("pd", 0.0)?,
+        get("lbc", 1.0)?,
+        get("pd", 1.0)?,
+        get("pd", largest)?,
+    );
+    let premise = l1[1] >= felt;
+    let a = l0[0] < p0[0] && l1[0] < p1[0];
+    let b = l1[1] >= visible_ratio * p1[1];
+    let c = pl[1] < l1[1] && pl[3] >= outcome_change;
+    Some((premise, a, b, c))
+}
+
+impl Family for LbcDiveDisturbance {
+    const KIND: &'static str = "lbc_dive_disturbance";
+    type Params = DisturbanceParams;
+    const CAPTIONS: &'static [(&'static str, &'static str)] = &[
+        (
+            "measures",
+            "per controller and force scale (0: unpushed), the mean over trials of the control effort ∫½uᵀRu dt, the deviation of the torso and joint angles from the same controller's unpushed dive (RMS, rad) and the entry's change (rad).",
+        ),
+        (
+            "torso",
+            "the torso angle over the flight of each controller, unpushed and under trial 0's pushes at each scale; dashed: when each of trial 0's pushes starts.",
+        ),
+        (
+            "dives",
+            "from the left: LBC under trial 0's pushes at scale 1, LBC unpushed (grey), PD under the same pushes, PD unpushed (grey).",
+        ),
+    ];
+
+    fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+        let t = tables.require("disturbance")?;
+        let (c, s) = (t.strs("controller"), t.f64s("force_scale"));
+        let mut scales: Vec<f64> = s.clone();
+        scales.sort_by(f64::total_cmp);
+        scales.dedup();
+        let x_of = |v: f64| scales.iter().position(|&x| x == v).unwrap_or(0) as f64;
+        let panel = |col: &str, title: &str, y: &str| {
+            let v = t.f64s(col);
+            let series = ["lbc", "pd"]
+                .iter()
+                .enumerate()
+                .map(|(k, name)| {
+                    let pts: Vec<(f64, f64)> = scales
+                        .iter()
+                        .map(|&sc| {
+                            let vals: Vec<f64> = (0..c.len())
+                                .filter(|&i| c[i] == *name && s[i] == sc)
+                                .map(|i| v[i])
+                                .collect();
+                            (
+                                x_of(sc),
+                                vals.iter().sum::<f64>() / vals.len().max(1) as f64,
+                            )
+                        })
+                        .collect();
+                    Series::line(name.to_uppercase(), pts, k).mark(Mark::LinePoints)
+                })
+                .collect();
+            Panel {
+                title: title.into(),
+                x_label: "force scale (0: unpushed)".into(),
+                y_label: y.into(),
+                series,
+                x_categories: scales.iter().map(|v| format!("{v}")).collect(),
+                x_range: Some((-0.5, scales.len() as f64 - 0.5)),
+                legend: Legend::UpperLeft,
+                ..Panel::default()
+            }
+        };
+        let mut files = fig.draw(
+            "measures",
+            &Figure::grid(
+                vec![
+                    panel("effort", "control effort", "∫½uᵀRu dt"),
+                    panel(
+                        "deviation",
+                        "motion's deviation from the unpushed dive",
+                        "RMS angle difference (rad)",
+                    ),
+                    panel(
+                        "entry_change",
+                        "change of the entry angle",
+                        "|Δ entry| (rad)",
+                    ),
+                ],
+                3,
+            ),
+        )?;
+        let m = tables.require("motion")?;
+        let (mc, ms, mt, q2) = (
+            m.strs("controller"),
+            m.f64s("force_scale"),
+            m.f64s("t"),
+            m.f64s("q2"),
+        );
+        let mut mscales = ms.clone();
+        mscales.sort_by(f64::total_cmp);
+        mscales.dedup();
+        // Trial 0's pushes, as vertical lines over the torso angles' range.
+        let p = tables.require("pushes")?;
+        let (pt, ps) = (p.f64s("trial"), p.f64s("start_s"));
+        let (lo, hi) = q2
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        let panels: Vec<Panel> = ["lbc", "pd"]
+            .iter()
+            .map(|name| {
+                let mut series: Vec<Series> = mscales
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &sc)| {
+                        let pts = (0..mc.len())
+                            .filter(|&i| mc[i] == *name && ms[i] == sc)
+                            .map(|i| (mt[i], q2[i]))
+                            .collect();
+                        let label = if sc == 0.0 {
+                            "unpushed".to_string()
+                        } else {
+                            format!("pushes ×{sc}")
+                        };
+                        Series::line(label, pts, k)
+                    })
+                    .collect();
+                for (n, i) in (0..pt.len()).filter(|&i| pt[i] == 0.0).enumerate() {
+                    let label = if n == 0 { "a push starts" } else { "" };
+                    series.push(
+                        Series::line(label, vec![(ps[i], lo), (ps[i], hi)], 7).mark(Mark::Dashed),
+                    );
+                }
+                Panel {
+                    title: format!("{}: torso angle", name.to_uppercase()),
+                    x_label: "t (s)".into(),
+                    y_label: "torso angle (rad)".into(),
+                    series,
+                    legend: Legend::UpperLeft,
+                    ..Panel::default()
+                }
+            })
+            .collect();
+        files.extend(fig.draw("torso", &Figure::grid(panels, 2))?);
+        // GIF: both controllers under scale 1, each beside its unpushed dive.
+        let tree = diver();
+        let q: Vec<Vec<f64>> = (0..9).map(|i| m.f64s(&format!("q{i}"))).collect();
+        let rows = |name: &str, sc: f64| -> Vec<usize> {
+            (0..mc.len())
+                .filter(|&i| mc[i] == name && ms[i] == sc)
+                .collect()
+        };
+        let mut dives = Vec::new();
+        let qs: Vec<Vec<f64>> = (0..mc.len())
+            .map(|i| (0..9).map(|k| q[k][i]).collect())
+            .collect();
+        for (k, (name, label)) in [("lbc", "LBC, pushed ×1"), ("pd", "PD, pushed ×1")]
+            .iter()
+            .enumerate()
+        {
+            for (sc, lab, color) in [
+                (1.0, label.to_string(), k),
+                (0.0, format!("{} unpushed", name.to_uppercase()), 7),
+            ] {
+                let r = rows(name, sc);
+                if r.is_empty() {
+                    continue;
+                }
+                dives.push(film::Dive {
+                    label: lab,
+                    color,
+                    t: r.iter().map(|&i| mt[i]).collect(),
+                    q: r.iter().map(|&i| qs[i].as_slice()).collect(),
+                });
+            }
+        }
+        if !dives.is_empty() {
+            let frames =
+                film::diver_frames(&tree, &dives, 1.5, "Random pushes: LBC reacts, PD does not");
+            files.push(fig.gif("dives", &frames, film::GIF_DELAY_CS)?);
+        }
+        Ok(files)
+    }
+
+    fn report(&self, dir: &Path) -> Result<Findings, Error> {
+        let rule = rule_settings(dir)?;
+        let m = means(dir)?;
+        let largest = rule("largest_scale");
+        let mut md = String::from("Means over the trials (force scale 0: the unpushed dive):\n\n| controller | force scale | effort ∫½uᵀRu dt | deviation (rad) | entry error (rad) | entry change (rad) |\n| --- | --- | --- | --- | --- | --- |\n");
+        for (c, s, v) in &m {
+            md.push_str(&format!(
+                "| {c} | {} | {} | {} | {} | {} |\n",
+                sig(*s),
+                sig(v[0]),
+                sig(v[1]),
+                sig(v[2]),
+                sig(v[3])
+            ));
+        }
+        let checks = disturbance_checks(
+            &m,
+            largest,
+            rule("visible_ratio"),
+            rule("outcome_change"),
+            rule("felt"),
+        );
+        let Some((premise, a, b, c)) = checks else {
+            return Ok(Findings {
+                ours: md,
+                verdict: Verdict::NotAssessed,
+                why: "The run lacks the unpushed or the scale-1 rows the rule reads.".into(),
+            });
+        };
+        let get = |c: &str, s: f64| {
+            m.iter()
+                .find(|o| o.0 == c && o.1 == s)
+                .map_or([f64::NAN; 4], |o| o.2)
+        };
+        let (l0, p0, l1, p1, pl) = (
+            get("lbc", 0.0),
+            get("pd", 0.0),
+            get("lbc", 1.0),
+            get("pd", 1.0),
+            get("pd", largest),
+        );
+        let verdict = Verdict::graded(a && b && c, a && b).given(premise);
+        let why = format!(
+            "LBC's control effort {le0} unpushed and {le1} under pushes against PD's {pe0} and {pe1}; its motion deviates {ld} rad (RMS) from its unpushed dive under pushes ×1 against PD's {pd1} rad, and PD's at ×{lg} {pdl} rad while its entry moves {pch} rad. Premise (the pushes are felt: LBC's mean deviation at ×1 at least {felt} rad): {pr}. (a) LBC uses less control than PD, unpushed and at ×1: {a}. (b) LBC's motion reacts at least {vr}x PD's at ×1: {b}. (c) PD's motion at ×{lg} deviates less than LBC's at ×1 while its entry moves at least {oc} rad: {c}. Held: (a), (b), (c); partly: (a) and (b). Rule and thresholds fixed in the spec before the run (ours); PD gains ours (full torque at {al} rad).",
+            le0 = sig(l0[0]),
+            le1 = sig(l1[0]),
+            pe0 = sig(p0[0]),
+            pe1 = sig(p1[0]),
+            ld = sig(l1[1]),
+            pd1 = sig(p1[1]),
+            lg = sig(largest),
+            pdl = sig(pl[1]),
+            pch = sig(pl[3]),
+            felt = sig(rule("felt")),
+            pr = yes_no(Some(premise)),
+            a = yes_no(Some(a)),
+            vr = sig(rule("visible_ratio")),
+            b = yes_no(Some(b)),
+            oc = sig(rule("outcome_change")),
+            c = yes_no(Some(c)),
+            al = sig(rule("angle_at_limit")),
+        );
+        Ok(Findings {
+            ours: md,
+            verdict,
+            why,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn m(rows: &[(&str, f64, [f64; 4])]) -> Vec<(String, f64, [f64; 4])> {
+        rows.iter().map(|r| (r.0.to_string(), r.1, r.2)).collect()
+    }
+
+    #[test]
+    fn the_rule_reads_effort_visibility_and_outcome() {
+        // The paper's story: LBC cheaper and visibly pushed, PD stiff but its entry altered.
+        let story = m(&[
+            ("lbc", 0.0, [1.0, 0.0, 0.01, 0.0]),
+            ("pd", 0.0, [5.0, 0.0, 0.02, 0.0]),
+            ("lbc", 1.0, [1.2, 0.05, 0.02, 0.01]),
+            ("pd", 1.0, [5.5, 0.005, 0.03, 0.01]),
+            ("pd", 4.0, [6.0, 0.02, 0.06, 0.04]),
+        ]);
+        assert_eq!(
+            disturbance_checks(&story, 4.0, 2.0, 0.01, 0.01),
+            Some((true, true, true, true))
+        );
+        // PD visibly pushed at ×4: (c) fails; PD cheaper: (a) fails.
+        let mut other = story.clone();
+        other[4].2[1] = 0.2;
+        other[1].2[0] = 0.5;
+        assert_eq!(
+            disturbance_checks(&other, 4.0, 2.0, 0.01, 0.01),
+            Some((true, false, true, false))
+        );
+        // Pushes too weak to be felt: the premise fails.
+        assert_eq!(
+            disturbance_checks(&story, 4.0, 2.0, 0.01, 0.1).unwrap().0,
+            false
+        );
+        // Missing rows: nothing to judge.
+        assert_eq!(disturbance_checks(&story[..2], 4.0, 2.0, 0.01, 0.01), None);
+    }
+}

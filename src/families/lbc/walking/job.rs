@@ -1,0 +1,482 @@
+//! The run of `lbc_walking`: the hill walker's search, the two gaits' value functions, the
+//! walks of every controller on every terrain, the temperature sweep.
+
+use super::Params;
+use crate::control::gait_value::GaitCycle;
+use crate::control::simbicon::{applet_start, fallen, Gait, Simbicon};
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::{other, Error, Job, RunContext};
+use crate::families::lbc::rule_table;
+use crate::physics::biped::{Biped, Contact, Terrain, DOF, TORQUES};
+use crate::physics::{Dynamics, IntegratorKind, Model, Simulator};
+use crate::row;
+use rayon::prelude::*;
+
+/// Who drives the body.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum Driver {
+    /// The flat walker alone.
+    Flat,
+    /// The hill walker alone.
+    Hill,
+    /// Both walkers' torques averaged with weights ½, ½.
+    Naive,
+    /// LBC at temperature λ.
+    Lbc(f64),
+}
+
+impl Driver {
+    fn name(self) -> &'static str {
+        match self {
+            Driver::Flat => "flat",
+            Driver::Hill => "hill",
+            Driver::Naive => "naive",
+            Driver::Lbc(_) => "lbc",
+        }
+    }
+}
+
+/// What a walk did.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Walk {
+    /// Pelvis x advance (m) up to the end or the fall.
+    pub distance: f64,
+    /// When it fell (s).
+    pub fell_at: Option<f64>,
+    /// Heel strikes of the (first) state machine.
+    pub steps: usize,
+    /// Seconds walked (to the fall or the end).
+    pub seconds: f64,
+    /// Every `sample_dt`: (t, state, α_hill, v_flat, v_hill); α_hill is the hill walker's
+    /// weight (0 or 1 alone, ½ naive).
+    pub samples: Vec<(f64, Vec<f64>, f64, f64, f64)>,
+}
+
+/// The two walkers and their gaits' value functions (needed by LBC only).
+pub(super) struct Walkers<'a> {
+    pub flat: &'a Gait,
+    pub hill: &'a Gait,
+    pub cycles: Option<(&'a GaitCycle, &'a GaitCycle)>,
+}
+
+/// LBC's weight of the hill walker: exp(−v_hill/λ) / (exp(−v_flat/λ) + exp(−v_hill/λ)).
+pub fn lbc_weight(v_flat: f64, v_hill: f64, lambda: f64) -> f64 {
+    let m = v_flat.min(v_hill);
+    let (zf, zh) = (
+        (-(v_flat - m) / lambda).exp(),
+        (-(v_hill - m) / lambda).exp(),
+    );
+    zh / (zf + zh)
+}
+
+/// Walks `driver` on `terrain` from the applet's start for `seconds`, stopping at a fall;
+/// samples every `sample_dt`.
+pub(super) fn walk(
+    p: &Params,
+    w: &Walkers,
+    terrain: Terrain,
+    driver: Driver,
+    seconds: f64,
+    sample_dt: f64,
+) -> Result<Walk, Error> {
+    let b = Biped::new(terrain, Contact::default());
+    let dt = b.default_dt();
+    let mut sim = Simulator::new(b.clone(), IntegratorKind::Rk4);
+    let mut x = applet_start(&b, 0.0);
+    let x0 = x[0];
+    let (mut cf, mut ch) = (
+        Simbicon::new(w.flat.clone(), 0),
+        Simbicon::new(w.hill.clone(), 0),
+    );
+    let (mut uf, mut uh, mut u) = ([0.0; TORQUES], [0.0; TORQUES], [0.0; TORQUES]);
+    let steps = (seconds / dt).round() as usize;
+    let every = ((p.blend_every_s / dt).round() as usize).max(1);
+    let sample = ((sample_dt / dt).round() as usize).max(1);
+    let (mut alpha, mut vf, mut vh) = (
+        match driver {
+            Driver::Flat => 0.0,
+            Driver::Hill => 1.0,
+            Driver::Naive | Driver::Lbc(_) => 0.5,
+        },
+        f64::NAN,
+        f64::NAN,
+    );
+    let mut samples = Vec::new();
+    let mut fell_at = None;
+    let mut k_end = steps;
+    for k in 0..steps {
+        let uses_flat = driver != Driver::Hill;
+        let uses_hill = driver != Driver::Flat;
+        if uses_flat {
+            cf.control(&b, &x, dt, &mut uf);
+        }
+        if uses_hill {
+            ch.control(&b, &x, dt, &mut uh);
+        }
+        if k % every == 0 {
+            if let Driver::Lbc(lambda) = driver {
+                let (fc, hc) = w
+                    .cycles
+                    .ok_or_else(|| other("lbc_walking: LBC needs the gaits' value functions"))?;
+                vf = fc.value(&b, &x, cf.left_stance()).0;
+                vh = hc.value(&b, &x, ch.left_stance()).0;
+                alpha = lbc_weight(vf, vh, lambda);
+            }
+        }
+        if k % sample == 0 {
+            samples.push((k as f64 * dt, x.clone(), alpha, vf, vh));
+        }
+        for i in 0..TORQUES {
+            u[i] = (1.0 - alpha) * uf[i] + alpha * uh[i];
+        }
+        sim.step(&mut x, &u, dt);
+        let t = (k + 1) as f64 * dt;
+        crate::physics::check_finite("biped", k + 1, t, &x).map_err(other)?;
+        if fallen(&b, &x) {
+            fell_at = Some(t);
+            k_end = k + 1;
+            break;
+        }
+    }
+    Ok(Walk {
+        distance: x[0] - x0,
+        fell_at,
+        steps: if driver == Driver::Hill {
+            ch.steps
+        } else {
+            cf.steps
+        },
+        seconds: k_end as f64 * dt,
+        samples,
+    })
+}
+
+/// The hill walker of grid offsets (torso, swing hip): `flat` with both states' targets moved.
+pub fn hill_gait(flat: &Gait, torso: f64, hip: f64) -> Gait {
+    let mut g = flat.clone();
+    for s in g.states.iter_mut() {
+        s.torso += torso;
+        s.swing_hip += hip;
+    }
+    g
+}
+
+/// The grid point the rule picks: the furthest walk without a fall, the first in grid order on
+/// ties; `None` when every point fell.
+pub fn choose_hill(results: &[(f64, bool)]) -> Option<usize> {
+    let mut best: Option<usize> = None;
+    for (i, &(d, fell)) in results.iter().enumerate() {
+        if !fell && best.is_none_or(|b| d > results[b].0) {
+            best = Some(i);
+        }
+    }
+    best
+}
+
+/// The temperature the rule picks: the smallest whose LBC walks every terrain without falling
+/// (`walked[i]` for `lambdas[i]`), else the largest (and the verdict's walk check fails).
+pub fn choose_lambda(walked: &[bool]) -> usize {
+    walked
+        .iter()
+        .position(|&w| w)
+        .unwrap_or(walked.len().saturating_sub(1))
+}
+
+/// Mean α_hill over the samples whose pelvis is at most `before` (flat part) and at least
+/// `after` (hill part) along x; NaN for a part never reached.
+pub fn part_means(
+    samples: &[(f64, Vec<f64>, f64, f64, f64)],
+    before: f64,
+    after: f64,
+) -> (f64, f64) {
+    let mean = |f: &dyn Fn(f64) -> bool| {
+        let v: Vec<f64> = samples.iter().filter(|s| f(s.1[0])).map(|s| s.2).collect();
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    (mean(&|x| x <= before), mean(&|x| x >= after))
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let incline = Terrain::Slope {
+            degrees: self.incline_degrees,
+        };
+        // 1. The hill walker: the grid's furthest walk up the incline.
+        let s = &self.hill_search;
+        let grid: Vec<(f64, f64)> = s
+            .torso_offsets
+            .iter()
+            .flat_map(|&t| s.hip_offsets.iter().map(move |&h| (t, h)))
+            .collect();
+        let results: Vec<(f64, bool)> = ctx.stage("hill walker search", || {
+            grid.par_iter()
+                .map(|&(t, h)| -> Result<(f64, bool), Error> {
+                    let g = hill_gait(&self.flat_gait, t, h);
+                    let alone = Walkers {
+                        flat: &g,
+                        hill: &g,
+                        cycles: None,
+                    };
+                    let r = walk(self, &alone, incline, Driver::Flat, s.seconds, s.seconds)?;
+                    Ok((r.distance, r.fell_at.is_some()))
+                })
+                .collect::<Result<_, _>>()
+        })?;
+        let chosen = choose_hill(&results).ok_or_else(|| {
+            other("lbc_walking: every hill walker of the grid fell on the incline")
+        })?;
+        let mut search =
+            Table::new(&["torso_offset", "hip_offset", "distance_m", "fell", "chosen"]);
+        for (i, (&(t, h), &(d, f))) in grid.iter().zip(&results).enumerate() {
+            search.push(row![t, h, d, i64::from(f), i64::from(i == chosen)]);
+        }
+        let hill = hill_gait(&self.flat_gait, grid[chosen].0, grid[chosen].1);
+        // 2. Each walker's gait on its own ground and its value function.
+        let cycles: Vec<GaitCycle> = ctx.stage("gaits and value functions", || {
+            [(&self.flat_gait, Terrain::Flat), (&hill, incline)]
+                .par_iter()
+                .map(|(g, t)| {
+                    GaitCycle::record(
+                        &Biped::new(*t, Contact::default()),
+                        g,
+                        &self.cost,
+                        self.warmup_s,
+                        self.knot_dt,
+                        self.horizon_s,
+                    )
+                    .map_err(other)
+                })
+                .collect::<Result<_, _>>()
+        })?;
+        let mut cyc = Table::new(&[
+            "walker",
+            "terrain",
+            "knots",
+            "half_period_s",
+            "speed_m_s",
+            "horizon_knots",
+        ]);
+        for (name, terrain, c) in [
+            ("flat", "flat", &cycles[0]),
+            ("hill", "incline", &cycles[1]),
+        ] {
+            cyc.push(row![
+                name,
+                terrain,
+                c.z.len(),
+                c.half_period,
+                c.speed,
+                c.horizon
+            ]);
+        }
+        let walkers = Walkers {
+            flat: &self.flat_gait,
+            hill: &hill,
+            cycles: Some((&cycles[0], &cycles[1])),
+        };
+        let terrains = self.terrains();
+        let track_split = (
+            self.hill_start_m - self.rule.margin_m,
+            self.hill_start_m + self.rule.margin_m,
+        );
+        // 3. LBC at every temperature on every terrain.
+        let jobs: Vec<(usize, usize)> = (0..self.lambdas.len())
+            .flat_map(|l| (0..terrains.len()).map(move |t| (l, t)))
+            .collect();
+        let sweep: Vec<Walk> = ctx.stage("LBC temperature sweep", || {
+            jobs.par_iter()
+                .map(|&(l, t)| {
+                    walk(
+                        self,
+                        &walkers,
+                        terrains[t].1,
+                        Driver::Lbc(self.lambdas[l]),
+                        self.walk_s,
+                        self.knot_dt,
+                    )
+                })
+                .collect::<Result<_, _>>()
+        })?;
+        let mut lambda_t = Table::new(&[
+            "lambda",
+            "terrain",
+            "distance_m",
+            "fell",
+            "alpha_hill_flat_part",
+            "alpha_hill_hill_part",
+        ]);
+        let mut walked = vec![true; self.lambdas.len()];
+        for (&(l, t), r) in jobs.iter().zip(&sweep) {
+            walked[l] &= r.fell_at.is_none();
+            let (af, ah) = if terrains[t].0 == "flat_then_hill" {
+                part_means(&r.samples, track_split.0, track_split.1)
+            } else {
+                (f64::NAN, f64::NAN)
+            };
+            lambda_t.push(row![
+                self.lambdas[l],
+                terrains[t].0,
+                r.distance,
+                i64::from(r.fell_at.is_some()),
+                af,
+                ah
+            ]);
+        }
+        let li = choose_lambda(&walked);
+        let lambda = self.lambdas[li];
+        // 4. Every controller on every terrain (LBC's walks are the sweep's at the chosen λ).
+        let drivers = [Driver::Flat, Driver::Hill, Driver::Naive];
+        let alone_jobs: Vec<(usize, usize)> = (0..terrains.len())
+            .flat_map(|t| (0..drivers.len()).map(move |d| (t, d)))
+            .collect();
+        let alone: Vec<Walk> = ctx.stage("walks", || {
+            alone_jobs
+                .par_iter()
+                .map(|&(t, d)| {
+                    walk(
+                        self,
+                        &walkers,
+                        terrains[t].1,
+                        drivers[d],
+                        self.walk_s,
+                        self.gif_frame_s.min(self.knot_dt),
+                    )
+                })
+                .collect::<Result<_, _>>()
+        })?;
+        let mut walks = Table::new(&[
+            "terrain",
+            "controller",
+            "distance_m",
+            "fell",
+            "mean_speed_m_s",
+            "steps",
+            "fell_at_s",
+            "lambda",
+        ]);
+        let mut push_walk = |terrain: &str, d: Driver, r: &Walk| {
+            let l = match d {
+                Driver::Lbc(l) => l,
+                _ => f64::NAN,
+            };
+            walks.push(row![
+                terrain,
+                d.name(),
+                r.distance,
+                i64::from(r.fell_at.is_some()),
+                r.distance / r.seconds.max(1e-9),
+                r.steps,
+                r.fell_at.unwrap_or(f64::NAN),
+                l
+            ]);
+        };
+        for (t, (name, _)) in terrains.iter().enumerate() {
+            for (d, &driver) in drivers.iter().enumerate() {
+                push_walk(name, driver, &alone[t * drivers.len() + d]);
+            }
+            push_walk(name, Driver::Lbc(lambda), &sweep[li * terrains.len() + t]);
+        }
+        // 5. LBC's weights and values over time at the chosen λ.
+        let mut weights = Table::new(&[
+            "terrain",
+            "t",
+            "x",
+            "slope_deg",
+            "alpha_flat",
+            "alpha_hill",
+            "v_flat",
+            "v_hill",
+        ]);
+        for (t, (name, terrain)) in terrains.iter().enumerate() {
+            for (time, x, a, vf, vh) in &sweep[li * terrains.len() + t].samples {
+                let slope = terrain.height_slope(x[0]).1.atan().to_degrees();
+                weights.push(row![*name, *time, x[0], slope, 1.0 - a, *a, *vf, *vh]);
+            }
+        }
+        // 6. The flat-then-hill walks of LBC and the flat walker, for the animation.
+        let mut motion_cols = vec!["controller".to_string(), "t".into(), "alpha_hill".into()];
+        motion_cols.extend((0..DOF).map(|i| format!("q{i}")));
+        let cols: Vec<&str> = motion_cols.iter().map(String::as_str).collect();
+        let mut motion = Table::new(&cols);
+        let track = terrains.len() - 1;
+        let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
+        for (name, r) in [
+            ("lbc", &sweep[li * terrains.len() + track]),
+            ("flat", &alone[track * drivers.len()]),
+        ] {
+            for (time, x, a, _, _) in r.samples.iter().step_by(frame) {
+                let mut row = row![name, *time, *a];
+                row.extend(x[..DOF].iter().map(|&v| v.into()));
+                motion.push(row);
+            }
+        }
+        let r = &self.rule;
+        let rule = rule_table(&[
+            ("lambda", lambda),
+            ("advance_fraction", r.advance_fraction),
+            ("climb_m", r.climb_m),
+            ("shift", r.shift),
+            ("margin_m", r.margin_m),
+            ("hill_start_m", self.hill_start_m),
+            ("incline_degrees", self.incline_degrees),
+            ("walk_s", self.walk_s),
+            ("knot_dt", self.knot_dt),
+            ("horizon_s", cycles[0].horizon as f64 * self.knot_dt),
+            ("hill_torso_offset", grid[chosen].0),
+            ("hill_hip_offset", grid[chosen].1),
+        ]);
+        Ok(Tables::from([
+            ("search", search),
+            ("cycles", cyc),
+            ("walks", walks),
+            ("weights", weights),
+            ("lambda_sweep", lambda_t),
+            ("motion", motion),
+            ("rule", rule),
+        ]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lbc_weights_follow_the_lower_value_and_lambda_softens_them() {
+        assert!((lbc_weight(1.0, 1.0, 0.5) - 0.5).abs() < 1e-15);
+        assert!(lbc_weight(10.0, 1.0, 1.0) > 0.999);
+        assert!(lbc_weight(1.0, 10.0, 1.0) < 0.001);
+        // Large values do not overflow: only differences count.
+        assert!((lbc_weight(1e6, 1e6 + 1.0, 1.0) - 1.0 / (1.0 + 1f64.exp())).abs() < 1e-12);
+        // A hotter temperature pulls the weight toward ½.
+        assert!(lbc_weight(1.0, 3.0, 10.0) > lbc_weight(1.0, 3.0, 1.0));
+        assert!(lbc_weight(1.0, 3.0, 10.0) < 0.5);
+    }
+
+    #[test]
+    fn the_rules_choose_the_furthest_standing_walker_and_the_coolest_walking_lambda() {
+        assert_eq!(
+            choose_hill(&[(5.0, true), (2.0, false), (3.0, false), (3.0, false)]),
+            Some(2)
+        );
+        assert_eq!(choose_hill(&[(5.0, true)]), None);
+        assert_eq!(choose_lambda(&[false, true, true]), 1);
+        assert_eq!(choose_lambda(&[false, false]), 1);
+        let s = |x: f64, a: f64| (0.0, vec![x], a, 0.0, 0.0);
+        let (f, h) = part_means(
+            &[s(0.0, 0.1), s(1.0, 0.3), s(5.0, 0.9), s(2.5, 0.5)],
+            2.0,
+            3.0,
+        );
+        assert!((f - 0.2).abs() < 1e-15 && (h - 0.9).abs() < 1e-15);
+        assert!(part_means(&[s(0.0, 0.1)], 2.0, 3.0).1.is_nan());
+    }
+}

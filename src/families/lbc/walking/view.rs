@@ -1,0 +1,552 @@
+//! `lbc_walking`'s figures, animation, verdict and report section.
+
+use super::job::part_means;
+use crate::experiment::output::{df_f64, df_str, read_csv, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, yes_no, Findings, Verdict};
+use crate::experiment::Error;
+use crate::families::lbc::film::{fitted, GIF_FRAME_DT};
+use crate::families::lbc::{rule_setting, rule_settings};
+use crate::physics::biped::{Biped, Contact, Terrain, DOF, FOOT_HEEL, FOOT_TOE};
+use std::path::{Path, PathBuf};
+
+const TERRAINS: [&str; 3] = ["flat", "incline", "flat_then_hill"];
+const CONTROLLERS: [&str; 4] = ["flat", "hill", "naive", "lbc"];
+
+/// What the rule reads from a run (module docs of the family).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WalkingFacts {
+    /// The flat walker on the incline: (distance m, fell).
+    pub flat_on_incline: (f64, bool),
+    /// The hill walker on the incline: (distance m, fell).
+    pub hill_on_incline: (f64, bool),
+    /// LBC on the flat-then-hill track: (distance m, fell).
+    pub lbc_on_track: (f64, bool),
+    /// LBC's mean α_hill on the track's flat and hill parts.
+    pub alpha_flat_part: f64,
+    /// (see `alpha_flat_part`)
+    pub alpha_hill_part: f64,
+}
+
+/// The rule's checks: (premise, a: LBC climbs the track, b: its weights shift, c: the flat
+/// walker does not fall on the incline), with the thresholds `advance_fraction`, the distance
+/// LBC must reach (`hill_start + climb`) and `shift`.
+pub fn checks(
+    f: &WalkingFacts,
+    advance_fraction: f64,
+    reach_m: f64,
+    shift: f64,
+) -> (bool, bool, bool, bool) {
+    let premise = !f.hill_on_incline.1
+        && f.hill_on_incline.0 > 0.0
+        && (f.flat_on_incline.1 || f.flat_on_incline.0 < advance_fraction * f.hill_on_incline.0);
+    let a = !f.lbc_on_track.1 && f.lbc_on_track.0 >= reach_m;
+    let b = f.alpha_hill_part >= 0.5 && f.alpha_hill_part - f.alpha_flat_part >= shift;
+    let c = !f.flat_on_incline.1;
+    (premise, a, b, c)
+}
+
+/// The verdict: premise not reproduced when the flat walker can climb or the hill walker
+/// cannot; held when LBC climbs, its weights shift and the flat walker stays up on the incline
+/// (the paper's "does not fall, but fails to advance"); partly when only the last fails.
+pub fn verdict_of(f: &WalkingFacts, advance_fraction: f64, reach_m: f64, shift: f64) -> Verdict {
+    let (premise, a, b, c) = checks(f, advance_fraction, reach_m, shift);
+    Verdict::graded(a && b && c, a && b).given(premise)
+}
+
+/// (distance, fell) of `controller` on `terrain` in `walks.csv`.
+fn walk_of(dir: &Path, terrain: &str, controller: &str) -> Result<(f64, bool), Error> {
+    let w = read_csv(&dir.join("walks.csv"))?;
+    let (t, c, d, f) = (
+        df_str(&w, "terrain")?,
+        df_str(&w, "controller")?,
+        df_f64(&w, "distance_m")?,
+        df_f64(&w, "fell")?,
+    );
+    (0..t.len())
+        .find(|&i| t[i] == terrain && c[i] == controller)
+        .map(|i| (d[i], f[i] != 0.0))
+        .ok_or_else(|| Error::Other(format!("walks.csv: no {controller} on {terrain}")))
+}
+
+pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
+    let rule = rule_settings(dir)?;
+    let w = read_csv(&dir.join("weights.csv"))?;
+    let (wt, wx, wa) = (
+        df_str(&w, "terrain")?,
+        df_f64(&w, "x")?,
+        df_f64(&w, "alpha_hill")?,
+    );
+    let track: Vec<(f64, Vec<f64>, f64, f64, f64)> = (0..wt.len())
+        .filter(|&i| wt[i] == "flat_then_hill")
+        .map(|i| (0.0, vec![wx[i]], wa[i], 0.0, 0.0))
+        .collect();
+    let (start, margin) = (rule("hill_start_m"), rule("margin_m"));
+    let (af, ah) = part_means(&track, start - margin, start + margin);
+    let facts = WalkingFacts {
+        flat_on_incline: walk_of(dir, "incline", "flat")?,
+        hill_on_incline: walk_of(dir, "incline", "hill")?,
+        lbc_on_track: walk_of(dir, "flat_then_hill", "lbc")?,
+        alpha_flat_part: af,
+        alpha_hill_part: ah,
+    };
+    let (adv, climb, shift) = (rule("advance_fraction"), rule("climb_m"), rule("shift"));
+    let verdict = verdict_of(&facts, adv, start + climb, shift);
+    let (premise, a, b, c) = checks(&facts, adv, start + climb, shift);
+    let mut md = String::from(
+        "| terrain | controller | distance (m) | fell | mean speed (m/s) | steps |\n| --- | --- | --- | --- | --- | --- |\n",
+    );
+    let walks = read_csv(&dir.join("walks.csv"))?;
+    let (t, ctl, d, f, v, st) = (
+        df_str(&walks, "terrain")?,
+        df_str(&walks, "controller")?,
+        df_f64(&walks, "distance_m")?,
+        df_f64(&walks, "fell")?,
+        df_f64(&walks, "mean_speed_m_s")?,
+        df_f64(&walks, "steps")?,
+    );
+    let fa = df_f64(&walks, "fell_at_s")?;
+    for i in 0..t.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            t[i],
+            ctl[i],
+            sig(d[i]),
+            if f[i] != 0.0 {
+                format!("yes, at {} s", sig(fa[i]))
+            } else {
+                "no".into()
+            },
+            sig(v[i]),
+            st[i]
+        ));
+    }
+    let sw = read_csv(&dir.join("lambda_sweep.csv"))?;
+    let (sl, st2, sd, sf, saf, sah) = (
+        df_f64(&sw, "lambda")?,
+        df_str(&sw, "terrain")?,
+        df_f64(&sw, "distance_m")?,
+        df_f64(&sw, "fell")?,
+        df_f64(&sw, "alpha_hill_flat_part")?,
+        df_f64(&sw, "alpha_hill_hill_part")?,
+    );
+    md.push_str("\nLBC at every temperature tried (`lambda_sweep.csv`; distance in m, a cross when it fell; α_hill's mean on the track's flat and hill parts):\n\n| λ | flat | incline | flat-then-hill | α_hill, flat part | α_hill, hill part |\n| --- | --- | --- | --- | --- | --- |\n");
+    let mut lambdas: Vec<f64> = sl.clone();
+    lambdas.dedup();
+    for l in lambdas {
+        let cell = |terrain: &str| {
+            (0..sl.len())
+                .find(|&i| sl[i] == l && st2[i] == terrain)
+                .map_or("–".to_string(), |i| {
+                    format!("{}{}", sig(sd[i]), if sf[i] != 0.0 { " ✗" } else { "" })
+                })
+        };
+        let track_i = (0..sl.len()).find(|&i| sl[i] == l && st2[i] == "flat_then_hill");
+        let g = |x: &[f64]| track_i.map_or("–".to_string(), |i| sig(x[i]));
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            sig(l),
+            cell("flat"),
+            cell("incline"),
+            cell("flat_then_hill"),
+            g(&saf),
+            g(&sah)
+        ));
+    }
+    let hill_track = walk_of(dir, "flat_then_hill", "hill")?;
+    let why = format!(
+        "On the flat-then-hill track LBC (λ = {lam}) walks {ld} m{lfall}, its weight of the hill walker {af} on the flat part and {ah} on the hill; alone, the flat walker {flat_alone} and the hill walker walks the track {htd} m. Premise (the flat walker cannot climb the {deg}° incline: it falls or covers less than {adv} of the hill walker's distance, and the hill walker climbs without falling): {p} (flat walker {fd} m, {ff}; hill walker {hd} m, {hf}). (a) LBC at the rule's λ = {lam} walks the flat-then-hill track without falling and reaches {reach} m (the hill starts at {start} m, {climb} m past it needed): {a} ({ld} m, {lf}). (b) Its weights shift to the hill walker: mean α_hill {ah} on the hill part (pelvis at least {margin} m past the hill's start) against {af} on the flat part (at least {margin} m before it); held needs at least 0.5 and {shift} above the flat part's: {b}. (c) The paper's \"the flat ground walker does not fall\" on the incline: {c}. Held: premise, (a), (b) and (c); partly: premise, (a) and (b). Rule and thresholds fixed in the spec (ours); the hill walker is the grid point of `search.csv` that walks furthest up the incline; λ is the smallest of the sweep at which LBC walks all three terrains without falling, a rule written after an exploratory sweep (the spec says so). Value functions: the cost of the time-varying LQR that tracks each walker's own periodic gait on its own ground over the next {h} s, in coordinates that include the ground's slope (src/control/gait_value.rs).",
+        deg = sig(rule("incline_degrees")),
+        adv = sig(adv),
+        p = yes_no(Some(premise)),
+        fd = sig(facts.flat_on_incline.0),
+        ff = if facts.flat_on_incline.1 { "fell" } else { "standing" },
+        hd = sig(facts.hill_on_incline.0),
+        hf = if facts.hill_on_incline.1 { "fell" } else { "standing" },
+        lam = sig(rule("lambda")),
+        reach = sig(start + climb),
+        start = sig(start),
+        climb = sig(climb),
+        a = yes_no(Some(a)),
+        ld = sig(facts.lbc_on_track.0),
+        lf = if facts.lbc_on_track.1 { "fell" } else { "standing" },
+        ah = sig(ah),
+        af = sig(af),
+        margin = sig(margin),
+        shift = sig(shift),
+        b = yes_no(Some(b)),
+        c = yes_no(Some(c)),
+        h = sig(rule("horizon_s")),
+        lfall = if facts.lbc_on_track.1 { " and falls" } else { " without falling" },
+        flat_alone = if c {
+            format!("stays up on the incline, covering {} m", sig(facts.flat_on_incline.0))
+        } else {
+            "falls on the incline (the paper: it does not fall)".to_string()
+        },
+        htd = sig(hill_track.0),
+    );
+    Ok(Findings {
+        ours: md,
+        verdict,
+        why,
+    })
+}
+
+pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let mut files = Vec::new();
+    let w = tables.require("walks")?;
+    let (t, c, d, f) = (
+        w.strs("terrain"),
+        w.strs("controller"),
+        w.f64s("distance_m"),
+        w.f64s("fell"),
+    );
+    let x_of = |name: &str| CONTROLLERS.iter().position(|x| *x == name).unwrap_or(0) as f64;
+    let mut series: Vec<Series> = Vec::new();
+    for (k, terrain) in TERRAINS.iter().enumerate() {
+        let off = (k as f64 - 1.0) * 0.22;
+        let pts: Vec<(f64, f64)> = (0..t.len())
+            .filter(|&i| t[i] == *terrain)
+            .map(|i| (x_of(&c[i]) + off, d[i]))
+            .collect();
+        let labels = (0..t.len())
+            .filter(|&i| t[i] == *terrain)
+            .map(|i| {
+                if f[i] != 0.0 {
+                    "✗".to_string()
+                } else {
+                    String::new()
+                }
+            })
+            .collect();
+        let mut s =
+            Series::line(terrain.replace('_', "-"), pts, k).mark(Mark::Bars { half_width: 0.1 });
+        s.point_labels = labels;
+        series.push(s);
+    }
+    let panel = Panel {
+        title: "distance walked by each controller on each terrain".into(),
+        x_label: "controller".into(),
+        y_label: "pelvis advance along x (m)".into(),
+        series,
+        x_categories: CONTROLLERS.iter().map(|s| s.to_string()).collect(),
+        x_range: Some((-0.5, CONTROLLERS.len() as f64 - 0.5)),
+        legend: Legend::UpperLeft,
+        ..Panel::default()
+    };
+    files.extend(fig.draw("walks", &Figure::grid(vec![panel], 1))?);
+    // Weights against position, with the track's profile.
+    let wt = tables.require("weights")?;
+    let (tt, xx, aa) = (wt.strs("terrain"), wt.f64s("x"), wt.f64s("alpha_hill"));
+    let start = rule_setting(tables, "hill_start_m").unwrap_or(f64::NAN);
+    let deg = rule_setting(tables, "incline_degrees").unwrap_or(10.0);
+    let mut s: Vec<Series> = TERRAINS
+        .iter()
+        .enumerate()
+        .map(|(k, terrain)| {
+            let pts = (0..tt.len())
+                .filter(|&i| tt[i] == *terrain)
+                .map(|i| (xx[i], aa[i]))
+                .collect();
+            Series::line(terrain.replace('_', "-"), pts, k)
+        })
+        .collect();
+    s.push(Series::line("hill starts", vec![(start, 0.0), (start, 1.0)], 3).mark(Mark::Dashed));
+    let x_max = xx.iter().cloned().fold(1.0, f64::max);
+    let alpha_panel = Panel {
+        title: "LBC's weight of the hill walker".into(),
+        x_label: "pelvis x (m)".into(),
+        y_label: "α_hill".into(),
+        series: s,
+        y_range: Some((-0.02, 1.02)),
+        legend: Legend::UpperLeft,
+        ..Panel::default()
+    };
+    let hill = Terrain::FlatThenHill {
+        start_m: start,
+        degrees: deg,
+        smoothing_m: 0.5,
+    };
+    let prof: Vec<(f64, f64)> = (0..=200)
+        .map(|i| {
+            let x = x_max * i as f64 / 200.0;
+            (x, hill.height_slope(x).0)
+        })
+        .collect();
+    let profile = Panel {
+        title: "the flat-then-hill track".into(),
+        x_label: "x (m)".into(),
+        y_label: "ground height (m)".into(),
+        series: vec![Series::line("ground", prof, 2)],
+        ..Panel::default()
+    };
+    files.extend(fig.draw("weights", &Figure::grid(vec![alpha_panel, profile], 1))?);
+    // The temperature sweep.
+    let sw = tables.require("lambda_sweep")?;
+    let (sl, st, sd, sf, saf, sah) = (
+        sw.f64s("lambda"),
+        sw.strs("terrain"),
+        sw.f64s("distance_m"),
+        sw.f64s("fell"),
+        sw.f64s("alpha_hill_flat_part"),
+        sw.f64s("alpha_hill_hill_part"),
+    );
+    let mut ds: Vec<Series> = Vec::new();
+    let mut fell_labelled = false;
+    for (k, terrain) in TERRAINS.iter().enumerate() {
+        let idx: Vec<usize> = (0..sl.len()).filter(|&i| st[i] == *terrain).collect();
+        ds.push(
+            Series::line(
+                terrain.replace('_', "-"),
+                idx.iter().map(|&i| (sl[i], sd[i])).collect(),
+                k,
+            )
+            .mark(Mark::LinePoints),
+        );
+        let fell: Vec<(f64, f64)> = idx
+            .iter()
+            .filter(|&&i| sf[i] != 0.0)
+            .map(|&i| (sl[i], sd[i]))
+            .collect();
+        if !fell.is_empty() {
+            let label = if fell_labelled { "" } else { "fell" };
+            fell_labelled = true;
+            ds.push(Series::line(label, fell, 3).mark(Mark::Points));
+        }
+    }
+    let lam = rule_setting(tables, "lambda").unwrap_or(f64::NAN);
+    let track: Vec<usize> = (0..sl.len())
+        .filter(|&i| st[i] == "flat_then_hill")
+        .collect();
+    let panels = vec![
+        Panel {
+            title: "LBC's distance against λ".into(),
+            x_label: "λ (log)".into(),
+            y_label: "pelvis advance (m)".into(),
+            log_x: true,
+            series: ds,
+            ..Panel::default()
+        },
+        Panel {
+            title: format!(
+                "α_hill on the track against λ (the rule's λ = {})",
+                sig(lam)
+            ),
+            x_label: "λ (log)".into(),
+            y_label: "mean α_hill".into(),
+            log_x: true,
+            y_range: Some((0.0, 1.0)),
+            series: vec![
+                Series::line(
+                    "flat part",
+                    track.iter().map(|&i| (sl[i], saf[i])).collect(),
+                    0,
+                )
+                .mark(Mark::LinePoints),
+                Series::line(
+                    "hill part",
+                    track.iter().map(|&i| (sl[i], sah[i])).collect(),
+                    2,
+                )
+                .mark(Mark::LinePoints),
+                Series::line("rule's λ", vec![(lam, 0.0), (lam, 1.0)], 3).mark(Mark::Dashed),
+            ],
+            ..Panel::default()
+        },
+    ];
+    files.extend(fig.draw("lambda", &Figure::grid(panels, 2))?);
+    // The search grid.
+    let se = tables.require("search")?;
+    let (to, ho, sdist, sfell, sch) = (
+        se.f64s("torso_offset"),
+        se.f64s("hip_offset"),
+        se.f64s("distance_m"),
+        se.f64s("fell"),
+        se.f64s("chosen"),
+    );
+    let mut torsos = to.clone();
+    torsos.dedup();
+    let mut ss: Vec<Series> = torsos
+        .iter()
+        .enumerate()
+        .map(|(k, &tv)| {
+            Series::line(
+                format!("torso {tv:+.2} rad"),
+                (0..to.len())
+                    .filter(|&i| to[i] == tv)
+                    .map(|i| (ho[i], sdist[i]))
+                    .collect(),
+                k,
+            )
+            .mark(Mark::LinePoints)
+        })
+        .collect();
+    let fell: Vec<(f64, f64)> = (0..to.len())
+        .filter(|&i| sfell[i] != 0.0)
+        .map(|i| (ho[i], sdist[i]))
+        .collect();
+    ss.push(Series::line("fell", fell, 7).mark(Mark::Points));
+    let chosen: Vec<(f64, f64)> = (0..to.len())
+        .filter(|&i| sch[i] != 0.0)
+        .map(|i| (ho[i], sdist[i]))
+        .collect();
+    ss.push(Series::line("chosen (hill walker)", chosen, 8).mark(Mark::Points));
+    let panel = Panel {
+        title: "hill walker search on the incline".into(),
+        x_label: "swing-hip offset (rad)".into(),
+        y_label: "distance up the incline (m)".into(),
+        series: ss,
+        legend: Legend::UpperLeft,
+        ..Panel::default()
+    };
+    files.extend(fig.draw("search", &Figure::grid(vec![panel], 1))?);
+    if let Some(m) = tables.get("motion") {
+        files.push(fig.gif(
+            "track",
+            &track_frames(m, start, deg)?,
+            (100.0 * GIF_FRAME_DT * 2.5).round() as u32,
+        )?);
+    }
+    Ok(files)
+}
+
+/// A biped's segments as polylines: torso, each leg hip-knee-ankle-heel-toe-ankle.
+fn body(b: &Biped, q: &[f64]) -> [Vec<(f64, f64)>; 3] {
+    let t = &b.tree;
+    let p = |i: usize, r: f64| {
+        let v = t.point(q, i, r);
+        (v[0], v[1])
+    };
+    let leg = |th: usize| {
+        vec![
+            p(th, 0.0),
+            p(th + 1, 0.0),
+            p(th + 2, 0.0),
+            p(th + 2, -FOOT_HEEL),
+            p(th + 2, FOOT_TOE),
+            p(th + 2, 0.0),
+        ]
+    };
+    [vec![p(0, 0.0), p(0, t.links[0].length)], leg(1), leg(4)]
+}
+
+/// Frames of LBC (colour) and the flat walker alone (grey) on the flat-then-hill track, the view
+/// following LBC's pelvis.
+fn track_frames(
+    m: &crate::experiment::output::Table,
+    start: f64,
+    deg: f64,
+) -> Result<Vec<Figure>, Error> {
+    let (who, t, a) = (m.strs("controller"), m.f64s("t"), m.f64s("alpha_hill"));
+    let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
+    let terrain = Terrain::FlatThenHill {
+        start_m: start,
+        degrees: deg,
+        smoothing_m: 0.5,
+    };
+    let b = Biped::new(terrain, Contact::default());
+    let lbc: Vec<usize> = (0..t.len()).filter(|&i| who[i] == "lbc").collect();
+    let flat: Vec<usize> = (0..t.len()).filter(|&i| who[i] == "flat").collect();
+    let state = |i: usize| -> Vec<f64> { (0..DOF).map(|k| q[k][i]).collect() };
+    let mut frames = Vec::new();
+    for (n, &i) in lbc.iter().enumerate() {
+        let x = q[0][i];
+        let (size, xr, yr) = fitted(
+            (x - 2.0, x + 2.0),
+            (
+                b.terrain.height_slope(x).0 - 0.3,
+                b.terrain.height_slope(x).0 + 1.9,
+            ),
+            360,
+        );
+        let ground: Vec<(f64, f64)> = (0..=80)
+            .map(|k| {
+                let gx = xr.0 + (xr.1 - xr.0) * k as f64 / 80.0;
+                (gx, terrain.height_slope(gx).0)
+            })
+            .collect();
+        let mut series = vec![Series::line("ground", ground, 2)];
+        // The flat walker at the same time, while it has not fallen (its samples end there).
+        if let Some(&j) = flat.get(n) {
+            for (k, seg) in body(&b, &state(j)).into_iter().enumerate() {
+                series.push(Series::line(
+                    if k == 0 { "flat walker alone" } else { "" },
+                    seg,
+                    7,
+                ));
+            }
+        } else {
+            series.push(Series::line("flat walker alone: fell", vec![], 7));
+        }
+        for (k, seg) in body(&b, &state(i)).into_iter().enumerate() {
+            series.push(Series::line(if k == 0 { "LBC" } else { "" }, seg, 0));
+        }
+        let mut f = Figure::grid(
+            vec![Panel {
+                title: format!(
+                    "LBC of the flat and hill walkers   t = {:.1} s   α_hill = {:.2}",
+                    t[i], a[i]
+                ),
+                x_label: "x (m)".into(),
+                y_label: "height (m)".into(),
+                series,
+                x_range: Some(xr),
+                y_range: Some(yr),
+                legend: Legend::UpperLeft,
+                ..Panel::default()
+            }],
+            1,
+        );
+        f.panel_size = size;
+        frames.push(f);
+    }
+    Ok(frames)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn facts(flat: (f64, bool), lbc: (f64, bool), af: f64, ah: f64) -> WalkingFacts {
+        WalkingFacts {
+            flat_on_incline: flat,
+            hill_on_incline: (10.0, false),
+            lbc_on_track: lbc,
+            alpha_flat_part: af,
+            alpha_hill_part: ah,
+        }
+    }
+
+    #[test]
+    fn the_rule_needs_the_climb_the_shift_and_a_standing_flat_walker() {
+        let v = |f: &WalkingFacts| verdict_of(f, 0.25, 7.0, 0.25);
+        // The paper's story: the flat walker stands but stalls, LBC climbs, weights shift.
+        assert_eq!(
+            v(&facts((1.0, false), (12.0, false), 0.1, 0.8)),
+            Verdict::Held
+        );
+        // The flat walker falls on the incline: partly.
+        assert_eq!(
+            v(&facts((1.0, true), (12.0, false), 0.1, 0.8)),
+            Verdict::Partly
+        );
+        // Weights that do not shift, or an LBC that falls: not held.
+        assert_eq!(
+            v(&facts((1.0, false), (12.0, false), 0.4, 0.6)),
+            Verdict::NotHeld
+        );
+        assert_eq!(
+            v(&facts((1.0, false), (12.0, true), 0.1, 0.8)),
+            Verdict::NotHeld
+        );
+        assert_eq!(
+            v(&facts((1.0, false), (6.0, false), 0.1, 0.8)),
+            Verdict::NotHeld
+        );
+        // A flat walker that climbs (premise): untested.
+        assert_eq!(
+            v(&facts((9.0, false), (12.0, false), 0.1, 0.8)),
+            Verdict::PremiseNotReproduced
+        );
+    }
+}
