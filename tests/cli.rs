@@ -188,6 +188,7 @@ fn lbc_walking_quick_writes_the_promised_tables_and_a_blend_between_the_walkers(
         .filter(|l| l.starts_with("incline,"))
         .all(|l| (l.split(',').nth(3).unwrap().parse::<f64>().unwrap() - 10.0).abs() < 1e-9));
     assert!(d.path().join("figs/lbc_walking_weights.png").exists());
+    assert!(d.path().join("figs/lbc_walking_filmstrip.png").exists());
     assert!(d.path().join("figs/lbc_walking_track.gif").exists());
 }
 

@@ -41,14 +41,7 @@ pub struct CoordinationParams {
 impl Validate for CoordinationParams {
     fn validate(&self) -> Result<(), ParamError> {
         self.dive
-            .validate()
-            .map_err(|e| ParamError::new(format!("dive.{}", e.key), e.message))?;
-        ensure(self.omegas.len() >= 2, "omegas", "need at least two dives")?;
-        ensure(
-            self.single < self.omegas.len(),
-            "single",
-            "must index `omegas`",
-        )?;
+            .validate_with(&self.omegas, self.single, "single")?;
         ensure(!self.tests.is_empty(), "tests", "must not be empty")?;
         positive("entry_tolerance", self.entry_tolerance)?;
         positive("objective_tolerance", self.objective_tolerance)?;

@@ -115,14 +115,7 @@ pub struct DisturbanceParams {
 impl Validate for DisturbanceParams {
     fn validate(&self) -> Result<(), ParamError> {
         self.dive
-            .validate()
-            .map_err(|e| ParamError::new(format!("dive.{}", e.key), e.message))?;
-        ensure(self.omegas.len() >= 2, "omegas", "need at least two dives")?;
-        ensure(
-            self.reference < self.omegas.len(),
-            "reference",
-            "must index `omegas`",
-        )?;
+            .validate_with(&self.omegas, self.reference, "reference")?;
         positive("pd.angle_at_limit", self.pd.angle_at_limit)?;
         positive("pd.damping_s", self.pd.damping_s)?;
         let p = &self.pushes;

@@ -156,6 +156,15 @@ impl DiveSettings {
         )
     }
 
+    /// Checks these settings (keys under `dive.`) and the component dives `omegas` (at least
+    /// two), with `index` (spec key `key`) naming one of them.
+    fn validate_with(&self, omegas: &[f64], index: usize, key: &str) -> Result<(), ParamError> {
+        self.validate()
+            .map_err(|e| ParamError::new(format!("dive.{}", e.key), e.message))?;
+        ensure(omegas.len() >= 2, "omegas", "need at least two dives")?;
+        ensure(index < omegas.len(), key, "must index `omegas`")
+    }
+
     fn steps(&self) -> usize {
         (self.horizon / self.dt).round() as usize
     }

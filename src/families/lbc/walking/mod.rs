@@ -243,6 +243,10 @@ impl Family for LbcWalking {
             "the temperature sweep: distance walked on each terrain and α_hill's mean on the flat and the hill part of the flat-then-hill track against λ; the rule's λ is the smallest at which LBC walks all three terrains.",
         ),
         (
+            "filmstrip",
+            "LBC's body every 0.5 s over the first 9 s on the flat-then-hill track (blue while the flat walker's weight leads, red once the hill walker's does) and the flat walker alone (grey) until it falls, to scale.",
+        ),
+        (
             "track",
             "LBC of the flat and hill walkers (colour) on the flat-then-hill track beside the flat walker alone (grey, until it falls), every 0.1 s played at 0.25 s per frame, the view following LBC's pelvis; the title gives LBC's weight of the hill walker.",
         ),

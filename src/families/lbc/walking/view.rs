@@ -401,6 +401,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     };
     files.extend(fig.draw("search", &Figure::grid(vec![panel], 1))?);
     if let Some(m) = tables.get("motion") {
+        files.extend(fig.draw("filmstrip", &track_filmstrip(m, start, deg)?)?);
         files.push(fig.gif(
             "track",
             &track_frames(m, start, deg)?,
@@ -410,24 +411,130 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     Ok(files)
 }
 
-/// A biped's segments as polylines: torso, each leg hip-knee-ankle-heel-toe-ankle.
-fn body(b: &Biped, q: &[f64]) -> [Vec<(f64, f64)>; 3] {
+/// A biped's segments as polylines: torso, each leg hip-knee-ankle, each sole heel-toe (a sole
+/// apart from its leg: a polyline that turns back on itself draws a spike at the turn).
+fn body(b: &Biped, q: &[f64]) -> [Vec<(f64, f64)>; 5] {
     let t = &b.tree;
     let p = |i: usize, r: f64| {
         let v = t.point(q, i, r);
         (v[0], v[1])
     };
-    let leg = |th: usize| {
-        vec![
-            p(th, 0.0),
-            p(th + 1, 0.0),
-            p(th + 2, 0.0),
-            p(th + 2, -FOOT_HEEL),
-            p(th + 2, FOOT_TOE),
-            p(th + 2, 0.0),
-        ]
+    let leg = |th: usize| vec![p(th, 0.0), p(th + 1, 0.0), p(th + 2, 0.0)];
+    let sole = |th: usize| vec![p(th + 2, -FOOT_HEEL), p(th + 2, FOOT_TOE)];
+    [
+        vec![p(0, 0.0), p(0, t.links[0].length)],
+        leg(1),
+        sole(1),
+        leg(4),
+        sole(4),
+    ]
+}
+
+/// Seconds between the filmstrip's poses, and the time it covers.
+const STRIP_EVERY_S: f64 = 0.5;
+const STRIP_END_S: f64 = 9.0;
+
+/// LBC's poses (coloured by α_hill: blue flat walker, red hill walker) and the flat walker's
+/// alone (grey, until it falls) every [`STRIP_EVERY_S`] over the first [`STRIP_END_S`] on the
+/// flat-then-hill track, to scale.
+fn track_filmstrip(
+    m: &crate::experiment::output::Table,
+    start: f64,
+    deg: f64,
+) -> Result<Figure, Error> {
+    let (who, t, a) = (m.strs("controller"), m.f64s("t"), m.f64s("alpha_hill"));
+    let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
+    let terrain = Terrain::FlatThenHill {
+        start_m: start,
+        degrees: deg,
+        smoothing_m: 0.5,
     };
-    [vec![p(0, 0.0), p(0, t.links[0].length)], leg(1), leg(4)]
+    let b = Biped::new(terrain, Contact::default());
+    let picked = |name: &str| -> Vec<usize> {
+        let rows: Vec<usize> = (0..t.len())
+            .filter(|&i| who[i] == name && t[i] <= STRIP_END_S + 1e-9)
+            .collect();
+        let mut next = 0.0;
+        rows.into_iter()
+            .filter(|&i| {
+                let keep = t[i] + 1e-9 >= next;
+                if keep {
+                    next = t[i] + STRIP_EVERY_S;
+                }
+                keep
+            })
+            .collect()
+    };
+    let (lbc, flat) = (picked("lbc"), picked("flat"));
+    let xs: Vec<f64> = lbc.iter().chain(&flat).map(|&i| q[0][i]).collect();
+    let (x0, x1) = (
+        xs.iter().cloned().fold(f64::INFINITY, f64::min) - 0.6,
+        xs.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + 0.6,
+    );
+    let (h0, h1) = (terrain.height_slope(x0).0, terrain.height_slope(x1).0);
+    let (size, xr, yr) = fitted((x0, x1), (h0.min(h1) - 0.2, h0.max(h1) + 1.8), 300);
+    let ground: Vec<(f64, f64)> = (0..=200)
+        .map(|k| {
+            let gx = xr.0 + (xr.1 - xr.0) * k as f64 / 200.0;
+            (gx, terrain.height_slope(gx).0)
+        })
+        .collect();
+    let state = |i: usize| -> Vec<f64> { (0..DOF).map(|k| q[k][i]).collect() };
+    let mut flat_series = vec![Series::line("ground", ground.clone(), 2)];
+    for (n, &i) in flat.iter().enumerate() {
+        for (k, seg) in body(&b, &state(i)).into_iter().enumerate() {
+            let label = if n == 0 && k == 0 {
+                "flat walker alone"
+            } else {
+                ""
+            };
+            flat_series.push(Series::line(label, seg, 7));
+        }
+    }
+    let mut lbc_series = vec![Series::line("ground", ground, 2)];
+    for (n, &i) in lbc.iter().enumerate() {
+        // Colour 0 (blue) while the flat walker leads, 3 (red) once the hill walker does.
+        let color = if a[i] >= 0.5 { 3 } else { 0 };
+        for (k, seg) in body(&b, &state(i)).into_iter().enumerate() {
+            let first = k == 0 && lbc[..n].iter().all(|&j| (a[j] >= 0.5) != (a[i] >= 0.5));
+            let label = match (first, color) {
+                (true, 0) => "LBC, α_hill < 0.5",
+                (true, _) => "LBC, α_hill ≥ 0.5",
+                _ => "",
+            };
+            lbc_series.push(Series::line(label, seg, color));
+        }
+    }
+    let fell = flat.last().map_or(0.0, |&i| t[i]);
+    let panel = |title: String, series: Vec<Series>| Panel {
+        title,
+        x_label: "x (m)".into(),
+        y_label: "height (m)".into(),
+        series,
+        x_range: Some(xr),
+        y_range: Some(yr),
+        legend: Legend::UpperLeft,
+        ..Panel::default()
+    };
+    let mut f = Figure::grid(
+        vec![
+            panel(
+                format!(
+                    "LBC on the flat-then-hill track, every {STRIP_EVERY_S} s for {STRIP_END_S} s"
+                ),
+                lbc_series,
+            ),
+            panel(
+                format!(
+                    "the flat walker alone, every {STRIP_EVERY_S} s (its last pose at {fell:.1} s)"
+                ),
+                flat_series,
+            ),
+        ],
+        1,
+    );
+    f.panel_size = size;
+    Ok(f)
 }
 
 /// Frames of LBC (colour) and the flat walker alone (grey) on the flat-then-hill track, the view
