@@ -385,7 +385,7 @@ impl Params {
         let (_, wave_g) = swim.simulate(&body, &x0, &wave_u, dt, n).map_err(other)?;
         let wave = swim.distance(&wave_g);
         let short = |dist: f64| (wave - dist).max(0.0) / (0.5 * wave);
-        let centre = |a: &[f64], b: &[f64]| {
+        let apart = |a: &[f64], b: &[f64]| {
             a.iter()
                 .zip(b)
                 .map(|(x, y)| (x - y).powi(2))
@@ -450,12 +450,13 @@ impl Params {
                 errs[0],
                 errs.iter().sum::<f64>() / errs.len() as f64,
                 errs[errs.len() - 1],
-                centre(&emu, &start),
-                centre(&sim, &start),
-                centre(&emu, &sim)
+                apart(&emu, &start),
+                apart(&sim, &start),
+                apart(&emu, &sim)
             ]);
             // Fig. 13's swim through this variant; a net without a finite step scale learns
-            // nothing (a result, as for the other tasks).
+            // nothing (a result, as for the other tasks: without a table of starts to fill,
+            // `learn_swim` fails only there or building the net's BPTT).
             let label = format!(" {}", v.name());
             match learn_swim(
                 ctx,

@@ -202,7 +202,11 @@ fn fly(
     let (steps, h) = (d.steps(), d.dt / substeps as f64);
     let mut x: Vec<f64> = x0.iter().copied().collect();
     let mut u = [0.0; 8];
-    let (mut tq, mut alpha, mut ui) = ([0.0; 6], vec![0.0; 8], [0.0; 6]);
+    let components = match ctl {
+        Controller::Lbc(b) => b.trackers.len(),
+        Controller::Pd(..) => 0,
+    };
+    let (mut tq, mut alpha, mut ui) = ([0.0; 6], vec![0.0; components], [0.0; 6]);
     let mut out = Flight {
         states: vec![x.clone()],
         effort: 0.0,
@@ -213,7 +217,6 @@ fn fly(
             let t = (k as f64 + s as f64 / substeps as f64) * d.dt;
             match ctl {
                 Controller::Lbc(b) => {
-                    alpha.resize(b.trackers.len(), 0.0);
                     b.control(&x, k, &mut tq, &mut alpha, &mut ui)
                         .map_err(|e| other(format!("LBC at step {k}: {e:?}")))?;
                 }
@@ -426,6 +429,13 @@ fn means(dir: &Path) -> Result<Vec<(String, f64, [f64; 4])>, Error> {
         .collect())
 }
 
+/// The means of `controller` at force scale `scale`, if the run has them.
+fn mean_of(m: &[(String, f64, [f64; 4])], controller: &str, scale: f64) -> Option<[f64; 4]> {
+    m.iter()
+        .find(|o| o.0 == controller && o.1 == scale)
+        .map(|o| o.2)
+}
+
 /// The rule's checks from the means: (premise: the pushes are felt by LBC; a: LBC uses less
 /// control than PD, unpushed and at scale 1; b: LBC's motion reacts at least `visible_ratio`
 /// times PD's at scale 1; c: PD's deviation at the largest scale stays below LBC's at scale 1
@@ -437,7 +447,7 @@ pub fn disturbance_checks(
     outcome_change: f64,
     felt: f64,
 ) -> Option<(bool, bool, bool, bool)> {
-    let get = |c: &str, s: f64| m.iter().find(|o| o.0 == c && o.1 == s).map(|o| o.2);
+    let get = |c: &str, s: f64| mean_of(m, c, s);
     let (l0, p0, l1, p1, pl) = (
         get("lbc", 0.0)?,
         get("pd", 0.0)?,
@@ -652,11 +662,7 @@ impl Family for LbcDiveDisturbance {
                 why: "The run lacks the unpushed or the scale-1 rows the rule reads.".into(),
             });
         };
-        let get = |c: &str, s: f64| {
-            m.iter()
-                .find(|o| o.0 == c && o.1 == s)
-                .map_or([f64::NAN; 4], |o| o.2)
-        };
+        let get = |c: &str, s: f64| mean_of(&m, c, s).unwrap_or([f64::NAN; 4]);
         let (l0, p0, l1, p1, pl) = (
             get("lbc", 0.0),
             get("pd", 0.0),

@@ -2,6 +2,7 @@
 //! walks of every controller on every terrain, the temperature sweep.
 
 use super::Params;
+use crate::bellman::combine::{blend_controls, blend_weights};
 use crate::control::gait_value::GaitCycle;
 use crate::control::simbicon::{applet_start, fallen, Gait, Simbicon};
 use crate::experiment::output::{Table, Tables};
@@ -47,9 +48,23 @@ pub(super) struct Walk {
     pub steps: usize,
     /// Seconds walked (to the fall or the end).
     pub seconds: f64,
-    /// Every `sample_dt`: (t, state, α_hill, v_flat, v_hill); α_hill is the hill walker's
-    /// weight (0 or 1 alone, ½ naive).
-    pub samples: Vec<(f64, Vec<f64>, f64, f64, f64)>,
+    /// One every `sample_dt`.
+    pub samples: Vec<Sample>,
+}
+
+/// The body and the blend at one instant of a walk.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Sample {
+    /// Time (s).
+    pub t: f64,
+    /// The state.
+    pub x: Vec<f64>,
+    /// The hill walker's weight (0 or 1 alone, ½ naive).
+    pub alpha_hill: f64,
+    /// The walkers' values (NaN unless LBC).
+    pub v_flat: f64,
+    /// (see `v_flat`)
+    pub v_hill: f64,
 }
 
 /// The two walkers and their gaits' value functions (needed by LBC only).
@@ -59,14 +74,11 @@ pub(super) struct Walkers<'a> {
     pub cycles: Option<(&'a GaitCycle, &'a GaitCycle)>,
 }
 
-/// LBC's weight of the hill walker: exp(−v_hill/λ) / (exp(−v_flat/λ) + exp(−v_hill/λ)).
+/// LBC's weight of the hill walker: exp(−v_hill/λ) / (exp(−v_flat/λ) + exp(−v_hill/λ))
+/// ([`blend_weights`] with weights one); NaN for non-finite values.
 pub fn lbc_weight(v_flat: f64, v_hill: f64, lambda: f64) -> f64 {
-    let m = v_flat.min(v_hill);
-    let (zf, zh) = (
-        (-(v_flat - m) / lambda).exp(),
-        (-(v_hill - m) / lambda).exp(),
-    );
-    zh / (zf + zh)
+    let mut alpha = [0.0; 2];
+    blend_weights(&[1.0, 1.0], &[v_flat, v_hill], lambda, &mut alpha).map_or(f64::NAN, |_| alpha[1])
 }
 
 /// Walks `driver` on `terrain` from the applet's start for `seconds`, stopping at a fall;
@@ -121,14 +133,24 @@ pub(super) fn walk(
                 vf = fc.value(&b, &x, cf.left_stance()).0;
                 vh = hc.value(&b, &x, ch.left_stance()).0;
                 alpha = lbc_weight(vf, vh, lambda);
+                if !alpha.is_finite() {
+                    return Err(other(format!(
+                        "lbc_walking: LBC's weights at t = {:.4} s (values {vf}, {vh})",
+                        k as f64 * dt
+                    )));
+                }
             }
         }
         if k % sample == 0 {
-            samples.push((k as f64 * dt, x.clone(), alpha, vf, vh));
+            samples.push(Sample {
+                t: k as f64 * dt,
+                x: x.clone(),
+                alpha_hill: alpha,
+                v_flat: vf,
+                v_hill: vh,
+            });
         }
-        for i in 0..TORQUES {
-            u[i] = (1.0 - alpha) * uf[i] + alpha * uh[i];
-        }
+        blend_controls(&[1.0 - alpha, alpha], &[&uf, &uh], &mut u);
         sim.step(&mut x, &u, dt);
         let t = (k + 1) as f64 * dt;
         crate::physics::check_finite("biped", k + 1, t, &x).map_err(other)?;
@@ -182,15 +204,11 @@ pub fn choose_lambda(walked: &[bool]) -> usize {
         .unwrap_or(walked.len().saturating_sub(1))
 }
 
-/// Mean α_hill over the samples whose pelvis is at most `before` (flat part) and at least
-/// `after` (hill part) along x; NaN for a part never reached.
-pub fn part_means(
-    samples: &[(f64, Vec<f64>, f64, f64, f64)],
-    before: f64,
-    after: f64,
-) -> (f64, f64) {
+/// Mean α_hill of the (pelvis x, α_hill) pairs whose x is at most `before` (flat part) and at
+/// least `after` (hill part); NaN for a part never reached.
+pub fn part_means(samples: &[(f64, f64)], before: f64, after: f64) -> (f64, f64) {
     let mean = |f: &dyn Fn(f64) -> bool| {
-        let v: Vec<f64> = samples.iter().filter(|s| f(s.1[0])).map(|s| s.2).collect();
+        let v: Vec<f64> = samples.iter().filter(|s| f(s.0)).map(|s| s.1).collect();
         if v.is_empty() {
             f64::NAN
         } else {
@@ -198,6 +216,11 @@ pub fn part_means(
         }
     };
     (mean(&|x| x <= before), mean(&|x| x >= after))
+}
+
+/// (pelvis x, α_hill) of a walk's samples.
+fn x_alpha(samples: &[Sample]) -> Vec<(f64, f64)> {
+    samples.iter().map(|s| (s.x[0], s.alpha_hill)).collect()
 }
 
 impl Job for Params {
@@ -317,7 +340,7 @@ impl Job for Params {
         for (&(l, t), r) in jobs.iter().zip(&sweep) {
             walked[l] &= r.fell_at.is_none();
             let (af, ah) = if terrains[t].0 == "flat_then_hill" {
-                part_means(&r.samples, track_split.0, track_split.1)
+                part_means(&x_alpha(&r.samples), track_split.0, track_split.1)
             } else {
                 (f64::NAN, f64::NAN)
             };
@@ -396,9 +419,18 @@ impl Job for Params {
             "v_hill",
         ]);
         for (t, (name, terrain)) in terrains.iter().enumerate() {
-            for (time, x, a, vf, vh) in &sweep[li * terrains.len() + t].samples {
-                let slope = terrain.height_slope(x[0]).1.atan().to_degrees();
-                weights.push(row![*name, *time, x[0], slope, 1.0 - a, *a, *vf, *vh]);
+            for sm in &sweep[li * terrains.len() + t].samples {
+                let slope = crate::portable::atan(terrain.height_slope(sm.x[0]).1).to_degrees();
+                weights.push(row![
+                    *name,
+                    sm.t,
+                    sm.x[0],
+                    slope,
+                    1.0 - sm.alpha_hill,
+                    sm.alpha_hill,
+                    sm.v_flat,
+                    sm.v_hill
+                ]);
             }
         }
         // 6. The flat-then-hill walks of LBC and the flat walker, for the animation.
@@ -412,9 +444,9 @@ impl Job for Params {
             ("lbc", &sweep[li * terrains.len() + track]),
             ("flat", &alone[track * drivers.len()]),
         ] {
-            for (time, x, a, _, _) in r.samples.iter().step_by(frame) {
-                let mut row = row![name, *time, *a];
-                row.extend(x[..DOF].iter().map(|&v| v.into()));
+            for sm in r.samples.iter().step_by(frame) {
+                let mut row = row![name, sm.t, sm.alpha_hill];
+                row.extend(sm.x[..DOF].iter().map(|&v| v.into()));
                 motion.push(row);
             }
         }
@@ -426,6 +458,7 @@ impl Job for Params {
             ("shift", r.shift),
             ("margin_m", r.margin_m),
             ("hill_start_m", self.hill_start_m),
+            ("hill_smoothing_m", self.hill_smoothing_m),
             ("incline_degrees", self.incline_degrees),
             ("walk_s", self.walk_s),
             ("knot_dt", self.knot_dt),
@@ -470,7 +503,7 @@ mod tests {
         assert_eq!(choose_hill(&[(5.0, true)]), None);
         assert_eq!(choose_lambda(&[false, true, true]), 1);
         assert_eq!(choose_lambda(&[false, false]), 1);
-        let s = |x: f64, a: f64| (0.0, vec![x], a, 0.0, 0.0);
+        let s = |x: f64, a: f64| (x, a);
         let (f, h) = part_means(
             &[s(0.0, 0.1), s(1.0, 0.3), s(5.0, 0.9), s(2.5, 0.5)],
             2.0,

@@ -248,7 +248,7 @@ impl Family for LbcWalking {
         ),
         (
             "track",
-            "LBC of the flat and hill walkers (colour) on the flat-then-hill track beside the flat walker alone (grey, until it falls), every 0.1 s played at 0.25 s per frame, the view following LBC's pelvis; the title gives LBC's weight of the hill walker.",
+            "LBC of the flat and hill walkers (colour) on the flat-then-hill track beside the flat walker alone (grey, until it falls), every `gif_frame_s` (0.1 s) of the walk, played in real time, the view following LBC's pelvis; the title gives LBC's weight of the hill walker.",
         ),
         (
             "search",

@@ -5,9 +5,10 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
 use crate::experiment::Error;
-use crate::families::lbc::film::{fitted, GIF_FRAME_DT};
+use crate::families::lbc::film::fitted;
 use crate::families::lbc::{rule_setting, rule_settings};
 use crate::physics::biped::{Biped, Contact, Terrain, DOF, FOOT_HEEL, FOOT_TOE};
+use polars::prelude::DataFrame;
 use std::path::{Path, PathBuf};
 
 const TERRAINS: [&str; 3] = ["flat", "incline", "flat_then_hill"];
@@ -54,19 +55,28 @@ pub fn verdict_of(f: &WalkingFacts, advance_fraction: f64, reach_m: f64, shift: 
     Verdict::graded(a && b && c, a && b).given(premise)
 }
 
-/// (distance, fell) of `controller` on `terrain` in `walks.csv`.
-fn walk_of(dir: &Path, terrain: &str, controller: &str) -> Result<(f64, bool), Error> {
-    let w = read_csv(&dir.join("walks.csv"))?;
+/// (distance, fell) of `controller` on `terrain` in a run's `walks.csv` table.
+fn walk_of(w: &DataFrame, terrain: &str, controller: &str) -> Result<(f64, bool), Error> {
     let (t, c, d, f) = (
-        df_str(&w, "terrain")?,
-        df_str(&w, "controller")?,
-        df_f64(&w, "distance_m")?,
-        df_f64(&w, "fell")?,
+        df_str(w, "terrain")?,
+        df_str(w, "controller")?,
+        df_f64(w, "distance_m")?,
+        df_f64(w, "fell")?,
     );
     (0..t.len())
         .find(|&i| t[i] == terrain && c[i] == controller)
         .map(|i| (d[i], f[i] != 0.0))
         .ok_or_else(|| Error::Other(format!("walks.csv: no {controller} on {terrain}")))
+}
+
+/// The flat-then-hill track of a run, from its `rule` table.
+fn track_of(tables: &Tables) -> Terrain {
+    let get = |k: &str, default: f64| rule_setting(tables, k).unwrap_or(default);
+    Terrain::FlatThenHill {
+        start_m: get("hill_start_m", f64::NAN),
+        degrees: get("incline_degrees", f64::NAN),
+        smoothing_m: get("hill_smoothing_m", 0.5),
+    }
 }
 
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
@@ -77,16 +87,17 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         df_f64(&w, "x")?,
         df_f64(&w, "alpha_hill")?,
     );
-    let track: Vec<(f64, Vec<f64>, f64, f64, f64)> = (0..wt.len())
+    let track: Vec<(f64, f64)> = (0..wt.len())
         .filter(|&i| wt[i] == "flat_then_hill")
-        .map(|i| (0.0, vec![wx[i]], wa[i], 0.0, 0.0))
+        .map(|i| (wx[i], wa[i]))
         .collect();
+    let walks = read_csv(&dir.join("walks.csv"))?;
     let (start, margin) = (rule("hill_start_m"), rule("margin_m"));
     let (af, ah) = part_means(&track, start - margin, start + margin);
     let facts = WalkingFacts {
-        flat_on_incline: walk_of(dir, "incline", "flat")?,
-        hill_on_incline: walk_of(dir, "incline", "hill")?,
-        lbc_on_track: walk_of(dir, "flat_then_hill", "lbc")?,
+        flat_on_incline: walk_of(&walks, "incline", "flat")?,
+        hill_on_incline: walk_of(&walks, "incline", "hill")?,
+        lbc_on_track: walk_of(&walks, "flat_then_hill", "lbc")?,
         alpha_flat_part: af,
         alpha_hill_part: ah,
     };
@@ -96,7 +107,6 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let mut md = String::from(
         "| terrain | controller | distance (m) | fell | mean speed (m/s) | steps |\n| --- | --- | --- | --- | --- | --- |\n",
     );
-    let walks = read_csv(&dir.join("walks.csv"))?;
     let (t, ctl, d, f, v, st) = (
         df_str(&walks, "terrain")?,
         df_str(&walks, "controller")?,
@@ -153,7 +163,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             g(&sah)
         ));
     }
-    let hill_track = walk_of(dir, "flat_then_hill", "hill")?;
+    let hill_track = walk_of(&walks, "flat_then_hill", "hill")?;
     let why = format!(
         "On the flat-then-hill track LBC (λ = {lam}) walks {ld} m{lfall}, its weight of the hill walker {af} on the flat part and {ah} on the hill; alone, the flat walker {flat_alone} and the hill walker walks the track {htd} m. Premise (the flat walker cannot climb the {deg}° incline: it falls or covers less than {adv} of the hill walker's distance, and the hill walker climbs without falling): {p} (flat walker {fd} m, {ff}; hill walker {hd} m, {hf}). (a) LBC at the rule's λ = {lam} walks the flat-then-hill track without falling and reaches {reach} m (the hill starts at {start} m, {climb} m past it needed): {a} ({ld} m, {lf}). (b) Its weights shift to the hill walker: mean α_hill {ah} on the hill part (pelvis at least {margin} m past the hill's start) against {af} on the flat part (at least {margin} m before it); held needs at least 0.5 and {shift} above the flat part's: {b}. (c) The paper's \"the flat ground walker does not fall\" on the incline: {c}. Held: premise, (a), (b) and (c); partly: premise, (a) and (b). Rule and thresholds fixed in the spec (ours); the hill walker is the grid point of `search.csv` that walks furthest up the incline; λ is the smallest of the sweep at which LBC walks all three terrains without falling, a rule written after an exploratory sweep (the spec says so). Value functions: the cost of the time-varying LQR that tracks each walker's own periodic gait on its own ground over the next {h} s, in coordinates that include the ground's slope (src/control/gait_value.rs).",
         deg = sig(rule("incline_degrees")),
@@ -238,8 +248,10 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     // Weights against position, with the track's profile.
     let wt = tables.require("weights")?;
     let (tt, xx, aa) = (wt.strs("terrain"), wt.f64s("x"), wt.f64s("alpha_hill"));
-    let start = rule_setting(tables, "hill_start_m").unwrap_or(f64::NAN);
-    let deg = rule_setting(tables, "incline_degrees").unwrap_or(10.0);
+    let hill = track_of(tables);
+    let Terrain::FlatThenHill { start_m: start, .. } = hill else {
+        unreachable!("track_of builds a flat-then-hill track")
+    };
     let mut s: Vec<Series> = TERRAINS
         .iter()
         .enumerate()
@@ -261,11 +273,6 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         y_range: Some((-0.02, 1.02)),
         legend: Legend::UpperLeft,
         ..Panel::default()
-    };
-    let hill = Terrain::FlatThenHill {
-        start_m: start,
-        degrees: deg,
-        smoothing_m: 0.5,
     };
     let prof: Vec<(f64, f64)> = (0..=200)
         .map(|i| {
@@ -401,11 +408,18 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     };
     files.extend(fig.draw("search", &Figure::grid(vec![panel], 1))?);
     if let Some(m) = tables.get("motion") {
-        files.extend(fig.draw("filmstrip", &track_filmstrip(m, start, deg)?)?);
+        files.extend(fig.draw("filmstrip", &track_filmstrip(m, hill)?)?);
+        // In real time: each frame shows for the simulated time between samples.
+        let t = m.f64s("t");
+        let step = t
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .find(|d| *d > 0.0)
+            .unwrap_or(0.1);
         files.push(fig.gif(
             "track",
-            &track_frames(m, start, deg)?,
-            (100.0 * GIF_FRAME_DT * 2.5).round() as u32,
+            &track_frames(m, hill)?,
+            (100.0 * step).round().max(1.0) as u32,
         )?);
     }
     Ok(files)
@@ -439,16 +453,10 @@ const STRIP_END_S: f64 = 9.0;
 /// flat-then-hill track, to scale.
 fn track_filmstrip(
     m: &crate::experiment::output::Table,
-    start: f64,
-    deg: f64,
+    terrain: Terrain,
 ) -> Result<Figure, Error> {
     let (who, t, a) = (m.strs("controller"), m.f64s("t"), m.f64s("alpha_hill"));
     let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
-    let terrain = Terrain::FlatThenHill {
-        start_m: start,
-        degrees: deg,
-        smoothing_m: 0.5,
-    };
     let b = Biped::new(terrain, Contact::default());
     let picked = |name: &str| -> Vec<usize> {
         let rows: Vec<usize> = (0..t.len())
@@ -541,16 +549,10 @@ fn track_filmstrip(
 /// following LBC's pelvis.
 fn track_frames(
     m: &crate::experiment::output::Table,
-    start: f64,
-    deg: f64,
+    terrain: Terrain,
 ) -> Result<Vec<Figure>, Error> {
     let (who, t, a) = (m.strs("controller"), m.f64s("t"), m.f64s("alpha_hill"));
     let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
-    let terrain = Terrain::FlatThenHill {
-        start_m: start,
-        degrees: deg,
-        smoothing_m: 0.5,
-    };
     let b = Biped::new(terrain, Contact::default());
     let lbc: Vec<usize> = (0..t.len()).filter(|&i| who[i] == "lbc").collect();
     let flat: Vec<usize> = (0..t.len()).filter(|&i| who[i] == "flat").collect();
