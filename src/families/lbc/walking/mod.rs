@@ -252,7 +252,7 @@ impl Family for LbcWalking {
         ),
         (
             "search",
-            "the hill walker's search: distance up the incline of each grid point (torso lean and swing-hip offsets), fallen points at their fall distance.",
+            "the hill walker's search: distance up the incline of each grid point (torso lean and swing-hip offsets; negative: it walked backwards down the incline), fallen points marked at their fall distance, the chosen point labelled.",
         ),
     ];
 

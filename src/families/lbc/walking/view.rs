@@ -271,7 +271,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         y_label: "α_hill".into(),
         series: s,
         y_range: Some((-0.02, 1.02)),
-        legend: Legend::UpperLeft,
+        legend: Legend::Auto,
         ..Panel::default()
     };
     let prof: Vec<(f64, f64)> = (0..=200)
@@ -392,18 +392,23 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         .filter(|&i| sfell[i] != 0.0)
         .map(|i| (ho[i], sdist[i]))
         .collect();
-    ss.push(Series::line("fell", fell, 7).mark(Mark::Points));
+    // Written at their points: dots alone hide under the lines' own markers.
+    let mut fell_s = Series::line("", fell.clone(), 7).mark(Mark::Points);
+    fell_s.point_labels = vec!["✗ fell".into(); fell.len()];
+    ss.push(fell_s);
     let chosen: Vec<(f64, f64)> = (0..to.len())
         .filter(|&i| sch[i] != 0.0)
         .map(|i| (ho[i], sdist[i]))
         .collect();
-    ss.push(Series::line("chosen (hill walker)", chosen, 8).mark(Mark::Points));
+    let mut chosen_s = Series::line("", chosen.clone(), 7).mark(Mark::Points);
+    chosen_s.point_labels = vec!["chosen: the hill walker".into(); chosen.len()];
+    ss.push(chosen_s);
     let panel = Panel {
         title: "hill walker search on the incline".into(),
         x_label: "swing-hip offset (rad)".into(),
         y_label: "distance up the incline (m)".into(),
         series: ss,
-        legend: Legend::UpperLeft,
+        legend: Legend::LowerLeft,
         ..Panel::default()
     };
     files.extend(fig.draw("search", &Figure::grid(vec![panel], 1))?);
