@@ -193,6 +193,58 @@ fn lbc_walking_quick_writes_the_promised_tables_and_a_blend_between_the_walkers(
 }
 
 #[test]
+fn lbc_stepping_quick_writes_the_promised_tables_and_two_different_examples() {
+    let d = quick_reproduction();
+    let out = d.path().join("out/lbc_stepping");
+    assert!(header(&out.join("targets.csv"))
+        .starts_with("desired_length_m,method,reached_length_m,fell,effort,seconds"));
+    let targets = std::fs::read_to_string(out.join("targets.csv")).unwrap();
+    // Every method at the quick run's one desired length.
+    let methods: Vec<&str> = targets
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap())
+        .collect();
+    assert_eq!(
+        methods,
+        ["lbc", "naive", "short", "long", "direct"],
+        "{targets}"
+    );
+    for l in targets.lines().skip(1) {
+        let effort: f64 = l.split(',').nth(4).unwrap().parse().unwrap();
+        assert!(effort > 0.0 && effort.is_finite(), "{l}");
+    }
+    // The two DDP examples step to different lengths, the long one further.
+    let comp = std::fs::read_to_string(out.join("components.csv")).unwrap();
+    let reached: Vec<f64> = comp
+        .lines()
+        .skip(1)
+        .take(2)
+        .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    assert!(reached[1] > reached[0] + 0.01, "{comp}");
+    let weights = std::fs::read_to_string(out.join("weights.csv")).unwrap();
+    for l in weights.lines().skip(1) {
+        let a: f64 = l.split(',').nth(2).unwrap().parse().unwrap();
+        assert!((0.0..=1.0).contains(&a), "{l}");
+    }
+    assert!(header(&out.join("walk.csv")).starts_with("step,stance_heel_m,foothold_m"));
+    assert!(
+        std::fs::read_to_string(out.join("walk.csv"))
+            .unwrap()
+            .lines()
+            .count()
+            >= 2
+    );
+    for f in ["lengths.png", "effort.png", "walk.png", "walk_anim.gif"] {
+        assert!(
+            d.path().join(format!("figs/lbc_stepping_{f}")).exists(),
+            "{f}"
+        );
+    }
+}
+
+#[test]
 fn lbc_grid_quick_combination_is_exact_and_naive_is_worse() {
     let d = quick_reproduction();
     let out = d.path().join("out/lbc_grid_optimality");
@@ -431,7 +483,7 @@ fn reproduce_quick_writes_report_with_every_experiment() {
             ids += 1;
         }
     }
-    assert_eq!(ids, 26, "the shipped experiments");
+    assert_eq!(ids, 27, "the shipped experiments");
     assert!(report.contains("**Paper:**") && report.contains("**Verdict:"));
     assert!(
         report.contains("../figs/lbc_projection_cost.png"),
@@ -865,7 +917,7 @@ fn a_closed_output_pipe_is_a_normal_end() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Close the read end at once: `list` reads 26 experiment files before its first line.
+    // Close the read end at once: `list` reads 27 experiment files before its first line.
     drop(child.stdout.take());
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -20,6 +20,7 @@
 //! | `lbc_dive_disturbance` | `lbc_dive_disturbance` | [`lbc::diver`] (`disturbance.rs`) |
 //! | `lbc_push_recovery` | `lbc_push_recovery` | [`lbc::push_recovery`] |
 //! | `lbc_walking` | `lbc_walking` | [`lbc::walking`] (+ its gaits' value functions: [`crate::control::gait_value`]) |
+//! | `lbc_stepping` | `lbc_stepping` | [`lbc::stepping`] |
 //! | `na_table1_structure` | `na_table1_structure` | [`na::table1_structure`] |
 //! | `na_table2_speedup` | `na_table2_speedup` | [`na::table2_speedup`] |
 //! | `na_regularization` | `na_regularization` | [`na::regularization`] |
@@ -61,6 +62,7 @@ static FAMILIES: &[&dyn Experiment] = &[
     &lbc::diver::LbcDiveDisturbance,
     &lbc::push_recovery::LbcPush,
     &lbc::walking::LbcWalking,
+    &lbc::stepping::LbcStepping,
     &na::table1_structure::NaStructure,
     &na::table2_speedup::NaSpeedup,
     &na::fig12_error::NaError,

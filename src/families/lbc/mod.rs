@@ -6,6 +6,7 @@ pub mod film;
 pub mod grid_optimality;
 pub mod projection;
 pub mod push_recovery;
+pub mod stepping;
 pub mod walking;
 
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};

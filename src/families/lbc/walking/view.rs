@@ -5,9 +5,9 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
 use crate::experiment::Error;
-use crate::families::lbc::film::fitted;
+use crate::families::lbc::film::{biped_body, fitted};
 use crate::families::lbc::{rule_setting, rule_settings};
-use crate::physics::biped::{Biped, Contact, Terrain, DOF, FOOT_HEEL, FOOT_TOE};
+use crate::physics::biped::{Biped, Contact, Terrain, DOF};
 use polars::prelude::DataFrame;
 use std::path::{Path, PathBuf};
 
@@ -432,23 +432,6 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
 
 /// A biped's segments as polylines: torso, each leg hip-knee-ankle, each sole heel-toe (a sole
 /// apart from its leg: a polyline that turns back on itself draws a spike at the turn).
-fn body(b: &Biped, q: &[f64]) -> [Vec<(f64, f64)>; 5] {
-    let t = &b.tree;
-    let p = |i: usize, r: f64| {
-        let v = t.point(q, i, r);
-        (v[0], v[1])
-    };
-    let leg = |th: usize| vec![p(th, 0.0), p(th + 1, 0.0), p(th + 2, 0.0)];
-    let sole = |th: usize| vec![p(th + 2, -FOOT_HEEL), p(th + 2, FOOT_TOE)];
-    [
-        vec![p(0, 0.0), p(0, t.links[0].length)],
-        leg(1),
-        sole(1),
-        leg(4),
-        sole(4),
-    ]
-}
-
 /// Seconds between the filmstrip's poses, and the time it covers.
 const STRIP_EVERY_S: f64 = 0.5;
 const STRIP_END_S: f64 = 9.0;
@@ -495,7 +478,7 @@ fn track_filmstrip(
     let state = |i: usize| -> Vec<f64> { (0..DOF).map(|k| q[k][i]).collect() };
     let mut flat_series = vec![Series::line("ground", ground.clone(), 2)];
     for (n, &i) in flat.iter().enumerate() {
-        for (k, seg) in body(&b, &state(i)).into_iter().enumerate() {
+        for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
             let label = if n == 0 && k == 0 {
                 "flat walker alone"
             } else {
@@ -508,7 +491,7 @@ fn track_filmstrip(
     for (n, &i) in lbc.iter().enumerate() {
         // Colour 0 (blue) while the flat walker leads, 3 (red) once the hill walker does.
         let color = if a[i] >= 0.5 { 3 } else { 0 };
-        for (k, seg) in body(&b, &state(i)).into_iter().enumerate() {
+        for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
             let first = k == 0 && lbc[..n].iter().all(|&j| (a[j] >= 0.5) != (a[i] >= 0.5));
             let label = match (first, color) {
                 (true, 0) => "LBC, α_hill < 0.5",
@@ -582,7 +565,7 @@ fn track_frames(
         let mut series = vec![Series::line("ground", ground, 2)];
         // The flat walker at the same time, while it has not fallen (its samples end there).
         if let Some(&j) = flat.get(n) {
-            for (k, seg) in body(&b, &state(j)).into_iter().enumerate() {
+            for (k, seg) in biped_body(&b, &state(j)).into_iter().enumerate() {
                 series.push(Series::line(
                     if k == 0 { "flat walker alone" } else { "" },
                     seg,
@@ -592,7 +575,7 @@ fn track_frames(
         } else {
             series.push(Series::line("flat walker alone: fell", vec![], 7));
         }
-        for (k, seg) in body(&b, &state(i)).into_iter().enumerate() {
+        for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
             series.push(Series::line(if k == 0 { "LBC" } else { "" }, seg, 0));
         }
         let mut f = Figure::grid(

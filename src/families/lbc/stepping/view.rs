@@ -1,0 +1,499 @@
+//! `lbc_stepping`'s figures, animation, verdict and report section.
+
+use super::job::gaps;
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, yes_no, Findings, Verdict};
+use crate::experiment::Error;
+use crate::families::lbc::film::{biped_body, fitted};
+use crate::families::lbc::{rule_setting, rule_settings};
+use crate::physics::biped::{Biped, DOF};
+use std::path::{Path, PathBuf};
+
+const METHODS: [&str; 5] = ["lbc", "naive", "short", "long", "direct"];
+
+/// What the rule reads from a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SteppingFacts {
+    /// Each example's tracker alone at its own length: (|error| m, landed and standing).
+    pub examples: [(f64, bool); 2],
+    /// LBC at every desired length: (|error| m, landed and standing).
+    pub lbc: Vec<(f64, bool)>,
+    /// The naive blend likewise.
+    pub naive: Vec<(f64, bool)>,
+    /// Mean effort of LBC and of the naive blend.
+    pub effort: (f64, f64),
+    /// The walk: steps taken, steps asked, any in a gap, fell.
+    pub walk: (usize, usize, bool, bool),
+}
+
+/// The rule's checks (premise, a, b, c, d) at tolerance `tol` (the spec's rule).
+pub fn checks(f: &SteppingFacts, tol: f64) -> (bool, [bool; 4]) {
+    let ok = |r: &(f64, bool)| r.0 <= tol && r.1;
+    let premise = f.examples.iter().all(ok);
+    let mean = |v: &[(f64, bool)]| v.iter().map(|r| r.0).sum::<f64>() / v.len().max(1) as f64;
+    let a = !f.lbc.is_empty() && f.lbc.iter().all(ok);
+    let b = mean(&f.lbc) < mean(&f.naive);
+    let c = f.effort.0 <= f.effort.1;
+    let (taken, asked, gap, fell) = f.walk;
+    let d = asked >= 6 && taken == asked && !gap && !fell;
+    (premise, [a, b, c, d])
+}
+
+/// The verdict of `f` at tolerance `tol`.
+pub fn verdict_of(f: &SteppingFacts, tol: f64) -> Verdict {
+    let (premise, c) = checks(f, tol);
+    Verdict::from_checks(&c).given(premise)
+}
+
+/// Rows of `targets` as (desired, method, reached, fell, effort, seconds, landed).
+struct Targets {
+    desired: Vec<f64>,
+    method: Vec<String>,
+    reached: Vec<f64>,
+    fell: Vec<f64>,
+    effort: Vec<f64>,
+    seconds: Vec<f64>,
+    landed: Vec<f64>,
+}
+
+impl Targets {
+    fn read(dir: &Path) -> Result<Self, Error> {
+        let t = read_csv(&dir.join("targets.csv"))?;
+        Ok(Self {
+            desired: df_f64(&t, "desired_length_m")?,
+            method: df_str(&t, "method")?,
+            reached: df_f64(&t, "reached_length_m")?,
+            fell: df_f64(&t, "fell")?,
+            effort: df_f64(&t, "effort")?,
+            seconds: df_f64(&t, "seconds")?,
+            landed: df_f64(&t, "landed")?,
+        })
+    }
+
+    fn of(t: &Table) -> Self {
+        Self {
+            desired: t.f64s("desired_length_m"),
+            method: t.strs("method"),
+            reached: t.f64s("reached_length_m"),
+            fell: t.f64s("fell"),
+            effort: t.f64s("effort"),
+            seconds: t.f64s("seconds"),
+            landed: t.f64s("landed"),
+        }
+    }
+
+    fn rows<'a>(&'a self, method: &'a str) -> impl Iterator<Item = usize> + 'a {
+        (0..self.method.len()).filter(move |&i| self.method[i] == method)
+    }
+
+    /// (|error|, landed and standing) of row i against length `l`.
+    fn outcome(&self, i: usize, l: f64) -> (f64, bool) {
+        (
+            (self.reached[i] - l).abs(),
+            self.fell[i] == 0.0 && self.landed[i] != 0.0,
+        )
+    }
+}
+
+pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
+    let rule = rule_settings(dir)?;
+    let tol = rule("tolerance_m");
+    let t = Targets::read(dir)?;
+    let comp = read_csv(&dir.join("components.csv"))?;
+    let walk = read_csv(&dir.join("walk.csv"))?;
+    let (short, long) = (rule("short_m"), rule("long_m"));
+    // The examples alone at their own lengths: every row of a tracker alone is the same run.
+    let own = |m: &str, l: f64| {
+        t.rows(m)
+            .next()
+            .map_or((f64::INFINITY, false), |i| t.outcome(i, l))
+    };
+    let per =
+        |m: &str| -> Vec<(f64, bool)> { t.rows(m).map(|i| t.outcome(i, t.desired[i])).collect() };
+    let mean_effort = |m: &str| {
+        let v: Vec<f64> = t.rows(m).map(|i| t.effort[i]).collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    };
+    let (wf, wg) = (df_f64(&walk, "fell")?, df_f64(&walk, "in_gap")?);
+    let asked = rule("walk_steps") as usize;
+    let facts = SteppingFacts {
+        examples: [own("short", short), own("long", long)],
+        lbc: per("lbc"),
+        naive: per("naive"),
+        effort: (mean_effort("lbc"), mean_effort("naive")),
+        walk: (
+            wf.len(),
+            asked,
+            wg.iter().any(|&v| v != 0.0),
+            wf.iter().any(|&v| v != 0.0),
+        ),
+    };
+    let verdict = verdict_of(&facts, tol);
+    let (premise, [a, b, c, d]) = checks(&facts, tol);
+    let mut md = String::from(
+        "| desired (m) | method | reached (m) | error (m) | fell | effort | seconds |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for i in 0..t.desired.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            sig(t.desired[i]),
+            t.method[i],
+            sig(t.reached[i]),
+            sig(t.reached[i] - t.desired[i]),
+            if t.fell[i] != 0.0 { "yes" } else { "no" },
+            sig(t.effort[i]),
+            sig(t.seconds[i])
+        ));
+    }
+    let (cn, ct, cr, ci, ca) = (
+        df_str(&comp, "component")?,
+        df_f64(&comp, "target_length_m")?,
+        df_f64(&comp, "reached_length_m")?,
+        df_f64(&comp, "iterations")?,
+        df_f64(&comp, "average_scale")?,
+    );
+    md.push_str("\nThe DDP examples (`components.csv`; reached on DDP's own map; the first two are the run's):\n\n| example | average-term scale | target (m) | reached (m) | DDP iterations |\n| --- | --- | --- | --- | --- |\n");
+    for i in 0..cn.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} |\n",
+            cn[i],
+            sig(ca[i]),
+            sig(ct[i]),
+            sig(cr[i]),
+            ci[i]
+        ));
+    }
+    let (ws, wd, wr, wh) = (
+        df_f64(&walk, "step")?,
+        df_f64(&walk, "desired_length_m")?,
+        df_f64(&walk, "reached_length_m")?,
+        df_f64(&walk, "landing_heel_m")?,
+    );
+    let wfh = df_f64(&walk, "foothold_m")?;
+    md.push_str("\nThe walk over gaps (`walk.csv`):\n\n| step | foothold (m) | desired (m) | reached (m) | heel landed at (m) | in a gap | fell |\n| --- | --- | --- | --- | --- | --- | --- |\n");
+    for i in 0..ws.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            ws[i],
+            sig(wfh[i]),
+            sig(wd[i]),
+            sig(wr[i]),
+            sig(wh[i]),
+            if wg[i] != 0.0 { "yes" } else { "no" },
+            if wf[i] != 0.0 { "yes" } else { "no" }
+        ));
+    }
+    let mean = |v: &[(f64, bool)]| v.iter().map(|r| r.0).sum::<f64>() / v.len().max(1) as f64;
+    let worst = |v: &[(f64, bool)]| v.iter().map(|r| r.0).fold(0.0, f64::max);
+    let fails = |v: &[(f64, bool)]| v.iter().filter(|r| !r.1).count();
+    // The direct DDP steps, and LBC and the naive blend at the other average-term scales.
+    let direct = per("direct");
+    let direct_effort = mean_effort("direct");
+    let av = read_csv(&dir.join("average_effect.csv"))?;
+    let (asc, ad, am, ar, al) = (
+        df_f64(&av, "average_scale")?,
+        df_f64(&av, "desired_length_m")?,
+        df_str(&av, "method")?,
+        df_f64(&av, "reached_length_m")?,
+        df_f64(&av, "landed")?,
+    );
+    let mut others: Vec<f64> = asc.iter().copied().filter(|&a| a != asc[0]).collect();
+    others.dedup();
+    let mut compared = String::new();
+    for a in others {
+        let stat = |m: &str| {
+            let rows: Vec<usize> = (0..asc.len())
+                .filter(|&i| asc[i] == a && am[i] == m)
+                .collect();
+            let err =
+                rows.iter().map(|&i| (ar[i] - ad[i]).abs()).sum::<f64>() / rows.len().max(1) as f64;
+            let missed = rows.iter().filter(|&&i| al[i] == 0.0).count();
+            (err, missed, rows.len())
+        };
+        let (le, lm, n) = stat("lbc");
+        let (ne, nm, _) = stat("naive");
+        compared.push_str(&format!(
+            " With the average-trajectory term at {} (the first run's scale; the examples optimized again): LBC's mean error {} m ({lm} of {n} not landed), the naive blend's {} m ({nm} not landed).",
+            sig(a),
+            sig(le),
+            sig(ne)
+        ));
+    }
+    let why = format!(
+        "LBC's steps land {la} m from the desired lengths on average (worst {lw} m; tolerance {tol} m), the naive blend's with the same weights {na} m, at mean effort {le} against {ne}; a direct DDP step per length lands {da} m off at effort {de}; the walk over gaps takes {taken} of {asked} steps{gap}{fall}. Premise (each example's tracker alone lands its own length, {short} m and {long} m, within {tol} m without falling): {p} (errors {e0} and {e1} m). (a) LBC reaches every desired length within {tol} m, landed, without falling: {a} (mean error {la} m, worst {lw} m, {lf} of {n} not landed or fallen). (b) LBC's mean error below the naive blend's with the same weights: {b} ({la} m against {na} m; naive worst {nw} m, {nf} not landed or fallen). (c) LBC's mean effort at most the naive blend's: {c} ({le} against {ne}). (d) The walk over gaps: {d} ({taken} of {asked} steps taken{gap}{fall}). Held: premise and all four; partly: premise and some. λ = {lam} by §4.1's scale rule (the two examples' terminal targets one unit apart in exp(−g/λ)); every step lasts {ts} s (SIMBICON's own step from the start, {sl} m). Rule and tolerance fixed in the spec (ours); the average-trajectory term's scale was raised from 0.1 to 1 after the first run, before judging (the spec says why).{compared}",
+        short = sig(short),
+        long = sig(long),
+        tol = sig(tol),
+        p = yes_no(Some(premise)),
+        e0 = sig(facts.examples[0].0),
+        e1 = sig(facts.examples[1].0),
+        a = yes_no(Some(a)),
+        la = sig(mean(&facts.lbc)),
+        lw = sig(worst(&facts.lbc)),
+        lf = fails(&facts.lbc),
+        n = facts.lbc.len(),
+        b = yes_no(Some(b)),
+        na = sig(mean(&facts.naive)),
+        nw = sig(worst(&facts.naive)),
+        nf = fails(&facts.naive),
+        c = yes_no(Some(c)),
+        le = sig(facts.effort.0),
+        ne = sig(facts.effort.1),
+        d = yes_no(Some(d)),
+        taken = facts.walk.0,
+        asked = asked,
+        gap = if facts.walk.2 { ", a foot in a gap" } else { "" },
+        fall = if facts.walk.3 { ", and it fell" } else { "" },
+        lam = sig(rule("lambda")),
+        ts = sig(rule("step_s")),
+        sl = sig(rule("simbicon_length_m")),
+        da = sig(mean(&direct)),
+        de = sig(direct_effort),
+    );
+    Ok(Findings {
+        ours: md,
+        verdict,
+        why,
+    })
+}
+
+pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let mut files = Vec::new();
+    let t = Targets::of(tables.require("targets")?);
+    let tol = rule_setting(tables, "tolerance_m").unwrap_or(0.0);
+    let (lo, hi) = t
+        .desired
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let band = |d: f64, label: &str| {
+        Series::line(label, vec![(lo, lo + d), (hi, hi + d)], 7).mark(Mark::Dashed)
+    };
+    let mut series = vec![
+        band(0.0, "desired"),
+        band(tol, "± tolerance"),
+        band(-tol, ""),
+    ];
+    let mut effort = Vec::new();
+    for (k, m) in METHODS.iter().enumerate() {
+        let rows: Vec<usize> = t.rows(m).collect();
+        let mut s = Series::line(
+            *m,
+            rows.iter().map(|&i| (t.desired[i], t.reached[i])).collect(),
+            k,
+        )
+        .mark(Mark::LinePoints);
+        s.point_labels = rows
+            .iter()
+            .map(|&i| {
+                if t.fell[i] != 0.0 {
+                    "✗".into()
+                } else {
+                    String::new()
+                }
+            })
+            .collect();
+        series.push(s);
+        effort.push(
+            Series::line(
+                *m,
+                rows.iter().map(|&i| (t.desired[i], t.effort[i])).collect(),
+                k,
+            )
+            .mark(Mark::LinePoints),
+        );
+    }
+    let lengths = Panel {
+        title: "step length reached on the simulator (landing heel from the stance heel)".into(),
+        x_label: "desired step length (m)".into(),
+        y_label: "reached step length (m)".into(),
+        series,
+        legend: Legend::UpperLeft,
+        ..Panel::default()
+    };
+    files.extend(fig.draw("lengths", &Figure::grid(vec![lengths], 1))?);
+    let effort = Panel {
+        title: "effort of each controller".into(),
+        x_label: "desired step length (m)".into(),
+        y_label: "effort ½∫uᵀRu dt".into(),
+        series: effort,
+        legend: Legend::Auto,
+        ..Panel::default()
+    };
+    files.extend(fig.draw("effort", &Figure::grid(vec![effort], 1))?);
+    // LBC's weights over the step.
+    let w = tables.require("weights")?;
+    let (wd, wt, wa) = (
+        w.f64s("desired_length_m"),
+        w.f64s("t"),
+        w.f64s("alpha_short"),
+    );
+    let mut ds = wd.clone();
+    ds.dedup();
+    let series = ds
+        .iter()
+        .enumerate()
+        .map(|(k, &d)| {
+            Series::line(
+                format!("{} m", sig(d)),
+                (0..wd.len())
+                    .filter(|&i| wd[i] == d)
+                    .map(|i| (wt[i], wa[i]))
+                    .collect(),
+                k,
+            )
+        })
+        .collect();
+    let weights = Panel {
+        title: "LBC's weight of the short step over the step".into(),
+        x_label: "time in the step (s)".into(),
+        y_label: "α_short".into(),
+        series,
+        y_range: Some((-0.02, 1.02)),
+        legend: Legend::Auto,
+        ..Panel::default()
+    };
+    files.extend(fig.draw("weights", &Figure::grid(vec![weights], 1))?);
+    // The walk: poses at each step's end, the footholds and the gaps.
+    let m = tables.require("motion")?;
+    let wk = tables.require("walk")?;
+    let (step, ft, fa) = (m.f64s("step"), m.f64s("t"), m.f64s("alpha_short"));
+    let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
+    let state = |i: usize| -> Vec<f64> { (0..DOF).map(|k| q[k][i]).collect() };
+    let mut holds = vec![wk.f64s("stance_heel_m").first().copied().unwrap_or(0.0)];
+    holds.extend(wk.f64s("foothold_m"));
+    let gap = gaps(&holds, tol);
+    let b = Biped::default();
+    let x_lo = holds[0] - 0.6;
+    let x_hi = holds.last().copied().unwrap_or(0.0) + 0.6;
+    let scene = |extra: Vec<Series>| -> Vec<Series> {
+        let mut s = vec![Series::line("ground", vec![(x_lo, 0.0), (x_hi, 0.0)], 7)];
+        for (k, g) in gap.iter().enumerate() {
+            s.push(
+                Series::line(
+                    if k == 0 {
+                        "gap (a sole must not touch)"
+                    } else {
+                        ""
+                    },
+                    vec![(g.0, -0.01), (g.1, -0.01)],
+                    3,
+                )
+                .mark(Mark::LinePoints),
+            );
+        }
+        s.extend(extra);
+        s
+    };
+    // The last sample of each step, and the first of the walk.
+    let mut ends: Vec<usize> = (0..step.len())
+        .filter(|&i| i + 1 == step.len() || step[i + 1] != step[i])
+        .collect();
+    ends.insert(0, 0);
+    let mut poses = Vec::new();
+    for (n, &i) in ends.iter().enumerate() {
+        for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
+            poses.push(Series::line(
+                if n == 0 && k == 0 {
+                    "body at each step's end"
+                } else {
+                    ""
+                },
+                seg,
+                0,
+            ));
+        }
+    }
+    let (size, xr, yr) = fitted((x_lo, x_hi), (-0.1, 1.6), 420);
+    let mut f = Figure::grid(
+        vec![Panel {
+            title: format!("LBC's walk over {} gaps", gap.len()),
+            x_label: "x (m)".into(),
+            y_label: "height (m)".into(),
+            series: scene(poses),
+            x_range: Some(xr),
+            y_range: Some(yr),
+            legend: Legend::UpperLeft,
+            ..Panel::default()
+        }],
+        1,
+    );
+    f.panel_size = size;
+    files.extend(fig.draw("walk", &f)?);
+    let mut frames = Vec::new();
+    for i in 0..step.len() {
+        let mut body = Vec::new();
+        for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
+            body.push(Series::line(if k == 0 { "LBC" } else { "" }, seg, 0));
+        }
+        let (size, xr, yr) = fitted((x_lo, x_hi), (-0.1, 1.6), 300);
+        let mut f = Figure::grid(
+            vec![Panel {
+                title: format!(
+                    "LBC stepping over gaps   step {}   t = {:.2} s   α_short = {:.2}",
+                    step[i], ft[i], fa[i]
+                ),
+                x_label: "x (m)".into(),
+                y_label: "height (m)".into(),
+                series: scene(body),
+                x_range: Some(xr),
+                y_range: Some(yr),
+                legend: Legend::UpperLeft,
+                ..Panel::default()
+            }],
+            1,
+        );
+        f.panel_size = size;
+        frames.push(f);
+    }
+    if !frames.is_empty() {
+        let dt = if ft.len() > 1 { ft[1] - ft[0] } else { 0.1 };
+        files.push(fig.gif("walk_anim", &frames, ((dt * 100.0).round() as u32).max(2))?);
+    }
+    Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn facts(lbc: f64, naive: f64, effort: (f64, f64), walk_ok: bool) -> SteppingFacts {
+        SteppingFacts {
+            examples: [(0.01, true), (0.015, true)],
+            lbc: vec![(lbc, true), (lbc / 2.0, true)],
+            naive: vec![(naive, true), (naive, true)],
+            effort,
+            walk: (6, 6, !walk_ok, false),
+        }
+    }
+
+    #[test]
+    fn the_rule_needs_the_examples_the_reach_the_accuracy_the_effort_and_the_walk() {
+        assert_eq!(
+            verdict_of(&facts(0.01, 0.03, (1.0, 2.0), true), 0.02),
+            Verdict::Held
+        );
+        assert_eq!(
+            verdict_of(&facts(0.03, 0.01, (3.0, 2.0), false), 0.02),
+            Verdict::NotHeld
+        );
+        assert_eq!(
+            verdict_of(&facts(0.01, 0.03, (3.0, 2.0), true), 0.02),
+            Verdict::Partly
+        );
+        let mut f = facts(0.01, 0.03, (1.0, 2.0), true);
+        f.examples[1].1 = false;
+        assert_eq!(verdict_of(&f, 0.02), Verdict::PremiseNotReproduced);
+        let mut f = facts(0.01, 0.03, (1.0, 2.0), true);
+        f.walk = (4, 6, false, true);
+        assert_eq!(checks(&f, 0.02).1, [true, true, true, false]);
+        let mut f = facts(0.01, 0.03, (1.0, 2.0), true);
+        f.lbc[1].1 = false;
+        assert!(
+            !checks(&f, 0.02).1[0],
+            "a fall fails (a) whatever the length"
+        );
+    }
+}
