@@ -91,6 +91,16 @@ fn start(name: &str, n: usize) -> Vec<f64> {
             }
             x
         }
+        "jumper" => {
+            // A crouch 1 cm above the ground, every joint moving a little.
+            let j = motionlab::physics::jumper::Jumper::default();
+            let mut x = j.crouch(0.0, 0.3, 0.3, 0.2);
+            x[1] += 0.01;
+            for (i, v) in x[n / 2..].iter_mut().enumerate() {
+                *v = pattern(i, 1, 0.3);
+            }
+            x
+        }
         "diver" => {
             let mut x = vec![0.0; n];
             (x[2], x[6], x[9], x[10], x[11]) = (1.5, 3.1, 1.0, 4.0, 1.0);
@@ -178,6 +188,7 @@ fn rollouts_of_every_model_keep_their_bits() {
             ("acrobot", 0x7dd8b5d5ec3defcb),
             ("biped", 0x59cc847aa9382477),
             ("diver", 0x3311cf476a8a696c),
+            ("jumper", 0x748a8c3a63e499df),
             ("push_recovery", 0xb2d6bc1ce7f73cce),
             ("truck", 0x4a85f3df3a90e50d),
             ("lander", 0x4df91033582ba475),

@@ -25,6 +25,7 @@ pub mod differentiable;
 pub mod diver;
 pub mod dolphin;
 pub mod integrate;
+pub mod jumper;
 pub mod lander;
 pub mod lattice;
 pub mod linearize;
@@ -273,6 +274,7 @@ pub const MODEL_NAMES: &[&str] = &[
     "acrobot",
     "biped",
     "diver",
+    "jumper",
     "push_recovery",
     "truck",
     "lander",
@@ -289,6 +291,7 @@ pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
         "acrobot" => Box::new(acrobot::Acrobot::default()),
         "biped" => Box::new(biped::Biped::default()),
         "diver" => Box::new(diver::diver()),
+        "jumper" => Box::new(jumper::Jumper::default()),
         "push_recovery" => Box::new(push::push_figure()),
         "truck" => Box::new(truck::Truck::default()),
         "lander" => Box::new(lander::Lander::default()),

@@ -1,0 +1,283 @@
+//! # `jumper`: the planar diver with ground contact at its feet (LBC §6.3's jumping body)
+//!
+//! "A version of the diver with both sets of extremities was used for the broad jump examples
+//! that land" (LBC §6.3): the seven-link diver of [`super::diver`] (torso, head, arms, legs,
+//! left and right limbs lumped as in a symmetric jump) whose foot touches the ground at its heel
+//! and toe through the same penalty contact as the biped ([`Contact::force`]: spring-damper
+//! normal force, regularized Coulomb friction, SIMBICON's ground constants). Six joint torques
+//! (neck, shoulder, elbow, hip, knee, ankle); state as the diver's (hip position, torso angle,
+//! six joint angles and their rates).
+//!
+//! The foot's sole is its axis: the heel 5 cm behind the ankle and the toe 18 cm ahead (ours:
+//! the diver's foot is 20 cm long from the ankle).
+
+use super::biped::{Contact, Terrain};
+use super::diver::diver;
+use super::planar::{ForcePoint, PlanarTree};
+use super::{Model, Ode, Parameter};
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// Heel contact point behind the ankle (m).
+pub const HEEL: f64 = 0.05;
+/// Toe contact point ahead of the ankle (m).
+pub const TOE: f64 = 0.18;
+/// Generalized coordinates (hip x, y, torso angle, six joints).
+pub const DOF: usize = 9;
+/// Joint torques.
+pub const TORQUES: usize = 6;
+/// Index of the foot link.
+const FOOT: usize = 6;
+
+/// The jumping diver on `terrain`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Jumper {
+    /// The diver's body with the heel and toe as force points (driven by the contact only).
+    pub tree: PlanarTree,
+    /// The ground.
+    pub terrain: Terrain,
+    /// Contact constants.
+    pub contact: Contact,
+}
+
+impl Default for Jumper {
+    fn default() -> Self {
+        Self::new(Terrain::Flat, Contact::default())
+    }
+}
+
+impl Jumper {
+    /// The diver on `terrain` with `contact` at heel and toe.
+    pub fn new(terrain: Terrain, contact: Contact) -> Self {
+        let mut tree = diver();
+        tree.name = "jumper".into();
+        tree.forces = vec![
+            ForcePoint {
+                link: FOOT,
+                offset: -HEEL,
+            },
+            ForcePoint {
+                link: FOOT,
+                offset: TOE,
+            },
+        ];
+        Self {
+            tree,
+            terrain,
+            contact,
+        }
+    }
+
+    /// Heel and toe positions (m) at configuration `q`.
+    pub fn contact_points(&self, q: &[f64]) -> [[f64; 2]; 2] {
+        std::array::from_fn(|k| {
+            let f = &self.tree.forces[k];
+            self.tree.point(q, f.link, f.offset)
+        })
+    }
+
+    /// The ground's forces on heel and toe (N).
+    pub fn contact_forces(&self, x: &[f64]) -> [[f64; 2]; 2] {
+        std::array::from_fn(|k| {
+            let f = &self.tree.forces[k];
+            let (p, v) = self.tree.point_state(x, f.link, f.offset);
+            self.contact.force(&self.terrain, p, v)
+        })
+    }
+
+    /// A crouch on level ground: torso leaning forward by `lean` from upright, the shank leaning
+    /// forward by `shin` (rad) over a flat foot, arms hanging back by `arm` (rad) from the
+    /// torso, the hip placed (thigh and knee following) so that the body's centre of mass lies
+    /// above the middle of the sole where the thigh reaches, the ankle at x = `x` and the sole
+    /// just on the ground.
+    pub fn crouch(&self, x: f64, lean: f64, shin: f64, arm: f64) -> Vec<f64> {
+        let mid = (TOE - HEEL) / 2.0;
+        let mut hip_x = mid;
+        let mut s = self.crouch_at(x, lean, shin, arm, hip_x);
+        for _ in 0..50 {
+            let e = self.tree.center_of_mass(&s[..DOF])[0] - (x + mid);
+            if e.abs() < 1e-12 {
+                break;
+            }
+            // The hip carries most of the mass: move it against the error (within the thigh's
+            // reach of the knee).
+            hip_x -= e;
+            let (lt, ls) = (self.tree.links[4].length, self.tree.links[5].length);
+            let knee_x = -ls * (1.5 * PI + shin).cos();
+            hip_x = hip_x.clamp(knee_x - 0.95 * lt, knee_x + 0.95 * lt);
+            s = self.crouch_at(x, lean, shin, arm, hip_x);
+        }
+        s
+    }
+
+    /// [`Jumper::crouch`] with the hip `hip_x` ahead of the ankle.
+    fn crouch_at(&self, x: f64, lean: f64, shin: f64, arm: f64, hip_x: f64) -> Vec<f64> {
+        let mut s = vec![0.0; 2 * DOF];
+        let torso = FRAC_PI_2 + lean;
+        let shank_abs = 1.5 * PI + shin;
+        let (lt, ls) = (self.tree.links[4].length, self.tree.links[5].length);
+        // Knee relative to the ankle (the shank points from the knee down to the ankle).
+        let knee = [-ls * shank_abs.cos(), -ls * shank_abs.sin()];
+        let dx = hip_x - knee[0];
+        let dy = (lt * lt - dx * dx).max(0.0).sqrt();
+        let hip = [hip_x, knee[1] + dy];
+        // The thigh points from the hip down to the knee, in (π, 2π).
+        let mut thigh_abs = (knee[1] - hip[1]).atan2(knee[0] - hip[0]);
+        if thigh_abs < 0.0 {
+            thigh_abs += 2.0 * PI;
+        }
+        s[0] = x + hip[0];
+        s[1] = self.terrain.height_slope(x).0 + hip[1];
+        s[2] = torso;
+        s[3] = 0.0; // head in line
+        s[4] = PI - arm; // arms down along the torso, swung back by `arm`
+        s[5] = 0.0;
+        s[6] = thigh_abs - torso;
+        s[7] = shank_abs - thigh_abs;
+        s[8] = 2.0 * PI - shank_abs; // foot flat (absolute angle 2π)
+        s
+    }
+}
+
+impl Model for Jumper {
+    fn name(&self) -> &str {
+        "jumper"
+    }
+    fn state_names(&self) -> Vec<String> {
+        self.tree.state_names()
+    }
+    fn control_names(&self) -> Vec<String> {
+        self.tree.control_names()[..TORQUES].to_vec()
+    }
+    fn parameters(&self) -> Vec<Parameter> {
+        let mut p = self.tree.parameters();
+        let c = &self.contact;
+        p.push(Parameter::new(
+            "contact.stiffness",
+            c.stiffness,
+            "N/m",
+            "penalty normal stiffness per contact point (heel, toe)",
+        ));
+        p.push(Parameter::new(
+            "contact.damping",
+            c.damping,
+            "N*s/m",
+            "penalty normal damping per contact point",
+        ));
+        p.push(Parameter::new(
+            "contact.friction",
+            c.friction,
+            "1",
+            "Coulomb friction coefficient (regularized)",
+        ));
+        p.push(Parameter::new(
+            "foot.heel",
+            HEEL,
+            "m",
+            "heel contact point behind the ankle",
+        ));
+        p.push(Parameter::new(
+            "foot.toe",
+            TOE,
+            "m",
+            "toe contact point ahead of the ankle",
+        ));
+        p
+    }
+    /// 0.1 ms, as the biped's (the same ground on a 2 kg foot).
+    fn default_dt(&self) -> f64 {
+        0.0001
+    }
+}
+
+impl Ode for Jumper {
+    fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        let mut all = [0.0; TORQUES + 4];
+        all[..TORQUES].copy_from_slice(&u[..TORQUES]);
+        for (k, f) in self.contact_forces(x).iter().enumerate() {
+            all[TORQUES + 2 * k] = f[0];
+            all[TORQUES + 2 * k + 1] = f[1];
+        }
+        self.tree.derivative(x, &all, dx);
+    }
+
+    fn position_dim(&self) -> Option<usize> {
+        Some(DOF)
+    }
+
+    /// Kinetic plus gravitational energy of the body (J); the contact springs' energy is not
+    /// included.
+    fn energy(&self, x: &[f64]) -> Option<f64> {
+        self.tree.energy(x)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::{Dynamics, IntegratorKind, Simulator};
+
+    /// Holds the crouch's joint angles with stiff PD servos for `seconds` from `x0`.
+    fn hold(j: &Jumper, x0: &[f64], seconds: f64) -> Vec<f64> {
+        let dt = j.default_dt();
+        let mut sim = Simulator::new(j.clone(), IntegratorKind::Rk4);
+        let mut x = x0.to_vec();
+        let target = x0[3..DOF].to_vec();
+        let mut u = [0.0; TORQUES];
+        for _ in 0..(seconds / dt).round() as usize {
+            for i in 0..TORQUES {
+                u[i] = 2000.0 * (target[i] - x[3 + i]) - 100.0 * x[DOF + 3 + i];
+            }
+            sim.step(&mut x, &u, dt);
+        }
+        x
+    }
+
+    #[test]
+    fn the_crouch_puts_a_flat_sole_on_the_ground_under_the_hip() {
+        let j = Jumper::default();
+        let x = j.crouch(0.3, 0.3, 0.3, 0.2);
+        let [heel, toe] = j.contact_points(&x[..DOF]);
+        assert!(
+            heel[1].abs() < 1e-12 && toe[1].abs() < 1e-12,
+            "{heel:?} {toe:?}"
+        );
+        assert!((heel[0] - (0.3 - HEEL)).abs() < 1e-12, "{heel:?} {x:?}");
+        let com = j.tree.center_of_mass(&x[..DOF])[0];
+        assert!((com - (heel[0] + toe[0]) / 2.0).abs() < 1e-9, "{com}");
+    }
+
+    #[test]
+    fn a_held_crouch_dropped_on_the_ground_rests_on_it_without_sinking_or_bouncing() {
+        let j = Jumper::default();
+        let mut x0 = j.crouch(0.0, 0.3, 0.3, 0.2);
+        x0[1] += 0.03;
+        let x = hold(&j, &x0, 1.0);
+        let [heel, toe] = j.contact_points(&x[..DOF]);
+        // 70 kg on two points of 1e5 N/m: a few mm of compression; not sunk, not in the air.
+        for p in [heel, toe] {
+            assert!(p[1] > -0.01, "sank: {p:?}");
+        }
+        assert!(heel[1].min(toe[1]) < 0.0, "bounced off: {heel:?} {toe:?}");
+        // The fall has stopped: the hip barely moves up or down, the ground carries the weight.
+        assert!(x[DOF + 1].abs() < 0.05, "{x:?}");
+        let f = j.contact_forces(&x);
+        let weight: f64 = j.tree.links.iter().map(|l| l.mass).sum::<f64>() * 9.81;
+        assert!(((f[0][1] + f[1][1]) / weight - 1.0).abs() < 0.1, "{f:?}");
+    }
+
+    #[test]
+    fn contact_forces_vanish_in_the_air_and_push_up_when_pressed() {
+        let j = Jumper::default();
+        let mut x = j.crouch(0.0, 0.3, 0.3, 0.0);
+        x[1] += 0.1;
+        let f = j.contact_forces(&x);
+        // The normal force's 1 N smoothing leaves ln 2 N at zero penetration rate.
+        assert!(
+            f.iter().all(|p| p[0].abs() < 1e-6 && p[1].abs() < 1.0),
+            "{f:?}"
+        );
+        x[1] -= 0.105;
+        let f = j.contact_forces(&x);
+        assert!(f.iter().all(|p| p[1] > 100.0), "{f:?}");
+    }
+}
