@@ -188,7 +188,7 @@ fn rollouts_of_every_model_keep_their_bits() {
             ("acrobot", 0x7dd8b5d5ec3defcb),
             ("biped", 0x59cc847aa9382477),
             ("diver", 0x3311cf476a8a696c),
-            ("jumper", 0x748a8c3a63e499df),
+            ("jumper", 0xfcdc369ed752d342),
             ("push_recovery", 0xb2d6bc1ce7f73cce),
             ("truck", 0x4a85f3df3a90e50d),
             ("lander", 0x4df91033582ba475),

@@ -200,6 +200,42 @@ impl Contact {
         }
     }
 
+    /// The constants as model parameters (for `describe`).
+    pub fn parameters(&self) -> Vec<Parameter> {
+        vec![
+            Parameter::new(
+                "contact.stiffness",
+                self.stiffness,
+                "N/m",
+                "penalty normal stiffness per contact point",
+            ),
+            Parameter::new(
+                "contact.damping",
+                self.damping,
+                "N*s/m",
+                "penalty normal damping per contact point",
+            ),
+            Parameter::new(
+                "contact.friction",
+                self.friction,
+                "1",
+                "Coulomb friction coefficient (regularized)",
+            ),
+            Parameter::new(
+                "contact.slip_speed",
+                self.slip_speed,
+                "m/s",
+                "slip speed of the regularized friction",
+            ),
+            Parameter::new(
+                "contact.smoothing",
+                self.smoothing,
+                "m",
+                "distance over which contact switches on",
+            ),
+        ]
+    }
+
     /// The ground's force (N, world x and y) on a point at `p` moving at `v`.
     pub fn force(&self, terrain: &Terrain, p: [f64; 2], v: [f64; 2]) -> [f64; 2] {
         if !self.enabled {
@@ -219,6 +255,39 @@ impl Contact {
         let f_t = -self.friction * f_n * tanh(vt / self.slip_speed);
         [f_n * n[0] + f_t * t[0], f_n * n[1] + f_t * t[1]]
     }
+}
+
+/// A foot's contact points as model parameters: the heel `heel` m behind the ankle and the toe
+/// `toe` m ahead of it.
+pub(crate) fn sole_parameters(heel: f64, toe: f64) -> [Parameter; 2] {
+    [
+        Parameter::new(
+            "foot.heel",
+            heel,
+            "m",
+            "heel contact point behind the ankle",
+        ),
+        Parameter::new("foot.toe", toe, "m", "toe contact point ahead of the ankle"),
+    ]
+}
+
+/// The equations of motion of `tree` under joint `torques` and the ground's `forces` on its
+/// force points (in their order): ẋ into `dx`. At most 8 torques and 4 points.
+pub(crate) fn driven_by_ground(
+    tree: &PlanarTree,
+    torques: &[f64],
+    forces: &[[f64; 2]],
+    x: &[f64],
+    dx: &mut [f64],
+) {
+    let mut all = [0.0; 16];
+    let m = torques.len();
+    all[..m].copy_from_slice(torques);
+    for (k, f) in forces.iter().enumerate() {
+        all[m + 2 * k] = f[0];
+        all[m + 2 * k + 1] = f[1];
+    }
+    tree.derivative(x, &all[..m + 2 * forces.len()], dx);
 }
 
 /// SIMBICON's planar biped links (torso, left thigh, shin, foot, right thigh, shin, foot).
@@ -376,49 +445,8 @@ impl Model for Biped {
     }
     fn parameters(&self) -> Vec<Parameter> {
         let mut p = self.tree.parameters();
-        let c = &self.contact;
-        p.push(Parameter::new(
-            "contact.stiffness",
-            c.stiffness,
-            "N/m",
-            "penalty normal stiffness per contact point (heel, toe of each foot)",
-        ));
-        p.push(Parameter::new(
-            "contact.damping",
-            c.damping,
-            "N*s/m",
-            "penalty normal damping per contact point",
-        ));
-        p.push(Parameter::new(
-            "contact.friction",
-            c.friction,
-            "1",
-            "Coulomb friction coefficient (regularized)",
-        ));
-        p.push(Parameter::new(
-            "contact.slip_speed",
-            c.slip_speed,
-            "m/s",
-            "slip speed of the regularized friction",
-        ));
-        p.push(Parameter::new(
-            "contact.smoothing",
-            c.smoothing,
-            "m",
-            "distance over which contact switches on",
-        ));
-        p.push(Parameter::new(
-            "foot.heel",
-            FOOT_HEEL,
-            "m",
-            "heel contact point behind the ankle",
-        ));
-        p.push(Parameter::new(
-            "foot.toe",
-            FOOT_TOE,
-            "m",
-            "toe contact point ahead of the ankle",
-        ));
+        p.extend(self.contact.parameters());
+        p.extend(sole_parameters(FOOT_HEEL, FOOT_TOE));
         p
     }
     /// 0.1 ms: the stiff contact (6000 N·s/m on a 1 kg foot) needs it for RK4 (the applet
@@ -430,13 +458,7 @@ impl Model for Biped {
 
 impl Ode for Biped {
     fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        let mut all = [0.0; TORQUES + 8];
-        all[..TORQUES].copy_from_slice(&u[..TORQUES]);
-        for (k, f) in self.contact_forces(x).iter().enumerate() {
-            all[TORQUES + 2 * k] = f[0];
-            all[TORQUES + 2 * k + 1] = f[1];
-        }
-        self.tree.derivative(x, &all, dx);
+        driven_by_ground(&self.tree, &u[..TORQUES], &self.contact_forces(x), x, dx);
     }
 
     fn position_dim(&self) -> Option<usize> {

@@ -11,7 +11,7 @@
 //! The foot's sole is its axis: the heel 5 cm behind the ankle and the toe 18 cm ahead (ours:
 //! the diver's foot is 20 cm long from the ankle).
 
-use super::biped::{Contact, Terrain};
+use super::biped::{driven_by_ground, sole_parameters, Contact, Terrain};
 use super::diver::diver;
 use super::planar::{ForcePoint, PlanarTree};
 use super::{Model, Ode, Parameter};
@@ -84,9 +84,9 @@ impl Jumper {
         })
     }
 
-    /// A crouch on level ground: torso leaning forward by `lean` from upright, the shank leaning
-    /// forward by `shin` (rad) over a flat foot, arms hanging back by `arm` (rad) from the
-    /// torso, the hip placed (thigh and knee following) so that the body's centre of mass lies
+    /// A crouch on level ground facing +x: the torso tipped forward by `lean` from upright, the
+    /// shank tipped forward by `shin` (rad, the knee ahead of the ankle) over a flat foot, the
+    /// arms swung back by `arm` (rad) from hanging straight down, the hip placed (thigh and knee following) so that the body's centre of mass lies
     /// above the middle of the sole where the thigh reaches, the ankle at x = `x` and the sole
     /// just on the ground.
     pub fn crouch(&self, x: f64, lean: f64, shin: f64, arm: f64) -> Vec<f64> {
@@ -102,7 +102,7 @@ impl Jumper {
             // reach of the knee).
             hip_x -= e;
             let (lt, ls) = (self.tree.links[4].length, self.tree.links[5].length);
-            let knee_x = -ls * (1.5 * PI + shin).cos();
+            let knee_x = -ls * (1.5 * PI - shin).cos();
             hip_x = hip_x.clamp(knee_x - 0.95 * lt, knee_x + 0.95 * lt);
             s = self.crouch_at(x, lean, shin, arm, hip_x);
         }
@@ -112,8 +112,10 @@ impl Jumper {
     /// [`Jumper::crouch`] with the hip `hip_x` ahead of the ankle.
     fn crouch_at(&self, x: f64, lean: f64, shin: f64, arm: f64, hip_x: f64) -> Vec<f64> {
         let mut s = vec![0.0; 2 * DOF];
-        let torso = FRAC_PI_2 + lean;
-        let shank_abs = 1.5 * PI + shin;
+        // Absolute angles from +x (forward), counter-clockwise: the torso up and tipped forward,
+        // the shank down with its top (the knee) forward.
+        let torso = FRAC_PI_2 - lean;
+        let shank_abs = 1.5 * PI - shin;
         let (lt, ls) = (self.tree.links[4].length, self.tree.links[5].length);
         // Knee relative to the ankle (the shank points from the knee down to the ankle).
         let knee = [-ls * shank_abs.cos(), -ls * shank_abs.sin()];
@@ -129,7 +131,7 @@ impl Jumper {
         s[1] = self.terrain.height_slope(x).0 + hip[1];
         s[2] = torso;
         s[3] = 0.0; // head in line
-        s[4] = PI - arm; // arms down along the torso, swung back by `arm`
+        s[4] = 1.5 * PI - arm - torso; // arms hanging, swung back (toward −x) by `arm`
         s[5] = 0.0;
         s[6] = thigh_abs - torso;
         s[7] = shank_abs - thigh_abs;
@@ -150,37 +152,8 @@ impl Model for Jumper {
     }
     fn parameters(&self) -> Vec<Parameter> {
         let mut p = self.tree.parameters();
-        let c = &self.contact;
-        p.push(Parameter::new(
-            "contact.stiffness",
-            c.stiffness,
-            "N/m",
-            "penalty normal stiffness per contact point (heel, toe)",
-        ));
-        p.push(Parameter::new(
-            "contact.damping",
-            c.damping,
-            "N*s/m",
-            "penalty normal damping per contact point",
-        ));
-        p.push(Parameter::new(
-            "contact.friction",
-            c.friction,
-            "1",
-            "Coulomb friction coefficient (regularized)",
-        ));
-        p.push(Parameter::new(
-            "foot.heel",
-            HEEL,
-            "m",
-            "heel contact point behind the ankle",
-        ));
-        p.push(Parameter::new(
-            "foot.toe",
-            TOE,
-            "m",
-            "toe contact point ahead of the ankle",
-        ));
+        p.extend(self.contact.parameters());
+        p.extend(sole_parameters(HEEL, TOE));
         p
     }
     /// 0.1 ms, as the biped's (the same ground on a 2 kg foot).
@@ -191,13 +164,7 @@ impl Model for Jumper {
 
 impl Ode for Jumper {
     fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        let mut all = [0.0; TORQUES + 4];
-        all[..TORQUES].copy_from_slice(&u[..TORQUES]);
-        for (k, f) in self.contact_forces(x).iter().enumerate() {
-            all[TORQUES + 2 * k] = f[0];
-            all[TORQUES + 2 * k + 1] = f[1];
-        }
-        self.tree.derivative(x, &all, dx);
+        driven_by_ground(&self.tree, &u[..TORQUES], &self.contact_forces(x), x, dx);
     }
 
     fn position_dim(&self) -> Option<usize> {
@@ -244,6 +211,15 @@ mod tests {
         assert!((heel[0] - (0.3 - HEEL)).abs() < 1e-12, "{heel:?} {x:?}");
         let com = j.tree.center_of_mass(&x[..DOF])[0];
         assert!((com - (heel[0] + toe[0]) / 2.0).abs() < 1e-9, "{com}");
+        // Facing +x: the knee ahead of the ankle, the neck ahead of the hip, the hands behind
+        // the shoulders.
+        let p = |link: usize, r: f64| j.tree.point(&x[..DOF], link, r);
+        assert!(p(5, 0.0)[0] > p(6, 0.0)[0], "knee behind the ankle");
+        assert!(p(0, j.tree.links[0].length)[0] > x[0], "torso tipped back");
+        assert!(
+            p(3, j.tree.links[3].length)[0] < p(2, 0.0)[0],
+            "arms forward"
+        );
     }
 
     #[test]
