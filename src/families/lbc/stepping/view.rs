@@ -397,7 +397,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
             poses.push(Series::line(
                 if n == 0 && k == 0 {
-                    "body at each step's end"
+                    "body at the start and at each step's end"
                 } else {
                     ""
                 },
