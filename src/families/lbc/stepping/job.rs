@@ -104,6 +104,12 @@ pub fn step_target(b: &Biped, end: &[f64], length: f64) -> Result<Vec<f64>, Erro
     )))
 }
 
+/// The reached step length: the right heel at `end` from the left (stance) heel at `start`
+/// (m), the measure of `targets.csv` and `components.csv` alike.
+pub fn reached_length(b: &Biped, start: &[f64], end: &[f64]) -> f64 {
+    b.contact_points(&end[..DOF])[RIGHT_HEEL][0] - b.contact_points(&start[..DOF])[LEFT_HEEL][0]
+}
+
 /// SIMBICON's walk from the applet's start, at its first left heel strike after `warmup` s.
 pub(super) fn start_state(b: &Biped, gait: &Gait, warmup: f64) -> Result<Vec<f64>, Error> {
     let dt = b.default_dt();
@@ -275,12 +281,13 @@ impl Setup {
     }
 
     /// Runs `blend` on the simulator from `x0` (stance on the left) for the step's knots, the
-    /// control held over each knot's `substeps`, then SIMBICON for `continue_s`.
+    /// control held over each knot's `substeps`, then SIMBICON for `continue_s` seconds.
     fn execute(
         &self,
         p: &Params,
         blend: &TrackerBlend,
         x0: &[f64],
+        continue_s: f64,
         keep_states: bool,
     ) -> Result<StepRun, Error> {
         let b = &self.body;
@@ -320,10 +327,10 @@ impl Setup {
         }
         let pts = b.contact_points(&x[..DOF]);
         let height = pts[RIGHT_HEEL][1] - b.terrain.height_slope(pts[RIGHT_HEEL][0]).0;
-        run.reached = pts[RIGHT_HEEL][0] - b.contact_points(&x0[..DOF])[LEFT_HEEL][0];
+        run.reached = reached_length(b, x0, &x);
         run.landed = !run.fell && height.abs() < 0.01;
-        if !run.fell && p.continue_s > 0.0 {
-            run.fell = walks_on_falls(b, &p.gait, &x, p.continue_s)?;
+        if !run.fell && continue_s > 0.0 {
+            run.fell = walks_on_falls(b, &p.gait, &x, continue_s)?;
         }
         Ok(run)
     }
@@ -460,7 +467,7 @@ impl Job for Params {
                 components.push(row![
                     *name,
                     jobs[i].1,
-                    step_length(&s.body, sol.x[n].as_slice()).0,
+                    reached_length(&s.body, &s.x0, sol.x[n].as_slice()),
                     sol.trace.len(),
                     sol.cost,
                     format!("{:?}", sol.termination),
@@ -498,23 +505,29 @@ impl Job for Params {
                 }
             }
         }
+        // The projected weights, once per desired length (their seconds are LBC's and the
+        // naive blend's overhead, a millisecond at most; not counted in `seconds`).
+        let projected = self
+            .desired_m
+            .iter()
+            .map(|&l| s.weights(l, lambda, &centers))
+            .collect::<Result<Vec<_>, _>>()?;
         let pb = ctx.progress(cases.len() as u64, "steps on the simulator");
         let runs: Vec<Result<(StepRun, Vec<f64>, f64), Error>> = ctx.stage("execute", || {
             cases
                 .par_iter()
-                .map(|&(k, d, l, m)| {
+                .map(|&(k, d, _, m)| {
                     let t0 = Instant::now();
-                    let w = s.weights(l, lambda, &centers)?;
+                    let w = projected[d].clone();
                     let r = if m == "direct" {
-                        let own = [solved[2 + d].1.clone()];
                         let b = TrackerBlend {
-                            trackers: &own,
+                            trackers: std::slice::from_ref(&solved[2 + d].1),
                             weights: vec![1.0],
                             lambda,
                             mode: BlendMode::Single(0),
                             limits: Some(&limits),
                         };
-                        s.execute(self, &b, &s.x0, false)?
+                        s.execute(self, &b, &s.x0, self.continue_s, false)?
                     } else {
                         let mode = match m {
                             "lbc" => BlendMode::Lbc,
@@ -522,7 +535,7 @@ impl Job for Params {
                             "short" => BlendMode::Single(0),
                             _ => BlendMode::Single(1),
                         };
-                        s.execute(self, &blend_of(k, &w, mode), &s.x0, false)?
+                        s.execute(self, &blend_of(k, &w, mode), &s.x0, self.continue_s, false)?
                     };
                     let mut secs = t0.elapsed().as_secs_f64();
                     if m == "direct" {
@@ -671,12 +684,13 @@ impl Params {
             local[0] += shift;
             let desired = (footholds[k + 1] - stance).clamp(self.short_m, self.long_m);
             let w = s.weights(desired, lambda, centers)?;
-            let last = k + 1 == gap.len();
-            let mut p = self.clone();
-            if !last {
-                p.continue_s = 0.0;
-            }
-            let r = s.execute(&p, &blend(&w, BlendMode::Lbc), &local, true)?;
+            // SIMBICON walks on after the last step only.
+            let walk_on = if k + 1 == gap.len() {
+                self.continue_s
+            } else {
+                0.0
+            };
+            let r = s.execute(self, &blend(&w, BlendMode::Lbc), &local, walk_on, true)?;
             let back = |x: &[f64]| {
                 let mut y = x.to_vec();
                 y[0] -= shift;

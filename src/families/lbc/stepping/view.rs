@@ -153,7 +153,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         df_f64(&comp, "iterations")?,
         df_f64(&comp, "average_scale")?,
     );
-    md.push_str("\nThe DDP examples (`components.csv`; reached on DDP's own map; the first two are the run's):\n\n| example | average-term scale | target (m) | reached (m) | DDP iterations |\n| --- | --- | --- | --- | --- |\n");
+    md.push_str("\nThe DDP examples (`components.csv`; reached on DDP's own map, the right heel at the end from the left heel at the start as in `targets.csv`; the first two are the run's):\n\n| example | average-term scale | target (m) | reached (m) | DDP iterations |\n| --- | --- | --- | --- | --- |\n");
     for i in 0..cn.len() {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} |\n",
@@ -268,13 +268,15 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
             (a.min(v), b.max(v))
         });
-    let band = |d: f64, label: &str| {
-        Series::line(label, vec![(lo, lo + d), (hi, hi + d)], 7).mark(Mark::Dashed)
+    // The desired line dashed, the tolerance's edges dotted (both grey).
+    let band = |d: f64, label: &str, mark: Mark| {
+        Series::line(label, vec![(lo, lo + d), (hi, hi + d)], 7).mark(mark)
     };
+    let dotted = Mark::Pattern { dash: 2, gap: 5 };
     let mut series = vec![
-        band(0.0, "desired"),
-        band(tol, "± tolerance"),
-        band(-tol, ""),
+        band(0.0, "desired", Mark::Dashed),
+        band(tol, "± tolerance", dotted),
+        band(-tol, "", dotted),
     ];
     let mut effort = Vec::new();
     for (k, m) in METHODS.iter().enumerate() {
