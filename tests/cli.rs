@@ -245,6 +245,58 @@ fn lbc_stepping_quick_writes_the_promised_tables_and_two_different_examples() {
 }
 
 #[test]
+fn lbc_jumping_quick_writes_the_promised_tables_and_two_different_take_offs() {
+    let d = quick_reproduction();
+    let out = d.path().join("out/lbc_jumping");
+    assert!(header(&out.join("jumps.csv")).starts_with("desired,method,takeoff_error,landed"));
+    let jumps = std::fs::read_to_string(out.join("jumps.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = jumps
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    let methods: Vec<&str> = rows.iter().map(|r| r[1]).collect();
+    assert_eq!(
+        methods,
+        ["lbc", "naive", "low", "high", "reference"],
+        "{jumps}"
+    );
+    for r in &rows {
+        let err: f64 = r[2].parse().unwrap();
+        let landed: f64 = r[3].parse().unwrap();
+        assert!(err >= 0.0 && err.is_finite(), "{r:?}");
+        assert!(landed == 0.0 || landed == 1.0, "{r:?}");
+    }
+    // The desired take-off's own push hits its own take-off state exactly.
+    assert_eq!(rows[4][2].parse::<f64>().unwrap(), 0.0, "{jumps}");
+    // The two examples jump to different heights, the high one higher.
+    let comp = std::fs::read_to_string(out.join("components.csv")).unwrap();
+    let h: Vec<f64> = comp
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    assert!(h.len() == 2 && h[1] > h[0] + 0.01, "{comp}");
+    let weights = std::fs::read_to_string(out.join("weights.csv")).unwrap();
+    for l in weights.lines().skip(1) {
+        let a: f64 = l.split(',').nth(2).unwrap().parse().unwrap();
+        assert!((0.0..=1.0).contains(&a), "{l}");
+    }
+    for f in [
+        "takeoff.png",
+        "heights.png",
+        "weights.png",
+        "jumps.png",
+        "jump_anim.gif",
+    ] {
+        assert!(
+            d.path().join(format!("figs/lbc_jumping_{f}")).exists(),
+            "{f}"
+        );
+    }
+}
+
+#[test]
 fn lbc_grid_quick_combination_is_exact_and_naive_is_worse() {
     let d = quick_reproduction();
     let out = d.path().join("out/lbc_grid_optimality");
@@ -483,7 +535,7 @@ fn reproduce_quick_writes_report_with_every_experiment() {
             ids += 1;
         }
     }
-    assert_eq!(ids, 27, "the shipped experiments");
+    assert_eq!(ids, 28, "the shipped experiments");
     assert!(report.contains("**Paper:**") && report.contains("**Verdict:"));
     assert!(
         report.contains("../figs/lbc_projection_cost.png"),
@@ -917,7 +969,7 @@ fn a_closed_output_pipe_is_a_normal_end() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Close the read end at once: `list` reads 27 experiment files before its first line.
+    // Close the read end at once: `list` reads 28 experiment files before its first line.
     drop(child.stdout.take());
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -21,6 +21,7 @@
 //! | `lbc_push_recovery` | `lbc_push_recovery` | [`lbc::push_recovery`] |
 //! | `lbc_walking` | `lbc_walking` | [`lbc::walking`] (+ its gaits' value functions: [`crate::control::gait_value`]) |
 //! | `lbc_stepping` | `lbc_stepping` | [`lbc::stepping`] |
+//! | `lbc_jumping` | `lbc_jumping` | [`lbc::jumping`] |
 //! | `na_table1_structure` | `na_table1_structure` | [`na::table1_structure`] |
 //! | `na_table2_speedup` | `na_table2_speedup` | [`na::table2_speedup`] |
 //! | `na_regularization` | `na_regularization` | [`na::regularization`] |
@@ -63,6 +64,7 @@ static FAMILIES: &[&dyn Experiment] = &[
     &lbc::push_recovery::LbcPush,
     &lbc::walking::LbcWalking,
     &lbc::stepping::LbcStepping,
+    &lbc::jumping::LbcJumping,
     &na::table1_structure::NaStructure,
     &na::table2_speedup::NaSpeedup,
     &na::fig12_error::NaError,

@@ -4,6 +4,7 @@ pub mod acrobot_swingup;
 pub mod diver;
 pub mod film;
 pub mod grid_optimality;
+pub mod jumping;
 pub mod projection;
 pub mod push_recovery;
 pub mod stepping;

@@ -1,0 +1,428 @@
+//! `lbc_jumping`'s figures, animation, verdict and report section.
+
+use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::{sig, yes_no, Findings, Verdict};
+use crate::experiment::Error;
+use crate::families::lbc::film::{diver_body, fitted};
+use crate::families::lbc::{rule_setting, rule_settings};
+use crate::physics::jumper::{Jumper, DOF};
+use std::path::{Path, PathBuf};
+
+const METHODS: [&str; 5] = ["lbc", "naive", "low", "high", "reference"];
+
+/// What the rule reads from a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JumpFacts {
+    /// Each example's tracker alone: its take-off error against its own target.
+    pub examples: [f64; 2],
+    /// The examples' jump heights (low, high) and the desired ones.
+    pub heights: (f64, f64, Vec<f64>),
+    /// Whether each desired jump's landing tracker lands from the desired take-off itself.
+    pub reference_landed: Vec<bool>,
+    /// LBC at every desired jump: (take-off error, landed).
+    pub lbc: Vec<(f64, bool)>,
+    /// The naive blend likewise.
+    pub naive: Vec<(f64, bool)>,
+}
+
+/// The rule's checks (premise, a, b, c) with the examples' take-off tolerance `tol`.
+pub fn checks(f: &JumpFacts, tol: f64) -> (bool, [bool; 3]) {
+    let (lo, hi, ref desired) = f.heights;
+    let premise = f.examples.iter().all(|&e| e <= tol)
+        && !f.reference_landed.is_empty()
+        && f.reference_landed.iter().all(|&l| l)
+        && desired.iter().all(|&h| h > lo && h < hi);
+    let landed = |v: &[(f64, bool)]| v.iter().filter(|r| r.1).count();
+    let mean = |v: &[(f64, bool)]| v.iter().map(|r| r.0).sum::<f64>() / v.len().max(1) as f64;
+    let a = !f.lbc.is_empty() && landed(&f.lbc) == f.lbc.len();
+    let b = landed(&f.lbc) > landed(&f.naive);
+    let c = mean(&f.lbc) < mean(&f.naive);
+    (premise, [a, b, c])
+}
+
+/// The verdict of `f`.
+pub fn verdict_of(f: &JumpFacts, tol: f64) -> Verdict {
+    let (premise, c) = checks(f, tol);
+    Verdict::from_checks(&c).given(premise)
+}
+
+/// The `jumps` table's columns the report and figures read.
+struct Jumps {
+    desired: Vec<f64>,
+    method: Vec<String>,
+    error: Vec<f64>,
+    landed: Vec<f64>,
+    height: Vec<f64>,
+    fell: Vec<f64>,
+    effort: Vec<f64>,
+    speed: Vec<f64>,
+    weight_low: Vec<f64>,
+}
+
+impl Jumps {
+    fn read(dir: &Path) -> Result<Self, Error> {
+        let t = read_csv(&dir.join("jumps.csv"))?;
+        Ok(Self {
+            desired: df_f64(&t, "desired")?,
+            method: df_str(&t, "method")?,
+            error: df_f64(&t, "takeoff_error")?,
+            landed: df_f64(&t, "landed")?,
+            height: df_f64(&t, "height_m")?,
+            fell: df_f64(&t, "fell")?,
+            effort: df_f64(&t, "effort")?,
+            speed: df_f64(&t, "speed_error_m_s")?,
+            weight_low: df_f64(&t, "weight_low")?,
+        })
+    }
+
+    fn of(t: &Table) -> Self {
+        Self {
+            desired: t.f64s("desired"),
+            method: t.strs("method"),
+            error: t.f64s("takeoff_error"),
+            landed: t.f64s("landed"),
+            height: t.f64s("height_m"),
+            fell: t.f64s("fell"),
+            effort: t.f64s("effort"),
+            speed: t.f64s("speed_error_m_s"),
+            weight_low: t.f64s("weight_low"),
+        }
+    }
+
+    fn rows<'a>(&'a self, method: &'a str) -> impl Iterator<Item = usize> + 'a {
+        (0..self.method.len()).filter(move |&i| self.method[i] == method)
+    }
+
+    fn outcomes(&self, method: &str) -> Vec<(f64, bool)> {
+        self.rows(method)
+            .map(|i| (self.error[i], self.landed[i] != 0.0))
+            .collect()
+    }
+}
+
+pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
+    let rule = rule_settings(dir)?;
+    let tol = rule("takeoff_tolerance");
+    let t = Jumps::read(dir)?;
+    let comp = read_csv(&dir.join("components.csv"))?;
+    let own = df_f64(&comp, "takeoff_error")?;
+    let facts = JumpFacts {
+        examples: [
+            own.first().copied().unwrap_or(f64::INFINITY),
+            own.get(1).copied().unwrap_or(f64::INFINITY),
+        ],
+        heights: (
+            rule("low_height_m"),
+            rule("high_height_m"),
+            t.rows("lbc").map(|i| t.desired[i]).collect(),
+        ),
+        reference_landed: t.rows("reference").map(|i| t.landed[i] != 0.0).collect(),
+        lbc: t.outcomes("lbc"),
+        naive: t.outcomes("naive"),
+    };
+    let verdict = verdict_of(&facts, tol);
+    let (premise, [a, b, c]) = checks(&facts, tol);
+    let mut md = String::from(
+        "| desired height (m) | method | take-off error | speed error (m/s) | height reached (m) | landed | fell | effort |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for i in 0..t.desired.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            sig(t.desired[i]),
+            t.method[i],
+            sig(t.error[i]),
+            sig(t.speed[i]),
+            sig(t.height[i]),
+            yes_no(Some(t.landed[i] != 0.0)),
+            yes_no(Some(t.fell[i] != 0.0)),
+            sig(t.effort[i]),
+        ));
+    }
+    let names = df_str(&comp, "component")?;
+    let (its, hs) = (df_f64(&comp, "iterations")?, df_f64(&comp, "height_m")?);
+    md.push_str("\nThe take-off examples (`components.csv`; DDP from the crouch; the take-off error is each tracker alone on the simulator against its own target):\n\n| example | jump height (m) | take-off error | DDP iterations |\n| --- | --- | --- | --- |\n");
+    for i in 0..names.len() {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} |\n",
+            names[i],
+            sig(hs[i]),
+            sig(own[i]),
+            its[i]
+        ));
+    }
+    let mean = |v: &[(f64, bool)]| v.iter().map(|r| r.0).sum::<f64>() / v.len().max(1) as f64;
+    let landed = |v: &[(f64, bool)]| v.iter().filter(|r| r.1).count();
+    let n = facts.lbc.len();
+    let why = format!(
+        "LBC's take-offs land {ll} of {n} desired jumps at mean take-off error {le}, the naive blend's with the same weights {nl} of {n} at {ne}; each example's tracker alone, handed to the same landing trackers, lands {lo_l} (low) and {hi_l} (high) of {n}, which shows how wide the landing trackers' regions are. Premise (each example's tracker alone reaches its own take-off within {tol}, each desired jump's landing tracker lands from the desired take-off state itself, and the desired heights lie between the examples' {lo} m and {hi} m): {p} (errors {e0} and {e1}; {rl} of {n} landing trackers land their own take-off). (a) LBC's jump lands at every desired height: {a}. (b) LBC lands more desired jumps than the naive blend: {b}. (c) LBC's mean take-off error is below the naive blend's: {c}. Held: premise and all three; partly: premise and some. λ = {lam} by §4.1's scale rule; take-off {ts} s, landing {tl} s, then the PD landing holds for {th} s. Rule and tolerance fixed in the spec (ours).",
+        ll = landed(&facts.lbc),
+        lo_l = landed(&t.outcomes("low")),
+        hi_l = landed(&t.outcomes("high")),
+        nl = landed(&facts.naive),
+        le = sig(mean(&facts.lbc)),
+        ne = sig(mean(&facts.naive)),
+        tol = sig(tol),
+        lo = sig(facts.heights.0),
+        hi = sig(facts.heights.1),
+        p = yes_no(Some(premise)),
+        e0 = sig(facts.examples[0]),
+        e1 = sig(facts.examples[1]),
+        rl = facts.reference_landed.iter().filter(|&&l| l).count(),
+        a = yes_no(Some(a)),
+        b = yes_no(Some(b)),
+        c = yes_no(Some(c)),
+        lam = sig(rule("lambda")),
+        ts = sig(rule("takeoff_s")),
+        tl = sig(rule("landing_s")),
+        th = sig(rule("hold_s")),
+    );
+    Ok(Findings {
+        ours: md,
+        verdict,
+        why,
+    })
+}
+
+/// The body's series at configuration `q` shifted by `off`, labelled once.
+fn body(
+    tree: &crate::physics::planar::PlanarTree,
+    q: &[f64],
+    off: (f64, f64),
+    label: &str,
+    color: usize,
+) -> Vec<Series> {
+    diver_body(tree, q, off)
+        .into_iter()
+        .enumerate()
+        .map(|(k, seg)| {
+            // Dots at the joints; solid whatever else the panel holds.
+            Series::line(if k == 0 { label } else { "" }, seg, color).mark(Mark::LinePoints)
+        })
+        .collect()
+}
+
+pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let mut files = Vec::new();
+    let t = Jumps::of(tables.require("jumps")?);
+    let _ = &t.weight_low;
+    // Take-off error and height reached per method.
+    let mut errors = Vec::new();
+    let mut heights = Vec::new();
+    for (k, m) in METHODS.iter().enumerate() {
+        let rows: Vec<usize> = t.rows(m).collect();
+        let marks: Vec<String> = rows
+            .iter()
+            .map(|&i| {
+                if t.landed[i] == 0.0 {
+                    "✗".into()
+                } else {
+                    String::new()
+                }
+            })
+            .collect();
+        let mut s = Series::line(
+            *m,
+            rows.iter().map(|&i| (t.desired[i], t.error[i])).collect(),
+            k,
+        )
+        .mark(Mark::LinePoints);
+        s.point_labels = marks.clone();
+        errors.push(s);
+        let mut h = Series::line(
+            *m,
+            rows.iter().map(|&i| (t.desired[i], t.height[i])).collect(),
+            k,
+        )
+        .mark(Mark::LinePoints);
+        h.point_labels = marks;
+        heights.push(h);
+    }
+    let panel = Panel {
+        title: "take-off error (✗: did not land)".into(),
+        x_label: "desired jump height (m)".into(),
+        y_label: "take-off error (Q_T norm)".into(),
+        series: errors,
+        legend: Legend::Auto,
+        ..Panel::default()
+    };
+    files.extend(fig.draw("takeoff", &Figure::grid(vec![panel], 1))?);
+    let (lo, hi) = t
+        .desired
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    heights.insert(
+        0,
+        Series::line("desired", vec![(lo, lo), (hi, hi)], 7).mark(Mark::Dashed),
+    );
+    let panel = Panel {
+        title: "jump height at take-off (✗: did not land)".into(),
+        x_label: "desired jump height (m)".into(),
+        y_label: "jump height reached (m)".into(),
+        series: heights,
+        legend: Legend::Auto,
+        ..Panel::default()
+    };
+    files.extend(fig.draw("heights", &Figure::grid(vec![panel], 1))?);
+    // LBC's weights over the take-off.
+    let w = tables.require("weights")?;
+    let (wd, wt, wa) = (w.f64s("desired"), w.f64s("t"), w.f64s("alpha_low"));
+    let mut ds = wd.clone();
+    ds.dedup();
+    let series = ds
+        .iter()
+        .enumerate()
+        .map(|(k, &d)| {
+            Series::line(
+                format!("{} m", sig(d)),
+                (0..wd.len())
+                    .filter(|&i| wd[i] == d)
+                    .map(|i| (wt[i], wa[i]))
+                    .collect(),
+                k,
+            )
+        })
+        .collect();
+    let panel = Panel {
+        title: "LBC's weight of the low jump's tracker over the take-off".into(),
+        x_label: "time from the crouch (s)".into(),
+        y_label: "α_low".into(),
+        series,
+        y_range: Some((-0.02, 1.02)),
+        legend: Legend::Auto,
+        ..Panel::default()
+    };
+    files.extend(fig.draw("weights", &Figure::grid(vec![panel], 1))?);
+    // The middle desired jump: LBC's and the naive blend's bodies over time.
+    let m = tables.require("motion")?;
+    let (mm, mt, ma) = (m.strs("method"), m.f64s("t"), m.f64s("alpha_low"));
+    let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
+    let state = |i: usize| -> Vec<f64> { (0..DOF).map(|k| q[k][i]).collect() };
+    let tree = Jumper::default().tree;
+    let middle = rule_setting(tables, "middle_desired").unwrap_or(f64::NAN);
+    let rows_of = |name: &str| -> Vec<usize> { (0..mm.len()).filter(|&i| mm[i] == name).collect() };
+    let (lbc_rows, naive_rows) = (rows_of("lbc"), rows_of("naive"));
+    // One panel per controller (each drawn solid): the body every 0.1 s until 1.2 s (take-off,
+    // flight and landing; the hold that follows is still).
+    let spacing = 0.6;
+    let mut panels = Vec::new();
+    let mut size = (0, 0);
+    for (name, rows, color) in [("LBC", &lbc_rows, 0usize), ("naive blend", &naive_rows, 1)] {
+        let mut strip = Vec::new();
+        let mut n = 0usize;
+        let mut last = f64::NEG_INFINITY;
+        for &i in rows.iter() {
+            if mt[i] - last < 0.1 - 1e-9 || mt[i] > 1.2 + 1e-9 {
+                continue;
+            }
+            last = mt[i];
+            let off = (n as f64 * spacing, 0.0);
+            strip.extend(body(
+                &tree,
+                &state(i),
+                off,
+                if n == 0 { name } else { "" },
+                color,
+            ));
+            n += 1;
+        }
+        let x_hi = n as f64 * spacing + 0.2;
+        strip.insert(0, Series::line("ground", vec![(-0.4, 0.0), (x_hi, 0.0)], 7));
+        let (sz, xr, yr) = fitted((-0.4, x_hi), (-0.1, 2.0), 260);
+        size = sz;
+        panels.push(Panel {
+            title: format!(
+                "{name}: the {} m jump every 0.1 s from the crouch (left) to 1.2 s",
+                sig(middle)
+            ),
+            x_label: "frame position (m; bodies spaced 0.6 m apart)".into(),
+            y_label: "height (m)".into(),
+            series: strip,
+            x_range: Some(xr),
+            y_range: Some(yr),
+            legend: Legend::UpperRight,
+            ..Panel::default()
+        });
+    }
+    let mut f = Figure::grid(panels, 1);
+    f.panel_size = size;
+    files.extend(fig.draw("jumps", &f)?);
+    // The animation: both side by side.
+    let mut frames = Vec::new();
+    for (k, &i) in lbc_rows.iter().enumerate() {
+        let mut series = vec![Series::line("ground", vec![(-0.6, 0.0), (1.8, 0.0)], 7)];
+        series.extend(body(&tree, &state(i), (0.0, 0.0), "LBC", 0));
+        let other = naive_rows
+            .get(k)
+            .copied()
+            .or_else(|| naive_rows.last().copied());
+        let mut title = format!("t = {:.2} s   α_low: LBC {:.2}", mt[i], ma[i]);
+        if let Some(o) = other {
+            series.extend(body(&tree, &state(o), (1.1, 0.0), "naive blend", 1));
+            title.push_str(&format!(", naive {:.2}", ma[o]));
+        }
+        let (size, xr, yr) = fitted((-0.6, 1.8), (-0.1, 2.1), 300);
+        let mut f = Figure::grid(
+            vec![Panel {
+                title,
+                x_label: "x (m; the naive blend's body drawn 1.1 m to the right)".into(),
+                y_label: "height (m)".into(),
+                series,
+                x_range: Some(xr),
+                y_range: Some(yr),
+                legend: Legend::UpperLeft,
+                ..Panel::default()
+            }],
+            1,
+        );
+        f.panel_size = size;
+        frames.push(f);
+    }
+    if !frames.is_empty() {
+        let dt = if lbc_rows.len() > 1 {
+            mt[lbc_rows[1]] - mt[lbc_rows[0]]
+        } else {
+            0.1
+        };
+        files.push(fig.gif("jump_anim", &frames, ((dt * 100.0).round() as u32).max(2))?);
+    }
+    Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn facts(lbc_landed: usize, naive_landed: usize, lbc_err: f64, naive_err: f64) -> JumpFacts {
+        JumpFacts {
+            examples: [0.5, 0.5],
+            heights: (0.2, 0.3, vec![0.22, 0.25, 0.28]),
+            reference_landed: vec![true; 3],
+            lbc: (0..3).map(|i| (lbc_err, i < lbc_landed)).collect(),
+            naive: (0..3).map(|i| (naive_err, i < naive_landed)).collect(),
+        }
+    }
+
+    #[test]
+    fn the_rule_needs_lbc_to_land_where_the_naive_blend_does_not() {
+        assert_eq!(verdict_of(&facts(3, 1, 0.5, 2.0), 1.0), Verdict::Held);
+        assert_eq!(checks(&facts(3, 3, 0.5, 2.0), 1.0).1, [true, false, true]);
+        assert_eq!(verdict_of(&facts(1, 2, 2.0, 1.0), 1.0), Verdict::NotHeld);
+        assert_eq!(verdict_of(&facts(2, 1, 0.5, 2.0), 1.0), Verdict::Partly);
+        let mut f = facts(3, 1, 0.5, 2.0);
+        f.reference_landed[1] = false;
+        assert_eq!(verdict_of(&f, 1.0), Verdict::PremiseNotReproduced);
+        let mut f = facts(3, 1, 0.5, 2.0);
+        f.examples[0] = 1.5;
+        assert_eq!(verdict_of(&f, 1.0), Verdict::PremiseNotReproduced);
+        let mut f = facts(3, 1, 0.5, 2.0);
+        f.heights.2[0] = 0.35;
+        assert_eq!(
+            verdict_of(&f, 1.0),
+            Verdict::PremiseNotReproduced,
+            "extrapolation"
+        );
+    }
+}
