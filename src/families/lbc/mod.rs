@@ -10,10 +10,57 @@ pub mod push_recovery;
 pub mod stepping;
 pub mod walking;
 
+use crate::bellman::projection::{project, GaussianReward};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
-use crate::experiment::Error;
+use crate::experiment::{other, Error};
 use crate::row;
+use nalgebra::{DMatrix, DVector};
 use std::path::Path;
+
+/// §4.1's scale rule ("the quadratic cost functions should share the same scale factor which
+/// is inversely proportional to the square of the distance between each minimum point"): the
+/// squared distance between two examples' terminal targets in the terminal metric `q`, so their
+/// exp-transformed terminal costs exp(−g_i/λ) lie one unit apart.
+pub fn scale_lambda(q: &DMatrix<f64>, a: &DVector<f64>, b: &DVector<f64>) -> f64 {
+    let d = a - b;
+    (d.transpose() * q * &d)[0]
+}
+
+/// Projected weights (LBC §4.1): the quadratic q/λ centred on `desired` projected in reward
+/// space onto the same quadratic centred on each of `centers`. Weights below 1e-9 of their
+/// sum snap to zero (at an example's own target the other's weight is zero up to rounding);
+/// a negative weight is an error naming `what`.
+pub(crate) fn projected_weights(
+    q: &DMatrix<f64>,
+    lambda: f64,
+    centers: &[DVector<f64>],
+    desired: &DVector<f64>,
+    what: &str,
+) -> Result<Vec<f64>, Error> {
+    let q = q / lambda;
+    let comps: Vec<GaussianReward> = centers
+        .iter()
+        .map(|c| GaussianReward {
+            center: c.clone(),
+            q: q.clone(),
+        })
+        .collect();
+    let goal = GaussianReward {
+        center: desired.clone(),
+        q,
+    };
+    let mut w = project(&comps, &goal).map_err(other)?.weights;
+    let scale: f64 = w.iter().map(|v| v.abs()).sum();
+    w.iter_mut()
+        .filter(|v| v.abs() <= 1e-9 * scale)
+        .for_each(|v| *v = 0.0);
+    if w.iter().any(|&v| !(v >= 0.0)) || !(scale > 0.0) {
+        return Err(other(format!(
+            "{what}: projected weights {w:?} are negative"
+        )));
+    }
+    Ok(w)
+}
 
 /// The settings of an experiment's `rule` table (columns setting, value) in `dir`, by name;
 /// NaN for a setting the table lacks.
@@ -271,5 +318,27 @@ mod entropy_tests {
         assert_eq!(sum.len(), 2);
         assert!(!sum[0].fixed && sum[1].fixed);
         assert!((sum[0].mean - 0.9).abs() < 1e-12 && sum[0].min == 0.8);
+    }
+}
+
+#[cfg(test)]
+mod scale_tests {
+    use super::*;
+
+    #[test]
+    fn lambda_puts_the_targets_one_unit_apart_and_projection_recovers_an_example() {
+        let q = DMatrix::from_diagonal(&DVector::from_vec(vec![4.0, 1.0]));
+        let (a, b) = (
+            DVector::from_vec(vec![1.0, 0.0]),
+            DVector::from_vec(vec![0.0, 2.0]),
+        );
+        let lambda = scale_lambda(&q, &a, &b);
+        assert!((lambda - 8.0).abs() < 1e-12);
+        let centers = [a.clone(), b.clone()];
+        let w = projected_weights(&q, lambda, &centers, &a, "a").unwrap();
+        assert!(w[1] == 0.0 && w[0] > 0.0, "{w:?}");
+        let mid = (&a + &b) * 0.5;
+        let w = projected_weights(&q, lambda, &centers, &mid, "mid").unwrap();
+        assert!((w[0] - w[1]).abs() < 1e-9 * w[0], "{w:?}");
     }
 }

@@ -2,15 +2,17 @@
 //! trackers, each desired jump's landing tracker, and every controller run on the simulator.
 
 use super::Params;
+use crate::bellman::combine::normalized_entropy;
 use crate::bellman::combine::{BlendMode, TrackerBlend};
-use crate::bellman::projection::{project, GaussianReward};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::resolve::{ensure, positive, ParamError};
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::families::lbc::rule_table;
+use crate::families::lbc::{
+    alpha_deviation, projected_weights, push_entropy, rule_table, scale_lambda, ENTROPY_COLUMNS,
+};
 use crate::physics::jumper::{Jumper, DOF, TORQUES};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::{check_finite, Dynamics, IntegratorKind, Simulator};
@@ -445,36 +447,6 @@ impl Setup {
         Ok((tracker, t0.elapsed().as_secs_f64()))
     }
 
-    /// The projected weights of the take-off state `x_d` on the examples' `centers`.
-    fn weights(
-        &self,
-        x_d: &DVector<f64>,
-        lambda: f64,
-        centers: &[DVector<f64>],
-    ) -> Result<Vec<f64>, Error> {
-        let q = &self.q_final / lambda;
-        let comps: Vec<GaussianReward> = centers
-            .iter()
-            .map(|c| GaussianReward {
-                center: c.clone(),
-                q: q.clone(),
-            })
-            .collect();
-        let desired = GaussianReward {
-            center: x_d.clone(),
-            q,
-        };
-        let mut w = project(&comps, &desired).map_err(other)?.weights;
-        let scale: f64 = w.iter().map(|v| v.abs()).sum();
-        w.iter_mut()
-            .filter(|v| v.abs() <= 1e-9 * scale)
-            .for_each(|v| *v = 0.0);
-        if w.iter().any(|&v| !(v >= 0.0)) || !(scale > 0.0) {
-            return Err(other(format!("projected weights {w:?} are negative")));
-        }
-        Ok(w)
-    }
-
     /// Runs a jump on the simulator: `takeoff` (a blend, or `None` for the PD push of
     /// `strength`) over the take-off, then `landing` over the landing, then the PD landing for
     /// `hold_s`.
@@ -572,12 +544,6 @@ impl Setup {
     }
 }
 
-/// §4.1's scale: the squared distance between the two examples' targets in the terminal metric.
-fn lambda_of(q_final: &DMatrix<f64>, a: &DVector<f64>, b: &DVector<f64>) -> f64 {
-    let d = a - b;
-    (d.transpose() * q_final * &d)[0]
-}
-
 /// The compared take-off controllers (`reference`: the desired jump's own PD push).
 const METHODS: [&str; 5] = ["lbc", "naive", "low", "high", "reference"];
 
@@ -637,10 +603,13 @@ impl Job for Params {
         }
         let trackers = [examples[0].1.clone(), examples[1].1.clone()];
         let centers = [targets[0].clone(), targets[1].clone()];
-        let lambda = lambda_of(&s.q_final, &centers[0], &centers[1]);
+        let lambda = scale_lambda(&s.q_final, &centers[0], &centers[1]);
         let limits = vec![self.push.torque_limit; TORQUES];
         let projected = (0..nd)
-            .map(|d| s.weights(&targets[3 + d], lambda, &centers))
+            .map(|d| {
+                let what = format!("desired strength {}", self.desired[d]);
+                projected_weights(&s.q_final, lambda, &centers, &targets[3 + d], &what)
+            })
             .collect::<Result<Vec<_>, _>>()?;
         // 3. Every take-off with every desired jump's landing, on the simulator; and each
         //    example alone with its own target's error for the premise.
@@ -700,6 +669,8 @@ impl Job for Params {
             "seconds",
         ]);
         let mut weights = Table::new(&["desired", "t", "alpha_low"]);
+        // α's entropy over the take-off (issue 56's entropy.csv), LBC's and the naive blend's.
+        let mut entropy = Table::new(&ENTROPY_COLUMNS);
         let mut cols = vec!["method".to_string(), "t".into(), "alpha_low".into()];
         cols.extend((0..DOF).map(|i| format!("q{i}")));
         let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
@@ -723,6 +694,21 @@ impl Job for Params {
                 (v[0] - vd[0]).hypot(v[1] - vd[1]),
                 *secs
             ]);
+            if m == "lbc" || m == "naive" {
+                let pair = |a: f64| [a, 1.0 - a];
+                let h: Vec<f64> = r
+                    .alpha_low
+                    .iter()
+                    .map(|&a| normalized_entropy(&pair(a)))
+                    .collect();
+                let dev: Vec<f64> = r
+                    .alpha_low
+                    .iter()
+                    .map(|&a| alpha_deviation(&pair(a), &projected[d]))
+                    .collect();
+                let run = format!("{} m", crate::experiment::report::sig(heights[3 + d]));
+                push_entropy(&mut entropy, &run, m, self.knot_dt, &h, &dev);
+            }
             if m == "lbc" {
                 // Every 5 ms (the take-off is short).
                 let every = ((0.005 / self.knot_dt).round() as usize).max(1);
@@ -790,6 +776,7 @@ impl Job for Params {
             ("components", components),
             ("landing", landing),
             ("weights", weights),
+            ("entropy", entropy),
             ("motion", motion),
             ("rule", rule),
         ]))

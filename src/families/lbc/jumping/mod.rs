@@ -30,8 +30,9 @@
 //!   knot).
 //!
 //! Tables: `jumps` (desired, method, takeoff_error, landed + desired_strength, height_m, fell,
-//! effort, weight_low, weight_high, speed_error_m_s), `components`, `landing`, `weights`,
-//! `motion`, `rule`.
+//! effort, weight_low, weight_high, speed_error_m_s, seconds), `components`, `landing`,
+//! `weights`, `entropy` (α's normalized entropy and distance from the fixed weights at every
+//! knot of the take-off, LBC's and the naive blend's), `motion`, `rule`.
 
 mod job;
 mod view;

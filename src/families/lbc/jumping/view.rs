@@ -5,7 +5,7 @@ use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
 use crate::experiment::Error;
 use crate::families::lbc::film::{diver_body, fitted};
-use crate::families::lbc::{rule_setting, rule_settings};
+use crate::families::lbc::{entropy_section, rule_setting, rule_settings};
 use crate::physics::jumper::{Jumper, DOF};
 use std::path::{Path, PathBuf};
 
@@ -151,6 +151,11 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             its[i]
         ));
     }
+    md.push_str(&entropy_section(
+        dir,
+        "runs are the desired jump heights; the naive blend's α is its fixed weights",
+        "the naive blend",
+    )?);
     let mean = |v: &[(f64, bool)]| v.iter().map(|r| r.0).sum::<f64>() / v.len().max(1) as f64;
     let landed = |v: &[(f64, bool)]| v.iter().filter(|r| r.1).count();
     let n = facts.lbc.len();

@@ -3,14 +3,13 @@
 
 use super::Params;
 use crate::bellman::combine::{BlendMode, TrackerBlend};
-use crate::bellman::projection::{project, GaussianReward};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::simbicon::{applet_start, fallen, Gait, Simbicon};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::families::lbc::rule_table;
+use crate::families::lbc::{projected_weights, rule_table, scale_lambda};
 use crate::physics::biped::{Biped, DOF, FOOT_HEEL, FOOT_TOE, TORQUES};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::{check_finite, Dynamics, IntegratorKind, Model, Simulator};
@@ -335,37 +334,15 @@ impl Setup {
         Ok(run)
     }
 
-    /// The blend of the two trackers for `length` in `mode`, with the projected weights.
+    /// The projected weights of `length` on the examples' `centers`.
     fn weights(
         &self,
         length: f64,
         lambda: f64,
         centers: &[DVector<f64>],
     ) -> Result<Vec<f64>, Error> {
-        let q = &self.q_final / lambda;
-        let comps: Vec<GaussianReward> = centers
-            .iter()
-            .map(|c| GaussianReward {
-                center: c.clone(),
-                q: q.clone(),
-            })
-            .collect();
-        let desired = GaussianReward {
-            center: self.target(length)?,
-            q,
-        };
-        let mut w = project(&comps, &desired).map_err(other)?.weights;
-        // At an example's own length the other's weight is zero up to rounding.
-        let scale: f64 = w.iter().map(|v| v.abs()).sum();
-        w.iter_mut()
-            .filter(|v| v.abs() <= 1e-9 * scale)
-            .for_each(|v| *v = 0.0);
-        if w.iter().any(|&v| !(v >= 0.0)) || !(scale > 0.0) {
-            return Err(other(format!(
-                "length {length} m: projected weights {w:?} are negative"
-            )));
-        }
-        Ok(w)
+        let what = format!("length {length} m");
+        projected_weights(&self.q_final, lambda, centers, &self.target(length)?, &what)
     }
 }
 
@@ -385,13 +362,6 @@ fn walks_on_falls(b: &Biped, gait: &Gait, x0: &[f64], seconds: f64) -> Result<bo
         }
     }
     Ok(false)
-}
-
-/// §4.1's scale: the squared distance between the two examples' targets in the terminal metric,
-/// so the exp-transformed terminal costs exp(−g_i/λ) lie one unit apart.
-pub fn lambda_of(q_final: &DMatrix<f64>, a: &DVector<f64>, b: &DVector<f64>) -> f64 {
-    let d = a - b;
-    (d.transpose() * q_final * &d)[0]
 }
 
 /// The footholds' gap intervals: between the stance toe plus `margin` and the next foothold
@@ -477,7 +447,7 @@ impl Job for Params {
             }
         }
         let centers = [s.target(self.short_m)?, s.target(self.long_m)?];
-        let lambda = lambda_of(&s.q_final, &centers[0], &centers[1]);
+        let lambda = scale_lambda(&s.q_final, &centers[0], &centers[1]);
         let limits = vec![self.torque_limit; TORQUES];
         let pairs: Vec<[TrackingController; 2]> = examples
             .iter()
@@ -778,15 +748,5 @@ mod tests {
         assert!(in_gap(0.37, 0.53, &g), "the heel in the gap");
         assert!(in_gap(0.0, 0.2, &g), "the toe in the gap");
         assert!(!in_gap(0.69, 0.85, &g));
-    }
-
-    #[test]
-    fn lambda_puts_the_targets_one_unit_apart() {
-        let q = DMatrix::from_diagonal(&DVector::from_vec(vec![4.0, 1.0]));
-        let (a, b) = (
-            DVector::from_vec(vec![1.0, 0.0]),
-            DVector::from_vec(vec![0.0, 2.0]),
-        );
-        assert!((lambda_of(&q, &a, &b) - 8.0).abs() < 1e-12);
     }
 }
