@@ -11,8 +11,14 @@ pub mod stepping;
 pub mod walking;
 
 use crate::bellman::projection::{project, GaussianReward};
+use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
+use crate::control::lqr::{track, TrackingController};
+use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::plot::{Legend, Panel, Series};
+use crate::experiment::report::sig;
 use crate::experiment::{other, Error};
+use crate::physics::linearize::Linearize;
 use crate::row;
 use nalgebra::{DMatrix, DVector};
 use std::path::Path;
@@ -24,6 +30,69 @@ use std::path::Path;
 pub fn scale_lambda(q: &DMatrix<f64>, a: &DVector<f64>, b: &DVector<f64>) -> f64 {
     let d = a - b;
     (d.transpose() * q * &d)[0]
+}
+
+/// DDP from `x0` and the initial torques `u_init` (each torque within ±`limit`, at most
+/// `max_iterations`, stopping when an iteration improves the cost by less than `tol_cost`),
+/// then the TV-LQR tracker of its solution (LBC §5.2), with the seconds both took.
+pub(crate) fn optimized_tracker<M: Linearize>(
+    map: &Rk4Map<M>,
+    cost: &QuadraticCost,
+    x0: &[f64],
+    u_init: &[DVector<f64>],
+    limit: f64,
+    max_iterations: usize,
+    tol_cost: f64,
+) -> Result<(DdpSolution, TrackingController, f64), Error> {
+    let t0 = std::time::Instant::now();
+    let bound = DVector::from_element(map.control_dim(), limit);
+    let options = DdpOptions {
+        max_iterations,
+        tol_cost,
+        bounds: Some(ControlBounds {
+            lower: -bound.clone(),
+            upper: bound,
+        }),
+        ..DdpOptions::default()
+    };
+    let x0 = DVector::from_row_slice(x0);
+    let sol = solve(map, cost, &x0, u_init, &options).map_err(other)?;
+    let tracker = track(map, cost, &sol.x, &sol.u).map_err(other)?;
+    Ok((sol, tracker, t0.elapsed().as_secs_f64()))
+}
+
+/// A panel of LBC's weight α over time, one line per run: `keys[i]` names row i's run (a
+/// desired length or height in m; rows grouped by run), `t` its time, `alpha` its α.
+pub(crate) fn alpha_panel(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    keys: &[f64],
+    t: &[f64],
+    alpha: &[f64],
+) -> Panel {
+    let mut runs = keys.to_vec();
+    runs.dedup();
+    let series = runs
+        .iter()
+        .enumerate()
+        .map(|(k, &d)| {
+            let points = (0..keys.len())
+                .filter(|&i| keys[i] == d)
+                .map(|i| (t[i], alpha[i]))
+                .collect();
+            Series::line(format!("{} m", sig(d)), points, k)
+        })
+        .collect();
+    Panel {
+        title: title.into(),
+        x_label: x_label.into(),
+        y_label: y_label.into(),
+        series,
+        y_range: Some((-0.02, 1.02)),
+        legend: Legend::Auto,
+        ..Panel::default()
+    }
 }
 
 /// Projected weights (LBC §4.1): the quadratic q/λ centred on `desired` projected in reward

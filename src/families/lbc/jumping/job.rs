@@ -4,14 +4,15 @@
 use super::Params;
 use crate::bellman::combine::normalized_entropy;
 use crate::bellman::combine::{BlendMode, TrackerBlend};
-use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
+use crate::control::ddp::DdpSolution;
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::resolve::{ensure, positive, ParamError};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::lbc::{
-    alpha_deviation, projected_weights, push_entropy, rule_table, scale_lambda, ENTROPY_COLUMNS,
+    alpha_deviation, optimized_tracker, projected_weights, push_entropy, rule_table, scale_lambda,
+    ENTROPY_COLUMNS,
 };
 use crate::physics::jumper::{Jumper, DOF, TORQUES};
 use crate::physics::linearize::FiniteDifference;
@@ -408,22 +409,16 @@ impl Setup {
         own: &Motion,
         average: &Motion,
     ) -> Result<(DdpSolution, TrackingController, f64), Error> {
-        let t0 = Instant::now();
         let cost = self.cost(p, own.xs[self.n_off].clone(), &average.xs);
-        let limit = DVector::from_element(TORQUES, p.push.torque_limit);
-        let options = DdpOptions {
-            max_iterations: p.takeoff_iterations,
-            tol_cost: p.tol_cost,
-            bounds: Some(ControlBounds {
-                lower: -limit.clone(),
-                upper: limit,
-            }),
-            ..DdpOptions::default()
-        };
-        let x0 = DVector::from_row_slice(&self.x0);
-        let sol = solve(&self.map, &cost, &x0, &own.us, &options).map_err(other)?;
-        let tracker = track(&self.map, &cost, &sol.x, &sol.u).map_err(other)?;
-        Ok((sol, tracker, t0.elapsed().as_secs_f64()))
+        optimized_tracker(
+            &self.map,
+            &cost,
+            &self.x0,
+            &own.us,
+            p.push.torque_limit,
+            p.takeoff_iterations,
+            p.tol_cost,
+        )
     }
 
     /// The landing tracker of take-off state `x_d`: the PD landing's motion from it, tracked by
@@ -465,15 +460,14 @@ impl Setup {
         let (mut u, mut ui) = (vec![0.0; TORQUES], vec![0.0; TORQUES]);
         let mut alpha = vec![0.0; 2];
         let mut run = JumpRun::default();
-        let own = [landing.clone()];
+        let limits = vec![p.push.torque_limit; TORQUES];
         let land = TrackerBlend {
-            trackers: &own,
+            trackers: std::slice::from_ref(landing),
             weights: vec![1.0],
             lambda: 1.0,
             mode: BlendMode::Single(0),
-            limits: None,
+            limits: Some(&limits),
         };
-        let limits = vec![p.push.torque_limit; TORQUES];
         let hold = (p.hold_s / p.knot_dt).round() as usize;
         let mut step = 0usize;
         for k in 0..self.n_off + self.n_land + hold {
@@ -493,9 +487,6 @@ impl Setup {
             } else if k < self.n_off + self.n_land {
                 land.control(&x, k - self.n_off, &mut u, &mut alpha[..1], &mut ui)
                     .map_err(other)?;
-                for (v, l) in u.iter_mut().zip(&limits) {
-                    *v = v.clamp(-l, *l);
-                }
                 true
             } else {
                 false
@@ -593,15 +584,18 @@ impl Job for Params {
                 .collect()
         });
         pb.finish_and_clear();
-        let mut examples = Vec::new();
-        let mut landings = Vec::new();
+        // The examples' DDP solutions with their seconds, their trackers, and the landings.
+        let (mut examples, mut trackers, mut landings) = (Vec::new(), Vec::new(), Vec::new());
         for b in built {
             match b? {
-                Built::Example(e) => examples.push(*e),
+                Built::Example(e) => {
+                    let (sol, tracker, secs) = *e;
+                    examples.push((sol, secs));
+                    trackers.push(tracker);
+                }
                 Built::Landing(t, secs) => landings.push((t, secs)),
             }
         }
-        let trackers = [examples[0].1.clone(), examples[1].1.clone()];
         let centers = [targets[0].clone(), targets[1].clone()];
         let lambda = scale_lambda(&s.q_final, &centers[0], &centers[1]);
         let limits = vec![self.push.torque_limit; TORQUES];
@@ -611,8 +605,7 @@ impl Job for Params {
                 projected_weights(&s.q_final, lambda, &centers, &targets[3 + d], &what)
             })
             .collect::<Result<Vec<_>, _>>()?;
-        // 3. Every take-off with every desired jump's landing, on the simulator; and each
-        //    example alone with its own target's error for the premise.
+        // 3. Every take-off with every desired jump's landing, on the simulator.
         let middle = nd / 2;
         let mut cases: Vec<(usize, &str)> = Vec::new();
         for d in 0..nd {
@@ -735,16 +728,14 @@ impl Job for Params {
             "seconds",
         ]);
         for (i, name) in ["low", "high"].iter().enumerate() {
-            let (sol, _, secs) = &examples[i];
-            let blend = TrackerBlend {
-                trackers: &trackers,
-                weights: vec![1.0, 1.0],
-                lambda,
-                mode: BlendMode::Single(i),
-                limits: Some(&limits),
-            };
-            // Its take-off on the simulator (the landing that follows does not matter here).
-            let r = s.jump(self, Some(&blend), strengths[i], &landings[0].0, false)?;
+            let (sol, secs) = &examples[i];
+            // Each example's tracker alone against its own target (the premise): its take-off
+            // is the same at every desired jump (only the landing that follows differs).
+            let r = cases
+                .iter()
+                .position(|c| c.1 == *name)
+                .map(|k| &runs[k].0)
+                .ok_or_else(|| other(format!("no {name} run")))?;
             components.push(row![
                 *name,
                 strengths[i],

@@ -5,7 +5,7 @@ use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
 use crate::experiment::Error;
 use crate::families::lbc::film::{diver_body, fitted};
-use crate::families::lbc::{entropy_section, rule_setting, rule_settings};
+use crate::families::lbc::{alpha_panel, entropy_section, rule_setting, rule_settings};
 use crate::physics::jumper::{Jumper, DOF};
 use std::path::{Path, PathBuf};
 
@@ -57,7 +57,6 @@ struct Jumps {
     fell: Vec<f64>,
     effort: Vec<f64>,
     speed: Vec<f64>,
-    weight_low: Vec<f64>,
 }
 
 impl Jumps {
@@ -72,7 +71,6 @@ impl Jumps {
             fell: df_f64(&t, "fell")?,
             effort: df_f64(&t, "effort")?,
             speed: df_f64(&t, "speed_error_m_s")?,
-            weight_low: df_f64(&t, "weight_low")?,
         })
     }
 
@@ -86,7 +84,6 @@ impl Jumps {
             fell: t.f64s("fell"),
             effort: t.f64s("effort"),
             speed: t.f64s("speed_error_m_s"),
-            weight_low: t.f64s("weight_low"),
         }
     }
 
@@ -210,7 +207,6 @@ fn body(
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let mut files = Vec::new();
     let t = Jumps::of(tables.require("jumps")?);
-    let _ = &t.weight_low;
     // Take-off error and height reached per method.
     let mut errors = Vec::new();
     let mut heights = Vec::new();
@@ -274,31 +270,14 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     // LBC's weights over the take-off.
     let w = tables.require("weights")?;
     let (wd, wt, wa) = (w.f64s("desired"), w.f64s("t"), w.f64s("alpha_low"));
-    let mut ds = wd.clone();
-    ds.dedup();
-    let series = ds
-        .iter()
-        .enumerate()
-        .map(|(k, &d)| {
-            Series::line(
-                format!("{} m", sig(d)),
-                (0..wd.len())
-                    .filter(|&i| wd[i] == d)
-                    .map(|i| (wt[i], wa[i]))
-                    .collect(),
-                k,
-            )
-        })
-        .collect();
-    let panel = Panel {
-        title: "LBC's weight of the low jump's tracker over the take-off".into(),
-        x_label: "time from the crouch (s)".into(),
-        y_label: "α_low".into(),
-        series,
-        y_range: Some((-0.02, 1.02)),
-        legend: Legend::Auto,
-        ..Panel::default()
-    };
+    let panel = alpha_panel(
+        "LBC's weight of the low jump's tracker over the take-off",
+        "time from the crouch (s)",
+        "α_low",
+        &wd,
+        &wt,
+        &wa,
+    );
     files.extend(fig.draw("weights", &Figure::grid(vec![panel], 1))?);
     // The middle desired jump: LBC's and the naive blend's bodies over time.
     let m = tables.require("motion")?;

@@ -3,13 +3,13 @@
 
 use super::Params;
 use crate::bellman::combine::{BlendMode, TrackerBlend};
-use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
-use crate::control::lqr::{track, TrackingController};
+use crate::control::ddp::DdpSolution;
+use crate::control::lqr::TrackingController;
 use crate::control::simbicon::{applet_start, fallen, Gait, Simbicon};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::families::lbc::{projected_weights, rule_table, scale_lambda};
+use crate::families::lbc::{optimized_tracker, projected_weights, rule_table, scale_lambda};
 use crate::physics::biped::{Biped, DOF, FOOT_HEEL, FOOT_TOE, TORQUES};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::{check_finite, Dynamics, IntegratorKind, Model, Simulator};
@@ -261,22 +261,16 @@ impl Setup {
         p: &Params,
         length: f64,
     ) -> Result<(DdpSolution, TrackingController, f64), Error> {
-        let t0 = Instant::now();
         let cost = self.cost(self.target(length)?);
-        let limit = DVector::from_element(TORQUES, p.torque_limit);
-        let options = DdpOptions {
-            max_iterations: p.max_iterations,
-            tol_cost: p.tol_cost,
-            bounds: Some(ControlBounds {
-                lower: -limit.clone(),
-                upper: limit,
-            }),
-            ..DdpOptions::default()
-        };
-        let x0 = DVector::from_row_slice(&self.x0);
-        let sol = solve(&self.map, &cost, &x0, &self.nominal_u, &options).map_err(other)?;
-        let tracker = track(&self.map, &cost, &sol.x, &sol.u).map_err(other)?;
-        Ok((sol, tracker, t0.elapsed().as_secs_f64()))
+        optimized_tracker(
+            &self.map,
+            &cost,
+            &self.x0,
+            &self.nominal_u,
+            p.torque_limit,
+            p.max_iterations,
+            p.tol_cost,
+        )
     }
 
     /// Runs `blend` on the simulator from `x0` (stance on the left) for the step's knots, the

@@ -6,7 +6,7 @@ use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
 use crate::experiment::Error;
 use crate::families::lbc::film::{biped_body, fitted};
-use crate::families::lbc::{rule_setting, rule_settings};
+use crate::families::lbc::{alpha_panel, rule_setting, rule_settings};
 use crate::physics::biped::{Biped, DOF};
 use std::path::{Path, PathBuf};
 
@@ -332,31 +332,14 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         w.f64s("t"),
         w.f64s("alpha_short"),
     );
-    let mut ds = wd.clone();
-    ds.dedup();
-    let series = ds
-        .iter()
-        .enumerate()
-        .map(|(k, &d)| {
-            Series::line(
-                format!("{} m", sig(d)),
-                (0..wd.len())
-                    .filter(|&i| wd[i] == d)
-                    .map(|i| (wt[i], wa[i]))
-                    .collect(),
-                k,
-            )
-        })
-        .collect();
-    let weights = Panel {
-        title: "LBC's weight of the short step over the step".into(),
-        x_label: "time in the step (s)".into(),
-        y_label: "α_short".into(),
-        series,
-        y_range: Some((-0.02, 1.02)),
-        legend: Legend::Auto,
-        ..Panel::default()
-    };
+    let weights = alpha_panel(
+        "LBC's weight of the short step over the step",
+        "time in the step (s)",
+        "α_short",
+        &wd,
+        &wt,
+        &wa,
+    );
     files.extend(fig.draw("weights", &Figure::grid(vec![weights], 1))?);
     // The walk: poses at each step's end, the footholds and the gaps.
     let m = tables.require("motion")?;
