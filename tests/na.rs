@@ -448,12 +448,21 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     // (seed 1, the same numbers as final.csv) and through the net of quick's further seed 2.
     assert_eq!(
         header(&out.join("net_seeds.csv")),
-        "task,net_seed,emulator_error,simulator_error,best_iteration,at_goal"
+        "task,net_seed,emulator_error,simulator_error,best_iteration,at_goal,formulation"
     );
     let seeds = rows(&out.join("net_seeds.csv"));
     let fin = rows(&out.join("final.csv"));
-    assert_eq!(seeds.len(), 6, "{seeds:?}");
-    for task in ["pendulum", "truck", "lander"] {
+    // The paper's three and our 200-step pendulum (net_seeds_ours), labelled.
+    assert_eq!(seeds.len(), 8, "{seeds:?}");
+    for c in &seeds {
+        let want = if c[0] == "pendulum_200steps" {
+            "ours"
+        } else {
+            "paper"
+        };
+        assert_eq!(c[6], want, "{c:?}");
+    }
+    for task in ["pendulum", "truck", "lander", "pendulum_200steps"] {
         let of = |seed: &str| seeds.iter().find(|c| c[0] == task && c[1] == seed).unwrap();
         let own = fin.iter().find(|c| c[0] == task).unwrap();
         assert_eq!(
@@ -468,12 +477,13 @@ fn na_fig13_quick_learns_controls_for_every_task() {
             assert_eq!(c[5] == "1", e <= 1.0 && s <= 1.0, "{c:?}");
         }
     }
-    // The sweep beside the headline: 6 tasks (the paper's pendulum, truck and lander, and our
-    // earlier 4 s pendulum, truck from rest and 13-variable lander) x (1 eta x 3 step rules +
-    // Levenberg-Marquardt) (quick), and the physics sweep 6 tasks x (2 rules + LM); iterations
+    // The sweep beside the headline: 7 tasks (the paper's pendulum, truck and lander, and our
+    // earlier 4 s pendulum, truck from rest, 13-variable lander and 200-step pendulum) x (1 eta
+    // x 3 step rules + Levenberg-Marquardt) (quick), and the physics sweep 7 tasks x (2 rules
+    // + LM); iterations
     // to goal are NaN or within the budget; LM has no eta or alpha.
     let cols = "task,rule,eta,alpha,iterations,evaluations,iterations_to_goal,evaluations_to_goal,best_iteration,best_objective,rollout_error,simulator_error";
-    for (file, runs) in [("sweep.csv", 24), ("physics_sweep.csv", 18)] {
+    for (file, runs) in [("sweep.csv", 28), ("physics_sweep.csv", 21)] {
         assert_eq!(header(&out.join(file)), cols, "{file}");
         let sw = rows(&out.join(file));
         assert_eq!(sw.len(), runs, "{file}");
@@ -516,7 +526,7 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         "task,substrate,knots,dof,step_scale,eigen_largest,eigen_slowest,condition,eta,iterations_per_decade,condition_equilibrated,condition_any_weighting,iterations_per_decade_any_weighting,paper_iterations"
     );
     let cond = rows(&out.join("conditioning.csv"));
-    assert_eq!(cond.len(), 12);
+    assert_eq!(cond.len(), 14);
     let physics_kappa = |task: &str| -> f64 {
         cond.iter()
             .find(|s| s[0] == task && s[1] == "physics")
@@ -551,7 +561,9 @@ fn na_fig13_quick_learns_controls_for_every_task() {
                 assert!((100.0..1e4).contains(&kappa) && pace > 100.0, "{c:?}");
                 assert!(any <= kappa && any_pace <= pace, "{c:?}");
             }
-            "pendulum" => {
+            // Through the physics the 200-step pendulum is the paper's task (the same RK4
+            // map at a finer step).
+            "pendulum" | "pendulum_200steps" => {
                 let short = cond
                     .iter()
                     .find(|s| s[0] == "pendulum_4s" && s[1] == "physics")
@@ -627,30 +639,44 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         );
     }
     // The ladder (issue 54): from each earlier formulation of ours to the paper's, one change
-    // at a time; its last rung is the paper's task (the condition of conditioning.csv's
-    // emulator row), and each task's conditioning ends far below where it started.
+    // at a time, each rung through its own net; its last rung is the paper's task (the
+    // condition of conditioning.csv's emulator row). The truck's and the lander's conditioning
+    // end far below where they started; the pendulum's horizon rung (20 s on our net: our
+    // 200-step task, the same condition) does, before the paper's super-step.
     assert_eq!(
         header(&out.join("conditioning_ladder.csv")),
         "task,rung,change,dof,condition,eta,iterations_per_decade"
     );
     let ladder = rows(&out.join("conditioning_ladder.csv"));
-    for (task, rungs) in [("pendulum", 2), ("truck", 5), ("lander", 5)] {
-        let t: Vec<&Vec<String>> = ladder.iter().filter(|c| c[0] == task).collect();
-        assert_eq!(t.len(), rungs, "{task}: {t:?}");
-        assert_eq!(t[0][2], "ours");
-        let first: f64 = t[0][4].parse().unwrap();
-        let last: f64 = t[rungs - 1][4].parse().unwrap();
-        let emulator: f64 = cond
-            .iter()
+    let emulator_kappa = |task: &str| -> f64 {
+        cond.iter()
             .find(|s| s[0] == task && s[1] == "emulator")
             .unwrap()[7]
             .parse()
-            .unwrap();
+            .unwrap()
+    };
+    for (task, rungs) in [("pendulum", 3), ("truck", 5), ("lander", 5)] {
+        let t: Vec<&Vec<String>> = ladder.iter().filter(|c| c[0] == task).collect();
+        assert_eq!(t.len(), rungs, "{task}: {t:?}");
+        assert_eq!(t[0][2], "ours");
+        let kappa = |i: usize| -> f64 { t[i][4].parse().unwrap() };
+        let emulator = emulator_kappa(task);
+        let last = kappa(rungs - 1);
         assert!(
             (last - emulator).abs() <= 1e-6 * emulator,
             "{task}: {last} vs {emulator}"
         );
-        assert!(last < 0.2 * first, "{task}: {first} -> {last}");
+        if task == "pendulum" {
+            assert_eq!(
+                (t[1][2].as_str(), t[2][2].as_str()),
+                ("horizon and knots", "super-step")
+            );
+            let ours_20s = emulator_kappa("pendulum_200steps");
+            assert!((kappa(1) - ours_20s).abs() <= 1e-6 * ours_20s, "{t:?}");
+            assert!(kappa(1) < 0.2 * kappa(0), "{t:?}");
+        } else {
+            assert!(last < 0.2 * kappa(0), "{task}: {t:?}");
+        }
     }
     let n_eigen: usize = cond.iter().map(|c| c[2].parse::<usize>().unwrap()).sum();
     assert_eq!(rows(&out.join("spectrum.csv")).len(), n_eigen);
@@ -710,6 +736,7 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         ("dolphin", 20),
         ("dolphin_4s", 20),
         ("pendulum_4s", 20),
+        ("pendulum_200steps", 20),
         ("truck_rest", 15),
         ("lander_13", 15),
     ] {
@@ -724,11 +751,17 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         assert!(best < js[0], "{task}: no descent {js:?}");
     }
     let f = rows(&out.join("final.csv"));
-    assert_eq!(f.len(), 8);
+    assert_eq!(f.len(), 9);
     // Our earlier formulations are labelled as ours; every other line is the paper's.
     for c in &f {
-        let ours =
-            ["pendulum_4s", "truck_rest", "lander_13", "dolphin_4s"].contains(&c[0].as_str());
+        let ours = [
+            "pendulum_4s",
+            "pendulum_200steps",
+            "truck_rest",
+            "lander_13",
+            "dolphin_4s",
+        ]
+        .contains(&c[0].as_str());
         let want = if ours { "ours" } else { "paper" };
         assert_eq!(c[4], want, "{c:?}");
     }
@@ -773,7 +806,12 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     assert_eq!(names.iter().filter(|c| c[0] == "truck_rest").count(), 6);
     // One animation per task of the paper's formulation: emulator and simulator replay over
     // the goal (none for our earlier formulation's second line).
-    for ours in ["pendulum_4s", "truck_rest", "lander_13"] {
+    for ours in [
+        "pendulum_4s",
+        "pendulum_200steps",
+        "truck_rest",
+        "lander_13",
+    ] {
         let gif = d.path().join(format!("figs/na_fig13_control_{ours}.gif"));
         assert!(!gif.exists(), "{}", gif.display());
     }

@@ -144,6 +144,7 @@ impl Params {
             physics_sweep: None,
             dagger: None,
             net_seeds: vec![],
+            net_seeds_ours: vec![],
         }
     }
 }

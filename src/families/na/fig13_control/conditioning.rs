@@ -9,7 +9,7 @@ use crate::control::conditioning::{
 };
 use crate::control::objective::Objective;
 use crate::control::Rk4Map;
-use crate::emulator::catalog::NetModel;
+use crate::emulator::catalog::{NetModel, NetSpec};
 use crate::experiment::output::Table;
 use crate::experiment::{other, Error};
 use crate::physics::lander::Lander;
@@ -228,10 +228,12 @@ pub const LADDER_COLUMNS: [&str; 7] = [
     "iterations_per_decade",
 ];
 
-/// The rungs from `ours` to `paper` (same net): each changes one thing of ours to the paper's,
-/// in a fixed order (horizon and knots, start, initial controls, target set and tolerances,
-/// control units, final-state weights), skipping what does not differ. Returns (change, task)
-/// per rung, ours first.
+/// The rungs from `ours` to `paper` (the same model): each changes one thing of ours to the
+/// paper's, in a fixed order (horizon and knots, super-step, start, initial controls, target
+/// set and tolerances, control units, final-state weights), skipping what does not differ.
+/// "horizon and knots" gives ours the paper's duration in ours' own emulator steps (its net
+/// unchanged); "super-step" then moves it to the paper's net (its physical δt), with the
+/// paper's step count. Returns (change, task) per rung, ours first.
 pub(super) fn ladder(ours: &Task, paper: &Task) -> Vec<(&'static str, Task)> {
     let mut t = ours.clone();
     t.name = paper.name.clone();
@@ -239,11 +241,20 @@ pub(super) fn ladder(ours: &Task, paper: &Task) -> Vec<(&'static str, Task)> {
     t.calibration = None;
     let mut rungs = vec![("ours", t.clone())];
     type Apply = fn(&mut Task, &Task) -> bool;
-    let steps: [(&str, Apply); 6] = [
+    let steps: [(&str, Apply); 7] = [
         ("horizon and knots", |t, p| {
-            let differs = (t.task.horizon, t.task.knots) != (p.task.horizon, p.task.knots);
-            t.task.horizon = p.task.horizon;
+            // The paper's duration in ours' steps (both nets take N of their own δt).
+            let ratio = p.net.physical_dt / t.net.physical_dt;
+            let horizon = (p.task.horizon as f64 * ratio).round() as usize;
+            let differs = (t.task.horizon, t.task.knots) != (horizon, p.task.knots);
+            t.task.horizon = horizon;
             t.task.knots = p.task.knots;
+            differs
+        }),
+        ("super-step", |t, p| {
+            let differs = t.net != p.net;
+            t.net = p.net.clone();
+            t.task.horizon = p.task.horizon;
             differs
         }),
         ("start state", |t, p| {
@@ -282,14 +293,16 @@ pub(super) fn ladder(ours: &Task, paper: &Task) -> Vec<(&'static str, Task)> {
     rungs
 }
 
-/// Rows of `conditioning_ladder.csv` for the rungs of [`ladder`] through `step` (the nets'
-/// shared Table 1 emulator), each from its own [`Task::start_state`].
-pub(super) fn record_ladder<D: crate::control::bptt::DifferentiableStep>(
-    step: &D,
+/// Rows of `conditioning_ladder.csv` for the rungs of [`ladder`], each through its own net
+/// (`net_of`: the trained emulator of a rung's net spec) from its own [`Task::start_state`].
+pub(super) fn record_ladder<'a, D: crate::control::bptt::DifferentiableStep + 'a>(
+    net_of: impl Fn(&NetSpec) -> Option<&'a D>,
     rungs: &[(&'static str, Task)],
     table: &mut Table,
 ) -> Result<(), Error> {
     for (i, (change, rung)) in rungs.iter().enumerate() {
+        let step = net_of(&rung.net)
+            .ok_or_else(|| other(format!("{}: no net for ladder rung {change}", rung.name)))?;
         let x0 = rung.start_state();
         let t = rung.calibrated(step, &x0).map_err(other)?;
         let objective = t.objective();

@@ -11,7 +11,7 @@ use crate::control::bptt::{
     learn_with, replay, Bptt, Descent, DifferentiableStep, Knots, Learned, Schedule, StepRule,
 };
 use crate::control::conditioning::{terminal_spectrum, weighting_bound};
-use crate::emulator::catalog::BuildSpec;
+use crate::emulator::catalog::{BuildSpec, NetSpec};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
@@ -111,7 +111,14 @@ impl Job for Params {
             &format!("train N{} emulators (side by side)", self.steps),
             || build_emulators(&specs),
         )?;
-        for ((task, spec), trained) in self.tasks.iter().zip(&specs).zip(built) {
+        // The trained emulator of a task's net spec (the conditioning ladder's rungs).
+        let net_of = |net: &NetSpec| {
+            self.tasks
+                .iter()
+                .position(|t| &t.net == net)
+                .map(|i| &built[i].emulator)
+        };
+        for ((task, spec), trained) in self.tasks.iter().zip(&specs).zip(&built) {
             let model = task.net.model;
             let (n, m) = (model.state_dim(), model.control_dim());
             let knots = Knots {
@@ -123,16 +130,23 @@ impl Job for Params {
             // The task's actuator gains and final-state weights, measured once at its initial
             // knots through its Table 1 net and then fixed for every run of the task (the
             // physics sweep and the DAgger rounds included).
-            // A formulation of ours beside the paper's on the same net: the conditioning as
-            // the paper's changes are applied to ours one at a time.
-            if task.formulation == Formulation::Ours {
+            // The first formulation of ours beside the paper's of the same model: the
+            // conditioning as the paper's changes are applied to ours one at a time.
+            let same_model = |t: &&Task| t.net.model == model;
+            let first_ours = self
+                .tasks
+                .iter()
+                .filter(same_model)
+                .find(|t| t.formulation == Formulation::Ours);
+            if first_ours.is_some_and(|t| std::ptr::eq(t, task)) {
                 if let Some(paper) = self
                     .tasks
                     .iter()
-                    .find(|p| p.formulation == Formulation::Paper && p.net == task.net)
+                    .filter(same_model)
+                    .find(|p| p.formulation == Formulation::Paper)
                 {
                     let rungs = ladder(task, paper);
-                    record_ladder(&trained.emulator, &rungs, &mut ladder_t)?;
+                    record_ladder(net_of, &rungs, &mut ladder_t)?;
                 }
             }
             let task = &task.calibrated(&trained.emulator, &x0).map_err(other)?;
@@ -216,7 +230,7 @@ impl Job for Params {
                 .as_ref()
                 .filter(|_| task.formulation == Formulation::Paper)
             {
-                self.run_dagger(ctx, d, task, &spec, &trained, &x0, &mut dagger_t)?;
+                self.run_dagger(ctx, d, task, spec, trained, &x0, &mut dagger_t)?;
             }
             let emu_final = &best.states[task.task.horizon * n..];
             let rep = replay(
@@ -240,8 +254,8 @@ impl Job for Params {
                 r.best_iteration as i64,
                 task.formulation.name()
             ]);
-            if task.formulation == Formulation::Paper {
-                run.push(&mut seeds_t, &task.name, ctx.seed);
+            if task.formulation == Formulation::Paper || self.net_seeds_ours.contains(&task.name) {
+                run.push(&mut seeds_t, task, ctx.seed);
             }
             let mut row = row![task.name.as_str(), model.name()];
             row.extend(

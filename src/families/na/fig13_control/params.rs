@@ -1,7 +1,7 @@
 //! Parameters of `na_fig13_control` ([`Params`]): the tasks, the step-size sweeps, the dolphin
 //! swim task, and their validation.
 
-use super::{dagger, dolphin_dagger, Task};
+use super::{dagger, dolphin_dagger, Formulation, Task};
 use crate::control::bptt::StepRule;
 use crate::emulator::catalog::{NetSpec, TrainSettings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
@@ -86,6 +86,10 @@ pub struct Params {
     /// [`super::seeds::MAX_NET_SEEDS`].
     #[serde(default)]
     pub net_seeds: Vec<u64>,
+    /// Tasks of our formulations also learned through every further net seed, beside the
+    /// paper's (ours; reported, never counted in the verdict). Each must name a task.
+    #[serde(default)]
+    pub net_seeds_ours: Vec<String>,
 }
 
 /// The dolphin swim task of Fig. 13(d) ([`crate::families::na::swim`]).
@@ -187,6 +191,15 @@ impl Validate for Params {
                 super::seeds::MAX_NET_SEEDS
             ),
         )?;
+        for name in &self.net_seeds_ours {
+            ensure(
+                self.tasks
+                    .iter()
+                    .any(|t| &t.name == name && t.formulation == Formulation::Ours),
+                "net_seeds_ours",
+                format!("`{name}` is not a task of formulation \"ours\""),
+            )?;
+        }
         let nets: Vec<NetSpec> = self.tasks.iter().map(|t| t.net.clone()).collect();
         validate_nets(&nets, self.example_scale)?;
         if let Some(d) = &self.dolphin {

@@ -129,8 +129,11 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
                 net_misses.push(format!("{name} ({} vs {})", sig(ee[r]), sig(se[r])));
             }
         } else {
+            let over_seeds = by_seeds(name).map_or(String::new(), |(k, n)| {
+                format!(" (net seeds at the goal on both: {k} of {n})")
+            });
             ours.push(format!(
-                "{name} {} on the emulator, {} on the simulator",
+                "{name} {} on the emulator, {} on the simulator{over_seeds}",
                 sig(ee[r]),
                 sig(se[r])
             ));
@@ -298,7 +301,7 @@ fn ladder_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
             "singular".to_string()
         }
     };
-    let mut md = String::from("\nWhich change mattered (ours; `conditioning_ladder.csv`): the condition of G through the task's Table 1 net at its initial knots, from our earlier formulation (rung 0) as the paper's changes are applied one at a time, in a fixed order (horizon and knots, start, initial controls, target set and tolerances, control units, final-state weights); the last rung is the paper's task. Iterations per tenfold reduction at the headline's eta and alpha along the slowest direction.\n\n| task | rung | change | r | condition | iterations per tenfold reduction |\n| --- | --- | --- | --- | --- | --- |\n");
+    let mut md = String::from("\nWhich change mattered (ours; `conditioning_ladder.csv`): the condition of G through the task's Table 1 net at its initial knots, from our earlier formulation (rung 0) as the paper's changes are applied one at a time, in a fixed order (horizon and knots: the paper's duration on our net; super-step: the paper's net and step count; start, initial controls, target set and tolerances, control units, final-state weights); the last rung is the paper's task, each rung through its own net. Iterations per tenfold reduction at the headline's eta and alpha along the slowest direction.\n\n| task | rung | change | r | condition | iterations per tenfold reduction |\n| --- | --- | --- | --- | --- | --- |\n");
     let mut parts = vec![];
     for name in unique(&task) {
         let rows: Vec<usize> = (0..task.len()).filter(|&r| task[r] == name).collect();
@@ -325,9 +328,22 @@ fn ladder_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
             .max_by(|a, b| a.1.total_cmp(&b.1));
         let first = rows[0];
         let last = *rows.last().expect("a task has rows");
+        // Rungs that made the conditioning worse (by more than half again).
+        let raised: String = rows
+            .windows(2)
+            .filter(|w| kappa[w[1]] > 1.5 * kappa[w[0]])
+            .map(|w| {
+                format!(
+                    "; the {} raised it {} -> {}",
+                    change[w[1]],
+                    show(kappa[w[0]]),
+                    show(kappa[w[1]])
+                )
+            })
+            .collect();
         parts.push(match biggest {
             Some((r, _)) => format!(
-                "{name} {} -> {} (most by the {})",
+                "{name} {} -> {} (most by the {}{raised})",
                 show(kappa[first]),
                 show(kappa[last]),
                 change[r]

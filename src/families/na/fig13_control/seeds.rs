@@ -23,14 +23,16 @@ use crate::families::na::table1_structure::{build_emulators, build_spec};
 use crate::row;
 use std::path::{Path, PathBuf};
 
-/// Columns of `net_seeds.csv`: `at_goal` is 1 when both final errors are at most 1.
-pub const SEEDS_COLUMNS: [&str; 6] = [
+/// Columns of `net_seeds.csv`: `at_goal` is 1 when both final errors are at most 1;
+/// `formulation` is `paper` (counted by the verdict) or `ours` (a second line, never counted).
+pub const SEEDS_COLUMNS: [&str; 7] = [
     "task",
     "net_seed",
     "emulator_error",
     "simulator_error",
     "best_iteration",
     "at_goal",
+    "formulation",
 ];
 
 /// The most net seeds a run may ask for (each trains one net per task).
@@ -55,14 +57,15 @@ impl HeadlineRun {
     }
 
     /// The row of `net_seeds.csv` for `task` through the net of `seed`.
-    pub fn push(&self, table: &mut Table, task: &str, seed: u64) {
+    pub fn push(&self, table: &mut Table, task: &Task, seed: u64) {
         table.push(row![
-            task,
+            task.name.as_str(),
             seed as i64,
             self.emulator_error,
             self.simulator_error,
             self.best_iteration as i64,
-            i64::from(self.at_goal())
+            i64::from(self.at_goal()),
+            task.formulation.name()
         ]);
     }
 }
@@ -89,14 +92,17 @@ impl Params {
         Ok(run)
     }
 
-    /// Every task of the paper's formulation learned through the nets of the further seeds
-    /// (trained side by side, or loaded from the cache), one row each in `table`.
+    /// Every task of the paper's formulation, and those of ours in
+    /// [`Params::net_seeds_ours`], learned through the nets of the further seeds (trained side
+    /// by side, or loaded from the cache), one row each in `table`.
     pub(super) fn run_seeds(&self, ctx: &RunContext, table: &mut Table) -> Result<(), Error> {
         let seeds = self.further_net_seeds(ctx.seed);
         let tasks: Vec<&Task> = self
             .tasks
             .iter()
-            .filter(|t| t.formulation == Formulation::Paper)
+            .filter(|t| {
+                t.formulation == Formulation::Paper || self.net_seeds_ours.contains(&t.name)
+            })
             .collect();
         let runs: Vec<(&Task, u64)> = seeds
             .iter()
@@ -121,7 +127,7 @@ impl Params {
             let run = ctx.stage(&format!("learn {} (net seed {seed})", task.name), || {
                 self.headline_run(task, &trained.emulator)
             })?;
-            run.push(table, &task.name, *seed);
+            run.push(table, task, *seed);
         }
         Ok(())
     }

@@ -454,12 +454,18 @@ mod tests {
                 ("pendulum_4s", Formulation::Ours),
                 ("truck_rest", Formulation::Ours),
                 ("lander_13", Formulation::Ours),
+                ("pendulum_200steps", Formulation::Ours),
             ]
         );
-        // The paper's pendulum animates 20 s (200 N50 steps of 0.1 s), ours 4 s.
+        // The paper's pendulum animates 20 s in 40 N50 steps of 0.5 s (2,000 physical steps of
+        // 0.01 s, section 6), ours 4 s, and ours of 2026-11-27 20 s in 200 steps of 0.1 s.
         let seconds = |t: &Task| t.task.horizon as f64 * t.net.physical_dt * p.steps as f64;
         assert!((seconds(&p.tasks[0]) - 20.0).abs() < 1e-9);
+        assert_eq!(p.tasks[0].task.horizon * p.steps, 2000);
+        assert_eq!(p.tasks[0].task.horizon, 40);
         assert!((seconds(&p.tasks[3]) - 4.0).abs() < 1e-9);
+        assert!((seconds(&p.tasks[6]) - 20.0).abs() < 1e-9);
+        assert_eq!(p.net_seeds_ours, ["pendulum_200steps"]);
         let paper = serde_json::to_value(&p.tasks[0]).unwrap();
         assert!(paper.get("formulation").is_none(), "{paper}");
         let ours = serde_json::to_value(&p.tasks[3]).unwrap();
@@ -471,6 +477,16 @@ mod tests {
             .insert("formulation".into(), toml::Value::String("mine".into()));
         let e = parse_params::<super::super::Params>(&toml::Value::Table(raw)).unwrap_err();
         assert_eq!(e.key, "tasks[0].formulation", "{e}");
+        // net_seeds_ours names tasks of ours only: a paper task or an unknown name is refused.
+        use crate::experiment::resolve::Validate;
+        assert!(p.validate().is_ok());
+        for name in ["truck", "no_such_task"] {
+            let mut q = p.clone();
+            q.net_seeds_ours = vec![name.into()];
+            let e = q.validate().unwrap_err();
+            assert_eq!(e.key, "net_seeds_ours", "{e}");
+            assert!(e.to_string().contains(name), "{e}");
+        }
     }
 
     /// The truck's drive-then-brake start (the spec's rule): +a for the first half of the
@@ -656,8 +672,19 @@ mod tests {
         );
         let last = serde_json::to_value(&rungs.last().unwrap().1).unwrap();
         assert_eq!(last, serde_json::to_value(get("truck")).unwrap());
+        // The pendulum: 20 s on our net first (exactly our 200-step task), then the paper's
+        // net and step count (exactly the paper's task).
         let rungs = super::super::conditioning::ladder(&get("pendulum_4s"), &get("pendulum"));
         let names: Vec<&str> = rungs.iter().map(|(c, _)| *c).collect();
-        assert_eq!(names, ["ours", "horizon and knots"]);
+        assert_eq!(names, ["ours", "horizon and knots", "super-step"]);
+        let mut ours_20s = get("pendulum_200steps");
+        ours_20s.name = "pendulum".into();
+        ours_20s.formulation = Formulation::Paper;
+        assert_eq!(
+            serde_json::to_value(&rungs[1].1).unwrap(),
+            serde_json::to_value(ours_20s).unwrap()
+        );
+        let last = serde_json::to_value(&rungs[2].1).unwrap();
+        assert_eq!(last, serde_json::to_value(get("pendulum")).unwrap());
     }
 }

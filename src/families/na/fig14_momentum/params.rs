@@ -280,6 +280,7 @@ impl Params {
             physics_sweep: None,
             dagger: Some(control.clone()),
             net_seeds: vec![],
+            net_seeds_ours: vec![],
         };
         (p, control)
     }

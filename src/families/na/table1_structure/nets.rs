@@ -179,15 +179,20 @@ mod tests {
     #[test]
     fn control_experiments_use_table_1s_rollout_faithful_nets() {
         // Fig. 13 and Fig. 14 must learn through the very nets Table 1 trains and reports (the
-        // same cache key: same model, size, data, settings, rollout fine-tuning), full and quick.
+        // same cache key: same model, size, data, settings, rollout fine-tuning), full and quick;
+        // Fig. 13's paper pendulum through the same net at the paper's physical step (0.01 s:
+        // 40 N50 super-steps for 20 s, issue 54), everything else Table 1's.
         for quick in [false, true] {
             let t1: Params = params("na_table1_structure", quick).try_into().unwrap();
             let key = |net: &NetSpec, steps: usize, scale: f64, s: &TrainSettings| {
                 EmulatorCache::key(&build_spec(1, net, steps, scale, s))
             };
-            let table1 = |model: NetModel| {
-                let net = t1.nets.iter().find(|n| n.model == model).unwrap();
-                key(net, t1.steps, t1.example_scale, &t1.training)
+            let t1_net = |model: NetModel| t1.nets.iter().find(|n| n.model == model).unwrap();
+            // Table 1's net of `model`, at `physical_dt`.
+            let table1 = |model: NetModel, physical_dt: f64| {
+                let mut net = t1_net(model).clone();
+                net.physical_dt = physical_dt;
+                key(&net, t1.steps, t1.example_scale, &t1.training)
             };
             assert!(
                 t1.training.rollout_k > 0,
@@ -196,9 +201,15 @@ mod tests {
             let f13: crate::families::na::fig13_control::Params =
                 params("na_fig13_control", quick).try_into().unwrap();
             for task in &f13.tasks {
+                let dt = if task.name == "pendulum" {
+                    assert_eq!(task.net.physical_dt, 0.01, "(quick {quick})");
+                    0.01
+                } else {
+                    t1_net(task.net.model).physical_dt
+                };
                 assert_eq!(
                     key(&task.net, f13.steps, f13.example_scale, &f13.training),
-                    table1(task.net.model),
+                    table1(task.net.model, dt),
                     "Fig. 13 {} (quick {quick})",
                     task.name
                 );
@@ -207,7 +218,7 @@ mod tests {
                 params("na_fig14_momentum", quick).try_into().unwrap();
             assert_eq!(
                 key(&f14.net, f14.steps, f14.example_scale, &f14.training),
-                table1(f14.net.model),
+                table1(f14.net.model, t1_net(f14.net.model).physical_dt),
                 "Fig. 14 (quick {quick})"
             );
         }
