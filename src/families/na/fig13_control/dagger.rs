@@ -497,8 +497,24 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
             let on_sim = sim[last] <= 1.0;
             ok += usize::from(on_net && on_sim);
             let by_round: Vec<String> = rows.iter().map(|&r| sig(sim[r])).collect();
+            // The open loop's sensitivity: the spread of the simulator's final error under
+            // ±SPREAD_FRACTION control changes, at round 0 (the Table 1 net's controls) and
+            // at the last round.
+            let spreads: Vec<String> = rows
+                .iter()
+                .filter(|&&r| spread[r].is_finite())
+                .map(|&r| sig(spread[r]))
+                .collect();
+            let sensitivity = match (spreads.first(), spreads.last()) {
+                (Some(a), Some(b)) => format!(
+                    "; the simulator's final error moves over a range of {a} (round 0) and {b} (round {}) under ±{}% control changes",
+                    round[last],
+                    SPREAD_FRACTION * 100.0
+                ),
+                _ => String::new(),
+            };
             format!(
-                "{name}: simulator error by round {} (net {} at round {}; goal on the net within {} iterations: {}; on the simulator: {})",
+                "{name}: simulator error by round {} (net {} at round {}; goal on the net within {} iterations: {}; on the simulator: {}{sensitivity})",
                 by_round.join(" -> "),
                 sig(emu[last]),
                 round[last],

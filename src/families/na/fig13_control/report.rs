@@ -77,12 +77,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     // majority of its net seeds reach the goal on both; where net_seeds.csv has one seed for a task
     // (or none: the dolphin), final.csv's row decides, as before.
     let seeds = super::seeds::seed_counts(dir)?.unwrap_or_default();
-    let by_seeds = |name: &str| {
-        seeds
-            .iter()
-            .find(|(t, _, n)| t == name && *n > 1)
-            .map(|&(_, k, n)| (k, n))
-    };
+    let by_seeds = |name: &str| seeds.iter().find(|c| c.task == name && c.seeds > 1);
     let mut seed_lines = Vec::new();
     let (mut reached, mut reached_sim, mut both, mut headline) = (0, 0, 0, 0);
     let mut ours = Vec::new();
@@ -116,12 +111,16 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             reached_sim += usize::from(ok(se[r]));
             let this_net = ok(ee[r]) && ok(se[r]);
             both += usize::from(match by_seeds(name) {
-                Some((k, n)) => {
+                Some(c) => {
                     seed_lines.push(format!(
-                        "{name} {k} of {n} (this run's net {})",
+                        "{name} {} of {} (on the emulator alone {} of {}; this run's net {})",
+                        c.both,
+                        c.seeds,
+                        c.emulator,
+                        c.seeds,
                         if this_net { "at its goal" } else { "not" }
                     ));
-                    2 * k > n
+                    2 * c.both > c.seeds
                 }
                 None => this_net,
             });
@@ -129,8 +128,11 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
                 net_misses.push(format!("{name} ({} vs {})", sig(ee[r]), sig(se[r])));
             }
         } else {
-            let over_seeds = by_seeds(name).map_or(String::new(), |(k, n)| {
-                format!(" (net seeds at the goal on both: {k} of {n})")
+            let over_seeds = by_seeds(name).map_or(String::new(), |c| {
+                format!(
+                    " (net seeds at the goal on both: {} of {}; on the emulator alone {})",
+                    c.both, c.seeds, c.emulator
+                )
             });
             ours.push(format!(
                 "{name} {} on the emulator, {} on the simulator{over_seeds}",

@@ -139,24 +139,44 @@ pub fn majority_at_goal(at_goal: &[bool]) -> bool {
     2 * at_goal.iter().filter(|&&b| b).count() > at_goal.len()
 }
 
-/// Per task of `net_seeds.csv` in `dir` (first-seen order): its name, how many net seeds reach the
-/// goal, and how many were run. `None` when the run wrote no such table.
-pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<(String, usize, usize)>>, Error> {
+/// One task's count over the net seeds of `net_seeds.csv`.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct SeedCount {
+    /// The task.
+    pub task: String,
+    /// Net seeds at the goal on the emulator and on the simulator.
+    pub both: usize,
+    /// Net seeds at the goal on the emulator (whatever the simulator's error).
+    pub emulator: usize,
+    /// Net seeds run.
+    pub seeds: usize,
+}
+
+/// Per task of `net_seeds.csv` in `dir` (first-seen order): how many net seeds reach the goal
+/// on both, on the emulator, and how many were run. `None` when the run wrote no such table.
+pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
     let Ok(df) = read_csv(&dir.join("net_seeds.csv")) else {
         return Ok(None);
     };
     let (task, goal) = (df_str(&df, "task")?, df_f64(&df, "at_goal")?);
-    let mut out: Vec<(String, usize, usize)> = Vec::new();
-    for (t, g) in task.iter().zip(&goal) {
-        let i = match out.iter().position(|(name, _, _)| name == t) {
+    let emu = df_f64(&df, "emulator_error")?;
+    let mut out: Vec<SeedCount> = Vec::new();
+    for ((t, g), e) in task.iter().zip(&goal).zip(&emu) {
+        let i = match out.iter().position(|c| &c.task == t) {
             Some(i) => i,
             None => {
-                out.push((t.clone(), 0, 0));
+                out.push(SeedCount {
+                    task: t.clone(),
+                    both: 0,
+                    emulator: 0,
+                    seeds: 0,
+                });
                 out.len() - 1
             }
         };
-        out[i].1 += usize::from(*g == 1.0);
-        out[i].2 += 1;
+        out[i].both += usize::from(*g == 1.0);
+        out[i].emulator += usize::from(*e <= 1.0);
+        out[i].seeds += 1;
     }
     Ok(Some(out))
 }
