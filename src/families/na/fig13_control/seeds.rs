@@ -229,6 +229,7 @@ pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
     };
     let (task, seed) = (t.strs("task"), t.f64s("net_seed"));
     let (emu, sim) = (t.f64s("emulator_error"), t.f64s("simulator_error"));
+    let formulation = t.strs("formulation");
     let all = emu
         .iter()
         .chain(&sim)
@@ -245,8 +246,13 @@ pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
                 .iter()
                 .filter(|&&r| emu[r] <= 1.0 && sim[r] <= 1.0)
                 .count();
+            let ours = if formulation.get(rows[0]).is_some_and(|f| f == "ours") {
+                "; ours, not counted"
+            } else {
+                ""
+            };
             Series::line(
-                format!("{name} ({at} of {} seeds at the goal)", rows.len()),
+                format!("{name} ({at} of {} seeds at the goal{ours})", rows.len()),
                 rows.iter().map(|&r| (emu[r], sim[r])).collect(),
                 c,
             )
