@@ -49,6 +49,32 @@ pub fn fitted(x: (f64, f64), y: (f64, f64), height: u32) -> ((u32, u32), (f64, f
     (size, xr, yr)
 }
 
+/// A figure of `panels` (title, series) in one column, drawn to scale: each panel of the
+/// `size` and the x and height ranges [`fitted`] gives, `x_label` under its x axis, the
+/// height (m) up, the legend upper left.
+pub fn to_scale(
+    (size, xr, yr): ((u32, u32), (f64, f64), (f64, f64)),
+    x_label: &str,
+    panels: Vec<(String, Vec<Series>)>,
+) -> Figure {
+    let panels = panels
+        .into_iter()
+        .map(|(title, series)| Panel {
+            title,
+            x_label: x_label.into(),
+            y_label: "height (m)".into(),
+            series,
+            x_range: Some(xr),
+            y_range: Some(yr),
+            legend: Legend::UpperLeft,
+            ..Panel::default()
+        })
+        .collect();
+    let mut f = Figure::grid(panels, 1);
+    f.panel_size = size;
+    f
+}
+
 /// Narrowest panel (pixels), for the legend and the title.
 const MIN_WIDTH: u32 = 720;
 

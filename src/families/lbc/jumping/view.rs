@@ -4,7 +4,7 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
 use crate::experiment::Error;
-use crate::families::lbc::film::{diver_body, fitted};
+use crate::families::lbc::film::{diver_body, fitted, to_scale};
 use crate::families::lbc::{alpha_panel, entropy_section, rule_setting, rule_settings};
 use crate::physics::jumper::{Jumper, DOF};
 use std::path::{Path, PathBuf};
@@ -347,22 +347,11 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             series.extend(body(&tree, &state(o), (1.1, 0.0), "naive blend", 1));
             title.push_str(&format!(", naive {:.2}", ma[o]));
         }
-        let (size, xr, yr) = fitted((-0.6, 1.8), (-0.1, 2.1), 300);
-        let mut f = Figure::grid(
-            vec![Panel {
-                title,
-                x_label: "x (m; the naive blend's body drawn 1.1 m to the right)".into(),
-                y_label: "height (m)".into(),
-                series,
-                x_range: Some(xr),
-                y_range: Some(yr),
-                legend: Legend::UpperLeft,
-                ..Panel::default()
-            }],
-            1,
-        );
-        f.panel_size = size;
-        frames.push(f);
+        frames.push(to_scale(
+            fitted((-0.6, 1.8), (-0.1, 2.1), 300),
+            "x (m; the naive blend's body drawn 1.1 m to the right)",
+            vec![(title, series)],
+        ));
     }
     if !frames.is_empty() {
         let dt = if lbc_rows.len() > 1 {

@@ -5,7 +5,7 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
 use crate::experiment::Error;
-use crate::families::lbc::film::{biped_body, fitted};
+use crate::families::lbc::film::{biped_body, fitted, to_scale};
 use crate::families::lbc::{alpha_panel, rule_setting, rule_settings};
 use crate::physics::biped::{Biped, DOF};
 use std::path::{Path, PathBuf};
@@ -391,21 +391,11 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             ));
         }
     }
-    let (size, xr, yr) = fitted((x_lo, x_hi), (-0.1, 1.6), 420);
-    let mut f = Figure::grid(
-        vec![Panel {
-            title: format!("LBC's walk over {} gaps", gap.len()),
-            x_label: "x (m)".into(),
-            y_label: "height (m)".into(),
-            series: scene(poses),
-            x_range: Some(xr),
-            y_range: Some(yr),
-            legend: Legend::UpperLeft,
-            ..Panel::default()
-        }],
-        1,
+    let f = to_scale(
+        fitted((x_lo, x_hi), (-0.1, 1.6), 420),
+        "x (m)",
+        vec![(format!("LBC's walk over {} gaps", gap.len()), scene(poses))],
     );
-    f.panel_size = size;
     files.extend(fig.draw("walk", &f)?);
     let mut frames = Vec::new();
     for i in 0..step.len() {
@@ -413,25 +403,15 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
             body.push(Series::line(if k == 0 { "LBC" } else { "" }, seg, 0));
         }
-        let (size, xr, yr) = fitted((x_lo, x_hi), (-0.1, 1.6), 300);
-        let mut f = Figure::grid(
-            vec![Panel {
-                title: format!(
-                    "LBC stepping over gaps   step {}   t = {:.2} s   α_short = {:.2}",
-                    step[i], ft[i], fa[i]
-                ),
-                x_label: "x (m)".into(),
-                y_label: "height (m)".into(),
-                series: scene(body),
-                x_range: Some(xr),
-                y_range: Some(yr),
-                legend: Legend::UpperLeft,
-                ..Panel::default()
-            }],
-            1,
+        let title = format!(
+            "LBC stepping over gaps   step {}   t = {:.2} s   α_short = {:.2}",
+            step[i], ft[i], fa[i]
         );
-        f.panel_size = size;
-        frames.push(f);
+        frames.push(to_scale(
+            fitted((x_lo, x_hi), (-0.1, 1.6), 300),
+            "x (m)",
+            vec![(title, scene(body))],
+        ));
     }
     if !frames.is_empty() {
         let dt = if ft.len() > 1 { ft[1] - ft[0] } else { 0.1 };

@@ -5,7 +5,7 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
 use crate::experiment::Error;
-use crate::families::lbc::film::{biped_body, fitted};
+use crate::families::lbc::film::{biped_body, fitted, to_scale};
 use crate::families::lbc::{rule_setting, rule_settings};
 use crate::physics::biped::{Biped, Contact, Terrain, DOF};
 use polars::prelude::DataFrame;
@@ -502,35 +502,24 @@ fn track_filmstrip(
         }
     }
     let fell = flat.last().map_or(0.0, |&i| t[i]);
-    let panel = |title: String, series: Vec<Series>| Panel {
-        title,
-        x_label: "x (m)".into(),
-        y_label: "height (m)".into(),
-        series,
-        x_range: Some(xr),
-        y_range: Some(yr),
-        legend: Legend::UpperLeft,
-        ..Panel::default()
-    };
-    let mut f = Figure::grid(
+    Ok(to_scale(
+        (size, xr, yr),
+        "x (m)",
         vec![
-            panel(
+            (
                 format!(
                     "LBC on the flat-then-hill track, every {STRIP_EVERY_S} s for {STRIP_END_S} s"
                 ),
                 lbc_series,
             ),
-            panel(
+            (
                 format!(
                     "the flat walker alone, every {STRIP_EVERY_S} s (its last pose at {fell:.1} s)"
                 ),
                 flat_series,
             ),
         ],
-        1,
-    );
-    f.panel_size = size;
-    Ok(f)
+    ))
 }
 
 /// Frames of LBC (colour) and the flat walker alone (grey) on the flat-then-hill track, the view
@@ -578,24 +567,11 @@ fn track_frames(
         for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
             series.push(Series::line(if k == 0 { "LBC" } else { "" }, seg, 0));
         }
-        let mut f = Figure::grid(
-            vec![Panel {
-                title: format!(
-                    "LBC of the flat and hill walkers   t = {:.1} s   α_hill = {:.2}",
-                    t[i], a[i]
-                ),
-                x_label: "x (m)".into(),
-                y_label: "height (m)".into(),
-                series,
-                x_range: Some(xr),
-                y_range: Some(yr),
-                legend: Legend::UpperLeft,
-                ..Panel::default()
-            }],
-            1,
+        let title = format!(
+            "LBC of the flat and hill walkers   t = {:.1} s   α_hill = {:.2}",
+            t[i], a[i]
         );
-        f.panel_size = size;
-        frames.push(f);
+        frames.push(to_scale((size, xr, yr), "x (m)", vec![(title, series)]));
     }
     Ok(frames)
 }
