@@ -17,11 +17,71 @@ use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Legend, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::resolve::{ensure, positive, ParamError};
 use crate::experiment::{other, Error};
 use crate::physics::linearize::Linearize;
 use crate::row;
 use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+/// Scales of §6.1's objective for the DDP-optimized contact motions (stepping, jumping):
+/// Q_T = diag(1/scale²) over the family's position, angle, velocity and angular-rate features
+/// (each family's job says which: the pelvis for a step, the centre of mass for a jump);
+/// R = I / torque²; the running weight Q is a family's chosen Q_T entries × `average_scale` / T.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CostScales {
+    /// Position features (m).
+    pub position_m: f64,
+    /// Torso and joint angles (rad).
+    pub angle_rad: f64,
+    /// Velocity features (m/s).
+    pub speed_m_s: f64,
+    /// Torso and joint rates (rad/s).
+    pub rate_rad_s: f64,
+    /// Torque (N m).
+    pub torque_n_m: f64,
+    /// Weight of the average-trajectory term relative to the terminal angle weights.
+    pub average_scale: f64,
+}
+
+impl CostScales {
+    /// Q_T's diagonal over a floating planar body's `2 dof` state features (the position's two
+    /// coordinates, then `dof - 2` angles, the velocity's two, then `dof - 2` rates):
+    /// 1/scale² of each group.
+    pub fn terminal_diagonal(&self, dof: usize) -> Vec<f64> {
+        let mut d = vec![0.0; 2 * dof];
+        d[..2].fill(self.position_m.powi(-2));
+        d[2..dof].fill(self.angle_rad.powi(-2));
+        d[dof..dof + 2].fill(self.speed_m_s.powi(-2));
+        d[dof + 2..].fill(self.rate_rad_s.powi(-2));
+        d
+    }
+
+    /// R = I / torque² over `m` torques.
+    pub fn control_weight(&self, m: usize) -> DMatrix<f64> {
+        DMatrix::identity(m, m) * self.torque_n_m.powi(-2)
+    }
+
+    /// Every scale positive, `average_scale` finite and non-negative (keys `cost.*`).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        for (key, v) in [
+            ("cost.position_m", self.position_m),
+            ("cost.angle_rad", self.angle_rad),
+            ("cost.speed_m_s", self.speed_m_s),
+            ("cost.rate_rad_s", self.rate_rad_s),
+            ("cost.torque_n_m", self.torque_n_m),
+        ] {
+            positive(key, v)?;
+        }
+        ensure(
+            self.average_scale >= 0.0 && self.average_scale.is_finite(),
+            "cost.average_scale",
+            "must be finite and non-negative",
+        )
+    }
+}
 
 /// §4.1's scale rule ("the quadratic cost functions should share the same scale factor which
 /// is inversely proportional to the square of the distance between each minimum point"): the

@@ -305,17 +305,8 @@ impl Params {
         let c = &self.crouch;
         let x0 = body.crouch(0.0, c.lean, c.shin, c.arm);
         let base = body.tree.center_of_mass(&x0[..DOF])[1];
-        let k = &self.cost;
         // W's diagonal (Q_T before [`Setup::set_metric`] maps it onto the state).
-        let mut d = vec![0.0; 2 * DOF];
-        d[..2].iter_mut().for_each(|v| *v = k.position_m.powi(-2));
-        d[2..DOF].iter_mut().for_each(|v| *v = k.angle_rad.powi(-2));
-        d[DOF..DOF + 2]
-            .iter_mut()
-            .for_each(|v| *v = k.speed_m_s.powi(-2));
-        d[DOF + 2..]
-            .iter_mut()
-            .for_each(|v| *v = k.rate_rad_s.powi(-2));
+        let d = self.cost.terminal_diagonal(DOF);
         let mut a = vec![0.0; 2 * DOF];
         a[2..DOF].copy_from_slice(&d[2..DOF]);
         Ok(Setup {
@@ -328,7 +319,7 @@ impl Params {
             q_final: DMatrix::from_diagonal(&DVector::from_vec(d.clone())),
             feature_weights: d,
             q_angles: DMatrix::from_diagonal(&DVector::from_vec(a)),
-            r: DMatrix::identity(TORQUES, TORQUES) * k.torque_n_m.powi(-2),
+            r: self.cost.control_weight(TORQUES),
         })
     }
 }

@@ -63,26 +63,6 @@ pub struct Crouch {
     pub arm: f64,
 }
 
-/// Scales of the §6.1 objective: Q_T = diag(1/scale²) over the hip's position, the angles, the
-/// hip's velocity and the angular rates; R = I / torque²; the running weight Q is Q_T's angle
-/// entries × `average_scale` / T.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct JumpCost {
-    /// Hip position (m).
-    pub position_m: f64,
-    /// Torso and joint angles (rad).
-    pub angle_rad: f64,
-    /// Hip velocity (m/s).
-    pub speed_m_s: f64,
-    /// Torso and joint rates (rad/s).
-    pub rate_rad_s: f64,
-    /// Torque (N m).
-    pub torque_n_m: f64,
-    /// Weight of the average-trajectory term relative to the terminal angle weights.
-    pub average_scale: f64,
-}
-
 /// The verdict's threshold (ours; the spec states the rule).
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -117,8 +97,9 @@ pub struct Params {
     pub high: f64,
     /// Push strengths defining the desired take-off states (between `low` and `high`).
     pub desired: Vec<f64>,
-    /// The objective's scales.
-    pub cost: JumpCost,
+    /// The objective's scales: Q_T on the centre of mass's position and velocity and the
+    /// torso's and joints' angles and rates; the running Q on the angles.
+    pub cost: super::CostScales,
     /// DDP's iterations at most for the take-off examples.
     pub takeoff_iterations: usize,
     /// DDP stops when an iteration improves the cost by less than this fraction.
@@ -184,21 +165,7 @@ impl Validate for Params {
             "desired",
             "every desired strength must lie strictly between low and high (LBC interpolates)",
         )?;
-        let c = &self.cost;
-        for (key, v) in [
-            ("cost.position_m", c.position_m),
-            ("cost.angle_rad", c.angle_rad),
-            ("cost.speed_m_s", c.speed_m_s),
-            ("cost.rate_rad_s", c.rate_rad_s),
-            ("cost.torque_n_m", c.torque_n_m),
-        ] {
-            positive(key, v)?;
-        }
-        ensure(
-            c.average_scale >= 0.0 && c.average_scale.is_finite(),
-            "cost.average_scale",
-            "must be finite and non-negative",
-        )?;
+        self.cost.validate()?;
         ensure(
             (1..=MAX_ITERATIONS).contains(&self.takeoff_iterations),
             "takeoff_iterations",

@@ -202,17 +202,7 @@ impl Params {
         let map = Rk4Map::new(FiniteDifference::new(body.clone()), self.knot_dt).map_err(other)?;
         let x0 = start_state(&body, &self.gait, self.warmup_s)?;
         let (nominal_x, nominal_u) = simbicon_step(&body, &map, &self.gait, &x0)?;
-        let c = &self.cost;
-        let mut d = vec![0.0; 2 * DOF];
-        d[0] = c.position_m.powi(-2);
-        d[1] = c.position_m.powi(-2);
-        d[2..DOF].iter_mut().for_each(|v| *v = c.angle_rad.powi(-2));
-        d[DOF..DOF + 2]
-            .iter_mut()
-            .for_each(|v| *v = c.speed_m_s.powi(-2));
-        d[DOF + 2..]
-            .iter_mut()
-            .for_each(|v| *v = c.rate_rad_s.powi(-2));
+        let d = self.cost.terminal_diagonal(DOF);
         let horizon = nominal_u.len() as f64 * self.knot_dt;
         let mut run = d.clone();
         run[0] = 0.0;
@@ -226,7 +216,7 @@ impl Params {
             nominal_u,
             q_final: DMatrix::from_diagonal(&DVector::from_vec(d)),
             q_run: DMatrix::from_diagonal(&DVector::from_vec(run)),
-            r: DMatrix::identity(TORQUES, TORQUES) * c.torque_n_m.powi(-2),
+            r: self.cost.control_weight(TORQUES),
             average_scale,
         })
     }

@@ -59,26 +59,6 @@ use std::path::{Path, PathBuf};
 /// The family.
 pub struct LbcStepping;
 
-/// Scales of the §6.1 objective: Q_T = diag(1/scale²) over positions, angles, pelvis velocity
-/// and angular rates; R = I / torque²; the running weight Q is Q_T's height and angle entries ×
-/// `average_scale` / T (no weight on the pelvis' position along the ground).
-#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct StepCost {
-    /// Pelvis position (m).
-    pub position_m: f64,
-    /// Torso and joint angles (rad).
-    pub angle_rad: f64,
-    /// Pelvis velocity (m/s).
-    pub speed_m_s: f64,
-    /// Torso and joint rates (rad/s).
-    pub rate_rad_s: f64,
-    /// Torque (N m).
-    pub torque_n_m: f64,
-    /// Weight of the average-trajectory term relative to the terminal angle weights.
-    pub average_scale: f64,
-}
-
 /// The verdict's threshold (ours; the spec states the rule).
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -107,8 +87,9 @@ pub struct Params {
     pub long_m: f64,
     /// Desired lengths between them (m).
     pub desired_m: Vec<f64>,
-    /// The objective's scales.
-    pub cost: StepCost,
+    /// The objective's scales: Q_T on the pelvis' position and velocity and the angles and
+    /// rates; the running Q on the pelvis' height and the angles (none along the ground).
+    pub cost: super::CostScales,
     /// Other scales of the average-trajectory term at which the two examples are optimized
     /// again and LBC and the naive blend run (the `average_effect` table; empty: none).
     #[serde(default)]
@@ -178,21 +159,7 @@ impl Validate for Params {
             "desired_m",
             "every desired length must lie more than rule.tolerance_m inside (short_m, long_m)",
         )?;
-        let c = &self.cost;
-        for (key, v) in [
-            ("cost.position_m", c.position_m),
-            ("cost.angle_rad", c.angle_rad),
-            ("cost.speed_m_s", c.speed_m_s),
-            ("cost.rate_rad_s", c.rate_rad_s),
-            ("cost.torque_n_m", c.torque_n_m),
-        ] {
-            positive(key, v)?;
-        }
-        ensure(
-            c.average_scale >= 0.0 && c.average_scale.is_finite(),
-            "cost.average_scale",
-            "must be finite and non-negative",
-        )?;
+        self.cost.validate()?;
         ensure(
             self.compare_average_scales.len() <= 4
                 && self

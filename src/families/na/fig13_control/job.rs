@@ -254,7 +254,7 @@ impl Job for Params {
                 r.best_iteration as i64,
                 task.formulation.name()
             ]);
-            if task.formulation == Formulation::Paper || self.net_seeds_ours.contains(&task.name) {
+            if self.over_net_seeds(task) {
                 run.push(&mut seeds_t, task, ctx.seed);
             }
             let mut row = row![task.name.as_str(), model.name()];

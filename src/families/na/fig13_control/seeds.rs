@@ -82,6 +82,12 @@ impl Params {
         out
     }
 
+    /// Whether `task` is learned over the net seeds (`net_seeds.csv`): every task of the
+    /// paper's formulation, and ours named in [`Params::net_seeds_ours`].
+    pub(super) fn over_net_seeds(&self, task: &Task) -> bool {
+        task.formulation == Formulation::Paper || self.net_seeds_ours.contains(&task.name)
+    }
+
     /// The headline of `task` (uncalibrated) through `net`: calibrated there, learned by the
     /// task's own η, α and step rule for its iteration count, scored at the best iterate.
     pub(super) fn headline_run(&self, task: &Task, net: &Emulator) -> Result<HeadlineRun, Error> {
@@ -100,9 +106,7 @@ impl Params {
         let tasks: Vec<&Task> = self
             .tasks
             .iter()
-            .filter(|t| {
-                t.formulation == Formulation::Paper || self.net_seeds_ours.contains(&t.name)
-            })
+            .filter(|t| self.over_net_seeds(t))
             .collect();
         let runs: Vec<(&Task, u64)> = seeds
             .iter()
