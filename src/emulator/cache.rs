@@ -270,7 +270,7 @@ impl EmulatorCache {
             "format": CACHE_FORMAT,
             "spec": spec,
             "physics": spec.net.model.physics_json(),
-            "recipe": spec.net.model.recipe_json(),
+            "recipe": spec.net.model.recipe_json(spec.net.data),
         })
     }
 
@@ -417,6 +417,7 @@ mod tests {
                 anchor: false,
                 normalization: Default::default(),
                 transforms: Default::default(),
+                data: Default::default(),
             },
             steps: 10,
             settings: TrainSettings::for_tests(20, 10, 5),
@@ -463,6 +464,7 @@ mod tests {
             BuildSpec {
                 net: NetSpec {
                     transforms: crate::emulator::catalog::TransformSet::Plain,
+                    data: Default::default(),
                     ..s.net.clone()
                 },
                 ..s.clone()

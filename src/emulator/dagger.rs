@@ -56,6 +56,37 @@ pub struct DaggerSettings {
     pub control_noise: f64,
     /// L-BFGS iteration limit of each round's fine-tuning.
     pub iters: u64,
+    /// k of the fine-tuning's k-step rollout loss, for nets trained without one (the catalog
+    /// nets train one step ahead, as the paper's): each round fine-tunes on the aggregated
+    /// one-step examples and k-step windows. 0 (the default, left out of cache keys): the net's
+    /// own training settings' `rollout_k` (the dolphin's global net).
+    #[serde(default, skip_serializing_if = "is_zero_usize")]
+    pub rollout_k: usize,
+    /// Weight of that k-step loss; 0 (the default, left out of cache keys): the net's own.
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub rollout_weight: f64,
+}
+
+fn is_zero_usize(v: &usize) -> bool {
+    *v == 0
+}
+
+fn is_zero_f64(v: &f64) -> bool {
+    *v == 0.0
+}
+
+impl DaggerSettings {
+    /// `settings` with this DAgger's k-step loss where it sets one.
+    pub fn fine_tune_settings(&self, settings: &TrainSettings) -> TrainSettings {
+        let mut s = *settings;
+        if self.rollout_k > 0 {
+            s.rollout_k = self.rollout_k;
+        }
+        if self.rollout_weight > 0.0 {
+            s.rollout_weight = self.rollout_weight;
+        }
+        s
+    }
 }
 
 impl DaggerSettings {
@@ -406,6 +437,8 @@ mod tests {
             perturbed_rollouts: 2,
             control_noise: 0.2,
             iters: 5,
+            rollout_k: 0,
+            rollout_weight: 0.0,
         }
     }
 
@@ -535,6 +568,7 @@ mod tests {
                 anchor: false,
                 normalization: Default::default(),
                 transforms: Default::default(),
+                data: Default::default(),
             },
             steps: 25,
             settings: TrainSettings {
@@ -574,6 +608,8 @@ mod tests {
             perturbed_rollouts: 4,
             control_noise: 0.1,
             iters: 60,
+            rollout_k: 0,
+            rollout_weight: 0.0,
         };
         let mut sim = NetModel::PendulumActive.simulator();
         let mut rng = ChaCha8Rng::seed_from_u64(9);

@@ -27,13 +27,19 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-/// Box limits of the controls (and external forces), per channel.
+/// Box limits of the controls (and external forces), per channel, and for
+/// [`ControlProcess::Manoeuvre`] how far into the box a channel's typical amplitude reaches.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ControlLimits {
     /// Lower bound per channel.
     pub low: Vec<f64>,
     /// Upper bound per channel.
     pub high: Vec<f64>,
+    /// Per channel, the smallest per-episode amplitude of a [`ControlProcess::Manoeuvre`], as
+    /// a fraction of the half-range about the box's centre (1: every episode spans the whole
+    /// box). Empty (the default, left out of the serialized form) for the other processes.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub amplitude_min: Vec<f64>,
 }
 
 impl ControlLimits {
@@ -42,6 +48,7 @@ impl ControlLimits {
         Self {
             low: vec![],
             high: vec![],
+            amplitude_min: vec![],
         }
     }
 
@@ -50,7 +57,21 @@ impl ControlLimits {
         Self {
             low: bound.iter().map(|b| -b).collect(),
             high: bound.to_vec(),
+            amplitude_min: vec![],
         }
+    }
+
+    /// The same box with per-channel smallest amplitudes for [`ControlProcess::Manoeuvre`].
+    pub fn with_amplitude_min(mut self, amplitude_min: &[f64]) -> Self {
+        assert_eq!(amplitude_min.len(), self.len(), "one amplitude per channel");
+        self.amplitude_min = amplitude_min.to_vec();
+        self
+    }
+
+    /// The centre of channel `c`'s box (the neutral control of every model here: zero torque,
+    /// drive and steering; the lander's hover thrust, half its [0, 2 m g] range).
+    pub fn centre(&self, c: usize) -> f64 {
+        0.5 * (self.low[c] + self.high[c])
     }
 
     /// Number of channels.
@@ -92,6 +113,25 @@ pub enum ControlProcess {
         hold_min: f64,
         /// Longest knot spacing (s).
         hold_max: f64,
+    },
+    /// Manoeuvres, the typical controls of a model's user (§4: "typical control input
+    /// functions"; ours in detail): knots held for U[`hold_min`, `hold_max`] seconds. Per
+    /// episode each channel c draws an amplitude a_c log-uniform in [`ControlLimits::
+    /// amplitude_min`]_c, 1]; a knot sets channel c to centre_c + a_c · half_c · U[−1, 1]
+    /// (centre and half of its box), so small corrections are sampled as densely per decade as
+    /// large moves. A knot is idle (every channel at its centre) with probability `idle`. With
+    /// `paired`, every drawn knot is followed by its mirror image about the centres for the
+    /// same hold (a drive then a brake, a push then a pull), so the states that integrate the
+    /// controls (speed, tilt, rates) return to where the pair began instead of drifting.
+    Manoeuvre {
+        /// Shortest hold (s).
+        hold_min: f64,
+        /// Longest hold (s).
+        hold_max: f64,
+        /// Probability that a knot (or a pair) is idle.
+        idle: f64,
+        /// Whether each knot is followed by its mirror image.
+        paired: bool,
     },
     /// Coordinated actions that travel along a chain of actuators (a swimming wave, §3.4's
     /// "coordinated muscle actions that produce locomotion"): per episode a frequency f, a
@@ -148,6 +188,9 @@ impl ControlSignal {
                 hold_min, hold_max, ..
             } => (false, hold_min, hold_max),
             ControlProcess::Smooth { hold_min, hold_max } => (true, hold_min, hold_max),
+            ControlProcess::Manoeuvre { .. } => {
+                return Self::manoeuvre(process, limits, duration, rng);
+            }
         };
         let channels = limits.len();
         // (frequency, lag, amplitude, phase, noise) of a travelling wave.
@@ -235,6 +278,65 @@ impl ControlSignal {
         }
     }
 
+    /// A [`ControlProcess::Manoeuvre`] realisation (see there).
+    fn manoeuvre(
+        process: ControlProcess,
+        limits: &ControlLimits,
+        duration: f64,
+        rng: &mut ChaCha8Rng,
+    ) -> Self {
+        let ControlProcess::Manoeuvre {
+            hold_min,
+            hold_max,
+            idle,
+            paired,
+        } = process
+        else {
+            unreachable!("called for manoeuvres only")
+        };
+        let channels = limits.len();
+        let amplitude: Vec<f64> = (0..channels)
+            .map(|c| {
+                let a_min = limits.amplitude_min.get(c).copied().unwrap_or(1.0);
+                let u: f64 = rng.random_range(0.0..1.0);
+                if a_min < 1.0 {
+                    crate::portable::exp(u * crate::portable::ln(a_min))
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        let (mut times, mut values) = (vec![], vec![]);
+        let mut t = 0.0;
+        let mut deviation = vec![0.0; channels];
+        while t <= duration {
+            let rest = idle > 0.0 && rng.random_range(0.0..1.0) < idle;
+            for (c, d) in deviation.iter_mut().enumerate() {
+                let half = 0.5 * (limits.high[c] - limits.low[c]);
+                let v: f64 = rng.random_range(-1.0..=1.0);
+                *d = if rest { 0.0 } else { amplitude[c] * half * v };
+            }
+            let hold = if hold_max > hold_min {
+                rng.random_range(hold_min..hold_max)
+            } else {
+                hold_min.max(1e-9)
+            };
+            for sign in if paired { &[1.0, -1.0][..] } else { &[1.0][..] } {
+                times.push(t);
+                for (c, d) in deviation.iter().enumerate() {
+                    values.push((limits.centre(c) + sign * d).clamp(limits.low[c], limits.high[c]));
+                }
+                t += hold;
+            }
+        }
+        Self {
+            smooth: false,
+            times,
+            values,
+            channels,
+        }
+    }
+
     /// Writes the control at time `t` (s) into `u`; beyond the last knot the last value holds.
     pub fn at(&self, t: f64, u: &mut [f64]) {
         if self.channels == 0 {
@@ -289,6 +391,20 @@ impl SamplingConfig {
         if !(self.episode_duration >= window) {
             // An episode must hold at least one lag (≤ 5Δt) plus one window (Δt).
             return bad("episode_duration", self.episode_duration);
+        }
+        if let ControlProcess::Manoeuvre {
+            idle,
+            hold_min,
+            hold_max,
+            ..
+        } = self.control
+        {
+            if !(0.0..=1.0).contains(&idle) {
+                return bad("idle", idle);
+            }
+            if !(hold_min > 0.0 && hold_max >= hold_min) {
+                return bad("hold_min", hold_min);
+            }
         }
         if let ControlProcess::PiecewiseConstant {
             idle, idle_first, ..
@@ -594,6 +710,65 @@ mod tests {
     fn same_seed_same_data_other_seed_other_data() {
         assert_eq!(run(3, 5, 50), run(3, 5, 50));
         assert_ne!(run(3, 5, 50), run(4, 5, 50));
+    }
+
+    /// Manoeuvres: each drawn knot is followed by its mirror image about the box's centre for
+    /// the same hold (a pair), idle pairs sit at the centre, every value stays in the box, and a
+    /// channel's deviations stay within its episode amplitude, which is log-uniform in
+    /// [amplitude_min, 1] (so about half the episodes lie below the geometric middle).
+    #[test]
+    fn manoeuvres_come_in_mirrored_pairs_at_log_uniform_amplitudes() {
+        let lim = ControlLimits {
+            low: vec![0.0, -2.0],
+            high: vec![10.0, 2.0],
+            amplitude_min: vec![0.01, 1.0],
+        };
+        let p = ControlProcess::Manoeuvre {
+            hold_min: 0.5,
+            hold_max: 2.0,
+            idle: 0.25,
+            paired: true,
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut below_middle = 0;
+        let episodes = 400;
+        let mut idle_pairs = 0;
+        let mut pairs = 0;
+        for _ in 0..episodes {
+            let s = ControlSignal::sample(p, &lim, 10.0, &mut rng);
+            assert!(s.times.len() % 2 == 0 && s.times.last().copied().unwrap() <= 10.0 + 2.0);
+            let mut largest: f64 = 0.0;
+            for k in (0..s.times.len()).step_by(2) {
+                let (a, b) = (&s.values[2 * k..2 * k + 2], &s.values[2 * k + 2..2 * k + 4]);
+                for c in 0..2 {
+                    let centre = lim.centre(c);
+                    assert!((lim.low[c]..=lim.high[c]).contains(&a[c]));
+                    assert!(((a[c] - centre) + (b[c] - centre)).abs() < 1e-12, "mirror");
+                }
+                if k + 2 < s.times.len() {
+                    let h1 = s.times[k + 1] - s.times[k];
+                    let h2 = s.times[k + 2] - s.times[k + 1];
+                    assert!((h1 - h2).abs() < 1e-12 && (0.5..2.0).contains(&h1));
+                }
+                largest = largest.max((a[0] - 5.0).abs() / 5.0);
+                pairs += 1;
+                idle_pairs += usize::from(a[0] == 5.0 && a[1] == 0.0);
+            }
+            assert!(largest <= 1.0);
+            // The amplitude bounds every deviation; 0.1 is the geometric middle of [0.01, 1].
+            below_middle += usize::from(largest < 0.1);
+        }
+        assert!(
+            (120..=280).contains(&below_middle),
+            "{below_middle} of {episodes}"
+        );
+        let share = idle_pairs as f64 / pairs as f64;
+        assert!((0.15..0.35).contains(&share), "idle share {share}");
+        // Same seed, same signal.
+        let draw =
+            |seed| ControlSignal::sample(p, &lim, 10.0, &mut ChaCha8Rng::seed_from_u64(seed));
+        assert_eq!(draw(3), draw(3));
+        assert_ne!(draw(3), draw(4));
     }
 
     #[test]

@@ -149,6 +149,8 @@ mod tests {
             perturbed_rollouts: 1,
             control_noise: 0.1,
             iters: 1,
+            rollout_k: 0,
+            rollout_weight: 0.0,
         };
         let mut sim = simulator(&d);
         let mut rng = ChaCha8Rng::seed_from_u64(3);

@@ -175,11 +175,11 @@ impl Job for Params {
             ctx.stage(&format!("trials {}", variant(model)), || {
                 for trial in 0..self.trials {
                     let mut rng = ctx.rng(1000 * (vi as u64 + 1) + trial as u64);
-                    let mut x0 = model.start_state(&mut rng);
+                    let mut x0 = model.start_state_in(net.data, &mut rng);
                     let warm = (self.warmup / dt).round() as usize;
                     let signal = ControlSignal::sample(
-                        model.control_process(),
-                        &model.control_limits(),
+                        model.control_process_in(net.data),
+                        &model.sampling_limits(net.data),
                         duration + warm as f64 * dt,
                         &mut rng,
                     );

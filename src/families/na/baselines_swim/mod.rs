@@ -145,6 +145,7 @@ impl Params {
             dagger: None,
             net_seeds: vec![],
             net_seeds_ours: vec![],
+            net_lines: vec![],
         }
     }
 }

@@ -45,9 +45,14 @@ impl DaggerControl {
         self.learner.validate("dagger.learner")?;
         self.settings.validate("dagger.settings")?;
         crate::experiment::resolve::ensure(
-            p.training.rollout_k >= 1,
-            "dagger",
-            "needs training.rollout_k >= 1 (the fine-tuning's k-step rollout loss)",
+            p.training.rollout_k >= 1 || self.settings.rollout_k >= 1,
+            "dagger.settings.rollout_k",
+            "needs a k-step rollout loss: dagger.settings.rollout_k >= 1 (or training.rollout_k)",
+        )?;
+        crate::experiment::resolve::ensure(
+            p.training.rollout_weight > 0.0 || self.settings.rollout_weight > 0.0,
+            "dagger.settings.rollout_weight",
+            "needs a positive weight of the k-step rollout loss",
         )
     }
 }
@@ -263,7 +268,14 @@ impl Params {
     ) -> Result<Emulator, Error> {
         let model = task.net.model;
         let (n, m) = (model.state_dim(), model.control_dim());
-        let k = self.training.rollout_k;
+        // The fine-tuning's k-step loss: DAgger's own where it sets one (the base net trained
+        // one step ahead), so its windows are sampled under a spec that carries it.
+        let tuned = BuildSpec {
+            settings: d.settings.fine_tune_settings(&spec.settings),
+            ..spec.clone()
+        };
+        let spec = &tuned;
+        let k = spec.settings.rollout_k;
         let cache = EmulatorCache::from_env();
         let settings = spec.effective_settings();
         let limits = model.control_limits();

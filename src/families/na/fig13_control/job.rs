@@ -272,6 +272,7 @@ impl Job for Params {
             }
         }
         self.run_seeds(ctx, &mut seeds_t)?;
+        let lines_t = self.run_lines(ctx)?;
         let mut swim_t = Table::new(&["source", "distance_m", "effort", "periodicity", "period_s"]);
         let mut motion_cols = vec!["source".to_string(), "step".into(), "t".into()];
         motion_cols.extend((0..N_POS).map(|k| format!("p{k}")));
@@ -319,6 +320,7 @@ impl Job for Params {
             ("objective", objective_t),
             ("final", final_t),
             ("net_seeds", seeds_t),
+            ("net_lines", lines_t),
             ("trajectory", trajectory),
             ("goal", goal),
             ("states", states_t),

@@ -6,7 +6,9 @@ use crate::control::bptt::StepRule;
 use crate::emulator::catalog::{NetSpec, TrainSettings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::families::na::swim::SwimTask;
-use crate::families::na::table1_structure::{validate_nets, validate_training, DolphinNets};
+use crate::families::na::table1_structure::{
+    validate_nets, validate_training, validate_variants, DolphinNets, NetVariant,
+};
 use serde::{Deserialize, Serialize};
 
 /// The step-size sweep beside the headline runs: every task (dolphin excluded) learned with
@@ -90,6 +92,12 @@ pub struct Params {
     /// paper's (ours; reported, never counted in the verdict). Each must name a task.
     #[serde(default)]
     pub net_seeds_ours: Vec<String>,
+    /// Second lines of the paper's tasks' nets ([`super::seeds`], `net_lines.csv`): each task
+    /// of the paper's formulation (the dolphin aside) learned again over the run's own and the
+    /// further net seeds through its net with one change (the data of the whole box, or input
+    /// noise), so a before/after table shows which change mattered. Reported, never counted.
+    #[serde(default)]
+    pub net_lines: Vec<NetVariant>,
 }
 
 /// The dolphin swim task of Fig. 13(d) ([`crate::families::na::swim`]).
@@ -200,6 +208,7 @@ impl Validate for Params {
                 format!("`{name}` is not a task of formulation \"ours\""),
             )?;
         }
+        validate_variants(&self.net_lines, "net_lines")?;
         let nets: Vec<NetSpec> = self.tasks.iter().map(|t| t.net.clone()).collect();
         validate_nets(&nets, self.example_scale)?;
         if let Some(d) = &self.dolphin {

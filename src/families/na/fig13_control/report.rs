@@ -181,6 +181,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     // simulator end within tolerance, for a strict majority of its net seeds (net_seeds.csv).
     let verdict = Verdict::from_counts(both, headline);
     md.push_str(&super::seeds::table_md(dir)?);
+    md.push_str(&super::seeds::lines_md(dir)?);
     let (cond_md, cond_why) = conditioning_summary(dir)?.unwrap_or_default();
     md.push_str(&cond_md);
     let (ladder_md, ladder_why) = ladder_summary(dir)?.unwrap_or_default();

@@ -137,6 +137,107 @@ impl Params {
     }
 }
 
+/// Columns of `net_lines.csv`: `line` names the net's change (`paper` is the headline's own
+/// nets, as in `net_seeds.csv`).
+pub const LINES_COLUMNS: [&str; 7] = [
+    "task",
+    "line",
+    "net_seed",
+    "emulator_error",
+    "simulator_error",
+    "best_iteration",
+    "at_goal",
+];
+
+impl Params {
+    /// `net_lines.csv`: every task of the paper's formulation (the dolphin aside) learned
+    /// through each of [`Params::net_lines`]' nets under the run's own and the further net
+    /// seeds (trained side by side, or from the cache), as the headline is.
+    pub(super) fn run_lines(&self, ctx: &RunContext) -> Result<Table, Error> {
+        let mut table = Table::new(&LINES_COLUMNS);
+        let mut seeds = vec![ctx.seed];
+        seeds.extend(self.further_net_seeds(ctx.seed));
+        let tasks: Vec<&Task> = self
+            .tasks
+            .iter()
+            .filter(|t| t.formulation == Formulation::Paper)
+            .collect();
+        let mut runs: Vec<(&Task, &str, u64, BuildSpec)> = Vec::new();
+        for line in &self.net_lines {
+            for &t in &tasks {
+                for &s in &seeds {
+                    let net = line.apply(&t.net);
+                    let spec = build_spec(s, &net, self.steps, self.example_scale, &self.training);
+                    runs.push((t, line.name.as_str(), s, spec));
+                }
+            }
+        }
+        if runs.is_empty() {
+            return Ok(table);
+        }
+        let specs: Vec<BuildSpec> = runs.iter().map(|r| r.3.clone()).collect();
+        let built = ctx.stage("train the second lines' nets", || build_emulators(&specs))?;
+        for ((task, line, seed, _), trained) in runs.iter().zip(&built) {
+            let run = ctx.stage(
+                &format!("learn {} ({line}, net seed {seed})", task.name),
+                || self.headline_run(task, &trained.emulator),
+            )?;
+            table.push(row![
+                task.name.as_str(),
+                *line,
+                *seed as i64,
+                run.emulator_error,
+                run.simulator_error,
+                run.best_iteration as i64,
+                i64::from(run.at_goal())
+            ]);
+        }
+        Ok(table)
+    }
+}
+
+/// The report's before/after table from `net_lines.csv` and `net_seeds.csv` in `dir`: per
+/// paper task, how many net seeds reach the goal on both and on the emulator alone through
+/// the headline's nets (`paper`) and through each second line's. Empty without `net_lines.csv`.
+pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
+    let Ok(lines) = read_csv(&dir.join("net_lines.csv")) else {
+        return Ok(String::new());
+    };
+    let (task, line) = (df_str(&lines, "task")?, df_str(&lines, "line")?);
+    if task.is_empty() {
+        return Ok(String::new());
+    }
+    let (goal, emu) = (
+        df_f64(&lines, "at_goal")?,
+        df_f64(&lines, "emulator_error")?,
+    );
+    let mut counts: Vec<(String, String, usize, usize, usize)> = Vec::new();
+    if let Some(paper) = seed_counts(dir)? {
+        let paper_tasks = unique(&task);
+        for c in paper.into_iter().filter(|c| paper_tasks.contains(&c.task)) {
+            counts.push((c.task, "paper".into(), c.both, c.emulator, c.seeds));
+        }
+    }
+    for r in 0..task.len() {
+        let i = match counts.iter().position(|c| c.0 == task[r] && c.1 == line[r]) {
+            Some(i) => i,
+            None => {
+                counts.push((task[r].clone(), line[r].clone(), 0, 0, 0));
+                counts.len() - 1
+            }
+        };
+        counts[i].2 += usize::from(goal[r] == 1.0);
+        counts[i].3 += usize::from(emu[r] <= 1.0);
+        counts[i].4 += 1;
+    }
+    counts.sort_by(|a, b| a.0.cmp(&b.0).then((a.1 != "paper").cmp(&(b.1 != "paper"))));
+    let mut md = String::from("\nBefore and after (`net_lines.csv`, ours; reported, never counted): each paper task learned the headline's way through its net with one change, over the same net seeds. `paper`: the headline's nets (typical manoeuvres, no input noise); `box`: trained on knots uniform over the whole control box from wide starts (our data before); `noise`: with input noise 0.05 (ours before).\n\n| task | nets | seeds at the goal on both | on the emulator alone |\n| --- | --- | --- | --- |\n");
+    for (t, l, both, emu, n) in counts {
+        md.push_str(&format!("| {t} | {l} | {both} of {n} | {emu} of {n} |\n"));
+    }
+    Ok(md)
+}
+
 /// Whether a strict majority of `at_goal` (one flag per net seed) is set: the rule by which
 /// the verdict counts a task as reaching its goal when `net_seeds.csv` has several seeds for it.
 pub fn majority_at_goal(at_goal: &[bool]) -> bool {

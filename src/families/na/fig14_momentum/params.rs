@@ -281,6 +281,7 @@ impl Params {
             dagger: Some(control.clone()),
             net_seeds: vec![],
             net_seeds_ours: vec![],
+            net_lines: vec![],
         };
         (p, control)
     }

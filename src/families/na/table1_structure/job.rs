@@ -3,7 +3,9 @@
 
 use super::nets::{build_dolphin_emulator, build_emulators, build_spec};
 use super::{position_part, DriftTask, Params};
-use crate::emulator::catalog::{anchor_of, rollout_error, BuildSpec};
+use crate::emulator::catalog::{
+    anchor_of, regime_fidelity, regime_share, rollout_error, training_data, BuildSpec,
+};
 use crate::emulator::hierarchy::{
     global_heldout_errors, hierarchy_rollout_error, DolphinEmulator, HierarchySpec,
 };
@@ -122,6 +124,8 @@ impl Job for Params {
             "rollout40_error_mean",
             "rollout40_error_final",
             "anchored",
+            "regime_share",
+            "data",
         ]);
         let mut training = Table::new(&["net", "iteration", "train_error", "heldout_error"]);
         let mut rollout = Table::new(&["net", "step", "error"]);
@@ -225,7 +229,12 @@ impl Job for Params {
                 i64::from(t.from_cache),
                 mean,
                 errors[errors.len() - 1],
-                i64::from(net.anchor)
+                i64::from(net.anchor),
+                ctx.stage(&format!("regime share {name}"), || {
+                    let data = training_data(spec).map_err(other)?;
+                    Ok::<_, Error>(regime_share(m, &data.train))
+                })?,
+                spec.net.data.name()
             ]);
             for p in &t.trace {
                 training.push(row![
@@ -246,6 +255,7 @@ impl Job for Params {
             pb.inc(1);
         }
         let normalization = self.normalization_table(ctx, &specs)?;
+        let regime_fidelity = self.regime_table(ctx, &specs)?;
         if let Some(d) = &self.dolphin {
             let spec = d.spec(ctx.seed, self.steps, self.example_scale);
             let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
@@ -299,7 +309,9 @@ impl Job for Params {
                     i64::from(n.from_cache),
                     mean,
                     last,
-                    0_i64
+                    0_i64,
+                    f64::NAN,
+                    "typical"
                 ]);
                 for p in &n.trace {
                     training.push(row![
@@ -328,11 +340,81 @@ impl Job for Params {
             ("rollout_training", rollout_training),
             ("global_error", global_error),
             ("normalization", normalization),
+            ("regime_fidelity", regime_fidelity),
         ]))
     }
 }
 
 impl Params {
+    /// `regime_fidelity.csv`: each catalog net with a `regime` entry (variant `paper`) and its
+    /// `variants` (built side by side, cached), measured on the control tasks' inputs in
+    /// tolerance units ([`regime_fidelity`]), with the share of its training examples in the
+    /// tasks' regime.
+    fn regime_table(&self, ctx: &RunContext, specs: &[BuildSpec]) -> Result<Table, Error> {
+        let mut table = Table::new(&[
+            "net",
+            "quantity",
+            "bias_tol",
+            "rms_tol",
+            "rollout40_tol",
+            "variant",
+            "data",
+            "input_noise",
+            "tolerance",
+            "regime_share",
+            "stop",
+        ]);
+        let mut lines: Vec<(&str, BuildSpec, &[f64])> = Vec::new();
+        for r in &self.regime {
+            let Some(spec) = specs.iter().find(|s| s.net.model.name() == r.net) else {
+                continue;
+            };
+            lines.push(("paper", spec.clone(), &r.tolerance));
+            for v in &self.variants {
+                let mut vs = spec.clone();
+                vs.net = v.apply(&spec.net);
+                lines.push((v.name.as_str(), vs, &r.tolerance));
+            }
+        }
+        let all: Vec<BuildSpec> = lines.iter().map(|l| l.1.clone()).collect();
+        let built = ctx.stage("train regime variants (side by side)", || {
+            build_emulators(&all)
+        })?;
+        for ((variant, spec, tolerance), t) in lines.iter().zip(&built) {
+            let model = spec.net.model;
+            let label = format!("regime fidelity {} ({variant})", model.name());
+            let (rows, share) = ctx.stage(&label, || {
+                let rows = regime_fidelity(
+                    &t.emulator,
+                    spec,
+                    tolerance,
+                    ROLLOUT_EPISODES,
+                    ROLLOUT_STEPS,
+                )
+                .map_err(other)?;
+                let data = training_data(spec).map_err(other)?;
+                Ok::<_, Error>((rows, regime_share(model, &data.train)))
+            })?;
+            let names = model.state_names();
+            for f in rows {
+                table.push(row![
+                    model.name(),
+                    names[f.variable].as_str(),
+                    f.bias_tol,
+                    f.rms_tol,
+                    f.rollout_tol,
+                    *variant,
+                    spec.net.data.name(),
+                    spec.effective_settings().input_noise,
+                    f.tolerance,
+                    share,
+                    t.stop.as_str()
+                ]);
+            }
+        }
+        Ok(table)
+    }
+
     /// `normalization.csv`: every catalog net of `specs` built under each of
     /// `self.normalizations` (the ones not already built, side by side, cached) and rolled out
     /// beside the simulator as `rollout.csv` is.

@@ -41,7 +41,7 @@ pub use nets::{
 };
 
 use crate::emulator::cache::fnv1a;
-use crate::emulator::catalog::{NetModel, NetSpec, Normalization, TrainSettings};
+use crate::emulator::catalog::{DataRegime, NetModel, NetSpec, Normalization, TrainSettings};
 use crate::emulator::hierarchy::{HierarchyNet, HierarchySpec};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
@@ -78,6 +78,55 @@ pub struct Params {
     /// chosen, [`normalization_pick`]. Empty: no comparison.
     #[serde(default)]
     pub normalizations: Vec<Normalization>,
+    /// Per catalog net, the tolerances its fidelity on the control tasks' inputs is measured in
+    /// (`regime_fidelity.csv`, [`crate::emulator::catalog::regime_fidelity`]).
+    #[serde(default)]
+    pub regime: Vec<RegimeTolerance>,
+    /// Second lines: every catalog net that has a `regime` entry built again with one change
+    /// and measured the same way (`regime_fidelity.csv`'s `variant`; the nets above are
+    /// `paper`).
+    #[serde(default)]
+    pub variants: Vec<NetVariant>,
+}
+
+/// The tolerances of one catalog net's regime fidelity: the Fig. 13 task's final tolerance per
+/// state variable (0: not measured).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegimeTolerance {
+    /// The catalog net's model name.
+    pub net: String,
+    /// One tolerance per state variable, in the variable's units.
+    pub tolerance: Vec<f64>,
+}
+
+/// A second line of every catalog net: the net of `nets` with its data regime or its input
+/// noise changed.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetVariant {
+    /// Its name in `regime_fidelity.csv` (not `paper`).
+    pub name: String,
+    /// Where its data come from, if not the net's own.
+    #[serde(default)]
+    pub data: Option<DataRegime>,
+    /// Its input noise, if not the net's own.
+    #[serde(default)]
+    pub input_noise: Option<f64>,
+}
+
+impl NetVariant {
+    /// `net` with this variant's change.
+    pub fn apply(&self, net: &NetSpec) -> NetSpec {
+        let mut v = net.clone();
+        if let Some(d) = self.data {
+            v.data = d;
+        }
+        if let Some(noise) = self.input_noise {
+            v.input_noise = Some(noise);
+        }
+        v
+    }
 }
 
 /// Relative margin within which a grouped normalization is preferred to a lower-error one
@@ -237,6 +286,32 @@ pub fn validate_training(t: &TrainSettings) -> Result<(), ParamError> {
     Ok(())
 }
 
+/// Checks a list of second lines (`key` names it in messages): unique names other than
+/// `paper`, each changing something, any input noise non-negative.
+pub fn validate_variants(variants: &[NetVariant], key: &str) -> Result<(), ParamError> {
+    for (i, v) in variants.iter().enumerate() {
+        let key = format!("{key}[{i}]");
+        ensure(
+            v.name != "paper" && !variants[..i].iter().any(|w| w.name == v.name),
+            &format!("{key}.name"),
+            "must be unique and not `paper`",
+        )?;
+        ensure(
+            v.data.is_some() || v.input_noise.is_some(),
+            &key,
+            "must change `data` or `input_noise`",
+        )?;
+        if let Some(noise) = v.input_noise {
+            ensure(
+                noise >= 0.0 && noise.is_finite(),
+                &format!("{key}.input_noise"),
+                "must be >= 0",
+            )?;
+        }
+    }
+    Ok(())
+}
+
 /// Checks a list of nets.
 pub fn validate_nets(nets: &[NetSpec], scale: f64) -> Result<(), ParamError> {
     ensure(!nets.is_empty(), "nets", "need at least one net")?;
@@ -305,6 +380,32 @@ impl Validate for Params {
                 &format!("needs {} values (or none)", m.control_dim()),
             )?;
         }
+        for (i, r) in self.regime.iter().enumerate() {
+            let key = format!("regime[{i}]");
+            let m = self
+                .nets
+                .iter()
+                .find(|n| n.model.name() == r.net)
+                .map(|n| n.model);
+            ensure(
+                m.is_some(),
+                &format!("{key}.net"),
+                "must name a net of `nets`",
+            )?;
+            let m = m.expect("checked");
+            ensure(
+                r.tolerance.len() == m.state_dim(),
+                &format!("{key}.tolerance"),
+                &format!("needs {} values", m.state_dim()),
+            )?;
+            ensure(
+                r.tolerance.iter().all(|t| t.is_finite() && *t >= 0.0)
+                    && r.tolerance.iter().any(|t| *t > 0.0),
+                &format!("{key}.tolerance"),
+                "must be >= 0 and finite, at least one positive",
+            )?;
+        }
+        validate_variants(&self.variants, "variants")?;
         for (i, n) in self.normalizations.iter().enumerate() {
             ensure(
                 !self.normalizations[..i].contains(n),

@@ -117,11 +117,11 @@ impl Job for Params {
             let model: NetModel = tm.net.model;
             let dt = tm.net.physical_dt;
             let mut rng = ctx.rng(100 + i as u64);
-            let x0 = model.start_state(&mut rng);
+            let x0 = model.start_state_in(tm.net.data, &mut rng);
             let m = model.control_dim();
             let signal = ControlSignal::sample(
-                model.control_process(),
-                &model.control_limits(),
+                model.control_process_in(tm.net.data),
+                &model.sampling_limits(tm.net.data),
                 steps as f64 * dt,
                 &mut rng,
             );
