@@ -307,6 +307,12 @@ fn na_fig12_quick_writes_error_curves() {
             let mean = curve.iter().sum::<f64>() / curve.len() as f64;
             let own: f64 = at("20")[4].parse().unwrap();
             assert!((own - mean).abs() <= 1e-12 * mean.max(1.0), "{v} {e}");
+            // common_mean_error: the curve's mean at the frames every emulator steps to (10 s
+            // at 0.1 s frames: every whole second, where N100 steps; 11 frames with t = 0).
+            let common: Vec<f64> = (0..curve.len()).step_by(10).map(|f| curve[f]).collect();
+            let want = common.iter().sum::<f64>() / common.len() as f64;
+            let got: f64 = at("20")[5].parse().unwrap();
+            assert!((got - want).abs() <= 1e-12 * want.max(1.0), "{v} {e}");
             let (e20, e40): (f64, f64) =
                 (at("20")[3].parse().unwrap(), at("40")[3].parse().unwrap());
             let w = |h: f64, n_in: f64| h * (n_in + 1.0) + 6.0 * (h + 1.0);
@@ -319,7 +325,7 @@ fn na_fig12_quick_writes_error_curves() {
     }
     assert_eq!(
         header(&out.join("capacity.csv")),
-        "variant,emulator,hidden,examples,mean_error"
+        "variant,emulator,hidden,examples,mean_error,common_mean_error"
     );
     assert_eq!(rows(&out.join("capacity.csv")).len(), 12);
     figure_exists(&d, "na_fig12_error_error");

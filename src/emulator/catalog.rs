@@ -253,36 +253,7 @@ impl NetModel {
                 let (s, c) = crate::portable::sin_cos(th);
                 vec![x, y, th, v * c, v * s, 0.0]
             }
-            Self::Lander => {
-                let yaw = rng.random_range(-PI..PI);
-                let axis_angle: f64 = rng.random_range(-PI..PI);
-                let tilt = rng.random_range(0.0..0.1);
-                let (s, c) = crate::portable::sin_cos(axis_angle);
-                let axis = Vector3::new(c, s, 0.0);
-                let q = axis_angle_quaternion(&nalgebra::Unit::new_normalize(axis), tilt)
-                    * axis_angle_quaternion(&Vector3::z_axis(), yaw);
-                let q = q.quaternion();
-                let mut s = vec![
-                    rng.random_range(-50.0..50.0),
-                    rng.random_range(-50.0..50.0),
-                    rng.random_range(20.0..200.0),
-                    q.w,
-                    q.i,
-                    q.j,
-                    q.k,
-                ];
-                s.extend((0..3).map(|_| rng.random_range(-5.0..5.0)));
-                let still = rng.random_range(0.0..1.0) < 0.5;
-                s.extend((0..3).map(|_| {
-                    let w = rng.random_range(-0.05..0.05);
-                    if still {
-                        0.0
-                    } else {
-                        w
-                    }
-                }));
-                s
-            }
+            Self::Lander => lander_start(rng, 0.1, 0.5, 0.05),
             _ => {
                 // Drawn either way, so the stream does not depend on which start it is.
                 let hanging = rng.random_range(0.0..1.0) < 0.25;
@@ -371,39 +342,9 @@ impl NetModel {
                 let (s, c) = crate::portable::sin_cos(th);
                 vec![x, y, th, v * c, v * s, 0.0]
             }
-            Self::Lander => {
-                let yaw = rng.random_range(-PI..PI);
-                let axis_angle: f64 = rng.random_range(-PI..PI);
-                let tilt = rng.random_range(0.0..0.4);
-                let (s, c) = crate::portable::sin_cos(axis_angle);
-                let axis = Vector3::new(c, s, 0.0);
-                let q = axis_angle_quaternion(&nalgebra::Unit::new_normalize(axis), tilt)
-                    * axis_angle_quaternion(&Vector3::z_axis(), yaw);
-                let q = q.quaternion();
-                let mut s = vec![
-                    rng.random_range(-50.0..50.0),
-                    rng.random_range(-50.0..50.0),
-                    rng.random_range(20.0..200.0),
-                    q.w,
-                    q.i,
-                    q.j,
-                    q.k,
-                ];
-                s.extend((0..3).map(|_| rng.random_range(-5.0..5.0)));
-                // A quarter of the episodes start with the jets' rates at zero (the tasks'
-                // starts), which idle jets then keep. The rates are drawn either way, so the
-                // stream does not depend on it.
-                let still = rng.random_range(0.0..1.0) < 0.25;
-                s.extend((0..3).map(|_| {
-                    let w = rng.random_range(-0.2..0.2);
-                    if still {
-                        0.0
-                    } else {
-                        w
-                    }
-                }));
-                s
-            }
+            // A quarter of the episodes start with the jets' rates at zero (the tasks'
+            // starts), which idle jets then keep.
+            Self::Lander => lander_start(rng, 0.4, 0.25, 0.2),
             _ => {
                 let mut s: Vec<f64> = (0..3).map(|_| rng.random_range(-0.7..0.7)).collect();
                 s.extend((0..3).map(|_| rng.random_range(-1.0..1.0)));
@@ -545,6 +486,41 @@ impl NetModel {
             _ => TransformConfig::standard(None),
         }
     }
+}
+
+/// A lander start: the centre of mass uniform in a 100 m square at 20–200 m height, yaw
+/// uniform, tilted up to `tilt_max` rad about a random horizontal axis, velocity U[−5, 5] m/s
+/// per axis, body rates U[−`rate_max`, `rate_max`] rad/s, all zero in a share `still` of the
+/// episodes (the rates are drawn either way, so the stream does not depend on it).
+fn lander_start(rng: &mut ChaCha8Rng, tilt_max: f64, still: f64, rate_max: f64) -> Vec<f64> {
+    let yaw = rng.random_range(-PI..PI);
+    let axis_angle: f64 = rng.random_range(-PI..PI);
+    let tilt = rng.random_range(0.0..tilt_max);
+    let (s, c) = crate::portable::sin_cos(axis_angle);
+    let axis = Vector3::new(c, s, 0.0);
+    let q = axis_angle_quaternion(&nalgebra::Unit::new_normalize(axis), tilt)
+        * axis_angle_quaternion(&Vector3::z_axis(), yaw);
+    let q = q.quaternion();
+    let mut x = vec![
+        rng.random_range(-50.0..50.0),
+        rng.random_range(-50.0..50.0),
+        rng.random_range(20.0..200.0),
+        q.w,
+        q.i,
+        q.j,
+        q.k,
+    ];
+    x.extend((0..3).map(|_| rng.random_range(-5.0..5.0)));
+    let is_still = rng.random_range(0.0..1.0) < still;
+    x.extend((0..3).map(|_| {
+        let w = rng.random_range(-rate_max..rate_max);
+        if is_still {
+            0.0
+        } else {
+            w
+        }
+    }));
+    x
 }
 
 /// Smallest per-episode amplitude of the typical manoeuvres, as a fraction of a channel's
