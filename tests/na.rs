@@ -468,6 +468,33 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         header(&out.join("final.csv")),
         "task,emulator_error,simulator_error,best_iteration,formulation"
     );
+    // The learned controls, one row per emulator step of each catalog task, within the
+    // control box (pendulum +-(2.5, 1.5, 0.5) N m, truck +-(3, 0.5), lander thrust <= 2 hover).
+    assert_eq!(header(&out.join("controls.csv")), "task,step,t,u0,u1,u2,u3");
+    let controls = rows(&out.join("controls.csv"));
+    for (task, horizon, bound) in [
+        ("pendulum", 40, [2.5, 1.5, 0.5, f64::NAN]),
+        ("truck", 40, [3.0, 0.5, f64::NAN, f64::NAN]),
+        ("pendulum_200steps", 200, [2.5, 1.5, 0.5, f64::NAN]),
+    ] {
+        let mine: Vec<&Vec<String>> = controls.iter().filter(|c| c[0] == task).collect();
+        assert_eq!(mine.len(), horizon, "{task}");
+        for c in mine {
+            for (k, b) in bound.iter().enumerate() {
+                let u: f64 = c[3 + k].parse().unwrap();
+                assert!(
+                    if b.is_nan() {
+                        u.is_nan()
+                    } else {
+                        u.abs() <= b + 1e-9
+                    },
+                    "{task}: {c:?}"
+                );
+            }
+        }
+    }
+    let lander_rows = controls.iter().filter(|c| c[0] == "lander").count();
+    assert_eq!(lander_rows, 40);
     // The headline over net seeds (issue 54): the paper's three tasks through this run's net
     // (seed 1, the same numbers as final.csv) and through the net of quick's further seed 2.
     assert_eq!(

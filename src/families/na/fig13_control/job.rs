@@ -82,6 +82,20 @@ impl Job for Params {
         cols.extend((0..width).map(|k| format!("s{k}")));
         let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
         let mut trajectory = Table::new(&col_refs);
+        // The learned controls (physical units, one row per emulator step, held over it).
+        let u_width = self
+            .tasks
+            .iter()
+            .map(|t| t.net.model.control_dim())
+            .max()
+            .unwrap_or(0);
+        let mut u_cols: Vec<String> = ["task", "step", "t"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        u_cols.extend((0..u_width).map(|k| format!("u{k}")));
+        let u_refs: Vec<&str> = u_cols.iter().map(String::as_str).collect();
+        let mut controls_t = Table::new(&u_refs);
         let mut goal_cols = vec!["task", "model"];
         goal_cols.extend_from_slice(&col_refs[4..]);
         let mut goal = Table::new(&goal_cols);
@@ -263,6 +277,11 @@ impl Job for Params {
             );
             goal.push(row);
             let dt = task.net.physical_dt * self.steps as f64;
+            for (k, u) in best.controls.chunks_exact(m.max(1)).enumerate() {
+                let mut row = row![task.name.as_str(), k as i64, k as f64 * dt];
+                row.extend((0..u_width).map(|c| u.get(c).copied().unwrap_or(f64::NAN).into()));
+                controls_t.push(row);
+            }
             for (source, states) in [("emulator", &best.states), ("simulator", &rep.states)] {
                 for (i, s) in states.chunks_exact(n).enumerate() {
                     let mut row = row![task.name.as_str(), i as i64, i as f64 * dt, source];
@@ -322,6 +341,7 @@ impl Job for Params {
             ("net_seeds", seeds_t),
             ("net_lines", lines_t),
             ("trajectory", trajectory),
+            ("controls", controls_t),
             ("goal", goal),
             ("states", states_t),
         ]))
