@@ -385,8 +385,8 @@ fn tiny_emulators_train_and_roll_out_with_their_bits() {
             ("truck_lbfgs_rollout_rollout", 0xce5ae43ac20c66ce),
             ("lander_cg_weights", 0xb1fe4070ca53806a),
             ("lander_cg_rollout", 0x682c6ec8049015ad),
-            ("pendulum_active_momentum_noise_weights", 0x64f4e2d481ad59fe),
-            ("pendulum_active_momentum_noise_rollout", 0x45eeefe7bf20c4b5),
+            ("pendulum_active_momentum_noise_weights", 0x96749f77f8ec36e1),
+            ("pendulum_active_momentum_noise_rollout", 0x2306f96dfbce8a9c),
         ],
     );
 }
