@@ -1133,22 +1133,13 @@ pub fn regime_fidelity(
     let model = twin.net.model;
     let n = model.state_dim();
     assert_eq!(tolerance.len(), n, "one tolerance per state variable");
-    let mut sim = model.simulator();
-    let start = |r: &mut ChaCha8Rng| twin.start_state(r);
-    let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(twin.seed, 21));
-    let test = sample_transitions(
-        sim.as_mut(),
-        &start,
-        &twin.sampling_limits(),
-        &twin.sampling(twin.held_out()),
-        &mut rng,
-    )?
-    .transitions;
+    let test = sampled(&twin, twin.held_out(), 21)?;
     let (mut scratch, mut next) = (emulator.scratch(), vec![0.0; n]);
     let (mut sum, mut sum_sq) = (vec![0.0; n], vec![0.0; n]);
+    let (mut s, mut u) = (vec![0.0; n], vec![0.0; model.control_dim()]);
     for r in 0..test.len() {
-        let s = test.states.row(r).to_vec();
-        let u = test.controls.row(r).to_vec();
+        copy_row(&test.states, r, &mut s);
+        copy_row(&test.controls, r, &mut u);
         emulator.predict(&s, &u, &mut scratch, &mut next);
         for v in 0..n {
             let e = next[v] - test.next_states[(r, v)];
@@ -1185,12 +1176,20 @@ pub fn regime_fidelity(
         .collect())
 }
 
+/// Row `r` of `a` into `out` (whatever `a`'s memory layout).
+fn copy_row(a: &ndarray::Array2<f64>, r: usize, out: &mut [f64]) {
+    for (o, v) in out.iter_mut().zip(a.row(r)) {
+        *o = *v;
+    }
+}
+
 /// The share of `data`'s examples in `model`'s task regime ([`NetModel::in_task_regime`]).
 pub fn regime_share(model: NetModel, data: &Transitions) -> f64 {
+    let (mut s, mut u) = (vec![0.0; model.state_dim()], vec![0.0; model.control_dim()]);
     let inside = (0..data.len())
         .filter(|&r| {
-            let s = data.states.row(r).to_vec();
-            let u = data.controls.row(r).to_vec();
+            copy_row(&data.states, r, &mut s);
+            copy_row(&data.controls, r, &mut u);
             model.in_task_regime(&s, &u)
         })
         .count();
@@ -1273,30 +1272,33 @@ pub struct TrainingData {
     pub sigma: Vec<f64>,
 }
 
+/// `examples` one-step transitions of `spec`'s data, from stream `stream` of its seed.
+fn sampled(spec: &BuildSpec, examples: usize, stream: u64) -> Result<Transitions, BuildError> {
+    let mut sim = spec.net.model.simulator();
+    let start = |r: &mut ChaCha8Rng| spec.start_state(r);
+    let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, stream));
+    Ok(sample_transitions(
+        sim.as_mut(),
+        &start,
+        &spec.sampling_limits(),
+        &spec.sampling(examples),
+        &mut rng,
+    )?
+    .transitions)
+}
+
+/// The one-step training transitions of `spec`, as [`training_data`] samples them (stream 1),
+/// without the held-out set or the transforms.
+pub fn training_transitions(spec: &BuildSpec) -> Result<Transitions, BuildError> {
+    sampled(spec, spec.net.examples, 1)
+}
+
 /// Samples the one-step data of `spec` and fits its transforms (streams 1, 2 and 5 of the
 /// spec's seed).
 pub fn training_data(spec: &BuildSpec) -> Result<TrainingData, BuildError> {
-    let model = spec.net.model;
-    let mut sim = model.simulator();
-    let limits = spec.sampling_limits();
-    let start = |r: &mut ChaCha8Rng| spec.start_state(r);
+    let train = sampled(spec, spec.net.examples, 1)?;
+    let held = sampled(spec, spec.held_out(), 2)?;
     let stream = |k: u64| ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, k));
-    let train = sample_transitions(
-        sim.as_mut(),
-        &start,
-        &limits,
-        &spec.sampling(spec.net.examples),
-        &mut stream(1),
-    )?
-    .transitions;
-    let held = sample_transitions(
-        sim.as_mut(),
-        &start,
-        &limits,
-        &spec.sampling(spec.held_out()),
-        &mut stream(2),
-    )?
-    .transitions;
     let transforms = Transforms::fit(&spec.net.transform_config(), &train)?;
     let (clean_ds, held_ds) = (transforms.encode(&train), transforms.encode(&held));
     let train_ds = noisy(

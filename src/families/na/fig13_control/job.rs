@@ -75,11 +75,7 @@ impl Job for Params {
             .map(|t| t.net.model.state_dim())
             .max()
             .unwrap_or(0);
-        let mut cols: Vec<String> = ["task", "step", "t", "source"]
-            .iter()
-            .map(|s| s.to_string())
-            .collect();
-        cols.extend((0..width).map(|k| format!("s{k}")));
+        let cols = wide_columns(&["task", "step", "t", "source"], "s", width);
         let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
         let mut trajectory = Table::new(&col_refs);
         // The learned controls (physical units, one row per emulator step, held over it).
@@ -89,11 +85,7 @@ impl Job for Params {
             .map(|t| t.net.model.control_dim())
             .max()
             .unwrap_or(0);
-        let mut u_cols: Vec<String> = ["task", "step", "t"]
-            .iter()
-            .map(|s| s.to_string())
-            .collect();
-        u_cols.extend((0..u_width).map(|k| format!("u{k}")));
+        let u_cols = wide_columns(&["task", "step", "t"], "u", u_width);
         let u_refs: Vec<&str> = u_cols.iter().map(String::as_str).collect();
         let mut controls_t = Table::new(&u_refs);
         let mut goal_cols = vec!["task", "model"];
@@ -346,6 +338,14 @@ impl Job for Params {
             ("states", states_t),
         ]))
     }
+}
+
+/// Columns `lead` then `prefix`0 … `prefix`(width − 1): one table for tasks of models of
+/// different sizes (NaN past a model's own).
+fn wide_columns(lead: &[&str], prefix: &str, width: usize) -> Vec<String> {
+    let mut cols: Vec<String> = lead.iter().map(|s| s.to_string()).collect();
+    cols.extend((0..width).map(|k| format!("{prefix}{k}")));
+    cols
 }
 
 /// The headline of a calibrated `task` through `net` (N`steps` emulator): its descent (the

@@ -4,7 +4,8 @@
 use super::nets::{build_dolphin_emulator, build_emulators, build_spec};
 use super::{position_part, DriftTask, Params};
 use crate::emulator::catalog::{
-    anchor_of, regime_fidelity, regime_share, rollout_error, training_data, BuildSpec,
+    anchor_of, regime_fidelity, regime_share, rollout_error, training_transitions, BuildSpec,
+    DataRegime, NetModel,
 };
 use crate::emulator::hierarchy::{
     global_heldout_errors, hierarchy_rollout_error, DolphinEmulator, HierarchySpec,
@@ -172,6 +173,7 @@ impl Job for Params {
                 ]);
             };
         let pb = ctx.progress(self.nets.len() as u64, "training emulators");
+        let mut shares = Shares::default();
         let specs: Vec<BuildSpec> = self
             .nets
             .iter()
@@ -230,10 +232,7 @@ impl Job for Params {
                 mean,
                 errors[errors.len() - 1],
                 i64::from(net.anchor),
-                ctx.stage(&format!("regime share {name}"), || {
-                    let data = training_data(spec).map_err(other)?;
-                    Ok::<_, Error>(regime_share(m, &data.train))
-                })?,
+                ctx.stage(&format!("regime share {name}"), || shares.get(spec))?,
                 spec.net.data.name()
             ]);
             for p in &t.trace {
@@ -255,7 +254,7 @@ impl Job for Params {
             pb.inc(1);
         }
         let normalization = self.normalization_table(ctx, &specs)?;
-        let regime_fidelity = self.regime_table(ctx, &specs)?;
+        let regime_fidelity = self.regime_table(ctx, &specs, &mut shares)?;
         if let Some(d) = &self.dolphin {
             let spec = d.spec(ctx.seed, self.steps, self.example_scale);
             let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
@@ -345,12 +344,36 @@ impl Job for Params {
     }
 }
 
+/// The share of a net's training examples in its model's task regime, sampled once per model
+/// and data regime: it depends on the data alone, so the nets that differ only in training
+/// (input noise, normalization) share it.
+#[derive(Default)]
+struct Shares(Vec<((NetModel, DataRegime), f64)>);
+
+impl Shares {
+    fn get(&mut self, spec: &BuildSpec) -> Result<f64, Error> {
+        let key = (spec.net.model, spec.net.data);
+        if let Some(s) = self.0.iter().find(|s| s.0 == key) {
+            return Ok(s.1);
+        }
+        let train = training_transitions(spec).map_err(other)?;
+        let share = regime_share(spec.net.model, &train);
+        self.0.push((key, share));
+        Ok(share)
+    }
+}
+
 impl Params {
     /// `regime_fidelity.csv`: each catalog net with a `regime` entry (variant `paper`) and its
     /// `variants` (built side by side, cached), measured on the control tasks' inputs in
     /// tolerance units ([`regime_fidelity`]), with the share of its training examples in the
     /// tasks' regime.
-    fn regime_table(&self, ctx: &RunContext, specs: &[BuildSpec]) -> Result<Table, Error> {
+    fn regime_table(
+        &self,
+        ctx: &RunContext,
+        specs: &[BuildSpec],
+        shares: &mut Shares,
+    ) -> Result<Table, Error> {
         let mut table = Table::new(&[
             "net",
             "quantity",
@@ -383,18 +406,17 @@ impl Params {
         for ((variant, spec, tolerance), t) in lines.iter().zip(&built) {
             let model = spec.net.model;
             let label = format!("regime fidelity {} ({variant})", model.name());
-            let (rows, share) = ctx.stage(&label, || {
-                let rows = regime_fidelity(
+            let rows = ctx.stage(&label, || {
+                regime_fidelity(
                     &t.emulator,
                     spec,
                     tolerance,
                     ROLLOUT_EPISODES,
                     ROLLOUT_STEPS,
                 )
-                .map_err(other)?;
-                let data = training_data(spec).map_err(other)?;
-                Ok::<_, Error>((rows, regime_share(model, &data.train)))
+                .map_err(other)
             })?;
+            let share = shares.get(spec)?;
             let names = model.state_names();
             for f in rows {
                 table.push(row![
