@@ -28,6 +28,7 @@ pub mod runner;
 pub mod seeds;
 pub mod shard;
 pub mod spec;
+pub mod stats;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use output::Tables;

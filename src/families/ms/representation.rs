@@ -28,6 +28,7 @@ use crate::experiment::plot::{Figure, Panel, Series};
 use crate::experiment::plot::{FigureSink, Mark};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
+use crate::experiment::stats::median;
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
 use crate::seed::mix_seed;
@@ -83,21 +84,6 @@ impl Validate for RepresentationParams {
             )?;
         }
         Ok(())
-    }
-}
-
-/// The median of `v` (NaN when empty).
-fn median(v: &[f64]) -> f64 {
-    let mut s: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
-    if s.is_empty() {
-        return f64::NAN;
-    }
-    s.sort_by(f64::total_cmp);
-    let n = s.len();
-    if n % 2 == 1 {
-        s[n / 2]
-    } else {
-        0.5 * (s[n / 2 - 1] + s[n / 2])
     }
 }
 

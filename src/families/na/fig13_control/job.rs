@@ -69,6 +69,7 @@ impl Job for Params {
         let mut ladder_t = Table::new(&LADDER_COLUMNS);
         // The headline of the paper's tasks per Table 1 net seed (seeds.rs), this run's first.
         let mut seeds_t = Table::new(&SEEDS_COLUMNS);
+        let mut path_t = Table::new(&PATH_COLUMNS);
         let width = self
             .tasks
             .iter()
@@ -185,15 +186,32 @@ impl Job for Params {
                 (&mut cond_t, &mut spectrum_t),
             );
             let schedule = self.schedule(task.eta, task.alpha, task.step_rule, lambda);
+            let record = self.over_net_seeds(task) && task.formulation == Formulation::Paper;
+            let mut iterates: Vec<Iterate> = Vec::new();
             let (r, best) = ctx.stage(&format!("learn {}", task.name), || {
                 learn_best(
                     &mut bptt,
                     &v0,
                     &schedule,
                     task.task.iterations,
-                    &mut |_, _, _| false,
+                    &mut |t, v, _| {
+                        if record {
+                            iterates.push((t.iteration, t.objective, v.to_vec()));
+                        }
+                        false
+                    },
                 )
             });
+            push_path(
+                &mut path_t,
+                task,
+                ctx.seed,
+                &mut bptt,
+                &iterates,
+                lambda,
+                self.steps,
+                self.curvature_iterations,
+            );
             for t in &r.trace {
                 objective_t.push(row![task.name.as_str(), t.iteration as i64, t.objective]);
             }
@@ -282,7 +300,7 @@ impl Job for Params {
                 }
             }
         }
-        self.run_seeds(ctx, &mut seeds_t)?;
+        self.run_seeds(ctx, &mut seeds_t, &mut path_t)?;
         let lines_t = self.run_lines(ctx)?;
         let mut swim_t = Table::new(&["source", "distance_m", "effort", "periodicity", "period_s"]);
         let mut motion_cols = vec!["source".to_string(), "step".into(), "t".into()];
@@ -332,6 +350,7 @@ impl Job for Params {
             ("final", final_t),
             ("net_seeds", seeds_t),
             ("net_lines", lines_t),
+            ("path", path_t),
             ("trajectory", trajectory),
             ("controls", controls_t),
             ("goal", goal),
@@ -358,6 +377,90 @@ pub fn learn_and_replay(
     net: &crate::emulator::Emulator,
     steps: usize,
     curvature_iterations: usize,
+) -> Result<Option<(HeadlineRun, Learned)>, Error> {
+    learn_and_replay_path(task, net, steps, curvature_iterations, None)
+}
+
+/// Columns of `path.csv` (ours): every iterate of the headline's descent of a paper task
+/// through the Table 1 net of `net_seed`: J on the net, the final error of the iterate's
+/// controls on the net and replayed on the simulator, and the largest Hessian eigenvalue of J
+/// through the net there over the one at the initial knots (λ, the fixed step's scale). The
+/// momentum descent with step η/λ is stable along a quadratic direction of curvature μ only
+/// while η μ/λ < 2(1 + α) ([`stable_curvature_ratio`]), so a ratio above that limit marks an
+/// iterate where the fixed step overshoots (`stable_ratio`, the task's limit); the two errors
+/// side by side show whether the net follows the physics along the whole descent or only at
+/// its end.
+pub const PATH_COLUMNS: [&str; 8] = [
+    "task",
+    "net_seed",
+    "iteration",
+    "objective",
+    "emulator_error",
+    "simulator_error",
+    "curvature_ratio",
+    "stable_ratio",
+];
+
+/// The largest curvature over the start's λ at which the heavy-ball step η/λ with momentum α
+/// still contracts along a quadratic direction: 2(1 + α)/η.
+pub fn stable_curvature_ratio(eta: f64, alpha: f64) -> f64 {
+    2.0 * (1.0 + alpha) / eta
+}
+
+/// One iterate of a descent: its iteration, J and normalized knots.
+type Iterate = (usize, f64, Vec<f64>);
+
+/// `path.csv`'s rows of `task`'s `iterates` through `bptt` (the net of `seed`, whose λ at the
+/// initial knots is `lambda`): each iterate rolled out on the net, its controls replayed on
+/// the simulator, and its curvature measured as λ was.
+#[allow(clippy::too_many_arguments)]
+fn push_path<D: DifferentiableStep>(
+    table: &mut Table,
+    task: &Task,
+    seed: u64,
+    bptt: &mut Bptt<'_, D>,
+    iterates: &[Iterate],
+    lambda: f64,
+    steps: usize,
+    curvature_iterations: usize,
+) {
+    let x0 = task.start_state();
+    let model = task.net.model;
+    let at = task.task.horizon * model.state_dim();
+    let mut sim = model.simulator();
+    for (iteration, objective, v) in iterates {
+        bptt.rollout(v);
+        let emu_final = bptt.states()[at..].to_vec();
+        let rep = replay(
+            sim.as_mut(),
+            &x0,
+            bptt.controls(),
+            task.net.physical_dt,
+            steps,
+            &emu_final,
+        );
+        let ratio = bptt.curvature(v, curvature_iterations) / lambda;
+        table.push(row![
+            task.name.as_str(),
+            seed as i64,
+            *iteration as i64,
+            *objective,
+            task.final_error(&emu_final),
+            task.final_error(&rep.states[at..]),
+            ratio,
+            stable_curvature_ratio(task.eta, task.alpha)
+        ]);
+    }
+}
+
+/// [`learn_and_replay`], and where `path` is given, `path.csv`'s rows of the descent (through
+/// the net of the given seed) pushed to its table.
+pub(super) fn learn_and_replay_path(
+    task: &Task,
+    net: &crate::emulator::Emulator,
+    steps: usize,
+    curvature_iterations: usize,
+    path: Option<(&mut Table, u64)>,
 ) -> Result<Option<(HeadlineRun, Learned)>, Error> {
     let x0 = task.start_state();
     let model = task.net.model;
@@ -388,13 +491,32 @@ pub fn learn_and_replay(
         scale: lambda,
         curvature_iterations,
     };
+    let mut iterates: Vec<Iterate> = Vec::new();
+    let record = path.is_some();
     let (r, best) = learn_best(
         &mut bptt,
         &v0,
         &schedule,
         task.task.iterations,
-        &mut |_, _, _| false,
+        &mut |t, v, _| {
+            if record {
+                iterates.push((t.iteration, t.objective, v.to_vec()));
+            }
+            false
+        },
     );
+    if let Some((table, seed)) = path {
+        push_path(
+            table,
+            task,
+            seed,
+            &mut bptt,
+            &iterates,
+            lambda,
+            steps,
+            curvature_iterations,
+        );
+    }
     let emu_final = &best.states[task.task.horizon * n..];
     let mut sim = model.simulator();
     let rep = replay(
@@ -529,5 +651,42 @@ pub(super) fn schedule(
         rule,
         scale: lambda,
         curvature_iterations,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::bptt::DescentState;
+
+    /// |x| after `n` steps of `descent` (λ = 1) on J = μ x²/2 from x = 1.
+    fn after(descent: Descent, mu: f64, n: usize) -> f64 {
+        let (mut x, mut state) = (1.0, DescentState::default());
+        for _ in 0..n {
+            let (step, next) = descent.update(&[mu * x], 1.0, state);
+            x += step[0];
+            state = next;
+        }
+        x.abs()
+    }
+
+    #[test]
+    fn the_momentum_step_contracts_exactly_below_the_stable_curvature_ratio() {
+        for (eta, alpha) in [(1.5, 0.5), (1.0, 0.0), (0.5, 0.9)] {
+            let limit = stable_curvature_ratio(eta, alpha);
+            let descent = if alpha > 0.0 {
+                Descent::Momentum { eta, alpha }
+            } else {
+                Descent::Plain { eta }
+            };
+            assert!(
+                after(descent, 0.97 * limit, 300) < 1e-3,
+                "eta {eta} alpha {alpha}"
+            );
+            assert!(
+                after(descent, 1.03 * limit, 300) > 1e3,
+                "eta {eta} alpha {alpha}"
+            );
+        }
     }
 }

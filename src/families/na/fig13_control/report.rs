@@ -182,6 +182,8 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let verdict = Verdict::from_counts(both, headline);
     md.push_str(&super::seeds::table_md(dir)?);
     md.push_str(&super::seeds::lines_md(dir)?);
+    let (path_md, path_why) = super::seeds::path_md(dir)?;
+    md.push_str(&path_md);
     let (cond_md, cond_why) = conditioning_summary(dir)?.unwrap_or_default();
     md.push_str(&cond_md);
     let (ladder_md, ladder_why) = ladder_summary(dir)?.unwrap_or_default();
@@ -196,7 +198,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         ours: md,
         verdict,
         why: format!(
-            "{both} of {headline} tasks of the paper's formulation reach their goal on the emulator within the paper's iteration counts and end within tolerance when their controls are replayed on the physical simulator, through a strict majority of their Table 1 net seeds where several ran (through this run's nets: {reached} reach it on the emulator, {reached_sim} on the simulator; every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far); it reaches its goal when it swims at least half as far as the wave (shortfall <= {} m) with a periodic muscle pattern (periodicity >= {}, ours; learned: {}).{seed_lines}{net_misses}{ours}{swim}{sweeps}{dagger_why}",
+            "{both} of {headline} tasks of the paper's formulation reach their goal on the emulator within the paper's iteration counts and end within tolerance when their controls are replayed on the physical simulator, through a strict majority of their Table 1 net seeds where several ran (through this run's nets: {reached} reach it on the emulator, {reached_sim} on the simulator; every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far); it reaches its goal when it swims at least half as far as the wave (shortfall <= {} m) with a periodic muscle pattern (periodicity >= {}, ours; learned: {}).{seed_lines}{path_why}{net_misses}{ours}{swim}{sweeps}{dagger_why}",
             sig(0.5 * wave),
             dolphin_dagger::PERIODIC,
             sig(learned_periodicity)

@@ -18,6 +18,7 @@ use crate::emulator::Emulator;
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::stats::median;
 use crate::experiment::{other, Error, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
 use crate::row;
@@ -90,18 +91,32 @@ impl Params {
 
     /// The headline of `task` (uncalibrated) through `net`: calibrated there, learned by the
     /// task's own η, α and step rule for its iteration count, scored at the best iterate.
-    pub(super) fn headline_run(&self, task: &Task, net: &Emulator) -> Result<HeadlineRun, Error> {
+    /// Where `path` is given, the descent's `path.csv` rows go to its table.
+    pub(super) fn headline_run(
+        &self,
+        task: &Task,
+        net: &Emulator,
+        path: Option<(&mut Table, u64)>,
+    ) -> Result<HeadlineRun, Error> {
         let x0 = task.start_state();
         let task = task.calibrated(net, &x0).map_err(other)?;
-        let (run, _) = super::learn_and_replay(&task, net, self.steps, self.curvature_iterations)?
-            .ok_or_else(|| other(format!("{}: no finite step scale λ", task.name)))?;
+        let steps = self.steps;
+        let (run, _) =
+            super::job::learn_and_replay_path(&task, net, steps, self.curvature_iterations, path)?
+                .ok_or_else(|| other(format!("{}: no finite step scale λ", task.name)))?;
         Ok(run)
     }
 
     /// Every task of the paper's formulation, and those of ours in
     /// [`Params::net_seeds_ours`], learned through the nets of the further seeds (trained side
-    /// by side, or loaded from the cache), one row each in `table`.
-    pub(super) fn run_seeds(&self, ctx: &RunContext, table: &mut Table) -> Result<(), Error> {
+    /// by side, or loaded from the cache), one row each in `table`; the descents of the
+    /// paper's tasks go to `path` (`path.csv`).
+    pub(super) fn run_seeds(
+        &self,
+        ctx: &RunContext,
+        table: &mut Table,
+        path: &mut Table,
+    ) -> Result<(), Error> {
         let seeds = self.further_net_seeds(ctx.seed);
         let tasks: Vec<&Task> = self
             .tasks
@@ -129,7 +144,9 @@ impl Params {
         )?;
         for ((task, seed), trained) in runs.iter().zip(&built) {
             let run = ctx.stage(&format!("learn {} (net seed {seed})", task.name), || {
-                self.headline_run(task, &trained.emulator)
+                let paper = task.formulation == Formulation::Paper;
+                let path = paper.then_some((&mut *path, *seed));
+                self.headline_run(task, &trained.emulator, path)
             })?;
             run.push(table, task, *seed);
         }
@@ -180,7 +197,7 @@ impl Params {
         for ((task, line, seed, _), trained) in runs.iter().zip(&built) {
             let run = ctx.stage(
                 &format!("learn {} ({line}, net seed {seed})", task.name),
-                || self.headline_run(task, &trained.emulator),
+                || self.headline_run(task, &trained.emulator, None),
             )?;
             table.push(row![
                 task.name.as_str(),
@@ -236,6 +253,80 @@ pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
         md.push_str(&format!("| {t} | {l} | {both} of {n} | {emu} of {n} |\n"));
     }
     Ok(md)
+}
+
+/// The report's table and sentence from `path.csv` in `dir` (empty without it): per paper
+/// task, over the net seeds, how far the curvature along the headline's descent rises above
+/// the start's λ against momentum's stable limit, and how the simulator's final error follows
+/// the net's at every iterate.
+pub(super) fn path_md(dir: &Path) -> Result<(String, String), Error> {
+    let Ok(df) = read_csv(&dir.join("path.csv")) else {
+        return Ok(Default::default());
+    };
+    let (task, seed) = (df_str(&df, "task")?, df_f64(&df, "net_seed")?);
+    if task.is_empty() {
+        return Ok(Default::default());
+    }
+    let (emu, sim) = (
+        df_f64(&df, "emulator_error")?,
+        df_f64(&df, "simulator_error")?,
+    );
+    let (ratio, limit) = (
+        df_f64(&df, "curvature_ratio")?,
+        df_f64(&df, "stable_ratio")?,
+    );
+    let mut md = String::from("
+Along the descent (ours; `path.csv`): every iterate of the headline through each net seed's Table 1 net, rolled out on the net and replayed on the simulator, and the largest Hessian eigenvalue of J through the net there over the one at the start (lambda, the fixed step's scale). The heavy-ball step eta/lambda contracts along a direction of curvature mu only while mu/lambda < 2(1 + alpha)/eta (the limit); a net that follows the physics along the whole descent has simulator errors near its own at every iterate, not only at the end.\n\n| task | net seeds | iterates | largest curvature ratio, median over seeds (range) | limit | iterates above the limit | simulator / emulator final error, median over iterates | iterates within tolerance on the net | of them within tolerance on the simulator |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+    let mut why = Vec::new();
+    for name in unique(&task) {
+        let rows: Vec<usize> = (0..task.len()).filter(|&r| task[r] == name).collect();
+        let seeds = unique(
+            &rows
+                .iter()
+                .map(|&r| seed[r].to_string())
+                .collect::<Vec<_>>(),
+        );
+        let peaks: Vec<f64> = seeds
+            .iter()
+            .map(|s| {
+                rows.iter()
+                    .filter(|&&r| seed[r].to_string() == *s)
+                    .map(|&r| ratio[r])
+                    .fold(f64::NAN, f64::max)
+            })
+            .collect();
+        let lim = limit[rows[0]];
+        let above = rows.iter().filter(|&&r| ratio[r] > lim).count();
+        let gap: Vec<f64> = rows.iter().map(|&r| sim[r] / emu[r]).collect();
+        let on_net: Vec<usize> = rows.iter().copied().filter(|&r| emu[r] <= 1.0).collect();
+        let both = on_net.iter().filter(|&&r| sim[r] <= 1.0).count();
+        let (lo, hi) = peaks
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        md.push_str(&format!(
+            "| {name} | {} | {} | {} ({}-{}) | {} | {above} | {} | {} | {both} |\n",
+            seeds.len(),
+            rows.len(),
+            sig(median(&peaks)),
+            sig(lo),
+            sig(hi),
+            sig(lim),
+            sig(median(&gap)),
+            on_net.len(),
+        ));
+        why.push(format!(
+            "{name}: curvature up to {}x the start's (median over seeds; limit {}), {above} of {} iterates above the limit, simulator/emulator error {} (median), {both} of {} iterates within tolerance on the net also on the simulator",
+            sig(median(&peaks)),
+            sig(lim),
+            rows.len(),
+            sig(median(&gap)),
+            on_net.len()
+        ));
+    }
+    let why = format!(" Along the descent (path.csv): {}.", why.join("; "));
+    Ok((md, why))
 }
 
 /// Whether a strict majority of `at_goal` (one flag per net seed) is set: the rule by which
@@ -386,6 +477,29 @@ pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_path_summary_counts_iterates_above_the_limit_and_the_simulators_misses() {
+        let dir = tempfile::tempdir().unwrap();
+        let csv = "task,net_seed,iteration,objective,emulator_error,simulator_error,curvature_ratio,stable_ratio\n\
+                   lander,1,0,9,4,4,1,2\n\
+                   lander,1,1,3,0.5,2,3,2\n\
+                   lander,2,0,9,4,4,1,2\n\
+                   lander,2,1,2,0.5,0.5,1.5,2\n";
+        std::fs::write(dir.path().join("path.csv"), csv).unwrap();
+        let (md, why) = path_md(dir.path()).unwrap();
+        // Peaks 3 and 1.5 (median 2.25); one iterate above 2; sim/emu ratios 1, 4, 1, 1.
+        assert!(
+            md.contains("| lander | 2 | 4 | 2.25 (1.50-3.00) | 2.00 | 1 | 1.00 | 2 | 1 |"),
+            "{md}"
+        );
+        assert!(why.contains("1 of 4 iterates above the limit"), "{why}");
+        let empty = tempfile::tempdir().unwrap();
+        assert_eq!(
+            path_md(empty.path()).unwrap(),
+            (String::new(), String::new())
+        );
+    }
 
     #[test]
     fn a_strict_majority_of_seeds_is_needed() {
