@@ -260,3 +260,35 @@ fn a_run_without_seeds_removes_an_earlier_runs_seeds() {
     assert!(folder.join("notes.txt").is_file());
     assert!(header(&folder.join("weights.csv")).starts_with("spacing"));
 }
+
+/// A spec's `[[history]]` (a rule or setup changed after a result) is shown in its section of
+/// REPORT.md with the old rule, its verdict and the reason, and the summary row marks it; a
+/// malformed entry is refused before any work, naming the file and the entry.
+#[test]
+fn the_report_shows_a_specs_rule_history_and_flags_it_in_the_summary() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let exp = two_experiments(dir);
+    let history = "\n[[history]]\ndate = \"2026-11-28\"\nkind = \"rule\"\nold = \"held when one minimum appears\"\nold_verdict = \"held\"\nreason = \"the old rule could not fail\"\n";
+    let path = exp.join("proj_a.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let (top, rest) = text.split_at(text.find("[params]").unwrap());
+    std::fs::write(&path, format!("{top}{history}\n{rest}")).unwrap();
+    ok(&cli(
+        dir,
+        Some(&exp),
+        &["reproduce", "--only", "proj_a"],
+        "figs",
+    ));
+    let report = std::fs::read_to_string(dir.join("out/REPORT.md")).unwrap();
+    assert!(report.contains("(changed after results: 1)"), "{report}");
+    assert!(
+        report.contains("2026-11-28, rule changed after a result: was held when one minimum appears (verdict then: held). Why: the old rule could not fail"),
+        "{report}"
+    );
+    let bad = history.replace("2026-11-28", "last week");
+    std::fs::write(&path, format!("{top}{bad}\n{rest}")).unwrap();
+    let e = fails(&cli(dir, Some(&exp), &["run", "proj_a"], "figs2"));
+    assert!(e.contains("proj_a.toml") && e.contains("history[0]"), "{e}");
+    assert!(!dir.join("figs2").exists(), "work done before refusing");
+}

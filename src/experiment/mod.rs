@@ -24,6 +24,7 @@ pub mod output;
 pub mod plot;
 pub mod report;
 pub mod resolve;
+pub mod rule;
 pub mod runner;
 pub mod seeds;
 pub mod shard;

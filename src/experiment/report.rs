@@ -20,6 +20,9 @@ pub enum Verdict {
     /// does not hold in our setup, so the experiment cannot test the claim; each family states
     /// its premise in its spec.
     PremiseNotReproduced,
+    /// A check the verdict turns on has a 95% interval that straddles its threshold
+    /// ([`super::rule::Rule::verdict`]): more seeds are needed to tell.
+    Inconclusive,
     /// Nothing to judge (e.g. an illustration).
     NotAssessed,
 }
@@ -32,6 +35,7 @@ impl Verdict {
             Verdict::Partly => "partly held",
             Verdict::NotHeld => "did not hold",
             Verdict::PremiseNotReproduced => "premise not reproduced",
+            Verdict::Inconclusive => "inconclusive",
             Verdict::NotAssessed => "not assessed",
         }
     }
@@ -192,7 +196,10 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
             ("not run".into(), String::new(), "Not run yet.\n".into())
         };
         let stale = run_provenance(&dir, code_rev.as_deref());
-        let mark = if stale.is_some() { " (stale)" } else { "" };
+        let mut mark = if stale.is_some() { " (stale)" } else { "" }.to_string();
+        if !r.history.is_empty() {
+            let _ = write!(mark, " (changed after results: {})", r.history.len());
+        }
         rows.push((
             format!(
                 "| [`{}`](#{}) | {} | {verdict}{mark} | {} |",
@@ -217,6 +224,16 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         );
         if !r.paper_claim.is_empty() {
             let _ = writeln!(sections, "**Paper:** {}\n", r.paper_claim.trim());
+        }
+        if !r.history.is_empty() {
+            let _ = writeln!(
+                sections,
+                "**Rule and setup history** (changes made after a result was seen, from the spec's `[[history]]`):\n"
+            );
+            for h in &r.history {
+                let _ = writeln!(sections, "- {}", h.line());
+            }
+            sections.push('\n');
         }
         if let Some(meta) = read_run_json(&dir) {
             let _ = writeln!(sections, "**Run:** {meta}\n");
@@ -378,11 +395,12 @@ enum Group {
 /// not reproduced and the sections not assessed or not run, where there are any.
 fn tally(rows: &[&(String, String, Group)]) -> String {
     let count = |label: &str| rows.iter().filter(|r| r.1 == label).count();
-    let (held, partly, not_held, premise) = (
+    let (held, partly, not_held, premise, unsure) = (
         count(Verdict::Held.label()),
         count(Verdict::Partly.label()),
         count(Verdict::NotHeld.label()),
         count(Verdict::PremiseNotReproduced.label()),
+        count(Verdict::Inconclusive.label()),
     );
     let mut t = format!(
         "{held} of {} held, {partly} partly, {not_held} did not hold",
@@ -391,7 +409,10 @@ fn tally(rows: &[&(String, String, Group)]) -> String {
     if premise > 0 {
         let _ = write!(t, ", {premise} premise not reproduced");
     }
-    match rows.len() - held - partly - not_held - premise {
+    if unsure > 0 {
+        let _ = write!(t, ", {unsure} inconclusive");
+    }
+    match rows.len() - held - partly - not_held - premise - unsure {
         0 => {}
         n => {
             let _ = write!(t, ", {n} not assessed or not run");
@@ -430,8 +451,9 @@ fn summary(rows: &[(String, String, Group)]) -> String {
          reproduced*: the condition the claim rests on (stated in the section) does not hold in \
          our setup, so the claim is untested. Each rule \
          and its thresholds (ours where the paper gives none) are fixed in the experiment's spec \
-         before the run; where a rule was rewritten after seeing results (issue 56), the spec and \
-         the section say so and give the old rule. \"(stale)\" marks results made by older code \
+         before the run; a rule or setup changed after a result was seen is listed in the spec's \
+         `[[history]]`, shown in the section with the old rule and verdict, and marked \
+         \"changed after results\" here. \"(stale)\" marks results made by older code \
          than the tree's.\n"
     );
     for (title, group) in [

@@ -127,6 +127,8 @@ pub struct Resolved {
     pub seeds: Option<Vec<u64>>,
     /// The options it was resolved with (recorded by shards, so `merge` resolves alike).
     pub options: ResolveOptions,
+    /// Changes of its rule or setup made after a result (the spec's `[[history]]`).
+    pub history: Vec<super::spec::HistoryEntry>,
 }
 
 /// One run of one sweep point with one seed: the unit that shards, resumes and merges.
@@ -264,6 +266,12 @@ pub fn resolve(
             ),
         )
     })?;
+    if let Some(i) = raw.history.iter().position(|h| !h.is_well_formed()) {
+        return Err(file.error_at(
+            &format!("history[{i}]"),
+            "a history entry needs a date (YYYY-MM-DD), the old rule or setup (`old`) and the reason (`reason`)",
+        ));
+    }
     let mut seed = raw.seed;
     if let Some(s) = opts.seed {
         seed = s;
@@ -473,6 +481,7 @@ pub fn resolve(
         path: file.path.clone(),
         seeds,
         options: opts.clone(),
+        history: raw.history.clone(),
     })
 }
 

@@ -50,6 +50,70 @@ pub struct RawSpec {
     /// Sweep axes: `params` key → array of values.
     #[serde(default)]
     pub sweep: toml::Table,
+    /// The rule's and setup's history: every change made after a result was seen, oldest
+    /// first (`[[history]]`), shown by the report in the section and flagged in its summary.
+    #[serde(default)]
+    pub history: Vec<HistoryEntry>,
+}
+
+/// One change of a verdict's rule or of an experiment's setup made after a result was seen.
+#[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct HistoryEntry {
+    /// When (YYYY-MM-DD).
+    pub date: String,
+    /// What changed: `rule` (the verdict's rule or thresholds) or `setup` (what is run).
+    pub kind: HistoryKind,
+    /// The old rule or setup, in words.
+    pub old: String,
+    /// The verdict the old rule or setup gave, where one was recorded.
+    #[serde(default)]
+    pub old_verdict: String,
+    /// Why it changed.
+    pub reason: String,
+}
+
+/// What a [`HistoryEntry`] changed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HistoryKind {
+    /// The verdict's rule or its thresholds.
+    Rule,
+    /// What is run (the task, its parameters, its premise).
+    Setup,
+}
+
+impl HistoryEntry {
+    /// Whether the date reads YYYY-MM-DD and the texts are not empty.
+    pub fn is_well_formed(&self) -> bool {
+        let d = self.date.as_bytes();
+        let date = d.len() == 10
+            && d[4] == b'-'
+            && d[7] == b'-'
+            && d.iter()
+                .enumerate()
+                .all(|(i, c)| i == 4 || i == 7 || c.is_ascii_digit());
+        date && !self.old.trim().is_empty() && !self.reason.trim().is_empty()
+    }
+
+    /// The report's line for it.
+    pub fn line(&self) -> String {
+        let kind = match self.kind {
+            HistoryKind::Rule => "rule",
+            HistoryKind::Setup => "setup",
+        };
+        let verdict = if self.old_verdict.is_empty() {
+            String::new()
+        } else {
+            format!(" (verdict then: {})", self.old_verdict)
+        };
+        format!(
+            "{}, {kind} changed after a result: was {}{verdict}. Why: {}",
+            self.date,
+            self.old.trim(),
+            self.reason.trim()
+        )
+    }
 }
 
 /// An experiment file as read: its path, text, typed top level and a span-preserving parse.

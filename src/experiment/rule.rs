@@ -1,0 +1,437 @@
+//! # Verdicts as data: checks that can fail, graded by one rule
+//!
+//! A family judges a paper's claim by a [`Rule`]: premise checks (the condition the claim
+//! rests on), the checks that make it *held*, and which of them make it *partly held*. Each
+//! [`Check`] holds its label, the measured value, the comparison and threshold (read from the
+//! spec's typed parameters, never restated in prose), and its **null**: what doing nothing,
+//! the starting point, an example alone or the baseline scores on the same measure.
+//! [`Check::new`] refuses a check its null passes, so a check that cannot fail cannot be
+//! written. The rule text, the yes/no lines and the verdict all come from the same objects
+//! ([`Rule::text`], [`Rule::lines`], [`Rule::verdict`]): prose fills in values only.
+//!
+//! Where a value is stochastic, a check carries its 95% interval ([`Check::with_interval`]);
+//! an interval that straddles the threshold makes the check *inconclusive*, and a verdict that
+//! turns on an inconclusive check is [`Verdict::Inconclusive`].
+
+use super::report::{sig, Verdict};
+use std::fmt::Write as _;
+
+/// How a check's value must compare with its threshold to pass.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cmp {
+    /// value ≥ threshold.
+    AtLeast,
+    /// value ≤ threshold.
+    AtMost,
+    /// value > threshold.
+    Above,
+    /// value < threshold.
+    Below,
+}
+
+impl Cmp {
+    /// Whether `value` passes against `threshold` (NaN never passes).
+    pub fn passes(self, value: f64, threshold: f64) -> bool {
+        match self {
+            Cmp::AtLeast => value >= threshold,
+            Cmp::AtMost => value <= threshold,
+            Cmp::Above => value > threshold,
+            Cmp::Below => value < threshold,
+        }
+    }
+
+    /// The comparison as the report writes it.
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Cmp::AtLeast => ">=",
+            Cmp::AtMost => "<=",
+            Cmp::Above => ">",
+            Cmp::Below => "<",
+        }
+    }
+}
+
+/// What a check's measure scores without the method under test: doing nothing, the start, an
+/// example alone, the baseline.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Null {
+    /// What it is, e.g. "the initial random best" or "PD at x1".
+    pub label: String,
+    /// Its value on the check's measure.
+    pub value: f64,
+}
+
+impl Null {
+    /// A null named `label` scoring `value`.
+    pub fn new(label: impl Into<String>, value: f64) -> Self {
+        Self {
+            label: label.into(),
+            value,
+        }
+    }
+}
+
+/// Why a check cannot be written.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RuleError {
+    /// The null passes the check, so the check cannot fail for want of the method.
+    #[error("check `{label}`: its null ({null}, {value}) passes {cmp} {threshold}, so the check cannot fail")]
+    NullPasses {
+        /// The check.
+        label: String,
+        /// The null's label.
+        null: String,
+        /// The null's value.
+        value: f64,
+        /// The comparison.
+        cmp: &'static str,
+        /// The threshold.
+        threshold: f64,
+    },
+    /// The threshold is not a finite number.
+    #[error("check `{label}`: threshold {threshold} is not finite")]
+    Threshold {
+        /// The check.
+        label: String,
+        /// The threshold.
+        threshold: f64,
+    },
+}
+
+/// A check's outcome.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// It passed (its whole interval, where it has one).
+    Pass,
+    /// It failed (its whole interval).
+    Fail,
+    /// Its interval straddles the threshold.
+    Inconclusive,
+}
+
+impl Outcome {
+    /// The report's word.
+    pub fn word(self) -> &'static str {
+        match self {
+            Outcome::Pass => "yes",
+            Outcome::Fail => "no",
+            Outcome::Inconclusive => "inconclusive",
+        }
+    }
+}
+
+/// One check of a rule.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Check {
+    /// What it checks, e.g. "LBC lands every desired jump".
+    pub label: String,
+    /// The measured value.
+    pub value: f64,
+    /// A 95% interval of the value, where it is stochastic.
+    pub interval: Option<(f64, f64)>,
+    /// How the value must compare with the threshold.
+    pub cmp: Cmp,
+    /// The threshold (from the spec's parameters).
+    pub threshold: f64,
+    /// What the measure scores without the method.
+    pub null: Null,
+}
+
+impl Check {
+    /// A check `label`: `value` `cmp` `threshold`, whose `null` must fail it.
+    pub fn new(
+        label: impl Into<String>,
+        value: f64,
+        cmp: Cmp,
+        threshold: f64,
+        null: Null,
+    ) -> Result<Self, RuleError> {
+        let label = label.into();
+        if !threshold.is_finite() {
+            return Err(RuleError::Threshold { label, threshold });
+        }
+        if cmp.passes(null.value, threshold) {
+            return Err(RuleError::NullPasses {
+                label,
+                null: null.label,
+                value: null.value,
+                cmp: cmp.symbol(),
+                threshold,
+            });
+        }
+        Ok(Self {
+            label,
+            value,
+            interval: None,
+            cmp,
+            threshold,
+            null,
+        })
+    }
+
+    /// The same check with a 95% interval `(lo, hi)` of its value.
+    pub fn with_interval(mut self, lo: f64, hi: f64) -> Self {
+        self.interval = Some((lo.min(hi), lo.max(hi)));
+        self
+    }
+
+    /// Pass, fail, or inconclusive where the interval straddles the threshold.
+    pub fn outcome(&self) -> Outcome {
+        let pass = self.cmp.passes(self.value, self.threshold);
+        match self.interval {
+            Some((lo, hi)) => {
+                let (a, b) = (
+                    self.cmp.passes(lo, self.threshold),
+                    self.cmp.passes(hi, self.threshold),
+                );
+                if a && b {
+                    Outcome::Pass
+                } else if !a && !b {
+                    Outcome::Fail
+                } else {
+                    Outcome::Inconclusive
+                }
+            }
+            None if pass => Outcome::Pass,
+            None => Outcome::Fail,
+        }
+    }
+
+    /// The rule's wording of the check: "label (value >= threshold)".
+    pub fn rule_text(&self) -> String {
+        format!(
+            "{} (measure {} {})",
+            self.label,
+            self.cmp.symbol(),
+            sig(self.threshold)
+        )
+    }
+
+    /// The report's line: label, value (and interval), threshold, outcome, and the null.
+    pub fn line(&self) -> String {
+        let interval = self.interval.map_or_else(String::new, |(lo, hi)| {
+            format!(" [95% interval {}-{}]", sig(lo), sig(hi))
+        });
+        format!(
+            "{}: {}{interval} {} {}: {} (null, {}: {})",
+            self.label,
+            sig(self.value),
+            self.cmp.symbol(),
+            sig(self.threshold),
+            self.outcome().word(),
+            self.null.label,
+            sig(self.null.value)
+        )
+    }
+}
+
+/// Which held checks make a claim partly held.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Partly {
+    /// Any one of them.
+    Any,
+    /// All of these (indices into the held checks).
+    All(Vec<usize>),
+    /// No partly grade.
+    Never,
+}
+
+/// A claim's rule: premise checks, held checks, and its partly grade.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rule {
+    /// The condition the claim rests on (all must pass, else "premise not reproduced").
+    pub premise: Vec<Check>,
+    /// Held needs all of these.
+    pub held: Vec<Check>,
+    /// Which of them make it partly held.
+    pub partly: Partly,
+}
+
+impl Rule {
+    /// The verdict under one resolution of inconclusive checks (`optimistic`: they pass).
+    fn resolve(&self, optimistic: bool) -> Verdict {
+        let ok = |c: &Check| match c.outcome() {
+            Outcome::Pass => true,
+            Outcome::Fail => false,
+            Outcome::Inconclusive => optimistic,
+        };
+        if !self.premise.iter().all(ok) {
+            return Verdict::PremiseNotReproduced;
+        }
+        let passed: Vec<bool> = self.held.iter().map(ok).collect();
+        if !passed.is_empty() && passed.iter().all(|&p| p) {
+            return Verdict::Held;
+        }
+        let partly = match &self.partly {
+            Partly::Any => passed.iter().any(|&p| p),
+            Partly::All(ids) => !ids.is_empty() && ids.iter().all(|&i| passed[i]),
+            Partly::Never => false,
+        };
+        if partly {
+            Verdict::Partly
+        } else {
+            Verdict::NotHeld
+        }
+    }
+
+    /// The verdict: the same whether the inconclusive checks pass or fail, else
+    /// [`Verdict::Inconclusive`].
+    pub fn verdict(&self) -> Verdict {
+        let (hi, lo) = (self.resolve(true), self.resolve(false));
+        if hi == lo {
+            hi
+        } else {
+            Verdict::Inconclusive
+        }
+    }
+
+    /// The rule in words, generated from its checks: premise, held, partly.
+    pub fn text(&self) -> String {
+        let mut t = String::new();
+        if !self.premise.is_empty() {
+            let p: Vec<String> = self.premise.iter().map(Check::rule_text).collect();
+            let _ = write!(
+                t,
+                "Premise (else \"premise not reproduced\"): {}. ",
+                p.join("; ")
+            );
+        }
+        let tag = |i: usize| format!("({})", (b'a' + (i % 26) as u8) as char);
+        let h: Vec<String> = self
+            .held
+            .iter()
+            .enumerate()
+            .map(|(i, c)| format!("{} {}", tag(i), c.rule_text()))
+            .collect();
+        let _ = write!(t, "Held needs all of: {}", h.join("; "));
+        match &self.partly {
+            Partly::Any => t.push_str("; partly needs any one of them"),
+            Partly::All(ids) => {
+                let p: Vec<String> = ids.iter().map(|&i| tag(i)).collect();
+                let _ = write!(t, "; partly needs {}", p.join(" and "));
+            }
+            Partly::Never => {}
+        }
+        t.push_str(". A check's null (what doing nothing, the start, an example alone or the baseline scores) fails it; an interval that straddles a threshold makes the check inconclusive.");
+        t
+    }
+
+    /// Every check's line (premise first), each with its outcome and null.
+    pub fn lines(&self) -> String {
+        let mut t = String::new();
+        for c in &self.premise {
+            let _ = write!(t, " Premise, {}.", c.line());
+        }
+        for (i, c) in self.held.iter().enumerate() {
+            let _ = write!(t, " ({}) {}.", (b'a' + (i % 26) as u8) as char, c.line());
+        }
+        t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(value: f64, threshold: f64, null: f64) -> Check {
+        Check::new(
+            "gain",
+            value,
+            Cmp::AtLeast,
+            threshold,
+            Null::new("nothing", null),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn a_check_whose_null_passes_is_refused() {
+        // A search that makes no progress scores its initial best: a threshold below it
+        // cannot fail.
+        let e = Check::new(
+            "final best",
+            9.0,
+            Cmp::AtLeast,
+            2.21,
+            Null::new("the initial random best", 2.30),
+        )
+        .unwrap_err();
+        assert!(matches!(e, RuleError::NullPasses { .. }), "{e}");
+        assert!(e.to_string().contains("cannot fail"));
+        assert!(Check::new("x", 1.0, Cmp::Below, f64::NAN, Null::new("n", 2.0)).is_err());
+        assert!(Check::new("x", 1.0, Cmp::Below, 1.5, Null::new("n", 2.0)).is_ok());
+    }
+
+    #[test]
+    fn comparisons_are_strict_or_not_as_named() {
+        assert!(Cmp::AtLeast.passes(1.0, 1.0) && !Cmp::Above.passes(1.0, 1.0));
+        assert!(Cmp::AtMost.passes(1.0, 1.0) && !Cmp::Below.passes(1.0, 1.0));
+        assert!(!Cmp::AtLeast.passes(f64::NAN, 0.0) && !Cmp::AtMost.passes(f64::NAN, 0.0));
+    }
+
+    #[test]
+    fn an_interval_straddling_the_threshold_is_inconclusive() {
+        assert_eq!(check(2.0, 1.0, 0.0).outcome(), Outcome::Pass);
+        assert_eq!(
+            check(2.0, 1.0, 0.0).with_interval(1.5, 2.5).outcome(),
+            Outcome::Pass
+        );
+        assert_eq!(
+            check(2.0, 1.0, 0.0).with_interval(0.5, 2.5).outcome(),
+            Outcome::Inconclusive
+        );
+        assert_eq!(
+            check(0.5, 1.0, 0.0).with_interval(0.2, 0.9).outcome(),
+            Outcome::Fail
+        );
+    }
+
+    #[test]
+    fn the_rule_grades_premise_held_partly_and_inconclusive() {
+        let (pass, fail) = (check(2.0, 1.0, 0.0), check(0.5, 1.0, 0.0));
+        let rule = |premise: Vec<Check>, held: Vec<Check>, partly| Rule {
+            premise,
+            held,
+            partly,
+        };
+        let r = rule(vec![], vec![pass.clone(), pass.clone()], Partly::Any);
+        assert_eq!(r.verdict(), Verdict::Held);
+        let r = rule(vec![], vec![pass.clone(), fail.clone()], Partly::Any);
+        assert_eq!(r.verdict(), Verdict::Partly);
+        let r = rule(
+            vec![],
+            vec![pass.clone(), fail.clone()],
+            Partly::All(vec![1]),
+        );
+        assert_eq!(r.verdict(), Verdict::NotHeld);
+        let r = rule(vec![], vec![fail.clone()], Partly::Any);
+        assert_eq!(r.verdict(), Verdict::NotHeld);
+        let r = rule(vec![fail.clone()], vec![pass.clone()], Partly::Any);
+        assert_eq!(r.verdict(), Verdict::PremiseNotReproduced);
+        // An inconclusive check that decides between held and partly.
+        let unsure = pass.clone().with_interval(0.5, 2.5);
+        let r = rule(vec![], vec![pass.clone(), unsure.clone()], Partly::Any);
+        assert_eq!(r.verdict(), Verdict::Inconclusive);
+        // One that cannot change the verdict (partly either way) does not make it so.
+        let r = rule(vec![], vec![fail.clone(), unsure, pass], Partly::Any);
+        assert_eq!(r.verdict(), Verdict::Partly);
+    }
+
+    #[test]
+    fn the_rule_text_and_lines_come_from_the_checks() {
+        let r = Rule {
+            premise: vec![check(3.0, 1.0, 0.0)],
+            held: vec![check(2.0, 1.5, 0.0), check(0.5, 1.0, 0.0)],
+            partly: Partly::All(vec![0]),
+        };
+        let t = r.text();
+        assert!(t.contains("(a) gain (measure >= 1.50)"), "{t}");
+        assert!(t.contains("partly needs (a)"), "{t}");
+        let l = r.lines();
+        assert!(
+            l.contains("(b) gain: 0.500 >= 1.00: no (null, nothing: 0)"),
+            "{l}"
+        );
+        assert_eq!(r.verdict(), Verdict::Partly);
+    }
+}
