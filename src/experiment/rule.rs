@@ -13,8 +13,12 @@
 //! an interval that straddles the threshold makes the check *inconclusive*, and a verdict that
 //! turns on an inconclusive check is [`Verdict::Inconclusive`].
 
+use super::output::{df_f64, df_str, read_csv, Table, Tables};
 use super::report::{sig, Verdict};
+use super::Error;
+use crate::row;
 use std::fmt::Write as _;
+use std::path::Path;
 
 /// How a check's value must compare with its threshold to pass.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -207,22 +211,48 @@ impl Check {
         )
     }
 
-    /// The report's line: label, value (and interval), threshold, outcome, and the null.
+    /// The report's line: label, value (and interval), threshold and outcome.
     pub fn line(&self) -> String {
         let interval = self.interval.map_or_else(String::new, |(lo, hi)| {
             format!(" [95% interval {}-{}]", sig(lo), sig(hi))
         });
         format!(
-            "{}: {}{interval} {} {}: {} (null, {}: {})",
+            "{}: {}{interval} {} {}: {}",
             self.label,
             sig(self.value),
             self.cmp.symbol(),
             sig(self.threshold),
             self.outcome().word(),
-            self.null.label,
-            sig(self.null.value)
         )
     }
+}
+
+/// "(a)", "(b)", … for the i-th held check.
+fn tag(i: usize) -> String {
+    format!("({})", (b'a' + (i % 26) as u8) as char)
+}
+
+/// Equal keys grouped as "(a)-(c)" / "(a), (d)" labels with the key, in order of first
+/// appearance.
+fn grouped<K: PartialEq + Clone>(keys: &[K]) -> Vec<(String, K)> {
+    let mut out: Vec<(Vec<usize>, K)> = Vec::new();
+    for (i, k) in keys.iter().enumerate() {
+        match out.iter_mut().find(|(_, g)| g == k) {
+            Some((ids, _)) => ids.push(i),
+            None => out.push((vec![i], k.clone())),
+        }
+    }
+    out.into_iter()
+        .map(|(ids, k)| {
+            let contiguous = ids.windows(2).all(|w| w[1] == w[0] + 1);
+            let label = match (ids.first(), ids.last()) {
+                (Some(&a), Some(&b)) if a == b => tag(a),
+                (Some(&a), Some(&b)) if contiguous => format!("{}-{}", tag(a), tag(b)),
+                _ => ids.iter().map(|&i| tag(i)).collect::<Vec<_>>().join(", "),
+            };
+            (label, k)
+        })
+        .collect()
 }
 
 /// Which held checks make a claim partly held.
@@ -285,7 +315,8 @@ impl Rule {
         }
     }
 
-    /// The rule in words, generated from its checks: premise, held, partly.
+    /// The rule in words, generated from its checks: premise, held (checks with one comparison
+    /// and threshold grouped), partly, and each check's null.
     pub fn text(&self) -> String {
         let mut t = String::new();
         if !self.premise.is_empty() {
@@ -296,14 +327,16 @@ impl Rule {
                 p.join("; ")
             );
         }
-        let tag = |i: usize| format!("({})", (b'a' + (i % 26) as u8) as char);
-        let h: Vec<String> = self
+        let bars: Vec<(&'static str, String)> = self
             .held
             .iter()
-            .enumerate()
-            .map(|(i, c)| format!("{} {}", tag(i), c.rule_text()))
+            .map(|c| (c.cmp.symbol(), sig(c.threshold)))
             .collect();
-        let _ = write!(t, "Held needs all of: {}", h.join("; "));
+        let h: Vec<String> = grouped(&bars)
+            .into_iter()
+            .map(|(ids, (cmp, th))| format!("{ids} {cmp} {th}"))
+            .collect();
+        let _ = write!(t, "Held needs every check: {}", h.join("; "));
         match &self.partly {
             Partly::Any => t.push_str("; partly needs any one of them"),
             Partly::All(ids) => {
@@ -312,21 +345,60 @@ impl Rule {
             }
             Partly::Never => {}
         }
-        t.push_str(". A check's null (what doing nothing, the start, an example alone or the baseline scores) fails it; an interval that straddles a threshold makes the check inconclusive.");
+        let nulls: Vec<(String, String)> = self
+            .held
+            .iter()
+            .map(|c| (c.null.label.clone(), sig(c.null.value)))
+            .collect();
+        let n: Vec<String> = grouped(&nulls)
+            .into_iter()
+            .map(|(ids, (label, v))| format!("{ids} {label}, {v}"))
+            .collect();
+        let _ = write!(
+            t,
+            ". Each check's null (what doing nothing, the start, an example alone or the baseline scores on it) fails it: {}. An interval that straddles a threshold makes a check inconclusive.",
+            n.join("; ")
+        );
         t
     }
 
-    /// Every check's line (premise first), each with its outcome and null.
+    /// Every check's line (premise first), each with its outcome.
     pub fn lines(&self) -> String {
         let mut t = String::new();
         for c in &self.premise {
             let _ = write!(t, " Premise, {}.", c.line());
         }
         for (i, c) in self.held.iter().enumerate() {
-            let _ = write!(t, " ({}) {}.", (b'a' + (i % 26) as u8) as char, c.line());
+            let _ = write!(t, " {} {}.", tag(i), c.line());
         }
         t
     }
+}
+
+/// The settings of an experiment's `rule` table (columns setting, value) in `dir`, by name;
+/// NaN for a setting the table lacks.
+pub fn rule_settings(dir: &Path) -> Result<impl Fn(&str) -> f64, Error> {
+    let rule = read_csv(&dir.join("rule.csv"))?;
+    let (rk, rv) = (df_str(&rule, "setting")?, df_f64(&rule, "value")?);
+    Ok(move |k: &str| rk.iter().position(|s| s == k).map_or(f64::NAN, |i| rv[i]))
+}
+
+/// The setting `key` of a run's in-memory `rule` table (what [`rule_settings`] reads from the
+/// CSV), for figures; `None` without the table or the key.
+pub fn rule_setting(tables: &Tables, key: &str) -> Option<f64> {
+    let rule = tables.get("rule")?;
+    let (k, v) = (rule.strs("setting"), rule.f64s("value"));
+    k.iter().position(|s| s == key).map(|i| v[i])
+}
+
+/// The `rule` table (columns setting, value) that [`rule_settings`] reads back: the verdict's
+/// settings, written beside the results so the report judges with the run's own values.
+pub fn rule_table(settings: &[(&str, f64)]) -> Table {
+    let mut rule = Table::new(&["setting", "value"]);
+    for &(k, v) in settings {
+        rule.push(row![k, v]);
+    }
+    rule
 }
 
 #[cfg(test)]
@@ -425,13 +497,15 @@ mod tests {
             partly: Partly::All(vec![0]),
         };
         let t = r.text();
-        assert!(t.contains("(a) gain (measure >= 1.50)"), "{t}");
-        assert!(t.contains("partly needs (a)"), "{t}");
-        let l = r.lines();
         assert!(
-            l.contains("(b) gain: 0.500 >= 1.00: no (null, nothing: 0)"),
-            "{l}"
+            t.contains("Held needs every check: (a) >= 1.50; (b) >= 1.00"),
+            "{t}"
         );
+        assert!(t.contains("partly needs (a)"), "{t}");
+        assert!(t.contains("fails it: (a)-(b) nothing, 0."), "{t}");
+        let l = r.lines();
+        assert!(l.contains("(b) gain: 0.500 >= 1.00: no."), "{l}");
+        assert!(l.contains("Premise, gain: 3.00 >= 1.00: yes."), "{l}");
         assert_eq!(r.verdict(), Verdict::Partly);
     }
 }

@@ -14,7 +14,7 @@ use crate::bellman::projection::{project, GaussianReward};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map};
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::output::{df_f64, df_str, read_csv, Table};
 use crate::experiment::plot::{Legend, Panel, Series};
 use crate::experiment::report::sig;
 use crate::experiment::resolve::{ensure, positive, ParamError};
@@ -191,31 +191,7 @@ pub(crate) fn projected_weights(
     Ok(w)
 }
 
-/// The settings of an experiment's `rule` table (columns setting, value) in `dir`, by name;
-/// NaN for a setting the table lacks.
-pub(crate) fn rule_settings(dir: &Path) -> Result<impl Fn(&str) -> f64, Error> {
-    let rule = read_csv(&dir.join("rule.csv"))?;
-    let (rk, rv) = (df_str(&rule, "setting")?, df_f64(&rule, "value")?);
-    Ok(move |k: &str| rk.iter().position(|s| s == k).map_or(f64::NAN, |i| rv[i]))
-}
-
-/// The setting `key` of a run's in-memory `rule` table (what [`rule_settings`] reads from the
-/// CSV), for figures; `None` without the table or the key.
-pub(crate) fn rule_setting(tables: &Tables, key: &str) -> Option<f64> {
-    let rule = tables.get("rule")?;
-    let (k, v) = (rule.strs("setting"), rule.f64s("value"));
-    k.iter().position(|s| s == key).map(|i| v[i])
-}
-
-/// The `rule` table (columns setting, value) that [`rule_settings`] reads back: the verdict's
-/// settings, written beside the results so the report judges with the run's own values.
-pub(crate) fn rule_table(settings: &[(&str, f64)]) -> Table {
-    let mut rule = Table::new(&["setting", "value"]);
-    for &(k, v) in settings {
-        rule.push(row![k, v]);
-    }
-    rule
-}
+pub(crate) use crate::experiment::rule::{rule_setting, rule_settings, rule_table};
 
 /// Columns of every LBC family's `entropy.csv` (issue 56 item 3): per main LBC run (`run` names
 /// it: a desired angle, a start, a take-off rate…) and `method` (lbc, and the fixed-weight

@@ -17,11 +17,13 @@
 //! best so far against iterations, the set sizes at the paper's mix and the mixes at the paper's
 //! N = 100) and the harness's `<id>_seeds.png/svg` (mean and spread over seeds per setting).
 //!
-//! Verdict rule (fixed in the spec before the first run; thresholds ours): σ is the pooled
-//! standard deviation over seeds of the final best (the root mean of each setting's variance).
-//! A setting *breaks* the search when its mean final best is more than 2σ below the paper's
-//! setting (N = 100, Table 2). Held: no setting breaks; partly: some but not all of the other
-//! settings break; did not hold: every other setting breaks.
+//! Verdict ([`settings_rule`], a [`Rule`]; the spec's `[[history]]` gives the rule before it):
+//! each run's *gain* is its final best over the best of its initial random set, so a search
+//! that makes no progress gains 0 (the null). Premise: the paper's setting (N = 100, Table 2)
+//! gains. A setting keeps the search working when its median gain over the seeds is at least
+//! `rule.gain_fraction` of the paper's setting's; held when every other setting does, partly
+//! when some do. Each median carries a 95% bootstrap interval; a check whose interval straddles
+//! the threshold is inconclusive.
 
 use super::search::{MotionJob, Params};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
@@ -29,7 +31,9 @@ use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
+use crate::experiment::rule::{rule_settings, rule_table, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::seeds::SeedMetric;
+use crate::experiment::stats::median_interval;
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
 use crate::synthesis::perturb::MixSpec;
@@ -48,21 +52,41 @@ pub const PAPER_SET_SIZE: usize = 100;
 pub const PAPER_MIX: &str = "table2";
 
 /// Parameters: an `ms_motion` setup, whose `set_size`, `iterations` and `perturbations` are
-/// the settings swept.
+/// the settings swept, and the verdict's thresholds.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(transparent)]
-pub struct SettingsParams(pub Params);
+pub struct SettingsParams {
+    /// The motion and its search.
+    #[serde(flatten)]
+    pub motion: Params,
+    /// The verdict's thresholds (ours).
+    pub rule: SettingsRule,
+}
+
+/// The verdict's thresholds ([`settings_rule`]).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SettingsRule {
+    /// A setting keeps the search working when its median gain over the initial best is at
+    /// least this fraction of the paper's setting's.
+    pub gain_fraction: f64,
+}
 
 /// Points kept of each run's curve (every ⌈iterations / CURVE_POINTS⌉-th iteration and the last).
 pub const CURVE_POINTS: usize = 150;
 
 impl Validate for SettingsParams {
     fn validate(&self) -> Result<(), ParamError> {
-        MotionJob(self.0.clone()).validate()?;
+        MotionJob(self.motion.clone()).validate()?;
         ensure(
-            self.0.iterations >= 8,
+            self.motion.iterations >= 8,
             "iterations",
             "must be at least 8 (the best is read after an eighth of them)",
+        )?;
+        let f = self.rule.gain_fraction;
+        ensure(
+            f > 0.0 && f <= 1.0,
+            "rule.gain_fraction",
+            "must be in (0, 1]: a fraction of the paper's setting's gain (0 would pass a search that makes no progress)",
         )
     }
 }
@@ -81,7 +105,7 @@ impl Job for SettingsParams {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let p = &self.0;
+        let p = &self.motion;
         let problem = p.problem()?;
         let eval = |c: &crate::synthesis::controller::Controller| problem.evaluate(c);
         let pb = ctx.progress(p.iterations as u64, "hill climbing");
@@ -142,17 +166,24 @@ impl Job for SettingsParams {
             -res.best_value,
             seconds
         ]);
-        Ok(Tables::from([("curve", curve), ("summary", summary)]))
+        let rule = rule_table(&[("gain_fraction", self.rule.gain_fraction)]);
+        Ok(Tables::from([
+            ("curve", curve),
+            ("summary", summary),
+            ("rule", rule),
+        ]))
     }
 }
 
-/// One setting's final bests over the seeds.
+/// One setting's bests over the seeds.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Setting {
     /// Search set size N.
     pub set_size: usize,
     /// Mix name.
     pub mix: String,
+    /// Best of the initial random set, each seed (what no search keeps).
+    pub initials: Vec<f64>,
     /// Final best objective of each seed.
     pub finals: Vec<f64>,
     /// Best after half the iterations, each seed.
@@ -163,13 +194,9 @@ fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
-fn variance(v: &[f64]) -> f64 {
-    if v.len() < 2 {
-        return 0.0;
-    }
-    let m = mean(v);
-    v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (v.len() - 1) as f64
-}
+/// The bootstrap stream of the report's intervals (any fixed value: the report is the same on
+/// every machine).
+const BOOTSTRAP_SEED: u64 = 1;
 
 impl Setting {
     /// Whether this is the paper's setting.
@@ -178,6 +205,18 @@ impl Setting {
     }
     fn label(&self) -> String {
         format!("N = {}, {}", self.set_size, mix_words(&self.mix))
+    }
+    /// Each seed's gain: final best over the initial set's best.
+    pub fn gains(&self) -> Vec<f64> {
+        self.finals
+            .iter()
+            .zip(&self.initials)
+            .map(|(f, i)| f - i)
+            .collect()
+    }
+    /// The median gain over the seeds with its 95% bootstrap interval.
+    pub fn gain(&self) -> (f64, f64, f64) {
+        median_interval(&self.gains(), BOOTSTRAP_SEED)
     }
 }
 
@@ -190,60 +229,80 @@ fn mix_words(m: &str) -> String {
     }
 }
 
-/// The settings of a merged `summary` table, in order of first appearance.
-pub fn settings_of(
-    set_size: &[f64],
-    mix: &[String],
-    finals: &[f64],
-    halves: &[f64],
-) -> Vec<Setting> {
+/// One row of the merged `summary` table: set size, mix, initial best, final best, best after
+/// half the iterations.
+pub type SummaryRow = (usize, String, f64, f64, f64);
+
+/// The settings of a merged `summary` table's rows, in order of first appearance.
+pub fn settings_of(rows: &[SummaryRow]) -> Vec<Setting> {
     let mut out: Vec<Setting> = Vec::new();
-    for i in 0..set_size.len() {
-        let (n, m) = (set_size[i] as usize, mix[i].clone());
-        match out.iter_mut().find(|s| s.set_size == n && s.mix == m) {
-            Some(s) => {
-                s.finals.push(finals[i]);
-                s.halves.push(halves[i]);
+    for (n, m, initial, fin, half) in rows {
+        let i = match out.iter().position(|s| s.set_size == *n && s.mix == *m) {
+            Some(i) => i,
+            None => {
+                out.push(Setting {
+                    set_size: *n,
+                    mix: m.clone(),
+                    initials: vec![],
+                    finals: vec![],
+                    halves: vec![],
+                });
+                out.len() - 1
             }
-            None => out.push(Setting {
-                set_size: n,
-                mix: m,
-                finals: vec![finals[i]],
-                halves: vec![halves[i]],
-            }),
-        }
+        };
+        out[i].initials.push(*initial);
+        out[i].finals.push(*fin);
+        out[i].halves.push(*half);
     }
     out
 }
 
-/// The pooled seed spread σ: the root mean of the settings' variances over seeds.
-pub fn pooled_sigma(s: &[Setting]) -> f64 {
-    (s.iter().map(|x| variance(&x.finals)).sum::<f64>() / s.len().max(1) as f64).sqrt()
-}
-
-/// The settings that break the search: mean final best more than 2σ below the paper's.
-pub fn breaking(s: &[Setting]) -> Option<Vec<&Setting>> {
-    let paper = s.iter().find(|x| x.is_paper())?;
-    let sigma = pooled_sigma(s);
-    let base = mean(&paper.finals);
-    Some(
-        s.iter()
-            .filter(|x| !x.is_paper() && base - mean(&x.finals) > 2.0 * sigma)
-            .collect(),
+/// The verdict's rule over `settings` (module docs): `None` without the paper's setting or
+/// another to compare. Without a gain of the paper's setting only the premise is checked.
+pub fn settings_rule(settings: &[Setting], gain_fraction: f64) -> Option<Rule> {
+    let paper = settings.iter().find(|x| x.is_paper())?;
+    let others: Vec<&Setting> = settings.iter().filter(|x| !x.is_paper()).collect();
+    if others.is_empty() {
+        return None;
+    }
+    let no_search = |v: f64| Null::new("no search (the initial best kept)", v);
+    let (g, lo, hi) = paper.gain();
+    let premise = Check::new(
+        format!(
+            "the paper's setting ({}) gains over its initial best",
+            paper.label()
+        ),
+        g,
+        Cmp::Above,
+        0.0,
+        no_search(0.0),
     )
-}
-
-/// The rule's verdict ([`NotAssessed`](Verdict::NotAssessed) without the paper's setting or
-/// another to compare, or with a single seed, which leaves σ undefined).
-pub fn verdict_of(s: &[Setting]) -> Verdict {
-    let others = s.iter().filter(|x| !x.is_paper()).count();
-    if others == 0 || s.iter().any(|x| x.finals.len() < 2) {
-        return Verdict::NotAssessed;
+    .ok()?
+    .with_interval(lo, hi);
+    let mut held = Vec::new();
+    if g > 0.0 {
+        for x in others {
+            let (m, lo, hi) = x.gain();
+            let c = Check::new(
+                format!(
+                    "{} gains as much as the paper's setting (median gain / the paper's)",
+                    x.label()
+                ),
+                m / g,
+                Cmp::AtLeast,
+                gain_fraction,
+                no_search(0.0),
+            )
+            .ok()?
+            .with_interval(lo / g, hi / g);
+            held.push(c);
+        }
     }
-    match breaking(s) {
-        None => Verdict::NotAssessed,
-        Some(b) => Verdict::graded(b.is_empty(), b.len() < others),
-    }
+    Some(Rule {
+        premise: vec![premise],
+        held,
+        partly: Partly::Any,
+    })
 }
 
 impl Family for MsSearchSettings {
@@ -308,6 +367,7 @@ impl Family for MsSearchSettings {
                     let label = Setting {
                         set_size: k.0,
                         mix: k.1.clone(),
+                        initials: vec![],
                         finals: vec![],
                         halves: vec![],
                     }
@@ -341,70 +401,61 @@ impl Family for MsSearchSettings {
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
         let s = read_csv(&dir.join("summary.csv"))?;
-        let settings = settings_of(
-            &df_f64(&s, "set_size")?,
-            &df_str(&s, "perturbations")?,
-            &df_f64(&s, "best_objective")?,
-            &df_f64(&s, "best_at_half")?,
+        let (n, mix) = (df_f64(&s, "set_size")?, df_str(&s, "perturbations")?);
+        let (initial, fin, half) = (
+            df_f64(&s, "initial_best")?,
+            df_f64(&s, "best_objective")?,
+            df_f64(&s, "best_at_half")?,
         );
-        let sigma = pooled_sigma(&settings);
-        let paper = settings.iter().find(|x| x.is_paper());
-        let base = paper.map(|p| mean(&p.finals));
+        let rows: Vec<SummaryRow> = (0..n.len())
+            .map(|i| (n[i] as usize, mix[i].clone(), initial[i], fin[i], half[i]))
+            .collect();
+        let settings = settings_of(&rows);
+        let fraction = rule_settings(dir)?("gain_fraction");
         let mut md = String::from(
-            "| setting | seeds | mean final best | lowest | highest | mean best after half the iterations | below the paper's setting, in σ |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+            "| setting | seeds | median gain over the initial best [95% interval] | mean initial best | mean final best | lowest final | highest final | mean best after half the iterations |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
         );
         for x in &settings {
             let lo = x.finals.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = x.finals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let below = match base {
-                Some(b) if sigma > 0.0 => sig((b - mean(&x.finals)) / sigma),
-                _ => "–".into(),
-            };
+            let (g, glo, ghi) = x.gain();
             md.push_str(&format!(
-                "| {}{} | {} | {} | {} | {} | {} | {} |\n",
+                "| {}{} | {} | {} [{}-{}] | {} | {} | {} | {} | {} |\n",
                 x.label(),
                 if x.is_paper() { " (the paper's)" } else { "" },
                 x.finals.len(),
+                sig(g),
+                sig(glo),
+                sig(ghi),
+                sig(mean(&x.initials)),
                 sig(mean(&x.finals)),
                 sig(lo),
                 sig(hi),
                 sig(mean(&x.halves)),
-                below
             ));
         }
-        let gain_half: Vec<f64> = settings
+        let seeds = settings.iter().map(|x| x.finals.len()).min().unwrap_or(0);
+        let Some(rule) = settings_rule(&settings, fraction) else {
+            return Ok(Findings {
+                ours: md,
+                verdict: Verdict::NotAssessed,
+                why: "The run lacks the paper's setting (N = 100, Table 2) or another setting to compare it with.".into(),
+            });
+        };
+        let kept = rule
+            .held
             .iter()
-            .map(|x| mean(&x.finals) - mean(&x.halves))
-            .collect();
-        md.push_str(&format!(
-            "\nPooled seed spread σ = {}. Doubling the iterations (half → all) raises the mean best by {} to {} across settings.\n",
-            sig(sigma),
-            sig(gain_half.iter().copied().fold(f64::INFINITY, f64::min)),
-            sig(gain_half.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
-        ));
-        let verdict = verdict_of(&settings);
-        let broken: Vec<String> = breaking(&settings)
-            .unwrap_or_default()
-            .iter()
-            .map(|x| x.label())
-            .collect();
-        let best = settings
-            .iter()
-            .max_by(|a, b| mean(&a.finals).total_cmp(&mean(&b.finals)));
+            .filter(|c| c.outcome() == crate::experiment::rule::Outcome::Pass)
+            .count();
         Ok(Findings {
             ours: md,
-            verdict,
+            verdict: rule.verdict(),
             why: format!(
-                "{} of {} other settings end more than 2σ below the paper's setting (σ = {}){}; the best mean is {}. Rule (fixed before the run, thresholds ours): a setting breaks the search when its mean final best over the seeds is more than 2σ (pooled seed spread) below the paper's N = 100 with Table 2; held when none breaks, partly when some but not all do, did not hold when all do.",
-                broken.len(),
-                settings.iter().filter(|x| !x.is_paper()).count(),
-                sig(sigma),
-                if broken.is_empty() {
-                    String::new()
-                } else {
-                    format!(": {}", broken.join("; "))
-                },
-                best.map_or("–".into(), |b| format!("{} ({})", b.label(), sig(mean(&b.finals)))),
+                "{kept} of {} other settings gain at least {} of the paper's setting's median gain over the initial best (over {seeds} seeds each, medians with 95% bootstrap intervals).{} Rule (ours): {}",
+                rule.held.len(),
+                sig(fraction),
+                rule.lines(),
+                rule.text()
             ),
         })
     }
@@ -414,63 +465,52 @@ impl Family for MsSearchSettings {
 mod tests {
     use super::*;
 
-    fn setting(n: usize, mix: &str, finals: &[f64]) -> Setting {
+    fn setting(n: usize, mix: &str, initials: &[f64], finals: &[f64]) -> Setting {
         Setting {
             set_size: n,
             mix: mix.into(),
+            initials: initials.to_vec(),
             finals: finals.to_vec(),
             halves: finals.to_vec(),
         }
     }
 
     #[test]
-    fn the_rule_breaks_only_settings_far_below_the_papers_and_contradicting_rows_fail() {
-        // σ: every setting has variance 1 (values m-1, m, m+1): σ = 1.
-        let paper = setting(100, "table2", &[9.0, 10.0, 11.0]);
-        let near = setting(25, "table2", &[7.0, 8.5, 9.0].map(|x| x + 0.0));
-        let s = vec![paper.clone(), setting(25, "table2", &[8.5, 9.5, 10.5])];
-        assert_eq!(verdict_of(&s), Verdict::Held);
-        // A setting 3σ below breaks it; one of two others: partly.
-        let s = vec![
-            paper.clone(),
-            setting(25, "table2", &[8.5, 9.5, 10.5]),
-            setting(400, "table2", &[6.0, 7.0, 8.0]),
-        ];
-        assert_eq!(verdict_of(&s), Verdict::Partly);
-        // Every other setting far below (data contradicting "not essential"): did not hold.
-        let s = vec![
-            paper.clone(),
-            setting(25, "table2", &[1.0, 2.0, 3.0]),
-            setting(400, "table2", &[0.0, 1.0, 2.0]),
-        ];
-        assert_eq!(verdict_of(&s), Verdict::NotHeld);
-        // Without the paper's setting, or with one seed, nothing is judged.
-        assert_eq!(verdict_of(&[near.clone()]), Verdict::NotAssessed);
-        assert_eq!(
-            verdict_of(&[
-                setting(100, "table2", &[1.0]),
-                setting(25, "table2", &[0.0])
-            ]),
-            Verdict::NotAssessed
-        );
-        assert!((pooled_sigma(&[paper]) - 1.0).abs() < 1e-12);
+    fn the_rule_judges_gains_over_the_initial_best_and_no_search_fails_it() {
+        let paper = setting(100, "table2", &[2.0; 5], &[10.0, 11.0, 12.0, 10.5, 11.5]);
+        let good = setting(25, "table2", &[3.0; 5], &[9.0, 10.0, 11.0, 9.5, 10.5]);
+        // A search that makes no progress ends at its initial best, however high that is:
+        // above the paper's final best minus any seed spread, so a rule on final bests alone
+        // passed it.
+        let stuck = setting(400, "table2", &[9.0; 5], &[9.0; 5]);
+        let r = settings_rule(&[paper.clone(), good.clone()], 0.5).unwrap();
+        assert_eq!(r.verdict(), Verdict::Held);
+        let r = settings_rule(&[paper.clone(), good.clone(), stuck.clone()], 0.5).unwrap();
+        assert_eq!(r.verdict(), Verdict::Partly);
+        assert_eq!(r.held[1].outcome(), crate::experiment::rule::Outcome::Fail);
+        let r = settings_rule(&[paper.clone(), stuck.clone()], 0.5).unwrap();
+        assert_eq!(r.verdict(), Verdict::NotHeld);
+        // The paper's setting itself stuck: the premise fails.
+        let r = settings_rule(
+            &[stuck.clone(), setting(100, "table2", &[9.0; 5], &[9.0; 5])],
+            0.5,
+        )
+        .unwrap();
+        assert_eq!(r.verdict(), Verdict::PremiseNotReproduced);
+        // Seeds that disagree leave an interval across the threshold: inconclusive.
+        let mixed = setting(25, "new_values_only", &[0.0; 5], &[0.0, 1.0, 5.0, 9.0, 9.5]);
+        let r = settings_rule(&[paper.clone(), mixed], 0.5).unwrap();
+        assert_eq!(r.verdict(), Verdict::Inconclusive, "{}", r.lines());
+        assert!(settings_rule(&[paper], 0.5).is_none());
     }
 
     #[test]
     fn settings_group_rows_by_size_and_mix() {
-        let s = settings_of(
-            &[100.0, 25.0, 100.0, 25.0],
-            &[
-                "table2".into(),
-                "table2".into(),
-                "table2".into(),
-                "table2".into(),
-            ],
-            &[1.0, 2.0, 3.0, 4.0],
-            &[0.5, 1.0, 1.5, 2.0],
-        );
+        let row = |n: usize, f: f64| (n, "table2".to_string(), 0.0, f, f / 2.0);
+        let s = settings_of(&[row(100, 1.0), row(25, 2.0), row(100, 3.0), row(25, 4.0)]);
         assert_eq!(s.len(), 2);
         assert_eq!(s[0].finals, vec![1.0, 3.0]);
+        assert_eq!(s[0].gains(), vec![1.0, 3.0]);
         assert!(s[0].is_paper() && !s[1].is_paper());
     }
 }
