@@ -139,6 +139,8 @@ pub struct Check {
     pub threshold: f64,
     /// What the measure scores without the method.
     pub null: Null,
+    /// A condition of the setup ([`Check::fact`]), not a measure of the method.
+    pub fact: bool,
 }
 
 impl Check {
@@ -170,7 +172,23 @@ impl Check {
             cmp,
             threshold,
             null,
+            fact: false,
         })
+    }
+
+    /// A condition of the setup (a premise such as "each desired jump's landing tracker lands
+    /// from the desired take-off itself"), not of the method under test: 1 when it `holds`,
+    /// needing 1, its null the condition absent (0).
+    pub fn fact(label: impl Into<String>, holds: bool) -> Self {
+        Self {
+            label: label.into(),
+            value: f64::from(u8::from(holds)),
+            interval: None,
+            cmp: Cmp::AtLeast,
+            threshold: 1.0,
+            null: Null::new("the condition absent", 0.0),
+            fact: true,
+        }
     }
 
     /// The same check with a 95% interval `(lo, hi)` of its value.
@@ -201,8 +219,12 @@ impl Check {
         }
     }
 
-    /// The rule's wording of the check: "label (value >= threshold)".
+    /// The rule's wording of the check: "label (value >= threshold)", or the label alone for a
+    /// [`Check::fact`].
     pub fn rule_text(&self) -> String {
+        if self.is_fact() {
+            return self.label.clone();
+        }
         format!(
             "{} (measure {} {})",
             self.label,
@@ -211,8 +233,16 @@ impl Check {
         )
     }
 
+    /// Whether it is a [`Check::fact`].
+    fn is_fact(&self) -> bool {
+        self.fact
+    }
+
     /// The report's line: label, value (and interval), threshold and outcome.
     pub fn line(&self) -> String {
+        if self.is_fact() {
+            return format!("{}: {}", self.label, self.outcome().word());
+        }
         let interval = self.interval.map_or_else(String::new, |(lo, hi)| {
             format!(" [95% interval {}-{}]", sig(lo), sig(hi))
         });

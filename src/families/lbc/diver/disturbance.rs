@@ -33,8 +33,9 @@ use super::{DiveSettings, TORSO};
 use crate::bellman::combine::{BlendMode, TrackerBlend};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
-use crate::experiment::report::{sig, yes_no, Findings, Verdict};
+use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::lbc::{film, rule_settings, rule_table};
 use crate::physics::diver::{diver, entry_angle};
@@ -436,17 +437,20 @@ fn mean_of(m: &[(String, f64, [f64; 4])], controller: &str, scale: f64) -> Optio
         .map(|o| o.2)
 }
 
-/// The rule's checks from the means: (premise: the pushes are felt by LBC; a: LBC uses less
-/// control than PD, unpushed and at scale 1; b: LBC's motion reacts at least `visible_ratio`
-/// times PD's at scale 1; c: PD's deviation at the largest scale stays below LBC's at scale 1
-/// while PD's outcome moves by at least `outcome_change`).
-pub fn disturbance_checks(
+/// The verdict's rule from the means (`None` without the unpushed, scale-1 or largest-scale
+/// rows). Premise: the pushes are felt (LBC's deviation at scale 1 at least `felt`). (a) LBC
+/// uses less control than PD, unpushed and at scale 1; (b) LBC's motion reacts visibly: its
+/// deviation at scale 1 at least `visible_ratio` times PD's there; (c) PD's stays invisible at
+/// the largest scale by the same ratio: LBC's deviation at scale 1 at least `visible_ratio`
+/// times PD's at the largest scale; (d) PD's outcome is altered there: its entry moves at least
+/// `outcome_change`. Held: all four; partly: (a) and (b).
+pub fn disturbance_rule(
     m: &[(String, f64, [f64; 4])],
     largest: f64,
     visible_ratio: f64,
     outcome_change: f64,
     felt: f64,
-) -> Option<(bool, bool, bool, bool)> {
+) -> Option<Rule> {
     let get = |c: &str, s: f64| mean_of(m, c, s);
     let (l0, p0, l1, p1, pl) = (
         get("lbc", 0.0)?,
@@ -455,11 +459,61 @@ pub fn disturbance_checks(
         get("pd", 1.0)?,
         get("pd", largest)?,
     );
-    let premise = l1[1] >= felt;
-    let a = l0[0] < p0[0] && l1[0] < p1[0];
-    let b = l1[1] >= visible_ratio * p1[1];
-    let c = pl[1] < l1[1] && pl[3] >= outcome_change;
-    Some((premise, a, b, c))
+    let unpushed = |v| Null::new("the unpushed dive", v);
+    let premise = Check::new(
+        "the pushes are felt: LBC's deviation at x1 (rad)",
+        l1[1],
+        Cmp::AtLeast,
+        felt,
+        unpushed(0.0),
+    )
+    .ok()?;
+    let held = vec![
+        Check::new(
+            "LBC's control effort over PD's, the larger of unpushed and x1",
+            (l0[0] / p0[0]).max(l1[0] / p1[0]),
+            Cmp::Below,
+            1.0,
+            Null::new("PD itself", 1.0),
+        )
+        .ok()?,
+        Check::new(
+            "LBC's motion reacts visibly: its deviation at x1 over PD's at x1",
+            l1[1] / p1[1],
+            Cmp::AtLeast,
+            visible_ratio,
+            Null::new("PD itself", 1.0),
+        )
+        .ok()?,
+        Check::new(
+            format!(
+                "PD's motion stays invisible at x{}: LBC's deviation at x1 over PD's at x{}",
+                sig(largest),
+                sig(largest)
+            ),
+            l1[1] / pl[1],
+            Cmp::AtLeast,
+            visible_ratio,
+            Null::new(format!("PD at x{} itself", sig(largest)), 1.0),
+        )
+        .ok()?,
+        Check::new(
+            format!(
+                "PD's outcome is altered at x{}: its entry moves (rad)",
+                sig(largest)
+            ),
+            pl[3],
+            Cmp::AtLeast,
+            outcome_change,
+            unpushed(0.0),
+        )
+        .ok()?,
+    ];
+    Some(Rule {
+        premise: vec![premise],
+        held,
+        partly: Partly::All(vec![0, 1]),
+    })
 }
 
 impl Family for LbcDiveDisturbance {
@@ -648,18 +702,18 @@ impl Family for LbcDiveDisturbance {
                 sig(v[3])
             ));
         }
-        let checks = disturbance_checks(
+        let rule = disturbance_rule(
             &m,
             largest,
             rule("visible_ratio"),
             rule("outcome_change"),
             rule("felt"),
         );
-        let Some((premise, a, b, c)) = checks else {
+        let Some(rule) = rule else {
             return Ok(Findings {
                 ours: md,
                 verdict: Verdict::NotAssessed,
-                why: "The run lacks the unpushed or the scale-1 rows the rule reads.".into(),
+                why: "The run lacks the unpushed, scale-1 or largest-scale rows the rule reads, or its thresholds let a null pass.".into(),
             });
         };
         let get = |c: &str, s: f64| mean_of(&m, c, s).unwrap_or([f64::NAN; 4]);
@@ -670,9 +724,9 @@ impl Family for LbcDiveDisturbance {
             get("pd", 1.0),
             get("pd", largest),
         );
-        let verdict = Verdict::graded(a && b && c, a && b).given(premise);
+        let verdict = rule.verdict();
         let why = format!(
-            "LBC's control effort {le0} unpushed and {le1} under pushes against PD's {pe0} and {pe1}; its motion deviates {ld} rad (RMS) from its unpushed dive under pushes ×1 against PD's {pd1} rad, and PD's at ×{lg} {pdl} rad while its entry moves {pch} rad. Premise (the pushes are felt: LBC's mean deviation at ×1 at least {felt} rad): {pr}. (a) LBC uses less control than PD, unpushed and at ×1: {a}. (b) LBC's motion reacts at least {vr}x PD's at ×1: {b}. (c) PD's motion at ×{lg} deviates less than LBC's at ×1 while its entry moves at least {oc} rad: {c}. Held: (a), (b), (c); partly: (a) and (b). Rule and thresholds fixed in the spec before the run (ours); PD gains ours (full torque at {al} rad).",
+            "LBC's control effort {le0} unpushed and {le1} under pushes against PD's {pe0} and {pe1}; its motion deviates {ld} rad (RMS) from its unpushed dive under pushes x1 against PD's {pd1} rad, and PD's at x{lg} {pdl} rad while its entry moves {pch} rad (means over the trials).{lines} Rule (ours, fixed in the spec; one ratio, visible_ratio, tells visible from invisible in (b) and (c)): {text} PD gains ours (full torque at {al} rad).",
             le0 = sig(l0[0]),
             le1 = sig(l1[0]),
             pe0 = sig(p0[0]),
@@ -682,14 +736,9 @@ impl Family for LbcDiveDisturbance {
             lg = sig(largest),
             pdl = sig(pl[1]),
             pch = sig(pl[3]),
-            felt = sig(rule("felt")),
-            pr = yes_no(Some(premise)),
-            a = yes_no(Some(a)),
-            vr = sig(rule("visible_ratio")),
-            b = yes_no(Some(b)),
-            oc = sig(rule("outcome_change")),
-            c = yes_no(Some(c)),
-            al = sig(rule("angle_at_limit")),
+            lines = rule.lines(),
+            text = rule.text(),
+            al = sig(rule_settings(dir)?("angle_at_limit")),
         );
         Ok(Findings {
             ours: md,
@@ -702,13 +751,14 @@ impl Family for LbcDiveDisturbance {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::experiment::rule::Outcome;
 
     fn m(rows: &[(&str, f64, [f64; 4])]) -> Vec<(String, f64, [f64; 4])> {
         rows.iter().map(|r| (r.0.to_string(), r.1, r.2)).collect()
     }
 
     #[test]
-    fn the_rule_reads_effort_visibility_and_outcome() {
+    fn the_rule_reads_effort_visibility_and_outcome_with_one_ratio() {
         // The paper's story: LBC cheaper and visibly pushed, PD stiff but its entry altered.
         let story = m(&[
             ("lbc", 0.0, [1.0, 0.0, 0.01, 0.0]),
@@ -717,24 +767,25 @@ mod tests {
             ("pd", 1.0, [5.5, 0.005, 0.03, 0.01]),
             ("pd", 4.0, [6.0, 0.02, 0.06, 0.04]),
         ]);
-        assert_eq!(
-            disturbance_checks(&story, 4.0, 2.0, 0.01, 0.01),
-            Some((true, true, true, true))
-        );
-        // PD visibly pushed at ×4: (c) fails; PD cheaper: (a) fails.
+        let rule = |m: &[(String, f64, [f64; 4])], felt: f64| {
+            disturbance_rule(m, 4.0, 2.0, 0.01, felt).unwrap()
+        };
+        assert_eq!(rule(&story, 0.01).verdict(), Verdict::Held);
+        // PD at x4 deviating nearly as much as LBC at x1 is not invisible by the ratio that
+        // makes LBC's visible: (c) fails, partly held.
+        let mut close = story.clone();
+        close[4].2[1] = 0.045;
+        let r = rule(&close, 0.01);
+        assert_eq!(r.verdict(), Verdict::Partly);
+        assert_eq!(r.held[2].outcome(), Outcome::Fail);
+        // PD cheaper: (a) fails, and partly needs it.
         let mut other = story.clone();
-        other[4].2[1] = 0.2;
         other[1].2[0] = 0.5;
-        assert_eq!(
-            disturbance_checks(&other, 4.0, 2.0, 0.01, 0.01),
-            Some((true, false, true, false))
-        );
+        assert_eq!(rule(&other, 0.01).verdict(), Verdict::NotHeld);
         // Pushes too weak to be felt: the premise fails.
-        assert_eq!(
-            disturbance_checks(&story, 4.0, 2.0, 0.01, 0.1).unwrap().0,
-            false
-        );
-        // Missing rows: nothing to judge.
-        assert_eq!(disturbance_checks(&story[..2], 4.0, 2.0, 0.01, 0.01), None);
+        assert_eq!(rule(&story, 0.1).verdict(), Verdict::PremiseNotReproduced);
+        // Missing rows: nothing to judge; a ratio of 1 (PD itself passes) is refused.
+        assert!(disturbance_rule(&story[..2], 4.0, 2.0, 0.01, 0.01).is_none());
+        assert!(disturbance_rule(&story, 4.0, 1.0, 0.01, 0.01).is_none());
     }
 }

@@ -39,7 +39,7 @@ pub use coordination::{
     compare_objectives, coordination_rule, CoordinationCounts, CoordinationParams,
     LbcDiverCoordination, PARTLY_WORSE_MARGIN,
 };
-pub use disturbance::{disturbance_checks, DisturbanceParams, LbcDiveDisturbance};
+pub use disturbance::{disturbance_rule, DisturbanceParams, LbcDiveDisturbance};
 pub use interpolation::{choose_offset, InterpolationParams, LbcDiverInterpolation, OffsetTrial};
 
 use crate::bellman::combine::{blend_weights, normalized_entropy, TrackerBlend};
