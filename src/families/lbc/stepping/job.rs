@@ -563,6 +563,7 @@ impl Job for Params {
         let (walk, motion) = ctx.stage("walk", || self.walk(s, lambda, &centers, &blend))?;
         let rule = rule_table(&[
             ("tolerance_m", self.rule.tolerance_m),
+            ("error_margin_m", self.rule.error_margin_m),
             ("lambda", lambda),
             ("short_m", self.short_m),
             ("long_m", self.long_m),

@@ -66,6 +66,8 @@ pub struct Rule {
     /// A step reaches its length when its heel lands within this of it (m); also the margin
     /// of the walk's gaps.
     pub tolerance_m: f64,
+    /// LBC's mean length error must beat the naive blend's by at least this (m).
+    pub error_margin_m: f64,
 }
 
 /// Parameters of `lbc_stepping`.
@@ -146,6 +148,7 @@ impl Validate for Params {
             "need 0.1 < short_m < long_m < 0.8 (m)",
         )?;
         positive("rule.tolerance_m", self.rule.tolerance_m)?;
+        positive("rule.error_margin_m", self.rule.error_margin_m)?;
         let tol = self.rule.tolerance_m;
         ensure(
             !self.desired_m.is_empty() && self.desired_m.len() <= MAX_LENGTHS,
