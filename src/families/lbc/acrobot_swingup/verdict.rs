@@ -81,23 +81,6 @@ pub fn judge_test_start(lbc: f64, naive: f64, sum: f64, success: f64) -> bool {
     lbc < success && beats(naive) && beats(sum)
 }
 
-/// The verdict (ours, written in the spec before the run): (held, partly) from the test start
-/// and the sweep. Held: the test-start claim ([`judge_test_start`]) and the sweep's held
-/// ([`judge`]). Partly: one of the two parts with nothing against the other: the test-start
-/// claim and LBC rescuing at least as many both-fail sweep starts as the better naive blend
-/// (`rescues_as_many`), or the sweep's partly and LBC no farther from the handstand at the
-/// test start than the closer naive blend (`not_farther`).
-pub fn grade(
-    test_claim: bool,
-    not_farther: bool,
-    sweep: (bool, bool),
-    rescues_as_many: bool,
-) -> (bool, bool) {
-    let held = test_claim && sweep.0;
-    let partly = held || (test_claim && rescues_as_many) || (sweep.1 && not_farther);
-    (held, partly)
-}
-
 /// Per-start success flags (in `POLICIES` order) of a long table's rows `(θ1, θ2, policy,
 /// success)`, starts in order of first appearance.
 pub(super) fn start_flags(a: &[f64], b: &[f64], p: &[String], s: &[f64]) -> Vec<Vec<bool>> {
@@ -147,20 +130,6 @@ mod tests {
         // A clear share (8 of 26) that the naive sum beats (9) is not partly either.
         let c = counts([46, 66, 28, 84, 41], [0, 0, 1, 8, 9]);
         assert_eq!(judge(&c, true, 0.5), (false, false));
-    }
-
-    #[test]
-    fn the_grade_needs_both_parts_for_held_and_one_uncontradicted_for_partly() {
-        assert_eq!(grade(true, true, (true, true), true), (true, true));
-        // Test start claimed, sweep only partly: partly (naive blends rescue no more).
-        assert_eq!(grade(true, true, (false, true), true), (false, true));
-        // Test start claimed but the naive blends rescue more sweep starts: not held.
-        assert_eq!(grade(true, true, (false, false), false), (false, false));
-        // Sweep partly but a naive blend ends closer at the test start: not held.
-        assert_eq!(grade(false, false, (false, true), true), (false, false));
-        assert_eq!(grade(false, true, (false, true), true), (false, true));
-        // The sweep's held alone is not held.
-        assert_eq!(grade(false, false, (true, true), true), (false, false));
     }
 
     #[test]
