@@ -513,6 +513,28 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         };
         assert_eq!(c[6], want, "{c:?}");
     }
+    // path.csv: every iterate of each paper task's descent through each net seed's net; the
+    // start's curvature ratio is 1 by definition, and the best iterate's row holds the final
+    // errors net_seeds.csv reports for it.
+    assert_eq!(
+        header(&out.join("path.csv")),
+        "task,net_seed,iteration,objective,emulator_error,simulator_error,curvature_ratio,stable_ratio"
+    );
+    let path = rows(&out.join("path.csv"));
+    for task in ["pendulum", "truck", "lander"] {
+        for seed in ["1", "2"] {
+            let its: Vec<&Vec<String>> =
+                path.iter().filter(|c| c[0] == task && c[1] == seed).collect();
+            assert!(its.len() >= 2, "{task} seed {seed}: {its:?}");
+            assert_eq!(its[0][2], "0");
+            assert_eq!(its[0][6].parse::<f64>().unwrap(), 1.0, "{:?}", its[0]);
+            assert_eq!(its[0][7].parse::<f64>().unwrap(), 2.0, "2(1 + 0.5)/1.5");
+            let row = seeds.iter().find(|c| c[0] == task && c[1] == seed).unwrap();
+            let best = its.iter().find(|c| c[2] == row[4]).unwrap();
+            assert_eq!(best[4..6], row[2..4], "{task} seed {seed}: best iterate");
+        }
+    }
+    assert!(!path.iter().any(|c| c[0] == "pendulum_200steps"), "ours: no path");
     for task in ["pendulum", "truck", "lander", "pendulum_200steps"] {
         let of = |seed: &str| seeds.iter().find(|c| c[0] == task && c[1] == seed).unwrap();
         let own = fin.iter().find(|c| c[0] == task).unwrap();
