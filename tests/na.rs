@@ -523,8 +523,10 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     let path = rows(&out.join("path.csv"));
     for task in ["pendulum", "truck", "lander"] {
         for seed in ["1", "2"] {
-            let its: Vec<&Vec<String>> =
-                path.iter().filter(|c| c[0] == task && c[1] == seed).collect();
+            let its: Vec<&Vec<String>> = path
+                .iter()
+                .filter(|c| c[0] == task && c[1] == seed)
+                .collect();
             assert!(its.len() >= 2, "{task} seed {seed}: {its:?}");
             assert_eq!(its[0][2], "0");
             assert_eq!(its[0][6].parse::<f64>().unwrap(), 1.0, "{:?}", its[0]);
@@ -534,7 +536,10 @@ fn na_fig13_quick_learns_controls_for_every_task() {
             assert_eq!(best[4..6], row[2..4], "{task} seed {seed}: best iterate");
         }
     }
-    assert!(!path.iter().any(|c| c[0] == "pendulum_200steps"), "ours: no path");
+    assert!(
+        !path.iter().any(|c| c[0] == "pendulum_200steps"),
+        "ours: no path"
+    );
     for task in ["pendulum", "truck", "lander", "pendulum_200steps"] {
         let of = |seed: &str| seeds.iter().find(|c| c[0] == task && c[1] == seed).unwrap();
         let own = fin.iter().find(|c| c[0] == task).unwrap();

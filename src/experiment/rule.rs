@@ -222,7 +222,7 @@ impl Check {
     /// The rule's wording of the check: "label (value >= threshold)", or the label alone for a
     /// [`Check::fact`].
     pub fn rule_text(&self) -> String {
-        if self.is_fact() {
+        if self.fact {
             return self.label.clone();
         }
         format!(
@@ -233,14 +233,9 @@ impl Check {
         )
     }
 
-    /// Whether it is a [`Check::fact`].
-    fn is_fact(&self) -> bool {
-        self.fact
-    }
-
     /// The report's line: label, value (and interval), threshold and outcome.
     pub fn line(&self) -> String {
-        if self.is_fact() {
+        if self.fact {
             return format!("{}: {}", self.label, self.outcome().word());
         }
         let interval = self.interval.map_or_else(String::new, |(lo, hi)| {
@@ -308,6 +303,28 @@ pub struct Rule {
 }
 
 impl Rule {
+    /// A rule whose held checks were built with [`Check::new`]: where the premise passes every
+    /// one must have been built (a refused check there means its null passes: `None`); where
+    /// it fails the verdict is "premise not reproduced" whatever they say, so the refused ones
+    /// are left out (an example alone that does what the premise says it cannot passes them).
+    pub fn gated(
+        premise: Vec<Check>,
+        held: Vec<Result<Check, RuleError>>,
+        partly: Partly,
+    ) -> Option<Self> {
+        let holds = premise.iter().all(|c| c.outcome() != Outcome::Fail);
+        let held: Vec<Check> = if holds {
+            held.into_iter().collect::<Result<_, _>>().ok()?
+        } else {
+            held.into_iter().filter_map(Result::ok).collect()
+        };
+        Some(Self {
+            premise,
+            held,
+            partly,
+        })
+    }
+
     /// The verdict under one resolution of inconclusive checks (`optimistic`: they pass).
     fn resolve(&self, optimistic: bool) -> Verdict {
         let ok = |c: &Check| match c.outcome() {
@@ -517,6 +534,17 @@ mod tests {
         // One that cannot change the verdict (partly either way) does not make it so.
         let r = rule(vec![], vec![fail.clone(), unsure, pass], Partly::Any);
         assert_eq!(r.verdict(), Verdict::Partly);
+    }
+
+    #[test]
+    fn a_gated_rule_drops_refused_checks_only_where_its_premise_fails() {
+        let refused = || Check::new("x", 2.0, Cmp::AtLeast, 1.0, Null::new("n", 1.5));
+        assert!(refused().is_err());
+        let held = || vec![Ok(check(2.0, 1.0, 0.0)), refused()];
+        assert!(Rule::gated(vec![Check::fact("setup", true)], held(), Partly::Any).is_none());
+        let r = Rule::gated(vec![Check::fact("setup", false)], held(), Partly::Any).unwrap();
+        assert_eq!(r.held.len(), 1);
+        assert_eq!(r.verdict(), Verdict::PremiseNotReproduced);
     }
 
     #[test]

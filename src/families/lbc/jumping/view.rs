@@ -3,7 +3,7 @@
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
-use crate::experiment::rule::{Check, Cmp, Null, Outcome, Partly, Rule};
+use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use crate::families::lbc::film::{diver_body, fitted, to_scale};
 use crate::families::lbc::{alpha_panel, entropy_section, rule_setting, rule_settings};
@@ -79,13 +79,12 @@ pub fn jump_rule(f: &JumpFacts, tol: f64) -> Option<Rule> {
         )
         .ok()?,
     ];
-    let holds = premise.iter().all(|c| c.outcome() == Outcome::Pass);
     let others = f
         .alone
         .iter()
         .map(|v| mean_error(v))
         .fold(mean_error(&f.naive), f64::min);
-    let held: Vec<Result<Check, _>> = vec![
+    let held = vec![
         Check::new(
             "desired jumps LBC lands",
             landed(&f.lbc) as f64,
@@ -108,16 +107,7 @@ pub fn jump_rule(f: &JumpFacts, tol: f64) -> Option<Rule> {
             Null::new("the best of the naive blend and the examples alone", 1.0),
         ),
     ];
-    let held: Vec<Check> = if holds {
-        held.into_iter().collect::<Result<_, _>>().ok()?
-    } else {
-        held.into_iter().filter_map(Result::ok).collect()
-    };
-    Some(Rule {
-        premise,
-        held,
-        partly: Partly::Any,
-    })
+    Rule::gated(premise, held, Partly::Any)
 }
 
 /// The verdict of `f` (not assessed where [`jump_rule`] cannot be built).
@@ -445,6 +435,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::experiment::rule::Outcome;
 
     fn facts(lbc_landed: usize, naive_landed: usize, lbc_err: f64, naive_err: f64) -> JumpFacts {
         JumpFacts {

@@ -4,7 +4,7 @@ use super::job::gaps;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::rule::{Check, Cmp, Null, Outcome, Partly, Rule};
+use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use crate::families::lbc::film::{biped_body, fitted, to_scale};
 use crate::families::lbc::{alpha_panel, rule_setting, rule_settings};
@@ -72,7 +72,6 @@ pub fn stepping_rule(f: &SteppingFacts, tol: f64, margin: f64) -> Option<Rule> {
         )
         .ok()?,
     ];
-    let holds = premise.iter().all(|c| c.outcome() == Outcome::Pass);
     let (steps, asked) = (&f.walk.0, f.walk.1);
     let clean = steps.iter().filter(|s| s.2).count() as f64;
     let worst_step = steps.iter().map(|s| s.1).fold(0.0, f64::max);
@@ -123,16 +122,7 @@ pub fn stepping_rule(f: &SteppingFacts, tol: f64, margin: f64) -> Option<Rule> {
             ),
         ),
     ];
-    let held: Vec<Check> = if holds {
-        held.into_iter().collect::<Result<_, _>>().ok()?
-    } else {
-        held.into_iter().filter_map(Result::ok).collect()
-    };
-    Some(Rule {
-        premise,
-        held,
-        partly: Partly::Any,
-    })
+    Rule::gated(premise, held, Partly::Any)
 }
 
 /// The verdict of `f` (not assessed where [`stepping_rule`] cannot be built).
@@ -526,6 +516,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::experiment::rule::Outcome;
 
     fn facts(lbc: f64, naive: f64, effort: (f64, f64), walk_ok: bool) -> SteppingFacts {
         SteppingFacts {
