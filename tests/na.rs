@@ -1135,8 +1135,21 @@ fn na_transforms_ablation_quick_builds_every_variant_and_learns_through_each() {
     );
     assert_eq!(
         header(&out.join("control.csv")),
-        "task,variant,iterations,best_iteration,j_start,j_best,emulator_error,simulator_error,at_goal"
+        "task,variant,iterations,best_iteration,j_start,j_best,emulator_error,simulator_error,at_goal,start_simulator_error"
     );
+    // The control checks' null, the start's controls replayed, is one value per task.
+    for task in ["truck", "lander", "dolphin"] {
+        let starts: Vec<String> = rows(&out.join("control.csv"))
+            .into_iter()
+            .filter(|r| r[0] == task)
+            .map(|r| r[9].clone())
+            .collect();
+        assert!(
+            starts.windows(2).all(|w| w[0] == w[1]),
+            "{task}: {starts:?}"
+        );
+        assert!(starts.iter().all(|x| x.parse::<f64>().unwrap() > 0.0));
+    }
     let nets = rows(&out.join("nets.csv"));
     assert_eq!(
         nets.len(),
@@ -1169,6 +1182,11 @@ fn na_transforms_ablation_quick_builds_every_variant_and_learns_through_each() {
         .unwrap();
     assert!(f.ours.contains("+ local frame"), "{}", f.ours);
     assert!(f.why.contains("Rule"), "{}", f.why);
+    assert!(
+        f.why.contains("an operator that changes nothing"),
+        "{}",
+        f.why
+    );
 }
 
 #[test]

@@ -381,6 +381,40 @@ pub fn learn_and_replay(
     learn_and_replay_path(task, net, steps, curvature_iterations, None)
 }
 
+/// The final error (1 = tolerance) of a calibrated `task`'s initial knots replayed on the
+/// simulator, each held for `steps` physical steps: what doing nothing scores, the null of
+/// a check on a learned control's simulator error. `net` only expands the knots into
+/// per-step controls, as the descent does.
+pub fn start_simulator_error(
+    task: &Task,
+    net: &crate::emulator::Emulator,
+    steps: usize,
+) -> Result<f64, Error> {
+    let x0 = task.start_state();
+    let model = task.net.model;
+    let knots = Knots {
+        steps: task.task.horizon,
+        per_actuator: task.task.knots,
+        m: model.control_dim(),
+    };
+    let objective = task.objective();
+    let mut bptt = Bptt::new(net, &objective, knots, task.bounds(), &x0).map_err(other)?;
+    let v0 = bptt.from_controls(&task.initial_knots());
+    bptt.rollout(&v0);
+    let at = task.task.horizon * model.state_dim();
+    let emu_final = bptt.states()[at..].to_vec();
+    let mut sim = model.simulator();
+    let rep = replay(
+        sim.as_mut(),
+        &x0,
+        bptt.controls(),
+        task.net.physical_dt,
+        steps,
+        &emu_final,
+    );
+    Ok(task.final_error(&rep.states[at..]))
+}
+
 /// Columns of `path.csv` (ours): every iterate of the headline's descent of a paper task
 /// through the Table 1 net of `net_seed`: J on the net, the final error of the iterate's
 /// controls on the net and replayed on the simulator, and the largest Hessian eigenvalue of J

@@ -53,7 +53,10 @@ mod task;
 
 pub use conditioning::{BEST_WEIGHTS_COLUMNS, CONDITIONING_COLUMNS};
 pub use dolphin::learn_swim;
-pub use job::{learn_and_replay, learn_best, stable_curvature_ratio, BestRollout, PATH_COLUMNS};
+pub use job::{
+    learn_and_replay, learn_best, stable_curvature_ratio, start_simulator_error, BestRollout,
+    PATH_COLUMNS,
+};
 pub use params::{DolphinControl, Params, Sweep};
 pub use task::{Calibration, ControlUnits, FinalWeights, Formulation, Task};
 
