@@ -4,6 +4,7 @@ pub mod fig6_learning_plot;
 pub mod lattice_draw;
 pub mod lattices;
 pub mod motion;
+pub mod motion_rule;
 pub mod representation;
 pub mod search;
 pub mod settings;

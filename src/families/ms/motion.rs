@@ -8,18 +8,52 @@
 
 use super::lattice_draw::{draw_panels, front_face, write_gif, LatticePanel, Scene};
 use super::lattices::springs_of;
-use super::search::{learning_panel, MotionJob};
+use super::motion_rule::{measures, motion_rule, seed_folders, unit, MotionFacts, MotionRule};
+use super::search::{learning_panel, Motion, MotionJob, Params};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::resolve::{ParamError, Validate};
+use crate::experiment::rule::{rule_setting, rule_settings, rule_table, Rule};
 use crate::experiment::seeds::SeedMetric;
-use crate::experiment::{Error, Family};
+use crate::experiment::stats::median_interval;
+use crate::experiment::{Error, Family, Job, RunContext};
+use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 /// The motion family.
 pub struct MsMotion;
+
+/// `ms_motion` parameters: the motion and its search, and the verdict's bars.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MotionSpec {
+    /// The motion and its search.
+    #[serde(flatten)]
+    pub motion: Params,
+    /// The verdict's bars (ours; [`super::motion_rule`]).
+    pub rule: MotionRule,
+}
+
+impl Validate for MotionSpec {
+    fn validate(&self) -> Result<(), ParamError> {
+        MotionJob(self.motion.clone()).validate()?;
+        self.rule.validate()
+    }
+}
+
+impl Job for MotionSpec {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let mut tables = MotionJob(self.motion.clone()).run(ctx)?;
+        tables.insert("rule", rule_table(&self.rule.settings()));
+        Ok(tables)
+    }
+}
 
 /// Frames `(t, regime, positions)` of a `trajectory` table.
 fn frames_of(t: &Table) -> Vec<(f64, usize, Vec<[f64; 3]>)> {
@@ -76,10 +110,12 @@ impl Family for MsMotion {
         ),
         (
             "heading",
-            "how the body turns: the heading of the face in front at t = 0 about the vertical (a pirouette turns it) and its pitch about the sideways axis (a somersault turns it), unwrapped, vs time, with the verdict's bars dashed; for the leap also the centre of mass's travel along +x with its 1 m and 0.3 m bars.",
+            "how the body turns: the heading of the face in front at t = 0 about the vertical (a pirouette turns it) and its pitch about the sideways axis (a somersault turns it), unwrapped, vs time, with the verdict's bars (the spec's [params.rule]) dashed; for the leap also the centre of mass's travel along +x with its bars.",
         ),
     ];
-    type Params = MotionJob;
+    type Params = MotionSpec;
+    // The verdict judges the seeds together (medians and a majority of seeds).
+    const SEEDS_POOLED: bool = true;
     const SEED_METRICS: &'static [SeedMetric] = &[
         SeedMetric {
             table: "summary",
@@ -199,9 +235,13 @@ impl Family for MsMotion {
             },
         )?);
         let motion_id = motion.first().map_or("", String::as_str);
+        let bars = MotionRule {
+            held: rule_setting(tables, "held").unwrap_or(f64::NAN),
+            partly: rule_setting(tables, "partly").unwrap_or(f64::NAN),
+        };
         files.extend(fig.draw(
             "heading",
-            &heading_figure(&frames, &scene.marked, motion_id),
+            &heading_figure(&frames, &scene.marked, motion_id, &bars),
         )?);
         let search = tables.require("search")?;
         files.extend(fig.draw(
@@ -219,8 +259,15 @@ impl Family for MsMotion {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let s = read_csv(&dir.join("summary.csv"))?;
-        let motion = df_str(&s, "motion")?.first().cloned().unwrap_or_default();
+        let folders = seed_folders(dir)?;
+        let (first_seed, first) = folders.first().cloned().ok_or_else(|| {
+            crate::experiment::other(format!("{}: no seed's results", dir.display()))
+        })?;
+        let s = read_csv(&first.join("summary.csv"))?;
+        let name = df_str(&s, "motion")?.first().cloned().unwrap_or_default();
+        let motion = Motion::from_name(&name).ok_or_else(|| {
+            crate::experiment::other(format!("summary.csv: unknown motion `{name}`"))
+        })?;
         let get1 = |c: &str| -> Result<f64, Error> {
             Ok(df_f64(&s, c)?.first().copied().unwrap_or(f64::NAN))
         };
@@ -230,23 +277,20 @@ impl Family for MsMotion {
             get1("best_objective")?,
             get1("initial_best")?,
         );
-        let m = read_csv(&dir.join("measures.csv"))?;
+        let mv = measures(&first)?;
+        let m = read_csv(&first.join("measures.csv"))?;
         let names = df_str(&m, "measure")?;
-        let vals = df_f64(&m, "value")?;
-        let mv = |n: &str| {
-            names
-                .iter()
-                .position(|x| x == n)
-                .map(|i| vals[i])
-                .unwrap_or(f64::NAN)
-        };
-        let b = read_csv(&dir.join("best.csv"))?;
+        let b = read_csv(&first.join("best.csv"))?;
         let (bt, bv, bw) = (
             df_str(&b, "term")?,
             df_f64(&b, "value")?,
             df_f64(&b, "weighted")?,
         );
-        let mut md = String::from("| objective term | value | weighted |\n| --- | --- | --- |\n");
+        let mut md = match first_seed {
+            Some(seed) => format!("The best motion of seed {seed} (the figures show it):\n\n"),
+            None => String::new(),
+        };
+        md.push_str("| objective term | value | weighted |\n| --- | --- | --- |\n");
         for i in 0..bt.len() {
             md.push_str(&format!(
                 "| {} | {} | {} |\n",
@@ -256,8 +300,8 @@ impl Family for MsMotion {
             ));
         }
         md.push_str("\n| measure of the best motion | value |\n| --- | --- |\n");
-        for (n, v) in names.iter().zip(&vals) {
-            md.push_str(&format!("| {n} | {} |\n", sig(*v)));
+        for n in &names {
+            md.push_str(&format!("| {n} | {} |\n", sig(mv(n))));
         }
         md.push_str(&format!(
             "\nSearch: {} evaluations in {} s ({} evaluations/s); best of the initial random set {}, final best {}.\n",
@@ -267,67 +311,78 @@ impl Family for MsMotion {
             sig(init),
             sig(best)
         ));
-        let upright = mv("uprightness_loss_60") == 0.0;
-        let airborne = mv("hops") >= 1.0 || mv("min_contacts") == 0.0;
-        let (verdict, why) = match motion.as_str() {
-            "leap" => {
-                let d = mv("displacement_x");
-                let v = Verdict::graded(d > 1.0 && upright && airborne, d > 0.3 && upright);
-                (
-                    v,
-                    format!(
-                        "The spider travels {} m along +x (1 m = its base width), stays upright: {}, leaves the ground: {}. Rule (thresholds ours): held needs more than 1 m along +x, upright and off the ground at least once; partly more than 0.3 m upright.",
-                        sig(d),
-                        upright,
-                        airborne
-                    ),
-                )
-            }
-            "somersault" => {
-                let r = mv("rotation_back_y");
-                let d = mv("displacement_x");
-                let ground = mv("on_ground") == 1.0;
-                let lr = mv("left_right_loss_45") == 0.0;
-                let v = Verdict::graded(
-                    r >= 0.9 * 2.0 * PI && d > 0.0 && ground && lr,
-                    r >= PI && d > 0.0,
-                );
-                (
-                    v,
-                    format!(
-                        "Backward rotation {} turns while moving {} m forward; on the ground at T: {}; no rolling/turning beyond 45°: {}. Rule (thresholds ours): held needs at least 0.9 of a backward turn while moving forward, on the ground at T, with no rolling or turning beyond 45°; partly half a backward turn while moving forward.",
-                        sig(r / (2.0 * PI)),
-                        sig(d),
-                        ground,
-                        lr
-                    ),
-                )
-            }
-            _ => {
-                let r = mv("rotation_z").abs();
-                let ground = mv("on_ground") == 1.0;
-                let v = Verdict::graded(
-                    r >= PI && upright && ground && airborne,
-                    r >= PI / 4.0 && upright,
-                );
-                (
-                    v,
-                    format!(
-                        "The table turns {}° about the vertical, stays upright: {}, jumps: {}, on the ground at T: {}, drifts {} m. Rule (thresholds ours): held needs at least 180° about the vertical, upright, a jump and on the ground at T; partly 45° upright.",
-                        sig(r.to_degrees()),
-                        upright,
-                        airborne,
-                        ground,
-                        sig(mv("horizontal_distance"))
-                    ),
-                )
-            }
+        let settings = rule_settings(&first)?;
+        let bars = MotionRule {
+            held: settings("held"),
+            partly: settings("partly"),
+        };
+        let mut facts = Vec::new();
+        md.push_str(&format!(
+            "\n| seed | {} | held bar with its conditions | partly bar with its conditions |\n| --- | --- | --- | --- |\n",
+            unit(motion)
+        ));
+        for (seed, folder) in &folders {
+            let f = MotionFacts::from_measures(motion, measures(folder)?);
+            md.push_str(&format!(
+                "| {} | {} | {} | {} |\n",
+                seed.map_or("–".into(), |s| s.to_string()),
+                sig(f.measure),
+                yes(f.held(&bars)),
+                yes(f.partly(&bars))
+            ));
+            facts.push(f);
+        }
+        let rule = motion_rule(motion, &facts, &bars);
+        let verdict = rule.as_ref().map_or(Verdict::NotAssessed, Rule::verdict);
+        let all: Vec<f64> = facts.iter().map(|f| f.measure).collect();
+        let (med, lo, hi) = median_interval(&all, 1);
+        let lead = match motion {
+            Motion::Leap => format!(
+                "The spider travels a median {} m along +x over {} seeds [95% interval {}-{}] (1 m = its base width)",
+                sig(med),
+                facts.len(),
+                sig(lo),
+                sig(hi)
+            ),
+            Motion::Somersault => format!(
+                "The poodle turns a median {} backward turns over {} seeds [95% interval {}-{}]",
+                sig(med),
+                facts.len(),
+                sig(lo),
+                sig(hi)
+            ),
+            Motion::Pirouette => format!(
+                "The table turns a median {}° about the vertical over {} seeds [95% interval {}-{}]",
+                sig(med),
+                facts.len(),
+                sig(lo),
+                sig(hi)
+            ),
+        };
+        let (lines, text) = rule
+            .as_ref()
+            .map_or_else(|| (String::new(), String::new()), |r| (r.lines(), r.text()));
+        let conditions = match motion {
+            Motion::Leap => "the held bar also needs the spider upright and off the ground at least once, the partly bar upright",
+            Motion::Somersault => "the held bar also needs forward travel, on the ground at T and no rolling or turning beyond 45°, the partly bar forward travel",
+            Motion::Pirouette => "the held bar also needs the table upright, a jump and on the ground at T, the partly bar upright",
         };
         Ok(Findings {
             ours: md,
             verdict,
-            why,
+            why: format!(
+                "{lead}. Checks:{lines} Rule (bars ours, in the spec's [params.rule]; {conditions}): {text}"
+            ),
         })
+    }
+}
+
+/// The report's yes/no.
+fn yes(b: bool) -> &'static str {
+    if b {
+        "yes"
+    } else {
+        "no"
     }
 }
 
@@ -335,13 +390,14 @@ impl Family for MsMotion {
 /// `marked` masses (the face in front at t = 0), as a heading about the vertical (atan2 of its
 /// y and x parts) and a pitch about the sideways y axis (atan2 of its z and x parts), each
 /// unwrapped, in degrees.
-/// The verdict's bars are drawn on it: the pirouette's 180° (held) and 45° (partly) about the
-/// vertical, the somersault's 0.9 and 0.5 of a backward turn, and for the leap a second panel of
-/// the centre of mass's travel along +x with its 1 m (held) and 0.3 m (partly).
+/// The verdict's `bars` (the spec's `[params.rule]`) are drawn on it: the pirouette's in
+/// degrees about the vertical, the somersault's in backward turns, and for the leap a second
+/// panel of the centre of mass's travel along +x with its bars in metres.
 fn heading_figure(
     frames: &[(f64, usize, Vec<[f64; 3]>)],
     marked: &[usize],
     motion: &str,
+    bars: &MotionRule,
 ) -> Figure {
     let (mut heading, mut pitch) = (Vec::new(), Vec::new());
     let (mut last_h, mut last_p): (Option<f64>, Option<f64>) = (None, None);
@@ -381,19 +437,35 @@ fn heading_figure(
                 .last()
                 .map_or(1.0, |h| if h.1 < 0.0 { -1.0 } else { 1.0 });
             series.push(bar(
-                "held bar: 180° about the vertical".into(),
-                sign * 180.0,
+                format!("held bar: {}° about the vertical", sig(bars.held)),
+                sign * bars.held,
                 2,
             ));
-            series.push(bar("partly bar: 45°".into(), sign * 45.0, 3));
+            series.push(bar(
+                format!("partly bar: {}°", sig(bars.partly)),
+                sign * bars.partly,
+                3,
+            ));
         }
         "somersault" => {
             series.push(bar(
-                "held bar: 0.9 of a backward turn (324°)".into(),
-                0.9 * 360.0,
+                format!(
+                    "held bar: {} of a backward turn ({}°)",
+                    sig(bars.held),
+                    sig(bars.held * 360.0)
+                ),
+                bars.held * 360.0,
                 2,
             ));
-            series.push(bar("partly bar: half a turn (180°)".into(), 180.0, 3));
+            series.push(bar(
+                format!(
+                    "partly bar: {} of a turn ({}°)",
+                    sig(bars.partly),
+                    sig(bars.partly * 360.0)
+                ),
+                bars.partly * 360.0,
+                3,
+            ));
         }
         _ => {}
     }
@@ -413,8 +485,12 @@ fn heading_figure(
             y_label: "distance along +x (m)".into(),
             series: vec![
                 Series::line("centre of mass along +x", travel, 0),
-                bar("held bar: 1 m".into(), 1.0, 2),
-                bar("partly bar: 0.3 m".into(), 0.3, 3),
+                bar(format!("held bar: {} m", sig(bars.held)), bars.held, 2),
+                bar(
+                    format!("partly bar: {} m", sig(bars.partly)),
+                    bars.partly,
+                    3,
+                ),
             ],
             ..Panel::default()
         });

@@ -51,12 +51,21 @@ pub enum Motion {
 }
 
 impl Motion {
-    fn name(self) -> &'static str {
+    /// Every motion.
+    pub const ALL: [Motion; 3] = [Motion::Leap, Motion::Somersault, Motion::Pirouette];
+
+    /// Its name in the spec and in `summary.csv`'s `motion` column.
+    pub fn name(self) -> &'static str {
         match self {
             Motion::Leap => "leap",
             Motion::Somersault => "somersault",
             Motion::Pirouette => "pirouette",
         }
+    }
+
+    /// The motion named `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
     }
 }
 
