@@ -11,6 +11,7 @@ use crate::experiment::output::{unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{all_positive, distinct, ensure, positive, ParamError, Validate};
+use crate::experiment::rule::{rule_settings, rule_table, Check, Cmp, Null, Outcome, Partly, Rule};
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::physics::acrobot::Acrobot;
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
@@ -55,7 +56,21 @@ pub struct Params {
     /// Drifts below this are round-off and left out of the order fit (J).
     #[serde(default = "default_floor")]
     pub fit_floor: f64,
+    /// The verdict's bar (ours): a measured order within this of theory.
+    pub rule: OrderRule,
 }
+
+/// The verdict's bar (ours).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OrderRule {
+    /// A measured energy-drift order passes within this of the theoretical order; below 1, so
+    /// an integrator one order off fails.
+    pub order_tolerance: f64,
+}
+
+/// An integrator one order off: the null of every order check.
+const ONE_ORDER_OFF: f64 = 1.0;
 
 fn default_atol_ratio() -> f64 {
     1e-3
@@ -81,6 +96,12 @@ pub fn conservative_model(name: &str) -> Option<Box<dyn Ode>> {
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         ensure(!self.models.is_empty(), "models", "must not be empty")?;
+        let t = self.rule.order_tolerance;
+        ensure(
+            t > 0.0 && t < ONE_ORDER_OFF,
+            "rule.order_tolerance",
+            "must be in (0, 1): an integrator one order off must fail",
+        )?;
         for (i, m) in self.models.iter().enumerate() {
             let model = conservative_model(m).ok_or_else(|| {
                 ParamError::new(
@@ -302,6 +323,10 @@ impl Job for Params {
         let mut tables = Tables::default();
         tables.insert("energy_drift", drift_t);
         tables.insert("orders", orders);
+        tables.insert(
+            "rule",
+            rule_table(&[("order_tolerance", self.rule.order_tolerance)]),
+        );
         tables.insert("adaptive", ad_t);
         // Passive motion.
         ctx.stage("passive motion", || -> Result<(), Error> {
@@ -549,13 +574,21 @@ impl Family for PhysicsValidation {
             .map_err(pe)?;
         let me = me.f64().map_err(pe)?.clone();
         let mut md = String::from("| model | integrator | theoretical order | measured order |\n| --- | --- | --- | --- |\n");
-        let (mut ok, mut total) = (0, 0);
+        let tolerance = rule_settings(dir)?("order_tolerance");
+        let mut held = Vec::new();
         for r in 0..df.height() {
             let (t, v) = (th.get(r).unwrap_or(f64::NAN), me.get(r).unwrap_or(f64::NAN));
-            total += 1;
-            if (t - v).abs() <= 0.5 {
-                ok += 1;
-            }
+            held.push(Check::new(
+                format!(
+                    "{} {}: |measured − theoretical order|",
+                    m.get(r).unwrap_or(""),
+                    i.get(r).unwrap_or("")
+                ),
+                (t - v).abs(),
+                Cmp::AtMost,
+                tolerance,
+                Null::new("an integrator one order off", ONE_ORDER_OFF),
+            ));
             md.push_str(&format!(
                 "| {} | {} | {} | {} |\n",
                 m.get(r).unwrap_or(""),
@@ -591,11 +624,23 @@ impl Family for PhysicsValidation {
             .collect();
         md.push_str(&parts.join("; "));
         md.push('.');
-        let verdict = Verdict::from_counts(ok, total);
+        let rule = Rule::gated(vec![], held, Partly::Any);
+        let verdict = rule.as_ref().map_or(Verdict::NotAssessed, Rule::verdict);
+        let (ok, total) = rule.as_ref().map_or((0, 0), |r| {
+            let pass = r.held.iter().filter(|c| c.outcome() == Outcome::Pass);
+            (pass.count(), r.held.len())
+        });
+        let text = rule.as_ref().map_or_else(
+            || "No rule: the order tolerance is not below one order.".to_string(),
+            Rule::text,
+        );
         Ok(Findings {
             ours: md,
             verdict,
-            why: format!("{ok} of {total} measured energy-drift orders are within 0.5 of theory. Rule (threshold ours): held when every one is, partly when some are."),
+            why: format!(
+                "{ok} of {total} measured energy-drift orders are within {} of theory. Rule (bar ours, in the spec's [params.rule]): {text}",
+                sig(tolerance)
+            ),
         })
     }
 }

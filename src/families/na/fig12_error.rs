@@ -28,6 +28,9 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::rule::{
+    rule_setting, rule_settings, rule_table, Check, Cmp, Null, Partly, Rule,
+};
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
 use serde::{Deserialize, Serialize};
@@ -61,6 +64,31 @@ pub struct Params {
     /// scaled to keep the net's examples per weight (empty: only the nets' own).
     #[serde(default)]
     pub capacity_hidden: Vec<usize>,
+    /// The verdict's bars (ours).
+    pub rule: Fig12Rule,
+}
+
+/// The verdict's bars on the ratio of the largest to the smallest time-averaged error across
+/// the emulators of a variant (ours).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fig12Rule {
+    /// Held: every variant's ratio at most this.
+    pub held_ratio: f64,
+    /// Partly: every variant's ratio at most this.
+    pub partly_ratio: f64,
+}
+
+impl Params {
+    /// The null's ratio: an error proportional to the super-step, the longest emulator's
+    /// steps over the shortest's.
+    pub fn null_ratio(&self) -> f64 {
+        let n = |f: fn(usize, usize) -> usize| self.emulators.iter().copied().reduce(f);
+        match (n(usize::max), n(usize::min)) {
+            (Some(hi), Some(lo)) if lo > 0 => hi as f64 / lo as f64,
+            _ => f64::NAN,
+        }
+    }
 }
 
 /// Examples for `net` at `hidden` units: the net's own examples per weight.
@@ -101,6 +129,21 @@ impl Validate for Params {
                 "Fig. 12 covers pendulum_passive and pendulum_active",
             )?;
         }
+        let (held, partly) = (self.rule.held_ratio, self.rule.partly_ratio);
+        ensure(
+            held >= 1.0 && partly >= held,
+            "rule.held_ratio",
+            "need 1 <= held_ratio <= partly_ratio (a ratio of largest to smallest error)",
+        )?;
+        // Quick runs may keep one emulator: no ratio, no rule (the report says so).
+        let null = self.null_ratio();
+        ensure(
+            self.emulators.len() < 2 || partly < null,
+            "rule.partly_ratio",
+            format!(
+                "must be below {null}, what an error proportional to the super-step scores (else the check cannot fail)"
+            ),
+        )?;
         validate_training(&self.training)
     }
 }
@@ -259,8 +302,44 @@ impl Job for Params {
                 ]);
             }
         }
-        Ok(Tables::from([("error", table), ("capacity", capacity)]))
+        let rule = rule_table(&[
+            ("held_ratio", self.rule.held_ratio),
+            ("partly_ratio", self.rule.partly_ratio),
+            ("null_ratio", self.null_ratio()),
+        ]);
+        Ok(Tables::from([
+            ("error", table),
+            ("capacity", capacity),
+            ("rule", rule),
+        ]))
     }
+}
+
+/// The verdict's rule over each variant's largest/smallest error ratio: held needs every
+/// variant's at most `held_ratio`, partly at most `partly_ratio`; each check's null an error
+/// proportional to the super-step (`null_ratio`). `None` without ratios or when a bar is not
+/// below the null's ratio.
+pub fn fig12_rule(ratios: &[(&str, f64)], bars: &Fig12Rule, null_ratio: f64) -> Option<Rule> {
+    if ratios.is_empty() {
+        return None;
+    }
+    let null = || Null::new("an error proportional to the super-step", null_ratio);
+    let check = |v: &str, r: f64, bar: f64| {
+        Check::new(
+            format!("{v} pendulum: largest over smallest time-averaged error"),
+            r,
+            Cmp::AtMost,
+            bar,
+            null(),
+        )
+    };
+    let mut held: Vec<_> = ratios
+        .iter()
+        .map(|(v, r)| check(v, *r, bars.held_ratio))
+        .collect();
+    let partly: Vec<usize> = (held.len()..2 * held.len()).collect();
+    held.extend(ratios.iter().map(|(v, r)| check(v, *r, bars.partly_ratio)));
+    Rule::gated(vec![], held, Partly::All(partly))
 }
 
 /// Time-averaged error per (variant, emulator), in first-seen order.
@@ -370,8 +449,8 @@ impl Family for NaError {
                         Series::line(format!("{h} hidden"), pts, i).mark(Mark::LinePoints)
                     })
                     .collect::<Vec<Series>>();
-                // The verdict's limits: each N at its best capacity tried, within 1.5x (held)
-                // or 3x (partly) of the smallest such error.
+                // The verdict's limits: each N at its best capacity tried, within the held or
+                // the partly ratio of the smallest such error.
                 let mut best_per_n: Vec<(f64, f64)> = vec![];
                 for r in (0..cv.len()).filter(|&r| cv[r] == v) {
                     if let Ok(n) = ce[r].trim_start_matches('N').parse::<f64>() {
@@ -390,12 +469,20 @@ impl Family for NaError {
                 let mut series = series;
                 if smallest.is_finite() && x1 > x0 {
                     let k = series.len();
-                    for (f, what) in [(1.5, "held"), (3.0, "partly")] {
+                    let limits = [
+                        (rule_setting(tables, "held_ratio"), "held"),
+                        (rule_setting(tables, "partly_ratio"), "partly"),
+                    ];
+                    for (i, (f, what)) in limits.into_iter().enumerate() {
+                        let Some(f) = f else { continue };
                         series.push(
                             Series::line(
-                                format!("{what} limit: {f} x the smallest best-capacity error"),
+                                format!(
+                                    "{what} limit: {} x the smallest best-capacity error",
+                                    sig(f)
+                                ),
                                 vec![(x0, f * smallest), (x1, f * smallest)],
-                                k + usize::from(f > 2.0),
+                                k + i,
                             )
                             .mark(Mark::Dashed),
                         );
@@ -512,14 +599,28 @@ impl Family for NaError {
         } else {
             format!(" Diagnostic (ours, not the verdict): at the paper's Table 1 capacity, at the frames every emulator steps to (multiples of the longest super-step, so no error from interpolating between coarse steps): {}.", common.join(", "))
         };
-        // NaN ratios fail every comparison; no ratio at all is no evidence.
-        let within = |limit: f64| !ratios.is_empty() && ratios.iter().all(|r| r.1 <= limit);
-        let verdict = Verdict::graded(within(1.5), within(3.0));
+        let settings = rule_settings(dir)?;
+        let bars = Fig12Rule {
+            held_ratio: settings("held_ratio"),
+            partly_ratio: settings("partly_ratio"),
+        };
+        let rule = fig12_rule(&ratios, &bars, settings("null_ratio"));
+        let verdict = rule.as_ref().map_or(Verdict::NotAssessed, Rule::verdict);
+        let (lines, text) = rule.as_ref().map_or_else(
+            || {
+                (
+                    String::new(),
+                    " No rule: no variant has two emulators, or a bar is not below the null's ratio."
+                        .to_string(),
+                )
+            },
+            |r| (r.lines(), r.text()),
+        );
         Ok(Findings {
             ours: md,
             verdict,
             why: format!(
-                "Largest / smallest time-averaged error across the emulators, each at the best capacity tried: {} (held if <= 1.5 for every variant, partly if <= 3; thresholds ours). At the paper's Table 1 capacity for all three: {}. Extra capacities keep the net's examples per weight.{common_text}",
+                "Largest / smallest time-averaged error across the emulators, each at the best capacity tried: {}. Checks:{lines} Rule (bars ours, in the spec's [params.rule]): {text} At the paper's Table 1 capacity for all three: {}. Extra capacities keep the net's examples per weight.{common_text}",
                 ratios
                     .iter()
                     .map(|(v, r)| format!("{v} {}", sig(*r)))

@@ -52,7 +52,7 @@ mod params;
 mod report;
 
 pub use job::{converged_columns, DAGGER_COLUMNS};
-pub use params::{Converged, DaggerNet, MomentumDagger, Params};
+pub use params::{Converged, DaggerNet, Fig14Rule, MomentumDagger, Params};
 pub use report::{converges, iterations_to, LANDING_DISTANCE};
 
 use crate::experiment::output::Tables;

@@ -66,6 +66,17 @@ pub struct Params {
     /// default `tolerance`; left out of the serialized parameters when `tolerance`).
     #[serde(default, skip_serializing_if = "FinalWeights::is_tolerance")]
     pub final_weights: FinalWeights,
+    /// The verdict's bar (ours).
+    pub rule: Fig14Rule,
+}
+
+/// The verdict's bar (ours; [`super::report`] builds the rule).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fig14Rule {
+    /// Momentum must reach plain descent's final J within this fraction of plain's iterations
+    /// (plain itself takes all of them: a fraction of 1, its null).
+    pub iteration_ratio: f64,
 }
 
 /// `[params.converged]` (ours): beside the paper's budget, the compared descents (same η, α,
@@ -124,6 +135,12 @@ pub struct DaggerNet {
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         ensure(self.steps >= 1, "steps", "must be >= 1")?;
+        let r = self.rule.iteration_ratio;
+        ensure(
+            r > 0.0 && r < 1.0,
+            "rule.iteration_ratio",
+            "must be in (0, 1): plain descent itself takes all its iterations (1)",
+        )?;
         self.task.validate(NetModel::Lander.state_dim())?;
         positive("plain_eta", self.plain_eta)?;
         positive("momentum_eta", self.momentum_eta)?;
