@@ -422,6 +422,15 @@ impl Rule {
     }
 }
 
+/// What a report shows of a rule that may be missing: its verdict, its check lines and its
+/// text; without a rule, not assessed, no lines and `missing` (why there is none) as the text.
+pub fn shown(rule: Option<&Rule>, missing: &str) -> (Verdict, String, String) {
+    rule.map_or_else(
+        || (Verdict::NotAssessed, String::new(), missing.to_string()),
+        |r| (r.verdict(), r.lines(), r.text()),
+    )
+}
+
 /// The settings of an experiment's `rule` table (columns setting, value) in `dir`, by name;
 /// NaN for a setting the table lacks.
 pub fn rule_settings(dir: &Path) -> Result<impl Fn(&str) -> f64, Error> {

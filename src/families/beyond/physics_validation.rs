@@ -9,9 +9,11 @@
 
 use crate::experiment::output::{unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{all_positive, distinct, ensure, positive, ParamError, Validate};
-use crate::experiment::rule::{rule_settings, rule_table, Check, Cmp, Null, Outcome, Partly, Rule};
+use crate::experiment::rule::{
+    rule_settings, rule_table, shown, Check, Cmp, Null, Outcome, Partly, Rule,
+};
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::physics::acrobot::Acrobot;
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
@@ -625,14 +627,13 @@ impl Family for PhysicsValidation {
         md.push_str(&parts.join("; "));
         md.push('.');
         let rule = Rule::gated(vec![], held, Partly::Any);
-        let verdict = rule.as_ref().map_or(Verdict::NotAssessed, Rule::verdict);
         let (ok, total) = rule.as_ref().map_or((0, 0), |r| {
             let pass = r.held.iter().filter(|c| c.outcome() == Outcome::Pass);
             (pass.count(), r.held.len())
         });
-        let text = rule.as_ref().map_or_else(
-            || "No rule: the order tolerance is not below one order.".to_string(),
-            Rule::text,
+        let (verdict, _, text) = shown(
+            rule.as_ref(),
+            "No rule: the order tolerance is not below one order.",
         );
         Ok(Findings {
             ours: md,

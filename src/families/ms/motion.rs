@@ -13,11 +13,10 @@ use super::search::{learning_panel, Motion, MotionJob, Params};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Mark, Panel, Series};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, yes_no, Findings};
 use crate::experiment::resolve::{ParamError, Validate};
-use crate::experiment::rule::{rule_setting, rule_settings, rule_table, Rule};
+use crate::experiment::rule::{rule_setting, rule_settings, rule_table, shown};
 use crate::experiment::seeds::SeedMetric;
-use crate::experiment::stats::median_interval;
 use crate::experiment::{Error, Family, Job, RunContext};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -327,15 +326,20 @@ impl Family for MsMotion {
                 "| {} | {} | {} | {} |\n",
                 seed.map_or("–".into(), |s| s.to_string()),
                 sig(f.measure),
-                yes(f.held(&bars)),
-                yes(f.partly(&bars))
+                yes_no(Some(f.held(&bars))),
+                yes_no(Some(f.partly(&bars)))
             ));
             facts.push(f);
         }
         let rule = motion_rule(motion, &facts, &bars);
-        let verdict = rule.as_ref().map_or(Verdict::NotAssessed, Rule::verdict);
-        let all: Vec<f64> = facts.iter().map(|f| f.measure).collect();
-        let (med, lo, hi) = median_interval(&all, 1);
+        let (verdict, lines, text) = shown(rule.as_ref(), "");
+        // The lead quotes the rule's own first check: the median with its interval.
+        let (med, (lo, hi)) = rule
+            .as_ref()
+            .and_then(|r| r.held.first())
+            .map_or((f64::NAN, (f64::NAN, f64::NAN)), |c| {
+                (c.value, c.interval.unwrap_or((f64::NAN, f64::NAN)))
+            });
         let lead = match motion {
             Motion::Leap => format!(
                 "The spider travels a median {} m along +x over {} seeds [95% interval {}-{}] (1 m = its base width)",
@@ -359,9 +363,6 @@ impl Family for MsMotion {
                 sig(hi)
             ),
         };
-        let (lines, text) = rule
-            .as_ref()
-            .map_or_else(|| (String::new(), String::new()), |r| (r.lines(), r.text()));
         let conditions = match motion {
             Motion::Leap => "the held bar also needs the spider upright and off the ground at least once, the partly bar upright",
             Motion::Somersault => "the held bar also needs forward travel, on the ground at T and no rolling or turning beyond 45°, the partly bar forward travel",
@@ -374,15 +375,6 @@ impl Family for MsMotion {
                 "{lead}. Checks:{lines} Rule (bars ours, in the spec's [params.rule]; {conditions}): {text}"
             ),
         })
-    }
-}
-
-/// The report's yes/no.
-fn yes(b: bool) -> &'static str {
-    if b {
-        "yes"
-    } else {
-        "no"
     }
 }
 

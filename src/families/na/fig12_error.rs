@@ -26,10 +26,10 @@ use crate::emulator::dataset::ControlSignal;
 use crate::emulator::mlp::Mlp;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::rule::{
-    rule_setting, rule_settings, rule_table, Check, Cmp, Null, Partly, Rule,
+    rule_setting, rule_settings, rule_table, shown, Check, Cmp, Null, Partly, Rule,
 };
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
@@ -605,16 +605,9 @@ impl Family for NaError {
             partly_ratio: settings("partly_ratio"),
         };
         let rule = fig12_rule(&ratios, &bars, settings("null_ratio"));
-        let verdict = rule.as_ref().map_or(Verdict::NotAssessed, Rule::verdict);
-        let (lines, text) = rule.as_ref().map_or_else(
-            || {
-                (
-                    String::new(),
-                    " No rule: no variant has two emulators, or a bar is not below the null's ratio."
-                        .to_string(),
-                )
-            },
-            |r| (r.lines(), r.text()),
+        let (verdict, lines, text) = shown(
+            rule.as_ref(),
+            " No rule: no variant has two emulators, or a bar is not below the null's ratio.",
         );
         Ok(Findings {
             ours: md,

@@ -42,9 +42,9 @@ use crate::emulator::hierarchy::{
 use crate::emulator::Emulator;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
-use crate::experiment::rule::{rule_settings, rule_table, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::rule::{rule_settings, rule_table, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::na::fig13_control::{
     learn_and_replay, learn_swim, start_simulator_error, DolphinControl, Formulation, Task,
@@ -960,7 +960,10 @@ impl Family for NaTransforms {
             control_over_plain: settings("control_over_plain"),
         };
         let rule = ablation_rule(&rows, &thresholds);
-        let verdict = rule.as_ref().map_or(Verdict::NotAssessed, Rule::verdict);
+        let (verdict, lines, text) = shown(
+            rule.as_ref(),
+            " No rule: a check's null passes (a start already within tolerance).",
+        );
         let mut parts = Vec::new();
         let mut stuck = Vec::new();
         for t in &rows {
@@ -987,16 +990,6 @@ impl Family for NaTransforms {
                 stuck.join("; ")
             )
         };
-        let (lines, text) = rule.as_ref().map_or_else(
-            || {
-                (
-                    String::new(),
-                    " No rule: a check's null passes (a start already within tolerance)."
-                        .to_string(),
-                )
-            },
-            |r| (r.lines(), r.text()),
-        );
         Ok(Findings {
             ours: md,
             verdict,

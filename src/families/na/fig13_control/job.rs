@@ -390,7 +390,20 @@ pub fn start_simulator_error(
     net: &crate::emulator::Emulator,
     steps: usize,
 ) -> Result<f64, Error> {
-    let x0 = task.start_state();
+    with_start(task, net, |bptt, v0| {
+        bptt.rollout(&v0);
+        let at = task.task.horizon * task.net.model.state_dim();
+        simulator_error(task, bptt.controls(), &bptt.states()[at..], steps)
+    })
+}
+
+/// Runs `f` on the descent of a calibrated `task` through `net` (its objective, knots, bounds
+/// and start) and the task's initial knots, normalized: the set-up every headline shares.
+fn with_start<R>(
+    task: &Task,
+    net: &crate::emulator::Emulator,
+    f: impl FnOnce(&mut Bptt<'_, crate::emulator::Emulator>, Vec<f64>) -> R,
+) -> Result<R, Error> {
     let model = task.net.model;
     let knots = Knots {
         steps: task.task.horizon,
@@ -398,21 +411,27 @@ pub fn start_simulator_error(
         m: model.control_dim(),
     };
     let objective = task.objective();
-    let mut bptt = Bptt::new(net, &objective, knots, task.bounds(), &x0).map_err(other)?;
+    let mut bptt =
+        Bptt::new(net, &objective, knots, task.bounds(), &task.start_state()).map_err(other)?;
     let v0 = bptt.from_controls(&task.initial_knots());
-    bptt.rollout(&v0);
-    let at = task.task.horizon * model.state_dim();
-    let emu_final = bptt.states()[at..].to_vec();
+    Ok(f(&mut bptt, v0))
+}
+
+/// The final error of per-step `controls` replayed on `task`'s simulator from its start, each
+/// emulator step `steps` physical steps (`emu_final`, the emulator's final state, is what the
+/// replay is compared with in its record).
+fn simulator_error(task: &Task, controls: &[f64], emu_final: &[f64], steps: usize) -> f64 {
+    let model = task.net.model;
     let mut sim = model.simulator();
     let rep = replay(
         sim.as_mut(),
-        &x0,
-        bptt.controls(),
+        &task.start_state(),
+        controls,
         task.net.physical_dt,
         steps,
-        &emu_final,
+        emu_final,
     );
-    Ok(task.final_error(&rep.states[at..]))
+    task.final_error(&rep.states[task.task.horizon * model.state_dim()..])
 }
 
 /// Columns of `path.csv` (ours): every iterate of the headline's descent of a paper task
@@ -458,21 +477,11 @@ fn push_path<D: DifferentiableStep>(
     steps: usize,
     curvature_iterations: usize,
 ) {
-    let x0 = task.start_state();
-    let model = task.net.model;
-    let at = task.task.horizon * model.state_dim();
-    let mut sim = model.simulator();
+    let at = task.task.horizon * task.net.model.state_dim();
     for (iteration, objective, v) in iterates {
         bptt.rollout(v);
         let emu_final = bptt.states()[at..].to_vec();
-        let rep = replay(
-            sim.as_mut(),
-            &x0,
-            bptt.controls(),
-            task.net.physical_dt,
-            steps,
-            &emu_final,
-        );
+        let sim_error = simulator_error(task, bptt.controls(), &emu_final, steps);
         let ratio = bptt.curvature(v, curvature_iterations) / lambda;
         table.push(row![
             task.name.as_str(),
@@ -480,7 +489,7 @@ fn push_path<D: DifferentiableStep>(
             *iteration as i64,
             *objective,
             task.final_error(&emu_final),
-            task.final_error(&rep.states[at..]),
+            sim_error,
             ratio,
             stable_curvature_ratio(task.eta, task.alpha)
         ]);
@@ -496,77 +505,59 @@ pub(super) fn learn_and_replay_path(
     curvature_iterations: usize,
     path: Option<(&mut Table, u64)>,
 ) -> Result<Option<(HeadlineRun, Learned)>, Error> {
-    let x0 = task.start_state();
-    let model = task.net.model;
-    let n = model.state_dim();
-    let knots = Knots {
-        steps: task.task.horizon,
-        per_actuator: task.task.knots,
-        m: model.control_dim(),
-    };
-    let objective = task.objective();
-    let mut bptt = Bptt::new(net, &objective, knots, task.bounds(), &x0).map_err(other)?;
-    let v0 = bptt.from_controls(&task.initial_knots());
-    let lambda = bptt.curvature(&v0, curvature_iterations);
-    if !(lambda.is_finite() && lambda > 0.0) {
-        return Ok(None);
-    }
-    let descent = if task.alpha > 0.0 {
-        Descent::Momentum {
-            eta: task.eta,
-            alpha: task.alpha,
+    with_start(task, net, |bptt, v0| {
+        let lambda = bptt.curvature(&v0, curvature_iterations);
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return None;
         }
-    } else {
-        Descent::Plain { eta: task.eta }
-    };
-    let schedule = Schedule {
-        descent,
-        rule: task.step_rule,
-        scale: lambda,
-        curvature_iterations,
-    };
-    let mut iterates: Vec<Iterate> = Vec::new();
-    let record = path.is_some();
-    let (r, best) = learn_best(
-        &mut bptt,
-        &v0,
-        &schedule,
-        task.task.iterations,
-        &mut |t, v, _| {
-            if record {
-                iterates.push((t.iteration, t.objective, v.to_vec()));
+        let descent = if task.alpha > 0.0 {
+            Descent::Momentum {
+                eta: task.eta,
+                alpha: task.alpha,
             }
-            false
-        },
-    );
-    if let Some((table, seed)) = path {
-        push_path(
-            table,
-            task,
-            seed,
-            &mut bptt,
-            &iterates,
-            lambda,
-            steps,
+        } else {
+            Descent::Plain { eta: task.eta }
+        };
+        let schedule = Schedule {
+            descent,
+            rule: task.step_rule,
+            scale: lambda,
             curvature_iterations,
+        };
+        let mut iterates: Vec<Iterate> = Vec::new();
+        let record = path.is_some();
+        let (r, best) = learn_best(
+            bptt,
+            &v0,
+            &schedule,
+            task.task.iterations,
+            &mut |t, v, _| {
+                if record {
+                    iterates.push((t.iteration, t.objective, v.to_vec()));
+                }
+                false
+            },
         );
-    }
-    let emu_final = &best.states[task.task.horizon * n..];
-    let mut sim = model.simulator();
-    let rep = replay(
-        sim.as_mut(),
-        &x0,
-        &best.controls,
-        task.net.physical_dt,
-        steps,
-        emu_final,
-    );
-    let run = HeadlineRun {
-        emulator_error: task.final_error(emu_final),
-        simulator_error: task.final_error(&rep.states[task.task.horizon * n..]),
-        best_iteration: r.best_iteration,
-    };
-    Ok(Some((run, r)))
+        if let Some((table, seed)) = path {
+            push_path(
+                table,
+                task,
+                seed,
+                bptt,
+                &iterates,
+                lambda,
+                steps,
+                curvature_iterations,
+            );
+        }
+        let emu_final = &best.states[task.task.horizon * task.net.model.state_dim()..];
+        let run = HeadlineRun {
+            emulator_error: task.final_error(emu_final),
+            simulator_error: simulator_error(task, &best.controls, emu_final, steps),
+            best_iteration: r.best_iteration,
+        };
+        Some((run, r))
+    })
 }
 
 /// Runs [`learn_with`] and rolls the best-so-far iterate out again: the run and the best

@@ -3,7 +3,7 @@
 
 use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::rule::{rule_settings, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::rule::{rule_settings, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error};
 use std::path::Path;
 
@@ -138,10 +138,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         ],
         Partly::All(vec![0, 1]),
     );
-    let verdict = rule.as_ref().map_or(Verdict::NotAssessed, Rule::verdict);
-    let (lines, text) = rule
-        .as_ref()
-        .map_or_else(|| (String::new(), String::new()), |r| (r.lines(), r.text()));
+    let (verdict, lines, text) = shown(rule.as_ref(), "");
     // Momentum's J 20 iterations before its end (its pace when it stops).
     let tail_start = mom.2[mom.2.len().saturating_sub(21)];
     let fall = 100.0 * (1.0 - mom_end / tail_start);
