@@ -71,8 +71,8 @@ fn refused(out: &Output, dir: &Path, needles: &[&str]) {
 /// a step that does not divide the duration, a truck with Euler written with --out). The
 /// pendulum's file was captured again on 2026-11-28 from the streamed verb when its simulator's
 /// trigonometry moved to `crate::portable` (the last digits of 6 values changed) and again on
-/// 2026-12-02 when the pendulum's elbows got their friction of 1 N·m·s/rad (a deliberate change
-/// to the model); the acrobot's and the truck's still match their first capture.
+/// 2026-12-02 when the pendulum's elbows got their friction of 1 N·m·s/rad and its pivot
+/// 0.2 N·m·s/rad (deliberate changes to the model); the acrobot's and the truck's still match their first capture.
 #[test]
 fn simulate_output_is_byte_identical_to_the_unstreamed_verb() {
     let d = tempfile::tempdir().unwrap();
