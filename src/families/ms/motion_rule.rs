@@ -18,7 +18,7 @@
 use super::search::Motion;
 use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::resolve::{ensure, ParamError};
-use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
+use crate::experiment::rule::{majority, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::{median, median_interval};
 use crate::experiment::Error;
 use serde::{Deserialize, Serialize};
@@ -118,11 +118,6 @@ impl MotionFacts {
 
 /// The bootstrap stream of the intervals (any fixed value: the report is the same everywhere).
 const BOOTSTRAP_SEED: u64 = 1;
-
-/// The fewest seeds of `k` that are a strict majority.
-pub fn majority(k: usize) -> usize {
-    k / 2 + 1
-}
 
 /// The rule over the seeds' `facts` (module docs); `None` without seeds.
 pub fn motion_rule(motion: Motion, facts: &[MotionFacts], r: &MotionRule) -> Option<Rule> {

@@ -1004,6 +1004,7 @@ impl Family for NaTransforms {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::experiment::report::Verdict;
 
     const RULE: AblationRule = AblationRule {
         operator_ratio: 0.95,

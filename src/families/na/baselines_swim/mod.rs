@@ -146,6 +146,7 @@ impl Params {
             net_seeds: vec![],
             net_seeds_ours: vec![],
             net_lines: vec![],
+            rule: None,
         }
     }
 }

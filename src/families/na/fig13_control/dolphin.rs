@@ -169,7 +169,8 @@ impl Params {
             (ref_d - emu_d).max(0.0),
             (ref_d - sim_d).max(0.0),
             r.best_iteration as i64,
-            Formulation::Paper.name()
+            Formulation::Paper.name(),
+            f64::NAN
         ]);
         if let Some(ours) = &d.ours_swim {
             // Our earlier swim (4 s), learned the same way through the same global net, scored
@@ -207,7 +208,8 @@ impl Params {
                 (wave - ours.distance(&best4.states)).max(0.0),
                 (wave - ours.distance(&sim4)).max(0.0),
                 r4.best_iteration as i64,
-                Formulation::Ours.name()
+                Formulation::Ours.name(),
+                f64::NAN
             ]);
         }
         // Trajectory: the mean segment centroid (s0, s1, s2 = x, y, z).

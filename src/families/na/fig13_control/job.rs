@@ -13,6 +13,7 @@ use crate::control::bptt::{
 use crate::control::conditioning::{terminal_spectrum, weighting_bound};
 use crate::emulator::catalog::{BuildSpec, NetSpec};
 use crate::experiment::output::{Table, Tables};
+use crate::experiment::rule::rule_table;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
 use crate::physics::dolphin::N_POS;
@@ -49,6 +50,7 @@ impl Job for Params {
             "simulator_error",
             "best_iteration",
             "formulation",
+            "start_simulator_error",
         ]);
         let mut sweep_t = Table::new(&SWEEP_COLUMNS);
         let mut physics_t = Table::new(&SWEEP_COLUMNS);
@@ -276,7 +278,8 @@ impl Job for Params {
                 run.emulator_error,
                 run.simulator_error,
                 r.best_iteration as i64,
-                task.formulation.name()
+                task.formulation.name(),
+                start_simulator_error(task, &trained.emulator, self.steps)?
             ]);
             if self.over_net_seeds(task) {
                 run.push(&mut seeds_t, task, ctx.seed);
@@ -355,6 +358,15 @@ impl Job for Params {
             ("controls", controls_t),
             ("goal", goal),
             ("states", states_t),
+            (
+                "rule",
+                rule_table(
+                    &self
+                        .rule
+                        .as_ref()
+                        .map_or_else(Vec::new, |r| r.settings().to_vec()),
+                ),
+            ),
         ]))
     }
 }

@@ -57,7 +57,7 @@ pub use job::{
     learn_and_replay, learn_best, stable_curvature_ratio, start_simulator_error, BestRollout,
     PATH_COLUMNS,
 };
-pub use params::{DolphinControl, Params, Sweep};
+pub use params::{DolphinControl, Fig13Rule, Params, Sweep};
 pub use task::{Calibration, ControlUnits, FinalWeights, Formulation, Task};
 
 use crate::experiment::output::Tables;

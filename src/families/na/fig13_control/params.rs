@@ -98,6 +98,46 @@ pub struct Params {
     /// noise), so a before/after table shows which change mattered. Reported, never counted.
     #[serde(default)]
     pub net_lines: Vec<NetVariant>,
+    /// The verdict's thresholds for the dolphin (ours; the control tasks' goal is their
+    /// tolerance, a final error of at most 1). Absent in the parameters other experiments
+    /// build to key their DAgger nets, which are never judged.
+    #[serde(default)]
+    pub rule: Option<Fig13Rule>,
+}
+
+/// The dolphin's goal in the verdict (ours; the paper says "learns to swim forward with a
+/// natural, periodic swimming pattern").
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fig13Rule {
+    /// The learned swim must cover at least this fraction of the hand-made wave's distance on
+    /// the simulator, on the emulator and on the simulator alike.
+    pub wave_fraction: f64,
+    /// Its muscle pattern's periodicity must be at least this (1: a sinusoid, 0: noise or
+    /// constant controls).
+    pub periodicity: f64,
+}
+
+impl Fig13Rule {
+    /// Both in (0, 1]: 0 is what a dolphin at rest scores on each.
+    fn validate(&self) -> Result<(), ParamError> {
+        for (key, v) in self.settings() {
+            ensure(
+                v > 0.0 && v <= 1.0,
+                &format!("rule.{key}"),
+                "must be in (0, 1]: 0 is what a dolphin at rest scores",
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The `rule` table's settings.
+    pub fn settings(&self) -> [(&'static str, f64); 2] {
+        [
+            ("wave_fraction", self.wave_fraction),
+            ("periodicity", self.periodicity),
+        ]
+    }
 }
 
 /// The dolphin swim task of Fig. 13(d) ([`crate::families::na::swim`]).
@@ -209,6 +249,9 @@ impl Validate for Params {
             )?;
         }
         validate_variants(&self.net_lines, "net_lines")?;
+        if let Some(r) = &self.rule {
+            r.validate()?;
+        }
         let nets: Vec<NetSpec> = self.tasks.iter().map(|t| t.net.clone()).collect();
         validate_nets(&nets, self.example_scale)?;
         if let Some(d) = &self.dolphin {

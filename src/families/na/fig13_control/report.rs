@@ -1,11 +1,101 @@
 //! Report of `na_fig13_control`: the verdict (tasks at their goal), the table of every task,
 //! and the sentences on the sweeps, the conditioning study and the best weights.
 
-use super::{dagger, dolphin_dagger};
+use super::{dagger, dolphin_dagger, Fig13Rule};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, Findings};
+use crate::experiment::rule::{
+    majority, rule_settings, shown, Check, Cmp, Null, Outcome, Partly, Rule,
+};
 use crate::experiment::Error;
 use std::path::Path;
+
+/// What the verdict reads of one task of the paper's formulation.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum TaskFacts {
+    /// A control task (pendulum, truck, lander).
+    Control {
+        /// The task.
+        name: String,
+        /// Net seeds whose learned controls reach the goal on the emulator and end within
+        /// tolerance on the simulator.
+        both: usize,
+        /// Net seeds run.
+        seeds: usize,
+        /// The final error of the task's initial controls replayed on the simulator.
+        start_error: f64,
+    },
+    /// The dolphin's swim.
+    Swim {
+        /// The learned swim's distance on the emulator over the hand-made wave's on the
+        /// simulator.
+        emulator: f64,
+        /// The same on the simulator.
+        simulator: f64,
+        /// The periodicity of its muscle pattern.
+        periodicity: f64,
+    },
+}
+
+/// The verdict's rule: per control task, a strict majority of its net seeds at the goal on
+/// both (null: the task's initial controls, at the goal on none unless they already end within
+/// tolerance); for the dolphin, the learned swim's distance over the wave's on both substrates
+/// and its periodicity at `r`'s bars (null: a dolphin at rest). Held when every task passes,
+/// partly when some task passes all of its checks. `None` when a null passes.
+pub(super) fn fig13_rule(tasks: &[TaskFacts], r: &Fig13Rule) -> Option<Rule> {
+    let mut held = Vec::new();
+    let mut groups = Vec::new();
+    for t in tasks {
+        match t {
+            TaskFacts::Control {
+                name,
+                both,
+                seeds,
+                start_error,
+            } => {
+                groups.push(vec![held.len()]);
+                let null = if *start_error <= 1.0 { *seeds } else { 0 };
+                held.push(Check::new(
+                    format!("{name}: net seeds of {seeds} whose learned controls reach the goal on the emulator within the paper's iterations and end within tolerance on the simulator"),
+                    *both as f64,
+                    Cmp::AtLeast,
+                    majority(*seeds) as f64,
+                    Null::new(
+                        format!("its initial controls (final error {} on the simulator)", sig(*start_error)),
+                        null as f64,
+                    ),
+                ));
+            }
+            TaskFacts::Swim {
+                emulator,
+                simulator,
+                periodicity,
+            } => {
+                groups.push(vec![held.len(), held.len() + 1]);
+                let distance = if emulator.is_nan() || simulator.is_nan() {
+                    f64::NAN
+                } else {
+                    emulator.min(*simulator)
+                };
+                held.push(Check::new(
+                    "dolphin: the learned swim's distance over the hand-made wave's, the smaller of emulator and simulator",
+                    distance,
+                    Cmp::AtLeast,
+                    r.wave_fraction,
+                    Null::new("a dolphin at rest (0 m)", 0.0),
+                ));
+                held.push(Check::new(
+                    "dolphin: the periodicity of its learned muscle pattern",
+                    *periodicity,
+                    Cmp::AtLeast,
+                    r.periodicity,
+                    Null::new("constant controls", 0.0),
+                ));
+            }
+        }
+    }
+    Rule::gated(vec![], held, Partly::AnyOf(groups))
+}
 
 /// The findings ([`crate::experiment::Family::report`]).
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
@@ -57,21 +147,34 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     // run): its learned knots swim at least half as far as the hand-made wave on the
     // simulator (shortfall <= half the wave's distance), on the emulator and on the simulator
     // each, with a periodic muscle pattern (periodicity >= 0.5, ours, as the DAgger line's).
-    let (wave, learned_periodicity) = match read_csv(&dir.join("swim.csv")) {
-        Ok(sw) => {
-            let (src, dist, per) = (
-                df_str(&sw, "source")?,
-                df_f64(&sw, "distance_m")?,
-                df_f64(&sw, "periodicity")?,
-            );
-            let at = |name: &str| (0..src.len()).find(|&r| src[r] == name);
-            (
-                at("reference_wave_simulator").map_or(f64::NAN, |r| dist[r]),
-                at("emulator").map_or(f64::NAN, |r| per[r]),
-            )
-        }
-        Err(_) => (f64::NAN, f64::NAN),
+    let (wave, emu_distance, sim_distance, learned_periodicity) =
+        match read_csv(&dir.join("swim.csv")) {
+            Ok(sw) => {
+                let (src, dist, per) = (
+                    df_str(&sw, "source")?,
+                    df_f64(&sw, "distance_m")?,
+                    df_f64(&sw, "periodicity")?,
+                );
+                let at = |name: &str| (0..src.len()).find(|&r| src[r] == name);
+                let d = |name: &str| at(name).map_or(f64::NAN, |r| dist[r]);
+                (
+                    d("reference_wave_simulator"),
+                    d("emulator"),
+                    d("simulator"),
+                    at("emulator").map_or(f64::NAN, |r| per[r]),
+                )
+            }
+            Err(_) => (f64::NAN, f64::NAN, f64::NAN, f64::NAN),
+        };
+    let settings = rule_settings(dir)?;
+    let bars = Fig13Rule {
+        wave_fraction: settings("wave_fraction"),
+        periodicity: settings("periodicity"),
     };
+    // Each task's initial controls replayed on the simulator (older runs have no column).
+    let start_error =
+        df_f64(&fin, "start_simulator_error").unwrap_or_else(|_| vec![f64::NAN; ft.len()]);
+    let mut facts = Vec::new();
     // The headline over several Table 1 net seeds (spec, issue 54, written 2026-11-28 before
     // the first run with several): a task of the paper's formulation counts when a strict
     // majority of its net seeds reach the goal on both; where net_seeds.csv has one seed for a task
@@ -79,7 +182,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let seeds = super::seeds::seed_counts(dir)?.unwrap_or_default();
     let by_seeds = |name: &str| seeds.iter().find(|c| c.task == name && c.seeds > 1);
     let mut seed_lines = Vec::new();
-    let (mut reached, mut reached_sim, mut both, mut headline) = (0, 0, 0, 0);
+    let (mut reached, mut reached_sim, mut headline) = (0, 0, 0);
     let mut ours = Vec::new();
     // Paper tasks at their goal on the emulator but not on the simulator: the net's error.
     let mut net_misses = Vec::new();
@@ -100,7 +203,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         // The dolphin's error is its shortfall (m) from the reference wave's distance.
         let ok = |e: f64| {
             if name == "dolphin" {
-                dolphin_at_goal(e, wave, learned_periodicity)
+                dolphin_at_goal(e, wave, learned_periodicity, &bars)
             } else {
                 e <= 1.0
             }
@@ -110,20 +213,34 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             reached += usize::from(ok(ee[r]));
             reached_sim += usize::from(ok(se[r]));
             let this_net = ok(ee[r]) && ok(se[r]);
-            both += usize::from(match by_seeds(name) {
-                Some(c) => {
-                    seed_lines.push(format!(
-                        "{name} {} of {} (on the emulator alone {} of {}; this run's net {})",
-                        c.both,
-                        c.seeds,
-                        c.emulator,
-                        c.seeds,
-                        if this_net { "at its goal" } else { "not" }
-                    ));
-                    2 * c.both > c.seeds
-                }
-                None => this_net,
-            });
+            if name == "dolphin" {
+                facts.push(TaskFacts::Swim {
+                    emulator: emu_distance / wave,
+                    simulator: sim_distance / wave,
+                    periodicity: learned_periodicity,
+                });
+            } else {
+                let (both, seeds) = match by_seeds(name) {
+                    Some(c) => {
+                        seed_lines.push(format!(
+                            "{name} {} of {} (on the emulator alone {} of {}; this run's net {})",
+                            c.both,
+                            c.seeds,
+                            c.emulator,
+                            c.seeds,
+                            if this_net { "at its goal" } else { "not" }
+                        ));
+                        (c.both, c.seeds)
+                    }
+                    None => (usize::from(this_net), 1),
+                };
+                facts.push(TaskFacts::Control {
+                    name: name.clone(),
+                    both,
+                    seeds,
+                    start_error: start_error[r],
+                });
+            }
             if ok(ee[r]) && !ok(se[r]) && name != "dolphin" {
                 net_misses.push(format!("{name} ({} vs {})", sig(ee[r]), sig(se[r])));
             }
@@ -153,7 +270,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         String::new()
     } else {
         format!(
-            " Over the Table 1 net seeds (net_seeds.csv; the same headline learned through the net trained under each seed, each calibrated through its own net), net seeds at the goal on both: {}; a task counts when a strict majority does.",
+            " Over the Table 1 net seeds (net_seeds.csv; the same headline learned through the net trained under each seed, each calibrated through its own net), net seeds at the goal on both: {}.",
             seed_lines.join(", ")
         )
     };
@@ -176,10 +293,30 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     .filter_map(|(f, title)| sweep_summary(&dir.join(f), title).transpose())
     .collect::<Result<Vec<_>, _>>()?
     .concat();
-    // The rule (spec, issue 54): a task of the paper's formulation counts when it reaches its
-    // goal on the emulator within the paper's iteration count AND its controls replayed on the
-    // simulator end within tolerance, for a strict majority of its net seeds (net_seeds.csv).
-    let verdict = Verdict::from_counts(both, headline);
+    let rule = fig13_rule(&facts, &bars);
+    let (verdict, lines, text) = shown(
+        rule.as_ref(),
+        " No rule: a task's initial controls already end within tolerance.",
+    );
+    // Tasks at their goal: those whose checks all pass.
+    let both = rule.as_ref().map_or(0, |r| {
+        let mut at = 0;
+        let mut i = 0;
+        for f in &facts {
+            let k = if matches!(f, TaskFacts::Swim { .. }) {
+                2
+            } else {
+                1
+            };
+            at += usize::from(
+                r.held[i..i + k]
+                    .iter()
+                    .all(|c| c.outcome() == Outcome::Pass),
+            );
+            i += k;
+        }
+        at
+    });
     md.push_str(&super::seeds::table_md(dir)?);
     md.push_str(&super::seeds::lines_md(dir)?);
     let (path_md, path_why) = super::seeds::path_md(dir)?;
@@ -198,9 +335,8 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         ours: md,
         verdict,
         why: format!(
-            "{both} of {headline} tasks of the paper's formulation reach their goal on the emulator within the paper's iteration counts and end within tolerance when their controls are replayed on the physical simulator, through a strict majority of their Table 1 net seeds where several ran (through this run's nets: {reached} reach it on the emulator, {reached_sim} on the simulator; every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator (0: swims at least as far); it reaches its goal when it swims at least half as far as the wave (shortfall <= {} m) with a periodic muscle pattern (periodicity >= {}, ours; learned: {}).{seed_lines}{path_why}{net_misses}{ours}{swim}{sweeps}{dagger_why}",
-            sig(0.5 * wave),
-            dolphin_dagger::PERIODIC,
+            "{both} of {headline} tasks of the paper's formulation reach their goal on the emulator within the paper's iteration counts and end within tolerance when their controls are replayed on the physical simulator, through a strict majority of their Table 1 net seeds where several ran (through this run's nets: {reached} reach it on the emulator, {reached_sim} on the simulator; every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Checks:{lines} Rule (the dolphin's bars ours, in the spec's [params.rule]): {text} Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator ({} m; 0: swims at least as far), its learned pattern's periodicity {}.{seed_lines}{path_why}{net_misses}{ours}{swim}{sweeps}{dagger_why}",
+            sig(wave),
             sig(learned_periodicity)
         ),
     })
@@ -614,24 +750,71 @@ fn best_weights_summary(dir: &Path, cond_task: &[String], paper: &[f64]) -> Resu
     })
 }
 
-/// The dolphin's goal: a shortfall from the hand-made wave's distance `wave` of at most half of
-/// it, with a periodic muscle pattern (`periodicity` >= [`dolphin_dagger::PERIODIC`]).
-pub(super) fn dolphin_at_goal(shortfall: f64, wave: f64, periodicity: f64) -> bool {
-    shortfall <= (1.0 - dolphin_dagger::HALF_WAVE) * wave && periodicity >= dolphin_dagger::PERIODIC
+/// The dolphin's goal: a shortfall from the hand-made wave's distance `wave` of at most
+/// (1 - `r.wave_fraction`) of it, with a periodic muscle pattern (`periodicity` at least
+/// `r.periodicity`).
+pub(super) fn dolphin_at_goal(shortfall: f64, wave: f64, periodicity: f64, r: &Fig13Rule) -> bool {
+    shortfall <= (1.0 - r.wave_fraction) * wave && periodicity >= r.periodicity
 }
 
 #[cfg(test)]
 mod tests {
-    use super::dolphin_at_goal;
+    use super::*;
+    use crate::experiment::report::Verdict;
+
+    const BARS: Fig13Rule = Fig13Rule {
+        wave_fraction: 0.5,
+        periodicity: 0.5,
+    };
 
     /// Half the wave's distance and a periodic pattern, both needed; unknown values fail.
     #[test]
     fn the_dolphins_goal_needs_half_the_wave_and_a_periodic_pattern() {
-        assert!(dolphin_at_goal(0.0, 6.0, 0.9));
-        assert!(dolphin_at_goal(3.0, 6.0, 0.5));
-        assert!(!dolphin_at_goal(3.01, 6.0, 0.9));
-        assert!(!dolphin_at_goal(1.0, 6.0, 0.49));
-        assert!(!dolphin_at_goal(1.0, f64::NAN, 0.9));
-        assert!(!dolphin_at_goal(1.0, 6.0, f64::NAN));
+        let at = |s, w, p| dolphin_at_goal(s, w, p, &BARS);
+        assert!(at(0.0, 6.0, 0.9));
+        assert!(at(3.0, 6.0, 0.5));
+        assert!(!at(3.01, 6.0, 0.9));
+        assert!(!at(1.0, 6.0, 0.49));
+        assert!(!at(1.0, f64::NAN, 0.9));
+        assert!(!at(1.0, 6.0, f64::NAN));
+    }
+
+    fn control(name: &str, both: usize, start_error: f64) -> TaskFacts {
+        TaskFacts::Control {
+            name: name.into(),
+            both,
+            seeds: 5,
+            start_error,
+        }
+    }
+
+    /// Held needs every task; partly some task with all of its checks (the dolphin's two
+    /// together); a task whose initial controls already end within tolerance leaves no rule.
+    #[test]
+    fn the_rule_counts_a_task_by_a_strict_majority_of_its_net_seeds() {
+        let swim = |d: f64, p: f64| TaskFacts::Swim {
+            emulator: d,
+            simulator: d,
+            periodicity: p,
+        };
+        let verdict = |facts: &[TaskFacts]| fig13_rule(facts, &BARS).map(|r| r.verdict());
+        let good = [
+            control("pendulum", 3, 12.0),
+            control("truck", 5, 4.9),
+            swim(0.6, 0.7),
+        ];
+        assert_eq!(verdict(&good), Some(Verdict::Held));
+        // Two of five seeds is no majority.
+        let two = [control("pendulum", 2, 12.0), control("truck", 5, 4.9)];
+        assert_eq!(verdict(&two), Some(Verdict::Partly));
+        // A dolphin that swims far without a periodic pattern is not at its goal.
+        let aperiodic = [control("pendulum", 0, 12.0), swim(0.9, 0.3)];
+        assert_eq!(verdict(&aperiodic), Some(Verdict::NotHeld));
+        assert_eq!(
+            verdict(&[control("pendulum", 0, 12.0), swim(0.6, 0.6)]),
+            Some(Verdict::Partly)
+        );
+        // Doing nothing would already be at the goal: the check cannot be written.
+        assert_eq!(verdict(&[control("truck", 5, 0.8)]), None);
     }
 }

@@ -299,6 +299,7 @@ impl Params {
             net_seeds: vec![],
             net_seeds_ours: vec![],
             net_lines: vec![],
+            rule: None,
         };
         (p, control)
     }

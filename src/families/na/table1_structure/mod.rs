@@ -87,6 +87,54 @@ pub struct Params {
     /// `paper`).
     #[serde(default)]
     pub variants: Vec<NetVariant>,
+    /// The verdict's thresholds (ours; the paper states no number).
+    pub rule: Table1Rule,
+}
+
+/// The verdict's thresholds ([`report::table1_rule`]; ours, the paper states no number). A net
+/// passes when it has learned, is not overfitted, is faithful over 40 super-steps and, for a
+/// catalog net, is faithful on the control tasks' inputs.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Table1Rule {
+    /// Learned: held-out one-step MSE below this fraction of the normalized state-change
+    /// variance (1 is what predicting the mean scores).
+    pub heldout_max: f64,
+    /// Not overfitted: held-out MSE at most this much above training (an absolute gap).
+    pub overfit_gap: f64,
+    /// Faithful: mean 40-step rollout error below this fraction of the state variance, where
+    /// measured.
+    pub rollout_max: f64,
+    /// Faithful on the tasks' inputs: every toleranced quantity's median 40-step open-loop
+    /// error on typical manoeuvres within this many of its Fig. 13 task's tolerances.
+    pub regime_rollout_max: f64,
+}
+
+impl Table1Rule {
+    fn validate(&self) -> Result<(), ParamError> {
+        for (key, v) in [
+            ("heldout_max", self.heldout_max),
+            ("rollout_max", self.rollout_max),
+        ] {
+            ensure(
+                v > 0.0 && v < 1.0,
+                &format!("rule.{key}"),
+                "must be in (0, 1): 1 is what predicting the mean scores",
+            )?;
+        }
+        positive("rule.overfit_gap", self.overfit_gap)?;
+        positive("rule.regime_rollout_max", self.regime_rollout_max)
+    }
+
+    /// The `rule` table's settings.
+    pub fn settings(&self) -> [(&'static str, f64); 4] {
+        [
+            ("heldout_max", self.heldout_max),
+            ("overfit_gap", self.overfit_gap),
+            ("rollout_max", self.rollout_max),
+            ("regime_rollout_max", self.regime_rollout_max),
+        ]
+    }
 }
 
 /// The tolerances of one catalog net's regime fidelity: the Fig. 13 task's final tolerance per
@@ -338,6 +386,7 @@ pub fn validate_nets(nets: &[NetSpec], scale: f64) -> Result<(), ParamError> {
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         ensure(self.steps >= 1, "steps", "must be >= 1")?;
+        self.rule.validate()?;
         validate_nets(&self.nets, self.example_scale)?;
         if let Some(d) = &self.dolphin {
             d.validate("dolphin", self.example_scale)?;

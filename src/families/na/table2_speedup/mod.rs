@@ -82,6 +82,38 @@ pub struct Params {
     /// The dolphin rows: N50 and N50 with regularization steps after each emulation step.
     #[serde(default)]
     pub dolphin: Option<TimedDolphin>,
+    /// The verdict's thresholds (ours, from the paper's words).
+    pub rule: Table2Rule,
+}
+
+/// The verdict's thresholds ([`report::table2_rule`]; ours, from the paper's words: N100
+/// "50-100 times faster ... and more", every emulator "one to two orders of magnitude").
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Table2Rule {
+    /// The slowest N100 speedup must be at least this.
+    pub n100_min: f64,
+    /// The slowest rigid-body N50 speedup must be at least this.
+    pub n50_min: f64,
+}
+
+impl Table2Rule {
+    /// Both above 1, what the physical simulator itself scores.
+    fn validate(&self) -> Result<(), ParamError> {
+        for (key, v) in self.settings() {
+            ensure(
+                v > 1.0,
+                &format!("rule.{key}"),
+                "must be above 1: the physical simulator itself scores 1",
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The `rule` table's settings.
+    pub fn settings(&self) -> [(&'static str, f64); 2] {
+        [("n100_min", self.n100_min), ("n50_min", self.n50_min)]
+    }
 }
 
 /// The dolphin rows of Table 2.
@@ -106,6 +138,7 @@ impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         ensure(self.physical_steps >= 1, "physical_steps", "must be >= 1")?;
         ensure(self.repeats >= 1, "repeats", "must be >= 1")?;
+        self.rule.validate()?;
         let nets: Vec<NetSpec> = self.models.iter().map(|m| m.net.clone()).collect();
         validate_nets(&nets, self.example_scale)?;
         for (i, m) in self.models.iter().enumerate() {
