@@ -466,8 +466,9 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     );
     assert_eq!(
         header(&out.join("final.csv")),
-        "task,emulator_error,simulator_error,best_iteration,formulation"
+        "task,emulator_error,simulator_error,best_iteration,formulation,start_simulator_error"
     );
+    assert_eq!(header(&out.join("rule.csv")), "setting,value");
     // The learned controls, one row per emulator step of each catalog task, within the
     // control box (pendulum +-(2.5, 1.5, 0.5) N m, truck +-(3, 0.5), lander thrust <= 2 hover).
     assert_eq!(header(&out.join("controls.csv")), "task,step,t,u0,u1,u2,u3");
