@@ -735,7 +735,6 @@ mod literal_scan {
         "src/families/ms/fig6_learning_plot.rs",
         "src/families/na/baselines_swim/report.rs",
         "src/families/na/fig14_momentum/report.rs",
-        "src/families/na/regularization.rs",
         "src/families/na/training_methods.rs",
     ];
 

@@ -25,8 +25,9 @@ use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy::{self, Regularizer, Schedule};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::rule::{rule_settings, rule_table, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
 use crate::physics::{check_finite, Dynamics};
@@ -70,11 +71,87 @@ pub struct Params {
     pub regularization: Regularizer,
     /// The schedules compared.
     pub schedules: Vec<NamedSchedule>,
+    /// The verdict's thresholds (ours).
+    pub rule: RegularizationRule,
+}
+
+/// The verdict's thresholds ([`regularization_rule`]; ours, the paper states no number).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegularizationRule {
+    /// The emulation drifts: its final shape error without regularization is at least this
+    /// many times the simulator's.
+    pub drift_ratio: f64,
+    /// A few steps after each emulation step fix it: their mean shape error is below this
+    /// fraction of the unregularized one.
+    pub fix_ratio: f64,
+}
+
+impl RegularizationRule {
+    fn validate(&self) -> Result<(), ParamError> {
+        ensure(
+            self.drift_ratio > 1.0,
+            "rule.drift_ratio",
+            "must be above 1: the simulator itself scores 1",
+        )?;
+        ensure(
+            self.fix_ratio > 0.0 && self.fix_ratio < 1.0,
+            "rule.fix_ratio",
+            "must be in (0, 1): no regularization scores 1",
+        )
+    }
+
+    /// The `rule` table's settings.
+    fn settings(&self) -> [(&'static str, f64); 2] {
+        [
+            ("drift_ratio", self.drift_ratio),
+            ("fix_ratio", self.fix_ratio),
+        ]
+    }
+}
+
+/// The verdict's rule on the final shape error without regularization over the simulator's
+/// (`drift`), the few-steps schedule's mean shape error over the unregularized one (`fix`) and
+/// its roughness over the same budget spent rarely (`rough`): (a) drift above `r.drift_ratio`
+/// (null: the simulator itself, 1), (b) fix below `r.fix_ratio` (null: no
+/// regularization, 1), (c) smoother than the rare bursts (null: the rare schedule itself, 1).
+/// Held when all pass; partly when (a) and (b) do, or (c).
+pub fn regularization_rule(
+    drift: f64,
+    fix: f64,
+    rough: f64,
+    r: &RegularizationRule,
+) -> Option<Rule> {
+    let held = vec![
+        Check::new(
+            "final shape error without regularization over the simulator's",
+            drift,
+            Cmp::Above,
+            r.drift_ratio,
+            Null::new("the simulator itself", 1.0),
+        ),
+        Check::new(
+            "mean shape error with a few steps after each emulation step over none",
+            fix,
+            Cmp::Below,
+            r.fix_ratio,
+            Null::new("no regularization", 1.0),
+        ),
+        Check::new(
+            "roughness of those steps over the same budget spent rarely",
+            rough,
+            Cmp::Below,
+            1.0,
+            Null::new("the rare schedule itself", 1.0),
+        ),
+    ];
+    Rule::gated(vec![], held, Partly::AnyOf(vec![vec![0, 1], vec![2]]))
 }
 
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         self.nets.validate("nets", self.example_scale)?;
+        self.rule.validate()?;
         ensure(self.steps >= 1, "steps", "must be >= 1")?;
         positive("example_scale", self.example_scale)?;
         positive("duration_s", self.duration_s)?;
@@ -239,7 +316,11 @@ impl Job for Params {
             pb.inc(1);
         }
         pb.finish_and_clear();
-        Ok(Tables::from([("shape_error", shape), ("cost", cost)]))
+        Ok(Tables::from([
+            ("shape_error", shape),
+            ("cost", cost),
+            ("rule", rule_table(&self.rule.settings())),
+        ]))
     }
 }
 
@@ -371,14 +452,22 @@ impl Family for NaRegularization {
         let rare = find(&|r| every[r] > 1.0 && steps[r] > 0.0);
         let (verdict, why) = match (sim, none, few, rare) {
             (Some(s), Some(z), Some(f), Some(r)) => {
-                let drift = final_e[z] > 2.0 * final_e[s];
-                let fixes = mean_e[f] < 0.7 * mean_e[z];
-                let smoother = rough[f] < rough[r];
-                let verdict = Verdict::from_checks(&[drift && fixes, smoother]);
+                let settings = rule_settings(dir)?;
+                let bars = RegularizationRule {
+                    drift_ratio: settings("drift_ratio"),
+                    fix_ratio: settings("fix_ratio"),
+                };
+                let rule = regularization_rule(
+                    final_e[z] / final_e[s],
+                    mean_e[f] / mean_e[z],
+                    rough[f] / rough[r],
+                    &bars,
+                );
+                let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
                 (
                     verdict,
                     format!(
-                        "Without regularization the final shape error is {} ({}x the simulator's {}); `{}` brings the mean shape error from {} to {}; its roughness {} vs {} for `{}` (same budget, rarely). Drift without regularization: {drift}; fixed by a few steps per emulation step: {fixes}; smoother than rare bursts: {smoother}. Rule (thresholds ours): held when both checks pass, drift (final shape error without regularization above twice the simulator's) fixed by a few steps per emulation step (mean shape error below 0.7 of the unregularized one), and smoother than the same budget spent rarely (lower roughness); partly when one does.",
+                        "Without regularization the final shape error is {} ({}x the simulator's {}); `{}` brings the mean shape error from {} to {}; its roughness {} vs {} for `{}` (same budget, rarely). Checks:{lines} Rule (thresholds ours, in the spec's [params.rule]): {text}",
                         sig(final_e[z]),
                         sig(final_e[z] / final_e[s]),
                         sig(final_e[s]),
@@ -392,7 +481,7 @@ impl Family for NaRegularization {
                 )
             }
             _ => (
-                Verdict::NotAssessed,
+                crate::experiment::report::Verdict::NotAssessed,
                 "needs a simulator row, a schedule without regularization, one with a few steps after every emulation step and one with steps done rarely".into(),
             ),
         };
@@ -401,5 +490,32 @@ impl Family for NaRegularization {
             verdict,
             why,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::report::Verdict;
+
+    const BARS: RegularizationRule = RegularizationRule {
+        drift_ratio: 2.0,
+        fix_ratio: 0.7,
+    };
+
+    #[test]
+    fn drift_fixed_and_smoother_is_held_and_each_half_is_partly() {
+        let verdict = |d, f, r| regularization_rule(d, f, r, &BARS).map(|x| x.verdict());
+        assert_eq!(verdict(734.0, 0.19, 0.54), Some(Verdict::Held));
+        // Fixed drift but rougher than rare bursts, or smoother without drift to fix.
+        assert_eq!(verdict(734.0, 0.19, 1.2), Some(Verdict::Partly));
+        assert_eq!(verdict(1.5, 0.19, 0.54), Some(Verdict::Partly));
+        assert_eq!(verdict(1.5, 0.9, 1.2), Some(Verdict::NotHeld));
+        // A drift bar the simulator itself passes is refused.
+        let low = RegularizationRule {
+            drift_ratio: 0.5,
+            fix_ratio: 0.7,
+        };
+        assert!(regularization_rule(734.0, 0.19, 0.54, &low).is_none());
     }
 }

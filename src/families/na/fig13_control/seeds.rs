@@ -433,6 +433,8 @@ pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
         .filter(|x| x.is_finite() && *x > 0.0);
     let (lo, hi) = all.fold((1.0f64, 1.0f64), |(a, b), x| (a.min(x), b.max(x)));
     let (lo, hi) = (lo / 1.5, hi * 1.5);
+    // Headroom above the highest dot, where the legend goes without hiding one.
+    let top = hi * 30.0;
     let mut series: Vec<Series> = unique(&task)
         .into_iter()
         .enumerate()
@@ -457,7 +459,8 @@ pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
         })
         .collect();
     series.push(
-        Series::line("tolerance (final error 1)", vec![(1.0, lo), (1.0, hi)], 7).mark(Mark::Dashed),
+        Series::line("tolerance (final error 1)", vec![(1.0, lo), (1.0, top)], 7)
+            .mark(Mark::Dashed),
     );
     series.push(Series::line("", vec![(lo, 1.0), (hi, 1.0)], 7).mark(Mark::Dashed));
     let panel = Panel {
@@ -467,7 +470,7 @@ pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
         log_x: true,
         log_y: true,
         x_range: Some((lo, hi)),
-        y_range: Some((lo, hi)),
+        y_range: Some((lo, top)),
         series,
         ..Panel::default()
     };
