@@ -189,20 +189,8 @@ impl Job for Params {
             );
             let schedule = self.schedule(task.eta, task.alpha, task.step_rule, lambda);
             let record = self.over_net_seeds(task) && task.formulation == Formulation::Paper;
-            let mut iterates: Vec<Iterate> = Vec::new();
-            let (r, best) = ctx.stage(&format!("learn {}", task.name), || {
-                learn_best(
-                    &mut bptt,
-                    &v0,
-                    &schedule,
-                    task.task.iterations,
-                    &mut |t, v, _| {
-                        if record {
-                            iterates.push((t.iteration, t.objective, v.to_vec()));
-                        }
-                        false
-                    },
-                )
+            let (r, best, iterates) = ctx.stage(&format!("learn {}", task.name), || {
+                learn_recording(&mut bptt, &v0, &schedule, task.task.iterations, record)
             });
             push_path(
                 &mut path_t,
@@ -536,20 +524,8 @@ pub(super) fn learn_and_replay_path(
             scale: lambda,
             curvature_iterations,
         };
-        let mut iterates: Vec<Iterate> = Vec::new();
-        let record = path.is_some();
-        let (r, best) = learn_best(
-            bptt,
-            &v0,
-            &schedule,
-            task.task.iterations,
-            &mut |t, v, _| {
-                if record {
-                    iterates.push((t.iteration, t.objective, v.to_vec()));
-                }
-                false
-            },
-        );
+        let (r, best, iterates) =
+            learn_recording(bptt, &v0, &schedule, task.task.iterations, path.is_some());
         if let Some((table, seed)) = path {
             push_path(
                 table,
@@ -570,6 +546,24 @@ pub(super) fn learn_and_replay_path(
         };
         Some((run, r))
     })
+}
+
+/// [`learn_best`] for `iterations`, and where `record`, every iterate (for `path.csv`).
+fn learn_recording<D: DifferentiableStep>(
+    bptt: &mut Bptt<'_, D>,
+    v0: &[f64],
+    schedule: &Schedule,
+    iterations: usize,
+    record: bool,
+) -> (Learned, BestRollout, Vec<Iterate>) {
+    let mut iterates: Vec<Iterate> = Vec::new();
+    let (r, best) = learn_best(bptt, v0, schedule, iterations, &mut |t, v, _| {
+        if record {
+            iterates.push((t.iteration, t.objective, v.to_vec()));
+        }
+        false
+    });
+    (r, best, iterates)
 }
 
 /// Runs [`learn_with`] and rolls the best-so-far iterate out again: the run and the best

