@@ -39,43 +39,6 @@ impl Verdict {
             Verdict::NotAssessed => "not assessed",
         }
     }
-
-    /// Held when all `total` checks passed, partly when some did, not held when none did.
-    pub fn from_counts(ok: usize, total: usize) -> Self {
-        if ok == total {
-            Verdict::Held
-        } else if ok > 0 {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        }
-    }
-
-    /// Held when the claim's `held` rule passed, else partly when its weaker `partly` rule did,
-    /// else not held.
-    pub fn graded(held: bool, partly: bool) -> Self {
-        if held {
-            Verdict::Held
-        } else if partly {
-            Verdict::Partly
-        } else {
-            Verdict::NotHeld
-        }
-    }
-
-    /// [`Verdict::PremiseNotReproduced`] when the claim's premise fails, else `self`.
-    pub fn given(self, premise: bool) -> Self {
-        if premise {
-            self
-        } else {
-            Verdict::PremiseNotReproduced
-        }
-    }
-
-    /// [`Verdict::from_counts`] of the checks that passed.
-    pub fn from_checks(checks: &[bool]) -> Self {
-        Self::from_counts(checks.iter().filter(|&&c| c).count(), checks.len())
-    }
 }
 
 /// A family's findings from its CSVs.
@@ -814,11 +777,7 @@ mod tests {
     }
 
     #[test]
-    fn a_failed_premise_overrides_the_grade() {
-        assert_eq!(Verdict::Partly.given(true), Verdict::Partly);
-        for v in [Verdict::Held, Verdict::Partly, Verdict::NotHeld] {
-            assert_eq!(v.given(false), Verdict::PremiseNotReproduced);
-        }
+    fn a_failed_premise_has_its_own_label() {
         assert_eq!(
             Verdict::PremiseNotReproduced.label(),
             "premise not reproduced"

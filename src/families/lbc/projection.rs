@@ -16,6 +16,7 @@ use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{
     all_positive, at_most, distinct, ensure, positive, ParamError, Validate,
 };
+use crate::experiment::rule::{shown, Check, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::row;
 use nalgebra::DVector;
@@ -407,16 +408,26 @@ impl Family for LbcProjection {
             " At the farthest spacing the weights sum to {} (paper: weights far from summing to one signal a poor basis).",
             sig(far_sum)
         ));
-        let verdict = if first == 1 && last == 2 {
-            Verdict::Held
-        } else {
-            Verdict::NotHeld
-        };
+        let rule = Rule::gated(
+            vec![],
+            vec![
+                Ok(Check::fact(
+                    "the closest spacing gives one minimum",
+                    first == 1,
+                )),
+                Ok(Check::fact(
+                    "the farthest spacing gives two minima",
+                    last == 2,
+                )),
+            ],
+            Partly::Never,
+        );
+        let (verdict, lines, text) = shown(rule.as_ref(), "");
         Ok(Findings {
             ours: md,
             verdict,
             why: format!(
-                "closest spacing: {first} minimum(s); farthest spacing: {last} minimum(s) (paper: one near the target when close, two when far apart). Rule: held when the closest spacing gives one minimum and the farthest two, else not held."
+                "closest spacing: {first} minimum(s); farthest spacing: {last} minimum(s) (paper: one near the target when close, two when far apart).{lines} Rule: {text}"
             ),
         })
     }

@@ -7,28 +7,138 @@
 //! seconds, best_objective). Figure: `<id>_learning.png/svg`, the scatter of every evaluation
 //! with best-so-far lines.
 
-use super::search::{learning_panel_on, LearningJob};
+use super::search::{learning_panel_on, LearningJob, Params};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Mark, Series};
-use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::{Error, Family};
+use crate::experiment::report::{sig, Findings};
+use crate::experiment::resolve::{ensure, ParamError, Validate};
+use crate::experiment::rule::{read_rule, rule_table_of, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The learning-plot family.
 pub struct MsLearning;
 
+/// `ms_learning` parameters: the search and annealing, and the verdict's bars.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LearningSpec {
+    /// The motion, its search and the annealing beside it.
+    #[serde(flatten)]
+    pub learning: Params,
+    /// The verdict's bars (ours; [`learning_rule`]).
+    pub rule: LearningRule,
+}
+
+/// The verdict's thresholds (ours: the paper describes the curve's shape, "improves quickly
+/// through the first 5,000 iterations and slowly after", and "many evaluated controllers are
+/// poor" at the end, without numbers).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LearningRule {
+    /// The early iterations, as a share of all (the paper: 5,000 of 25,000).
+    pub early_fraction: f64,
+    /// Fast, then slow: at least this share of hill climbing's total gain is made early.
+    pub early_gain_share: f64,
+    /// The end of the search, as a share of the iterations.
+    pub late_fraction: f64,
+    /// Many stay poor: at least this share of the late evaluations score below the best
+    /// random controller.
+    pub late_poor_share: f64,
+}
+
+impl Validate for LearningRule {
+    fn validate(&self) -> Result<(), ParamError> {
+        for (key, v) in [
+            ("rule.early_fraction", self.early_fraction),
+            ("rule.early_gain_share", self.early_gain_share),
+            ("rule.late_fraction", self.late_fraction),
+            ("rule.late_poor_share", self.late_poor_share),
+        ] {
+            ensure(v > 0.0 && v < 1.0, key, "must be in (0, 1)")?;
+        }
+        Ok(())
+    }
+}
+
+impl Validate for LearningSpec {
+    fn validate(&self) -> Result<(), ParamError> {
+        LearningJob(self.learning.clone()).validate()?;
+        self.rule.validate()
+    }
+}
+
+impl Job for LearningSpec {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or_default()
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let mut tables = LearningJob(self.learning.clone()).run(ctx)?;
+        tables.insert("rule", rule_table_of(&self.rule)?);
+        Ok(tables)
+    }
+}
+
+/// The verdict's rule on hill climbing's curve `c`: (a) the share of its gain made in the
+/// early iterations (null: a search gaining at a constant rate, the early fraction itself),
+/// (b) some gain over the best random controller (null: the random controllers alone, 0),
+/// (c) the share of late evaluations below that controller (null: a search whose
+/// perturbations never disrupt, 0). Held when all pass; partly when (a) and (b) do, or (c).
+fn learning_rule(c: &Curve, r: &LearningRule) -> Option<Rule> {
+    let held = vec![
+        Check::new(
+            "share of hill climbing's gain made in the early iterations",
+            c.early_share(),
+            Cmp::AtLeast,
+            r.early_gain_share,
+            Null::new("a search gaining at a constant rate", r.early_fraction),
+        ),
+        Check::new(
+            "hill climbing's gain over the best random controller",
+            c.end_best - c.init_best,
+            Cmp::Above,
+            0.0,
+            Null::new("the random controllers alone", 0.0),
+        ),
+        Check::new(
+            "share of the late evaluations below the best random controller",
+            c.poor_late,
+            Cmp::AtLeast,
+            r.late_poor_share,
+            Null::new("a search whose perturbations never disrupt", 0.0),
+        ),
+    ];
+    Rule::gated(vec![], held, Partly::AnyOf(vec![vec![0, 1], vec![2]]))
+}
+
 /// Learning-curve statistics of one method from `learning.csv` columns.
 struct Curve {
     init_best: f64,
-    at_fifth: f64,
+    at_early: f64,
     end_best: f64,
     poor_late: f64,
     iterations: f64,
 }
 
-fn curve(method: &str, m: &[String], it: &[f64], obj: &[f64], best: &[f64]) -> Curve {
+impl Curve {
+    /// The share of the total gain made by the end of the early iterations.
+    fn early_share(&self) -> f64 {
+        (self.at_early - self.init_best) / (self.end_best - self.init_best).max(1e-12)
+    }
+}
+
+/// The curve of `method`, its early and late iterations as `r` says.
+fn curve(
+    method: &str,
+    m: &[String],
+    it: &[f64],
+    obj: &[f64],
+    best: &[f64],
+    r: &LearningRule,
+) -> Curve {
     let rows: Vec<usize> = (0..m.len()).filter(|&i| m[i] == method).collect();
     let iterations = rows.iter().map(|&i| it[i]).fold(0.0, f64::max);
     let best_at = |limit: f64| {
@@ -41,12 +151,12 @@ fn curve(method: &str, m: &[String], it: &[f64], obj: &[f64], best: &[f64]) -> C
     let late: Vec<usize> = rows
         .iter()
         .copied()
-        .filter(|&i| it[i] > 0.8 * iterations)
+        .filter(|&i| it[i] > (1.0 - r.late_fraction) * iterations)
         .collect();
     let poor = late.iter().filter(|&&i| obj[i] < init_best).count() as f64;
     Curve {
         init_best,
-        at_fifth: best_at(iterations / 5.0),
+        at_early: best_at(r.early_fraction * iterations),
         end_best: best_at(iterations),
         poor_late: poor / late.len().max(1) as f64,
         iterations,
@@ -61,7 +171,7 @@ impl Family for MsLearning {
             "every evaluation's objective over the hill-climbing iterations with the best so far (the paper's Fig. 6), beside simulated annealing with the same budget.",
         ),
     ];
-    type Params = LearningJob;
+    type Params = LearningSpec;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("learning")?;
@@ -122,11 +232,13 @@ impl Family for MsLearning {
             .first()
             .copied()
             .unwrap_or(f64::NAN);
-        let h = curve("hill_climbing", &m, &it, &obj, &best);
-        let a = curve("simulated_annealing", &m, &it, &obj, &best);
-        let frac = |c: &Curve| (c.at_fifth - c.init_best) / (c.end_best - c.init_best).max(1e-12);
-        let mut md = String::from(
-            "| method | evaluations | seconds | best of initial set | best at 1/5 of the iterations | final best | share of the gain by 1/5 | evaluations in the last 1/5 worse than the initial best |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        let r: LearningRule = read_rule(dir)?;
+        let h = curve("hill_climbing", &m, &it, &obj, &best, &r);
+        let a = curve("simulated_annealing", &m, &it, &obj, &best, &r);
+        let mut md = format!(
+            "| method | evaluations | seconds | best of initial set | best after {}% of the iterations | final best | share of the gain by then | evaluations in the last {}% worse than the initial best |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+            sig(100.0 * r.early_fraction),
+            sig(100.0 * r.late_fraction)
         );
         for (name, c) in [("hill_climbing", &h), ("simulated_annealing", &a)] {
             let k = sm.iter().position(|x| x == name);
@@ -135,9 +247,9 @@ impl Family for MsLearning {
                 k.map(|k| evals[k]).unwrap_or(f64::NAN),
                 sig(k.map(|k| secs[k]).unwrap_or(f64::NAN)),
                 sig(c.init_best),
-                sig(c.at_fifth),
+                sig(c.at_early),
                 sig(c.end_best),
-                sig(frac(c)),
+                sig(c.early_share()),
                 sig(c.poor_late)
             ));
         }
@@ -146,21 +258,74 @@ impl Family for MsLearning {
             sig(wall),
             h.iterations
         ));
-        let fast_then_slow = frac(&h) >= 0.6 && h.end_best > h.init_best;
-        let many_poor = h.poor_late >= 0.2;
-        let verdict = Verdict::from_checks(&[fast_then_slow, many_poor]);
+        let rule = learning_rule(&h, &r);
+        let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
         Ok(Findings {
             ours: md,
             verdict,
             why: format!(
-                "Hill climbing made {}% of its total gain in the first fifth of the iterations (fast, then slow: {}); {}% of its evaluations in the last fifth were worse than the best random controller (many stay poor: {}); simulated annealing with the same budget ended at {} vs {}. Rule (thresholds ours): held when both checks pass, fast then slow (at least 60% of hill climbing's gain in the first fifth of the iterations, and some gain) and many stay poor (at least 20% of the last fifth's evaluations worse than the best random controller); partly when one does.",
-                sig(100.0 * frac(&h)),
-                fast_then_slow,
+                "Hill climbing made {}% of its total gain in the first {}% of the iterations; {}% of its evaluations in the last {}% were worse than the best random controller; simulated annealing with the same budget ended at {} vs {}. Checks:{lines} Rule (thresholds ours, in the spec's [params.rule]): {text}",
+                sig(100.0 * h.early_share()),
+                sig(100.0 * r.early_fraction),
                 sig(100.0 * h.poor_late),
-                many_poor,
+                sig(100.0 * r.late_fraction),
                 sig(a.end_best),
                 sig(h.end_best)
             ),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::report::Verdict;
+
+    const BARS: LearningRule = LearningRule {
+        early_fraction: 0.2,
+        early_gain_share: 0.6,
+        late_fraction: 0.2,
+        late_poor_share: 0.2,
+    };
+
+    fn curve_of(at_early: f64, end_best: f64, poor_late: f64) -> Curve {
+        Curve {
+            init_best: 1.0,
+            at_early,
+            end_best,
+            poor_late,
+            iterations: 100.0,
+        }
+    }
+
+    #[test]
+    fn fast_then_slow_with_poor_late_evaluations_is_held_and_each_half_partly() {
+        let verdict = |c: &Curve| learning_rule(c, &BARS).map(|r| r.verdict());
+        assert_eq!(verdict(&curve_of(8.0, 10.0, 0.5)), Some(Verdict::Held));
+        // A constant-rate search (a fifth of its gain in a fifth of the iterations) is not
+        // fast then slow.
+        assert_eq!(verdict(&curve_of(2.8, 10.0, 0.5)), Some(Verdict::Partly));
+        assert_eq!(verdict(&curve_of(8.0, 10.0, 0.0)), Some(Verdict::Partly));
+        // No gain at all, with every late evaluation above the start: not held.
+        assert_eq!(verdict(&curve_of(1.0, 1.0, 0.0)), Some(Verdict::NotHeld));
+        // A gain-share bar that a constant-rate search meets is refused.
+        let low = LearningRule {
+            early_gain_share: 0.15,
+            ..BARS
+        };
+        assert!(learning_rule(&curve_of(8.0, 10.0, 0.5), &low).is_none());
+    }
+
+    #[test]
+    fn the_curve_reads_the_early_and_late_iterations_of_one_method() {
+        let m: Vec<String> = ["h"; 11].iter().map(|s| s.to_string()).collect();
+        let it: Vec<f64> = (0..11).map(f64::from).collect();
+        let best = [0.0, 5.0, 8.0, 9.0, 9.0, 9.0, 9.0, 9.0, 9.0, 9.0, 10.0];
+        let obj = [0.0, 5.0, 8.0, 9.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 10.0];
+        let c = curve("h", &m, &it, &obj, &best, &BARS);
+        assert_eq!((c.init_best, c.at_early, c.end_best), (0.0, 8.0, 10.0));
+        // The last 20% of 10 iterations: 9 and 10; one of the two is below the start.
+        assert_eq!(c.poor_late, 0.5);
+        assert_eq!(c.early_share(), 0.8);
     }
 }

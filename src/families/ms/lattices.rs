@@ -9,8 +9,9 @@
 use super::lattice_draw::{draw_panels, LatticePanel, Scene};
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::FigureSink;
-use crate::experiment::report::{Findings, Verdict};
+use crate::experiment::report::Findings;
 use crate::experiment::resolve::{distinct, ensure, ParamError, Validate};
+use crate::experiment::rule::{read_rule, rule_table_of, shown, Check, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::lattice::Lattice;
 use crate::physics::reflex::{deform, Reflex, ReflexGains};
@@ -31,6 +32,50 @@ pub struct Params {
     pub alpha: f64,
     /// Reflex gains (κ, γ, σ, τ).
     pub gains: ReflexGains,
+    /// The paper's numbers the check compares with.
+    pub rule: LatticeRule,
+}
+
+/// The paper's lattice numbers (§2.1-2.2): the cube's masses and springs, and the ranges of
+/// the lattices used.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LatticeRule {
+    /// The cube's point masses.
+    pub cube_masses: usize,
+    /// The cube's springs.
+    pub cube_springs: usize,
+    /// Fewest masses of a lattice used.
+    pub masses_min: usize,
+    /// Most masses.
+    pub masses_max: usize,
+    /// Fewest springs.
+    pub springs_min: usize,
+    /// Most springs.
+    pub springs_max: usize,
+}
+
+/// The check's rule: (a) the cube has the paper's masses and springs and every reflex deforms
+/// it (`cube_ok`); (b) every lattice's masses and springs lie in the paper's ranges
+/// (`in_range`). Held when both hold, partly when one does.
+fn lattice_rule(cube_ok: bool, in_range: bool, r: &LatticeRule) -> Option<Rule> {
+    let held = vec![
+        Ok(Check::fact(
+            format!(
+                "the cube has {} masses and {} springs and every reflex deforms it",
+                r.cube_masses, r.cube_springs
+            ),
+            cube_ok,
+        )),
+        Ok(Check::fact(
+            format!(
+                "every lattice has {}-{} masses and {}-{} springs",
+                r.masses_min, r.masses_max, r.springs_min, r.springs_max
+            ),
+            in_range,
+        )),
+    ];
+    Rule::gated(vec![], held, Partly::Any)
 }
 
 /// The shipped lattice called `name` (`cube`, `pyramid`, `chair`).
@@ -67,6 +112,12 @@ impl Validate for Params {
         ] {
             ensure(v.is_finite() && v >= 0.0, k, "must be finite and >= 0")?;
         }
+        let r = &self.rule;
+        ensure(
+            r.masses_min <= r.masses_max && r.springs_min <= r.springs_max,
+            "rule",
+            "each range's minimum must not exceed its maximum",
+        )?;
         ensure(
             self.gains.scale < 1.0 && self.gains.splay < 1.0,
             "gains",
@@ -142,6 +193,7 @@ impl Job for Params {
             ("rest_lengths", rl),
             ("positions", pos),
             ("springs", spr),
+            ("rule", rule_table_of(&self.rule)?),
         ]))
     }
 }
@@ -272,6 +324,8 @@ impl Family for MsLattices {
         let mut md = String::from(
             "| lattice | masses | springs | reflexes that change no rest length |\n| --- | --- | --- | --- |\n",
         );
+        let r: LatticeRule = read_rule(dir)?;
+        let within = |x: f64, lo: usize, hi: usize| (lo as f64..=hi as f64).contains(&x);
         let mut in_range = true;
         let mut cube_ok = false;
         for i in 0..names.len() {
@@ -279,27 +333,25 @@ impl Family for MsLattices {
                 "| {} | {} | {} | {} |\n",
                 names[i], m[i], s[i], rigid[i]
             ));
-            in_range &= (5.0..=10.0).contains(&m[i]) && (10.0..=35.0).contains(&s[i]);
+            in_range &= within(m[i], r.masses_min, r.masses_max)
+                && within(s[i], r.springs_min, r.springs_max);
             if names[i] == "cube" {
-                cube_ok = m[i] == 8.0 && s[i] == 28.0 && rigid[i] == 0.0;
+                cube_ok = m[i] == r.cube_masses as f64
+                    && s[i] == r.cube_springs as f64
+                    && rigid[i] == 0.0;
             }
         }
         let largest = change.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         md.push_str(&format!(
             "\nLargest rest-length change of a reflex: {largest:.3} m; shortest deformed rest length: {minlen:.3} m.\n"
         ));
-        let verdict = if in_range && cube_ok {
-            Verdict::Held
-        } else {
-            Verdict::Partly
-        };
+        let rule = lattice_rule(cube_ok, in_range, &r);
+        let (verdict, lines, text) = shown(rule.as_ref(), "");
         Ok(Findings {
             ours: md,
             verdict,
             why: format!(
-                "The cube has 8 masses and 28 springs and all 12 reflexes deform it: {}; every lattice has 5-10 masses and 10-35 springs: {}. Rule (an implementation check): held when both are yes, else partly.",
-                if cube_ok { "yes" } else { "no" },
-                if in_range { "yes" } else { "no" }
+                "An implementation check against the paper's numbers (in the spec's [params.rule]).{lines} Rule: {text}"
             ),
         })
     }

@@ -55,8 +55,9 @@ use crate::emulator::train::{
 };
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
-use crate::experiment::report::{sig, yes_no as yes, Findings, Verdict};
+use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
+use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::na::table1_structure::{build_spec, validate_nets, validate_training};
 use crate::row;
@@ -157,6 +158,24 @@ pub struct Params {
     /// Training settings: held-out fraction and the momentum method's rate, momentum and batch
     /// size (Table 1's); the iteration limits and patience are replaced by the pass budget.
     pub training: TrainSettings,
+    /// The verdict's thresholds (ours; [`training_rule`]).
+    pub rule: TrainingRule,
+}
+
+/// The examples-per-weight thresholds of the verdict (ours: the paper says 8-10 examples per
+/// weight "seem sufficient to avoid serious overfitting or underfitting", without numbers).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainingRule {
+    /// Premise: the sweep can show overfitting, a test/training error ratio of at least this
+    /// at the smallest examples per weight.
+    pub overfit_ratio: f64,
+    /// No serious overfitting: at the rule's ratio the test error is at most this multiple
+    /// of the training error.
+    pub test_train_max: f64,
+    /// No serious underfitting of the data: the test error at the rule's ratio is at most
+    /// this multiple of the test error at the largest ratio.
+    pub more_data_max: f64,
 }
 
 impl Validate for Params {
@@ -184,6 +203,17 @@ impl Validate for Params {
             "target_factor",
             "must be >= 1",
         )?;
+        for (key, v) in [
+            ("rule.overfit_ratio", self.rule.overfit_ratio),
+            ("rule.test_train_max", self.rule.test_train_max),
+            ("rule.more_data_max", self.rule.more_data_max),
+        ] {
+            ensure(
+                v > 1.0 && v.is_finite(),
+                key,
+                "must be above 1: a net that generalizes perfectly scores 1",
+            )?;
+        }
         let nets: Vec<NetSpec> = self.nets.iter().map(|n| n.net.clone()).collect();
         validate_nets(&nets, 1.0)?;
         for (i, n) in self.nets.iter().enumerate() {
@@ -649,6 +679,7 @@ impl Job for Params {
             ("curves", curves),
             ("methods", methods),
             ("examples", examples),
+            ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
         ]))
     }
 }
@@ -691,50 +722,117 @@ fn method_words(m: &str) -> &str {
     }
 }
 
-/// The optimizer half of the rule: (a) on the small net CG's median passes to target below
-/// momentum's; (b) on the large net momentum's median at most CG's. `None` where a net or a
-/// method is missing. Rows: (net size, method, passes to target per init; NaN = never).
-pub fn optimizer_checks(rows: &[(NetSize, String, Vec<f64>)]) -> (Option<bool>, Option<bool>) {
+/// The optimizer half of the rule, as (small net: CG's median passes to target over
+/// momentum's, large net: momentum's over CG's), NaN where a net or a method is missing or
+/// neither reaches the target. Rows: (net size, method, passes to target per init; NaN =
+/// never).
+pub fn optimizer_ratios(rows: &[(NetSize, String, Vec<f64>)]) -> (f64, f64) {
     let med = |size: NetSize, m: &str| {
         rows.iter()
             .find(|r| r.0 == size && r.1 == m)
-            .map(|r| median_inf(&r.2))
+            .map_or(f64::NAN, |r| median_inf(&r.2))
     };
-    let a = match (med(NetSize::Small, "cg"), med(NetSize::Small, "momentum")) {
-        (Some(cg), Some(mo)) => Some(cg < mo),
-        _ => None,
+    // Never against never says nothing (NaN); never against some count is infinite or 0.
+    let ratio = |a: f64, b: f64| {
+        if a.is_infinite() && b.is_infinite() {
+            f64::NAN
+        } else {
+            a / b
+        }
     };
-    let b = match (med(NetSize::Large, "cg"), med(NetSize::Large, "momentum")) {
-        (Some(cg), Some(mo)) => Some(mo <= cg && mo.is_finite()),
-        _ => None,
-    };
-    (a, b)
+    (
+        ratio(med(NetSize::Small, "cg"), med(NetSize::Small, "momentum")),
+        ratio(med(NetSize::Large, "momentum"), med(NetSize::Large, "cg")),
+    )
 }
 
-/// The examples half of the rule, from (ratio, median test/train ratio, median test error) in
-/// increasing ratio: (premise, (c), (d)).
-pub fn examples_checks(
-    rows: &[(f64, f64, f64)],
-    rule_ratio: f64,
-) -> (bool, Option<bool>, Option<bool>) {
-    let premise = rows.first().is_some_and(|r| r.1 >= 2.0);
-    let at = rows.iter().find(|r| r.0 == rule_ratio);
-    let largest = rows.last();
-    let c = at.map(|r| r.1 <= 1.25);
-    let d = match (at, largest) {
-        (Some(a), Some(l)) => Some(a.2 <= 1.5 * l.2),
-        _ => None,
-    };
-    (premise, c, d)
+/// The examples rows the rule reads, from (ratio, median test/train ratio, median test error)
+/// in increasing ratio: the smallest ratio's, the rule ratio's and the largest's.
+pub struct ExampleFacts {
+    /// Test/training error at the smallest examples per weight.
+    pub smallest_ratio: f64,
+    /// Its test error over the largest ratio's.
+    pub smallest_more_data: f64,
+    /// Test/training error at the rule's examples per weight.
+    pub at_ratio: f64,
+    /// Its test error over the largest ratio's.
+    pub at_more_data: f64,
 }
 
-/// The verdict from the four checks and the premise.
-pub fn verdict_of(checks: [Option<bool>; 4], premise: bool) -> Verdict {
-    if !premise {
-        return Verdict::PremiseNotReproduced;
+impl ExampleFacts {
+    /// The facts of `rows` at `rule_ratio` (NaN where a row is missing).
+    pub fn of(rows: &[(f64, f64, f64)], rule_ratio: f64) -> Self {
+        let nan = (f64::NAN, f64::NAN, f64::NAN);
+        let first = rows.first().copied().unwrap_or(nan);
+        let at = rows
+            .iter()
+            .find(|r| r.0 == rule_ratio)
+            .copied()
+            .unwrap_or(nan);
+        let largest = rows.last().copied().unwrap_or(nan);
+        Self {
+            smallest_ratio: first.1,
+            smallest_more_data: first.2 / largest.2,
+            at_ratio: at.1,
+            at_more_data: at.2 / largest.2,
+        }
     }
-    let k = checks.iter().filter(|c| **c == Some(true)).count();
-    Verdict::graded(k == 4, k >= 2)
+}
+
+/// The verdict's rule: premise, the sweep shows overfitting at its smallest ratio
+/// (test/training at least `overfit_ratio`; null: a net that generalizes perfectly, 1); (a)
+/// small net, CG's passes to target over momentum's below 1 (null: CG no faster, 1); (b)
+/// large net, momentum's over CG's at most 1 (null: momentum never reaching the target); (c)
+/// test/training at the rule's ratio at most `test_train_max` and (d) its test error over the
+/// largest ratio's at most `more_data_max` (null for both: the smallest ratio's net). Held:
+/// all four; partly: any two.
+pub fn training_rule(
+    (small, large): (f64, f64),
+    e: &ExampleFacts,
+    r: &TrainingRule,
+) -> Option<Rule> {
+    let fewest = "the net with the fewest examples per weight";
+    let premise = match Check::new(
+        "test/training error at the smallest examples per weight",
+        e.smallest_ratio,
+        Cmp::AtLeast,
+        r.overfit_ratio,
+        Null::new("a net that generalizes perfectly", 1.0),
+    ) {
+        Ok(c) => c,
+        Err(_) => return None,
+    };
+    let held = vec![
+        Check::new(
+            "small net: conjugate gradient's passes to target over momentum's",
+            small,
+            Cmp::Below,
+            1.0,
+            Null::new("conjugate gradient no faster than momentum", 1.0),
+        ),
+        Check::new(
+            "large net: momentum's passes to target over conjugate gradient's",
+            large,
+            Cmp::AtMost,
+            1.0,
+            Null::new("momentum never reaching the target", f64::INFINITY),
+        ),
+        Check::new(
+            "test/training error at the rule's examples per weight",
+            e.at_ratio,
+            Cmp::AtMost,
+            r.test_train_max,
+            Null::new(fewest, e.smallest_ratio),
+        ),
+        Check::new(
+            "its test error over the largest examples per weight's",
+            e.at_more_data,
+            Cmp::AtMost,
+            r.more_data_max,
+            Null::new(fewest, e.smallest_more_data),
+        ),
+    ];
+    Rule::gated(vec![premise], held, Partly::AtLeast(2))
 }
 
 /// (net size, method, passes to target per init) from `nets.csv` and `methods.csv`.
@@ -1034,7 +1132,7 @@ impl Family for NaTrainingMethods {
         let rule_ratio = first("examples.csv", "rule_ratio")?;
         let target_factor = first("methods.csv", "target_factor")?;
         let opt_rows = optimizer_rows(dir)?;
-        let (a, b) = optimizer_checks(&opt_rows);
+        let bars: TrainingRule = read_rule(dir)?;
         // The result first: each method's median passes to the target, per net size.
         let passes = |size: NetSize| {
             opt_rows
@@ -1052,8 +1150,9 @@ impl Family for NaTrainingMethods {
                 .join(", ")
         };
         let triples: Vec<(f64, f64, f64)> = med.iter().map(|r| (r.0, r.1, r.2)).collect();
-        let (premise, c, d) = examples_checks(&triples, rule_ratio);
-        let verdict = verdict_of([a, b, c, d], premise);
+        let facts = ExampleFacts::of(&triples, rule_ratio);
+        let rule = training_rule(optimizer_ratios(&opt_rows), &facts, &bars);
+        let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
         let at = med.iter().find(|r| r.0 == rule_ratio);
         // The small net's best held-out error of a method, median over inits.
         let best_of = |method: &str| {
@@ -1073,21 +1172,11 @@ impl Family for NaTrainingMethods {
             ours: md,
             verdict,
             why: format!(
-                "Passes to target (median): small net {}; large net {}; test/training error {} at {} examples per weight. Checks: (a) small net, conjugate gradient in fewer passes than momentum: {}; (b) large net, momentum in at most conjugate gradient's passes: {}; premise, test/training ratio at {} examples per weight at least 2: {} ({}); (c) at {} per weight test error within 1.25x training error: {} ({}); (d) test error at {} per weight within 1.5x the largest ratio's: {}. Best held-out error in the budget, small net: conjugate gradient {}, momentum {} (median over inits). Rule (fixed in the spec before the first run, thresholds ours): target = {} x the lowest held-out error any method reaches in the budget, per init; medians over the inits; held needs all four checks, partly two; premise not reproduced when the smallest ratio shows no overfitting. Changed after the first run, as the spec says: the pass budgets (400 and 200 then, before any batch method had converged) and conjugate gradient's line search (c2 = 0.1).",
+                "Passes to target (median): small net {}; large net {}; test/training error {} at {} examples per weight. Best held-out error in the budget, small net: conjugate gradient {}, momentum {} (median over inits). Checks:{lines} Rule (fixed in the spec before the first run, thresholds ours, in the spec's [params.rule]; target = {} x the lowest held-out error any method reaches in the budget, per init; medians over the inits; the pass budgets and conjugate gradient's line search changed after the first run: see the rule history): {text}",
                 passes(NetSize::Small),
                 passes(NetSize::Large),
                 at.map_or("?".into(), |r| sig(r.1)),
                 sig(rule_ratio),
-                yes(a),
-                yes(b),
-                med.first().map_or("?".into(), |r| sig(r.0)),
-                if premise { "yes" } else { "no" },
-                med.first().map_or("?".into(), |r| sig(r.1)),
-                sig(rule_ratio),
-                yes(c),
-                at.map_or("?".into(), |r| sig(r.1)),
-                sig(rule_ratio),
-                yes(d),
                 sig(best_of("cg")),
                 sig(best_of("momentum")),
                 sig(target_factor),
@@ -1127,56 +1216,65 @@ mod tests {
                 ),
             ]
         };
+        let passes = |r: (f64, f64)| (r.0 < 1.0, r.1 <= 1.0);
         // The paper's picture: CG faster on the small net, momentum on the large one.
         assert_eq!(
-            optimizer_checks(&rows([10.0, 40.0], [60.0, 5.0])),
-            (Some(true), Some(true))
+            passes(optimizer_ratios(&rows([10.0, 40.0], [60.0, 5.0]))),
+            (true, true)
         );
         // The contradicting data: momentum faster on the small net, CG on the large one.
         assert_eq!(
-            optimizer_checks(&rows([40.0, 10.0], [5.0, 60.0])),
-            (Some(false), Some(false))
+            passes(optimizer_ratios(&rows([40.0, 10.0], [5.0, 60.0]))),
+            (false, false)
         );
-        // Never reaching the target counts as infinitely many passes.
+        // Never reaching the target counts as infinitely many passes; never against never
+        // says nothing.
         assert_eq!(
-            optimizer_checks(&rows([nan, 10.0], [nan, nan])),
-            (Some(false), Some(false))
+            passes(optimizer_ratios(&rows([nan, 10.0], [nan, nan]))),
+            (false, false)
         );
         assert_eq!(
-            optimizer_checks(&rows([10.0, nan], [nan, 3.0])),
-            (Some(true), Some(true))
+            passes(optimizer_ratios(&rows([10.0, nan], [nan, 3.0]))),
+            (true, true)
         );
-        // A missing method: not measured.
+        // A missing method: not measured, so it fails.
         assert_eq!(
-            optimizer_checks(&rows([10.0, 40.0], [60.0, 5.0])[..2]),
-            (Some(true), None)
+            passes(optimizer_ratios(&rows([10.0, 40.0], [60.0, 5.0])[..2])),
+            (true, false)
         );
     }
 
+    const BARS: TrainingRule = TrainingRule {
+        overfit_ratio: 2.0,
+        test_train_max: 1.25,
+        more_data_max: 1.5,
+    };
+
     #[test]
     fn the_examples_rule_needs_visible_overfitting_and_fails_on_contradicting_rows() {
-        // Overfitting at 0.5 per weight, none at 8, little to gain beyond: premise and checks.
+        use crate::experiment::report::Verdict;
+        let verdict = |opt: (f64, f64), rows: &[(f64, f64, f64)]| {
+            training_rule(opt, &ExampleFacts::of(rows, 8.0), &BARS).map(|r| r.verdict())
+        };
+        let (fast, slow) = ((0.25, 0.1), (4.0, 12.0));
+        // Overfitting at 0.5 per weight, none at 8, little to gain beyond.
         let good = [(0.5, 10.0, 1.0), (8.0, 1.1, 0.012), (32.0, 1.0, 0.01)];
-        assert_eq!(examples_checks(&good, 8.0), (true, Some(true), Some(true)));
-        // Still overfitting at 8 and much to gain: both checks fail.
+        assert_eq!(verdict(fast, &good), Some(Verdict::Held));
+        assert_eq!(verdict(slow, &good), Some(Verdict::Partly));
+        // Still overfitting at 8 and much to gain: both examples checks fail.
         let bad = [(0.5, 10.0, 1.0), (8.0, 3.0, 0.1), (32.0, 1.0, 0.01)];
-        assert_eq!(examples_checks(&bad, 8.0), (true, Some(false), Some(false)));
+        assert_eq!(verdict(fast, &bad), Some(Verdict::Partly));
+        assert_eq!(verdict(slow, &bad), Some(Verdict::NotHeld));
+        assert_eq!(verdict((0.25, 12.0), &bad), Some(Verdict::NotHeld));
         // No overfitting even at the smallest ratio: the premise fails.
         let flat = [(0.5, 1.2, 0.02), (8.0, 1.0, 0.01), (32.0, 1.0, 0.01)];
-        assert!(!examples_checks(&flat, 8.0).0);
-        assert_eq!(
-            verdict_of([Some(true); 4], false),
-            Verdict::PremiseNotReproduced
-        );
-        assert_eq!(verdict_of([Some(true); 4], true), Verdict::Held);
-        assert_eq!(
-            verdict_of([Some(true), Some(false), None, Some(true)], true),
-            Verdict::Partly
-        );
-        assert_eq!(
-            verdict_of([Some(true), Some(false), None, Some(false)], true),
-            Verdict::NotHeld
-        );
+        assert_eq!(verdict(fast, &flat), Some(Verdict::PremiseNotReproduced));
+        // A more-data bar that the fewest-examples net itself meets cannot fail: refused.
+        let lax = TrainingRule {
+            more_data_max: 200.0,
+            ..BARS
+        };
+        assert!(training_rule(fast, &ExampleFacts::of(&good, 8.0), &lax).is_none());
     }
 
     #[test]

@@ -3,47 +3,63 @@
 
 use super::METHODS;
 use crate::experiment::output::{df_f64, df_str, read_csv};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, Findings};
+use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use crate::families::lbc::{entropy_section, rule_settings};
 use std::path::Path;
 
-/// What the rule reads over the desired targets strictly between the components.
+/// What the rule reads over the desired targets strictly between the components: per
+/// method, (share of targets within tolerance on the simulator, mean simulator final error,
+/// mean distance of the final x from the desired x in m).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RuleInputs {
-    /// In-between targets with an LBC landing.
-    pub targets: usize,
-    /// Of those, LBC's landings within tolerance on the simulator (final error <= 1).
-    pub within: usize,
+    /// LBC's.
+    pub lbc: (f64, f64, f64),
+    /// The naive blend's.
+    pub naive: (f64, f64, f64),
+    /// The better example (tracker) alone's on each measure.
+    pub example: (f64, f64, f64),
     /// The spec's `within_fraction`.
     pub within_fraction: f64,
-    /// LBC's mean simulator error over those targets.
-    pub lbc_error: f64,
-    /// The naive blend's mean simulator error there.
-    pub naive_error: f64,
     /// The spec's `naive_margin` (tolerance units).
     pub naive_margin: f64,
-    /// LBC's mean distance of the final x from the desired x there (m).
-    pub lbc_axis: f64,
-    /// The naive blend's (m).
-    pub naive_axis: f64,
     /// The spec's `axis_margin` (m).
     pub axis_margin: f64,
 }
 
-/// The spec's rule: (held, partly). Held: (1) LBC within tolerance on at least
-/// `within_fraction` of the in-between targets, (2) its mean simulator error no worse than the
-/// naive blend's + `naive_margin`, (3) its mean distance from the desired x no more than
-/// naive's + `axis_margin`. Partly (rewritten 2026-11-28 after seeing the committed results,
-/// issue 56; it was "one of the three"): (2) and (3), LBC not beaten by the naive blend on
-/// either measure.
-pub fn rule(r: &RuleInputs) -> (bool, bool) {
-    let any = r.targets > 0;
-    let need = (r.within_fraction * r.targets as f64).ceil() as usize;
-    let ok_within = any && r.within >= need;
-    let ok_naive = any && r.lbc_error <= r.naive_error + r.naive_margin;
-    let ok_axis = any && r.lbc_axis <= r.naive_axis + r.axis_margin;
-    (ok_within && ok_naive && ok_axis, ok_naive && ok_axis)
+/// The spec's rule: (a) LBC within tolerance on the simulator at no fewer than
+/// `within_fraction` of the in-between targets; (b) its mean simulator error at most the naive
+/// blend's + `naive_margin`; (c) its mean distance from the desired x at most naive's +
+/// `axis_margin`. Each check's null is the better example alone (a component's tracker, which
+/// lands at its own x). Held needs all three; partly (b) and (c), LBC not beaten by the naive
+/// blend on either measure.
+pub fn rule(r: &RuleInputs) -> Option<Rule> {
+    let alone = "the better example alone";
+    let held = vec![
+        Check::new(
+            "share of the in-between targets LBC ends within tolerance on the simulator",
+            r.lbc.0,
+            Cmp::AtLeast,
+            r.within_fraction,
+            Null::new(alone, r.example.0),
+        ),
+        Check::new(
+            "LBC's mean simulator error minus the naive blend's",
+            r.lbc.1 - r.naive.1,
+            Cmp::AtMost,
+            r.naive_margin,
+            Null::new(alone, r.example.1 - r.naive.1),
+        ),
+        Check::new(
+            "LBC's mean distance from the desired x minus the naive blend's (m)",
+            r.lbc.2 - r.naive.2,
+            Cmp::AtMost,
+            r.axis_margin,
+            Null::new(alone, r.example.2 - r.naive.2),
+        ),
+    ];
+    Rule::gated(vec![], held, Partly::All(vec![1, 2]))
 }
 
 /// The findings ([`crate::experiment::Family::report`]).
@@ -84,18 +100,22 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let within = lbc.iter().filter(|&&e| e <= 1.0).count();
     let (ml, mn) = (mean(&lbc), mean(&errs("naive")));
     let (xl, xn) = (mean(&miss("lbc")), mean(&miss("naive")));
-    let (held, partly) = rule(&RuleInputs {
-        targets: lbc.len(),
-        within,
+    let measures = |m: &str| {
+        let e = errs(m);
+        let share = e.iter().filter(|&&x| x <= 1.0).count() as f64 / e.len().max(1) as f64;
+        (share, mean(&e), mean(&miss(m)))
+    };
+    let (t1, t2) = (measures("tracker1"), measures("tracker2"));
+    let inputs = RuleInputs {
+        lbc: measures("lbc"),
+        naive: measures("naive"),
+        example: (t1.0.max(t2.0), t1.1.min(t2.1), t1.2.min(t2.2)),
         within_fraction: frac,
-        lbc_error: ml,
-        naive_error: mn,
         naive_margin: margin,
-        lbc_axis: xl,
-        naive_axis: xn,
         axis_margin,
-    });
-    let verdict = Verdict::graded(held, partly);
+    };
+    let rule = rule(&inputs);
+    let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
     let mut md = String::from(
         "Final error (RMS of (s − s_d)/tolerance, ≤ 1 within tolerance) on the simulator / emulator, per desired target and method:\n\n| desired x (m) |",
     );
@@ -168,22 +188,15 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         ours: md,
         verdict,
         why: format!(
-            "On the simulator, over the {} targets between the components, LBC ends within tolerance at {}, with mean final error {} against the naive blend's {} and mean distance from the desired x {} m against {} m. Rule (ours, fixed in the spec): held needs LBC's simulator error ≤ 1 on at least {} of the {} targets strictly between the components ({} were), LBC's mean simulator error there no worse than the naive blend's + {} ({} vs {}), and LBC's mean distance from the desired x no more than naive's + {} m ({} vs {} m; this third condition was added after the first full run showed that the RMS error dilutes a miss along x); partly needs the last two, LBC not beaten by the naive blend on either measure (this partly rule was rewritten on 2026-11-28 after seeing the committed results, issue 56: it was \"one of the three\", which held with the naive blend landing nearer the desired x).",
+            "On the simulator, over the {} targets between the components, LBC ends within tolerance at {}, with mean final error {} against the naive blend's {} and mean distance from the desired x {} m against {} m; the better example alone ends within tolerance at a share {} of them, {} m from the desired x on average.{lines} Rule (ours, in the spec; revised after results, see the rule history): {text}",
             lbc.len(),
             within,
             sig(ml),
             sig(mn),
             sig(xl),
             sig(xn),
-            sig(frac),
-            lbc.len(),
-            within,
-            sig(margin),
-            sig(ml),
-            sig(mn),
-            sig(axis_margin),
-            sig(xl),
-            sig(xn)
+            sig(inputs.example.0),
+            sig(inputs.example.2),
         ),
     })
 }
@@ -191,66 +204,60 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::experiment::report::Verdict;
 
     /// The committed run's numbers over the 5 in-between targets.
     fn committed() -> RuleInputs {
         RuleInputs {
-            targets: 5,
-            within: 2,
-            within_fraction: 0.6,
-            lbc_error: 0.876,
-            naive_error: 0.959,
+            lbc: (0.6, 0.607, 0.253),
+            naive: (0.8, 0.629, 0.041),
+            example: (0.6, 0.83, 2.99),
+            within_fraction: 0.8,
             naive_margin: 0.05,
-            lbc_axis: 0.254,
-            naive_axis: 0.0442,
             axis_margin: 0.1,
         }
+    }
+
+    fn verdict(r: &RuleInputs) -> Option<Verdict> {
+        rule(r).map(|x| x.verdict())
     }
 
     #[test]
     fn naive_beating_lbc_on_a_main_measure_is_not_partly_held() {
         // LBC's error is lower, but the naive blend lands 0.21 m nearer the desired x.
-        assert_eq!(rule(&committed()), (false, false));
-        // Naive better on both measures (issue 56's 0.29 vs 0.33 error, within the error
-        // margin, and 0.0065 vs 0.18 m along x, beyond the axis margin), even with LBC within
-        // tolerance on every target: not partly.
+        assert_eq!(verdict(&committed()), Some(Verdict::NotHeld));
+        // Naive better on both measures beyond the margins: not partly.
         let both = RuleInputs {
-            within: 5,
-            lbc_error: 0.33,
-            naive_error: 0.29,
-            lbc_axis: 0.18,
-            naive_axis: 0.0065,
+            lbc: (1.0, 0.4, 0.18),
+            naive: (1.0, 0.29, 0.0065),
             ..committed()
         };
-        assert_eq!(rule(&both), (false, false));
-        // Naive's error lower by more than the margin, LBC nearer along x: not partly.
-        let error = RuleInputs {
-            lbc_error: 0.5,
-            naive_error: 0.3,
-            lbc_axis: 0.01,
-            ..committed()
-        };
-        assert_eq!(rule(&error), (false, false));
-        // Naive nearer along x only, LBC within tolerance everywhere: still not partly.
+        assert_eq!(verdict(&both), Some(Verdict::NotHeld));
+        // LBC within tolerance everywhere but naive nearer along x: still not partly.
         let axis = RuleInputs {
-            within: 5,
+            lbc: (1.0, 0.5, 0.253),
             ..committed()
         };
-        assert_eq!(rule(&axis), (false, false));
+        assert_eq!(verdict(&axis), Some(Verdict::NotHeld));
     }
 
     #[test]
     fn lbc_matching_naive_is_partly_and_within_tolerance_too_held() {
         let matched = RuleInputs {
-            lbc_axis: 0.1,
+            lbc: (0.6, 0.607, 0.1),
             ..committed()
         };
-        assert_eq!(rule(&matched), (false, true));
+        assert_eq!(verdict(&matched), Some(Verdict::Partly));
         let held = RuleInputs {
-            within: 3,
+            lbc: (0.8, 0.607, 0.1),
             ..matched
         };
-        assert_eq!(rule(&held), (true, true));
-        assert_eq!(rule(&RuleInputs { targets: 0, ..held }), (false, false));
+        assert_eq!(verdict(&held), Some(Verdict::Held));
+        // A within-tolerance bar that an example alone meets cannot fail: refused.
+        let lax = RuleInputs {
+            within_fraction: 0.6,
+            ..held
+        };
+        assert!(rule(&lax).is_none());
     }
 }

@@ -387,6 +387,7 @@ impl Job for Params {
             ("torque_limit", self.torque_limit),
             ("success_distance", self.success_distance),
             ("held_fraction", self.held_fraction),
+            ("partly_fraction", self.partly_fraction),
             ("max_cost_ratio", self.max_cost_ratio),
             ("value_model_ddp", (self.value_model == "ddp") as u8 as f64),
             ("other_value_model_built", alt.is_some() as u8 as f64),

@@ -41,7 +41,8 @@ mod verdict;
 
 pub use setup::{distance_to_handstand, first_swing_sign, first_torque_sign, tape_correlation};
 pub use verdict::{
-    choose_scale, judge, judge_test_start, sweep_counts, SweepCounts, PARTLY_FRACTION,
+    choose_scale, judge_test_start, premise_checks, sweep_checks, sweep_counts, sweep_rule,
+    SweepCounts,
 };
 
 use crate::experiment::output::Tables;
@@ -101,6 +102,8 @@ pub struct Params {
     /// fail (and more of them than either naive blend, and overall at least as many starts as
     /// the better tracker).
     pub held_fraction: f64,
+    /// Partly needs LBC to succeed on at least this fraction of them.
+    pub partly_fraction: f64,
     /// Range of θ1 (degrees) of the start-state sweep.
     pub sweep_theta1: [f64; 2],
     /// Range of θ2 (degrees) of the start-state sweep.
@@ -192,6 +195,11 @@ impl Validate for Params {
             "held_fraction",
             "must be in (0, 1]",
         )?;
+        ensure(
+            self.partly_fraction > 0.0 && self.partly_fraction <= self.held_fraction,
+            "partly_fraction",
+            "must be in (0, held_fraction]",
+        )?;
         ensure(self.sweep_points >= 1, "sweep_points", "must be at least 1")?;
         ensure(
             VALUE_MODELS.contains(&self.value_model.as_str()),
@@ -272,6 +280,7 @@ mod tests {
             weights: vec![1.0, 1.0],
             success_distance: 0.3,
             held_fraction: 0.5,
+            partly_fraction: 0.25,
             sweep_theta1: [-125.0, -75.0],
             sweep_theta2: [-40.0, 20.0],
             sweep_points: 1,
@@ -420,13 +429,15 @@ mod tests {
             successes,
             rescued,
         };
+        use crate::experiment::report::Verdict;
+        let v = |c: &SweepCounts, same: bool| sweep_rule(c, same, 0.5, 0.25).map(|r| r.verdict());
         let held = counts(vec![5, 6, 3, 8, 2], vec![0, 0, 1, 2, 1]);
-        assert_eq!(judge(&held, true, 0.5), (true, true));
-        assert_eq!(judge(&held, false, 0.5), (false, true));
+        assert_eq!(v(&held, true), Some(Verdict::Held));
+        assert_eq!(v(&held, false), Some(Verdict::PremiseNotReproduced));
         let one = counts(vec![5, 6, 3, 6, 2], vec![0, 0, 1, 1, 1]);
-        assert_eq!(judge(&one, true, 0.5), (false, true));
+        assert_eq!(v(&one, true), Some(Verdict::Partly));
         let none = counts(vec![5, 6, 3, 6, 2], vec![0, 0, 1, 0, 1]);
-        assert_eq!(judge(&none, true, 0.5), (false, false));
+        assert_eq!(v(&none, true), Some(Verdict::NotHeld));
     }
 
     #[test]

@@ -2,7 +2,9 @@
 //! value models and the verdict.
 
 use super::setup::POLICIES;
-use super::verdict::{judge, start_flags, sweep_counts, SweepCounts, PARTLY_FRACTION};
+use super::verdict::{
+    premise_checks, start_flags, sweep_checks, sweep_counts, sweep_rule, SweepCounts,
+};
 use super::{CONTROL_WEIGHT, VALUE_MODELS};
 use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings, Verdict};
@@ -22,6 +24,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         setting("held_fraction"),
         setting("max_cost_ratio"),
     );
+    let partly_fraction = setting("partly_fraction");
     // Swing-ups and their family.
     let su = read_csv(&dir.join("swingups.csv"))?;
     let (s1, s2, sc, sg, ss, st, sr, sx, sf) = (
@@ -166,7 +169,8 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         let pick = |v: &[f64]| rows.iter().map(|&r| v[r]).collect::<Vec<_>>();
         let names: Vec<String> = rows.iter().map(|&r| vp[r].clone()).collect();
         let c = sweep_counts(&start_flags(&pick(&va), &pick(&vb), &names, &pick(&vs)));
-        let (h, p) = judge(&c, same_family, held_fraction);
+        let grade = sweep_rule(&c, same_family, held_fraction, partly_fraction)
+            .map_or(Verdict::NotAssessed, |r| r.verdict());
         md.push_str(&format!(
             "| {name} | {} of {} | {} | {} / {} | {} | {} | {} |\n",
             c.both_fail,
@@ -176,9 +180,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             c.rescued[4],
             c.successes[3],
             c.successes[0].max(c.successes[1]),
-            Verdict::graded(h, p)
-                .given(same_family && c.both_fail > 0)
-                .label()
+            grade.label()
         ));
         per_model.push((name, c));
     }
@@ -215,65 +217,17 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     // results without the selection: not asked): reported, no longer a premise.
     let found = setting("scale_premise_found");
     let found = found.is_nan() || found == 1.0;
-    let both = counts.both_fail.max(1) as f64;
-    let share = rescued as f64 / both;
-    let none = |label: &str| Null::new(label, 0.0);
-    let rule = Rule {
-        premise: vec![
-            Check::fact("swing-ups of one family (aligned examples)", same_family),
-            Check::new(
-                "sweep starts where both torque-limited trackers fail",
-                counts.both_fail as f64,
-                Cmp::AtLeast,
-                1.0,
-                none("trackers that swing up from every start"),
-            )
-            .map_err(crate::experiment::other)?,
-        ],
-        held: vec![
-            Check::new(
-                "LBC's distance from the handstand at the test start over the closer naive blend's",
-                dl / dn.min(ds),
-                Cmp::Below,
-                1.0,
-                Null::new("the closer naive blend itself", 1.0),
-            )
-            .map_err(crate::experiment::other)?,
-            Check::new(
-                "share of the both-fail sweep starts LBC swings up from (partly)",
-                share,
-                Cmp::AtLeast,
-                PARTLY_FRACTION,
-                none("the trackers alone"),
-            )
-            .map_err(crate::experiment::other)?,
-            Check::new(
-                "share of the both-fail sweep starts LBC swings up from (held)",
-                share,
-                Cmp::AtLeast,
-                held_fraction,
-                none("the trackers alone"),
-            )
-            .map_err(crate::experiment::other)?,
-            Check::new(
-                "both-fail sweep starts LBC swings up from beyond the better naive blend's",
-                rescued as f64 - naive_rescued as f64,
-                Cmp::Above,
-                0.0,
-                none("the better naive blend itself"),
-            )
-            .map_err(crate::experiment::other)?,
-            Check::new(
-                "sweep starts LBC swings up from over the better tracker's",
-                counts.successes[lbc] as f64 / better_tracker.max(1) as f64,
-                Cmp::Above,
-                1.0,
-                Null::new("the better tracker itself", 1.0),
-            )
-            .map_err(crate::experiment::other)?,
-        ],
-        partly: Partly::All(vec![0, 1]),
-    };
+    let mut held = vec![Check::new(
+        "LBC's distance from the handstand at the test start over the closer naive blend's",
+        dl / dn.min(ds),
+        Cmp::Below,
+        1.0,
+        Null::new("the closer naive blend itself", 1.0),
+    )];
+    held.extend(sweep_checks(&counts, held_fraction, partly_fraction));
+    let premise = premise_checks(&counts, same_family).map_err(crate::experiment::other)?;
+    let rule = Rule::gated(premise, held, Partly::All(vec![0, 1]))
+        .ok_or_else(|| crate::experiment::other("lbc_acrobot_swingup: a check its null passes"))?;
     Ok(Findings {
         ours: md,
         verdict: rule.verdict(),

@@ -2,6 +2,7 @@
 //! trackers fail, and the spec's grade of them.
 
 use super::setup::POLICIES;
+use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule, RuleError};
 
 /// Counts over the start-state sweep: per policy successes, and on the subset where both
 /// trackers fail.
@@ -38,29 +39,81 @@ pub fn sweep_counts(ok: &[Vec<bool>]) -> SweepCounts {
     c
 }
 
-/// The share of the starts where both trackers fail that LBC must rescue for "partly" (ours,
-/// issue 56, 2026-11-28: a clear share, a quarter, rather than any one start).
-pub const PARTLY_FRACTION: f64 = 0.25;
+/// The premise of the spec's rule on sweep counts `c`: swing-ups of one family (aligned
+/// examples), and starts where both torque-limited trackers fail (null: trackers that swing up
+/// from every start).
+pub fn premise_checks(c: &SweepCounts, same_family: bool) -> Result<Vec<Check>, RuleError> {
+    Ok(vec![
+        Check::fact("swing-ups of one family (aligned examples)", same_family),
+        Check::new(
+            "sweep starts where both torque-limited trackers fail",
+            c.both_fail as f64,
+            Cmp::AtLeast,
+            1.0,
+            Null::new("trackers that swing up from every start", 0.0),
+        )?,
+    ])
+}
 
-/// The spec's rule on sweep counts: (held, partly). Held: same-family swing-ups, LBC succeeds
-/// on at least `held_fraction` of the starts where both trackers fail and on more of them than
-/// either naive blend, and over the whole sweep on at least as many starts as the better
-/// tracker. Partly (rewritten 2026-11-28 after seeing the committed results, issue 56; it was
-/// "LBC rescues a start where both trackers fail, or covers more starts than the better
-/// tracker"): LBC rescues at least [`PARTLY_FRACTION`] of the starts where both trackers fail
-/// and at least as many of them as the better naive blend (average or sum), so that the naive
-/// blend doing better contradicts it.
-pub fn judge(c: &SweepCounts, same_family: bool, held_fraction: f64) -> (bool, bool) {
+/// The sweep's checks of the spec's rule on counts `c`: (1) LBC swings up from at least
+/// `partly_fraction` and (2) `held_fraction` of the starts where both trackers fail (null:
+/// the trackers alone, 0); (3) from more of them than the better naive blend (null: that blend
+/// itself); (4) from more sweep starts than the better tracker (null: that tracker itself).
+/// The partly fraction was set after seeing results (the spec's history).
+pub fn sweep_checks(
+    c: &SweepCounts,
+    held_fraction: f64,
+    partly_fraction: f64,
+) -> Vec<Result<Check, RuleError>> {
     let (t1, t2, nv, lbc, ns) = (0, 1, 2, 3, 4);
     let better_tracker = c.successes[t1].max(c.successes[t2]);
     let rescued = c.rescued[lbc];
     let naive = c.rescued[nv].max(c.rescued[ns]);
-    let premise = c.both_fail > 0;
-    let share = |f: f64| premise && rescued as f64 >= f * c.both_fail as f64;
-    let covers = c.successes[lbc] >= better_tracker;
-    let held = same_family && share(held_fraction) && rescued > naive && covers;
-    let partly = share(PARTLY_FRACTION) && rescued >= naive;
-    (held, partly)
+    let share = rescued as f64 / c.both_fail.max(1) as f64;
+    let none = |label: &str| Null::new(label, 0.0);
+    vec![
+        Check::new(
+            "share of the both-fail sweep starts LBC swings up from (partly)",
+            share,
+            Cmp::AtLeast,
+            partly_fraction,
+            none("the trackers alone"),
+        ),
+        Check::new(
+            "share of the both-fail sweep starts LBC swings up from (held)",
+            share,
+            Cmp::AtLeast,
+            held_fraction,
+            none("the trackers alone"),
+        ),
+        Check::new(
+            "both-fail sweep starts LBC swings up from beyond the better naive blend's",
+            rescued as f64 - naive as f64,
+            Cmp::Above,
+            0.0,
+            none("the better naive blend itself"),
+        ),
+        Check::new(
+            "sweep starts LBC swings up from over the better tracker's",
+            c.successes[lbc] as f64 / better_tracker.max(1) as f64,
+            Cmp::Above,
+            1.0,
+            Null::new("the better tracker itself", 1.0),
+        ),
+    ]
+}
+
+/// The spec's rule on the sweep alone (the value models' table, which has no test start):
+/// [`premise_checks`] and [`sweep_checks`], partly on (1).
+pub fn sweep_rule(
+    c: &SweepCounts,
+    same_family: bool,
+    held_fraction: f64,
+    partly_fraction: f64,
+) -> Option<Rule> {
+    let premise = premise_checks(c, same_family).ok()?;
+    let held = sweep_checks(c, held_fraction, partly_fraction);
+    Rule::gated(premise, held, Partly::All(vec![0]))
 }
 
 /// The tracker-setting rule (ours, written in the spec before the run): of the trials
@@ -106,6 +159,7 @@ pub(super) fn start_flags(a: &[f64], b: &[f64], p: &[String], s: &[f64]) -> Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::experiment::report::Verdict;
 
     /// Counts over a 121-start sweep with 26 starts where both trackers fail; per policy
     /// (tracker1, tracker2, naive, lbc, naive_sum) successes overall and on those 26.
@@ -118,29 +172,37 @@ mod tests {
         }
     }
 
-    #[test]
-    fn lbc_rescuing_few_starts_while_the_naive_sum_rescues_more_is_not_partly_held() {
-        // The committed sweep's counts: LBC rescues 2 of 26, the naive sum 7, though LBC
-        // covers more starts overall than the better tracker (84 vs 66).
-        let c = counts([46, 66, 28, 84, 41], [0, 0, 1, 2, 7]);
-        assert_eq!(judge(&c, true, 0.5), (false, false));
-        // One rescue of 26 is no clear share, even with no naive rescue.
-        let c = counts([46, 66, 28, 84, 41], [0, 0, 0, 1, 0]);
-        assert_eq!(judge(&c, true, 0.5), (false, false));
-        // A clear share (8 of 26) that the naive sum beats (9) is not partly either.
-        let c = counts([46, 66, 28, 84, 41], [0, 0, 1, 8, 9]);
-        assert_eq!(judge(&c, true, 0.5), (false, false));
+    fn grade(c: &SweepCounts, same_family: bool) -> Verdict {
+        sweep_rule(c, same_family, 0.5, 0.25).unwrap().verdict()
     }
 
     #[test]
-    fn a_clear_share_at_least_the_naive_blends_is_partly_and_half_beating_them_held() {
+    fn lbc_rescuing_few_starts_is_not_partly_held() {
+        // The committed sweep's counts: LBC rescues 2 of 26, the naive sum 7, though LBC
+        // covers more starts overall than the better tracker (84 vs 66).
+        let c = counts([46, 66, 28, 84, 41], [0, 0, 1, 2, 7]);
+        assert_eq!(grade(&c, true), Verdict::NotHeld);
+        // One rescue of 26 is no clear share, even with no naive rescue.
+        let c = counts([46, 66, 28, 84, 41], [0, 0, 0, 1, 0]);
+        assert_eq!(grade(&c, true), Verdict::NotHeld);
+    }
+
+    #[test]
+    fn a_clear_share_is_partly_and_half_beating_the_naive_blends_held() {
         let c = counts([46, 66, 28, 84, 41], [0, 0, 1, 8, 8]);
-        assert_eq!(judge(&c, true, 0.5), (false, true));
+        assert_eq!(grade(&c, true), Verdict::Partly);
         let c = counts([46, 66, 28, 84, 41], [0, 0, 1, 13, 7]);
-        assert_eq!(judge(&c, true, 0.5), (true, true));
+        assert_eq!(grade(&c, true), Verdict::Held);
         // Held also needs the swing-ups of one family and LBC to cover the better tracker.
-        assert_eq!(judge(&c, false, 0.5), (false, true));
+        assert_eq!(grade(&c, false), Verdict::PremiseNotReproduced);
         let c = counts([46, 66, 28, 60, 41], [0, 0, 1, 13, 7]);
-        assert_eq!(judge(&c, true, 0.5), (false, true));
+        assert_eq!(grade(&c, true), Verdict::Partly);
+        // No start where both trackers fail: the premise fails.
+        let c = SweepCounts {
+            both_fail: 0,
+            rescued: vec![0; 5],
+            ..counts([46, 66, 28, 84, 41], [0; 5])
+        };
+        assert_eq!(grade(&c, true), Verdict::PremiseNotReproduced);
     }
 }

@@ -37,7 +37,7 @@ mod report;
 
 pub use coordination::{
     compare_objectives, coordination_rule, CoordinationCounts, CoordinationParams,
-    LbcDiverCoordination, PARTLY_WORSE_MARGIN,
+    CoordinationRule, LbcDiverCoordination,
 };
 pub use disturbance::{disturbance_rule, DisturbanceParams, LbcDiveDisturbance};
 pub use interpolation::{choose_offset, InterpolationParams, LbcDiverInterpolation, OffsetTrial};

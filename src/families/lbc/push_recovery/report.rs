@@ -3,7 +3,8 @@
 use super::measures::{mirror_gap, swings, window_gap, window_range};
 use super::COMMITTED;
 use crate::experiment::output::{df_f64, df_str, read_csv};
-use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::report::{sig, Findings};
+use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use crate::families::lbc::{entropy_section, rule_settings};
 use std::f64::consts::FRAC_PI_2;
@@ -50,10 +51,12 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         setting("mirror_tolerance"),
         setting("fall_angle"),
     );
-    let swung = tugged_swings as f64 >= min_swings;
-    let from_tugs = baseline_swings < tugged_swings;
-    let settled = !window.is_empty() && settle_range < settle_tol;
-    let mirrored = mirror_gap < mirror_tol;
+    // An empty window says nothing about settling.
+    let settle_range = if window.is_empty() {
+        f64::NAN
+    } else {
+        settle_range
+    };
     // At rest over the window: the body's largest angular rate (finite differences of the
     // body angle, tugged and mirrored runs). Older results have no rest_rate: not judged.
     let rest_rate = setting("rest_rate");
@@ -67,7 +70,6 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         })
         .fold(0.0, f64::max);
     let at_rest = rest_rate.is_nan() || rate < rest_rate;
-    let stood = lean < fall && at_rest;
     let reaches = read_csv(&dir.join("reaches.csv"))?;
     let (rn, rc, rt) = (
         df_str(&reaches, "reach")?,
@@ -84,15 +86,13 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             .join(", ")
     );
     md.push_str(&format!(
-        "| check (thresholds ours, in the spec) | measured | passes |\n| --- | --- | --- |\n| the weight swings from one side to the other (below 0.25 to above 0.75, or back) at least {} times before t = {} s | {} | {} |\n| the swings come from the tugs: the no-tug baseline swings fewer times before t = {} s | {} | {} |\n| settles: the weight's range over [{}, {}] s (horizon {} s), tugged and mirrored, below {} | {} | {} |\n| mirrored tugs give the mirrored choice: max abs(alpha_fwd − alpha_bwd(mirrored)) below {} | {} | {} |\n| no fall: largest lean from upright (tugged and mirrored) below {} rad, and at rest over the window (body rate below {} rad/s) | {} rad, {} rad/s | {} |\n\nThe last tug ends at t = {} s. Walls at ±{} m from the ankle. Beside the rule: the tugged weight's largest distance from the no-tug baseline's over the window is {} (the tugs may change which strategy is kept).\n",
-        min_swings, sig(w0), tugged_swings, swung,
-        sig(w0), baseline_swings, from_tugs,
-        sig(w0), sig(w1), sig(setting("horizon")), sig(settle_tol), sig(settle_range), settled,
-        sig(mirror_tol), sig(mirror_gap), mirrored,
-        sig(fall), sig(rest_rate), sig(lean), sig(rate), stood,
+        "The last tug ends at t = {} s. Walls at ±{} m from the ankle. Beside the rule: the tugged weight's largest distance from the no-tug baseline's over the settling window [{}, {}] s is {} (the tugs may change which strategy is kept); the body's largest rate there {} rad/s.\n",
         sig(last_tug),
         sig(setting("walls_distance")),
-        sig(settle_gap)
+        sig(w0),
+        sig(w1),
+        sig(settle_gap),
+        sig(rate)
     ));
     // When the tugged weight first leaves the undecided middle, and for which reach; where
     // the hand is when the first tug ends.
@@ -177,39 +177,131 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         "the fixed weights are w = (1, 1), so their entropy is 1: uniform α",
         "the fixed average of the two reaches",
     )?);
-    let verdict = Verdict::graded(
-        swung && from_tugs && settled && mirrored && stood,
-        swung && mirrored,
-    )
-    .given(premise && found);
+    let rule = push_rule(
+        &PushFacts {
+            swings: (tugged_swings as f64, baseline_swings as f64),
+            settle_range,
+            mirror_gap,
+            lean: (lean, no_reach),
+            at_rest,
+            committed_late: found,
+        },
+        &PushBars {
+            min_swings,
+            settle_tolerance: settle_tol,
+            mirror_tolerance: mirror_tol,
+            fall_angle: fall,
+        },
+    );
+    let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
     Ok(Findings {
         ours: md,
         verdict,
         why: format!(
-            "paper: the blend weight swings as the arm is tugged back and forth, then settles (Fig. 9). {}Held needs all five checks; partly needs the swings with mirrored choices. Premise (else \"premise not reproduced\"): without a reach the same tugs lean the body beyond the fall angle, and at the reach scale the spec's rule chose LBC's weights have not committed (both below {}) before the second tug ({}).",
-            if premise {
-                format!(
-                    "Ours: the weight swings {} times under the tugs (held and partly need {}; the no-tug baseline {}), keeps one reach over the window (range {}), mirrors (gap {}); with LBC the body leans at most {} rad and is at rest{}, while without a reach the same tugs topple it ({} rad). ",
-                    tugged_swings,
-                    min_swings as usize,
-                    baseline_swings,
-                    sig(settle_range),
-                    sig(mirror_gap),
-                    sig(lean),
-                    if at_rest { "" } else { " only if it is still" },
-                    if no_reach.is_nan() { "not measured".to_string() } else { sig(no_reach) }
-                )
-            } else {
-                format!(
-                    "Premise not reproduced: without a reach the tugs lean the body at most {} rad from upright, within the fall angle {} rad, so no reach is needed to prevent a fall. ",
-                    sig(no_reach),
-                    sig(fall)
-                )
-            },
+            "paper: the blend weight swings as the arm is tugged back and forth, then settles (Fig. 9). Ours: the weight swings {} times under the tugs (the no-tug baseline {}), keeps one reach over the window (range {}), mirrors (gap {}); with LBC the body leans at most {} rad, without a reach the same tugs lean it {} rad.{lines} Rule (thresholds ours, in the spec; a swing is the weight crossing from below 0.25 to above 0.75 or back before the settling window; the reach scale is the first at which, with the first tug alone, neither reach's weight exceeds {} before the second tug): {text}",
+            tugged_swings,
+            baseline_swings,
+            sig(settle_range),
+            sig(mirror_gap),
+            sig(lean),
+            if no_reach.is_nan() { "not measured".to_string() } else { sig(no_reach) },
             sig(COMMITTED),
-            if found { "found" } else { "not found at any scale tried" }
         ),
     })
+}
+
+/// What [`push_rule`] reads.
+pub struct PushFacts {
+    /// Side-to-side swings of the weight before the settling window: tugged, no-tug baseline.
+    pub swings: (f64, f64),
+    /// The weight's largest range over the window, tugged or mirrored.
+    pub settle_range: f64,
+    /// max |α_fwd − α_bwd(mirrored)|.
+    pub mirror_gap: f64,
+    /// The body's largest lean from upright (rad): with LBC, and without a reach.
+    pub lean: (f64, f64),
+    /// At rest over the window.
+    pub at_rest: bool,
+    /// At the chosen reach scale LBC's weights had not committed before the second tug.
+    pub committed_late: bool,
+}
+
+/// The spec's bars [`push_rule`] reads.
+pub struct PushBars {
+    /// Swings needed.
+    pub min_swings: f64,
+    /// Settled: the range over the window below this.
+    pub settle_tolerance: f64,
+    /// Mirrored: the gap below this.
+    pub mirror_tolerance: f64,
+    /// A lean beyond this (rad) is a fall.
+    pub fall_angle: f64,
+}
+
+/// The verdict's rule. Premise: without a reach the tugs lean the body beyond the fall angle
+/// (null: a body that does not lean), and at the chosen reach scale LBC's weights have not
+/// committed before the second tug. Held: (a) the weight swings at least `min_swings` times
+/// (null: the no-tug baseline's swings) and (b) more than the baseline (null: the baseline, 0
+/// more); (c) it settles, its range over the window below `settle_tolerance` (null: a weight
+/// sweeping the whole range, 1); (d) mirrored tugs give the mirrored choice, gap below
+/// `mirror_tolerance` (null: the same reach under mirrored tugs, 1); (e) no fall, the lean
+/// below the fall angle (null: the body without a reach), and (f) at rest over the window.
+/// Partly: (a) and (d), the swings with mirrored choices.
+pub fn push_rule(f: &PushFacts, b: &PushBars) -> Option<Rule> {
+    let premise = vec![
+        Check::new(
+            "without a reach, the tugs' largest lean from upright (rad)",
+            f.lean.1,
+            Cmp::Above,
+            b.fall_angle,
+            Null::new("a body that does not lean", 0.0),
+        )
+        .ok()?,
+        Check::fact(
+            "at the chosen reach scale, LBC's weights have not committed before the second tug",
+            f.committed_late,
+        ),
+    ];
+    let baseline = "the no-tug baseline";
+    let held = vec![
+        Check::new(
+            "side-to-side swings of the weight under the tugs",
+            f.swings.0,
+            Cmp::AtLeast,
+            b.min_swings,
+            Null::new(baseline, f.swings.1),
+        ),
+        Check::new(
+            "swings beyond the no-tug baseline's",
+            f.swings.0 - f.swings.1,
+            Cmp::Above,
+            0.0,
+            Null::new(baseline, 0.0),
+        ),
+        Check::new(
+            "the weight's range over the settling window",
+            f.settle_range,
+            Cmp::Below,
+            b.settle_tolerance,
+            Null::new("a weight sweeping the whole range", 1.0),
+        ),
+        Check::new(
+            "mirror gap max |alpha_fwd - alpha_bwd(mirrored)|",
+            f.mirror_gap,
+            Cmp::Below,
+            b.mirror_tolerance,
+            Null::new("the same reach under mirrored tugs", 1.0),
+        ),
+        Check::new(
+            "largest lean from upright with LBC (rad)",
+            f.lean.0,
+            Cmp::Below,
+            b.fall_angle,
+            Null::new("the body without a reach", f.lean.1),
+        ),
+        Ok(Check::fact("at rest over the settling window", f.at_rest)),
+    ];
+    Rule::gated(premise, held, Partly::All(vec![0, 3]))
 }
 
 /// The reach-scale search's table (from `reach_scales.csv`, absent in old results) and whether
@@ -247,4 +339,49 @@ fn reach_scales(dir: &Path, chosen: f64) -> Result<(String, bool), Error> {
         )
     });
     Ok((md, found))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::report::Verdict;
+
+    const BARS: PushBars = PushBars {
+        min_swings: 2.0,
+        settle_tolerance: 0.1,
+        mirror_tolerance: 0.05,
+        fall_angle: 0.5,
+    };
+
+    fn facts(swings: f64, no_reach: f64) -> PushFacts {
+        PushFacts {
+            swings: (swings, 0.0),
+            settle_range: 0.01,
+            mirror_gap: 1e-6,
+            lean: (0.1, no_reach),
+            at_rest: true,
+            committed_late: true,
+        }
+    }
+
+    #[test]
+    fn swings_with_mirrored_choices_are_partly_and_every_check_held() {
+        let v = |f: &PushFacts| push_rule(f, &BARS).map(|r| r.verdict());
+        assert_eq!(v(&facts(3.0, 0.9)), Some(Verdict::Held));
+        // No swings under the tugs: not even partly.
+        assert_eq!(v(&facts(0.0, 0.9)), Some(Verdict::NotHeld));
+        let unsettled = PushFacts {
+            settle_range: 0.5,
+            ..facts(3.0, 0.9)
+        };
+        assert_eq!(v(&unsettled), Some(Verdict::Partly));
+        // Tugs that would not topple the body without a reach: the premise fails.
+        assert_eq!(v(&facts(3.0, 0.2)), Some(Verdict::PremiseNotReproduced));
+        // A no-tug baseline that swings as often as the bar: the swing check cannot fail.
+        let baseline = PushFacts {
+            swings: (3.0, 2.0),
+            ..facts(3.0, 0.9)
+        };
+        assert!(push_rule(&baseline, &BARS).is_none());
+    }
 }

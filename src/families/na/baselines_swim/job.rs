@@ -309,6 +309,10 @@ impl Job for Params {
                 opt(own.map(|x| x.iteration as f64))
             ]);
         }
-        Ok(Tables::from([("baselines", baselines), ("final", final_t)]))
+        Ok(Tables::from([
+            ("baselines", baselines),
+            ("final", final_t),
+            ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
+        ]))
     }
 }

@@ -91,6 +91,24 @@ pub struct Params {
     /// `na_fig13_control` (ours), if run.
     #[serde(default)]
     pub dagger: Option<SwimDagger>,
+    /// The verdict's thresholds (ours; [`report::swim_rule`]).
+    pub rule: SwimRule,
+}
+
+/// The verdict's thresholds (ours: the paper compares "about 20 iterations" with "500-3,500").
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SwimRule {
+    /// Where the common target J* lies between the initial J and the best J any method
+    /// reaches on the substrate.
+    pub target_fraction: f64,
+    /// BPTT is fast when it reaches J* within this many iterations.
+    pub fast_iterations: f64,
+    /// A gradient-free method is slow when it needs at least this many times BPTT's
+    /// iterations (or never gets there).
+    pub slow_factor: f64,
+    /// Partly needs more than this share of the methods slow.
+    pub partly_slow_share: f64,
 }
 
 /// `[params.dagger]`: what, besides this file's task, nets and BPTT settings, determines
@@ -154,6 +172,23 @@ impl Params {
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
         ensure(self.steps >= 1, "steps", "must be >= 1")?;
+        let r = &self.rule;
+        ensure(
+            r.target_fraction > 0.0 && r.target_fraction <= 1.0,
+            "rule.target_fraction",
+            "must be in (0, 1]",
+        )?;
+        ensure(
+            r.fast_iterations >= 1.0,
+            "rule.fast_iterations",
+            "must be >= 1",
+        )?;
+        ensure(r.slow_factor > 1.0, "rule.slow_factor", "must be above 1")?;
+        ensure(
+            r.partly_slow_share >= 0.0 && r.partly_slow_share < 1.0,
+            "rule.partly_slow_share",
+            "must be in [0, 1)",
+        )?;
         positive("example_scale", self.example_scale)?;
         ensure(
             self.curvature_iterations >= 1,

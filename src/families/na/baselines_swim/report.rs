@@ -1,15 +1,17 @@
 //! The report: every run's table row, and the verdict rule (BPTT fast, every gradient-free
 //! method at least 10x slower, BPTT's knots swimming at least as far on the simulator).
 
-use super::{DAGGER_SUBSTRATE, SEARCHES};
+use super::{SwimRule, DAGGER_SUBSTRATE, SEARCHES};
 use crate::experiment::other;
 use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use std::path::Path;
 
 /// The findings from the run folder `dir`.
 pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
+    let bars: SwimRule = read_rule(dir)?;
     let f = read_csv(&dir.join("final.csv"))?;
     let (meth, sub) = (df_str(&f, "method")?, df_str(&f, "substrate")?);
     let col = |name: &str| df_f64(&f, name);
@@ -81,7 +83,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
             .filter(|&r| bs[r] == substrate)
             .map(|r| bo[r])
             .fold(f64::INFINITY, f64::min);
-        let target = common_target(j0, j_best);
+        let target = common_target(j0, j_best, &bars);
         let k_bptt = iterations_to(&mi, &mo, target);
         let (mut rivals, mut notes) = (vec![], vec![]);
         for m in SEARCHES {
@@ -107,7 +109,8 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
             .filter_map(|m| row_of(m, substrate))
             .map(|r| d_sim[r])
             .fold(f64::NEG_INFINITY, f64::max);
-        let (held, partly) = rule(k_bptt, &rivals, d_sim[mom], rival_sim);
+        let rule = swim_rule(k_bptt, &rivals, d_sim[mom], rival_sim, &bars);
+        let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
         let target_line = format!(
             "common target J* = {} (halfway from the initial J = {} to the best any method reaches, {}): BPTT with momentum {}; {}",
             sig(target),
@@ -123,7 +126,9 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
             mom,
             target_line,
             rival_sim,
-            verdict: Verdict::graded(held, partly),
+            verdict,
+            lines,
+            text,
         })
     };
     // The notes on reaching BPTT-momentum's own best J (the table's column; not the rule).
@@ -158,6 +163,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     };
     let main = judge("emulator").ok_or_else(|| other("no bptt_momentum run"))?;
     let (rival_sim, verdict) = (main.rival_sim, main.verdict);
+    let (lines, text) = (&main.lines, &main.text);
     let (k_bptt, notes) = (k_to[mom], own_notes("emulator"));
     let sim_notes: Vec<String> = SEARCHES
         .iter()
@@ -194,14 +200,15 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     // The same rule on the DAgger net (ours; a line beside the headline, rule in the spec).
     let dagger_line = match judge(DAGGER_SUBSTRATE) {
             Some(g) => format!(
-                " On the dolphin's last-round DAgger global net (ours, substrate `{DAGGER_SUBSTRATE}`, the same start and budgets): BPTT with momentum reaches its best J = {} at iteration {}; {}. Its {}. Replayed on the simulator, BPTT's knots learned there swim {} m, the gradient-free methods' at most {} m. The same rule on the DAgger net: {}.",
+                " On the dolphin's last-round DAgger global net (ours, substrate `{DAGGER_SUBSTRATE}`, the same start and budgets): BPTT with momentum reaches its best J = {} at iteration {}; {}. Its {}. Replayed on the simulator, BPTT's knots learned there swim {} m, the gradient-free methods' at most {} m. The same rule on the DAgger net: {}.{}",
                 sig(j_sub[g.mom]),
                 k_to[g.mom],
                 own_notes(DAGGER_SUBSTRATE).join("; "),
                 g.target_line,
                 sig(d_sim[g.mom]),
                 sig(g.rival_sim),
-                g.verdict.label()
+                g.verdict.label(),
+                g.lines
             ),
             None => String::new(),
         };
@@ -209,7 +216,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
             ours: md,
             verdict,
             why: format!(
-                "On the emulator, the {}. BPTT with momentum reaches its best emulator J = {} at iteration {} ({} s, the step-scale estimate included; its iterate's J rose in {rises} of {} steps; its knots swim {} m on the simulator vs {} m on the emulator). On the emulator, {}. On the physical simulator (target: BPTT's knots replayed there, J = {}), {}. Replayed on the simulator, BPTT's knots swim {} m, the gradient-free methods' emulator-learned knots at most {} m. Held needs BPTT with momentum to reach the common target J* within 30 iterations, every gradient-free method on the emulator to need at least 10x as many iterations to reach J* or never reach it, and BPTT's knots to swim on the simulator at least as far as every gradient-free method's emulator-learned knots (the emulator's ranking holds on the physical model); partly: BPTT reaches J* within 30 iterations, more than half the gradient-free methods need at least 10x as many, and none needs fewer than BPTT. This rule was rewritten on 2026-11-28 after seeing the committed results (issue 56; J* halfway to the best J any method reaches is ours): the old rule timed every method to BPTT's own best J, so 'BPTT fast' always held, and partly was 'BPTT fast and at least one method slow'. An iteration is one annealing proposal, one simplex step, one hill-climbing batch (several evaluations) or one gradient step; budgets are far below the paper's hour, so 'never' means 'not within the budget'. Seconds are this machine's wall clock.",
+                "On the emulator, the {}. BPTT with momentum reaches its best emulator J = {} at iteration {} ({} s, the step-scale estimate included; its iterate's J rose in {rises} of {} steps; its knots swim {} m on the simulator vs {} m on the emulator). On the emulator, {}. On the physical simulator (target: BPTT's knots replayed there, J = {}), {}. Replayed on the simulator, BPTT's knots swim {} m, the gradient-free methods' emulator-learned knots at most {} m. Checks on the emulator:{lines} Rule (ours, in the spec's [params.rule], rewritten after results: see the rule history; J* lies target_fraction of the way from the initial J to the best J any method reaches): {text} An iteration is one annealing proposal, one simplex step, one hill-climbing batch (several evaluations) or one gradient step; budgets are far below the paper's hour, so 'never' means 'not within the budget'. Seconds are this machine's wall clock.",
                 main.target_line,
                 sig(j_sub[mom]),
                 k_bptt,
@@ -232,22 +239,14 @@ struct Judged {
     target_line: String,
     rival_sim: f64,
     verdict: Verdict,
+    lines: String,
+    text: String,
 }
 
-/// Where the common target lies between the initial J and the best J any method reaches on
-/// the substrate (ours, issue 56, 2026-11-28: halfway).
-pub const TARGET_FRACTION: f64 = 0.5;
-
-/// BPTT is fast when it reaches the common target within this many iterations.
-pub const FAST_ITERATIONS: f64 = 30.0;
-
-/// A gradient-free method is slow when it needs at least this many times BPTT's iterations.
-pub const SLOW_FACTOR: f64 = 10.0;
-
-/// The common target J* on a substrate: [`TARGET_FRACTION`] of the way from the initial J
+/// The common target J* on a substrate: `bars.target_fraction` of the way from the initial J
 /// `j0` (the common initial knots') to the best J `j_best` any method reaches there.
-pub fn common_target(j0: f64, j_best: f64) -> f64 {
-    j0 + TARGET_FRACTION * (j_best - j0)
+pub fn common_target(j0: f64, j_best: f64, bars: &SwimRule) -> f64 {
+    j0 + bars.target_fraction * (j_best - j0)
 }
 
 /// The first iteration of a run (`iterations`, with its best-so-far J `best`) whose J is at or
@@ -260,38 +259,98 @@ pub fn iterations_to(iterations: &[f64], best: &[f64], target: f64) -> Option<f6
         .map(|(&k, _)| k)
 }
 
-/// The spec's rule (rewritten 2026-11-28 after seeing the committed results, issue 56; it timed
-/// every method to BPTT's own best J): (held, partly) from the iterations BPTT-momentum
-/// (`bptt`) and each gradient-free method (`rivals`) need to reach the common target (`None`:
-/// never), and how far BPTT's knots (`bptt_swim`) and the farthest of the methods' knots
-/// (`rival_swim`) swim on the simulator. Held: BPTT reaches it within [`FAST_ITERATIONS`],
-/// every method needs at least [`SLOW_FACTOR`] times as many iterations or never gets there,
-/// and BPTT's knots swim at least as far. Partly: BPTT reaches it within
-/// [`FAST_ITERATIONS`], more than half the methods are that slow, and none needs fewer
-/// iterations than BPTT.
-pub fn rule(
+/// The verdict's rule on one substrate, from the iterations BPTT-momentum (`bptt`) and each
+/// gradient-free method (`rivals`) need to reach the common target (`None`: never), and how far
+/// BPTT's knots (`bptt_swim`) and the farthest of the methods' knots (`rival_swim`) swim on the
+/// simulator: (a) BPTT reaches J* within `fast_iterations` (null: the initial knots, which
+/// never do); (b) the share of methods needing at least `slow_factor` times BPTT's iterations
+/// or never getting there is 1, and (c) above `partly_slow_share` (null for both: methods as
+/// fast as BPTT, 0); (d) no method needs fewer iterations than BPTT (null: every method
+/// faster); (e) BPTT's knots swim farther on the simulator than every method's (null: the
+/// farthest method's knots themselves, 0 m farther). Held needs all; partly (a), (c), (d).
+pub fn swim_rule(
     bptt: Option<f64>,
     rivals: &[Option<f64>],
     bptt_swim: f64,
     rival_swim: f64,
-) -> (bool, bool) {
-    let Some(kb) = bptt.filter(|&k| k <= FAST_ITERATIONS) else {
-        return (false, false);
-    };
+    bars: &SwimRule,
+) -> Option<Rule> {
+    let kb = bptt.unwrap_or(f64::INFINITY);
     let slow = rivals
         .iter()
-        .filter(|k| k.map_or(true, |k| k >= SLOW_FACTOR * kb.max(1.0)))
-        .count();
-    let faster = rivals.iter().any(|k| k.is_some_and(|k| k < kb));
-    let all_slow = !rivals.is_empty() && slow == rivals.len();
-    let held = all_slow && bptt_swim >= rival_swim;
-    let partly = 2 * slow > rivals.len() && !faster;
-    (held, partly)
+        .filter(|k| k.map_or(true, |k| k >= bars.slow_factor * kb.max(1.0)))
+        .count() as f64;
+    let share = if rivals.is_empty() {
+        f64::NAN
+    } else {
+        slow / rivals.len() as f64
+    };
+    let faster = rivals.iter().filter(|k| k.is_some_and(|k| k < kb)).count() as f64;
+    let n = rivals.len() as f64;
+    let slow_label = format!(
+        "share of gradient-free methods needing >= {}x BPTT's iterations to J* (or never reaching it)",
+        sig(bars.slow_factor)
+    );
+    let as_fast = "methods as fast as BPTT";
+    let held = vec![
+        Check::new(
+            "BPTT-momentum's iterations to J*",
+            kb,
+            Cmp::AtMost,
+            bars.fast_iterations,
+            Null::new("the initial knots (never)", f64::INFINITY),
+        ),
+        Check::new(
+            slow_label.clone(),
+            share,
+            Cmp::AtLeast,
+            1.0,
+            Null::new(as_fast, 0.0),
+        ),
+        Check::new(
+            slow_label,
+            share,
+            Cmp::Above,
+            bars.partly_slow_share,
+            Null::new(as_fast, 0.0),
+        ),
+        Check::new(
+            "gradient-free methods reaching J* in fewer iterations than BPTT",
+            faster,
+            Cmp::AtMost,
+            0.0,
+            Null::new("every method faster", n.max(1.0)),
+        ),
+        Check::new(
+            "how much farther BPTT's knots swim on the simulator than every method's (m)",
+            bptt_swim - rival_swim,
+            Cmp::Above,
+            0.0,
+            Null::new("the farthest method's knots themselves", 0.0),
+        ),
+    ];
+    Rule::gated(vec![], held, Partly::All(vec![0, 2, 3]))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const BARS: SwimRule = SwimRule {
+        target_fraction: 0.5,
+        fast_iterations: 30.0,
+        slow_factor: 10.0,
+        partly_slow_share: 0.5,
+    };
+
+    /// (held, partly) of the rule on these facts.
+    fn rule(k: Option<f64>, rivals: &[Option<f64>], swim: f64, rival: f64) -> (bool, bool) {
+        let v = swim_rule(k, rivals, swim, rival, &BARS).unwrap().verdict();
+        (
+            v == Verdict::Held,
+            matches!(v, Verdict::Held | Verdict::Partly),
+        )
+    }
 
     #[test]
     fn bptt_stalling_short_of_the_common_target_is_not_partly_held() {
@@ -327,7 +386,7 @@ mod tests {
 
     #[test]
     fn the_common_target_lies_halfway_and_is_reached_at_the_first_iteration_below_it() {
-        assert!((common_target(0.242, -1.594) - -0.676).abs() < 1e-12);
+        assert!((common_target(0.242, -1.594, &BARS) - -0.676).abs() < 1e-12);
         let (k, j) = ([0.0, 1.0, 2.0, 3.0], [0.2, 0.0, -0.7, -0.8]);
         assert_eq!(iterations_to(&k, &j, -0.676), Some(2.0));
         assert_eq!(iterations_to(&k, &j, -1.0), None);

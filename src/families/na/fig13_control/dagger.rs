@@ -453,7 +453,8 @@ pub fn figure(
 /// paper's iteration count and on the simulator. `None` when there is no `dagger.csv`.
 pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error> {
     use crate::experiment::output::{df_f64, df_str, read_csv, unique};
-    use crate::experiment::report::{sig, Verdict};
+    use crate::experiment::report::sig;
+    use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
     let Ok(df) = read_csv(&dir.join("dagger.csv")) else {
         return Ok(None);
     };
@@ -497,6 +498,8 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
     }
     let names = unique(&task);
     let mut ok = 0;
+    let mut checks = Vec::new();
+    let mut groups = Vec::new();
     let parts: Vec<String> = names
         .iter()
         .map(|name| {
@@ -508,6 +511,28 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
             let on_net = to_goal[last].is_finite() && to_goal[last] <= its[last];
             let on_sim = sim[last] <= 1.0;
             ok += usize::from(on_net && on_sim);
+            // The last round's controls, judged as the headline's: at the goal on the net
+            // within the paper's iterations (null: never reaching it) and within tolerance on
+            // the simulator (null: round 0, the Table 1 net's controls).
+            let first = *rows
+                .iter()
+                .min_by(|&&a, &&b| round[a].total_cmp(&round[b]))
+                .expect("a task has rows");
+            groups.push(vec![checks.len(), checks.len() + 1]);
+            checks.push(Check::new(
+                format!("{name}: iterations to the goal on the last round's net"),
+                to_goal[last],
+                Cmp::AtMost,
+                its[last],
+                Null::new("never reaching it", f64::INFINITY),
+            ));
+            checks.push(Check::new(
+                format!("{name}: final error on the simulator, in tolerances"),
+                sim[last],
+                Cmp::AtMost,
+                1.0,
+                Null::new("round 0, the Table 1 net's controls", sim[first]),
+            ));
             let by_round: Vec<String> = rows.iter().map(|&r| sig(sim[r])).collect();
             // The open loop's sensitivity: the spread of the simulator's final error under
             // ±SPREAD_FRACTION control changes, at round 0 (the Table 1 net's controls) and
@@ -536,11 +561,15 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
             )
         })
         .collect();
-    let v = Verdict::from_counts(ok, names.len());
+    let rule = Rule::gated(vec![], checks, Partly::AnyOf(groups));
+    let (v, lines, text) = shown(
+        rule.as_ref(),
+        "none: a check's null passes it (round 0, the Table 1 net's controls, already ends within tolerance on the simulator), so DAgger has nothing to show here",
+    );
     Ok(Some((
         md,
         format!(
-            " Control through DAgger emulators (ours), LM, judged at the last round (rule fixed in the spec): {} ({ok} of {} tasks reach their goal on the net within the paper's iteration count and end within tolerance on the simulator); {}.",
+            " Control through DAgger emulators (ours), LM, judged at the last round (rule fixed in the spec): {} ({ok} of {} tasks reach their goal on the net within the paper's iteration count and end within tolerance on the simulator); {}.{lines} Rule: {text}",
             v.label(),
             names.len(),
             parts.join("; ")

@@ -25,6 +25,7 @@ use crate::emulator::train::mse;
 use crate::emulator::Emulator;
 use crate::experiment::output::Table;
 use crate::experiment::resolve::{ensure, positive, ParamError};
+use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error, RunContext};
 use crate::families::na::swim::periodicity;
 use crate::physics::dolphin::{Dolphin, N_SEGMENTS};
@@ -319,10 +320,31 @@ impl Params {
     }
 }
 
-/// Periodicity at or above which the learned muscle pattern counts as periodic (ours).
-pub const PERIODIC: f64 = 0.5;
-/// Fraction of the hand-made wave's simulator distance the learned swim must reach (issue 11).
-pub const HALF_WAVE: f64 = 0.5;
+/// The rule of the dolphin DAgger line (ours; the bars are the headline's, `Fig13Rule`): the
+/// learned swim at the last round, replayed on the simulator, (a) covers at least
+/// `wave_fraction` of the hand-made wave's distance and (b) has a muscle pattern of
+/// periodicity at least `periodicity` (null for both: a dolphin at rest, 0). Held needs both,
+/// partly (a).
+pub fn dagger_rule(fraction: f64, periodicity: f64, bars: &super::Fig13Rule) -> Option<Rule> {
+    let rest = || Null::new("a dolphin at rest", 0.0);
+    let held = vec![
+        Check::new(
+            "the learned swim's simulator distance over the hand-made wave's",
+            fraction,
+            Cmp::AtLeast,
+            bars.wave_fraction,
+            rest(),
+        ),
+        Check::new(
+            "the periodicity of its muscle pattern",
+            periodicity,
+            Cmp::AtLeast,
+            bars.periodicity,
+            rest(),
+        ),
+    ];
+    Rule::gated(vec![], held, Partly::All(vec![0]))
+}
 
 /// The dolphin DAgger figure: the learned swim's forward distance on the simulator (solid) and
 /// on the net learned through (dashed) against the round, with the hand-made wave's simulator
@@ -345,7 +367,7 @@ pub fn figure(
             .map(|i| (last * i as f64 / 20.0, y))
             .collect::<Vec<_>>()
     };
-    let series = vec![
+    let mut series = vec![
         Series::line(
             "learned swim: simulator",
             pts(&t.f64s("distance_simulator_m")),
@@ -358,8 +380,20 @@ pub fn figure(
         )
         .mark(Mark::Dashed),
         Series::line("hand-made 1 Hz wave (simulator)", line(reference), 2),
-        Series::line("half the wave (the bar)", line(HALF_WAVE * reference), 7).mark(Mark::Points),
     ];
+    if let Some(f) = crate::experiment::rule::rule_setting(tables, "wave_fraction") {
+        series.push(
+            Series::line(
+                format!(
+                    "{} of the wave (the bar)",
+                    crate::experiment::report::sig(f)
+                ),
+                line(f * reference),
+                7,
+            )
+            .mark(Mark::Points),
+        );
+    }
     // The swim's duration: the last time of the headline swim's motion (the same task).
     let horizon = tables
         .get("dolphin_motion")
@@ -380,7 +414,8 @@ pub fn figure(
 /// there is no `dolphin_dagger.csv` or it has no rows.
 pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error> {
     use crate::experiment::output::{df_f64, read_csv};
-    use crate::experiment::report::{sig, Verdict};
+    use crate::experiment::report::sig;
+    use crate::experiment::rule::{rule_settings, shown};
     let Ok(df) = read_csv(&dir.join("dolphin_dagger.csv")) else {
         return Ok(None);
     };
@@ -419,20 +454,18 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
     let last = (0..round.len())
         .max_by(|&a, &b| round[a].total_cmp(&round[b]))
         .expect("rows");
-    let far = frac[last] >= HALF_WAVE;
-    let periodic = per[last] >= PERIODIC;
-    let v = if far && periodic {
-        Verdict::Held
-    } else if far {
-        Verdict::Partly
-    } else {
-        Verdict::NotHeld
+    let settings = rule_settings(dir)?;
+    let bars = super::Fig13Rule {
+        wave_fraction: settings("wave_fraction"),
+        periodicity: settings("periodicity"),
     };
+    let rule = dagger_rule(frac[last], per[last], &bars);
+    let (v, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
     let by_round: Vec<String> = (0..round.len()).map(|r| sig(sim[r])).collect();
     Ok(Some((
         md,
         format!(
-            " The dolphin through DAgger global nets (ours), judged at the last round (rule fixed in the spec): {}; the learned swim's simulator distance by round {} m; at round {} it is {} of the wave's (held needs at least {HALF_WAVE}) with periodicity {} (held needs at least {PERIODIC}, ours).",
+            " The dolphin through DAgger global nets (ours), judged at the last round (rule fixed in the spec, the headline's bars): {}; the learned swim's simulator distance by round {} m; at round {} it is {} of the wave's with periodicity {}.{lines} Rule: {text}",
             v.label(),
             by_round.join(" -> "),
             round[last],

@@ -303,13 +303,7 @@ impl Job for Params {
             ("momentum_dagger_rounds", chain_rounds),
             ("converged", converged_t),
             ("unclipped", unclipped_t),
-            (
-                "rule",
-                crate::experiment::rule::rule_table(&[(
-                    "iteration_ratio",
-                    self.rule.iteration_ratio,
-                )]),
-            ),
+            ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
             ("unclipped_objective", unclipped_objective),
         ]))
     }

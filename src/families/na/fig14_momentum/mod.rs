@@ -53,7 +53,7 @@ mod report;
 
 pub use job::{converged_columns, DAGGER_COLUMNS};
 pub use params::{Converged, DaggerNet, Fig14Rule, MomentumDagger, Params};
-pub use report::{converges, iterations_to, LANDING_DISTANCE};
+pub use report::iterations_to;
 
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;

@@ -70,13 +70,34 @@ pub struct Params {
     pub rule: Fig14Rule,
 }
 
-/// The verdict's bar (ours; [`super::report`] builds the rule).
-#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+/// The verdict's bars (ours; [`super::report`] builds the rules).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Fig14Rule {
     /// Momentum must reach plain descent's final J within this fraction of plain's iterations
     /// (plain itself takes all of them: a fraction of 1, its null).
     pub iteration_ratio: f64,
+    /// A plain run converges when its last J is below this fraction of its start's ...
+    pub converge_fraction: f64,
+    /// ... and at most this multiple of its smallest J (it has not climbed back).
+    pub converge_climb: f64,
+    /// The DAgger lines: held when momentum's controls, replayed on the simulator, end with
+    /// a final error (RMS in tolerances) at most this.
+    pub dagger_final_error: f64,
+    /// The DAgger lines: partly when they land within this distance of the target (m).
+    pub dagger_landing_distance: f64,
+}
+
+impl Fig14Rule {
+    /// Whether a plain-descent trace converges: it ends below `converge_fraction` of its
+    /// start and has not climbed back above `converge_climb` × its minimum.
+    pub fn converges(&self, trace: &[f64]) -> bool {
+        let (first, last) = (trace[0], trace[trace.len() - 1]);
+        let min = trace.iter().copied().fold(f64::INFINITY, f64::min);
+        last.is_finite()
+            && last < self.converge_fraction * first
+            && last <= self.converge_climb * min
+    }
 }
 
 /// `[params.converged]` (ours): beside the paper's budget, the compared descents (same η, α,
@@ -140,6 +161,21 @@ impl Validate for Params {
             r > 0.0 && r < 1.0,
             "rule.iteration_ratio",
             "must be in (0, 1): plain descent itself takes all its iterations (1)",
+        )?;
+        ensure(
+            self.rule.converge_fraction > 0.0 && self.rule.converge_fraction < 1.0,
+            "rule.converge_fraction",
+            "must be in (0, 1): a run that stays at its start does not converge",
+        )?;
+        ensure(
+            self.rule.converge_climb >= 1.0,
+            "rule.converge_climb",
+            "must be >= 1: a run's last J is at least its smallest",
+        )?;
+        positive("rule.dagger_final_error", self.rule.dagger_final_error)?;
+        positive(
+            "rule.dagger_landing_distance",
+            self.rule.dagger_landing_distance,
         )?;
         self.task.validate(NetModel::Lander.state_dim())?;
         positive("plain_eta", self.plain_eta)?;

@@ -1,22 +1,41 @@
 //! Report of `na_fig14_momentum`: the verdict rules (momentum against plain descent, and through
 //! the DAgger nets), the tables, and the sentences on the DAgger nets and the run to convergence.
 
+use super::params::Fig14Rule;
 use crate::experiment::output::{df_f64, df_str, read_csv};
-use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::rule::{rule_settings, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::report::{sig, Findings};
+use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error};
 use std::path::Path;
 
-/// The DAgger verdict's partly-held bar (m, ours; the spec states the rule): the norm of the
-/// position tolerances (1, 1, 0.5) m.
-pub const LANDING_DISTANCE: f64 = 1.5;
-
-/// Whether a plain-descent trace converges: it ends below half its start and has not climbed
-/// back above 1.5 × its minimum.
-pub fn converges(trace: &[f64]) -> bool {
-    let (first, last) = (trace[0], trace[trace.len() - 1]);
-    let min = trace.iter().copied().fold(f64::INFINITY, f64::min);
-    last.is_finite() && last < 0.5 * first && last <= 1.5 * min
+/// The rule of a DAgger line (ours, bars in the spec's `rule`): momentum's controls learned
+/// through a DAgger net and replayed on the simulator, (a) final error (RMS in tolerances) at
+/// most `bars.dagger_final_error`, (b) landing distance at most `bars.dagger_landing_distance`;
+/// held when both pass, partly when (b) does. Each check's null is momentum's controls learned
+/// through the Table 1 net (`before`: final error, landing distance), the before of DAgger.
+pub fn dagger_rule(
+    (error, distance): (f64, f64),
+    before: (f64, f64),
+    bars: &Fig14Rule,
+) -> Option<Rule> {
+    let null = "momentum through the Table 1 net";
+    let held = vec![
+        Check::new(
+            "momentum's final error on the simulator, in tolerances",
+            error,
+            Cmp::AtMost,
+            bars.dagger_final_error,
+            Null::new(null, before.0),
+        ),
+        Check::new(
+            "momentum's landing distance on the simulator (m)",
+            distance,
+            Cmp::AtMost,
+            bars.dagger_landing_distance,
+            Null::new(null, before.1),
+        ),
+    ];
+    Rule::gated(vec![], held, Partly::All(vec![1]))
 }
 
 /// First iteration at which a trace is at or below `level` (None if never).
@@ -38,6 +57,7 @@ fn traces(method: &[String], eta: &[f64], obj: &[f64]) -> Vec<(String, f64, Vec<
 
 /// The findings ([`crate::experiment::Family::report`]).
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
+    let bars: Fig14Rule = read_rule(dir)?;
     let df = read_csv(&dir.join("objective.csv"))?;
     let tr = traces(
         &df_str(&df, "method")?,
@@ -85,16 +105,16 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let k_mom = iterations_to(&mom.2, plain_end);
     let converging: Vec<f64> = plain
         .iter()
-        .filter(|t| converges(&t.2))
+        .filter(|t| bars.converges(&t.2))
         .map(|t| t.1)
         .collect();
     let largest = converging.iter().copied().fold(f64::NAN, f64::max);
     let diverging: Vec<f64> = plain
         .iter()
-        .filter(|t| !converges(&t.2))
+        .filter(|t| !bars.converges(&t.2))
         .map(|t| t.1)
         .collect();
-    let base_converges = converges(&base.2);
+    let base_converges = bars.converges(&base.2);
     // The paper's second claim: the plain rate of the comparison is the largest that
     // converges, i.e. the next rate tried above it does not.
     let base_is_limit = base_converges
@@ -102,7 +122,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             .iter()
             .filter(|t| t.1 > base.1)
             .min_by(|a, b| a.1.total_cmp(&b.1))
-            .is_some_and(|t| !converges(&t.2));
+            .is_some_and(|t| !bars.converges(&t.2));
     let next = plain
         .iter()
         .filter(|t| t.1 > base.1)
@@ -121,7 +141,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
                 "momentum's iterations to plain descent's final J over plain's",
                 ratio,
                 Cmp::AtMost,
-                rule_settings(dir)?("iteration_ratio"),
+                bars.iteration_ratio,
                 Null::new("plain descent itself", 1.0),
             ),
             Ok(Check::fact(
@@ -142,13 +162,13 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     // Momentum's J 20 iterations before its end (its pace when it stops).
     let tail_start = mom.2[mom.2.len().saturating_sub(21)];
     let fall = 100.0 * (1.0 - mom_end / tail_start);
-    let (dagger_md, dagger_why) = dagger_summary(dir)?.unwrap_or_default();
+    let (dagger_md, dagger_why) = dagger_summary(dir, &bars)?.unwrap_or_default();
     md.push_str(&dagger_md);
     Ok(Findings {
         ours: md,
         verdict,
         why: format!(
-            "Momentum (eta {}) ends at J = {} vs plain (eta {}) J = {} after {k_plain} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2).{lines} Rule (bar ours, in the spec's [params.rule]; a plain run converges when it ends below half its start without climbing back above 1.5x its minimum; the next rate above eta {} not converging is the paper's 'largest rate that converges', read as the stability limit, and rates further up that converge again are listed above, not counted): {text} Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim. Over its last 20 iterations momentum's J fell {}% ({} -> {}){}.",
+            "Momentum (eta {}) ends at J = {} vs plain (eta {}) J = {} after {k_plain} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2).{lines} Rule (bars ours, in the spec's `rule`; a plain run converges when it ends below {} of its start without climbing back above {}x its minimum; the next rate above eta {} not converging is the paper's 'largest rate that converges', read as the stability limit, and rates further up that converge again are listed above, not counted): {text} Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim. Over its last 20 iterations momentum's J fell {}% ({} -> {}){}.",
             mom.1,
             sig(mom_end),
             base.1,
@@ -158,6 +178,8 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             diverging,
             sig(largest),
             sig(lam.first().copied().unwrap_or(f64::NAN)),
+            sig(bars.converge_fraction),
+            sig(bars.converge_climb),
             base.1,
             sig(mom_row.map_or(f64::NAN, |r| sim_err[r])),
             sig(mom_row.map_or(f64::NAN, |r| emu_err[r])),
@@ -272,7 +294,7 @@ fn converged_summary(dir: &Path) -> Result<String, Error> {
 
 /// The report's DAgger paragraph, table and verdict sentence (rule in the spec): `None` when
 /// there is no `dagger.csv` or it is empty.
-fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
+fn dagger_summary(dir: &Path, bars: &Fig14Rule) -> Result<Option<(String, String)>, Error> {
     let Ok(df) = read_csv(&dir.join("dagger.csv")) else {
         return Ok(None);
     };
@@ -329,16 +351,18 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
         .iter()
         .find(|t| t.0 == "momentum")
         .and_then(|t| iterations_to(&t.2, j1[dp]));
-    let held = sim_e[dm] <= 1.0;
-    let partly = sim_d[dm] <= LANDING_DISTANCE;
-    let v = Verdict::graded(held, partly);
+    let before = before.map_or((f64::NAN, f64::NAN), |r| (sim_e[r], sim_d[r]));
+    let line = |r: usize| {
+        let rule = dagger_rule((sim_e[r], sim_d[r]), before, bars);
+        let (v, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
+        format!("{}.{lines} Rule: {text}", v.label())
+    };
     // The chain whose learner is the momentum descent itself (rule in the spec).
     let chain = match (
         find("momentum_dagger", "momentum"),
         find("momentum_dagger", "plain"),
     ) {
         (Some(cm), Some(cp)) => {
-            let v = Verdict::graded(sim_e[cm] <= 1.0, sim_d[cm] <= LANDING_DISTANCE);
             // The chain's rounds: the learner's final error on its net and on the simulator.
             let by_round = match read_csv(&dir.join("momentum_dagger_rounds.csv")) {
                 Ok(rd) => {
@@ -361,7 +385,7 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
                 Err(_) => String::new(),
             };
             format!(
-                " Through the round-{} net of a DAgger chain whose learner is this momentum descent itself (ours; aggregated on the states its controls visit, from the Table 1 net): momentum ends at J = {} (plain: {}); replayed on the simulator its controls land {} m from the target with final error {} (plain's {} m, {}).{by_round} Fig. 14 through the momentum-DAgger net (ours; the same rule): {}.",
+                " Through the round-{} net of a DAgger chain whose learner is this momentum descent itself (ours; aggregated on the states its controls visit, from the Table 1 net): momentum ends at J = {} (plain: {}); replayed on the simulator its controls land {} m from the target with final error {} (plain's {} m, {}).{by_round} Fig. 14 through the momentum-DAgger net (ours; the same rule): {}",
                 round[cm],
                 sig(j1[cm]),
                 sig(j1[cp]),
@@ -369,7 +393,7 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
                 sig(sim_e[cm]),
                 sig(sim_d[cp]),
                 sig(sim_e[cp]),
-                v.label()
+                line(cm)
             )
         }
         _ => String::new(),
@@ -377,7 +401,7 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
     Ok(Some((
         md,
         format!(
-            " Through the lander's round-{} DAgger net (ours; Fig. 13's, aggregated on Fig. 13's lander task, same start and target): momentum (eta {}) ends at J = {} vs plain (eta {}) J = {}, reaching plain's final J at iteration {}; replayed on the simulator, momentum's controls land {} m from the target with final error {} (Table 1 net: {} m, {}), plain's {} m with {}. Fig. 14 through the DAgger net (ours; rule fixed in the spec: held when momentum's simulator final error <= 1, partly when its simulator landing distance <= {} m): {}.",
+            " Through the lander's round-{} DAgger net (ours; Fig. 13's, aggregated on Fig. 13's lander task, same start and target): momentum (eta {}) ends at J = {} vs plain (eta {}) J = {}, reaching plain's final J at iteration {}; replayed on the simulator, momentum's controls land {} m from the target with final error {} (Table 1 net: {} m, {}), plain's {} m with {}. Fig. 14 through the DAgger net (ours; rule fixed in the spec before its first run): {}",
             round[dm],
             eta[dm],
             sig(j1[dm]),
@@ -386,12 +410,11 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
             k_mom.map_or("never".to_string(), |k| k.to_string()),
             sig(sim_d[dm]),
             sig(sim_e[dm]),
-            sig(before.map_or(f64::NAN, |r| sim_d[r])),
-            sig(before.map_or(f64::NAN, |r| sim_e[r])),
+            sig(before.1),
+            sig(before.0),
             sig(sim_d[dp]),
             sig(sim_e[dp]),
-            LANDING_DISTANCE,
-            v.label()
+            line(dm)
         ) + &chain,
     )))
 }
@@ -400,13 +423,34 @@ fn dagger_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
 mod tests {
     use super::*;
 
+    use crate::experiment::report::Verdict;
+
+    const BARS: Fig14Rule = Fig14Rule {
+        iteration_ratio: 0.5,
+        converge_fraction: 0.5,
+        converge_climb: 1.5,
+        dagger_final_error: 1.0,
+        dagger_landing_distance: 1.5,
+    };
+
     #[test]
     fn convergence_rules() {
-        assert!(converges(&[10.0, 5.0, 2.0, 1.0]));
-        assert!(!converges(&[10.0, 5.0, 2.0, 4.0]));
-        assert!(!converges(&[10.0, 9.0, 8.0]));
-        assert!(!converges(&[10.0, f64::NAN]));
+        assert!(BARS.converges(&[10.0, 5.0, 2.0, 1.0]));
+        assert!(!BARS.converges(&[10.0, 5.0, 2.0, 4.0]));
+        assert!(!BARS.converges(&[10.0, 9.0, 8.0]));
+        assert!(!BARS.converges(&[10.0, f64::NAN]));
         assert_eq!(iterations_to(&[5.0, 3.0, 1.0], 3.0), Some(1));
         assert_eq!(iterations_to(&[5.0, 4.0], 3.0), None);
+    }
+
+    #[test]
+    fn a_dagger_line_is_held_within_tolerance_and_partly_near_the_pad() {
+        let before = (7.98, 13.3);
+        let v = |e, d| dagger_rule((e, d), before, &BARS).map(|r| r.verdict());
+        assert_eq!(v(0.17, 0.27), Some(Verdict::Held));
+        assert_eq!(v(1.4, 1.2), Some(Verdict::Partly));
+        assert_eq!(v(5.8, 14.9), Some(Verdict::NotHeld));
+        // Where the Table 1 net's own controls already land, DAgger's line cannot fail.
+        assert!(dagger_rule((0.17, 0.27), (0.5, 1.0), &BARS).is_none());
     }
 }
