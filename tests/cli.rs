@@ -58,7 +58,14 @@ fn physics_validation_quick_writes_promised_outputs() {
 #[test]
 fn every_figure_and_animation_is_in_the_report_with_a_caption() {
     let d = quick_reproduction();
-    let report = std::fs::read_to_string(d.path().join("out/REPORT.md")).unwrap();
+    // The report shows each experiment's main figure; its DETAILS.md shows them all.
+    let mut report = std::fs::read_to_string(d.path().join("out/REPORT.md")).unwrap();
+    for e in std::fs::read_dir(d.path().join("out")).unwrap() {
+        let details = e.unwrap().path().join("DETAILS.md");
+        if details.is_file() {
+            report.push_str(&std::fs::read_to_string(details).unwrap());
+        }
+    }
     assert!(
         !report.contains(motionlab::experiment::report::NO_CAPTION),
         "a figure without a caption: {}",
@@ -74,7 +81,7 @@ fn every_figure_and_animation_is_in_the_report_with_a_caption() {
         if name.ends_with(".png") || name.ends_with(".gif") {
             assert!(
                 report.contains(&format!("/{name})")),
-                "{name} is not in REPORT.md"
+                "{name} is not in REPORT.md or a DETAILS.md"
             );
             n += 1;
         }

@@ -48,6 +48,9 @@ pub struct Findings {
     pub ours: String,
     /// Whether the claim held.
     pub verdict: Verdict,
+    /// The rule that gave the verdict (its checks are the report's bullets and the claims
+    /// table's reason); `None` where none could be built (a missing table, a refused check).
+    pub rule: Option<super::rule::Rule>,
     /// One sentence on why that verdict.
     pub why: String,
 }
@@ -115,9 +118,16 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
     let mut rows: Vec<(String, String, Group)> = Vec::new();
     let mut sections = String::new();
     let code_rev = code_revision();
-    for r in specs {
+    let mut order: Vec<&Resolved> = specs.iter().collect();
+    order.sort_by_key(|r| paper_rank(&r.id));
+    for r in order {
         let dir = out.join(&r.id);
-        let (verdict, headline, body) = if dir.join("run.json").exists() {
+        let rel_figures = relative(&dir, figures);
+        let mut details = format!(
+            "# {} — details\n\n*{}* — {}. The summary is in [REPORT.md](../REPORT.md#{}).\n\n",
+            r.id, r.title, r.paper_item, r.id
+        );
+        let (verdict, headline, reason, body) = if dir.join("run.json").exists() {
             let seeds = run_seeds(&dir);
             // With swept seeds the section reads the first seed's tables, then the spread; a
             // family judging over seeds reads them all.
@@ -127,10 +137,10 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
                 .filter(|_| !pooled)
                 .map(|s| dir.join("seeds").join(s.to_string()));
             match r.family.report(first.as_deref().unwrap_or(&dir)) {
-                Ok(f) => (
-                    f.verdict.label().to_string(),
-                    headline(&f.why),
-                    format!(
+                Ok(f) => {
+                    let spread = seeds_section(r, &dir, &seeds, &mut unreadable);
+                    let _ = write!(
+                        details,
                         "{}{}\n\n**Verdict: {}.** {}\n{}",
                         match seeds.first().filter(|_| !pooled) {
                             Some(s) => format!(
@@ -143,33 +153,67 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
                         f.ours.trim_end(),
                         f.verdict.label(),
                         f.why,
-                        seeds_section(r, &dir, &seeds, &mut unreadable)
-                    ),
-                ),
+                        spread
+                    );
+                    let reason = f.rule.as_ref().map_or_else(String::new, |x| x.reason());
+                    let mut body = format!("**Verdict: {}.**", f.verdict.label());
+                    if !reason.is_empty() {
+                        let _ = write!(body, " {}.", capitalized(&reason));
+                    }
+                    body.push_str("\n\n");
+                    // Over seeds, the verdict of each (its first paragraph; the spread is
+                    // in the details).
+                    if let Some(line) = spread.split("\n\n").map(str::trim).find(|p| !p.is_empty())
+                    {
+                        let _ = write!(body, "{line}\n\n");
+                    }
+                    if let Some(rule) = &f.rule {
+                        body.push_str(&rule.bullets());
+                    }
+                    (
+                        f.verdict.label().to_string(),
+                        headline(&f.why),
+                        reason,
+                        body,
+                    )
+                }
                 Err(e) => {
                     unreadable.push(format!("{}: {e}", r.id));
                     (
                         "error".into(),
+                        String::new(),
                         String::new(),
                         format!("Could not read the results: {e}\n"),
                     )
                 }
             }
         } else {
-            ("not run".into(), String::new(), "Not run yet.\n".into())
+            (
+                "not run".into(),
+                String::new(),
+                String::new(),
+                "Not run yet.\n\n".into(),
+            )
         };
         let stale = run_provenance(&dir, code_rev.as_deref());
         let mut mark = if stale.is_some() { " (stale)" } else { "" }.to_string();
         if !r.history.is_empty() {
             let _ = write!(mark, " (changed after results: {})", r.history.len());
         }
+        let cell = |t: &str| t.replace('|', "\\|");
         rows.push((
             format!(
-                "| [`{}`](#{}) | {} | {verdict}{mark} | {} |",
+                "| [`{}`](#{}) | {} | {} | {} | {verdict}{mark} | {} |",
                 r.id,
                 r.id,
-                r.paper_item,
-                headline.replace('|', "\\|")
+                cell(if r.claim.is_empty() {
+                    &r.paper_item
+                } else {
+                    &r.claim
+                }),
+                cell(&r.paper_number),
+                cell(&headline),
+                cell(&reason)
             ),
             verdict,
             if r.family.is_check() {
@@ -188,46 +232,64 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         if !r.paper_claim.is_empty() {
             let _ = writeln!(sections, "**Paper:** {}\n", r.paper_claim.trim());
         }
+        if !headline.is_empty() {
+            let _ = writeln!(sections, "**Ours:** {headline}\n");
+        }
+        sections.push_str(&body);
         if !r.history.is_empty() {
             let _ = writeln!(
                 sections,
-                "**Rule and setup history** (changes made after a result was seen, from the spec's `[[history]]`):\n"
+                "- History (changes made after a result was seen, from the spec's `[[history]]`):"
             );
             for h in &r.history {
-                let _ = writeln!(sections, "- {}", h.line());
+                let _ = writeln!(sections, "  - {}", h.line());
             }
-            sections.push('\n');
         }
         if let Some(meta) = read_run_json(&dir) {
-            let _ = writeln!(sections, "**Run:** {meta}\n");
+            let _ = writeln!(sections, "- Run: {meta}");
+            let _ = writeln!(details, "\n**Run:** {meta}\n");
         }
         if let Some(w) = stale {
-            let _ = writeln!(sections, "**Stale results:** {w}.\n");
+            let _ = writeln!(sections, "- Stale results: {w}.");
         }
-        let _ = writeln!(sections, "**Ours:**\n\n{body}");
+        if dir.is_dir() {
+            let _ = writeln!(
+                sections,
+                "- Details (every table, the full reasons, every figure): [`{}/DETAILS.md`]({}/DETAILS.md)",
+                r.id, r.id
+            );
+        }
         let figs = figure_files(figures, &r.id);
-        if !figs.is_empty() {
-            let rel = relative(out, figures);
-            for f in figs {
-                let name = figure_name(&r.id, &f);
-                let caption = caption(r.family.captions(), name).map_or_else(
-                    || format!("{} {NO_CAPTION}", name.replace('_', " ")),
-                    str::to_string,
-                );
+        let rel = relative(out, figures);
+        for (k, f) in figs.iter().enumerate() {
+            let name = figure_name(&r.id, f);
+            let caption = caption(r.family.captions(), name).map_or_else(
+                || format!("{} {NO_CAPTION}", name.replace('_', " ")),
+                str::to_string,
+            );
+            let show = |md: &mut String, rel: &Path| {
                 if f.ends_with(".gif") {
                     let _ = writeln!(
-                        sections,
+                        md,
                         "\n*Animation* [`{f}`]({}/{f}): {caption}",
                         rel.display()
                     );
                 } else {
                     let _ = writeln!(
-                        sections,
+                        md,
                         "\n![{f}]({}/{f})\n\n*Figure `{name}`: {caption}*",
                         rel.display()
                     );
                 }
+            };
+            // The report shows the main figure (the family's first); the details all.
+            if k == 0 {
+                show(&mut sections, &rel);
             }
+            show(&mut details, &rel_figures);
+        }
+        if dir.is_dir() {
+            atomic_write(&dir.join("DETAILS.md"), details.as_bytes())?;
         }
     }
     md.push_str(&summary(&rows));
@@ -243,6 +305,59 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         )));
     }
     Ok(path)
+}
+
+/// The papers' own order, for the report's sections and tables: NeuroAnimator's tables and
+/// figures, the mass-spring paper's, LBC's, then the ablations the papers call crucial, our
+/// checks and our claims; an id not listed comes last, by name.
+const PAPER_ORDER: [&str; 28] = [
+    "na_table1_structure",
+    "na_table2_speedup",
+    "na_fig12_error",
+    "na_regularization",
+    "na_fig13_control",
+    "na_fig14_momentum",
+    "na_baselines_swim",
+    "na_transforms_ablation",
+    "na_training_methods",
+    "ms_lattices",
+    "ms_fig6_learning_plot",
+    "ms_spider_leap",
+    "ms_poodle_somersault",
+    "ms_table_pirouette",
+    "ms_representation",
+    "ms_search_settings",
+    "lbc_grid_optimality",
+    "lbc_projection",
+    "lbc_acrobot_swingup",
+    "lbc_diver_interpolation",
+    "lbc_diver_coordination",
+    "lbc_push_recovery",
+    "lbc_stepping",
+    "lbc_walking",
+    "lbc_jumping",
+    "lbc_dive_disturbance",
+    "physics_validation",
+    "x_lbc_emulator",
+];
+
+/// Where `id` comes in [`PAPER_ORDER`] (unlisted ids after, by name).
+fn paper_rank(id: &str) -> (usize, String) {
+    (
+        PAPER_ORDER
+            .iter()
+            .position(|x| *x == id)
+            .unwrap_or(PAPER_ORDER.len()),
+        id.to_string(),
+    )
+}
+
+/// `text` with its first letter upper-case.
+fn capitalized(text: &str) -> String {
+    let mut c = text.chars();
+    c.next().map_or_else(String::new, |f| {
+        f.to_uppercase().collect::<String>() + c.as_str()
+    })
 }
 
 /// Marks a figure whose family gives it no caption (a test keeps the report free of it).
@@ -432,7 +547,7 @@ fn summary(rows: &[(String, String, Group)]) -> String {
         }
         let _ = writeln!(
             md,
-            "### {title}\n\n| experiment | paper item | verdict | headline |\n| --- | --- | --- | --- |"
+            "### {title}\n\n| experiment | claim | paper | ours | verdict | reason |\n| --- | --- | --- | --- | --- | --- |"
         );
         for r in rows.iter().filter(|r| r.2 == group) {
             let _ = writeln!(md, "{}", r.0);

@@ -112,6 +112,10 @@ pub struct Resolved {
     pub paper_item: String,
     /// The paper's claim.
     pub paper_claim: String,
+    /// The claim in a few words (the claims table).
+    pub claim: String,
+    /// The paper's number or statement in a few words (the claims table).
+    pub paper_number: String,
     /// The family that runs it.
     pub family: &'static dyn Experiment,
     /// Root seed.
@@ -266,6 +270,16 @@ pub fn resolve(
             ),
         )
     })?;
+    let words = raw.claim.split_whitespace().count();
+    if words > super::spec::CLAIM_WORDS {
+        return Err(file.error_at(
+            "claim",
+            format!(
+                "{words} words: the claims table's claim has at most {}",
+                super::spec::CLAIM_WORDS
+            ),
+        ));
+    }
     if let Some(i) = raw.history.iter().position(|h| !h.is_well_formed()) {
         return Err(file.error_at(
             &format!("history[{i}]"),
@@ -474,6 +488,8 @@ pub fn resolve(
         title: raw.title.clone(),
         paper_item: raw.paper_item.clone(),
         paper_claim: raw.paper_claim.clone(),
+        claim: raw.claim.clone(),
+        paper_number: raw.paper_number.clone(),
         family,
         seed,
         quick: opts.quick,

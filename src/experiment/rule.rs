@@ -451,6 +451,89 @@ impl Rule {
     }
 }
 
+impl Rule {
+    /// The claims table's one-line reason: for held, that every check passed; otherwise the
+    /// first premise check that failed, else the first held check that was inconclusive (for an
+    /// inconclusive verdict) or failed, with its value against its bar.
+    pub fn reason(&self) -> String {
+        let verdict = self.verdict();
+        let short = |tag: &str, c: &Check| {
+            let interval = c.interval.map_or_else(String::new, |(lo, hi)| {
+                format!(" [{}-{}]", sig(lo), sig(hi))
+            });
+            if c.fact {
+                format!("{tag}{}: no", c.label)
+            } else {
+                format!(
+                    "{tag}{}: {}{interval}, needs {} {}",
+                    c.label,
+                    sig(c.value),
+                    c.cmp.symbol(),
+                    sig(c.threshold)
+                )
+            }
+        };
+        if let Some(c) = self.premise.iter().find(|c| c.outcome() == Outcome::Fail) {
+            return format!("premise: {}", short("", c));
+        }
+        if verdict == Verdict::Held {
+            return format!("all {} checks pass", self.held.len());
+        }
+        let wanted = if verdict == Verdict::Inconclusive {
+            Outcome::Inconclusive
+        } else {
+            Outcome::Fail
+        };
+        let failed = self
+            .held
+            .iter()
+            .filter(|c| c.outcome() != Outcome::Pass)
+            .count();
+        match self
+            .held
+            .iter()
+            .enumerate()
+            .find(|(_, c)| c.outcome() == wanted)
+        {
+            Some((i, c)) => {
+                let more = if failed > 1 {
+                    format!(" (and {} more)", failed - 1)
+                } else {
+                    String::new()
+                };
+                format!("{}{more}", short(&format!("{} ", tag(i)), c))
+            }
+            None => String::new(),
+        }
+    }
+
+    /// The report's bullets: every check (premise first) with its value, bar, null and
+    /// outcome, then how the grades are given.
+    pub fn bullets(&self) -> String {
+        let mut t = String::new();
+        let null = |c: &Check| {
+            if c.fact {
+                String::new()
+            } else {
+                format!(" (null: {}, {})", c.null.label, sig(c.null.value))
+            }
+        };
+        for c in &self.premise {
+            let _ = writeln!(t, "- Premise: {}{}", c.line(), null(c));
+        }
+        for (i, c) in self.held.iter().enumerate() {
+            let _ = writeln!(t, "- {} {}{}", tag(i), c.line(), null(c));
+        }
+        let text = self.text();
+        let grading = text
+            .split_once("Held needs")
+            .map(|(_, g)| g.split(". Each check's null").next().unwrap_or(g))
+            .unwrap_or("");
+        let _ = writeln!(t, "- Grades: held needs{grading}.");
+        t
+    }
+}
+
 /// What a report shows of a rule that may be missing: its verdict, its check lines and its
 /// text; without a rule, not assessed, no lines and `missing` (why there is none) as the text.
 pub fn shown(rule: Option<&Rule>, missing: &str) -> (Verdict, String, String) {
@@ -656,6 +739,33 @@ mod tests {
         // One that cannot change the verdict (partly either way) does not make it so.
         let r = rule(vec![], vec![fail.clone(), unsure, pass], Partly::Any);
         assert_eq!(r.verdict(), Verdict::Partly);
+    }
+
+    #[test]
+    fn the_reason_names_the_first_failing_check_or_that_all_pass() {
+        let (pass, fail) = (check(2.0, 1.0, 0.0), check(0.5, 1.0, 0.0));
+        let rule = |premise: Vec<Check>, held: Vec<Check>| Rule {
+            premise,
+            held,
+            partly: Partly::Any,
+        };
+        assert_eq!(
+            rule(vec![], vec![pass.clone()]).reason(),
+            "all 1 checks pass"
+        );
+        let r = rule(vec![], vec![pass.clone(), fail.clone(), fail.clone()]);
+        assert_eq!(r.reason(), "(b) gain: 0.500, needs >= 1.00 (and 1 more)");
+        let r = rule(vec![fail.clone()], vec![pass.clone()]);
+        assert_eq!(r.reason(), "premise: gain: 0.500, needs >= 1.00");
+        let unsure = pass.clone().with_interval(0.5, 2.5);
+        let r = rule(vec![], vec![pass.clone(), unsure]);
+        assert_eq!(r.reason(), "(b) gain: 2.00 [0.500-2.50], needs >= 1.00");
+        let b = r.bullets();
+        assert!(
+            b.contains("- (a) gain: 2.00 >= 1.00: yes (null: nothing, 0)"),
+            "{b}"
+        );
+        assert!(b.contains("- Grades: held needs every check"), "{b}");
     }
 
     #[test]

@@ -8,6 +8,8 @@
 //! title = "Integrator convergence and energy drift"
 //! paper_item = "beyond the papers"
 //! paper_claim = "what the paper says, shown beside ours in REPORT.md"
+//! claim = "the claim in at most 15 words, for the claims table"
+//! paper_number = "the paper's number or statement, in a few words"
 //! seed = 1
 //!
 //! [params]     # the family's parameters (checked by the family, unknown keys rejected)
@@ -39,6 +41,12 @@ pub struct RawSpec {
     /// The paper's number or claim, quoted beside ours in the report.
     #[serde(default)]
     pub paper_claim: String,
+    /// The claim in at most [`CLAIM_WORDS`] words, for the report's claims table.
+    #[serde(default)]
+    pub claim: String,
+    /// The paper's number or statement in a few words, for the claims table.
+    #[serde(default)]
+    pub paper_number: String,
     /// Root seed of every random choice.
     pub seed: u64,
     /// The family's parameters.
@@ -55,6 +63,9 @@ pub struct RawSpec {
     #[serde(default)]
     pub history: Vec<HistoryEntry>,
 }
+
+/// The most words of a spec's short `claim`.
+pub const CLAIM_WORDS: usize = 15;
 
 /// One change of a verdict's rule or of an experiment's setup made after a result was seen.
 #[derive(Debug, Clone, PartialEq, Deserialize, serde::Serialize)]

@@ -352,6 +352,7 @@ impl Family for LbcProjection {
             return Ok(Findings {
                 ours: "No midpoint target (0.5) was run.".into(),
                 verdict: Verdict::NotAssessed,
+                rule: None,
                 why: "the claim concerns the midpoint target.".into(),
             });
         }
@@ -426,6 +427,7 @@ impl Family for LbcProjection {
         Ok(Findings {
             ours: md,
             verdict,
+            rule: rule.clone().into(),
             why: format!(
                 "closest spacing: {first} minimum(s); farthest spacing: {last} minimum(s) (paper: one near the target when close, two when far apart).{lines} Rule: {text}"
             ),

@@ -263,6 +263,7 @@ impl Family for MsLearning {
         Ok(Findings {
             ours: md,
             verdict,
+            rule: rule.clone().into(),
             why: format!(
                 "Hill climbing made {}% of its total gain in the first {}% of the iterations; {}% of its evaluations in the last {}% were worse than the best random controller; simulated annealing with the same budget ended at {} vs {}. Checks:{lines} Rule (thresholds ours, in the spec's [params.rule]): {text}",
                 sig(100.0 * h.early_share()),

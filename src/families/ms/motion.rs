@@ -371,6 +371,7 @@ impl Family for MsMotion {
         Ok(Findings {
             ours: md,
             verdict,
+            rule: rule.clone().into(),
             why: format!(
                 "{lead}. Checks:{lines} Rule (bars ours, in the spec's [params.rule]; {conditions}): {text}"
             ),

@@ -564,6 +564,7 @@ impl Family for MsRepresentation {
         Ok(Findings {
             ours: md,
             verdict,
+            rule: rule.clone().into(),
             why: format!(
                 "{}. Checks over {} seeds per motion and representation:{lines} Rule (fixed before the run, bar ours, in the spec's [params.rule]): {text} \"Less coordinated\" is not measured apart from the objective: the measures table gives each representation's best motion.",
                 summary.join("; "),

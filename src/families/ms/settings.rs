@@ -439,6 +439,7 @@ impl Family for MsSearchSettings {
             return Ok(Findings {
                 ours: md,
                 verdict: Verdict::NotAssessed,
+                rule: None,
                 why: "The run lacks the paper's setting (N = 100, Table 2) or another setting to compare it with.".into(),
             });
         };
@@ -450,6 +451,7 @@ impl Family for MsSearchSettings {
         Ok(Findings {
             ours: md,
             verdict: rule.verdict(),
+            rule: rule.clone().into(),
             why: format!(
                 "{kept} of {} other settings gain at least {} of the paper's setting's median gain over the initial best (over {seeds} seeds each, medians with 95% bootstrap intervals).{} Rule (ours): {}",
                 rule.held.len(),

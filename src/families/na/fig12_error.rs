@@ -612,6 +612,7 @@ impl Family for NaError {
         Ok(Findings {
             ours: md,
             verdict,
+            rule: rule.clone().into(),
             why: format!(
                 "Largest / smallest time-averaged error across the emulators, each at the best capacity tried: {}. Checks:{lines} Rule (bars ours, in the spec's [params.rule]): {text} At the paper's Table 1 capacity for all three: {}. Extra capacities keep the net's examples per weight.{common_text}",
                 ratios

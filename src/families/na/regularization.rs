@@ -450,7 +450,7 @@ impl Family for NaRegularization {
             })
             .max_by(|&a, &b| steps[a].total_cmp(&steps[b]));
         let rare = find(&|r| every[r] > 1.0 && steps[r] > 0.0);
-        let (verdict, why) = match (sim, none, few, rare) {
+        let (verdict, why, rule) = match (sim, none, few, rare) {
             (Some(s), Some(z), Some(f), Some(r)) => {
                 let settings = rule_settings(dir)?;
                 let bars = RegularizationRule {
@@ -478,16 +478,19 @@ impl Family for NaRegularization {
                         sig(rough[r]),
                         name[r]
                     ),
+                    rule,
                 )
             }
             _ => (
                 crate::experiment::report::Verdict::NotAssessed,
                 "needs a simulator row, a schedule without regularization, one with a few steps after every emulation step and one with steps done rarely".into(),
+                None,
             ),
         };
         Ok(Findings {
             ours: md,
             verdict,
+            rule,
             why,
         })
     }

@@ -187,6 +187,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
+        rule: rule.clone().into(),
         why: format!(
             "On the simulator, over the {} targets between the components, LBC ends within tolerance at {}, with mean final error {} against the naive blend's {} and mean distance from the desired x {} m against {} m; the better example alone ends within tolerance at a share {} of them, {} m from the desired x on average.{lines} Rule (ours, in the spec; revised after results, see the rule history): {text}",
             lbc.len(),

@@ -231,6 +231,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict: rule.verdict(),
+        rule: rule.clone().into(),
         why: format!(
             "At the test start LBC ends {} from the handstand (naive average {}, sum {}); over the sweep LBC swings up from {} of the {} starts where both trackers fail, the better naive blend from {}, and from {} of all starts against the better tracker's {}. paper: from a start neither was made for, both trackers fail, the naive blend does better, LBC comes closest. Each tracker alone fails from the test start at the chosen tracker setting: {} (reported, not a premise: the sweep's starts where both trackers fail are the test of the claim).{} Rule (ours, fixed in the spec; the spec's history gives what changed after results): {}",
             sig(dl),

@@ -713,6 +713,7 @@ impl Family for LbcDiveDisturbance {
             return Ok(Findings {
                 ours: md,
                 verdict: Verdict::NotAssessed,
+                rule: None,
                 why: "The run lacks the unpushed, scale-1 or largest-scale rows the rule reads, or its thresholds let a null pass.".into(),
             });
         };
@@ -743,6 +744,7 @@ impl Family for LbcDiveDisturbance {
         Ok(Findings {
             ours: md,
             verdict,
+            rule: rule.clone().into(),
             why,
         })
     }

@@ -164,6 +164,7 @@ pub(super) fn interpolation(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict: rule.verdict(),
+        rule: rule.clone().into(),
         why: format!(
             "At the vertical target LBC enters {} rad from vertical and the naive blend with the same weights {} rad (tolerance {}); over all {n} desired angles LBC lands on average {} rad from the desired angle, the naive blend {} rad (LBC farther at {worse} of {n}); their mean excess objective over the direct DDP optimum is {} vs {}. paper: with weights projected for a vertical goal, LBC enters vertically and the naive average with the same weights does not.{} Rule (ours, fixed in the spec; the spec's history gives what changed after results): {}",
             sig(lv),
@@ -420,6 +421,7 @@ pub(super) fn coordination(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
+        rule: rule.clone().into(),
         why: format!("Over {n} take-off rates LBC's objective is better than the single tracker's at {better} and worse at {worse} ({much_worse} by more than {} of the smaller), and LBC enters vertically from {lv} rates against the single tracker's {sv}. paper: the combination recovers a vertical entry better than one tracker, with a better objective in every case.{lines} Rule (fixed in the spec; its partly grade rewritten after results, see the rule history): {text}", sig(bars.partly_worse_margin)),
     })
 }

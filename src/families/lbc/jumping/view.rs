@@ -250,6 +250,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
+        rule: Some(jump.clone()),
         why,
     })
 }

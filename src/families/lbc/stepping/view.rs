@@ -347,6 +347,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
+        rule: Some(step_rule.clone()),
         why,
     })
 }

@@ -261,6 +261,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
+        rule: Some(walk_rule.clone()),
         why,
     })
 }

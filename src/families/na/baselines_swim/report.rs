@@ -129,6 +129,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
             verdict,
             lines,
             text,
+            rule,
         })
     };
     // The notes on reaching BPTT-momentum's own best J (the table's column; not the rule).
@@ -215,6 +216,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
             ours: md,
             verdict,
+            rule: main.rule.clone(),
             why: format!(
                 "On the emulator, the {}. BPTT with momentum reaches its best emulator J = {} at iteration {} ({} s, the step-scale estimate included; its iterate's J rose in {rises} of {} steps; its knots swim {} m on the simulator vs {} m on the emulator). On the emulator, {}. On the physical simulator (target: BPTT's knots replayed there, J = {}), {}. Replayed on the simulator, BPTT's knots swim {} m, the gradient-free methods' emulator-learned knots at most {} m. Checks on the emulator:{lines} Rule (ours, in the spec's [params.rule], rewritten after results: see the rule history; J* lies target_fraction of the way from the initial J to the best J any method reaches): {text} An iteration is one annealing proposal, one simplex step, one hill-climbing batch (several evaluations) or one gradient step; budgets are far below the paper's hour, so 'never' means 'not within the budget'. Seconds are this machine's wall clock.",
                 main.target_line,
@@ -241,6 +243,7 @@ struct Judged {
     verdict: Verdict,
     lines: String,
     text: String,
+    rule: Option<Rule>,
 }
 
 /// The common target J* on a substrate: `bars.target_fraction` of the way from the initial J

@@ -240,6 +240,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
             ours: md,
             verdict,
+            rule: rule.clone().into(),
             why: format!(
                 "{good} of {n} Table 1 nets (the dolphin counts its global and six local nets) pass every condition, at about 8-10 examples per weight. Each condition alone (thresholds ours, in the spec's [params.rule]; the paper states none): learned, a held-out one-step MSE below {} of the normalized state-change variance: {} of {n}; not overfitted, held-out at most {} above training: {} of {n}; faithful, a mean 40-step rollout error below {} of the state variance: {} of {n} ({rolled} measured; the dolphin's local-net rows carry the composed hierarchy's); faithful on the tasks' inputs, every task quantity's median 40-step error within {} tolerance(s): {regime_pass} of the {regime_nets} catalog nets measured (the dolphin's nets are not). Checks:{lines} Rule: {text}",
                 sig(bars.heldout_max),
