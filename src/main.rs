@@ -2,6 +2,7 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
+use motionlab::experiment::diff::{diff, Options as DiffOptions};
 use motionlab::experiment::folder::check_complete;
 use motionlab::experiment::output::remove_stale_temps;
 use motionlab::experiment::report::write_report;
@@ -207,6 +208,15 @@ enum Command {
         #[arg(long)]
         quick: bool,
     },
+    /// Compare two results folders (two revisions' `results/`, a shard merge against a plain
+    /// run, a rerun on another machine): experiment folders and CSV tables on one side only, each
+    /// shared table's columns, row count and cells beyond the tolerances, and the verdicts of the
+    /// two REPORT.md claims tables. Timing columns, run.json and the Parquet twins are not
+    /// compared.
+    ///
+    /// Exits 0 when nothing differs, 1 when something does, 2 on an error (a folder that does
+    /// not exist, a file that cannot be read), as `diff` and `cmp` do.
+    Diff(DiffArgs),
     /// Throughput of the hot loops.
     Bench {
         /// Print one JSON object of named numbers.
@@ -216,6 +226,30 @@ enum Command {
         #[arg(long, default_value_t = 0.5)]
         seconds: f64,
     },
+}
+
+#[derive(Args)]
+struct DiffArgs {
+    /// Folder A (e.g. `results`).
+    a: PathBuf,
+    /// Folder B, compared against A.
+    b: PathBuf,
+    /// Relative tolerance of numeric cells: equal within atol + rtol * max(|a|, |b|).
+    #[arg(long, default_value = "1e-9", value_name = "R")]
+    rtol: f64,
+    /// Absolute tolerance of numeric cells.
+    #[arg(long, default_value = "1e-12", value_name = "A")]
+    atol: f64,
+    /// Compare the timing columns too: names ending in `seconds`, `_s` or `seconds_per_pass`, or
+    /// starting with `seconds` or `wall` (wall-clock times, which differ on every run).
+    #[arg(long)]
+    all_columns: bool,
+    /// Differing cells shown per table (all are counted).
+    #[arg(long, default_value_t = 10, value_name = "N")]
+    max_cells: usize,
+    /// Print one JSON object with the same content instead of text.
+    #[arg(long)]
+    json: bool,
 }
 
 fn experiments_dir(cli: &Option<PathBuf>) -> PathBuf {
@@ -400,6 +434,10 @@ fn broken_pipe(e: &anyhow::Error) -> bool {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // `diff` tells a difference (exit 1) from an error (exit 2), which no other verb does.
+    if let Command::Diff(args) = &cli.command {
+        return diff_verb(args);
+    }
     // The vector-instruction cap, read once at start-up: an unknown value is an error here
     // rather than a warning in the middle of a run.
     if let Err(e) = motionlab::simd::requested() {
@@ -415,6 +453,39 @@ fn main() -> ExitCode {
             eprintln!("error: {}", error_text(&e));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Runs `diff`: exit 0 when the folders agree, 1 when they differ, 2 on an error.
+fn diff_verb(args: &DiffArgs) -> ExitCode {
+    match print_diff(args) {
+        Ok(false) => ExitCode::SUCCESS,
+        Ok(true) => ExitCode::from(1),
+        Err(e) => {
+            eprintln!("error: {}", error_text(&e));
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// Compares the two folders and prints the result (text, or JSON with `--json`); returns
+/// whether they differ. A reader that stops reading early does not change the answer.
+fn print_diff(args: &DiffArgs) -> Result<bool> {
+    let opts = DiffOptions {
+        rtol: args.rtol,
+        atol: args.atol,
+        all_columns: args.all_columns,
+        max_cells: args.max_cells,
+    };
+    let d = diff(&args.a, &args.b, &opts)?;
+    let text = if args.json {
+        serde_json::to_string_pretty(&d)?
+    } else {
+        d.to_string()
+    };
+    match say(text) {
+        Err(e) if !broken_pipe(&e) => Err(e),
+        _ => Ok(d.changed),
     }
 }
 
@@ -582,6 +653,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             duration,
             out.as_deref(),
         ),
+        Command::Diff(_) => unreachable!("`main` runs `diff` itself, for its own exit codes"),
         Command::Bench { json, seconds } => {
             if !(seconds > 0.0) {
                 bail!("--seconds must be > 0");

@@ -2,6 +2,7 @@
 //! small scale. One test binary (polars makes each binary large).
 
 mod cli;
+mod diff;
 mod digits;
 mod folders;
 mod inputs;

@@ -12,6 +12,8 @@
 //!    units for `--resume`, runs `--shard I/N` and merges shards, [`seeds`] aggregates seeds;
 //! 4. [`report`]: `REPORT.md`, each family's section read back from its CSVs.
 //!
+//! [`diff`] compares two results folders (`motionlab diff`): tables, cells and verdicts.
+//!
 //! This module is the harness only: it runs whatever [`Registry`] it is handed and names no
 //! family. The families live in [`crate::families`], one folder per paper, and
 //! [`crate::families::registry`] lists them; `main.rs` hands that registry to [`resolve::resolve`]
@@ -19,6 +21,7 @@
 //! functions receive them. To add an experiment family, implement [`Experiment`] (and [`Job`]
 //! for its parameters) in a new file there and list it in [`crate::families`].
 
+pub mod diff;
 pub mod folder;
 pub mod output;
 pub mod plot;

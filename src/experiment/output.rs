@@ -643,7 +643,10 @@ fn numeric_columns(path: &Path) -> Vec<(String, bool)> {
 /// The records of CSV `text` (RFC 4180 quoting, as polars writes it): each with the 1-based
 /// line it starts on and its fields (unquoted text, whether it was quoted); an error names
 /// the line of a quote left open.
-fn csv_records(path: &Path, text: &str) -> Result<Vec<(usize, Vec<(String, bool)>)>, Error> {
+pub(crate) fn csv_records(
+    path: &Path,
+    text: &str,
+) -> Result<Vec<(usize, Vec<(String, bool)>)>, Error> {
     let mut records = Vec::new();
     let (mut line, mut start) = (1, 1);
     let mut fields: Vec<(String, bool)> = Vec::new();
