@@ -338,8 +338,7 @@ fn reproduce_with_seeds_reports_each_seed_and_the_spread() {
         report.contains("**Over 2 seeds** (1, 2): the verdict held for 2."),
         "{report}"
     );
-    let details =
-        std::fs::read_to_string(d.path().join("out/lbc_projection/DETAILS.md")).unwrap();
+    let details = std::fs::read_to_string(d.path().join("out/lbc_projection/DETAILS.md")).unwrap();
     assert!(details.contains("*Seed 1, the first of 2"), "{details}");
     assert!(details.contains("values vary with the seed"), "{details}");
 }

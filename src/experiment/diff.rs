@@ -198,19 +198,28 @@ pub struct VerdictChange {
     pub b: String,
 }
 
-/// Whether column `name` holds wall-clock time, which differs from run to run (and machine to
-/// machine) while every other number is reproducible: a name that ends in `seconds`, `_s` or
-/// `seconds_per_pass`, starts with `seconds` or `wall`, or is `train_s`. The rule goes by name
-/// only, so it also covers some columns of simulated time or physical units (`fell_at_s`,
-/// `speed_m_s`, `wall_force`); `--all-columns` compares every column.
+/// Whether column `name` holds a wall-clock measurement, which differs from run to run (and
+/// machine to machine) while every other number is reproducible: a name with `seconds` in it,
+/// or one of the measured rates and times the result tables name otherwise ([`TIMING`]).
+/// Columns of simulated time or physical units (`horizon_s`, `fell_at_s`, `speed_m_s`,
+/// `wall_force`) are results and are compared; `--all-columns` compares every column.
 pub fn is_timing_column(name: &str) -> bool {
-    name.ends_with("seconds")
-        || name.ends_with("_s")
-        || name.ends_with("seconds_per_pass")
-        || name.starts_with("seconds")
-        || name.starts_with("wall")
-        || name == "train_s"
+    name.contains("seconds") || TIMING.contains(&name)
 }
+
+/// Wall-clock columns whose names do not say `seconds`: the step costs and rates of the
+/// speed tables and what is computed from them.
+const TIMING: [&str; 9] = [
+    "train_s",
+    "emulator_s",
+    "emulator_step_s",
+    "physical_s",
+    "physical_step_s",
+    "evals_per_s",
+    "us_per_step",
+    "speedup",
+    "step_cost_ratio",
+];
 
 /// Whether two cells are the same: equal text; or two numbers within `atol + rtol·max(|a|,
 /// |b|)` when both are finite, and otherwise equal (an infinity only equals itself, a NaN a
@@ -416,8 +425,14 @@ fn compare_table(
     }
     let (mut cells, mut cells_differing) = (Vec::new(), 0);
     let mut ignored: Vec<usize> = vec![0; shared.len()];
+    // A summary table (seed_summary.csv) has one row per summarized column, named in its
+    // `column` cell: a row summarizing a timing column is timing throughout.
+    let summarized = position(&ta.header, "column");
     for (row, (ra, rb)) in ta.rows.iter().zip(&tb.rows).enumerate() {
+        let timing_row =
+            !opts.all_columns && summarized.is_some_and(|c| is_timing_column(cell(ra, c)));
         for (k, &(column, i, j, counts)) in shared.iter().enumerate() {
+            let counts = counts && !timing_row;
             let (x, y) = (cell(ra, i), cell(rb, j));
             if cells_equal(x, y, opts.rtol, opts.atol) {
                 continue;
@@ -837,7 +852,19 @@ mod tests {
         ] {
             assert!(is_timing_column(timing), "{timing}");
         }
-        for kept in ["x", "speedup", "seed", "sessions", "us_per_step"] {
+        for timing in ["speedup", "us_per_step", "step_cost_ratio"] {
+            assert!(is_timing_column(timing), "{timing}");
+        }
+        for kept in [
+            "x",
+            "seed",
+            "sessions",
+            "horizon_s",
+            "fell_at_s",
+            "speed_m_s",
+            "wall_force",
+            "max_weight_before_second_tug",
+        ] {
             assert!(!is_timing_column(kept), "{kept}");
         }
     }
