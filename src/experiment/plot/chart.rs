@@ -262,6 +262,10 @@ where
                 pts.iter()
                     .map(|&q| Circle::new(q, (dot - 1).max(2), color.filled())),
             )?,
+            Mark::Area => chart.draw_series(std::iter::once(Polygon::new(
+                pts.clone(),
+                color.mix(0.18).filled(),
+            )))?,
             Mark::Bars { half_width } => {
                 let bottom = chart.y_range().start;
                 chart.draw_series(pts.iter().map(|&(x, y)| {

@@ -117,7 +117,7 @@ impl LegendSample {
             }
             Mark::Points => (vec![], Some(3), None),
             Mark::LinePoints => (vec![line(0, 18)], Some(3), None),
-            Mark::Bars { .. } => (vec![], None, Some([(0, -5), (18, 5)])),
+            Mark::Bars { .. } | Mark::Area => (vec![], None, Some([(0, -5), (18, 5)])),
         };
         Self { pieces, dot, bar }
     }

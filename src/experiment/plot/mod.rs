@@ -49,6 +49,9 @@ pub enum Mark {
         /// Half the bar width in x units.
         half_width: f64,
     },
+    /// A translucent filled polygon through the points in order (a band: the lower edge left
+    /// to right, then the upper edge right to left; [`Series::band`]).
+    Area,
 }
 
 /// One data series.
@@ -143,6 +146,25 @@ impl Panel {
                 (m, _) => m,
             })
             .collect()
+    }
+}
+
+impl Series {
+    /// A band between `lower` and `upper` (points at the same x, in increasing x) as a
+    /// translucent [`Mark::Area`] of colour index `color`: the spread of a quantity (lowest to
+    /// highest seed, an interval) around a line drawn on top of it.
+    pub fn band(
+        label: impl Into<String>,
+        lower: &[(f64, f64)],
+        upper: &[(f64, f64)],
+        color: usize,
+    ) -> Self {
+        let outline: Vec<(f64, f64)> = lower
+            .iter()
+            .copied()
+            .chain(upper.iter().rev().copied())
+            .collect();
+        Series::line(label, outline, color).mark(Mark::Area)
     }
 }
 
@@ -254,6 +276,21 @@ impl Figure {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_band_is_the_lower_edge_then_the_upper_edge_backwards() {
+        let b = Series::band(
+            "spread",
+            &[(0.0, 1.0), (1.0, 2.0)],
+            &[(0.0, 3.0), (1.0, 5.0)],
+            2,
+        );
+        assert_eq!(b.mark, Mark::Area);
+        assert_eq!(
+            b.points,
+            vec![(0.0, 1.0), (1.0, 2.0), (1.0, 5.0), (0.0, 3.0)]
+        );
+    }
 
     #[test]
     fn lines_beside_others_differ_by_stroke_as_well_as_colour() {

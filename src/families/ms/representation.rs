@@ -388,7 +388,7 @@ impl Family for MsRepresentation {
     type Params = RepresentationParams;
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[(
         "search",
-        "hill climbing with the 12 canonical reflexes and with free rest lengths, same search and budget: the best objective so far against evaluations, median over the seeds (solid or long dashes) with the lowest and highest seed (thin dots for the reflexes, short dashes for free rest lengths, same colours).",
+        "hill climbing with the 12 canonical reflexes and with free rest lengths, same search and budget: the best objective so far against evaluations, median over the seeds (solid for the reflexes, dashed for free rest lengths) over a shaded band from the lowest to the highest seed, in the same colour.",
     )];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
@@ -419,21 +419,18 @@ impl Family for MsRepresentation {
                         mc.iter().map(|p| (p.0, p.1)).collect(),
                         k,
                     ));
-                    for pick in [2usize, 3] {
-                        let pts = mc
-                            .iter()
-                            .map(|p| (p.0, if pick == 2 { p.2 } else { p.3 }))
-                            .collect();
-                        let lab = if pick == 2 {
-                            format!("{}: lowest and highest seed", label(rep))
-                        } else {
-                            String::new()
-                        };
-                        series.push(Series::line(lab, pts, k).mark(Mark::Pattern {
-                            dash: 2 + 4 * k as u32,
-                            gap: 5,
-                        }));
-                    }
+                    // The seeds' spread as a band under the median.
+                    let lower: Vec<(f64, f64)> = mc.iter().map(|p| (p.0, p.2)).collect();
+                    let upper: Vec<(f64, f64)> = mc.iter().map(|p| (p.0, p.3)).collect();
+                    series.insert(
+                        0,
+                        Series::band(
+                            format!("{}: lowest to highest seed", label(rep)),
+                            &lower,
+                            &upper,
+                            k,
+                        ),
+                    );
                 }
                 // The rule's bar: free's median final, to be reached by the reflexes' median
                 // within the rule's share of the evaluations.

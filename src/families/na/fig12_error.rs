@@ -407,7 +407,7 @@ impl Family for NaError {
             panels.push(Panel {
                 title: format!("{v} pendulum"),
                 x_label: "time (s)".into(),
-                y_label: "mean |emulated - simulated| state".into(),
+                y_label: "mean |emulated - simulated| over the state (rad and rad/s)".into(),
                 series,
                 ..Panel::default()
             });
@@ -491,7 +491,7 @@ impl Family for NaError {
                 panels.push(Panel {
                     title: format!("{v} pendulum: capacity"),
                     x_label: "physical steps per emulator step N".into(),
-                    y_label: "time-averaged mean |emulated - simulated| state".into(),
+                    y_label: "time-averaged mean |emulated - simulated| (rad and rad/s)".into(),
                     series,
                     ..Panel::default()
                 });

@@ -323,10 +323,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
             (a.min(v), b.max(v))
         });
-    heights.insert(
-        0,
-        Series::line("desired", vec![(lo, lo), (hi, hi)], 7).mark(Mark::Dashed),
-    );
+    // Drawn last, so the reference (which the desired take-off is built from, and nearly
+    // equals) does not hide it.
+    heights.push(Series::line("desired", vec![(lo, lo), (hi, hi)], 7).mark(Mark::Dashed));
     let panel = Panel {
         title: "jump height at take-off (✗: did not land)".into(),
         x_label: "desired jump height (m)".into(),

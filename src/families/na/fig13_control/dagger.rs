@@ -428,11 +428,14 @@ pub fn figure(
     for (c, name) in unique(&task).into_iter().enumerate() {
         let pts = |v: &[f64]| -> Vec<(f64, f64)> {
             (0..task.len())
-                .filter(|&r| task[r] == name)
-                .map(|r| (round[r], v[r].max(1e-3)))
+                // Log axis: an exact zero has no place on it and is left out.
+                .filter(|&r| task[r] == name && v[r] > 0.0)
+                .map(|r| (round[r], v[r]))
                 .collect()
         };
-        series.push(Series::line(format!("{name}: simulator"), pts(&sim), c));
+        // Solid with dots on the simulator, dashed on the net, in the task's colour.
+        series
+            .push(Series::line(format!("{name}: simulator"), pts(&sim), c).mark(Mark::LinePoints));
         series.push(Series::line(format!("{name}: DAgger net"), pts(&emu), c).mark(Mark::Dashed));
     }
     let dots = (0..=20).map(|i| (last * i as f64 / 20.0, 1.0)).collect();
