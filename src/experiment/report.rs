@@ -245,8 +245,8 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
                 let _ = writeln!(sections, "  - {}", h.line());
             }
         }
+        // How the run went (seed, scale, time, cached nets) is in the details.
         if let Some(meta) = read_run_json(&dir) {
-            let _ = writeln!(sections, "- Run: {meta}");
             let _ = writeln!(details, "\n**Run:** {meta}\n");
         }
         if let Some(w) = stale {

@@ -57,7 +57,7 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
-use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::rule::{read_rule, rule_setting, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::na::table1_structure::{build_spec, validate_nets, validate_training};
 use crate::row;
@@ -904,7 +904,7 @@ impl Family for NaTrainingMethods {
         ),
         (
             "examples",
-            "left: training and test error of the same net trained to convergence on more and more examples (median over initial weights), against examples per weight; right: test/training error ratio with the rule's thresholds (2: overfitting visible; 1.25: none serious) and the paper's 8-10 examples per weight between two dashed verticals.",
+            "left: training and test error of the same net trained to convergence on more and more examples (median over initial weights), against examples per weight; right: test/training error ratio with the rule's thresholds (overfitting visible; none serious; values in the legend) and the paper's 8-10 examples per weight between two dashed verticals, the axis cut a few times above the larger threshold.",
         ),
     ];
 
@@ -1034,23 +1034,37 @@ impl Family for NaTrainingMethods {
             ],
             ..Panel::default()
         };
-        let rmax = ratio.iter().map(|p| p.1).fold(2.5, f64::max);
+        // The rule's bars from the run's rule table; the axis stops a few times above the
+        // larger bar so the bars, which decide the verdict, are not squeezed by the smallest
+        // ratios' overfitting (hundreds; their values are in the table).
+        let overfit = rule_setting(tables, "overfit_ratio").unwrap_or(f64::NAN);
+        let serious = rule_setting(tables, "test_train_max").unwrap_or(f64::NAN);
+        let top = 5.0 * overfit.max(serious).max(1.0);
+        let rmax = ratio.iter().map(|p| p.1).fold(2.5, f64::max).min(top);
         let right = Panel {
-            title: "overfitting: test / training error".into(),
+            title: format!(
+                "overfitting: test / training error (axis cut at {})",
+                sig(top)
+            ),
             x_label: "training examples per network weight".into(),
             y_label: "test error / training error".into(),
             log_x: true,
             log_y: true,
+            y_range: Some((0.8, top)),
             series: vec![
                 Series::line("test / training", ratio, 0).mark(Mark::LinePoints),
                 Series::line(
-                    "2: overfitting visible (premise)",
-                    vec![(lo, 2.0), (hi, 2.0)],
+                    format!("{}: overfitting visible (premise)", sig(overfit)),
+                    vec![(lo, overfit), (hi, overfit)],
                     3,
                 )
                 .mark(Mark::Dashed),
-                Series::line("1.25: none serious (rule)", vec![(lo, 1.25), (hi, 1.25)], 4)
-                    .mark(Mark::Pattern { dash: 3, gap: 3 }),
+                Series::line(
+                    format!("{}: none serious (rule)", sig(serious)),
+                    vec![(lo, serious), (hi, serious)],
+                    4,
+                )
+                .mark(Mark::Pattern { dash: 3, gap: 3 }),
                 vline(8.0, 0.8, rmax, "the paper's 8-10 per weight", 2),
                 vline(10.0, 0.8, rmax, "", 2),
             ],

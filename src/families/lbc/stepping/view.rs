@@ -426,7 +426,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         w.f64s("t"),
         w.f64s("alpha_short"),
     );
-    let weights = alpha_panel(
+    let mut weights = alpha_panel(
         "LBC's weight of the short step over the step",
         "time in the step (s)",
         "α_short",
@@ -434,6 +434,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         &wt,
         &wa,
     );
+    // Room above the weights for the legend: every corner of [0, 1] holds a curve.
+    weights.y_range = Some((-0.02, 1.45));
+    weights.legend = Legend::UpperRight;
     files.extend(fig.draw("weights", &Figure::grid(vec![weights], 1))?);
     // The walk: poses at each step's end, the footholds and the gaps.
     let m = tables.require("motion")?;
@@ -485,8 +488,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             ));
         }
     }
+    // Headroom above the 1.4 m bodies for the legend, which would hide the first poses.
     let f = to_scale(
-        fitted((x_lo, x_hi), (-0.1, 1.6), 420),
+        fitted((x_lo, x_hi), (-0.1, 2.2), 420),
         "x (m)",
         vec![(format!("LBC's walk over {} gaps", gap.len()), scene(poses))],
     );

@@ -456,9 +456,27 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         .filter(|&i| sfell[i] != 0.0)
         .map(|i| (ho[i], sdist[i]))
         .collect();
-    // Written at their points: dots alone hide under the lines' own markers.
+    // Written at their points (dots alone hide under the lines' own markers), one label per
+    // hip offset at its highest fall, with the count where several walkers fell there (their
+    // points lie too close to label apart).
     let mut fell_s = Series::line("", fell.clone(), 7).mark(Mark::Points);
-    fell_s.point_labels = vec!["✗ fell".into(); fell.len()];
+    fell_s.point_labels = fell
+        .iter()
+        .enumerate()
+        .map(|(i, &(x, _))| {
+            let here: Vec<usize> = (0..fell.len()).filter(|&j| fell[j].0 == x).collect();
+            let top = here
+                .iter()
+                .copied()
+                .max_by(|&a, &b| fell[a].1.total_cmp(&fell[b].1).then(b.cmp(&a)))
+                .unwrap_or(i);
+            match (top == i, here.len()) {
+                (false, _) => String::new(),
+                (true, 1) => "✗ fell".into(),
+                (true, n) => format!("✗ {n} fell"),
+            }
+        })
+        .collect();
     ss.push(fell_s);
     let chosen: Vec<(f64, f64)> = (0..to.len())
         .filter(|&i| sch[i] != 0.0)

@@ -3,6 +3,8 @@
 
 use crate::experiment::output::{unique, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::report::sig;
+use crate::experiment::rule::rule_setting;
 use crate::experiment::Error;
 use std::path::PathBuf;
 
@@ -49,15 +51,17 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
                     );
                 }
             }
-            // The verdict's bar on the final held-out error (ours): below 0.05.
-            series.push(
-                Series::line(
-                    "rule: held-out below 0.05",
-                    vec![(0.0, 0.05), (x_end, 0.05)],
-                    7,
-                )
-                .mark(Mark::Dashed),
-            );
+            // The verdict's bar on the final held-out error (ours, the run's rule table).
+            if let Some(bar) = rule_setting(tables, "heldout_max") {
+                series.push(
+                    Series::line(
+                        format!("rule: held-out below {}", sig(bar)),
+                        vec![(0.0, bar), (x_end, bar)],
+                        7,
+                    )
+                    .mark(Mark::Dashed),
+                );
+            }
             Panel {
                 title: format!("{name}: first training stage"),
                 x_label: "iteration (CG, L-BFGS) or epoch (momentum)".into(),
@@ -66,6 +70,19 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
                 series,
                 ..Panel::default()
             }
+        })
+        .collect::<Vec<Panel>>();
+    // One legend for the figure, in the first panel: every panel draws the same series.
+    let panels: Vec<Panel> = panels
+        .into_iter()
+        .enumerate()
+        .map(|(k, mut p)| {
+            if k > 0 {
+                for s in &mut p.series {
+                    s.label.clear();
+                }
+            }
+            p
         })
         .collect();
     let mut files = fig.draw("training", &Figure::grid(panels, 3))?;

@@ -470,7 +470,7 @@ impl Family for NaStructure {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
         (
             "training",
-            "each Table 1 net's one-step MSE per output (normalized) on its training and held-out sets vs iteration (L-BFGS) or epoch (momentum), with the table's final errors as dotted lines (the dolphin's global net's after its rollout fine-tuning); the catalog nets train one step ahead without input noise, the dolphin's nets with it, which is why their training error can lie above the clean held-out error; the grey dashed line is the verdict's 0.05 bar on the final held-out error.",
+            "each Table 1 net's one-step MSE per output (normalized) on its training and held-out sets vs iteration (L-BFGS) or epoch (momentum), with the table's final errors as dotted lines (the dolphin's global net's after its rollout fine-tuning); the catalog nets train one step ahead without input noise, the dolphin's nets with it, which is why their training error can lie above the clean held-out error; the grey dashed line is the verdict's bar on the final held-out error; one legend, in the first panel, serves all.",
         ),
         (
             "rollout",
