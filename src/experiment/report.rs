@@ -261,12 +261,21 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         }
         let figs = figure_files(figures, &r.id);
         let rel = relative(out, figures);
+        // The main figure is the first the family captions (its own order), else the first.
+        let main = r
+            .family
+            .captions()
+            .iter()
+            .find_map(|(name, _)| figs.iter().position(|f| figure_name(&r.id, f) == *name))
+            .unwrap_or(0);
         for (k, f) in figs.iter().enumerate() {
             let name = figure_name(&r.id, f);
-            let caption = caption(r.family.captions(), name).map_or_else(
-                || format!("{} {NO_CAPTION}", name.replace('_', " ")),
-                str::to_string,
-            );
+            let caption = caption(r.family.captions(), name)
+                .or((name == CHECKS_FIGURE).then_some(CHECKS_CAPTION))
+                .map_or_else(
+                    || format!("{} {NO_CAPTION}", name.replace('_', " ")),
+                    str::to_string,
+                );
             let show = |md: &mut String, rel: &Path| {
                 if f.ends_with(".gif") {
                     let _ = writeln!(
@@ -282,8 +291,8 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
                     );
                 }
             };
-            // The report shows the main figure (the family's first); the details all.
-            if k == 0 {
+            // The report shows the main figure; the details all.
+            if k == main {
                 show(&mut sections, &rel);
             }
             show(&mut details, &rel_figures);
@@ -358,6 +367,71 @@ fn capitalized(text: &str) -> String {
     c.next().map_or_else(String::new, |f| {
         f.to_uppercase().collect::<String>() + c.as_str()
     })
+}
+
+/// The name of the figure of a rule's checks with intervals ([`checks_figure`]).
+pub const CHECKS_FIGURE: &str = "checks";
+
+/// Its caption.
+const CHECKS_CAPTION: &str = "each check of the verdict's rule that carries a 95% bootstrap interval over its seeds: the median (dot) and interval (bar) against the check's bar (dashed); an interval that straddles the bar makes the check inconclusive.";
+
+/// Draws `<id>_checks.png/svg` when `rule` has checks with intervals (none otherwise): one
+/// panel per such check, its median and 95% interval against its bar, so the uncertainty a
+/// verdict rests on is seen, not only read. Returns the files drawn.
+pub(crate) fn checks_figure(
+    sink: &super::plot::FigureSink,
+    rule: &super::rule::Rule,
+) -> Result<Vec<std::path::PathBuf>, Error> {
+    use super::plot::{Figure, Legend, Mark, Panel, Series};
+    let tagged: Vec<(String, &super::rule::Check)> = rule
+        .premise
+        .iter()
+        .map(|c| ("premise".to_string(), c))
+        .chain(
+            rule.held
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (format!("({})", (b'a' + (i % 26) as u8) as char), c)),
+        )
+        .filter(|(_, c)| c.interval.is_some())
+        .collect();
+    if tagged.is_empty() {
+        return Ok(vec![]);
+    }
+    let panels: Vec<Panel> = tagged
+        .iter()
+        .map(|(tag, c)| {
+            let (lo, hi) = c.interval.unwrap_or((c.value, c.value));
+            let top = hi.max(c.threshold).max(c.value);
+            let bottom = lo.min(c.threshold).min(c.value).min(0.0);
+            let pad = 0.1 * (top - bottom).max(1e-12);
+            let mut label: String = c.label.chars().take(60).collect();
+            if c.label.chars().count() > 60 {
+                label.push('…');
+            }
+            Panel {
+                title: format!("{tag} {label}: {}", c.outcome().word()),
+                x_label: String::new(),
+                y_label: "the check's measure".into(),
+                series: vec![
+                    Series::line("95% interval", vec![(0.0, lo), (0.0, hi)], 0),
+                    Series::line("median", vec![(0.0, c.value)], 0).mark(Mark::Points),
+                    Series::line(
+                        format!("bar: {} {}", c.cmp.symbol(), sig(c.threshold)),
+                        vec![(-0.5, c.threshold), (0.5, c.threshold)],
+                        3,
+                    )
+                    .mark(Mark::Dashed),
+                ],
+                x_range: Some((-1.0, 1.0)),
+                y_range: Some((bottom - pad, top + pad)),
+                x_ticks: vec![(0.0, String::new())],
+                legend: Legend::UpperRight,
+                ..Panel::default()
+            }
+        })
+        .collect();
+    sink.draw(CHECKS_FIGURE, &Figure::grid(panels, 3))
 }
 
 /// Marks a figure whose family gives it no caption (a test keeps the report free of it).

@@ -395,6 +395,20 @@ fn finish(
             files.extend(ctx.stage("seed figure", || sink.draw("seeds", &fig))?);
         }
     }
+    // The verdict's checks with intervals, as the report will judge them from these tables
+    // (the first seed's where seeds are swept and judged one by one). A table the report
+    // cannot read yet draws nothing here; the report says why.
+    let judged = match (&res.seeds, res.family.seeds_pooled()) {
+        (Some(seeds), false) => seeds
+            .first()
+            .map_or(dir.clone(), |s| dir.join("seeds").join(s.to_string())),
+        _ => dir.clone(),
+    };
+    if let Ok(Some(rule)) = res.family.report(&judged).map(|f| f.rule) {
+        files.extend(ctx.stage("checks figure", || {
+            super::report::checks_figure(&sink, &rule)
+        })?);
+    }
     let seconds = t0.elapsed().as_secs_f64();
     let stages: serde_json::Map<String, serde_json::Value> = ctx
         .stages()

@@ -1041,10 +1041,17 @@ impl Family for NaTrainingMethods {
         let serious = rule_setting(tables, "test_train_max").unwrap_or(f64::NAN);
         let top = 5.0 * overfit.max(serious).max(1.0);
         let rmax = ratio.iter().map(|p| p.1).fold(2.5, f64::max).min(top);
+        let cut = ratio.iter().filter(|p| p.1 > top).count();
+        let ratio: Vec<(f64, f64)> = ratio.into_iter().filter(|p| p.1 <= top).collect();
         let right = Panel {
             title: format!(
-                "overfitting: test / training error (axis cut at {})",
-                sig(top)
+                "overfitting: test / training error (axis cut at {}{})",
+                sig(top),
+                if cut > 0 {
+                    format!("; {cut} smaller ratios above it")
+                } else {
+                    String::new()
+                }
             ),
             x_label: "training examples per network weight".into(),
             y_label: "test error / training error".into(),

@@ -372,15 +372,15 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             last = mt[i];
             let off = (n as f64 * spacing, 0.0);
             let pose = body(&tree, &state(i), off, if n == 0 { name } else { "" }, color);
-            // Frames in flight (no point of the body within 1 cm of the ground) are marked,
-            // since a 0.2 m jump is hard to see at this scale.
+            // Frames in flight (no point of the body within 1 cm of the ground) are marked
+            // "air", since a 0.2 m jump is hard to see at this scale.
             let lowest = pose
                 .iter()
                 .flat_map(|s| s.points.iter().map(|p| p.1))
                 .fold(f64::INFINITY, f64::min);
             if lowest > 0.01 {
                 let mut air = Series::line("", vec![(off.0, 1.85)], 7).mark(Mark::Points);
-                air.point_labels = vec!["in flight".into()];
+                air.point_labels = vec!["air".into()];
                 strip.push(air);
             }
             strip.extend(pose);
