@@ -405,14 +405,14 @@ pub(crate) fn checks_figure(
             let top = hi.max(c.threshold).max(c.value);
             let bottom = lo.min(c.threshold).min(c.value).min(0.0);
             let pad = 0.1 * (top - bottom).max(1e-12);
-            let mut label: String = c.label.chars().take(60).collect();
-            if c.label.chars().count() > 60 {
+            let mut label: String = c.label.chars().take(40).collect();
+            if c.label.chars().count() > 40 {
                 label.push('…');
             }
             Panel {
                 title: format!("{tag} {label}: {}", c.outcome().word()),
                 x_label: String::new(),
-                y_label: "the check's measure".into(),
+                y_label: "measure".into(),
                 series: vec![
                     Series::line("95% interval", vec![(0.0, lo), (0.0, hi)], 0),
                     Series::line("median", vec![(0.0, c.value)], 0).mark(Mark::Points),
@@ -423,7 +423,8 @@ pub(crate) fn checks_figure(
                     )
                     .mark(Mark::Dashed),
                 ],
-                x_range: Some((-1.0, 1.0)),
+                // Room right of the data for the legend, which would cover the bar.
+                x_range: Some((-1.0, 2.6)),
                 y_range: Some((bottom - pad, top + pad)),
                 x_ticks: vec![(0.0, String::new())],
                 legend: Legend::UpperRight,

@@ -1045,10 +1045,10 @@ impl Family for NaTrainingMethods {
         let ratio: Vec<(f64, f64)> = ratio.into_iter().filter(|p| p.1 <= top).collect();
         let right = Panel {
             title: format!(
-                "overfitting: test / training error (axis cut at {}{})",
+                "test / training error (cut at {}{})",
                 sig(top),
                 if cut > 0 {
-                    format!("; {cut} smaller ratios above it")
+                    format!(": {cut} points above")
                 } else {
                     String::new()
                 }
