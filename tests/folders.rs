@@ -262,7 +262,8 @@ fn a_run_without_seeds_removes_an_earlier_runs_seeds() {
 }
 
 /// A spec's `[[history]]` (a rule or setup changed after a result) is shown in its section of
-/// REPORT.md with the old rule, its verdict and the reason, and the summary row marks it; a
+/// REPORT.md with its verdict and the reason, in full with the old rule in the experiment's
+/// DETAILS.md, and the summary row marks it; a
 /// malformed entry is refused before any work, naming the file and the entry.
 #[test]
 fn the_report_shows_a_specs_rule_history_and_flags_it_in_the_summary() {
@@ -283,8 +284,15 @@ fn the_report_shows_a_specs_rule_history_and_flags_it_in_the_summary() {
     let report = std::fs::read_to_string(dir.join("out/REPORT.md")).unwrap();
     assert!(report.contains("(changed after results: 1)"), "{report}");
     assert!(
-        report.contains("2026-11-28, rule changed after a result: was held when one minimum appears (verdict then: held). Why: the old rule could not fail"),
+        report.contains(
+            "2026-11-28, rule changed (verdict then: held). Why: the old rule could not fail"
+        ),
         "{report}"
+    );
+    let details = std::fs::read_to_string(dir.join("out/proj_a/DETAILS.md")).unwrap();
+    assert!(
+        details.contains("2026-11-28, rule changed after a result: was held when one minimum appears (verdict then: held). Why: the old rule could not fail"),
+        "{details}"
     );
     let bad = history.replace("2026-11-28", "last week");
     std::fs::write(&path, format!("{top}{bad}\n{rest}")).unwrap();

@@ -168,7 +168,7 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
                         let _ = write!(body, "{line}\n\n");
                     }
                     if let Some(rule) = &f.rule {
-                        body.push_str(&rule.bullets());
+                        body.push_str(&rule.table());
                     }
                     (
                         f.verdict.label().to_string(),
@@ -236,13 +236,20 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
             let _ = writeln!(sections, "**Ours:** {headline}\n");
         }
         sections.push_str(&body);
+        // The section says when, what kind, the verdict then and why; the old rule's wording
+        // is in the details.
         if !r.history.is_empty() {
             let _ = writeln!(
                 sections,
-                "- History (changes made after a result was seen, from the spec's `[[history]]`):"
+                "- History (changed after a result was seen; the old rules in the details):"
+            );
+            let _ = writeln!(
+                details,
+                "\n**History** (changes made after a result was seen, from the spec's `[[history]]`):\n"
             );
             for h in &r.history {
-                let _ = writeln!(sections, "  - {}", h.line());
+                let _ = writeln!(sections, "  - {}", h.short());
+                let _ = writeln!(details, "- {}", h.line());
             }
         }
         // How the run went (seed, scale, time, cached nets) is in the details.
@@ -605,7 +612,7 @@ fn summary(rows: &[(String, String, Group)]) -> String {
          our setup, so the claim is untested. Each rule \
          and its thresholds (ours where the paper gives none) are fixed in the experiment's spec \
          before the run; a rule or setup changed after a result was seen is listed in the spec's \
-         `[[history]]`, shown in the section with the old rule and verdict, and marked \
+         `[[history]]`, shown in the section with the verdict then (the old rule in its details), and marked \
          \"changed after results\" here. \"(stale)\" marks results made by older code \
          than the tree's.\n"
     );

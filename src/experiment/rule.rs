@@ -534,6 +534,70 @@ impl Rule {
     }
 }
 
+impl Rule {
+    /// How many groups of a [`Partly::AnyOf`] rule (each a task, say) pass every one of their
+    /// checks (inconclusive is not a pass); 0 under another grading.
+    pub fn groups_passing(&self) -> usize {
+        match &self.partly {
+            Partly::AnyOf(groups) => groups
+                .iter()
+                .filter(|g| {
+                    g.iter().all(|&i| {
+                        self.held
+                            .get(i)
+                            .is_some_and(|c| c.outcome() == Outcome::Pass)
+                    })
+                })
+                .count(),
+            _ => 0,
+        }
+    }
+
+    /// The report's table of checks: one row per check (premise first) with its value and
+    /// interval, its bar, its null and its outcome, then the grading as one line below it. A
+    /// table reads faster than the bullets when a rule has many checks; the bullets stay in
+    /// the details.
+    pub fn table(&self) -> String {
+        let cell = |s: &str| s.replace('|', "\\|");
+        let row = |t: &mut String, tag: &str, c: &Check| {
+            let (ours, needs, null) = if c.fact {
+                (String::new(), String::new(), String::new())
+            } else {
+                let interval = c.interval.map_or_else(String::new, |(lo, hi)| {
+                    format!(" [{}-{}]", sig(lo), sig(hi))
+                });
+                (
+                    format!("{}{interval}", sig(c.value)),
+                    format!("{} {}", c.cmp.symbol(), sig(c.threshold)),
+                    format!("{}, {}", c.null.label, sig(c.null.value)),
+                )
+            };
+            let _ = writeln!(
+                t,
+                "| {tag} | {} | {ours} | {needs} | {} | {} |",
+                cell(&c.label),
+                cell(&null),
+                c.outcome().word()
+            );
+        };
+        let mut t = String::from("| | check | ours | needs | null (fails it) | result |\n| --- | --- | --- | --- | --- | --- |\n");
+        for c in &self.premise {
+            row(&mut t, "premise", c);
+        }
+        for (i, c) in self.held.iter().enumerate() {
+            row(&mut t, &tag(i), c);
+        }
+        t.push('\n');
+        let text = self.text();
+        let grading = text
+            .split_once("Held needs")
+            .map(|(_, g)| g.split(". Each check's null").next().unwrap_or(g))
+            .unwrap_or("");
+        let _ = writeln!(t, "- Rule: held needs{grading}.");
+        t
+    }
+}
+
 /// What a report shows of a rule that may be missing: its verdict, its check lines and its
 /// text; without a rule, not assessed, no lines and `missing` (why there is none) as the text.
 pub fn shown(rule: Option<&Rule>, missing: &str) -> (Verdict, String, String) {
@@ -572,17 +636,9 @@ pub fn rule_table(settings: &[(&str, f64)]) -> Table {
 /// The `rule` table of a thresholds struct `bars` whose fields are all numbers (its serde
 /// field names are the settings), so the thresholds are written once, in the struct.
 pub fn rule_table_of<T: serde::Serialize>(bars: &T) -> Result<Table, Error> {
-    let value = serde_json::to_value(bars).map_err(super::other)?;
-    let map = value
-        .as_object()
-        .ok_or_else(|| super::other("rule thresholds are not a struct"))?;
-    let mut settings = Vec::with_capacity(map.len());
-    for (k, v) in map {
-        let x = v
-            .as_f64()
-            .ok_or_else(|| super::other(format!("rule setting `{k}` is not a number")))?;
-        settings.push((k.as_str(), x));
-    }
+    let settings = crate::params::bars_of(bars)
+        .map_err(|e| super::other(format!("{}: {}", e.key, e.message)))?;
+    let settings: Vec<(&str, f64)> = settings.iter().map(|(k, v)| (k.as_str(), *v)).collect();
     Ok(rule_table(&settings))
 }
 
@@ -766,6 +822,33 @@ mod tests {
             "{b}"
         );
         assert!(b.contains("- Grades: held needs every check"), "{b}");
+        let t = r.table();
+        assert!(
+            t.contains("| (a) | gain | 2.00 | >= 1.00 | nothing, 0 | yes |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| (b) | gain | 2.00 [0.500-2.50] | >= 1.00 | nothing, 0 | inconclusive |"),
+            "{t}"
+        );
+        assert!(t.contains("- Rule: held needs every check"), "{t}");
+    }
+
+    #[test]
+    fn groups_passing_counts_groups_whose_checks_all_pass() {
+        let (pass, fail) = (check(2.0, 1.0, 0.0), check(0.5, 1.0, 0.0));
+        let unsure = pass.clone().with_interval(0.5, 2.5);
+        let r = Rule {
+            premise: vec![],
+            held: vec![pass.clone(), pass.clone(), fail, unsure, pass],
+            partly: Partly::AnyOf(vec![vec![0, 1], vec![2], vec![3], vec![4]]),
+        };
+        assert_eq!(r.groups_passing(), 2);
+        let any = Rule {
+            partly: Partly::Any,
+            ..r
+        };
+        assert_eq!(any.groups_passing(), 0);
     }
 
     #[test]

@@ -107,23 +107,42 @@ impl HistoryEntry {
         date && !self.old.trim().is_empty() && !self.reason.trim().is_empty()
     }
 
-    /// The report's line for it.
+    /// The report section's line: when, what kind, the verdict then and why.
+    pub fn short(&self) -> String {
+        format!(
+            "{}, {} changed{}. Why: {}",
+            self.date,
+            self.kind_word(),
+            self.verdict_then(),
+            self.reason.trim()
+        )
+    }
+
+    /// The entry in full: when, what kind, the old rule or setup, the verdict then, and why.
     pub fn line(&self) -> String {
-        let kind = match self.kind {
+        format!(
+            "{}, {} changed after a result: was {}{}. Why: {}",
+            self.date,
+            self.kind_word(),
+            self.old.trim(),
+            self.verdict_then(),
+            self.reason.trim()
+        )
+    }
+
+    fn kind_word(&self) -> &'static str {
+        match self.kind {
             HistoryKind::Rule => "rule",
             HistoryKind::Setup => "setup",
-        };
-        let verdict = if self.old_verdict.is_empty() {
+        }
+    }
+
+    fn verdict_then(&self) -> String {
+        if self.old_verdict.is_empty() {
             String::new()
         } else {
             format!(" (verdict then: {})", self.old_verdict)
-        };
-        format!(
-            "{}, {kind} changed after a result: was {}{verdict}. Why: {}",
-            self.date,
-            self.old.trim(),
-            self.reason.trim()
-        )
+        }
     }
 }
 
