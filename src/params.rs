@@ -54,6 +54,35 @@ pub fn positive(key: &str, v: f64) -> Result<(), ParamError> {
     )
 }
 
+/// The numeric fields of a verdict's thresholds struct `bars`, by their serde names (the
+/// settings of its `rule` table), sorted by name; an error names a field that is not a number.
+pub fn bars_of<T: serde::Serialize>(bars: &T) -> Result<Vec<(String, f64)>, ParamError> {
+    let value = serde_json::to_value(bars).map_err(|e| ParamError::new("rule", e))?;
+    let map = value
+        .as_object()
+        .ok_or_else(|| ParamError::new("rule", "the thresholds are not a table"))?;
+    map.iter()
+        .map(|(k, v)| {
+            v.as_f64()
+                .map(|x| (k.clone(), x))
+                .ok_or_else(|| ParamError::new(format!("rule.{k}"), "must be a number"))
+        })
+        .collect()
+}
+
+/// Every threshold of `bars` ([`bars_of`]) satisfies `ok`; the error names the first that does
+/// not (`rule.<name>`) and says `why`.
+pub fn each_bar<T: serde::Serialize>(
+    bars: &T,
+    ok: impl Fn(f64) -> bool,
+    why: &str,
+) -> Result<(), ParamError> {
+    for (key, v) in bars_of(bars)? {
+        ensure(ok(v), &format!("rule.{key}"), why)?;
+    }
+    Ok(())
+}
+
 /// Every element finite and > 0, and at least one.
 pub fn all_positive(key: &str, vs: &[f64]) -> Result<(), ParamError> {
     ensure(!vs.is_empty(), key, "must not be empty")?;

@@ -7,7 +7,7 @@ use super::{Experiment, Job};
 use serde::de::DeserializeOwned;
 use std::path::PathBuf;
 
-pub use crate::params::{all_positive, at_most, distinct, ensure, positive, ParamError};
+pub use crate::params::{all_positive, at_most, distinct, each_bar, ensure, positive, ParamError};
 
 /// The most seeds a run may sweep (`--seeds K`, or a `seeds = [...]` sweep axis).
 pub const MAX_SEEDS: usize = 1_000;

@@ -15,7 +15,7 @@ use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings};
 use crate::experiment::resolve::{ParamError, Validate};
-use crate::experiment::rule::{rule_setting, rule_settings, rule_table, shown};
+use crate::experiment::rule::{rule_setting, rule_settings, rule_table_of, shown};
 use crate::experiment::seeds::SeedMetric;
 use crate::experiment::{Error, Family, Job, RunContext};
 use serde::{Deserialize, Serialize};
@@ -49,7 +49,7 @@ impl Job for MotionSpec {
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let mut tables = MotionJob(self.motion.clone()).run(ctx)?;
-        tables.insert("rule", rule_table(&self.rule.settings()));
+        tables.insert("rule", rule_table_of(&self.rule)?);
         Ok(tables)
     }
 }

@@ -50,11 +50,6 @@ impl MotionRule {
             "must be above rule.partly",
         )
     }
-
-    /// The `rule` table's settings.
-    pub fn settings(&self) -> [(&'static str, f64); 2] {
-        [("held", self.held), ("partly", self.partly)]
-    }
 }
 
 /// A motion's measure with its unit, as the report writes it.

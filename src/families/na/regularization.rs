@@ -27,7 +27,9 @@ use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables}
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
-use crate::experiment::rule::{rule_settings, rule_table, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::rule::{
+    rule_settings, rule_table_of, shown, Check, Cmp, Null, Partly, Rule,
+};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
 use crate::physics::{check_finite, Dynamics};
@@ -99,14 +101,6 @@ impl RegularizationRule {
             "rule.fix_ratio",
             "must be in (0, 1): no regularization scores 1",
         )
-    }
-
-    /// The `rule` table's settings.
-    fn settings(&self) -> [(&'static str, f64); 2] {
-        [
-            ("drift_ratio", self.drift_ratio),
-            ("fix_ratio", self.fix_ratio),
-        ]
     }
 }
 
@@ -319,7 +313,7 @@ impl Job for Params {
         Ok(Tables::from([
             ("shape_error", shape),
             ("cost", cost),
-            ("rule", rule_table(&self.rule.settings())),
+            ("rule", rule_table_of(&self.rule)?),
         ]))
     }
 }

@@ -43,8 +43,10 @@ use crate::emulator::Emulator;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings};
-use crate::experiment::resolve::{ensure, ParamError, Validate};
-use crate::experiment::rule::{rule_settings, rule_table, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::resolve::{each_bar, ensure, ParamError, Validate};
+use crate::experiment::rule::{
+    rule_settings, rule_table_of, shown, Check, Cmp, Null, Partly, Rule,
+};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::na::fig13_control::{
     learn_and_replay, learn_swim, start_simulator_error, DolphinControl, Formulation, Task,
@@ -106,23 +108,11 @@ pub struct AblationRule {
 impl AblationRule {
     /// Every ratio in (0, 1): 1 is what a variant that changes nothing scores.
     fn validate(&self) -> Result<(), ParamError> {
-        for (key, v) in self.settings() {
-            ensure(
-                v > 0.0 && v < 1.0,
-                &format!("rule.{key}"),
-                "must be in (0, 1): a ratio of 1 is what a variant that changes nothing scores",
-            )?;
-        }
-        Ok(())
-    }
-
-    /// The `rule` table's settings.
-    fn settings(&self) -> [(&'static str, f64); 3] {
-        [
-            ("operator_ratio", self.operator_ratio),
-            ("full_over_plain", self.full_over_plain),
-            ("control_over_plain", self.control_over_plain),
-        ]
+        each_bar(
+            self,
+            |v| v > 0.0 && v < 1.0,
+            "must be in (0, 1): a ratio of 1 is what a variant that changes nothing scores",
+        )
     }
 }
 
@@ -397,7 +387,7 @@ impl Job for Params {
             ("errors", errors),
             ("rollout", rollout),
             ("control", control),
-            ("rule", rule_table(&self.rule.settings())),
+            ("rule", rule_table_of(&self.rule)?),
         ]))
     }
 }

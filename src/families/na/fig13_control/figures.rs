@@ -30,8 +30,15 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         st.strs("name"),
         st.f64s("tolerance"),
     );
-    let mut panels = vec![];
+    // The paper's four tasks make the main figure; our second lines (formulation "ours") a
+    // figure of their own, so neither is a wall of panels.
+    let fin = tables.require("final")?;
+    let (fin_task, formulation) = (fin.strs("task"), fin.strs("formulation"));
+    let ours =
+        |name: &str| (0..fin_task.len()).any(|r| fin_task[r] == name && formulation[r] == "ours");
+    let (mut panels, mut panels_ours) = (vec![], vec![]);
     for name in unique(&task) {
+        let start = panels.len();
         let pts = (0..task.len())
             .filter(|&r| task[r] == name)
             .map(|r| (it[r], obj[r]))
@@ -74,6 +81,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                     series,
                     ..Panel::default()
                 });
+            }
+            if ours(&name) {
+                panels_ours.extend(panels.drain(start..));
             }
             continue;
         }
@@ -121,9 +131,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                 title: format!(
                     "{name}: {}",
                     if c == 0 {
-                        "emulator-driven motion"
+                        "on the emulator"
                     } else {
-                        "the same controls on the simulator (colours as left)"
+                        "replayed on the simulator"
                     }
                 ),
                 x_label: "time (s)".into(),
@@ -133,8 +143,19 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                 ..Panel::default()
             });
         }
+        if ours(&name) {
+            panels_ours.extend(panels.drain(start..));
+        }
     }
-    let mut files = fig.draw("control", &Figure::grid(panels, 3))?;
+    // Taller panels than the default leave the variables' legend room beside the data.
+    let tall = |panels| Figure {
+        panel_size: (640, 560),
+        ..Figure::grid(panels, 3)
+    };
+    let mut files = fig.draw("control", &tall(panels))?;
+    if !panels_ours.is_empty() {
+        files.extend(fig.draw("control_ours", &tall(panels_ours))?);
+    }
     files.extend(spectrum_figure(fig, tables)?);
     files.extend(animations(fig, tables)?);
     files.extend(dolphin_animation(fig, tables)?);

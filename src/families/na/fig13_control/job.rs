@@ -13,7 +13,7 @@ use crate::control::bptt::{
 use crate::control::conditioning::{terminal_spectrum, weighting_bound};
 use crate::emulator::catalog::{BuildSpec, NetSpec};
 use crate::experiment::output::{Table, Tables};
-use crate::experiment::rule::rule_table;
+use crate::experiment::rule::{rule_table, rule_table_of};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
 use crate::physics::dolphin::N_POS;
@@ -348,12 +348,10 @@ impl Job for Params {
             ("states", states_t),
             (
                 "rule",
-                rule_table(
-                    &self
-                        .rule
-                        .as_ref()
-                        .map_or_else(Vec::new, |r| r.settings().to_vec()),
-                ),
+                match &self.rule {
+                    Some(r) => rule_table_of(r)?,
+                    None => rule_table(&[]),
+                },
             ),
         ]))
     }

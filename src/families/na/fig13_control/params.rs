@@ -4,7 +4,7 @@
 use super::{dagger, dolphin_dagger, Formulation, Task};
 use crate::control::bptt::StepRule;
 use crate::emulator::catalog::{NetSpec, TrainSettings};
-use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::resolve::{each_bar, ensure, positive, ParamError, Validate};
 use crate::families::na::swim::SwimTask;
 use crate::families::na::table1_structure::{
     validate_nets, validate_training, validate_variants, DolphinNets, NetVariant,
@@ -121,22 +121,11 @@ pub struct Fig13Rule {
 impl Fig13Rule {
     /// Both in (0, 1]: 0 is what a dolphin at rest scores on each.
     fn validate(&self) -> Result<(), ParamError> {
-        for (key, v) in self.settings() {
-            ensure(
-                v > 0.0 && v <= 1.0,
-                &format!("rule.{key}"),
-                "must be in (0, 1]: 0 is what a dolphin at rest scores",
-            )?;
-        }
-        Ok(())
-    }
-
-    /// The `rule` table's settings.
-    pub fn settings(&self) -> [(&'static str, f64); 2] {
-        [
-            ("wave_fraction", self.wave_fraction),
-            ("periodicity", self.periodicity),
-        ]
+        each_bar(
+            self,
+            |v| v > 0.0 && v <= 1.0,
+            "must be in (0, 1]: 0 is what a dolphin at rest scores",
+        )
     }
 }
 

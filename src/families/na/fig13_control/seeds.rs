@@ -346,6 +346,9 @@ pub(super) struct SeedCount {
     pub emulator: usize,
     /// Net seeds run.
     pub seeds: usize,
+    /// Per net seed (in the table's order), the larger of its final errors on the emulator
+    /// and on the simulator: at most 1 exactly when it is at the goal on both.
+    pub errors: Vec<f64>,
 }
 
 /// Per task of `net_seeds.csv` in `dir` (first-seen order): how many net seeds reach the goal
@@ -356,8 +359,9 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
     };
     let (task, goal) = (df_str(&df, "task")?, df_f64(&df, "at_goal")?);
     let emu = df_f64(&df, "emulator_error")?;
+    let sim = df_f64(&df, "simulator_error")?;
     let mut out: Vec<SeedCount> = Vec::new();
-    for ((t, g), e) in task.iter().zip(&goal).zip(&emu) {
+    for (((t, g), e), s) in task.iter().zip(&goal).zip(&emu).zip(&sim) {
         let i = match out.iter().position(|c| &c.task == t) {
             Some(i) => i,
             None => {
@@ -366,6 +370,7 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
                     both: 0,
                     emulator: 0,
                     seeds: 0,
+                    errors: Vec::new(),
                 });
                 out.len() - 1
             }
@@ -373,6 +378,7 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
         out[i].both += usize::from(*g == 1.0);
         out[i].emulator += usize::from(*e <= 1.0);
         out[i].seeds += 1;
+        out[i].errors.push(e.max(*s));
     }
     Ok(Some(out))
 }
@@ -416,9 +422,10 @@ pub(super) fn table_md(dir: &Path) -> Result<String, Error> {
     Ok(md)
 }
 
-/// Figure `net_seeds`: per task of `net_seeds`, every net seed's final error on the emulator
-/// (x) against its controls' on the simulator (y), log-log, each dot labelled with its seed;
-/// dashed lines at 1 bound the goal (lower left: within tolerance on both).
+/// Figure `net_seeds`: one panel per task of `net_seeds`, every net seed's final error on the
+/// emulator (x) against its controls' on the simulator (y), log-log, each dot labelled with its
+/// seed; dashed lines at 1 bound the goal (lower left: within tolerance on both). Each panel is
+/// scaled to its own dots (and the tolerance), so a task's seeds do not crowd one corner.
 pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let Some(t) = tables.get("net_seeds").filter(|t| !t.is_empty()) else {
         return Ok(vec![]);
@@ -426,16 +433,7 @@ pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
     let (task, seed) = (t.strs("task"), t.f64s("net_seed"));
     let (emu, sim) = (t.f64s("emulator_error"), t.f64s("simulator_error"));
     let formulation = t.strs("formulation");
-    let all = emu
-        .iter()
-        .chain(&sim)
-        .copied()
-        .filter(|x| x.is_finite() && *x > 0.0);
-    let (lo, hi) = all.fold((1.0f64, 1.0f64), |(a, b), x| (a.min(x), b.max(x)));
-    let (lo, hi) = (lo / 1.5, hi * 1.5);
-    // Headroom above the highest dot, where the legend goes without hiding one.
-    let top = hi * 30.0;
-    let mut series: Vec<Series> = unique(&task)
+    let panels: Vec<Panel> = unique(&task)
         .into_iter()
         .enumerate()
         .map(|(c, name)| {
@@ -445,36 +443,44 @@ pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
                 .filter(|&&r| emu[r] <= 1.0 && sim[r] <= 1.0)
                 .count();
             let ours = if formulation.get(rows[0]).is_some_and(|f| f == "ours") {
-                "; ours, not counted"
+                " (ours, not counted)"
             } else {
                 ""
             };
-            Series::line(
-                format!("{name} ({at} of {} seeds at the goal{ours})", rows.len()),
-                rows.iter().map(|&r| (emu[r], sim[r])).collect(),
-                c,
-            )
-            .mark(Mark::Points)
-            .labelled(rows.iter().map(|&r| format!("{}", seed[r])).collect())
+            let (lo, hi) = rows
+                .iter()
+                .flat_map(|&r| [emu[r], sim[r]])
+                .filter(|x| x.is_finite() && *x > 0.0)
+                .fold((1.0f64, 1.0f64), |(a, b), x| (a.min(x), b.max(x)));
+            let (lo, hi) = (lo / 1.5, hi * 1.5);
+            // Headroom above the highest dot, where the legend goes without hiding one.
+            let top = hi * 4.0;
+            let series = vec![
+                Series::line(
+                    format!("{} net seeds", rows.len()),
+                    rows.iter().map(|&r| (emu[r], sim[r])).collect(),
+                    c,
+                )
+                .mark(Mark::Points)
+                .labelled(rows.iter().map(|&r| format!("{}", seed[r])).collect()),
+                Series::line("tolerance (final error 1)", vec![(1.0, lo), (1.0, top)], 7)
+                    .mark(Mark::Dashed),
+                Series::line("", vec![(lo, 1.0), (hi, 1.0)], 7).mark(Mark::Dashed),
+            ];
+            Panel {
+                title: format!("{name}{ours}: {at} of {} seeds at the goal", rows.len()),
+                x_label: "final error through the emulator (1 = tolerance)".into(),
+                y_label: "final error on the simulator (1 = tolerance)".into(),
+                log_x: true,
+                log_y: true,
+                x_range: Some((lo, hi)),
+                y_range: Some((lo, top)),
+                series,
+                ..Panel::default()
+            }
         })
         .collect();
-    series.push(
-        Series::line("tolerance (final error 1)", vec![(1.0, lo), (1.0, top)], 7)
-            .mark(Mark::Dashed),
-    );
-    series.push(Series::line("", vec![(lo, 1.0), (hi, 1.0)], 7).mark(Mark::Dashed));
-    let panel = Panel {
-        title: "Headline per Table 1 net seed (dots labelled by seed)".into(),
-        x_label: "final error through the emulator (1 = tolerance)".into(),
-        y_label: "final error replayed on the simulator (1 = tolerance)".into(),
-        log_x: true,
-        log_y: true,
-        x_range: Some((lo, hi)),
-        y_range: Some((lo, top)),
-        series,
-        ..Panel::default()
-    };
-    fig.draw("net_seeds", &Figure::grid(vec![panel], 1))
+    fig.draw("net_seeds", &Figure::grid(panels, 2))
 }
 
 #[cfg(test)]

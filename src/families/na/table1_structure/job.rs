@@ -12,7 +12,7 @@ use crate::emulator::hierarchy::{
 };
 use crate::emulator::mlp::Mlp;
 use crate::experiment::output::{Table, Tables};
-use crate::experiment::rule::rule_table;
+use crate::experiment::rule::rule_table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::row;
 
@@ -341,7 +341,7 @@ impl Job for Params {
             ("global_error", global_error),
             ("normalization", normalization),
             ("regime_fidelity", regime_fidelity),
-            ("rule", rule_table(&self.rule.settings())),
+            ("rule", rule_table_of(&self.rule)?),
         ]))
     }
 }

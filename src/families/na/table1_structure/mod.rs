@@ -125,16 +125,6 @@ impl Table1Rule {
         positive("rule.overfit_gap", self.overfit_gap)?;
         positive("rule.regime_rollout_max", self.regime_rollout_max)
     }
-
-    /// The `rule` table's settings.
-    pub fn settings(&self) -> [(&'static str, f64); 4] {
-        [
-            ("heldout_max", self.heldout_max),
-            ("overfit_gap", self.overfit_gap),
-            ("rollout_max", self.rollout_max),
-            ("regime_rollout_max", self.regime_rollout_max),
-        ]
-    }
 }
 
 /// The tolerances of one catalog net's regime fidelity: the Fig. 13 task's final tolerance per

@@ -8,7 +8,7 @@ use crate::emulator::catalog::{NetModel, RolloutReference};
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy;
 use crate::experiment::output::{Table, Tables};
-use crate::experiment::rule::rule_table;
+use crate::experiment::rule::rule_table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::equal_accuracy::match_substeps;
 use crate::families::na::table1_structure::{
@@ -278,7 +278,7 @@ impl Job for Params {
         Ok(Tables::from([
             ("speedup", table),
             ("equal_accuracy", equal),
-            ("rule", rule_table(&self.rule.settings())),
+            ("rule", rule_table_of(&self.rule)?),
         ]))
     }
 }

@@ -47,7 +47,7 @@ use crate::emulator::hierarchy::Regularizer;
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
-use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::resolve::{each_bar, ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -100,19 +100,11 @@ pub struct Table2Rule {
 impl Table2Rule {
     /// Both above 1, what the physical simulator itself scores.
     fn validate(&self) -> Result<(), ParamError> {
-        for (key, v) in self.settings() {
-            ensure(
-                v > 1.0,
-                &format!("rule.{key}"),
-                "must be above 1: the physical simulator itself scores 1",
-            )?;
-        }
-        Ok(())
-    }
-
-    /// The `rule` table's settings.
-    pub fn settings(&self) -> [(&'static str, f64); 2] {
-        [("n100_min", self.n100_min), ("n50_min", self.n50_min)]
+        each_bar(
+            self,
+            |v| v > 1.0,
+            "must be above 1: the physical simulator itself scores 1",
+        )
     }
 }
 
