@@ -12,8 +12,9 @@ use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Mark, Series};
 use crate::experiment::report::{sig, Findings};
-use crate::experiment::resolve::{ensure, ParamError, Validate};
+use crate::experiment::resolve::{distinct, ensure, ParamError, Validate};
 use crate::experiment::rule::{read_rule, rule_table_of, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::stats::median_interval;
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
 use serde::{Deserialize, Serialize};
@@ -28,9 +29,16 @@ pub struct LearningSpec {
     /// The motion, its search and the annealing beside it.
     #[serde(flatten)]
     pub learning: Params,
+    /// The seeds the verdict judges together: the run's own seed draws the figure and writes
+    /// `learning.csv`; every seed's curve statistics go to `seed_curves.csv`.
+    #[serde(default)]
+    pub seeds: Vec<u64>,
     /// The verdict's bars (ours; [`learning_rule`]).
     pub rule: LearningRule,
 }
+
+/// The most seeds a run judges (each is a whole search).
+const MAX_SEEDS: usize = 20;
 
 /// The verdict's thresholds (ours: the paper describes the curve's shape, "improves quickly
 /// through the first 5,000 iterations and slowly after", and "many evaluated controllers are
@@ -66,6 +74,12 @@ impl Validate for LearningRule {
 impl Validate for LearningSpec {
     fn validate(&self) -> Result<(), ParamError> {
         LearningJob(self.learning.clone()).validate()?;
+        ensure(
+            self.seeds.len() <= MAX_SEEDS,
+            "seeds",
+            format!("at most {MAX_SEEDS} seeds (each is a whole search)"),
+        )?;
+        distinct("seeds", &self.seeds)?;
         self.rule.validate()
     }
 }
@@ -76,41 +90,103 @@ impl Job for LearningSpec {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut tables = LearningJob(self.learning.clone()).run(ctx)?;
+        let job = LearningJob(self.learning.clone());
+        let mut tables = job.run(ctx)?;
+        let mut seed_curves = Table::new(&[
+            "seed",
+            "method",
+            "init_best",
+            "at_early",
+            "end_best",
+            "poor_late",
+            "iterations",
+        ]);
+        let mut add = |seed: u64, t: &Tables| -> Result<(), Error> {
+            let l = t.require("learning")?;
+            let (m, it, obj, best) = (
+                l.strs("method"),
+                l.f64s("iteration"),
+                l.f64s("objective"),
+                l.f64s("best"),
+            );
+            for method in METHODS {
+                let c = curve(method, &m, &it, &obj, &best, &self.rule);
+                seed_curves.push(row![
+                    seed as i64,
+                    method,
+                    c.init_best,
+                    c.at_early,
+                    c.end_best,
+                    c.poor_late,
+                    c.iterations
+                ]);
+            }
+            Ok(())
+        };
+        add(ctx.seed, &tables)?;
+        // The other seeds' searches keep only their curves' statistics (each learning table
+        // is megabytes).
+        for &seed in self.seeds.iter().filter(|&&s| s != ctx.seed) {
+            let own = RunContext::new(seed, ctx.quick, false);
+            let t = job.run(&own)?;
+            for (stage, secs) in own.stages() {
+                ctx.record(&format!("{stage}, seed {seed}"), secs);
+            }
+            add(seed, &t)?;
+        }
+        tables.insert("seed_curves", seed_curves);
         tables.insert("rule", rule_table_of(&self.rule)?);
         Ok(tables)
     }
 }
 
-/// The verdict's rule on hill climbing's curve `c`: (a) the share of its gain made in the
-/// early iterations (null: a search gaining at a constant rate, the early fraction itself),
-/// (b) some gain over the best random controller (null: the random controllers alone, 0),
-/// (c) the share of late evaluations below that controller (null: a search whose
-/// perturbations never disrupt, 0). Held when all pass; partly when (a) and (b) do, or (c).
-fn learning_rule(c: &Curve, r: &LearningRule) -> Option<Rule> {
-    let held = vec![
-        Check::new(
-            "share of hill climbing's gain made in the early iterations",
-            c.early_share(),
+/// The two searches of a run, as `learning.csv` names them.
+const METHODS: [&str; 2] = ["hill_climbing", "simulated_annealing"];
+
+/// Bootstrap seed of the medians over seeds (fixed, so a report is the same on every machine).
+const BOOTSTRAP_SEED: u64 = 1;
+
+/// The verdict's rule on hill climbing's curves `cs`, one per seed, each measure the median
+/// over the seeds with its 95% bootstrap interval: (a) the share of its gain made in the early
+/// iterations (null: a search gaining at a constant rate, the early fraction itself), (b) its
+/// gain over the best random controller (null: the random controllers alone, 0), (c) the share
+/// of late evaluations below that controller (null: a search whose perturbations never
+/// disrupt, 0). Held when all pass; partly when (a) and (b) do, or (c).
+fn learning_rule(cs: &[Curve], r: &LearningRule) -> Option<Rule> {
+    let over = |f: &dyn Fn(&Curve) -> f64| {
+        let v: Vec<f64> = cs.iter().map(f).collect();
+        median_interval(&v, BOOTSTRAP_SEED)
+    };
+    let seeds = cs.len();
+    let checks = [
+        (
+            format!("median over {seeds} seeds of the share of hill climbing's gain made in the early iterations"),
+            over(&Curve::early_share),
             Cmp::AtLeast,
             r.early_gain_share,
             Null::new("a search gaining at a constant rate", r.early_fraction),
         ),
-        Check::new(
-            "hill climbing's gain over the best random controller",
-            c.end_best - c.init_best,
+        (
+            format!("median over {seeds} seeds of hill climbing's gain over the best random controller"),
+            over(&|c| c.end_best - c.init_best),
             Cmp::Above,
             0.0,
             Null::new("the random controllers alone", 0.0),
         ),
-        Check::new(
-            "share of the late evaluations below the best random controller",
-            c.poor_late,
+        (
+            format!("median over {seeds} seeds of the share of the late evaluations below the best random controller"),
+            over(&|c| c.poor_late),
             Cmp::AtLeast,
             r.late_poor_share,
             Null::new("a search whose perturbations never disrupt", 0.0),
         ),
     ];
+    let held = checks
+        .into_iter()
+        .map(|(label, (median, lo, hi), cmp, bar, null)| {
+            Check::new(label, median, cmp, bar, null).map(|c| c.with_interval(lo, hi))
+        })
+        .collect();
     Rule::gated(vec![], held, Partly::AnyOf(vec![vec![0, 1], vec![2]]))
 }
 
@@ -258,20 +334,73 @@ impl Family for MsLearning {
             sig(wall),
             h.iterations
         ));
-        let rule = learning_rule(&h, &r);
+        // Every seed's curves (older runs: this run's alone).
+        let (hills, anneals) = match read_csv(&dir.join("seed_curves.csv")) {
+            Ok(sc) => {
+                let (seed, method) = (df_f64(&sc, "seed")?, df_str(&sc, "method")?);
+                let col = |k: &str| df_f64(&sc, k);
+                let (ib, ae, eb, pl, its) = (
+                    col("init_best")?,
+                    col("at_early")?,
+                    col("end_best")?,
+                    col("poor_late")?,
+                    col("iterations")?,
+                );
+                let of = |name: &str| -> Vec<(f64, Curve)> {
+                    (0..method.len())
+                        .filter(|&i| method[i] == name)
+                        .map(|i| {
+                            (
+                                seed[i],
+                                Curve {
+                                    init_best: ib[i],
+                                    at_early: ae[i],
+                                    end_best: eb[i],
+                                    poor_late: pl[i],
+                                    iterations: its[i],
+                                },
+                            )
+                        })
+                        .collect()
+                };
+                (of(METHODS[0]), of(METHODS[1]))
+            }
+            Err(_) => (vec![(f64::NAN, h)], vec![(f64::NAN, a)]),
+        };
+        md.push_str(&format!(
+            "\nOver the seeds (`seed_curves.csv`; the table above and the figure are the first seed's):\n\n| seed | hill climbing: share of the gain by {}% | its gain over the initial best | late evaluations worse than it | final best | annealing's final best |\n| --- | --- | --- | --- | --- | --- |\n",
+            sig(100.0 * r.early_fraction)
+        ));
+        for ((seed, c), (_, an)) in hills.iter().zip(&anneals) {
+            md.push_str(&format!(
+                "| {seed} | {} | {} | {} | {} | {} |\n",
+                sig(c.early_share()),
+                sig(c.end_best - c.init_best),
+                sig(c.poor_late),
+                sig(c.end_best),
+                sig(an.end_best)
+            ));
+        }
+        let curves: Vec<Curve> = hills.into_iter().map(|(_, c)| c).collect();
+        let anneal_ahead = anneals
+            .iter()
+            .zip(&curves)
+            .filter(|((_, an), c)| an.end_best > c.end_best)
+            .count();
+        let rule = learning_rule(&curves, &r);
         let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
+        let median_of = |i: usize| rule.as_ref().map_or(f64::NAN, |x| x.held[i].value);
         Ok(Findings {
             ours: md,
             verdict,
             rule: rule.clone().into(),
             why: format!(
-                "Hill climbing made {}% of its total gain in the first {}% of the iterations; {}% of its evaluations in the last {}% were worse than the best random controller; simulated annealing with the same budget ended at {} vs {}. Checks:{lines} Rule (thresholds ours, in the spec's [params.rule]): {text}",
-                sig(100.0 * h.early_share()),
+                "Over {} seeds hill climbing made a median {}% of its total gain in the first {}% of the iterations; a median {}% of its evaluations in the last {}% were worse than the best random controller; simulated annealing with the same budget ended ahead of it for {anneal_ahead} of the seeds. Checks:{lines} Rule (thresholds ours, in the spec's [params.rule]): {text}",
+                curves.len(),
+                sig(100.0 * median_of(0)),
                 sig(100.0 * r.early_fraction),
-                sig(100.0 * h.poor_late),
+                sig(100.0 * median_of(2)),
                 sig(100.0 * r.late_fraction),
-                sig(a.end_best),
-                sig(h.end_best)
             ),
         })
     }
@@ -301,7 +430,8 @@ mod tests {
 
     #[test]
     fn fast_then_slow_with_poor_late_evaluations_is_held_and_each_half_partly() {
-        let verdict = |c: &Curve| learning_rule(c, &BARS).map(|r| r.verdict());
+        let verdict =
+            |c: &Curve| learning_rule(std::slice::from_ref(c), &BARS).map(|r| r.verdict());
         assert_eq!(verdict(&curve_of(8.0, 10.0, 0.5)), Some(Verdict::Held));
         // A constant-rate search (a fifth of its gain in a fifth of the iterations) is not
         // fast then slow.
@@ -314,7 +444,26 @@ mod tests {
             early_gain_share: 0.15,
             ..BARS
         };
-        assert!(learning_rule(&curve_of(8.0, 10.0, 0.5), &low).is_none());
+        assert!(learning_rule(&[curve_of(8.0, 10.0, 0.5)], &low).is_none());
+    }
+
+    /// Over seeds each check reads the median with its interval: one seed in five that makes
+    /// no early progress leaves the median early share above the bar but its interval
+    /// straddling it.
+    #[test]
+    fn over_seeds_the_medians_and_their_intervals_decide() {
+        let five = |early: [f64; 5]| -> Vec<Curve> {
+            early.iter().map(|&e| curve_of(e, 10.0, 0.5)).collect()
+        };
+        let r = learning_rule(&five([8.0, 8.5, 9.0, 7.5, 8.2]), &BARS).unwrap();
+        assert_eq!(r.verdict(), Verdict::Held);
+        assert!((r.held[0].value - 0.8).abs() < 1e-12);
+        let r = learning_rule(&five([8.0, 8.5, 9.0, 7.5, 1.5]), &BARS).unwrap();
+        assert!((r.held[0].value - 7.0 / 9.0).abs() < 1e-12);
+        assert_eq!(
+            r.held[0].outcome(),
+            crate::experiment::rule::Outcome::Inconclusive
+        );
     }
 
     #[test]
