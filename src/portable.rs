@@ -617,4 +617,78 @@ mod tests {
             assert_eq!((sin(x), cos(x)), crate::fastmath::sin_cos(x));
         }
     }
+
+    /// The rule these functions exist for, enforced: no code that simulates, optimizes,
+    /// trains or measures on the way to a table calls the platform's elementary functions
+    /// (`f64::sin`, `exp`, `atan2`, `hypot`, …; `powi` is repeated multiplication and
+    /// allowed). Test modules are skipped; the files below draw figures, validate settings or
+    /// time benchmarks, where a last-bit difference reaches no table, or are named with why
+    /// they are not yet converted.
+    #[test]
+    fn no_data_path_calls_the_platforms_elementary_functions() {
+        const ALLOWED: &[(&str, &str)] = &[
+            ("src/bench/", "benchmark inputs, never written to a results table"),
+            ("src/experiment/plot/", "figure axes"),
+            ("src/experiment/report.rs", "number formatting"),
+            ("src/families/ms/lattice_draw.rs", "drawing"),
+            ("src/families/ms/motion.rs", "the heading and pitch figure"),
+            ("src/families/ms/search.rs", "a settings check (> 0)"),
+            ("src/families/na/fig13_control/anim.rs", "animation frames"),
+            ("src/families/na/fig13_control/frames.rs", "animation frames"),
+            ("src/physics/lattice/contact.rs", "a settings check (> 0)"),
+            (
+                "src/emulator/transform/spatial.rs",
+                "the local frame's heading norm: every cached lander and dolphin net was trained through it; to convert with their next retraining",
+            ),
+        ];
+        let names = [
+            "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "exp",
+            "exp2", "exp_m1", "ln", "ln_1p", "log", "log2", "log10", "powf", "hypot", "cbrt",
+            "sin_cos",
+        ];
+        fn files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+            for e in std::fs::read_dir(dir).unwrap().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    files(&p, out);
+                } else if p.extension().is_some_and(|x| x == "rs") {
+                    out.push(p);
+                }
+            }
+        }
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut all = Vec::new();
+        files(&root.join("src"), &mut all);
+        let mut offending = Vec::new();
+        for path in all {
+            let rel = path
+                .strip_prefix(root)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/");
+            if rel == "src/portable.rs"
+                || rel.starts_with("src/portable/")
+                || rel == "src/fastmath.rs"
+                || ALLOWED.iter().any(|(a, _)| rel.starts_with(a))
+            {
+                continue;
+            }
+            let text = std::fs::read_to_string(&path).unwrap();
+            let code = text.split("#[cfg(test)]").next().unwrap_or("");
+            for (n, line) in code.lines().enumerate() {
+                let line = line.split("//").next().unwrap_or("");
+                for name in names {
+                    let call = format!(".{name}(");
+                    if line.contains(&call) {
+                        offending.push(format!("{rel}:{}: {}", n + 1, line.trim()));
+                    }
+                }
+            }
+        }
+        assert!(
+            offending.is_empty(),
+            "platform math on a data path (use crate::portable):\n{}",
+            offending.join("\n")
+        );
+    }
 }

@@ -15,6 +15,7 @@ use super::biped::{driven_by_ground, sole_parameters, Contact, Terrain};
 use super::diver::diver;
 use super::planar::{ForcePoint, PlanarTree};
 use super::{Model, Ode, Parameter};
+use crate::portable::{atan2, cos, sin_cos};
 use std::f64::consts::{FRAC_PI_2, PI};
 
 /// Heel contact point behind the ankle (m).
@@ -102,7 +103,7 @@ impl Jumper {
             // reach of the knee).
             hip_x -= e;
             let (lt, ls) = (self.tree.links[4].length, self.tree.links[5].length);
-            let knee_x = -ls * (1.5 * PI - shin).cos();
+            let knee_x = -ls * cos(1.5 * PI - shin);
             hip_x = hip_x.clamp(knee_x - 0.95 * lt, knee_x + 0.95 * lt);
             s = self.crouch_at(x, lean, shin, arm, hip_x);
         }
@@ -118,12 +119,13 @@ impl Jumper {
         let shank_abs = 1.5 * PI - shin;
         let (lt, ls) = (self.tree.links[4].length, self.tree.links[5].length);
         // Knee relative to the ankle (the shank points from the knee down to the ankle).
-        let knee = [-ls * shank_abs.cos(), -ls * shank_abs.sin()];
+        let (sin_s, cos_s) = sin_cos(shank_abs);
+        let knee = [-ls * cos_s, -ls * sin_s];
         let dx = hip_x - knee[0];
         let dy = (lt * lt - dx * dx).max(0.0).sqrt();
         let hip = [hip_x, knee[1] + dy];
         // The thigh points from the hip down to the knee, in (π, 2π).
-        let mut thigh_abs = (knee[1] - hip[1]).atan2(knee[0] - hip[0]);
+        let mut thigh_abs = atan2(knee[1] - hip[1], knee[0] - hip[0]);
         if thigh_abs < 0.0 {
             thigh_abs += 2.0 * PI;
         }

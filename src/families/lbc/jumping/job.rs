@@ -17,6 +17,7 @@ use crate::families::lbc::{
 use crate::physics::jumper::{Jumper, DOF, TORQUES};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::{check_finite, Dynamics, IntegratorKind, Simulator};
+use crate::portable::hypot;
 use crate::row;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -274,7 +275,7 @@ pub fn standing(j: &Jumper, x: &[f64]) -> bool {
         && (low(heel) || low(toe))
         && c >= heel[0].min(toe[0])
         && c <= heel[0].max(toe[0])
-        && v[0].hypot(v[1]) < 0.5
+        && hypot(v[0], v[1]) < 0.5
 }
 
 /// What the run builds once.
@@ -675,7 +676,7 @@ impl Job for Params {
                 r.effort,
                 projected[d][0],
                 projected[d][1],
-                (v[0] - vd[0]).hypot(v[1] - vd[1]),
+                hypot(v[0] - vd[0], v[1] - vd[1]),
                 *secs
             ]);
             if m == "lbc" || m == "naive" {

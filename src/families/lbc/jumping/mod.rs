@@ -184,11 +184,11 @@ impl Family for LbcJumping {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
         (
             "takeoff",
-            "take-off error (the Q_T norm of the take-off state's distance from the desired one) of LBC, the naive blend with the same weights and each example's tracker alone, against the desired jump height; filled markers landed, a cross did not land.",
+            "take-off error (the Q_T norm of the take-off state's distance from the desired one) of LBC, the naive blend with the same weights and each example's tracker alone, against the desired jump height, with the rule's take-off tolerance as a grey band; filled markers landed, a cross did not land.",
         ),
         (
             "heights",
-            "jump height (the centre of mass's ballistic apex above its height in the crouch) reached at take-off against the desired height, per method; the dashed line is the desired height.",
+            "jump height (the centre of mass's ballistic apex above its height in the crouch) reached at take-off against the desired height, per method (the dashed line is the desired height), and beside it the take-off error the verdict reads, with the rule's take-off tolerance as a grey band.",
         ),
         (
             "weights",

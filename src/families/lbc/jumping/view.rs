@@ -308,7 +308,25 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         h.point_labels = marks;
         heights.push(h);
     }
-    let panel = Panel {
+    let (lo, hi) = t
+        .desired
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    // The rule's take-off tolerance as a band: a take-off inside it reaches its target.
+    if let Some(tol) = rule_setting(tables, "takeoff_tolerance") {
+        errors.insert(
+            0,
+            Series::band(
+                "take-off tolerance (rule)",
+                &[(lo, 0.0), (hi, 0.0)],
+                &[(lo, tol), (hi, tol)],
+                7,
+            ),
+        );
+    }
+    let takeoff = Panel {
         title: "take-off error (✗: did not land)".into(),
         x_label: "desired jump height (m)".into(),
         y_label: "take-off error (Q_T norm)".into(),
@@ -316,13 +334,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         legend: Legend::Auto,
         ..Panel::default()
     };
-    files.extend(fig.draw("takeoff", &Figure::grid(vec![panel], 1))?);
-    let (lo, hi) = t
-        .desired
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+    files.extend(fig.draw("takeoff", &Figure::grid(vec![takeoff.clone()], 1))?);
     // Drawn last, so the reference (which the desired take-off is built from, and nearly
     // equals) does not hide it.
     heights.push(Series::line("desired", vec![(lo, lo), (hi, hi)], 7).mark(Mark::Dashed));
@@ -334,7 +346,8 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         legend: Legend::Auto,
         ..Panel::default()
     };
-    files.extend(fig.draw("heights", &Figure::grid(vec![panel], 1))?);
+    // Beside the heights, the take-off error the verdict reads, with its tolerance.
+    files.extend(fig.draw("heights", &Figure::grid(vec![panel, takeoff], 2))?);
     // LBC's weights over the take-off.
     let w = tables.require("weights")?;
     let (wd, wt, wa) = (w.f64s("desired"), w.f64s("t"), w.f64s("alpha_low"));
