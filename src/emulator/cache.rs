@@ -117,6 +117,85 @@ struct Stored {
     /// The rollout fine-tuning trace, same layout (absent when it was off).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     rollout_trace: Vec<(usize, u64, u64)>,
+    /// FNV-1a of the entry's JSON without this field ([`Stored::content_hash`]): a file whose
+    /// content no longer matches it (a flipped bit, an edit) is rebuilt. Absent in entries
+    /// written before it existed, which are checked for parse and finiteness only and then
+    /// stamped.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    checksum: Option<u64>,
+}
+
+impl Stored {
+    /// The hash of the entry's canonical JSON without its checksum (serde_json writes the same
+    /// fields in the same order with the same number texts, so a parsed entry hashes as the
+    /// one written).
+    fn content_hash(&self) -> Result<u64, serde_json::Error> {
+        let text = serde_json::to_string(&Stored {
+            checksum: None,
+            key: self.key.clone(),
+            stop: self.stop.clone(),
+            weights: self.weights.clone(),
+            input_mean: self.input_mean.clone(),
+            input_std: self.input_std.clone(),
+            output_mean: self.output_mean.clone(),
+            output_std: self.output_std.clone(),
+            trace: self.trace.clone(),
+            rollout_trace: self.rollout_trace.clone(),
+            ..*self
+        })?;
+        Ok(fnv1a(text.as_bytes()))
+    }
+
+    /// Every number a net is built from is finite (weights, normalizations, the step).
+    fn finite(&self) -> bool {
+        [
+            &self.weights,
+            &self.input_mean,
+            &self.input_std,
+            &self.output_mean,
+            &self.output_std,
+        ]
+        .iter()
+        .flat_map(|v| v.iter())
+        .chain(std::iter::once(&self.dt))
+        .all(|&b| f64::from_bits(b).is_finite())
+    }
+}
+
+/// Why a cache file is not used: absent or another net's (a plain miss), or damaged.
+enum Damage {
+    Missing,
+    Damaged(&'static str),
+}
+
+/// Reads and checks the entry at `path`: parsed, stored under `key` with `shape`, finite, and
+/// (where it has one) matching its checksum.
+fn checked_entry(path: &Path, key: &str, shape: [usize; 3]) -> Result<Stored, Damage> {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Err(Damage::Missing);
+    };
+    let s: Stored = serde_json::from_str(&text).map_err(|_| Damage::Damaged("cannot be parsed"))?;
+    let [n_in, hidden, n_out] = shape;
+    if s.key != key || s.shape != shape {
+        return Err(Damage::Missing);
+    }
+    if s.weights.len() != Mlp::weight_count(n_in, hidden, n_out)
+        || s.input_mean.len() != n_in
+        || s.input_std.len() != n_in
+        || s.output_mean.len() != n_out
+        || s.output_std.len() != n_out
+    {
+        return Err(Damage::Damaged("has the wrong number of weights"));
+    }
+    if let Some(sum) = s.checksum {
+        if s.content_hash().ok() != Some(sum) {
+            return Err(Damage::Damaged("does not match its checksum"));
+        }
+    }
+    if !s.finite() {
+        return Err(Damage::Damaged("holds a non-finite weight"));
+    }
+    Ok(s)
 }
 
 /// One trained network with its normalization and training record, as a cache file holds it.
@@ -145,23 +224,24 @@ pub struct NetRecord {
 }
 
 /// Reads the record at `path` if it exists, was stored under `key` and has `shape`
-/// (inputs, hidden, outputs); `None` otherwise (a stale or foreign file is a cache miss).
+/// (inputs, hidden, outputs); `None` otherwise (a stale or foreign file is a cache miss). A
+/// damaged entry (unparsable, a wrong weight count, non-finite numbers, or a checksum that no
+/// longer matches its content) is a miss too, so the net is rebuilt, with a line on stderr
+/// naming the file. An entry from before checksums is stamped with one once it passes.
 pub fn read_record(path: &Path, key: &str, shape: [usize; 3]) -> Option<NetRecord> {
-    let text = std::fs::read_to_string(path).ok()?;
-    let s: Stored = serde_json::from_str(&text).ok()?;
+    let s = match checked_entry(path, key, shape) {
+        Ok(s) => s,
+        Err(Damage::Missing) => return None,
+        Err(Damage::Damaged(why)) => {
+            eprintln!(
+                "emulator cache: {} {why}; rebuilding the net",
+                path.display()
+            );
+            return None;
+        }
+    };
     let [n_in, hidden, n_out] = shape;
-    if s.key != key
-        || s.shape != shape
-        || s.weights.len() != Mlp::weight_count(n_in, hidden, n_out)
-        || s.input_mean.len() != n_in
-        || s.input_std.len() != n_in
-        || s.output_mean.len() != n_out
-        || s.output_std.len() != n_out
-    {
-        return None;
-    }
-    note_use(path, false, s.train_s);
-    Some(NetRecord {
+    let rec = NetRecord {
         mlp: Mlp::from_weights(n_in, hidden, n_out, floats(&s.weights)),
         input_norm: Normalizer {
             mean: floats(&s.input_mean),
@@ -178,7 +258,13 @@ pub fn read_record(path: &Path, key: &str, shape: [usize; 3]) -> Option<NetRecor
         stop: s.stop,
         trace: trace_from_bits(&s.trace),
         rollout_trace: trace_from_bits(&s.rollout_trace),
-    })
+    };
+    if s.checksum.is_none() {
+        // Best effort: an entry that cannot be stamped is still used as read.
+        let _ = write_record_quiet(path, key, &rec);
+    }
+    note_use(path, false, rec.train_s);
+    Some(rec)
 }
 
 fn trace_from_bits(t: &[(usize, u64, u64)]) -> Vec<TracePoint> {
@@ -204,10 +290,17 @@ fn trace_bits(t: &[TracePoint]) -> Vec<(usize, u64, u64)> {
 }
 
 /// Writes `rec` under `key` to `path` atomically (temporary file, then rename), creating the
-/// folder.
+/// folder, with the checksum of its content.
 pub fn write_record(path: &Path, key: &str, rec: &NetRecord) -> Result<(), BuildError> {
+    write_record_quiet(path, key, rec)?;
+    note_use(path, true, rec.train_s);
+    Ok(())
+}
+
+/// [`write_record`] without counting the write as a training.
+fn write_record_quiet(path: &Path, key: &str, rec: &NetRecord) -> Result<(), BuildError> {
     let mlp = &rec.mlp;
-    let stored = Stored {
+    let mut stored = Stored {
         key: key.to_string(),
         shape: [mlp.n_in(), mlp.n_hidden(), mlp.n_out()],
         dt: rec.dt.to_bits(),
@@ -222,11 +315,13 @@ pub fn write_record(path: &Path, key: &str, rec: &NetRecord) -> Result<(), Build
         stop: rec.stop.clone(),
         trace: trace_bits(&rec.trace),
         rollout_trace: trace_bits(&rec.rollout_trace),
+        checksum: None,
     };
     let fail = |message: String| BuildError::Cache {
         path: path.display().to_string(),
         message,
     };
+    stored.checksum = Some(stored.content_hash().map_err(|e| fail(e.to_string()))?);
     let text = serde_json::to_string(&stored).map_err(|e| fail(e.to_string()))?;
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| fail(e.to_string()))?;
@@ -239,7 +334,6 @@ pub fn write_record(path: &Path, key: &str, rec: &NetRecord) -> Result<(), Build
     let tmp = path.with_extension(format!("json.tmp{}-{n}", std::process::id()));
     std::fs::write(&tmp, text).map_err(|e| fail(e.to_string()))?;
     std::fs::rename(&tmp, path).map_err(|e| fail(e.to_string()))?;
-    note_use(path, true, rec.train_s);
     Ok(())
 }
 
@@ -510,5 +604,85 @@ mod tests {
         std::fs::write(cache.path(&other), text).unwrap();
         assert!(cache.load(&other).is_none());
         assert!(cache.load(&s).unwrap().emulator.mlp() == a.emulator.mlp());
+    }
+
+    /// The file's JSON with `f` applied to its first weight (a u64 of the f64's bits).
+    fn with_first_weight(path: &Path, f: impl Fn(u64) -> u64) {
+        let text = std::fs::read_to_string(path).unwrap();
+        let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let w = v["weights"][0].as_u64().unwrap();
+        v["weights"][0] = serde_json::json!(f(w));
+        std::fs::write(path, serde_json::to_string(&v).unwrap()).unwrap();
+    }
+
+    /// A damaged entry (one flipped bit in a weight, a NaN weight, a truncated file) is not
+    /// used: the net is rebuilt, and the rebuilt net is the clean run's, bit for bit.
+    #[test]
+    fn a_damaged_entry_is_rebuilt_into_the_clean_net() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = EmulatorCache::new(dir.path());
+        let s = spec();
+        let clean = cache.get_or_train(&s).unwrap();
+        let path = cache.path(&s);
+        type Damage = Box<dyn Fn(&Path)>;
+        let damages: Vec<(&str, Damage)> = vec![
+            (
+                "bit 40 flipped",
+                Box::new(|p: &Path| with_first_weight(p, |w| w ^ (1 << 40))),
+            ),
+            (
+                "a NaN weight",
+                Box::new(|p: &Path| with_first_weight(p, |_| f64::NAN.to_bits())),
+            ),
+            (
+                "truncated",
+                Box::new(|p: &Path| {
+                    let t = std::fs::read(p).unwrap();
+                    std::fs::write(p, &t[..t.len() / 2]).unwrap();
+                }),
+            ),
+        ];
+        for (what, damage) in damages {
+            damage(&path);
+            assert!(
+                cache.load(&s).is_none(),
+                "{what}: the damaged entry was used"
+            );
+            let rebuilt = cache.get_or_train(&s).unwrap();
+            assert!(!rebuilt.from_cache, "{what}");
+            assert_eq!(rebuilt.emulator.mlp(), clean.emulator.mlp(), "{what}");
+            assert!(
+                cache.load(&s).unwrap().from_cache,
+                "{what}: not stored again"
+            );
+        }
+    }
+
+    /// A non-finite number refused even under a checksum that matches it (written through
+    /// the cache's own writer), and an entry written before checksums is used and stamped.
+    #[test]
+    fn non_finite_entries_are_refused_and_old_entries_are_stamped() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = EmulatorCache::new(dir.path());
+        let s = spec();
+        let clean = cache.get_or_train(&s).unwrap();
+        let path = cache.path(&s);
+        let key = EmulatorCache::key(&s).to_string();
+        let shape = [clean.emulator.mlp().n_in(), 6, clean.emulator.mlp().n_out()];
+        let mut rec = read_record(&path, &key, shape).unwrap();
+        let good = rec.clone();
+        rec.output_norm.std[0] = f64::INFINITY;
+        write_record(&path, &key, &rec).unwrap();
+        assert!(read_record(&path, &key, shape).is_none());
+        // Without its checksum field: used as before, and stamped with one.
+        write_record(&path, &key, &good).unwrap();
+        let mut v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        v.as_object_mut().unwrap().remove("checksum");
+        std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
+        assert_eq!(read_record(&path, &key, shape).unwrap(), good);
+        let stamped: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        assert!(stamped["checksum"].is_u64());
     }
 }

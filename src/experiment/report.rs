@@ -412,13 +412,15 @@ pub(crate) fn checks_figure(
             let top = hi.max(c.threshold).max(c.value);
             let bottom = lo.min(c.threshold).min(c.value).min(0.0);
             let pad = 0.1 * (top - bottom).max(1e-12);
-            let mut label: String = c.label.chars().take(40).collect();
-            if c.label.chars().count() > 40 {
+            // The check's words under the panel, where a line has room for them; the title
+            // keeps the tag and the outcome, large.
+            let mut label: String = c.label.chars().take(LABEL_CHARS).collect();
+            if c.label.chars().count() > LABEL_CHARS {
                 label.push('…');
             }
             Panel {
-                title: format!("{tag} {label}: {}", c.outcome().word()),
-                x_label: String::new(),
+                title: format!("{tag}: {}", c.outcome().word()),
+                x_label: label,
                 y_label: "measure".into(),
                 series: vec![
                     Series::line("95% interval", vec![(0.0, lo), (0.0, hi)], 0),
@@ -441,6 +443,9 @@ pub(crate) fn checks_figure(
         .collect();
     sink.draw(CHECKS_FIGURE, &Figure::grid(panels, 3))
 }
+
+/// The most characters of a check's label under its panel of the checks figure.
+const LABEL_CHARS: usize = 80;
 
 /// Marks a figure whose family gives it no caption (a test keeps the report free of it).
 pub const NO_CAPTION: &str = "(no caption yet)";

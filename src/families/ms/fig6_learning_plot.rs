@@ -160,21 +160,21 @@ fn learning_rule(cs: &[Curve], r: &LearningRule) -> Option<Rule> {
     let seeds = cs.len();
     let checks = [
         (
-            format!("median over {seeds} seeds of the share of hill climbing's gain made in the early iterations"),
+            format!("share of hill climbing's gain made in the early iterations, median over {seeds} seeds"),
             over(&Curve::early_share),
             Cmp::AtLeast,
             r.early_gain_share,
             Null::new("a search gaining at a constant rate", r.early_fraction),
         ),
         (
-            format!("median over {seeds} seeds of hill climbing's gain over the best random controller"),
+            format!("hill climbing's gain over the best random controller, median over {seeds} seeds"),
             over(&|c| c.end_best - c.init_best),
             Cmp::Above,
             0.0,
             Null::new("the random controllers alone", 0.0),
         ),
         (
-            format!("median over {seeds} seeds of the share of the late evaluations below the best random controller"),
+            format!("share of the late evaluations below the best random controller, median over {seeds} seeds"),
             over(&|c| c.poor_late),
             Cmp::AtLeast,
             r.late_poor_share,

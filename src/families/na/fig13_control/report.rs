@@ -81,7 +81,7 @@ pub(super) fn fig13_rule(tasks: &[TaskFacts], r: &Fig13Rule) -> Option<Rule> {
                 let (median, lo, hi) = median_interval(errors, BOOTSTRAP_SEED);
                 held.push(
                     Check::new(
-                        format!("{name}: median over {} net seeds of the larger final error, on the emulator within the paper's iterations or on the simulator (tolerances)", errors.len()),
+                        format!("{name}: the larger final error, emulator (the paper's iterations) or simulator, median over {} net seeds (tolerances)", errors.len()),
                         median,
                         Cmp::AtMost,
                         1.0,
