@@ -352,11 +352,17 @@ pub(super) struct SeedCount {
 }
 
 /// Per task of `net_seeds.csv` in `dir` (first-seen order): how many net seeds reach the goal
-/// on both, on the emulator, and how many were run. `None` when the run wrote no such table.
+/// on both, on the emulator, and how many were run. `None` when the run wrote no such table (a
+/// spec without net seeds); a table that cannot be read, holds a non-finite error or whose
+/// tasks ran different numbers of seeds (a truncated file) is an error naming it, never a
+/// verdict on fewer seeds.
 pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
-    let Ok(df) = read_csv(&dir.join("net_seeds.csv")) else {
+    let path = dir.join("net_seeds.csv");
+    if !path.exists() {
         return Ok(None);
-    };
+    }
+    let damaged = |why: &str| crate::experiment::other(format!("{}: {why}", path.display()));
+    let df = read_csv(&path)?;
     let (task, goal) = (df_str(&df, "task")?, df_f64(&df, "at_goal")?);
     let emu = df_f64(&df, "emulator_error")?;
     let sim = df_f64(&df, "simulator_error")?;
@@ -379,6 +385,14 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
         out[i].emulator += usize::from(*e <= 1.0);
         out[i].seeds += 1;
         out[i].errors.push(e.max(*s));
+    }
+    if out.iter().flat_map(|c| &c.errors).any(|e| !e.is_finite()) {
+        return Err(damaged("a net seed's final error is not a number"));
+    }
+    if out.windows(2).any(|w| w[0].seeds != w[1].seeds) {
+        return Err(damaged(
+            "its tasks ran different numbers of net seeds (a truncated or edited table)",
+        ));
     }
     Ok(Some(out))
 }
@@ -508,6 +522,34 @@ mod tests {
             path_md(empty.path()).unwrap(),
             (String::new(), String::new())
         );
+    }
+
+    /// A truncated `net_seeds.csv` is an error naming the file, not a verdict on the seeds
+    /// left; a missing one means a run without net seeds.
+    #[test]
+    fn a_truncated_seed_table_is_an_error_not_another_verdict() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(seed_counts(dir.path()).unwrap(), None);
+        let mut csv = String::from(
+            "task,net_seed,emulator_error,simulator_error,best_iteration,at_goal,formulation\n",
+        );
+        for seed in 1..=5 {
+            for task in ["pendulum", "truck"] {
+                csv.push_str(&format!("{task},{seed},0.5,0.6,20,1,paper\n"));
+            }
+        }
+        let path = dir.path().join("net_seeds.csv");
+        std::fs::write(&path, &csv).unwrap();
+        let counts = seed_counts(dir.path()).unwrap().unwrap();
+        assert_eq!(counts.len(), 2);
+        assert_eq!(counts[0].errors, vec![0.6; 5]);
+        // Cut after the last seed's pendulum row, and mid-row.
+        let lines: Vec<&str> = csv.lines().collect();
+        std::fs::write(&path, lines[..lines.len() - 1].join("\n")).unwrap();
+        let e = seed_counts(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("net_seeds.csv"), "{e}");
+        std::fs::write(&path, &csv[..csv.len() - 12]).unwrap();
+        assert!(seed_counts(dir.path()).is_err());
     }
 
     #[test]
