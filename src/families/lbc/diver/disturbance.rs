@@ -36,6 +36,7 @@ use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
+use crate::experiment::stats::bootstrap_interval;
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::lbc::{film, rule_settings, rule_table};
 use crate::physics::diver::{diver, entry_angle};
@@ -402,32 +403,121 @@ impl Job for DisturbanceParams {
     }
 }
 
-/// Means over trials of (effort, deviation, final_error, entry_change) per (controller, scale).
-fn means(dir: &Path) -> Result<Vec<(String, f64, [f64; 4])>, Error> {
+/// One row of `disturbance.csv`: a controller's dive at a force scale under one trial's pushes
+/// (the unpushed dive has one trial), with its effort, deviation, final error and entry change.
+struct TrialRow {
+    controller: String,
+    scale: f64,
+    trial: usize,
+    v: [f64; 4],
+}
+
+/// The rows of `disturbance.csv` in `dir`.
+fn trial_rows(dir: &Path) -> Result<Vec<TrialRow>, Error> {
     let t = read_csv(&dir.join("disturbance.csv"))?;
-    let (c, s) = (df_str(&t, "controller")?, df_f64(&t, "force_scale")?);
+    let (c, s, trial) = (
+        df_str(&t, "controller")?,
+        df_f64(&t, "force_scale")?,
+        df_f64(&t, "trial")?,
+    );
     let cols = [
         df_f64(&t, "effort")?,
         df_f64(&t, "deviation")?,
         df_f64(&t, "final_error")?,
         df_f64(&t, "entry_change")?,
     ];
-    let mut out: Vec<(String, f64, [f64; 4], usize)> = Vec::new();
-    for i in 0..c.len() {
-        match out.iter_mut().find(|o| o.0 == c[i] && o.1 == s[i]) {
-            Some(o) => {
-                for k in 0..4 {
-                    o.2[k] += cols[k][i];
-                }
-                o.3 += 1;
-            }
-            None => out.push((c[i].clone(), s[i], std::array::from_fn(|k| cols[k][i]), 1)),
+    Ok((0..c.len())
+        .map(|i| TrialRow {
+            controller: c[i].clone(),
+            scale: s[i],
+            trial: trial[i] as usize,
+            v: std::array::from_fn(|k| cols[k][i]),
+        })
+        .collect())
+}
+
+/// The pushed trials' ids, ascending.
+fn trial_ids(rows: &[TrialRow]) -> Vec<usize> {
+    let mut ids: Vec<usize> = rows
+        .iter()
+        .filter(|r| r.scale != 0.0)
+        .map(|r| r.trial)
+        .collect();
+    ids.sort_unstable();
+    ids.dedup();
+    ids
+}
+
+/// Per controller and force scale (first-seen order), the means of the four measures over the
+/// pushed trials `pick` (indices into [`trial_ids`], repeats allowed, as a bootstrap resample
+/// draws them; `None`: every trial once); the unpushed dive's single row as it is.
+fn means_over(rows: &[TrialRow], pick: Option<&[usize]>) -> Vec<(String, f64, [f64; 4])> {
+    let ids = trial_ids(rows);
+    let all: Vec<usize> = (0..ids.len()).collect();
+    let pick = pick.unwrap_or(&all);
+    let mut out: Vec<(String, f64, [f64; 4])> = Vec::new();
+    for r in rows {
+        if !out.iter().any(|o| o.0 == r.controller && o.1 == r.scale) {
+            out.push((r.controller.clone(), r.scale, [0.0; 4]));
         }
     }
-    Ok(out
-        .into_iter()
-        .map(|(c, s, v, n)| (c, s, v.map(|x| x / n as f64)))
-        .collect())
+    for o in &mut out {
+        let of = |trial: usize| {
+            rows.iter()
+                .find(|r| r.controller == o.0 && r.scale == o.1 && r.trial == trial)
+                .map_or([f64::NAN; 4], |r| r.v)
+        };
+        o.2 = if o.1 == 0.0 {
+            rows.iter()
+                .find(|r| r.controller == o.0 && r.scale == 0.0)
+                .map_or([f64::NAN; 4], |r| r.v)
+        } else {
+            let mut sum = [0.0; 4];
+            for &k in pick {
+                let v = of(ids[k]);
+                for j in 0..4 {
+                    sum[j] += v[j];
+                }
+            }
+            sum.map(|x| x / pick.len() as f64)
+        };
+    }
+    out
+}
+
+/// Bootstrap seed of the intervals over trials (fixed, so a report is the same everywhere).
+const BOOTSTRAP_SEED: u64 = 1;
+
+/// `rule` with each check's 95% bootstrap interval over the pushed trials of `rows`: the
+/// trials resampled with replacement, the rule rebuilt from each resample's means, and the
+/// percentiles of each check's value (the premise first, then the held checks).
+fn with_trial_intervals(
+    mut rule: Rule,
+    rows: &[TrialRow],
+    build: impl Fn(&[(String, f64, [f64; 4])]) -> Option<Rule>,
+) -> Rule {
+    let n = trial_ids(rows).len();
+    let value = |idx: &[usize], k: usize| {
+        build(&means_over(rows, Some(idx))).map_or(f64::NAN, |r| {
+            r.premise
+                .iter()
+                .chain(&r.held)
+                .nth(k)
+                .map_or(f64::NAN, |c| c.value)
+        })
+    };
+    let checks: Vec<&mut Check> = rule
+        .premise
+        .iter_mut()
+        .chain(rule.held.iter_mut())
+        .collect();
+    for (k, c) in checks.into_iter().enumerate() {
+        let (lo, hi) = bootstrap_interval(n, BOOTSTRAP_SEED, |idx| value(idx, k));
+        if lo.is_finite() && hi.is_finite() {
+            *c = c.clone().with_interval(lo, hi);
+        }
+    }
+    rule
 }
 
 /// The means of `controller` at force scale `scale`, if the run has them.
@@ -689,7 +779,8 @@ impl Family for LbcDiveDisturbance {
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
         let rule = rule_settings(dir)?;
-        let m = means(dir)?;
+        let rows = trial_rows(dir)?;
+        let m = means_over(&rows, None);
         let largest = rule("largest_scale");
         let mut md = String::from("Means over the trials (force scale 0: the unpushed dive):\n\n| controller | force scale | effort ∫½uᵀRu dt | deviation (rad) | entry error (rad) | entry change (rad) |\n| --- | --- | --- | --- | --- | --- |\n");
         for (c, s, v) in &m {
@@ -702,13 +793,16 @@ impl Family for LbcDiveDisturbance {
                 sig(v[3])
             ));
         }
-        let rule = disturbance_rule(
-            &m,
-            largest,
-            rule("visible_ratio"),
-            rule("outcome_change"),
-            rule("felt"),
-        );
+        let build = |m: &[(String, f64, [f64; 4])]| {
+            disturbance_rule(
+                m,
+                largest,
+                rule("visible_ratio"),
+                rule("outcome_change"),
+                rule("felt"),
+            )
+        };
+        let rule = build(&m).map(|r| with_trial_intervals(r, &rows, build));
         let Some(rule) = rule else {
             return Ok(Findings {
                 ours: md,
@@ -752,6 +846,47 @@ impl Family for LbcDiveDisturbance {
 
 #[cfg(test)]
 mod tests {
+
+    /// Resampling trials moves the pushed means and leaves the unpushed dive alone; the
+    /// intervals bracket each check's value over every trial.
+    #[test]
+    fn the_trial_bootstrap_resamples_pushed_trials_only() {
+        let row = |c: &str, scale: f64, trial: usize, dev: f64| TrialRow {
+            controller: c.into(),
+            scale,
+            trial,
+            v: [1.0, dev, 0.0, dev / 10.0],
+        };
+        let mut rows = vec![row("lbc", 0.0, 0, 0.0), row("pd", 0.0, 0, 0.0)];
+        for t in 0..6 {
+            let d = 0.1 + 0.02 * t as f64;
+            rows.push(row("lbc", 1.0, t, d));
+            rows.push(row("pd", 1.0, t, d / 5.0));
+            rows.push(row("lbc", 4.0, t, 4.0 * d));
+            rows.push(row("pd", 4.0, t, d / 1.5));
+        }
+        let all = means_over(&rows, None);
+        let lbc1 = all.iter().find(|o| o.0 == "lbc" && o.1 == 1.0).unwrap().2[1];
+        assert!((lbc1 - 0.15).abs() < 1e-12);
+        let first = means_over(&rows, Some(&[0, 0, 0, 0, 0, 0]));
+        let lbc1_first = first.iter().find(|o| o.0 == "lbc" && o.1 == 1.0).unwrap().2[1];
+        assert!((lbc1_first - 0.1).abs() < 1e-12);
+        assert_eq!(
+            first.iter().find(|o| o.0 == "lbc" && o.1 == 0.0).unwrap().2,
+            all[0].2
+        );
+        let build = |m: &[(String, f64, [f64; 4])]| disturbance_rule(m, 4.0, 2.0, 0.001, 0.01);
+        let rule = with_trial_intervals(build(&all).unwrap(), &rows, build);
+        for c in rule.premise.iter().chain(&rule.held) {
+            let (lo, hi) = c.interval.expect("an interval");
+            assert!(
+                lo <= c.value + 1e-12 && c.value <= hi + 1e-12,
+                "{}: {lo} {} {hi}",
+                c.label,
+                c.value
+            );
+        }
+    }
     use super::*;
     use crate::experiment::rule::Outcome;
 
