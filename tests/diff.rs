@@ -104,3 +104,52 @@ fn diff_of_a_folder_that_does_not_exist_exits_2_naming_it() {
     );
     assert!(out.stdout.is_empty());
 }
+
+/// Two runs of one experiment, the second with one parameter changed (the projection's
+/// spacings), into two folders: `diff` exits 1 and names the changed tables, their rows, and
+/// compares the two reports' verdicts.
+#[test]
+fn diff_of_two_runs_with_one_changed_parameter_names_tables_rows_and_verdicts() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let spec = std::fs::read_to_string(root().join("experiments/lbc_projection.toml")).unwrap();
+    let changed = spec.replacen(
+        "spacings = [0.5, 2.0, 6.0]",
+        "spacings = [0.5, 2.0, 5.0]",
+        1,
+    );
+    assert_ne!(spec, changed, "the quick spacings moved: update this test");
+    for (side, text) in [("a", &spec), ("b", &changed)] {
+        let exp = d.join(format!("exp_{side}"));
+        std::fs::create_dir_all(&exp).unwrap();
+        std::fs::write(exp.join("lbc_projection.toml"), text).unwrap();
+        let out = motionlab(
+            d,
+            &[
+                "--experiments",
+                exp.to_str().unwrap(),
+                "reproduce",
+                "--quick",
+                "--only",
+                "lbc_projection",
+                "--out",
+                side,
+                "--figures",
+                &format!("figs_{side}"),
+            ],
+        );
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let out = motionlab(d, &["diff", "a", "b"]);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}{}",
+        stdout(&out),
+        stderr(&out)
+    );
+    let text = stdout(&out);
+    assert!(text.contains("table lbc_projection/"), "{text}");
+    assert!(text.contains(" row "), "{text}");
+    assert!(text.contains("verdicts: 1 compared"), "{text}");
+}
