@@ -609,6 +609,17 @@ pub fn unique(v: &[String]) -> Vec<String> {
     out
 }
 
+/// [`read_csv`] of a table a run may not write (a spec without the study that writes it):
+/// `None` when the file is absent; a file that exists but cannot be read is an error naming
+/// it, never "nothing to say".
+pub fn read_optional_csv(path: &Path) -> Result<Option<DataFrame>, Error> {
+    if path.exists() {
+        read_csv(path).map(Some)
+    } else {
+        Ok(None)
+    }
+}
+
 /// Reads a CSV written by [`write_table`] into a polars data frame, strictly: a table that is
 /// not whole (see [`check_csv`]) is an error naming the file and line, never a frame with
 /// missing or made-up values.

@@ -2,7 +2,7 @@
 //! and the sentences on the sweeps, the conditioning study and the best weights.
 
 use super::{dagger, dolphin_dagger, Fig13Rule};
-use crate::experiment::output::{df_f64, df_str, read_csv, unique};
+use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv, unique};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::rule::{
     rule_settings, shown, Check, Cmp, Null, Outcome, Partly, Rule, RuleError,
@@ -348,7 +348,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
 /// One sentence per task of a sweep table: the fewest iterations to the goal over its rules and
 /// rates (and the simulator error of those controls), or the lowest final error reached.
 fn sweep_summary(path: &Path, title: &str) -> Result<Option<String>, Error> {
-    let Ok(df) = read_csv(path) else {
+    let Some(df) = read_optional_csv(path)? else {
         return Ok(None);
     };
     let (task, rule) = (df_str(&df, "task")?, df_str(&df, "rule")?);

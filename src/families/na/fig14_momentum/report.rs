@@ -2,7 +2,7 @@
 //! the DAgger nets), the tables, and the sentences on the DAgger nets and the run to convergence.
 
 use super::params::Fig14Rule;
-use crate::experiment::output::{df_f64, df_str, read_csv};
+use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error};
@@ -249,7 +249,7 @@ fn unclipped_summary(dir: &Path) -> Result<String, Error> {
 /// The report's sentence on `converged.csv` (empty when absent): per net, where momentum's
 /// and plain descent's controls run to convergence end on the emulator and the simulator.
 fn converged_summary(dir: &Path) -> Result<String, Error> {
-    let Ok(df) = read_csv(&dir.join("converged.csv")) else {
+    let Some(df) = read_optional_csv(&dir.join("converged.csv"))? else {
         return Ok(String::new());
     };
     let (net, method) = (df_str(&df, "net")?, df_str(&df, "method")?);
@@ -296,7 +296,7 @@ fn converged_summary(dir: &Path) -> Result<String, Error> {
 /// The report's DAgger paragraph, table and verdict sentence (rule in the spec): `None` when
 /// there is no `dagger.csv` or it is empty.
 fn dagger_summary(dir: &Path, bars: &Fig14Rule) -> Result<Option<(String, String)>, Error> {
-    let Ok(df) = read_csv(&dir.join("dagger.csv")) else {
+    let Some(df) = read_optional_csv(&dir.join("dagger.csv"))? else {
         return Ok(None);
     };
     let net = df_str(&df, "net")?;
