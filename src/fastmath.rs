@@ -2,7 +2,7 @@
 //!
 //! The acrobot's derivative and linearization need sin and cos of both joint angles at every
 //! RK4 stage; glibc's `sincos` costs about 20 ns a call and was a quarter of a DDP iteration
-//! (issue 14's profile). [`sin_cos`] and [`sin_cos2`] compute the pair with
+//! in a profile. [`sin_cos`] and [`sin_cos2`] compute the pair with
 //!
 //! 1. a Cody–Waite reduction x = k π/2 + r, |r| ≤ π/4 (k rounded to nearest, π/2 split into
 //!    three doubles, each term subtracted by a fused multiply–add);

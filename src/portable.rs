@@ -5,7 +5,7 @@
 //! copies differ in the last bit now and then; other C libraries differ again. A simulation
 //! that calls them through `f64::sin_cos`, `f64::exp` … therefore gives different digits on
 //! different machines, and a DDP optimization amplifies a last-bit difference into the 7th
-//! significant digit (issue 60: the diver's tables). Everything that simulates, optimizes or
+//! significant digit (the diver's tables). Everything that simulates, optimizes or
 //! combines on the way to a verdict calls these functions instead. Each is plain IEEE
 //! arithmetic (`+ − × ÷ √` and `f64::mul_add`, all correctly rounded, so the same bits on
 //! every x86-64 and every other IEEE machine):

@@ -7,7 +7,7 @@
 //! evaluates the same IEEE operations in the same order (a multiply–add is
 //! [`f64::mul_add`], rounded once, on every path; a wider vector holds more independent
 //! outputs, never a different sum), so all give the same bits; the tests compare them, and
-//! this switch lets a whole run be forced onto one path to compare its tables (issue 60).
+//! this switch lets a whole run be forced onto one path to compare its tables.
 //!
 //! The environment variable [`ENV`] (`MOTIONLAB_SIMD`), read once when first needed (the
 //! binary reads it at start-up and rejects an unknown value), caps the level:

@@ -245,7 +245,7 @@ pub(super) fn emulator_rollouts(min_seconds: f64) -> Vec<(String, f64)> {
 /// Training and stepping throughput of the Table 1 network of `model` (random weights and data
 /// of the real shapes; the emulator uses the model's transforms).
 /// Gradients per second of the k-step rollout loss (k = 8) over 64 windows through `e` (its
-/// net and transforms), the loss `fine_tune` minimizes (issue 11): windows are the emulator's
+/// net and transforms), the loss `fine_tune` minimizes: windows are the emulator's
 /// own rollouts from `s0` under per-step controls around `u`, with targets moved off them by a
 /// little, so every step's cotangent is nonzero. Counted in windows per second.
 pub fn rollout_grad_metric(e: &Emulator, s0: &[f64], u: &[f64], min_seconds: f64) -> f64 {

@@ -1,9 +1,9 @@
-//! # Equilibrium anchoring (ours, issue 11; not in the paper)
+//! # Equilibrium anchoring (ours; not in the paper)
 //!
 //! A model at a known equilibrium, the truck parked with no drive, stays exactly where it is.
 //! A net trained on sampled transitions only comes close: the truck net predicted a state
 //! change of a few millimetres per second at rest, and from the parking task's start with zero
-//! controls it drove 3.5 m in 20 s while the simulator stayed put (issue 11, defect 4).
+//! controls it drove 3.5 m in 20 s while the simulator stayed put.
 //!
 //! An [`Anchor`] makes the net reproduce one example exactly: the network-space input `x₀` of
 //! the equilibrium (state and neutral control, through the emulator's local frame and

@@ -73,10 +73,11 @@ pub fn take_usage() -> NetUsage {
 /// the network's arithmetic, the simulators' arithmetic: the key fingerprints the sampling
 /// recipe, not the simulated transitions). 2: the network's σ and sums became fused
 /// multiply–adds on lanes; 3: the pendulum's derivative takes its angle differences by the
-/// angle identities and solves by L D Lᵀ (issue 14); 4: the sampling's trigonometry (start
+/// angle identities and solves by L D Lᵀ; 4: the sampling's trigonometry (start
 /// states, smooth and travelling-wave controls, the planar frame) through `crate::portable`
 /// instead of the C library, and the batch products outside the register-tiled kernels in a
-/// fixed order (issue 60). A net trained before is not the net this code trains.
+/// fixed order, so the same bits on every machine. A net trained before is not the net this
+/// code trains.
 pub const CACHE_FORMAT: u32 = 4;
 
 /// 64-bit FNV-1a hash.

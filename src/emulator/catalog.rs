@@ -166,8 +166,8 @@ impl NetModel {
         match self {
             // The lander's simulator calls no library function whose bits depend on the
             // processor; the truck's and the pendulum's trigonometry went through the C library
-            // until 2026-11-28 (issue 60, `crate::portable` since), so their nets are keyed by
-            // the arithmetic too and retrain with the new bits.
+            // before it went through `crate::portable`, so their nets are keyed by the arithmetic
+            // too and retrain with the portable bits.
             Self::Lander => parameters,
             _ => serde_json::json!({ "parameters": parameters, "arithmetic": "portable" }),
         }
@@ -650,7 +650,7 @@ pub struct NetSpec {
     /// cache keys when absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub input_noise: Option<f64>,
-    /// Equilibrium anchoring (ours, issue 11; [`super::anchor`]): the net reproduces the
+    /// Equilibrium anchoring (ours; [`super::anchor`]): the net reproduces the
     /// model's [`NetModel::equilibrium`] exactly, its output bias following the other weights.
     /// False (the default, left out of cache keys) is the paper's free net.
     #[serde(default, skip_serializing_if = "is_false")]
@@ -757,13 +757,13 @@ pub struct TrainSettings {
     pub momentum: f64,
     /// Mini-batch size (the paper: about 30).
     pub batch_size: usize,
-    /// Rollout-faithful training (issue 11, defect 5): Gaussian noise on the training state
+    /// Rollout-faithful training: Gaussian noise on the training state
     /// inputs, as a fraction of each input's spread, with targets corrected back to the true
     /// next state ([`Transforms::perturb`], Sanchez-Gonzalez et al. 2020). 0 (the default, left
     /// out of cache keys) is the paper's plain one-step training.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub input_noise: f64,
-    /// k-step rollout fine-tuning (issue 11, defect 5; [`super::rollout`]): after one-step
+    /// k-step rollout fine-tuning ([`super::rollout`]): after one-step
     /// training, the net is fine-tuned by L-BFGS on its one-step loss plus `rollout_weight`
     /// times its k-step rollout loss on simulated windows of k = `rollout_k` super-steps
     /// (examples / k windows, held out as the examples), for at most `rollout_iters`
@@ -1419,7 +1419,7 @@ pub fn train_emulator(spec: &BuildSpec) -> Result<Trained, BuildError> {
 }
 
 /// nalgebra's `UnitQuaternion::from_axis_angle` (cos ½θ, sin ½θ · axis) with the sine and
-/// cosine of [`crate::portable`] instead of the C library's (issue 60).
+/// cosine of [`crate::portable`] instead of the C library's, so the same bits on every machine.
 fn axis_angle_quaternion(axis: &nalgebra::Unit<Vector3<f64>>, angle: f64) -> UnitQuaternion<f64> {
     let (s, c) = crate::portable::sin_cos(angle / 2.0);
     UnitQuaternion::new_unchecked(nalgebra::Quaternion::from_parts(c, axis.into_inner() * s))
@@ -1782,7 +1782,7 @@ mod tests {
     fn a_truck_emulator_parked_with_zero_controls_stays_parked() {
         // The parking task's start, at rest; 20 s of zero controls in 0.5 s super-steps, from
         // a net trained as na_table1_structure's truck: no input noise, k = 8 rollout
-        // fine-tuning (issue 11, defect 5).
+        // fine-tuning.
         let mut spec = small(NetModel::Truck, 40, 5200, 50);
         spec.settings.rollout_k = 8;
         spec.settings.rollout_weight = 1.0;

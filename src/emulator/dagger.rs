@@ -1,4 +1,4 @@
-//! # Data aggregation on the states learned controllers visit (DAgger, issue 11)
+//! # Data aggregation on the states learned controllers visit (DAgger)
 //!
 //! A net trained on §3.4's random episodes is accurate where those episodes go; control
 //! learning (§4) then drives it into states they rarely visit, where its errors steer the

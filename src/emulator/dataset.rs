@@ -460,7 +460,7 @@ pub fn sample_transitions<D: Dynamics + ?Sized>(
     })
 }
 
-/// Windows of `k` consecutive super-steps (k-step rollout training, issue 11): per window the
+/// Windows of `k` consecutive super-steps (k-step rollout training): per window the
 /// k + 1 simulated states s_0 … s_k and the k controls u_0 … u_{k−1}, u_j read from the
 /// episode's control signal at the start of super-step j and held over it. Rows (windows) are
 /// shuffled; row r's states are `states[r (k+1) n ..]`, its controls `controls[r k m ..]`.

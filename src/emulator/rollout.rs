@@ -1,4 +1,4 @@
-//! # k-step rollout training (issue 11, defect 5)
+//! # k-step rollout training
 //!
 //! A net trained for one super-step is used for 40 in a row by control learning (§4), and its
 //! small one-step errors compound: the rollout leaves the states it was trained on. The k-step

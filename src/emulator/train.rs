@@ -118,7 +118,7 @@ fn prefetch_row(a: &Array2<f64>, i: usize) {
 
 /// Copies rows `rows` of `src`, in that order, into the first `rows.len()` rows of `dst` (as
 /// many columns): the values ndarray's `select` gives, without the new array it allocates and
-/// appends to one row at a time. Measured (issue 14, one core): `select` took about a tenth
+/// appends to one row at a time. Measured (one core): `select` took about a tenth
 /// of a 70-40-24 net's momentum training (980 against 885 ns per example and epoch).
 pub(crate) fn gather_rows(src: &Array2<f64>, rows: &[usize], dst: &mut Array2<f64>) {
     assert!(rows.len() <= dst.nrows() && src.ncols() == dst.ncols());

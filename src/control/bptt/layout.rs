@@ -77,7 +77,7 @@ impl Bounds {
     }
     /// The same map from normalized values to controls, with the boxes no longer enforced:
     /// [`Bounds::project`] is the identity (the controls may leave their boxes). For studying
-    /// descent without the clipping that hides its divergence (issue 54, Fig. 14).
+    /// descent without the clipping that hides its divergence (Fig. 14).
     pub fn without_clipping(mut self) -> Self {
         self.clip = false;
         self

@@ -410,7 +410,7 @@ mod tests {
         let mut b = Bptt::new(&sys, &obj, knots, bounds.clone(), &[0.2, -0.1, 0.3]).unwrap();
         let v: Vec<f64> = (0..b.dim()).map(|i| (i as f64 * 0.3).sin() * 0.5).collect();
         fd_check(&mut b, &v, 1e-6);
-        // Gains on the actuators (issue 54's control units): the gradient is still J's over
+        // Gains on the actuators (equal-sensitivity control units): the gradient is still J's over
         // the gained variables, and equals the unit-gain gradient times each actuator's gain
         // at the same controls.
         let gained = bounds.with_gain(vec![7.0, 0.25]);

@@ -1,4 +1,4 @@
-//! # DAgger for the dolphin's global net (issue 11)
+//! # DAgger for the dolphin's global net
 //!
 //! Swim controllers are learned through the global net alone (§6), so that is the net whose
 //! errors steer them wrong, and the one data aggregation refines ([`crate::emulator::dagger`]

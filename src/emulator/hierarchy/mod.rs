@@ -39,7 +39,7 @@
 //! does (what controllers are learned through) and the local nets refine that motion (§6:
 //! "sub-networks refine the motion produced by the global network"). Refitting the frames to
 //! the emulated masses instead fed the local nets' velocity errors back into the global net as
-//! frame angular velocities: on Table 1's nets (issue 11) the refitted frames' 40-step error was
+//! frame angular velocities: on Table 1's nets the refitted frames' 40-step error was
 //! 4.1 of their spread against 0.32 for the global net alone. During training each local net
 //! is given the true next frame (teacher forcing); at run time the predicted one. With the
 //! settings' `input_noise`, each local net trains on local coordinates perturbed as the global
@@ -169,7 +169,7 @@ pub fn global_transforms_of(set: TransformSet) -> TransformConfig {
 /// group 4. Per variable, the near-rigid spacings of the segments (a few millimetres of
 /// spread in the reference frame) would be divided by their own tiny deviations, so that
 /// millimetre errors of a rollout became many deviations of input within a few steps and the
-/// net left its training distribution (issue 11, defect 3).
+/// net left its training distribution.
 pub fn global_groups() -> (Vec<usize>, Vec<usize>) {
     let state: Vec<usize> = (0..GLOBAL_DIM)
         .map(|k| match k % FRAME_DIM {

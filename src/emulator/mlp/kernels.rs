@@ -413,7 +413,7 @@ impl Packed {
         // AVX-512 halves the instructions of a pass but runs at a lower clock (this bench's
         // `cpu.fma_f64.*` peaks: 45.7 against 24.6 GMAC/s, 7% below twice), so it pays where
         // the passes are bound by instruction issue (short products, the sigmoid) more than by
-        // the latency of long multiply–add chains. Measured (issue 14, one core, interleaved):
+        // the latency of long multiply–add chains. Measured (one core, interleaved):
         // 17-50-13 13% and 70-40-24 8% faster, 84-50-78 6% slower; hence nets with more than
         // 72 inputs or 64 outputs keep 4 lanes.
         let wide = wide_lanes() && p <= 72 && r <= 64;
@@ -718,7 +718,7 @@ fn copy_lanes<L: Lanes>(s: &[f64], d: &mut [f64]) {
 /// lanes), the hidden lane groups are stored whole there and the output product broadcasts
 /// from it; `h` gets a copy. Emitted one value at a time instead (as [`hidden_generic`] does),
 /// each value goes through a store and a load to a scalar buffer and another store before the
-/// output product reads it. Measured on AMD Zen 4 (issue 14): the lander's emulator step took
+/// output product reads it. Measured on AMD Zen 4: the lander's emulator step took
 /// 7–8% longer that way (232 against 216 ns, medians of 12 interleaved rounds), on 8 lanes or
 /// on 4; the forward pass timed alone, passes independent of each other, took as long either
 /// way, so what it saves is latency on the step's chain. With more outputs (84-50-78's 78, three

@@ -470,7 +470,7 @@ impl Family for LbcGrid {
     ];
     const KIND: &'static str = "lbc_grid_optimality";
     // An implementation check (LBC against the linearly-solvable direct solution), listed and
-    // counted with the checks in the report's summary, not among the reproductions (issue 56).
+    // counted with the checks in the report's summary, not among the reproductions.
     const CHECK: bool = true;
     type Params = Params;
 

@@ -193,7 +193,7 @@ pub(crate) fn projected_weights(
 
 pub(crate) use crate::experiment::rule::{rule_setting, rule_settings, rule_table};
 
-/// Columns of every LBC family's `entropy.csv` (issue 56 item 3): per main LBC run (`run` names
+/// Columns of every LBC family's `entropy.csv`: per main LBC run (`run` names
 /// it: a desired angle, a start, a take-off rate…) and `method` (lbc, and the fixed-weight
 /// blend beside it), at each control step `t` (s): `entropy`, the normalized entropy of the
 /// blend weights α ([`normalized_entropy`](crate::bellman::combine::normalized_entropy): 1 for

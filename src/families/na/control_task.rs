@@ -119,7 +119,7 @@ mod tests {
         assert!(json.get("task").is_none(), "no `task` key in params_json");
     }
 
-    /// Fig. 14's lander is Fig. 13's paper lander (issue 54): its DAgger task serializes
+    /// Fig. 14's lander is Fig. 13's paper lander: its DAgger task serializes
     /// exactly as Fig. 13's lander task, so the two share the DAgger chain's cache key.
     #[test]
     fn fig14s_lander_is_fig13s_paper_lander() {

@@ -1,4 +1,4 @@
-//! Table 2 at equal accuracy (issue 11, defect 8): the physical time step whose simulation is as
+//! Table 2 at equal accuracy: the physical time step whose simulation is as
 //! far from the truth as the emulator is.
 //!
 //! The error is the one `na_table1_structure` reports as `rollout40_error_mean`

@@ -199,8 +199,8 @@ fn train_global(
     })
 }
 
-/// Noise injection for a local net (as [`Transforms::perturb`] for the global net, issue 11
-/// defect 5): each local coordinate of each seen mass (positions and velocities in frame F₀,
+/// Noise injection for a local net (as [`Transforms::perturb`] for the global net):
+/// each local coordinate of each seen mass (positions and velocities in frame F₀,
 /// raw inputs `inp`) moves by δ ~ N(0, (`scale` · sd)²), sd that column's spread, and the target
 /// of each owned mass becomes the change from the perturbed local state to the true next one
 /// (Δl − δ), so that the net learns to pull its own deformation errors back. The frame inputs
@@ -399,7 +399,7 @@ mod tests {
         (mean(&g) - mean(&g0)).norm()
     }
 
-    /// Issue 11, defect 3: with all controls zero, the global net does not swim. From the
+    /// With all controls zero, the global net does not swim. From the
     /// swim start (the rest shape at rest) the simulator stays exactly put; the emulator's
     /// mean segment centroid must stay within 0.1 m over the swim's 40 steps (ours: a tenth of
     /// the ≈ 1 m the reference travelling wave swims on the simulator in those 4 s). With

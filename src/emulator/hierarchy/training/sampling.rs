@@ -233,7 +233,7 @@ mod tests {
     use crate::emulator::Transforms;
     use crate::physics::Dynamics;
 
-    /// Issue 11, defect 2: the global net's training data have no quaternion sign jumps.
+    /// The global net's training data have no quaternion sign jumps.
     /// Episodes start at uniform headings, so segments pass through half-turn rotations where
     /// a w ≥ 0 convention flips q to −q; with signs chosen against the reference segment (inputs)
     /// and the previous step (targets), every relative quaternion the net sees has w > 0 and

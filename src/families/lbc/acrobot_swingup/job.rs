@@ -26,7 +26,7 @@ impl Job for Params {
         let map = Rk4Map::new(Acrobot::default(), self.dt).map_err(other)?;
         let (cands, best) = ctx.stage("ddp", || self.swing_ups(&map))?;
         let sols: Vec<&DdpSolution> = best.iter().map(|&b| &cands[b].sol).collect();
-        // The trackers' setting (issue 56): the first scale of their LQR terminal weights at
+        // The trackers' setting: the first scale of their LQR terminal weights at
         // which each tracker alone fails from the test start (the paper's premise); every
         // policy from the test start at every scale tried, for the table.
         let lambda = self.lambda();

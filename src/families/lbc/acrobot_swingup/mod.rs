@@ -115,7 +115,7 @@ pub struct Params {
     /// is run over the same sweep for comparison.
     #[serde(default = "default_value_model")]
     pub value_model: String,
-    /// Scales of the trackers' LQR terminal weights tried, in the order listed (issue 56): the
+    /// Scales of the trackers' LQR terminal weights tried, in the order listed: the
     /// trackers' gains and value functions come from the LQR recursion with Q_f × scale (the
     /// swing-ups themselves keep `terminal_weights`); the run uses the first scale at which
     /// each tracker alone fails from the test start ([`choose_scale`]), or the first listed

@@ -35,7 +35,7 @@ pub struct InterpolationParams {
     /// out (0): the run sets it to the offset the search chooses.
     #[serde(default)]
     pub offset: f64,
-    /// The offset search (issue 56 item 1): offsets δ tried in ascending order, each building
+    /// The offset search: offsets δ tried in ascending order, each building
     /// the components exactly as a run at that offset does (average-term scale chosen by its
     /// own rule); the run judges LBC at the first offset where the premise holds
     /// ([`choose_offset`]), and stops searching there. Empty: only `offset`, as before.

@@ -654,7 +654,7 @@ impl Job for Params {
             "seconds",
         ]);
         let mut weights = Table::new(&["desired", "t", "alpha_low"]);
-        // α's entropy over the take-off (issue 56's entropy.csv), LBC's and the naive blend's.
+        // α's entropy over the take-off (entropy.csv), LBC's and the naive blend's.
         let mut entropy = Table::new(&ENTROPY_COLUMNS);
         let mut cols = vec!["method".to_string(), "t".into(), "alpha_low".into()];
         cols.extend((0..DOF).map(|i| format!("q{i}")));

@@ -275,7 +275,7 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        // The reach scale (issue 56): the first whose weights, with the first tug alone, have
+        // The reach scale: the first whose weights, with the first tug alone, have
         // not committed before the second tug; every table below uses it.
         let (trials, pick) = ctx.stage("reach scales", || self.reach_scale_trials())?;
         let scale = trials[pick.unwrap_or(0)].0;

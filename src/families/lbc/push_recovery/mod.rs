@@ -111,7 +111,7 @@ pub struct Params {
     #[serde(default = "default_substeps")]
     pub substeps: usize,
     /// Scales of the reaches' state weights (`terminal_weights` and `hold_weights` × scale:
-    /// a slower, less decisive reach as the scale falls) tried in the listed order (issue 56):
+    /// a slower, less decisive reach as the scale falls) tried in the listed order:
     /// the run uses the first at which, with the first tug alone, LBC's weights have not
     /// committed (both below [`COMMITTED`]) before the second tug starts
     /// ([`choose_reach_scale`]); the first listed when none (premise not reproduced). Empty:

@@ -301,7 +301,7 @@ mod tests {
     /// The DAgger net searched on is built as `na_fig13_control`'s: this file's task, nets,
     /// BPTT settings and `[params.dagger]` rebuild exactly its dolphin task and chain (and its
     /// steps, step-scale iterations and example scale), on Fig. 13's 4 s swim (its
-    /// `dolphin_4s` line; Fig. 13's own dolphin swims 20 s since 2026-11-28).
+    /// `dolphin_4s` line; Fig. 13's own dolphin swims 20 s).
     #[test]
     fn the_dagger_net_is_fig13s_dolphin_chain() {
         use crate::experiment::spec::SpecFile;

@@ -71,7 +71,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
             .map(|r| (bi[r], bo[r]))
             .unzip()
     };
-    // The rule on one emulator substrate (rewritten 2026-11-28, issue 56): the common target
+    // The rule on one emulator substrate: the common target
     // J* (halfway from the initial J to the best J any method reaches there), the iterations
     // BPTT-momentum and each gradient-free method need to reach it, a note per method, the
     // farthest the methods' knots learned there swim on the simulator, and the verdict.

@@ -211,7 +211,7 @@ impl Params {
     }
 }
 
-/// Columns of `conditioning_ladder.csv` (ours, issue 54): per task of the paper's formulation
+/// Columns of `conditioning_ladder.csv` (ours): per task of the paper's formulation
 /// that has a formulation of ours on the same net, the terminal Gauss-Newton condition through
 /// that net at the initial knots as the paper's changes are applied to ours one at a time
 /// ([`ladder`]): rung 0 is ours, the last rung the paper's task; `change` names what the rung

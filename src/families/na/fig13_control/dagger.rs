@@ -1,4 +1,4 @@
-//! The DAgger stage of `na_fig13_control` (ours, issue 11; [`crate::emulator::dagger`]): per
+//! The DAgger stage of `na_fig13_control` (ours; [`crate::emulator::dagger`]): per
 //! task with a catalog net, R rounds of (learn controls through the current net with the
 //! learner, replay them on the simulator, aggregate the visited states' examples, fine-tune
 //! the net from the previous round's weights). One `dagger.csv` row per task and round: the

@@ -1,4 +1,4 @@
-//! DAgger for the dolphin swim (ours, issue 11; [`crate::emulator::hierarchy::dagger`]): the
+//! DAgger for the dolphin swim (ours; [`crate::emulator::hierarchy::dagger`]): the
 //! swim is learned through the hierarchy's global net, so that net is refined on the states the
 //! learned swims visit. Round r learns the swim through net_r exactly as the headline does
 //! (momentum, the same seeded restarts and iterations), replays the knots on the simulator,

@@ -77,10 +77,10 @@ pub struct Params {
     /// descent reaches the goal without the emulator.
     #[serde(default)]
     pub physics_sweep: Option<Sweep>,
-    /// The DAgger stage (ours, issue 11; [`dagger`]), if run.
+    /// The DAgger stage (ours; [`dagger`]), if run.
     #[serde(default)]
     pub dagger: Option<dagger::DaggerControl>,
-    /// Further Table 1 net seeds (ours, issue 54; [`super::seeds`]): the headline of every
+    /// Further Table 1 net seeds (ours; [`super::seeds`]): the headline of every
     /// task of the paper's formulation (the dolphin aside) is learned again through the net
     /// `na_table1_structure` trains under each seed, and the verdict counts a task at its goal
     /// when a strict majority of its seeds (the run's own and these) reach it. The run's own
@@ -154,10 +154,10 @@ pub struct DolphinControl {
     /// How the step scale evolves (default `fixed`).
     #[serde(default)]
     pub step_rule: StepRule,
-    /// DAgger of the global net (ours, issue 11; [`dolphin_dagger`]), if run.
+    /// DAgger of the global net (ours; [`dolphin_dagger`]), if run.
     #[serde(default)]
     pub dagger: Option<dolphin_dagger::DolphinDagger>,
-    /// An earlier swim task of ours learned the same way beside the paper's (issue 54: the
+    /// An earlier swim task of ours learned the same way beside the paper's (the
     /// 4 s swim, `dolphin_4s` in final.csv, formulation `ours`, not counted), if set.
     #[serde(default)]
     pub ours_swim: Option<SwimTask>,

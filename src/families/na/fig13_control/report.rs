@@ -153,10 +153,10 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         }
         Err(_) => String::new(),
     };
-    // The dolphin's goal (spec, issue 54, written 2026-11-28 before the 20 s swim's first
-    // run): its learned knots swim at least half as far as the hand-made wave on the
-    // simulator (shortfall <= half the wave's distance), on the emulator and on the simulator
-    // each, with a periodic muscle pattern (periodicity >= 0.5, ours, as the DAgger line's).
+    // The dolphin's goal (the spec's, fixed before the 20 s swim's first run): its learned
+    // knots swim at least half as far as the hand-made wave on the simulator (shortfall <=
+    // half the wave's distance), on the emulator and on the simulator each, with a periodic
+    // muscle pattern (periodicity >= 0.5, ours, as the DAgger line's).
     let (wave, emu_distance, sim_distance, learned_periodicity) =
         match read_csv(&dir.join("swim.csv")) {
             Ok(sw) => {
@@ -517,7 +517,7 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
         df_f64(&df, "eta")?,
         df_f64(&df, "iterations_per_decade")?,
     );
-    // The weighting bound (absent in runs before 2026-11-24).
+    // The weighting bound (absent in the tables of older runs).
     let any = df_f64(&df, "condition_any_weighting").ok();
     let (eq, any_pace, paper) = match any {
         Some(_) => (

@@ -1,4 +1,4 @@
-//! The headline over several Table 1 net seeds (issue 54, ours): one trained net per task is
+//! The headline over several Table 1 net seeds (ours): one trained net per task is
 //! one draw of the training's randomness, and whether a net carries its learned controls to the
 //! goal on the simulator turned on that draw (two `reproduce` runs whose nets differ only by
 //! retraining noise gave 2 of 4 and 0 of 4). So every task of the paper's formulation (the

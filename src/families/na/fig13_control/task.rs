@@ -62,13 +62,13 @@ pub struct Task {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ControlUnits {
-    /// The half-width of the actuator's box (ours until issue 54).
+    /// The half-width of the actuator's box (ours; the default).
     #[default]
     Box,
     /// Box units times a gain per actuator chosen so every actuator's knots move the weighted
     /// final state equally at the initial knots: g_j = sqrt(max_i t_i / t_j), t_j the trace of
     /// actuator j's block of the terminal Gauss-Newton matrix J^T W J (W the 1/σ² weights)
-    /// through the net the task learns through (ours, issue 54; for actuators of different
+    /// through the net the task learns through (ours; for actuators of different
     /// physical units, e.g. the truck's m/s² and rad, where the paper's own unit, a rate of
     /// turning, is not our model's control).
     EqualSensitivity,
@@ -85,7 +85,7 @@ impl ControlUnits {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FinalWeights {
-    /// w_k = 1/σ_k², σ_k the tolerance (ours until issue 54).
+    /// w_k = 1/σ_k², σ_k the tolerance (ours; the default).
     #[default]
     Tolerance,
     /// Each weighted variable weighs by its sensitivity to the knots: w_k = c/|∂s_{M,k}/∂v|²
@@ -93,7 +93,7 @@ pub enum FinalWeights {
     /// (the terminal Gauss-Newton matrix's diagonal in final-state space is constant); c sets
     /// its largest eigenvalue to that of the 1/σ² weights, so the effort term weighs as much
     /// against the fastest direction as before. The variables weighted are still those with a
-    /// tolerance, and success is still judged by the tolerances (ours, issue 54).
+    /// tolerance, and success is still judged by the tolerances (ours).
     Sensitivity,
 }
 
@@ -458,7 +458,7 @@ mod tests {
             ]
         );
         // The paper's pendulum animates 20 s in 40 N50 steps of 0.5 s (2,000 physical steps of
-        // 0.01 s, section 6), ours 4 s, and ours of 2026-11-27 20 s in 200 steps of 0.1 s.
+        // 0.01 s, section 6), ours 4 s, and `pendulum_200steps` 20 s in 200 steps of 0.1 s.
         let seconds = |t: &Task| t.task.horizon as f64 * t.net.physical_dt * p.steps as f64;
         assert!((seconds(&p.tasks[0]) - 20.0).abs() < 1e-9);
         assert_eq!(p.tasks[0].task.horizon * p.steps, 2000);
@@ -534,7 +534,7 @@ mod tests {
         );
     }
 
-    /// The spec's paper tasks of issue 54: the truck and the lander learn in equal-sensitivity
+    /// The spec's paper tasks: the truck and the lander learn in equal-sensitivity
     /// units under sensitivity weights, the lander's final state is the paper's target set
     /// (position, attitude, descent velocity: 7 independent variables) from an upright, still
     /// start; our earlier lander stays as `lander_13`, box units, 1/σ² weights, all 13.

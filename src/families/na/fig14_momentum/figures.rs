@@ -122,7 +122,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             },
         );
     }
-    // The same sweep with the knots free of the actuators' boxes (ours, issue 54: the boxes
+    // The same sweep with the knots free of the actuators' boxes (ours: the boxes
     // can hide divergence above the stability limit), the start's J drawn as the rule's line.
     if let Some(ut) = tables.get("unclipped_objective").filter(|t| !t.is_empty()) {
         let mut series: Vec<Series> = plain_eta

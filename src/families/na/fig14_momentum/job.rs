@@ -103,7 +103,7 @@ impl Job for Params {
             Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
         let mut converged_t = Table::new(&converged_columns());
         // Every descent of the sweep with the knots clipped to the boxes (as the runs above)
-        // and without (ours, issue 54): whether plain descent above its stability limit
+        // and without (ours): whether plain descent above its stability limit
         // diverges once the boxes no longer hide it.
         let mut unclipped_t = Table::new(&UNCLIPPED_COLUMNS);
         // The unclipped descents' objective per iteration (the figure's unclipped panel).
@@ -309,7 +309,7 @@ impl Job for Params {
     }
 }
 
-/// Columns of `unclipped.csv` (ours, issue 54): per descent (method, eta in units of 1/lambda,
+/// Columns of `unclipped.csv` (ours): per descent (method, eta in units of 1/lambda,
 /// alpha) with its knots clipped to the actuators' boxes or not (`clipped`, 1 or 0), the objective at
 /// the start, at the last iteration, its least and its largest over the run, and whether it
 /// diverged (1 or 0): the last objective not finite or above the start's (the rule, ours, fixed before

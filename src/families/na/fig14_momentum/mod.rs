@@ -33,9 +33,9 @@
 //! times, emulated and simulated (tilt: angle of the thrust axis from vertical, rad).
 //! `unclipped` (job.rs, `UNCLIPPED_COLUMNS`) and `unclipped_objective` (method, eta, alpha,
 //! iteration, objective): every descent again with its knots free of the actuators' boxes
-//! (ours, issue 54), drawn as the figure's last panel.
+//! (ours), drawn as the figure's last panel.
 //!
-//! **Through the DAgger net (ours, issue 11).** With `[params.dagger]`, momentum and plain
+//! **Through the DAgger net (ours).** With `[params.dagger]`, momentum and plain
 //! descent (same η, α, iterations) also learn through the lander's final-round DAgger net of
 //! `na_fig13_control` ([`crate::families::na::fig13_control::dagger`]; its task, learner and
 //! settings are rebuilt here from this spec so its cache key is Fig. 13's), λ re-measured at

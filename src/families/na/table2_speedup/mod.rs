@@ -15,7 +15,7 @@
 //!
 //! Speedup = n × (physical step cost / emulator step cost), with n the physical steps one
 //! emulator step covers, so a cheap simulator makes a small speedup whatever the net costs
-//! (issue 11, defect 8): every row carries that breakdown. Two comparisons the paper made
+//! so every row carries that breakdown. Two comparisons the paper made
 //! besides: the dolphin against an implicit mass-spring integrator like its \[18\]
 //! ([`crate::physics::dolphin::ImplicitDolphin`], linearized backward Euler) at the paper's
 //! δt = 0.01 s (§6: 20 s are 2,000 physical steps), covering the emulator's simulated time; and
