@@ -1769,7 +1769,7 @@ mod tests {
     }
 
     #[test]
-    #[ignore = "a known limitation, kept as its record (issue 11, defects 4 and 5): an \
+    #[ignore = "a known limitation, kept as its record: an \
                 unanchored net's drift at rest is its bias at one point: here 3.4 m one-step without noise, 0.94 m with 0.05 (0.46 m and 0.05 m \
                 at 1,000 iterations); with na_table1_structure's k = 8 rollout fine-tuning \
                 (600 iterations, no noise) 0.72 m (1.3 m with noise 0.05); full scale 0.99 m \

@@ -1,7 +1,7 @@
 //! Figures: multi-panel line and scatter charts written as PNG and SVG.
 //!
 //! Log axes use plotters' logarithmic coordinates (points ≤ 0 are skipped there). The y-axis description is written horizontally above
-//! the plotting area: plotters draws it unrotated in PNG output (a plotters limitation), which
+//! the plotting area: plotters draws it unrotated in PNG output (plotters-rs/plotters#655 upstream), which
 //! would overlap the tick labels.
 //!
 //! Fonts come from the `dejavu` crate (no system fontconfig needed).

@@ -15,7 +15,9 @@
 use super::{Formulation, Params, Task};
 use crate::emulator::catalog::BuildSpec;
 use crate::emulator::Emulator;
-use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv, unique, Table, Tables};
+use crate::experiment::output::{
+    df_f64, df_str, read_csv, read_optional_csv, unique, Table, Tables,
+};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::sig;
 use crate::experiment::stats::median;
