@@ -6,7 +6,8 @@
 //! tiny emulators trained by each method and rolled out (recorded on 2026-11-29 on the same
 //! machine, the same with `MOTIONLAB_SIMD=scalar` and `avx2`). The pendulums' and the tiny
 //! emulators' constants were recorded again on 2026-12-02 for two deliberate changes: the
-//! pendulum's elbow and pivot friction and the emulators' typical training data.
+//! pendulum's elbow and pivot friction and the emulators' typical training data. The jumper's
+//! crouch was added on 2026-12-03 (portable math since then).
 //!
 //! A failure on a machine where the rest of the suite passes means some operation on that
 //! path picks its implementation by processor (a libm call, a dispatched matrix kernel):
@@ -293,6 +294,24 @@ fn bellman_combination_and_portable_functions_keep_their_bits() {
             ("portable", 0x36d05a7346521db0),
         ],
     );
+}
+
+/// The jumper's crouch (an inverse-kinematics pose built with the portable sine, cosine and
+/// arctangent, the start state of every jump DDP optimizes) over a grid of leans, shin angles
+/// and arm angles.
+#[test]
+fn the_jumpers_crouch_keeps_its_bits() {
+    let j = motionlab::physics::jumper::Jumper::default();
+    let mut h = Fnv::new();
+    for k in 0..24 {
+        let (lean, shin, arm) = (
+            0.1 + 0.03 * k as f64,
+            0.4 + 0.025 * k as f64,
+            -0.5 + 0.05 * k as f64,
+        );
+        h.all(&j.crouch(0.2 * k as f64, lean, shin, arm));
+    }
+    check(&[("crouch".into(), h.0)], &[("crouch", 0xa0c7ec33f18649d9)]);
 }
 
 /// A tiny emulator of `model` trained by `method` (a few iterations on a few hundred
