@@ -438,6 +438,16 @@ impl Rule {
         t
     }
 
+    /// How the grades are given, as [`Rule::text`] words it after "Held needs" (up to the
+    /// nulls).
+    fn grading(&self) -> String {
+        let text = self.text();
+        text.split_once("Held needs")
+            .map(|(_, g)| g.split(". Each check's null").next().unwrap_or(g))
+            .unwrap_or("")
+            .to_string()
+    }
+
     /// Every check's line (premise first), each with its outcome.
     pub fn lines(&self) -> String {
         let mut t = String::new();
@@ -524,11 +534,7 @@ impl Rule {
         for (i, c) in self.held.iter().enumerate() {
             let _ = writeln!(t, "- {} {}{}", tag(i), c.line(), null(c));
         }
-        let text = self.text();
-        let grading = text
-            .split_once("Held needs")
-            .map(|(_, g)| g.split(". Each check's null").next().unwrap_or(g))
-            .unwrap_or("");
+        let grading = self.grading();
         let _ = writeln!(t, "- Grades: held needs{grading}.");
         t
     }
@@ -588,11 +594,7 @@ impl Rule {
             row(&mut t, &tag(i), c);
         }
         t.push('\n');
-        let text = self.text();
-        let grading = text
-            .split_once("Held needs")
-            .map(|(_, g)| g.split(". Each check's null").next().unwrap_or(g))
-            .unwrap_or("");
+        let grading = self.grading();
         let _ = writeln!(t, "- Rule: held needs{grading}.");
         t
     }

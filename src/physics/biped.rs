@@ -124,6 +124,10 @@ impl Terrain {
     }
 }
 
+/// The largest RK4 step (s) on the default ground ([`Contact::default`]): its 6000 N·s/m of
+/// damping per point makes RK4 unstable at larger steps for the lightest links.
+pub const GROUND_RK4_MAX_DT: f64 = 4.5e-4;
+
 /// Penalty contact constants.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

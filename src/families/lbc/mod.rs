@@ -83,6 +83,20 @@ impl CostScales {
     }
 }
 
+/// A contact family's `knot_dt`: positive and at most the ground's stable RK4 step
+/// ([`crate::physics::biped::GROUND_RK4_MAX_DT`]).
+pub(crate) fn knot_dt_on_ground(knot_dt: f64) -> Result<(), ParamError> {
+    use crate::physics::biped::GROUND_RK4_MAX_DT;
+    ensure(
+        knot_dt > 0.0 && knot_dt <= GROUND_RK4_MAX_DT,
+        "knot_dt",
+        format!(
+            "must be in (0, {:.2} ms]: RK4 on the ground's 6000 N s/m damping is unstable above",
+            GROUND_RK4_MAX_DT * 1e3
+        ),
+    )
+}
+
 /// §4.1's scale rule ("the quadratic cost functions should share the same scale factor which
 /// is inversely proportional to the square of the distance between each minimum point"): the
 /// squared distance between two examples' terminal targets in the terminal metric `q`, so their

@@ -132,11 +132,7 @@ impl Validate for Params {
         )?;
         positive("warmup_s", self.warmup_s)?;
         ensure(self.warmup_s <= 60.0, "warmup_s", "at most 60 s")?;
-        ensure(
-            self.knot_dt > 0.0 && self.knot_dt <= 4.5e-4,
-            "knot_dt",
-            "must be in (0, 0.45 ms]: RK4 on the ground's 6000 N s/m damping is unstable above",
-        )?;
+        crate::families::lbc::knot_dt_on_ground(self.knot_dt)?;
         ensure(
             (1..=100).contains(&self.substeps),
             "substeps",
