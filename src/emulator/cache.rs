@@ -118,8 +118,8 @@ struct Stored {
     /// The rollout fine-tuning trace, same layout (absent when it was off).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     rollout_trace: Vec<(usize, u64, u64)>,
-    /// FNV-1a of the entry's JSON without this field ([`Stored::content_hash`]): a file whose
-    /// content no longer matches it (a flipped bit, an edit) is rebuilt. Absent in entries
+    /// FNV-1a of the file's text before this field, the last one ([`with_checksum`]): a file
+    /// whose text no longer matches it (a flipped bit, an edit) is rebuilt. Absent in entries
     /// written before it existed, which are checked for parse and finiteness only and then
     /// stamped.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -127,26 +127,6 @@ struct Stored {
 }
 
 impl Stored {
-    /// The hash of the entry's canonical JSON without its checksum (serde_json writes the same
-    /// fields in the same order with the same number texts, so a parsed entry hashes as the
-    /// one written).
-    fn content_hash(&self) -> Result<u64, serde_json::Error> {
-        let text = serde_json::to_string(&Stored {
-            checksum: None,
-            key: self.key.clone(),
-            stop: self.stop.clone(),
-            weights: self.weights.clone(),
-            input_mean: self.input_mean.clone(),
-            input_std: self.input_std.clone(),
-            output_mean: self.output_mean.clone(),
-            output_std: self.output_std.clone(),
-            trace: self.trace.clone(),
-            rollout_trace: self.rollout_trace.clone(),
-            ..*self
-        })?;
-        Ok(fnv1a(text.as_bytes()))
-    }
-
     /// Every number a net is built from is finite (weights, normalizations, the step).
     fn finite(&self) -> bool {
         [
@@ -161,6 +141,25 @@ impl Stored {
         .chain(std::iter::once(&self.dt))
         .all(|&b| f64::from_bits(b).is_finite())
     }
+}
+
+/// The key of the checksum field, the last in the file's text.
+const CHECKSUM_KEY: &str = ",\"checksum\":";
+
+/// `text` (an entry's JSON object without a checksum) with its checksum appended as the last
+/// field: the hash is of the text itself, byte for byte (parsing the numbers back and writing
+/// them again would not do: serde_json's default float parsing is not exact).
+fn with_checksum(text: &str) -> String {
+    let body = text.strip_suffix('}').unwrap_or(text);
+    format!("{body}{CHECKSUM_KEY}{}}}", fnv1a(text.as_bytes()))
+}
+
+/// Whether `text` ends with a checksum field, and if so whether it matches the text before it.
+fn checksum_matches(text: &str) -> Option<bool> {
+    let at = text.rfind(CHECKSUM_KEY)?;
+    let digits = text[at + CHECKSUM_KEY.len()..].strip_suffix('}')?;
+    let sum: u64 = digits.parse().ok()?;
+    Some(fnv1a(format!("{}}}", &text[..at]).as_bytes()) == sum)
 }
 
 /// Why a cache file is not used: absent or another net's (a plain miss), or damaged.
@@ -188,10 +187,8 @@ fn checked_entry(path: &Path, key: &str, shape: [usize; 3]) -> Result<Stored, Da
     {
         return Err(Damage::Damaged("has the wrong number of weights"));
     }
-    if let Some(sum) = s.checksum {
-        if s.content_hash().ok() != Some(sum) {
-            return Err(Damage::Damaged("does not match its checksum"));
-        }
+    if s.checksum.is_some() && checksum_matches(&text) != Some(true) {
+        return Err(Damage::Damaged("does not match its checksum"));
     }
     if !s.finite() {
         return Err(Damage::Damaged("holds a non-finite weight"));
@@ -301,7 +298,7 @@ pub fn write_record(path: &Path, key: &str, rec: &NetRecord) -> Result<(), Build
 /// [`write_record`] without counting the write as a training.
 fn write_record_quiet(path: &Path, key: &str, rec: &NetRecord) -> Result<(), BuildError> {
     let mlp = &rec.mlp;
-    let mut stored = Stored {
+    let stored = Stored {
         key: key.to_string(),
         shape: [mlp.n_in(), mlp.n_hidden(), mlp.n_out()],
         dt: rec.dt.to_bits(),
@@ -322,8 +319,7 @@ fn write_record_quiet(path: &Path, key: &str, rec: &NetRecord) -> Result<(), Bui
         path: path.display().to_string(),
         message,
     };
-    stored.checksum = Some(stored.content_hash().map_err(|e| fail(e.to_string()))?);
-    let text = serde_json::to_string(&stored).map_err(|e| fail(e.to_string()))?;
+    let text = with_checksum(&serde_json::to_string(&stored).map_err(|e| fail(e.to_string()))?);
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| fail(e.to_string()))?;
     }
@@ -607,13 +603,29 @@ mod tests {
         assert!(cache.load(&s).unwrap().emulator.mlp() == a.emulator.mlp());
     }
 
-    /// The file's JSON with `f` applied to its first weight (a u64 of the f64's bits).
+    /// The file's text with `f` applied to its first weight (a u64 of the f64's bits), edited
+    /// in place: every other byte as written.
     fn with_first_weight(path: &Path, f: impl Fn(u64) -> u64) {
         let text = std::fs::read_to_string(path).unwrap();
-        let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
-        let w = v["weights"][0].as_u64().unwrap();
-        v["weights"][0] = serde_json::json!(f(w));
-        std::fs::write(path, serde_json::to_string(&v).unwrap()).unwrap();
+        let start = text.find("\"weights\":[").unwrap() + "\"weights\":[".len();
+        let end = start + text[start..].find(',').unwrap();
+        let w: u64 = text[start..end].parse().unwrap();
+        let edited = format!("{}{}{}", &text[..start], f(w), &text[end..]);
+        assert_ne!(edited, text);
+        std::fs::write(path, edited).unwrap();
+    }
+
+    /// The checksum is of the text as written: it holds for it, fails after a one-character
+    /// edit anywhere before it, and is absent from a text without it.
+    #[test]
+    fn the_checksum_is_of_the_text_as_written() {
+        let text = r#"{"key":"k","train_s":0.30000000000000004,"weights":[1,2,3]}"#;
+        let stamped = with_checksum(text);
+        assert!(stamped.starts_with(&text[..text.len() - 1]));
+        assert_eq!(checksum_matches(&stamped), Some(true));
+        let edited = stamped.replacen("0.3", "0.4", 1);
+        assert_eq!(checksum_matches(&edited), Some(false));
+        assert_eq!(checksum_matches(text), None);
     }
 
     /// A damaged entry (one flipped bit in a weight, a NaN weight, a truncated file) is not

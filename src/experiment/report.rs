@@ -441,11 +441,16 @@ pub(crate) fn checks_figure(
             }
         })
         .collect();
-    sink.draw(CHECKS_FIGURE, &Figure::grid(panels, 3))
+    // Two wide panels a row: each check's words fit under its own panel.
+    let figure = Figure {
+        panel_size: (960, 440),
+        ..Figure::grid(panels, 2)
+    };
+    sink.draw(CHECKS_FIGURE, &figure)
 }
 
 /// The most characters of a check's label under its panel of the checks figure.
-const LABEL_CHARS: usize = 80;
+const LABEL_CHARS: usize = 84;
 
 /// Marks a figure whose family gives it no caption (a test keeps the report free of it).
 pub const NO_CAPTION: &str = "(no caption yet)";
