@@ -990,6 +990,24 @@ fn na_baselines_swim_quick_traces_every_method_on_its_substrates() {
         .unwrap();
     assert_eq!(dagger_mom[5], dagger_mom[10], "{dagger_mom:?}");
     figure_exists(&d, "na_baselines_swim_objective");
+    // The quick spec's 2 search seeds: each seed's five emulator runs, the run's own seed's
+    // common target and iterations as the report computes them from baselines.csv.
+    assert_eq!(
+        header(&out.join("search_seeds.csv")),
+        "seed,method,initial_objective,best_objective,target,iterations_to_target,distance_simulator_m"
+    );
+    let s = rows(&out.join("search_seeds.csv"));
+    assert_eq!(s.len(), 10, "{s:?}");
+    for seed in ["1", "2"] {
+        let of: Vec<&Vec<String>> = s.iter().filter(|c| c[0] == seed).collect();
+        assert_eq!(of.len(), 5, "seed {seed}");
+        // One start and one target per seed.
+        assert!(
+            of.iter().all(|c| c[2] == of[0][2] && c[4] == of[0][4]),
+            "{of:?}"
+        );
+    }
+    assert_ne!(s[0][2], s[5][2], "two seeds, two random starts");
 }
 
 #[test]

@@ -380,7 +380,7 @@ fn capitalized(text: &str) -> String {
 pub const CHECKS_FIGURE: &str = "checks";
 
 /// Its caption.
-const CHECKS_CAPTION: &str = "each check of the verdict's rule that carries a 95% bootstrap interval over its seeds: the median (dot) and interval (bar) against the check's bar (dashed); an interval that straddles the bar makes the check inconclusive.";
+const CHECKS_CAPTION: &str = "each check of the verdict's rule that carries a 95% bootstrap interval over its seeds or trials: the check's value (dot: the median or mean its label names) and interval (bar; an arrow-less bar that runs off the panel reaches infinity, a run that never got there) against the check's bar (dashed); an interval that straddles the bar makes the check inconclusive.";
 
 /// Draws `<id>_checks.png/svg` when `rule` has checks with intervals (none otherwise): one
 /// panel per such check, its median and 95% interval against its bar, so the uncertainty a
@@ -409,9 +409,14 @@ pub(crate) fn checks_figure(
         .iter()
         .map(|(tag, c)| {
             let (lo, hi) = c.interval.unwrap_or((c.value, c.value));
-            let top = hi.max(c.threshold).max(c.value);
-            let bottom = lo.min(c.threshold).min(c.value).min(0.0);
+            // The panel spans the finite values; an infinite bound (a "never") runs off it.
+            let finite = [lo, hi, c.value, c.threshold, 0.0];
+            let finite = finite.iter().copied().filter(|v| v.is_finite());
+            let top = finite.clone().fold(f64::NEG_INFINITY, f64::max);
+            let bottom = finite.fold(f64::INFINITY, f64::min);
             let pad = 0.1 * (top - bottom).max(1e-12);
+            let clamp = |v: f64| v.clamp(bottom - 2.0 * pad, top + 2.0 * pad);
+            let (lo, hi) = (clamp(lo), clamp(hi));
             // The check's words under the panel, where a line has room for them; the title
             // keeps the tag and the outcome, large.
             let mut label: String = c.label.chars().take(LABEL_CHARS).collect();
@@ -424,7 +429,7 @@ pub(crate) fn checks_figure(
                 y_label: "measure".into(),
                 series: vec![
                     Series::line("95% interval", vec![(0.0, lo), (0.0, hi)], 0),
-                    Series::line("median", vec![(0.0, c.value)], 0).mark(Mark::Points),
+                    Series::line("value", vec![(0.0, clamp(c.value))], 0).mark(Mark::Points),
                     Series::line(
                         format!("bar: {} {}", c.cmp.symbol(), sig(c.threshold)),
                         vec![(-0.5, c.threshold), (0.5, c.threshold)],

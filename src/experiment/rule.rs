@@ -461,6 +461,16 @@ impl Rule {
     }
 }
 
+/// A check's interval as the report writes it after its value: " [lo-hi]", or " [lo to hi]"
+/// when a bound is negative (a hyphen beside a minus sign reads as a double minus).
+fn interval_text((lo, hi): (f64, f64)) -> String {
+    if lo < 0.0 || hi < 0.0 {
+        format!(" [{} to {}]", sig(lo), sig(hi))
+    } else {
+        format!(" [{}-{}]", sig(lo), sig(hi))
+    }
+}
+
 impl Rule {
     /// The claims table's one-line reason: for held, that every check passed; otherwise the
     /// first premise check that failed, else the first held check that was inconclusive (for an
@@ -468,9 +478,7 @@ impl Rule {
     pub fn reason(&self) -> String {
         let verdict = self.verdict();
         let short = |tag: &str, c: &Check| {
-            let interval = c.interval.map_or_else(String::new, |(lo, hi)| {
-                format!(" [{}-{}]", sig(lo), sig(hi))
-            });
+            let interval = c.interval.map_or_else(String::new, interval_text);
             if c.fact {
                 format!("{tag}{}: no", c.label)
             } else {
@@ -569,9 +577,7 @@ impl Rule {
             let (ours, needs, null) = if c.fact {
                 (String::new(), String::new(), String::new())
             } else {
-                let interval = c.interval.map_or_else(String::new, |(lo, hi)| {
-                    format!(" [{}-{}]", sig(lo), sig(hi))
-                });
+                let interval = c.interval.map_or_else(String::new, interval_text);
                 (
                     format!("{}{interval}", sig(c.value)),
                     format!("{} {}", c.cmp.symbol(), sig(c.threshold)),
@@ -818,6 +824,7 @@ mod tests {
         let unsure = pass.clone().with_interval(0.5, 2.5);
         let r = rule(vec![], vec![pass.clone(), unsure]);
         assert_eq!(r.reason(), "(b) gain: 2.00 [0.500-2.50], needs >= 1.00");
+        assert_eq!(interval_text((-1.31, -0.226)), " [-1.31 to -0.226]");
         let b = r.bullets();
         assert!(
             b.contains("- (a) gain: 2.00 >= 1.00: yes (null: nothing, 0)"),

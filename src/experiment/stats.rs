@@ -9,7 +9,18 @@ pub const BOOTSTRAP_RESAMPLES: usize = 2000;
 /// The median of the finite values of `v` (the mean of the two middle ones for an even count;
 /// NaN when none is finite).
 pub fn median(v: &[f64]) -> f64 {
-    let mut s: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    middle(v.iter().copied().filter(|x| x.is_finite()).collect())
+}
+
+/// The median of the values of `v` that are not NaN, infinities kept (the mean of the two
+/// middle ones for an even count; NaN when none is left): where +∞ codes "never", a run that
+/// never got there counts as the slowest, not as missing.
+pub fn median_with_infinities(v: &[f64]) -> f64 {
+    middle(v.iter().copied().filter(|x| !x.is_nan()).collect())
+}
+
+/// The median of sorted-or-not `s` (the mean of the two middle ones for an even count).
+fn middle(mut s: Vec<f64>) -> f64 {
     if s.is_empty() {
         return f64::NAN;
     }
@@ -27,7 +38,18 @@ pub fn median(v: &[f64]) -> f64 {
 /// `seed` (so a report is the same on every machine), and the 2.5th and 97.5th percentiles of
 /// their medians. `(median, lo, hi)`; all NaN without a finite value.
 pub fn median_interval(v: &[f64], seed: u64) -> (f64, f64, f64) {
-    let x: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    resampled_median(v.iter().copied().filter(|x| x.is_finite()).collect(), seed)
+}
+
+/// [`median_interval`] over the values that are not NaN, infinities kept (as
+/// [`median_with_infinities`]): an interval bound may be infinite.
+pub fn median_interval_with_infinities(v: &[f64], seed: u64) -> (f64, f64, f64) {
+    resampled_median(v.iter().copied().filter(|x| !x.is_nan()).collect(), seed)
+}
+
+/// The median of `x` and the 2.5th and 97.5th percentiles of the medians of
+/// [`BOOTSTRAP_RESAMPLES`] resamples with replacement (a ChaCha8 stream seeded with `seed`).
+fn resampled_median(x: Vec<f64>, seed: u64) -> (f64, f64, f64) {
     if x.is_empty() {
         return (f64::NAN, f64::NAN, f64::NAN);
     }
@@ -38,12 +60,12 @@ pub fn median_interval(v: &[f64], seed: u64) -> (f64, f64, f64) {
             for s in sample.iter_mut() {
                 *s = x[rng.random_range(0..x.len())];
             }
-            median(&sample)
+            middle(sample.clone())
         })
         .collect();
     medians.sort_by(f64::total_cmp);
     let at = |q: f64| medians[((q * (medians.len() - 1) as f64).round()) as usize];
-    (median(&x), at(0.025), at(0.975))
+    (middle(x), at(0.025), at(0.975))
 }
 
 /// The difference of medians `median(a) - median(b)` of two independent samples with its 95%
@@ -79,26 +101,49 @@ pub fn median_difference_interval(a: &[f64], b: &[f64], seed: u64) -> (f64, f64,
 /// ChaCha8 stream seeded with `seed`, each passed to `stat`; the 2.5th and 97.5th percentiles
 /// of its finite values. NaN without a unit or a finite value.
 pub fn bootstrap_interval(n: usize, seed: u64, stat: impl Fn(&[usize]) -> f64) -> (f64, f64) {
+    bootstrap_intervals(n, seed, 1, |idx, out| out[0] = stat(idx))[0]
+}
+
+/// [`bootstrap_interval`] of `k` statistics computed together from each resample (`stat`
+/// writes them into its slice): the same resamples for all, so a statistic costs nothing
+/// extra where its siblings share the work, and each interval is the one
+/// [`bootstrap_interval`] would give it alone.
+pub fn bootstrap_intervals(
+    n: usize,
+    seed: u64,
+    k: usize,
+    stat: impl Fn(&[usize], &mut [f64]),
+) -> Vec<(f64, f64)> {
     if n == 0 {
-        return (f64::NAN, f64::NAN);
+        return vec![(f64::NAN, f64::NAN); k];
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut idx = vec![0; n];
-    let mut values: Vec<f64> = (0..BOOTSTRAP_RESAMPLES)
-        .map(|_| {
-            for i in idx.iter_mut() {
-                *i = rng.random_range(0..n);
+    let mut one = vec![0.0; k];
+    let mut values: Vec<Vec<f64>> = vec![Vec::with_capacity(BOOTSTRAP_RESAMPLES); k];
+    for _ in 0..BOOTSTRAP_RESAMPLES {
+        for i in idx.iter_mut() {
+            *i = rng.random_range(0..n);
+        }
+        one.fill(f64::NAN);
+        stat(&idx, &mut one);
+        for (v, &x) in values.iter_mut().zip(&one) {
+            if x.is_finite() {
+                v.push(x);
             }
-            stat(&idx)
-        })
-        .filter(|v| v.is_finite())
-        .collect();
-    if values.is_empty() {
-        return (f64::NAN, f64::NAN);
+        }
     }
-    values.sort_by(f64::total_cmp);
-    let at = |q: f64| values[((q * (values.len() - 1) as f64).round()) as usize];
-    (at(0.025), at(0.975))
+    values
+        .into_iter()
+        .map(|mut v| {
+            if v.is_empty() {
+                return (f64::NAN, f64::NAN);
+            }
+            v.sort_by(f64::total_cmp);
+            let at = |q: f64| v[((q * (v.len() - 1) as f64).round()) as usize];
+            (at(0.025), at(0.975))
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -146,6 +191,20 @@ mod tests {
         assert!(median(&[]).is_nan());
     }
 
+    /// Where +∞ codes "never", it counts as the slowest value; NaN is still skipped; the
+    /// interval's upper bound reaches +∞ once enough resamples draw it.
+    #[test]
+    fn the_median_with_infinities_counts_never_as_slowest() {
+        let inf = f64::INFINITY;
+        assert_eq!(median_with_infinities(&[1.0, inf, inf]), inf);
+        assert_eq!(median_with_infinities(&[1.0, 2.0, inf]), 2.0);
+        assert_eq!(median_with_infinities(&[1.0, f64::NAN, 3.0]), 2.0);
+        let (m, lo, hi) = median_interval_with_infinities(&[1.0, 2.0, 3.0, 4.0, inf], 5);
+        assert_eq!(m, 3.0);
+        assert!(lo >= 1.0 && lo <= 3.0 && hi == inf, "{lo} {hi}");
+        assert_eq!(median_interval(&[1.0, 2.0, 3.0, 4.0, inf], 5).0, 2.5);
+    }
+
     /// The bootstrap of the mean of paired units brackets the mean; a constant statistic has
     /// a point interval; the same seed gives the same interval.
     #[test]
@@ -157,5 +216,12 @@ mod tests {
         assert_eq!(bootstrap_interval(x.len(), 3, mean), (lo, hi));
         assert_eq!(bootstrap_interval(4, 1, |_| 2.5), (2.5, 2.5));
         assert!(bootstrap_interval(0, 1, |_| 1.0).0.is_nan());
+        // Two statistics from the same resamples: each interval as it would be alone.
+        let max = |idx: &[usize]| idx.iter().map(|&i| x[i]).fold(f64::MIN, f64::max);
+        let both = bootstrap_intervals(x.len(), 3, 2, |idx, out| {
+            out[0] = mean(idx);
+            out[1] = max(idx);
+        });
+        assert_eq!(both, vec![(lo, hi), bootstrap_interval(x.len(), 3, max)]);
     }
 }

@@ -36,7 +36,7 @@ use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
-use crate::experiment::stats::bootstrap_interval;
+use crate::experiment::stats::bootstrap_intervals;
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::lbc::{film, rule_settings, rule_table};
 use crate::physics::diver::{diver, entry_angle};
@@ -497,22 +497,17 @@ fn with_trial_intervals(
     build: impl Fn(&[(String, f64, [f64; 4])]) -> Option<Rule>,
 ) -> Rule {
     let n = trial_ids(rows).len();
-    let value = |idx: &[usize], k: usize| {
-        build(&means_over(rows, Some(idx))).map_or(f64::NAN, |r| {
-            r.premise
-                .iter()
-                .chain(&r.held)
-                .nth(k)
-                .map_or(f64::NAN, |c| c.value)
-        })
-    };
-    let checks: Vec<&mut Check> = rule
-        .premise
-        .iter_mut()
-        .chain(rule.held.iter_mut())
-        .collect();
-    for (k, c) in checks.into_iter().enumerate() {
-        let (lo, hi) = bootstrap_interval(n, BOOTSTRAP_SEED, |idx| value(idx, k));
+    let k = rule.premise.len() + rule.held.len();
+    // One rule built per resample gives every check's value.
+    let intervals = bootstrap_intervals(n, BOOTSTRAP_SEED, k, |idx, out| {
+        if let Some(r) = build(&means_over(rows, Some(idx))) {
+            for (o, c) in out.iter_mut().zip(r.premise.iter().chain(&r.held)) {
+                *o = c.value;
+            }
+        }
+    });
+    let checks = rule.premise.iter_mut().chain(rule.held.iter_mut());
+    for (c, (lo, hi)) in checks.zip(intervals) {
         if lo.is_finite() && hi.is_finite() {
             *c = c.clone().with_interval(lo, hi);
         }

@@ -2,6 +2,7 @@
 //! emulator and the simulator (and on the DAgger net, if asked), each run's best knots
 //! evaluated on both substrates.
 
+use super::report::{common_target, iterations_to};
 use super::settings::SearchBudget;
 use super::{Params, DAGGER_SUBSTRATE, SEARCHES};
 use crate::control::bptt::{Bptt, Descent};
@@ -15,7 +16,8 @@ use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::build_dolphin_emulator;
 use crate::row;
 use crate::seed::mix_seed;
-use rand::Rng;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 /// One finished run.
 struct Run {
@@ -78,12 +80,13 @@ impl Params {
         problem: &BpttProblem<'_, crate::emulator::Emulator>,
         v0: &[f64],
         substrate: &'static str,
+        suffix: &str,
     ) -> Result<Vec<Run>, Error> {
         let label = |name: &str| {
             if substrate == "emulator" {
-                name.to_string()
+                format!("{name}{suffix}")
             } else {
-                format!("{name} ({substrate})")
+                format!("{name} ({substrate}){suffix}")
             }
         };
         let (lambda, spent) = ctx.stage(&label("curvature"), || {
@@ -132,6 +135,79 @@ fn opt(v: Option<f64>) -> f64 {
     v.unwrap_or(f64::NAN)
 }
 
+/// Columns of `search_seeds.csv`: per search seed and emulator run, the seed's common target
+/// J* (the rule's: `rule.target_fraction` of the way from the initial J to the best J any run
+/// from that start reaches), where the run's best J first reached it (NaN: never), and how far
+/// its best knots swim replayed on the simulator.
+pub const SEEDS_COLUMNS: [&str; 7] = [
+    "seed",
+    "method",
+    "initial_objective",
+    "best_objective",
+    "target",
+    "iterations_to_target",
+    "distance_simulator_m",
+];
+
+/// The seed of gradient-free method `k`'s randomness from search seed `seed`.
+fn search_seed(seed: u64, k: usize) -> u64 {
+    mix_seed(seed, 410 + k as u64)
+}
+
+impl Params {
+    /// The random initial knots of search seed `seed` (for the run's own seed, the first start
+    /// of `na_fig13_control`'s dolphin: stream 400).
+    fn initial_knots(&self, seed: u64, n: usize) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, 400));
+        (0..n)
+            .map(|_| self.init_spread * (2.0 * rng.random::<f64>() - 1.0))
+            .collect()
+    }
+
+    /// The search seeds after the run's own: `own + 1 ..= own + search_seeds - 1`.
+    fn further_search_seeds(&self, own: u64) -> Vec<u64> {
+        (1..self.search_seeds as u64).map(|k| own + k).collect()
+    }
+
+    /// The rows of `search_seeds.csv` for the emulator runs `runs` from search seed `seed`'s
+    /// start: the common target over them and each run's iterations to it.
+    fn seed_rows(
+        &self,
+        seed: u64,
+        runs: &[&Run],
+        replay_distance: &dyn Fn(&[f64]) -> f64,
+        table: &mut Table,
+    ) {
+        let j0 = runs
+            .iter()
+            .find(|r| r.method == "bptt_momentum")
+            .and_then(|r| r.result.trace.first())
+            .map_or(f64::NAN, |t| t.best);
+        let j_best = runs
+            .iter()
+            .flat_map(|r| r.result.trace.iter().map(|t| t.best))
+            .fold(f64::INFINITY, f64::min);
+        let target = common_target(j0, j_best, &self.rule);
+        for r in runs {
+            let (k, j): (Vec<f64>, Vec<f64>) = r
+                .result
+                .trace
+                .iter()
+                .map(|t| (t.iteration as f64, t.best))
+                .unzip();
+            table.push(row![
+                seed as i64,
+                r.method,
+                j0,
+                r.result.best_value,
+                target,
+                opt(iterations_to(&k, &j, target)),
+                replay_distance(&r.result.best)
+            ]);
+        }
+    }
+}
+
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).unwrap_or_default()
@@ -148,10 +224,7 @@ impl Job for Params {
         let (x0, g0) = swim.start(&body);
         let bptt = Bptt::new(global, &objective, knots, swim.bounds(), &g0).map_err(other)?;
         // The initial knots of na_fig13_control's dolphin.
-        let mut rng = ctx.rng(400);
-        let v0: Vec<f64> = (0..knots.len())
-            .map(|_| self.init_spread * (2.0 * rng.random::<f64>() - 1.0))
-            .collect();
+        let v0 = self.initial_knots(ctx.seed, knots.len());
         let emulator = BpttProblem::new(&bptt);
         let simulator = ReplayProblem::new(
             &bptt,
@@ -164,10 +237,10 @@ impl Job for Params {
         .map_err(other)?;
 
         let mut runs: Vec<Run> = vec![];
-        runs.extend(self.bptt_runs(ctx, &emulator, &v0, "emulator")?);
+        runs.extend(self.bptt_runs(ctx, &emulator, &v0, "emulator", "")?);
         let pb = ctx.progress(2 * SEARCHES.len() as u64, "gradient-free searches");
         for (k, method) in SEARCHES.into_iter().enumerate() {
-            let seed = mix_seed(ctx.seed, 410 + k as u64);
+            let seed = search_seed(ctx.seed, k);
             let result = ctx.stage(&format!("{method} emulator"), || {
                 self.search(method, &emulator, &v0, &self.budget.emulator, seed)
             })?;
@@ -202,9 +275,9 @@ impl Job for Params {
         };
         if let Some(b) = &dagger_bptt {
             let problem = BpttProblem::new(b);
-            runs.extend(self.bptt_runs(ctx, &problem, &v0, DAGGER_SUBSTRATE)?);
+            runs.extend(self.bptt_runs(ctx, &problem, &v0, DAGGER_SUBSTRATE, "")?);
             for (k, method) in SEARCHES.into_iter().enumerate() {
-                let seed = mix_seed(ctx.seed, 410 + k as u64);
+                let seed = search_seed(ctx.seed, k);
                 let result = ctx.stage(&format!("{method} ({DAGGER_SUBSTRATE})"), || {
                     self.search(method, &problem, &v0, &self.budget.emulator, seed)
                 })?;
@@ -309,9 +382,43 @@ impl Job for Params {
                 opt(own.map(|x| x.iteration as f64))
             ]);
         }
+        // The emulator runs again from each further search seed's start (search_seeds.csv).
+        let replay_distance = |v: &[f64]| -> f64 {
+            if v.iter().any(|x| !x.is_finite()) {
+                return f64::NAN;
+            }
+            swim.distance(&simulator.rollout(v).states)
+        };
+        let mut seeds_t = Table::new(&SEEDS_COLUMNS);
+        let own: Vec<&Run> = runs.iter().filter(|r| r.substrate == "emulator").collect();
+        self.seed_rows(ctx.seed, &own, &replay_distance, &mut seeds_t);
+        for s in self.further_search_seeds(ctx.seed) {
+            let v0 = self.initial_knots(s, knots.len());
+            let mut more =
+                self.bptt_runs(ctx, &emulator, &v0, "emulator", &format!(", seed {s}"))?;
+            for (k, method) in SEARCHES.into_iter().enumerate() {
+                let result = ctx.stage(&format!("{method} emulator, seed {s}"), || {
+                    self.search(
+                        method,
+                        &emulator,
+                        &v0,
+                        &self.budget.emulator,
+                        search_seed(s, k),
+                    )
+                })?;
+                more.push(Run {
+                    method,
+                    substrate: "emulator",
+                    result,
+                });
+            }
+            let more: Vec<&Run> = more.iter().collect();
+            self.seed_rows(s, &more, &replay_distance, &mut seeds_t);
+        }
         Ok(Tables::from([
             ("baselines", baselines),
             ("final", final_t),
+            ("search_seeds", seeds_t),
             ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
         ]))
     }

@@ -34,6 +34,9 @@
 //!   swim; `target` is BPTT-momentum's best J on the row's substrate (on the simulator: its
 //!   learned knots replayed there) and the `*_to_bptt` columns are where the run's best J
 //!   first reached it (NaN: never); `best_iteration` is where it reached its own best.
+//! - `search_seeds` ([`job::SEEDS_COLUMNS`]): the emulator runs from each of
+//!   [`Params::search_seeds`] random starts (the run's own first), each with the common target
+//!   of its start; the verdict reads their medians ([`report::swim_rule_over`]).
 //!
 //! Here: the parameters and their validation, and the family; `settings` holds each method's
 //! settings, `job` runs the searches, `figures` and `report` present them (the report holds
@@ -73,6 +76,11 @@ pub struct Params {
     pub curvature_iterations: usize,
     /// Half-width of the uniform random initial knots (normalized units).
     pub init_spread: f64,
+    /// Search seeds the verdict's medians run over: the run's own and the next
+    /// `search_seeds - 1` (each its own random start and gradient-free randomness; the
+    /// emulator runs only). 1 (the default) judges the run's own seed alone.
+    #[serde(default = "one_seed")]
+    pub search_seeds: usize,
     /// The swim task.
     pub swim: SwimTask,
     /// The dolphin hierarchy (only its global net is used).
@@ -94,6 +102,13 @@ pub struct Params {
     /// The verdict's thresholds (ours; [`report::swim_rule`]).
     pub rule: SwimRule,
 }
+
+fn one_seed() -> usize {
+    1
+}
+
+/// The most search seeds a run may ask for.
+pub const MAX_SEARCH_SEEDS: usize = 32;
 
 /// The verdict's thresholds (ours: the paper compares "about 20 iterations" with "500-3,500").
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -199,6 +214,11 @@ impl Validate for Params {
             self.init_spread >= 0.0 && self.init_spread <= 1.0,
             "init_spread",
             "must be in [0, 1]",
+        )?;
+        ensure(
+            (1..=MAX_SEARCH_SEEDS).contains(&self.search_seeds),
+            "search_seeds",
+            format!("must be in 1..={MAX_SEARCH_SEEDS}"),
         )?;
         self.swim.validate("swim")?;
         self.nets.validate("nets", self.example_scale)?;

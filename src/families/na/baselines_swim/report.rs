@@ -3,9 +3,10 @@
 
 use super::{SwimRule, DAGGER_SUBSTRATE, SEARCHES};
 use crate::experiment::other;
-use crate::experiment::output::{df_f64, df_str, read_csv};
+use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::stats::median_interval_with_infinities;
 use crate::experiment::Error;
 use std::path::Path;
 
@@ -162,7 +163,36 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
         }
         notes
     };
-    let main = judge("emulator").ok_or_else(|| other("no bptt_momentum run"))?;
+    let mut main = judge("emulator").ok_or_else(|| other("no bptt_momentum run"))?;
+    // Over several search seeds the verdict reads their medians (search_seeds.csv).
+    let mut seeds_line = String::new();
+    if let Some(seeds) = seed_measures(dir, &bars)?.filter(|s| s.len() > 1) {
+        let measures: Vec<SwimMeasures> = seeds.iter().map(|(_, m)| *m).collect();
+        main.rule = swim_rule_over(&measures, &bars);
+        let (verdict, lines, text) = shown(main.rule.as_ref(), " No rule: a bar its null meets.");
+        (main.verdict, main.lines, main.text) = (verdict, lines, text);
+        let per_seed: Vec<String> = seeds
+            .iter()
+            .map(|(s, m)| {
+                format!(
+                    "seed {s}: BPTT {}, {} of methods slow, {} faster, swims {} m farther",
+                    if m.bptt.is_finite() {
+                        format!("at iteration {}", m.bptt)
+                    } else {
+                        "never".into()
+                    },
+                    sig(m.slow_share),
+                    m.faster,
+                    sig(m.swim_margin)
+                )
+            })
+            .collect();
+        seeds_line = format!(
+            " Over {} search seeds (each its own random start and gradient-free randomness, on the emulator; the checks read their medians): {}.",
+            seeds.len(),
+            per_seed.join("; ")
+        );
+    }
     let (rival_sim, verdict) = (main.rival_sim, main.verdict);
     let (lines, text) = (&main.lines, &main.text);
     let (k_bptt, notes) = (k_to[mom], own_notes("emulator"));
@@ -231,7 +261,8 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
                 sim_notes.join("; "),
                 sig(d_sim[mom]),
                 sig(rival_sim)
-            ) + &dagger_line,
+            ) + &seeds_line
+                + &dagger_line,
         })
 }
 
@@ -262,15 +293,52 @@ pub fn iterations_to(iterations: &[f64], best: &[f64], target: f64) -> Option<f6
         .map(|(&k, _)| k)
 }
 
-/// The verdict's rule on one substrate, from the iterations BPTT-momentum (`bptt`) and each
-/// gradient-free method (`rivals`) need to reach the common target (`None`: never), and how far
-/// BPTT's knots (`bptt_swim`) and the farthest of the methods' knots (`rival_swim`) swim on the
-/// simulator: (a) BPTT reaches J* within `fast_iterations` (null: the initial knots, which
-/// never do); (b) the share of methods needing at least `slow_factor` times BPTT's iterations
-/// or never getting there is 1, and (c) above `partly_slow_share` (null for both: methods as
-/// fast as BPTT, 0); (d) no method needs fewer iterations than BPTT (null: every method
-/// faster); (e) BPTT's knots swim farther on the simulator than every method's (null: the
-/// farthest method's knots themselves, 0 m farther). Held needs all; partly (a), (c), (d).
+/// What the verdict's rule measures from one start on one substrate (see [`swim_rule`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SwimMeasures {
+    /// BPTT-momentum's iterations to J* (+∞: never).
+    pub bptt: f64,
+    /// Share of the gradient-free methods needing at least `slow_factor` x BPTT's
+    /// iterations or never getting there.
+    pub slow_share: f64,
+    /// Gradient-free methods reaching J* in fewer iterations than BPTT.
+    pub faster: f64,
+    /// How much farther BPTT's knots swim on the simulator than every method's (m).
+    pub swim_margin: f64,
+    /// Gradient-free methods compared.
+    pub methods: usize,
+}
+
+/// The rule's measures from the iterations BPTT-momentum (`bptt`) and each gradient-free
+/// method (`rivals`) need to reach the common target (`None`: never), and how far BPTT's knots
+/// (`bptt_swim`) and the farthest of the methods' knots (`rival_swim`) swim on the simulator.
+pub fn swim_measures(
+    bptt: Option<f64>,
+    rivals: &[Option<f64>],
+    bptt_swim: f64,
+    rival_swim: f64,
+    bars: &SwimRule,
+) -> SwimMeasures {
+    let kb = bptt.unwrap_or(f64::INFINITY);
+    let slow = rivals
+        .iter()
+        .filter(|k| k.map_or(true, |k| k >= bars.slow_factor * kb.max(1.0)))
+        .count() as f64;
+    SwimMeasures {
+        bptt: kb,
+        slow_share: if rivals.is_empty() {
+            f64::NAN
+        } else {
+            slow / rivals.len() as f64
+        },
+        faster: rivals.iter().filter(|k| k.is_some_and(|k| k < kb)).count() as f64,
+        swim_margin: bptt_swim - rival_swim,
+        methods: rivals.len(),
+    }
+}
+
+/// The verdict's rule on one substrate from one start: [`swim_rule_over`] of its
+/// [`swim_measures`].
 pub fn swim_rule(
     bptt: Option<f64>,
     rivals: &[Option<f64>],
@@ -278,61 +346,138 @@ pub fn swim_rule(
     rival_swim: f64,
     bars: &SwimRule,
 ) -> Option<Rule> {
-    let kb = bptt.unwrap_or(f64::INFINITY);
-    let slow = rivals
-        .iter()
-        .filter(|k| k.map_or(true, |k| k >= bars.slow_factor * kb.max(1.0)))
-        .count() as f64;
-    let share = if rivals.is_empty() {
-        f64::NAN
-    } else {
-        slow / rivals.len() as f64
+    swim_rule_over(
+        &[swim_measures(bptt, rivals, bptt_swim, rival_swim, bars)],
+        bars,
+    )
+}
+
+/// Seed of the bootstrap over search seeds (fixed, so a report is the same on every machine).
+const BOOTSTRAP_SEED: u64 = 1;
+
+/// The verdict's rule over the measures of one or more search seeds (each its own random
+/// start; with several, each check reads the median over them with its 95% bootstrap
+/// interval, a "never" counting as the slowest): (a) BPTT reaches J* within
+/// `fast_iterations` (null: the initial knots, which never do); (b) the share of methods
+/// needing at least `slow_factor` times BPTT's iterations or never getting there is 1, and
+/// (c) above `partly_slow_share` (null for both: methods as fast as BPTT, 0); (d) no method
+/// needs fewer iterations than BPTT (null: every method faster); (e) BPTT's knots swim farther
+/// on the simulator than every method's (null: the farthest method's knots themselves, 0 m
+/// farther). Held needs all; partly (a), (c), (d).
+pub fn swim_rule_over(seeds: &[SwimMeasures], bars: &SwimRule) -> Option<Rule> {
+    let k = seeds.len();
+    let over = |f: fn(&SwimMeasures) -> f64| -> (f64, Option<(f64, f64)>) {
+        let v: Vec<f64> = seeds.iter().map(f).collect();
+        if k > 1 {
+            let (m, lo, hi) = median_interval_with_infinities(&v, BOOTSTRAP_SEED);
+            (m, Some((lo, hi)))
+        } else {
+            (v.first().copied().unwrap_or(f64::NAN), None)
+        }
     };
-    let faster = rivals.iter().filter(|k| k.is_some_and(|k| k < kb)).count() as f64;
-    let n = rivals.len() as f64;
+    let label = |what: String| -> String {
+        if k > 1 {
+            format!("{what}, median over {k} search seeds")
+        } else {
+            what
+        }
+    };
+    let n = seeds.iter().map(|m| m.methods).max().unwrap_or(0) as f64;
     let slow_label = format!(
         "share of gradient-free methods needing >= {}x BPTT's iterations to J* (or never reaching it)",
         sig(bars.slow_factor)
     );
     let as_fast = "methods as fast as BPTT";
+    let check = |what: String,
+                 (value, interval): (f64, Option<(f64, f64)>),
+                 cmp: Cmp,
+                 bar: f64,
+                 null: Null| {
+        Check::new(label(what), value, cmp, bar, null).map(|c| match interval {
+            Some((lo, hi)) => c.with_interval(lo, hi),
+            None => c,
+        })
+    };
     let held = vec![
-        Check::new(
-            "BPTT-momentum's iterations to J*",
-            kb,
+        check(
+            "BPTT-momentum's iterations to J*".into(),
+            over(|m| m.bptt),
             Cmp::AtMost,
             bars.fast_iterations,
             Null::new("the initial knots (never)", f64::INFINITY),
         ),
-        Check::new(
+        check(
             slow_label.clone(),
-            share,
+            over(|m| m.slow_share),
             Cmp::AtLeast,
             1.0,
             Null::new(as_fast, 0.0),
         ),
-        Check::new(
+        check(
             slow_label,
-            share,
+            over(|m| m.slow_share),
             Cmp::Above,
             bars.partly_slow_share,
             Null::new(as_fast, 0.0),
         ),
-        Check::new(
-            "gradient-free methods reaching J* in fewer iterations than BPTT",
-            faster,
+        check(
+            "gradient-free methods reaching J* in fewer iterations than BPTT".into(),
+            over(|m| m.faster),
             Cmp::AtMost,
             0.0,
             Null::new("every method faster", n.max(1.0)),
         ),
-        Check::new(
-            "how much farther BPTT's knots swim on the simulator than every method's (m)",
-            bptt_swim - rival_swim,
+        check(
+            "how much farther BPTT's knots swim on the simulator than every method's (m)".into(),
+            over(|m| m.swim_margin),
             Cmp::Above,
             0.0,
             Null::new("the farthest method's knots themselves", 0.0),
         ),
     ];
     Rule::gated(vec![], held, Partly::All(vec![0, 2, 3]))
+}
+
+/// The measures of every search seed in `search_seeds.csv` (`None` without the table).
+pub fn seed_measures(
+    dir: &Path,
+    bars: &SwimRule,
+) -> Result<Option<Vec<(i64, SwimMeasures)>>, Error> {
+    let Some(t) = read_optional_csv(&dir.join("search_seeds.csv"))? else {
+        return Ok(None);
+    };
+    let (seed, meth) = (df_f64(&t, "seed")?, df_str(&t, "method")?);
+    let (k, d) = (
+        df_f64(&t, "iterations_to_target")?,
+        df_f64(&t, "distance_simulator_m")?,
+    );
+    let mut seeds: Vec<i64> = seed.iter().map(|&s| s as i64).collect();
+    seeds.dedup();
+    let out = seeds
+        .into_iter()
+        .map(|s| {
+            let rows: Vec<usize> = (0..seed.len()).filter(|&r| seed[r] as i64 == s).collect();
+            let of = |m: &str| rows.iter().copied().find(|&r| meth[r] == m);
+            let finite = |r: usize| Some(k[r]).filter(|x| x.is_finite());
+            let mom = of("bptt_momentum");
+            let rivals: Vec<Option<f64>> =
+                SEARCHES.iter().filter_map(|m| of(m)).map(finite).collect();
+            let rival_swim = SEARCHES
+                .iter()
+                .filter_map(|m| of(m))
+                .map(|r| d[r])
+                .fold(f64::NEG_INFINITY, f64::max);
+            let m = swim_measures(
+                mom.and_then(finite),
+                &rivals,
+                mom.map_or(f64::NAN, |r| d[r]),
+                rival_swim,
+                bars,
+            );
+            (s, m)
+        })
+        .collect();
+    Ok(Some(out))
 }
 
 #[cfg(test)]
@@ -385,6 +530,32 @@ mod tests {
         // Two of three slow, none faster: partly.
         let rivals = [Some(297.0), None, Some(20.0)];
         assert_eq!(rule(Some(3.0), &rivals, 0.959, 0.797), (false, true));
+    }
+
+    /// Over several search seeds each check reads the median with its interval: five seeds
+    /// alike hold; one seed of five where BPTT never reaches J* (a "never" counts as the
+    /// slowest) leaves the medians passing but their intervals reaching that seed's values
+    /// (three or more of five resampled draws of it happen more than 2.5% of the time), so the
+    /// verdict is inconclusive; one seed alone has no interval.
+    #[test]
+    fn over_search_seeds_the_rule_reads_medians_and_their_intervals() {
+        let m = |bptt: Option<f64>, margin: f64| {
+            swim_measures(bptt, &[Some(300.0), None, Some(3000.0)], margin, 0.0, &BARS)
+        };
+        let mut seeds = vec![m(Some(4.0), 0.2); 5];
+        let r = swim_rule_over(&seeds, &BARS).unwrap();
+        assert_eq!(r.verdict(), Verdict::Held, "{}", r.table());
+        assert!(r.table().contains("median over 5 search seeds"));
+        seeds[4] = m(None, 0.2);
+        let r = swim_rule_over(&seeds, &BARS).unwrap();
+        assert_eq!(r.verdict(), Verdict::Inconclusive, "{}", r.table());
+        assert!(r.table().contains("4.00 [4.00-inf]"), "{}", r.table());
+        // Every seed's knots swimming less far on the simulator: not held, whatever the rest.
+        let behind = vec![m(Some(4.0), -0.3); 5];
+        let r = swim_rule_over(&behind, &BARS).unwrap();
+        assert_eq!(r.verdict(), Verdict::Partly, "{}", r.table());
+        let one = swim_rule_over(&seeds[..1], &BARS).unwrap();
+        assert!(!one.table().contains('['), "{}", one.table());
     }
 
     #[test]

@@ -1,8 +1,12 @@
-//! Figure `objective` of `na_fig14_momentum`: momentum against plain descent, the same through
-//! the DAgger net, and the plain learning-rate sweep.
+//! Figures of `na_fig14_momentum`: `objective` (momentum against plain descent, the same through
+//! the DAgger net, and the plain learning-rate sweep) and `net_seeds` (the verdict's ratio per
+//! Table 1 lander net seed).
 
 use crate::experiment::output::{Table, Tables};
-use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::report::sig;
+use crate::experiment::rule::rule_setting;
+use crate::experiment::stats::median_interval;
 use crate::experiment::Error;
 use std::path::PathBuf;
 
@@ -153,5 +157,94 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         });
     }
     let cols = panels.len().min(2);
-    fig.draw("objective", &Figure::grid(panels, cols))
+    let mut out = fig.draw("objective", &Figure::grid(panels, cols))?;
+    out.extend(net_seeds_figure(fig, tables)?);
+    Ok(out)
+}
+
+/// Figure `net_seeds` (none without `net_seeds.csv` or with one seed): per Table 1 lander net
+/// seed, momentum's iterations to plain descent's final J over plain's (the verdict's (a),
+/// [`super::report::seed_ratio`]) as a dot labelled with the seed, the median over the seeds
+/// with its 95% bootstrap interval in the legend, the held bar and plain descent itself (1).
+fn net_seeds_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let Some(t) = tables.get("net_seeds").filter(|t| !t.is_empty()) else {
+        return Ok(vec![]);
+    };
+    let (seed, method, compared) = (t.f64s("net_seed"), t.strs("method"), t.f64s("compared"));
+    let (iters, fin, reach) = (
+        t.f64s("iterations"),
+        t.f64s("final_objective"),
+        t.f64s("iterations_to_plain_final"),
+    );
+    let mut seeds: Vec<f64> = Vec::new();
+    for &s in &seed {
+        if !seeds.contains(&s) {
+            seeds.push(s);
+        }
+    }
+    if seeds.len() < 2 {
+        return Ok(vec![]);
+    }
+    let find = |s: f64, m: &str| {
+        (0..seed.len()).find(|&r| seed[r] == s && method[r] == m && compared[r] == 1.0)
+    };
+    let points: Vec<(f64, f64)> = seeds
+        .iter()
+        .filter_map(|&s| {
+            let (rm, rp) = (find(s, "momentum")?, find(s, "plain")?);
+            let k = (reach[rm].is_finite() && reach[rm] >= 0.0).then(|| reach[rm] as usize);
+            let ratio = super::report::seed_ratio(k, (fin[rm], fin[rp]), iters[rp] as usize);
+            Some((s, ratio))
+        })
+        .collect();
+    let ratios: Vec<f64> = points.iter().map(|p| p.1).collect();
+    let (med, lo, hi) = median_interval(&ratios, super::report::BOOTSTRAP_SEED);
+    let x0 = seeds.iter().copied().fold(f64::INFINITY, f64::min) - 0.5;
+    let x1 = seeds.iter().copied().fold(f64::NEG_INFINITY, f64::max) + 0.5;
+    let mut series = vec![Series::line(
+        "momentum's iterations to plain's final J / plain's, per net seed",
+        points.clone(),
+        0,
+    )
+    .mark(Mark::Points)
+    .labelled(points.iter().map(|p| format!("{}", p.0)).collect())];
+    series.push(Series::line(
+        format!(
+            "median over {} seeds {} [95% interval {}-{}]",
+            points.len(),
+            sig(med),
+            sig(lo),
+            sig(hi)
+        ),
+        vec![(x0, med), (x1, med)],
+        1,
+    ));
+    if let Some(bar) = rule_setting(tables, "iteration_ratio") {
+        series.push(
+            Series::line("held bar (median at most)", vec![(x0, bar), (x1, bar)], 2)
+                .mark(Mark::Dashed),
+        );
+    }
+    series.push(
+        Series::line(
+            "plain descent itself (the null)",
+            vec![(x0, 1.0), (x1, 1.0)],
+            7,
+        )
+        .mark(Mark::Dashed),
+    );
+    // Headroom above the null's line for the legend, where it hides no dot.
+    let top = ratios.iter().copied().fold(1.0, f64::max) * 1.7;
+    let panel = Panel {
+        title: "lander: momentum's pace over plain descent's, per Table 1 net seed".into(),
+        x_label: "Table 1 lander net seed".into(),
+        y_label: "momentum's iterations to plain's final J / plain's".into(),
+        x_integer: true,
+        x_range: Some((x0, x1)),
+        y_range: Some((0.0, top)),
+        legend: Legend::UpperRight,
+        series,
+        ..Panel::default()
+    };
+    fig.draw("net_seeds", &Figure::grid(vec![panel], 1))
 }

@@ -6,12 +6,12 @@ use crate::control::bptt::{
     learn_until, replay, Bounds, Bptt, Descent, IterationTrace, Knots, Learned, Replay,
 };
 use crate::control::objective::Objective;
-use crate::emulator::catalog::NetModel;
+use crate::emulator::catalog::{BuildSpec, NetModel};
 use crate::emulator::Emulator;
 use crate::experiment::output::{Cell, Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::fig13_control::dagger::{ChainLearner, Round};
-use crate::families::na::table1_structure::{build_emulator, build_spec};
+use crate::families::na::table1_structure::{build_emulator, build_emulators, build_spec};
 use crate::physics::lander::{Lander, VEL};
 use crate::physics::Dynamics;
 use crate::row;
@@ -113,8 +113,11 @@ impl Job for Params {
         let descents = self.descents();
         let pb = ctx.progress(descents.len() as u64, "control learning");
         let mut sim = model.simulator();
+        // The headline's objective curves through the run's own net, for `net_seeds.csv`.
+        let mut own_curves: Vec<(Descent, Vec<f64>)> = Vec::new();
         for d in &descents {
             let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, "");
+            own_curves.push((*d, r.trace.iter().map(|t| t.objective).collect()));
             for t in &r.trace {
                 objective_t.push(row![
                     method(d),
@@ -164,6 +167,7 @@ impl Job for Params {
             pb.inc(1);
         }
         pb.finish_and_clear();
+        let net_seeds_t = self.net_seeds_table(ctx, scale, &own_curves, &x0, sim.as_mut())?;
         let mut free =
             self.problem_clipped(ctx, &trained.emulator, &objective, &x0, (false, &gains))?;
         for d in &descents {
@@ -305,6 +309,7 @@ impl Job for Params {
             ("unclipped", unclipped_t),
             ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
             ("unclipped_objective", unclipped_objective),
+            ("net_seeds", net_seeds_t),
         ]))
     }
 }
@@ -359,6 +364,29 @@ fn unclipped_row(d: &Descent, clipped: bool, r: &Learned) -> Vec<Cell> {
         i64::from(diverged)
     ]
 }
+
+/// Columns of `net_seeds.csv` (ours): per Table 1 lander net seed (the run's own first, then
+/// the spec's `net_seeds`) and descent of the headline (momentum, then plain descent at every
+/// rate of the sweep): `compared` is 1 for the paper's pair (momentum and plain at
+/// `plain_eta`); `scale` is λ through that seed's net; `iterations` the iterations run;
+/// `converges` (1 or 0) the spec's rule ([`super::Fig14Rule::converges`]) on the run's
+/// objective curve; `iterations_to_plain_final` the first iteration at which its objective is
+/// at or below the final objective of plain descent at `plain_eta` through the same net (NaN
+/// when never).
+pub const NET_SEEDS_COLUMNS: [&str; 12] = [
+    "net_seed",
+    "method",
+    "eta",
+    "alpha",
+    "compared",
+    "scale",
+    "iterations",
+    "initial_objective",
+    "final_objective",
+    "min_objective",
+    "converges",
+    "iterations_to_plain_final",
+];
 
 /// One net's landing problem from hover: BPTT through the net, the hover knots, λ there.
 struct Problem<'a> {
@@ -415,6 +443,90 @@ impl Params {
             return Err(other(format!("step scale λ = {scale} at hover")));
         }
         Ok(Problem { bptt, v0, scale })
+    }
+
+    /// `net_seeds.csv`: the headline's descents through the run's own net (`own`: each
+    /// descent's objective curve, `scale` its λ) and again through the Table 1 lander net of
+    /// each further net seed (from the cache, or trained side by side), each such net
+    /// calibrated at hover and its λ measured there, as a run under that seed would.
+    fn net_seeds_table(
+        &self,
+        ctx: &RunContext,
+        scale: f64,
+        own: &[(Descent, Vec<f64>)],
+        x0: &[f64],
+        sim: &mut dyn Dynamics,
+    ) -> Result<Table, Error> {
+        let mut table = Table::new(&NET_SEEDS_COLUMNS);
+        self.net_seed_rows(ctx.seed, scale, own, &mut table);
+        let seeds = self.further_net_seeds(ctx.seed);
+        if seeds.is_empty() {
+            return Ok(table);
+        }
+        let specs: Vec<BuildSpec> = seeds
+            .iter()
+            .map(|&s| build_spec(s, &self.net, self.steps, self.example_scale, &self.training))
+            .collect();
+        let built = ctx.stage(
+            &format!("train lander N50 of {} further net seeds", seeds.len()),
+            || build_emulators(&specs),
+        )?;
+        let descents = self.descents();
+        for (&seed, trained) in seeds.iter().zip(&built) {
+            let calibration = self
+                .lander_task(self.task.iterations)
+                .calibrated(&trained.emulator, x0)
+                .map_err(other)?
+                .calibration
+                .expect("calibrated");
+            let objective = self.objective_with(Some(&calibration));
+            let gains = calibration.gains.clone();
+            let mut p = self.problem(ctx, &trained.emulator, &objective, x0, &gains)?;
+            let label = format!("net seed {seed}: ");
+            let curves: Vec<(Descent, Vec<f64>)> = descents
+                .iter()
+                .map(|d| {
+                    let (r, _) = self.descend(ctx, &mut p, d, sim, x0, &label);
+                    (*d, r.trace.iter().map(|t| t.objective).collect())
+                })
+                .collect();
+            self.net_seed_rows(seed, p.scale, &curves, &mut table);
+        }
+        Ok(table)
+    }
+
+    /// The `net_seeds.csv` rows of net seed `seed`: each descent's objective curve, λ `scale`.
+    fn net_seed_rows(&self, seed: u64, scale: f64, curves: &[(Descent, Vec<f64>)], t: &mut Table) {
+        let compared = self.compared();
+        let plain_final = curves
+            .iter()
+            .find(|(d, _)| matches!(d, Descent::Plain { .. }) && compared.contains(d))
+            .and_then(|(_, js)| js.last().copied())
+            .unwrap_or(f64::NAN);
+        for (d, js) in curves {
+            let first = js.first().copied().unwrap_or(f64::NAN);
+            let last = js.last().copied().unwrap_or(f64::NAN);
+            let min = js
+                .iter()
+                .copied()
+                .filter(|x| !x.is_nan())
+                .fold(f64::INFINITY, f64::min);
+            let reach = super::iterations_to(js, plain_final).map_or(f64::NAN, |k| k as f64);
+            t.push(row![
+                seed as i64,
+                method(d),
+                d.eta(),
+                d.alpha(),
+                i64::from(compared.contains(d)),
+                scale,
+                js.len().saturating_sub(1) as i64,
+                first,
+                last,
+                min,
+                i64::from(!js.is_empty() && self.rule.converges(js)),
+                reach
+            ]);
+        }
     }
 
     /// The two runs of the paper's comparison: momentum and plain descent at `plain_eta`.

@@ -45,13 +45,22 @@
 //! DAgger net's; final error = RMS over the weighted state variables of (s_M − s_d)/σ (Fig. 13's
 //! measure, ≤ 1: within tolerance). `dagger_objective` (method, eta, alpha, iteration,
 //! objective): the DAgger-net curves.
+//!
+//! **Over the Table 1 net seeds (ours).** One trained net is one draw of the training's
+//! randomness, so the headline's descents (momentum and plain descent at every rate of the
+//! sweep) are learned again through the Table 1 lander net trained under each of
+//! [`Params::net_seeds`] (each calibrated at hover and λ measured there, as a run under that
+//! seed would): `net_seeds` (job.rs, [`NET_SEEDS_COLUMNS`]), the run's own seed included.
+//! The verdict reads the median over the seeds of momentum's iterations to plain's final J
+//! over plain's, with its 95% bootstrap interval, and counts the seeds at which plain's rate
+//! converges and is the limit (report.rs). The other tables are the run's own net's.
 
 mod figures;
 mod job;
 mod params;
 mod report;
 
-pub use job::{converged_columns, DAGGER_COLUMNS};
+pub use job::{converged_columns, DAGGER_COLUMNS, NET_SEEDS_COLUMNS};
 pub use params::{Converged, DaggerNet, Fig14Rule, MomentumDagger, Params};
 pub use report::iterations_to;
 
@@ -69,6 +78,10 @@ impl Family for NaMomentum {
         (
             "objective",
             "the lander's objective J (log scale) vs iteration: momentum (η 1.5, α 0.5) beside plain descent at each η, with the knots clipped to their boxes and without.",
+        ),
+        (
+            "net_seeds",
+            "per Table 1 lander net seed (dots, labelled with the seed), momentum's iterations to plain descent's final J over plain's iterations, the verdict's measure; the median over the seeds with its 95% bootstrap interval, the held bar and plain descent itself (1, the null).",
         ),
     ];
     const KIND: &'static str = "na_fig14_momentum";

@@ -5,9 +5,10 @@ use crate::control::bptt::{Descent, IterationTrace, StepRule};
 use crate::control::objective::{ControlEffort, FinalState, Objective, StateWindow};
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dagger::DaggerSettings;
-use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::resolve::{at_most, distinct, ensure, positive, ParamError, Validate};
 use crate::families::na::control_task::{keyed, ControlTask};
 use crate::families::na::fig13_control::dagger::DaggerControl;
+use crate::families::na::fig13_control::seeds::MAX_NET_SEEDS;
 use crate::families::na::fig13_control::{
     Calibration, ControlUnits, FinalWeights, Formulation, Task,
 };
@@ -37,6 +38,14 @@ pub struct Params {
     pub sweep_eta: Vec<f64>,
     /// Power iterations for the step scale λ.
     pub curvature_iterations: usize,
+    /// Table 1 lander net seeds beyond the run's own (ours; as `na_fig13_control`'s): the
+    /// headline pair (momentum and the plain sweep) is learned again through the net trained
+    /// under each, and the verdict reads the median over all of them, the run's own included
+    /// (`net_seeds.csv`). Empty: the run's own net only. At most [`MAX_NET_SEEDS`], no
+    /// repeats; the run's own seed is skipped. Left out of the serialized parameters when
+    /// empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub net_seeds: Vec<u64>,
     /// Last states w whose vertical velocity the touchdown term penalizes.
     pub touchdown_states: usize,
     /// Tolerance σ_v of the descent velocity before touchdown (m/s).
@@ -193,6 +202,8 @@ impl Validate for Params {
             "curvature_iterations",
             "must be >= 1",
         )?;
+        at_most("net_seeds", self.net_seeds.len(), MAX_NET_SEEDS)?;
+        distinct("net_seeds", &self.net_seeds)?;
         ensure(
             self.task.final_tolerance.iter().all(|&t| t >= 0.0),
             "final_tolerance",
@@ -348,6 +359,15 @@ impl Params {
             learner: StepRule::Fixed,
             settings: md.settings,
         }
+    }
+
+    /// The net seeds beyond the run's own (`own`), in the spec's order.
+    pub fn further_net_seeds(&self, own: u64) -> Vec<u64> {
+        self.net_seeds
+            .iter()
+            .copied()
+            .filter(|&s| s != own)
+            .collect()
     }
 
     /// The start state with a unit quaternion.

@@ -4,7 +4,8 @@
 use super::params::Fig14Rule;
 use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv};
 use crate::experiment::report::{sig, Findings};
-use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::rule::{majority, read_rule, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::stats::median_interval;
 use crate::experiment::{other, Error};
 use std::path::Path;
 
@@ -36,6 +37,210 @@ pub fn dagger_rule(
         ),
     ];
     Rule::gated(vec![], held, Partly::All(vec![1]))
+}
+
+/// The bootstrap stream of the net seeds' median interval (any fixed value: the report is the
+/// same everywhere).
+pub(super) const BOOTSTRAP_SEED: u64 = 1;
+
+/// One Table 1 lander net seed's headline (`net_seeds.csv`), as the verdict reads it.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct SeedFacts {
+    /// The net seed.
+    pub seed: u64,
+    /// λ through its net.
+    pub scale: f64,
+    /// Momentum's and plain descent's (at the compared rate) final J.
+    pub ends: (f64, f64),
+    /// The first iteration at which momentum reaches plain's final J (None: never).
+    pub reach: Option<usize>,
+    /// Momentum's iterations to plain's final J over plain's ([`seed_ratio`]).
+    pub ratio: f64,
+    /// Plain descent at the compared rate converges (the spec's rule).
+    pub plain_converges: bool,
+    /// ... and the next plain rate tried above it does not.
+    pub plain_is_limit: bool,
+}
+
+/// Momentum's iterations to plain descent's final J over plain's (`iterations`), at one net
+/// seed: `reach` / `iterations` where momentum reaches plain's final J and ends below it;
+/// otherwise (`iterations` + 1) / `iterations`, more than plain's own 1 (momentum would need
+/// more than the budget: the ratio is censored there), so that every seed has a finite value
+/// for the median and its interval.
+pub(super) fn seed_ratio(reach: Option<usize>, ends: (f64, f64), iterations: usize) -> f64 {
+    let n = iterations.max(1) as f64;
+    match reach {
+        Some(k) if ends.0 < ends.1 && iterations > 0 => k as f64 / n,
+        _ => (n + 1.0) / n,
+    }
+}
+
+/// The headline rule over the net seeds (ours, bars in the spec's `rule`): (a) the median over
+/// the seeds of momentum's iterations to plain's final J over plain's, at most
+/// `bars.iteration_ratio`, with its 95% bootstrap interval (null: plain descent itself, 1);
+/// (b) the net seeds at which plain descent at `plain_eta` converges and (c) those at which,
+/// besides, the next plain rate tried above it (`next_eta`) does not, each a strict majority of
+/// the seeds (null: no seed). Held: all three; partly: (a) and (b). `None` when a null passes.
+pub(super) fn seeds_rule(
+    facts: &[SeedFacts],
+    (plain_eta, next_eta): (f64, f64),
+    bars: &Fig14Rule,
+) -> Option<Rule> {
+    let k = facts.len();
+    let ratios: Vec<f64> = facts.iter().map(|f| f.ratio).collect();
+    let (med, lo, hi) = median_interval(&ratios, BOOTSTRAP_SEED);
+    let need = majority(k) as f64;
+    let count = |f: &dyn Fn(&SeedFacts) -> bool| facts.iter().filter(|x| f(x)).count() as f64;
+    let none = || Null::new("on no net seed", 0.0);
+    let held = vec![
+        Check::new(
+            format!("momentum's iterations to plain descent's final J over plain's, median over {k} net seeds"),
+            med,
+            Cmp::AtMost,
+            bars.iteration_ratio,
+            Null::new("plain descent itself", 1.0),
+        )
+        .map(|c| c.with_interval(lo, hi)),
+        Check::new(
+            format!("net seeds of {k} at which plain descent at eta {} converges", sig(plain_eta)),
+            count(&|f| f.plain_converges),
+            Cmp::AtLeast,
+            need,
+            none(),
+        ),
+        Check::new(
+            format!(
+                "net seeds of {k} at which it converges and the next plain rate tried above it (eta {}) does not",
+                sig(next_eta)
+            ),
+            count(&|f| f.plain_is_limit),
+            Cmp::AtLeast,
+            need,
+            none(),
+        ),
+    ];
+    Rule::gated(vec![], held, Partly::All(vec![0, 1]))
+}
+
+/// The net seeds' headlines of `net_seeds.csv` in `dir`, the run's own seed first, with the
+/// compared plain rate and the next rate tried above it: `None` when the run wrote no such
+/// table or it holds fewer than two seeds (the single-net rule decides). A seed without its
+/// compared pair, or seeds with different rows (a truncated table), is an error naming the
+/// file, never a verdict on fewer seeds.
+pub(super) fn seed_facts(dir: &Path) -> Result<Option<(Vec<SeedFacts>, (f64, f64))>, Error> {
+    let path = dir.join("net_seeds.csv");
+    let Some(df) = read_optional_csv(&path)? else {
+        return Ok(None);
+    };
+    let damaged = |why: &str| other(format!("{}: {why}", path.display()));
+    let seed = df_f64(&df, "net_seed")?;
+    let (method, eta) = (df_str(&df, "method")?, df_f64(&df, "eta")?);
+    let col = |c: &str| df_f64(&df, c);
+    let (compared, scale, iters, fin, conv, reach) = (
+        col("compared")?,
+        col("scale")?,
+        col("iterations")?,
+        col("final_objective")?,
+        col("converges")?,
+        col("iterations_to_plain_final")?,
+    );
+    let mut seeds: Vec<f64> = Vec::new();
+    for &s in &seed {
+        if !seeds.contains(&s) {
+            seeds.push(s);
+        }
+    }
+    if seeds.len() < 2 {
+        return Ok(None);
+    }
+    let rows_of = |s: f64| -> Vec<usize> { (0..seed.len()).filter(|&r| seed[r] == s).collect() };
+    if seeds
+        .windows(2)
+        .any(|w| rows_of(w[0]).len() != rows_of(w[1]).len())
+    {
+        return Err(damaged(
+            "its net seeds have different numbers of rows (a truncated or edited table)",
+        ));
+    }
+    let mut out = Vec::new();
+    let mut rates = (f64::NAN, f64::NAN);
+    for &s in &seeds {
+        let rows = rows_of(s);
+        let find = |m: &str| {
+            rows.iter()
+                .copied()
+                .find(|&r| method[r] == m && compared[r] == 1.0)
+        };
+        let (Some(rm), Some(rp)) = (find("momentum"), find("plain")) else {
+            return Err(damaged(&format!(
+                "net seed {s} lacks momentum or the compared plain rate"
+            )));
+        };
+        let next = rows
+            .iter()
+            .copied()
+            .filter(|&r| method[r] == "plain" && eta[r] > eta[rp])
+            .min_by(|&a, &b| eta[a].total_cmp(&eta[b]));
+        let plain_converges = conv[rp] == 1.0;
+        let ends = (fin[rm], fin[rp]);
+        let reached = (reach[rm].is_finite() && reach[rm] >= 0.0).then(|| reach[rm] as usize);
+        rates = (eta[rp], next.map_or(f64::NAN, |r| eta[r]));
+        out.push(SeedFacts {
+            seed: s as u64,
+            scale: scale[rm],
+            ends,
+            reach: reached,
+            ratio: seed_ratio(reached, ends, iters[rp] as usize),
+            plain_converges,
+            plain_is_limit: plain_converges && next.is_some_and(|r| conv[r] == 0.0),
+        });
+    }
+    Ok(Some((out, rates)))
+}
+
+/// The report's table of the net seeds and its sentence.
+fn seeds_md(facts: &[SeedFacts], (plain_eta, next_eta): (f64, f64)) -> (String, String, String) {
+    let mut md = format!(
+        "\nThe headline per Table 1 lander net seed (ours, `net_seeds.csv`; the same task and descents through the net trained under each seed, each net calibrated at hover and lambda measured through it; the verdict reads these):\n\n| net seed | lambda | momentum J end | plain (eta {}) J end | momentum reaches plain's final J at iteration | ratio | plain converges | next rate (eta {}) does not |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        sig(plain_eta),
+        sig(next_eta)
+    );
+    let yes = |b: bool| if b { "yes" } else { "no" };
+    for f in facts {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            f.seed,
+            sig(f.scale),
+            sig(f.ends.0),
+            sig(f.ends.1),
+            f.reach.map_or("never".to_string(), |k| k.to_string()),
+            sig(f.ratio),
+            yes(f.plain_converges),
+            yes(f.plain_is_limit)
+        ));
+    }
+    let ratios: Vec<f64> = facts.iter().map(|f| f.ratio).collect();
+    let (med, lo, hi) = median_interval(&ratios, BOOTSTRAP_SEED);
+    let k = facts.len();
+    let per: Vec<String> = facts
+        .iter()
+        .map(|f| format!("{}: {}", f.seed, sig(f.ratio)))
+        .collect();
+    let head = format!(
+        "Over {k} Table 1 lander net seeds momentum reaches plain descent's final J in a median {} of plain's iterations [95% interval {}-{}]; plain at eta {} converges at {} of {k} seeds, the next rate (eta {}) does not at {} of {k}.",
+        sig(med),
+        sig(lo),
+        sig(hi),
+        sig(plain_eta),
+        facts.iter().filter(|f| f.plain_converges).count(),
+        sig(next_eta),
+        facts.iter().filter(|f| f.plain_is_limit).count(),
+    );
+    let why = format!(
+        " Per net seed (net_seeds.csv; one net is one draw of the training's randomness), momentum's iterations to plain's final J over plain's: {}. Each check is read over the net seeds: (a) by the median with its 95% percentile-bootstrap interval (a seed at which momentum does not end below plain's final J counts as (iterations + 1)/iterations, more than plain's own), (b) and (c) by a strict majority of the seeds.",
+        per.join(", ")
+    );
+    (md, head, why)
 }
 
 /// First iteration at which a trace is at or below `level` (None if never).
@@ -134,7 +339,8 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         Some(k) if mom_end < plain_end && k_plain > 0 => k as f64 / k_plain as f64,
         _ => f64::INFINITY,
     };
-    let rule = Rule::gated(
+    let seeds = seed_facts(dir)?;
+    let single = Rule::gated(
         vec![],
         vec![
             Check::new(
@@ -158,6 +364,22 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         ],
         Partly::All(vec![0, 1]),
     );
+    // Over the net seeds where the run has them (net_seeds.csv); else the run's own net alone.
+    let (rule, seeds_why, lead) = match &seeds {
+        Some((facts, rates)) => {
+            let (seeds_table, head, why) = seeds_md(facts, *rates);
+            md.push_str(&seeds_table);
+            (
+                seeds_rule(facts, *rates, &bars),
+                why,
+                format!(
+                    "{head} Through the run's own net (seed {}), momentum",
+                    facts[0].seed
+                ),
+            )
+        }
+        None => (single, String::new(), "Momentum".to_string()),
+    };
     let (verdict, lines, text) = shown(rule.as_ref(), "");
     // Momentum's J 20 iterations before its end (its pace when it stops).
     let tail_start = mom.2[mom.2.len().saturating_sub(21)];
@@ -169,7 +391,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         verdict,
         rule: rule.clone().into(),
         why: format!(
-            "Momentum (eta {}) ends at J = {} vs plain (eta {}) J = {} after {k_plain} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2).{lines} Rule (bars ours, in the spec's `rule`; a plain run converges when it ends below {} of its start without climbing back above {}x its minimum; the next rate above eta {} not converging is the paper's 'largest rate that converges', read as the stability limit, and rates further up that converge again are listed above, not counted): {text} Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim. Over its last 20 iterations momentum's J fell {}% ({} -> {}){}.",
+            "{lead} (eta {}) ends at J = {} vs plain (eta {}) J = {} after {k_plain} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2).{seeds_why}{lines} Rule (bars ours, in the spec's `rule`; a plain run converges when it ends below {} of its start without climbing back above {}x its minimum; the next rate above eta {} not converging is the paper's 'largest rate that converges', read as the stability limit, and rates further up that converge again are listed above, not counted): {text} Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim. Over its last 20 iterations momentum's J fell {}% ({} -> {}){}.",
             mom.1,
             sig(mom_end),
             base.1,
@@ -453,5 +675,115 @@ mod tests {
         assert_eq!(v(5.8, 14.9), Some(Verdict::NotHeld));
         // Where the Table 1 net's own controls already land, DAgger's line cannot fail.
         assert!(dagger_rule((0.17, 0.27), (0.5, 1.0), &BARS).is_none());
+    }
+
+    /// Five net seeds' facts: ratios as given, plain's rate converging at the first `conv`
+    /// seeds and the limit at the first `limit`.
+    fn seeds(ratios: &[f64], conv: usize, limit: usize) -> Vec<SeedFacts> {
+        ratios
+            .iter()
+            .enumerate()
+            .map(|(i, &ratio)| SeedFacts {
+                seed: i as u64 + 1,
+                scale: 2.5e5,
+                ends: (2.5, 3.5),
+                reach: Some((ratio * 200.0) as usize),
+                ratio,
+                plain_converges: i < conv,
+                plain_is_limit: i < limit,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_rule_judges_momentum_by_its_median_net_seed_and_its_interval() {
+        use crate::experiment::rule::Outcome;
+        let rates = (1.0, 1.5);
+        let rule = |f: &[SeedFacts]| seeds_rule(f, rates, &BARS).unwrap();
+        // Every seed fast, plain's rate converging and the limit at each: held.
+        let fast = seeds(&[0.3, 0.32, 0.35, 0.33, 0.31], 5, 5);
+        let r = rule(&fast);
+        assert_eq!(r.held[0].outcome(), Outcome::Pass);
+        assert_eq!(r.held[0].value, 0.32);
+        assert_eq!(r.verdict(), Verdict::Held);
+        // Fast, but the next rate converges too at every seed: partly.
+        assert_eq!(
+            rule(&seeds(&[0.3, 0.32, 0.35, 0.33, 0.31], 5, 0)).verdict(),
+            Verdict::Partly
+        );
+        // One slow seed in five: the median is below the bar, but a resampled median lands
+        // above it more than 2.5% of the time, so held or partly is undecided against not
+        // held (the first multi-seed run's numbers).
+        let one_slow = seeds(&[0.335, 0.765, 0.35, 0.37, 0.365], 5, 0);
+        let r = rule(&one_slow);
+        assert!(r.held[0].value <= BARS.iteration_ratio);
+        assert_eq!(r.held[0].outcome(), Outcome::Inconclusive);
+        assert_eq!(r.verdict(), Verdict::Inconclusive);
+        // Seeds on both sides of the bar: the interval straddles it.
+        let split = rule(&seeds(&[0.3, 0.4, 0.45, 0.7, 0.8], 5, 5));
+        assert_eq!(split.held[0].outcome(), Outcome::Inconclusive);
+        // Every seed slow (momentum never reaching plain's final J counts above 1): not held.
+        let slow = seeds(&[0.8, 0.9, 201.0 / 200.0, 0.95, 0.85], 5, 5);
+        assert_eq!(rule(&slow).held[0].outcome(), Outcome::Fail);
+        assert_eq!(rule(&slow).verdict(), Verdict::NotHeld);
+        // Plain's rate converging at 2 of 5 seeds is no strict majority.
+        let r = rule(&seeds(&[0.3, 0.32, 0.35, 0.33, 0.31], 2, 2));
+        assert_eq!(r.held[1].value, 2.0);
+        assert_eq!(r.held[1].threshold, 3.0);
+        assert_eq!(r.verdict(), Verdict::NotHeld);
+        assert_eq!(
+            rule(&seeds(&[0.3, 0.32, 0.35, 0.33, 0.31], 3, 3)).verdict(),
+            Verdict::Held
+        );
+        // A bar plain descent itself meets: the check cannot fail, so there is no rule.
+        let loose = Fig14Rule {
+            iteration_ratio: 1.0,
+            ..BARS
+        };
+        assert!(seeds_rule(&fast, rates, &loose).is_none());
+    }
+
+    #[test]
+    fn a_seed_where_momentum_never_gets_there_counts_above_plain() {
+        assert_eq!(seed_ratio(Some(67), (2.72, 3.53), 200), 0.335);
+        // Never reaching plain's final J, or reaching it and ending above it.
+        assert_eq!(seed_ratio(None, (4.0, 3.53), 200), 201.0 / 200.0);
+        assert_eq!(seed_ratio(Some(50), (3.6, 3.53), 200), 201.0 / 200.0);
+    }
+
+    #[test]
+    fn the_seed_table_is_read_per_seed_and_a_truncated_one_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(seed_facts(dir.path()).unwrap(), None);
+        let head = "net_seed,method,eta,alpha,compared,scale,iterations,initial_objective,final_objective,min_objective,converges,iterations_to_plain_final\n";
+        let seed_rows = |s: u64, reach: &str, next_converges: u8| {
+            format!(
+                "{s},momentum,1.5,0.5,1,2.5e5,200,3700,2.7,2.7,1,{reach}\n\
+                 {s},plain,0.5,0,0,2.5e5,200,3700,4.0,4.0,1,NaN\n\
+                 {s},plain,1.0,0,1,2.5e5,200,3700,3.5,3.5,1,200\n\
+                 {s},plain,1.5,0,0,2.5e5,200,3700,4.5,4.4,{next_converges},NaN\n"
+            )
+        };
+        let path = dir.path().join("net_seeds.csv");
+        // One seed: the single-net rule decides.
+        std::fs::write(&path, format!("{head}{}", seed_rows(1, "67", 1))).unwrap();
+        assert_eq!(seed_facts(dir.path()).unwrap(), None);
+        let csv = format!("{head}{}{}", seed_rows(1, "67", 1), seed_rows(2, "NaN", 0));
+        std::fs::write(&path, &csv).unwrap();
+        let (facts, rates) = seed_facts(dir.path()).unwrap().unwrap();
+        assert_eq!(rates, (1.0, 1.5));
+        assert_eq!(facts.len(), 2);
+        assert_eq!(
+            (facts[0].seed, facts[0].reach, facts[0].ratio),
+            (1, Some(67), 0.335)
+        );
+        assert!(facts[0].plain_converges && !facts[0].plain_is_limit);
+        assert_eq!((facts[1].reach, facts[1].ratio), (None, 201.0 / 200.0));
+        assert!(facts[1].plain_is_limit);
+        // The last seed cut short.
+        let lines: Vec<&str> = csv.lines().collect();
+        std::fs::write(&path, lines[..lines.len() - 1].join("\n")).unwrap();
+        let e = seed_facts(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("net_seeds.csv"), "{e}");
     }
 }
