@@ -58,6 +58,7 @@ use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
 use crate::experiment::rule::{read_rule, rule_setting, shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::stats::bootstrap_intervals;
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::na::table1_structure::{build_spec, validate_nets, validate_training};
 use crate::row;
@@ -866,6 +867,100 @@ fn optimizer_rows(dir: &Path) -> Result<Vec<(NetSize, String, Vec<f64>)>, Error>
     Ok(out)
 }
 
+/// Per examples-per-weight ratio, increasing: (ratio, per init in row order (test/training
+/// error, test error)) from `examples.csv`.
+type InitExamples = Vec<(f64, Vec<(f64, f64)>)>;
+
+/// [`InitExamples`] from `examples.csv`.
+fn example_rows(dir: &Path) -> Result<InitExamples, Error> {
+    let e = read_csv(&dir.join("examples.csv"))?;
+    let (r, q, te) = (
+        df_f64(&e, "examples_per_weight")?,
+        df_f64(&e, "test_train_ratio")?,
+        df_f64(&e, "test_error")?,
+    );
+    let mut ratios: Vec<f64> = r.clone();
+    ratios.sort_by(f64::total_cmp);
+    ratios.dedup();
+    Ok(ratios
+        .into_iter()
+        .map(|x| {
+            let rows = (0..r.len()).filter(|&i| r[i] == x).map(|i| (q[i], te[i]));
+            (x, rows.collect())
+        })
+        .collect())
+}
+
+/// Seed of the bootstrap over initial weight sets (fixed, so a report is the same on every
+/// machine).
+const BOOTSTRAP_SEED: u64 = 1;
+
+/// The verdict's rule ([`training_rule`]) on the medians over the initial weight sets `idx`
+/// (indices into each method's and each ratio's per-init values; repeats allowed: a bootstrap
+/// resample).
+fn rule_of_inits(
+    opt: &[(NetSize, String, Vec<f64>)],
+    examples: &InitExamples,
+    idx: &[usize],
+    rule_ratio: f64,
+    bars: &TrainingRule,
+) -> Option<Rule> {
+    let pick = |v: &[f64]| -> Vec<f64> {
+        idx.iter()
+            .map(|&i| v.get(i).copied().unwrap_or(f64::NAN))
+            .collect()
+    };
+    let opt: Vec<(NetSize, String, Vec<f64>)> = opt
+        .iter()
+        .map(|(size, m, v)| (*size, m.clone(), pick(v)))
+        .collect();
+    let triples: Vec<(f64, f64, f64)> = examples
+        .iter()
+        .map(|(x, rows)| {
+            let (q, te): (Vec<f64>, Vec<f64>) = rows.iter().copied().unzip();
+            (*x, median_inf(&pick(&q)), median_inf(&pick(&te)))
+        })
+        .collect();
+    training_rule(
+        optimizer_ratios(&opt),
+        &ExampleFacts::of(&triples, rule_ratio),
+        bars,
+    )
+}
+
+/// The verdict's rule on the medians over every initial weight set, each check with its 95%
+/// bootstrap interval over the sets (resampled together: one set is one draw of every
+/// method's and every ratio's initial weights) where there are several and the interval is
+/// finite.
+fn rule_over_inits(
+    opt: &[(NetSize, String, Vec<f64>)],
+    examples: &InitExamples,
+    rule_ratio: f64,
+    bars: &TrainingRule,
+) -> Option<Rule> {
+    let n = opt.iter().map(|r| r.2.len()).max().unwrap_or(0);
+    let all: Vec<usize> = (0..n).collect();
+    let mut rule = rule_of_inits(opt, examples, &all, rule_ratio, bars)?;
+    if n < 2 {
+        return Some(rule);
+    }
+    let k = rule.premise.len() + rule.held.len();
+    let intervals = bootstrap_intervals(n, BOOTSTRAP_SEED, k, |idx, out| {
+        if let Some(r) = rule_of_inits(opt, examples, idx, rule_ratio, bars) {
+            for (o, c) in out.iter_mut().zip(r.premise.iter().chain(&r.held)) {
+                *o = c.value;
+            }
+        }
+    });
+    let checks = rule.premise.iter_mut().chain(rule.held.iter_mut());
+    for (c, (lo, hi)) in checks.zip(intervals) {
+        if lo.is_finite() && hi.is_finite() && c.value.is_finite() {
+            *c = c.clone().with_interval(lo, hi);
+        }
+    }
+    Some(rule)
+}
+
 /// Per ratio, increasing: (ratio, median test/train ratio, median test error, median train
 /// error) from `examples.csv`.
 fn example_medians(dir: &Path) -> Result<Vec<(f64, f64, f64, f64)>, Error> {
@@ -1170,9 +1265,8 @@ impl Family for NaTrainingMethods {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
-        let triples: Vec<(f64, f64, f64)> = med.iter().map(|r| (r.0, r.1, r.2)).collect();
-        let facts = ExampleFacts::of(&triples, rule_ratio);
-        let rule = training_rule(optimizer_ratios(&opt_rows), &facts, &bars);
+        let per_init = example_rows(dir)?;
+        let rule = rule_over_inits(&opt_rows, &per_init, rule_ratio, &bars);
         let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
         let at = med.iter().find(|r| r.0 == rule_ratio);
         // The small net's best held-out error of a method, median over inits.
@@ -1297,6 +1391,47 @@ mod tests {
             ..BARS
         };
         assert!(training_rule(fast, &ExampleFacts::of(&good, 8.0), &lax).is_none());
+    }
+
+    /// Over several initial weight sets each check carries its bootstrap interval over the
+    /// sets; one set alone carries none; one set of five that contradicts the rest reaches
+    /// into the intervals and leaves the verdict inconclusive.
+    #[test]
+    fn the_rule_over_inits_carries_intervals_over_the_sets() {
+        use crate::experiment::report::Verdict;
+        let opt = |small_cg: Vec<f64>| {
+            vec![
+                (NetSize::Small, "cg".to_string(), small_cg),
+                (NetSize::Small, "momentum".to_string(), vec![40.0; 5]),
+                (NetSize::Large, "cg".to_string(), vec![60.0; 5]),
+                (NetSize::Large, "momentum".to_string(), vec![5.0; 5]),
+            ]
+        };
+        // Examples: (test/training, test error) per set at 0.25, 8 and 32 examples per weight.
+        let examples: InitExamples = vec![
+            (0.25, vec![(50.0, 0.03); 5]),
+            (8.0, vec![(1.1, 0.0012); 5]),
+            (32.0, vec![(1.05, 0.001); 5]),
+        ];
+        let rule = rule_over_inits(&opt(vec![10.0; 5]), &examples, 8.0, &BARS).unwrap();
+        assert_eq!(rule.verdict(), Verdict::Held, "{}", rule.table());
+        assert!(rule.held.iter().all(|c| c.interval.is_some()));
+        let one: Vec<(NetSize, String, Vec<f64>)> = opt(vec![10.0; 5])
+            .into_iter()
+            .map(|(s, m, v)| (s, m, v[..1].to_vec()))
+            .collect();
+        let rule = rule_over_inits(&one, &examples, 8.0, &BARS).unwrap();
+        assert!(rule.held.iter().all(|c| c.interval.is_none()));
+        // Two sets of five where CG is the slower on the small net: the median passes (a),
+        // its interval reaches past 1.
+        let rule = rule_over_inits(
+            &opt(vec![10.0, 10.0, 10.0, 80.0, 80.0]),
+            &examples,
+            8.0,
+            &BARS,
+        )
+        .unwrap();
+        assert_eq!(rule.verdict(), Verdict::Inconclusive, "{}", rule.table());
     }
 
     #[test]
