@@ -24,13 +24,14 @@ use crate::emulator::catalog::BuildSpec;
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::mlp::Mlp;
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
 use crate::experiment::rule::{
     rule_setting, rule_settings, rule_table, shown, Check, Cmp, Null, Partly, Rule,
 };
+use crate::experiment::stats::median_interval;
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
 use serde::{Deserialize, Serialize};
@@ -66,7 +67,20 @@ pub struct Params {
     pub capacity_hidden: Vec<usize>,
     /// The verdict's bars (ours).
     pub rule: Fig12Rule,
+    /// Net seeds beyond the run's own: every emulator trained again under each (the same
+    /// trials), so the verdict's ratios carry an interval over the nets' training randomness
+    /// (`net_seeds.csv`; empty: the run's own nets alone).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub net_seeds: Vec<u64>,
 }
+
+/// The most further net seeds a run may ask for (each trains every emulator again).
+pub const MAX_NET_SEEDS: usize = 16;
+
+/// Columns of `net_seeds.csv`: per net seed (the run's own first), variant, emulator and hidden
+/// units, the time-averaged error over the trials.
+pub const NET_SEEDS_COLUMNS: [&str; 5] =
+    ["net_seed", "variant", "emulator", "hidden", "mean_error"];
 
 /// The verdict's bars on the ratio of the largest to the smallest time-averaged error across
 /// the emulators of a variant (ours).
@@ -114,6 +128,16 @@ impl Validate for Params {
             "need at least one n >= 1",
         )?;
         validate_nets(&self.nets, self.example_scale)?;
+        ensure(
+            self.net_seeds.len() <= MAX_NET_SEEDS,
+            "net_seeds",
+            format!("at most {MAX_NET_SEEDS}"),
+        )?;
+        ensure(
+            (1..self.net_seeds.len()).all(|i| !self.net_seeds[..i].contains(&self.net_seeds[i])),
+            "net_seeds",
+            "must not repeat a seed",
+        )?;
         ensure(
             self.capacity_hidden.iter().all(|&h| h >= 1),
             "capacity_hidden",
@@ -186,100 +210,20 @@ impl Job for Params {
             "mean_error",
             "common_mean_error",
         ]);
+        let mut seeds_t = Table::new(&NET_SEEDS_COLUMNS);
         let steps = self.physical_steps;
+        let mean = |curve: &[f64]| curve.iter().sum::<f64>() / curve.len() as f64;
         for (vi, net) in self.nets.iter().enumerate() {
             let dt = net.physical_dt;
-            let duration = steps as f64 * dt;
-            let frames = (duration / self.frame_dt + 1e-9).floor() as usize;
             let frame_step = |j: usize| ((j as f64 * self.frame_dt) / dt).round() as usize;
             let model = net.model;
-            let (n, m) = (model.state_dim(), model.control_dim());
-            // Every emulator at the net's own hidden units, then at each extra capacity.
-            let mut hiddens = vec![net.hidden];
-            hiddens.extend(self.capacity_hidden.iter().filter(|&&h| h != net.hidden));
-            let mut specs = vec![];
-            for &hidden in &hiddens {
-                let mut sized = net.clone();
-                (sized.hidden, sized.examples) = (hidden, scaled_examples(net, hidden));
-                for &k in &self.emulators {
-                    let spec = build_spec(ctx.seed, &sized, k, self.example_scale, &self.training);
-                    specs.push((k, hidden, spec));
-                }
-            }
-            let only: Vec<BuildSpec> = specs.iter().map(|s| s.2.clone()).collect();
-            let label = format!("train {} emulators (side by side)", model.name());
-            let built = ctx.stage(&label, || build_emulators(&only))?;
-            let emulators: Vec<_> = specs
-                .into_iter()
-                .zip(built)
-                .map(|((k, hidden, spec), t)| (k, hidden, spec.net.examples, t.emulator))
-                .collect();
-            // Sum of |error| per emulator and frame over trials and variables.
-            let mut sums = vec![vec![0.0; frames + 1]; emulators.len()];
-            let mut sim = model.simulator();
-            let mut phys = vec![0.0; (steps + 1) * n];
-            let mut u = vec![0.0; m];
-            let mut x = vec![0.0; n];
-            let mut y = vec![0.0; n];
-            let mut s_int = vec![0.0; n];
-            ctx.stage(&format!("trials {}", variant(model)), || {
-                for trial in 0..self.trials {
-                    let mut rng = ctx.rng(1000 * (vi as u64 + 1) + trial as u64);
-                    let mut x0 = model.start_state_in(net.data, &mut rng);
-                    let warm = (self.warmup / dt).round() as usize;
-                    let signal = ControlSignal::sample(
-                        model.control_process_in(net.data),
-                        &model.sampling_limits(net.data),
-                        duration + warm as f64 * dt,
-                        &mut rng,
-                    );
-                    for k in 0..warm {
-                        signal.at(k as f64 * dt, &mut u);
-                        sim.step(&mut x0, &u, dt);
-                    }
-                    let t0 = warm as f64 * dt;
-                    x.copy_from_slice(&x0);
-                    phys[..n].copy_from_slice(&x);
-                    for k in 0..steps {
-                        signal.at(t0 + k as f64 * dt, &mut u);
-                        sim.step(&mut x, &u, dt);
-                        phys[(k + 1) * n..(k + 2) * n].copy_from_slice(&x);
-                    }
-                    for (ei, (k, _, _, e)) in emulators.iter().enumerate() {
-                        let h = *k as f64 * dt;
-                        let count = steps.div_ceil(*k);
-                        let mut traj = Vec::with_capacity((count + 1) * n);
-                        traj.extend_from_slice(&x0);
-                        let mut scratch = e.scratch();
-                        x.copy_from_slice(&x0);
-                        for j in 0..count {
-                            signal.at(t0 + (j as f64 + 0.5) * h, &mut u);
-                            e.predict(&x, &u, &mut scratch, &mut y);
-                            std::mem::swap(&mut x, &mut y);
-                            traj.extend_from_slice(&x);
-                        }
-                        for (f, sum) in sums[ei].iter_mut().enumerate() {
-                            let ps = frame_step(f).min(steps);
-                            interp(&traj, n, h, ps as f64 * dt, &mut s_int);
-                            *sum += s_int
-                                .iter()
-                                .zip(&phys[ps * n..(ps + 1) * n])
-                                .map(|(a, b)| (a - b).abs())
-                                .sum::<f64>();
-                        }
-                    }
-                }
-            });
-            for (ei, (k, hidden, examples, _)) in emulators.iter().enumerate() {
-                let curve: Vec<f64> = sums[ei]
-                    .iter()
-                    .map(|s| s / (self.trials * n) as f64)
-                    .collect();
-                if *hidden == net.hidden {
-                    for (f, e) in curve.iter().enumerate() {
+            let own = self.curves(ctx, ctx.seed, vi, net, "")?;
+            for c in &own {
+                if c.hidden == net.hidden {
+                    for (f, e) in c.curve.iter().enumerate() {
                         table.push(row![
                             variant(model),
-                            format!("N{k}"),
+                            format!("N{}", c.k),
                             frame_step(f).min(steps) as f64 * dt,
                             *e
                         ]);
@@ -288,18 +232,36 @@ impl Job for Params {
                 // The frames every emulator steps to (multiples of the longest super-step): no
                 // interpolation between coarse steps in their error.
                 let k_max = self.emulators.iter().copied().max().unwrap_or(1);
-                let common: Vec<f64> = (0..curve.len())
+                let common: Vec<f64> = (0..c.curve.len())
                     .filter(|&f| frame_step(f).min(steps) % k_max == 0)
-                    .map(|f| curve[f])
+                    .map(|f| c.curve[f])
                     .collect();
                 capacity.push(row![
                     variant(model),
-                    format!("N{k}"),
-                    *hidden as i64,
-                    *examples as i64,
-                    curve.iter().sum::<f64>() / curve.len() as f64,
+                    format!("N{}", c.k),
+                    c.hidden as i64,
+                    c.examples as i64,
+                    mean(&c.curve),
                     common.iter().sum::<f64>() / common.len().max(1) as f64
                 ]);
+            }
+            let mut seeds = vec![(ctx.seed, own)];
+            for &seed in &self.net_seeds {
+                if seed != ctx.seed {
+                    let label = format!(", net seed {seed}");
+                    seeds.push((seed, self.curves(ctx, seed, vi, net, &label)?));
+                }
+            }
+            for (seed, curves) in &seeds {
+                for c in curves {
+                    seeds_t.push(row![
+                        *seed as i64,
+                        variant(model),
+                        format!("N{}", c.k),
+                        c.hidden as i64,
+                        mean(&c.curve)
+                    ]);
+                }
             }
         }
         let rule = rule_table(&[
@@ -310,36 +272,230 @@ impl Job for Params {
         Ok(Tables::from([
             ("error", table),
             ("capacity", capacity),
+            ("net_seeds", seeds_t),
             ("rule", rule),
         ]))
     }
 }
 
+/// One emulator's mean absolute error per comparison frame over the trials.
+struct Curve {
+    /// Physical steps per emulator step.
+    k: usize,
+    /// Hidden units.
+    hidden: usize,
+    /// Training examples.
+    examples: usize,
+    /// Mean |error| over trials and state variables, per frame.
+    curve: Vec<f64>,
+}
+
+impl Params {
+    /// Every emulator of `net` (variant `vi`) trained under net seed `seed` (at the net's own
+    /// hidden units, then at each extra capacity), rolled out beside the simulator on the run's
+    /// trials (the same trials whatever the net seed: they test the nets, whose training
+    /// randomness the seed draws). `label` tells the stages of a further seed apart.
+    fn curves(
+        &self,
+        ctx: &RunContext,
+        seed: u64,
+        vi: usize,
+        net: &NetSpec,
+        label: &str,
+    ) -> Result<Vec<Curve>, Error> {
+        let steps = self.physical_steps;
+        let dt = net.physical_dt;
+        let duration = steps as f64 * dt;
+        let frames = (duration / self.frame_dt + 1e-9).floor() as usize;
+        let frame_step = |j: usize| ((j as f64 * self.frame_dt) / dt).round() as usize;
+        let model = net.model;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        let mut hiddens = vec![net.hidden];
+        hiddens.extend(self.capacity_hidden.iter().filter(|&&h| h != net.hidden));
+        let mut specs = vec![];
+        for &hidden in &hiddens {
+            let mut sized = net.clone();
+            (sized.hidden, sized.examples) = (hidden, scaled_examples(net, hidden));
+            for &k in &self.emulators {
+                let spec = build_spec(seed, &sized, k, self.example_scale, &self.training);
+                specs.push((k, hidden, spec));
+            }
+        }
+        let only: Vec<BuildSpec> = specs.iter().map(|s| s.2.clone()).collect();
+        let stage = format!("train {} emulators (side by side){label}", model.name());
+        let built = ctx.stage(&stage, || build_emulators(&only))?;
+        let emulators: Vec<_> = specs
+            .into_iter()
+            .zip(built)
+            .map(|((k, hidden, spec), t)| (k, hidden, spec.net.examples, t.emulator))
+            .collect();
+        // Sum of |error| per emulator and frame over trials and variables.
+        let mut sums = vec![vec![0.0; frames + 1]; emulators.len()];
+        let mut sim = model.simulator();
+        let mut phys = vec![0.0; (steps + 1) * n];
+        let mut u = vec![0.0; m];
+        let mut x = vec![0.0; n];
+        let mut y = vec![0.0; n];
+        let mut s_int = vec![0.0; n];
+        ctx.stage(&format!("trials {}{label}", variant(model)), || {
+            for trial in 0..self.trials {
+                let mut rng = ctx.rng(1000 * (vi as u64 + 1) + trial as u64);
+                let mut x0 = model.start_state_in(net.data, &mut rng);
+                let warm = (self.warmup / dt).round() as usize;
+                let signal = ControlSignal::sample(
+                    model.control_process_in(net.data),
+                    &model.sampling_limits(net.data),
+                    duration + warm as f64 * dt,
+                    &mut rng,
+                );
+                for k in 0..warm {
+                    signal.at(k as f64 * dt, &mut u);
+                    sim.step(&mut x0, &u, dt);
+                }
+                let t0 = warm as f64 * dt;
+                x.copy_from_slice(&x0);
+                phys[..n].copy_from_slice(&x);
+                for k in 0..steps {
+                    signal.at(t0 + k as f64 * dt, &mut u);
+                    sim.step(&mut x, &u, dt);
+                    phys[(k + 1) * n..(k + 2) * n].copy_from_slice(&x);
+                }
+                for (ei, (k, _, _, e)) in emulators.iter().enumerate() {
+                    let h = *k as f64 * dt;
+                    let count = steps.div_ceil(*k);
+                    let mut traj = Vec::with_capacity((count + 1) * n);
+                    traj.extend_from_slice(&x0);
+                    let mut scratch = e.scratch();
+                    x.copy_from_slice(&x0);
+                    for j in 0..count {
+                        signal.at(t0 + (j as f64 + 0.5) * h, &mut u);
+                        e.predict(&x, &u, &mut scratch, &mut y);
+                        std::mem::swap(&mut x, &mut y);
+                        traj.extend_from_slice(&x);
+                    }
+                    for (f, sum) in sums[ei].iter_mut().enumerate() {
+                        let ps = frame_step(f).min(steps);
+                        interp(&traj, n, h, ps as f64 * dt, &mut s_int);
+                        *sum += s_int
+                            .iter()
+                            .zip(&phys[ps * n..(ps + 1) * n])
+                            .map(|(a, b)| (a - b).abs())
+                            .sum::<f64>();
+                    }
+                }
+            }
+        });
+        Ok(emulators
+            .iter()
+            .zip(sums)
+            .map(|((k, hidden, examples, _), sum)| Curve {
+                k: *k,
+                hidden: *hidden,
+                examples: *examples,
+                curve: sum.iter().map(|s| s / (self.trials * n) as f64).collect(),
+            })
+            .collect())
+    }
+}
+
 /// The verdict's rule over each variant's largest/smallest error ratio: held needs every
 /// variant's at most `held_ratio`, partly at most `partly_ratio`; each check's null an error
-/// proportional to the super-step (`null_ratio`). `None` without ratios or when a bar is not
-/// below the null's ratio.
-pub fn fig12_rule(ratios: &[(&str, f64)], bars: &Fig12Rule, null_ratio: f64) -> Option<Rule> {
+/// proportional to the super-step (`null_ratio`). A ratio may carry its 95% interval over net
+/// seeds and `over` names the statistic (e.g. ", median over 5 net seeds"). `None` without
+/// ratios or when a bar is not below the null's ratio.
+pub fn fig12_rule(
+    ratios: &[(&str, f64, Option<(f64, f64)>)],
+    over: &str,
+    bars: &Fig12Rule,
+    null_ratio: f64,
+) -> Option<Rule> {
     if ratios.is_empty() {
         return None;
     }
     let null = || Null::new("an error proportional to the super-step", null_ratio);
-    let check = |v: &str, r: f64, bar: f64| {
+    let check = |v: &str, r: f64, interval: Option<(f64, f64)>, bar: f64| {
         Check::new(
-            format!("{v} pendulum: largest over smallest time-averaged error"),
+            format!("{v} pendulum: largest over smallest time-averaged error{over}"),
             r,
             Cmp::AtMost,
             bar,
             null(),
         )
+        .map(|c| match interval {
+            Some((lo, hi)) => c.with_interval(lo, hi),
+            None => c,
+        })
     };
     let mut held: Vec<_> = ratios
         .iter()
-        .map(|(v, r)| check(v, *r, bars.held_ratio))
+        .map(|(v, r, i)| check(v, *r, *i, bars.held_ratio))
         .collect();
     let partly: Vec<usize> = (held.len()..2 * held.len()).collect();
-    held.extend(ratios.iter().map(|(v, r)| check(v, *r, bars.partly_ratio)));
+    held.extend(
+        ratios
+            .iter()
+            .map(|(v, r, i)| check(v, *r, *i, bars.partly_ratio)),
+    );
     Rule::gated(vec![], held, Partly::All(partly))
+}
+
+/// The largest over the smallest of `errors` (None for fewer than two).
+fn spread(errors: &[f64]) -> Option<f64> {
+    (errors.len() >= 2).then(|| {
+        let lo = errors.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = errors.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        hi / lo
+    })
+}
+
+/// Seed of the bootstrap over net seeds (fixed, so a report is the same on every machine).
+const BOOTSTRAP_SEED: u64 = 1;
+
+/// Per variant, the verdict's ratio (each emulator at the best capacity tried) under each net
+/// seed of `net_seeds.csv`: (variant, ratio per seed in the table's order). `None` without the
+/// table or with one seed.
+fn seed_ratios(dir: &Path) -> Result<Option<Vec<(String, Vec<f64>)>>, Error> {
+    let Some(t) = read_optional_csv(&dir.join("net_seeds.csv"))? else {
+        return Ok(None);
+    };
+    let (seed, var) = (df_f64(&t, "net_seed")?, df_str(&t, "variant")?);
+    let (emu, err) = (df_str(&t, "emulator")?, df_f64(&t, "mean_error")?);
+    let mut seeds: Vec<f64> = vec![];
+    let mut variants: Vec<String> = vec![];
+    for r in 0..seed.len() {
+        if !seeds.contains(&seed[r]) {
+            seeds.push(seed[r]);
+        }
+        if !variants.contains(&var[r]) {
+            variants.push(var[r].clone());
+        }
+    }
+    if seeds.len() < 2 {
+        return Ok(None);
+    }
+    let out = variants
+        .into_iter()
+        .map(|v| {
+            let ratios = seeds
+                .iter()
+                .filter_map(|&s| {
+                    let rows: Vec<usize> = (0..seed.len())
+                        .filter(|&r| seed[r] == s && var[r] == v)
+                        .collect();
+                    let mut best: Vec<(&str, f64)> = vec![];
+                    for &r in &rows {
+                        match best.iter_mut().find(|b| b.0 == emu[r]) {
+                            Some(b) => b.1 = b.1.min(err[r]),
+                            None => best.push((emu[r].as_str(), err[r])),
+                        }
+                    }
+                    spread(&best.iter().map(|b| b.1).collect::<Vec<_>>())
+                })
+                .collect();
+            (v, ratios)
+        })
+        .collect();
+    Ok(Some(out))
 }
 
 /// Time-averaged error per (variant, emulator), in first-seen order.
@@ -558,11 +714,7 @@ impl Family for NaError {
                 .filter(|m| m.0 == v)
                 .map(|m| if own_only { m.2 } else { best(&m.0, &m.1, m.2) })
                 .collect();
-            (vals.len() >= 2).then(|| {
-                let lo = vals.iter().copied().fold(f64::INFINITY, f64::min);
-                let hi = vals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                hi / lo
-            })
+            spread(&vals)
         };
         let variants = ["passive", "active"];
         let ratios: Vec<(&str, f64)> = variants
@@ -584,11 +736,7 @@ impl Family for NaError {
                 .filter(|&r| cv[r] == v && ch[r] == own)
                 .map(|r| cc[r])
                 .collect();
-            (vals.len() >= 2).then(|| {
-                let lo = vals.iter().copied().fold(f64::INFINITY, f64::min);
-                let hi = vals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                hi / lo
-            })
+            spread(&vals)
         };
         let common: Vec<String> = ["passive", "active"]
             .iter()
@@ -604,7 +752,39 @@ impl Family for NaError {
             held_ratio: settings("held_ratio"),
             partly_ratio: settings("partly_ratio"),
         };
-        let rule = fig12_rule(&ratios, &bars, settings("null_ratio"));
+        // Over several net seeds each variant's ratio is their median with its interval.
+        let by_seed = seed_ratios(dir)?;
+        let mut seeds_text = String::new();
+        let (checked, over): (Vec<(&str, f64, Option<(f64, f64)>)>, String) = match &by_seed {
+            Some(by_seed) => {
+                let k = by_seed.iter().map(|v| v.1.len()).max().unwrap_or(0);
+                let rows = variants
+                    .iter()
+                    .filter_map(|v| {
+                        let (_, r) = by_seed.iter().find(|b| b.0 == *v)?;
+                        let (m, lo, hi) = median_interval(r, BOOTSTRAP_SEED);
+                        Some((*v, m, Some((lo, hi))))
+                    })
+                    .collect();
+                let per: Vec<String> = by_seed
+                    .iter()
+                    .map(|(v, r)| {
+                        let r: Vec<String> = r.iter().map(|x| sig(*x)).collect();
+                        format!("{v} {}", r.join(", "))
+                    })
+                    .collect();
+                seeds_text = format!(
+                    " Per net seed (net_seeds.csv: every emulator trained again under each seed, the same trials; the run's own first), the ratio: {}.",
+                    per.join("; ")
+                );
+                (rows, format!(", median over {k} net seeds"))
+            }
+            None => (
+                ratios.iter().map(|(v, r)| (*v, *r, None)).collect(),
+                String::new(),
+            ),
+        };
+        let rule = fig12_rule(&checked, &over, &bars, settings("null_ratio"));
         let (verdict, lines, text) = shown(
             rule.as_ref(),
             " No rule: no variant has two emulators, or a bar is not below the null's ratio.",
@@ -614,14 +794,67 @@ impl Family for NaError {
             verdict,
             rule: rule.clone().into(),
             why: format!(
-                "Largest / smallest time-averaged error across the emulators, each at the best capacity tried: {}. Checks:{lines} Rule (bars ours, in the spec's [params.rule]): {text} At the paper's Table 1 capacity for all three: {}. Extra capacities keep the net's examples per weight.{common_text}",
-                ratios
+                "Largest / smallest time-averaged error across the emulators, each at the best capacity tried{over}: {}{}. Checks:{lines} Rule (bars ours, in the spec's [params.rule]): {text} At the paper's Table 1 capacity for all three: {}. Extra capacities keep the net's examples per weight.{seeds_text}{common_text}",
+                checked
                     .iter()
-                    .map(|(v, r)| format!("{v} {}", sig(*r)))
+                    .map(|(v, r, i)| match i {
+                        Some((lo, hi)) => format!("{v} {} [{}-{}]", sig(*r), sig(*lo), sig(*hi)),
+                        None => format!("{v} {}", sig(*r)),
+                    })
                     .collect::<Vec<_>>()
                     .join(", "),
+                if by_seed.is_some() {
+                    let r: Vec<String> = ratios
+                        .iter()
+                        .map(|(v, r)| format!("{v} {}", sig(*r)))
+                        .collect();
+                    format!(" (the run's own nets: {})", r.join(", "))
+                } else {
+                    String::new()
+                },
                 own.join(", ")
             ),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::report::Verdict;
+
+    const BARS: Fig12Rule = Fig12Rule {
+        held_ratio: 1.5,
+        partly_ratio: 3.0,
+    };
+
+    /// The spread is the largest over the smallest error; the rule reads each variant's
+    /// ratio (or its median over net seeds) against both bars, and a median whose interval
+    /// straddles the partly bar leaves the verdict between partly and not held: inconclusive.
+    #[test]
+    fn the_rule_reads_each_variants_ratio_and_its_interval() {
+        assert_eq!(spread(&[2.0, 1.0, 4.0]), Some(4.0));
+        assert_eq!(spread(&[2.0]), None);
+        let rule = |r: &[(&str, f64, Option<(f64, f64)>)]| {
+            fig12_rule(r, "", &BARS, 4.0).unwrap().verdict()
+        };
+        assert_eq!(
+            rule(&[("passive", 1.2, None), ("active", 1.4, None)]),
+            Verdict::Held
+        );
+        assert_eq!(
+            rule(&[("passive", 2.0, None), ("active", 1.4, None)]),
+            Verdict::Partly
+        );
+        assert_eq!(
+            rule(&[("passive", 14.5, None), ("active", 3.01, None)]),
+            Verdict::NotHeld
+        );
+        assert_eq!(
+            rule(&[("passive", 2.0, None), ("active", 2.9, Some((2.5, 3.4)))]),
+            Verdict::Inconclusive
+        );
+        // A bar the null meets is refused: no rule.
+        assert!(fig12_rule(&[("passive", 1.0, None)], "", &BARS, 2.0).is_none());
     }
 }
