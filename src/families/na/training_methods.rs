@@ -805,7 +805,7 @@ pub fn training_rule(
     };
     let held = vec![
         Check::new(
-            "small net: conjugate gradient's passes to target over momentum's",
+            "small net: conjugate gradient's passes to target over momentum's (NaN: neither reaches it)",
             small,
             Cmp::Below,
             1.0,
@@ -868,16 +868,17 @@ fn optimizer_rows(dir: &Path) -> Result<Vec<(NetSize, String, Vec<f64>)>, Error>
 }
 
 /// Per examples-per-weight ratio, increasing: (ratio, per init in row order (test/training
-/// error, test error)) from `examples.csv`.
-type InitExamples = Vec<(f64, Vec<(f64, f64)>)>;
+/// error, test error, training error)) from `examples.csv`.
+type InitExamples = Vec<(f64, Vec<(f64, f64, f64)>)>;
 
 /// [`InitExamples`] from `examples.csv`.
 fn example_rows(dir: &Path) -> Result<InitExamples, Error> {
     let e = read_csv(&dir.join("examples.csv"))?;
-    let (r, q, te) = (
+    let (r, q, te, tr) = (
         df_f64(&e, "examples_per_weight")?,
         df_f64(&e, "test_train_ratio")?,
         df_f64(&e, "test_error")?,
+        df_f64(&e, "train_error")?,
     );
     let mut ratios: Vec<f64> = r.clone();
     ratios.sort_by(f64::total_cmp);
@@ -885,7 +886,9 @@ fn example_rows(dir: &Path) -> Result<InitExamples, Error> {
     Ok(ratios
         .into_iter()
         .map(|x| {
-            let rows = (0..r.len()).filter(|&i| r[i] == x).map(|i| (q[i], te[i]));
+            let rows = (0..r.len())
+                .filter(|&i| r[i] == x)
+                .map(|i| (q[i], te[i], tr[i]));
             (x, rows.collect())
         })
         .collect())
@@ -917,7 +920,8 @@ fn rule_of_inits(
     let triples: Vec<(f64, f64, f64)> = examples
         .iter()
         .map(|(x, rows)| {
-            let (q, te): (Vec<f64>, Vec<f64>) = rows.iter().copied().unzip();
+            let q: Vec<f64> = rows.iter().map(|r| r.0).collect();
+            let te: Vec<f64> = rows.iter().map(|r| r.1).collect();
             (*x, median_inf(&pick(&q)), median_inf(&pick(&te)))
         })
         .collect();
@@ -962,29 +966,15 @@ fn rule_over_inits(
 }
 
 /// Per ratio, increasing: (ratio, median test/train ratio, median test error, median train
-/// error) from `examples.csv`.
+/// error) from `examples.csv`, over every init ([`example_rows`]).
 fn example_medians(dir: &Path) -> Result<Vec<(f64, f64, f64, f64)>, Error> {
-    let e = read_csv(&dir.join("examples.csv"))?;
-    let (r, q, te, tr) = (
-        df_f64(&e, "examples_per_weight")?,
-        df_f64(&e, "test_train_ratio")?,
-        df_f64(&e, "test_error")?,
-        df_f64(&e, "train_error")?,
-    );
-    let mut ratios: Vec<f64> = r.clone();
-    ratios.sort_by(f64::total_cmp);
-    ratios.dedup();
-    Ok(ratios
+    Ok(example_rows(dir)?
         .into_iter()
-        .map(|x| {
-            let pick = |col: &[f64]| {
-                let v: Vec<f64> = (0..r.len())
-                    .filter(|&i| r[i] == x)
-                    .map(|i| col[i])
-                    .collect();
-                median_inf(&v)
+        .map(|(x, rows)| {
+            let col = |f: fn(&(f64, f64, f64)) -> f64| {
+                median_inf(&rows.iter().map(f).collect::<Vec<_>>())
             };
-            (x, pick(&q), pick(&te), pick(&tr))
+            (x, col(|r| r.0), col(|r| r.1), col(|r| r.2))
         })
         .collect())
 }
@@ -1407,11 +1397,11 @@ mod tests {
                 (NetSize::Large, "momentum".to_string(), vec![5.0; 5]),
             ]
         };
-        // Examples: (test/training, test error) per set at 0.25, 8 and 32 examples per weight.
+        // Examples: (test/training, test error, training error) per set at 0.25, 8 and 32 examples per weight.
         let examples: InitExamples = vec![
-            (0.25, vec![(50.0, 0.03); 5]),
-            (8.0, vec![(1.1, 0.0012); 5]),
-            (32.0, vec![(1.05, 0.001); 5]),
+            (0.25, vec![(50.0, 0.03, 0.0006); 5]),
+            (8.0, vec![(1.1, 0.0012, 0.0011); 5]),
+            (32.0, vec![(1.05, 0.001, 0.00095); 5]),
         ];
         let rule = rule_over_inits(&opt(vec![10.0; 5]), &examples, 8.0, &BARS).unwrap();
         assert_eq!(rule.verdict(), Verdict::Held, "{}", rule.table());
