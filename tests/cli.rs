@@ -911,6 +911,16 @@ fn x_lbc_emulator_quick_compares_every_method_on_both_substrates() {
     for f in ["components.csv", "trajectory.csv", "goal.csv", "rule.csv"] {
         assert!(out.join(f).is_file(), "{f}");
     }
+    // net_seeds.csv: the run's own seed's rows are targets.csv's under net_seed 1 (quick names
+    // no further seed).
+    let seeds = std::fs::read_to_string(out.join("net_seeds.csv")).unwrap();
+    let mut seed_lines = seeds.lines();
+    assert_eq!(
+        seed_lines.next().unwrap(),
+        format!("net_seed,{}", t.lines().next().unwrap())
+    );
+    let own: Vec<String> = t.lines().skip(1).map(|l| format!("1,{l}")).collect();
+    assert_eq!(seed_lines.map(str::to_string).collect::<Vec<_>>(), own);
     // States by their `describe` names (the lander's), never s0, s1, ...
     assert!(header(&out.join("trajectory.csv"))
         .starts_with("desired_target,method,step,t,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz"));

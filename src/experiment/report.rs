@@ -429,13 +429,15 @@ pub(crate) fn checks_figure(
                 y_label: "measure".into(),
                 series: vec![
                     Series::line("95% interval", vec![(0.0, lo), (0.0, hi)], 0),
-                    Series::line("value", vec![(0.0, clamp(c.value))], 0).mark(Mark::Points),
                     Series::line(
                         format!("bar: {} {}", c.cmp.symbol(), sig(c.threshold)),
                         vec![(-0.5, c.threshold), (0.5, c.threshold)],
                         3,
                     )
                     .mark(Mark::Dashed),
+                    // Its own colour, drawn last, so the dot stands out on its interval's bar
+                    // and on the check's bar.
+                    Series::line("value", vec![(0.0, clamp(c.value))], 1).mark(Mark::Points),
                 ],
                 // Room right of the data for the legend, which would cover the bar.
                 x_range: Some((-1.0, 2.6)),

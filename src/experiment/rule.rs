@@ -238,8 +238,8 @@ impl Check {
         if self.fact {
             return format!("{}: {}", self.label, self.outcome().word());
         }
-        let interval = self.interval.map_or_else(String::new, |(lo, hi)| {
-            format!(" [95% interval {}-{}]", sig(lo), sig(hi))
+        let interval = self.interval.map_or_else(String::new, |iv| {
+            format!(" [95% interval {}]", interval_bounds(iv))
         });
         format!(
             "{}: {}{interval} {} {}: {}",
@@ -463,11 +463,16 @@ impl Rule {
 
 /// A check's interval as the report writes it after its value: " [lo-hi]", or " [lo to hi]"
 /// when a bound is negative (a hyphen beside a minus sign reads as a double minus).
-fn interval_text((lo, hi): (f64, f64)) -> String {
+fn interval_text(iv: (f64, f64)) -> String {
+    format!(" [{}]", interval_bounds(iv))
+}
+
+/// An interval's bounds in words: "lo-hi", or "lo to hi" when a bound is negative.
+fn interval_bounds((lo, hi): (f64, f64)) -> String {
     if lo < 0.0 || hi < 0.0 {
-        format!(" [{} to {}]", sig(lo), sig(hi))
+        format!("{} to {}", sig(lo), sig(hi))
     } else {
-        format!(" [{}-{}]", sig(lo), sig(hi))
+        format!("{}-{}", sig(lo), sig(hi))
     }
 }
 

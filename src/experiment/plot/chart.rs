@@ -69,6 +69,8 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
     let chars = p.title.chars().count().max(1) as f64;
     let fit = (0.95 * area.dim_in_pixel().0 as f64 / (0.6 * chars)).floor();
     let title_size = (px(20.0) as f64).min(fit).max(10.0);
+    // A strip above the title, so a top row's title does not touch the figure's edge.
+    let area = area.margin(px(8.0), 0, 0, 0);
     let area = area.titled(
         &p.title,
         ("sans-serif", title_size)

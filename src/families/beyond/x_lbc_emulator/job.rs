@@ -172,6 +172,263 @@ fn blend_policy<'a>(
     }
 }
 
+/// The tables one net's comparison writes.
+struct Outputs {
+    components: Table,
+    targets: Table,
+    trajectory: Table,
+    goal: Table,
+    entropy: Table,
+}
+
+/// Columns of `targets.csv` (and, after `net_seed`, of `net_seeds.csv`).
+const TARGET_COLUMNS: [&str; 10] = [
+    "desired_target",
+    "method",
+    "final_error_emulator",
+    "final_error_simulator",
+    "effort",
+    "seconds",
+    "weight1",
+    "weight2",
+    "final_axis_value",
+    "mean_entropy",
+];
+
+impl Outputs {
+    fn new(params: &Params) -> Self {
+        let model = params.net.model;
+        let mut cols: Vec<String> = ["desired_target", "method", "step", "t"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        // The state variables by their `describe` names.
+        cols.extend(model.state_names());
+        debug_assert_eq!(cols.len(), 4 + model.state_dim());
+        let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
+        let mut goal_cols = vec!["desired_target"];
+        goal_cols.extend_from_slice(&col_refs[4..]);
+        Self {
+            components: Table::new(&[
+                "component",
+                "target",
+                "learn_seconds",
+                "tracker_seconds",
+                "iterations",
+                "objective",
+                "emulator_error",
+                "open_loop_simulator_error",
+                "tracked_simulator_error",
+            ]),
+            targets: Table::new(&TARGET_COLUMNS),
+            trajectory: Table::new(&col_refs),
+            goal: Table::new(&goal_cols),
+            entropy: Table::new(&ENTROPY_COLUMNS),
+        }
+    }
+}
+
+impl Params {
+    /// The lander net of `seed` (from the cache, or trained).
+    fn net(&self, seed: u64) -> Result<crate::emulator::catalog::Trained, Error> {
+        build_emulator(&build_spec(
+            seed,
+            &self.net,
+            self.steps,
+            self.example_scale,
+            &self.training,
+        ))
+    }
+
+    /// The components learned through `emu`, their trackers, and every method at every desired
+    /// target on the emulator and the simulator, into `out`.
+    fn compare(&self, emu: &Emulator, comps: &[Component], out: &mut Outputs) -> Result<(), Error> {
+        let trackers: Vec<StepTracker> = comps.iter().map(|c| c.tracker.clone()).collect();
+        let lambda = self.lambda();
+        let q = self.terminal_weight(self.axis) / lambda;
+        let dt = self.super_dt();
+        for (i, (c, &value)) in comps.iter().zip(&self.components).enumerate() {
+            let task = self.target_task(value);
+            let open = self.execute(emu, Substrate::Simulator, &mut |_, k, v| {
+                v.copy_from_slice(c.tape[k].as_slice());
+                Ok(())
+            })?;
+            let tracked = self.execute(emu, Substrate::Simulator, &mut |x, k, v| {
+                c.tracker.policy_into(x, k, v);
+                Ok(())
+            })?;
+            out.components.push(row![
+                format!("{}", i + 1),
+                value,
+                c.learn_seconds,
+                c.tracker_seconds,
+                c.iterations as i64,
+                c.objective,
+                task.final_error(&c.emulator_final),
+                task.final_error(&open.states[self.task.horizon]),
+                task.final_error(&tracked.states[self.task.horizon])
+            ]);
+        }
+        for &d in &self.desired {
+            let task = self.target_task(d);
+            let mut r = row![d];
+            r.extend(task.task.target.iter().map(|&v| v.into()));
+            out.goal.push(r);
+            let t0 = Instant::now();
+            let comp_rewards: Vec<GaussianReward> = self
+                .components
+                .iter()
+                .map(|&c| GaussianReward::isotropic(&[c], q))
+                .collect();
+            let mut w = project(&comp_rewards, &GaussianReward::isotropic(&[d], q))
+                .map_err(other)?
+                .weights;
+            // Projection round-off: at a component's own target the other weight comes out
+            // as ±1e-16, and a negative one makes Σ w_i z_i ≤ 0 wherever that component's
+            // z dominates. A weight within 1e-12 of the largest's magnitude is zero.
+            let largest = w.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+            for wi in &mut w {
+                if wi.abs() <= 1e-12 * largest {
+                    *wi = 0.0;
+                }
+            }
+            let projection_seconds = t0.elapsed().as_secs_f64();
+            let fresh = self.learn(emu, d)?;
+            let limits = None;
+            for method in METHODS {
+                let blend = |mode| TrackerBlend {
+                    trackers: &trackers,
+                    weights: w.clone(),
+                    lambda,
+                    mode,
+                    limits,
+                };
+                let own = [fresh.tracker.clone()];
+                let (blend, seconds) = match method {
+                    "lbc" => (Some(blend(BlendMode::Lbc)), projection_seconds),
+                    "naive" => (Some(blend(BlendMode::Naive)), projection_seconds),
+                    "tracker1" => (Some(blend(BlendMode::Single(0))), 0.0),
+                    "tracker2" => (Some(blend(BlendMode::Single(1))), 0.0),
+                    "bptt_tracked" => (
+                        Some(TrackerBlend {
+                            trackers: &own,
+                            weights: vec![1.0],
+                            lambda,
+                            mode: BlendMode::Single(0),
+                            limits,
+                        }),
+                        fresh.learn_seconds + fresh.tracker_seconds,
+                    ),
+                    "bptt" => (None, fresh.learn_seconds),
+                    _ => (None, 0.0),
+                };
+                let tape = match method {
+                    "open_loop1" => &comps[0].tape,
+                    "open_loop2" => &comps[1].tape,
+                    _ => &fresh.tape,
+                };
+                let mut entropy = Vec::new();
+                let undefined = std::cell::Cell::new(false);
+                let mut run = |substrate| -> Result<Outcome, Error> {
+                    match &blend {
+                        Some(b) => {
+                            let mut log = Vec::new();
+                            let r = self.execute(
+                                emu,
+                                substrate,
+                                &mut blend_policy(b, &mut log, &undefined),
+                            );
+                            if matches!(substrate, Substrate::Simulator) {
+                                entropy = log;
+                            }
+                            r
+                        }
+                        None => self.execute(emu, substrate, &mut |_, k, v| {
+                            v.copy_from_slice(tape[k].as_slice());
+                            Ok(())
+                        }),
+                    }
+                };
+                // A blend undefined along a run (above) is a failed run on that substrate:
+                // its row has NaN final errors, effort and axis value.
+                let mut outcome = |substrate| match run(substrate) {
+                    Ok(o) => Ok(Some(o)),
+                    Err(_) if undefined.replace(false) => Ok(None),
+                    Err(e) => Err(e),
+                };
+                let on_emu = outcome(Substrate::Emulator)?;
+                let on_sim = outcome(Substrate::Simulator)?;
+                let (Some(on_emu), Some(on_sim)) = (&on_emu, on_sim) else {
+                    let emu_error = on_emu
+                        .as_ref()
+                        .map_or(f64::NAN, |o| task.final_error(&o.states[self.task.horizon]));
+                    out.targets.push(row![
+                        d,
+                        method,
+                        emu_error,
+                        f64::NAN,
+                        f64::NAN,
+                        seconds,
+                        w[0],
+                        w[1],
+                        f64::NAN,
+                        f64::NAN
+                    ]);
+                    continue;
+                };
+                let end = &on_sim.states[self.task.horizon];
+                let mean_entropy = if entropy.is_empty() {
+                    f64::NAN
+                } else {
+                    entropy.iter().map(|e| e.0).sum::<f64>() / entropy.len() as f64
+                };
+                if matches!(method, "lbc" | "naive") {
+                    let (h, dev): (Vec<f64>, Vec<f64>) = entropy.iter().copied().unzip();
+                    let run = format!("desired {d} m");
+                    push_entropy(&mut out.entropy, &run, method, dt, &h, &dev);
+                }
+                out.targets.push(row![
+                    d,
+                    method,
+                    task.final_error(&on_emu.states[self.task.horizon]),
+                    task.final_error(end),
+                    on_sim.effort,
+                    seconds,
+                    w[0],
+                    w[1],
+                    end[self.axis],
+                    mean_entropy
+                ]);
+                for (k, s) in on_sim.states.iter().enumerate() {
+                    let mut r = row![d, method, k as i64, k as f64 * dt];
+                    r.extend(s.iter().map(|&v| v.into()));
+                    out.trajectory.push(r);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The components learned through `emu`.
+    fn learn_components(&self, emu: &Emulator) -> Result<Vec<Component>, Error> {
+        self.components
+            .iter()
+            .map(|&c| self.learn(emu, c))
+            .collect()
+    }
+
+    /// The seeds beyond the run's own (`own`), in the spec's order, without repeats.
+    fn further_net_seeds(&self, own: u64) -> Vec<u64> {
+        let mut out: Vec<u64> = Vec::new();
+        for &s in &self.net_seeds {
+            if s != own && !out.contains(&s) {
+                out.push(s);
+            }
+        }
+        out
+    }
+}
+
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).unwrap_or_default()
@@ -179,229 +436,40 @@ impl Job for Params {
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let model = self.net.model;
-        let n = model.state_dim();
-        let spec = build_spec(
-            ctx.seed,
-            &self.net,
-            self.steps,
-            self.example_scale,
-            &self.training,
-        );
         let trained = ctx.stage(&format!("train {} N{}", model.name(), self.steps), || {
-            build_emulator(&spec)
+            self.net(ctx.seed)
         })?;
         let emu = &trained.emulator;
-        let comps = ctx.stage("learn components", || {
-            self.components
-                .iter()
-                .map(|&c| self.learn(emu, c))
+        let comps = ctx.stage("learn components", || self.learn_components(emu))?;
+        let mut out = Outputs::new(self);
+        ctx.stage("compare", || self.compare(emu, &comps, &mut out))?;
+        // The same comparison through the lander net of each further seed: `net_seeds.csv` is
+        // every seed's `targets.csv` rows, the run's own first, under its `net_seed`.
+        let mut seeds_t = Table::new(&[]);
+        let own = std::iter::once((ctx.seed, out.targets.clone()));
+        let further = ctx.stage("net seeds", || {
+            self.further_net_seeds(ctx.seed)
+                .into_iter()
+                .map(|s| -> Result<(u64, Table), Error> {
+                    let net = self.net(s)?;
+                    let comps = self.learn_components(&net.emulator)?;
+                    let mut o = Outputs::new(self);
+                    self.compare(&net.emulator, &comps, &mut o)?;
+                    Ok((s, o.targets))
+                })
                 .collect::<Result<Vec<_>, Error>>()
         })?;
-        let trackers: Vec<StepTracker> = comps.iter().map(|c| c.tracker.clone()).collect();
+        for (s, t) in own.chain(further) {
+            let t = t.with_prefix(&[("net_seed".to_string(), (s as i64).into())]);
+            if seeds_t.names().is_empty() {
+                seeds_t = t;
+            } else {
+                seeds_t.append(&t).map_err(other)?;
+            }
+        }
         let lambda = self.lambda();
         let q = self.terminal_weight(self.axis) / lambda;
         let spacing = self.components[1] - self.components[0];
-
-        let mut components_t = Table::new(&[
-            "component",
-            "target",
-            "learn_seconds",
-            "tracker_seconds",
-            "iterations",
-            "objective",
-            "emulator_error",
-            "open_loop_simulator_error",
-            "tracked_simulator_error",
-        ]);
-        let mut targets_t = Table::new(&[
-            "desired_target",
-            "method",
-            "final_error_emulator",
-            "final_error_simulator",
-            "effort",
-            "seconds",
-            "weight1",
-            "weight2",
-            "final_axis_value",
-            "mean_entropy",
-        ]);
-        let mut cols: Vec<String> = ["desired_target", "method", "step", "t"]
-            .iter()
-            .map(|s| s.to_string())
-            .collect();
-        // The state variables by their `describe` names.
-        cols.extend(model.state_names());
-        debug_assert_eq!(cols.len(), 4 + n);
-        let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
-        let mut trajectory = Table::new(&col_refs);
-        let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
-        let mut goal_cols = vec!["desired_target"];
-        goal_cols.extend_from_slice(&col_refs[4..]);
-        let mut goal_t = Table::new(&goal_cols);
-
-        let dt = self.super_dt();
-        ctx.stage("compare", || -> Result<(), Error> {
-            for (i, (c, &value)) in comps.iter().zip(&self.components).enumerate() {
-                let task = self.target_task(value);
-                let open = self.execute(emu, Substrate::Simulator, &mut |_, k, v| {
-                    v.copy_from_slice(c.tape[k].as_slice());
-                    Ok(())
-                })?;
-                let tracked = self.execute(emu, Substrate::Simulator, &mut |x, k, v| {
-                    c.tracker.policy_into(x, k, v);
-                    Ok(())
-                })?;
-                components_t.push(row![
-                    format!("{}", i + 1),
-                    value,
-                    c.learn_seconds,
-                    c.tracker_seconds,
-                    c.iterations as i64,
-                    c.objective,
-                    task.final_error(&c.emulator_final),
-                    task.final_error(&open.states[self.task.horizon]),
-                    task.final_error(&tracked.states[self.task.horizon])
-                ]);
-            }
-            for &d in &self.desired {
-                let task = self.target_task(d);
-                let mut r = row![d];
-                r.extend(task.task.target.iter().map(|&v| v.into()));
-                goal_t.push(r);
-                let t0 = Instant::now();
-                let comp_rewards: Vec<GaussianReward> = self
-                    .components
-                    .iter()
-                    .map(|&c| GaussianReward::isotropic(&[c], q))
-                    .collect();
-                let mut w = project(&comp_rewards, &GaussianReward::isotropic(&[d], q))
-                    .map_err(other)?
-                    .weights;
-                // Projection round-off: at a component's own target the other weight comes out
-                // as ±1e-16, and a negative one makes Σ w_i z_i ≤ 0 wherever that component's
-                // z dominates. A weight within 1e-12 of the largest's magnitude is zero.
-                let largest = w.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-                for wi in &mut w {
-                    if wi.abs() <= 1e-12 * largest {
-                        *wi = 0.0;
-                    }
-                }
-                let projection_seconds = t0.elapsed().as_secs_f64();
-                let fresh = self.learn(emu, d)?;
-                let limits = None;
-                for method in METHODS {
-                    let blend = |mode| TrackerBlend {
-                        trackers: &trackers,
-                        weights: w.clone(),
-                        lambda,
-                        mode,
-                        limits,
-                    };
-                    let own = [fresh.tracker.clone()];
-                    let (blend, seconds) = match method {
-                        "lbc" => (Some(blend(BlendMode::Lbc)), projection_seconds),
-                        "naive" => (Some(blend(BlendMode::Naive)), projection_seconds),
-                        "tracker1" => (Some(blend(BlendMode::Single(0))), 0.0),
-                        "tracker2" => (Some(blend(BlendMode::Single(1))), 0.0),
-                        "bptt_tracked" => (
-                            Some(TrackerBlend {
-                                trackers: &own,
-                                weights: vec![1.0],
-                                lambda,
-                                mode: BlendMode::Single(0),
-                                limits,
-                            }),
-                            fresh.learn_seconds + fresh.tracker_seconds,
-                        ),
-                        "bptt" => (None, fresh.learn_seconds),
-                        _ => (None, 0.0),
-                    };
-                    let tape = match method {
-                        "open_loop1" => &comps[0].tape,
-                        "open_loop2" => &comps[1].tape,
-                        _ => &fresh.tape,
-                    };
-                    let mut entropy = Vec::new();
-                    let undefined = std::cell::Cell::new(false);
-                    let mut run = |substrate| -> Result<Outcome, Error> {
-                        match &blend {
-                            Some(b) => {
-                                let mut log = Vec::new();
-                                let r = self.execute(
-                                    emu,
-                                    substrate,
-                                    &mut blend_policy(b, &mut log, &undefined),
-                                );
-                                if matches!(substrate, Substrate::Simulator) {
-                                    entropy = log;
-                                }
-                                r
-                            }
-                            None => self.execute(emu, substrate, &mut |_, k, v| {
-                                v.copy_from_slice(tape[k].as_slice());
-                                Ok(())
-                            }),
-                        }
-                    };
-                    // A blend undefined along a run (above) is a failed run on that substrate:
-                    // its row has NaN final errors, effort and axis value.
-                    let mut outcome = |substrate| match run(substrate) {
-                        Ok(o) => Ok(Some(o)),
-                        Err(_) if undefined.replace(false) => Ok(None),
-                        Err(e) => Err(e),
-                    };
-                    let on_emu = outcome(Substrate::Emulator)?;
-                    let on_sim = outcome(Substrate::Simulator)?;
-                    let (Some(on_emu), Some(on_sim)) = (&on_emu, on_sim) else {
-                        let emu_error = on_emu
-                            .as_ref()
-                            .map_or(f64::NAN, |o| task.final_error(&o.states[self.task.horizon]));
-                        targets_t.push(row![
-                            d,
-                            method,
-                            emu_error,
-                            f64::NAN,
-                            f64::NAN,
-                            seconds,
-                            w[0],
-                            w[1],
-                            f64::NAN,
-                            f64::NAN
-                        ]);
-                        continue;
-                    };
-                    let end = &on_sim.states[self.task.horizon];
-                    let mean_entropy = if entropy.is_empty() {
-                        f64::NAN
-                    } else {
-                        entropy.iter().map(|e| e.0).sum::<f64>() / entropy.len() as f64
-                    };
-                    if matches!(method, "lbc" | "naive") {
-                        let (h, dev): (Vec<f64>, Vec<f64>) = entropy.iter().copied().unzip();
-                        let run = format!("desired {d} m");
-                        push_entropy(&mut entropy_t, &run, method, dt, &h, &dev);
-                    }
-                    targets_t.push(row![
-                        d,
-                        method,
-                        task.final_error(&on_emu.states[self.task.horizon]),
-                        task.final_error(end),
-                        on_sim.effort,
-                        seconds,
-                        w[0],
-                        w[1],
-                        end[self.axis],
-                        mean_entropy
-                    ]);
-                    for (k, s) in on_sim.states.iter().enumerate() {
-                        let mut r = row![d, method, k as i64, k as f64 * dt];
-                        r.extend(s.iter().map(|&v| v.into()));
-                        trajectory.push(r);
-                    }
-                }
-            }
-            Ok(())
-        })?;
         let rule = rule_table(&[
             ("lambda", lambda),
             ("control_noise", self.control_noise),
@@ -411,14 +479,15 @@ impl Job for Params {
             ("within_fraction", self.within_fraction),
             ("naive_margin", self.naive_margin),
             ("axis_margin", self.axis_margin),
-            ("super_step_s", dt),
+            ("super_step_s", self.super_dt()),
         ]);
         Ok(Tables::from([
-            ("targets", targets_t),
-            ("components", components_t),
-            ("trajectory", trajectory),
-            ("goal", goal_t),
-            ("entropy", entropy_t),
+            ("targets", out.targets),
+            ("components", out.components),
+            ("trajectory", out.trajectory),
+            ("goal", out.goal),
+            ("entropy", out.entropy),
+            ("net_seeds", seeds_t),
             ("rule", rule),
         ]))
     }

@@ -50,7 +50,15 @@ pub struct Params {
     /// Ours: LBC's mean distance of the final position on the axis from the desired target
     /// (simulator, in-between targets) may exceed naive's by at most this (m).
     pub axis_margin: f64,
+    /// Further seeds of the lander net (beside the run's own) through which the whole
+    /// comparison is repeated (`net_seeds.csv`); the rule reads the median over all of them. At
+    /// most [`MAX_NET_SEEDS`].
+    #[serde(default)]
+    pub net_seeds: Vec<u64>,
 }
+
+/// The most net seeds a run may name (each is a lander net to train when not cached).
+pub const MAX_NET_SEEDS: usize = 16;
 
 impl Validate for Params {
     fn validate(&self) -> Result<(), ParamError> {
@@ -95,6 +103,11 @@ impl Validate for Params {
         )?;
         ensure(self.naive_margin >= 0.0, "naive_margin", "must be >= 0")?;
         ensure(self.axis_margin >= 0.0, "axis_margin", "must be >= 0")?;
+        ensure(
+            self.net_seeds.len() <= MAX_NET_SEEDS,
+            "net_seeds",
+            format!("at most {MAX_NET_SEEDS}"),
+        )?;
         validate_nets(std::slice::from_ref(&self.net), self.example_scale)?;
         validate_training(&self.training)
     }

@@ -5,21 +5,46 @@ use super::METHODS;
 use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
+use crate::experiment::stats::{bootstrap_intervals, median};
 use crate::experiment::Error;
 use crate::families::lbc::{entropy_section, rule_settings};
 use std::path::Path;
 
-/// What the rule reads over the desired targets strictly between the components: per
-/// method, (share of targets within tolerance on the simulator, mean simulator final error,
-/// mean distance of the final x from the desired x in m).
+/// What one net seed's comparison gives over the desired targets strictly between the
+/// components: per method, (share of targets within tolerance on the simulator, mean simulator
+/// final error, mean distance of the final x from the desired x in m).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RuleInputs {
+pub struct Measures {
     /// LBC's.
     pub lbc: (f64, f64, f64),
     /// The naive blend's.
     pub naive: (f64, f64, f64),
     /// The better example (tracker) alone's on each measure.
     pub example: (f64, f64, f64),
+}
+
+impl Measures {
+    /// The three checks' values for LBC: its share within tolerance, and its error and
+    /// distance minus the naive blend's.
+    fn lbc_values(&self) -> [f64; 3] {
+        Self::values(self.lbc, self.naive)
+    }
+
+    /// The same values for the better example alone (the checks' null).
+    fn null_values(&self) -> [f64; 3] {
+        Self::values(self.example, self.naive)
+    }
+
+    fn values(m: (f64, f64, f64), naive: (f64, f64, f64)) -> [f64; 3] {
+        [m.0, m.1 - naive.1, m.2 - naive.2]
+    }
+}
+
+/// What the rule reads: each net seed's [`Measures`] and the spec's bars.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RuleInputs {
+    /// One per net seed (`net_seeds.csv`), the run's own first.
+    pub seeds: Vec<Measures>,
     /// The spec's `within_fraction`.
     pub within_fraction: f64,
     /// The spec's `naive_margin` (tolerance units).
@@ -28,38 +53,101 @@ pub struct RuleInputs {
     pub axis_margin: f64,
 }
 
-/// The spec's rule: (a) LBC within tolerance on the simulator at no fewer than
-/// `within_fraction` of the in-between targets; (b) its mean simulator error at most the naive
-/// blend's + `naive_margin`; (c) its mean distance from the desired x at most naive's +
-/// `axis_margin`. Each check's null is the better example alone (a component's tracker, which
-/// lands at its own x). Held needs all three; partly (b) and (c), LBC not beaten by the naive
-/// blend on either measure.
+/// Bootstrap seed of the intervals over net seeds (fixed, so a report is the same everywhere).
+const BOOTSTRAP_SEED: u64 = 1;
+
+/// The median over the net seeds of each check's value (LBC's) and of its null (the better
+/// example alone's), and each value's 95% bootstrap interval over the seeds (`None` with one
+/// seed).
+fn over_seeds(seeds: &[Measures]) -> ([f64; 3], [f64; 3], Option<Vec<(f64, f64)>>) {
+    let column = |f: fn(&Measures) -> [f64; 3], k: usize, idx: &[usize]| -> f64 {
+        median(&idx.iter().map(|&i| f(&seeds[i])[k]).collect::<Vec<_>>())
+    };
+    let all: Vec<usize> = (0..seeds.len()).collect();
+    let value = [0, 1, 2].map(|k| column(Measures::lbc_values, k, &all));
+    let null = [0, 1, 2].map(|k| column(Measures::null_values, k, &all));
+    let intervals = (seeds.len() > 1).then(|| {
+        bootstrap_intervals(seeds.len(), BOOTSTRAP_SEED, 3, |idx, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = column(Measures::lbc_values, k, idx);
+            }
+        })
+    });
+    (value, null, intervals)
+}
+
+/// The spec's rule, over the net seeds: (a) the median share of the in-between targets at
+/// which LBC ends within tolerance on the simulator is no less than `within_fraction`; (b) the
+/// median of LBC's mean simulator error minus the naive blend's is at most `naive_margin`; (c)
+/// the median of LBC's mean distance from the desired x minus naive's is at most
+/// `axis_margin`. Each check carries its 95% bootstrap interval over the seeds (inconclusive
+/// where it straddles the bar), and its null is the better example alone (a component's
+/// tracker, which lands at its own x), median over the seeds. Held needs all three; partly (b)
+/// and (c), LBC not beaten by the naive blend on either measure.
 pub fn rule(r: &RuleInputs) -> Option<Rule> {
+    if r.seeds.is_empty() {
+        return None;
+    }
+    let (value, null, intervals) = over_seeds(&r.seeds);
     let alone = "the better example alone";
-    let held = vec![
-        Check::new(
+    let checks = [
+        (
             "share of the in-between targets LBC ends within tolerance on the simulator",
-            r.lbc.0,
             Cmp::AtLeast,
             r.within_fraction,
-            Null::new(alone, r.example.0),
         ),
-        Check::new(
+        (
             "LBC's mean simulator error minus the naive blend's",
-            r.lbc.1 - r.naive.1,
             Cmp::AtMost,
             r.naive_margin,
-            Null::new(alone, r.example.1 - r.naive.1),
         ),
-        Check::new(
+        (
             "LBC's mean distance from the desired x minus the naive blend's (m)",
-            r.lbc.2 - r.naive.2,
             Cmp::AtMost,
             r.axis_margin,
-            Null::new(alone, r.example.2 - r.naive.2),
         ),
     ];
+    let held = checks
+        .into_iter()
+        .enumerate()
+        .map(|(k, (label, cmp, bar))| {
+            let c = Check::new(label, value[k], cmp, bar, Null::new(alone, null[k]));
+            match &intervals {
+                Some(iv) if iv[k].0.is_finite() && iv[k].1.is_finite() => {
+                    c.map(|c| c.with_interval(iv[k].0, iv[k].1))
+                }
+                _ => c,
+            }
+        })
+        .collect();
     Rule::gated(vec![], held, Partly::All(vec![1, 2]))
+}
+
+/// One net seed's [`Measures`] from its `targets.csv` rows: `d` desired targets, `meth`
+/// methods, `es` simulator final errors, `reached` final axis values, over the rows `rows`.
+fn measures(
+    rows: &[usize],
+    (d, meth, es, reached): (&[f64], &[String], &[f64], &[f64]),
+    between: impl Fn(f64) -> bool,
+) -> Measures {
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let of = |m: &str| {
+        let picked: Vec<usize> = rows
+            .iter()
+            .copied()
+            .filter(|&r| meth[r] == m && between(d[r]))
+            .collect();
+        let e: Vec<f64> = picked.iter().map(|&r| es[r]).collect();
+        let miss: Vec<f64> = picked.iter().map(|&r| (reached[r] - d[r]).abs()).collect();
+        let share = e.iter().filter(|&&x| x <= 1.0).count() as f64 / e.len().max(1) as f64;
+        (share, mean(&e), mean(&miss))
+    };
+    let (t1, t2) = (of("tracker1"), of("tracker2"));
+    Measures {
+        lbc: of("lbc"),
+        naive: of("naive"),
+        example: (t1.0.max(t2.0), t1.1.min(t2.1), t1.2.min(t2.2)),
+    }
 }
 
 /// The findings ([`crate::experiment::Family::report`]).
@@ -100,16 +188,29 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let within = lbc.iter().filter(|&&e| e <= 1.0).count();
     let (ml, mn) = (mean(&lbc), mean(&errs("naive")));
     let (xl, xn) = (mean(&miss("lbc")), mean(&miss("naive")));
-    let measures = |m: &str| {
-        let e = errs(m);
-        let share = e.iter().filter(|&&x| x <= 1.0).count() as f64 / e.len().max(1) as f64;
-        (share, mean(&e), mean(&miss(m)))
-    };
-    let (t1, t2) = (measures("tracker1"), measures("tracker2"));
+    let seeds_df = read_csv(&dir.join("net_seeds.csv"))?;
+    let (sd, sm, se, sr, sseed) = (
+        df_f64(&seeds_df, "desired_target")?,
+        df_str(&seeds_df, "method")?,
+        df_f64(&seeds_df, "final_error_simulator")?,
+        df_f64(&seeds_df, "final_axis_value")?,
+        df_f64(&seeds_df, "net_seed")?,
+    );
+    let mut seed_ids: Vec<f64> = Vec::new();
+    for &s in &sseed {
+        if !seed_ids.contains(&s) {
+            seed_ids.push(s);
+        }
+    }
+    let per_seed: Vec<(f64, Measures)> = seed_ids
+        .iter()
+        .map(|&s| {
+            let rows: Vec<usize> = (0..sseed.len()).filter(|&r| sseed[r] == s).collect();
+            (s, measures(&rows, (&sd, &sm, &se, &sr), between))
+        })
+        .collect();
     let inputs = RuleInputs {
-        lbc: measures("lbc"),
-        naive: measures("naive"),
-        example: (t1.0.max(t2.0), t1.1.min(t2.1), t1.2.min(t2.2)),
+        seeds: per_seed.iter().map(|p| p.1).collect(),
         within_fraction: frac,
         naive_margin: margin,
         axis_margin,
@@ -179,6 +280,21 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             sig(mean(&errs(mm)))
         ));
     }
+    md.push_str(&format!(
+        "\nThe same comparison through the lander net of each net seed (`net_seeds.csv`; components, trackers and blends rebuilt through each net), over the in-between targets on the simulator; the rule reads the median over the seeds:\n\n| net seed | LBC within tolerance (share) | LBC's mean error − naive's | LBC's mean distance − naive's (m) | better example alone within tolerance | its mean distance − naive's (m) |\n| --- | --- | --- | --- | --- | --- |\n",
+    ));
+    for (s, m) in &per_seed {
+        let (v, n) = (m.lbc_values(), m.null_values());
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            *s as u64,
+            sig(v[0]),
+            sig(v[1]),
+            sig(v[2]),
+            sig(n[0]),
+            sig(n[2])
+        ));
+    }
     md.push_str(&entropy_section(
         dir,
         "1 = uniform α; the projected weights are uniform only at the midpoint target, so elsewhere the naive blend's constant entropy is below 1, and beyond the components a negative weight leaves it undefined (NaN)",
@@ -189,15 +305,14 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         verdict,
         rule: rule.clone().into(),
         why: format!(
-            "On the simulator, over the {} targets between the components, LBC ends within tolerance at {}, with mean final error {} against the naive blend's {} and mean distance from the desired x {} m against {} m; the better example alone ends within tolerance at a share {} of them, {} m from the desired x on average.{lines} Rule (ours, in the spec; revised after results, see the rule history): {text}",
+            "On the simulator, over the {} targets between the components, through the run's own net LBC ends within tolerance at {}, with mean final error {} against the naive blend's {} and mean distance from the desired x {} m against {} m. The rule reads the median over {} net seeds.{lines} Rule (ours, in the spec; revised after results, see the rule history): {text}",
             lbc.len(),
             within,
             sig(ml),
             sig(mn),
             sig(xl),
             sig(xn),
-            sig(inputs.example.0),
-            sig(inputs.example.2),
+            per_seed.len(),
         ),
     })
 }
@@ -206,13 +321,20 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
 mod tests {
     use super::*;
     use crate::experiment::report::Verdict;
+    use crate::experiment::rule::Outcome;
 
-    /// The committed run's numbers over the 5 in-between targets.
-    fn committed() -> RuleInputs {
-        RuleInputs {
+    /// The run's own net's numbers over the 5 in-between targets (seed 1).
+    fn own() -> Measures {
+        Measures {
             lbc: (0.6, 0.607, 0.253),
             naive: (0.8, 0.629, 0.041),
             example: (0.6, 0.83, 2.99),
+        }
+    }
+
+    fn one(m: Measures) -> RuleInputs {
+        RuleInputs {
+            seeds: vec![m],
             within_fraction: 0.8,
             naive_margin: 0.05,
             axis_margin: 0.1,
@@ -226,39 +348,87 @@ mod tests {
     #[test]
     fn naive_beating_lbc_on_a_main_measure_is_not_partly_held() {
         // LBC's error is lower, but the naive blend lands 0.21 m nearer the desired x.
-        assert_eq!(verdict(&committed()), Some(Verdict::NotHeld));
+        assert_eq!(verdict(&one(own())), Some(Verdict::NotHeld));
         // Naive better on both measures beyond the margins: not partly.
-        let both = RuleInputs {
+        let both = Measures {
             lbc: (1.0, 0.4, 0.18),
             naive: (1.0, 0.29, 0.0065),
-            ..committed()
+            ..own()
         };
-        assert_eq!(verdict(&both), Some(Verdict::NotHeld));
+        assert_eq!(verdict(&one(both)), Some(Verdict::NotHeld));
         // LBC within tolerance everywhere but naive nearer along x: still not partly.
-        let axis = RuleInputs {
+        let axis = Measures {
             lbc: (1.0, 0.5, 0.253),
-            ..committed()
+            ..own()
         };
-        assert_eq!(verdict(&axis), Some(Verdict::NotHeld));
+        assert_eq!(verdict(&one(axis)), Some(Verdict::NotHeld));
     }
 
     #[test]
     fn lbc_matching_naive_is_partly_and_within_tolerance_too_held() {
-        let matched = RuleInputs {
+        let matched = Measures {
             lbc: (0.6, 0.607, 0.1),
-            ..committed()
+            ..own()
         };
-        assert_eq!(verdict(&matched), Some(Verdict::Partly));
-        let held = RuleInputs {
+        assert_eq!(verdict(&one(matched)), Some(Verdict::Partly));
+        let held = Measures {
             lbc: (0.8, 0.607, 0.1),
             ..matched
         };
-        assert_eq!(verdict(&held), Some(Verdict::Held));
+        assert_eq!(verdict(&one(held)), Some(Verdict::Held));
         // A within-tolerance bar that an example alone meets cannot fail: refused.
         let lax = RuleInputs {
             within_fraction: 0.6,
-            ..held
+            ..one(held)
         };
         assert!(rule(&lax).is_none());
+        assert!(rule(&RuleInputs {
+            seeds: vec![],
+            ..one(held)
+        })
+        .is_none());
+    }
+
+    #[test]
+    fn over_seeds_the_rule_reads_medians_with_intervals() {
+        let held = Measures {
+            lbc: (1.0, 0.5, 0.0),
+            ..own()
+        };
+        // Four seeds where LBC is as good as naive along x, one where it misses by 0.5 m: the
+        // median passes; every check has an interval over the seeds.
+        let miss = Measures {
+            lbc: (1.0, 0.5, 0.541),
+            ..own()
+        };
+        let r = RuleInputs {
+            seeds: vec![held, held, miss, held, held],
+            ..one(held)
+        };
+        let rule = rule(&r).expect("a rule");
+        let c = &rule.held[2];
+        assert!((c.value - (0.0 - 0.041)).abs() < 1e-12);
+        assert!(rule.held.iter().all(|c| c.interval.is_some()));
+        // The resamples that draw the missing seed three times or more move the median: the
+        // interval reaches 0.5 m, so the check straddles its bar.
+        assert_eq!(c.outcome(), Outcome::Inconclusive);
+        // The null is the example alone's median.
+        assert!((c.null.value - (2.99 - 0.041)).abs() < 1e-12);
+        // With every seed alike the intervals collapse onto the value and the verdict is clear.
+        let same = RuleInputs {
+            seeds: vec![held; 5],
+            ..one(held)
+        };
+        assert_eq!(verdict(&same), Some(Verdict::Held));
+        // One seed: no interval.
+        assert!(rule_of_one_has_no_interval(held));
+    }
+
+    fn rule_of_one_has_no_interval(m: Measures) -> bool {
+        rule(&one(m))
+            .expect("a rule")
+            .held
+            .iter()
+            .all(|c| c.interval.is_none())
     }
 }

@@ -6,7 +6,6 @@ use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::sig;
 use crate::experiment::rule::rule_setting;
-use crate::experiment::stats::median_interval;
 use crate::experiment::Error;
 use std::path::PathBuf;
 
@@ -198,27 +197,39 @@ fn net_seeds_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, E
         })
         .collect();
     let ratios: Vec<f64> = points.iter().map(|p| p.1).collect();
-    let (med, lo, hi) = median_interval(&ratios, super::report::BOOTSTRAP_SEED);
+    let (med, lo, hi) = super::report::ratio_median(&ratios);
     let x0 = seeds.iter().copied().fold(f64::INFINITY, f64::min) - 0.5;
     let x1 = seeds.iter().copied().fold(f64::NEG_INFINITY, f64::max) + 0.5;
+    // Headroom above the null's line for the legend, where it hides no dot; a seed where
+    // momentum never gets there (+∞) sits on the top edge, labelled "never".
+    let top = ratios
+        .iter()
+        .copied()
+        .filter(|r| r.is_finite())
+        .fold(1.0, f64::max)
+        * 1.7;
+    let shown: Vec<(f64, f64)> = points.iter().map(|p| (p.0, p.1.min(top))).collect();
+    let labels = points
+        .iter()
+        .map(|p| {
+            if p.1.is_finite() {
+                format!("{}", p.0)
+            } else {
+                format!("{} (never)", p.0)
+            }
+        })
+        .collect();
     let mut series = vec![Series::line(
-        "momentum's iterations to plain's final J / plain's, per net seed",
-        points.clone(),
-        0,
-    )
-    .mark(Mark::Points)
-    .labelled(points.iter().map(|p| format!("{}", p.0)).collect())];
-    series.push(Series::line(
         format!(
-            "median over {} seeds {} [95% interval {}-{}]",
+            "median over {} seeds {} [95% interval {} to {}]",
             points.len(),
             sig(med),
             sig(lo),
             sig(hi)
         ),
-        vec![(x0, med), (x1, med)],
+        vec![(x0, med.min(top)), (x1, med.min(top))],
         1,
-    ));
+    )];
     if let Some(bar) = rule_setting(tables, "iteration_ratio") {
         series.push(
             Series::line("held bar (median at most)", vec![(x0, bar), (x1, bar)], 2)
@@ -233,8 +244,16 @@ fn net_seeds_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, E
         )
         .mark(Mark::Dashed),
     );
-    // Headroom above the null's line for the legend, where it hides no dot.
-    let top = ratios.iter().copied().fold(1.0, f64::max) * 1.7;
+    // The seeds' dots last, over the lines (the median passes through the middle ones).
+    series.push(
+        Series::line(
+            "momentum's iterations to plain's final J / plain's, per net seed",
+            shown,
+            0,
+        )
+        .mark(Mark::Points)
+        .labelled(labels),
+    );
     let panel = Panel {
         title: "lander: momentum's pace over plain descent's, per Table 1 net seed".into(),
         x_label: "Table 1 lander net seed".into(),

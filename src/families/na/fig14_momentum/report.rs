@@ -5,7 +5,7 @@ use super::params::Fig14Rule;
 use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::rule::{majority, read_rule, shown, Check, Cmp, Null, Partly, Rule};
-use crate::experiment::stats::median_interval;
+use crate::experiment::stats::median_interval_with_infinities;
 use crate::experiment::{other, Error};
 use std::path::Path;
 
@@ -64,15 +64,19 @@ pub(super) struct SeedFacts {
 
 /// Momentum's iterations to plain descent's final J over plain's (`iterations`), at one net
 /// seed: `reach` / `iterations` where momentum reaches plain's final J and ends below it;
-/// otherwise (`iterations` + 1) / `iterations`, more than plain's own 1 (momentum would need
-/// more than the budget: the ratio is censored there), so that every seed has a finite value
-/// for the median and its interval.
+/// otherwise +∞, "never", as the single-net rule counts it ([`ratio_median`] keeps it as the
+/// slowest seed).
 pub(super) fn seed_ratio(reach: Option<usize>, ends: (f64, f64), iterations: usize) -> f64 {
-    let n = iterations.max(1) as f64;
     match reach {
-        Some(k) if ends.0 < ends.1 && iterations > 0 => k as f64 / n,
-        _ => (n + 1.0) / n,
+        Some(k) if ends.0 < ends.1 && iterations > 0 => k as f64 / iterations as f64,
+        _ => f64::INFINITY,
     }
+}
+
+/// The median over the net seeds of [`seed_ratio`] with its 95% bootstrap interval, "never"
+/// counted as the slowest (a bound may be +∞): what the rule's check (a) and the figure read.
+pub(super) fn ratio_median(ratios: &[f64]) -> (f64, f64, f64) {
+    median_interval_with_infinities(ratios, BOOTSTRAP_SEED)
 }
 
 /// The headline rule over the net seeds (ours, bars in the spec's `rule`): (a) the median over
@@ -88,7 +92,7 @@ pub(super) fn seeds_rule(
 ) -> Option<Rule> {
     let k = facts.len();
     let ratios: Vec<f64> = facts.iter().map(|f| f.ratio).collect();
-    let (med, lo, hi) = median_interval(&ratios, BOOTSTRAP_SEED);
+    let (med, lo, hi) = ratio_median(&ratios);
     let need = majority(k) as f64;
     let count = |f: &dyn Fn(&SeedFacts) -> bool| facts.iter().filter(|x| f(x)).count() as f64;
     let none = || Null::new("on no net seed", 0.0);
@@ -199,7 +203,12 @@ pub(super) fn seed_facts(dir: &Path) -> Result<Option<(Vec<SeedFacts>, (f64, f64
 }
 
 /// The report's table of the net seeds and its sentence.
-fn seeds_md(facts: &[SeedFacts], (plain_eta, next_eta): (f64, f64)) -> (String, String, String) {
+/// `median` is check (a)'s value and interval, as the rule read them.
+fn seeds_md(
+    facts: &[SeedFacts],
+    (plain_eta, next_eta): (f64, f64),
+    (med, (lo, hi)): (f64, (f64, f64)),
+) -> (String, String, String) {
     let mut md = format!(
         "\nThe headline per Table 1 lander net seed (ours, `net_seeds.csv`; the same task and descents through the net trained under each seed, each net calibrated at hover and lambda measured through it; the verdict reads these):\n\n| net seed | lambda | momentum J end | plain (eta {}) J end | momentum reaches plain's final J at iteration | ratio | plain converges | next rate (eta {}) does not |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
         sig(plain_eta),
@@ -219,15 +228,13 @@ fn seeds_md(facts: &[SeedFacts], (plain_eta, next_eta): (f64, f64)) -> (String, 
             yes(f.plain_is_limit)
         ));
     }
-    let ratios: Vec<f64> = facts.iter().map(|f| f.ratio).collect();
-    let (med, lo, hi) = median_interval(&ratios, BOOTSTRAP_SEED);
     let k = facts.len();
     let per: Vec<String> = facts
         .iter()
         .map(|f| format!("{}: {}", f.seed, sig(f.ratio)))
         .collect();
     let head = format!(
-        "Over {k} Table 1 lander net seeds momentum reaches plain descent's final J in a median {} of plain's iterations [95% interval {}-{}]; plain at eta {} converges at {} of {k} seeds, the next rate (eta {}) does not at {} of {k}.",
+        "Over {k} Table 1 lander net seeds momentum reaches plain descent's final J in a median {} of plain's iterations [95% interval {} to {}]; plain at eta {} converges at {} of {k} seeds, the next rate (eta {}) does not at {} of {k}.",
         sig(med),
         sig(lo),
         sig(hi),
@@ -237,7 +244,7 @@ fn seeds_md(facts: &[SeedFacts], (plain_eta, next_eta): (f64, f64)) -> (String, 
         facts.iter().filter(|f| f.plain_is_limit).count(),
     );
     let why = format!(
-        " Per net seed (net_seeds.csv; one net is one draw of the training's randomness), momentum's iterations to plain's final J over plain's: {}. Each check is read over the net seeds: (a) by the median with its 95% percentile-bootstrap interval (a seed at which momentum does not end below plain's final J counts as (iterations + 1)/iterations, more than plain's own), (b) and (c) by a strict majority of the seeds.",
+        " Per net seed (net_seeds.csv; one net is one draw of the training's randomness), momentum's iterations to plain's final J over plain's: {}. Each check is read over the net seeds: (a) by the median with its 95% percentile-bootstrap interval (a seed at which momentum does not end below plain's final J counts as never, +inf, the slowest), (b) and (c) by a strict majority of the seeds.",
         per.join(", ")
     );
     (md, head, why)
@@ -367,10 +374,15 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     // Over the net seeds where the run has them (net_seeds.csv); else the run's own net alone.
     let (rule, seeds_why, lead) = match &seeds {
         Some((facts, rates)) => {
-            let (seeds_table, head, why) = seeds_md(facts, *rates);
+            let rule = seeds_rule(facts, *rates, &bars);
+            let a = rule.as_ref().map_or((f64::NAN, (f64::NAN, f64::NAN)), |r| {
+                let c = &r.held[0];
+                (c.value, c.interval.unwrap_or((f64::NAN, f64::NAN)))
+            });
+            let (seeds_table, head, why) = seeds_md(facts, *rates, a);
             md.push_str(&seeds_table);
             (
-                seeds_rule(facts, *rates, &bars),
+                rule,
                 why,
                 format!(
                     "{head} Through the run's own net (seed {}), momentum",
@@ -722,8 +734,9 @@ mod tests {
         // Seeds on both sides of the bar: the interval straddles it.
         let split = rule(&seeds(&[0.3, 0.4, 0.45, 0.7, 0.8], 5, 5));
         assert_eq!(split.held[0].outcome(), Outcome::Inconclusive);
-        // Every seed slow (momentum never reaching plain's final J counts above 1): not held.
-        let slow = seeds(&[0.8, 0.9, 201.0 / 200.0, 0.95, 0.85], 5, 5);
+        // Every seed slow (momentum never reaching plain's final J counts as the slowest): not
+        // held.
+        let slow = seeds(&[0.8, 0.9, f64::INFINITY, 0.95, 0.85], 5, 5);
         assert_eq!(rule(&slow).held[0].outcome(), Outcome::Fail);
         assert_eq!(rule(&slow).verdict(), Verdict::NotHeld);
         // Plain's rate converging at 2 of 5 seeds is no strict majority.
@@ -744,11 +757,15 @@ mod tests {
     }
 
     #[test]
-    fn a_seed_where_momentum_never_gets_there_counts_above_plain() {
+    fn a_seed_where_momentum_never_gets_there_counts_as_never() {
         assert_eq!(seed_ratio(Some(67), (2.72, 3.53), 200), 0.335);
         // Never reaching plain's final J, or reaching it and ending above it.
-        assert_eq!(seed_ratio(None, (4.0, 3.53), 200), 201.0 / 200.0);
-        assert_eq!(seed_ratio(Some(50), (3.6, 3.53), 200), 201.0 / 200.0);
+        assert_eq!(seed_ratio(None, (4.0, 3.53), 200), f64::INFINITY);
+        assert_eq!(seed_ratio(Some(50), (3.6, 3.53), 200), f64::INFINITY);
+        // As the slowest seed: three nevers of five make the median never; two do not.
+        let inf = f64::INFINITY;
+        assert_eq!(ratio_median(&[0.3, inf, inf, 0.4, inf]).0, inf);
+        assert_eq!(ratio_median(&[0.3, inf, 0.5, 0.4, inf]).0, 0.5);
     }
 
     #[test]
@@ -778,7 +795,7 @@ mod tests {
             (1, Some(67), 0.335)
         );
         assert!(facts[0].plain_converges && !facts[0].plain_is_limit);
-        assert_eq!((facts[1].reach, facts[1].ratio), (None, 201.0 / 200.0));
+        assert_eq!((facts[1].reach, facts[1].ratio), (None, f64::INFINITY));
         assert!(facts[1].plain_is_limit);
         // The last seed cut short.
         let lines: Vec<&str> = csv.lines().collect();
