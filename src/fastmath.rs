@@ -111,6 +111,9 @@ fn quadrant(k: f64, s: f64, c: f64) -> (f64, f64) {
 }
 
 #[inline(always)]
+// Beyond the reduced range (NaN, or |x| at or above `REDUCED_LIMIT`, which no model reaches)
+// the platform's function is the fallback.
+#[allow(clippy::disallowed_methods)]
 fn sin_cos_reduced(x: f64) -> (f64, f64) {
     if !in_reduced_range(x) {
         return x.sin_cos();

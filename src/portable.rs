@@ -33,6 +33,11 @@
 //! > use, copy, modify, and distribute this software is freely granted, provided that this
 //! > notice is preserved.
 
+// fdlibm's coefficients are written as fdlibm writes them (more digits than an f64 holds, and
+// split constants near π/4, π/2, 1/√2, √2 that are not the std constants): they are the
+// reference's bits.
+#![allow(clippy::excessive_precision, clippy::approx_constant)]
+
 pub use crate::fastmath::sin_cos;
 
 mod normal;

@@ -251,6 +251,8 @@ pub fn mean_control(grid: &Grid2, p: &Transitions, z_next: &[f64], dt: f64, s: u
 /// Value of a stochastic policy given as a mixture Σ_i β_i π_i with π_i(x′|x) ∝ p(x′|x)
 /// z_i(x′) (fixed β: the naive blend), by backward policy evaluation with cost
 /// q·dt + λ·KL(π ‖ p); `terminal` is the terminal cost.
+// The arguments are the problem's named quantities (p, q, λ, z_i, β, …), as the paper writes them.
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate_mixture(
     p: &Transitions,
     state_cost: &[f64],

@@ -871,6 +871,8 @@ pub fn caption(captions: &[(&str, &'static str)], name: &str) -> Option<&'static
 }
 
 /// Formats a number for the report with 3 significant digits.
+// Number formatting: the decade of a value to print, no table's data.
+#[allow(clippy::disallowed_methods)]
 pub fn sig(v: f64) -> String {
     if !v.is_finite() {
         return format!("{v}");

@@ -638,7 +638,7 @@ impl Family for PhysicsValidation {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "{ok} of {total} measured energy-drift orders are within {} of theory. Rule (bar ours, in the spec's [params.rule]): {text}",
                 sig(tolerance)

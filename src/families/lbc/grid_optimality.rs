@@ -649,7 +649,7 @@ impl Family for LbcGrid {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "The premise is an implementation check (the discrete linearly-solvable operator is linear, so LBC equals the direct solution by construction): LBC matches it to {} in value and {} in control. The naive blend is off by {} in value and {} in control; on the ordinary Bellman backup LBC's mean value error is {} of the value range.{lines} Rule (ours, in the spec): {text}",
                 sig(lbc),

@@ -427,7 +427,7 @@ impl Family for LbcProjection {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "closest spacing: {first} minimum(s); farthest spacing: {last} minimum(s) (paper: one near the target when close, two when far apart).{lines} Rule: {text}"
             ),

@@ -393,7 +393,7 @@ impl Family for MsLearning {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "Over {} seeds hill climbing made a median {}% of its total gain in the first {}% of the iterations; a median {}% of its evaluations in the last {}% were worse than the best random controller; simulated annealing with the same budget ended ahead of it for {anneal_ahead} of the seeds. Checks:{lines} Rule (thresholds ours, in the spec's [params.rule]): {text}",
                 curves.len(),

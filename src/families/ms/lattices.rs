@@ -350,7 +350,7 @@ impl Family for MsLattices {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "An implementation check against the paper's numbers (in the spec's [params.rule]).{lines} Rule: {text}"
             ),

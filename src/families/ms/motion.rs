@@ -371,7 +371,7 @@ impl Family for MsMotion {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "{lead}. Checks:{lines} Rule (bars ours, in the spec's [params.rule]; {conditions}): {text}"
             ),
@@ -386,6 +386,8 @@ impl Family for MsMotion {
 /// The verdict's `bars` (the spec's `[params.rule]`) are drawn on it: the pirouette's in
 /// degrees about the vertical, the somersault's in backward turns, and for the leap a second
 /// panel of the centre of mass's travel along +x with its bars in metres.
+// The heading and pitch figure only.
+#[allow(clippy::disallowed_methods)]
 fn heading_figure(
     frames: &[(f64, usize, Vec<[f64; 3]>)],
     marked: &[usize],

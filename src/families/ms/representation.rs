@@ -96,7 +96,7 @@ impl Validate for RepresentationParams {
         )?;
         for (name, p) in &self.motions {
             p.check()
-                .map_err(|e| ParamError::new(&format!("motions.{name}.{}", e.key), e.message))?;
+                .map_err(|e| ParamError::new(format!("motions.{name}.{}", e.key), e.message))?;
             ensure(
                 p.anneal.is_none(),
                 &format!("motions.{name}.anneal"),
@@ -561,7 +561,7 @@ impl Family for MsRepresentation {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "{}. Checks over {} seeds per motion and representation:{lines} Rule (fixed before the run, bar ours, in the spec's [params.rule]): {text} \"Less coordinated\" is not measured apart from the objective: the measures table gives each representation's best motion.",
                 summary.join("; "),

@@ -129,6 +129,8 @@ pub struct Params {
 
 impl Params {
     /// Checks every parameter (the lattice exists, ranges, the objective, the mix).
+    // A settings check (a length > 0), no data path.
+    #[allow(clippy::disallowed_methods)]
     pub fn check(&self) -> Result<(), ParamError> {
         let lattice = lattice_by_name(&self.lattice).ok_or_else(|| {
             ParamError::new(

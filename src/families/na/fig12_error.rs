@@ -792,7 +792,7 @@ impl Family for NaError {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "Largest / smallest time-averaged error across the emulators, each at the best capacity tried{over}: {}{}. Checks:{lines} Rule (bars ours, in the spec's [params.rule]): {text} At the paper's Table 1 capacity for all three: {}. Extra capacities keep the net's examples per weight.{seeds_text}{common_text}",
                 checked

@@ -200,7 +200,7 @@ pub fn emulated_masses(
 /// maxima (steps; per actuator the shortest lag within 10% of its maximum), the dominant
 /// period. Empty or too short sequences give (0, NaN).
 pub fn periodicity(u: &[f64], m: usize) -> (f64, f64) {
-    let n = if m == 0 { 0 } else { u.len() / m };
+    let n = u.len().checked_div(m).unwrap_or(0);
     if n < 6 {
         return (0.0, f64::NAN);
     }

@@ -1276,7 +1276,7 @@ impl Family for NaTrainingMethods {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "Passes to target (median): small net {}; large net {}; test/training error {} at {} examples per weight. Best held-out error in the budget, small net: conjugate gradient {}, momentum {} (median over inits). Checks:{lines} Rule (fixed in the spec before the first run, thresholds ours, in the spec's [params.rule]; target = {} x the lowest held-out error any method reaches in the budget, per init; medians over the inits; the pass budgets and conjugate gradient's line search changed after the first run: see the rule history): {text}",
                 passes(NetSize::Small),

@@ -1230,7 +1230,7 @@ impl Family for NaTransforms {
         Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "{}. Checks:{lines}{stuck} Rule (thresholds ours, in the spec; the spec's history gives the rule before): {text} Same data, net size, training and budget for every variant; the full chain is Fig. 13's net. The dolphin's rows are its global net's (composed with the whole chain's local nets for the rollouts); its control is the 20 s swim, whose final error is the distance it falls short of the hand-made wave's on the simulator in units of half that distance (1 = Fig. 13's bar), its start the dolphin at rest.",
                 parts.join("; ")

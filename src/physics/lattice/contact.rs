@@ -62,6 +62,8 @@ impl Default for Floor {
 impl Floor {
     /// Checks that coefficients are ≥ 0, the direction is non-zero and the time constant and
     /// tolerances are positive.
+    // A settings check (a length > 0), no data path.
+    #[allow(clippy::disallowed_methods)]
     pub fn validate(&self) -> Result<(), LatticeError> {
         let [dx, dy] = self.preferred_direction;
         for (name, value, ok) in [

@@ -280,9 +280,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             sig(mean(&errs(mm)))
         ));
     }
-    md.push_str(&format!(
-        "\nThe same comparison through the lander net of each net seed (`net_seeds.csv`; components, trackers and blends rebuilt through each net), over the in-between targets on the simulator; the rule reads the median over the seeds:\n\n| net seed | LBC within tolerance (share) | LBC's mean error − naive's | LBC's mean distance − naive's (m) | better example alone within tolerance | its mean distance − naive's (m) |\n| --- | --- | --- | --- | --- | --- |\n",
-    ));
+    md.push_str("\nThe same comparison through the lander net of each net seed (`net_seeds.csv`; components, trackers and blends rebuilt through each net), over the in-between targets on the simulator; the rule reads the median over the seeds:\n\n| net seed | LBC within tolerance (share) | LBC's mean error − naive's | LBC's mean distance − naive's (m) | better example alone within tolerance | its mean distance − naive's (m) |\n| --- | --- | --- | --- | --- | --- |\n");
     for (s, m) in &per_seed {
         let (v, n) = (m.lbc_values(), m.null_values());
         md.push_str(&format!(
@@ -303,7 +301,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
-        rule: rule.clone().into(),
+        rule: rule.clone(),
         why: format!(
             "On the simulator, over the {} targets between the components, through the run's own net LBC ends within tolerance at {}, with mean final error {} against the naive blend's {} and mean distance from the desired x {} m against {} m. The rule reads the median over {} net seeds.{lines} Rule (ours, in the spec; revised after results, see the rule history): {text}",
             lbc.len(),

@@ -421,7 +421,7 @@ pub(super) fn coordination(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
-        rule: rule.clone().into(),
+        rule: rule.clone(),
         why: format!("Over {n} take-off rates LBC's objective is better than the single tracker's at {better} and worse at {worse} ({much_worse} by more than {} of the smaller), and LBC enters vertically from {lv} rates against the single tracker's {sv}. paper: the combination recovers a vertical entry better than one tracker, with a better objective in every case.{lines} Rule (fixed in the spec; its partly grade rewritten after results, see the rule history): {text}", sig(bars.partly_worse_margin)),
     })
 }

@@ -557,7 +557,7 @@ impl Job for Params {
         let pb = ctx.progress((2 + nd) as u64, "take-off examples and landings");
         enum Built {
             Example(Box<(DdpSolution, TrackingController, f64)>),
-            Landing(TrackingController, f64),
+            Landing(Box<TrackingController>, f64),
         }
         let built: Vec<Result<Built, Error>> = ctx.stage("controllers", || {
             (0..2 + nd)
@@ -568,7 +568,7 @@ impl Job for Params {
                             .map(|e| Built::Example(Box::new(e)))
                     } else {
                         s.landing(self, &targets[1 + i])
-                            .map(|(t, secs)| Built::Landing(t, secs))
+                            .map(|(t, secs)| Built::Landing(Box::new(t), secs))
                     };
                     pb.inc(1);
                     r
@@ -585,7 +585,7 @@ impl Job for Params {
                     examples.push((sol, secs));
                     trackers.push(tracker);
                 }
-                Built::Landing(t, secs) => landings.push((t, secs)),
+                Built::Landing(t, secs) => landings.push((*t, secs)),
             }
         }
         let centers = [targets[0].clone(), targets[1].clone()];

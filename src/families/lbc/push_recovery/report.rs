@@ -197,7 +197,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
-        rule: rule.clone().into(),
+        rule: rule.clone(),
         why: format!(
             "paper: the blend weight swings as the arm is tugged back and forth, then settles (Fig. 9). Ours: the weight swings {} times under the tugs (the no-tug baseline {}), keeps one reach over the window (range {}), mirrors (gap {}); with LBC the body leans at most {} rad, without a reach the same tugs lean it {} rad.{lines} Rule (thresholds ours, in the spec; a swing is the weight crossing from below 0.25 to above 0.75 or back before the settling window; the reach scale is the first at which, with the first tug alone, neither reach's weight exceeds {} before the second tug): {text}",
             tugged_swings,
@@ -330,7 +330,7 @@ fn reach_scales(dir: &Path, chosen: f64) -> Result<(String, bool), Error> {
             if c[r] == 1.0 { "yes" } else { "no" }
         ));
     }
-    let found = c.iter().any(|&v| v == 0.0);
+    let found = c.contains(&0.0);
     md.push_str(&if found {
         format!("\nChosen: scale {}.\n", sig(chosen))
     } else {

@@ -322,7 +322,7 @@ pub fn swim_measures(
     let kb = bptt.unwrap_or(f64::INFINITY);
     let slow = rivals
         .iter()
-        .filter(|k| k.map_or(true, |k| k >= bars.slow_factor * kb.max(1.0)))
+        .filter(|k| k.is_none_or(|k| k >= bars.slow_factor * kb.max(1.0)))
         .count() as f64;
     SwimMeasures {
         bptt: kb,

@@ -7,7 +7,7 @@ use crate::emulator::catalog::NetModel;
 use crate::experiment::output::{unique, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::{other, Error};
-use crate::physics::dolphin::{Dolphin, N_POS};
+use crate::physics::dolphin::N_POS;
 use rayon::prelude::*;
 use std::path::PathBuf;
 
@@ -252,7 +252,7 @@ fn dolphin_animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
     let (p, _) = write_animation(
         &fig.dir,
         &format!("{}_dolphin", fig.id),
-        &Scene::Dolphin(Box::new(Dolphin::default())),
+        &Scene::Dolphin(Box::default()),
         "dolphin: swim forward",
         "learned muscle controls: hierarchical emulator (purple), simulator replay (grey)",
         step,

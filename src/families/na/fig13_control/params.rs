@@ -223,7 +223,7 @@ impl Validate for Params {
         ensure(
             self.net_seeds.len() <= super::seeds::MAX_NET_SEEDS,
             "net_seeds",
-            &format!(
+            format!(
                 "at most {} seeds (each trains one net per task)",
                 super::seeds::MAX_NET_SEEDS
             ),

@@ -331,7 +331,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
-        rule: rule.clone().into(),
+        rule: rule.clone(),
         why: format!(
             "{both} of {headline} tasks of the paper's formulation pass every check{}. A task passes when its median Table 1 net seed (where several ran) reaches the goal on the emulator within the paper's iteration counts and ends within tolerance when its controls are replayed on the physical simulator, the median's 95% bootstrap interval inside the tolerance (through this run's nets: {reached} reach it on the emulator, {reached_sim} on the simulator; every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Checks:{lines} Rule (the dolphin's bars ours, in the spec's [params.rule]): {text} Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator ({} m; 0: swims at least as far), its learned pattern's periodicity {}.{seed_lines}{path_why}{net_misses}{ours}{swim}{sweeps}{dagger_why}",
             if counts.is_empty() {

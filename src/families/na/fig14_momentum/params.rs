@@ -338,7 +338,7 @@ impl Params {
             curvature_iterations: self.curvature_iterations,
             example_scale: self.example_scale,
             tasks: vec![self.dagger_task(d)],
-            training: self.training.clone(),
+            training: self.training,
             dolphin: None,
             sweep: None,
             physics_sweep: None,

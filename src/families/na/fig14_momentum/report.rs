@@ -401,7 +401,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
         ours: md,
         verdict,
-        rule: rule.clone().into(),
+        rule: rule.clone(),
         why: format!(
             "{lead} (eta {}) ends at J = {} vs plain (eta {}) J = {} after {k_plain} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2).{seeds_why}{lines} Rule (bars ours, in the spec's `rule`; a plain run converges when it ends below {} of its start without climbing back above {}x its minimum; the next rate above eta {} not converging is the paper's 'largest rate that converges', read as the stability limit, and rates further up that converge again are listed above, not counted): {text} Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim. Over its last 20 iterations momentum's J fell {}% ({} -> {}){}.",
             mom.1,

@@ -195,7 +195,7 @@ impl Job for Params {
             let (n_in, n_out) = (m.state_dim() + m.control_dim(), m.state_dim());
             let w = Mlp::weight_count(n_in, net.hidden, n_out);
             let errors = ctx.stage(&format!("rollouts {name}"), || {
-                rollout_error(&t.emulator, &spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other)
+                rollout_error(&t.emulator, spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other)
             })?;
             for (k, e) in errors.iter().enumerate() {
                 rollout.push(row![name, (k + 1) as i64, *e]);
@@ -206,7 +206,7 @@ impl Job for Params {
                 } else {
                     task.control.clone()
                 };
-                let ends = catalog_drift(&t.emulator, &spec, &task.start, &u, ROLLOUT_STEPS)?;
+                let ends = catalog_drift(&t.emulator, spec, &task.start, &u, ROLLOUT_STEPS)?;
                 let tf = t.emulator.transforms();
                 let at_anchor = anchor_of(spec, tf).is_some_and(|a| a.covers(tf, &task.start, &u));
                 push_drift(

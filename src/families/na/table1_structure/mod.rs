@@ -411,12 +411,12 @@ impl Validate for Params {
             ensure(
                 t.start.len() == m.state_dim(),
                 &format!("{key}.start"),
-                &format!("needs {} values", m.state_dim()),
+                format!("needs {} values", m.state_dim()),
             )?;
             ensure(
                 t.control.is_empty() || t.control.len() == m.control_dim(),
                 &format!("{key}.control"),
-                &format!("needs {} values (or none)", m.control_dim()),
+                format!("needs {} values (or none)", m.control_dim()),
             )?;
         }
         for (i, r) in self.regime.iter().enumerate() {
@@ -435,7 +435,7 @@ impl Validate for Params {
             ensure(
                 r.tolerance.len() == m.state_dim(),
                 &format!("{key}.tolerance"),
-                &format!("needs {} values", m.state_dim()),
+                format!("needs {} values", m.state_dim()),
             )?;
             ensure(
                 r.tolerance.iter().all(|t| t.is_finite() && *t >= 0.0)

@@ -64,8 +64,8 @@ fn regime_section(dir: &Path, max: f64) -> Result<Option<(Vec<(String, bool)>, S
         df_f64(&df, "regime_share")?,
     );
     let mut passes: Vec<(String, bool)> = Vec::new();
-    let mut md = format!("
-Fidelity on the control tasks' inputs (`regime_fidelity.csv`): one-step bias and RMS error on fresh typical examples and the median open-loop error after 40 super-steps of typical manoeuvres (32 episodes), each over the Fig. 13 task's tolerance; `paper` is each net above, the other variants the same net with one change (`box`: data uniform over the whole control box, our recipe before; `noise`: input noise in training). A catalog net's 40-step errors here are the verdict's fourth condition. Share in regime: the training examples inside the tasks' regime.\n\n| net | variant | quantity | bias (tol) | RMS (tol) | 40-step (tol) | share in regime |\n| --- | --- | --- | --- | --- | --- | --- |\n");
+    let mut md = "
+Fidelity on the control tasks' inputs (`regime_fidelity.csv`): one-step bias and RMS error on fresh typical examples and the median open-loop error after 40 super-steps of typical manoeuvres (32 episodes), each over the Fig. 13 task's tolerance; `paper` is each net above, the other variants the same net with one change (`box`: data uniform over the whole control box, our recipe before; `noise`: input noise in training). A catalog net's 40-step errors here are the verdict's fourth condition. Share in regime: the training examples inside the tasks' regime.\n\n| net | variant | quantity | bias (tol) | RMS (tol) | 40-step (tol) | share in regime |\n| --- | --- | --- | --- | --- | --- | --- |\n".to_string();
     for r in 0..net.len() {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} |\n",
@@ -240,7 +240,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "{good} of {n} Table 1 nets (the dolphin counts its global and six local nets) pass every condition, at about 8-10 examples per weight. Each condition alone (thresholds ours, in the spec's [params.rule]; the paper states none): learned, a held-out one-step MSE below {} of the normalized state-change variance: {} of {n}; not overfitted, held-out at most {} above training: {} of {n}; faithful, a mean 40-step rollout error below {} of the state variance: {} of {n} ({rolled} measured; the dolphin's local-net rows carry the composed hierarchy's); faithful on the tasks' inputs, every task quantity's median 40-step error within {} tolerance(s): {regime_pass} of the {regime_nets} catalog nets measured (the dolphin's nets are not). Checks:{lines} Rule: {text}",
                 sig(bars.heldout_max),

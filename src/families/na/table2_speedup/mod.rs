@@ -141,7 +141,7 @@ impl Validate for Params {
             )?;
             for &n in &m.emulators {
                 ensure(
-                    self.physical_steps % n == 0,
+                    self.physical_steps.is_multiple_of(n),
                     &format!("models[{i}].emulators"),
                     format!("n = {n} must divide physical_steps"),
                 )?;

@@ -194,7 +194,7 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     Ok(Findings {
             ours: md,
             verdict,
-            rule: rule.clone().into(),
+            rule: rule.clone(),
             why: format!(
                 "N100 speedups {} (paper: 50-100x and more); the slowest rigid-body N50 speedup is {} (paper: one to two orders of magnitude); speedup = n x step cost ratio (physical step s / emulator step s); the paper's ratios, from its Table 2, are 1.1-2.4 (0.5 with regularization), ours {pend_lo}-{pend_hi} for the pendulums, {truck_ratio} for the truck, {lander_ratio} for the lander (a 13-variable rigid body: one RK4 step costs less than a 17-50-13 net).{dolphin_text}{implicit_text}{equal_text} Checks:{lines} Rule (thresholds ours, from the paper's words, in the spec's [params.rule]): {text}",
                 n100.iter().map(|s| sig(*s)).collect::<Vec<_>>().join(", "),
