@@ -27,6 +27,18 @@ pub const MAX_ROWS_PER_SEED: usize = 100;
 /// The name of the summary table.
 pub const SUMMARY: &str = "seed_summary";
 
+/// The seeds of `seeds` beyond a run's own (`own`), in their order, without repeats: the further
+/// net seeds a family repeats its measure through (its own seed's results are the run's).
+pub fn further_seeds(seeds: &[u64], own: u64) -> Vec<u64> {
+    let mut out: Vec<u64> = Vec::new();
+    for &s in seeds {
+        if s != own && !out.contains(&s) {
+            out.push(s);
+        }
+    }
+    out
+}
+
 /// Removes what an earlier run over seeds wrote into the experiment folder `dir` (and
 /// `figures`) that the run now writing it does not: the folders `seeds/<seed>/` of seeds not in
 /// `keep` (their tables, `.csv` and `.parquet`, and the folder when nothing else is in it) and,
@@ -425,6 +437,12 @@ pub fn summary_markdown(dir: &Path) -> Result<String, Error> {
 mod tests {
     use super::*;
     use crate::row;
+
+    #[test]
+    fn further_seeds_drop_the_runs_own_and_repeats_in_order() {
+        assert_eq!(further_seeds(&[2, 1, 3, 2, 5], 1), vec![2, 3, 5]);
+        assert_eq!(further_seeds(&[], 1), Vec::<u64>::new());
+    }
 
     /// A rerun with other seeds removes the tables of the seeds it has not; one without seeds
     /// removes every seed's tables, the summary and the seeds figure; other files stay.

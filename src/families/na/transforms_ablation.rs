@@ -302,7 +302,7 @@ impl Job for Params {
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let mut out = Outputs::new();
-        let further = self.further_net_seeds(ctx.seed);
+        let further = crate::experiment::seeds::further_seeds(&self.net_seeds, ctx.seed);
         let pb = ctx.progress(
             (self.tasks.len() * self.variants.len() * (1 + further.len())) as u64,
             "emulator variants",
@@ -341,17 +341,6 @@ impl Job for Params {
 }
 
 impl Params {
-    /// The seeds beyond the run's own (`own`), in the spec's order, without repeats.
-    fn further_net_seeds(&self, own: u64) -> Vec<u64> {
-        let mut out: Vec<u64> = Vec::new();
-        for &s in &self.net_seeds {
-            if s != own && !out.contains(&s) {
-                out.push(s);
-            }
-        }
-        out
-    }
-
     /// Every variant of `task` built with the nets of `seed` (side by side; from the cache
     /// where there), its rollout error, drift and Fig. 13 control replayed on the simulator,
     /// into `out`.

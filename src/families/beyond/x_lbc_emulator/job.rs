@@ -416,17 +416,6 @@ impl Params {
             .map(|&c| self.learn(emu, c))
             .collect()
     }
-
-    /// The seeds beyond the run's own (`own`), in the spec's order, without repeats.
-    fn further_net_seeds(&self, own: u64) -> Vec<u64> {
-        let mut out: Vec<u64> = Vec::new();
-        for &s in &self.net_seeds {
-            if s != own && !out.contains(&s) {
-                out.push(s);
-            }
-        }
-        out
-    }
 }
 
 impl Job for Params {
@@ -448,7 +437,7 @@ impl Job for Params {
         let mut seeds_t = Table::new(&[]);
         let own = std::iter::once((ctx.seed, out.targets.clone()));
         let further = ctx.stage("net seeds", || {
-            self.further_net_seeds(ctx.seed)
+            crate::experiment::seeds::further_seeds(&self.net_seeds, ctx.seed)
                 .into_iter()
                 .map(|s| -> Result<(u64, Table), Error> {
                     let net = self.net(s)?;

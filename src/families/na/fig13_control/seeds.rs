@@ -76,13 +76,7 @@ impl HeadlineRun {
 impl Params {
     /// The seeds beyond the run's own (`own`), in the spec's order, without repeats.
     pub(super) fn further_net_seeds(&self, own: u64) -> Vec<u64> {
-        let mut out: Vec<u64> = Vec::new();
-        for &s in &self.net_seeds {
-            if s != own && !out.contains(&s) {
-                out.push(s);
-            }
-        }
-        out
+        crate::experiment::seeds::further_seeds(&self.net_seeds, own)
     }
 
     /// Whether `task` is learned over the net seeds (`net_seeds.csv`): every task of the

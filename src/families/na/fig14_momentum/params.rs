@@ -363,11 +363,7 @@ impl Params {
 
     /// The net seeds beyond the run's own (`own`), in the spec's order.
     pub fn further_net_seeds(&self, own: u64) -> Vec<u64> {
-        self.net_seeds
-            .iter()
-            .copied()
-            .filter(|&s| s != own)
-            .collect()
+        crate::experiment::seeds::further_seeds(&self.net_seeds, own)
     }
 
     /// The start state with a unit quaternion.
