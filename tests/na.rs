@@ -3,7 +3,7 @@
 
 use crate::util::*;
 
-fn figure_exists(d: impl AsRef<std::path::Path>, stem: &str) {
+fn figure_exists(d: &impl AsRef<std::path::Path>, stem: &str) {
     for ext in ["png", "svg"] {
         let p = d.as_ref().join(format!("figs/{stem}.{ext}"));
         assert!(
@@ -1087,7 +1087,11 @@ fn emulate_writes_simulates_columns_one_row_per_super_step_and_reuses_the_cache(
     // The emulated truck accelerates forward as the simulated one does.
     let x = |rows: &[Vec<String>]| rows[rows.len() - 1][0..2].to_vec();
     let moved = |p: Vec<String>| -> f64 {
-        (p[0].parse::<f64>().unwrap() + 15.0).hypot(p[1].parse::<f64>().unwrap() + 8.0)
+        let (dx, dy) = (
+            p[0].parse::<f64>().unwrap() + 15.0,
+            p[1].parse::<f64>().unwrap() + 8.0,
+        );
+        (dx * dx + dy * dy).sqrt()
     };
     let (me, ms) = (moved(x(&e)), moved(x(&s)));
     assert!(

@@ -38,8 +38,9 @@
 //! - M. da Silva, F. Durand, J. Popović, *Linear Bellman Combination for Control of Character
 //!   Animation*, SIGGRAPH 2009, §5.2 (tracking value functions), §6.2 (two SIMBICON walkers).
 
-use super::simbicon::{applet_start, fallen, Gait, Simbicon};
-use crate::physics::biped::{Biped, Terrain, DOF, TORQUES};
+use super::simbicon::{applet_start, Gait, Simbicon};
+use crate::physics::biped::{Biped, Side, DOF, TORQUES};
+use crate::physics::ground::Terrain;
 use crate::physics::{Dynamics, IntegratorKind, Model, Simulator};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -48,8 +49,8 @@ use serde::{Deserialize, Serialize};
 pub const Z: usize = 18;
 
 /// The joint coordinates (hip, knee, ankle) of the left and the right leg in q.
-const LEFT: [usize; 3] = [3, 4, 5];
-const RIGHT: [usize; 3] = [6, 7, 8];
+const LEFT: [usize; 3] = Biped::leg(Side::Left).joints();
+const RIGHT: [usize; 3] = Biped::leg(Side::Right).joints();
 
 /// The reduced coordinates of state `x` with the stance side `left_stance` (module docs).
 pub fn reduced(b: &Biped, x: &[f64], left_stance: bool) -> [f64; Z] {
@@ -247,7 +248,7 @@ fn record_half_stride(
         t += dt;
         crate::physics::check_finite("biped", (t / dt) as usize, t, &x)
             .map_err(|e| GaitError::BlowUp(e.to_string()))?;
-        if fallen(b, &x) {
+        if b.fallen(&x) {
             return Err(GaitError::Fell(t));
         }
         if recording {
@@ -458,7 +459,7 @@ fn horizon_riccati(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::biped::{Contact, Terrain};
+    use crate::physics::ground::{Contact, Terrain};
 
     fn cost() -> GaitCost {
         GaitCost {

@@ -18,7 +18,7 @@
 //! flat-ground walk (its published controller source: kp = 300, kd = 30 for every joint, torques
 //! within ±1000 N·m, swing-hip targets within [−0.4, 1.6] rad, and the targets below).
 
-use crate::physics::biped::{link, Biped, DOF, TORQUES};
+use crate::physics::biped::{point, Biped, Leg, Side, DOF, TORQUES};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -101,14 +101,10 @@ impl Gait {
     }
 }
 
-/// Which leg a joint index set belongs to: (hip, knee, ankle) coordinates in q.
-fn leg(left: bool) -> (usize, usize, usize) {
-    let first = if left {
-        link::LEFT_THIGH
-    } else {
-        link::RIGHT_THIGH
-    };
-    (2 + first, 3 + first, 4 + first)
+/// The (hip, knee, ankle) coordinates in q of the leg on `side`.
+fn leg(side: Side) -> (usize, usize, usize) {
+    let Leg { hip, knee, ankle } = Biped::leg(side);
+    (hip, knee, ankle)
 }
 
 /// The SIMBICON angles of a state `x` of the biped: (torso from upright, [left hip, knee,
@@ -116,8 +112,8 @@ fn leg(left: bool) -> (usize, usize, usize) {
 pub fn simbicon_angles(x: &[f64]) -> ([f64; 7], [f64; 7]) {
     let q = |i: usize| x[i];
     let r = |i: usize| x[DOF + i];
-    let (lh, lk, la) = leg(true);
-    let (rh, rk, ra) = leg(false);
+    let (lh, lk, la) = leg(Side::Left);
+    let (rh, rk, ra) = leg(Side::Right);
     let angles = [
         q(2) - FRAC_PI_2,
         q(lh) + PI,
@@ -196,7 +192,11 @@ impl Simbicon {
         // Indices into the SIMBICON angle arrays: 1-3 left, 4-6 right.
         let (st, sw) = if left { (1, 4) } else { (4, 1) };
         let pd = |target: f64, angle: f64, rate: f64| g.kp * (target - angle) - g.kd * rate;
-        let heel = if left { 0 } else { 2 };
+        let heel = if left {
+            point::LEFT_HEEL
+        } else {
+            point::RIGHT_HEEL
+        };
         let heel_x = biped.contact_point(&x[..DOF], heel)[0];
         let (d, v) = (x[0] - heel_x, x[DOF]);
         let hip_target =
@@ -226,21 +226,13 @@ impl Simbicon {
     }
 }
 
-/// Whether the biped has fallen: the pelvis lower than 0.55 m above the ground under it, or the
-/// torso more than 1 rad from upright (ours; the applet switches off at 2 rad or on a non-foot
-/// contact).
-pub fn fallen(biped: &Biped, x: &[f64]) -> bool {
-    let (h, _) = biped.terrain.height_slope(x[0]);
-    x[1] - h < 0.55 || (x[2] - FRAC_PI_2).abs() > 1.0
-}
-
 /// The SIMBICON applet's start, mid-stride just after a left heel strike (its published initial
 /// state, in this model's coordinates: the pelvis at x = `x`, its height lowered so that the left
 /// foot's lowest point touches the ground).
 pub fn applet_start(biped: &Biped, x: f64) -> Vec<f64> {
     let mut s = vec![0.0; 2 * DOF];
-    let (lh, lk, la) = leg(true);
-    let (rh, rk, ra) = leg(false);
+    let (lh, lk, la) = leg(Side::Left);
+    let (rh, rk, ra) = leg(Side::Right);
     s[0] = x;
     s[2] = FRAC_PI_2 + 0.051;
     s[lh] = -PI + 0.298;
@@ -295,7 +287,7 @@ mod tests {
             steps,
             |_, _, x, u| c.control(&b, x, dt, u),
             |k, _, x| {
-                if fell_at.is_none() && fallen(&b, x) {
+                if fell_at.is_none() && b.fallen(x) {
                     fell_at = Some(k as f64 * dt);
                 }
                 last.copy_from_slice(x);

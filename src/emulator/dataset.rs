@@ -736,7 +736,9 @@ mod tests {
         let mut pairs = 0;
         for _ in 0..episodes {
             let s = ControlSignal::sample(p, &lim, 10.0, &mut rng);
-            assert!(s.times.len() % 2 == 0 && s.times.last().copied().unwrap() <= 10.0 + 2.0);
+            assert!(
+                s.times.len().is_multiple_of(2) && s.times.last().copied().unwrap() <= 10.0 + 2.0
+            );
             let mut largest: f64 = 0.0;
             for k in (0..s.times.len()).step_by(2) {
                 let (a, b) = (&s.values[2 * k..2 * k + 2], &s.values[2 * k + 2..2 * k + 4]);

@@ -203,21 +203,36 @@ impl Table {
         self.columns.get(i)
     }
 
-    /// Float values of a column (integers converted).
+    /// Float values of a column (integers converted); empty for a table without rows.
+    ///
+    /// Panics when the table has no such column or it holds strings: these tables are built by
+    /// the job in the same program, so either is a programming error, never an empty column.
     pub fn f64s(&self, name: &str) -> Vec<f64> {
-        match self.column(name) {
+        match self.named_column(name) {
+            None => Vec::new(),
             Some(ColumnData::F(v)) => v.clone(),
             Some(ColumnData::I(v)) => v.iter().map(|&x| x as f64).collect(),
-            _ => Vec::new(),
+            Some(ColumnData::S(_)) => panic!("column `{name}` holds strings, not numbers"),
         }
     }
 
-    /// String values of a column.
+    /// String values of a column; empty for a table without rows. Panics when the table has no
+    /// such column or it holds numbers (a programming error, as in [`Table::f64s`]).
     pub fn strs(&self, name: &str) -> Vec<String> {
-        match self.column(name) {
+        match self.named_column(name) {
+            None => Vec::new(),
             Some(ColumnData::S(v)) => v.clone(),
-            _ => Vec::new(),
+            Some(_) => panic!("column `{name}` holds numbers, not strings"),
         }
+    }
+
+    /// The data of column `name` (`None` before the first row); panics when no column has
+    /// that name.
+    fn named_column(&self, name: &str) -> Option<&ColumnData> {
+        let Some(i) = self.names.iter().position(|n| n == name) else {
+            panic!("no column `{name}` among {:?}", self.names);
+        };
+        self.columns.get(i)
     }
 
     /// This table with constant columns prepended (the sweep values of its point). A table that
@@ -787,6 +802,28 @@ pub fn check_csv(path: &Path, text: &str, numeric: &[(String, bool)]) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A column read by a name the table does not have, or as the wrong type, stops the
+    /// program naming it, rather than reading as an empty column; a table without rows reads
+    /// as empty columns.
+    #[test]
+    fn a_missing_or_mistyped_column_is_an_error_not_an_empty_one() {
+        let mut t = Table::new(&["name", "x"]);
+        assert!(t.f64s("x").is_empty() && t.strs("name").is_empty());
+        t.push(row!["a", 0.5]);
+        assert_eq!(t.f64s("x"), vec![0.5]);
+        for read in [
+            Box::new(|t: &Table| drop(t.f64s("missing"))) as Box<dyn Fn(&Table)>,
+            Box::new(|t: &Table| drop(t.strs("missing"))),
+            Box::new(|t: &Table| drop(t.f64s("name"))),
+            Box::new(|t: &Table| drop(t.strs("x"))),
+        ] {
+            let err = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| read(&t)))
+                .expect_err("a bad column read must not pass");
+            let msg = err.downcast_ref::<String>().cloned().unwrap_or_default();
+            assert!(msg.contains("column `"), "{msg}");
+        }
+    }
 
     #[test]
     fn tables_round_trip_through_csv() {

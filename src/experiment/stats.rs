@@ -201,7 +201,7 @@ mod tests {
         assert_eq!(median_with_infinities(&[1.0, f64::NAN, 3.0]), 2.0);
         let (m, lo, hi) = median_interval_with_infinities(&[1.0, 2.0, 3.0, 4.0, inf], 5);
         assert_eq!(m, 3.0);
-        assert!(lo >= 1.0 && lo <= 3.0 && hi == inf, "{lo} {hi}");
+        assert!((1.0..=3.0).contains(&lo) && hi == inf, "{lo} {hi}");
         assert_eq!(median_interval(&[1.0, 2.0, 3.0, 4.0, inf], 5).0, 2.5);
     }
 

@@ -11,10 +11,9 @@
 //! The foot's sole is its axis: the heel 5 cm behind the ankle and the toe 18 cm ahead (ours:
 //! the diver's foot is 20 cm long from the ankle).
 
-use super::biped::{driven_by_ground, sole_parameters, Contact, Terrain};
 use super::diver::diver;
+use super::ground::{BodyPlan, FallLimits, OnGround};
 use super::planar::{ForcePoint, PlanarTree};
-use super::{Model, Ode, Parameter};
 use crate::portable::{atan2, cos, sin_cos};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -26,65 +25,61 @@ pub const TOE: f64 = 0.18;
 pub const DOF: usize = 9;
 /// Joint torques.
 pub const TORQUES: usize = 6;
-/// Index of the foot link.
-const FOOT: usize = 6;
 
-/// The jumping diver on `terrain`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Jumper {
-    /// The diver's body with the heel and toe as force points (driven by the contact only).
-    pub tree: PlanarTree,
-    /// The ground.
-    pub terrain: Terrain,
-    /// Contact constants.
-    pub contact: Contact,
+/// Index of each link in the diver's tree ([`super::diver::diver`]).
+pub mod link {
+    /// Torso (root; its joint is the hip).
+    pub const TORSO: usize = 0;
+    /// Head.
+    pub const HEAD: usize = 1;
+    /// Upper arm.
+    pub const UPPER_ARM: usize = 2;
+    /// Forearm.
+    pub const FOREARM: usize = 3;
+    /// Thigh.
+    pub const THIGH: usize = 4;
+    /// Shank.
+    pub const SHANK: usize = 5;
+    /// Foot.
+    pub const FOOT: usize = 6;
 }
 
-impl Default for Jumper {
-    fn default() -> Self {
-        Self::new(Terrain::Flat, Contact::default())
-    }
-}
+/// The jumping diver's description: the diver's links, its heel and toe, its fall limits.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct DiverBody;
 
-impl Jumper {
-    /// The diver on `terrain` with `contact` at heel and toe.
-    pub fn new(terrain: Terrain, contact: Contact) -> Self {
+impl BodyPlan for DiverBody {
+    const DOF: usize = DOF;
+    const TORQUES: usize = TORQUES;
+    const HEEL: f64 = HEEL;
+    const TOE: f64 = TOE;
+    /// The hip lower than 0.4 m above the ground (the crouch's hip is about 0.7 m high) or the
+    /// torso more than 1.2 rad from upright (ours).
+    const FALL: FallLimits = FallLimits {
+        min_height: 0.4,
+        max_tilt: 1.2,
+    };
+    fn tree() -> PlanarTree {
         let mut tree = diver();
         tree.name = "jumper".into();
         tree.forces = vec![
             ForcePoint {
-                link: FOOT,
+                link: link::FOOT,
                 offset: -HEEL,
             },
             ForcePoint {
-                link: FOOT,
+                link: link::FOOT,
                 offset: TOE,
             },
         ];
-        Self {
-            tree,
-            terrain,
-            contact,
-        }
+        tree
     }
+}
 
-    /// Heel and toe positions (m) at configuration `q`.
-    pub fn contact_points(&self, q: &[f64]) -> [[f64; 2]; 2] {
-        std::array::from_fn(|k| {
-            let f = &self.tree.forces[k];
-            self.tree.point(q, f.link, f.offset)
-        })
-    }
+/// The jumping diver on its terrain: heel and toe are its contact points.
+pub type Jumper = OnGround<DiverBody, 2>;
 
-    /// The ground's forces on heel and toe (N).
-    pub fn contact_forces(&self, x: &[f64]) -> [[f64; 2]; 2] {
-        std::array::from_fn(|k| {
-            let f = &self.tree.forces[k];
-            let (p, v) = self.tree.point_state(x, f.link, f.offset);
-            self.contact.force(&self.terrain, p, v)
-        })
-    }
-
+impl Jumper {
     /// A crouch on level ground facing +x: the torso tipped forward by `lean` from upright, the
     /// shank tipped forward by `shin` (rad, the knee ahead of the ankle) over a flat foot, the
     /// arms swung back by `arm` (rad) from hanging straight down, the hip placed (thigh and knee following) so that the body's centre of mass lies
@@ -102,7 +97,10 @@ impl Jumper {
             // The hip carries most of the mass: move it against the error (within the thigh's
             // reach of the knee).
             hip_x -= e;
-            let (lt, ls) = (self.tree.links[4].length, self.tree.links[5].length);
+            let (lt, ls) = (
+                self.tree.links[link::THIGH].length,
+                self.tree.links[link::SHANK].length,
+            );
             let knee_x = -ls * cos(1.5 * PI - shin);
             hip_x = hip_x.clamp(knee_x - 0.95 * lt, knee_x + 0.95 * lt);
             s = self.crouch_at(x, lean, shin, arm, hip_x);
@@ -117,7 +115,10 @@ impl Jumper {
         // the shank down with its top (the knee) forward.
         let torso = FRAC_PI_2 - lean;
         let shank_abs = 1.5 * PI - shin;
-        let (lt, ls) = (self.tree.links[4].length, self.tree.links[5].length);
+        let (lt, ls) = (
+            self.tree.links[link::THIGH].length,
+            self.tree.links[link::SHANK].length,
+        );
         // Knee relative to the ankle (the shank points from the knee down to the ankle).
         let (sin_s, cos_s) = sin_cos(shank_abs);
         let knee = [-ls * cos_s, -ls * sin_s];
@@ -142,48 +143,10 @@ impl Jumper {
     }
 }
 
-impl Model for Jumper {
-    fn name(&self) -> &str {
-        "jumper"
-    }
-    fn state_names(&self) -> Vec<String> {
-        self.tree.state_names()
-    }
-    fn control_names(&self) -> Vec<String> {
-        self.tree.control_names()[..TORQUES].to_vec()
-    }
-    fn parameters(&self) -> Vec<Parameter> {
-        let mut p = self.tree.parameters();
-        p.extend(self.contact.parameters());
-        p.extend(sole_parameters(HEEL, TOE));
-        p
-    }
-    /// 0.1 ms, as the biped's (the same ground on a 2 kg foot).
-    fn default_dt(&self) -> f64 {
-        0.0001
-    }
-}
-
-impl Ode for Jumper {
-    fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        driven_by_ground(&self.tree, &u[..TORQUES], &self.contact_forces(x), x, dx);
-    }
-
-    fn position_dim(&self) -> Option<usize> {
-        Some(DOF)
-    }
-
-    /// Kinetic plus gravitational energy of the body (J); the contact springs' energy is not
-    /// included.
-    fn energy(&self, x: &[f64]) -> Option<f64> {
-        self.tree.energy(x)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::{Dynamics, IntegratorKind, Simulator};
+    use crate::physics::{Dynamics, IntegratorKind, Model, Simulator};
 
     /// Holds the crouch's joint angles with stiff PD servos for `seconds` from `x0`.
     fn hold(j: &Jumper, x0: &[f64], seconds: f64) -> Vec<f64> {

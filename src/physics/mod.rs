@@ -24,6 +24,7 @@ pub mod biped;
 pub mod differentiable;
 pub mod diver;
 pub mod dolphin;
+pub mod ground;
 pub mod integrate;
 pub mod jumper;
 pub mod lander;

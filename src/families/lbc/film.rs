@@ -514,6 +514,27 @@ pub fn diver_frames(tree: &PlanarTree, dives: &[Dive], gap: f64, caption: &str) 
         .collect()
 }
 
+/// The biped's body at configuration `q` as five polylines: torso, left leg (hip, knee,
+/// ankle), left sole (heel to toe), right leg, right sole (sole and leg apart: a polyline that
+/// turns back on itself draws spikes).
+pub fn biped_body(b: &crate::physics::biped::Biped, q: &[f64]) -> [Vec<(f64, f64)>; 5] {
+    use crate::physics::biped::{FOOT_HEEL, FOOT_TOE};
+    let t = &b.tree;
+    let p = |i: usize, r: f64| {
+        let v = t.point(q, i, r);
+        (v[0], v[1])
+    };
+    let leg = |th: usize| vec![p(th, 0.0), p(th + 1, 0.0), p(th + 2, 0.0)];
+    let sole = |th: usize| vec![p(th + 2, -FOOT_HEEL), p(th + 2, FOOT_TOE)];
+    [
+        vec![p(0, 0.0), p(0, t.links[0].length)],
+        leg(1),
+        sole(1),
+        leg(4),
+        sole(4),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -574,25 +595,4 @@ mod tests {
         let line = entry_line(&diver_body(&tree, &q, (0.0, 0.0)));
         assert!(line[1].1 > line[0].1);
     }
-}
-
-/// The biped's body at configuration `q` as five polylines: torso, left leg (hip, knee,
-/// ankle), left sole (heel to toe), right leg, right sole (sole and leg apart: a polyline that
-/// turns back on itself draws spikes).
-pub fn biped_body(b: &crate::physics::biped::Biped, q: &[f64]) -> [Vec<(f64, f64)>; 5] {
-    use crate::physics::biped::{FOOT_HEEL, FOOT_TOE};
-    let t = &b.tree;
-    let p = |i: usize, r: f64| {
-        let v = t.point(q, i, r);
-        (v[0], v[1])
-    };
-    let leg = |th: usize| vec![p(th, 0.0), p(th + 1, 0.0), p(th + 2, 0.0)];
-    let sole = |th: usize| vec![p(th + 2, -FOOT_HEEL), p(th + 2, FOOT_TOE)];
-    [
-        vec![p(0, 0.0), p(0, t.links[0].length)],
-        leg(1),
-        sole(1),
-        leg(4),
-        sole(4),
-    ]
 }

@@ -84,9 +84,9 @@ impl CostScales {
 }
 
 /// A contact family's `knot_dt`: positive and at most the ground's stable RK4 step
-/// ([`crate::physics::biped::GROUND_RK4_MAX_DT`]).
+/// ([`crate::physics::ground::GROUND_RK4_MAX_DT`]).
 pub(crate) fn knot_dt_on_ground(knot_dt: f64) -> Result<(), ParamError> {
-    use crate::physics::biped::GROUND_RK4_MAX_DT;
+    use crate::physics::ground::GROUND_RK4_MAX_DT;
     ensure(
         knot_dt > 0.0 && knot_dt <= GROUND_RK4_MAX_DT,
         "knot_dt",

@@ -169,7 +169,7 @@ impl Landing {
         if touching(heel) || touching(toe) {
             u[3] = (kp * (x[2] - torso) + kd * x[DOF + 2]).clamp(-lim, lim);
             let c = j.tree.center_of_mass(&x[..DOF])[0];
-            let v = com_velocity(j, x)[0];
+            let v = j.com_velocity(x)[0];
             let ahead = c - 0.5 * (heel[0] + toe[0]);
             u[5] = (flat - (self.balance_kp * ahead + self.balance_kd * v)).clamp(-al, al);
         } else {
@@ -179,17 +179,10 @@ impl Landing {
     }
 }
 
-/// The centre of mass's velocity (m/s).
-pub fn com_velocity(j: &Jumper, x: &[f64]) -> [f64; 2] {
-    let (p, _) = j.tree.momentum(x);
-    let m: f64 = j.tree.links.iter().map(|l| l.mass).sum();
-    [p[0] / m, p[1] / m]
-}
-
 /// The jump's height from state `x`: the centre of mass's ballistic apex above `base` (m),
 /// its height now plus v_y²/2g when rising.
 pub fn jump_height(j: &Jumper, x: &[f64], base: f64) -> f64 {
-    let vy = com_velocity(j, x)[1].max(0.0);
+    let vy = j.com_velocity(x)[1].max(0.0);
     j.tree.center_of_mass(&x[..DOF])[1] + vy * vy / (2.0 * j.tree.gravity) - base
 }
 
@@ -239,8 +232,7 @@ fn simulate(
 pub(super) struct JumpRun {
     /// The state at take-off.
     pub takeoff: Vec<f64>,
-    /// Whether the body fell (hip below `FALLEN_HIP_M` or the torso beyond `FALLEN_TORSO` from
-    /// upright) at any time.
+    /// Whether the body fell ([`crate::physics::jumper::DiverBody`]'s fall limits) at any time.
     pub fell: bool,
     /// Whether it ended standing: not fallen, heel and toe on the ground, the centre of mass
     /// over the sole.
@@ -253,16 +245,6 @@ pub(super) struct JumpRun {
     pub alpha_low: Vec<f64>,
 }
 
-/// The hip below this height has fallen (m; the crouch's hip is about 0.7 m high).
-pub const FALLEN_HIP_M: f64 = 0.4;
-/// The torso further than this from upright has fallen (rad).
-pub const FALLEN_TORSO: f64 = 1.2;
-
-/// Whether `x` has fallen.
-pub fn fallen(j: &Jumper, x: &[f64]) -> bool {
-    x[1] - j.terrain.height_slope(x[0]).0 < FALLEN_HIP_M || (x[2] - FRAC_PI_2).abs() > FALLEN_TORSO
-}
-
 /// Whether `x` stands balanced on its foot: not fallen, heel or toe within 1 cm of the
 /// ground, the centre of mass above the sole (between heel and toe) and moving slower than
 /// 0.5 m/s (the PD landing's balance rocks the body between heel and toe, so either may be up).
@@ -270,8 +252,8 @@ pub fn standing(j: &Jumper, x: &[f64]) -> bool {
     let [heel, toe] = j.contact_points(&x[..DOF]);
     let low = |p: [f64; 2]| (p[1] - j.terrain.height_slope(p[0]).0).abs() < 0.01;
     let c = j.tree.center_of_mass(&x[..DOF])[0];
-    let v = com_velocity(j, x);
-    !fallen(j, x)
+    let v = j.com_velocity(x);
+    !j.fallen(x)
         && (low(heel) || low(toe))
         && c >= heel[0].min(toe[0])
         && c <= heel[0].max(toe[0])
@@ -332,7 +314,7 @@ impl Params {
 pub fn features(j: &Jumper, x: &[f64]) -> Vec<f64> {
     let mut f = x.to_vec();
     let c = j.tree.center_of_mass(&x[..DOF]);
-    let v = com_velocity(j, x);
+    let v = j.com_velocity(x);
     f[..2].copy_from_slice(&c);
     f[DOF..DOF + 2].copy_from_slice(&v);
     f
@@ -511,7 +493,7 @@ impl Setup {
             if k + 1 == self.n_off {
                 run.takeoff = x.clone();
             }
-            if fallen(j, &x) {
+            if j.fallen(&x) {
                 run.fell = true;
                 break;
             }
@@ -525,6 +507,15 @@ impl Setup {
         run.landed = !run.fell && standing(j, &x);
         Ok(run)
     }
+}
+
+/// Where each PD push sits in the job's list of pushes (and of their targets): the low and the
+/// high example, their average (the metric's scale), then one per desired jump.
+mod push {
+    pub const LOW: usize = 0;
+    pub const HIGH: usize = 1;
+    pub const MEAN: usize = 2;
+    pub const FIRST_DESIRED: usize = 3;
 }
 
 /// The compared take-off controllers (`reference`: the desired jump's own PD push).
@@ -548,7 +539,7 @@ impl Job for Params {
                 .collect::<Result<Vec<_>, _>>()
         })?;
         let targets: Vec<DVector<f64>> = pushes.iter().map(|m| m.xs[s.n_off].clone()).collect();
-        s.set_metric(targets[2].as_slice());
+        s.set_metric(targets[push::MEAN].as_slice());
         let s = s;
         let j = &s.body;
         // 2. The two take-off examples by DDP and each desired jump's landing tracker, in
@@ -564,10 +555,10 @@ impl Job for Params {
                 .into_par_iter()
                 .map(|i| {
                     let r = if i < 2 {
-                        s.example(self, &pushes[i], &pushes[2])
+                        s.example(self, &pushes[i], &pushes[push::MEAN])
                             .map(|e| Built::Example(Box::new(e)))
                     } else {
-                        s.landing(self, &targets[1 + i])
+                        s.landing(self, &targets[push::FIRST_DESIRED + (i - 2)])
                             .map(|(t, secs)| Built::Landing(Box::new(t), secs))
                     };
                     pb.inc(1);
@@ -588,13 +579,19 @@ impl Job for Params {
                 Built::Landing(t, secs) => landings.push((*t, secs)),
             }
         }
-        let centers = [targets[0].clone(), targets[1].clone()];
+        let centers = [targets[push::LOW].clone(), targets[push::HIGH].clone()];
         let lambda = scale_lambda(&s.q_final, &centers[0], &centers[1]);
         let limits = vec![self.push.torque_limit; TORQUES];
         let projected = (0..nd)
             .map(|d| {
                 let what = format!("desired strength {}", self.desired[d]);
-                projected_weights(&s.q_final, lambda, &centers, &targets[3 + d], &what)
+                projected_weights(
+                    &s.q_final,
+                    lambda,
+                    &centers,
+                    &targets[push::FIRST_DESIRED + d],
+                    &what,
+                )
             })
             .collect::<Result<Vec<_>, _>>()?;
         // 3. Every take-off with every desired jump's landing, on the simulator.
@@ -662,11 +659,11 @@ impl Job for Params {
         let mut motion = Table::new(&cols);
         let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
         for (&(d, m), (r, secs)) in cases.iter().zip(&runs) {
-            let x_d = &targets[3 + d];
-            let v = com_velocity(j, &r.takeoff);
-            let vd = com_velocity(j, x_d.as_slice());
+            let x_d = &targets[push::FIRST_DESIRED + d];
+            let v = j.com_velocity(&r.takeoff);
+            let vd = j.com_velocity(x_d.as_slice());
             jumps.push(row![
-                heights[3 + d],
+                heights[push::FIRST_DESIRED + d],
                 m,
                 s.error(&r.takeoff, x_d),
                 r.landed as u8 as f64,
@@ -691,14 +688,21 @@ impl Job for Params {
                     .iter()
                     .map(|&a| alpha_deviation(&pair(a), &projected[d]))
                     .collect();
-                let run = format!("{} m", crate::experiment::report::sig(heights[3 + d]));
+                let run = format!(
+                    "{} m",
+                    crate::experiment::report::sig(heights[push::FIRST_DESIRED + d])
+                );
                 push_entropy(&mut entropy, &run, m, self.knot_dt, &h, &dev);
             }
             if m == "lbc" {
                 // Every 5 ms (the take-off is short).
                 let every = ((0.005 / self.knot_dt).round() as usize).max(1);
                 for (i, a) in r.alpha_low.iter().enumerate().step_by(every) {
-                    weights.push(row![heights[3 + d], i as f64 * self.knot_dt, *a]);
+                    weights.push(row![
+                        heights[push::FIRST_DESIRED + d],
+                        i as f64 * self.knot_dt,
+                        *a
+                    ]);
                 }
             }
             for (i, x) in r.states.iter().enumerate().step_by(frame) {
@@ -741,18 +745,22 @@ impl Job for Params {
         }
         let mut landing = Table::new(&["desired", "desired_strength", "seconds"]);
         for d in 0..nd {
-            landing.push(row![heights[3 + d], self.desired[d], landings[d].1]);
+            landing.push(row![
+                heights[push::FIRST_DESIRED + d],
+                self.desired[d],
+                landings[d].1
+            ]);
         }
         let rule = rule_table(&[
             ("takeoff_tolerance", self.rule.takeoff_tolerance),
             ("lambda", lambda),
-            ("low_height_m", heights[0]),
-            ("high_height_m", heights[1]),
+            ("low_height_m", heights[push::LOW]),
+            ("high_height_m", heights[push::HIGH]),
             ("takeoff_s", self.takeoff_s),
             ("landing_s", self.landing_s),
             ("hold_s", self.hold_s),
             ("knot_dt", self.knot_dt),
-            ("middle_desired", heights[3 + middle]),
+            ("middle_desired", heights[push::FIRST_DESIRED + middle]),
         ]);
         Ok(Tables::from([
             ("jumps", jumps),
@@ -826,11 +834,11 @@ mod tests {
             // toe still touches by about 2 mm).
             let [heel, toe] = j.contact_points(&x[..DOF]);
             assert!(heel[1] > 0.01 && toe[1] > -0.005, "{heel:?} {toe:?}");
-            assert!(com_velocity(&j, x)[1] > 0.3, "{:?}", com_velocity(&j, x));
+            assert!(j.com_velocity(x)[1] > 0.3, "{:?}", j.com_velocity(x));
             heights.push(jump_height(&j, x, base));
             let land = simulate(&j, x, 18000, 1e-4, 1, |x, u| landing.control(&j, x, u)).unwrap();
             for s in &land.xs {
-                assert!(!fallen(&j, s.as_slice()), "{strength}: fell");
+                assert!(!j.fallen(s.as_slice()), "{strength}: fell");
             }
             assert!(
                 standing(&j, land.xs[18000].as_slice()),
@@ -844,10 +852,10 @@ mod tests {
     fn a_crouch_stands_and_a_body_lying_down_has_fallen() {
         let j = Jumper::default();
         let x = j.crouch(0.0, 0.3, 0.3, 0.0);
-        assert!(standing(&j, &x) && !fallen(&j, &x));
+        assert!(standing(&j, &x) && !j.fallen(&x));
         let mut y = x.clone();
         y[1] = 0.2;
-        assert!(fallen(&j, &y) && !standing(&j, &y));
+        assert!(j.fallen(&y) && !standing(&j, &y));
         let mut z = x.clone();
         z[1] += 0.05;
         assert!(!standing(&j, &z), "in the air");

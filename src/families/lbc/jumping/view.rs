@@ -12,13 +12,24 @@ use std::path::{Path, PathBuf};
 
 const METHODS: [&str; 5] = ["lbc", "naive", "low", "high", "reference"];
 
+/// Jump heights (m, the centre of mass's apex above the crouch's).
+#[derive(Debug, Clone, PartialEq)]
+pub struct JumpHeights {
+    /// The low example's.
+    pub low: f64,
+    /// The high example's.
+    pub high: f64,
+    /// Every desired jump's.
+    pub desired: Vec<f64>,
+}
+
 /// What the rule reads from a run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JumpFacts {
     /// Each example's tracker alone: its take-off error against its own target.
     pub examples: [f64; 2],
-    /// The examples' jump heights (low, high) and the desired ones.
-    pub heights: (f64, f64, Vec<f64>),
+    /// The examples' jump heights and the desired ones.
+    pub heights: JumpHeights,
     /// Whether each desired jump's landing tracker lands from the desired take-off itself.
     pub reference_landed: Vec<bool>,
     /// LBC at every desired jump: (take-off error, landed).
@@ -47,7 +58,11 @@ fn mean_error(v: &[(f64, bool)]) -> f64 {
 /// Held: all three; partly: any. `None` when a check the premise should rule out is refused
 /// although the premise holds (which would be a bug).
 pub fn jump_rule(f: &JumpFacts, tol: f64) -> Option<Rule> {
-    let (lo, hi, ref desired) = f.heights;
+    let JumpHeights {
+        low: lo,
+        high: hi,
+        ref desired,
+    } = f.heights;
     let n = f.lbc.len();
     let best_alone = f.alone.iter().map(|v| landed(v)).max().unwrap_or(0);
     let premise = vec![
@@ -177,11 +192,11 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             own.first().copied().unwrap_or(f64::INFINITY),
             own.get(1).copied().unwrap_or(f64::INFINITY),
         ],
-        heights: (
-            rule("low_height_m"),
-            rule("high_height_m"),
-            t.rows("lbc").map(|i| t.desired[i]).collect(),
-        ),
+        heights: JumpHeights {
+            low: rule("low_height_m"),
+            high: rule("high_height_m"),
+            desired: t.rows("lbc").map(|i| t.desired[i]).collect(),
+        },
         reference_landed: t.rows("reference").map(|i| t.landed[i] != 0.0).collect(),
         lbc: t.outcomes("lbc"),
         naive: t.outcomes("naive"),
@@ -460,7 +475,11 @@ mod tests {
     fn facts(lbc_landed: usize, naive_landed: usize, lbc_err: f64, naive_err: f64) -> JumpFacts {
         JumpFacts {
             examples: [0.5, 0.5],
-            heights: (0.2, 0.3, vec![0.22, 0.25, 0.28]),
+            heights: JumpHeights {
+                low: 0.2,
+                high: 0.3,
+                desired: vec![0.22, 0.25, 0.28],
+            },
             reference_landed: vec![true; 3],
             lbc: (0..3).map(|i| (lbc_err, i < lbc_landed)).collect(),
             naive: (0..3).map(|i| (naive_err, i < naive_landed)).collect(),
@@ -486,7 +505,7 @@ mod tests {
         f.examples[0] = 1.5;
         assert_eq!(verdict_of(&f, 1.0), Verdict::PremiseNotReproduced);
         let mut f = facts(3, 1, 0.5, 2.0);
-        f.heights.2[0] = 0.35;
+        f.heights.desired[0] = 0.35;
         assert_eq!(
             verdict_of(&f, 1.0),
             Verdict::PremiseNotReproduced,

@@ -5,11 +5,12 @@ use super::Params;
 use crate::bellman::combine::{BlendMode, TrackerBlend};
 use crate::control::ddp::DdpSolution;
 use crate::control::lqr::TrackingController;
-use crate::control::simbicon::{applet_start, fallen, Gait, Simbicon};
+use crate::control::simbicon::{applet_start, Gait, Simbicon};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::lbc::{optimized_tracker, projected_weights, rule_table, scale_lambda};
+use crate::physics::biped::point::{LEFT_HEEL, RIGHT_HEEL, RIGHT_TOE};
 use crate::physics::biped::{Biped, DOF, FOOT_HEEL, FOOT_TOE, TORQUES};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::{check_finite, Dynamics, IntegratorKind, Model, Simulator};
@@ -21,29 +22,12 @@ use std::time::Instant;
 /// DDP's discrete dynamics: one RK4 step of the biped per knot, Jacobians by differences.
 type Map = Rk4Map<FiniteDifference<Biped>>;
 
-/// Contact points' indices in [`Biped::contact_points`].
-const LEFT_HEEL: usize = 0;
-const RIGHT_HEEL: usize = 2;
-const RIGHT_TOE: usize = 3;
-
 /// Step length (right heel x − left heel x, m) and the right heel's height above the ground
 /// (m) at state `x`.
 pub fn step_length(b: &Biped, x: &[f64]) -> (f64, f64) {
     let p = b.contact_points(&x[..DOF]);
     let h = b.terrain.height_slope(p[RIGHT_HEEL][0]).0;
     (p[RIGHT_HEEL][0] - p[LEFT_HEEL][0], p[RIGHT_HEEL][1] - h)
-}
-
-/// The body with its legs swapped (left ↔ right hip, knee, ankle, angles and rates): the same
-/// motion seen with the other stance leg (the body is symmetric).
-pub fn mirror(x: &[f64]) -> Vec<f64> {
-    let mut m = x.to_vec();
-    for base in [0, DOF] {
-        for j in 0..3 {
-            m.swap(base + 3 + j, base + 6 + j);
-        }
-    }
-    m
 }
 
 /// The terminal target of a step of `length`: state `end` (a heel-strike state) with the pelvis
@@ -125,7 +109,7 @@ pub(super) fn start_state(b: &Biped, gait: &Gait, warmup: f64) -> Result<Vec<f64
         }
         sim.step(&mut x, &u, dt);
         t += dt;
-        if fallen(b, &x) {
+        if b.fallen(&x) {
             return Err(other(format!("the start's SIMBICON walk fell at {t:.2} s")));
         }
     }
@@ -300,7 +284,7 @@ impl Setup {
                 )
                 .map_err(other)?;
             }
-            if fallen(b, &x) {
+            if b.fallen(&x) {
                 run.fell = true;
                 break;
             }
@@ -341,7 +325,7 @@ fn walks_on_falls(b: &Biped, gait: &Gait, x0: &[f64], seconds: f64) -> Result<bo
         c.control(b, &x, dt, &mut u);
         sim.step(&mut x, &u, dt);
         check_finite("biped", k, k as f64 * dt, &x).map_err(other)?;
-        if fallen(b, &x) {
+        if b.fallen(&x) {
             return Ok(true);
         }
     }
@@ -632,7 +616,7 @@ impl Params {
             let mut local = if left_stance {
                 world.clone()
             } else {
-                mirror(&world)
+                Biped::mirror(&world)
             };
             let stance = b.contact_points(&local[..DOF])[LEFT_HEEL][0];
             let shift = home - stance;
@@ -652,7 +636,7 @@ impl Params {
                 if left_stance {
                     y
                 } else {
-                    mirror(&y)
+                    Biped::mirror(&y)
                 }
             };
             for (i, x) in r.states.iter().enumerate().step_by(frame) {
@@ -696,11 +680,11 @@ mod tests {
     #[test]
     fn mirroring_twice_is_the_identity_and_swaps_the_legs() {
         let x: Vec<f64> = (0..2 * DOF).map(|i| i as f64).collect();
-        let m = mirror(&x);
+        let m = Biped::mirror(&x);
         assert_eq!(m[3..6], x[6..9]);
         assert_eq!(m[DOF + 6..], x[DOF + 3..DOF + 6]);
         assert_eq!(m[..3], x[..3]);
-        assert_eq!(mirror(&m), x);
+        assert_eq!(Biped::mirror(&m), x);
     }
 
     #[test]

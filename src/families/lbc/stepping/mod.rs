@@ -44,7 +44,7 @@
 mod job;
 mod view;
 
-pub use job::{mirror, step_length, step_target};
+pub use job::{step_length, step_target};
 pub use view::{verdict_of, SteppingFacts};
 
 use crate::control::simbicon::Gait;

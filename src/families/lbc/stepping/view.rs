@@ -291,24 +291,27 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let direct = per("direct");
     let direct_effort = mean_effort("direct");
     let av = read_csv(&dir.join("average_effect.csv"))?;
-    let (asc, ad, am, ar, al) = (
-        df_f64(&av, "average_scale")?,
-        df_f64(&av, "desired_length_m")?,
-        df_str(&av, "method")?,
-        df_f64(&av, "reached_length_m")?,
-        df_f64(&av, "landed")?,
-    );
-    let mut others: Vec<f64> = asc.iter().copied().filter(|&a| a != asc[0]).collect();
+    // average_effect.csv's columns: the average term's scale, the desired and the reached
+    // length, the method, whether it landed.
+    let scale = df_f64(&av, "average_scale")?;
+    let desired = df_f64(&av, "desired_length_m")?;
+    let method = df_str(&av, "method")?;
+    let reached = df_f64(&av, "reached_length_m")?;
+    let landed = df_f64(&av, "landed")?;
+    let mut others: Vec<f64> = scale.iter().copied().filter(|&a| a != scale[0]).collect();
     others.dedup();
     let mut compared = String::new();
     for a in others {
         let stat = |m: &str| {
-            let rows: Vec<usize> = (0..asc.len())
-                .filter(|&i| asc[i] == a && am[i] == m)
+            let rows: Vec<usize> = (0..scale.len())
+                .filter(|&i| scale[i] == a && method[i] == m)
                 .collect();
-            let err =
-                rows.iter().map(|&i| (ar[i] - ad[i]).abs()).sum::<f64>() / rows.len().max(1) as f64;
-            let missed = rows.iter().filter(|&&i| al[i] == 0.0).count();
+            let err = rows
+                .iter()
+                .map(|&i| (reached[i] - desired[i]).abs())
+                .sum::<f64>()
+                / rows.len().max(1) as f64;
+            let missed = rows.iter().filter(|&&i| landed[i] == 0.0).count();
             (err, missed, rows.len())
         };
         let (le, lm, n) = stat("lbc");

@@ -4,11 +4,12 @@
 use super::Params;
 use crate::bellman::combine::{blend_controls, blend_weights};
 use crate::control::gait_value::GaitCycle;
-use crate::control::simbicon::{applet_start, fallen, Gait, Simbicon};
+use crate::control::simbicon::{applet_start, Gait, Simbicon};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::lbc::rule_table;
-use crate::physics::biped::{Biped, Contact, Terrain, DOF, TORQUES};
+use crate::physics::biped::{Biped, DOF, TORQUES};
+use crate::physics::ground::{Contact, Terrain};
 use crate::physics::{Dynamics, IntegratorKind, Model, Simulator};
 use crate::row;
 use rayon::prelude::*;
@@ -154,7 +155,7 @@ pub(super) fn walk(
         sim.step(&mut x, &u, dt);
         let t = (k + 1) as f64 * dt;
         crate::physics::check_finite("biped", k + 1, t, &x).map_err(other)?;
-        if fallen(&b, &x) {
+        if b.fallen(&x) {
             fell_at = Some(t);
             k_end = k + 1;
             break;

@@ -36,7 +36,7 @@ use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
 use crate::experiment::resolve::{all_positive, ensure, positive, ParamError, Validate};
 use crate::experiment::{Error, Family};
-use crate::physics::biped::Terrain;
+use crate::physics::ground::Terrain;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 

@@ -8,7 +8,8 @@ use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use crate::families::lbc::film::{biped_body, fitted, to_scale};
 use crate::families::lbc::{rule_setting, rule_settings};
-use crate::physics::biped::{Biped, Contact, Terrain, DOF};
+use crate::physics::biped::{Biped, DOF};
+use crate::physics::ground::{Contact, Terrain};
 use polars::prelude::DataFrame;
 use std::path::{Path, PathBuf};
 
