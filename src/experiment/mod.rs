@@ -27,6 +27,7 @@ pub mod output;
 pub mod plot;
 pub mod report;
 pub mod resolve;
+pub mod rows;
 pub mod rule;
 pub mod runner;
 pub mod seeds;

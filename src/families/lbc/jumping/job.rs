@@ -9,6 +9,7 @@ use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::resolve::{ensure, positive, ParamError};
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::lbc::{
     alpha_deviation, optimized_tracker, projected_weights, push_entropy, rule_table, scale_lambda,
@@ -518,6 +519,37 @@ mod push {
     pub const FIRST_DESIRED: usize = 3;
 }
 
+crate::result_rows! {
+    /// One row of `jumps.csv`: one take-off controller at one desired jump, run on the
+    /// simulator through its take-off and the desired jump's landing tracker.
+    pub struct JumpRow {
+        /// The desired jump's height (m; its PD push's strength is `desired_strength`).
+        desired_height_m: f64 = "desired",
+        /// The take-off controller ([`METHODS`]).
+        method: String = "method",
+        /// The take-off state's distance from the desired jump's, in the metric's units.
+        takeoff_error: f64 = "takeoff_error",
+        /// 1 when the body ended standing on its foot, else 0.
+        landed: f64 = "landed",
+        /// The desired jump's PD push strength (the spec's `desired`).
+        desired_strength: f64 = "desired_strength",
+        /// The jump's height (m).
+        height_m: f64 = "height_m",
+        /// 1 when the body fell at any time, else 0.
+        fell: f64 = "fell",
+        /// ½∫uᵀRu dt over the take-off.
+        effort: f64 = "effort",
+        /// The projected weight of the low example.
+        weight_low: f64 = "weight_low",
+        /// The projected weight of the high example.
+        weight_high: f64 = "weight_high",
+        /// The take-off's centre-of-mass velocity error (m/s).
+        speed_error_m_s: f64 = "speed_error_m_s",
+        /// Wall time of the run (s).
+        seconds: f64 = "seconds",
+    }
+}
+
 /// The compared take-off controllers (`reference`: the desired jump's own PD push).
 const METHODS: [&str; 5] = ["lbc", "naive", "low", "high", "reference"];
 
@@ -636,20 +668,7 @@ impl Job for Params {
             .iter()
             .map(|t| jump_height(j, t.as_slice(), s.base))
             .collect();
-        let mut jumps = Table::new(&[
-            "desired",
-            "method",
-            "takeoff_error",
-            "landed",
-            "desired_strength",
-            "height_m",
-            "fell",
-            "effort",
-            "weight_low",
-            "weight_high",
-            "speed_error_m_s",
-            "seconds",
-        ]);
+        let mut jumps: Vec<JumpRow> = Vec::with_capacity(runs.len());
         let mut weights = Table::new(&["desired", "t", "alpha_low"]);
         // α's entropy over the take-off (entropy.csv), LBC's and the naive blend's.
         let mut entropy = Table::new(&ENTROPY_COLUMNS);
@@ -662,20 +681,20 @@ impl Job for Params {
             let x_d = &targets[push::FIRST_DESIRED + d];
             let v = j.com_velocity(&r.takeoff);
             let vd = j.com_velocity(x_d.as_slice());
-            jumps.push(row![
-                heights[push::FIRST_DESIRED + d],
-                m,
-                s.error(&r.takeoff, x_d),
-                r.landed as u8 as f64,
-                self.desired[d],
-                jump_height(j, &r.takeoff, s.base),
-                r.fell as u8 as f64,
-                r.effort,
-                projected[d][0],
-                projected[d][1],
-                hypot(v[0] - vd[0], v[1] - vd[1]),
-                *secs
-            ]);
+            jumps.push(JumpRow {
+                desired_height_m: heights[push::FIRST_DESIRED + d],
+                method: m.to_string(),
+                takeoff_error: s.error(&r.takeoff, x_d),
+                landed: r.landed as u8 as f64,
+                desired_strength: self.desired[d],
+                height_m: jump_height(j, &r.takeoff, s.base),
+                fell: r.fell as u8 as f64,
+                effort: r.effort,
+                weight_low: projected[d][0],
+                weight_high: projected[d][1],
+                speed_error_m_s: hypot(v[0] - vd[0], v[1] - vd[1]),
+                seconds: *secs,
+            });
             if m == "lbc" || m == "naive" {
                 let pair = |a: f64| [a, 1.0 - a];
                 let h: Vec<f64> = r
@@ -763,7 +782,7 @@ impl Job for Params {
             ("middle_desired", heights[push::FIRST_DESIRED + middle]),
         ]);
         Ok(Tables::from([
-            ("jumps", jumps),
+            ("jumps", table_of(&jumps)),
             ("components", components),
             ("landing", landing),
             ("weights", weights),

@@ -1,8 +1,10 @@
 //! `lbc_jumping`'s figures, animation, verdict and report section.
 
+use super::job::JumpRow;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
+use crate::experiment::rows::{read_rows, TableRow};
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use crate::families::lbc::film::{diver_body, fitted, to_scale};
@@ -130,53 +132,25 @@ pub fn verdict_of(f: &JumpFacts, tol: f64) -> Verdict {
     jump_rule(f, tol).map_or(Verdict::NotAssessed, |r| r.verdict())
 }
 
-/// The `jumps` table's columns the report and figures read.
-struct Jumps {
-    desired: Vec<f64>,
-    method: Vec<String>,
-    error: Vec<f64>,
-    landed: Vec<f64>,
-    height: Vec<f64>,
-    fell: Vec<f64>,
-    effort: Vec<f64>,
-    speed: Vec<f64>,
-}
+/// `jumps.csv`'s rows, with the rows of one take-off controller picked out.
+struct Jumps(Vec<JumpRow>);
 
 impl Jumps {
     fn read(dir: &Path) -> Result<Self, Error> {
-        let t = read_csv(&dir.join("jumps.csv"))?;
-        Ok(Self {
-            desired: df_f64(&t, "desired")?,
-            method: df_str(&t, "method")?,
-            error: df_f64(&t, "takeoff_error")?,
-            landed: df_f64(&t, "landed")?,
-            height: df_f64(&t, "height_m")?,
-            fell: df_f64(&t, "fell")?,
-            effort: df_f64(&t, "effort")?,
-            speed: df_f64(&t, "speed_error_m_s")?,
-        })
+        Ok(Self(read_rows(&dir.join("jumps.csv"))?))
     }
 
     fn of(t: &Table) -> Self {
-        Self {
-            desired: t.f64s("desired"),
-            method: t.strs("method"),
-            error: t.f64s("takeoff_error"),
-            landed: t.f64s("landed"),
-            height: t.f64s("height_m"),
-            fell: t.f64s("fell"),
-            effort: t.f64s("effort"),
-            speed: t.f64s("speed_error_m_s"),
-        }
+        Self(JumpRow::from_table(t))
     }
 
-    fn rows<'a>(&'a self, method: &'a str) -> impl Iterator<Item = usize> + 'a {
-        (0..self.method.len()).filter(move |&i| self.method[i] == method)
+    fn rows<'a>(&'a self, method: &'a str) -> impl Iterator<Item = &'a JumpRow> + 'a {
+        self.0.iter().filter(move |r| r.method == method)
     }
 
     fn outcomes(&self, method: &str) -> Vec<(f64, bool)> {
         self.rows(method)
-            .map(|i| (self.error[i], self.landed[i] != 0.0))
+            .map(|r| (r.takeoff_error, r.landed != 0.0))
             .collect()
     }
 }
@@ -195,9 +169,9 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         heights: JumpHeights {
             low: rule("low_height_m"),
             high: rule("high_height_m"),
-            desired: t.rows("lbc").map(|i| t.desired[i]).collect(),
+            desired: t.rows("lbc").map(|r| r.desired_height_m).collect(),
         },
-        reference_landed: t.rows("reference").map(|i| t.landed[i] != 0.0).collect(),
+        reference_landed: t.rows("reference").map(|r| r.landed != 0.0).collect(),
         lbc: t.outcomes("lbc"),
         naive: t.outcomes("naive"),
         alone: [t.outcomes("low"), t.outcomes("high")],
@@ -211,17 +185,17 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let mut md = String::from(
         "| desired height (m) | method | take-off error | speed error (m/s) | height reached (m) | landed | fell | effort |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
-    for i in 0..t.desired.len() {
+    for r in &t.0 {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
-            sig(t.desired[i]),
-            t.method[i],
-            sig(t.error[i]),
-            sig(t.speed[i]),
-            sig(t.height[i]),
-            yes_no(Some(t.landed[i] != 0.0)),
-            yes_no(Some(t.fell[i] != 0.0)),
-            sig(t.effort[i]),
+            sig(r.desired_height_m),
+            r.method,
+            sig(r.takeoff_error),
+            sig(r.speed_error_m_s),
+            sig(r.height_m),
+            yes_no(Some(r.landed != 0.0)),
+            yes_no(Some(r.fell != 0.0)),
+            sig(r.effort),
         ));
     }
     let names = df_str(&comp, "component")?;
@@ -295,11 +269,11 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     let mut errors = Vec::new();
     let mut heights = Vec::new();
     for (k, m) in METHODS.iter().enumerate() {
-        let rows: Vec<usize> = t.rows(m).collect();
+        let rows: Vec<&JumpRow> = t.rows(m).collect();
         let marks: Vec<String> = rows
             .iter()
-            .map(|&i| {
-                if t.landed[i] == 0.0 {
+            .map(|r| {
+                if r.landed == 0.0 {
                     "✗".into()
                 } else {
                     String::new()
@@ -308,7 +282,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             .collect();
         let mut s = Series::line(
             *m,
-            rows.iter().map(|&i| (t.desired[i], t.error[i])).collect(),
+            rows.iter()
+                .map(|r| (r.desired_height_m, r.takeoff_error))
+                .collect(),
             k,
         )
         .mark(Mark::LinePoints);
@@ -316,19 +292,21 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         errors.push(s);
         let mut h = Series::line(
             *m,
-            rows.iter().map(|&i| (t.desired[i], t.height[i])).collect(),
+            rows.iter()
+                .map(|r| (r.desired_height_m, r.height_m))
+                .collect(),
             k,
         )
         .mark(Mark::LinePoints);
         h.point_labels = marks;
         heights.push(h);
     }
-    let (lo, hi) = t
-        .desired
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+    let (lo, hi) =
+        t.0.iter()
+            .map(|r| r.desired_height_m)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            });
     // The rule's take-off tolerance as a band: a take-off inside it reaches its target.
     if let Some(tol) = rule_setting(tables, "takeoff_tolerance") {
         errors.insert(

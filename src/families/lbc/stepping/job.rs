@@ -8,6 +8,7 @@ use crate::control::lqr::TrackingController;
 use crate::control::simbicon::{applet_start, Gait, Simbicon};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
 use crate::experiment::output::{Table, Tables};
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::lbc::{optimized_tracker, projected_weights, rule_table, scale_lambda};
 use crate::physics::biped::point::{LEFT_HEEL, RIGHT_HEEL, RIGHT_TOE};
@@ -21,6 +22,33 @@ use std::time::Instant;
 
 /// DDP's discrete dynamics: one RK4 step of the biped per knot, Jacobians by differences.
 type Map = Rk4Map<FiniteDifference<Biped>>;
+
+crate::result_rows! {
+    /// One row of `targets.csv`: one controller's step toward one desired length, on the
+    /// simulator.
+    pub struct StepRow {
+        /// The desired step length (m).
+        desired_length_m: f64 = "desired_length_m",
+        /// The controller (`lbc`, `naive`, `short`, `long`, `direct`).
+        method: String = "method",
+        /// The step length reached (m).
+        reached_length_m: f64 = "reached_length_m",
+        /// 1 when the body fell, else 0.
+        fell: f64 = "fell",
+        /// The step's control effort.
+        effort: f64 = "effort",
+        /// Wall time of the run (s).
+        seconds: f64 = "seconds",
+        /// 1 when the swing heel landed and the body stood, else 0.
+        landed: f64 = "landed",
+        /// Reached minus desired length (m).
+        length_error_m: f64 = "length_error_m",
+        /// The projected weight of the short example.
+        weight_short: f64 = "weight_short",
+        /// The projected weight of the long example.
+        weight_long: f64 = "weight_long",
+    }
+}
 
 /// Step length (right heel x − left heel x, m) and the right heel's height above the ground
 /// (m) at state `x`.
@@ -486,18 +514,7 @@ impl Job for Params {
         });
         pb.finish_and_clear();
         let runs = runs.into_iter().collect::<Result<Vec<_>, _>>()?;
-        let mut targets = Table::new(&[
-            "desired_length_m",
-            "method",
-            "reached_length_m",
-            "fell",
-            "effort",
-            "seconds",
-            "landed",
-            "length_error_m",
-            "weight_short",
-            "weight_long",
-        ]);
+        let mut targets: Vec<StepRow> = Vec::new();
         let mut average = Table::new(&[
             "average_scale",
             "desired_length_m",
@@ -524,18 +541,18 @@ impl Job for Params {
             if k > 0 {
                 continue;
             }
-            targets.push(row![
-                l,
-                m,
-                r.reached,
-                r.fell as u8 as f64,
-                r.effort,
-                *secs,
-                r.landed as u8 as f64,
-                r.reached - l,
-                w[0],
-                w[1]
-            ]);
+            targets.push(StepRow {
+                desired_length_m: l,
+                method: m.to_string(),
+                reached_length_m: r.reached,
+                fell: r.fell as u8 as f64,
+                effort: r.effort,
+                seconds: *secs,
+                landed: r.landed as u8 as f64,
+                length_error_m: r.reached - l,
+                weight_short: w[0],
+                weight_long: w[1],
+            });
             if m == "lbc" {
                 for (i, a) in r.alpha_short.iter().enumerate().step_by(frame) {
                     weights.push(row![l, i as f64 * self.knot_dt, *a]);
@@ -562,7 +579,7 @@ impl Job for Params {
         ]);
         Ok(Tables::from([
             ("components", components),
-            ("targets", targets),
+            ("targets", table_of(&targets)),
             ("weights", weights),
             ("average_effect", average),
             ("walk", walk),

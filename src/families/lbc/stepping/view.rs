@@ -1,9 +1,11 @@
 //! `lbc_stepping`'s figures, animation, verdict and report section.
 
 use super::job::gaps;
+use super::job::StepRow;
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::rows::{read_rows, TableRow};
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use crate::families::lbc::film::{biped_body, fitted, to_scale};
@@ -130,52 +132,29 @@ pub fn verdict_of(f: &SteppingFacts, tol: f64, margin: f64) -> Verdict {
     stepping_rule(f, tol, margin).map_or(Verdict::NotAssessed, |r| r.verdict())
 }
 
-/// Rows of `targets` as (desired, method, reached, fell, effort, seconds, landed).
-struct Targets {
-    desired: Vec<f64>,
-    method: Vec<String>,
-    reached: Vec<f64>,
-    fell: Vec<f64>,
-    effort: Vec<f64>,
-    seconds: Vec<f64>,
-    landed: Vec<f64>,
-}
+/// `targets.csv`'s rows, with the rows of one controller picked out.
+struct Targets(Vec<StepRow>);
 
 impl Targets {
     fn read(dir: &Path) -> Result<Self, Error> {
-        let t = read_csv(&dir.join("targets.csv"))?;
-        Ok(Self {
-            desired: df_f64(&t, "desired_length_m")?,
-            method: df_str(&t, "method")?,
-            reached: df_f64(&t, "reached_length_m")?,
-            fell: df_f64(&t, "fell")?,
-            effort: df_f64(&t, "effort")?,
-            seconds: df_f64(&t, "seconds")?,
-            landed: df_f64(&t, "landed")?,
-        })
+        Ok(Self(read_rows(&dir.join("targets.csv"))?))
     }
 
     fn of(t: &Table) -> Self {
-        Self {
-            desired: t.f64s("desired_length_m"),
-            method: t.strs("method"),
-            reached: t.f64s("reached_length_m"),
-            fell: t.f64s("fell"),
-            effort: t.f64s("effort"),
-            seconds: t.f64s("seconds"),
-            landed: t.f64s("landed"),
-        }
+        Self(StepRow::from_table(t))
     }
 
-    fn rows<'a>(&'a self, method: &'a str) -> impl Iterator<Item = usize> + 'a {
-        (0..self.method.len()).filter(move |&i| self.method[i] == method)
+    fn rows<'a>(&'a self, method: &'a str) -> impl Iterator<Item = &'a StepRow> + 'a {
+        self.0.iter().filter(move |r| r.method == method)
     }
+}
 
-    /// (|error|, landed and standing) of row i against length `l`.
-    fn outcome(&self, i: usize, l: f64) -> (f64, bool) {
+impl StepRow {
+    /// (|error|, landed and standing) of this row against length `l`.
+    fn outcome(&self, l: f64) -> (f64, bool) {
         (
-            (self.reached[i] - l).abs(),
-            self.fell[i] == 0.0 && self.landed[i] != 0.0,
+            (self.reached_length_m - l).abs(),
+            self.fell == 0.0 && self.landed != 0.0,
         )
     }
 }
@@ -191,12 +170,13 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let own = |m: &str, l: f64| {
         t.rows(m)
             .next()
-            .map_or((f64::INFINITY, false), |i| t.outcome(i, l))
+            .map_or((f64::INFINITY, false), |r| r.outcome(l))
     };
-    let per =
-        |m: &str| -> Vec<(f64, bool)> { t.rows(m).map(|i| t.outcome(i, t.desired[i])).collect() };
+    let per = |m: &str| -> Vec<(f64, bool)> {
+        t.rows(m).map(|r| r.outcome(r.desired_length_m)).collect()
+    };
     let mean_effort = |m: &str| {
-        let v: Vec<f64> = t.rows(m).map(|i| t.effort[i]).collect();
+        let v: Vec<f64> = t.rows(m).map(|r| r.effort).collect();
         v.iter().sum::<f64>() / v.len().max(1) as f64
     };
     let (wf, wg) = (df_f64(&walk, "fell")?, df_f64(&walk, "in_gap")?);
@@ -235,16 +215,16 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let mut md = String::from(
         "| desired (m) | method | reached (m) | error (m) | fell | effort | seconds |\n| --- | --- | --- | --- | --- | --- | --- |\n",
     );
-    for i in 0..t.desired.len() {
+    for r in &t.0 {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} |\n",
-            sig(t.desired[i]),
-            t.method[i],
-            sig(t.reached[i]),
-            sig(t.reached[i] - t.desired[i]),
-            if t.fell[i] != 0.0 { "yes" } else { "no" },
-            sig(t.effort[i]),
-            sig(t.seconds[i])
+            sig(r.desired_length_m),
+            r.method,
+            sig(r.reached_length_m),
+            sig(r.reached_length_m - r.desired_length_m),
+            if r.fell != 0.0 { "yes" } else { "no" },
+            sig(r.effort),
+            sig(r.seconds)
         ));
     }
     let (cn, ct, cr, ci, ca) = (
@@ -359,12 +339,12 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     let mut files = Vec::new();
     let t = Targets::of(tables.require("targets")?);
     let tol = rule_setting(tables, "tolerance_m").unwrap_or(0.0);
-    let (lo, hi) = t
-        .desired
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+    let (lo, hi) =
+        t.0.iter()
+            .map(|r| r.desired_length_m)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            });
     // The desired line dashed, the tolerance's edges dotted (both grey).
     let band = |d: f64, label: &str, mark: Mark| {
         Series::line(label, vec![(lo, lo + d), (hi, hi + d)], 7).mark(mark)
@@ -377,17 +357,19 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     ];
     let mut effort = Vec::new();
     for (k, m) in METHODS.iter().enumerate() {
-        let rows: Vec<usize> = t.rows(m).collect();
+        let rows: Vec<&StepRow> = t.rows(m).collect();
         let mut s = Series::line(
             *m,
-            rows.iter().map(|&i| (t.desired[i], t.reached[i])).collect(),
+            rows.iter()
+                .map(|r| (r.desired_length_m, r.reached_length_m))
+                .collect(),
             k,
         )
         .mark(Mark::LinePoints);
         s.point_labels = rows
             .iter()
-            .map(|&i| {
-                if t.fell[i] != 0.0 {
+            .map(|r| {
+                if r.fell != 0.0 {
                     "✗".into()
                 } else {
                     String::new()
@@ -398,7 +380,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         effort.push(
             Series::line(
                 *m,
-                rows.iter().map(|&i| (t.desired[i], t.effort[i])).collect(),
+                rows.iter()
+                    .map(|r| (r.desired_length_m, r.effort))
+                    .collect(),
                 k,
             )
             .mark(Mark::LinePoints),
