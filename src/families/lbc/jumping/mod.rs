@@ -34,11 +34,12 @@
 //! `weights`, `entropy` (α's normalized entropy and distance from the fixed weights at every
 //! knot of the take-off, LBC's and the naive blend's), `motion`, `rule`.
 
+mod figures;
 mod job;
-mod view;
+mod report;
 
 pub use job::{jump_height, Landing, Push};
-pub use view::{verdict_of, JumpFacts};
+pub use report::{verdict_of, JumpFacts};
 
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
@@ -201,10 +202,10 @@ impl Family for LbcJumping {
     ];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        view::figures(fig, tables)
+        figures::figures(fig, tables)
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        view::report(dir)
+        report::report(dir)
     }
 }

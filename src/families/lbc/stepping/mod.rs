@@ -41,11 +41,12 @@
 //! landing_heel_m, landing_toe_m, gap_start_m, gap_end_m, in_gap, fell, weight_short), `motion`
 //! (step, t, alpha_short, q0..q8 of the walk, world frame), `rule`.
 
+mod figures;
 mod job;
-mod view;
+mod report;
 
 pub use job::{step_length, step_target};
-pub use view::{verdict_of, SteppingFacts};
+pub use report::{verdict_of, SteppingFacts};
 
 use crate::control::simbicon::Gait;
 use crate::experiment::output::Tables;
@@ -224,10 +225,10 @@ impl Family for LbcStepping {
     ];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        view::figures(fig, tables)
+        figures::figures(fig, tables)
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        view::report(dir)
+        report::report(dir)
     }
 }

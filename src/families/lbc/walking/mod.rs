@@ -26,8 +26,9 @@
 //! (lambda, terrain, distance_m, fell, alpha_hill_flat_part, alpha_hill_hill_part), `motion`
 //! (controller, t, q0..q8 on the flat-then-hill track, for the GIF), `rule`.
 
+mod figures;
 mod job;
-mod view;
+mod report;
 
 use crate::control::gait_value::GaitCost;
 use crate::control::simbicon::Gait;
@@ -40,7 +41,7 @@ use crate::physics::ground::Terrain;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-pub use view::{verdict_of, WalkingFacts};
+pub use report::{verdict_of, WalkingFacts};
 
 /// The family.
 pub struct LbcWalking;
@@ -257,10 +258,10 @@ impl Family for LbcWalking {
     ];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        view::figures(fig, tables)
+        figures::figures(fig, tables)
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        view::report(dir)
+        report::report(dir)
     }
 }
