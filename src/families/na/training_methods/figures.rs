@@ -8,7 +8,17 @@ use crate::experiment::rule::rule_setting;
 use crate::experiment::Error;
 use std::path::PathBuf;
 
+/// The `curves` figure (one row per net: held-out error against seconds and against passes)
+/// and the `examples` figure (errors and their ratio against examples per weight).
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
+    let mut files = fig.draw("curves", &Figure::grid(curve_panels(tables)?, 2))?;
+    files.extend(fig.draw("examples", &Figure::grid(example_panels(tables)?, 2))?);
+    Ok(files)
+}
+
+/// Per net, its held-out error curves against wall-clock seconds and against data passes,
+/// every init in its method's stroke, with the first init's target dashed.
+fn curve_panels(tables: &Tables) -> Result<Vec<Panel>, Error> {
     let c = tables.require("curves")?;
     let (cn, cm, ci) = (c.strs("net"), c.strs("method"), c.f64s("init"));
     let (cp, cs, ch) = (
@@ -79,7 +89,12 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             });
         }
     }
-    let mut files = fig.draw("curves", &Figure::grid(panels, 2))?;
+    Ok(panels)
+}
+
+/// The examples figure's panels: the training and test errors, and their ratio against the
+/// rule's bars.
+fn example_panels(tables: &Tables) -> Result<Vec<Panel>, Error> {
     let e = tables.require("examples")?;
     let (er, ete, etr) = (
         e.f64s("examples_per_weight"),
@@ -177,6 +192,5 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         ],
         ..Panel::default()
     };
-    files.extend(fig.draw("examples", &Figure::grid(vec![left, right], 2))?);
-    Ok(files)
+    Ok(vec![left, right])
 }
