@@ -5,7 +5,7 @@ use super::{Params, WITHIN_TOLERANCE};
 use crate::emulator::cache::EmulatorCache;
 use crate::emulator::catalog::{rollout_error, BuildSpec, NetModel, TransformSet};
 use crate::emulator::hierarchy::{
-    build_global, hierarchy_rollout_error, HierarchySpec, NetReport, GLOBAL_DIM,
+    build_global, hierarchy_rollout_error, BuiltDolphin, HierarchySpec, NetReport, GLOBAL_DIM,
 };
 use crate::emulator::Emulator;
 use crate::experiment::output::{Table, Tables};
@@ -341,26 +341,9 @@ impl Params {
         rollout: &mut Table,
         control: &mut Table,
     ) -> Result<(), Error> {
-        use rayon::prelude::*;
         let spec = d.nets.spec(ctx.seed, self.steps, self.example_scale);
         let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
-        let cache = EmulatorCache::from_env();
-        let variants: Vec<Result<(Emulator, NetReport), String>> =
-            ctx.stage("train dolphin global-net variants", || {
-                self.variants
-                    .par_iter()
-                    .map(|&v| {
-                        if v == TransformSet::Full {
-                            return Ok((built.emulator.global().clone(), built.nets[0].clone()));
-                        }
-                        let s = HierarchySpec {
-                            global_transforms: v,
-                            ..spec.clone()
-                        };
-                        build_global(&s, &cache).map_err(|e| e.to_string())
-                    })
-                    .collect()
-            });
+        let variants = self.dolphin_variants(ctx, &spec, &built);
         let body = built.emulator.dolphin().clone();
         let swim = &d.swim;
         let (x0, _) = swim.start(&body);
@@ -483,5 +466,32 @@ impl Params {
             }
         }
         Ok(())
+    }
+
+    /// Every variant's global net of the dolphin's hierarchy `built` (of `spec`), trained in
+    /// parallel (the full variant is the hierarchy's own); a failed build is its error's text.
+    fn dolphin_variants(
+        &self,
+        ctx: &RunContext,
+        spec: &HierarchySpec,
+        built: &BuiltDolphin,
+    ) -> Vec<Result<(Emulator, NetReport), String>> {
+        use rayon::prelude::*;
+        let cache = EmulatorCache::from_env();
+        ctx.stage("train dolphin global-net variants", || {
+            self.variants
+                .par_iter()
+                .map(|&v| {
+                    if v == TransformSet::Full {
+                        return Ok((built.emulator.global().clone(), built.nets[0].clone()));
+                    }
+                    let s = HierarchySpec {
+                        global_transforms: v,
+                        ..spec.clone()
+                    };
+                    build_global(&s, &cache).map_err(|e| e.to_string())
+                })
+                .collect()
+        })
     }
 }
