@@ -34,6 +34,7 @@ use crate::experiment::rule::{
 use crate::experiment::stats::median_interval;
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::row;
+use polars::prelude::DataFrame;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -498,6 +499,68 @@ fn seed_ratios(dir: &Path) -> Result<Option<Vec<(String, Vec<f64>)>>, Error> {
     Ok(Some(out))
 }
 
+/// The best of an emulator's own time-averaged error `own` and its mean error at every
+/// capacity tried (`tried`: variant, emulator, hidden units, mean error).
+fn best_of(tried: &[(String, String, f64, f64)], v: &str, e: &str, own: f64) -> f64 {
+    tried
+        .iter()
+        .filter(|t| t.0 == v && t.1 == e)
+        .map(|t| t.3)
+        .fold(own, f64::min)
+}
+
+/// The report's table: per (variant, emulator) its time-averaged error, its mean error at
+/// each further capacity tried (`hiddens` past the first, the nets' own) and the best.
+fn capacity_md(
+    means: &[(String, String, f64)],
+    tried: &[(String, String, f64, f64)],
+    hiddens: &[f64],
+) -> String {
+    let best = |v: &str, e: &str, own: f64| best_of(tried, v, e, own);
+    let mut md = String::from("| variant | emulator | time-averaged error |");
+    for h in &hiddens[1.min(hiddens.len())..] {
+        md.push_str(&format!(" with {h} hidden |"));
+    }
+    md.push_str(" best |\n|");
+    md.push_str(&" --- |".repeat(4 + hiddens.len().saturating_sub(1)));
+    md.push('\n');
+    for (v, e, s) in means {
+        md.push_str(&format!("| {v} | {e} | {} |", sig(*s)));
+        for h in &hiddens[1.min(hiddens.len())..] {
+            let x = tried.iter().find(|t| &t.0 == v && &t.1 == e && t.2 == *h);
+            md.push_str(&format!(" {} |", x.map_or("-".into(), |t| sig(t.3))));
+        }
+        md.push_str(&format!(" {} |\n", sig(best(v, e, *s))));
+    }
+    md
+}
+
+/// Diagnostic (ours, not the verdict): the same ratio at the frames every emulator steps
+/// to, where no emulator's error includes linear interpolation between its coarse steps, at
+/// the nets' own capacity (empty without `capacity.csv`'s common-frame column).
+fn common_text(cap: Option<&DataFrame>, tried: &[(String, String, f64, f64)]) -> String {
+    let common_ratio = |v: &str| -> Option<f64> {
+        let c = cap?;
+        let (cv, ch) = (df_str(c, "variant").ok()?, df_f64(c, "hidden").ok()?);
+        let cc = df_f64(c, "common_mean_error").ok()?;
+        let own = tried.first().map(|t| t.2)?;
+        let vals: Vec<f64> = (0..cv.len())
+            .filter(|&r| cv[r] == v && ch[r] == own)
+            .map(|r| cc[r])
+            .collect();
+        spread(&vals)
+    };
+    let common: Vec<String> = ["passive", "active"]
+        .iter()
+        .filter_map(|v| common_ratio(v).map(|r| format!("{v} {}", sig(r))))
+        .collect();
+    if common.is_empty() {
+        String::new()
+    } else {
+        format!(" Diagnostic (ours, not the verdict): at the paper's Table 1 capacity, at the frames every emulator steps to (multiples of the longest super-step, so no error from interpolating between coarse steps): {}.", common.join(", "))
+    }
+}
+
 /// Time-averaged error per (variant, emulator), in first-seen order.
 fn mean_errors(variant: &[String], emu: &[String], err: &[f64]) -> Vec<(String, String, f64)> {
     let mut out: Vec<(String, String, f64, usize)> = vec![];
@@ -683,28 +746,8 @@ impl Family for NaError {
                 hiddens.push(t.2);
             }
         }
-        let best = |v: &str, e: &str, own: f64| {
-            tried
-                .iter()
-                .filter(|t| t.0 == v && t.1 == e)
-                .map(|t| t.3)
-                .fold(own, f64::min)
-        };
-        let mut md = String::from("| variant | emulator | time-averaged error |");
-        for h in &hiddens[1.min(hiddens.len())..] {
-            md.push_str(&format!(" with {h} hidden |"));
-        }
-        md.push_str(" best |\n|");
-        md.push_str(&" --- |".repeat(4 + hiddens.len().saturating_sub(1)));
-        md.push('\n');
-        for (v, e, s) in &means {
-            md.push_str(&format!("| {v} | {e} | {} |", sig(*s)));
-            for h in &hiddens[1.min(hiddens.len())..] {
-                let x = tried.iter().find(|t| &t.0 == v && &t.1 == e && t.2 == *h);
-                md.push_str(&format!(" {} |", x.map_or("-".into(), |t| sig(t.3))));
-            }
-            md.push_str(&format!(" {} |\n", sig(best(v, e, *s))));
-        }
+        let best = |v: &str, e: &str, own: f64| best_of(&tried, v, e, own);
+        let md = capacity_md(&means, &tried, &hiddens);
         // "Nearly the same": per variant, the largest time-averaged error within 1.5x of the
         // smallest (within 3x: partly), each emulator at the best capacity tried (the paper's
         // nets have O(N) hidden units; the capacity is the modeller's choice per emulator).
@@ -725,28 +768,7 @@ impl Family for NaError {
             .iter()
             .filter_map(|v| ratio_of(v, true).map(|r| format!("{v} {}", sig(r))))
             .collect();
-        // Diagnostic (ours, not the verdict): the same ratio at the frames every emulator steps
-        // to, where no emulator's error includes linear interpolation between its coarse steps.
-        let common_ratio = |v: &str| -> Option<f64> {
-            let c = cap.as_ref()?;
-            let (cv, ch) = (df_str(c, "variant").ok()?, df_f64(c, "hidden").ok()?);
-            let cc = df_f64(c, "common_mean_error").ok()?;
-            let own = tried.first().map(|t| t.2)?;
-            let vals: Vec<f64> = (0..cv.len())
-                .filter(|&r| cv[r] == v && ch[r] == own)
-                .map(|r| cc[r])
-                .collect();
-            spread(&vals)
-        };
-        let common: Vec<String> = ["passive", "active"]
-            .iter()
-            .filter_map(|v| common_ratio(v).map(|r| format!("{v} {}", sig(r))))
-            .collect();
-        let common_text = if common.is_empty() {
-            String::new()
-        } else {
-            format!(" Diagnostic (ours, not the verdict): at the paper's Table 1 capacity, at the frames every emulator steps to (multiples of the longest super-step, so no error from interpolating between coarse steps): {}.", common.join(", "))
-        };
+        let common_text = common_text(cap.as_ref(), &tried);
         let settings = rule_settings(dir)?;
         let bars = Fig12Rule {
             held_ratio: settings("held_ratio"),

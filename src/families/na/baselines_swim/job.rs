@@ -236,32 +236,7 @@ impl Job for Params {
         )
         .map_err(other)?;
 
-        let mut runs: Vec<Run> = vec![];
-        runs.extend(self.bptt_runs(ctx, &emulator, &v0, "emulator", "")?);
-        let pb = ctx.progress(2 * SEARCHES.len() as u64, "gradient-free searches");
-        for (k, method) in SEARCHES.into_iter().enumerate() {
-            let seed = search_seed(ctx.seed, k);
-            let result = ctx.stage(&format!("{method} emulator"), || {
-                self.search(method, &emulator, &v0, &self.budget.emulator, seed)
-            })?;
-            runs.push(Run {
-                method,
-                substrate: "emulator",
-                result,
-            });
-            pb.inc(1);
-            let result = ctx.stage(&format!("{method} simulator"), || {
-                self.search(method, &simulator, &v0, &self.budget.simulator, seed)
-            })?;
-            runs.push(Run {
-                method,
-                substrate: "simulator",
-                result,
-            });
-            pb.inc(1);
-        }
-        pb.finish_and_clear();
-
+        let mut runs = self.headline_runs(ctx, &emulator, &simulator, &v0)?;
         // The same runs on the dolphin's last-round DAgger net (ours), from the same start.
         let dagger_net = match &self.dagger {
             Some(d) => Some(self.fig13(d).dolphin_dagger_net(ctx)?),
@@ -274,115 +249,136 @@ impl Job for Params {
             None => None,
         };
         if let Some(b) = &dagger_bptt {
-            let problem = BpttProblem::new(b);
-            runs.extend(self.bptt_runs(ctx, &problem, &v0, DAGGER_SUBSTRATE, "")?);
-            for (k, method) in SEARCHES.into_iter().enumerate() {
-                let seed = search_seed(ctx.seed, k);
-                let result = ctx.stage(&format!("{method} ({DAGGER_SUBSTRATE})"), || {
-                    self.search(method, &problem, &v0, &self.budget.emulator, seed)
-                })?;
-                runs.push(Run {
-                    method,
-                    substrate: DAGGER_SUBSTRATE,
-                    result,
-                });
-            }
+            runs.extend(self.dagger_runs(ctx, b, &v0)?);
         }
 
-        let mut baselines = Table::new(&[
-            "method",
-            "substrate",
-            "iteration",
-            "evaluations",
-            "seconds",
-            "objective",
-            "gradients",
-            "current",
-        ]);
-        for r in &runs {
-            for t in &r.result.trace {
-                baselines.push(row![
-                    r.method,
-                    r.substrate,
-                    t.iteration,
-                    t.evaluations,
-                    t.seconds,
-                    t.best,
-                    t.gradients,
-                    t.current
-                ]);
-            }
+        let baselines = baselines_table(&runs);
+        let evaluated = self.evaluate_runs(&runs, &emulator, &simulator);
+        let final_t = final_table(&runs, &evaluated);
+        let seeds_t = self.seeds_table(ctx, &runs, &emulator, &simulator, knots.len())?;
+        Ok(Tables::from([
+            ("baselines", baselines),
+            ("final", final_t),
+            ("search_seeds", seeds_t),
+            ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
+        ]))
+    }
+}
+
+/// A run's best knots evaluated on both substrates: J and swim distance on each (NaN for
+/// knots that are not finite).
+struct OnBoth {
+    j_emulator: f64,
+    j_simulator: f64,
+    d_emulator: f64,
+    d_simulator: f64,
+}
+
+impl Params {
+    /// The BPTT runs on the emulator, then every gradient-free search on the emulator and on
+    /// the simulator in turn, each from `v0` with its own search seed.
+    fn headline_runs(
+        &self,
+        ctx: &RunContext,
+        emulator: &BpttProblem<'_, crate::emulator::Emulator>,
+        simulator: &ReplayProblem<'_>,
+        v0: &[f64],
+    ) -> Result<Vec<Run>, Error> {
+        let mut runs: Vec<Run> = vec![];
+        runs.extend(self.bptt_runs(ctx, emulator, v0, "emulator", "")?);
+        let pb = ctx.progress(2 * SEARCHES.len() as u64, "gradient-free searches");
+        for (k, method) in SEARCHES.into_iter().enumerate() {
+            let seed = search_seed(ctx.seed, k);
+            let result = ctx.stage(&format!("{method} emulator"), || {
+                self.search(method, emulator, v0, &self.budget.emulator, seed)
+            })?;
+            runs.push(Run {
+                method,
+                substrate: "emulator",
+                result,
+            });
+            pb.inc(1);
+            let result = ctx.stage(&format!("{method} simulator"), || {
+                self.search(method, simulator, v0, &self.budget.simulator, seed)
+            })?;
+            runs.push(Run {
+                method,
+                substrate: "simulator",
+                result,
+            });
+            pb.inc(1);
         }
-        // Every run's best knots on both substrates.
-        let on_both = |v: &[f64]| -> (f64, f64, f64, f64) {
+        pb.finish_and_clear();
+        Ok(runs)
+    }
+
+    /// The BPTT runs and every gradient-free search through the DAgger net's descent `b`, from
+    /// `v0` with the emulator's budgets and search seeds.
+    fn dagger_runs(
+        &self,
+        ctx: &RunContext,
+        b: &Bptt<'_, crate::emulator::Emulator>,
+        v0: &[f64],
+    ) -> Result<Vec<Run>, Error> {
+        let problem = BpttProblem::new(b);
+        let mut runs = self.bptt_runs(ctx, &problem, v0, DAGGER_SUBSTRATE, "")?;
+        for (k, method) in SEARCHES.into_iter().enumerate() {
+            let seed = search_seed(ctx.seed, k);
+            let result = ctx.stage(&format!("{method} ({DAGGER_SUBSTRATE})"), || {
+                self.search(method, &problem, v0, &self.budget.emulator, seed)
+            })?;
+            runs.push(Run {
+                method,
+                substrate: DAGGER_SUBSTRATE,
+                result,
+            });
+        }
+        Ok(runs)
+    }
+
+    /// Every run's best knots on both substrates.
+    fn evaluate_runs(
+        &self,
+        runs: &[Run],
+        emulator: &BpttProblem<'_, crate::emulator::Emulator>,
+        simulator: &ReplayProblem<'_>,
+    ) -> Vec<OnBoth> {
+        let swim = &self.swim;
+        let on_both = |v: &[f64]| -> OnBoth {
             if v.iter().any(|x| !x.is_finite()) {
-                return (f64::NAN, f64::NAN, f64::NAN, f64::NAN);
+                return OnBoth {
+                    j_emulator: f64::NAN,
+                    j_simulator: f64::NAN,
+                    d_emulator: f64::NAN,
+                    d_simulator: f64::NAN,
+                };
             }
             let (je, de) = emulator.with_bptt(|b| {
                 let j = b.rollout(v);
                 (j, swim.distance(b.states()))
             });
             let sim = simulator.rollout(v);
-            (je, sim.objective, de, swim.distance(&sim.states))
+            OnBoth {
+                j_emulator: je,
+                j_simulator: sim.objective,
+                d_emulator: de,
+                d_simulator: swim.distance(&sim.states),
+            }
         };
-        let evaluated: Vec<(f64, f64, f64, f64)> =
-            runs.iter().map(|r| on_both(&r.result.best)).collect();
-        let momentum = runs
-            .iter()
-            .position(|r| r.method == "bptt_momentum")
-            .expect("the momentum run is first");
-        let targets = (evaluated[momentum].0, evaluated[momentum].1);
-        // On the DAgger net: its own momentum run's best J there.
-        let dagger_target = runs
-            .iter()
-            .find(|r| r.method == "bptt_momentum" && r.substrate == DAGGER_SUBSTRATE)
-            .map_or(f64::NAN, |r| r.result.best_value);
-        let mut final_t = Table::new(&[
-            "method",
-            "substrate",
-            "iterations",
-            "evaluations",
-            "seconds",
-            "objective_substrate",
-            "objective_emulator",
-            "objective_simulator",
-            "distance_emulator_m",
-            "distance_simulator_m",
-            "target",
-            "iterations_to_bptt",
-            "evaluations_to_bptt",
-            "seconds_to_bptt",
-            "best_iteration",
-        ]);
-        for (r, &(je, js, de, ds)) in runs.iter().zip(&evaluated) {
-            let target = match r.substrate {
-                "emulator" => targets.0,
-                DAGGER_SUBSTRATE => dagger_target,
-                _ => targets.1,
-            };
-            let trace = &r.result.trace;
-            let last = trace.last().expect("a search has iteration 0");
-            let reached = time_to_target(trace, target);
-            let own = time_to_target(trace, r.result.best_value);
-            final_t.push(row![
-                r.method,
-                r.substrate,
-                last.iteration,
-                last.evaluations,
-                last.seconds,
-                r.result.best_value,
-                je,
-                js,
-                de,
-                ds,
-                target,
-                opt(reached.map(|x| x.iteration as f64)),
-                opt(reached.map(|x| x.evaluations as f64)),
-                opt(reached.map(|x| x.seconds)),
-                opt(own.map(|x| x.iteration as f64))
-            ]);
-        }
-        // The emulator runs again from each further search seed's start (search_seeds.csv).
+        runs.iter().map(|r| on_both(&r.result.best)).collect()
+    }
+
+    /// The emulator runs again from each further search seed's start (search_seeds.csv),
+    /// after this run's own rows; knots not finite swim NaN.
+    fn seeds_table(
+        &self,
+        ctx: &RunContext,
+        runs: &[Run],
+        emulator: &BpttProblem<'_, crate::emulator::Emulator>,
+        simulator: &ReplayProblem<'_>,
+        knots_len: usize,
+    ) -> Result<Table, Error> {
+        let swim = &self.swim;
         let replay_distance = |v: &[f64]| -> f64 {
             if v.iter().any(|x| !x.is_finite()) {
                 return f64::NAN;
@@ -393,14 +389,14 @@ impl Job for Params {
         let own: Vec<&Run> = runs.iter().filter(|r| r.substrate == "emulator").collect();
         self.seed_rows(ctx.seed, &own, &replay_distance, &mut seeds_t);
         for s in self.further_search_seeds(ctx.seed) {
-            let v0 = self.initial_knots(s, knots.len());
+            let v0 = self.initial_knots(s, knots_len);
             let mut more =
-                self.bptt_runs(ctx, &emulator, &v0, "emulator", &format!(", seed {s}"))?;
+                self.bptt_runs(ctx, emulator, &v0, "emulator", &format!(", seed {s}"))?;
             for (k, method) in SEARCHES.into_iter().enumerate() {
                 let result = ctx.stage(&format!("{method} emulator, seed {s}"), || {
                     self.search(
                         method,
-                        &emulator,
+                        emulator,
                         &v0,
                         &self.budget.emulator,
                         search_seed(s, k),
@@ -415,11 +411,99 @@ impl Job for Params {
             let more: Vec<&Run> = more.iter().collect();
             self.seed_rows(s, &more, &replay_distance, &mut seeds_t);
         }
-        Ok(Tables::from([
-            ("baselines", baselines),
-            ("final", final_t),
-            ("search_seeds", seeds_t),
-            ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
-        ]))
+        Ok(seeds_t)
     }
+}
+
+/// `baselines.csv`: every run's trace, iteration by iteration.
+fn baselines_table(runs: &[Run]) -> Table {
+    let mut baselines = Table::new(&[
+        "method",
+        "substrate",
+        "iteration",
+        "evaluations",
+        "seconds",
+        "objective",
+        "gradients",
+        "current",
+    ]);
+    for r in runs {
+        for t in &r.result.trace {
+            baselines.push(row![
+                r.method,
+                r.substrate,
+                t.iteration,
+                t.evaluations,
+                t.seconds,
+                t.best,
+                t.gradients,
+                t.current
+            ]);
+        }
+    }
+    baselines
+}
+
+/// `final.csv`: every run's end, its best knots on both substrates and when it reached its
+/// substrate's target (BPTT-momentum's J there) and its own best J.
+fn final_table(runs: &[Run], evaluated: &[OnBoth]) -> Table {
+    let momentum = runs
+        .iter()
+        .position(|r| r.method == "bptt_momentum")
+        .expect("the momentum run is first");
+    let targets = (
+        evaluated[momentum].j_emulator,
+        evaluated[momentum].j_simulator,
+    );
+    // On the DAgger net: its own momentum run's best J there.
+    let dagger_target = runs
+        .iter()
+        .find(|r| r.method == "bptt_momentum" && r.substrate == DAGGER_SUBSTRATE)
+        .map_or(f64::NAN, |r| r.result.best_value);
+    let mut final_t = Table::new(&[
+        "method",
+        "substrate",
+        "iterations",
+        "evaluations",
+        "seconds",
+        "objective_substrate",
+        "objective_emulator",
+        "objective_simulator",
+        "distance_emulator_m",
+        "distance_simulator_m",
+        "target",
+        "iterations_to_bptt",
+        "evaluations_to_bptt",
+        "seconds_to_bptt",
+        "best_iteration",
+    ]);
+    for (r, e) in runs.iter().zip(evaluated) {
+        let target = match r.substrate {
+            "emulator" => targets.0,
+            DAGGER_SUBSTRATE => dagger_target,
+            _ => targets.1,
+        };
+        let trace = &r.result.trace;
+        let last = trace.last().expect("a search has iteration 0");
+        let reached = time_to_target(trace, target);
+        let own = time_to_target(trace, r.result.best_value);
+        final_t.push(row![
+            r.method,
+            r.substrate,
+            last.iteration,
+            last.evaluations,
+            last.seconds,
+            r.result.best_value,
+            e.j_emulator,
+            e.j_simulator,
+            e.d_emulator,
+            e.d_simulator,
+            target,
+            opt(reached.map(|x| x.iteration as f64)),
+            opt(reached.map(|x| x.evaluations as f64)),
+            opt(reached.map(|x| x.seconds)),
+            opt(own.map(|x| x.iteration as f64))
+        ]);
+    }
+    final_t
 }

@@ -11,7 +11,8 @@ use super::{learn_best, Params, Task};
 use crate::control::bptt::{replay, Bptt, Knots, StepRule};
 use crate::emulator::cache::EmulatorCache;
 use crate::emulator::catalog::{
-    anchor_of, rollout_windows, stop_name, training_data, BuildSpec, Trained, TrainingData,
+    anchor_of, rollout_windows, stop_name, training_data, BuildSpec, TrainSettings, Trained,
+    TrainingData,
 };
 use crate::emulator::dagger::{
     aggregate, collect, fine_tune_aggregated, DaggerSettings, Plan, Visits,
@@ -354,46 +355,17 @@ impl Params {
             let next = match cache.load_derived(spec, &tag(task), &key) {
                 Some(t) => t,
                 None => {
-                    let t0 = std::time::Instant::now();
-                    if base_data.is_none() {
-                        let data = ctx.stage(&format!("dagger {}: base data", task.name), || {
-                            training_data(spec)
-                        });
-                        base_data = Some((
-                            data.map_err(other)?,
-                            rollout_windows(spec).map_err(other)?.0,
-                        ));
-                    }
-                    let (data, windows) = base_data.as_ref().expect("just built");
-                    let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(stream, 2 * round as u64 + 1));
-                    let agg = aggregate(&net, data, windows, &train, &held, &settings, &mut rng)
-                        .map_err(other)?;
-                    let mut emulator = net.clone();
-                    let anchor = anchor_of(spec, emulator.transforms());
-                    let report = ctx.stage(
-                        &format!("dagger {} round {}: fine-tune", task.name, round + 1),
-                        || {
-                            fine_tune_aggregated(
-                                &mut emulator,
-                                &agg,
-                                &data.sigma,
-                                &settings,
-                                d.settings.iters,
-                                anchor.as_ref(),
-                            )
-                        },
-                    );
-                    let report = report.map_err(other)?;
-                    let trained = Trained {
-                        train_error: mse(emulator.mlp(), &agg.clean),
-                        heldout_error: mse(emulator.mlp(), &agg.held),
-                        emulator,
-                        trace: report.trace,
-                        train_s: t0.elapsed().as_secs_f64(),
-                        stop: stop_name(&report.stop),
-                        from_cache: false,
-                        rollout_trace: Vec::new(),
-                    };
+                    let trained = fine_tune_round(
+                        ctx,
+                        d,
+                        task,
+                        spec,
+                        &net,
+                        &mut base_data,
+                        (&train, &held),
+                        &settings,
+                        (stream, round),
+                    )?;
                     cache
                         .store_derived(spec, &tag(task), &key, &trained)
                         .map_err(other)?;
@@ -405,6 +377,63 @@ impl Params {
         }
         Ok(net)
     }
+}
+
+/// Round `round`'s fine-tune of `net` for `task` on the base data and windows (built once
+/// into `base_data`) and the visits aggregated so far, timed from the start of the round's
+/// training; the aggregation's randomness is stream `2 round + 1` of `stream`.
+#[allow(clippy::too_many_arguments)]
+fn fine_tune_round(
+    ctx: &crate::experiment::RunContext,
+    d: &DaggerControl,
+    task: &Task,
+    spec: &BuildSpec,
+    net: &Emulator,
+    base_data: &mut Option<(TrainingData, Windows)>,
+    (train, held): (&Visits, &Visits),
+    settings: &TrainSettings,
+    (stream, round): (u64, usize),
+) -> Result<Trained, Error> {
+    let t0 = std::time::Instant::now();
+    if base_data.is_none() {
+        let data = ctx.stage(&format!("dagger {}: base data", task.name), || {
+            training_data(spec)
+        });
+        *base_data = Some((
+            data.map_err(other)?,
+            rollout_windows(spec).map_err(other)?.0,
+        ));
+    }
+    let (data, windows) = base_data.as_ref().expect("just built");
+    let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(stream, 2 * round as u64 + 1));
+    let agg = aggregate(net, data, windows, train, held, settings, &mut rng).map_err(other)?;
+    let mut emulator = net.clone();
+    let anchor = anchor_of(spec, emulator.transforms());
+    let report = ctx.stage(
+        &format!("dagger {} round {}: fine-tune", task.name, round + 1),
+        || {
+            fine_tune_aggregated(
+                &mut emulator,
+                &agg,
+                &data.sigma,
+                settings,
+                d.settings.iters,
+                anchor.as_ref(),
+            )
+        },
+    );
+    let report = report.map_err(other)?;
+    let trained = Trained {
+        train_error: mse(emulator.mlp(), &agg.clean),
+        heldout_error: mse(emulator.mlp(), &agg.held),
+        emulator,
+        trace: report.trace,
+        train_s: t0.elapsed().as_secs_f64(),
+        stop: stop_name(&report.stop),
+        from_cache: false,
+        rollout_trace: Vec::new(),
+    };
+    Ok(trained)
 }
 
 /// The DAgger figure: per task, the learned controls' final error on the simulator (solid) and

@@ -201,55 +201,17 @@ impl Params {
             let (next_net, rec) = match load_derived(&cache, spec, body, &key) {
                 Some(found) => found,
                 None => {
-                    let t0 = std::time::Instant::now();
-                    if base_data.is_none() {
-                        let data = ctx.stage("dagger dolphin: base data", || {
-                            global_training_data(body, spec)
-                        });
-                        base_data = Some(data.map_err(other)?);
-                    }
-                    let data = base_data.as_ref().expect("just built");
-                    let no_windows = Windows {
-                        k,
-                        state_dim: GLOBAL_DIM,
-                        control_dim: N_SEGMENTS,
-                        states: vec![],
-                        controls: vec![],
-                        episode: vec![],
-                        start_step: vec![],
-                    };
-                    let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(stream, 2 * round as u64 + 1));
-                    let agg =
-                        aggregate(&net, data, &no_windows, &train, &held, &settings, &mut rng)
-                            .map_err(other)?;
-                    let mut emulator = net.clone();
-                    let report = ctx.stage(
-                        &format!("dagger dolphin round {}: fine-tune", round + 1),
-                        || {
-                            fine_tune_aggregated(
-                                &mut emulator,
-                                &agg,
-                                &data.sigma,
-                                &settings,
-                                dd.settings.iters,
-                                None,
-                            )
-                        },
-                    );
-                    let report = report.map_err(other)?;
-                    let t = emulator.transforms();
-                    let rec = NetRecord {
-                        mlp: emulator.mlp().clone(),
-                        input_norm: t.input_norm.clone(),
-                        output_norm: t.output_norm.clone(),
-                        dt: emulator.dt(),
-                        train_error: mse(emulator.mlp(), &agg.clean),
-                        heldout_error: mse(emulator.mlp(), &agg.held),
-                        train_s: t0.elapsed().as_secs_f64(),
-                        stop: stop_name(&report.stop),
-                        trace: report.trace,
-                        rollout_trace: Vec::new(),
-                    };
+                    let (emulator, rec) = self.fine_tune_round(
+                        ctx,
+                        dd,
+                        spec,
+                        body,
+                        &net,
+                        &mut base_data,
+                        (&train, &held),
+                        &settings,
+                        (stream, round),
+                    )?;
                     store_derived(&cache, spec, body, &key, &rec).map_err(other)?;
                     (emulator, rec)
                 }
@@ -258,6 +220,74 @@ impl Params {
             net = next_net;
         }
         Ok(net)
+    }
+
+    /// Round `round`'s fine-tune of `net` on the base data (built once into `base_data`) and
+    /// the visits aggregated so far, with its record (timed from the start of the round's
+    /// training); the aggregation's randomness is stream `2 round + 1` of `stream`.
+    #[allow(clippy::too_many_arguments)]
+    fn fine_tune_round(
+        &self,
+        ctx: &RunContext,
+        dd: &DolphinDagger,
+        spec: &HierarchySpec,
+        body: &Dolphin,
+        net: &Emulator,
+        base_data: &mut Option<TrainingData>,
+        (train, held): (&Visits, &Visits),
+        settings: &TrainSettings,
+        (stream, round): (u64, usize),
+    ) -> Result<(Emulator, NetRecord), Error> {
+        let k = dd.rollout_k;
+        let t0 = std::time::Instant::now();
+        if base_data.is_none() {
+            let data = ctx.stage("dagger dolphin: base data", || {
+                global_training_data(body, spec)
+            });
+            *base_data = Some(data.map_err(other)?);
+        }
+        let data = base_data.as_ref().expect("just built");
+        let no_windows = Windows {
+            k,
+            state_dim: GLOBAL_DIM,
+            control_dim: N_SEGMENTS,
+            states: vec![],
+            controls: vec![],
+            episode: vec![],
+            start_step: vec![],
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(stream, 2 * round as u64 + 1));
+        let agg =
+            aggregate(net, data, &no_windows, train, held, settings, &mut rng).map_err(other)?;
+        let mut emulator = net.clone();
+        let report = ctx.stage(
+            &format!("dagger dolphin round {}: fine-tune", round + 1),
+            || {
+                fine_tune_aggregated(
+                    &mut emulator,
+                    &agg,
+                    &data.sigma,
+                    settings,
+                    dd.settings.iters,
+                    None,
+                )
+            },
+        );
+        let report = report.map_err(other)?;
+        let t = emulator.transforms();
+        let rec = NetRecord {
+            mlp: emulator.mlp().clone(),
+            input_norm: t.input_norm.clone(),
+            output_norm: t.output_norm.clone(),
+            dt: emulator.dt(),
+            train_error: mse(emulator.mlp(), &agg.clean),
+            heldout_error: mse(emulator.mlp(), &agg.held),
+            train_s: t0.elapsed().as_secs_f64(),
+            stop: stop_name(&report.stop),
+            trace: report.trace,
+            rollout_trace: Vec::new(),
+        };
+        Ok((emulator, rec))
     }
 
     /// Everything besides the base net that determines round `round`'s global net.

@@ -11,7 +11,8 @@ use crate::control::bptt::{
     learn_with, replay, Bptt, Descent, DifferentiableStep, Knots, Learned, Schedule, StepRule,
 };
 use crate::control::conditioning::{terminal_spectrum, weighting_bound};
-use crate::emulator::catalog::{BuildSpec, NetSpec};
+use crate::control::objective::Objective;
+use crate::emulator::catalog::{BuildSpec, NetSpec, Trained};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::rule::{rule_table, rule_table_of};
 use crate::experiment::{other, Error, Job, RunContext};
@@ -43,66 +44,7 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut objective_t = Table::new(&["task", "iteration", "objective"]);
-        let mut final_t = Table::new(&[
-            "task",
-            "emulator_error",
-            "simulator_error",
-            "best_iteration",
-            "formulation",
-            "start_simulator_error",
-        ]);
-        let mut sweep_t = Table::new(&SWEEP_COLUMNS);
-        let mut physics_t = Table::new(&SWEEP_COLUMNS);
-        // The headline through the physics under the best-conditioned final-state weights
-        // (ours; `best_weights*.csv`), where conditioning.csv does not rule them out.
-        let mut best_t = Table::new(&SWEEP_COLUMNS);
-        let mut best_tol_t = Table::new(&BEST_WEIGHTS_COLUMNS);
-        let mut best_emulator_t = Table::new(&SWEEP_COLUMNS);
-        // The terminal Gauss-Newton spectrum at the start knots on both substrates
-        // (src/control/conditioning.rs): why fixed-step descent is slow.
-        let mut cond_t = Table::new(&CONDITIONING_COLUMNS);
-        let mut spectrum_t = Table::new(&["task", "substrate", "index", "eigenvalue"]);
-        let mut dagger_t = Table::new(&dagger::COLUMNS);
-        // Per task, the actuator gains and final-state weights its objective and bounds use
-        // ([`Task::calibrated`]): kind `gain` (index = actuator) or `weight` (index = state
-        // variable).
-        let mut calibration_t = Table::new(&["task", "kind", "index", "value"]);
-        let mut ladder_t = Table::new(&LADDER_COLUMNS);
-        // The headline of the paper's tasks per Table 1 net seed (seeds.rs), this run's first.
-        let mut seeds_t = Table::new(&SEEDS_COLUMNS);
-        let mut path_t = Table::new(&PATH_COLUMNS);
-        let width = self
-            .tasks
-            .iter()
-            .map(|t| t.net.model.state_dim())
-            .max()
-            .unwrap_or(0);
-        let cols = wide_columns(&["task", "step", "t", "source"], "s", width);
-        let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
-        let mut trajectory = Table::new(&col_refs);
-        // The learned controls (physical units, one row per emulator step, held over it).
-        let u_width = self
-            .tasks
-            .iter()
-            .map(|t| t.net.model.control_dim())
-            .max()
-            .unwrap_or(0);
-        let u_cols = wide_columns(&["task", "step", "t"], "u", u_width);
-        let u_refs: Vec<&str> = u_cols.iter().map(String::as_str).collect();
-        let mut controls_t = Table::new(&u_refs);
-        let mut goal_cols = vec!["task", "model"];
-        goal_cols.extend_from_slice(&col_refs[4..]);
-        let mut goal = Table::new(&goal_cols);
-        // The generic state columns (one table holds tasks of different models) by name.
-        // Each variable's final-state tolerance (0: not part of the goal).
-        let mut states_t = Table::new(&["task", "column", "name", "tolerance"]);
-        for task in &self.tasks {
-            for (k, name) in task.net.model.state_names().into_iter().enumerate() {
-                let tol = task.task.final_tolerance.get(k).copied().unwrap_or(0.0);
-                states_t.push(row![task.name.as_str(), format!("s{k}"), name, tol]);
-            }
-        }
+        let mut t = RunTables::new(self);
         let specs: Vec<BuildSpec> = self
             .tasks
             .iter()
@@ -120,6 +62,250 @@ impl Job for Params {
             &format!("train N{} emulators (side by side)", self.steps),
             || build_emulators(&specs),
         )?;
+        for ((task, spec), trained) in self.tasks.iter().zip(&specs).zip(&built) {
+            self.run_task(ctx, task, spec, trained, &built, &mut t)?;
+        }
+        self.run_seeds(ctx, &mut t.seeds, &mut t.path)?;
+        let lines_t = self.run_lines(ctx)?;
+        let dolphin = self.run_dolphin_tables(ctx, &mut t)?;
+        t.into_tables(self, lines_t, dolphin)
+    }
+}
+
+/// The tables the paper's tasks fill, task by task, and the widths of their wide columns.
+struct RunTables {
+    objective: Table,
+    final_: Table,
+    sweep: Table,
+    physics: Table,
+    /// The headline through the physics under the best-conditioned final-state weights
+    /// (ours; `best_weights*.csv`), where conditioning.csv does not rule them out.
+    best: Table,
+    best_tol: Table,
+    best_emulator: Table,
+    /// The terminal Gauss-Newton spectrum at the start knots on both substrates
+    /// (src/control/conditioning.rs): why fixed-step descent is slow.
+    cond: Table,
+    spectrum: Table,
+    dagger: Table,
+    /// Per task, the actuator gains and final-state weights its objective and bounds use
+    /// ([`Task::calibrated`]): kind `gain` (index = actuator) or `weight` (index = state
+    /// variable).
+    calibration: Table,
+    ladder: Table,
+    /// The headline of the paper's tasks per Table 1 net seed (seeds.rs), this run's first.
+    seeds: Table,
+    path: Table,
+    trajectory: Table,
+    /// The learned controls (physical units, one row per emulator step, held over it).
+    controls: Table,
+    goal: Table,
+    /// The generic state columns (one table holds tasks of different models) by name.
+    /// Each variable's final-state tolerance (0: not part of the goal).
+    states: Table,
+    /// The largest state dimension over the tasks (the `s` columns).
+    width: usize,
+    /// The largest control dimension over the tasks (the `u` columns).
+    u_width: usize,
+}
+
+/// The dolphin's tables (empty without `[params.dolphin]`).
+struct DolphinTables {
+    swim: Table,
+    motion: Table,
+    restarts: Table,
+    dagger: Table,
+}
+
+impl RunTables {
+    /// The empty tables of `p`'s tasks, `states` already filled.
+    fn new(p: &Params) -> Self {
+        let final_ = Table::new(&[
+            "task",
+            "emulator_error",
+            "simulator_error",
+            "best_iteration",
+            "formulation",
+            "start_simulator_error",
+        ]);
+        let width = p
+            .tasks
+            .iter()
+            .map(|t| t.net.model.state_dim())
+            .max()
+            .unwrap_or(0);
+        let cols = wide_columns(&["task", "step", "t", "source"], "s", width);
+        let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
+        let u_width = p
+            .tasks
+            .iter()
+            .map(|t| t.net.model.control_dim())
+            .max()
+            .unwrap_or(0);
+        let u_cols = wide_columns(&["task", "step", "t"], "u", u_width);
+        let u_refs: Vec<&str> = u_cols.iter().map(String::as_str).collect();
+        let mut goal_cols = vec!["task", "model"];
+        goal_cols.extend_from_slice(&col_refs[4..]);
+        let mut states = Table::new(&["task", "column", "name", "tolerance"]);
+        for task in &p.tasks {
+            for (k, name) in task.net.model.state_names().into_iter().enumerate() {
+                let tol = task.task.final_tolerance.get(k).copied().unwrap_or(0.0);
+                states.push(row![task.name.as_str(), format!("s{k}"), name, tol]);
+            }
+        }
+        RunTables {
+            objective: Table::new(&["task", "iteration", "objective"]),
+            final_,
+            sweep: Table::new(&SWEEP_COLUMNS),
+            physics: Table::new(&SWEEP_COLUMNS),
+            best: Table::new(&SWEEP_COLUMNS),
+            best_tol: Table::new(&BEST_WEIGHTS_COLUMNS),
+            best_emulator: Table::new(&SWEEP_COLUMNS),
+            cond: Table::new(&CONDITIONING_COLUMNS),
+            spectrum: Table::new(&["task", "substrate", "index", "eigenvalue"]),
+            dagger: Table::new(&dagger::COLUMNS),
+            calibration: Table::new(&["task", "kind", "index", "value"]),
+            ladder: Table::new(&LADDER_COLUMNS),
+            seeds: Table::new(&SEEDS_COLUMNS),
+            path: Table::new(&PATH_COLUMNS),
+            trajectory: Table::new(&col_refs),
+            controls: Table::new(&u_refs),
+            goal: Table::new(&goal_cols),
+            states,
+            width,
+            u_width,
+        }
+    }
+
+    /// Every table of the run under its file name, with `net_lines`, the dolphin's and the rule.
+    fn into_tables(self, p: &Params, lines: Table, d: DolphinTables) -> Result<Tables, Error> {
+        Ok(Tables::from([
+            ("dolphin_motion", d.motion),
+            ("sweep", self.sweep),
+            ("physics_sweep", self.physics),
+            ("best_weights", self.best_tol),
+            ("best_weights_sweep", self.best),
+            ("best_weights_emulator_sweep", self.best_emulator),
+            ("conditioning", self.cond),
+            ("calibration", self.calibration),
+            ("conditioning_ladder", self.ladder),
+            ("spectrum", self.spectrum),
+            ("dagger", self.dagger),
+            ("dolphin_restarts", d.restarts),
+            ("dolphin_dagger", d.dagger),
+            ("swim", d.swim),
+            ("objective", self.objective),
+            ("final", self.final_),
+            ("net_seeds", self.seeds),
+            ("net_lines", lines),
+            ("path", self.path),
+            ("trajectory", self.trajectory),
+            ("controls", self.controls),
+            ("goal", self.goal),
+            ("states", self.states),
+            (
+                "rule",
+                match &p.rule {
+                    Some(r) => rule_table_of(r)?,
+                    None => rule_table(&[]),
+                },
+            ),
+        ]))
+    }
+}
+
+/// Where a task's descents start: its knot layout, start state, normalized initial knots and
+/// the step scale λ measured there.
+struct Start<'a> {
+    knots: Knots,
+    x0: &'a [f64],
+    v0: &'a [f64],
+    lambda: f64,
+}
+
+impl Params {
+    /// One task through its trained Table 1 net: the conditioning ladder, the calibration,
+    /// the start's spectrum, the headline descent, the sweeps, the DAgger rounds and the best
+    /// iterate replayed on the simulator.
+    fn run_task(
+        &self,
+        ctx: &RunContext,
+        task: &Task,
+        spec: &BuildSpec,
+        trained: &Trained,
+        built: &[Trained],
+        t: &mut RunTables,
+    ) -> Result<(), Error> {
+        let knots = Knots {
+            steps: task.task.horizon,
+            per_actuator: task.task.knots,
+            m: task.net.model.control_dim(),
+        };
+        let x0 = task.start_state();
+        // The task's actuator gains and final-state weights, measured once at its initial
+        // knots through its Table 1 net and then fixed for every run of the task (the
+        // physics sweep and the DAgger rounds included).
+        self.record_task_ladder(task, built, &mut t.ladder)?;
+        let task = &task.calibrated(&trained.emulator, &x0).map_err(other)?;
+        push_calibration(task, &mut t.calibration);
+        let objective = task.objective();
+        let mut bptt =
+            Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0).map_err(other)?;
+        let init = task.initial_knots();
+        let v0 = bptt.from_controls(&init);
+        let lambda = bptt.curvature(&v0, self.curvature_iterations);
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return Err(other(format!("{}: step scale λ = {lambda}", task.name)));
+        }
+        record_start_spectrum(task, &objective, &mut bptt, &v0, lambda, t)?;
+        let schedule = self.schedule(task.eta, task.alpha, task.step_rule, lambda);
+        let record = self.over_net_seeds(task) && task.formulation == Formulation::Paper;
+        let (r, best, iterates) = ctx.stage(&format!("learn {}", task.name), || {
+            learn_recording(&mut bptt, &v0, &schedule, task.task.iterations, record)
+        });
+        push_path(
+            &mut t.path,
+            task,
+            ctx.seed,
+            &mut bptt,
+            &iterates,
+            lambda,
+            self.steps,
+            self.curvature_iterations,
+        );
+        for tr in &r.trace {
+            t.objective
+                .push(row![task.name.as_str(), tr.iteration as i64, tr.objective]);
+        }
+        let start = Start {
+            knots,
+            x0: &x0,
+            v0: &v0,
+            lambda,
+        };
+        self.run_task_sweeps(ctx, task, trained, &objective, &mut bptt, &start, t)?;
+        // DAgger refines the nets of the paper's tasks; a formulation of ours kept for
+        // comparison gets the headline and the sweeps only.
+        if let Some(d) = self
+            .dagger
+            .as_ref()
+            .filter(|_| task.formulation == Formulation::Paper)
+        {
+            self.run_dagger(ctx, d, task, spec, trained, &x0, &mut t.dagger)?;
+        }
+        self.record_headline(ctx, task, trained, &x0, &r, &best, t)
+    }
+
+    /// The conditioning ladder of `task` when it is the first formulation of ours beside a
+    /// paper one of the same model: the conditioning as the paper's changes are applied to
+    /// ours one at a time, each rung through its own trained net of `built`.
+    fn record_task_ladder(
+        &self,
+        task: &Task,
+        built: &[Trained],
+        ladder_t: &mut Table,
+    ) -> Result<(), Error> {
+        let model = task.net.model;
         // The trained emulator of a task's net spec (the conditioning ladder's rungs).
         let net_of = |net: &NetSpec| {
             self.tasks
@@ -127,172 +313,148 @@ impl Job for Params {
                 .position(|t| &t.net == net)
                 .map(|i| &built[i].emulator)
         };
-        for ((task, spec), trained) in self.tasks.iter().zip(&specs).zip(&built) {
-            let model = task.net.model;
-            let (n, m) = (model.state_dim(), model.control_dim());
-            let knots = Knots {
-                steps: task.task.horizon,
-                per_actuator: task.task.knots,
-                m,
-            };
-            let x0 = task.start_state();
-            // The task's actuator gains and final-state weights, measured once at its initial
-            // knots through its Table 1 net and then fixed for every run of the task (the
-            // physics sweep and the DAgger rounds included).
-            // The first formulation of ours beside the paper's of the same model: the
-            // conditioning as the paper's changes are applied to ours one at a time.
-            let same_model = |t: &&Task| t.net.model == model;
-            let first_ours = self
+        let same_model = |t: &&Task| t.net.model == model;
+        let first_ours = self
+            .tasks
+            .iter()
+            .filter(same_model)
+            .find(|t| t.formulation == Formulation::Ours);
+        if first_ours.is_some_and(|t| std::ptr::eq(t, task)) {
+            if let Some(paper) = self
                 .tasks
                 .iter()
                 .filter(same_model)
-                .find(|t| t.formulation == Formulation::Ours);
-            if first_ours.is_some_and(|t| std::ptr::eq(t, task)) {
-                if let Some(paper) = self
-                    .tasks
-                    .iter()
-                    .filter(same_model)
-                    .find(|p| p.formulation == Formulation::Paper)
-                {
-                    let rungs = ladder(task, paper);
-                    record_ladder(net_of, &rungs, &mut ladder_t)?;
-                }
-            }
-            let task = &task.calibrated(&trained.emulator, &x0).map_err(other)?;
-            let c = task.calibration.as_ref().expect("calibrated");
-            for (j, g) in c.gains.iter().enumerate() {
-                calibration_t.push(row![task.name.as_str(), "gain", j as i64, *g]);
-            }
-            for (k, w) in c.weights.iter().enumerate() {
-                calibration_t.push(row![task.name.as_str(), "weight", k as i64, *w]);
-            }
-            let objective = task.objective();
-            let mut bptt = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0)
-                .map_err(other)?;
-            let init = task.initial_knots();
-            let v0 = bptt.from_controls(&init);
-            let lambda = bptt.curvature(&v0, self.curvature_iterations);
-            if !(lambda.is_finite() && lambda > 0.0) {
-                return Err(other(format!("{}: step scale λ = {lambda}", task.name)));
-            }
-            let curvature = objective
-                .gauss_newton()
-                .ok_or_else(|| other(format!("{}: objective without curvature", task.name)))?;
-            let spectrum = terminal_spectrum(&mut bptt, &v0, &curvature, task.final_dof());
-            let bound = weighting_bound(&task.final_rows(&mut bptt, &v0));
-            record_spectrum(
-                task,
-                "emulator",
-                (&spectrum, &bound),
-                lambda,
-                (&mut cond_t, &mut spectrum_t),
-            );
-            let schedule = self.schedule(task.eta, task.alpha, task.step_rule, lambda);
-            let record = self.over_net_seeds(task) && task.formulation == Formulation::Paper;
-            let (r, best, iterates) = ctx.stage(&format!("learn {}", task.name), || {
-                learn_recording(&mut bptt, &v0, &schedule, task.task.iterations, record)
-            });
-            push_path(
-                &mut path_t,
-                task,
-                ctx.seed,
-                &mut bptt,
-                &iterates,
-                lambda,
-                self.steps,
-                self.curvature_iterations,
-            );
-            for t in &r.trace {
-                objective_t.push(row![task.name.as_str(), t.iteration as i64, t.objective]);
-            }
-            let mut sim = model.simulator();
-            let dt_phys = task.net.physical_dt;
-            if let Some(sw) = &self.sweep {
-                ctx.stage(&format!("sweep {}", task.name), || {
-                    self.sweep_task(task, sw, &mut bptt, &v0, lambda, &x0, &mut sweep_t)
-                });
-            }
-            if let Some(sw) = &self.physics_sweep {
-                let best_tolerance = ctx.stage(&format!("physics sweep {}", task.name), || {
-                    let tables = PhysicsTables {
-                        sweep: &mut physics_t,
-                        conditioning: &mut cond_t,
-                        spectrum: &mut spectrum_t,
-                        best_sweep: &mut best_t,
-                        best_weights: &mut best_tol_t,
-                    };
-                    self.physics_sweep_task(task, sw, &objective, knots, &x0, tables)
-                })?;
-                // The same headline through the Table 1 net under the best weights (the
-                // spec's reading: data beside the physics' run).
-                if let Some(tolerance) = best_tolerance {
-                    let mut best = task.clone();
-                    best.task.final_tolerance = tolerance;
-                    let objective = best.objective();
-                    let mut b = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), &x0)
-                        .map_err(other)?;
-                    let lambda = b.curvature(&v0, self.curvature_iterations);
-                    let headline = task.headline_sweep(sw.iterations);
-                    let table = &mut best_emulator_t;
-                    self.sweep_task(task, &headline, &mut b, &v0, lambda, &x0, table);
-                }
-            }
-            // DAgger refines the nets of the paper's tasks; a formulation of ours kept for
-            // comparison gets the headline and the sweeps only.
-            if let Some(d) = self
-                .dagger
-                .as_ref()
-                .filter(|_| task.formulation == Formulation::Paper)
+                .find(|p| p.formulation == Formulation::Paper)
             {
-                self.run_dagger(ctx, d, task, spec, trained, &x0, &mut dagger_t)?;
-            }
-            let emu_final = &best.states[task.task.horizon * n..];
-            let rep = replay(
-                sim.as_mut(),
-                &x0,
-                &best.controls,
-                dt_phys,
-                self.steps,
-                emu_final,
-            );
-            let sim_final = &rep.states[task.task.horizon * n..];
-            let run = HeadlineRun {
-                emulator_error: task.final_error(emu_final),
-                simulator_error: task.final_error(sim_final),
-                best_iteration: r.best_iteration,
-            };
-            final_t.push(row![
-                task.name.as_str(),
-                run.emulator_error,
-                run.simulator_error,
-                r.best_iteration as i64,
-                task.formulation.name(),
-                start_simulator_error(task, &trained.emulator, self.steps)?
-            ]);
-            if self.over_net_seeds(task) {
-                run.push(&mut seeds_t, task, ctx.seed);
-            }
-            let mut row = row![task.name.as_str(), model.name()];
-            row.extend(
-                (0..width).map(|k| task.task.target.get(k).copied().unwrap_or(f64::NAN).into()),
-            );
-            goal.push(row);
-            let dt = task.net.physical_dt * self.steps as f64;
-            for (k, u) in best.controls.chunks_exact(m.max(1)).enumerate() {
-                let mut row = row![task.name.as_str(), k as i64, k as f64 * dt];
-                row.extend((0..u_width).map(|c| u.get(c).copied().unwrap_or(f64::NAN).into()));
-                controls_t.push(row);
-            }
-            for (source, states) in [("emulator", &best.states), ("simulator", &rep.states)] {
-                for (i, s) in states.chunks_exact(n).enumerate() {
-                    let mut row = row![task.name.as_str(), i as i64, i as f64 * dt, source];
-                    row.extend((0..width).map(|k| s.get(k).copied().unwrap_or(f64::NAN).into()));
-                    trajectory.push(row);
-                }
+                let rungs = ladder(task, paper);
+                record_ladder(net_of, &rungs, ladder_t)?;
             }
         }
-        self.run_seeds(ctx, &mut seeds_t, &mut path_t)?;
-        let lines_t = self.run_lines(ctx)?;
+        Ok(())
+    }
+
+    /// The step-size sweep through the task's net and the physics sweep (with, under the best
+    /// final-state weights it finds, the headline again through the net).
+    #[allow(clippy::too_many_arguments)]
+    fn run_task_sweeps(
+        &self,
+        ctx: &RunContext,
+        task: &Task,
+        trained: &Trained,
+        objective: &Objective,
+        bptt: &mut Bptt<'_, crate::emulator::Emulator>,
+        start: &Start<'_>,
+        t: &mut RunTables,
+    ) -> Result<(), Error> {
+        let Start {
+            knots,
+            x0,
+            v0,
+            lambda,
+        } = *start;
+        if let Some(sw) = &self.sweep {
+            ctx.stage(&format!("sweep {}", task.name), || {
+                self.sweep_task(task, sw, bptt, v0, lambda, x0, &mut t.sweep)
+            });
+        }
+        if let Some(sw) = &self.physics_sweep {
+            let best_tolerance = ctx.stage(&format!("physics sweep {}", task.name), || {
+                let tables = PhysicsTables {
+                    sweep: &mut t.physics,
+                    conditioning: &mut t.cond,
+                    spectrum: &mut t.spectrum,
+                    best_sweep: &mut t.best,
+                    best_weights: &mut t.best_tol,
+                };
+                self.physics_sweep_task(task, sw, objective, knots, x0, tables)
+            })?;
+            // The same headline through the Table 1 net under the best weights (the
+            // spec's reading: data beside the physics' run).
+            if let Some(tolerance) = best_tolerance {
+                let mut best = task.clone();
+                best.task.final_tolerance = tolerance;
+                let objective = best.objective();
+                let mut b = Bptt::new(&trained.emulator, &objective, knots, task.bounds(), x0)
+                    .map_err(other)?;
+                let lambda = b.curvature(v0, self.curvature_iterations);
+                let headline = task.headline_sweep(sw.iterations);
+                let table = &mut t.best_emulator;
+                self.sweep_task(task, &headline, &mut b, v0, lambda, x0, table);
+            }
+        }
+        Ok(())
+    }
+
+    /// The headline's best iterate replayed on the simulator: its `final` row (and `net_seeds`
+    /// row where the task runs over the seeds), goal, controls and both trajectories.
+    #[allow(clippy::too_many_arguments)]
+    fn record_headline(
+        &self,
+        ctx: &RunContext,
+        task: &Task,
+        trained: &Trained,
+        x0: &[f64],
+        r: &Learned,
+        best: &BestRollout,
+        t: &mut RunTables,
+    ) -> Result<(), Error> {
+        let model = task.net.model;
+        let (n, m) = (model.state_dim(), model.control_dim());
+        let (width, u_width) = (t.width, t.u_width);
+        let mut sim = model.simulator();
+        let dt_phys = task.net.physical_dt;
+        let emu_final = &best.states[task.task.horizon * n..];
+        let rep = replay(
+            sim.as_mut(),
+            x0,
+            &best.controls,
+            dt_phys,
+            self.steps,
+            emu_final,
+        );
+        let sim_final = &rep.states[task.task.horizon * n..];
+        let run = HeadlineRun {
+            emulator_error: task.final_error(emu_final),
+            simulator_error: task.final_error(sim_final),
+            best_iteration: r.best_iteration,
+        };
+        t.final_.push(row![
+            task.name.as_str(),
+            run.emulator_error,
+            run.simulator_error,
+            r.best_iteration as i64,
+            task.formulation.name(),
+            start_simulator_error(task, &trained.emulator, self.steps)?
+        ]);
+        if self.over_net_seeds(task) {
+            run.push(&mut t.seeds, task, ctx.seed);
+        }
+        let mut row = row![task.name.as_str(), model.name()];
+        row.extend((0..width).map(|k| task.task.target.get(k).copied().unwrap_or(f64::NAN).into()));
+        t.goal.push(row);
+        let dt = task.net.physical_dt * self.steps as f64;
+        for (k, u) in best.controls.chunks_exact(m.max(1)).enumerate() {
+            let mut row = row![task.name.as_str(), k as i64, k as f64 * dt];
+            row.extend((0..u_width).map(|c| u.get(c).copied().unwrap_or(f64::NAN).into()));
+            t.controls.push(row);
+        }
+        for (source, states) in [("emulator", &best.states), ("simulator", &rep.states)] {
+            for (i, s) in states.chunks_exact(n).enumerate() {
+                let mut row = row![task.name.as_str(), i as i64, i as f64 * dt, source];
+                row.extend((0..width).map(|k| s.get(k).copied().unwrap_or(f64::NAN).into()));
+                t.trajectory.push(row);
+            }
+        }
+        Ok(())
+    }
+
+    /// The dolphin's tables: filled by [`Params::run_dolphin`] under `[params.dolphin]` (its
+    /// headline rows also go to `objective`, `final` and `trajectory`), empty otherwise.
+    fn run_dolphin_tables(
+        &self,
+        ctx: &RunContext,
+        t: &mut RunTables,
+    ) -> Result<DolphinTables, Error> {
         let mut swim_t = Table::new(&["source", "distance_m", "effort", "periodicity", "period_s"]);
         let mut motion_cols = vec!["source".to_string(), "step".into(), "t".into()];
         motion_cols.extend((0..N_POS).map(|k| format!("p{k}")));
@@ -312,49 +474,59 @@ impl Job for Params {
             self.run_dolphin(
                 ctx,
                 d,
-                width,
+                t.width,
                 &mut restarts_t,
-                &mut objective_t,
-                &mut final_t,
-                &mut trajectory,
+                &mut t.objective,
+                &mut t.final_,
+                &mut t.trajectory,
                 &mut swim_t,
                 &mut motion_t,
                 &mut dolphin_dagger_t,
             )?;
         }
-        Ok(Tables::from([
-            ("dolphin_motion", motion_t),
-            ("sweep", sweep_t),
-            ("physics_sweep", physics_t),
-            ("best_weights", best_tol_t),
-            ("best_weights_sweep", best_t),
-            ("best_weights_emulator_sweep", best_emulator_t),
-            ("conditioning", cond_t),
-            ("calibration", calibration_t),
-            ("conditioning_ladder", ladder_t),
-            ("spectrum", spectrum_t),
-            ("dagger", dagger_t),
-            ("dolphin_restarts", restarts_t),
-            ("dolphin_dagger", dolphin_dagger_t),
-            ("swim", swim_t),
-            ("objective", objective_t),
-            ("final", final_t),
-            ("net_seeds", seeds_t),
-            ("net_lines", lines_t),
-            ("path", path_t),
-            ("trajectory", trajectory),
-            ("controls", controls_t),
-            ("goal", goal),
-            ("states", states_t),
-            (
-                "rule",
-                match &self.rule {
-                    Some(r) => rule_table_of(r)?,
-                    None => rule_table(&[]),
-                },
-            ),
-        ]))
+        Ok(DolphinTables {
+            swim: swim_t,
+            motion: motion_t,
+            restarts: restarts_t,
+            dagger: dolphin_dagger_t,
+        })
     }
+}
+
+/// `calibration.csv`'s rows of a calibrated `task`: its actuator gains and final-state weights.
+fn push_calibration(task: &Task, calibration_t: &mut Table) {
+    let c = task.calibration.as_ref().expect("calibrated");
+    for (j, g) in c.gains.iter().enumerate() {
+        calibration_t.push(row![task.name.as_str(), "gain", j as i64, *g]);
+    }
+    for (k, w) in c.weights.iter().enumerate() {
+        calibration_t.push(row![task.name.as_str(), "weight", k as i64, *w]);
+    }
+}
+
+/// The terminal Gauss-Newton spectrum and weighting bound of `task` at its start knots `v0`
+/// through the emulator, recorded beside the step scale `lambda`.
+fn record_start_spectrum(
+    task: &Task,
+    objective: &Objective,
+    bptt: &mut Bptt<'_, crate::emulator::Emulator>,
+    v0: &[f64],
+    lambda: f64,
+    t: &mut RunTables,
+) -> Result<(), Error> {
+    let curvature = objective
+        .gauss_newton()
+        .ok_or_else(|| other(format!("{}: objective without curvature", task.name)))?;
+    let spectrum = terminal_spectrum(bptt, v0, &curvature, task.final_dof());
+    let bound = weighting_bound(&task.final_rows(bptt, v0));
+    record_spectrum(
+        task,
+        "emulator",
+        (&spectrum, &bound),
+        lambda,
+        (&mut t.cond, &mut t.spectrum),
+    );
+    Ok(())
 }
 
 /// Columns `lead` then `prefix`0 … `prefix`(width − 1): one table for tasks of models of

@@ -122,7 +122,114 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let mut md = String::from(
         "| task | formulation | iterations | J start | J end | final error, emulator | final error, simulator |\n| --- | --- | --- | --- | --- | --- | --- |\n",
     );
-    let swim = match read_csv(&dir.join("swim.csv")) {
+    let swim = swim_sentence(dir)?;
+    let goal = swim_goal(dir)?;
+    let settings = rule_settings(dir)?;
+    let bars = Fig13Rule {
+        wave_fraction: settings("wave_fraction"),
+        periodicity: settings("periodicity"),
+    };
+    // Each task's initial controls replayed on the simulator.
+    let start_error = df_f64(&fin, "start_simulator_error")?;
+    let finals = Finals {
+        task,
+        obj,
+        ft,
+        ee,
+        se,
+        form,
+        start_error,
+    };
+    // The headline over several Table 1 net seeds: a task of the paper's formulation is judged
+    // by its median net seed, with the median's interval; where net_seeds.csv has one seed for a
+    // task (or none: the dolphin), final.csv's row decides.
+    let seeds = super::seeds::seed_counts(dir)?.unwrap_or_default();
+    let h = headline(&finals, &seeds, &goal, &bars, &mut md);
+    let (net_misses, seed_lines, ours) = h.sentences();
+    let sweeps: String = [
+        ("sweep.csv", "Step-size sweep through the emulator"),
+        (
+            "physics_sweep.csv",
+            "The same learned through the physical model's RK4 step",
+        ),
+    ]
+    .iter()
+    .filter_map(|(f, title)| sweep_summary(&dir.join(f), title).transpose())
+    .collect::<Result<Vec<_>, _>>()?
+    .concat();
+    let rule = fig13_rule(&h.facts, &bars);
+    let (verdict, lines, text) = shown(
+        rule.as_ref(),
+        " No rule: a task's initial controls already end within tolerance.",
+    );
+    // Tasks at their goal: those whose checks all pass.
+    let both = rule.as_ref().map_or(0, Rule::groups_passing);
+    let (path_why, study_why, dagger_why) = push_sections(dir, &mut md)?;
+    let sweeps = format!("{sweeps}{study_why}");
+    let Headline {
+        counts,
+        reached,
+        reached_sim,
+        headline,
+        ..
+    } = h;
+    let wave = goal.wave;
+    Ok(Findings {
+        ours: md,
+        verdict,
+        rule: rule.clone(),
+        why: format!(
+            "{both} of {headline} tasks of the paper's formulation pass every check{}. A task passes when its median Table 1 net seed (where several ran) reaches the goal on the emulator within the paper's iteration counts and ends within tolerance when its controls are replayed on the physical simulator, the median's 95% bootstrap interval inside the tolerance (through this run's nets: {reached} reach it on the emulator, {reached_sim} on the simulator; every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Checks:{lines} Rule (the dolphin's bars ours, in the spec's [params.rule]): {text} Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator ({} m; 0: swims at least as far), its learned pattern's periodicity {}.{seed_lines}{path_why}{net_misses}{ours}{swim}{sweeps}{dagger_why}",
+            if counts.is_empty() {
+                String::new()
+            } else {
+                format!(" (net seeds at the goal on both: {})", counts.join("; "))
+            },
+            sig(wave),
+            sig(goal.learned_periodicity)
+        ),
+    })
+}
+
+/// The columns of `objective.csv` and `final.csv` the headline reads.
+struct Finals {
+    /// `objective.csv`: task and objective per iteration.
+    task: Vec<String>,
+    obj: Vec<f64>,
+    /// `final.csv`: task, emulator and simulator errors, formulation and start error per task.
+    ft: Vec<String>,
+    ee: Vec<f64>,
+    se: Vec<f64>,
+    form: Vec<String>,
+    start_error: Vec<f64>,
+}
+
+/// The dolphin's swim distances against the hand-made wave's (NaN without `swim.csv`).
+struct SwimGoal {
+    wave: f64,
+    emu_distance: f64,
+    sim_distance: f64,
+    learned_periodicity: f64,
+}
+
+/// What the task-by-task pass over `final.csv` collects for the verdict and its sentences.
+struct Headline {
+    facts: Vec<TaskFacts>,
+    seed_lines: Vec<String>,
+    /// The headline's short form: per task over its net seeds, how many reach the goal on both.
+    counts: Vec<String>,
+    reached: usize,
+    reached_sim: usize,
+    headline: usize,
+    ours: Vec<String>,
+    /// Paper tasks at their goal on the emulator but not on the simulator: the net's error.
+    net_misses: Vec<String>,
+}
+
+/// The sentence on the dolphin's swim distances and its controls' periodicity (empty without
+/// `swim.csv`).
+fn swim_sentence(dir: &Path) -> Result<String, Error> {
+    Ok(match read_csv(&dir.join("swim.csv")) {
         Ok(sw) => {
             let (src, dist) = (df_str(&sw, "source")?, df_f64(&sw, "distance_m")?);
             let parts: Vec<String> = (0..src.len())
@@ -152,11 +259,14 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             }
         }
         Err(_) => String::new(),
-    };
-    // The dolphin's goal (the spec's, fixed before the 20 s swim's first run): its learned
-    // knots swim at least half as far as the hand-made wave on the simulator (shortfall <=
-    // half the wave's distance), on the emulator and on the simulator each, with a periodic
-    // muscle pattern (periodicity >= 0.5, ours, as the DAgger line's).
+    })
+}
+
+/// The dolphin's goal (the spec's, fixed before the 20 s swim's first run): its learned
+/// knots swim at least half as far as the hand-made wave on the simulator (shortfall <=
+/// half the wave's distance), on the emulator and on the simulator each, with a periodic
+/// muscle pattern (periodicity >= 0.5, ours, as the DAgger line's).
+fn swim_goal(dir: &Path) -> Result<SwimGoal, Error> {
     let (wave, emu_distance, sim_distance, learned_periodicity) =
         match read_csv(&dir.join("swim.csv")) {
             Ok(sw) => {
@@ -176,27 +286,43 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             }
             Err(_) => (f64::NAN, f64::NAN, f64::NAN, f64::NAN),
         };
-    let settings = rule_settings(dir)?;
-    let bars = Fig13Rule {
-        wave_fraction: settings("wave_fraction"),
-        periodicity: settings("periodicity"),
-    };
-    // Each task's initial controls replayed on the simulator.
-    let start_error = df_f64(&fin, "start_simulator_error")?;
-    let mut facts = Vec::new();
-    // The headline over several Table 1 net seeds: a task of the paper's formulation is judged
-    // by its median net seed, with the median's interval; where net_seeds.csv has one seed for a
-    // task (or none: the dolphin), final.csv's row decides.
-    let seeds = super::seeds::seed_counts(dir)?.unwrap_or_default();
+    Ok(SwimGoal {
+        wave,
+        emu_distance,
+        sim_distance,
+        learned_periodicity,
+    })
+}
+
+/// Every task of `final.csv` in turn: its row of the table pushed to `md`, and for the paper's
+/// tasks the verdict's facts (over the net seeds where several ran) and the counts, for ours a
+/// second line.
+fn headline(
+    f: &Finals,
+    seeds: &[super::seeds::SeedCount],
+    goal: &SwimGoal,
+    bars: &Fig13Rule,
+    md: &mut String,
+) -> Headline {
+    let SwimGoal {
+        wave,
+        emu_distance,
+        sim_distance,
+        learned_periodicity,
+    } = *goal;
+    let (task, obj, ee, se, form) = (&f.task, &f.obj, &f.ee, &f.se, &f.form);
     let by_seeds = |name: &str| seeds.iter().find(|c| c.task == name && c.seeds > 1);
-    let mut seed_lines = Vec::new();
-    // The headline's short form: per task over its net seeds, how many reach the goal on both.
-    let mut counts = Vec::new();
-    let (mut reached, mut reached_sim, mut headline) = (0, 0, 0);
-    let mut ours = Vec::new();
-    // Paper tasks at their goal on the emulator but not on the simulator: the net's error.
-    let mut net_misses = Vec::new();
-    for (r, name) in ft.iter().enumerate() {
+    let mut h = Headline {
+        facts: Vec::new(),
+        seed_lines: Vec::new(),
+        counts: Vec::new(),
+        reached: 0,
+        reached_sim: 0,
+        headline: 0,
+        ours: Vec::new(),
+        net_misses: Vec::new(),
+    };
+    for (r, name) in f.ft.iter().enumerate() {
         let js: Vec<f64> = (0..task.len())
             .filter(|&i| &task[i] == name)
             .map(|i| obj[i])
@@ -213,22 +339,22 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         // The dolphin's error is its shortfall (m) from the reference wave's distance.
         let ok = |e: f64| {
             if name == "dolphin" {
-                dolphin_at_goal(e, wave, learned_periodicity, &bars)
+                dolphin_at_goal(e, wave, learned_periodicity, bars)
             } else {
                 e <= 1.0
             }
         };
         if form[r] == "paper" {
-            headline += 1;
-            reached += usize::from(ok(ee[r]));
-            reached_sim += usize::from(ok(se[r]));
+            h.headline += 1;
+            h.reached += usize::from(ok(ee[r]));
+            h.reached_sim += usize::from(ok(se[r]));
             let this_net = ok(ee[r]) && ok(se[r]);
             if name == "dolphin" {
-                counts.push(format!(
+                h.counts.push(format!(
                     "the dolphin swims {} of the hand-made wave's distance",
                     sig((emu_distance / wave).min(sim_distance / wave))
                 ));
-                facts.push(TaskFacts::Swim {
+                h.facts.push(TaskFacts::Swim {
                     emulator: emu_distance / wave,
                     simulator: sim_distance / wave,
                     periodicity: learned_periodicity,
@@ -236,8 +362,8 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             } else {
                 let errors = match by_seeds(name) {
                     Some(c) => {
-                        counts.push(format!("{name} {} of {}", c.both, c.seeds));
-                        seed_lines.push(format!(
+                        h.counts.push(format!("{name} {} of {}", c.both, c.seeds));
+                        h.seed_lines.push(format!(
                             "{name} {} of {} (on the emulator alone {} of {}; this run's net {})",
                             c.both,
                             c.seeds,
@@ -249,14 +375,15 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
                     }
                     None => vec![ee[r].max(se[r])],
                 };
-                facts.push(TaskFacts::Control {
+                h.facts.push(TaskFacts::Control {
                     name: name.clone(),
                     errors,
-                    start_error: start_error[r],
+                    start_error: f.start_error[r],
                 });
             }
             if ok(ee[r]) && !ok(se[r]) && name != "dolphin" {
-                net_misses.push(format!("{name} ({} vs {})", sig(ee[r]), sig(se[r])));
+                h.net_misses
+                    .push(format!("{name} ({} vs {})", sig(ee[r]), sig(se[r])));
             }
         } else {
             let over_seeds = by_seeds(name).map_or(String::new(), |c| {
@@ -265,55 +392,52 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
                     c.both, c.seeds, c.emulator
                 )
             });
-            ours.push(format!(
+            h.ours.push(format!(
                 "{name} {} on the emulator, {} on the simulator{over_seeds}",
                 sig(ee[r]),
                 sig(se[r])
             ));
         }
     }
-    let net_misses = if net_misses.is_empty() {
-        String::new()
-    } else {
-        format!(
-            " At their goal on the emulator but not on the simulator: {}; the same controls drive both from the same start, so the difference is the Table 1 net's own open-loop error along the learned trajectory over the task's super-steps (the DAgger line below learns the same tasks through nets refined on the states such controls visit).",
-            net_misses.join(", ")
-        )
-    };
-    let seed_lines = if seed_lines.is_empty() {
-        String::new()
-    } else {
-        format!(
-            " Over the Table 1 net seeds (net_seeds.csv; the same headline learned through the net trained under each seed, each calibrated through its own net), net seeds at the goal on both: {}.",
-            seed_lines.join(", ")
-        )
-    };
-    let ours = if ours.is_empty() {
-        String::new()
-    } else {
-        format!(
-            " Our earlier formulations, kept as second lines (not counted): {}.",
-            ours.join("; ")
-        )
-    };
-    let sweeps: String = [
-        ("sweep.csv", "Step-size sweep through the emulator"),
-        (
-            "physics_sweep.csv",
-            "The same learned through the physical model's RK4 step",
-        ),
-    ]
-    .iter()
-    .filter_map(|(f, title)| sweep_summary(&dir.join(f), title).transpose())
-    .collect::<Result<Vec<_>, _>>()?
-    .concat();
-    let rule = fig13_rule(&facts, &bars);
-    let (verdict, lines, text) = shown(
-        rule.as_ref(),
-        " No rule: a task's initial controls already end within tolerance.",
-    );
-    // Tasks at their goal: those whose checks all pass.
-    let both = rule.as_ref().map_or(0, Rule::groups_passing);
+    h
+}
+
+impl Headline {
+    /// The sentences on the net's misses, the net seeds and our formulations (each empty when
+    /// there is nothing to say).
+    fn sentences(&self) -> (String, String, String) {
+        let net_misses = if self.net_misses.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " At their goal on the emulator but not on the simulator: {}; the same controls drive both from the same start, so the difference is the Table 1 net's own open-loop error along the learned trajectory over the task's super-steps (the DAgger line below learns the same tasks through nets refined on the states such controls visit).",
+                self.net_misses.join(", ")
+            )
+        };
+        let seed_lines = if self.seed_lines.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " Over the Table 1 net seeds (net_seeds.csv; the same headline learned through the net trained under each seed, each calibrated through its own net), net seeds at the goal on both: {}.",
+                self.seed_lines.join(", ")
+            )
+        };
+        let ours = if self.ours.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " Our earlier formulations, kept as second lines (not counted): {}.",
+                self.ours.join("; ")
+            )
+        };
+        (net_misses, seed_lines, ours)
+    }
+}
+
+/// The report's further sections pushed to `md` (net seeds, net lines, path, conditioning,
+/// ladder, DAgger, dolphin DAgger); returns their sentences: the path's, the conditioning
+/// study's (conditioning and ladder) and the DAgger lines' (the lander's and the dolphin's).
+fn push_sections(dir: &Path, md: &mut String) -> Result<(String, String, String), Error> {
     md.push_str(&super::seeds::table_md(dir)?);
     md.push_str(&super::seeds::lines_md(dir)?);
     let (path_md, path_why) = super::seeds::path_md(dir)?;
@@ -322,27 +446,12 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     md.push_str(&cond_md);
     let (ladder_md, ladder_why) = ladder_summary(dir)?.unwrap_or_default();
     md.push_str(&ladder_md);
-    let sweeps = format!("{sweeps}{cond_why}{ladder_why}");
     let (dagger_md, mut dagger_why) = dagger::summary(dir)?.unwrap_or_default();
     md.push_str(&dagger_md);
     let (dolphin_md, dolphin_why) = dolphin_dagger::summary(dir)?.unwrap_or_default();
     md.push_str(&dolphin_md);
     dagger_why.push_str(&dolphin_why);
-    Ok(Findings {
-        ours: md,
-        verdict,
-        rule: rule.clone(),
-        why: format!(
-            "{both} of {headline} tasks of the paper's formulation pass every check{}. A task passes when its median Table 1 net seed (where several ran) reaches the goal on the emulator within the paper's iteration counts and ends within tolerance when its controls are replayed on the physical simulator, the median's 95% bootstrap interval inside the tolerance (through this run's nets: {reached} reach it on the emulator, {reached_sim} on the simulator; every task scored at its best-so-far iterate, the lowest emulator J; the headline is the paper's eta = 1.5, alpha = 0.5 with lambda fixed at the start). Checks:{lines} Rule (the dolphin's bars ours, in the spec's [params.rule]): {text} Final error = RMS of (s_M - s_d)/tolerance over the weighted state variables (<= 1: goal reached); for the dolphin, the shortfall (m) of its forward distance from that of a hand-made 1 Hz travelling wave on the simulator ({} m; 0: swims at least as far), its learned pattern's periodicity {}.{seed_lines}{path_why}{net_misses}{ours}{swim}{sweeps}{dagger_why}",
-            if counts.is_empty() {
-                String::new()
-            } else {
-                format!(" (net seeds at the goal on both: {})", counts.join("; "))
-            },
-            sig(wave),
-            sig(learned_periodicity)
-        ),
-    })
+    Ok((path_why, format!("{cond_why}{ladder_why}"), dagger_why))
 }
 
 /// One sentence per task of a sweep table: the fewest iterations to the goal over its rules and

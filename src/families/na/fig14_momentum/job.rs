@@ -1,12 +1,12 @@
 //! The job of `na_fig14_momentum`: the lander net trained, every descent learned through it and
 //! replayed on the simulator, and the same through the DAgger nets and to convergence.
 
-use super::{DaggerNet, Params};
+use super::{DaggerNet, MomentumDagger, Params};
 use crate::control::bptt::{
     learn_until, replay, Bounds, Bptt, Descent, IterationTrace, Knots, Learned, Replay,
 };
 use crate::control::objective::Objective;
-use crate::emulator::catalog::{BuildSpec, NetModel};
+use crate::emulator::catalog::{BuildSpec, NetModel, Trained};
 use crate::emulator::Emulator;
 use crate::experiment::output::{Cell, Table, Tables};
 use crate::experiment::{other, Error, Job, RunContext};
@@ -75,8 +75,6 @@ impl Job for Params {
             &self.training,
         );
         let trained = ctx.stage("train lander N50", || build_emulator(&spec))?;
-        let model = NetModel::Lander;
-        let n = model.state_dim();
         let x0 = self.start_state();
         // The actuator gains and final-state weights of the task's units and weights, measured
         // once at hover through the Table 1 net and fixed for every net (as na_fig13_control).
@@ -89,228 +87,352 @@ impl Job for Params {
         let gains = calibration.gains.clone();
         let objective = self.objective_with(Some(&calibration));
         let mut problem = self.problem(ctx, &trained.emulator, &objective, &x0, &gains)?;
+        let base = Base {
+            spec: &spec,
+            trained: &trained,
+            objective: &objective,
+            x0: &x0,
+            gains: &gains,
+        };
         let scale = problem.scale;
-        let mut objective_t = Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
-        let mut gradient_t = Table::new(&["method", "eta", "alpha", "iteration", "grad_norm"]);
-        let mut runs_cols = vec!["method", "eta", "alpha"];
-        runs_cols.extend_from_slice(&DAGGER_COLUMNS[5..14]);
-        let mut runs = Table::new(&runs_cols);
-        let mut trajectory = Table::new(&[
-            "method", "eta", "step", "t", "source", "x", "y", "z", "vz", "tilt",
-        ]);
-        let mut dagger_t = Table::new(&DAGGER_COLUMNS);
-        let mut dagger_objective =
-            Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
-        let mut converged_t = Table::new(&converged_columns());
-        // Every descent of the sweep with the knots clipped to the boxes (as the runs above)
-        // and without (ours): whether plain descent above its stability limit
-        // diverges once the boxes no longer hide it.
-        let mut unclipped_t = Table::new(&UNCLIPPED_COLUMNS);
-        // The unclipped descents' objective per iteration (the figure's unclipped panel).
-        let mut unclipped_objective =
-            Table::new(&["method", "eta", "alpha", "iteration", "objective"]);
-        let compared = self.compared();
+        let mut t = MomentumTables::new();
         let descents = self.descents();
-        let pb = ctx.progress(descents.len() as u64, "control learning");
-        let mut sim = model.simulator();
-        // The headline's objective curves through the run's own net, for `net_seeds.csv`.
-        let mut own_curves: Vec<(Descent, Vec<f64>)> = Vec::new();
-        for d in &descents {
-            let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, "");
-            own_curves.push((*d, r.trace.iter().map(|t| t.objective).collect()));
-            for t in &r.trace {
-                objective_t.push(row![
-                    method(d),
-                    d.eta(),
-                    d.alpha(),
-                    t.iteration as i64,
-                    t.objective
-                ]);
-                gradient_t.push(row![
-                    method(d),
-                    d.eta(),
-                    d.alpha(),
-                    t.iteration as i64,
-                    t.grad_norm
-                ]);
-            }
-            let dt = self.net.physical_dt * self.steps as f64;
-            for (source, states) in [("emulator", &r.states), ("simulator", &rep.states)] {
-                for (i, s) in states.chunks_exact(n).enumerate() {
-                    let axis = Lander::thrust_axis(s);
-                    trajectory.push(row![
-                        method(d),
-                        d.eta(),
-                        i as i64,
-                        i as f64 * dt,
-                        source,
-                        s[0],
-                        s[1],
-                        s[2],
-                        s[VEL + 2],
-                        {
-                            // acos z as atan2(√(1 − z²), z), in portable arithmetic.
-                            let z = axis.z.clamp(-1.0, 1.0);
-                            crate::portable::atan2(((1.0 - z) * (1.0 + z)).sqrt(), z)
-                        }
-                    ]);
-                }
-            }
-            unclipped_t.push(unclipped_row(d, true, &r));
-            let scores = self.scores(scale, &r, &rep);
-            let mut run = row![method(d), d.eta(), d.alpha()];
-            run.extend(scores.iter().cloned());
-            runs.push(run);
-            if let (Some(dn), true) = (&self.dagger, compared.contains(d)) {
-                dagger_t.push(self.dagger_row("table1", 0, d, scores, &r, &rep, dn));
-            }
-            pb.inc(1);
-        }
-        pb.finish_and_clear();
+        let mut sim = NetModel::Lander.simulator();
+        let own_curves =
+            self.headline_descents(ctx, &mut problem, &descents, sim.as_mut(), &x0, &mut t);
         let net_seeds_t = self.net_seeds_table(ctx, scale, &own_curves, &x0, sim.as_mut())?;
-        let mut free =
-            self.problem_clipped(ctx, &trained.emulator, &objective, &x0, (false, &gains))?;
-        for d in &descents {
-            let (r, _) = self.descend(ctx, &mut free, d, sim.as_mut(), &x0, "unclipped ");
-            unclipped_t.push(unclipped_row(d, false, &r));
-            for t in &r.trace {
-                unclipped_objective.push(row![
-                    method(d),
-                    d.eta(),
-                    d.alpha(),
-                    t.iteration as i64,
-                    t.objective
-                ]);
-            }
-        }
+        self.unclipped_descents(ctx, &base, &descents, sim.as_mut(), &mut t)?;
         self.converged_rows(
             ctx,
             &mut problem,
             sim.as_mut(),
             &x0,
             ("table1", 0),
-            &mut converged_t,
+            &mut t.converged,
         );
         if let Some(dn) = &self.dagger {
-            // The lander's final-round DAgger net of na_fig13_control (cached: only its
-            // rounds' learning and replays run again).
-            let (f13, control) = self.fig13(dn);
-            let mut rounds = Table::new(&crate::families::na::fig13_control::dagger::COLUMNS);
-            let net = f13.run_dagger(
-                ctx,
-                &control,
-                &f13.tasks[0],
-                &spec,
-                &trained,
-                &x0,
-                &mut rounds,
-            )?;
-            let mut problem = self.problem(ctx, &net, &objective, &x0, &gains)?;
-            for d in &compared {
-                let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, "DAgger net ");
-                for t in &r.trace {
-                    dagger_objective.push(row![
-                        method(d),
-                        d.eta(),
-                        d.alpha(),
-                        t.iteration as i64,
-                        t.objective
-                    ]);
-                }
-                let scores = self.scores(problem.scale, &r, &rep);
-                let round = dn.settings.rounds as i64;
-                dagger_t.push(self.dagger_row("dagger", round, d, scores, &r, &rep, dn));
-            }
-            let round = dn.settings.rounds as i64;
-            let at = ("dagger", round);
-            self.converged_rows(ctx, &mut problem, sim.as_mut(), &x0, at, &mut converged_t);
+            self.through_dagger_net(ctx, dn, &base, sim.as_mut(), &mut t)?;
         }
-        let mut chain_rounds = Table::new(&crate::families::na::fig13_control::dagger::COLUMNS);
         if let Some(md) = &self.momentum_dagger {
-            let dn = self.momentum_chain(md);
-            let (f13, control) = self.fig13(&dn);
-            let mut task = f13.tasks[0].clone();
-            task.name = "lander_momentum".into();
-            let momentum = Descent::Momentum {
-                eta: self.momentum_eta,
-                alpha: self.momentum_alpha,
-            };
-            let mut chain_sim = model.simulator();
-            let mut learn = |net: &Emulator, seed: u64| -> Result<Round, Error> {
-                let mut p = self.problem(ctx, net, &objective, &x0, &gains)?;
-                let (r, rep) = self.descend(
-                    ctx,
-                    &mut p,
-                    &momentum,
-                    chain_sim.as_mut(),
-                    &x0,
-                    "momentum DAgger ",
-                );
-                let emu_final = &r.states[self.task.horizon * n..];
-                Ok(Round {
-                    emulator_error: task.final_error(emu_final),
-                    simulator_error: task.final_error(&rep.states[self.task.horizon * n..]),
-                    simulator_spread: f13.open_loop_spread(
-                        &task,
-                        &x0,
-                        &r.controls,
-                        emu_final,
-                        seed,
-                    ),
-                    iterations: r.trace.last().map_or(0, |t| t.iteration),
-                    to_goal: None,
-                    best_iteration: r.trace.len().saturating_sub(1),
-                    controls: r.controls,
-                })
-            };
-            let key = serde_json::json!({
-                "learner": "na_fig14_momentum momentum descent from hover",
-                "momentum_eta": self.momentum_eta,
-                "momentum_alpha": self.momentum_alpha,
-                "iterations": self.task.iterations,
-                "touchdown_states": self.touchdown_states,
-                "touchdown_tolerance": self.touchdown_tolerance,
-                "effort_mu": self.task.effort_mu,
-                "curvature_iterations": self.curvature_iterations,
-            });
-            let net = f13.run_dagger_with(
-                ctx,
-                &control,
-                &task,
-                &spec,
-                &trained,
-                &x0,
-                &mut chain_rounds,
-                Some(ChainLearner {
-                    key,
-                    learn: &mut learn,
-                }),
-            )?;
-            let mut problem = self.problem(ctx, &net, &objective, &x0, &gains)?;
-            for d in &compared {
-                let label = "momentum-DAgger net ";
-                let (r, rep) = self.descend(ctx, &mut problem, d, sim.as_mut(), &x0, label);
-                let scores = self.scores(problem.scale, &r, &rep);
-                let round = md.settings.rounds as i64;
-                dagger_t.push(self.dagger_row("momentum_dagger", round, d, scores, &r, &rep, &dn));
-            }
-            let at = ("momentum_dagger", md.settings.rounds as i64);
-            self.converged_rows(ctx, &mut problem, sim.as_mut(), &x0, at, &mut converged_t);
+            self.through_momentum_dagger(ctx, md, &base, sim.as_mut(), &mut t)?;
         }
         Ok(Tables::from([
-            ("objective", objective_t),
-            ("gradient", gradient_t),
-            ("runs", runs),
-            ("trajectory", trajectory),
-            ("dagger", dagger_t),
-            ("dagger_objective", dagger_objective),
-            ("momentum_dagger_rounds", chain_rounds),
-            ("converged", converged_t),
-            ("unclipped", unclipped_t),
+            ("objective", t.objective),
+            ("gradient", t.gradient),
+            ("runs", t.runs),
+            ("trajectory", t.trajectory),
+            ("dagger", t.dagger),
+            ("dagger_objective", t.dagger_objective),
+            ("momentum_dagger_rounds", t.chain_rounds),
+            ("converged", t.converged),
+            ("unclipped", t.unclipped),
             ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
-            ("unclipped_objective", unclipped_objective),
+            ("unclipped_objective", t.unclipped_objective),
             ("net_seeds", net_seeds_t),
         ]))
+    }
+}
+
+/// What every descent of the run shares: the Table 1 lander net (its spec and training), the
+/// calibrated objective, the start state and the actuator gains.
+struct Base<'a> {
+    spec: &'a BuildSpec,
+    trained: &'a Trained,
+    objective: &'a Objective,
+    x0: &'a [f64],
+    gains: &'a [f64],
+}
+
+/// The tables the descents fill (`net_seeds` is built on its own).
+struct MomentumTables {
+    objective: Table,
+    gradient: Table,
+    runs: Table,
+    trajectory: Table,
+    dagger: Table,
+    dagger_objective: Table,
+    converged: Table,
+    /// Every descent of the sweep with the knots clipped to the boxes (as the runs above)
+    /// and without (ours): whether plain descent above its stability limit
+    /// diverges once the boxes no longer hide it.
+    unclipped: Table,
+    /// The unclipped descents' objective per iteration (the figure's unclipped panel).
+    unclipped_objective: Table,
+    chain_rounds: Table,
+}
+
+impl MomentumTables {
+    /// The empty tables.
+    fn new() -> Self {
+        let mut runs_cols = vec!["method", "eta", "alpha"];
+        runs_cols.extend_from_slice(&DAGGER_COLUMNS[5..14]);
+        MomentumTables {
+            objective: Table::new(&["method", "eta", "alpha", "iteration", "objective"]),
+            gradient: Table::new(&["method", "eta", "alpha", "iteration", "grad_norm"]),
+            runs: Table::new(&runs_cols),
+            trajectory: Table::new(&[
+                "method", "eta", "step", "t", "source", "x", "y", "z", "vz", "tilt",
+            ]),
+            dagger: Table::new(&DAGGER_COLUMNS),
+            dagger_objective: Table::new(&["method", "eta", "alpha", "iteration", "objective"]),
+            converged: Table::new(&converged_columns()),
+            unclipped: Table::new(&UNCLIPPED_COLUMNS),
+            unclipped_objective: Table::new(&["method", "eta", "alpha", "iteration", "objective"]),
+            chain_rounds: Table::new(&crate::families::na::fig13_control::dagger::COLUMNS),
+        }
+    }
+}
+
+impl Params {
+    /// Every descent of the sweep through the Table 1 net (`problem`, step scale taken before
+    /// the first), replayed on the simulator: its objective, gradient, trajectory, clipped
+    /// `unclipped`, `runs` and (for the compared pair) `dagger` rows. Returns the objective
+    /// curves, for `net_seeds.csv`.
+    fn headline_descents(
+        &self,
+        ctx: &RunContext,
+        problem: &mut Problem<'_>,
+        descents: &[Descent],
+        sim: &mut dyn Dynamics,
+        x0: &[f64],
+        t: &mut MomentumTables,
+    ) -> Vec<(Descent, Vec<f64>)> {
+        let scale = problem.scale;
+        let compared = self.compared();
+        let pb = ctx.progress(descents.len() as u64, "control learning");
+        // The headline's objective curves through the run's own net, for `net_seeds.csv`.
+        let mut own_curves: Vec<(Descent, Vec<f64>)> = Vec::new();
+        for d in descents {
+            let (r, rep) = self.descend(ctx, problem, d, sim, x0, "");
+            own_curves.push((*d, r.trace.iter().map(|t| t.objective).collect()));
+            for tr in &r.trace {
+                t.objective.push(row![
+                    method(d),
+                    d.eta(),
+                    d.alpha(),
+                    tr.iteration as i64,
+                    tr.objective
+                ]);
+                t.gradient.push(row![
+                    method(d),
+                    d.eta(),
+                    d.alpha(),
+                    tr.iteration as i64,
+                    tr.grad_norm
+                ]);
+            }
+            self.push_trajectory(d, &r, &rep, &mut t.trajectory);
+            t.unclipped.push(unclipped_row(d, true, &r));
+            let scores = self.scores(scale, &r, &rep);
+            let mut run = row![method(d), d.eta(), d.alpha()];
+            run.extend(scores.iter().cloned());
+            t.runs.push(run);
+            if let (Some(dn), true) = (&self.dagger, compared.contains(d)) {
+                t.dagger
+                    .push(self.dagger_row("table1", 0, d, scores, &r, &rep, dn));
+            }
+            pb.inc(1);
+        }
+        pb.finish_and_clear();
+        own_curves
+    }
+
+    /// `trajectory.csv`'s rows of descent `d`: its emulated and simulated states at the
+    /// emulator step times (tilt: the thrust axis's angle from vertical).
+    fn push_trajectory(&self, d: &Descent, r: &Learned, rep: &Replay, trajectory: &mut Table) {
+        let n = NetModel::Lander.state_dim();
+        let dt = self.net.physical_dt * self.steps as f64;
+        for (source, states) in [("emulator", &r.states), ("simulator", &rep.states)] {
+            for (i, s) in states.chunks_exact(n).enumerate() {
+                let axis = Lander::thrust_axis(s);
+                trajectory.push(row![
+                    method(d),
+                    d.eta(),
+                    i as i64,
+                    i as f64 * dt,
+                    source,
+                    s[0],
+                    s[1],
+                    s[2],
+                    s[VEL + 2],
+                    {
+                        // acos z as atan2(√(1 − z²), z), in portable arithmetic.
+                        let z = axis.z.clamp(-1.0, 1.0);
+                        crate::portable::atan2(((1.0 - z) * (1.0 + z)).sqrt(), z)
+                    }
+                ]);
+            }
+        }
+    }
+
+    /// Every descent of the sweep again through the Table 1 net with its knots free of the
+    /// actuators' boxes: its `unclipped` row and objective curve.
+    fn unclipped_descents(
+        &self,
+        ctx: &RunContext,
+        base: &Base<'_>,
+        descents: &[Descent],
+        sim: &mut dyn Dynamics,
+        t: &mut MomentumTables,
+    ) -> Result<(), Error> {
+        let x0 = base.x0;
+        let emu = &base.trained.emulator;
+        let mut free = self.problem_clipped(ctx, emu, base.objective, x0, (false, base.gains))?;
+        for d in descents {
+            let (r, _) = self.descend(ctx, &mut free, d, sim, x0, "unclipped ");
+            t.unclipped.push(unclipped_row(d, false, &r));
+            for tr in &r.trace {
+                t.unclipped_objective.push(row![
+                    method(d),
+                    d.eta(),
+                    d.alpha(),
+                    tr.iteration as i64,
+                    tr.objective
+                ]);
+            }
+        }
+        Ok(())
+    }
+
+    /// The compared pair through the lander's final-round DAgger net of na_fig13_control (cached:
+    /// only its rounds' learning and replays run again): their `dagger` rows and curves, and
+    /// the `converged` rows there.
+    fn through_dagger_net(
+        &self,
+        ctx: &RunContext,
+        dn: &DaggerNet,
+        base: &Base<'_>,
+        sim: &mut dyn Dynamics,
+        t: &mut MomentumTables,
+    ) -> Result<(), Error> {
+        let x0 = base.x0;
+        let compared = self.compared();
+        let (f13, control) = self.fig13(dn);
+        let mut rounds = Table::new(&crate::families::na::fig13_control::dagger::COLUMNS);
+        let net = f13.run_dagger(
+            ctx,
+            &control,
+            &f13.tasks[0],
+            base.spec,
+            base.trained,
+            x0,
+            &mut rounds,
+        )?;
+        let mut problem = self.problem(ctx, &net, base.objective, x0, base.gains)?;
+        for d in &compared {
+            let (r, rep) = self.descend(ctx, &mut problem, d, sim, x0, "DAgger net ");
+            for tr in &r.trace {
+                t.dagger_objective.push(row![
+                    method(d),
+                    d.eta(),
+                    d.alpha(),
+                    tr.iteration as i64,
+                    tr.objective
+                ]);
+            }
+            let scores = self.scores(problem.scale, &r, &rep);
+            let round = dn.settings.rounds as i64;
+            t.dagger
+                .push(self.dagger_row("dagger", round, d, scores, &r, &rep, dn));
+        }
+        let round = dn.settings.rounds as i64;
+        let at = ("dagger", round);
+        self.converged_rows(ctx, &mut problem, sim, x0, at, &mut t.converged);
+        Ok(())
+    }
+
+    /// The DAgger chain whose learner is momentum descent from hover (its rounds in
+    /// `momentum_dagger_rounds`), and the compared pair through its final net: their `dagger`
+    /// rows and the `converged` rows there.
+    fn through_momentum_dagger(
+        &self,
+        ctx: &RunContext,
+        md: &MomentumDagger,
+        base: &Base<'_>,
+        sim: &mut dyn Dynamics,
+        t: &mut MomentumTables,
+    ) -> Result<(), Error> {
+        let x0 = base.x0;
+        let compared = self.compared();
+        let dn = self.momentum_chain(md);
+        let net = self.momentum_chain_net(ctx, &dn, base, &mut t.chain_rounds)?;
+        let mut problem = self.problem(ctx, &net, base.objective, x0, base.gains)?;
+        for d in &compared {
+            let label = "momentum-DAgger net ";
+            let (r, rep) = self.descend(ctx, &mut problem, d, sim, x0, label);
+            let scores = self.scores(problem.scale, &r, &rep);
+            let round = md.settings.rounds as i64;
+            t.dagger
+                .push(self.dagger_row("momentum_dagger", round, d, scores, &r, &rep, &dn));
+        }
+        let at = ("momentum_dagger", md.settings.rounds as i64);
+        self.converged_rows(ctx, &mut problem, sim, x0, at, &mut t.converged);
+        Ok(())
+    }
+
+    /// The final net of the DAgger chain `dn` whose rounds learn by momentum descent from
+    /// hover (on a simulator of their own), its rounds pushed to `chain_rounds`.
+    fn momentum_chain_net(
+        &self,
+        ctx: &RunContext,
+        dn: &DaggerNet,
+        base: &Base<'_>,
+        chain_rounds: &mut Table,
+    ) -> Result<Emulator, Error> {
+        let n = NetModel::Lander.state_dim();
+        let x0 = base.x0;
+        let (f13, control) = self.fig13(dn);
+        let mut task = f13.tasks[0].clone();
+        task.name = "lander_momentum".into();
+        let momentum = Descent::Momentum {
+            eta: self.momentum_eta,
+            alpha: self.momentum_alpha,
+        };
+        let mut chain_sim = NetModel::Lander.simulator();
+        let mut learn = |net: &Emulator, seed: u64| -> Result<Round, Error> {
+            let mut p = self.problem(ctx, net, base.objective, x0, base.gains)?;
+            let (r, rep) = self.descend(
+                ctx,
+                &mut p,
+                &momentum,
+                chain_sim.as_mut(),
+                x0,
+                "momentum DAgger ",
+            );
+            let emu_final = &r.states[self.task.horizon * n..];
+            Ok(Round {
+                emulator_error: task.final_error(emu_final),
+                simulator_error: task.final_error(&rep.states[self.task.horizon * n..]),
+                simulator_spread: f13.open_loop_spread(&task, x0, &r.controls, emu_final, seed),
+                iterations: r.trace.last().map_or(0, |t| t.iteration),
+                to_goal: None,
+                best_iteration: r.trace.len().saturating_sub(1),
+                controls: r.controls,
+            })
+        };
+        let key = serde_json::json!({
+            "learner": "na_fig14_momentum momentum descent from hover",
+            "momentum_eta": self.momentum_eta,
+            "momentum_alpha": self.momentum_alpha,
+            "iterations": self.task.iterations,
+            "touchdown_states": self.touchdown_states,
+            "touchdown_tolerance": self.touchdown_tolerance,
+            "effort_mu": self.task.effort_mu,
+            "curvature_iterations": self.curvature_iterations,
+        });
+        f13.run_dagger_with(
+            ctx,
+            &control,
+            &task,
+            base.spec,
+            base.trained,
+            x0,
+            chain_rounds,
+            Some(ChainLearner {
+                key,
+                learn: &mut learn,
+            }),
+        )
     }
 }
 

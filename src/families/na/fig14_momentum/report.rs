@@ -267,6 +267,117 @@ fn traces(method: &[String], eta: &[f64], obj: &[f64]) -> Vec<(String, f64, Vec<
     out
 }
 
+/// What the verdict compares on the run's own net: momentum's descent against plain
+/// descent's at the comparison rate, and which plain rates converge.
+struct Comparison {
+    plain_end: f64,
+    mom_end: f64,
+    k_plain: usize,
+    k_mom: Option<usize>,
+    converging: Vec<f64>,
+    largest: f64,
+    diverging: Vec<f64>,
+    base_converges: bool,
+    base_is_limit: bool,
+    /// The next plain rate tried above the comparison's (NaN: none).
+    next: f64,
+    /// Momentum's iterations to plain's final J over plain's.
+    ratio: f64,
+}
+
+/// The [`Comparison`] of the momentum trace `mom` against the plain traces, `base` the plain
+/// rate of the comparison.
+fn compare(
+    mom: &(String, f64, Vec<f64>),
+    plain: &[&(String, f64, Vec<f64>)],
+    base: &(String, f64, Vec<f64>),
+    bars: &Fig14Rule,
+) -> Comparison {
+    let plain_end = base.2[base.2.len() - 1];
+    let mom_end = mom.2[mom.2.len() - 1];
+    let k_plain = base.2.len() - 1;
+    let k_mom = iterations_to(&mom.2, plain_end);
+    let converging: Vec<f64> = plain
+        .iter()
+        .filter(|t| bars.converges(&t.2))
+        .map(|t| t.1)
+        .collect();
+    let largest = converging.iter().copied().fold(f64::NAN, f64::max);
+    let diverging: Vec<f64> = plain
+        .iter()
+        .filter(|t| !bars.converges(&t.2))
+        .map(|t| t.1)
+        .collect();
+    let base_converges = bars.converges(&base.2);
+    // The paper's second claim: the plain rate of the comparison is the largest that
+    // converges, i.e. the next rate tried above it does not.
+    let base_is_limit = base_converges
+        && plain
+            .iter()
+            .filter(|t| t.1 > base.1)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .is_some_and(|t| !bars.converges(&t.2));
+    let next = plain
+        .iter()
+        .filter(|t| t.1 > base.1)
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(f64::NAN, |t| t.1);
+    // Momentum's iterations to plain's final J over plain's (infinite if it never gets there
+    // or does not end below it).
+    let ratio = match k_mom {
+        Some(k) if mom_end < plain_end && k_plain > 0 => k as f64 / k_plain as f64,
+        _ => f64::INFINITY,
+    };
+    Comparison {
+        plain_end,
+        mom_end,
+        k_plain,
+        k_mom,
+        converging,
+        largest,
+        diverging,
+        base_converges,
+        base_is_limit,
+        next,
+        ratio,
+    }
+}
+
+/// The verdict's rule on the run's own net alone: momentum's iteration `ratio` against the
+/// bar, plain descent at `base_eta` converging, and the `next` rate above it not converging.
+fn single_rule(
+    ratio: f64,
+    base_eta: f64,
+    base_converges: bool,
+    (next, base_is_limit): (f64, bool),
+    bars: &Fig14Rule,
+) -> Option<Rule> {
+    Rule::gated(
+        vec![],
+        vec![
+            Check::new(
+                "momentum's iterations to plain descent's final J over plain's",
+                ratio,
+                Cmp::AtMost,
+                bars.iteration_ratio,
+                Null::new("plain descent itself", 1.0),
+            ),
+            Ok(Check::fact(
+                format!("plain descent at eta {} converges", base_eta),
+                base_converges,
+            )),
+            Ok(Check::fact(
+                format!(
+                    "the next plain rate tried above it (eta {}) does not converge",
+                    sig(next)
+                ),
+                base_is_limit,
+            )),
+        ],
+        Partly::All(vec![0, 1]),
+    )
+}
+
 /// The findings ([`crate::experiment::Family::report`]).
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let bars: Fig14Rule = read_rule(dir)?;
@@ -311,66 +422,21 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         ));
     }
     let mom_row = rm.iter().position(|m| m == "momentum");
-    let plain_end = base.2[base.2.len() - 1];
-    let mom_end = mom.2[mom.2.len() - 1];
-    let k_plain = base.2.len() - 1;
-    let k_mom = iterations_to(&mom.2, plain_end);
-    let converging: Vec<f64> = plain
-        .iter()
-        .filter(|t| bars.converges(&t.2))
-        .map(|t| t.1)
-        .collect();
-    let largest = converging.iter().copied().fold(f64::NAN, f64::max);
-    let diverging: Vec<f64> = plain
-        .iter()
-        .filter(|t| !bars.converges(&t.2))
-        .map(|t| t.1)
-        .collect();
-    let base_converges = bars.converges(&base.2);
-    // The paper's second claim: the plain rate of the comparison is the largest that
-    // converges, i.e. the next rate tried above it does not.
-    let base_is_limit = base_converges
-        && plain
-            .iter()
-            .filter(|t| t.1 > base.1)
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .is_some_and(|t| !bars.converges(&t.2));
-    let next = plain
-        .iter()
-        .filter(|t| t.1 > base.1)
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map_or(f64::NAN, |t| t.1);
-    // Momentum's iterations to plain's final J over plain's (infinite if it never gets there
-    // or does not end below it).
-    let ratio = match k_mom {
-        Some(k) if mom_end < plain_end && k_plain > 0 => k as f64 / k_plain as f64,
-        _ => f64::INFINITY,
-    };
+    let Comparison {
+        plain_end,
+        mom_end,
+        k_plain,
+        k_mom,
+        converging,
+        largest,
+        diverging,
+        base_converges,
+        base_is_limit,
+        next,
+        ratio,
+    } = compare(mom, &plain, base, &bars);
     let seeds = seed_facts(dir)?;
-    let single = Rule::gated(
-        vec![],
-        vec![
-            Check::new(
-                "momentum's iterations to plain descent's final J over plain's",
-                ratio,
-                Cmp::AtMost,
-                bars.iteration_ratio,
-                Null::new("plain descent itself", 1.0),
-            ),
-            Ok(Check::fact(
-                format!("plain descent at eta {} converges", base.1),
-                base_converges,
-            )),
-            Ok(Check::fact(
-                format!(
-                    "the next plain rate tried above it (eta {}) does not converge",
-                    sig(next)
-                ),
-                base_is_limit,
-            )),
-        ],
-        Partly::All(vec![0, 1]),
-    );
+    let single = single_rule(ratio, base.1, base_converges, (next, base_is_limit), &bars);
     // Over the net seeds where the run has them (net_seeds.csv); else the run's own net alone.
     let (rule, seeds_why, lead) = match &seeds {
         Some((facts, rates)) => {

@@ -2,15 +2,16 @@
 //! simulator and its neutral-control drift from the control tasks' starts, and tabulate it all.
 
 use super::nets::{build_dolphin_emulator, build_emulators, build_spec};
-use super::{position_part, DriftTask, Params};
+use super::{position_part, DolphinNets, DriftTask, Params};
 use crate::emulator::catalog::{
     anchor_of, regime_fidelity, regime_share, rollout_error, training_transitions, BuildSpec,
-    DataRegime, NetModel,
+    DataRegime, NetModel, NetSpec, Trained,
 };
 use crate::emulator::hierarchy::{
     global_heldout_errors, hierarchy_rollout_error, DolphinEmulator, HierarchySpec,
 };
 use crate::emulator::mlp::Mlp;
+use crate::emulator::train::TracePoint;
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::rule::rule_table_of;
 use crate::experiment::{other, Error, Job, RunContext};
@@ -110,7 +111,63 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut structure = Table::new(&[
+        let mut t = StructureTables::new();
+        let pb = ctx.progress(self.nets.len() as u64, "training emulators");
+        let mut shares = Shares::default();
+        let specs: Vec<BuildSpec> = self
+            .nets
+            .iter()
+            .map(|net| {
+                build_spec(
+                    ctx.seed,
+                    net,
+                    self.steps,
+                    self.example_scale,
+                    &self.training,
+                )
+            })
+            .collect();
+        let built = ctx.stage("train emulators (side by side)", || build_emulators(&specs))?;
+        for ((net, spec), trained) in self.nets.iter().zip(&specs).zip(built) {
+            self.record_net(ctx, net, spec, &trained, &mut shares, &mut t)?;
+            pb.inc(1);
+        }
+        let normalization = self.normalization_table(ctx, &specs)?;
+        let regime_fidelity = self.regime_table(ctx, &specs, &mut shares)?;
+        if let Some(d) = &self.dolphin {
+            self.record_dolphin(ctx, d, &mut t)?;
+        }
+        pb.finish_and_clear();
+        Ok(Tables::from([
+            ("structure", t.structure),
+            ("training", t.training),
+            ("rollout", t.rollout),
+            ("drift", t.drift),
+            ("rollout_training", t.rollout_training),
+            ("global_error", t.global_error),
+            ("normalization", normalization),
+            ("regime_fidelity", regime_fidelity),
+            ("rule", rule_table_of(&self.rule)?),
+        ]))
+    }
+}
+
+/// The tables every net's rows go to (the normalization and regime tables are built apart).
+struct StructureTables {
+    structure: Table,
+    training: Table,
+    rollout: Table,
+    /// The k-step rollout fine-tuning (training.rollout_k): one-step loss + rollout_weight x
+    /// k-step rollout loss, on the training and held-out examples and windows.
+    rollout_training: Table,
+    global_error: Table,
+    drift: Table,
+}
+
+impl StructureTables {
+    /// The empty tables.
+    fn new() -> Self {
+        let structure = Table::new(&[
             "net",
             "inputs",
             "hidden",
@@ -129,19 +186,14 @@ impl Job for Params {
             "regime_share",
             "data",
         ]);
-        let mut training = Table::new(&["net", "iteration", "train_error", "heldout_error"]);
-        let mut rollout = Table::new(&["net", "step", "error"]);
-        // The k-step rollout fine-tuning (training.rollout_k): one-step loss + rollout_weight x
-        // k-step rollout loss, on the training and held-out examples and windows.
-        let mut rollout_training = Table::new(&["net", "iteration", "train_loss", "heldout_loss"]);
-        let mut global_error = Table::new(&[
+        let global_error = Table::new(&[
             "segment",
             "quantity",
             "component",
             "heldout_mse",
             "target_variance",
         ]);
-        let mut drift = Table::new(&[
+        let drift = Table::new(&[
             "net",
             "task",
             "horizon_s",
@@ -151,198 +203,200 @@ impl Job for Params {
             "tolerance",
             "at_anchor",
         ]);
-        let dist = |a: &[f64], b: &[f64]| {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| (x - y).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        };
-        // at_anchor: the start and control encode to the net's anchor (NetSpec::anchor), so
-        // the emulator's first step is exact by construction, not by fit.
-        let mut push_drift =
-            |t: &DriftTask, horizon_s: f64, [e, s, x0]: [Vec<f64>; 3], at_anchor: bool| {
-                drift.push(row![
-                    t.net.as_str(),
-                    t.task.as_str(),
-                    horizon_s,
-                    dist(&e, &x0),
-                    dist(&s, &x0),
-                    dist(&e, &s),
-                    t.tolerance,
-                    i64::from(at_anchor)
-                ]);
-            };
-        let pb = ctx.progress(self.nets.len() as u64, "training emulators");
-        let mut shares = Shares::default();
-        let specs: Vec<BuildSpec> = self
-            .nets
-            .iter()
-            .map(|net| {
-                build_spec(
-                    ctx.seed,
-                    net,
-                    self.steps,
-                    self.example_scale,
-                    &self.training,
-                )
-            })
-            .collect();
-        let built = ctx.stage("train emulators (side by side)", || build_emulators(&specs))?;
-        for ((net, spec), t) in self.nets.iter().zip(&specs).zip(built) {
-            let name = net.model.name();
-            let m = net.model;
-            let (n_in, n_out) = (m.state_dim() + m.control_dim(), m.state_dim());
-            let w = Mlp::weight_count(n_in, net.hidden, n_out);
-            let errors = ctx.stage(&format!("rollouts {name}"), || {
-                rollout_error(&t.emulator, spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other)
-            })?;
-            for (k, e) in errors.iter().enumerate() {
-                rollout.push(row![name, (k + 1) as i64, *e]);
-            }
-            for task in self.drift.iter().filter(|d| d.net == name) {
-                let u = if task.control.is_empty() {
-                    vec![0.0; m.control_dim()]
-                } else {
-                    task.control.clone()
-                };
-                let ends = catalog_drift(&t.emulator, spec, &task.start, &u, ROLLOUT_STEPS)?;
-                let tf = t.emulator.transforms();
-                let at_anchor = anchor_of(spec, tf).is_some_and(|a| a.covers(tf, &task.start, &u));
-                push_drift(
-                    task,
-                    ROLLOUT_STEPS as f64 * spec.super_dt(),
-                    ends,
-                    at_anchor,
-                );
-            }
-            let mean = errors.iter().sum::<f64>() / errors.len() as f64;
-            structure.push(row![
+        StructureTables {
+            structure,
+            training: Table::new(&["net", "iteration", "train_error", "heldout_error"]),
+            rollout: Table::new(&["net", "step", "error"]),
+            rollout_training: Table::new(&["net", "iteration", "train_loss", "heldout_loss"]),
+            global_error,
+            drift,
+        }
+    }
+
+    /// A drift task's row from its ends (emulated, simulated, start) after `horizon_s`.
+    /// at_anchor: the start and control encode to the net's anchor (NetSpec::anchor), so
+    /// the emulator's first step is exact by construction, not by fit.
+    fn push_drift(
+        &mut self,
+        t: &DriftTask,
+        horizon_s: f64,
+        [e, s, x0]: [Vec<f64>; 3],
+        at_anchor: bool,
+    ) {
+        self.drift.push(row![
+            t.net.as_str(),
+            t.task.as_str(),
+            horizon_s,
+            dist(&e, &x0),
+            dist(&s, &x0),
+            dist(&e, &s),
+            t.tolerance,
+            i64::from(at_anchor)
+        ]);
+    }
+
+    /// A net's training curves: its one-step `training` rows and its rollout fine-tuning's.
+    fn push_traces(&mut self, name: &str, trace: &[TracePoint], rollout_trace: &[TracePoint]) {
+        for p in trace {
+            self.training.push(row![
                 name,
-                n_in as i64,
-                net.hidden as i64,
-                n_out as i64,
-                spec.net.examples as i64,
-                t.train_error,
-                t.heldout_error,
-                t.train_s,
-                w as i64,
-                spec.net.examples as f64 / w as f64,
-                t.stop.as_str(),
-                i64::from(t.from_cache),
-                mean,
-                errors[errors.len() - 1],
-                i64::from(net.anchor),
-                ctx.stage(&format!("regime share {name}"), || shares.get(spec))?,
-                spec.net.data.name()
+                p.iteration as i64,
+                p.train_error,
+                p.held_out_error
             ]);
-            for p in &t.trace {
-                training.push(row![
-                    name,
-                    p.iteration as i64,
-                    p.train_error,
-                    p.held_out_error
-                ]);
-            }
-            for p in &t.rollout_trace {
-                rollout_training.push(row![
-                    name,
-                    p.iteration as i64,
-                    p.train_error,
-                    p.held_out_error
-                ]);
-            }
-            pb.inc(1);
         }
-        let normalization = self.normalization_table(ctx, &specs)?;
-        let regime_fidelity = self.regime_table(ctx, &specs, &mut shares)?;
-        if let Some(d) = &self.dolphin {
-            let spec = d.spec(ctx.seed, self.steps, self.example_scale);
-            let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
-            let (global_err, composed_err) = ctx.stage("rollouts dolphin", || {
-                hierarchy_rollout_error(&built.emulator, &spec, ROLLOUT_EPISODES, ROLLOUT_STEPS)
-                    .map_err(other)
-            })?;
-            for (name, errors) in [("dolphin_global", &global_err), ("dolphin", &composed_err)] {
-                for (k, e) in errors.iter().enumerate() {
-                    rollout.push(row![name, (k + 1) as i64, *e]);
-                }
-            }
-            let per_output = ctx.stage("dolphin global error by output", || {
-                global_heldout_errors(&built.emulator, &spec).map_err(other)
-            })?;
-            for (j, (e, v)) in per_output.iter().enumerate() {
-                let (quantity, component) = GLOBAL_OUTPUTS[j % 13];
-                global_error.push(row![(j / 13) as i64, quantity, component, *e, *v]);
-            }
-            for task in self.drift.iter().filter(|d| d.net == "dolphin") {
-                let u = if task.control.is_empty() {
-                    vec![0.0; 6]
-                } else {
-                    task.control.clone()
-                };
-                let ends = dolphin_drift(&built.emulator, &spec, &u, ROLLOUT_STEPS)?;
-                push_drift(task, ROLLOUT_STEPS as f64 * spec.super_dt(), ends, false);
-            }
-            let summary = |e: &[f64]| (e.iter().sum::<f64>() / e.len() as f64, e[e.len() - 1]);
-            for n in &built.nets {
-                // The global net's own rollout; the local nets act only composed, so their rows
-                // carry the composed hierarchy's mass-state rollout.
-                let (mean, last) = if n.name == "dolphin_global" {
-                    summary(&global_err)
-                } else {
-                    summary(&composed_err)
-                };
-                let w = Mlp::weight_count(n.inputs, n.hidden, n.outputs);
-                structure.push(row![
-                    n.name.as_str(),
-                    n.inputs as i64,
-                    n.hidden as i64,
-                    n.outputs as i64,
-                    n.examples as i64,
-                    n.train_error,
-                    n.heldout_error,
-                    n.train_s,
-                    w as i64,
-                    n.examples as f64 / w as f64,
-                    n.stop.as_str(),
-                    i64::from(n.from_cache),
-                    mean,
-                    last,
-                    0_i64,
-                    f64::NAN,
-                    "typical"
-                ]);
-                for p in &n.trace {
-                    training.push(row![
-                        n.name.as_str(),
-                        p.iteration as i64,
-                        p.train_error,
-                        p.held_out_error
-                    ]);
-                }
-                for p in &n.rollout_trace {
-                    rollout_training.push(row![
-                        n.name.as_str(),
-                        p.iteration as i64,
-                        p.train_error,
-                        p.held_out_error
-                    ]);
-                }
+        for p in rollout_trace {
+            self.rollout_training.push(row![
+                name,
+                p.iteration as i64,
+                p.train_error,
+                p.held_out_error
+            ]);
+        }
+    }
+}
+
+/// The Euclidean distance of `a` and `b`.
+fn dist(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+impl Params {
+    /// One trained Table 1 net: its rollout errors, its drift tasks, its `structure` row
+    /// (with its regime share) and its training curves.
+    fn record_net(
+        &self,
+        ctx: &RunContext,
+        net: &NetSpec,
+        spec: &BuildSpec,
+        t: &Trained,
+        shares: &mut Shares,
+        tables: &mut StructureTables,
+    ) -> Result<(), Error> {
+        let name = net.model.name();
+        let m = net.model;
+        let (n_in, n_out) = (m.state_dim() + m.control_dim(), m.state_dim());
+        let w = Mlp::weight_count(n_in, net.hidden, n_out);
+        let errors = ctx.stage(&format!("rollouts {name}"), || {
+            rollout_error(&t.emulator, spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other)
+        })?;
+        for (k, e) in errors.iter().enumerate() {
+            tables.rollout.push(row![name, (k + 1) as i64, *e]);
+        }
+        for task in self.drift.iter().filter(|d| d.net == name) {
+            let u = if task.control.is_empty() {
+                vec![0.0; m.control_dim()]
+            } else {
+                task.control.clone()
+            };
+            let ends = catalog_drift(&t.emulator, spec, &task.start, &u, ROLLOUT_STEPS)?;
+            let tf = t.emulator.transforms();
+            let at_anchor = anchor_of(spec, tf).is_some_and(|a| a.covers(tf, &task.start, &u));
+            tables.push_drift(
+                task,
+                ROLLOUT_STEPS as f64 * spec.super_dt(),
+                ends,
+                at_anchor,
+            );
+        }
+        let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+        tables.structure.push(row![
+            name,
+            n_in as i64,
+            net.hidden as i64,
+            n_out as i64,
+            spec.net.examples as i64,
+            t.train_error,
+            t.heldout_error,
+            t.train_s,
+            w as i64,
+            spec.net.examples as f64 / w as f64,
+            t.stop.as_str(),
+            i64::from(t.from_cache),
+            mean,
+            errors[errors.len() - 1],
+            i64::from(net.anchor),
+            ctx.stage(&format!("regime share {name}"), || shares.get(spec))?,
+            spec.net.data.name()
+        ]);
+        tables.push_traces(name, &t.trace, &t.rollout_trace);
+        Ok(())
+    }
+
+    /// The dolphin hierarchy: trained, its global and composed rollout errors, the global
+    /// net's held-out error per output, its drift tasks, and every net's `structure` row and
+    /// training curves.
+    fn record_dolphin(
+        &self,
+        ctx: &RunContext,
+        d: &DolphinNets,
+        tables: &mut StructureTables,
+    ) -> Result<(), Error> {
+        let spec = d.spec(ctx.seed, self.steps, self.example_scale);
+        let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
+        let (global_err, composed_err) = ctx.stage("rollouts dolphin", || {
+            hierarchy_rollout_error(&built.emulator, &spec, ROLLOUT_EPISODES, ROLLOUT_STEPS)
+                .map_err(other)
+        })?;
+        for (name, errors) in [("dolphin_global", &global_err), ("dolphin", &composed_err)] {
+            for (k, e) in errors.iter().enumerate() {
+                tables.rollout.push(row![name, (k + 1) as i64, *e]);
             }
         }
-        pb.finish_and_clear();
-        Ok(Tables::from([
-            ("structure", structure),
-            ("training", training),
-            ("rollout", rollout),
-            ("drift", drift),
-            ("rollout_training", rollout_training),
-            ("global_error", global_error),
-            ("normalization", normalization),
-            ("regime_fidelity", regime_fidelity),
-            ("rule", rule_table_of(&self.rule)?),
-        ]))
+        let per_output = ctx.stage("dolphin global error by output", || {
+            global_heldout_errors(&built.emulator, &spec).map_err(other)
+        })?;
+        for (j, (e, v)) in per_output.iter().enumerate() {
+            let (quantity, component) = GLOBAL_OUTPUTS[j % 13];
+            tables
+                .global_error
+                .push(row![(j / 13) as i64, quantity, component, *e, *v]);
+        }
+        for task in self.drift.iter().filter(|d| d.net == "dolphin") {
+            let u = if task.control.is_empty() {
+                vec![0.0; 6]
+            } else {
+                task.control.clone()
+            };
+            let ends = dolphin_drift(&built.emulator, &spec, &u, ROLLOUT_STEPS)?;
+            tables.push_drift(task, ROLLOUT_STEPS as f64 * spec.super_dt(), ends, false);
+        }
+        let summary = |e: &[f64]| (e.iter().sum::<f64>() / e.len() as f64, e[e.len() - 1]);
+        for n in &built.nets {
+            // The global net's own rollout; the local nets act only composed, so their rows
+            // carry the composed hierarchy's mass-state rollout.
+            let (mean, last) = if n.name == "dolphin_global" {
+                summary(&global_err)
+            } else {
+                summary(&composed_err)
+            };
+            let w = Mlp::weight_count(n.inputs, n.hidden, n.outputs);
+            tables.structure.push(row![
+                n.name.as_str(),
+                n.inputs as i64,
+                n.hidden as i64,
+                n.outputs as i64,
+                n.examples as i64,
+                n.train_error,
+                n.heldout_error,
+                n.train_s,
+                w as i64,
+                n.examples as f64 / w as f64,
+                n.stop.as_str(),
+                i64::from(n.from_cache),
+                mean,
+                last,
+                0_i64,
+                f64::NAN,
+                "typical"
+            ]);
+            tables.push_traces(n.name.as_str(), &n.trace, &n.rollout_trace);
+        }
+        Ok(())
     }
 }
 

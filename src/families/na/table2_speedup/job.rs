@@ -3,7 +3,7 @@
 //! with their breakdown.
 
 use super::timing::{hold, time_dolphin, time_emulator, time_physical};
-use super::{Params, DOLPHIN_EXPLICIT, DOLPHIN_IMPLICIT};
+use super::{Params, TimedDolphin, TimedNet, DOLPHIN_EXPLICIT, DOLPHIN_IMPLICIT};
 use crate::emulator::catalog::{NetModel, RolloutReference};
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy;
@@ -84,7 +84,31 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut table = Table::new(&[
+        let mut t = SpeedupTables::new();
+        for (i, tm) in self.models.iter().enumerate() {
+            self.time_model(ctx, i, tm, &mut t)?;
+        }
+        if let Some(d) = &self.dolphin {
+            self.time_dolphin_nets(ctx, d, &mut t.speedup)?;
+        }
+        Ok(Tables::from([
+            ("speedup", t.speedup),
+            ("equal_accuracy", t.equal),
+            ("rule", rule_table_of(&self.rule)?),
+        ]))
+    }
+}
+
+/// The `speedup` and `equal_accuracy` tables.
+struct SpeedupTables {
+    speedup: Table,
+    equal: Table,
+}
+
+impl SpeedupTables {
+    /// The empty tables.
+    fn new() -> Self {
+        let speedup = Table::new(&[
             "model",
             "emulator",
             "physical_s",
@@ -99,7 +123,7 @@ impl Job for Params {
             "physical_integrator",
             "physical_dt",
         ]);
-        let mut equal = Table::new(&[
+        let equal = Table::new(&[
             "model",
             "emulator",
             "emulator_error",
@@ -113,173 +137,214 @@ impl Job for Params {
             "emulator_s",
             "speedup",
         ]);
+        SpeedupTables { speedup, equal }
+    }
+}
+
+/// A model's timed horizon: its start, the sampled per-step controls and the physical
+/// simulator's seconds over them.
+struct PhysicalRun {
+    x0: Vec<f64>,
+    u: Vec<f64>,
+    physical_s: f64,
+}
+
+impl Params {
+    /// One model: its controls sampled from stream `100 + i`, the physical simulator timed
+    /// over them, then every emulator of `tm` ([`Params::time_net`]).
+    fn time_model(
+        &self,
+        ctx: &RunContext,
+        i: usize,
+        tm: &TimedNet,
+        t: &mut SpeedupTables,
+    ) -> Result<(), Error> {
         let steps = self.physical_steps;
-        for (i, tm) in self.models.iter().enumerate() {
-            let model: NetModel = tm.net.model;
-            let dt = tm.net.physical_dt;
-            let mut rng = ctx.rng(100 + i as u64);
-            let x0 = model.start_state_in(tm.net.data, &mut rng);
-            let m = model.control_dim();
-            let signal = ControlSignal::sample(
-                model.control_process_in(tm.net.data),
-                &model.sampling_limits(tm.net.data),
-                steps as f64 * dt,
-                &mut rng,
-            );
-            let mut u = vec![0.0; steps * m];
-            for k in 0..steps {
-                signal.at(k as f64 * dt, &mut u[k * m..(k + 1) * m]);
-            }
-            let mut sim = model.simulator();
-            let physical_s = ctx.stage(&format!("time {} physical", model.name()), || {
-                time_physical(sim.as_mut(), &x0, &u, dt, steps, self.repeats)
-            });
-            for &n in &tm.emulators {
-                let spec = build_spec(ctx.seed, &tm.net, n, self.example_scale, &self.training);
-                let trained = ctx.stage(&format!("train {} N{n}", model.name()), || {
-                    build_emulator(&spec)
-                })?;
-                let k_steps = steps / n;
-                let mut ue = vec![0.0; k_steps * m];
-                for k in 0..k_steps {
-                    ue[k * m..(k + 1) * m].copy_from_slice(&u[k * n * m..(k * n + 1) * m]);
-                }
-                let emulator_s = ctx.stage(&format!("time {} N{n}", model.name()), || {
-                    time_emulator(&trained.emulator, &x0, &ue, k_steps, self.repeats)
-                });
-                let label = format!("N{n}");
-                push_speedup(
-                    &mut table,
-                    model.name(),
-                    &label,
-                    "RK4",
-                    dt,
-                    (physical_s, steps),
-                    (emulator_s, k_steps),
-                );
-                // Equal accuracy: the largest step Δt / j as accurate as the emulator.
-                let reference = ctx
-                    .stage(&format!("reference rollouts {} N{n}", model.name()), || {
-                        RolloutReference::sample(&spec, ROLLOUT_EPISODES, ROLLOUT_STEPS)
-                    })
-                    .map_err(other)?;
-                let emulator_error = reference.emulator_error(&trained.emulator);
-                let matched = ctx.stage(&format!("match {} N{n}", model.name()), || {
-                    match_substeps(emulator_error, n, |j| reference.physical_error(j))
-                });
-                let Some(matched) = matched else {
-                    return Err(other(format!(
-                        "{} N{n}: no physical step matches the emulator's error {emulator_error}",
-                        model.name()
-                    )));
-                };
-                let j = matched.substeps;
-                let matched_dt = spec.super_dt() / j as f64;
-                let uj = hold(&ue, m, j);
-                let matched_s =
-                    ctx.stage(&format!("time {} at {matched_dt} s", model.name()), || {
-                        time_physical(
-                            sim.as_mut(),
-                            &x0,
-                            &uj,
-                            matched_dt,
-                            k_steps * j,
-                            self.repeats,
-                        )
-                    });
-                equal.push(row![
-                    model.name(),
-                    label.as_str(),
-                    emulator_error,
-                    j as i64,
-                    matched_dt,
-                    matched.error,
-                    matched.coarser_error,
-                    (k_steps * j) as i64,
-                    k_steps as i64,
-                    matched_s,
-                    emulator_s,
-                    matched_s / emulator_s
-                ]);
-            }
+        let model: NetModel = tm.net.model;
+        let dt = tm.net.physical_dt;
+        let mut rng = ctx.rng(100 + i as u64);
+        let x0 = model.start_state_in(tm.net.data, &mut rng);
+        let m = model.control_dim();
+        let signal = ControlSignal::sample(
+            model.control_process_in(tm.net.data),
+            &model.sampling_limits(tm.net.data),
+            steps as f64 * dt,
+            &mut rng,
+        );
+        let mut u = vec![0.0; steps * m];
+        for k in 0..steps {
+            signal.at(k as f64 * dt, &mut u[k * m..(k + 1) * m]);
         }
-        if let Some(d) = &self.dolphin {
-            let spec = d.nets.spec(ctx.seed, d.steps, self.example_scale);
-            let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
-            let dolphin = built.emulator.dolphin().clone();
-            let dt = d.nets.physical_dt;
-            let mut rng = ctx.rng(200);
-            let x0 = hierarchy::start_state(&dolphin, &mut rng);
-            let m = Dynamics::control_dim(&built.emulator);
-            let signal = ControlSignal::sample(
-                hierarchy::control_process(),
-                &hierarchy::control_limits(),
-                steps as f64 * dt,
-                &mut rng,
-            );
-            let mut u = vec![0.0; steps * m];
-            for k in 0..steps {
-                signal.at(k as f64 * dt, &mut u[k * m..(k + 1) * m]);
-            }
-            let mut sim = hierarchy::simulator(&dolphin);
-            let physical_s = ctx.stage("time dolphin physical", || {
-                time_physical(&mut sim, &x0, &u, dt, steps, self.repeats)
-            });
-            let n = d.steps;
-            let k_steps = steps / n;
-            let mut ue = vec![0.0; k_steps * m];
-            for k in 0..k_steps {
-                ue[k * m..(k + 1) * m].copy_from_slice(&u[k * n * m..(k * n + 1) * m]);
-            }
-            let mut reg = d.regularization.bind(&dolphin).map_err(other)?;
-            for (label, reg_steps) in [
-                (format!("N{n}"), 0),
-                (format!("N{n}_reg"), d.regularization_steps),
-            ] {
-                let emulator_s = ctx.stage(&format!("time dolphin {label}"), || {
-                    time_dolphin(&built.emulator, &mut reg, reg_steps, &x0, &ue, self.repeats)
-                });
-                push_speedup(
-                    &mut table,
-                    "dolphin",
-                    &label,
-                    DOLPHIN_EXPLICIT,
-                    dt,
-                    (physical_s, steps),
-                    (emulator_s, k_steps),
-                );
-                if reg_steps > 0 {
-                    continue;
-                }
-                // The implicit integrator at the paper's step over the same simulated time,
-                // against the plain N50 (controls held over each implicit step as sampled).
-                let Some(h) = d.implicit_dt else { continue };
-                let per_super = (n as f64 * dt / h).round() as usize;
-                let implicit_steps = k_steps * per_super;
-                let mut ui = vec![0.0; implicit_steps * m];
-                for k in 0..implicit_steps {
-                    signal.at(k as f64 * h, &mut ui[k * m..(k + 1) * m]);
-                }
-                let mut imp = ImplicitDolphin::new(dolphin.clone());
-                let implicit_s = ctx.stage("time dolphin implicit", || {
-                    time_physical(&mut imp, &x0, &ui, h, implicit_steps, self.repeats)
-                });
-                push_speedup(
-                    &mut table,
-                    "dolphin",
-                    &label,
-                    DOLPHIN_IMPLICIT,
-                    h,
-                    (implicit_s, implicit_steps),
-                    (emulator_s, k_steps),
-                );
-            }
+        let mut sim = model.simulator();
+        let physical_s = ctx.stage(&format!("time {} physical", model.name()), || {
+            time_physical(sim.as_mut(), &x0, &u, dt, steps, self.repeats)
+        });
+        let run = PhysicalRun { x0, u, physical_s };
+        for &n in &tm.emulators {
+            self.time_net(ctx, tm, n, &run, sim.as_mut(), t)?;
         }
-        Ok(Tables::from([
-            ("speedup", table),
-            ("equal_accuracy", equal),
-            ("rule", rule_table_of(&self.rule)?),
-        ]))
+        Ok(())
+    }
+
+    /// The N`n` emulator of `tm`: trained, timed on the held controls beside the physical
+    /// run (`speedup` row), and against the largest physical step as accurate as it
+    /// (`equal_accuracy` row, that step's run timed on `sim`).
+    fn time_net(
+        &self,
+        ctx: &RunContext,
+        tm: &TimedNet,
+        n: usize,
+        run: &PhysicalRun,
+        sim: &mut dyn Dynamics,
+        t: &mut SpeedupTables,
+    ) -> Result<(), Error> {
+        let steps = self.physical_steps;
+        let model: NetModel = tm.net.model;
+        let dt = tm.net.physical_dt;
+        let m = model.control_dim();
+        let (x0, u, physical_s) = (&run.x0, &run.u, run.physical_s);
+        let spec = build_spec(ctx.seed, &tm.net, n, self.example_scale, &self.training);
+        let trained = ctx.stage(&format!("train {} N{n}", model.name()), || {
+            build_emulator(&spec)
+        })?;
+        let k_steps = steps / n;
+        let mut ue = vec![0.0; k_steps * m];
+        for k in 0..k_steps {
+            ue[k * m..(k + 1) * m].copy_from_slice(&u[k * n * m..(k * n + 1) * m]);
+        }
+        let emulator_s = ctx.stage(&format!("time {} N{n}", model.name()), || {
+            time_emulator(&trained.emulator, x0, &ue, k_steps, self.repeats)
+        });
+        let label = format!("N{n}");
+        push_speedup(
+            &mut t.speedup,
+            model.name(),
+            &label,
+            "RK4",
+            dt,
+            (physical_s, steps),
+            (emulator_s, k_steps),
+        );
+        // Equal accuracy: the largest step Δt / j as accurate as the emulator.
+        let reference = ctx
+            .stage(&format!("reference rollouts {} N{n}", model.name()), || {
+                RolloutReference::sample(&spec, ROLLOUT_EPISODES, ROLLOUT_STEPS)
+            })
+            .map_err(other)?;
+        let emulator_error = reference.emulator_error(&trained.emulator);
+        let matched = ctx.stage(&format!("match {} N{n}", model.name()), || {
+            match_substeps(emulator_error, n, |j| reference.physical_error(j))
+        });
+        let Some(matched) = matched else {
+            return Err(other(format!(
+                "{} N{n}: no physical step matches the emulator's error {emulator_error}",
+                model.name()
+            )));
+        };
+        let j = matched.substeps;
+        let matched_dt = spec.super_dt() / j as f64;
+        let uj = hold(&ue, m, j);
+        let matched_s = ctx.stage(&format!("time {} at {matched_dt} s", model.name()), || {
+            time_physical(sim, x0, &uj, matched_dt, k_steps * j, self.repeats)
+        });
+        t.equal.push(row![
+            model.name(),
+            label.as_str(),
+            emulator_error,
+            j as i64,
+            matched_dt,
+            matched.error,
+            matched.coarser_error,
+            (k_steps * j) as i64,
+            k_steps as i64,
+            matched_s,
+            emulator_s,
+            matched_s / emulator_s
+        ]);
+        Ok(())
+    }
+
+    /// The dolphin: its controls sampled from stream 200, the explicit simulator timed over
+    /// them, and the plain and regularized hierarchy (the plain one also against the implicit
+    /// integrator at the paper's step), one `speedup` row each.
+    fn time_dolphin_nets(
+        &self,
+        ctx: &RunContext,
+        d: &TimedDolphin,
+        table: &mut Table,
+    ) -> Result<(), Error> {
+        let steps = self.physical_steps;
+        let spec = d.nets.spec(ctx.seed, d.steps, self.example_scale);
+        let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
+        let dolphin = built.emulator.dolphin().clone();
+        let dt = d.nets.physical_dt;
+        let mut rng = ctx.rng(200);
+        let x0 = hierarchy::start_state(&dolphin, &mut rng);
+        let m = Dynamics::control_dim(&built.emulator);
+        let signal = ControlSignal::sample(
+            hierarchy::control_process(),
+            &hierarchy::control_limits(),
+            steps as f64 * dt,
+            &mut rng,
+        );
+        let mut u = vec![0.0; steps * m];
+        for k in 0..steps {
+            signal.at(k as f64 * dt, &mut u[k * m..(k + 1) * m]);
+        }
+        let mut sim = hierarchy::simulator(&dolphin);
+        let physical_s = ctx.stage("time dolphin physical", || {
+            time_physical(&mut sim, &x0, &u, dt, steps, self.repeats)
+        });
+        let n = d.steps;
+        let k_steps = steps / n;
+        let mut ue = vec![0.0; k_steps * m];
+        for k in 0..k_steps {
+            ue[k * m..(k + 1) * m].copy_from_slice(&u[k * n * m..(k * n + 1) * m]);
+        }
+        let mut reg = d.regularization.bind(&dolphin).map_err(other)?;
+        for (label, reg_steps) in [
+            (format!("N{n}"), 0),
+            (format!("N{n}_reg"), d.regularization_steps),
+        ] {
+            let emulator_s = ctx.stage(&format!("time dolphin {label}"), || {
+                time_dolphin(&built.emulator, &mut reg, reg_steps, &x0, &ue, self.repeats)
+            });
+            push_speedup(
+                table,
+                "dolphin",
+                &label,
+                DOLPHIN_EXPLICIT,
+                dt,
+                (physical_s, steps),
+                (emulator_s, k_steps),
+            );
+            if reg_steps > 0 {
+                continue;
+            }
+            // The implicit integrator at the paper's step over the same simulated time,
+            // against the plain N50 (controls held over each implicit step as sampled).
+            let Some(h) = d.implicit_dt else { continue };
+            let per_super = (n as f64 * dt / h).round() as usize;
+            let implicit_steps = k_steps * per_super;
+            let mut ui = vec![0.0; implicit_steps * m];
+            for k in 0..implicit_steps {
+                signal.at(k as f64 * h, &mut ui[k * m..(k + 1) * m]);
+            }
+            let mut imp = ImplicitDolphin::new(dolphin.clone());
+            let implicit_s = ctx.stage("time dolphin implicit", || {
+                time_physical(&mut imp, &x0, &ui, h, implicit_steps, self.repeats)
+            });
+            push_speedup(
+                table,
+                "dolphin",
+                &label,
+                DOLPHIN_IMPLICIT,
+                h,
+                (implicit_s, implicit_steps),
+                (emulator_s, k_steps),
+            );
+        }
+        Ok(())
     }
 }
 
