@@ -389,59 +389,11 @@ impl Job for Params {
                 .collect::<Result<Vec<_>, _>>()
         })?;
         let s = &setups[0];
-        let n = s.horizon();
-        // 1. DDP, in parallel: the two examples and a direct solve per desired length, then the
-        //    two examples at each compared scale.
-        let mut jobs: Vec<(usize, f64)> = vec![(0, self.short_m), (0, self.long_m)];
-        jobs.extend(self.desired_m.iter().map(|&l| (0, l)));
-        for k in 1..setups.len() {
-            jobs.extend([(k, self.short_m), (k, self.long_m)]);
-        }
-        let pb = ctx.progress(jobs.len() as u64, "DDP steps");
-        let solved: Vec<Result<(DdpSolution, TrackingController, f64), Error>> =
-            ctx.stage("ddp", || {
-                jobs.par_iter()
-                    .map(|&(k, l)| {
-                        let r = setups[k].optimize(self, l);
-                        pb.inc(1);
-                        r
-                    })
-                    .collect()
-            });
-        pb.finish_and_clear();
-        let solved = solved.into_iter().collect::<Result<Vec<_>, _>>()?;
-        let mut components = Table::new(&[
-            "component",
-            "target_length_m",
-            "reached_length_m",
-            "iterations",
-            "cost",
-            "termination",
-            "seconds",
-            "average_scale",
-        ]);
-        // Examples: (setup, index into `solved`) for short and long.
-        let mut examples = vec![(0usize, [0usize, 1])];
-        let first_compared = 2 + self.desired_m.len();
-        for k in 1..setups.len() {
-            let i = first_compared + 2 * (k - 1);
-            examples.push((k, [i, i + 1]));
-        }
-        for &(k, idx) in &examples {
-            for (name, &i) in ["short", "long"].iter().zip(&idx) {
-                let (sol, _, secs) = &solved[i];
-                components.push(row![
-                    *name,
-                    jobs[i].1,
-                    reached_length(&s.body, &s.x0, sol.x[n].as_slice()),
-                    sol.trace.len(),
-                    sol.cost,
-                    format!("{:?}", sol.termination),
-                    *secs,
-                    setups[k].average_scale
-                ]);
-            }
-        }
+        let Solves {
+            solved,
+            examples,
+            components,
+        } = self.solve_steps(ctx, &setups)?;
         let centers = [s.target(self.short_m)?, s.target(self.long_m)?];
         let lambda = scale_lambda(&s.q_final, &centers[0], &centers[1]);
         let limits = vec![self.torque_limit; TORQUES];
@@ -456,21 +408,8 @@ impl Job for Params {
             mode,
             limits: Some(&limits),
         };
-        // 2. Every controller at every desired length, on the simulator; at the compared
-        //    scales LBC and the naive blend only.
-        let mut cases: Vec<(usize, usize, f64, &str)> = Vec::new();
-        for (d, &l) in self.desired_m.iter().enumerate() {
-            for m in METHODS {
-                cases.push((0, d, l, m));
-            }
-        }
-        for k in 1..setups.len() {
-            for (d, &l) in self.desired_m.iter().enumerate() {
-                for m in ["lbc", "naive"] {
-                    cases.push((k, d, l, m));
-                }
-            }
-        }
+        // 2. Every controller at every desired length, on the simulator.
+        let cases = self.cases(setups.len());
         // The projected weights, once per desired length (their seconds are LBC's and the
         // naive blend's overhead, a millisecond at most; not counted in `seconds`).
         let projected = self
@@ -514,6 +453,125 @@ impl Job for Params {
         });
         pb.finish_and_clear();
         let runs = runs.into_iter().collect::<Result<Vec<_>, _>>()?;
+        let (targets, average, weights) = self.step_tables(&setups, &cases, &runs);
+        let blend = |w: &[f64], mode: BlendMode| blend_of(0, w, mode);
+        // 3. The walk over gaps.
+        let (walk, motion) = ctx.stage("walk", || self.walk(s, lambda, &centers, &blend))?;
+        let rule = self.rule_settings(s, lambda);
+        Ok(Tables::from([
+            ("components", components),
+            ("targets", table_of(&targets)),
+            ("weights", weights),
+            ("average_effect", average),
+            ("walk", walk),
+            ("motion", motion),
+            ("rule", rule),
+        ]))
+    }
+}
+
+/// A case run on the simulator: (setup, desired length's index, desired length, method).
+type Case = (usize, usize, f64, &'static str);
+
+/// The DDP steps: every solve (the two examples and a direct solve per desired length, then the
+/// two examples at each compared scale), where each setup's examples are among them, and the
+/// components table.
+struct Solves {
+    solved: Vec<(DdpSolution, TrackingController, f64)>,
+    /// (setup, index into `solved`) of the short and the long example.
+    examples: Vec<(usize, [usize; 2])>,
+    components: Table,
+}
+
+impl Params {
+    /// Step 1, DDP in parallel: the two examples and a direct solve per desired length, then
+    /// the two examples at each compared scale.
+    fn solve_steps(&self, ctx: &RunContext, setups: &[Setup]) -> Result<Solves, Error> {
+        let s = &setups[0];
+        let n = s.horizon();
+        let mut jobs: Vec<(usize, f64)> = vec![(0, self.short_m), (0, self.long_m)];
+        jobs.extend(self.desired_m.iter().map(|&l| (0, l)));
+        for k in 1..setups.len() {
+            jobs.extend([(k, self.short_m), (k, self.long_m)]);
+        }
+        let pb = ctx.progress(jobs.len() as u64, "DDP steps");
+        let solved: Vec<Result<(DdpSolution, TrackingController, f64), Error>> =
+            ctx.stage("ddp", || {
+                jobs.par_iter()
+                    .map(|&(k, l)| {
+                        let r = setups[k].optimize(self, l);
+                        pb.inc(1);
+                        r
+                    })
+                    .collect()
+            });
+        pb.finish_and_clear();
+        let solved = solved.into_iter().collect::<Result<Vec<_>, _>>()?;
+        let mut components = Table::new(&[
+            "component",
+            "target_length_m",
+            "reached_length_m",
+            "iterations",
+            "cost",
+            "termination",
+            "seconds",
+            "average_scale",
+        ]);
+        let mut examples = vec![(0usize, [0usize, 1])];
+        let first_compared = 2 + self.desired_m.len();
+        for k in 1..setups.len() {
+            let i = first_compared + 2 * (k - 1);
+            examples.push((k, [i, i + 1]));
+        }
+        for &(k, idx) in &examples {
+            for (name, &i) in ["short", "long"].iter().zip(&idx) {
+                let (sol, _, secs) = &solved[i];
+                components.push(row![
+                    *name,
+                    jobs[i].1,
+                    reached_length(&s.body, &s.x0, sol.x[n].as_slice()),
+                    sol.trace.len(),
+                    sol.cost,
+                    format!("{:?}", sol.termination),
+                    *secs,
+                    setups[k].average_scale
+                ]);
+            }
+        }
+        Ok(Solves {
+            solved,
+            examples,
+            components,
+        })
+    }
+
+    /// Every controller at every desired length on the run's setup; at the compared scales
+    /// (setups 1..) LBC and the naive blend only.
+    fn cases(&self, setups: usize) -> Vec<Case> {
+        let mut cases: Vec<Case> = Vec::new();
+        for (d, &l) in self.desired_m.iter().enumerate() {
+            for m in METHODS {
+                cases.push((0, d, l, m));
+            }
+        }
+        for k in 1..setups {
+            for (d, &l) in self.desired_m.iter().enumerate() {
+                for m in ["lbc", "naive"] {
+                    cases.push((k, d, l, m));
+                }
+            }
+        }
+        cases
+    }
+
+    /// `targets.csv`'s rows (the run's setup), `average_effect.csv` (LBC and the naive blend
+    /// at every scale) and `weights.csv` (LBC's α over each step) from the runs of `cases`.
+    fn step_tables(
+        &self,
+        setups: &[Setup],
+        cases: &[Case],
+        runs: &[(StepRun, Vec<f64>, f64)],
+    ) -> (Vec<StepRow>, Table, Table) {
         let mut targets: Vec<StepRow> = Vec::new();
         let mut average = Table::new(&[
             "average_scale",
@@ -526,7 +584,7 @@ impl Job for Params {
         ]);
         let mut weights = Table::new(&["desired_length_m", "t", "alpha_short"]);
         let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
-        for (&(k, _, l, m), (r, w, secs)) in cases.iter().zip(&runs) {
+        for (&(k, _, l, m), (r, w, secs)) in cases.iter().zip(runs) {
             if m == "lbc" || m == "naive" {
                 average.push(row![
                     setups[k].average_scale,
@@ -559,10 +617,13 @@ impl Job for Params {
                 }
             }
         }
-        let blend = |w: &[f64], mode: BlendMode| blend_of(0, w, mode);
-        // 3. The walk over gaps.
-        let (walk, motion) = ctx.stage("walk", || self.walk(s, lambda, &centers, &blend))?;
-        let rule = rule_table(&[
+        (targets, average, weights)
+    }
+
+    /// The rule's settings table.
+    fn rule_settings(&self, s: &Setup, lambda: f64) -> Table {
+        let n = s.horizon();
+        rule_table(&[
             ("tolerance_m", self.rule.tolerance_m),
             ("error_margin_m", self.rule.error_margin_m),
             ("lambda", lambda),
@@ -576,20 +637,9 @@ impl Job for Params {
                 "simbicon_length_m",
                 step_length(&s.body, s.nominal_x[n].as_slice()).0,
             ),
-        ]);
-        Ok(Tables::from([
-            ("components", components),
-            ("targets", table_of(&targets)),
-            ("weights", weights),
-            ("average_effect", average),
-            ("walk", walk),
-            ("motion", motion),
-            ("rule", rule),
-        ]))
+        ])
     }
-}
 
-impl Params {
     /// The walk: footholds `walk_m` apart from the start's left heel; each step LBC's toward the
     /// next foothold from wherever the stance heel is.
     fn walk<'a>(

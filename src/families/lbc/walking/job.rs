@@ -224,16 +224,24 @@ fn x_alpha(samples: &[Sample]) -> Vec<(f64, f64)> {
     samples.iter().map(|s| (s.x[0], s.alpha_hill)).collect()
 }
 
-impl Job for Params {
-    fn params_json(&self) -> serde_json::Value {
-        serde_json::to_value(self).unwrap_or_default()
-    }
+/// The hill walker the search chose: its gait, its grid point and the search's table.
+struct HillWalker {
+    gait: Gait,
+    torso_offset: f64,
+    hip_offset: f64,
+    search: Table,
+}
 
-    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let incline = Terrain::Slope {
-            degrees: self.incline_degrees,
-        };
-        // 1. The hill walker: the grid's furthest walk up the incline.
+/// The temperature sweep: every λ's walk on every terrain (λ-major) and the chosen λ's index.
+struct Sweep {
+    walks: Vec<Walk>,
+    chosen: usize,
+    table: Table,
+}
+
+impl Params {
+    /// Step 1, the hill walker: the grid's furthest walk up the incline.
+    fn search_hill_walker(&self, ctx: &RunContext, incline: Terrain) -> Result<HillWalker, Error> {
         let s = &self.hill_search;
         let grid: Vec<(f64, f64)> = s
             .torso_offsets
@@ -262,10 +270,24 @@ impl Job for Params {
         for (i, (&(t, h), &(d, f))) in grid.iter().zip(&results).enumerate() {
             search.push(row![t, h, d, i64::from(f), i64::from(i == chosen)]);
         }
-        let hill = hill_gait(&self.flat_gait, grid[chosen].0, grid[chosen].1);
-        // 2. Each walker's gait on its own ground and its value function.
+        let (torso_offset, hip_offset) = grid[chosen];
+        Ok(HillWalker {
+            gait: hill_gait(&self.flat_gait, torso_offset, hip_offset),
+            torso_offset,
+            hip_offset,
+            search,
+        })
+    }
+
+    /// Step 2: each walker's gait on its own ground and its value function, with their table.
+    fn record_cycles(
+        &self,
+        ctx: &RunContext,
+        hill: &Gait,
+        incline: Terrain,
+    ) -> Result<(Vec<GaitCycle>, Table), Error> {
         let cycles: Vec<GaitCycle> = ctx.stage("gaits and value functions", || {
-            [(&self.flat_gait, Terrain::Flat), (&hill, incline)]
+            [(&self.flat_gait, Terrain::Flat), (hill, incline)]
                 .par_iter()
                 .map(|(g, t)| {
                     GaitCycle::record(
@@ -301,17 +323,20 @@ impl Job for Params {
                 c.horizon
             ]);
         }
-        let walkers = Walkers {
-            flat: &self.flat_gait,
-            hill: &hill,
-            cycles: Some((&cycles[0], &cycles[1])),
-        };
-        let terrains = self.terrains();
+        Ok((cycles, cyc))
+    }
+
+    /// Step 3: LBC at every temperature on every terrain, and the λ chosen from them.
+    fn lambda_sweep(
+        &self,
+        ctx: &RunContext,
+        walkers: &Walkers,
+        terrains: &[(&'static str, Terrain)],
+    ) -> Result<Sweep, Error> {
         let track_split = (
             self.hill_start_m - self.rule.margin_m,
             self.hill_start_m + self.rule.margin_m,
         );
-        // 3. LBC at every temperature on every terrain.
         let jobs: Vec<(usize, usize)> = (0..self.lambdas.len())
             .flat_map(|l| (0..terrains.len()).map(move |t| (l, t)))
             .collect();
@@ -320,7 +345,7 @@ impl Job for Params {
                 .map(|&(l, t)| {
                     walk(
                         self,
-                        &walkers,
+                        walkers,
                         terrains[t].1,
                         Driver::Lbc(self.lambdas[l]),
                         self.walk_s,
@@ -354,105 +379,44 @@ impl Job for Params {
                 ah
             ]);
         }
-        let li = choose_lambda(&walked);
-        let lambda = self.lambdas[li];
-        // 4. Every controller on every terrain (LBC's walks are the sweep's at the chosen λ).
-        let drivers = [Driver::Flat, Driver::Hill, Driver::Naive];
-        let alone_jobs: Vec<(usize, usize)> = (0..terrains.len())
-            .flat_map(|t| (0..drivers.len()).map(move |d| (t, d)))
+        Ok(Sweep {
+            walks: sweep,
+            chosen: choose_lambda(&walked),
+            table: lambda_t,
+        })
+    }
+
+    /// Step 4: every walker alone and the naive blend on every terrain (terrain-major, in
+    /// [`DRIVERS_ALONE`]' order).
+    fn walks_alone(
+        &self,
+        ctx: &RunContext,
+        walkers: &Walkers,
+        terrains: &[(&'static str, Terrain)],
+    ) -> Result<Vec<Walk>, Error> {
+        let jobs: Vec<(usize, usize)> = (0..terrains.len())
+            .flat_map(|t| (0..DRIVERS_ALONE.len()).map(move |d| (t, d)))
             .collect();
-        let alone: Vec<Walk> = ctx.stage("walks", || {
-            alone_jobs
-                .par_iter()
+        ctx.stage("walks", || {
+            jobs.par_iter()
                 .map(|&(t, d)| {
                     walk(
                         self,
-                        &walkers,
+                        walkers,
                         terrains[t].1,
-                        drivers[d],
+                        DRIVERS_ALONE[d],
                         self.walk_s,
                         self.gif_frame_s.min(self.knot_dt),
                     )
                 })
                 .collect::<Result<_, _>>()
-        })?;
-        let mut walks = Table::new(&[
-            "terrain",
-            "controller",
-            "distance_m",
-            "fell",
-            "mean_speed_m_s",
-            "steps",
-            "fell_at_s",
-            "lambda",
-        ]);
-        let mut push_walk = |terrain: &str, d: Driver, r: &Walk| {
-            let l = match d {
-                Driver::Lbc(l) => l,
-                _ => f64::NAN,
-            };
-            walks.push(row![
-                terrain,
-                d.name(),
-                r.distance,
-                i64::from(r.fell_at.is_some()),
-                r.distance / r.seconds.max(1e-9),
-                r.steps,
-                r.fell_at.unwrap_or(f64::NAN),
-                l
-            ]);
-        };
-        for (t, (name, _)) in terrains.iter().enumerate() {
-            for (d, &driver) in drivers.iter().enumerate() {
-                push_walk(name, driver, &alone[t * drivers.len() + d]);
-            }
-            push_walk(name, Driver::Lbc(lambda), &sweep[li * terrains.len() + t]);
-        }
-        // 5. LBC's weights and values over time at the chosen λ.
-        let mut weights = Table::new(&[
-            "terrain",
-            "t",
-            "x",
-            "slope_deg",
-            "alpha_flat",
-            "alpha_hill",
-            "v_flat",
-            "v_hill",
-        ]);
-        for (t, (name, terrain)) in terrains.iter().enumerate() {
-            for sm in &sweep[li * terrains.len() + t].samples {
-                let slope = crate::portable::atan(terrain.height_slope(sm.x[0]).1).to_degrees();
-                weights.push(row![
-                    *name,
-                    sm.t,
-                    sm.x[0],
-                    slope,
-                    1.0 - sm.alpha_hill,
-                    sm.alpha_hill,
-                    sm.v_flat,
-                    sm.v_hill
-                ]);
-            }
-        }
-        // 6. The flat-then-hill walks of LBC and the flat walker, for the animation.
-        let mut motion_cols = vec!["controller".to_string(), "t".into(), "alpha_hill".into()];
-        motion_cols.extend((0..DOF).map(|i| format!("q{i}")));
-        let cols: Vec<&str> = motion_cols.iter().map(String::as_str).collect();
-        let mut motion = Table::new(&cols);
-        let track = terrains.len() - 1;
-        let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
-        for (name, r) in [
-            ("lbc", &sweep[li * terrains.len() + track]),
-            ("flat", &alone[track * drivers.len()]),
-        ] {
-            for sm in r.samples.iter().step_by(frame) {
-                let mut row = row![name, sm.t, sm.alpha_hill];
-                row.extend(sm.x[..DOF].iter().map(|&v| v.into()));
-                motion.push(row);
-            }
-        }
+        })
+    }
+
+    /// The rule's settings table.
+    fn rule_settings(&self, lambda: f64, cycles: &[GaitCycle], hill: &HillWalker) -> Table {
         let r = &self.rule;
-        let rule = rule_table(&[
+        rule_table(&[
             ("lambda", lambda),
             ("advance_fraction", r.advance_fraction),
             ("climb_m", r.climb_m),
@@ -464,15 +428,142 @@ impl Job for Params {
             ("walk_s", self.walk_s),
             ("knot_dt", self.knot_dt),
             ("horizon_s", cycles[0].horizon as f64 * self.knot_dt),
-            ("hill_torso_offset", grid[chosen].0),
-            ("hill_hip_offset", grid[chosen].1),
+            ("hill_torso_offset", hill.torso_offset),
+            ("hill_hip_offset", hill.hip_offset),
+        ])
+    }
+}
+
+/// The drivers of [`Params::walks_alone`], in its order.
+const DRIVERS_ALONE: [Driver; 3] = [Driver::Flat, Driver::Hill, Driver::Naive];
+
+/// `walks.csv`: every controller on every terrain, LBC's walks (`lbc`, one per terrain) at
+/// `lambda`.
+fn walks_table(
+    terrains: &[(&'static str, Terrain)],
+    alone: &[Walk],
+    lbc: &[Walk],
+    lambda: f64,
+) -> Table {
+    let mut walks = Table::new(&[
+        "terrain",
+        "controller",
+        "distance_m",
+        "fell",
+        "mean_speed_m_s",
+        "steps",
+        "fell_at_s",
+        "lambda",
+    ]);
+    let mut push_walk = |terrain: &str, d: Driver, r: &Walk| {
+        let l = match d {
+            Driver::Lbc(l) => l,
+            _ => f64::NAN,
+        };
+        walks.push(row![
+            terrain,
+            d.name(),
+            r.distance,
+            i64::from(r.fell_at.is_some()),
+            r.distance / r.seconds.max(1e-9),
+            r.steps,
+            r.fell_at.unwrap_or(f64::NAN),
+            l
         ]);
+    };
+    for (t, (name, _)) in terrains.iter().enumerate() {
+        for (d, &driver) in DRIVERS_ALONE.iter().enumerate() {
+            push_walk(name, driver, &alone[t * DRIVERS_ALONE.len() + d]);
+        }
+        push_walk(name, Driver::Lbc(lambda), &lbc[t]);
+    }
+    walks
+}
+
+/// `weights.csv`: LBC's weights and values over time on every terrain (`lbc`, one walk per
+/// terrain) at the chosen λ.
+fn weights_table(terrains: &[(&'static str, Terrain)], lbc: &[Walk]) -> Table {
+    let mut weights = Table::new(&[
+        "terrain",
+        "t",
+        "x",
+        "slope_deg",
+        "alpha_flat",
+        "alpha_hill",
+        "v_flat",
+        "v_hill",
+    ]);
+    for (t, (name, terrain)) in terrains.iter().enumerate() {
+        for sm in &lbc[t].samples {
+            let slope = crate::portable::atan(terrain.height_slope(sm.x[0]).1).to_degrees();
+            weights.push(row![
+                *name,
+                sm.t,
+                sm.x[0],
+                slope,
+                1.0 - sm.alpha_hill,
+                sm.alpha_hill,
+                sm.v_flat,
+                sm.v_hill
+            ]);
+        }
+    }
+    weights
+}
+
+/// `motion.csv`: the flat-then-hill walks of LBC and the flat walker, every `frame` samples,
+/// for the animation.
+fn motion_table(lbc: &Walk, flat: &Walk, frame: usize) -> Table {
+    let mut motion_cols = vec!["controller".to_string(), "t".into(), "alpha_hill".into()];
+    motion_cols.extend((0..DOF).map(|i| format!("q{i}")));
+    let cols: Vec<&str> = motion_cols.iter().map(String::as_str).collect();
+    let mut motion = Table::new(&cols);
+    for (name, r) in [("lbc", lbc), ("flat", flat)] {
+        for sm in r.samples.iter().step_by(frame) {
+            let mut row = row![name, sm.t, sm.alpha_hill];
+            row.extend(sm.x[..DOF].iter().map(|&v| v.into()));
+            motion.push(row);
+        }
+    }
+    motion
+}
+
+impl Job for Params {
+    fn params_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).expect("params serialize")
+    }
+
+    fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
+        let incline = Terrain::Slope {
+            degrees: self.incline_degrees,
+        };
+        let hill = self.search_hill_walker(ctx, incline)?;
+        let (cycles, cyc) = self.record_cycles(ctx, &hill.gait, incline)?;
+        let walkers = Walkers {
+            flat: &self.flat_gait,
+            hill: &hill.gait,
+            cycles: Some((&cycles[0], &cycles[1])),
+        };
+        let terrains = self.terrains();
+        let sweep = self.lambda_sweep(ctx, &walkers, &terrains)?;
+        let li = sweep.chosen;
+        let lambda = self.lambdas[li];
+        let alone = self.walks_alone(ctx, &walkers, &terrains)?;
+        // LBC's walks on each terrain are the sweep's at the chosen λ (the sweep is λ-major).
+        let n = terrains.len();
+        let lbc = &sweep.walks[li * n..(li + 1) * n];
+        let walks = walks_table(&terrains, &alone, lbc, lambda);
+        let weights = weights_table(&terrains, lbc);
+        let track = terrains.len() - 1;
+        let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
+        let motion = motion_table(&lbc[track], &alone[track * DRIVERS_ALONE.len()], frame);
+        let rule = self.rule_settings(lambda, &cycles, &hill);
         Ok(Tables::from([
-            ("search", search),
+            ("search", hill.search),
             ("cycles", cyc),
             ("walks", walks),
             ("weights", weights),
-            ("lambda_sweep", lambda_t),
+            ("lambda_sweep", sweep.table),
             ("motion", motion),
             ("rule", rule),
         ]))

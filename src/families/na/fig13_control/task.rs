@@ -616,7 +616,7 @@ mod tests {
             trace(0),
             trace(1)
         );
-        assert!(cal.gains.iter().any(|&g| g == 1.0) && cal.gains.iter().all(|&g| g >= 1.0));
+        assert!(cal.gains.contains(&1.0) && cal.gains.iter().all(|&g| g >= 1.0));
         assert!(
             cal.gains[1] > 5.0,
             "steering moves the final state far less per box unit"

@@ -249,7 +249,7 @@ mod tests {
             ("delta_frame", 0.3, 3.0),
             ("full", 0.1, 0.5),
         ]);
-        assert_eq!(verdict(&[good.clone()]), Verdict::Held);
+        assert_eq!(verdict(std::slice::from_ref(&good)), Verdict::Held);
         // An operator that changes nothing (the null of check (b)) fails it: only partly.
         let no_op = task(&[
             ("plain", 1.0, 10.0),
@@ -274,7 +274,7 @@ mod tests {
             ("delta_frame", 0.2, 1.5),
             ("full", 0.2, 1.5),
         ]);
-        assert_eq!(verdict(&[flat.clone()]), Verdict::NotHeld);
+        assert_eq!(verdict(std::slice::from_ref(&flat)), Verdict::NotHeld);
         // Partly needs the training half in every task.
         assert_eq!(verdict(&[good.clone(), flat]), Verdict::NotHeld);
         // A plain net whose training failed counts as an infinite error.
