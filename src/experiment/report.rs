@@ -168,19 +168,13 @@ fn experiment_section(
     unreadable: &mut Vec<String>,
 ) -> Result<(String, String, Group), Error> {
     let dir = out.join(&r.id);
-    let rel_figures = relative(&dir, figures);
     let mut details = format!(
         "# {} — details\n\n*{}* — {}. The summary is in [REPORT.md](../REPORT.md#{}).\n\n",
         r.id, r.title, r.paper_item, r.id
     );
-    let Judged {
-        verdict,
-        headline,
-        reason,
-        body,
-    } = judge(r, &dir, &mut details, unreadable);
+    let j = judge(r, &dir, &mut details, unreadable);
     let stale = run_provenance(&dir, code_rev);
-    let row = summary_row(r, stale.is_some(), verdict, &headline, &reason);
+    let row = summary_row(r, stale.is_some(), &j);
     let _ = writeln!(
         sections,
         "\n## {}\n\n<a id=\"{}\"></a>*{}* — {}\n",
@@ -189,10 +183,10 @@ fn experiment_section(
     if !r.paper_claim.is_empty() {
         let _ = writeln!(sections, "**Paper:** {}\n", r.paper_claim.trim());
     }
-    if !headline.is_empty() {
-        let _ = writeln!(sections, "**Ours:** {headline}\n");
+    if !j.headline.is_empty() {
+        let _ = writeln!(sections, "**Ours:** {}\n", j.headline);
     }
-    sections.push_str(&body);
+    sections.push_str(&j.body);
     history_notes(r, sections, &mut details);
     // How the run went (seed, scale, time, cached nets) is in the details.
     if let Some(meta) = read_run_json(&dir) {
@@ -208,7 +202,7 @@ fn experiment_section(
             r.id, r.id
         );
     }
-    figure_notes(out, figures, r, &rel_figures, sections, &mut details);
+    figure_notes(out, figures, r, sections, &mut details);
     if dir.is_dir() {
         atomic_write(&dir.join("DETAILS.md"), details.as_bytes())?;
     }
@@ -218,7 +212,7 @@ fn experiment_section(
 /// The experiment's judgement by its family from the results in `dir` (the first seed's,
 /// with the spread over seeds after it), its reasons appended to `details`.
 fn judge(r: &Resolved, dir: &Path, details: &mut String, unreadable: &mut Vec<String>) -> Judged {
-    let (verdict, headline, reason, body) = if dir.join("run.json").exists() {
+    if dir.join("run.json").exists() {
         let seeds = run_seeds(dir);
         // With swept seeds the section reads the first seed's tables, then the spread; a
         // family judging over seeds reads them all.
@@ -260,47 +254,35 @@ fn judge(r: &Resolved, dir: &Path, details: &mut String, unreadable: &mut Vec<St
                 if let Some(rule) = &f.rule {
                     body.push_str(&rule.table());
                 }
-                (
-                    f.verdict.label().to_string(),
-                    headline(&f.why),
+                Judged {
+                    verdict: f.verdict.label().to_string(),
+                    headline: headline(&f.why),
                     reason,
                     body,
-                )
+                }
             }
             Err(e) => {
                 unreadable.push(format!("{}: {e}", r.id));
-                (
-                    "error".into(),
-                    String::new(),
-                    String::new(),
-                    format!("Could not read the results: {e}\n"),
-                )
+                Judged {
+                    verdict: "error".into(),
+                    headline: String::new(),
+                    reason: String::new(),
+                    body: format!("Could not read the results: {e}\n"),
+                }
             }
         }
     } else {
-        (
-            "not run".into(),
-            String::new(),
-            String::new(),
-            "Not run yet.\n\n".into(),
-        )
-    };
-    Judged {
-        verdict,
-        headline,
-        reason,
-        body,
+        Judged {
+            verdict: "not run".into(),
+            headline: String::new(),
+            reason: String::new(),
+            body: "Not run yet.\n\n".into(),
+        }
     }
 }
 
 /// The experiment's row of the summary table, marked stale or changed after results.
-fn summary_row(
-    r: &Resolved,
-    stale: bool,
-    verdict: String,
-    headline: &str,
-    reason: &str,
-) -> (String, String, Group) {
+fn summary_row(r: &Resolved, stale: bool, j: &Judged) -> (String, String, Group) {
     let mut mark = if stale { " (stale)" } else { "" }.to_string();
     if !r.history.is_empty() {
         let _ = write!(mark, " (changed after results: {})", r.history.len());
@@ -308,7 +290,7 @@ fn summary_row(
     let cell = |t: &str| t.replace('|', "\\|");
     (
         format!(
-            "| [`{}`](#{}) | {} | {} | {} | {verdict}{mark} | {} |",
+            "| [`{}`](#{}) | {} | {} | {} | {}{mark} | {} |",
             r.id,
             r.id,
             cell(if r.claim.is_empty() {
@@ -317,10 +299,11 @@ fn summary_row(
                 &r.claim
             }),
             cell(&r.paper_number),
-            cell(headline),
-            cell(reason)
+            cell(&j.headline),
+            j.verdict,
+            cell(&j.reason)
         ),
-        verdict,
+        j.verdict.clone(),
         if r.family.is_check() {
             Group::Check
         } else if r.family.is_beyond() {
@@ -356,10 +339,10 @@ fn figure_notes(
     out: &Path,
     figures: &Path,
     r: &Resolved,
-    rel_figures: &Path,
     sections: &mut String,
     details: &mut String,
 ) {
+    let rel_figures = relative(&out.join(&r.id), figures);
     let figs = figure_files(figures, &r.id);
     let rel = relative(out, figures);
     // The main figure is the first the family captions (its own order), else the first.
@@ -396,7 +379,7 @@ fn figure_notes(
         if k == main {
             show(sections, &rel);
         }
-        show(details, rel_figures);
+        show(details, &rel_figures);
     }
 }
 
