@@ -511,109 +511,20 @@ fn dispatch(cli: Cli) -> Result<()> {
             shard,
             resume,
         } => {
-            check_jobs(&outputs)?;
-            let file = SpecFile::load(&spec_path(&exp_dir, &target)?)?;
-            let res = resolve(
-                &file,
-                &ResolveOptions {
-                    quick: outputs.quick,
-                    seed,
-                    sets,
-                    seeds,
-                },
-                &families::registry(),
-            )?;
-            let opts = RunOptions {
-                resume,
-                shard,
-                ..run_options(&outputs, false)
+            let ropts = ResolveOptions {
+                quick: outputs.quick,
+                seed,
+                sets,
+                seeds,
             };
-            remove_leftovers(&opts, std::slice::from_ref(&res.id))?;
-            let s = run(&res, &opts)?;
-            say_notes(&s.notes);
-            let units = if resume || shard.is_some() {
-                format!(" ({} units run, {} resumed)", s.computed, s.reused)
-            } else {
-                String::new()
-            };
-            eprintln!(
-                "{}: {} files in {:.2} s{units} -> {}",
-                s.id,
-                s.files.len(),
-                s.seconds,
-                s.dir.display()
-            );
-            Ok(())
+            run_command(&exp_dir, &target, &outputs, ropts, shard, resume)
         }
-        Command::Merge { target, outputs } => {
-            check_jobs(&outputs)?;
-            let file = SpecFile::load(&spec_path(&exp_dir, &target)?)?;
-            let opts = run_options(&outputs, false);
-            // The report covers every experiment file, as `reproduce` writes it; a bad file
-            // stops everything before any work.
-            let mut all = resolve_all(&exp_dir, outputs.quick, None)?;
-            let others = all.iter().map(|r| &r.id).filter(|id| **id != file.raw.id);
-            refuse_incomplete(&opts.out, others)?;
-            let mut ids: Vec<String> = all.iter().map(|r| r.id.clone()).collect();
-            ids.push(file.raw.id.clone());
-            remove_leftovers(&opts, &ids)?;
-            let (s, merged) = merge(&file, &opts, &families::registry())?;
-            say_notes(&s.notes);
-            eprintln!(
-                "{}: merged {} units, {} files in {:.2} s -> {}",
-                s.id,
-                s.reused,
-                s.files.len(),
-                s.seconds,
-                s.dir.display()
-            );
-            match all.iter().position(|r| r.id == merged.id) {
-                Some(i) => all[i] = merged,
-                None => all.push(merged),
-            }
-            let report = write_report(&opts.out, &opts.figures, &all)?;
-            eprintln!("report: {}", report.display());
-            Ok(())
-        }
+        Command::Merge { target, outputs } => merge_command(&exp_dir, &target, &outputs),
         Command::Reproduce {
             outputs,
             only,
             seeds,
-        } => {
-            check_jobs(&outputs)?;
-            let t0 = Instant::now();
-            // Resolve every file first: a bad file stops everything before any work.
-            let all = resolve_all(&exp_dir, outputs.quick, seeds)?;
-            for id in &only {
-                if !all.iter().any(|r| r.id == *id) {
-                    bail!("--only: no experiment `{id}`");
-                }
-            }
-            let opts = run_options(&outputs, true);
-            // The report reads the experiments not rerun as they are.
-            let kept = all
-                .iter()
-                .map(|r| &r.id)
-                .filter(|id| !only.is_empty() && !only.contains(id));
-            refuse_incomplete(&opts.out, kept)?;
-            let ids: Vec<String> = all.iter().map(|r| r.id.clone()).collect();
-            remove_leftovers(&opts, &ids)?;
-            for r in all
-                .iter()
-                .filter(|r| only.is_empty() || only.contains(&r.id))
-            {
-                let s = run(r, &opts).with_context(|| format!("experiment {}", r.id))?;
-                say_notes(&s.notes);
-                eprintln!("{:<26} {:>8.2} s  {} files", s.id, s.seconds, s.files.len());
-            }
-            let report = write_report(&opts.out, &opts.figures, &all)?;
-            eprintln!(
-                "report: {} (total {:.1} s)",
-                report.display(),
-                t0.elapsed().as_secs_f64()
-            );
-            Ok(())
-        }
+        } => reproduce_command(&exp_dir, &outputs, &only, seeds),
         Command::Describe { model } => {
             let m =
                 physics::model_by_name(&model).ok_or_else(|| anyhow!("unknown model {model}"))?;
@@ -669,6 +580,115 @@ fn dispatch(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// `run`: one experiment, resolved with `ropts`, optionally one shard of it or resuming.
+fn run_command(
+    exp_dir: &Path,
+    target: &str,
+    outputs: &Outputs,
+    ropts: ResolveOptions,
+    shard: Option<Shard>,
+    resume: bool,
+) -> Result<()> {
+    check_jobs(outputs)?;
+    let file = SpecFile::load(&spec_path(exp_dir, target)?)?;
+    let res = resolve(&file, &ropts, &families::registry())?;
+    let opts = RunOptions {
+        resume,
+        shard,
+        ..run_options(outputs, false)
+    };
+    remove_leftovers(&opts, std::slice::from_ref(&res.id))?;
+    let s = run(&res, &opts)?;
+    say_notes(&s.notes);
+    let units = if resume || shard.is_some() {
+        format!(" ({} units run, {} resumed)", s.computed, s.reused)
+    } else {
+        String::new()
+    };
+    eprintln!(
+        "{}: {} files in {:.2} s{units} -> {}",
+        s.id,
+        s.files.len(),
+        s.seconds,
+        s.dir.display()
+    );
+    Ok(())
+}
+
+/// `merge`: one experiment's shards into its results, then the report over every file.
+fn merge_command(exp_dir: &Path, target: &str, outputs: &Outputs) -> Result<()> {
+    check_jobs(outputs)?;
+    let file = SpecFile::load(&spec_path(exp_dir, target)?)?;
+    let opts = run_options(outputs, false);
+    // The report covers every experiment file, as `reproduce` writes it; a bad file
+    // stops everything before any work.
+    let mut all = resolve_all(exp_dir, outputs.quick, None)?;
+    let others = all.iter().map(|r| &r.id).filter(|id| **id != file.raw.id);
+    refuse_incomplete(&opts.out, others)?;
+    let mut ids: Vec<String> = all.iter().map(|r| r.id.clone()).collect();
+    ids.push(file.raw.id.clone());
+    remove_leftovers(&opts, &ids)?;
+    let (s, merged) = merge(&file, &opts, &families::registry())?;
+    say_notes(&s.notes);
+    eprintln!(
+        "{}: merged {} units, {} files in {:.2} s -> {}",
+        s.id,
+        s.reused,
+        s.files.len(),
+        s.seconds,
+        s.dir.display()
+    );
+    match all.iter().position(|r| r.id == merged.id) {
+        Some(i) => all[i] = merged,
+        None => all.push(merged),
+    }
+    let report = write_report(&opts.out, &opts.figures, &all)?;
+    eprintln!("report: {}", report.display());
+    Ok(())
+}
+
+/// `reproduce`: every experiment (or those in `only`) run, then the report.
+fn reproduce_command(
+    exp_dir: &Path,
+    outputs: &Outputs,
+    only: &[String],
+    seeds: Option<usize>,
+) -> Result<()> {
+    check_jobs(outputs)?;
+    let t0 = Instant::now();
+    // Resolve every file first: a bad file stops everything before any work.
+    let all = resolve_all(exp_dir, outputs.quick, seeds)?;
+    for id in only {
+        if !all.iter().any(|r| r.id == *id) {
+            bail!("--only: no experiment `{id}`");
+        }
+    }
+    let opts = run_options(outputs, true);
+    // The report reads the experiments not rerun as they are.
+    let kept = all
+        .iter()
+        .map(|r| &r.id)
+        .filter(|id| !only.is_empty() && !only.contains(id));
+    refuse_incomplete(&opts.out, kept)?;
+    let ids: Vec<String> = all.iter().map(|r| r.id.clone()).collect();
+    remove_leftovers(&opts, &ids)?;
+    for r in all
+        .iter()
+        .filter(|r| only.is_empty() || only.contains(&r.id))
+    {
+        let s = run(r, &opts).with_context(|| format!("experiment {}", r.id))?;
+        say_notes(&s.notes);
+        eprintln!("{:<26} {:>8.2} s  {} files", s.id, s.seconds, s.files.len());
+    }
+    let report = write_report(&opts.out, &opts.figures, &all)?;
+    eprintln!(
+        "report: {} (total {:.1} s)",
+        report.display(),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
 }
 
 fn emulate(

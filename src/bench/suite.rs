@@ -26,6 +26,9 @@ fn sim_steps<D: Dynamics>(sim: &mut D, x0: &[f64], u: &[f64], dt: f64, steps: us
     black_box(&x);
 }
 
+/// Where a stage hands its measured metrics, in the order measured.
+type Push<'a> = &'a mut dyn FnMut(&str, f64);
+
 /// Every metric, each measured for about `min_seconds`.
 pub fn metrics(min_seconds: f64) -> Vec<Metric> {
     let mut out = Vec::new();
@@ -35,6 +38,38 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             value,
         })
     };
+    pendulum_and_acrobot_sims(min_seconds, &mut push);
+    lbc_metrics(min_seconds, &mut push);
+    truck_lander_dolphin_sims(min_seconds, &mut push);
+    for (model, hidden, examples) in [
+        (NetModel::PendulumPassive, 20, 2400),
+        (NetModel::PendulumActive, 20, 3000),
+        (NetModel::PendulumExt, 20, 3000),
+        (NetModel::Lander, 50, 13500),
+        (NetModel::Truck, 40, 5200),
+    ] {
+        for (name, value) in emulator_metrics(model, hidden, examples, min_seconds) {
+            push(&name, value);
+        }
+    }
+    for (name, value) in emulator_rollouts(min_seconds) {
+        push(&name, value);
+    }
+    lattice_metrics(min_seconds, &mut push);
+    push("bptt.lander.iters_per_s", bptt_lander(min_seconds));
+    push("bptt.17-50-13.bare.iters_per_s", bptt_bare(min_seconds));
+    for (name, value) in fma_peaks(min_seconds) {
+        push(&name, value);
+    }
+    for (name, value) in dolphin_metrics(min_seconds) {
+        push(&name, value);
+    }
+    push("bptt.dolphin.iters_per_s", bptt_dolphin(min_seconds));
+    out
+}
+
+/// The pendulum's and the acrobot's simulators, 1000 steps of 10 ms per call.
+fn pendulum_and_acrobot_sims(min_seconds: f64, push: Push) {
     let steps = 1000;
     let mut p = Simulator::new(Pendulum3::new(PendulumVariant::Active), IntegratorKind::Rk4);
     let x0 = [0.5, -0.3, 0.2, 0.0, 0.0, 0.0];
@@ -69,6 +104,16 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             sim_steps(&mut a, &a0, &[0.5], 0.01, steps)
         }),
     );
+}
+
+/// LBC: the value projection, then DDP iteration, LQR backward pass and blended-policy
+/// evaluation on the acrobot swing-up horizon (4 s at 0.01 s).
+fn lbc_metrics(min_seconds: f64, push: Push) {
+    use crate::bellman::combine::{BlendMode, TrackerBlend};
+    use crate::control::ddp::{solve, DdpOptions};
+    use crate::control::lqr::track;
+    use crate::control::{QuadraticCost, Rk4Map};
+    use nalgebra::{DMatrix, DVector};
     let comps: Vec<GaussianReward> = (0..4)
         .map(|i| GaussianReward::isotropic(&[i as f64, 0.5 * i as f64, 0.0, 1.0], 2.0))
         .collect();
@@ -79,113 +124,109 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             black_box(project(black_box(&comps), black_box(&desired)).ok());
         }),
     );
-    // LBC: DDP iteration, LQR backward pass and blended-policy evaluation on the acrobot
-    // swing-up horizon (4 s at 0.01 s).
-    {
-        use crate::bellman::combine::{BlendMode, TrackerBlend};
-        use crate::control::ddp::{solve, DdpOptions};
-        use crate::control::lqr::track;
-        use crate::control::{QuadraticCost, Rk4Map};
-        use nalgebra::{DMatrix, DVector};
-        let dt = 0.01;
-        let steps = 400;
-        let map = Rk4Map::new(Acrobot::default(), dt).expect("valid dt");
-        let cost = QuadraticCost::effort(
-            dt,
-            1,
-            DMatrix::from_diagonal(&DVector::from_vec(vec![1e3, 1e3, 1e2, 1e2])),
-            DVector::from_vec(vec![std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0]),
-        );
-        let x0 = DVector::from_vec(vec![-std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0]);
-        let u0: Vec<DVector<f64>> = (0..steps)
-            .map(|k| DVector::from_element(1, (k as f64 * dt * 3.0).sin()))
-            .collect();
-        let one_iter = DdpOptions {
-            max_iterations: 1,
-            ..DdpOptions::default()
-        };
-        let ddp_iters = throughput(min_seconds, 1, || {
-            black_box(solve(&map, &cost, &x0, &u0, &one_iter).ok());
+    let dt = 0.01;
+    let steps = 400;
+    let map = Rk4Map::new(Acrobot::default(), dt).expect("valid dt");
+    let cost = QuadraticCost::effort(
+        dt,
+        1,
+        DMatrix::from_diagonal(&DVector::from_vec(vec![1e3, 1e3, 1e2, 1e2])),
+        DVector::from_vec(vec![std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0]),
+    );
+    let x0 = DVector::from_vec(vec![-std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0]);
+    let u0: Vec<DVector<f64>> = (0..steps)
+        .map(|k| DVector::from_element(1, (k as f64 * dt * 3.0).sin()))
+        .collect();
+    let one_iter = DdpOptions {
+        max_iterations: 1,
+        ..DdpOptions::default()
+    };
+    let ddp_iters = throughput(min_seconds, 1, || {
+        black_box(solve(&map, &cost, &x0, &u0, &one_iter).ok());
+    });
+    push("ddp.acrobot.iters_per_s", ddp_iters);
+    // Derived: microseconds per knot of one DDP iteration (the peers' unit). This is a
+    // whole one-iteration `solve`: its first rollout and its stopping test's second
+    // linearization and backward pass are counted against the one iteration.
+    push("ddp.acrobot.us_per_knot", 1e6 / (ddp_iters * steps as f64));
+    // The same problem solved for ten iterations (line searches included), the time per
+    // knot and iteration: the first rollout and the last stopping test spread over ten.
+    let ten = DdpOptions {
+        max_iterations: 10,
+        ..DdpOptions::default()
+    };
+    let done = solve(&map, &cost, &x0, &u0, &ten).map_or(0, |s| s.trace.len());
+    if done > 0 {
+        let solves = throughput(min_seconds, 1, || {
+            black_box(solve(&map, &cost, &x0, &u0, &ten).ok());
         });
-        push("ddp.acrobot.iters_per_s", ddp_iters);
-        // Derived: microseconds per knot of one DDP iteration (the peers' unit). This is a
-        // whole one-iteration `solve`: its first rollout and its stopping test's second
-        // linearization and backward pass are counted against the one iteration.
-        push("ddp.acrobot.us_per_knot", 1e6 / (ddp_iters * steps as f64));
-        // The same problem solved for ten iterations (line searches included), the time per
-        // knot and iteration: the first rollout and the last stopping test spread over ten.
-        let ten = DdpOptions {
-            max_iterations: 10,
-            ..DdpOptions::default()
-        };
-        let done = solve(&map, &cost, &x0, &u0, &ten).map_or(0, |s| s.trace.len());
-        if done > 0 {
-            let solves = throughput(min_seconds, 1, || {
-                black_box(solve(&map, &cost, &x0, &u0, &ten).ok());
-            });
-            push("ddp.acrobot.solves10_per_s", solves);
-            push(
-                "ddp.acrobot.us_per_knot_iteration",
-                1e6 / (solves * (done * steps) as f64),
-            );
-        }
-        let xs = map.rollout(&x0, &u0).expect("finite rollout");
-        let lqr_passes = throughput(min_seconds, 1, || {
-            black_box(track(&map, &cost, &xs, &u0).ok());
-        });
-        push("lqr.acrobot.backward_passes_per_s", lqr_passes);
-        // Derived: microseconds per Riccati step of the tracker's backward pass.
-        push("lqr.acrobot.us_per_step", 1e6 / (lqr_passes * steps as f64));
-        // The Riccati recursion alone, on the same trajectory and cost with its A_k, B_k
-        // computed beforehand: the problem `../shared/peers/bench_scipy_lqr.py` times in NumPy
-        // (compare.py's LQR row times `track`, linearization included).
-        {
-            use crate::control::lqr::track_linearized;
-            let (n, m) = (map.state_dim(), map.control_dim());
-            let mut ws = map.workspace();
-            let (mut a_k, mut b_k) = (vec![], vec![]);
-            for k in 0..steps {
-                let (mut a, mut b) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
-                map.jacobians(&xs[k], &u0[k], &mut a, &mut b, &mut ws);
-                a_k.push(a);
-                b_k.push(b);
-            }
-            let riccati_passes = throughput(min_seconds, 1, || {
-                let mut given = |k: usize,
-                                 _: &DVector<f64>,
-                                 _: &DVector<f64>,
-                                 a: &mut DMatrix<f64>,
-                                 b: &mut DMatrix<f64>| {
-                    a.copy_from(&a_k[k]);
-                    b.copy_from(&b_k[k]);
-                };
-                black_box(track_linearized((n, m), &cost, &xs, &u0, &mut given).ok());
-            });
-            push(
-                "lqr.riccati_n4_m1.us_per_step",
-                1e6 / (riccati_passes * steps as f64),
-            );
-        }
-        let t = track(&map, &cost, &xs, &u0).expect("tracker");
-        let trackers = vec![t.clone(), t];
-        let blend = TrackerBlend {
-            trackers: &trackers,
-            weights: vec![1.0, 1.0],
-            lambda: 1.0,
-            limits: None,
-            mode: BlendMode::Lbc,
-        };
-        let (mut u, mut a, mut ui) = ([0.0], [0.0; 2], [0.0]);
-        let xq = [-1.4, 0.1, 0.2, -0.1];
+        push("ddp.acrobot.solves10_per_s", solves);
         push(
-            "lbc.acrobot.policy_evals_per_s",
-            throughput(min_seconds, steps as u64, || {
-                for k in 0..steps {
-                    black_box(blend.control(&xq, k, &mut u, &mut a, &mut ui).ok());
-                }
-            }),
+            "ddp.acrobot.us_per_knot_iteration",
+            1e6 / (solves * (done * steps) as f64),
         );
     }
+    let xs = map.rollout(&x0, &u0).expect("finite rollout");
+    let lqr_passes = throughput(min_seconds, 1, || {
+        black_box(track(&map, &cost, &xs, &u0).ok());
+    });
+    push("lqr.acrobot.backward_passes_per_s", lqr_passes);
+    // Derived: microseconds per Riccati step of the tracker's backward pass.
+    push("lqr.acrobot.us_per_step", 1e6 / (lqr_passes * steps as f64));
+    // The Riccati recursion alone, on the same trajectory and cost with its A_k, B_k
+    // computed beforehand: the problem `../shared/peers/bench_scipy_lqr.py` times in NumPy
+    // (compare.py's LQR row times `track`, linearization included).
+    {
+        use crate::control::lqr::track_linearized;
+        let (n, m) = (map.state_dim(), map.control_dim());
+        let mut ws = map.workspace();
+        let (mut a_k, mut b_k) = (vec![], vec![]);
+        for k in 0..steps {
+            let (mut a, mut b) = (DMatrix::zeros(n, n), DMatrix::zeros(n, m));
+            map.jacobians(&xs[k], &u0[k], &mut a, &mut b, &mut ws);
+            a_k.push(a);
+            b_k.push(b);
+        }
+        let riccati_passes = throughput(min_seconds, 1, || {
+            let mut given = |k: usize,
+                             _: &DVector<f64>,
+                             _: &DVector<f64>,
+                             a: &mut DMatrix<f64>,
+                             b: &mut DMatrix<f64>| {
+                a.copy_from(&a_k[k]);
+                b.copy_from(&b_k[k]);
+            };
+            black_box(track_linearized((n, m), &cost, &xs, &u0, &mut given).ok());
+        });
+        push(
+            "lqr.riccati_n4_m1.us_per_step",
+            1e6 / (riccati_passes * steps as f64),
+        );
+    }
+    let t = track(&map, &cost, &xs, &u0).expect("tracker");
+    let trackers = vec![t.clone(), t];
+    let blend = TrackerBlend {
+        trackers: &trackers,
+        weights: vec![1.0, 1.0],
+        lambda: 1.0,
+        limits: None,
+        mode: BlendMode::Lbc,
+    };
+    let (mut u, mut a, mut ui) = ([0.0], [0.0; 2], [0.0]);
+    let xq = [-1.4, 0.1, 0.2, -0.1];
+    push(
+        "lbc.acrobot.policy_evals_per_s",
+        throughput(min_seconds, steps as u64, || {
+            for k in 0..steps {
+                black_box(blend.control(&xq, k, &mut u, &mut a, &mut ui).ok());
+            }
+        }),
+    );
+}
+
+/// The truck's, the lander's and the dolphin's simulators, 1000 steps per call.
+fn truck_lander_dolphin_sims(min_seconds: f64, push: Push) {
+    let steps = 1000;
     let mut t = Simulator::new(crate::physics::truck::Truck::default(), IntegratorKind::Rk4);
     let t0 = [0.0, 0.0, 0.3, 4.0, 1.0, 0.1];
     push(
@@ -214,20 +255,11 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             sim_steps(&mut d, &d0, &[0.5, -0.3, 0.2, 0.8, -0.6, 0.1], 0.002, steps)
         }),
     );
-    for (model, hidden, examples) in [
-        (NetModel::PendulumPassive, 20, 2400),
-        (NetModel::PendulumActive, 20, 3000),
-        (NetModel::PendulumExt, 20, 3000),
-        (NetModel::Lander, 50, 13500),
-        (NetModel::Truck, 40, 5200),
-    ] {
-        for (name, value) in emulator_metrics(model, hidden, examples, min_seconds) {
-            push(&name, value);
-        }
-    }
-    for (name, value) in emulator_rollouts(min_seconds) {
-        push(&name, value);
-    }
+}
+
+/// The cube lattice's simulator and one hill-climbing evaluation on it.
+fn lattice_metrics(min_seconds: f64, push: Push) {
+    let steps = 1000;
     // The cube lattice under alternating scale_z reflexes (a squash-and-stretch hop): 1000
     // steps of 10 ms, switching every 0.25 s.
     let model = LatticeModel::new(Lattice::cube())
@@ -282,14 +314,4 @@ pub fn metrics(min_seconds: f64) -> Vec<Metric> {
             j += 1;
         }),
     );
-    push("bptt.lander.iters_per_s", bptt_lander(min_seconds));
-    push("bptt.17-50-13.bare.iters_per_s", bptt_bare(min_seconds));
-    for (name, value) in fma_peaks(min_seconds) {
-        push(&name, value);
-    }
-    for (name, value) in dolphin_metrics(min_seconds) {
-        push(&name, value);
-    }
-    push("bptt.dolphin.iters_per_s", bptt_dolphin(min_seconds));
-    out
 }

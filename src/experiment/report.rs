@@ -121,192 +121,14 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
     let mut order: Vec<&Resolved> = specs.iter().collect();
     order.sort_by_key(|r| paper_rank(&r.id));
     for r in order {
-        let dir = out.join(&r.id);
-        let rel_figures = relative(&dir, figures);
-        let mut details = format!(
-            "# {} — details\n\n*{}* — {}. The summary is in [REPORT.md](../REPORT.md#{}).\n\n",
-            r.id, r.title, r.paper_item, r.id
-        );
-        let (verdict, headline, reason, body) = if dir.join("run.json").exists() {
-            let seeds = run_seeds(&dir);
-            // With swept seeds the section reads the first seed's tables, then the spread; a
-            // family judging over seeds reads them all.
-            let pooled = r.family.seeds_pooled();
-            let first = seeds
-                .first()
-                .filter(|_| !pooled)
-                .map(|s| dir.join("seeds").join(s.to_string()));
-            match r.family.report(first.as_deref().unwrap_or(&dir)) {
-                Ok(f) => {
-                    let spread = seeds_section(r, &dir, &seeds, &mut unreadable);
-                    let _ = write!(
-                        details,
-                        "{}{}\n\n**Verdict: {}.** {}\n{}",
-                        match seeds.first().filter(|_| !pooled) {
-                            Some(s) => format!(
-                                "*Seed {s}, the first of {} (the verdict of each seed and the \
-                                 spread over seeds follow).*\n\n",
-                                seeds.len()
-                            ),
-                            None => String::new(),
-                        },
-                        f.ours.trim_end(),
-                        f.verdict.label(),
-                        f.why,
-                        spread
-                    );
-                    let reason = f.rule.as_ref().map_or_else(String::new, |x| x.reason());
-                    let mut body = format!("**Verdict: {}.**", f.verdict.label());
-                    if !reason.is_empty() {
-                        let _ = write!(body, " {}.", capitalized(&reason));
-                    }
-                    body.push_str("\n\n");
-                    // Over seeds, the verdict of each (its first paragraph; the spread is
-                    // in the details).
-                    if let Some(line) = spread.split("\n\n").map(str::trim).find(|p| !p.is_empty())
-                    {
-                        let _ = write!(body, "{line}\n\n");
-                    }
-                    if let Some(rule) = &f.rule {
-                        body.push_str(&rule.table());
-                    }
-                    (
-                        f.verdict.label().to_string(),
-                        headline(&f.why),
-                        reason,
-                        body,
-                    )
-                }
-                Err(e) => {
-                    unreadable.push(format!("{}: {e}", r.id));
-                    (
-                        "error".into(),
-                        String::new(),
-                        String::new(),
-                        format!("Could not read the results: {e}\n"),
-                    )
-                }
-            }
-        } else {
-            (
-                "not run".into(),
-                String::new(),
-                String::new(),
-                "Not run yet.\n\n".into(),
-            )
-        };
-        let stale = run_provenance(&dir, code_rev.as_deref());
-        let mut mark = if stale.is_some() { " (stale)" } else { "" }.to_string();
-        if !r.history.is_empty() {
-            let _ = write!(mark, " (changed after results: {})", r.history.len());
-        }
-        let cell = |t: &str| t.replace('|', "\\|");
-        rows.push((
-            format!(
-                "| [`{}`](#{}) | {} | {} | {} | {verdict}{mark} | {} |",
-                r.id,
-                r.id,
-                cell(if r.claim.is_empty() {
-                    &r.paper_item
-                } else {
-                    &r.claim
-                }),
-                cell(&r.paper_number),
-                cell(&headline),
-                cell(&reason)
-            ),
-            verdict,
-            if r.family.is_check() {
-                Group::Check
-            } else if r.family.is_beyond() {
-                Group::Beyond
-            } else {
-                Group::Reproduction
-            },
-        ));
-        let _ = writeln!(
-            sections,
-            "\n## {}\n\n<a id=\"{}\"></a>*{}* — {}\n",
-            r.id, r.id, r.title, r.paper_item
-        );
-        if !r.paper_claim.is_empty() {
-            let _ = writeln!(sections, "**Paper:** {}\n", r.paper_claim.trim());
-        }
-        if !headline.is_empty() {
-            let _ = writeln!(sections, "**Ours:** {headline}\n");
-        }
-        sections.push_str(&body);
-        // The section says when, what kind, the verdict then and why; the old rule's wording
-        // is in the details.
-        if !r.history.is_empty() {
-            let _ = writeln!(
-                sections,
-                "- History (changed after a result was seen; the old rules in the details):"
-            );
-            let _ = writeln!(
-                details,
-                "\n**History** (changes made after a result was seen, from the spec's `[[history]]`):\n"
-            );
-            for h in &r.history {
-                let _ = writeln!(sections, "  - {}", h.short());
-                let _ = writeln!(details, "- {}", h.line());
-            }
-        }
-        // How the run went (seed, scale, time, cached nets) is in the details.
-        if let Some(meta) = read_run_json(&dir) {
-            let _ = writeln!(details, "\n**Run:** {meta}\n");
-        }
-        if let Some(w) = stale {
-            let _ = writeln!(sections, "- Stale results: {w}.");
-        }
-        if dir.is_dir() {
-            let _ = writeln!(
-                sections,
-                "- Details (every table, the full reasons, every figure): [`{}/DETAILS.md`]({}/DETAILS.md)",
-                r.id, r.id
-            );
-        }
-        let figs = figure_files(figures, &r.id);
-        let rel = relative(out, figures);
-        // The main figure is the first the family captions (its own order), else the first.
-        let main = r
-            .family
-            .captions()
-            .iter()
-            .find_map(|(name, _)| figs.iter().position(|f| figure_name(&r.id, f) == *name))
-            .unwrap_or(0);
-        for (k, f) in figs.iter().enumerate() {
-            let name = figure_name(&r.id, f);
-            let caption = caption(r.family.captions(), name)
-                .or((name == CHECKS_FIGURE).then_some(CHECKS_CAPTION))
-                .map_or_else(
-                    || format!("{} {NO_CAPTION}", name.replace('_', " ")),
-                    str::to_string,
-                );
-            let show = |md: &mut String, rel: &Path| {
-                if f.ends_with(".gif") {
-                    let _ = writeln!(
-                        md,
-                        "\n*Animation* [`{f}`]({}/{f}): {caption}",
-                        rel.display()
-                    );
-                } else {
-                    let _ = writeln!(
-                        md,
-                        "\n![{f}]({}/{f})\n\n*Figure `{name}`: {caption}*",
-                        rel.display()
-                    );
-                }
-            };
-            // The report shows the main figure; the details all.
-            if k == main {
-                show(&mut sections, &rel);
-            }
-            show(&mut details, &rel_figures);
-        }
-        if dir.is_dir() {
-            atomic_write(&dir.join("DETAILS.md"), details.as_bytes())?;
-        }
+        rows.push(experiment_section(
+            out,
+            figures,
+            r,
+            code_rev.as_deref(),
+            &mut sections,
+            &mut unreadable,
+        )?);
     }
     md.push_str(&summary(&rows));
     md.push_str(GLOSSARY);
@@ -321,6 +143,244 @@ pub fn write_report(out: &Path, figures: &Path, specs: &[Resolved]) -> Result<Pa
         )));
     }
     Ok(path)
+}
+
+/// One experiment's judgement from its results, for the summary and its section.
+struct Judged {
+    /// The verdict's label, "error" or "not run".
+    verdict: String,
+    /// The first sentence of why.
+    headline: String,
+    /// The rule's reason, if any.
+    reason: String,
+    /// The section's body: the verdict, the verdict per seed and the rule's table.
+    body: String,
+}
+
+/// One experiment: its summary row, its section appended to `sections`, and its DETAILS.md
+/// written; results that cannot be read are added to `unreadable`.
+fn experiment_section(
+    out: &Path,
+    figures: &Path,
+    r: &Resolved,
+    code_rev: Option<&str>,
+    sections: &mut String,
+    unreadable: &mut Vec<String>,
+) -> Result<(String, String, Group), Error> {
+    let dir = out.join(&r.id);
+    let mut details = format!(
+        "# {} — details\n\n*{}* — {}. The summary is in [REPORT.md](../REPORT.md#{}).\n\n",
+        r.id, r.title, r.paper_item, r.id
+    );
+    let j = judge(r, &dir, &mut details, unreadable);
+    let stale = run_provenance(&dir, code_rev);
+    let row = summary_row(r, stale.is_some(), &j);
+    let _ = writeln!(
+        sections,
+        "\n## {}\n\n<a id=\"{}\"></a>*{}* — {}\n",
+        r.id, r.id, r.title, r.paper_item
+    );
+    if !r.paper_claim.is_empty() {
+        let _ = writeln!(sections, "**Paper:** {}\n", r.paper_claim.trim());
+    }
+    if !j.headline.is_empty() {
+        let _ = writeln!(sections, "**Ours:** {}\n", j.headline);
+    }
+    sections.push_str(&j.body);
+    history_notes(r, sections, &mut details);
+    // How the run went (seed, scale, time, cached nets) is in the details.
+    if let Some(meta) = read_run_json(&dir) {
+        let _ = writeln!(details, "\n**Run:** {meta}\n");
+    }
+    if let Some(w) = stale {
+        let _ = writeln!(sections, "- Stale results: {w}.");
+    }
+    if dir.is_dir() {
+        let _ = writeln!(
+            sections,
+            "- Details (every table, the full reasons, every figure): [`{}/DETAILS.md`]({}/DETAILS.md)",
+            r.id, r.id
+        );
+    }
+    figure_notes(out, figures, r, sections, &mut details);
+    if dir.is_dir() {
+        atomic_write(&dir.join("DETAILS.md"), details.as_bytes())?;
+    }
+    Ok(row)
+}
+
+/// The experiment's judgement by its family from the results in `dir` (the first seed's,
+/// with the spread over seeds after it), its reasons appended to `details`.
+fn judge(r: &Resolved, dir: &Path, details: &mut String, unreadable: &mut Vec<String>) -> Judged {
+    if dir.join("run.json").exists() {
+        let seeds = run_seeds(dir);
+        // With swept seeds the section reads the first seed's tables, then the spread; a
+        // family judging over seeds reads them all.
+        let pooled = r.family.seeds_pooled();
+        let first = seeds
+            .first()
+            .filter(|_| !pooled)
+            .map(|s| dir.join("seeds").join(s.to_string()));
+        match r.family.report(first.as_deref().unwrap_or(dir)) {
+            Ok(f) => {
+                let spread = seeds_section(r, dir, &seeds, unreadable);
+                let _ = write!(
+                    details,
+                    "{}{}\n\n**Verdict: {}.** {}\n{}",
+                    match seeds.first().filter(|_| !pooled) {
+                        Some(s) => format!(
+                            "*Seed {s}, the first of {} (the verdict of each seed and the \
+                             spread over seeds follow).*\n\n",
+                            seeds.len()
+                        ),
+                        None => String::new(),
+                    },
+                    f.ours.trim_end(),
+                    f.verdict.label(),
+                    f.why,
+                    spread
+                );
+                let reason = f.rule.as_ref().map_or_else(String::new, |x| x.reason());
+                let mut body = format!("**Verdict: {}.**", f.verdict.label());
+                if !reason.is_empty() {
+                    let _ = write!(body, " {}.", capitalized(&reason));
+                }
+                body.push_str("\n\n");
+                // Over seeds, the verdict of each (its first paragraph; the spread is
+                // in the details).
+                if let Some(line) = spread.split("\n\n").map(str::trim).find(|p| !p.is_empty()) {
+                    let _ = write!(body, "{line}\n\n");
+                }
+                if let Some(rule) = &f.rule {
+                    body.push_str(&rule.table());
+                }
+                Judged {
+                    verdict: f.verdict.label().to_string(),
+                    headline: headline(&f.why),
+                    reason,
+                    body,
+                }
+            }
+            Err(e) => {
+                unreadable.push(format!("{}: {e}", r.id));
+                Judged {
+                    verdict: "error".into(),
+                    headline: String::new(),
+                    reason: String::new(),
+                    body: format!("Could not read the results: {e}\n"),
+                }
+            }
+        }
+    } else {
+        Judged {
+            verdict: "not run".into(),
+            headline: String::new(),
+            reason: String::new(),
+            body: "Not run yet.\n\n".into(),
+        }
+    }
+}
+
+/// The experiment's row of the summary table, marked stale or changed after results.
+fn summary_row(r: &Resolved, stale: bool, j: &Judged) -> (String, String, Group) {
+    let mut mark = if stale { " (stale)" } else { "" }.to_string();
+    if !r.history.is_empty() {
+        let _ = write!(mark, " (changed after results: {})", r.history.len());
+    }
+    let cell = |t: &str| t.replace('|', "\\|");
+    (
+        format!(
+            "| [`{}`](#{}) | {} | {} | {} | {}{mark} | {} |",
+            r.id,
+            r.id,
+            cell(if r.claim.is_empty() {
+                &r.paper_item
+            } else {
+                &r.claim
+            }),
+            cell(&r.paper_number),
+            cell(&j.headline),
+            j.verdict,
+            cell(&j.reason)
+        ),
+        j.verdict.clone(),
+        if r.family.is_check() {
+            Group::Check
+        } else if r.family.is_beyond() {
+            Group::Beyond
+        } else {
+            Group::Reproduction
+        },
+    )
+}
+
+/// The spec's history: a short line per change in the section, the full one in the details.
+fn history_notes(r: &Resolved, sections: &mut String, details: &mut String) {
+    // The section says when, what kind, the verdict then and why; the old rule's wording
+    // is in the details.
+    if !r.history.is_empty() {
+        let _ = writeln!(
+            sections,
+            "- History (changed after a result was seen; the old rules in the details):"
+        );
+        let _ = writeln!(
+            details,
+            "\n**History** (changes made after a result was seen, from the spec's `[[history]]`):\n"
+        );
+        for h in &r.history {
+            let _ = writeln!(sections, "  - {}", h.short());
+            let _ = writeln!(details, "- {}", h.line());
+        }
+    }
+}
+
+/// The experiment's figures: the main one in the section, every one in the details.
+fn figure_notes(
+    out: &Path,
+    figures: &Path,
+    r: &Resolved,
+    sections: &mut String,
+    details: &mut String,
+) {
+    let rel_figures = relative(&out.join(&r.id), figures);
+    let figs = figure_files(figures, &r.id);
+    let rel = relative(out, figures);
+    // The main figure is the first the family captions (its own order), else the first.
+    let main = r
+        .family
+        .captions()
+        .iter()
+        .find_map(|(name, _)| figs.iter().position(|f| figure_name(&r.id, f) == *name))
+        .unwrap_or(0);
+    for (k, f) in figs.iter().enumerate() {
+        let name = figure_name(&r.id, f);
+        let caption = caption(r.family.captions(), name)
+            .or((name == CHECKS_FIGURE).then_some(CHECKS_CAPTION))
+            .map_or_else(
+                || format!("{} {NO_CAPTION}", name.replace('_', " ")),
+                str::to_string,
+            );
+        let show = |md: &mut String, rel: &Path| {
+            if f.ends_with(".gif") {
+                let _ = writeln!(
+                    md,
+                    "\n*Animation* [`{f}`]({}/{f}): {caption}",
+                    rel.display()
+                );
+            } else {
+                let _ = writeln!(
+                    md,
+                    "\n![{f}]({}/{f})\n\n*Figure `{name}`: {caption}*",
+                    rel.display()
+                );
+            }
+        };
+        // The report shows the main figure; the details all.
+        if k == main {
+            show(sections, &rel);
+        }
+        show(details, &rel_figures);
+    }
 }
 
 /// The papers' own order, for the report's sections and tables: NeuroAnimator's tables and

@@ -259,7 +259,35 @@ pub fn resolve(
     registry: &Registry,
 ) -> Result<Resolved, SpecError> {
     let raw = &file.raw;
-    let family = registry.find(&raw.experiment).ok_or_else(|| {
+    let family = find_family(file, registry)?;
+    check_claim_and_history(file)?;
+    let over = overrides(file, opts)?;
+    let seeds = seed_axis(file, opts, &over)?;
+    let axes = sweep_axes(file, &over.sweep)?;
+    let total = sweep_size(file, opts, &axes, seeds.as_ref().map_or(1, |s| s.len()))?;
+    let points = sweep_points(file, opts, family, &over.sets, &axes, total)?;
+    Ok(Resolved {
+        id: raw.id.clone(),
+        title: raw.title.clone(),
+        paper_item: raw.paper_item.clone(),
+        paper_claim: raw.paper_claim.clone(),
+        claim: raw.claim.clone(),
+        paper_number: raw.paper_number.clone(),
+        family,
+        seed: over.seed,
+        quick: opts.quick,
+        points,
+        path: file.path.clone(),
+        seeds,
+        options: opts.clone(),
+        history: raw.history.clone(),
+    })
+}
+
+/// The experiment file's family, from `registry`.
+fn find_family(file: &SpecFile, registry: &Registry) -> Result<&'static dyn Experiment, SpecError> {
+    let raw = &file.raw;
+    registry.find(&raw.experiment).ok_or_else(|| {
         let known: Vec<&str> = registry.families().iter().map(|f| f.kind()).collect();
         file.error_at(
             "experiment",
@@ -269,7 +297,12 @@ pub fn resolve(
                 known.join(", ")
             ),
         )
-    })?;
+    })
+}
+
+/// The claim within its word limit and every history entry well formed.
+fn check_claim_and_history(file: &SpecFile) -> Result<(), SpecError> {
+    let raw = &file.raw;
     let words = raw.claim.split_whitespace().count();
     if words > super::spec::CLAIM_WORDS {
         return Err(file.error_at(
@@ -286,6 +319,49 @@ pub fn resolve(
             "a history entry needs a date (YYYY-MM-DD), the old rule or setup (`old`) and the reason (`reason`)",
         ));
     }
+    Ok(())
+}
+
+/// `(as given, key inside [params], value)` of a `--set`.
+type Set = (String, String, toml::Value);
+
+/// The file's seed and sweep after `--seed` and the `--set` overrides.
+struct Overrides {
+    /// The run's seed.
+    seed: u64,
+    /// Whether `--seed` or `--set seed=` gave it.
+    seed_overridden: bool,
+    /// The sweep's axes less `seeds` and less every key a `--set` overrides.
+    sweep: toml::Table,
+    /// The file's `seeds` sweep axis, if any.
+    seeds_axis: Option<toml::Value>,
+    /// Each `--set` other than the seed, in the order given.
+    sets: Vec<Set>,
+}
+
+/// An error in the `--set` override of `key`.
+fn set_err(key: &str, message: String) -> SpecError {
+    SpecError {
+        path: PathBuf::from("--set"),
+        line: None,
+        key: key.to_string(),
+        message,
+    }
+}
+
+/// An error in the command-line flag `flag`.
+fn flag_err(flag: &str, message: String) -> SpecError {
+    SpecError {
+        path: PathBuf::from(flag),
+        line: None,
+        key: flag.trim_start_matches('-').to_string(),
+        message,
+    }
+}
+
+/// Applies `--seed` and reads the `--set` overrides: a swept key that is set leaves the sweep.
+fn overrides(file: &SpecFile, opts: &ResolveOptions) -> Result<Overrides, SpecError> {
+    let raw = &file.raw;
     let mut seed = raw.seed;
     if let Some(s) = opts.seed {
         seed = s;
@@ -295,18 +371,6 @@ pub fn resolve(
     let mut seed_overridden = opts.seed.is_some();
     // `(as given, key inside [params], value)` of each `--set`.
     let mut sets: Vec<(String, String, toml::Value)> = Vec::new();
-    let set_err = |key: &str, message: String| SpecError {
-        path: PathBuf::from("--set"),
-        line: None,
-        key: key.to_string(),
-        message,
-    };
-    let flag_err = |flag: &str, message: String| SpecError {
-        path: PathBuf::from(flag),
-        line: None,
-        key: flag.trim_start_matches('-').to_string(),
-        message,
-    };
     for s in &opts.sets {
         let (k, v) = s
             .split_once('=')
@@ -324,51 +388,79 @@ pub fn resolve(
         sweep.remove(key);
         sets.push((k.to_string(), key.to_string(), parse_value(v.trim())));
     }
-    // `[params]`, with `[quick]` over it in quick mode, then the `--set` overrides.
-    let params_for = |quick: bool| -> Result<toml::Table, SpecError> {
-        let mut params = raw.params.clone();
-        if quick {
-            merge(&mut params, &raw.quick);
-        }
-        for (given, key, value) in &sets {
-            set_path(&mut params, key, value.clone()).map_err(|m| set_err(given, m))?;
-        }
-        Ok(params)
-    };
-    // Seeds: an explicit seed override drops a `seeds` axis, as overriding a swept key does.
-    let seeds = match (seeds_axis.filter(|_| !seed_overridden), opts.seeds) {
-        (Some(_), Some(_)) => {
-            return Err(file.error_at(
-                "sweep.seeds",
-                "give either --seeds or a `seeds` sweep axis, not both",
-            ))
-        }
-        (Some(axis), None) => Some(seed_list(file, &axis)?),
-        (None, Some(0)) => return Err(flag_err("--seeds", "must be at least 1".into())),
-        (None, Some(k)) if k > MAX_SEEDS => {
-            return Err(flag_err(
-                "--seeds",
-                format!("must be at most {MAX_SEEDS}, got {k}"),
-            ))
-        }
-        (None, Some(k)) => Some(
-            (0..k as u64)
-                .map(|i| seed.checked_add(i).filter(|&s| i64::try_from(s).is_ok()))
-                .collect::<Option<Vec<u64>>>()
-                .ok_or_else(|| {
-                    flag_err(
-                        "--seeds",
-                        format!(
+    Ok(Overrides {
+        seed,
+        seed_overridden,
+        sweep,
+        seeds_axis,
+        sets,
+    })
+}
+
+/// `[params]`, with `[quick]` over it in quick mode, then the `--set` overrides.
+fn params_for(file: &SpecFile, sets: &[Set], quick: bool) -> Result<toml::Table, SpecError> {
+    let raw = &file.raw;
+    let mut params = raw.params.clone();
+    if quick {
+        merge(&mut params, &raw.quick);
+    }
+    for (given, key, value) in sets {
+        set_path(&mut params, key, value.clone()).map_err(|m| set_err(given, m))?;
+    }
+    Ok(params)
+}
+
+/// The seeds swept: a `seeds` axis or `--seeds K`; an explicit seed override drops a `seeds`
+/// axis, as overriding a swept key does.
+fn seed_axis(
+    file: &SpecFile,
+    opts: &ResolveOptions,
+    over: &Overrides,
+) -> Result<Option<Vec<u64>>, SpecError> {
+    let seed = over.seed;
+    let seeds_axis = over.seeds_axis.clone();
+    let seed_overridden = over.seed_overridden;
+    Ok(
+        match (seeds_axis.filter(|_| !seed_overridden), opts.seeds) {
+            (Some(_), Some(_)) => {
+                return Err(file.error_at(
+                    "sweep.seeds",
+                    "give either --seeds or a `seeds` sweep axis, not both",
+                ))
+            }
+            (Some(axis), None) => Some(seed_list(file, &axis)?),
+            (None, Some(0)) => return Err(flag_err("--seeds", "must be at least 1".into())),
+            (None, Some(k)) if k > MAX_SEEDS => {
+                return Err(flag_err(
+                    "--seeds",
+                    format!("must be at most {MAX_SEEDS}, got {k}"),
+                ))
+            }
+            (None, Some(k)) => Some(
+                (0..k as u64)
+                    .map(|i| seed.checked_add(i).filter(|&s| i64::try_from(s).is_ok()))
+                    .collect::<Option<Vec<u64>>>()
+                    .ok_or_else(|| {
+                        flag_err(
+                            "--seeds",
+                            format!(
                             "seeds {seed} to {seed} + {k} - 1 pass 2^63 (the `seed` column is i64)"
                         ),
-                    )
-                })?,
-        ),
-        (None, None) => None,
-    };
-    // Sweep axes: non-empty arrays of distinct values.
+                        )
+                    })?,
+            ),
+            (None, None) => None,
+        },
+    )
+}
+
+/// Sweep axes: non-empty arrays of distinct values.
+fn sweep_axes(
+    file: &SpecFile,
+    sweep: &toml::Table,
+) -> Result<Vec<(String, Vec<toml::Value>)>, SpecError> {
     let mut axes: Vec<(String, Vec<toml::Value>)> = Vec::new();
-    for (k, v) in &sweep {
+    for (k, v) in sweep {
         match v {
             toml::Value::Array(a) if !a.is_empty() => {
                 for (i, x) in a.iter().enumerate() {
@@ -391,7 +483,17 @@ pub fn resolve(
             }
         }
     }
-    // Sizes, before anything is allocated for them.
+    Ok(axes)
+}
+
+/// The number of sweep points, checked (with `n_seeds`) against the limits before anything
+/// is allocated for them.
+fn sweep_size(
+    file: &SpecFile,
+    opts: &ResolveOptions,
+    axes: &[(String, Vec<toml::Value>)],
+    n_seeds: usize,
+) -> Result<usize, SpecError> {
     let total = axes
         .iter()
         .try_fold(1usize, |n, (_, v)| n.checked_mul(v.len()))
@@ -406,7 +508,6 @@ pub fn resolve(
                 ),
             )
         })?;
-    let n_seeds = seeds.as_ref().map_or(1, |s| s.len());
     if total * n_seeds > MAX_UNITS {
         let message = format!(
             "{total} sweep points x {n_seeds} seeds = {} runs are more than {MAX_UNITS}, the most a run may have",
@@ -417,35 +518,56 @@ pub fn resolve(
             None => file.error_at("sweep", message),
         });
     }
-    // Where a family's error belongs: a sweep value, a `--set`, `[quick]` (in quick mode) or
-    // `[params]`.
-    let locate = |pe: ParamError, axis_index: &[usize], quick: bool| -> SpecError {
-        let root = pe.key.split(['.', '[']).next().unwrap_or("").to_string();
-        if let Some(pos) = axes.iter().position(|(k, _)| *k == pe.key || *k == root) {
-            return file.error_at(
-                &format!("sweep.{}[{}]", axes[pos].0, axis_index[pos]),
-                pe.message,
-            );
-        }
-        // The last `--set` that wrote the key, a table around it or a key inside it.
-        if let Some((given, key, _)) = sets
-            .iter()
-            .rev()
-            .find(|(_, key, _)| nested(&pe.key, key) || nested(key, &pe.key))
-        {
-            let shown = if nested(&pe.key, key) { &pe.key } else { given };
-            return set_err(shown, pe.message);
-        }
-        if quick && raw.quick.contains_key(&root) {
-            return file.error_at(&format!("quick.{}", pe.key), pe.message);
-        }
-        file.error_at(&format!("params.{}", pe.key), pe.message)
-    };
-    // Every point in the mode asked for; then, so that neither table hides a mistake until
-    // the other mode runs, every point in the other mode, whose errors say which mode.
+    Ok(total)
+}
+
+/// Where a family's error belongs: a sweep value, a `--set`, `[quick]` (in quick mode) or
+/// `[params]`.
+fn locate(
+    file: &SpecFile,
+    axes: &[(String, Vec<toml::Value>)],
+    sets: &[Set],
+    pe: ParamError,
+    axis_index: &[usize],
+    quick: bool,
+) -> SpecError {
+    let raw = &file.raw;
+    let root = pe.key.split(['.', '[']).next().unwrap_or("").to_string();
+    if let Some(pos) = axes.iter().position(|(k, _)| *k == pe.key || *k == root) {
+        return file.error_at(
+            &format!("sweep.{}[{}]", axes[pos].0, axis_index[pos]),
+            pe.message,
+        );
+    }
+    // The last `--set` that wrote the key, a table around it or a key inside it.
+    if let Some((given, key, _)) = sets
+        .iter()
+        .rev()
+        .find(|(_, key, _)| nested(&pe.key, key) || nested(key, &pe.key))
+    {
+        let shown = if nested(&pe.key, key) { &pe.key } else { given };
+        return set_err(shown, pe.message);
+    }
+    if quick && raw.quick.contains_key(&root) {
+        return file.error_at(&format!("quick.{}", pe.key), pe.message);
+    }
+    file.error_at(&format!("params.{}", pe.key), pe.message)
+}
+
+/// Every point in the mode asked for, each resolved by its family; then, so that neither
+/// table hides a mistake until the other mode runs, every point in the other mode, whose
+/// errors say which mode.
+fn sweep_points(
+    file: &SpecFile,
+    opts: &ResolveOptions,
+    family: &'static dyn Experiment,
+    sets: &[Set],
+    axes: &[(String, Vec<toml::Value>)],
+    total: usize,
+) -> Result<Vec<SweepPoint>, SpecError> {
     let mut points = Vec::with_capacity(total);
     for quick in [opts.quick, !opts.quick] {
-        let params = params_for(quick)?;
+        let params = params_for(file, sets, quick)?;
         for flat in 0..total {
             // Row-major: the last axis varies fastest.
             let mut idx = vec![0; axes.len()];
@@ -466,7 +588,7 @@ pub fn resolve(
                 Ok(job) if quick == opts.quick => points.push(SweepPoint { values, job }),
                 Ok(_) => {}
                 Err(e) => {
-                    let mut err = locate(e, &idx, quick);
+                    let mut err = locate(file, axes, sets, e, &idx, quick);
                     if quick != opts.quick && !err.key.starts_with("quick.") {
                         err.message = format!(
                             "{} ({})",
@@ -483,22 +605,7 @@ pub fn resolve(
             }
         }
     }
-    Ok(Resolved {
-        id: raw.id.clone(),
-        title: raw.title.clone(),
-        paper_item: raw.paper_item.clone(),
-        paper_claim: raw.paper_claim.clone(),
-        claim: raw.claim.clone(),
-        paper_number: raw.paper_number.clone(),
-        family,
-        seed,
-        quick: opts.quick,
-        points,
-        path: file.path.clone(),
-        seeds,
-        options: opts.clone(),
-        history: raw.history.clone(),
-    })
+    Ok(points)
 }
 
 /// Whether dotted key `inner` is `outer` or lies inside it (`a.b` and `a.b[2]` lie in `a`).

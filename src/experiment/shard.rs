@@ -260,108 +260,12 @@ pub fn read_shards(
     registry: &Registry,
 ) -> Result<MergedShards, Error> {
     let dir = out.join(&file.raw.id).join("shards");
-    let entries = std::fs::read_dir(&dir).map_err(|e| {
-        refuse(
-            &dir,
-            format!(
-                "no shards ({e}); run `motionlab run {} --shard I/N` for every I first",
-                file.raw.id
-            ),
-        )
-    })?;
-    let mut folders: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_dir())
-        .collect();
-    folders.sort();
-    let mut records: Vec<(PathBuf, ShardRecord)> = Vec::new();
-    for f in folders {
-        let path = f.join(SHARD_RECORD);
-        let text = std::fs::read_to_string(&path).map_err(|_| {
-            refuse(
-                &dir,
-                format!(
-                    "{} has no {SHARD_RECORD}: that shard did not finish (rerun it, with --resume \
-                     to keep its finished points)",
-                    f.display()
-                ),
-            )
-        })?;
-        let r: ShardRecord = serde_json::from_str(&text)
-            .map_err(|e| refuse(&dir, format!("{}: {e}", path.display())))?;
-        records.push((f, r));
-    }
-    let Some((first_dir, first)) = records.first().cloned() else {
+    let records = shard_records(file, &dir)?;
+    let Some((_, first)) = records.first().cloned() else {
         return Err(refuse(&dir, "no shards"));
     };
     let n = first.of;
-    for (f, r) in &records {
-        let name = f.file_name().and_then(|s| s.to_str()).unwrap_or("");
-        let differs = |what: &str| {
-            refuse(
-                &dir,
-                format!(
-                    "{} and {} come from different {what}",
-                    first_dir.display(),
-                    f.display()
-                ),
-            )
-        };
-        if r.id != file.raw.id {
-            return Err(refuse(
-                &dir,
-                format!("{} is a shard of `{}`", f.display(), r.id),
-            ));
-        }
-        if r.of != n {
-            return Err(refuse(
-                &dir,
-                format!(
-                    "{} is a shard of {} but {} one of {n}: shards of different counts N",
-                    f.display(),
-                    r.of,
-                    first_dir.display()
-                ),
-            ));
-        }
-        if r.spec_hash != first.spec_hash || r.options() != first.options() {
-            return Err(differs("specs (spec hash or options)"));
-        }
-        if r.git_revision != first.git_revision || r.git_dirty != first.git_dirty {
-            return Err(differs("code revisions"));
-        }
-        if r.shard == 0 || r.shard > n {
-            return Err(refuse(
-                &dir,
-                format!("{}: shard {} of {n} is out of range", f.display(), r.shard),
-            ));
-        }
-        if let Some((g, _)) = records
-            .iter()
-            .find(|(g, q)| g != f && q.shard == r.shard && g < f)
-        {
-            return Err(refuse(
-                &dir,
-                format!(
-                    "shard {} of {n} is duplicated ({} and {})",
-                    r.shard,
-                    g.display(),
-                    f.display()
-                ),
-            ));
-        }
-        if name != r.shard().dir_name() {
-            return Err(refuse(
-                &dir,
-                format!(
-                    "{} holds shard {} of {n}, whose folder is {}",
-                    f.display(),
-                    r.shard,
-                    r.shard().dir_name()
-                ),
-            ));
-        }
-    }
+    check_records(file, &dir, &records)?;
     let missing: Vec<String> = (1..=n)
         .filter(|i| !records.iter().any(|(_, r)| r.shard == *i))
         .map(|i| i.to_string())
@@ -412,6 +316,121 @@ pub fn read_shards(
         git_dirty: first.git_dirty,
         count: n,
     })
+}
+
+/// Every shard's record under `dir`, in folder order; a shard without one did not finish.
+fn shard_records(file: &SpecFile, dir: &Path) -> Result<Vec<(PathBuf, ShardRecord)>, Error> {
+    let entries = std::fs::read_dir(dir).map_err(|e| {
+        refuse(
+            dir,
+            format!(
+                "no shards ({e}); run `motionlab run {} --shard I/N` for every I first",
+                file.raw.id
+            ),
+        )
+    })?;
+    let mut folders: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
+    folders.sort();
+    let mut records: Vec<(PathBuf, ShardRecord)> = Vec::new();
+    for f in folders {
+        let path = f.join(SHARD_RECORD);
+        let text = std::fs::read_to_string(&path).map_err(|_| {
+            refuse(
+                dir,
+                format!(
+                    "{} has no {SHARD_RECORD}: that shard did not finish (rerun it, with --resume \
+                     to keep its finished points)",
+                    f.display()
+                ),
+            )
+        })?;
+        let r: ShardRecord = serde_json::from_str(&text)
+            .map_err(|e| refuse(dir, format!("{}: {e}", path.display())))?;
+        records.push((f, r));
+    }
+    Ok(records)
+}
+
+/// The shards are of this spec, one run of N shards from one spec and code revision, each
+/// once and in its own folder (`records` is not empty).
+fn check_records(
+    file: &SpecFile,
+    dir: &Path,
+    records: &[(PathBuf, ShardRecord)],
+) -> Result<(), Error> {
+    let (first_dir, first) = &records[0];
+    let n = first.of;
+    for (f, r) in records {
+        let name = f.file_name().and_then(|s| s.to_str()).unwrap_or("");
+        let differs = |what: &str| {
+            refuse(
+                dir,
+                format!(
+                    "{} and {} come from different {what}",
+                    first_dir.display(),
+                    f.display()
+                ),
+            )
+        };
+        if r.id != file.raw.id {
+            return Err(refuse(
+                dir,
+                format!("{} is a shard of `{}`", f.display(), r.id),
+            ));
+        }
+        if r.of != n {
+            return Err(refuse(
+                dir,
+                format!(
+                    "{} is a shard of {} but {} one of {n}: shards of different counts N",
+                    f.display(),
+                    r.of,
+                    first_dir.display()
+                ),
+            ));
+        }
+        if r.spec_hash != first.spec_hash || r.options() != first.options() {
+            return Err(differs("specs (spec hash or options)"));
+        }
+        if r.git_revision != first.git_revision || r.git_dirty != first.git_dirty {
+            return Err(differs("code revisions"));
+        }
+        if r.shard == 0 || r.shard > n {
+            return Err(refuse(
+                dir,
+                format!("{}: shard {} of {n} is out of range", f.display(), r.shard),
+            ));
+        }
+        if let Some((g, _)) = records
+            .iter()
+            .find(|(g, q)| g != f && q.shard == r.shard && g < f)
+        {
+            return Err(refuse(
+                dir,
+                format!(
+                    "shard {} of {n} is duplicated ({} and {})",
+                    r.shard,
+                    g.display(),
+                    f.display()
+                ),
+            ));
+        }
+        if name != r.shard().dir_name() {
+            return Err(refuse(
+                dir,
+                format!(
+                    "{} holds shard {} of {n}, whose folder is {}",
+                    f.display(),
+                    r.shard,
+                    r.shard().dir_name()
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

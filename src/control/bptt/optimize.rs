@@ -3,6 +3,7 @@
 //! best-so-far iterate ([`Learned`]).
 
 use super::{dot, norm, Bptt, Descent, DescentState, Schedule, StepRule};
+use crate::control::objective::GaussNewton;
 use crate::physics::differentiable::DifferentiableStep;
 
 /// One traced iteration: J and |∇J| at the iterate v^l (iteration 0 = the initial knots).
@@ -115,31 +116,18 @@ pub fn learn_with<D: DifferentiableStep>(
     let mut trace = Vec::with_capacity(iterations.min(4096) + 1);
     let (mut best_iteration, mut best_value, mut best_knots) = (0, f64::INFINITY, v.clone());
     let mut taken_scale = lambda;
-    // Levenberg–Marquardt: the terms' curvatures (an objective without one gets none, and the
-    // damping alone scales the step), the Gauss–Newton matrix, the damping μ and its growth ν.
-    let lm = matches!(schedule.rule, StepRule::LevenbergMarquardt { .. });
-    let curvature = if lm {
-        bptt.objective().gauss_newton().unwrap_or_default()
-    } else {
-        Vec::new()
-    };
-    let mut hmat = vec![0.0; if lm { d * d } else { 0 }];
-    let (mut mu, mut nu) = match schedule.rule {
-        StepRule::LevenbergMarquardt { damping, .. } => (damping, 2.0),
-        _ => (0.0, 2.0),
-    };
+    let Damping {
+        lm,
+        curvature,
+        mut hmat,
+        mut mu,
+        mut nu,
+    } = damping(bptt, schedule, d);
     if lm {
         taken_scale = mu;
     }
     for l in 0..=iterations {
-        if let StepRule::Reestimate { every } = schedule.rule {
-            if l > 0 && l % every == 0 {
-                let est = bptt.curvature(&v, schedule.curvature_iterations.max(1));
-                if est.is_finite() && est > 0.0 {
-                    lambda = est;
-                }
-            }
-        }
+        lambda = reestimated(bptt, &v, schedule, l, lambda);
         let j = if lm {
             bptt.gauss_newton(&v, &curvature, &mut g, &mut hmat)
         } else {
@@ -244,13 +232,87 @@ pub fn learn_with<D: DifferentiableStep>(
             }
         }
         bptt.project(&mut v);
-        // The momentum state carries the step actually taken (after projection); `trial`
-        // holds the previous iterate.
-        state.delta.resize(d, 0.0);
-        for (dl, (a, b)) in state.delta.iter_mut().zip(v.iter().zip(&trial)) {
-            *dl = a - b;
+        carry_step(&mut state, &v, &trial, d);
+    }
+    finish(bptt, v, trace, best_iteration, best_knots)
+}
+
+/// Levenberg–Marquardt's state: whether the schedule uses it, the terms' curvatures, the
+/// Gauss–Newton matrix (d × d), the damping μ and its growth ν.
+struct Damping {
+    lm: bool,
+    curvature: Vec<GaussNewton>,
+    hmat: Vec<f64>,
+    mu: f64,
+    nu: f64,
+}
+
+/// Levenberg–Marquardt's setup for `d` knots: the terms' curvatures (an objective without one
+/// gets none, and the damping alone scales the step), the Gauss–Newton matrix, the damping μ
+/// and its growth ν; empty, with μ = 0, under other step rules.
+fn damping<D: DifferentiableStep>(bptt: &Bptt<'_, D>, schedule: &Schedule, d: usize) -> Damping {
+    let lm = matches!(schedule.rule, StepRule::LevenbergMarquardt { .. });
+    let curvature = if lm {
+        bptt.objective().gauss_newton().unwrap_or_default()
+    } else {
+        Vec::new()
+    };
+    let hmat = vec![0.0; if lm { d * d } else { 0 }];
+    let (mu, nu) = match schedule.rule {
+        StepRule::LevenbergMarquardt { damping, .. } => (damping, 2.0),
+        _ => (0.0, 2.0),
+    };
+    Damping {
+        lm,
+        curvature,
+        hmat,
+        mu,
+        nu,
+    }
+}
+
+/// The step scale of iteration `l`: re-estimated from the curvature at `v` every `every`
+/// iterations under [`StepRule::Reestimate`] (where the estimate is finite and positive),
+/// else `lambda`.
+// `%` as the loop had it (`is_multiple_of` would differ for `every` = 0).
+#[allow(clippy::manual_is_multiple_of)]
+#[inline]
+fn reestimated<D: DifferentiableStep>(
+    bptt: &mut Bptt<'_, D>,
+    v: &[f64],
+    schedule: &Schedule,
+    l: usize,
+    lambda: f64,
+) -> f64 {
+    if let StepRule::Reestimate { every } = schedule.rule {
+        if l > 0 && l % every == 0 {
+            let est = bptt.curvature(v, schedule.curvature_iterations.max(1));
+            if est.is_finite() && est > 0.0 {
+                return est;
+            }
         }
     }
+    lambda
+}
+
+/// The momentum state carries the step actually taken (after projection) to `v` from
+/// `trial`, the previous iterate; in place, no allocation after the first iteration.
+#[inline]
+fn carry_step(state: &mut DescentState, v: &[f64], trial: &[f64], d: usize) {
+    state.delta.resize(d, 0.0);
+    for (dl, (a, b)) in state.delta.iter_mut().zip(v.iter().zip(trial)) {
+        *dl = a - b;
+    }
+}
+
+/// The last iterate `v` rolled out once more, so the controls and states are its own.
+fn finish<D: DifferentiableStep>(
+    bptt: &mut Bptt<'_, D>,
+    v: Vec<f64>,
+    trace: Vec<IterationTrace>,
+    best_iteration: usize,
+    best_knots: Vec<f64>,
+) -> Learned {
     bptt.rollout(&v);
     Learned {
         knots: v,

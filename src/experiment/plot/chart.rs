@@ -33,37 +33,7 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
                 .collect()
         })
         .collect();
-    let span = |vals: Vec<f64>, log: bool| -> (f64, f64) {
-        let t: Vec<f64> = vals.into_iter().filter_map(|v| tr(v, log)).collect();
-        let (a, b) = range(t.into_iter());
-        if log {
-            (10f64.powf(a), 10f64.powf(b))
-        } else {
-            (a, b)
-        }
-    };
-    // Bars extend half a width to either side of their x.
-    let xr = match p.x_range {
-        Some(r) => r,
-        None => span(
-            p.series
-                .iter()
-                .zip(&data)
-                .flat_map(|(s, pts)| {
-                    let hw = match s.mark {
-                        Mark::Bars { half_width } => half_width,
-                        _ => 0.0,
-                    };
-                    pts.iter().flat_map(move |q| [q.0 - hw, q.0 + hw])
-                })
-                .collect(),
-            p.log_x,
-        ),
-    };
-    let mut yr = match p.y_range {
-        Some(r) => r,
-        None => span(data.iter().flatten().map(|q| q.1).collect(), p.log_y),
-    };
+    let (xr, yr) = data_ranges(p, &data);
     // The title at the scaled size, or smaller where that would not fit the panel's width
     // (a bold sans-serif character is about 0.6 of the font size wide).
     let chars = p.title.chars().count().max(1) as f64;
@@ -83,40 +53,7 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
         (px(12.0), px(4.0)),
         ("sans-serif", px(15.0)).into_font().color(&BLACK),
     ))?;
-    // The legend's corner, chosen before drawing; where every corner would cover data and the
-    // y range is ours to choose, the top is raised to leave room for it.
-    let labels: Vec<usize> = p
-        .series
-        .iter()
-        .filter(|s| !s.label.is_empty())
-        .map(|s| s.label.chars().count())
-        .collect();
-    let mut corner = p.legend;
-    if corner == Legend::Auto && !labels.is_empty() {
-        let (w, h) = plot_area.dim_in_pixel();
-        let plot_px = ((w as i32 - px(82.0)).max(50), (h as i32 - px(62.0)).max(50));
-        let size = (
-            labels.iter().copied().max().unwrap_or(0) as i32 * px(8.0) + px(40.0),
-            labels.len() as i32 * px(19.0) + px(10.0),
-        );
-        let place = |yr: (f64, f64)| {
-            let cover = covered_pixels(p, &data, (xr, yr), plot_px);
-            emptiest_corner(((0, 0), plot_px), size, &cover)
-        };
-        let (c, n) = place(yr);
-        corner = c;
-        if n > 0 && p.y_range.is_none() && size.1 + 12 < plot_px.1 / 2 {
-            let (t0, t1) = (tr(yr.0, p.log_y), tr(yr.1, p.log_y));
-            if let (Some(t0), Some(t1)) = (t0, t1) {
-                let t1 = t0 + (t1 - t0) * plot_px.1 as f64 / (plot_px.1 - size.1 - 12) as f64;
-                let raised = (yr.0, if p.log_y { 10f64.powf(t1) } else { t1 });
-                let (c2, n2) = place(raised);
-                if n2 < n {
-                    (corner, yr) = (c2, raised);
-                }
-            }
-        }
-    }
+    let (corner, yr) = legend_corner(p, &data, (xr, yr), plot_area.dim_in_pixel(), scale);
     let builder = || {
         let mut b = ChartBuilder::on(&plot_area);
         b.margin(px(10.0))
@@ -128,20 +65,7 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
         if p.log_x { 0.0 } else { xr.1 - xr.0 },
         if p.log_y { 0.0 } else { yr.1 - yr.0 },
     );
-    let xt = if !p.x_ticks.is_empty() {
-        p.x_ticks
-            .iter()
-            .map(|t| t.0)
-            .filter(|v| (xr.0.min(xr.1)..=xr.0.max(xr.1)).contains(v))
-            .collect()
-    } else if p.x_categories.is_empty() {
-        axis_ticks(xr.0, xr.1, p.log_x)
-    } else {
-        (0..p.x_categories.len())
-            .map(|i| i as f64)
-            .filter(|v| (xr.0.min(xr.1)..=xr.0.max(xr.1)).contains(v))
-            .collect()
-    };
+    let xt = x_ticks(p, xr);
     let yt = axis_ticks(yr.0, yr.1, p.log_y);
     let sci = (
         p.x_categories.is_empty() && p.x_ticks.is_empty() && needs_sci(&xt, snap.0),
@@ -184,6 +108,107 @@ pub(super) fn draw_panel<DB: DrawingBackend>(
             data,
             (snap, sci, corner, scale),
         ),
+    }
+}
+
+/// The x and y ranges: the panel's own, else the data's (`data` in plot coordinates, bars
+/// extending half a width to either side of their x).
+fn data_ranges(p: &Panel, data: &[Vec<(f64, f64)>]) -> ((f64, f64), (f64, f64)) {
+    let span = |vals: Vec<f64>, log: bool| -> (f64, f64) {
+        let t: Vec<f64> = vals.into_iter().filter_map(|v| tr(v, log)).collect();
+        let (a, b) = range(t.into_iter());
+        if log {
+            (10f64.powf(a), 10f64.powf(b))
+        } else {
+            (a, b)
+        }
+    };
+    // Bars extend half a width to either side of their x.
+    let xr = match p.x_range {
+        Some(r) => r,
+        None => span(
+            p.series
+                .iter()
+                .zip(data)
+                .flat_map(|(s, pts)| {
+                    let hw = match s.mark {
+                        Mark::Bars { half_width } => half_width,
+                        _ => 0.0,
+                    };
+                    pts.iter().flat_map(move |q| [q.0 - hw, q.0 + hw])
+                })
+                .collect(),
+            p.log_x,
+        ),
+    };
+    let yr = match p.y_range {
+        Some(r) => r,
+        None => span(data.iter().flatten().map(|q| q.1).collect(), p.log_y),
+    };
+    (xr, yr)
+}
+
+/// The legend's corner, chosen before drawing on a plot area of `dims` pixels, and the y
+/// range: where every corner would cover data and the y range is ours to choose, its top is
+/// raised to leave room for the legend.
+fn legend_corner(
+    p: &Panel,
+    data: &[Vec<(f64, f64)>],
+    (xr, mut yr): ((f64, f64), (f64, f64)),
+    (w, h): (u32, u32),
+    scale: f64,
+) -> (Legend, (f64, f64)) {
+    let px = |v: f64| (v * scale).round() as i32;
+    let labels: Vec<usize> = p
+        .series
+        .iter()
+        .filter(|s| !s.label.is_empty())
+        .map(|s| s.label.chars().count())
+        .collect();
+    let mut corner = p.legend;
+    if corner == Legend::Auto && !labels.is_empty() {
+        let plot_px = ((w as i32 - px(82.0)).max(50), (h as i32 - px(62.0)).max(50));
+        let size = (
+            labels.iter().copied().max().unwrap_or(0) as i32 * px(8.0) + px(40.0),
+            labels.len() as i32 * px(19.0) + px(10.0),
+        );
+        let place = |yr: (f64, f64)| {
+            let cover = covered_pixels(p, data, (xr, yr), plot_px);
+            emptiest_corner(((0, 0), plot_px), size, &cover)
+        };
+        let (c, n) = place(yr);
+        corner = c;
+        if n > 0 && p.y_range.is_none() && size.1 + 12 < plot_px.1 / 2 {
+            let (t0, t1) = (tr(yr.0, p.log_y), tr(yr.1, p.log_y));
+            if let (Some(t0), Some(t1)) = (t0, t1) {
+                let t1 = t0 + (t1 - t0) * plot_px.1 as f64 / (plot_px.1 - size.1 - 12) as f64;
+                let raised = (yr.0, if p.log_y { 10f64.powf(t1) } else { t1 });
+                let (c2, n2) = place(raised);
+                if n2 < n {
+                    (corner, yr) = (c2, raised);
+                }
+            }
+        }
+    }
+    (corner, yr)
+}
+
+/// The x axis's ticks: the panel's own within the range, else the axis's, or one per
+/// category.
+fn x_ticks(p: &Panel, xr: (f64, f64)) -> Vec<f64> {
+    if !p.x_ticks.is_empty() {
+        p.x_ticks
+            .iter()
+            .map(|t| t.0)
+            .filter(|v| (xr.0.min(xr.1)..=xr.0.max(xr.1)).contains(v))
+            .collect()
+    } else if p.x_categories.is_empty() {
+        axis_ticks(xr.0, xr.1, p.log_x)
+    } else {
+        (0..p.x_categories.len())
+            .map(|i| i as f64)
+            .filter(|v| (xr.0.min(xr.1)..=xr.0.max(xr.1)).contains(v))
+            .collect()
     }
 }
 

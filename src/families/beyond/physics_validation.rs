@@ -400,97 +400,9 @@ impl Family for PhysicsValidation {
         let drift = tables.require("energy_drift")?;
         let orders = tables.require("orders")?;
         let models = unique(&drift.strs("model"));
-        let (dm, di, dd, dv) = (
-            drift.strs("model"),
-            drift.strs("integrator"),
-            drift.f64s("dt"),
-            drift.f64s("drift"),
-        );
-        let (om, oi, oo) = (
-            orders.strs("model"),
-            orders.strs("integrator"),
-            orders.f64s("measured_order"),
-        );
-        let mut panels = Vec::new();
-        for m in &models {
-            let mut series = Vec::new();
-            for (c, integ) in unique(&di).iter().enumerate() {
-                let pts: Vec<(f64, f64)> = (0..dm.len())
-                    .filter(|&r| dm[r] == *m && di[r] == *integ)
-                    .map(|r| (dd[r], dv[r]))
-                    .collect();
-                let order = (0..om.len())
-                    .find(|&r| om[r] == *m && oi[r] == *integ)
-                    .map(|r| oo[r])
-                    .unwrap_or(f64::NAN);
-                let theory = IntegratorKind::from_name(integ)
-                    .map(|k| k.order())
-                    .unwrap_or(0);
-                series.push(
-                    Series::line(
-                        format!("{integ}: slope {order:.2} (theory {theory})"),
-                        pts,
-                        c,
-                    )
-                    .mark(Mark::LinePoints),
-                );
-            }
-            panels.push(Panel {
-                title: format!("{m}: energy drift vs time step"),
-                x_label: "time step dt (s)".into(),
-                y_label: "max |E(t) - E(0)| (J)".into(),
-                log_x: true,
-                log_y: true,
-                series,
-                ..Panel::default()
-            });
-        }
-        files.extend(fig.draw("energy_drift", &Figure::grid(panels, 2))?);
+        files.extend(fig.draw("energy_drift", &drift_figure(drift, orders, &models))?);
         if let Some(ad) = tables.get("adaptive") {
-            let (am, ar, adr, aa) = (
-                ad.strs("model"),
-                ad.f64s("rtol"),
-                ad.f64s("drift"),
-                ad.f64s("accepted_steps"),
-            );
-            let mut drift_series = Vec::new();
-            let mut step_series = Vec::new();
-            for (c, m) in unique(&am).iter().enumerate() {
-                let rows: Vec<usize> = (0..am.len()).filter(|&r| am[r] == *m).collect();
-                drift_series.push(
-                    Series::line(
-                        m.clone(),
-                        rows.iter().map(|&r| (ar[r], adr[r])).collect(),
-                        c,
-                    )
-                    .mark(Mark::LinePoints),
-                );
-                step_series.push(
-                    Series::line(m.clone(), rows.iter().map(|&r| (ar[r], aa[r])).collect(), c)
-                        .mark(Mark::LinePoints),
-                );
-            }
-            let panels = vec![
-                Panel {
-                    title: "adaptive RK45: energy drift vs tolerance".into(),
-                    x_label: "relative tolerance".into(),
-                    y_label: "max |E(t) - E(0)| (J)".into(),
-                    log_x: true,
-                    log_y: true,
-                    series: drift_series,
-                    ..Panel::default()
-                },
-                Panel {
-                    title: "adaptive RK45: accepted steps vs tolerance".into(),
-                    x_label: "relative tolerance".into(),
-                    y_label: "accepted steps".into(),
-                    log_x: true,
-                    log_y: true,
-                    series: step_series,
-                    ..Panel::default()
-                },
-            ];
-            files.extend(fig.draw("adaptive", &Figure::grid(panels, 2))?);
+            files.extend(fig.draw("adaptive", &adaptive_figure(ad))?);
         }
         for m in &models {
             let Some(t) = tables.get(&format!("passive_{m}")) else {
@@ -645,6 +557,105 @@ impl Family for PhysicsValidation {
             ),
         })
     }
+}
+
+/// Per model, the energy drift against the time step for every integrator (from
+/// `energy_drift`), labelled with its measured order (from `orders`) and the theory's.
+fn drift_figure(drift: &Table, orders: &Table, models: &[String]) -> Figure {
+    let (dm, di, dd, dv) = (
+        drift.strs("model"),
+        drift.strs("integrator"),
+        drift.f64s("dt"),
+        drift.f64s("drift"),
+    );
+    let (om, oi, oo) = (
+        orders.strs("model"),
+        orders.strs("integrator"),
+        orders.f64s("measured_order"),
+    );
+    let mut panels = Vec::new();
+    for m in models {
+        let mut series = Vec::new();
+        for (c, integ) in unique(&di).iter().enumerate() {
+            let pts: Vec<(f64, f64)> = (0..dm.len())
+                .filter(|&r| dm[r] == *m && di[r] == *integ)
+                .map(|r| (dd[r], dv[r]))
+                .collect();
+            let order = (0..om.len())
+                .find(|&r| om[r] == *m && oi[r] == *integ)
+                .map(|r| oo[r])
+                .unwrap_or(f64::NAN);
+            let theory = IntegratorKind::from_name(integ)
+                .map(|k| k.order())
+                .unwrap_or(0);
+            series.push(
+                Series::line(
+                    format!("{integ}: slope {order:.2} (theory {theory})"),
+                    pts,
+                    c,
+                )
+                .mark(Mark::LinePoints),
+            );
+        }
+        panels.push(Panel {
+            title: format!("{m}: energy drift vs time step"),
+            x_label: "time step dt (s)".into(),
+            y_label: "max |E(t) - E(0)| (J)".into(),
+            log_x: true,
+            log_y: true,
+            series,
+            ..Panel::default()
+        });
+    }
+    Figure::grid(panels, 2)
+}
+
+/// Adaptive RK45's energy drift and accepted steps against its tolerance (from `adaptive`).
+fn adaptive_figure(ad: &Table) -> Figure {
+    let (am, ar, adr, aa) = (
+        ad.strs("model"),
+        ad.f64s("rtol"),
+        ad.f64s("drift"),
+        ad.f64s("accepted_steps"),
+    );
+    let mut drift_series = Vec::new();
+    let mut step_series = Vec::new();
+    for (c, m) in unique(&am).iter().enumerate() {
+        let rows: Vec<usize> = (0..am.len()).filter(|&r| am[r] == *m).collect();
+        drift_series.push(
+            Series::line(
+                m.clone(),
+                rows.iter().map(|&r| (ar[r], adr[r])).collect(),
+                c,
+            )
+            .mark(Mark::LinePoints),
+        );
+        step_series.push(
+            Series::line(m.clone(), rows.iter().map(|&r| (ar[r], aa[r])).collect(), c)
+                .mark(Mark::LinePoints),
+        );
+    }
+    let panels = vec![
+        Panel {
+            title: "adaptive RK45: energy drift vs tolerance".into(),
+            x_label: "relative tolerance".into(),
+            y_label: "max |E(t) - E(0)| (J)".into(),
+            log_x: true,
+            log_y: true,
+            series: drift_series,
+            ..Panel::default()
+        },
+        Panel {
+            title: "adaptive RK45: accepted steps vs tolerance".into(),
+            x_label: "relative tolerance".into(),
+            y_label: "accepted steps".into(),
+            log_x: true,
+            log_y: true,
+            series: step_series,
+            ..Panel::default()
+        },
+    ];
+    Figure::grid(panels, 2)
 }
 
 #[cfg(test)]

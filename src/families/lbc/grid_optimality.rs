@@ -13,7 +13,7 @@
 use crate::bellman::combine::{blend_weights, naive_weights};
 use crate::bellman::grid_dp::{
     evaluate_mixture, mean_control, passive_transitions, solve_linear, solve_nonlinear, Grid2,
-    GridSystem,
+    GridSystem, Transitions,
 };
 use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Heatmap};
@@ -23,6 +23,7 @@ use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::lbc::rule_settings;
 use crate::row;
+use indicatif::ProgressBar;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -254,7 +255,6 @@ impl Job for Params {
         let n = grid.len();
         let steps = (self.horizon / self.dt).round() as usize;
         let lam = self.lambda;
-        let k = self.targets.len();
         let q: Vec<f64> = (0..n)
             .map(|s| GridSystem::state_cost(self, grid.point(s)))
             .collect();
@@ -267,146 +267,283 @@ impl Job for Params {
             .map(|&t| self.terminal(&grid, t))
             .collect();
         // Combined terminal cost −λ log Σ w_i e^{−g_i/λ}.
-        let mut alpha = vec![0.0; k];
-        let mut vals = vec![0.0; k];
-        let mut g_comb = vec![0.0; n];
-        for s in 0..n {
-            for i in 0..k {
-                vals[i] = g[i][s];
-            }
-            g_comb[s] = blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(other)?;
-        }
+        let g_comb = self.combine(&g, n)?;
         // Linearly-solvable problems: components, and the combined terminal solved directly.
-        let pb = ctx.progress((k + 1) as u64 * 2, "grid dynamic programming");
+        let pb = ctx.progress(
+            (self.targets.len() + 1) as u64 * 2,
+            "grid dynamic programming",
+        );
         let (z, z_direct) = ctx.stage("linear backups", || {
-            let z: Vec<Vec<Vec<f64>>> = g
-                .iter()
-                .map(|gi| {
-                    let h: Vec<f64> = gi.iter().map(|v| crate::portable::exp(-v / lam)).collect();
-                    let out = solve_linear(&p, &q, &h, self.dt, lam, steps);
-                    pb.inc(1);
-                    out
-                })
-                .collect();
-            let h: Vec<f64> = g_comb
-                .iter()
-                .map(|v| crate::portable::exp(-v / lam))
-                .collect();
-            let zd = solve_linear(&p, &q, &h, self.dt, lam, steps);
-            pb.inc(1);
-            (z, zd)
+            self.linear_backups(&p, &q, &g, &g_comb, steps, &pb)
         });
-        let v = |zz: f64| -lam * crate::portable::ln(zz);
-        // LBC value: −λ log Σ w_i z_i, every time step.
-        let (lbc_max, lbc_mean) = diff_stats((0..=steps).flat_map(|t| {
-            let z = &z;
-            let zd = &z_direct;
-            (0..n).map(move |s| {
-                let comb: f64 = (0..k).map(|i| self.weights[i] * z[i][t][s]).sum();
-                (v(comb), v(zd[t][s]))
-            })
-        }));
+        let lbc_value = self.lbc_value_gap(&z, &z_direct, n, steps);
         // Policies (mean control) at every step: direct, LBC (eq. 11), naive.
         let beta = naive_weights(&self.weights);
-        let mut u_direct0 = vec![0.0; n];
-        let mut u_lbc0 = vec![0.0; n];
-        let mut u_naive0 = vec![0.0; n];
-        let (mut lp_max, mut lp_sum, mut np_max, mut np_sum) = (0.0f64, 0.0, 0.0f64, 0.0);
-        ctx.stage("policies", || -> Result<(), Error> {
-            let mut ui = vec![0.0; k];
-            for t in 0..steps {
-                for s in 0..n {
-                    let ud = mean_control(&grid, &p, &z_direct[t + 1], self.dt, s);
-                    for i in 0..k {
-                        ui[i] = mean_control(&grid, &p, &z[i][t + 1], self.dt, s);
-                        vals[i] = v(z[i][t][s]);
-                    }
-                    blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(other)?;
-                    let ul: f64 = (0..k).map(|i| alpha[i] * ui[i]).sum();
-                    let un: f64 = (0..k).map(|i| beta[i] * ui[i]).sum();
-                    lp_max = lp_max.max((ul - ud).abs());
-                    np_max = np_max.max((un - ud).abs());
-                    lp_sum += (ul - ud).abs();
-                    np_sum += (un - ud).abs();
-                    if t == 0 {
-                        u_direct0[s] = ud;
-                        u_lbc0[s] = ul;
-                        u_naive0[s] = un;
-                    }
-                }
-            }
-            Ok(())
+        let pol = ctx.stage("policies", || {
+            self.policies(&grid, &p, &z, &z_direct, &beta, steps)
         })?;
-        let cnt = (steps * n) as f64;
         // Value of the naive blend (fixed weights) by policy evaluation.
         let comps: Vec<&[Vec<f64>]> = z.iter().map(|zi| zi.as_slice()).collect();
         let v_naive = ctx.stage("naive policy evaluation", || {
             evaluate_mixture(&p, &q, &g_comb, &comps, &beta, self.dt, lam, steps)
         });
-        let (nv_max, nv_mean) = diff_stats((0..n).map(|s| (v_naive[0][s], v(z_direct[0][s]))));
+        let naive_value = diff_stats((0..n).map(|s| (v_naive[0][s], value(lam, z_direct[0][s]))));
         // Ordinary Bellman backup: components vs direct.
+        let (nl, nl_direct) = ctx.stage("ordinary backups", || {
+            self.ordinary_backups(&grid, &g, &g_comb, steps, &pb)
+        });
+        pb.finish_and_clear();
+        let nl_comb = self.combine(&nl, n)?;
+        let nonlinear = diff_stats((0..n).map(|s| (nl_comb[s], nl_direct[s])));
+        let opt = optimality_table(lbc_value, naive_value, &pol, (steps * n) as f64, nonlinear);
+        let fields = self.fields_table(&grid, &z, &z_direct, &v_naive, &pol, &nl_direct, &nl_comb);
+        let (lo, hi) = nl_direct
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        let rule = super::rule_table(&[
+            ("nonlinear_tolerance", self.nonlinear_tolerance),
+            ("nonlinear_direct_range", hi - lo),
+            ("exact_value", self.rule.exact_value),
+            ("exact_control", self.rule.exact_control),
+            ("naive_factor", self.rule.naive_factor),
+        ]);
+        Ok(Tables::from([
+            ("optimality", opt),
+            ("grid", fields),
+            ("rule", rule),
+        ]))
+    }
+}
+
+/// The value v = −λ log z of a desirability z.
+#[inline]
+fn value(lam: f64, zz: f64) -> f64 {
+    -lam * crate::portable::ln(zz)
+}
+
+/// The LBC, direct and naive policies' mean controls: their gaps over every grid point and
+/// step, and the controls themselves at t = 0.
+struct PolicyGaps {
+    lp_max: f64,
+    lp_sum: f64,
+    np_max: f64,
+    np_sum: f64,
+    u_direct0: Vec<f64>,
+    u_lbc0: Vec<f64>,
+    u_naive0: Vec<f64>,
+}
+
+/// The `optimality` table: each comparison's largest and mean gap; `cnt`, the grid points
+/// times steps, averages the policy gaps.
+fn optimality_table(
+    (lbc_max, lbc_mean): (f64, f64),
+    (nv_max, nv_mean): (f64, f64),
+    pol: &PolicyGaps,
+    cnt: f64,
+    (nn_max, nn_mean): (f64, f64),
+) -> Table {
+    let (lp_max, lp_sum, np_max, np_sum) = (pol.lp_max, pol.lp_sum, pol.np_max, pol.np_sum);
+    let mut opt = Table::new(&["comparison", "max_abs_diff", "mean_abs_diff", "quantity"]);
+    opt.push(row![
+        "lbc_vs_direct",
+        lbc_max,
+        lbc_mean,
+        "value v = -lambda log z, every grid point and step"
+    ]);
+    opt.push(row![
+        "naive_vs_direct",
+        nv_max,
+        nv_mean,
+        "value of the naive fixed-weight policy blend vs the optimal value, t = 0"
+    ]);
+    opt.push(row![
+        "lbc_policy_vs_direct",
+        lp_max,
+        lp_sum / cnt,
+        "mean control (rad/s^2), every grid point and step"
+    ]);
+    opt.push(row![
+        "naive_policy_vs_direct",
+        np_max,
+        np_sum / cnt,
+        "mean control (rad/s^2), every grid point and step"
+    ]);
+    opt.push(row![
+        "nonlinear_lbc_vs_direct",
+        nn_max,
+        nn_mean,
+        "ordinary Bellman backup: -lambda log sum w exp(-v_i/lambda) vs direct, t = 0"
+    ]);
+    opt
+}
+
+impl Params {
+    /// Per grid point, the combined value −λ log Σ w_i e^{−v_i/λ} of the components' values
+    /// `comps[i]`.
+    fn combine(&self, comps: &[Vec<f64>], n: usize) -> Result<Vec<f64>, Error> {
+        let k = self.targets.len();
+        let mut alpha = vec![0.0; k];
+        let mut vals = vec![0.0; k];
+        let mut out = vec![0.0; n];
+        for s in 0..n {
+            for i in 0..k {
+                vals[i] = comps[i][s];
+            }
+            out[s] = blend_weights(&self.weights, &vals, self.lambda, &mut alpha).map_err(other)?;
+        }
+        Ok(out)
+    }
+
+    /// The linearly-solvable backups: every component's desirability z_i over time, and the
+    /// combined terminal's solved directly.
+    fn linear_backups(
+        &self,
+        p: &Transitions,
+        q: &[f64],
+        g: &[Vec<f64>],
+        g_comb: &[f64],
+        steps: usize,
+        pb: &ProgressBar,
+    ) -> (Vec<Vec<Vec<f64>>>, Vec<Vec<f64>>) {
+        let lam = self.lambda;
+        let z: Vec<Vec<Vec<f64>>> = g
+            .iter()
+            .map(|gi| {
+                let h: Vec<f64> = gi.iter().map(|v| crate::portable::exp(-v / lam)).collect();
+                let out = solve_linear(p, q, &h, self.dt, lam, steps);
+                pb.inc(1);
+                out
+            })
+            .collect();
+        let h: Vec<f64> = g_comb
+            .iter()
+            .map(|v| crate::portable::exp(-v / lam))
+            .collect();
+        let zd = solve_linear(p, q, &h, self.dt, lam, steps);
+        pb.inc(1);
+        (z, zd)
+    }
+
+    /// LBC value −λ log Σ w_i z_i against the direct one, every grid point and time step.
+    fn lbc_value_gap(
+        &self,
+        z: &[Vec<Vec<f64>>],
+        z_direct: &[Vec<f64>],
+        n: usize,
+        steps: usize,
+    ) -> (f64, f64) {
+        let (lam, k) = (self.lambda, self.targets.len());
+        let v = |zz: f64| value(lam, zz);
+        diff_stats((0..=steps).flat_map(|t| {
+            let zd = z_direct;
+            (0..n).map(move |s| {
+                let comb: f64 = (0..k).map(|i| self.weights[i] * z[i][t][s]).sum();
+                (v(comb), v(zd[t][s]))
+            })
+        }))
+    }
+
+    /// The direct, LBC (eq. 11) and naive (fixed weights `beta`) policies' mean controls at
+    /// every step, compared.
+    fn policies(
+        &self,
+        grid: &Grid2,
+        p: &Transitions,
+        z: &[Vec<Vec<f64>>],
+        z_direct: &[Vec<f64>],
+        beta: &[f64],
+        steps: usize,
+    ) -> Result<PolicyGaps, Error> {
+        let (n, k, lam) = (grid.len(), self.targets.len(), self.lambda);
+        let v = |zz: f64| value(lam, zz);
+        let mut alpha = vec![0.0; k];
+        let mut vals = vec![0.0; k];
+        let mut u_direct0 = vec![0.0; n];
+        let mut u_lbc0 = vec![0.0; n];
+        let mut u_naive0 = vec![0.0; n];
+        let (mut lp_max, mut lp_sum, mut np_max, mut np_sum) = (0.0f64, 0.0, 0.0f64, 0.0);
+        let mut ui = vec![0.0; k];
+        for t in 0..steps {
+            for s in 0..n {
+                let ud = mean_control(grid, p, &z_direct[t + 1], self.dt, s);
+                for i in 0..k {
+                    ui[i] = mean_control(grid, p, &z[i][t + 1], self.dt, s);
+                    vals[i] = v(z[i][t][s]);
+                }
+                blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(other)?;
+                let ul: f64 = (0..k).map(|i| alpha[i] * ui[i]).sum();
+                let un: f64 = (0..k).map(|i| beta[i] * ui[i]).sum();
+                lp_max = lp_max.max((ul - ud).abs());
+                np_max = np_max.max((un - ud).abs());
+                lp_sum += (ul - ud).abs();
+                np_sum += (un - ud).abs();
+                if t == 0 {
+                    u_direct0[s] = ud;
+                    u_lbc0[s] = ul;
+                    u_naive0[s] = un;
+                }
+            }
+        }
+        Ok(PolicyGaps {
+            lp_max,
+            lp_sum,
+            np_max,
+            np_sum,
+            u_direct0,
+            u_lbc0,
+            u_naive0,
+        })
+    }
+
+    /// The ordinary Bellman backups (min over the control grid): every component's value at
+    /// t = 0, and the combined terminal's solved directly.
+    fn ordinary_backups(
+        &self,
+        grid: &Grid2,
+        g: &[Vec<f64>],
+        g_comb: &[f64],
+        steps: usize,
+        pb: &ProgressBar,
+    ) -> (Vec<Vec<f64>>, Vec<f64>) {
         let controls: Vec<f64> = (0..self.controls)
             .map(|j| {
                 -self.control_max + 2.0 * self.control_max * j as f64 / (self.controls - 1) as f64
             })
             .collect();
-        let (nl, nl_direct) = ctx.stage("ordinary backups", || {
-            let nl: Vec<Vec<f64>> = g
-                .iter()
-                .map(|gi| {
-                    let out = solve_nonlinear(&grid, self, gi, &controls, self.dt, steps)
-                        .0
-                        .swap_remove(0);
-                    pb.inc(1);
-                    out
-                })
-                .collect();
-            let d = solve_nonlinear(&grid, self, &g_comb, &controls, self.dt, steps)
-                .0
-                .swap_remove(0);
-            pb.inc(1);
-            (nl, d)
-        });
-        pb.finish_and_clear();
-        let mut nl_comb = vec![0.0; n];
-        for s in 0..n {
-            for i in 0..k {
-                vals[i] = nl[i][s];
-            }
-            nl_comb[s] = blend_weights(&self.weights, &vals, lam, &mut alpha).map_err(other)?;
-        }
-        let (nn_max, nn_mean) = diff_stats((0..n).map(|s| (nl_comb[s], nl_direct[s])));
-        let mut opt = Table::new(&["comparison", "max_abs_diff", "mean_abs_diff", "quantity"]);
-        opt.push(row![
-            "lbc_vs_direct",
-            lbc_max,
-            lbc_mean,
-            "value v = -lambda log z, every grid point and step"
-        ]);
-        opt.push(row![
-            "naive_vs_direct",
-            nv_max,
-            nv_mean,
-            "value of the naive fixed-weight policy blend vs the optimal value, t = 0"
-        ]);
-        opt.push(row![
-            "lbc_policy_vs_direct",
-            lp_max,
-            lp_sum / cnt,
-            "mean control (rad/s^2), every grid point and step"
-        ]);
-        opt.push(row![
-            "naive_policy_vs_direct",
-            np_max,
-            np_sum / cnt,
-            "mean control (rad/s^2), every grid point and step"
-        ]);
-        opt.push(row![
-            "nonlinear_lbc_vs_direct",
-            nn_max,
-            nn_mean,
-            "ordinary Bellman backup: -lambda log sum w exp(-v_i/lambda) vs direct, t = 0"
-        ]);
+        let nl: Vec<Vec<f64>> = g
+            .iter()
+            .map(|gi| {
+                let out = solve_nonlinear(grid, self, gi, &controls, self.dt, steps)
+                    .0
+                    .swap_remove(0);
+                pb.inc(1);
+                out
+            })
+            .collect();
+        let d = solve_nonlinear(grid, self, g_comb, &controls, self.dt, steps)
+            .0
+            .swap_remove(0);
+        pb.inc(1);
+        (nl, d)
+    }
+
+    /// The `grid` table: the t = 0 fields per grid point.
+    #[allow(clippy::too_many_arguments)]
+    fn fields_table(
+        &self,
+        grid: &Grid2,
+        z: &[Vec<Vec<f64>>],
+        z_direct: &[Vec<f64>],
+        v_naive: &[Vec<f64>],
+        pol: &PolicyGaps,
+        nl_direct: &[f64],
+        nl_comb: &[f64],
+    ) -> Table {
+        let (n, k, lam) = (grid.len(), self.targets.len(), self.lambda);
+        let v = |zz: f64| value(lam, zz);
+        let (u_direct0, u_lbc0, u_naive0) = (&pol.u_direct0, &pol.u_lbc0, &pol.u_naive0);
         let mut fields = Table::new(&[
             "angle",
             "rate",
@@ -437,23 +574,7 @@ impl Job for Params {
                 nl_comb[s]
             ]);
         }
-        let (lo, hi) = nl_direct
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        let rule = super::rule_table(&[
-            ("nonlinear_tolerance", self.nonlinear_tolerance),
-            ("nonlinear_direct_range", hi - lo),
-            ("exact_value", self.rule.exact_value),
-            ("exact_control", self.rule.exact_control),
-            ("naive_factor", self.rule.naive_factor),
-        ]);
-        Ok(Tables::from([
-            ("optimality", opt),
-            ("grid", fields),
-            ("rule", rule),
-        ]))
+        fields
     }
 }
 

@@ -43,189 +43,10 @@ fn bend_arm(rest: &[f64], masses: &[f64], segment: usize, a: usize, b: usize) ->
 impl Dolphin {
     /// Validates `params` and builds the body.
     pub fn new(params: DolphinParams) -> Result<Self, DolphinError> {
-        let positive = |name, value: f64| {
-            if value.is_finite() && value > 0.0 {
-                Ok(())
-            } else {
-                Err(DolphinError::NotPositive { name, value })
-            }
-        };
-        let non_negative = |name, value: f64| {
-            if value.is_finite() && value >= 0.0 {
-                Ok(())
-            } else {
-                Err(DolphinError::Negative { name, value })
-            }
-        };
-        let p = &params;
-        if !(p.station_x.iter().all(|x| x.is_finite())
-            && p.station_x.windows(2).all(|w| w[0] > w[1]))
-        {
-            return Err(DolphinError::StationOrder(p.station_x));
-        }
-        for &h in &p.ring_half_height {
-            positive("ring_half_height", h)?;
-        }
-        for &w in &p.ring_half_width {
-            positive("ring_half_width", w)?;
-        }
-        positive("fluke_half_span", p.fluke_half_span)?;
-        for &m in &p.station_mass {
-            positive("station_mass", m)?;
-        }
-        positive("stiffness", p.stiffness)?;
-        positive("muscle_stiffness", p.muscle_stiffness)?;
-        non_negative("damping", p.damping)?;
-        non_negative("drag", p.drag)?;
-        if !p.gravity.is_finite() {
-            return Err(DolphinError::NotPositive {
-                name: "gravity",
-                value: p.gravity,
-            });
-        }
-        if !(p.max_bend.is_finite() && p.max_bend >= 0.0) {
-            return Err(DolphinError::Bend(p.max_bend));
-        }
-
-        let mut masses = [0.0; N_MASSES];
-        let mut rest = [0.0; N_POS];
-        for (i, m) in masses.iter_mut().enumerate() {
-            let st = station_of_mass(i);
-            *m = p.station_mass[st];
-            let x = p.station_x[st];
-            let (y, z) = match i {
-                NOSE => (0.0, 0.0),
-                FLUKE_LEFT => (p.fluke_half_span, 0.0),
-                FLUKE_RIGHT => (-p.fluke_half_span, 0.0),
-                _ => {
-                    let (h, w) = (p.ring_half_height[st - 1], p.ring_half_width[st - 1]);
-                    [(0.0, h), (w, 0.0), (0.0, -h), (-w, 0.0)][(i - 1) % 4]
-                }
-            };
-            rest[3 * i..3 * i + 3].copy_from_slice(&[x, y, z]);
-        }
-
-        let mut springs = Vec::with_capacity(91);
-        let mut spring = |a: usize, b: usize, kind, muscle: Option<(usize, Side)>| {
-            let rest_length = (point(&rest, b) - point(&rest, a)).norm();
-            let muscle = muscle.map(|(segment, side)| Muscle {
-                segment,
-                side,
-                arm: bend_arm(&rest, &masses, segment, a, b),
-            });
-            springs.push(Spring {
-                a,
-                b,
-                rest_length,
-                stiffness: if muscle.is_some() {
-                    p.muscle_stiffness
-                } else {
-                    p.stiffness
-                },
-                kind,
-                muscle,
-            })
-        };
-        let side = |k: usize, seg: usize| match k {
-            TOP => Some((seg, Side::Dorsal)),
-            BOTTOM => Some((seg, Side::Ventral)),
-            _ => None,
-        };
-        for r in 0..N_RINGS {
-            for k in 0..4 {
-                spring(
-                    ring_mass(r, k),
-                    ring_mass(r, (k + 1) % 4),
-                    SpringKind::Ring,
-                    None,
-                );
-            }
-            spring(
-                ring_mass(r, TOP),
-                ring_mass(r, BOTTOM),
-                SpringKind::Cross,
-                None,
-            );
-            spring(
-                ring_mass(r, LEFT),
-                ring_mass(r, RIGHT),
-                SpringKind::Cross,
-                None,
-            );
-        }
-        for k in 0..4 {
-            spring(NOSE, ring_mass(0, k), SpringKind::Longitudinal, side(k, 0));
-        }
-        for r in 0..N_RINGS - 1 {
-            for k in 0..4 {
-                let k1 = (k + 1) % 4;
-                spring(
-                    ring_mass(r, k),
-                    ring_mass(r + 1, k),
-                    SpringKind::Longitudinal,
-                    side(k, r + 1),
-                );
-                spring(
-                    ring_mass(r, k),
-                    ring_mass(r + 1, k1),
-                    SpringKind::Diagonal,
-                    None,
-                );
-                spring(
-                    ring_mass(r, k1),
-                    ring_mass(r + 1, k),
-                    SpringKind::Diagonal,
-                    None,
-                );
-            }
-        }
-        for k in 0..4 {
-            for tip in [FLUKE_LEFT, FLUKE_RIGHT] {
-                spring(ring_mass(4, k), tip, SpringKind::Longitudinal, side(k, 5));
-            }
-        }
-        spring(FLUKE_LEFT, FLUKE_RIGHT, SpringKind::Fluke, None);
-        for s in &springs {
-            if let Some(m) = s.muscle {
-                if p.max_bend * m.arm >= s.rest_length {
-                    return Err(DolphinError::Bend(p.max_bend));
-                }
-            }
-        }
-
-        let mut faces = Vec::with_capacity(26);
-        let tri = |a, b, c| Face {
-            corners: [a, b, c, c],
-            n: 3,
-        };
-        for k in 0..4 {
-            faces.push(tri(NOSE, ring_mass(0, (k + 1) % 4), ring_mass(0, k)));
-        }
-        for r in 0..N_RINGS - 1 {
-            for k in 0..4 {
-                let k1 = (k + 1) % 4;
-                faces.push(Face {
-                    corners: [
-                        ring_mass(r, k1),
-                        ring_mass(r + 1, k1),
-                        ring_mass(r + 1, k),
-                        ring_mass(r, k),
-                    ],
-                    n: 4,
-                });
-            }
-        }
-        let m5 = |k| ring_mass(4, k);
-        let (fl, fr) = (FLUKE_LEFT, FLUKE_RIGHT);
-        faces.extend([
-            tri(m5(LEFT), fl, m5(TOP)),
-            tri(m5(TOP), fl, fr),
-            tri(m5(TOP), fr, m5(RIGHT)),
-            tri(m5(BOTTOM), fl, m5(LEFT)),
-            tri(m5(BOTTOM), fr, fl),
-            tri(m5(RIGHT), fr, m5(BOTTOM)),
-        ]);
-
+        validate(&params)?;
+        let (masses, rest) = rest_shape(&params);
+        let springs = springs(&params, &rest, &masses)?;
+        let faces = faces();
         Ok(Self {
             params,
             masses,
@@ -234,6 +55,209 @@ impl Dolphin {
             faces,
         })
     }
+}
+
+/// Checks the parameters: stations ordered nose to tail, sizes, masses and stiffnesses
+/// positive, damping and drag not negative, gravity finite, the largest bend not negative.
+fn validate(p: &DolphinParams) -> Result<(), DolphinError> {
+    let positive = |name, value: f64| {
+        if value.is_finite() && value > 0.0 {
+            Ok(())
+        } else {
+            Err(DolphinError::NotPositive { name, value })
+        }
+    };
+    let non_negative = |name, value: f64| {
+        if value.is_finite() && value >= 0.0 {
+            Ok(())
+        } else {
+            Err(DolphinError::Negative { name, value })
+        }
+    };
+    if !(p.station_x.iter().all(|x| x.is_finite()) && p.station_x.windows(2).all(|w| w[0] > w[1])) {
+        return Err(DolphinError::StationOrder(p.station_x));
+    }
+    for &h in &p.ring_half_height {
+        positive("ring_half_height", h)?;
+    }
+    for &w in &p.ring_half_width {
+        positive("ring_half_width", w)?;
+    }
+    positive("fluke_half_span", p.fluke_half_span)?;
+    for &m in &p.station_mass {
+        positive("station_mass", m)?;
+    }
+    positive("stiffness", p.stiffness)?;
+    positive("muscle_stiffness", p.muscle_stiffness)?;
+    non_negative("damping", p.damping)?;
+    non_negative("drag", p.drag)?;
+    if !p.gravity.is_finite() {
+        return Err(DolphinError::NotPositive {
+            name: "gravity",
+            value: p.gravity,
+        });
+    }
+    if !(p.max_bend.is_finite() && p.max_bend >= 0.0) {
+        return Err(DolphinError::Bend(p.max_bend));
+    }
+    Ok(())
+}
+
+/// Every mass and the rest positions (x, y, z per mass): the nose, each ring's top, left,
+/// bottom and right, the fluke tips.
+fn rest_shape(p: &DolphinParams) -> ([f64; N_MASSES], [f64; N_POS]) {
+    let mut masses = [0.0; N_MASSES];
+    let mut rest = [0.0; N_POS];
+    for (i, m) in masses.iter_mut().enumerate() {
+        let st = station_of_mass(i);
+        *m = p.station_mass[st];
+        let x = p.station_x[st];
+        let (y, z) = match i {
+            NOSE => (0.0, 0.0),
+            FLUKE_LEFT => (p.fluke_half_span, 0.0),
+            FLUKE_RIGHT => (-p.fluke_half_span, 0.0),
+            _ => {
+                let (h, w) = (p.ring_half_height[st - 1], p.ring_half_width[st - 1]);
+                [(0.0, h), (w, 0.0), (0.0, -h), (-w, 0.0)][(i - 1) % 4]
+            }
+        };
+        rest[3 * i..3 * i + 3].copy_from_slice(&[x, y, z]);
+    }
+    (masses, rest)
+}
+
+/// The 91 springs at their rest lengths, muscles with their lever arms; a largest bend that
+/// would shorten a muscle spring to nothing is an error.
+fn springs(
+    p: &DolphinParams,
+    rest: &[f64; N_POS],
+    masses: &[f64; N_MASSES],
+) -> Result<Vec<Spring>, DolphinError> {
+    let mut springs = Vec::with_capacity(91);
+    let mut spring = |a: usize, b: usize, kind, muscle: Option<(usize, Side)>| {
+        let rest_length = (point(rest, b) - point(rest, a)).norm();
+        let muscle = muscle.map(|(segment, side)| Muscle {
+            segment,
+            side,
+            arm: bend_arm(rest, masses, segment, a, b),
+        });
+        springs.push(Spring {
+            a,
+            b,
+            rest_length,
+            stiffness: if muscle.is_some() {
+                p.muscle_stiffness
+            } else {
+                p.stiffness
+            },
+            kind,
+            muscle,
+        })
+    };
+    let side = |k: usize, seg: usize| match k {
+        TOP => Some((seg, Side::Dorsal)),
+        BOTTOM => Some((seg, Side::Ventral)),
+        _ => None,
+    };
+    for r in 0..N_RINGS {
+        for k in 0..4 {
+            spring(
+                ring_mass(r, k),
+                ring_mass(r, (k + 1) % 4),
+                SpringKind::Ring,
+                None,
+            );
+        }
+        spring(
+            ring_mass(r, TOP),
+            ring_mass(r, BOTTOM),
+            SpringKind::Cross,
+            None,
+        );
+        spring(
+            ring_mass(r, LEFT),
+            ring_mass(r, RIGHT),
+            SpringKind::Cross,
+            None,
+        );
+    }
+    for k in 0..4 {
+        spring(NOSE, ring_mass(0, k), SpringKind::Longitudinal, side(k, 0));
+    }
+    for r in 0..N_RINGS - 1 {
+        for k in 0..4 {
+            let k1 = (k + 1) % 4;
+            spring(
+                ring_mass(r, k),
+                ring_mass(r + 1, k),
+                SpringKind::Longitudinal,
+                side(k, r + 1),
+            );
+            spring(
+                ring_mass(r, k),
+                ring_mass(r + 1, k1),
+                SpringKind::Diagonal,
+                None,
+            );
+            spring(
+                ring_mass(r, k1),
+                ring_mass(r + 1, k),
+                SpringKind::Diagonal,
+                None,
+            );
+        }
+    }
+    for k in 0..4 {
+        for tip in [FLUKE_LEFT, FLUKE_RIGHT] {
+            spring(ring_mass(4, k), tip, SpringKind::Longitudinal, side(k, 5));
+        }
+    }
+    spring(FLUKE_LEFT, FLUKE_RIGHT, SpringKind::Fluke, None);
+    for s in &springs {
+        if let Some(m) = s.muscle {
+            if p.max_bend * m.arm >= s.rest_length {
+                return Err(DolphinError::Bend(p.max_bend));
+            }
+        }
+    }
+    Ok(springs)
+}
+
+/// The 26 outward faces: triangles at the nose and the fluke, quads between the rings.
+fn faces() -> Vec<Face> {
+    let mut faces = Vec::with_capacity(26);
+    let tri = |a, b, c| Face {
+        corners: [a, b, c, c],
+        n: 3,
+    };
+    for k in 0..4 {
+        faces.push(tri(NOSE, ring_mass(0, (k + 1) % 4), ring_mass(0, k)));
+    }
+    for r in 0..N_RINGS - 1 {
+        for k in 0..4 {
+            let k1 = (k + 1) % 4;
+            faces.push(Face {
+                corners: [
+                    ring_mass(r, k1),
+                    ring_mass(r + 1, k1),
+                    ring_mass(r + 1, k),
+                    ring_mass(r, k),
+                ],
+                n: 4,
+            });
+        }
+    }
+    let m5 = |k| ring_mass(4, k);
+    let (fl, fr) = (FLUKE_LEFT, FLUKE_RIGHT);
+    faces.extend([
+        tri(m5(LEFT), fl, m5(TOP)),
+        tri(m5(TOP), fl, fr),
+        tri(m5(TOP), fr, m5(RIGHT)),
+        tri(m5(BOTTOM), fl, m5(LEFT)),
+        tri(m5(BOTTOM), fr, fl),
+        tri(m5(RIGHT), fr, m5(BOTTOM)),
+    ]);
+    faces
 }
 
 #[cfg(test)]

@@ -247,51 +247,14 @@ impl Params {
         let lambda = self.lambda();
         let q = self.terminal_weight(self.axis) / lambda;
         let dt = self.super_dt();
-        for (i, (c, &value)) in comps.iter().zip(&self.components).enumerate() {
-            let task = self.target_task(value);
-            let open = self.execute(emu, Substrate::Simulator, &mut |_, k, v| {
-                v.copy_from_slice(c.tape[k].as_slice());
-                Ok(())
-            })?;
-            let tracked = self.execute(emu, Substrate::Simulator, &mut |x, k, v| {
-                c.tracker.policy_into(x, k, v);
-                Ok(())
-            })?;
-            out.components.push(row![
-                format!("{}", i + 1),
-                value,
-                c.learn_seconds,
-                c.tracker_seconds,
-                c.iterations as i64,
-                c.objective,
-                task.final_error(&c.emulator_final),
-                task.final_error(&open.states[self.task.horizon]),
-                task.final_error(&tracked.states[self.task.horizon])
-            ]);
-        }
+        self.component_rows(emu, comps, out)?;
         for &d in &self.desired {
             let task = self.target_task(d);
             let mut r = row![d];
             r.extend(task.task.target.iter().map(|&v| v.into()));
             out.goal.push(r);
             let t0 = Instant::now();
-            let comp_rewards: Vec<GaussianReward> = self
-                .components
-                .iter()
-                .map(|&c| GaussianReward::isotropic(&[c], q))
-                .collect();
-            let mut w = project(&comp_rewards, &GaussianReward::isotropic(&[d], q))
-                .map_err(other)?
-                .weights;
-            // Projection round-off: at a component's own target the other weight comes out
-            // as ±1e-16, and a negative one makes Σ w_i z_i ≤ 0 wherever that component's
-            // z dominates. A weight within 1e-12 of the largest's magnitude is zero.
-            let largest = w.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-            for wi in &mut w {
-                if wi.abs() <= 1e-12 * largest {
-                    *wi = 0.0;
-                }
-            }
+            let w = self.projected_weights(d, q)?;
             let projection_seconds = t0.elapsed().as_secs_f64();
             let fresh = self.learn(emu, d)?;
             let limits = None;
@@ -407,6 +370,62 @@ impl Params {
             }
         }
         Ok(())
+    }
+
+    /// Per component: its learning, and the final errors on the emulator, open loop and
+    /// tracked on the simulator.
+    fn component_rows(
+        &self,
+        emu: &Emulator,
+        comps: &[Component],
+        out: &mut Outputs,
+    ) -> Result<(), Error> {
+        for (i, (c, &value)) in comps.iter().zip(&self.components).enumerate() {
+            let task = self.target_task(value);
+            let open = self.execute(emu, Substrate::Simulator, &mut |_, k, v| {
+                v.copy_from_slice(c.tape[k].as_slice());
+                Ok(())
+            })?;
+            let tracked = self.execute(emu, Substrate::Simulator, &mut |x, k, v| {
+                c.tracker.policy_into(x, k, v);
+                Ok(())
+            })?;
+            out.components.push(row![
+                format!("{}", i + 1),
+                value,
+                c.learn_seconds,
+                c.tracker_seconds,
+                c.iterations as i64,
+                c.objective,
+                task.final_error(&c.emulator_final),
+                task.final_error(&open.states[self.task.horizon]),
+                task.final_error(&tracked.states[self.task.horizon])
+            ]);
+        }
+        Ok(())
+    }
+
+    /// The components' weights projected for desired value `d` (reward precision `q`),
+    /// projection round-off set to zero.
+    fn projected_weights(&self, d: f64, q: f64) -> Result<Vec<f64>, Error> {
+        let comp_rewards: Vec<GaussianReward> = self
+            .components
+            .iter()
+            .map(|&c| GaussianReward::isotropic(&[c], q))
+            .collect();
+        let mut w = project(&comp_rewards, &GaussianReward::isotropic(&[d], q))
+            .map_err(other)?
+            .weights;
+        // Projection round-off: at a component's own target the other weight comes out
+        // as ±1e-16, and a negative one makes Σ w_i z_i ≤ 0 wherever that component's
+        // z dominates. A weight within 1e-12 of the largest's magnitude is zero.
+        let largest = w.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        for wi in &mut w {
+            if wi.abs() <= 1e-12 * largest {
+                *wi = 0.0;
+            }
+        }
+        Ok(w)
     }
 
     /// The components learned through `emu`.

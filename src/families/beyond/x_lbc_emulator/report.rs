@@ -188,27 +188,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let within = lbc.iter().filter(|&&e| e <= 1.0).count();
     let (ml, mn) = (mean(&lbc), mean(&errs("naive")));
     let (xl, xn) = (mean(&miss("lbc")), mean(&miss("naive")));
-    let seeds_df = read_csv(&dir.join("net_seeds.csv"))?;
-    let (sd, sm, se, sr, sseed) = (
-        df_f64(&seeds_df, "desired_target")?,
-        df_str(&seeds_df, "method")?,
-        df_f64(&seeds_df, "final_error_simulator")?,
-        df_f64(&seeds_df, "final_axis_value")?,
-        df_f64(&seeds_df, "net_seed")?,
-    );
-    let mut seed_ids: Vec<f64> = Vec::new();
-    for &s in &sseed {
-        if !seed_ids.contains(&s) {
-            seed_ids.push(s);
-        }
-    }
-    let per_seed: Vec<(f64, Measures)> = seed_ids
-        .iter()
-        .map(|&s| {
-            let rows: Vec<usize> = (0..sseed.len()).filter(|&r| sseed[r] == s).collect();
-            (s, measures(&rows, (&sd, &sm, &se, &sr), between))
-        })
-        .collect();
+    let per_seed = per_seed_measures(dir, between)?;
     let inputs = RuleInputs {
         seeds: per_seed.iter().map(|p| p.1).collect(),
         within_fraction: frac,
@@ -217,32 +197,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     };
     let rule = rule(&inputs);
     let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
-    let mut md = String::from(
-        "Final error (RMS of (s − s_d)/tolerance, ≤ 1 within tolerance) on the simulator / emulator, per desired target and method:\n\n| desired x (m) |",
-    );
-    for mm in METHODS {
-        md.push_str(&format!(" {mm} |"));
-    }
-    md.push_str("\n| --- |");
-    md.push_str(&" --- |".repeat(METHODS.len()));
-    md.push('\n');
-    let mut targets: Vec<f64> = Vec::new();
-    for &x in &d {
-        if !targets.contains(&x) {
-            targets.push(x);
-        }
-    }
-    for &x in &targets {
-        md.push_str(&format!("| {} |", sig(x)));
-        for mm in METHODS {
-            let r = (0..d.len()).find(|&r| d[r] == x && meth[r] == mm);
-            match r {
-                Some(r) => md.push_str(&format!(" {} / {} |", sig(es[r]), sig(ee[r]))),
-                None => md.push_str(" – |"),
-            }
-        }
-        md.push('\n');
-    }
+    let mut md = targets_table(&d, &meth, &es, &ee);
     let bptt_s: Vec<f64> = (0..d.len())
         .filter(|&r| meth[r] == "bptt")
         .map(|r| secs[r])
@@ -280,19 +235,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             sig(mean(&errs(mm)))
         ));
     }
-    md.push_str("\nThe same comparison through the lander net of each net seed (`net_seeds.csv`; components, trackers and blends rebuilt through each net), over the in-between targets on the simulator; the rule reads the median over the seeds:\n\n| net seed | LBC within tolerance (share) | LBC's mean error − naive's | LBC's mean distance − naive's (m) | better example alone within tolerance | its mean distance − naive's (m) |\n| --- | --- | --- | --- | --- | --- |\n");
-    for (s, m) in &per_seed {
-        let (v, n) = (m.lbc_values(), m.null_values());
-        md.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} |\n",
-            *s as u64,
-            sig(v[0]),
-            sig(v[1]),
-            sig(v[2]),
-            sig(n[0]),
-            sig(n[2])
-        ));
-    }
+    md.push_str(&seeds_table(&per_seed));
     md.push_str(&entropy_section(
         dir,
         "1 = uniform α; the projected weights are uniform only at the midpoint target, so elsewhere the naive blend's constant entropy is below 1, and beyond the components a negative weight leaves it undefined (NaN)",
@@ -313,6 +256,86 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             per_seed.len(),
         ),
     })
+}
+
+/// Per net seed (from `net_seeds.csv`, in the order first listed), the rule's measures over
+/// the targets for which `between` holds.
+fn per_seed_measures(
+    dir: &Path,
+    between: impl Fn(f64) -> bool + Copy,
+) -> Result<Vec<(f64, Measures)>, Error> {
+    let seeds_df = read_csv(&dir.join("net_seeds.csv"))?;
+    let (sd, sm, se, sr, sseed) = (
+        df_f64(&seeds_df, "desired_target")?,
+        df_str(&seeds_df, "method")?,
+        df_f64(&seeds_df, "final_error_simulator")?,
+        df_f64(&seeds_df, "final_axis_value")?,
+        df_f64(&seeds_df, "net_seed")?,
+    );
+    let mut seed_ids: Vec<f64> = Vec::new();
+    for &s in &sseed {
+        if !seed_ids.contains(&s) {
+            seed_ids.push(s);
+        }
+    }
+    let per_seed: Vec<(f64, Measures)> = seed_ids
+        .iter()
+        .map(|&s| {
+            let rows: Vec<usize> = (0..sseed.len()).filter(|&r| sseed[r] == s).collect();
+            (s, measures(&rows, (&sd, &sm, &se, &sr), between))
+        })
+        .collect();
+    Ok(per_seed)
+}
+
+/// The final errors on the simulator and the emulator per desired target and method.
+fn targets_table(d: &[f64], meth: &[String], es: &[f64], ee: &[f64]) -> String {
+    let mut md = String::from(
+        "Final error (RMS of (s − s_d)/tolerance, ≤ 1 within tolerance) on the simulator / emulator, per desired target and method:\n\n| desired x (m) |",
+    );
+    for mm in METHODS {
+        md.push_str(&format!(" {mm} |"));
+    }
+    md.push_str("\n| --- |");
+    md.push_str(&" --- |".repeat(METHODS.len()));
+    md.push('\n');
+    let mut targets: Vec<f64> = Vec::new();
+    for &x in d {
+        if !targets.contains(&x) {
+            targets.push(x);
+        }
+    }
+    for &x in &targets {
+        md.push_str(&format!("| {} |", sig(x)));
+        for mm in METHODS {
+            let r = (0..d.len()).find(|&r| d[r] == x && meth[r] == mm);
+            match r {
+                Some(r) => md.push_str(&format!(" {} / {} |", sig(es[r]), sig(ee[r]))),
+                None => md.push_str(" – |"),
+            }
+        }
+        md.push('\n');
+    }
+    md
+}
+
+/// The comparison per net seed, as the rule reads it.
+fn seeds_table(per_seed: &[(f64, Measures)]) -> String {
+    let mut md = String::new();
+    md.push_str("\nThe same comparison through the lander net of each net seed (`net_seeds.csv`; components, trackers and blends rebuilt through each net), over the in-between targets on the simulator; the rule reads the median over the seeds:\n\n| net seed | LBC within tolerance (share) | LBC's mean error − naive's | LBC's mean distance − naive's (m) | better example alone within tolerance | its mean distance − naive's (m) |\n| --- | --- | --- | --- | --- | --- |\n");
+    for (s, m) in per_seed {
+        let (v, n) = (m.lbc_values(), m.null_values());
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            *s as u64,
+            sig(v[0]),
+            sig(v[1]),
+            sig(v[2]),
+            sig(n[0]),
+            sig(n[2])
+        ));
+    }
+    md
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! sweep heat maps and the λ sweep.
 
 use super::setup::POLICIES;
-use crate::experiment::output::Tables;
+use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Heatmap, Mark, Panel, Series};
 use crate::experiment::Error;
 use crate::families::lbc::film;
@@ -87,6 +87,35 @@ fn words(policy: &str) -> &str {
 /// Fig. 7 (final poses, filmstrip, the showcase GIF), the sweep heat maps and the λ sweep.
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let traj = tables.require("trajectories")?;
+    let acro = Acrobot::default();
+    let mut files = fig.draw("final_pose", &final_pose(&acro, traj))?;
+    let (p, t, a1, a2) = (
+        traj.strs("policy"),
+        traj.f64s("t"),
+        traj.f64s("theta1"),
+        traj.f64s("theta2"),
+    );
+    files.extend(fig.draw("filmstrip", &filmstrip(&acro, (&p, &t, &a1, &a2)))?);
+    // The showcase GIF: the trackers and LBC from a start where both trackers fail.
+    if let Some(sc) = tables.get("showcase") {
+        if let Some(file) = showcase_gif(fig, &acro, sc)? {
+            files.push(file);
+        }
+    }
+    // Sweep heat maps.
+    let sw = tables.require("sweep")?;
+    files.extend(fig.draw("sweep", &sweep_maps(sw))?);
+    // λ sweep.
+    let ls = tables.require("lambda_sweep")?;
+    if let Some(f) = lambda_figure(ls, sw) {
+        files.extend(fig.draw("lambda", &f)?);
+    }
+    Ok(files)
+}
+
+/// Fig. 7's final poses from the test start, the shoulder angle over time and LBC's weight
+/// of tracker 1 with α's entropy (from `trajectories`).
+fn final_pose(acro: &Acrobot, traj: &Table) -> Figure {
     let (p, t, a1, a2, al, ah) = (
         traj.strs("policy"),
         traj.f64s("t"),
@@ -95,7 +124,6 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         traj.f64s("alpha1"),
         traj.f64s("alpha_entropy"),
     );
-    let acro = Acrobot::default();
     // Final poses.
     let mut series = vec![
         Series::line("handstand", vec![(0.0, 0.0), (0.0, 1.0), (0.0, 2.0)], 7).mark(Mark::Dashed),
@@ -170,49 +198,52 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         y_range: Some((-0.05, 1.05)),
         ..Default::default()
     };
-    let mut files = fig.draw("final_pose", &Figure::grid(vec![pose, angles, weights], 3))?;
-    files.extend(fig.draw("filmstrip", &filmstrip(&acro, (&p, &t, &a1, &a2)))?);
-    // The showcase GIF: the trackers and LBC from a start where both trackers fail.
-    if let Some(sc) = tables.get("showcase") {
-        let (sp, s1, s2, sr, st, sa1, sa2) = (
-            sc.strs("policy"),
-            sc.f64s("theta1_deg"),
-            sc.f64s("theta2_deg"),
-            sc.f64s("rescued"),
-            sc.f64s("t"),
-            sc.f64s("theta1"),
-            sc.f64s("theta2"),
-        );
-        let rows: Vec<Vec<usize>> = POLICIES
-            .iter()
-            .map(|name| (0..sp.len()).filter(|&r| sp[r] == *name).collect())
-            .collect();
-        let motions: Vec<film::Motion> = POLICIES
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| !rows[*i].is_empty())
-            .map(|(i, name)| film::Motion {
-                label: words(name).into(),
-                color: i,
-                rows: &rows[i],
-            })
-            .collect();
-        if let Some(&r0) = motions.first().and_then(|m| m.rows.first()) {
-            let caption = if sr[r0] == 1.0 {
-                format!(
-                    "From ({}, {}) deg at rest: both trackers fail, LBC swings up",
-                    s1[r0], s2[r0]
-                )
-            } else {
-                format!("From the test start ({}, {}) deg at rest", s1[r0], s2[r0])
-            };
-            let frames = film::acrobot_frames(&acro, &motions, (&st, &sa1, &sa2), 4.5, &caption);
-            files.push(fig.gif("swingup", &frames, film::GIF_DELAY_CS)?);
-        }
+    Figure::grid(vec![pose, angles, weights], 3)
+}
+
+/// The showcase GIF (from `showcase`), `None` without rows.
+fn showcase_gif(fig: &FigureSink, acro: &Acrobot, sc: &Table) -> Result<Option<PathBuf>, Error> {
+    let (sp, s1, s2, sr, st, sa1, sa2) = (
+        sc.strs("policy"),
+        sc.f64s("theta1_deg"),
+        sc.f64s("theta2_deg"),
+        sc.f64s("rescued"),
+        sc.f64s("t"),
+        sc.f64s("theta1"),
+        sc.f64s("theta2"),
+    );
+    let rows: Vec<Vec<usize>> = POLICIES
+        .iter()
+        .map(|name| (0..sp.len()).filter(|&r| sp[r] == *name).collect())
+        .collect();
+    let motions: Vec<film::Motion> = POLICIES
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !rows[*i].is_empty())
+        .map(|(i, name)| film::Motion {
+            label: words(name).into(),
+            color: i,
+            rows: &rows[i],
+        })
+        .collect();
+    if let Some(&r0) = motions.first().and_then(|m| m.rows.first()) {
+        let caption = if sr[r0] == 1.0 {
+            format!(
+                "From ({}, {}) deg at rest: both trackers fail, LBC swings up",
+                s1[r0], s2[r0]
+            )
+        } else {
+            format!("From the test start ({}, {}) deg at rest", s1[r0], s2[r0])
+        };
+        let frames = film::acrobot_frames(acro, &motions, (&st, &sa1, &sa2), 4.5, &caption);
+        return Ok(Some(fig.gif("swingup", &frames, film::GIF_DELAY_CS)?));
     }
-    // Sweep heat maps.
+    Ok(None)
+}
+
+/// The sweep heat maps: per policy, the final distance over the start states (from `sweep`).
+fn sweep_maps(sw: &Table) -> Figure {
     const CLAMP: f64 = 3.0;
-    let sw = tables.require("sweep")?;
     let (s1, s2, sp, sd) = (
         sw.f64s("theta1_deg"),
         sw.f64s("theta2_deg"),
@@ -248,9 +279,12 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             range: Some((0.0, CLAMP)),
         });
     }
-    files.extend(fig.draw("sweep", &Figure::heatmaps(maps, 3))?);
-    // λ sweep.
-    let ls = tables.require("lambda_sweep")?;
+    Figure::heatmaps(maps, 3)
+}
+
+/// LBC over λ on the start sweep (from `lambda_sweep`; `sw`, the sweep, counts the starts),
+/// `None` without rows.
+fn lambda_figure(ls: &Table, sw: &Table) -> Option<Figure> {
     let (l, succ, resc, nf, hs) = (
         ls.f64s("lambda"),
         ls.f64s("sweep_successes"),
@@ -258,25 +292,25 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         ls.f64s("both_fail_starts"),
         ls.f64s("sweep_mean_entropy"),
     );
-    if !l.is_empty() {
-        let pts = |v: &[f64]| l.iter().zip(v).map(|(&a, &b)| (a, b)).collect();
-        let frac: Vec<f64> = resc.iter().zip(&nf).map(|(r, n)| r / n.max(1.0)).collect();
-        let starts = sw.len() as f64 / POLICIES.len() as f64;
-        let cover: Vec<f64> = succ.iter().map(|s| s / starts.max(1.0)).collect();
-        let panel = Panel {
-            title: "LBC vs temperature lambda over the start sweep".into(),
-            x_label: "lambda".into(),
-            y_label: "fraction / normalized entropy".into(),
-            log_x: true,
-            series: vec![
-                Series::line("success, all starts", pts(&cover), 0).mark(Mark::LinePoints),
-                Series::line("success, both trackers fail", pts(&frac), 1).mark(Mark::LinePoints),
-                Series::line("mean entropy of alpha", pts(&hs), 2).mark(Mark::Dashed),
-            ],
-            y_range: Some((-0.05, 1.05)),
-            ..Default::default()
-        };
-        files.extend(fig.draw("lambda", &Figure::grid(vec![panel], 1))?);
+    if l.is_empty() {
+        return None;
     }
-    Ok(files)
+    let pts = |v: &[f64]| l.iter().zip(v).map(|(&a, &b)| (a, b)).collect();
+    let frac: Vec<f64> = resc.iter().zip(&nf).map(|(r, n)| r / n.max(1.0)).collect();
+    let starts = sw.len() as f64 / POLICIES.len() as f64;
+    let cover: Vec<f64> = succ.iter().map(|s| s / starts.max(1.0)).collect();
+    let panel = Panel {
+        title: "LBC vs temperature lambda over the start sweep".into(),
+        x_label: "lambda".into(),
+        y_label: "fraction / normalized entropy".into(),
+        log_x: true,
+        series: vec![
+            Series::line("success, all starts", pts(&cover), 0).mark(Mark::LinePoints),
+            Series::line("success, both trackers fail", pts(&frac), 1).mark(Mark::LinePoints),
+            Series::line("mean entropy of alpha", pts(&hs), 2).mark(Mark::Dashed),
+        ],
+        y_range: Some((-0.05, 1.05)),
+        ..Default::default()
+    };
+    Some(Figure::grid(vec![panel], 1))
 }

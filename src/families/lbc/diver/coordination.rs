@@ -3,7 +3,9 @@
 
 use super::{entry, wrap, DiveRun, DiveSettings, DDP_VALUE_STEP};
 use crate::bellman::combine::{BlendMode, TrackerBlend};
+use crate::control::ddp::DdpSolution;
 use crate::control::lqr::{track_with, TrackingController, ValueModel};
+use crate::control::{QuadraticCost, Rk4Map};
 use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::{sig, Findings};
@@ -11,6 +13,8 @@ use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validat
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::families::lbc::{film, push_entropy, rule_table, ENTROPY_COLUMNS};
+use crate::physics::linearize::FiniteDifference;
+use crate::physics::planar::PlanarTree;
 use crate::row;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -189,115 +193,204 @@ impl Job for CoordinationParams {
         let map = d.map()?;
         // With the second-order terms Q_uu need not be positive definite away from a converged
         // optimum (e.g. at the quick budgets); then the comparison is left out.
-        let ddp_trackers: Option<Vec<TrackingController>> = ctx.stage("ddp value", || {
-            sols.par_iter()
-                .map(|s| {
-                    track_with(
-                        &map,
-                        &cost,
-                        &s.x,
-                        &s.u,
-                        ValueModel::Ddp {
-                            fd_step: DDP_VALUE_STEP,
-                        },
-                    )
-                    .ok()
-                })
-                .collect::<Option<Vec<_>>>()
-        });
-        let ones = vec![1.0; trackers.len()];
-        let limits = d.torque_limits;
-        let blend_of = |ddp: bool, mode: BlendMode, lambda: f64| TrackerBlend {
-            trackers: match (&ddp_trackers, ddp) {
-                (Some(t), true) => t,
-                _ => &trackers,
-            },
-            weights: ones.clone(),
-            lambda,
-            limits: Some(&limits),
-            mode,
-        };
-        let blend = |mode: BlendMode, lambda: f64| TrackerBlend {
+        let ddp_trackers = ctx.stage("ddp value", || ddp_value_trackers(&map, &cost, &sols));
+        let bl = Blender {
             trackers: &trackers,
-            weights: ones.clone(),
+            ddp: ddp_trackers.as_deref(),
+            ones: vec![1.0; trackers.len()],
+            limits: d.torque_limits,
+        };
+        let rows = ctx.stage("coordinate", || self.coordinate(d, &bl, &cost));
+        let CoordinationTables {
+            table,
+            lam,
+            values,
+            poses: poses_t,
+            entropy: entropy_t,
+        } = self.coordination_tables(d, rows)?;
+        let rule = rule_table(&[
+            ("lambda", d.lambda()),
+            ("torque_noise", d.torque_noise),
+            ("entry_tolerance", self.entry_tolerance),
+            ("objective_tolerance", self.objective_tolerance),
+            ("ddp_value_built", ddp_trackers.is_some() as u8 as f64),
+            ("better_share", self.rule.better_share),
+            ("partly_worse_margin", self.rule.partly_worse_margin),
+        ]);
+        Ok(Tables::from([
+            ("coordination", table),
+            ("dives", examples),
+            ("lambda_sweep", lam),
+            ("value_comparison", values),
+            ("poses", poses_t),
+            ("entropy", entropy_t),
+            ("rule", rule),
+        ]))
+    }
+}
+
+/// The dives tracked with DDP's value function, `None` where some Q_uu is not positive
+/// definite.
+fn ddp_value_trackers(
+    map: &Rk4Map<FiniteDifference<PlanarTree>>,
+    cost: &QuadraticCost,
+    sols: &[DdpSolution],
+) -> Option<Vec<TrackingController>> {
+    sols.par_iter()
+        .map(|s| {
+            track_with(
+                map,
+                cost,
+                &s.x,
+                &s.u,
+                ValueModel::Ddp {
+                    fd_step: DDP_VALUE_STEP,
+                },
+            )
+            .ok()
+        })
+        .collect::<Option<Vec<_>>>()
+}
+
+/// The trackers (LQR value, and DDP value when built) blended with equal weights under the
+/// torque limits.
+struct Blender<'a> {
+    trackers: &'a [TrackingController],
+    ddp: Option<&'a [TrackingController]>,
+    ones: Vec<f64>,
+    limits: [f64; 6],
+}
+
+impl Blender<'_> {
+    /// The blend in mode `mode` at temperature `lambda`, of the DDP-value trackers when `ddp`
+    /// and they were built, else of the LQR-value ones.
+    fn blend(&self, ddp: bool, mode: BlendMode, lambda: f64) -> TrackerBlend<'_> {
+        TrackerBlend {
+            trackers: match (self.ddp, ddp) {
+                (Some(t), true) => t,
+                _ => self.trackers,
+            },
+            weights: self.ones.clone(),
             lambda,
-            limits: Some(&limits),
+            limits: Some(&self.limits),
             mode,
-        };
-        let objective = |r: &DiveRun| match &r.final_state {
-            Some(x) => r.running + cost.terminal(x),
-            None => f64::INFINITY,
-        };
-        type Out = (
-            Vec<(&'static str, f64, f64, f64, f64)>,
-            Vec<(f64, f64, f64)>,
-            Vec<(&'static str, f64, f64, f64)>,
-            Vec<Vec<f64>>,
-            (Vec<f64>, Vec<f64>),
-        );
-        let rows: Vec<Result<Out, Error>> = ctx.stage("coordinate", || {
-            self.tests
-                .par_iter()
-                .map(|&w| {
-                    let x0 = d.takeoff(w);
-                    let mut out = Vec::new();
-                    // The last executed pose of each (Fig. 8 shows final poses); a diverged
-                    // loop's is NaN.
-                    let mut poses = Vec::new();
-                    let mut steps = (Vec::new(), Vec::new());
-                    for (name, mode) in [
-                        ("lbc", BlendMode::Lbc),
-                        ("single", BlendMode::Single(self.single)),
-                    ] {
-                        let r = d.execute(&blend(mode, d.lambda()), &x0)?;
-                        poses.push(match &r.final_state {
-                            Some(x) => x.iter().take(film::DIVER_COORDS).copied().collect(),
-                            None => vec![f64::NAN; film::DIVER_COORDS],
-                        });
-                        out.push((
-                            name,
+        }
+    }
+}
+
+/// The dive's objective: running cost plus terminal cost, infinite for a diverged loop.
+fn objective(cost: &QuadraticCost, r: &DiveRun) -> f64 {
+    match &r.final_state {
+        Some(x) => r.running + cost.terminal(x),
+        None => f64::INFINITY,
+    }
+}
+
+/// One test take-off: per method (LBC, the single tracker) its entry error, objective, mean
+/// entropy and largest torque fraction; LBC's per swept λ; both with the DDP-value trackers
+/// (when built); each method's last pose; LBC's entropy and α deviation per step.
+struct TestOut {
+    out: Vec<(&'static str, f64, f64, f64, f64)>,
+    sweep: Vec<(f64, f64, f64)>,
+    ddp: Vec<(&'static str, f64, f64, f64)>,
+    poses: Vec<Vec<f64>>,
+    steps: (Vec<f64>, Vec<f64>),
+}
+
+/// The `coordination`, `lambda_sweep`, `value_comparison`, `poses` and `entropy` tables.
+struct CoordinationTables {
+    table: Table,
+    lam: Table,
+    values: Table,
+    poses: Table,
+    entropy: Table,
+}
+
+impl CoordinationParams {
+    /// LBC and the single tracker from every test take-off, LBC over the λ sweep, and both
+    /// with the DDP-value trackers.
+    fn coordinate(
+        &self,
+        d: &DiveSettings,
+        bl: &Blender,
+        cost: &QuadraticCost,
+    ) -> Vec<Result<TestOut, Error>> {
+        let objective = |r: &DiveRun| objective(cost, r);
+        self.tests
+            .par_iter()
+            .map(|&w| {
+                let x0 = d.takeoff(w);
+                let mut out = Vec::new();
+                // The last executed pose of each (Fig. 8 shows final poses); a diverged
+                // loop's is NaN.
+                let mut poses = Vec::new();
+                let mut steps = (Vec::new(), Vec::new());
+                for (name, mode) in [
+                    ("lbc", BlendMode::Lbc),
+                    ("single", BlendMode::Single(self.single)),
+                ] {
+                    let r = d.execute(&bl.blend(false, mode, d.lambda()), &x0)?;
+                    poses.push(match &r.final_state {
+                        Some(x) => x.iter().take(film::DIVER_COORDS).copied().collect(),
+                        None => vec![f64::NAN; film::DIVER_COORDS],
+                    });
+                    out.push((
+                        name,
+                        wrap(entry(&r.final_state)).abs(),
+                        objective(&r),
+                        r.mean_entropy,
+                        r.max_torque_fraction,
+                    ));
+                    if name == "lbc" {
+                        steps = (r.entropy, r.alpha_deviation);
+                    }
+                }
+                let sweep = self
+                    .lambda_sweep
+                    .iter()
+                    .map(|&l| {
+                        let r = d.execute(&bl.blend(false, BlendMode::Lbc, l), &x0)?;
+                        Ok((
                             wrap(entry(&r.final_state)).abs(),
                             objective(&r),
                             r.mean_entropy,
-                            r.max_torque_fraction,
-                        ));
-                        if name == "lbc" {
-                            steps = (r.entropy, r.alpha_deviation);
-                        }
-                    }
-                    let sweep = self
-                        .lambda_sweep
-                        .iter()
-                        .map(|&l| {
-                            let r = d.execute(&blend(BlendMode::Lbc, l), &x0)?;
-                            Ok((
-                                wrap(entry(&r.final_state)).abs(),
-                                objective(&r),
-                                r.mean_entropy,
-                            ))
-                        })
-                        .collect::<Result<Vec<_>, Error>>()?;
-                    let mut ddp = Vec::new();
-                    let models = if ddp_trackers.is_some() { 2 } else { 0 };
-                    for (name, mode) in [
-                        ("lbc", BlendMode::Lbc),
-                        ("single", BlendMode::Single(self.single)),
-                    ]
-                    .into_iter()
-                    .take(models)
-                    {
-                        let r = d.execute(&blend_of(true, mode, d.lambda()), &x0)?;
-                        ddp.push((
-                            name,
-                            wrap(entry(&r.final_state)).abs(),
-                            objective(&r),
-                            r.mean_entropy,
-                        ));
-                    }
-                    Ok((out, sweep, ddp, poses, steps))
+                        ))
+                    })
+                    .collect::<Result<Vec<_>, Error>>()?;
+                let mut ddp = Vec::new();
+                let models = if bl.ddp.is_some() { 2 } else { 0 };
+                for (name, mode) in [
+                    ("lbc", BlendMode::Lbc),
+                    ("single", BlendMode::Single(self.single)),
+                ]
+                .into_iter()
+                .take(models)
+                {
+                    let r = d.execute(&bl.blend(true, mode, d.lambda()), &x0)?;
+                    ddp.push((
+                        name,
+                        wrap(entry(&r.final_state)).abs(),
+                        objective(&r),
+                        r.mean_entropy,
+                    ));
+                }
+                Ok(TestOut {
+                    out,
+                    sweep,
+                    ddp,
+                    poses,
+                    steps,
                 })
-                .collect()
-        });
+            })
+            .collect()
+    }
+
+    /// The tables, in the order of the test take-offs; the first failed take-off is the error.
+    fn coordination_tables(
+        &self,
+        d: &DiveSettings,
+        rows: Vec<Result<TestOut, Error>>,
+    ) -> Result<CoordinationTables, Error> {
         let mut table = Table::new(&[
             "initial_omega",
             "method",
@@ -326,7 +419,13 @@ impl Job for CoordinationParams {
         let mut poses_t = Table::new(&POSE_COLUMNS);
         let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
         for (&w, r) in self.tests.iter().zip(rows) {
-            let (out, sweep, ddp, poses, steps) = r?;
+            let TestOut {
+                out,
+                sweep,
+                ddp,
+                poses,
+                steps,
+            } = r?;
             let run = format!("omega {w} rad/s");
             push_entropy(&mut entropy_t, &run, "lbc", d.dt, &steps.0, &steps.1);
             for (&(m, e, ..), q) in out.iter().zip(&poses) {
@@ -360,24 +459,13 @@ impl Job for CoordinationParams {
                 ]);
             }
         }
-        let rule = rule_table(&[
-            ("lambda", d.lambda()),
-            ("torque_noise", d.torque_noise),
-            ("entry_tolerance", self.entry_tolerance),
-            ("objective_tolerance", self.objective_tolerance),
-            ("ddp_value_built", ddp_trackers.is_some() as u8 as f64),
-            ("better_share", self.rule.better_share),
-            ("partly_worse_margin", self.rule.partly_worse_margin),
-        ]);
-        Ok(Tables::from([
-            ("coordination", table),
-            ("dives", examples),
-            ("lambda_sweep", lam),
-            ("value_comparison", values),
-            ("poses", poses_t),
-            ("entropy", entropy_t),
-            ("rule", rule),
-        ]))
+        Ok(CoordinationTables {
+            table,
+            lam,
+            values,
+            poses: poses_t,
+            entropy: entropy_t,
+        })
     }
 }
 

@@ -621,119 +621,14 @@ impl Family for LbcDiveDisturbance {
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let t = tables.require("disturbance")?;
-        let (c, s) = (t.strs("controller"), t.f64s("force_scale"));
-        let mut scales: Vec<f64> = s.clone();
-        scales.sort_by(f64::total_cmp);
-        scales.dedup();
-        let x_of = |v: f64| scales.iter().position(|&x| x == v).unwrap_or(0) as f64;
-        let panel = |col: &str, title: &str, y: &str| {
-            let v = t.f64s(col);
-            let series = ["lbc", "pd"]
-                .iter()
-                .enumerate()
-                .map(|(k, name)| {
-                    let pts: Vec<(f64, f64)> = scales
-                        .iter()
-                        .map(|&sc| {
-                            let vals: Vec<f64> = (0..c.len())
-                                .filter(|&i| c[i] == *name && s[i] == sc)
-                                .map(|i| v[i])
-                                .collect();
-                            (
-                                x_of(sc),
-                                vals.iter().sum::<f64>() / vals.len().max(1) as f64,
-                            )
-                        })
-                        .collect();
-                    Series::line(name.to_uppercase(), pts, k).mark(Mark::LinePoints)
-                })
-                .collect();
-            Panel {
-                title: title.into(),
-                x_label: "force scale (0: unpushed)".into(),
-                y_label: y.into(),
-                series,
-                x_categories: scales.iter().map(|v| format!("{v}")).collect(),
-                x_range: Some((-0.5, scales.len() as f64 - 0.5)),
-                legend: Legend::UpperLeft,
-                ..Panel::default()
-            }
-        };
-        let mut files = fig.draw(
-            "measures",
-            &Figure::grid(
-                vec![
-                    panel("effort", "control effort", "∫½uᵀRu dt"),
-                    panel(
-                        "deviation",
-                        "motion's deviation from the unpushed dive",
-                        "RMS angle difference (rad)",
-                    ),
-                    panel(
-                        "entry_change",
-                        "change of the entry angle",
-                        "|Δ entry| (rad)",
-                    ),
-                ],
-                3,
-            ),
-        )?;
+        let mut files = fig.draw("measures", &measures_figure(t))?;
         let m = tables.require("motion")?;
-        let (mc, ms, mt, q2) = (
-            m.strs("controller"),
-            m.f64s("force_scale"),
-            m.f64s("t"),
-            m.f64s("q2"),
-        );
-        let mut mscales = ms.clone();
-        mscales.sort_by(f64::total_cmp);
-        mscales.dedup();
         // Trial 0's pushes, as vertical lines over the torso angles' range.
         let p = tables.require("pushes")?;
-        let (pt, ps) = (p.f64s("trial"), p.f64s("start_s"));
-        let (lo, hi) = q2
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        let panels: Vec<Panel> = ["lbc", "pd"]
-            .iter()
-            .map(|name| {
-                let mut series: Vec<Series> = mscales
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &sc)| {
-                        let pts = (0..mc.len())
-                            .filter(|&i| mc[i] == *name && ms[i] == sc)
-                            .map(|i| (mt[i], q2[i]))
-                            .collect();
-                        let label = if sc == 0.0 {
-                            "unpushed".to_string()
-                        } else {
-                            format!("pushes ×{sc}")
-                        };
-                        Series::line(label, pts, k)
-                    })
-                    .collect();
-                for (n, i) in (0..pt.len()).filter(|&i| pt[i] == 0.0).enumerate() {
-                    let label = if n == 0 { "a push starts" } else { "" };
-                    series.push(
-                        Series::line(label, vec![(ps[i], lo), (ps[i], hi)], 7).mark(Mark::Dashed),
-                    );
-                }
-                Panel {
-                    title: format!("{}: torso angle", name.to_uppercase()),
-                    x_label: "t (s)".into(),
-                    y_label: "torso angle (rad)".into(),
-                    series,
-                    legend: Legend::UpperLeft,
-                    ..Panel::default()
-                }
-            })
-            .collect();
-        files.extend(fig.draw("torso", &Figure::grid(panels, 2))?);
+        files.extend(fig.draw("torso", &torso_figure(m, p))?);
         // GIF: both controllers under scale 1, each beside its unpushed dive.
         let tree = diver();
+        let (mc, ms, mt) = (m.strs("controller"), m.f64s("force_scale"), m.f64s("t"));
         let q: Vec<Vec<f64>> = (0..9).map(|i| m.f64s(&format!("q{i}"))).collect();
         let rows = |name: &str, sc: f64| -> Vec<usize> {
             (0..mc.len())
@@ -837,6 +732,121 @@ impl Family for LbcDiveDisturbance {
             why,
         })
     }
+}
+
+/// The measures per force scale (from `disturbance`): each controller's mean effort,
+/// deviation and entry change.
+fn measures_figure(t: &Table) -> Figure {
+    let (c, s) = (t.strs("controller"), t.f64s("force_scale"));
+    let mut scales: Vec<f64> = s.clone();
+    scales.sort_by(f64::total_cmp);
+    scales.dedup();
+    let x_of = |v: f64| scales.iter().position(|&x| x == v).unwrap_or(0) as f64;
+    let panel = |col: &str, title: &str, y: &str| {
+        let v = t.f64s(col);
+        let series = ["lbc", "pd"]
+            .iter()
+            .enumerate()
+            .map(|(k, name)| {
+                let pts: Vec<(f64, f64)> = scales
+                    .iter()
+                    .map(|&sc| {
+                        let vals: Vec<f64> = (0..c.len())
+                            .filter(|&i| c[i] == *name && s[i] == sc)
+                            .map(|i| v[i])
+                            .collect();
+                        (
+                            x_of(sc),
+                            vals.iter().sum::<f64>() / vals.len().max(1) as f64,
+                        )
+                    })
+                    .collect();
+                Series::line(name.to_uppercase(), pts, k).mark(Mark::LinePoints)
+            })
+            .collect();
+        Panel {
+            title: title.into(),
+            x_label: "force scale (0: unpushed)".into(),
+            y_label: y.into(),
+            series,
+            x_categories: scales.iter().map(|v| format!("{v}")).collect(),
+            x_range: Some((-0.5, scales.len() as f64 - 0.5)),
+            legend: Legend::UpperLeft,
+            ..Panel::default()
+        }
+    };
+    Figure::grid(
+        vec![
+            panel("effort", "control effort", "∫½uᵀRu dt"),
+            panel(
+                "deviation",
+                "motion's deviation from the unpushed dive",
+                "RMS angle difference (rad)",
+            ),
+            panel(
+                "entry_change",
+                "change of the entry angle",
+                "|Δ entry| (rad)",
+            ),
+        ],
+        3,
+    )
+}
+
+/// The torso angle over time per controller and force scale (from `motion`), trial 0's
+/// pushes (from `pushes`) as vertical lines.
+fn torso_figure(m: &Table, p: &Table) -> Figure {
+    let (mc, ms, mt, q2) = (
+        m.strs("controller"),
+        m.f64s("force_scale"),
+        m.f64s("t"),
+        m.f64s("q2"),
+    );
+    let mut mscales = ms.clone();
+    mscales.sort_by(f64::total_cmp);
+    mscales.dedup();
+    let (pt, ps) = (p.f64s("trial"), p.f64s("start_s"));
+    let (lo, hi) = q2
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let panels: Vec<Panel> = ["lbc", "pd"]
+        .iter()
+        .map(|name| {
+            let mut series: Vec<Series> = mscales
+                .iter()
+                .enumerate()
+                .map(|(k, &sc)| {
+                    let pts = (0..mc.len())
+                        .filter(|&i| mc[i] == *name && ms[i] == sc)
+                        .map(|i| (mt[i], q2[i]))
+                        .collect();
+                    let label = if sc == 0.0 {
+                        "unpushed".to_string()
+                    } else {
+                        format!("pushes ×{sc}")
+                    };
+                    Series::line(label, pts, k)
+                })
+                .collect();
+            for (n, i) in (0..pt.len()).filter(|&i| pt[i] == 0.0).enumerate() {
+                let label = if n == 0 { "a push starts" } else { "" };
+                series.push(
+                    Series::line(label, vec![(ps[i], lo), (ps[i], hi)], 7).mark(Mark::Dashed),
+                );
+            }
+            Panel {
+                title: format!("{}: torso angle", name.to_uppercase()),
+                x_label: "t (s)".into(),
+                y_label: "torso angle (rad)".into(),
+                series,
+                legend: Legend::UpperLeft,
+                ..Panel::default()
+            }
+        })
+        .collect();
+    Figure::grid(panels, 2)
 }
 
 #[cfg(test)]

@@ -469,14 +469,95 @@ impl InterpolationParams {
         let d = &d;
         let lambda = d.lambda();
         let x0 = d.takeoff(self.omega);
-        let limits = d.torque_limits;
-        let blend = |w: &[f64], mode: BlendMode, lambda: f64| TrackerBlend {
+        let bl = Blender {
             trackers: &trackers,
+            limits: d.torque_limits,
+        };
+        let rows = self.interpolate(ctx, d, &bl, &sols, &x0);
+        let InterpTables {
+            table,
+            proj,
+            entropy: entropy_t,
+        } = self.interpolation_tables(d, rows)?;
+        let lam = self.lambda_table(d, &bl, &x0)?;
+        let motion = self.motion_table(d, &bl, &x0)?;
+        let spacing = 2.0 * self.offset;
+        let rule = rule_table(&[
+            ("lambda", lambda),
+            ("torque_noise", d.torque_noise),
+            ("entry_tolerance", self.entry_tolerance),
+            ("objective_tolerance", self.objective_tolerance),
+            ("average_scale", d.average_scale),
+            ("offset", self.offset),
+            ("offset_premise_found", found as u8 as f64),
+            (
+                "q_spacing2_over_lambda",
+                d.torso_weight * spacing * spacing / lambda,
+            ),
+        ]);
+        Ok(Tables::from([
+            ("interpolation", table),
+            ("dives", examples),
+            ("projection", proj),
+            ("lambda_sweep", lam),
+            ("motion", motion),
+            ("average_term", average_t),
+            ("entropy", entropy_t),
+            ("rule", rule),
+        ]))
+    }
+}
+
+/// The component trackers and the torque limits every blend of them shares.
+struct Blender<'a> {
+    trackers: &'a [TrackingController],
+    limits: [f64; 6],
+}
+
+impl Blender<'_> {
+    /// The blend of the trackers with weights `w` in mode `mode` at temperature `lambda`.
+    fn blend(&self, w: &[f64], mode: BlendMode, lambda: f64) -> TrackerBlend<'_> {
+        TrackerBlend {
+            trackers: self.trackers,
             weights: w.to_vec(),
             lambda,
-            limits: Some(&limits),
+            limits: Some(&self.limits),
             mode,
-        };
+        }
+    }
+}
+
+/// One desired entry angle's interpolation: LBC's, the naive blend's and the direct dive's
+/// rows, the projected weights, the projection's residual, the reconstructed minimum and
+/// the direct dive's outer iterations and initial guess.
+struct InterpOut {
+    rows: Vec<InterpRow>,
+    w: Vec<f64>,
+    residual: f64,
+    minimum: f64,
+    iterations: usize,
+    start: String,
+}
+
+/// The `interpolation`, `projection` and `entropy` tables.
+struct InterpTables {
+    table: Table,
+    proj: Table,
+    entropy: Table,
+}
+
+impl InterpolationParams {
+    /// Every desired entry angle: LBC and the naive blend executed with the projected weights,
+    /// and the best direct DDP dive for the reconstructed objective as ground truth.
+    fn interpolate(
+        &self,
+        ctx: &RunContext,
+        d: &DiveSettings,
+        bl: &Blender,
+        sols: &[DdpSolution],
+        x0: &DVector<f64>,
+    ) -> Vec<Result<InterpOut, Error>> {
+        let lambda = d.lambda();
         // Initial guesses of the direct dive: the average tape and a component's tape.
         let average: Vec<DVector<f64>> = sols[0]
             .u
@@ -488,9 +569,8 @@ impl InterpolationParams {
             ("under-rotating tape", &sols[0].u),
             ("over-rotating tape", &sols[1].u),
         ];
-        type RowOut = (Vec<InterpRow>, Vec<f64>, f64, f64, usize, String);
         let pb = ctx.progress(self.desired.len() as u64, "interpolations");
-        let rows: Vec<Result<RowOut, Error>> = ctx.stage("interpolate", || {
+        let rows: Vec<Result<InterpOut, Error>> = ctx.stage("interpolate", || {
             self.desired
                 .par_iter()
                 .map(|&g| {
@@ -498,7 +578,7 @@ impl InterpolationParams {
                     let rec = self.reconstructed(&w, lambda);
                     let mut out = Vec::new();
                     for (name, mode) in [("lbc", BlendMode::Lbc), ("naive", BlendMode::Naive)] {
-                        let r = d.execute(&blend(&w, mode, lambda), &x0)?;
+                        let r = d.execute(&bl.blend(&w, mode, lambda), x0)?;
                         out.push(InterpRow {
                             method: name,
                             reached: entry(&r.final_state),
@@ -513,7 +593,7 @@ impl InterpolationParams {
                     let heavier = tapes[(w[1] > w[0]) as usize];
                     let mut best: Option<(f64, DdpSolution, usize, &str)> = None;
                     for (label, u0) in [("average tape", average.as_slice()), heavier] {
-                        let (s, it) = d.direct(&x0, &rec, u0, self.direct_outer_iterations)?;
+                        let (s, it) = d.direct(x0, &rec, u0, self.direct_outer_iterations)?;
                         let run =
                             s.u.iter()
                                 .enumerate()
@@ -535,11 +615,28 @@ impl InterpolationParams {
                     });
                     let minimum = rec.minimum() - DiveSettings::target_torso(0.0);
                     pb.inc(1);
-                    Ok((out, w, residual, minimum, it, label.to_string()))
+                    Ok(InterpOut {
+                        rows: out,
+                        w,
+                        residual,
+                        minimum,
+                        iterations: it,
+                        start: label.to_string(),
+                    })
                 })
                 .collect()
         });
         pb.finish_and_clear();
+        rows
+    }
+
+    /// The interpolation rows as tables, in the order of the desired angles; the first
+    /// failed interpolation is the error.
+    fn interpolation_tables(
+        &self,
+        d: &DiveSettings,
+        rows: Vec<Result<InterpOut, Error>>,
+    ) -> Result<InterpTables, Error> {
         let mut table = Table::new(&[
             "desired_angle",
             "method",
@@ -563,7 +660,14 @@ impl InterpolationParams {
         ]);
         let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
         for (&g, r) in self.desired.iter().zip(rows) {
-            let (out, w, residual, minimum, it, label) = r?;
+            let InterpOut {
+                rows: out,
+                w,
+                residual,
+                minimum,
+                iterations: it,
+                start: label,
+            } = r?;
             for r in out.iter().filter(|r| r.method != "direct") {
                 let run = format!("desired {g} rad");
                 push_entropy(&mut entropy_t, &run, r.method, d.dt, &r.steps.0, &r.steps.1);
@@ -596,7 +700,20 @@ impl InterpolationParams {
                 label
             ]);
         }
-        // λ sweep of LBC (weights re-projected at each λ, as the blend and projection agree).
+        Ok(InterpTables {
+            table,
+            proj,
+            entropy: entropy_t,
+        })
+    }
+
+    /// λ sweep of LBC (weights re-projected at each λ, as the blend and projection agree).
+    fn lambda_table(
+        &self,
+        d: &DiveSettings,
+        bl: &Blender,
+        x0: &DVector<f64>,
+    ) -> Result<Table, Error> {
         let mut lam = Table::new(&[
             "lambda",
             "desired_angle",
@@ -608,7 +725,7 @@ impl InterpolationParams {
         for &l in &self.lambda_sweep {
             for &g in &self.desired {
                 let (w, _) = self.weights(g, l)?;
-                let r = d.execute(&blend(&w, BlendMode::Lbc, l), &x0)?;
+                let r = d.execute(&bl.blend(&w, BlendMode::Lbc, l), x0)?;
                 lam.push(row![
                     l,
                     g,
@@ -619,8 +736,18 @@ impl InterpolationParams {
                 ]);
             }
         }
-        // The filmstrip's dives: the two components and, with the weights projected for the
-        // vertical entry, the naive average and LBC (every executed state).
+        Ok(lam)
+    }
+
+    /// The filmstrip's dives: the two components and, with the weights projected for the
+    /// vertical entry, the naive average and LBC (every executed state).
+    fn motion_table(
+        &self,
+        d: &DiveSettings,
+        bl: &Blender,
+        x0: &DVector<f64>,
+    ) -> Result<Table, Error> {
+        let lambda = d.lambda();
         let (w0, _) = self.weights(0.0, lambda)?;
         let mut motion = Table::new(&MOTION_COLUMNS);
         for (name, mode) in MOTION_DIVES.iter().zip([
@@ -629,37 +756,14 @@ impl InterpolationParams {
             BlendMode::Naive,
             BlendMode::Lbc,
         ]) {
-            let r = d.execute(&blend(&w0, mode, lambda), &x0)?;
+            let r = d.execute(&bl.blend(&w0, mode, lambda), x0)?;
             for (k, x) in r.states.iter().enumerate() {
                 let mut cells = vec![(*name).into(), (k as f64 * d.dt).into()];
                 cells.extend(x.iter().take(film::DIVER_COORDS).map(|&v| v.into()));
                 motion.push(cells);
             }
         }
-        let spacing = 2.0 * self.offset;
-        let rule = rule_table(&[
-            ("lambda", lambda),
-            ("torque_noise", d.torque_noise),
-            ("entry_tolerance", self.entry_tolerance),
-            ("objective_tolerance", self.objective_tolerance),
-            ("average_scale", d.average_scale),
-            ("offset", self.offset),
-            ("offset_premise_found", found as u8 as f64),
-            (
-                "q_spacing2_over_lambda",
-                d.torso_weight * spacing * spacing / lambda,
-            ),
-        ]);
-        Ok(Tables::from([
-            ("interpolation", table),
-            ("dives", examples),
-            ("projection", proj),
-            ("lambda_sweep", lam),
-            ("motion", motion),
-            ("average_term", average_t),
-            ("entropy", entropy_t),
-            ("rule", rule),
-        ]))
+        Ok(motion)
     }
 }
 

@@ -96,26 +96,9 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     ));
     // When the tugged weight first leaves the undecided middle, and for which reach; where
     // the hand is when the first tug ends.
-    let first = (0..t.len()).find(|&k| a[k] > 0.75 || a[k] < 0.25);
     let hand_x = df_f64(&df, "hand_x")?;
-    let tug_on = (0..t.len()).find(|&k| f[k] != 0.0);
-    let tug_off = tug_on.and_then(|k0| (k0..t.len()).find(|&k| f[k] == 0.0));
-    md.push_str(&match first {
-        Some(k) => format!(
-            "\nThe tugged weight first leaves the undecided middle (0.25 to 0.75) at t = {} s, for the {} reach{}; when the first tug ends (t = {} s) the hand is at x = {} m (walls at ±{} m).\n",
-            sig(t[k]),
-            if a[k] > 0.75 { "forward" } else { "backward" },
-            if tugged_swings == 0 {
-                ", and never swings to the other side afterwards"
-            } else {
-                ""
-            },
-            tug_off.map_or("n/a".into(), |j| sig(t[j])),
-            tug_off.map_or("n/a".into(), |j| sig(hand_x[j])),
-            sig(setting("walls_distance"))
-        ),
-        None => "\nThe tugged weight never leaves the undecided middle (0.25 to 0.75).\n".into(),
-    });
+    let walls = setting("walls_distance");
+    md.push_str(&commitment_line(&t, &a, &f, &hand_x, tugged_swings, walls));
     let range = |v: &[f64]| window_range(&t, v, [w0, w1]);
     let mean = |v: &[f64]| window.iter().map(|&k| v[k]).sum::<f64>() / window.len() as f64;
     md.push_str(&format!(
@@ -127,48 +110,13 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         sig(range(&am)),
         sig(mean(&am))
     ));
-    let ls = read_csv(&dir.join("lambda_sweep.csv"))?;
-    let (ll, lsw, lse, lmi, lh, lle) = (
-        df_f64(&ls, "lambda")?,
-        df_f64(&ls, "swings")?,
-        df_f64(&ls, "settle_gap")?,
-        df_f64(&ls, "mirror_gap")?,
-        df_f64(&ls, "mean_entropy")?,
-        df_f64(&ls, "max_lean")?,
-    );
-    // Older results have no settle_range column.
-    let lsr = df_f64(&ls, "settle_range").unwrap_or_else(|_| vec![f64::NAN; ll.len()]);
-    if !ll.is_empty() {
-        md.push_str("\nThe same checks over λ (not judged; entropy of α normalized to [0, 1], 0 a switch, 1 uniform):\n\n| λ | swings | range over the window | gap to the no-tug baseline | mirror gap | mean entropy of α under the tugs | largest lean (rad) |\n| --- | --- | --- | --- | --- | --- | --- |\n");
-        for i in 0..ll.len() {
-            md.push_str(&format!(
-                "| {} | {} | {} | {} | {} | {} | {} |\n",
-                sig(ll[i]),
-                lsw[i],
-                sig(lsr[i]),
-                sig(lse[i]),
-                sig(lmi[i]),
-                sig(lh[i]),
-                sig(lle[i])
-            ));
-        }
-    }
+    md.push_str(&lambda_sweep_section(dir)?);
     // The premise: without a reach the tugs topple the body (a fall is what the reaches
     // prevent). Older results have no such row: the premise is then untested, not failed.
     let no_reach = setting("no_reach_lean");
     let premise = no_reach.is_nan() || no_reach > fall;
     if !no_reach.is_nan() {
-        md.push_str(&format!(
-            "\nWithout a reach (arm held at its start pose, the ankle pushing back to upright, both torque-limited), the same tugs and the mirrored ones lean the body at most {} rad from upright: {} the fall angle {} rad, so {}.\n",
-            sig(no_reach),
-            if premise { "beyond" } else { "within" },
-            sig(fall),
-            if premise {
-                "the tugs would topple it and the reaches prevent a fall (the paper's premise holds)"
-            } else {
-                "the tugs do not threaten a fall here and the paper's premise (a reach is needed to prevent a fall) does not hold"
-            }
-        ));
+        md.push_str(&no_reach_line(no_reach, premise, fall));
     }
     let (scales_md, found) = reach_scales(dir, setting("reach_scale"))?;
     md.push_str(&scales_md);
@@ -209,6 +157,84 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             sig(COMMITTED),
         ),
     })
+}
+
+/// When the tugged weight `a` first leaves the undecided middle, and for which reach; where
+/// the hand is when the first tug (force `f`) ends.
+fn commitment_line(
+    t: &[f64],
+    a: &[f64],
+    f: &[f64],
+    hand_x: &[f64],
+    tugged_swings: usize,
+    walls: f64,
+) -> String {
+    let first = (0..t.len()).find(|&k| a[k] > 0.75 || a[k] < 0.25);
+    let tug_on = (0..t.len()).find(|&k| f[k] != 0.0);
+    let tug_off = tug_on.and_then(|k0| (k0..t.len()).find(|&k| f[k] == 0.0));
+    match first {
+        Some(k) => format!(
+            "\nThe tugged weight first leaves the undecided middle (0.25 to 0.75) at t = {} s, for the {} reach{}; when the first tug ends (t = {} s) the hand is at x = {} m (walls at ±{} m).\n",
+            sig(t[k]),
+            if a[k] > 0.75 { "forward" } else { "backward" },
+            if tugged_swings == 0 {
+                ", and never swings to the other side afterwards"
+            } else {
+                ""
+            },
+            tug_off.map_or("n/a".into(), |j| sig(t[j])),
+            tug_off.map_or("n/a".into(), |j| sig(hand_x[j])),
+            sig(walls)
+        ),
+        None => "\nThe tugged weight never leaves the undecided middle (0.25 to 0.75).\n".into(),
+    }
+}
+
+/// The same checks over λ (from `lambda_sweep.csv`), empty without rows.
+fn lambda_sweep_section(dir: &Path) -> Result<String, Error> {
+    let mut md = String::new();
+    let ls = read_csv(&dir.join("lambda_sweep.csv"))?;
+    let (ll, lsw, lse, lmi, lh, lle) = (
+        df_f64(&ls, "lambda")?,
+        df_f64(&ls, "swings")?,
+        df_f64(&ls, "settle_gap")?,
+        df_f64(&ls, "mirror_gap")?,
+        df_f64(&ls, "mean_entropy")?,
+        df_f64(&ls, "max_lean")?,
+    );
+    // Older results have no settle_range column.
+    let lsr = df_f64(&ls, "settle_range").unwrap_or_else(|_| vec![f64::NAN; ll.len()]);
+    if !ll.is_empty() {
+        md.push_str("\nThe same checks over λ (not judged; entropy of α normalized to [0, 1], 0 a switch, 1 uniform):\n\n| λ | swings | range over the window | gap to the no-tug baseline | mirror gap | mean entropy of α under the tugs | largest lean (rad) |\n| --- | --- | --- | --- | --- | --- | --- |\n");
+        for i in 0..ll.len() {
+            md.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} |\n",
+                sig(ll[i]),
+                lsw[i],
+                sig(lsr[i]),
+                sig(lse[i]),
+                sig(lmi[i]),
+                sig(lh[i]),
+                sig(lle[i])
+            ));
+        }
+    }
+    Ok(md)
+}
+
+/// How far the tugs lean the body without a reach (`no_reach`), against the fall angle.
+fn no_reach_line(no_reach: f64, premise: bool, fall: f64) -> String {
+    format!(
+        "\nWithout a reach (arm held at its start pose, the ankle pushing back to upright, both torque-limited), the same tugs and the mirrored ones lean the body at most {} rad from upright: {} the fall angle {} rad, so {}.\n",
+        sig(no_reach),
+        if premise { "beyond" } else { "within" },
+        sig(fall),
+        if premise {
+            "the tugs would topple it and the reaches prevent a fall (the paper's premise holds)"
+        } else {
+            "the tugs do not threaten a fall here and the paper's premise (a reach is needed to prevent a fall) does not hold"
+        }
+    )
 }
 
 /// What [`push_rule`] reads.
