@@ -553,6 +553,174 @@ crate::result_rows! {
 /// The compared take-off controllers (`reference`: the desired jump's own PD push).
 const METHODS: [&str; 5] = ["lbc", "naive", "low", "high", "reference"];
 
+/// The tables made from the runs on the simulator ([`Params::run_tables`]).
+struct RunTables {
+    jumps: Vec<JumpRow>,
+    weights: Table,
+    entropy: Table,
+    motion: Table,
+}
+
+/// A take-off example by DDP or a desired jump's landing tracker, built in one parallel stage.
+enum Built {
+    Example(Box<(DdpSolution, TrackingController, f64)>),
+    Landing(Box<TrackingController>, f64),
+}
+
+/// The controllers a run compares: the two examples' DDP solutions with their seconds, their
+/// trackers, and each desired jump's landing tracker with its seconds.
+struct Controllers {
+    examples: Vec<(DdpSolution, f64)>,
+    trackers: Vec<TrackingController>,
+    landings: Vec<(TrackingController, f64)>,
+}
+
+impl Params {
+    /// Step 2: the two take-off examples by DDP and each desired jump's landing tracker, in
+    /// parallel.
+    fn controllers(
+        &self,
+        ctx: &RunContext,
+        s: &Setup,
+        pushes: &[Motion],
+        targets: &[DVector<f64>],
+    ) -> Result<Controllers, Error> {
+        let nd = self.desired.len();
+        let pb = ctx.progress((2 + nd) as u64, "take-off examples and landings");
+        let built: Vec<Result<Built, Error>> = ctx.stage("controllers", || {
+            (0..2 + nd)
+                .into_par_iter()
+                .map(|i| {
+                    let r = if i < 2 {
+                        s.example(self, &pushes[i], &pushes[push::MEAN])
+                            .map(|e| Built::Example(Box::new(e)))
+                    } else {
+                        s.landing(self, &targets[push::FIRST_DESIRED + (i - 2)])
+                            .map(|(t, secs)| Built::Landing(Box::new(t), secs))
+                    };
+                    pb.inc(1);
+                    r
+                })
+                .collect()
+        });
+        pb.finish_and_clear();
+        let (mut examples, mut trackers, mut landings) = (Vec::new(), Vec::new(), Vec::new());
+        for b in built {
+            match b? {
+                Built::Example(e) => {
+                    let (sol, tracker, secs) = *e;
+                    examples.push((sol, secs));
+                    trackers.push(tracker);
+                }
+                Built::Landing(t, secs) => landings.push((*t, secs)),
+            }
+        }
+        Ok(Controllers {
+            examples,
+            trackers,
+            landings,
+        })
+    }
+
+    /// `jumps.csv`'s rows, LBC's α over each take-off (`weights.csv`), LBC's and the naive
+    /// blend's α entropy (`entropy.csv`) and the kept runs' motion, from the runs of `cases`.
+    fn run_tables(
+        &self,
+        s: &Setup,
+        cases: &[(usize, &str)],
+        runs: &[(JumpRun, f64)],
+        targets: &[DVector<f64>],
+        heights: &[f64],
+        projected: &[Vec<f64>],
+    ) -> RunTables {
+        let j = &s.body;
+        let mut jumps: Vec<JumpRow> = Vec::with_capacity(runs.len());
+        let mut weights = Table::new(&["desired", "t", "alpha_low"]);
+        // α's entropy over the take-off (entropy.csv), LBC's and the naive blend's.
+        let mut entropy = Table::new(&ENTROPY_COLUMNS);
+        let mut cols = vec!["method".to_string(), "t".into(), "alpha_low".into()];
+        cols.extend((0..DOF).map(|i| format!("q{i}")));
+        let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
+        let mut motion = Table::new(&cols);
+        let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
+        for (&(d, m), (r, secs)) in cases.iter().zip(runs) {
+            let x_d = &targets[push::FIRST_DESIRED + d];
+            let v = j.com_velocity(&r.takeoff);
+            let vd = j.com_velocity(x_d.as_slice());
+            jumps.push(JumpRow {
+                desired_height_m: heights[push::FIRST_DESIRED + d],
+                method: m.to_string(),
+                takeoff_error: s.error(&r.takeoff, x_d),
+                landed: r.landed as u8 as f64,
+                desired_strength: self.desired[d],
+                height_m: jump_height(j, &r.takeoff, s.base),
+                fell: r.fell as u8 as f64,
+                effort: r.effort,
+                weight_low: projected[d][0],
+                weight_high: projected[d][1],
+                speed_error_m_s: hypot(v[0] - vd[0], v[1] - vd[1]),
+                seconds: *secs,
+            });
+            if m == "lbc" || m == "naive" {
+                let pair = |a: f64| [a, 1.0 - a];
+                let h: Vec<f64> = r
+                    .alpha_low
+                    .iter()
+                    .map(|&a| normalized_entropy(&pair(a)))
+                    .collect();
+                let dev: Vec<f64> = r
+                    .alpha_low
+                    .iter()
+                    .map(|&a| alpha_deviation(&pair(a), &projected[d]))
+                    .collect();
+                let run = format!(
+                    "{} m",
+                    crate::experiment::report::sig(heights[push::FIRST_DESIRED + d])
+                );
+                push_entropy(&mut entropy, &run, m, self.knot_dt, &h, &dev);
+            }
+            if m == "lbc" {
+                // Every 5 ms (the take-off is short).
+                let every = ((0.005 / self.knot_dt).round() as usize).max(1);
+                for (i, a) in r.alpha_low.iter().enumerate().step_by(every) {
+                    weights.push(row![
+                        heights[push::FIRST_DESIRED + d],
+                        i as f64 * self.knot_dt,
+                        *a
+                    ]);
+                }
+            }
+            for (i, x) in r.states.iter().enumerate().step_by(frame) {
+                let a = r.alpha_low.get(i).copied().unwrap_or(f64::NAN);
+                let mut row = row![m, i as f64 * self.knot_dt, a];
+                row.extend(x[..DOF].iter().map(|&v| v.into()));
+                motion.push(row);
+            }
+        }
+        RunTables {
+            jumps,
+            weights,
+            entropy,
+            motion,
+        }
+    }
+
+    /// The rule's settings table; `heights` are the pushes' jump heights in [`push`]'s order.
+    fn rule_settings(&self, lambda: f64, heights: &[f64], middle: usize) -> Table {
+        rule_table(&[
+            ("takeoff_tolerance", self.rule.takeoff_tolerance),
+            ("lambda", lambda),
+            ("low_height_m", heights[push::LOW]),
+            ("high_height_m", heights[push::HIGH]),
+            ("takeoff_s", self.takeoff_s),
+            ("landing_s", self.landing_s),
+            ("hold_s", self.hold_s),
+            ("knot_dt", self.knot_dt),
+            ("middle_desired", heights[push::FIRST_DESIRED + middle]),
+        ])
+    }
+}
+
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).expect("params serialize")
@@ -577,40 +745,11 @@ impl Job for Params {
         // 2. The two take-off examples by DDP and each desired jump's landing tracker, in
         //    parallel.
         let nd = self.desired.len();
-        let pb = ctx.progress((2 + nd) as u64, "take-off examples and landings");
-        enum Built {
-            Example(Box<(DdpSolution, TrackingController, f64)>),
-            Landing(Box<TrackingController>, f64),
-        }
-        let built: Vec<Result<Built, Error>> = ctx.stage("controllers", || {
-            (0..2 + nd)
-                .into_par_iter()
-                .map(|i| {
-                    let r = if i < 2 {
-                        s.example(self, &pushes[i], &pushes[push::MEAN])
-                            .map(|e| Built::Example(Box::new(e)))
-                    } else {
-                        s.landing(self, &targets[push::FIRST_DESIRED + (i - 2)])
-                            .map(|(t, secs)| Built::Landing(Box::new(t), secs))
-                    };
-                    pb.inc(1);
-                    r
-                })
-                .collect()
-        });
-        pb.finish_and_clear();
-        // The examples' DDP solutions with their seconds, their trackers, and the landings.
-        let (mut examples, mut trackers, mut landings) = (Vec::new(), Vec::new(), Vec::new());
-        for b in built {
-            match b? {
-                Built::Example(e) => {
-                    let (sol, tracker, secs) = *e;
-                    examples.push((sol, secs));
-                    trackers.push(tracker);
-                }
-                Built::Landing(t, secs) => landings.push((*t, secs)),
-            }
-        }
+        let Controllers {
+            examples,
+            trackers,
+            landings,
+        } = self.controllers(ctx, &s, &pushes, &targets)?;
         let centers = [targets[push::LOW].clone(), targets[push::HIGH].clone()];
         let lambda = scale_lambda(&s.q_final, &centers[0], &centers[1]);
         let limits = vec![self.push.torque_limit; TORQUES];
@@ -668,69 +807,12 @@ impl Job for Params {
             .iter()
             .map(|t| jump_height(j, t.as_slice(), s.base))
             .collect();
-        let mut jumps: Vec<JumpRow> = Vec::with_capacity(runs.len());
-        let mut weights = Table::new(&["desired", "t", "alpha_low"]);
-        // α's entropy over the take-off (entropy.csv), LBC's and the naive blend's.
-        let mut entropy = Table::new(&ENTROPY_COLUMNS);
-        let mut cols = vec!["method".to_string(), "t".into(), "alpha_low".into()];
-        cols.extend((0..DOF).map(|i| format!("q{i}")));
-        let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
-        let mut motion = Table::new(&cols);
-        let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
-        for (&(d, m), (r, secs)) in cases.iter().zip(&runs) {
-            let x_d = &targets[push::FIRST_DESIRED + d];
-            let v = j.com_velocity(&r.takeoff);
-            let vd = j.com_velocity(x_d.as_slice());
-            jumps.push(JumpRow {
-                desired_height_m: heights[push::FIRST_DESIRED + d],
-                method: m.to_string(),
-                takeoff_error: s.error(&r.takeoff, x_d),
-                landed: r.landed as u8 as f64,
-                desired_strength: self.desired[d],
-                height_m: jump_height(j, &r.takeoff, s.base),
-                fell: r.fell as u8 as f64,
-                effort: r.effort,
-                weight_low: projected[d][0],
-                weight_high: projected[d][1],
-                speed_error_m_s: hypot(v[0] - vd[0], v[1] - vd[1]),
-                seconds: *secs,
-            });
-            if m == "lbc" || m == "naive" {
-                let pair = |a: f64| [a, 1.0 - a];
-                let h: Vec<f64> = r
-                    .alpha_low
-                    .iter()
-                    .map(|&a| normalized_entropy(&pair(a)))
-                    .collect();
-                let dev: Vec<f64> = r
-                    .alpha_low
-                    .iter()
-                    .map(|&a| alpha_deviation(&pair(a), &projected[d]))
-                    .collect();
-                let run = format!(
-                    "{} m",
-                    crate::experiment::report::sig(heights[push::FIRST_DESIRED + d])
-                );
-                push_entropy(&mut entropy, &run, m, self.knot_dt, &h, &dev);
-            }
-            if m == "lbc" {
-                // Every 5 ms (the take-off is short).
-                let every = ((0.005 / self.knot_dt).round() as usize).max(1);
-                for (i, a) in r.alpha_low.iter().enumerate().step_by(every) {
-                    weights.push(row![
-                        heights[push::FIRST_DESIRED + d],
-                        i as f64 * self.knot_dt,
-                        *a
-                    ]);
-                }
-            }
-            for (i, x) in r.states.iter().enumerate().step_by(frame) {
-                let a = r.alpha_low.get(i).copied().unwrap_or(f64::NAN);
-                let mut row = row![m, i as f64 * self.knot_dt, a];
-                row.extend(x[..DOF].iter().map(|&v| v.into()));
-                motion.push(row);
-            }
-        }
+        let RunTables {
+            jumps,
+            weights,
+            entropy,
+            motion,
+        } = self.run_tables(&s, &cases, &runs, &targets, &heights, &projected);
         // The examples alone against their own targets (the premise), on the simulator.
         let mut components = Table::new(&[
             "component",
@@ -770,17 +852,7 @@ impl Job for Params {
                 landings[d].1
             ]);
         }
-        let rule = rule_table(&[
-            ("takeoff_tolerance", self.rule.takeoff_tolerance),
-            ("lambda", lambda),
-            ("low_height_m", heights[push::LOW]),
-            ("high_height_m", heights[push::HIGH]),
-            ("takeoff_s", self.takeoff_s),
-            ("landing_s", self.landing_s),
-            ("hold_s", self.hold_s),
-            ("knot_dt", self.knot_dt),
-            ("middle_desired", heights[push::FIRST_DESIRED + middle]),
-        ]);
+        let rule = self.rule_settings(lambda, &heights, middle);
         Ok(Tables::from([
             ("jumps", table_of(&jumps)),
             ("components", components),
