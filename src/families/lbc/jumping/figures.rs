@@ -1,7 +1,8 @@
 //! `lbc_jumping`'s figures and animation.
 
 use super::job::JumpRow;
-use super::report::{Jumps, METHODS};
+use super::job::METHODS;
+use super::report::Jumps;
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::sig;

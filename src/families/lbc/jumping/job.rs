@@ -550,8 +550,56 @@ crate::result_rows! {
     }
 }
 
-/// The compared take-off controllers (`reference`: the desired jump's own PD push).
-const METHODS: [&str; 5] = ["lbc", "naive", "low", "high", "reference"];
+/// A compared take-off controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Takeoff {
+    /// Linear Bellman combination of the two examples' trackers.
+    Lbc,
+    /// The examples' torques averaged with the projected weights.
+    Naive,
+    /// The low example's tracker alone.
+    Low,
+    /// The high example's tracker alone.
+    High,
+    /// The desired jump's own PD push (no blend).
+    Reference,
+}
+
+impl Takeoff {
+    /// Every controller, in `jumps.csv`'s order.
+    const ALL: [Takeoff; 5] = [
+        Takeoff::Lbc,
+        Takeoff::Naive,
+        Takeoff::Low,
+        Takeoff::High,
+        Takeoff::Reference,
+    ];
+
+    /// Its name in the tables.
+    fn name(self) -> &'static str {
+        METHODS[self as usize]
+    }
+
+    /// How its blend mixes the examples' trackers; `None`: it does not use them.
+    fn mode(self) -> Option<BlendMode> {
+        match self {
+            Takeoff::Lbc => Some(BlendMode::Lbc),
+            Takeoff::Naive => Some(BlendMode::Naive),
+            Takeoff::Low => Some(BlendMode::Single(0)),
+            Takeoff::High => Some(BlendMode::Single(1)),
+            Takeoff::Reference => None,
+        }
+    }
+
+    /// Whether its take-off is a blend whose α the tables record (LBC's and the naive one's).
+    fn blends(self) -> bool {
+        matches!(self, Takeoff::Lbc | Takeoff::Naive)
+    }
+}
+
+/// The compared take-off controllers' names, in [`Takeoff::ALL`]'s order (`reference`: the
+/// desired jump's own PD push).
+pub(super) const METHODS: [&str; 5] = ["lbc", "naive", "low", "high", "reference"];
 
 /// The tables made from the runs on the simulator ([`Params::run_tables`]).
 struct RunTables {
@@ -627,7 +675,7 @@ impl Params {
     fn run_tables(
         &self,
         s: &Setup,
-        cases: &[(usize, &str)],
+        cases: &[(usize, Takeoff)],
         runs: &[(JumpRun, f64)],
         targets: &[DVector<f64>],
         heights: &[f64],
@@ -649,7 +697,7 @@ impl Params {
             let vd = j.com_velocity(x_d.as_slice());
             jumps.push(JumpRow {
                 desired_height_m: heights[push::FIRST_DESIRED + d],
-                method: m.to_string(),
+                method: m.name().to_string(),
                 takeoff_error: s.error(&r.takeoff, x_d),
                 landed: r.landed as u8 as f64,
                 desired_strength: self.desired[d],
@@ -661,7 +709,7 @@ impl Params {
                 speed_error_m_s: hypot(v[0] - vd[0], v[1] - vd[1]),
                 seconds: *secs,
             });
-            if m == "lbc" || m == "naive" {
+            if m.blends() {
                 let pair = |a: f64| [a, 1.0 - a];
                 let h: Vec<f64> = r
                     .alpha_low
@@ -677,9 +725,9 @@ impl Params {
                     "{} m",
                     crate::experiment::report::sig(heights[push::FIRST_DESIRED + d])
                 );
-                push_entropy(&mut entropy, &run, m, self.knot_dt, &h, &dev);
+                push_entropy(&mut entropy, &run, m.name(), self.knot_dt, &h, &dev);
             }
-            if m == "lbc" {
+            if m == Takeoff::Lbc {
                 // Every 5 ms (the take-off is short).
                 let every = ((0.005 / self.knot_dt).round() as usize).max(1);
                 for (i, a) in r.alpha_low.iter().enumerate().step_by(every) {
@@ -692,7 +740,7 @@ impl Params {
             }
             for (i, x) in r.states.iter().enumerate().step_by(frame) {
                 let a = r.alpha_low.get(i).copied().unwrap_or(f64::NAN);
-                let mut row = row![m, i as f64 * self.knot_dt, a];
+                let mut row = row![m.name(), i as f64 * self.knot_dt, a];
                 row.extend(x[..DOF].iter().map(|&v| v.into()));
                 motion.push(row);
             }
@@ -767,9 +815,9 @@ impl Job for Params {
             .collect::<Result<Vec<_>, _>>()?;
         // 3. Every take-off with every desired jump's landing, on the simulator.
         let middle = nd / 2;
-        let mut cases: Vec<(usize, &str)> = Vec::new();
+        let mut cases: Vec<(usize, Takeoff)> = Vec::new();
         for d in 0..nd {
-            for m in METHODS {
+            for m in Takeoff::ALL {
                 cases.push((d, m));
             }
         }
@@ -780,22 +828,15 @@ impl Job for Params {
                 .map(|&(d, m)| {
                     let t0 = Instant::now();
                     let w = &projected[d];
-                    let mode = match m {
-                        "lbc" => BlendMode::Lbc,
-                        "naive" => BlendMode::Naive,
-                        "low" => BlendMode::Single(0),
-                        _ => BlendMode::Single(1),
-                    };
-                    let blend = TrackerBlend {
+                    let blend = m.mode().map(|mode| TrackerBlend {
                         trackers: &trackers,
                         weights: w.clone(),
                         lambda,
                         mode,
                         limits: Some(&limits),
-                    };
-                    let takeoff = (m != "reference").then_some(&blend);
-                    let keep = d == middle && (m == "lbc" || m == "naive");
-                    let r = s.jump(self, takeoff, self.desired[d], &landings[d].0, keep)?;
+                    });
+                    let keep = d == middle && m.blends();
+                    let r = s.jump(self, blend.as_ref(), self.desired[d], &landings[d].0, keep)?;
                     pb.inc(1);
                     Ok((r, t0.elapsed().as_secs_f64()))
                 })
@@ -824,17 +865,18 @@ impl Job for Params {
             "termination",
             "seconds",
         ]);
-        for (i, name) in ["low", "high"].iter().enumerate() {
+        for (i, example) in [Takeoff::Low, Takeoff::High].into_iter().enumerate() {
             let (sol, secs) = &examples[i];
+            let name = example.name();
             // Each example's tracker alone against its own target (the premise): its take-off
             // is the same at every desired jump (only the landing that follows differs).
             let r = cases
                 .iter()
-                .position(|c| c.1 == *name)
+                .position(|c| c.1 == example)
                 .map(|k| &runs[k].0)
                 .ok_or_else(|| other(format!("no {name} run")))?;
             components.push(row![
-                *name,
+                name,
                 strengths[i],
                 heights[i],
                 s.error(&r.takeoff, &targets[i]),

@@ -9,8 +9,6 @@ use crate::experiment::Error;
 use crate::families::lbc::{entropy_section, rule_settings};
 use std::path::Path;
 
-pub(super) const METHODS: [&str; 5] = ["lbc", "naive", "low", "high", "reference"];
-
 /// Jump heights (m, the centre of mass's apex above the crouch's).
 #[derive(Debug, Clone, PartialEq)]
 pub struct JumpHeights {
