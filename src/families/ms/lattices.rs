@@ -198,12 +198,16 @@ impl Job for Params {
     }
 }
 
-/// Springs `(a, b)` of `lattice` from a `springs` table.
+/// Springs `(a, b)` of `lattice` from a `springs` table; `None`: every spring of a table of
+/// one lattice's springs (which has no `lattice` column).
 pub fn springs_of(t: &Table, lattice: Option<&str>) -> Vec<(usize, usize)> {
-    let names = t.strs("lattice");
+    let names = lattice.map(|_| t.strs("lattice"));
     let (a, b) = (t.f64s("a"), t.f64s("b"));
     (0..a.len())
-        .filter(|&i| lattice.is_none_or(|l| names.get(i).is_some_and(|n| n == l)))
+        .filter(|&i| match (lattice, &names) {
+            (Some(l), Some(names)) => names[i] == l,
+            _ => true,
+        })
         .map(|i| (a[i] as usize, b[i] as usize))
         .collect()
 }
