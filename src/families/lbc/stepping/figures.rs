@@ -2,7 +2,8 @@
 
 use super::job::gaps;
 use super::job::StepRow;
-use super::report::{Targets, METHODS};
+use super::job::METHODS;
+use super::report::Targets;
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::Error;

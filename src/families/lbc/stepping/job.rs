@@ -373,7 +373,54 @@ pub fn in_gap(heel: f64, toe: f64, gaps: &[(f64, f64)]) -> bool {
     gaps.iter().any(|&(a, b)| heel < b && toe > a)
 }
 
-const METHODS: [&str; 5] = ["lbc", "naive", "short", "long", "direct"];
+pub(super) const METHODS: [&str; 5] = ["lbc", "naive", "short", "long", "direct"];
+
+/// A compared step controller, in [`METHODS`]' order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stepper {
+    /// Linear Bellman combination of the two examples' trackers.
+    Lbc,
+    /// The examples' torques averaged with the projected weights.
+    Naive,
+    /// The short example's tracker alone.
+    Short,
+    /// The long example's tracker alone.
+    Long,
+    /// The tracker of a DDP step solved for the desired length itself.
+    Direct,
+}
+
+impl Stepper {
+    /// Every controller, in `targets.csv`'s order.
+    const ALL: [Stepper; 5] = [
+        Stepper::Lbc,
+        Stepper::Naive,
+        Stepper::Short,
+        Stepper::Long,
+        Stepper::Direct,
+    ];
+
+    /// Its name in the tables.
+    fn name(self) -> &'static str {
+        METHODS[self as usize]
+    }
+
+    /// How it mixes the two examples' trackers; `None`: it does not (the direct step).
+    fn mode(self) -> Option<BlendMode> {
+        match self {
+            Stepper::Lbc => Some(BlendMode::Lbc),
+            Stepper::Naive => Some(BlendMode::Naive),
+            Stepper::Short => Some(BlendMode::Single(0)),
+            Stepper::Long => Some(BlendMode::Single(1)),
+            Stepper::Direct => None,
+        }
+    }
+
+    /// Whether it is a blend run again at the compared average-term scales.
+    fn blends(self) -> bool {
+        matches!(self, Stepper::Lbc | Stepper::Naive)
+    }
+}
 
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
@@ -424,26 +471,23 @@ impl Job for Params {
                 .map(|&(k, d, _, m)| {
                     let t0 = Instant::now();
                     let w = projected[d].clone();
-                    let r = if m == "direct" {
-                        let b = TrackerBlend {
-                            trackers: std::slice::from_ref(&solved[2 + d].1),
-                            weights: vec![1.0],
-                            lambda,
-                            mode: BlendMode::Single(0),
-                            limits: Some(&limits),
-                        };
-                        s.execute(self, &b, &s.x0, self.continue_s, false)?
-                    } else {
-                        let mode = match m {
-                            "lbc" => BlendMode::Lbc,
-                            "naive" => BlendMode::Naive,
-                            "short" => BlendMode::Single(0),
-                            _ => BlendMode::Single(1),
-                        };
-                        s.execute(self, &blend_of(k, &w, mode), &s.x0, self.continue_s, false)?
+                    let r = match m.mode() {
+                        None => {
+                            let b = TrackerBlend {
+                                trackers: std::slice::from_ref(&solved[2 + d].1),
+                                weights: vec![1.0],
+                                lambda,
+                                mode: BlendMode::Single(0),
+                                limits: Some(&limits),
+                            };
+                            s.execute(self, &b, &s.x0, self.continue_s, false)?
+                        }
+                        Some(mode) => {
+                            s.execute(self, &blend_of(k, &w, mode), &s.x0, self.continue_s, false)?
+                        }
                     };
                     let mut secs = t0.elapsed().as_secs_f64();
-                    if m == "direct" {
+                    if m == Stepper::Direct {
                         secs += solved[2 + d].2;
                     }
                     pb.inc(1);
@@ -471,7 +515,7 @@ impl Job for Params {
 }
 
 /// A case run on the simulator: (setup, desired length's index, desired length, method).
-type Case = (usize, usize, f64, &'static str);
+type Case = (usize, usize, f64, Stepper);
 
 /// The DDP steps: every solve (the two examples and a direct solve per desired length, then the
 /// two examples at each compared scale), where each setup's examples are among them, and the
@@ -550,13 +594,13 @@ impl Params {
     fn cases(&self, setups: usize) -> Vec<Case> {
         let mut cases: Vec<Case> = Vec::new();
         for (d, &l) in self.desired_m.iter().enumerate() {
-            for m in METHODS {
+            for m in Stepper::ALL {
                 cases.push((0, d, l, m));
             }
         }
         for k in 1..setups {
             for (d, &l) in self.desired_m.iter().enumerate() {
-                for m in ["lbc", "naive"] {
+                for m in Stepper::ALL.into_iter().filter(|m| m.blends()) {
                     cases.push((k, d, l, m));
                 }
             }
@@ -585,11 +629,11 @@ impl Params {
         let mut weights = Table::new(&["desired_length_m", "t", "alpha_short"]);
         let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
         for (&(k, _, l, m), (r, w, secs)) in cases.iter().zip(runs) {
-            if m == "lbc" || m == "naive" {
+            if m.blends() {
                 average.push(row![
                     setups[k].average_scale,
                     l,
-                    m,
+                    m.name(),
                     r.reached,
                     r.fell as u8 as f64,
                     r.effort,
@@ -601,7 +645,7 @@ impl Params {
             }
             targets.push(StepRow {
                 desired_length_m: l,
-                method: m.to_string(),
+                method: m.name().to_string(),
                 reached_length_m: r.reached,
                 fell: r.fell as u8 as f64,
                 effort: r.effort,
@@ -611,7 +655,7 @@ impl Params {
                 weight_short: w[0],
                 weight_long: w[1],
             });
-            if m == "lbc" {
+            if m == Stepper::Lbc {
                 for (i, a) in r.alpha_short.iter().enumerate().step_by(frame) {
                     weights.push(row![l, i as f64 * self.knot_dt, *a]);
                 }

@@ -9,8 +9,6 @@ use crate::experiment::Error;
 use crate::families::lbc::rule_settings;
 use std::path::Path;
 
-pub(super) const METHODS: [&str; 5] = ["lbc", "naive", "short", "long", "direct"];
-
 /// What the rule reads from a run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SteppingFacts {
