@@ -216,6 +216,17 @@ impl Table {
         }
     }
 
+    /// Integer values of a column; empty for a table without rows. Panics when the table has
+    /// no such column or it holds floats or strings (a programming error, as in
+    /// [`Table::f64s`]).
+    pub fn i64s(&self, name: &str) -> Vec<i64> {
+        match self.named_column(name) {
+            None => Vec::new(),
+            Some(ColumnData::I(v)) => v.clone(),
+            Some(_) => panic!("column `{name}` does not hold integers"),
+        }
+    }
+
     /// String values of a column; empty for a table without rows. Panics when the table has no
     /// such column or it holds numbers (a programming error, as in [`Table::f64s`]).
     pub fn strs(&self, name: &str) -> Vec<String> {
@@ -633,6 +644,25 @@ pub fn read_optional_csv(path: &Path) -> Result<Option<DataFrame>, Error> {
     } else {
         Ok(None)
     }
+}
+
+/// An integer column of a data frame; a missing value, or a column that does not hold integers
+/// (e.g. `0.5`), is an error naming the column.
+pub fn df_i64(df: &DataFrame, name: &str) -> Result<Vec<i64>, Error> {
+    let pe = |e: PolarsError| Error::Polars(format!("column {name}: {e}"));
+    let c = df.column(name).map_err(pe)?;
+    if !c.dtype().is_integer() {
+        return Err(Error::Polars(format!(
+            "column {name}: {} values, not integers",
+            c.dtype()
+        )));
+    }
+    let c = c.cast(&DataType::Int64).map_err(pe)?;
+    c.i64()
+        .map_err(pe)?
+        .iter()
+        .map(|v| v.ok_or_else(|| Error::Polars(format!("column {name}: a missing value"))))
+        .collect()
 }
 
 /// Reads a CSV written by [`write_table`] into a polars data frame, strictly: a table that is

@@ -6,7 +6,7 @@
 //! wrote with `row![..]` cells in that order. [`read_rows`] reads the file back strictly: a
 //! missing file, a missing column or a value of the wrong type is an error naming the file.
 
-use super::output::{df_f64, df_str, read_csv, Cell, Table};
+use super::output::{df_f64, df_i64, df_str, read_csv, Cell, Table};
 use super::Error;
 use std::path::Path;
 
@@ -33,6 +33,18 @@ impl ColumnValue for f64 {
     }
     fn cell(&self) -> Cell {
         Cell::F(*self)
+    }
+}
+
+impl ColumnValue for i64 {
+    fn frame_column(df: &Frame, name: &str) -> Result<Vec<Self>, Error> {
+        df_i64(df, name)
+    }
+    fn table_column(t: &Table, name: &str) -> Vec<Self> {
+        t.i64s(name)
+    }
+    fn cell(&self) -> Cell {
+        Cell::I(*self)
     }
 }
 
@@ -158,6 +170,8 @@ mod tests {
             name: String = "name",
             /// A number.
             x: f64 = "x_m",
+            /// A count.
+            n: i64 = "n",
         }
     }
 
@@ -171,27 +185,40 @@ mod tests {
             Probe {
                 name: "a".into(),
                 x: 0.5,
+                n: 3,
             },
             Probe {
                 name: "b".into(),
                 x: f64::INFINITY,
+                n: -1,
             },
         ];
         let t = table_of(&rows);
-        assert_eq!(t.names(), ["name", "x_m"]);
+        assert_eq!(t.names(), ["name", "x_m", "n"]);
         assert_eq!(Probe::from_table(&t), rows);
         write_table(dir.path(), "probe", &t).unwrap();
         let back: Vec<Probe> = read_rows(&dir.path().join("probe.csv")).unwrap();
         assert_eq!(back, rows);
         assert!(Probe::from_table(&table_of::<Probe>(&[])).is_empty());
 
-        let mut other = Table::new(&["name", "y"]);
-        other.push(crate::row!["a", 1.0]);
+        let mut other = Table::new(&["name", "y", "n"]);
+        other.push(crate::row!["a", 1.0, 2i64]);
         write_table(dir.path(), "other", &other).unwrap();
         let err = read_rows::<Probe>(&dir.path().join("other.csv"))
             .unwrap_err()
             .to_string();
         assert!(err.contains("other.csv") && err.contains("x_m"), "{err}");
+        // Integers are read as integers: a column of fractions is refused, naming it.
+        let mut fractions = Table::new(&["name", "x_m", "n"]);
+        fractions.push(crate::row!["a", 1.0, 2.5]);
+        write_table(dir.path(), "fractions", &fractions).unwrap();
+        let err = read_rows::<Probe>(&dir.path().join("fractions.csv"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("fractions.csv") && err.contains("column n"),
+            "{err}"
+        );
         let err = read_rows::<Probe>(&dir.path().join("absent.csv"))
             .unwrap_err()
             .to_string();

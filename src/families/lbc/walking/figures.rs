@@ -1,9 +1,11 @@
 //! `lbc_walking`'s figures and animation.
 
+use super::job::{SweepRow, WalkRow};
 use super::report::{track_of, CONTROLLERS, TERRAINS};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use crate::families::lbc::film::{biped_body, fitted, to_scale};
 use crate::families::lbc::rule_setting;
@@ -13,25 +15,20 @@ use std::path::PathBuf;
 
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let mut files = Vec::new();
-    let w = tables.require("walks")?;
-    let (t, c, d, f) = (
-        w.strs("terrain"),
-        w.strs("controller"),
-        w.f64s("distance_m"),
-        w.f64s("fell"),
-    );
+    let walks = WalkRow::from_table(tables.require("walks")?);
     let x_of = |name: &str| CONTROLLERS.iter().position(|x| *x == name).unwrap_or(0) as f64;
     let mut series: Vec<Series> = Vec::new();
     for (k, terrain) in TERRAINS.iter().enumerate() {
         let off = (k as f64 - 1.0) * 0.22;
-        let pts: Vec<(f64, f64)> = (0..t.len())
-            .filter(|&i| t[i] == *terrain)
-            .map(|i| (x_of(&c[i]) + off, d[i]))
+        let on: Vec<&WalkRow> = walks.iter().filter(|r| r.terrain == *terrain).collect();
+        let pts: Vec<(f64, f64)> = on
+            .iter()
+            .map(|r| (x_of(&r.controller) + off, r.distance_m))
             .collect();
-        let labels = (0..t.len())
-            .filter(|&i| t[i] == *terrain)
-            .map(|i| {
-                if f[i] != 0.0 {
+        let labels = on
+            .iter()
+            .map(|r| {
+                if r.fell != 0 {
                     "✗".to_string()
                 } else {
                     String::new()
@@ -98,31 +95,23 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     };
     files.extend(fig.draw("weights", &Figure::grid(vec![alpha_panel, profile], 1))?);
     // The temperature sweep.
-    let sw = tables.require("lambda_sweep")?;
-    let (sl, st, sd, sf, saf, sah) = (
-        sw.f64s("lambda"),
-        sw.strs("terrain"),
-        sw.f64s("distance_m"),
-        sw.f64s("fell"),
-        sw.f64s("alpha_hill_flat_part"),
-        sw.f64s("alpha_hill_hill_part"),
-    );
+    let sweep = SweepRow::from_table(tables.require("lambda_sweep")?);
     let mut ds: Vec<Series> = Vec::new();
     let mut fell_labelled = false;
     for (k, terrain) in TERRAINS.iter().enumerate() {
-        let idx: Vec<usize> = (0..sl.len()).filter(|&i| st[i] == *terrain).collect();
+        let on: Vec<&SweepRow> = sweep.iter().filter(|r| r.terrain == *terrain).collect();
         ds.push(
             Series::line(
                 terrain.replace('_', "-"),
-                idx.iter().map(|&i| (sl[i], sd[i])).collect(),
+                on.iter().map(|r| (r.lambda, r.distance_m)).collect(),
                 k,
             )
             .mark(Mark::LinePoints),
         );
-        let fell: Vec<(f64, f64)> = idx
+        let fell: Vec<(f64, f64)> = on
             .iter()
-            .filter(|&&i| sf[i] != 0.0)
-            .map(|&i| (sl[i], sd[i]))
+            .filter(|r| r.fell != 0)
+            .map(|r| (r.lambda, r.distance_m))
             .collect();
         if !fell.is_empty() {
             let label = if fell_labelled { "" } else { "fell" };
@@ -131,8 +120,9 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         }
     }
     let lam = rule_setting(tables, "lambda").unwrap_or(f64::NAN);
-    let track: Vec<usize> = (0..sl.len())
-        .filter(|&i| st[i] == "flat_then_hill")
+    let track: Vec<&SweepRow> = sweep
+        .iter()
+        .filter(|r| r.terrain == "flat_then_hill")
         .collect();
     let panels = vec![
         Panel {
@@ -155,13 +145,19 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             series: vec![
                 Series::line(
                     "flat part",
-                    track.iter().map(|&i| (sl[i], saf[i])).collect(),
+                    track
+                        .iter()
+                        .map(|r| (r.lambda, r.alpha_hill_flat_part))
+                        .collect(),
                     0,
                 )
                 .mark(Mark::LinePoints),
                 Series::line(
                     "hill part",
-                    track.iter().map(|&i| (sl[i], sah[i])).collect(),
+                    track
+                        .iter()
+                        .map(|r| (r.lambda, r.alpha_hill_hill_part))
+                        .collect(),
                     2,
                 )
                 .mark(Mark::LinePoints),

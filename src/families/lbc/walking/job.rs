@@ -6,6 +6,7 @@ use crate::bellman::combine::{blend_controls, blend_weights};
 use crate::control::gait_value::GaitCycle;
 use crate::control::simbicon::{applet_start, Gait, Simbicon};
 use crate::experiment::output::{Table, Tables};
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::lbc::rule_table;
 use crate::physics::biped::{Biped, DOF, TORQUES};
@@ -13,6 +14,46 @@ use crate::physics::ground::{Contact, Terrain};
 use crate::physics::{Dynamics, IntegratorKind, Model, Simulator};
 use crate::row;
 use rayon::prelude::*;
+
+crate::result_rows! {
+    /// One row of `walks.csv`: one controller's walk on one terrain.
+    pub struct WalkRow {
+        /// The terrain's name (`flat`, `incline`, `flat_then_hill`).
+        terrain: String = "terrain",
+        /// The controller (`flat`, `hill`, `naive`, `lbc`).
+        controller: String = "controller",
+        /// Pelvis x advance (m) up to the end or the fall.
+        distance_m: f64 = "distance_m",
+        /// 1 when it fell, else 0.
+        fell: i64 = "fell",
+        /// Distance over the seconds walked (m/s).
+        mean_speed_m_s: f64 = "mean_speed_m_s",
+        /// Heel strikes of the (first) state machine.
+        steps: i64 = "steps",
+        /// When it fell (s; NaN when it did not).
+        fell_at_s: f64 = "fell_at_s",
+        /// LBC's temperature (NaN for the other controllers).
+        lambda: f64 = "lambda",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `lambda_sweep.csv`: LBC at one temperature on one terrain.
+    pub struct SweepRow {
+        /// LBC's temperature λ.
+        lambda: f64 = "lambda",
+        /// The terrain's name.
+        terrain: String = "terrain",
+        /// Pelvis x advance (m) up to the end or the fall.
+        distance_m: f64 = "distance_m",
+        /// 1 when it fell, else 0.
+        fell: i64 = "fell",
+        /// α_hill's mean on the track's flat part (NaN off the flat-then-hill track).
+        alpha_hill_flat_part: f64 = "alpha_hill_flat_part",
+        /// α_hill's mean on the track's hill part (likewise).
+        alpha_hill_hill_part: f64 = "alpha_hill_hill_part",
+    }
+}
 
 /// Who drives the body.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -236,7 +277,7 @@ struct HillWalker {
 struct Sweep {
     walks: Vec<Walk>,
     chosen: usize,
-    table: Table,
+    rows: Vec<SweepRow>,
 }
 
 impl Params {
@@ -354,14 +395,7 @@ impl Params {
                 })
                 .collect::<Result<_, _>>()
         })?;
-        let mut lambda_t = Table::new(&[
-            "lambda",
-            "terrain",
-            "distance_m",
-            "fell",
-            "alpha_hill_flat_part",
-            "alpha_hill_hill_part",
-        ]);
+        let mut rows = Vec::with_capacity(jobs.len());
         let mut walked = vec![true; self.lambdas.len()];
         for (&(l, t), r) in jobs.iter().zip(&sweep) {
             walked[l] &= r.fell_at.is_none();
@@ -370,19 +404,19 @@ impl Params {
             } else {
                 (f64::NAN, f64::NAN)
             };
-            lambda_t.push(row![
-                self.lambdas[l],
-                terrains[t].0,
-                r.distance,
-                i64::from(r.fell_at.is_some()),
-                af,
-                ah
-            ]);
+            rows.push(SweepRow {
+                lambda: self.lambdas[l],
+                terrain: terrains[t].0.to_string(),
+                distance_m: r.distance,
+                fell: i64::from(r.fell_at.is_some()),
+                alpha_hill_flat_part: af,
+                alpha_hill_hill_part: ah,
+            });
         }
         Ok(Sweep {
             walks: sweep,
             chosen: choose_lambda(&walked),
-            table: lambda_t,
+            rows,
         })
     }
 
@@ -444,32 +478,23 @@ fn walks_table(
     alone: &[Walk],
     lbc: &[Walk],
     lambda: f64,
-) -> Table {
-    let mut walks = Table::new(&[
-        "terrain",
-        "controller",
-        "distance_m",
-        "fell",
-        "mean_speed_m_s",
-        "steps",
-        "fell_at_s",
-        "lambda",
-    ]);
+) -> Vec<WalkRow> {
+    let mut walks = Vec::new();
     let mut push_walk = |terrain: &str, d: Driver, r: &Walk| {
         let l = match d {
             Driver::Lbc(l) => l,
             _ => f64::NAN,
         };
-        walks.push(row![
-            terrain,
-            d.name(),
-            r.distance,
-            i64::from(r.fell_at.is_some()),
-            r.distance / r.seconds.max(1e-9),
-            r.steps,
-            r.fell_at.unwrap_or(f64::NAN),
-            l
-        ]);
+        walks.push(WalkRow {
+            terrain: terrain.to_string(),
+            controller: d.name().to_string(),
+            distance_m: r.distance,
+            fell: i64::from(r.fell_at.is_some()),
+            mean_speed_m_s: r.distance / r.seconds.max(1e-9),
+            steps: r.steps as i64,
+            fell_at_s: r.fell_at.unwrap_or(f64::NAN),
+            lambda: l,
+        });
     };
     for (t, (name, _)) in terrains.iter().enumerate() {
         for (d, &driver) in DRIVERS_ALONE.iter().enumerate() {
@@ -561,9 +586,9 @@ impl Job for Params {
         Ok(Tables::from([
             ("search", hill.search),
             ("cycles", cyc),
-            ("walks", walks),
+            ("walks", table_of(&walks)),
             ("weights", weights),
-            ("lambda_sweep", sweep.table),
+            ("lambda_sweep", table_of(&sweep.rows)),
             ("motion", motion),
             ("rule", rule),
         ]))

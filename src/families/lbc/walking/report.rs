@@ -1,13 +1,13 @@
 //! `lbc_walking`'s verdict and report section.
 
-use super::job::part_means;
+use super::job::{part_means, SweepRow, WalkRow};
 use crate::experiment::output::{df_f64, df_str, read_csv, Tables};
 use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use crate::families::lbc::{rule_setting, rule_settings};
 use crate::physics::ground::Terrain;
-use polars::prelude::DataFrame;
 use std::path::Path;
 
 pub(super) const TERRAINS: [&str; 3] = ["flat", "incline", "flat_then_hill"];
@@ -121,17 +121,12 @@ pub fn verdict_of(f: &WalkingFacts, advance_fraction: f64, reach_m: f64, shift: 
     walking_rule(f, advance_fraction, reach_m, shift).map_or(Verdict::NotAssessed, |r| r.verdict())
 }
 
-/// (distance, fell) of `controller` on `terrain` in a run's `walks.csv` table.
-fn walk_of(w: &DataFrame, terrain: &str, controller: &str) -> Result<(f64, bool), Error> {
-    let (t, c, d, f) = (
-        df_str(w, "terrain")?,
-        df_str(w, "controller")?,
-        df_f64(w, "distance_m")?,
-        df_f64(w, "fell")?,
-    );
-    (0..t.len())
-        .find(|&i| t[i] == terrain && c[i] == controller)
-        .map(|i| (d[i], f[i] != 0.0))
+/// (distance, fell) of `controller` on `terrain` in a run's `walks.csv` rows.
+fn walk_of(walks: &[WalkRow], terrain: &str, controller: &str) -> Result<(f64, bool), Error> {
+    walks
+        .iter()
+        .find(|r| r.terrain == terrain && r.controller == controller)
+        .map(|r| (r.distance_m, r.fell != 0))
         .ok_or_else(|| Error::Other(format!("walks.csv: no {controller} on {terrain}")))
 }
 
@@ -157,7 +152,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         .filter(|&i| wt[i] == "flat_then_hill")
         .map(|i| (wx[i], wa[i]))
         .collect();
-    let walks = read_csv(&dir.join("walks.csv"))?;
+    let walks: Vec<WalkRow> = read_rows(&dir.join("walks.csv"))?;
     let (start, margin) = (rule("hill_start_m"), rule("margin_m"));
     let (af, ah) = part_means(&track, start - margin, start + margin);
     let facts = WalkingFacts {
@@ -179,60 +174,46 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let mut md = String::from(
         "| terrain | controller | distance (m) | fell | mean speed (m/s) | steps |\n| --- | --- | --- | --- | --- | --- |\n",
     );
-    let (t, ctl, d, f, v, st) = (
-        df_str(&walks, "terrain")?,
-        df_str(&walks, "controller")?,
-        df_f64(&walks, "distance_m")?,
-        df_f64(&walks, "fell")?,
-        df_f64(&walks, "mean_speed_m_s")?,
-        df_f64(&walks, "steps")?,
-    );
-    let fa = df_f64(&walks, "fell_at_s")?;
-    for i in 0..t.len() {
+    for r in &walks {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} |\n",
-            t[i],
-            ctl[i],
-            sig(d[i]),
-            if f[i] != 0.0 {
-                format!("yes, at {} s", sig(fa[i]))
+            r.terrain,
+            r.controller,
+            sig(r.distance_m),
+            if r.fell != 0 {
+                format!("yes, at {} s", sig(r.fell_at_s))
             } else {
                 "no".into()
             },
-            sig(v[i]),
-            st[i]
+            sig(r.mean_speed_m_s),
+            r.steps
         ));
     }
-    let sw = read_csv(&dir.join("lambda_sweep.csv"))?;
-    let (sl, st2, sd, sf, saf, sah) = (
-        df_f64(&sw, "lambda")?,
-        df_str(&sw, "terrain")?,
-        df_f64(&sw, "distance_m")?,
-        df_f64(&sw, "fell")?,
-        df_f64(&sw, "alpha_hill_flat_part")?,
-        df_f64(&sw, "alpha_hill_hill_part")?,
-    );
+    let sweep: Vec<SweepRow> = read_rows(&dir.join("lambda_sweep.csv"))?;
     md.push_str("\nLBC at every temperature tried (`lambda_sweep.csv`; distance in m, a cross when it fell; α_hill's mean on the track's flat and hill parts):\n\n| λ | flat | incline | flat-then-hill | α_hill, flat part | α_hill, hill part |\n| --- | --- | --- | --- | --- | --- |\n");
-    let mut lambdas: Vec<f64> = sl.clone();
+    let mut lambdas: Vec<f64> = sweep.iter().map(|r| r.lambda).collect();
     lambdas.dedup();
     for l in lambdas {
+        let at = |terrain: &str| sweep.iter().find(|r| r.lambda == l && r.terrain == terrain);
         let cell = |terrain: &str| {
-            (0..sl.len())
-                .find(|&i| sl[i] == l && st2[i] == terrain)
-                .map_or("–".to_string(), |i| {
-                    format!("{}{}", sig(sd[i]), if sf[i] != 0.0 { " ✗" } else { "" })
-                })
+            at(terrain).map_or("–".to_string(), |r| {
+                format!(
+                    "{}{}",
+                    sig(r.distance_m),
+                    if r.fell != 0 { " ✗" } else { "" }
+                )
+            })
         };
-        let track_i = (0..sl.len()).find(|&i| sl[i] == l && st2[i] == "flat_then_hill");
-        let g = |x: &[f64]| track_i.map_or("–".to_string(), |i| sig(x[i]));
+        let track = at("flat_then_hill");
+        let g = |x: fn(&SweepRow) -> f64| track.map_or("–".to_string(), |r| sig(x(r)));
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} |\n",
             sig(l),
             cell("flat"),
             cell("incline"),
             cell("flat_then_hill"),
-            g(&saf),
-            g(&sah)
+            g(|r| r.alpha_hill_flat_part),
+            g(|r| r.alpha_hill_hill_part)
         ));
     }
     let why = format!(
