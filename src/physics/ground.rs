@@ -564,10 +564,9 @@ mod tests {
             for (i, part) in leg.joints().into_iter().zip(["thigh", "shin", "foot"]) {
                 assert_eq!(names[i], format!("{word}_{part}_joint"));
             }
-            assert_eq!(
-                Biped::leg(side.other()),
-                Biped::leg(side.other().other().other())
-            );
+            assert_ne!(side.other(), side);
+            assert_eq!(side.other().other(), side);
+            assert_ne!(Biped::leg(side), Biped::leg(side.other()));
         }
         let x: Vec<f64> = (0..2 * crate::physics::biped::DOF)
             .map(|i| i as f64)
