@@ -635,12 +635,55 @@ pub fn unique(v: &[String]) -> Vec<String> {
     out
 }
 
-/// [`read_csv`] of a table a run may not write (a spec without the study that writes it):
-/// `None` when the file is absent; a file that exists but cannot be read is an error naming
-/// it, never "nothing to say".
-pub fn read_optional_csv(path: &Path) -> Result<Option<DataFrame>, Error> {
-    if path.exists() {
-        read_csv(path).map(Some)
+/// The run record (`run.json`) that covers the result folder `dir`: the experiment's own, or
+/// for a seed's folder (`<id>/seeds/<s>/`) the experiment's two levels up.
+fn run_record(dir: &Path) -> Option<PathBuf> {
+    [Some(dir), dir.parent().and_then(Path::parent)]
+        .into_iter()
+        .flatten()
+        .map(|d| d.join("run.json"))
+        .find(|p| p.is_file())
+}
+
+/// [`read_csv`] of `dir/name`, a table that a run writes only when its spec asks for the study
+/// behind it (net seeds, DAgger rounds, a sweep): whether the run wrote it is read from the run
+/// record's file list (`run.json`'s `files`), not from the folder.
+///
+/// - Listed there: the table is read, and a missing or cut file is an error naming it.
+/// - Not listed: `None`, the study was not asked for.
+/// - No run record (a folder that no run finished, as in tests): `None` when the file is
+///   absent, else it is read.
+///
+/// So deleting or truncating a table the run wrote is an error, never a quieter verdict.
+pub fn written_csv(dir: &Path, name: &str) -> Result<Option<DataFrame>, Error> {
+    let path = dir.join(name);
+    let Some(record) = run_record(dir) else {
+        return if path.exists() {
+            read_csv(&path).map(Some)
+        } else {
+            Ok(None)
+        };
+    };
+    let text = std::fs::read_to_string(&record).map_err(|source| Error::Io {
+        path: record.clone(),
+        source,
+    })?;
+    let bad = |why: &str| Error::Other(format!("{}: {why}", record.display()));
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| bad(&format!("not JSON: {e}")))?;
+    let files = v
+        .get("files")
+        .and_then(|f| f.as_array())
+        .ok_or_else(|| bad("has no `files` list"))?;
+    // `files` names paths relative to the results root, the folder above the experiment's.
+    let root = record
+        .parent()
+        .and_then(Path::parent)
+        .unwrap_or(Path::new(""));
+    let rel = path.strip_prefix(root).unwrap_or(&path);
+    let rel = rel.to_string_lossy().replace('\\', "/");
+    if files.iter().any(|f| f.as_str() == Some(rel.as_str())) {
+        read_csv(&path).map(Some)
     } else {
         Ok(None)
     }
@@ -853,6 +896,43 @@ mod tests {
             let msg = err.downcast_ref::<String>().cloned().unwrap_or_default();
             assert!(msg.contains("column `"), "{msg}");
         }
+    }
+
+    /// A table the run record lists is required: deleted or cut, it is an error naming the
+    /// file; one the run did not write reads as absent, even when a stray file lies there; a
+    /// seed's folder is covered by the experiment's record two levels up.
+    #[test]
+    fn a_table_the_run_wrote_is_required_and_one_it_did_not_is_absent() {
+        let root = tempfile::tempdir().unwrap();
+        let dir = root.path().join("e1");
+        let seed = dir.join("seeds").join("1");
+        std::fs::create_dir_all(&seed).unwrap();
+        let files = r#"{"files": ["e1/a.csv", "e1/seeds/1/c.csv"]}"#;
+        std::fs::write(dir.join("run.json"), files).unwrap();
+        std::fs::write(dir.join("a.csv"), "x\n1\n2\n").unwrap();
+        std::fs::write(dir.join("b.csv"), "x\n1\n").unwrap();
+        std::fs::write(seed.join("c.csv"), "x\n3\n").unwrap();
+        let a = written_csv(&dir, "a.csv").unwrap().expect("listed");
+        assert_eq!(df_f64(&a, "x").unwrap(), vec![1.0, 2.0]);
+        assert!(
+            written_csv(&dir, "b.csv").unwrap().is_none(),
+            "not listed: absent"
+        );
+        let c = written_csv(&seed, "c.csv")
+            .unwrap()
+            .expect("listed under the seed");
+        assert_eq!(df_f64(&c, "x").unwrap(), vec![3.0]);
+        // Cut mid-row, then deleted: both errors naming the file.
+        std::fs::write(dir.join("a.csv"), "x,y\n1,2\n3").unwrap();
+        let cut = written_csv(&dir, "a.csv").expect_err("a cut table is an error");
+        assert!(cut.to_string().contains("a.csv"), "{cut}");
+        std::fs::remove_file(dir.join("a.csv")).unwrap();
+        let gone = written_csv(&dir, "a.csv").expect_err("a deleted table is an error");
+        assert!(gone.to_string().contains("a.csv"), "{gone}");
+        // Without a record (a folder no run finished) the folder decides.
+        let bare = root.path().join("bare");
+        std::fs::create_dir_all(&bare).unwrap();
+        assert!(written_csv(&bare, "a.csv").unwrap().is_none());
     }
 
     #[test]

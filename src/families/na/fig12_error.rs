@@ -24,7 +24,7 @@ use crate::emulator::catalog::BuildSpec;
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::mlp::Mlp;
-use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv, Table, Tables};
+use crate::experiment::output::{df_f64, df_str, read_csv, written_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
@@ -456,7 +456,7 @@ const BOOTSTRAP_SEED: u64 = 1;
 /// seed of `net_seeds.csv`: (variant, ratio per seed in the table's order). `None` without the
 /// table or with one seed.
 fn seed_ratios(dir: &Path) -> Result<Option<Vec<(String, Vec<f64>)>>, Error> {
-    let Some(t) = read_optional_csv(&dir.join("net_seeds.csv"))? else {
+    let Some(t) = written_csv(dir, "net_seeds.csv")? else {
         return Ok(None);
     };
     let (seed, var) = (df_f64(&t, "net_seed")?, df_str(&t, "variant")?);

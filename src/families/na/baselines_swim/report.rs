@@ -3,7 +3,7 @@
 
 use super::{SwimRule, DAGGER_SUBSTRATE, SEARCHES};
 use crate::experiment::other;
-use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv};
+use crate::experiment::output::{df_f64, df_str, read_csv, written_csv};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::median_interval_with_infinities;
@@ -564,7 +564,7 @@ pub fn seed_measures(
     dir: &Path,
     bars: &SwimRule,
 ) -> Result<Option<Vec<(i64, SwimMeasures)>>, Error> {
-    let Some(t) = read_optional_csv(&dir.join("search_seeds.csv"))? else {
+    let Some(t) = written_csv(dir, "search_seeds.csv")? else {
         return Ok(None);
     };
     let (seed, meth) = (df_f64(&t, "seed")?, df_str(&t, "method")?);

@@ -484,10 +484,10 @@ pub fn figure(
 /// simulator errors, and at the last round whether the goal is reached on the net within the
 /// paper's iteration count and on the simulator. `None` when there is no `dagger.csv`.
 pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error> {
-    use crate::experiment::output::{df_f64, df_str, read_optional_csv, unique};
+    use crate::experiment::output::{df_f64, df_str, unique, written_csv};
     use crate::experiment::report::sig;
     use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
-    let Some(df) = read_optional_csv(&dir.join("dagger.csv"))? else {
+    let Some(df) = written_csv(dir, "dagger.csv")? else {
         return Ok(None);
     };
     let (task, round) = (df_str(&df, "task")?, df_f64(&df, "round")?);

@@ -443,10 +443,10 @@ pub fn figure(
 /// The report's dolphin DAgger paragraph and verdict line (rule in the spec). `None` when
 /// there is no `dolphin_dagger.csv` or it has no rows.
 pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error> {
-    use crate::experiment::output::{df_f64, read_optional_csv};
+    use crate::experiment::output::{df_f64, written_csv};
     use crate::experiment::report::sig;
     use crate::experiment::rule::{rule_settings, shown};
-    let Some(df) = read_optional_csv(&dir.join("dolphin_dagger.csv"))? else {
+    let Some(df) = written_csv(dir, "dolphin_dagger.csv")? else {
         return Ok(None);
     };
     let round = df_f64(&df, "round")?;

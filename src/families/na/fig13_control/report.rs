@@ -2,7 +2,7 @@
 //! and the sentences on the sweeps, the conditioning study and the best weights.
 
 use super::{dagger, dolphin_dagger, Fig13Rule};
-use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv, unique};
+use crate::experiment::output::{df_f64, df_str, read_csv, unique, written_csv};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::rule::{
     rule_settings, shown, Check, Cmp, Null, Outcome, Partly, Rule, RuleError,
@@ -154,7 +154,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         ),
     ]
     .iter()
-    .filter_map(|(f, title)| sweep_summary(&dir.join(f), title).transpose())
+    .filter_map(|(f, title)| sweep_summary(dir, f, title).transpose())
     .collect::<Result<Vec<_>, _>>()?
     .concat();
     let rule = fig13_rule(&h.facts, &bars);
@@ -456,8 +456,8 @@ fn push_sections(dir: &Path, md: &mut String) -> Result<(String, String, String)
 
 /// One sentence per task of a sweep table: the fewest iterations to the goal over its rules and
 /// rates (and the simulator error of those controls), or the lowest final error reached.
-fn sweep_summary(path: &Path, title: &str) -> Result<Option<String>, Error> {
-    let Some(df) = read_optional_csv(path)? else {
+fn sweep_summary(dir: &Path, file: &str, title: &str) -> Result<Option<String>, Error> {
+    let Some(df) = written_csv(dir, file)? else {
         return Ok(None);
     };
     let (task, rule) = (df_str(&df, "task")?, df_str(&df, "rule")?);
@@ -530,14 +530,12 @@ fn sweep_summary(path: &Path, title: &str) -> Result<Option<String>, Error> {
     Ok(Some(format!(" {title}: {}.", parts.join("; "))))
 }
 
-/// The report's table and sentence from `conditioning_ladder.csv` (absent in older runs): which
+/// The report's table and sentence from `conditioning_ladder.csv` (written when the spec asks for the study): which
 /// of the paper's changes to our earlier formulations moved the conditioning.
 fn ladder_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
-    let path = dir.join("conditioning_ladder.csv");
-    if !path.exists() {
+    let Some(df) = written_csv(dir, "conditioning_ladder.csv")? else {
         return Ok(None);
-    }
-    let df = read_csv(&path)?;
+    };
     let (task, change) = (df_str(&df, "task")?, df_str(&df, "change")?);
     let (dof, kappa, pace) = (
         df_f64(&df, "dof")?,
@@ -611,13 +609,11 @@ fn ladder_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
     Ok(Some((md, why)))
 }
 
-/// The report's conditioning table and sentence from `conditioning.csv` (absent in older runs).
+/// The report's conditioning table and sentence from `conditioning.csv` (written when the spec asks for the study).
 fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
-    let path = dir.join("conditioning.csv");
-    if !path.exists() {
+    let Some(df) = written_csv(dir, "conditioning.csv")? else {
         return Ok(None);
-    }
-    let df = read_csv(&path)?;
+    };
     let (task, sub) = (df_str(&df, "task")?, df_str(&df, "substrate")?);
     let (knots, dof, kappa, eta, pace) = (
         df_f64(&df, "knots")?,

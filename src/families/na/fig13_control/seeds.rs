@@ -15,9 +15,7 @@
 use super::{Formulation, Params, Task};
 use crate::emulator::catalog::BuildSpec;
 use crate::emulator::Emulator;
-use crate::experiment::output::{
-    df_f64, df_str, read_csv, read_optional_csv, unique, Table, Tables,
-};
+use crate::experiment::output::{df_f64, df_str, unique, written_csv, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::sig;
 use crate::experiment::stats::median;
@@ -213,7 +211,7 @@ impl Params {
 /// paper task, how many net seeds reach the goal on both and on the emulator alone through
 /// the headline's nets (`paper`) and through each second line's. Empty without `net_lines.csv`.
 pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
-    let Some(lines) = read_optional_csv(&dir.join("net_lines.csv"))? else {
+    let Some(lines) = written_csv(dir, "net_lines.csv")? else {
         return Ok(String::new());
     };
     let (task, line) = (df_str(&lines, "task")?, df_str(&lines, "line")?);
@@ -256,7 +254,7 @@ pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
 /// the start's λ against momentum's stable limit, and how the simulator's final error follows
 /// the net's at every iterate.
 pub(super) fn path_md(dir: &Path) -> Result<(String, String), Error> {
-    let Some(df) = read_optional_csv(&dir.join("path.csv"))? else {
+    let Some(df) = written_csv(dir, "path.csv")? else {
         return Ok(Default::default());
     };
     let (task, seed) = (df_str(&df, "task")?, df_f64(&df, "net_seed")?);
@@ -354,11 +352,10 @@ pub(super) struct SeedCount {
 /// verdict on fewer seeds.
 pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
     let path = dir.join("net_seeds.csv");
-    if !path.exists() {
+    let Some(df) = written_csv(dir, "net_seeds.csv")? else {
         return Ok(None);
-    }
+    };
     let damaged = |why: &str| crate::experiment::other(format!("{}: {why}", path.display()));
-    let df = read_csv(&path)?;
     let (task, goal) = (df_str(&df, "task")?, df_f64(&df, "at_goal")?);
     let emu = df_f64(&df, "emulator_error")?;
     let sim = df_f64(&df, "simulator_error")?;
@@ -396,7 +393,7 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
 /// The report's table of `net_seeds.csv` in `dir` (empty when the run has none): every task and
 /// net seed with both final errors and whether it reached the goal.
 pub(super) fn table_md(dir: &Path) -> Result<String, Error> {
-    let Some(df) = read_optional_csv(&dir.join("net_seeds.csv"))? else {
+    let Some(df) = written_csv(dir, "net_seeds.csv")? else {
         return Ok(String::new());
     };
     let (task, seed) = (df_str(&df, "task")?, df_f64(&df, "net_seed")?);

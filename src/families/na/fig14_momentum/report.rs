@@ -2,7 +2,7 @@
 //! the DAgger nets), the tables, and the sentences on the DAgger nets and the run to convergence.
 
 use super::params::Fig14Rule;
-use crate::experiment::output::{df_f64, df_str, read_csv, read_optional_csv};
+use crate::experiment::output::{df_f64, df_str, read_csv, written_csv};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::rule::{majority, read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::median_interval_with_infinities;
@@ -133,7 +133,7 @@ pub(super) fn seeds_rule(
 /// file, never a verdict on fewer seeds.
 pub(super) fn seed_facts(dir: &Path) -> Result<Option<(Vec<SeedFacts>, (f64, f64))>, Error> {
     let path = dir.join("net_seeds.csv");
-    let Some(df) = read_optional_csv(&path)? else {
+    let Some(df) = written_csv(dir, "net_seeds.csv")? else {
         return Ok(None);
     };
     let damaged = |why: &str| other(format!("{}: {why}", path.display()));
@@ -502,11 +502,9 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
 /// The report's sentence on `unclipped.csv` (empty when absent): which plain rates diverge with
 /// and without the boxes clipping the knots, against the quadratic's limit eta < 2.
 fn unclipped_summary(dir: &Path) -> Result<String, Error> {
-    let path = dir.join("unclipped.csv");
-    if !path.exists() {
+    let Some(df) = written_csv(dir, "unclipped.csv")? else {
         return Ok(String::new());
-    }
-    let df = read_csv(&path)?;
+    };
     let (method, eta) = (df_str(&df, "method")?, df_f64(&df, "eta")?);
     let (clipped, diverged) = (df_f64(&df, "clipped")?, df_f64(&df, "diverged")?);
     let (first, peak) = (
@@ -549,7 +547,7 @@ fn unclipped_summary(dir: &Path) -> Result<String, Error> {
 /// The report's sentence on `converged.csv` (empty when absent): per net, where momentum's
 /// and plain descent's controls run to convergence end on the emulator and the simulator.
 fn converged_summary(dir: &Path) -> Result<String, Error> {
-    let Some(df) = read_optional_csv(&dir.join("converged.csv"))? else {
+    let Some(df) = written_csv(dir, "converged.csv")? else {
         return Ok(String::new());
     };
     let (net, method) = (df_str(&df, "net")?, df_str(&df, "method")?);
@@ -596,7 +594,7 @@ fn converged_summary(dir: &Path) -> Result<String, Error> {
 /// The report's DAgger paragraph, table and verdict sentence (rule in the spec): `None` when
 /// there is no `dagger.csv` or it is empty.
 fn dagger_summary(dir: &Path, bars: &Fig14Rule) -> Result<Option<(String, String)>, Error> {
-    let Some(df) = read_optional_csv(&dir.join("dagger.csv"))? else {
+    let Some(df) = written_csv(dir, "dagger.csv")? else {
         return Ok(None);
     };
     let net = df_str(&df, "net")?;

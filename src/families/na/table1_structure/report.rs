@@ -3,8 +3,9 @@
 
 use super::Table1Rule;
 use crate::emulator::catalog::Normalization;
-use crate::experiment::output::{df_f64, df_str, read_csv};
+use crate::experiment::output::{df_f64, df_str, read_csv, written_csv};
 use crate::experiment::report::{sig, Findings};
+use crate::experiment::rows::Frame as DataFrame;
 use crate::experiment::rule::{majority, rule_settings, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use std::path::Path;
@@ -47,11 +48,9 @@ pub fn table1_rule(passed: usize, nets: usize) -> Option<Rule> {
 /// quantity's median 40-step error is within `max` tolerances, and the report's table of
 /// every row; `None` when the run wrote no such table.
 fn regime_section(dir: &Path, max: f64) -> Result<Option<(Vec<(String, bool)>, String)>, Error> {
-    let path = dir.join("regime_fidelity.csv");
-    if !path.exists() {
+    let Some(df) = written_csv(dir, "regime_fidelity.csv")? else {
         return Ok(None);
-    }
-    let df = read_csv(&path)?;
+    };
     let (net, quantity, variant) = (
         df_str(&df, "net")?,
         df_str(&df, "quantity")?,
@@ -172,9 +171,8 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     if let Some((_, text)) = &regime {
         md.push_str(text);
     }
-    let norm_path = dir.join("normalization.csv");
-    if norm_path.exists() {
-        md.push_str(&normalization_section(&norm_path)?);
+    if let Some(df) = written_csv(dir, "normalization.csv")? {
+        md.push_str(&normalization_section(&df)?);
     }
     md.push_str(&global_error_section(dir)?);
     let rule = table1_rule(good, net.len());
@@ -199,10 +197,8 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
 
 /// The drift section (`drift.csv`; empty when absent): every neutral-control drift row.
 fn drift_section(dir: &Path) -> Result<String, Error> {
-    let drift_path = dir.join("drift.csv");
     let mut out = String::new();
-    if drift_path.exists() {
-        let df = read_csv(&drift_path)?;
+    if let Some(df) = written_csv(dir, "drift.csv")? {
         let (dn, task) = (df_str(&df, "net")?, df_str(&df, "task")?);
         let (hz, de, ds, gap, tol) = (
             df_f64(&df, "horizon_s")?,
@@ -233,10 +229,8 @@ fn drift_section(dir: &Path) -> Result<String, Error> {
 /// The dolphin's global net's held-out error by segment (`global_error.csv`; empty when
 /// absent).
 fn global_error_section(dir: &Path) -> Result<String, Error> {
-    let ge_path = dir.join("global_error.csv");
     let mut out = String::new();
-    if ge_path.exists() {
-        let df = read_csv(&ge_path)?;
+    if let Some(df) = written_csv(dir, "global_error.csv")? {
         let (seg, mse, var) = (
             df_f64(&df, "segment")?,
             df_f64(&df, "heldout_mse")?,
@@ -272,17 +266,16 @@ fn global_error_section(dir: &Path) -> Result<String, Error> {
 /// The normalization comparison (`normalization.csv`): every catalog net under each
 /// normalization, and whether the net's own is the one the spec's rule picks
 /// ([`super::normalization_pick`]).
-fn normalization_section(path: &Path) -> Result<String, Error> {
-    let df = read_csv(path)?;
-    let (net, norm) = (df_str(&df, "net")?, df_str(&df, "normalization")?);
+fn normalization_section(df: &DataFrame) -> Result<String, Error> {
+    let (net, norm) = (df_str(df, "net")?, df_str(df, "normalization")?);
     if net.is_empty() {
         return Ok(String::new());
     }
-    let in_spec = df_f64(&df, "in_spec")?;
+    let in_spec = df_f64(df, "in_spec")?;
     let (one, mean, last) = (
-        df_f64(&df, "rollout1_error")?,
-        df_f64(&df, "rollout40_error_mean")?,
-        df_f64(&df, "rollout40_error_final")?,
+        df_f64(df, "rollout1_error")?,
+        df_f64(df, "rollout40_error_mean")?,
+        df_f64(df, "rollout40_error_final")?,
     );
     fn label(n: &str) -> &str {
         match n {

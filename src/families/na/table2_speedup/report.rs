@@ -2,7 +2,7 @@
 //! comparison, and the verdict rule (N100 at least 50x, every rigid-body N50 at least 10x).
 
 use super::{Table2Rule, DOLPHIN_IMPLICIT};
-use crate::experiment::output::{df_f64, df_str, read_csv};
+use crate::experiment::output::{df_f64, df_str, read_csv, written_csv};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::rule::{rule_settings, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
@@ -163,12 +163,10 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
 }
 
 /// The equal-accuracy table (`equal_accuracy.csv`; data, not part of the verdict) and its
-/// sentence, both empty when the file is absent.
+/// sentence, both empty when the run wrote no such table.
 fn equal_accuracy_section(dir: &Path) -> Result<(String, String), Error> {
     let (mut md, mut equal_text) = (String::new(), String::new());
-    let eq_path = dir.join("equal_accuracy.csv");
-    if eq_path.exists() {
-        let eq = read_csv(&eq_path)?;
+    if let Some(eq) = written_csv(dir, "equal_accuracy.csv")? {
         let (em, ee) = (df_str(&eq, "model")?, df_str(&eq, "emulator")?);
         let (err, j, mdt, merr, cerr, eps, ees, esp) = (
             df_f64(&eq, "emulator_error")?,
