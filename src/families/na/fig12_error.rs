@@ -24,17 +24,16 @@ use crate::emulator::catalog::BuildSpec;
 use crate::emulator::catalog::{NetModel, NetSpec, TrainSettings};
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::mlp::Mlp;
-use crate::experiment::output::{df_f64, df_str, read_csv, written_csv, Table, Tables};
+use crate::experiment::output::{written_csv, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{
     rule_setting, rule_settings, rule_table, shown, Check, Cmp, Null, Partly, Rule,
 };
 use crate::experiment::stats::median_interval;
 use crate::experiment::{Error, Family, Job, RunContext};
-use crate::row;
-use polars::prelude::DataFrame;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -78,10 +77,55 @@ pub struct Params {
 /// The most further net seeds a run may ask for (each trains every emulator again).
 pub const MAX_NET_SEEDS: usize = 16;
 
-/// Columns of `net_seeds.csv`: per net seed (the run's own first), variant, emulator and hidden
-/// units, the time-averaged error over the trials.
-pub const NET_SEEDS_COLUMNS: [&str; 5] =
-    ["net_seed", "variant", "emulator", "hidden", "mean_error"];
+crate::result_rows! {
+    /// One row of `error.csv`: an emulator's mean absolute error at one comparison frame.
+    pub struct ErrorRow {
+        /// The pendulum variant (`passive`, `active`).
+        variant: String = "variant",
+        /// The emulator (`N25`, `N50`, `N100`).
+        emulator: String = "emulator",
+        /// The frame's time (s).
+        t: f64 = "t",
+        /// Mean |emulated - simulated| over trials and state variables (rad and rad/s).
+        error: f64 = "error",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `capacity.csv`: an emulator at one capacity tried (the net's own first).
+    pub struct CapacityRow {
+        /// The pendulum variant.
+        variant: String = "variant",
+        /// The emulator.
+        emulator: String = "emulator",
+        /// Hidden units.
+        hidden: i64 = "hidden",
+        /// Training examples.
+        examples: i64 = "examples",
+        /// The error averaged over every frame.
+        mean_error: f64 = "mean_error",
+        /// The error averaged over the frames every emulator steps to (multiples of the
+        /// longest super-step).
+        common_mean_error: f64 = "common_mean_error",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `net_seeds.csv`: per net seed (the run's own first), an emulator at one
+    /// capacity, its time-averaged error over the trials.
+    pub struct NetSeedRow {
+        /// The net seed.
+        net_seed: i64 = "net_seed",
+        /// The pendulum variant.
+        variant: String = "variant",
+        /// The emulator.
+        emulator: String = "emulator",
+        /// Hidden units.
+        hidden: i64 = "hidden",
+        /// The error averaged over every frame.
+        mean_error: f64 = "mean_error",
+    }
+}
 
 /// The verdict's bars on the ratio of the largest to the smallest time-averaged error across
 /// the emulators of a variant (ours).
@@ -202,16 +246,7 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut table = Table::new(&["variant", "emulator", "t", "error"]);
-        let mut capacity = Table::new(&[
-            "variant",
-            "emulator",
-            "hidden",
-            "examples",
-            "mean_error",
-            "common_mean_error",
-        ]);
-        let mut seeds_t = Table::new(&NET_SEEDS_COLUMNS);
+        let (mut table, mut capacity, mut seeds_t) = (Vec::new(), Vec::new(), Vec::new());
         let steps = self.physical_steps;
         let mean = |curve: &[f64]| curve.iter().sum::<f64>() / curve.len() as f64;
         for (vi, net) in self.nets.iter().enumerate() {
@@ -222,12 +257,12 @@ impl Job for Params {
             for c in &own {
                 if c.hidden == net.hidden {
                     for (f, e) in c.curve.iter().enumerate() {
-                        table.push(row![
-                            variant(model),
-                            format!("N{}", c.k),
-                            frame_step(f).min(steps) as f64 * dt,
-                            *e
-                        ]);
+                        table.push(ErrorRow {
+                            variant: variant(model).to_string(),
+                            emulator: format!("N{}", c.k),
+                            t: frame_step(f).min(steps) as f64 * dt,
+                            error: *e,
+                        });
                     }
                 }
                 // The frames every emulator steps to (multiples of the longest super-step): no
@@ -237,14 +272,14 @@ impl Job for Params {
                     .filter(|&f| frame_step(f).min(steps) % k_max == 0)
                     .map(|f| c.curve[f])
                     .collect();
-                capacity.push(row![
-                    variant(model),
-                    format!("N{}", c.k),
-                    c.hidden as i64,
-                    c.examples as i64,
-                    mean(&c.curve),
-                    common.iter().sum::<f64>() / common.len().max(1) as f64
-                ]);
+                capacity.push(CapacityRow {
+                    variant: variant(model).to_string(),
+                    emulator: format!("N{}", c.k),
+                    hidden: c.hidden as i64,
+                    examples: c.examples as i64,
+                    mean_error: mean(&c.curve),
+                    common_mean_error: common.iter().sum::<f64>() / common.len().max(1) as f64,
+                });
             }
             let mut seeds = vec![(ctx.seed, own)];
             for &seed in &self.net_seeds {
@@ -255,13 +290,13 @@ impl Job for Params {
             }
             for (seed, curves) in &seeds {
                 for c in curves {
-                    seeds_t.push(row![
-                        *seed as i64,
-                        variant(model),
-                        format!("N{}", c.k),
-                        c.hidden as i64,
-                        mean(&c.curve)
-                    ]);
+                    seeds_t.push(NetSeedRow {
+                        net_seed: *seed as i64,
+                        variant: variant(model).to_string(),
+                        emulator: format!("N{}", c.k),
+                        hidden: c.hidden as i64,
+                        mean_error: mean(&c.curve),
+                    });
                 }
             }
         }
@@ -271,9 +306,9 @@ impl Job for Params {
             ("null_ratio", self.null_ratio()),
         ]);
         Ok(Tables::from([
-            ("error", table),
-            ("capacity", capacity),
-            ("net_seeds", seeds_t),
+            ("error", table_of(&table)),
+            ("capacity", table_of(&capacity)),
+            ("net_seeds", table_of(&seeds_t)),
             ("rule", rule),
         ]))
     }
@@ -449,6 +484,11 @@ fn spread(errors: &[f64]) -> Option<f64> {
     })
 }
 
+/// Physical steps per emulator step of an emulator's name (`N50`: 50).
+fn super_step(emulator: &str) -> Option<f64> {
+    emulator.trim_start_matches('N').parse::<f64>().ok()
+}
+
 /// Seed of the bootstrap over net seeds (fixed, so a report is the same on every machine).
 const BOOTSTRAP_SEED: u64 = 1;
 
@@ -456,19 +496,19 @@ const BOOTSTRAP_SEED: u64 = 1;
 /// seed of `net_seeds.csv`: (variant, ratio per seed in the table's order). `None` without the
 /// table or with one seed.
 fn seed_ratios(dir: &Path) -> Result<Option<Vec<(String, Vec<f64>)>>, Error> {
-    let Some(t) = written_csv(dir, "net_seeds.csv")? else {
+    let Some(df) = written_csv(dir, "net_seeds.csv")? else {
         return Ok(None);
     };
-    let (seed, var) = (df_f64(&t, "net_seed")?, df_str(&t, "variant")?);
-    let (emu, err) = (df_str(&t, "emulator")?, df_f64(&t, "mean_error")?);
-    let mut seeds: Vec<f64> = vec![];
+    let rows = NetSeedRow::from_frame(&df)
+        .map_err(|e| Error::Other(format!("{}: {e}", dir.join("net_seeds.csv").display())))?;
+    let mut seeds: Vec<i64> = vec![];
     let mut variants: Vec<String> = vec![];
-    for r in 0..seed.len() {
-        if !seeds.contains(&seed[r]) {
-            seeds.push(seed[r]);
+    for r in &rows {
+        if !seeds.contains(&r.net_seed) {
+            seeds.push(r.net_seed);
         }
-        if !variants.contains(&var[r]) {
-            variants.push(var[r].clone());
+        if !variants.contains(&r.variant) {
+            variants.push(r.variant.clone());
         }
     }
     if seeds.len() < 2 {
@@ -480,14 +520,11 @@ fn seed_ratios(dir: &Path) -> Result<Option<Vec<(String, Vec<f64>)>>, Error> {
             let ratios = seeds
                 .iter()
                 .filter_map(|&s| {
-                    let rows: Vec<usize> = (0..seed.len())
-                        .filter(|&r| seed[r] == s && var[r] == v)
-                        .collect();
                     let mut best: Vec<(&str, f64)> = vec![];
-                    for &r in &rows {
-                        match best.iter_mut().find(|b| b.0 == emu[r]) {
-                            Some(b) => b.1 = b.1.min(err[r]),
-                            None => best.push((emu[r].as_str(), err[r])),
+                    for r in rows.iter().filter(|r| r.net_seed == s && r.variant == v) {
+                        match best.iter_mut().find(|b| b.0 == r.emulator) {
+                            Some(b) => b.1 = b.1.min(r.mean_error),
+                            None => best.push((r.emulator.as_str(), r.mean_error)),
                         }
                     }
                     spread(&best.iter().map(|b| b.1).collect::<Vec<_>>())
@@ -500,22 +537,18 @@ fn seed_ratios(dir: &Path) -> Result<Option<Vec<(String, Vec<f64>)>>, Error> {
 }
 
 /// The best of an emulator's own time-averaged error `own` and its mean error at every
-/// capacity tried (`tried`: variant, emulator, hidden units, mean error).
-fn best_of(tried: &[(String, String, f64, f64)], v: &str, e: &str, own: f64) -> f64 {
+/// capacity tried.
+fn best_of(tried: &[CapacityRow], v: &str, e: &str, own: f64) -> f64 {
     tried
         .iter()
-        .filter(|t| t.0 == v && t.1 == e)
-        .map(|t| t.3)
+        .filter(|t| t.variant == v && t.emulator == e)
+        .map(|t| t.mean_error)
         .fold(own, f64::min)
 }
 
 /// The report's table: per (variant, emulator) its time-averaged error, its mean error at
 /// each further capacity tried (`hiddens` past the first, the nets' own) and the best.
-fn capacity_md(
-    means: &[(String, String, f64)],
-    tried: &[(String, String, f64, f64)],
-    hiddens: &[f64],
-) -> String {
+fn capacity_md(means: &[(String, String, f64)], tried: &[CapacityRow], hiddens: &[i64]) -> String {
     let best = |v: &str, e: &str, own: f64| best_of(tried, v, e, own);
     let mut md = String::from("| variant | emulator | time-averaged error |");
     for h in &hiddens[1.min(hiddens.len())..] {
@@ -527,8 +560,13 @@ fn capacity_md(
     for (v, e, s) in means {
         md.push_str(&format!("| {v} | {e} | {} |", sig(*s)));
         for h in &hiddens[1.min(hiddens.len())..] {
-            let x = tried.iter().find(|t| &t.0 == v && &t.1 == e && t.2 == *h);
-            md.push_str(&format!(" {} |", x.map_or("-".into(), |t| sig(t.3))));
+            let x = tried
+                .iter()
+                .find(|t| t.variant == *v && t.emulator == *e && t.hidden == *h);
+            md.push_str(&format!(
+                " {} |",
+                x.map_or("-".into(), |t| sig(t.mean_error))
+            ));
         }
         md.push_str(&format!(" {} |\n", sig(best(v, e, *s))));
     }
@@ -537,16 +575,14 @@ fn capacity_md(
 
 /// Diagnostic (ours, not the verdict): the same ratio at the frames every emulator steps
 /// to, where no emulator's error includes linear interpolation between its coarse steps, at
-/// the nets' own capacity (empty without `capacity.csv`'s common-frame column).
-fn common_text(cap: Option<&DataFrame>, tried: &[(String, String, f64, f64)]) -> String {
+/// the nets' own capacity (the first tried).
+fn common_text(tried: &[CapacityRow]) -> String {
     let common_ratio = |v: &str| -> Option<f64> {
-        let c = cap?;
-        let (cv, ch) = (df_str(c, "variant").ok()?, df_f64(c, "hidden").ok()?);
-        let cc = df_f64(c, "common_mean_error").ok()?;
-        let own = tried.first().map(|t| t.2)?;
-        let vals: Vec<f64> = (0..cv.len())
-            .filter(|&r| cv[r] == v && ch[r] == own)
-            .map(|r| cc[r])
+        let own = tried.first()?.hidden;
+        let vals: Vec<f64> = tried
+            .iter()
+            .filter(|t| t.variant == v && t.hidden == own)
+            .map(|t| t.common_mean_error)
             .collect();
         spread(&vals)
     };
@@ -562,15 +598,18 @@ fn common_text(cap: Option<&DataFrame>, tried: &[(String, String, f64, f64)]) ->
 }
 
 /// Time-averaged error per (variant, emulator), in first-seen order.
-fn mean_errors(variant: &[String], emu: &[String], err: &[f64]) -> Vec<(String, String, f64)> {
+fn mean_errors(rows: &[ErrorRow]) -> Vec<(String, String, f64)> {
     let mut out: Vec<(String, String, f64, usize)> = vec![];
-    for r in 0..variant.len() {
-        match out.iter_mut().find(|o| o.0 == variant[r] && o.1 == emu[r]) {
+    for r in rows {
+        match out
+            .iter_mut()
+            .find(|o| o.0 == r.variant && o.1 == r.emulator)
+        {
             Some(o) => {
-                o.2 += err[r];
+                o.2 += r.error;
                 o.3 += 1;
             }
-            None => out.push((variant[r].clone(), emu[r].clone(), err[r], 1)),
+            None => out.push((r.variant.clone(), r.emulator.clone(), r.error, 1)),
         }
     }
     out.into_iter()
@@ -593,19 +632,13 @@ impl Family for NaError {
     type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let tb = tables.require("error")?;
-        let (var, emu, t, err) = (
-            tb.strs("variant"),
-            tb.strs("emulator"),
-            tb.f64s("t"),
-            tb.f64s("error"),
-        );
+        let rows = ErrorRow::from_table(tables.require("error")?);
         let mut panels = vec![];
         for v in ["passive", "active"] {
             let mut kinds: Vec<String> = vec![];
-            for r in 0..var.len() {
-                if var[r] == v && !kinds.contains(&emu[r]) {
-                    kinds.push(emu[r].clone());
+            for r in rows.iter().filter(|r| r.variant == v) {
+                if !kinds.contains(&r.emulator) {
+                    kinds.push(r.emulator.clone());
                 }
             }
             if kinds.is_empty() {
@@ -616,9 +649,10 @@ impl Family for NaError {
                 .iter()
                 .enumerate()
                 .map(|(i, k)| {
-                    let pts = (0..var.len())
-                        .filter(|&r| var[r] == v && &emu[r] == k)
-                        .map(|r| (t[r], err[r]))
+                    let pts = rows
+                        .iter()
+                        .filter(|r| r.variant == v && r.emulator == *k)
+                        .map(|r| (r.t, r.error))
                         .collect();
                     Series::line(k.clone(), pts, i).mark(marks[i % 3])
                 })
@@ -634,18 +668,13 @@ impl Family for NaError {
         let mut out = fig.draw("error", &Figure::grid(panels, 2))?;
         // Time-averaged error against the super step, one line per hidden-unit count.
         if let Some(c) = tables.get("capacity") {
-            let (cv, ce, ch, cm) = (
-                c.strs("variant"),
-                c.strs("emulator"),
-                c.f64s("hidden"),
-                c.f64s("mean_error"),
-            );
+            let cap = CapacityRow::from_table(c);
             let mut panels = vec![];
             for v in ["passive", "active"] {
-                let mut hs: Vec<f64> = vec![];
-                for r in 0..cv.len() {
-                    if cv[r] == v && !hs.contains(&ch[r]) {
-                        hs.push(ch[r]);
+                let mut hs: Vec<i64> = vec![];
+                for r in cap.iter().filter(|r| r.variant == v) {
+                    if !hs.contains(&r.hidden) {
+                        hs.push(r.hidden);
                     }
                 }
                 if hs.is_empty() {
@@ -655,15 +684,10 @@ impl Family for NaError {
                     .iter()
                     .enumerate()
                     .map(|(i, h)| {
-                        let pts = (0..cv.len())
-                            .filter(|&r| cv[r] == v && ch[r] == *h)
-                            .filter_map(|r| {
-                                ce[r]
-                                    .trim_start_matches('N')
-                                    .parse::<f64>()
-                                    .ok()
-                                    .map(|n| (n, cm[r]))
-                            })
+                        let pts = cap
+                            .iter()
+                            .filter(|r| r.variant == v && r.hidden == *h)
+                            .filter_map(|r| super_step(&r.emulator).map(|n| (n, r.mean_error)))
                             .collect();
                         Series::line(format!("{h} hidden"), pts, i).mark(Mark::LinePoints)
                     })
@@ -671,11 +695,11 @@ impl Family for NaError {
                 // The verdict's limits: each N at its best capacity tried, within the held or
                 // the partly ratio of the smallest such error.
                 let mut best_per_n: Vec<(f64, f64)> = vec![];
-                for r in (0..cv.len()).filter(|&r| cv[r] == v) {
-                    if let Ok(n) = ce[r].trim_start_matches('N').parse::<f64>() {
+                for r in cap.iter().filter(|r| r.variant == v) {
+                    if let Some(n) = super_step(&r.emulator) {
                         match best_per_n.iter_mut().find(|b| b.0 == n) {
-                            Some(b) => b.1 = b.1.min(cm[r]),
-                            None => best_per_n.push((n, cm[r])),
+                            Some(b) => b.1 = b.1.min(r.mean_error),
+                            None => best_per_n.push((n, r.mean_error)),
                         }
                     }
                 }
@@ -723,27 +747,13 @@ impl Family for NaError {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let df = read_csv(&dir.join("error.csv"))?;
-        let (var, emu, err) = (
-            df_str(&df, "variant")?,
-            df_str(&df, "emulator")?,
-            df_f64(&df, "error")?,
-        );
-        let means = mean_errors(&var, &emu, &err);
-        // Every capacity tried (capacity.csv; older runs have none: the nets' own only).
-        let cap = read_csv(&dir.join("capacity.csv")).ok();
-        let mut tried: Vec<(String, String, f64, f64)> = vec![];
-        if let Some(c) = &cap {
-            let (cv, ce) = (df_str(c, "variant")?, df_str(c, "emulator")?);
-            let (ch, cm) = (df_f64(c, "hidden")?, df_f64(c, "mean_error")?);
-            for r in 0..cv.len() {
-                tried.push((cv[r].clone(), ce[r].clone(), ch[r], cm[r]));
-            }
-        }
-        let mut hiddens: Vec<f64> = vec![];
+        let means = mean_errors(&read_rows::<ErrorRow>(&dir.join("error.csv"))?);
+        // Every capacity tried, the nets' own first.
+        let tried: Vec<CapacityRow> = read_rows(&dir.join("capacity.csv"))?;
+        let mut hiddens: Vec<i64> = vec![];
         for t in &tried {
-            if !hiddens.contains(&t.2) {
-                hiddens.push(t.2);
+            if !hiddens.contains(&t.hidden) {
+                hiddens.push(t.hidden);
             }
         }
         let best = |v: &str, e: &str, own: f64| best_of(&tried, v, e, own);
@@ -768,7 +778,7 @@ impl Family for NaError {
             .iter()
             .filter_map(|v| ratio_of(v, true).map(|r| format!("{v} {}", sig(r))))
             .collect();
-        let common_text = common_text(cap.as_ref(), &tried);
+        let common_text = common_text(&tried);
         let settings = rule_settings(dir)?;
         let bars = Fig12Rule {
             held_ratio: settings("held_ratio"),

@@ -23,20 +23,57 @@ use super::table1_structure::{build_dolphin_emulator, DolphinNets};
 use super::table2_speedup::validate_regularizer;
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy::{self, Regularizer, Schedule};
-use crate::experiment::output::{df_f64, df_str, read_csv, unique, Table, Tables};
+use crate::experiment::output::{unique, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{
     rule_settings, rule_table_of, shown, Check, Cmp, Null, Partly, Rule,
 };
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::dolphin::{Dolphin, N_POS, N_SEGMENTS};
 use crate::physics::{check_finite, Dynamics};
-use crate::row;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// The schedule name of the physical simulator's rows.
+const SIMULATOR: &str = "simulator";
+
+crate::result_rows! {
+    /// One row of `shape_error.csv`: a schedule's mean shape error over the trials at one time.
+    pub struct ShapeErrorRow {
+        /// The schedule's name ([`SIMULATOR`] for the physical reference).
+        schedule: String = "schedule",
+        /// Animation time (s).
+        t: f64 = "t",
+        /// RMS relative spring-length deviation, mean over trials (inf once an emulation diverged).
+        shape_error: f64 = "shape_error",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `cost.csv`: a schedule's cost and its shape error over the whole run.
+    pub struct CostRow {
+        /// The schedule's name ([`SIMULATOR`] for the physical reference).
+        schedule: String = "schedule",
+        /// Regularization steps per burst (0: none).
+        reg_steps: i64 = "reg_steps",
+        /// Emulation steps between bursts (0 for the simulator).
+        every: i64 = "every",
+        /// Wall time of the emulation loop (s; fastest of the repeats; NaN for the simulator).
+        seconds: f64 = "seconds",
+        /// Microseconds per emulation step (NaN for the simulator).
+        us_per_step: f64 = "us_per_step",
+        /// Shape error averaged over the steps after the start.
+        mean_shape_error: f64 = "mean_shape_error",
+        /// Shape error at the last step.
+        final_shape_error: f64 = "final_shape_error",
+        /// Mean RMS second difference of the mass positions about the centre of mass (m).
+        roughness: f64 = "roughness",
+    }
+}
 
 /// The family.
 pub struct NaRegularization;
@@ -222,17 +259,7 @@ impl Job for Params {
                 (x0, u)
             })
             .collect();
-        let mut shape = Table::new(&["schedule", "t", "shape_error"]);
-        let mut cost = Table::new(&[
-            "schedule",
-            "reg_steps",
-            "every",
-            "seconds",
-            "us_per_step",
-            "mean_shape_error",
-            "final_shape_error",
-            "roughness",
-        ]);
+        let (mut shape, mut cost) = (Vec::new(), Vec::new());
         // The physical reference.
         {
             let mut sim = hierarchy::simulator(&d);
@@ -253,17 +280,17 @@ impl Job for Params {
                 }
                 rough += mean_roughness(&d, &traj) / self.trials as f64;
             }
-            push_curve(&mut shape, "simulator", &curve, big_dt);
-            cost.push(row![
-                "simulator",
-                0i64,
-                0i64,
-                f64::NAN,
-                f64::NAN,
-                mean(&curve[1..]),
-                curve[k_steps],
-                rough
-            ]);
+            push_curve(&mut shape, SIMULATOR, &curve, big_dt);
+            cost.push(CostRow {
+                schedule: SIMULATOR.into(),
+                reg_steps: 0,
+                every: 0,
+                seconds: f64::NAN,
+                us_per_step: f64::NAN,
+                mean_shape_error: mean(&curve[1..]),
+                final_shape_error: curve[k_steps],
+                roughness: rough,
+            });
         }
         let pb = ctx.progress(self.schedules.len() as u64, "regularization schedules");
         for s in &self.schedules {
@@ -297,22 +324,22 @@ impl Job for Params {
                 })
                 .fold(f64::INFINITY, f64::min);
             push_curve(&mut shape, &s.name, &curve, big_dt);
-            cost.push(row![
-                s.name.as_str(),
-                s.steps as i64,
-                s.every as i64,
+            cost.push(CostRow {
+                schedule: s.name.clone(),
+                reg_steps: s.steps as i64,
+                every: s.every as i64,
                 seconds,
-                1e6 * seconds / k_steps as f64,
-                mean(&curve[1..]),
-                curve[k_steps],
-                rough
-            ]);
+                us_per_step: 1e6 * seconds / k_steps as f64,
+                mean_shape_error: mean(&curve[1..]),
+                final_shape_error: curve[k_steps],
+                roughness: rough,
+            });
             pb.inc(1);
         }
         pb.finish_and_clear();
         Ok(Tables::from([
-            ("shape_error", shape),
-            ("cost", cost),
+            ("shape_error", table_of(&shape)),
+            ("cost", table_of(&cost)),
             ("rule", rule_table_of(&self.rule)?),
         ]))
     }
@@ -335,9 +362,13 @@ fn mean_roughness(d: &Dolphin, traj: &[Vec<f64>]) -> f64 {
     }
 }
 
-fn push_curve(t: &mut Table, name: &str, curve: &[f64], big_dt: f64) {
+fn push_curve(rows: &mut Vec<ShapeErrorRow>, name: &str, curve: &[f64], big_dt: f64) {
     for (k, e) in curve.iter().enumerate() {
-        t.push(row![name, k as f64 * big_dt, *e]);
+        rows.push(ShapeErrorRow {
+            schedule: name.to_string(),
+            t: k as f64 * big_dt,
+            shape_error: *e,
+        });
     }
 }
 
@@ -352,28 +383,22 @@ impl Family for NaRegularization {
     type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let t = tables.require("shape_error")?;
-        let (name, time, err) = (t.strs("schedule"), t.f64s("t"), t.f64s("shape_error"));
-        let names = unique(&name);
+        let shape = ShapeErrorRow::from_table(tables.require("shape_error")?);
+        let names = unique(&shape.iter().map(|r| r.schedule.clone()).collect::<Vec<_>>());
         // Each schedule in words, from the cost table's steps and spacing.
-        let cost = tables.require("cost")?;
-        let (cn, cs, ce) = (
-            cost.strs("schedule"),
-            cost.f64s("reg_steps"),
-            cost.f64s("every"),
-        );
+        let cost = CostRow::from_table(tables.require("cost")?);
         let words = |nm: &str| -> String {
-            match cn.iter().position(|c| c == nm) {
-                _ if nm == "simulator" => "physical simulator".into(),
-                Some(r) if cs[r] == 0.0 => "emulator, no regularization".into(),
-                Some(r) if ce[r] <= 1.0 => format!(
+            match cost.iter().find(|c| c.schedule == nm) {
+                _ if nm == SIMULATOR => "physical simulator".into(),
+                Some(c) if c.reg_steps == 0 => "emulator, no regularization".into(),
+                Some(c) if c.every <= 1 => format!(
                     "emulator, {} regularization step{} after every step",
-                    cs[r],
-                    if cs[r] == 1.0 { "" } else { "s" }
+                    c.reg_steps,
+                    if c.reg_steps == 1 { "" } else { "s" }
                 ),
-                Some(r) => format!(
+                Some(c) => format!(
                     "emulator, {} regularization steps after every {}th step",
-                    cs[r], ce[r]
+                    c.reg_steps, c.every
                 ),
                 None => nm.to_string(),
             }
@@ -382,13 +407,14 @@ impl Family for NaRegularization {
             .iter()
             .enumerate()
             .map(|(i, nm)| {
-                let pts = (0..name.len())
+                let pts = shape
+                    .iter()
                     // t = 0 is the exact rest shape (error ~1e-15), off the log scale.
-                    .filter(|&r| &name[r] == nm && time[r] > 0.0)
-                    .map(|r| (time[r], err[r]))
+                    .filter(|r| r.schedule == *nm && r.t > 0.0)
+                    .map(|r| (r.t, r.shape_error))
                     .collect();
                 let s = Series::line(words(nm), pts, i);
-                if nm == "simulator" {
+                if nm == SIMULATOR {
                     s.mark(Mark::Dashed)
                 } else {
                     s
@@ -409,41 +435,30 @@ impl Family for NaRegularization {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let df = read_csv(&dir.join("cost.csv"))?;
-        let name = df_str(&df, "schedule")?;
-        let (steps, every, us, mean_e, final_e, rough) = (
-            df_f64(&df, "reg_steps")?,
-            df_f64(&df, "every")?,
-            df_f64(&df, "us_per_step")?,
-            df_f64(&df, "mean_shape_error")?,
-            df_f64(&df, "final_shape_error")?,
-            df_f64(&df, "roughness")?,
-        );
+        let cost: Vec<CostRow> = read_rows(&dir.join("cost.csv"))?;
         let mut md = String::from(
             "| schedule | steps | every | us per emulation step | mean shape error | final shape error | roughness (m) |\n| --- | --- | --- | --- | --- | --- | --- |\n",
         );
-        for r in 0..name.len() {
+        for r in &cost {
             md.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {} | {} |\n",
-                name[r],
-                steps[r],
-                every[r],
-                sig(us[r]),
-                sig(mean_e[r]),
-                sig(final_e[r]),
-                sig(rough[r])
+                r.schedule,
+                r.reg_steps,
+                r.every,
+                sig(r.us_per_step),
+                sig(r.mean_shape_error),
+                sig(r.final_shape_error),
+                sig(r.roughness)
             ));
         }
-        let find = |pred: &dyn Fn(usize) -> bool| (0..name.len()).find(|&r| pred(r));
-        let sim = find(&|r| name[r] == "simulator");
-        let none = find(&|r| name[r] != "simulator" && steps[r] == 0.0);
+        let emulated = || cost.iter().filter(|r| r.schedule != SIMULATOR);
+        let sim = cost.iter().find(|r| r.schedule == SIMULATOR);
+        let none = emulated().find(|r| r.reg_steps == 0);
         // "A few steps after each emulation step": the largest such schedule up to 5 steps.
-        let few = (0..name.len())
-            .filter(|&r| {
-                name[r] != "simulator" && steps[r] > 0.0 && every[r] == 1.0 && steps[r] <= 5.0
-            })
-            .max_by(|&a, &b| steps[a].total_cmp(&steps[b]));
-        let rare = find(&|r| every[r] > 1.0 && steps[r] > 0.0);
+        let few = emulated()
+            .filter(|r| r.reg_steps > 0 && r.every == 1 && r.reg_steps <= 5)
+            .max_by_key(|r| r.reg_steps);
+        let rare = cost.iter().find(|r| r.every > 1 && r.reg_steps > 0);
         let (verdict, why, rule) = match (sim, none, few, rare) {
             (Some(s), Some(z), Some(f), Some(r)) => {
                 let settings = rule_settings(dir)?;
@@ -452,9 +467,9 @@ impl Family for NaRegularization {
                     fix_ratio: settings("fix_ratio"),
                 };
                 let rule = regularization_rule(
-                    final_e[z] / final_e[s],
-                    mean_e[f] / mean_e[z],
-                    rough[f] / rough[r],
+                    z.final_shape_error / s.final_shape_error,
+                    f.mean_shape_error / z.mean_shape_error,
+                    f.roughness / r.roughness,
                     &bars,
                 );
                 let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
@@ -462,15 +477,15 @@ impl Family for NaRegularization {
                     verdict,
                     format!(
                         "Without regularization the final shape error is {} ({}x the simulator's {}); `{}` brings the mean shape error from {} to {}; its roughness {} vs {} for `{}` (same budget, rarely). Checks:{lines} Rule (thresholds ours, in the spec's [params.rule]): {text}",
-                        sig(final_e[z]),
-                        sig(final_e[z] / final_e[s]),
-                        sig(final_e[s]),
-                        name[f],
-                        sig(mean_e[z]),
-                        sig(mean_e[f]),
-                        sig(rough[f]),
-                        sig(rough[r]),
-                        name[r]
+                        sig(z.final_shape_error),
+                        sig(z.final_shape_error / s.final_shape_error),
+                        sig(s.final_shape_error),
+                        f.schedule,
+                        sig(z.mean_shape_error),
+                        sig(f.mean_shape_error),
+                        sig(f.roughness),
+                        sig(r.roughness),
+                        r.schedule
                     ),
                     rule,
                 )

@@ -1,8 +1,10 @@
 //! The figure: each run's best objective against iterations and wall-clock time (`objective`).
 
+use super::job::BaselineRow;
 use super::{DAGGER_SUBSTRATE, METHODS};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use std::path::PathBuf;
 
@@ -19,23 +21,19 @@ fn curves(method: &[String], substrate: &[String]) -> Vec<(String, String)> {
 
 /// Draws the `objective` figure.
 pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let t = tables.require("baselines")?;
-    let (meth, sub, it, secs, obj) = (
-        t.strs("method"),
-        t.strs("substrate"),
-        t.f64s("iteration"),
-        t.f64s("seconds"),
-        t.f64s("objective"),
-    );
+    let rows = BaselineRow::from_table(tables.require("baselines")?);
+    let meth: Vec<String> = rows.iter().map(|r| r.method.clone()).collect();
+    let sub: Vec<String> = rows.iter().map(|r| r.substrate.clone()).collect();
     // `dagger`: the runs on the DAgger net alone, else the others.
-    let series = |x: &dyn Fn(usize) -> f64, dagger: bool| -> Vec<Series> {
+    let series = |x: &dyn Fn(&BaselineRow) -> f64, dagger: bool| -> Vec<Series> {
         curves(&meth, &sub)
             .iter()
             .filter(|(_, s)| (s == DAGGER_SUBSTRATE) == dagger)
             .map(|(m, s)| {
-                let pts = (0..meth.len())
-                    .filter(|&r| &meth[r] == m && &sub[r] == s && obj[r].is_finite())
-                    .map(|r| (x(r), obj[r]))
+                let pts = rows
+                    .iter()
+                    .filter(|r| r.method == *m && r.substrate == *s && r.objective.is_finite())
+                    .map(|r| (x(r), r.objective))
                     .filter(|p| p.0 > 0.0)
                     .collect();
                 let color = METHODS.iter().position(|x| x == m).unwrap_or(0);
@@ -51,7 +49,7 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
     // The first two panels draw the same series in the same colours, so the key is drawn
     // once, in the wall-clock panel: in the iteration panel every corner's key box hid part
     // of a curve (hill_climbing (simulator) around iterations 10-40).
-    let mut by_iteration = series(&|r| it[r] + 1.0, false);
+    let mut by_iteration = series(&|r| r.iteration as f64 + 1.0, false);
     by_iteration.iter_mut().for_each(|s| s.label.clear());
     let mut panels = vec![
         Panel {
@@ -67,11 +65,11 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
             x_label: "wall-clock seconds (log)".into(),
             y_label: "best objective J (effort - distance in m)".into(),
             log_x: true,
-            series: series(&|r| secs[r], false),
+            series: series(&|r| r.seconds, false),
             ..Panel::default()
         },
     ];
-    let on_dagger = series(&|r| it[r] + 1.0, true);
+    let on_dagger = series(&|r| r.iteration as f64 + 1.0, true);
     if !on_dagger.is_empty() {
         panels.push(Panel {
             title: "the same on the DAgger global net (ours)".into(),

@@ -11,10 +11,10 @@ use crate::control::search::{
     ReplayProblem, SearchProblem, SearchResult, SimplexConfig,
 };
 use crate::emulator::hierarchy::{self, global_state};
-use crate::experiment::output::{Table, Tables};
+use crate::experiment::output::Tables;
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::build_dolphin_emulator;
-use crate::row;
 use crate::seed::mix_seed;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -135,19 +135,87 @@ fn opt(v: Option<f64>) -> f64 {
     v.unwrap_or(f64::NAN)
 }
 
-/// Columns of `search_seeds.csv`: per search seed and emulator run, the seed's common target
-/// J* (the rule's: `rule.target_fraction` of the way from the initial J to the best J any run
-/// from that start reaches), where the run's best J first reached it (NaN: never), and how far
-/// its best knots swim replayed on the simulator.
-pub const SEEDS_COLUMNS: [&str; 7] = [
-    "seed",
-    "method",
-    "initial_objective",
-    "best_objective",
-    "target",
-    "iterations_to_target",
-    "distance_simulator_m",
-];
+crate::result_rows! {
+    /// One row of `search_seeds.csv`: per search seed and emulator run, the seed's common
+    /// target J* (the rule's: `rule.target_fraction` of the way from the initial J to the best
+    /// J any run from that start reaches), where the run's best J first reached it, and how far
+    /// its best knots swim replayed on the simulator.
+    pub struct SearchSeedRow {
+        /// The search seed.
+        seed: i64 = "seed",
+        /// The method's name.
+        method: String = "method",
+        /// BPTT-momentum's initial J from the seed's start.
+        initial_objective: f64 = "initial_objective",
+        /// The run's best J.
+        best_objective: f64 = "best_objective",
+        /// The seed's common target J*.
+        target: f64 = "target",
+        /// Iterations until the run's best J first reached J* (NaN: never).
+        iterations_to_target: f64 = "iterations_to_target",
+        /// How far its best knots swim replayed on the simulator (m; NaN for knots not finite).
+        distance_simulator_m: f64 = "distance_simulator_m",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `baselines.csv`: one run's state after one iteration.
+    pub struct BaselineRow {
+        /// The method's name.
+        method: String = "method",
+        /// The substrate it learned on (`emulator`, `simulator`, the DAgger net's).
+        substrate: String = "substrate",
+        /// The iteration.
+        iteration: i64 = "iteration",
+        /// Objective evaluations so far.
+        evaluations: i64 = "evaluations",
+        /// Wall-clock seconds so far.
+        seconds: f64 = "seconds",
+        /// The best J so far.
+        objective: f64 = "objective",
+        /// Gradients so far.
+        gradients: i64 = "gradients",
+        /// The current iterate's J.
+        current: f64 = "current",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `final.csv`: one run's end, its best knots on both substrates and when it
+    /// reached its substrate's target (BPTT-momentum's J there) and its own best J.
+    pub struct FinalRow {
+        /// The method's name.
+        method: String = "method",
+        /// The substrate it learned on.
+        substrate: String = "substrate",
+        /// Iterations run.
+        iterations: i64 = "iterations",
+        /// Objective evaluations run.
+        evaluations: i64 = "evaluations",
+        /// Wall-clock seconds run.
+        seconds: f64 = "seconds",
+        /// Its best J on its substrate.
+        objective_substrate: f64 = "objective_substrate",
+        /// Its best knots' J on the emulator.
+        objective_emulator: f64 = "objective_emulator",
+        /// Its best knots' J on the simulator.
+        objective_simulator: f64 = "objective_simulator",
+        /// Its best knots' swim on the emulator (m).
+        distance_emulator_m: f64 = "distance_emulator_m",
+        /// Its best knots' swim on the simulator (m).
+        distance_simulator_m: f64 = "distance_simulator_m",
+        /// Its substrate's target: BPTT-momentum's J there.
+        target: f64 = "target",
+        /// Iterations to the target (NaN: never).
+        iterations_to_bptt: f64 = "iterations_to_bptt",
+        /// Evaluations to the target (NaN: never).
+        evaluations_to_bptt: f64 = "evaluations_to_bptt",
+        /// Seconds to the target (NaN: never).
+        seconds_to_bptt: f64 = "seconds_to_bptt",
+        /// The iteration it first reached its own best J.
+        best_iteration: f64 = "best_iteration",
+    }
+}
 
 /// The seed of gradient-free method `k`'s randomness from search seed `seed`.
 fn search_seed(seed: u64, k: usize) -> u64 {
@@ -176,7 +244,7 @@ impl Params {
         seed: u64,
         runs: &[&Run],
         replay_distance: &dyn Fn(&[f64]) -> f64,
-        table: &mut Table,
+        table: &mut Vec<SearchSeedRow>,
     ) {
         let j0 = runs
             .iter()
@@ -195,15 +263,15 @@ impl Params {
                 .iter()
                 .map(|t| (t.iteration as f64, t.best))
                 .unzip();
-            table.push(row![
-                seed as i64,
-                r.method,
-                j0,
-                r.result.best_value,
+            table.push(SearchSeedRow {
+                seed: seed as i64,
+                method: r.method.to_string(),
+                initial_objective: j0,
+                best_objective: r.result.best_value,
                 target,
-                opt(iterations_to(&k, &j, target)),
-                replay_distance(&r.result.best)
-            ]);
+                iterations_to_target: opt(iterations_to(&k, &j, target)),
+                distance_simulator_m: replay_distance(&r.result.best),
+            });
         }
     }
 }
@@ -257,9 +325,9 @@ impl Job for Params {
         let final_t = final_table(&runs, &evaluated);
         let seeds_t = self.seeds_table(ctx, &runs, &emulator, &simulator, knots.len())?;
         Ok(Tables::from([
-            ("baselines", baselines),
-            ("final", final_t),
-            ("search_seeds", seeds_t),
+            ("baselines", table_of(&baselines)),
+            ("final", table_of(&final_t)),
+            ("search_seeds", table_of(&seeds_t)),
             ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
         ]))
     }
@@ -377,7 +445,7 @@ impl Params {
         emulator: &BpttProblem<'_, crate::emulator::Emulator>,
         simulator: &ReplayProblem<'_>,
         knots_len: usize,
-    ) -> Result<Table, Error> {
+    ) -> Result<Vec<SearchSeedRow>, Error> {
         let swim = &self.swim;
         let replay_distance = |v: &[f64]| -> f64 {
             if v.iter().any(|x| !x.is_finite()) {
@@ -385,7 +453,7 @@ impl Params {
             }
             swim.distance(&simulator.rollout(v).states)
         };
-        let mut seeds_t = Table::new(&SEEDS_COLUMNS);
+        let mut seeds_t = Vec::new();
         let own: Vec<&Run> = runs.iter().filter(|r| r.substrate == "emulator").collect();
         self.seed_rows(ctx.seed, &own, &replay_distance, &mut seeds_t);
         for s in self.further_search_seeds(ctx.seed) {
@@ -416,37 +484,26 @@ impl Params {
 }
 
 /// `baselines.csv`: every run's trace, iteration by iteration.
-fn baselines_table(runs: &[Run]) -> Table {
-    let mut baselines = Table::new(&[
-        "method",
-        "substrate",
-        "iteration",
-        "evaluations",
-        "seconds",
-        "objective",
-        "gradients",
-        "current",
-    ]);
-    for r in runs {
-        for t in &r.result.trace {
-            baselines.push(row![
-                r.method,
-                r.substrate,
-                t.iteration,
-                t.evaluations,
-                t.seconds,
-                t.best,
-                t.gradients,
-                t.current
-            ]);
-        }
-    }
-    baselines
+fn baselines_table(runs: &[Run]) -> Vec<BaselineRow> {
+    runs.iter()
+        .flat_map(|r| {
+            r.result.trace.iter().map(|t| BaselineRow {
+                method: r.method.to_string(),
+                substrate: r.substrate.to_string(),
+                iteration: t.iteration as i64,
+                evaluations: t.evaluations as i64,
+                seconds: t.seconds,
+                objective: t.best,
+                gradients: t.gradients as i64,
+                current: t.current,
+            })
+        })
+        .collect()
 }
 
 /// `final.csv`: every run's end, its best knots on both substrates and when it reached its
 /// substrate's target (BPTT-momentum's J there) and its own best J.
-fn final_table(runs: &[Run], evaluated: &[OnBoth]) -> Table {
+fn final_table(runs: &[Run], evaluated: &[OnBoth]) -> Vec<FinalRow> {
     let momentum = runs
         .iter()
         .position(|r| r.method == "bptt_momentum")
@@ -460,23 +517,7 @@ fn final_table(runs: &[Run], evaluated: &[OnBoth]) -> Table {
         .iter()
         .find(|r| r.method == "bptt_momentum" && r.substrate == DAGGER_SUBSTRATE)
         .map_or(f64::NAN, |r| r.result.best_value);
-    let mut final_t = Table::new(&[
-        "method",
-        "substrate",
-        "iterations",
-        "evaluations",
-        "seconds",
-        "objective_substrate",
-        "objective_emulator",
-        "objective_simulator",
-        "distance_emulator_m",
-        "distance_simulator_m",
-        "target",
-        "iterations_to_bptt",
-        "evaluations_to_bptt",
-        "seconds_to_bptt",
-        "best_iteration",
-    ]);
+    let mut final_t = Vec::with_capacity(runs.len());
     for (r, e) in runs.iter().zip(evaluated) {
         let target = match r.substrate {
             "emulator" => targets.0,
@@ -487,23 +528,23 @@ fn final_table(runs: &[Run], evaluated: &[OnBoth]) -> Table {
         let last = trace.last().expect("a search has iteration 0");
         let reached = time_to_target(trace, target);
         let own = time_to_target(trace, r.result.best_value);
-        final_t.push(row![
-            r.method,
-            r.substrate,
-            last.iteration,
-            last.evaluations,
-            last.seconds,
-            r.result.best_value,
-            e.j_emulator,
-            e.j_simulator,
-            e.d_emulator,
-            e.d_simulator,
+        final_t.push(FinalRow {
+            method: r.method.to_string(),
+            substrate: r.substrate.to_string(),
+            iterations: last.iteration as i64,
+            evaluations: last.evaluations as i64,
+            seconds: last.seconds,
+            objective_substrate: r.result.best_value,
+            objective_emulator: e.j_emulator,
+            objective_simulator: e.j_simulator,
+            distance_emulator_m: e.d_emulator,
+            distance_simulator_m: e.d_simulator,
             target,
-            opt(reached.map(|x| x.iteration as f64)),
-            opt(reached.map(|x| x.evaluations as f64)),
-            opt(reached.map(|x| x.seconds)),
-            opt(own.map(|x| x.iteration as f64))
-        ]);
+            iterations_to_bptt: opt(reached.map(|x| x.iteration as f64)),
+            evaluations_to_bptt: opt(reached.map(|x| x.evaluations as f64)),
+            seconds_to_bptt: opt(reached.map(|x| x.seconds)),
+            best_iteration: opt(own.map(|x| x.iteration as f64)),
+        });
     }
     final_t
 }

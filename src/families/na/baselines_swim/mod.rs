@@ -34,7 +34,7 @@
 //!   swim; `target` is BPTT-momentum's best J on the row's substrate (on the simulator: its
 //!   learned knots replayed there) and the `*_to_bptt` columns are where the run's best J
 //!   first reached it (NaN: never); `best_iteration` is where it reached its own best.
-//! - `search_seeds` ([`job::SEEDS_COLUMNS`]): the emulator runs from each of
+//! - `search_seeds` ([`job::SearchSeedRow`]): the emulator runs from each of
 //!   [`Params::search_seeds`] random starts (the run's own first), each with the common target
 //!   of its start; the verdict reads their medians ([`report::swim_rule_over`]).
 //!

@@ -1,10 +1,12 @@
 //! The report: every run's table row, and the verdict rule (BPTT fast, every gradient-free
 //! method at least 10x slower, BPTT's knots swimming at least as far on the simulator).
 
+use super::job::{BaselineRow, FinalRow, SearchSeedRow};
 use super::{SwimRule, DAGGER_SUBSTRATE, SEARCHES};
 use crate::experiment::other;
-use crate::experiment::output::{df_f64, df_str, read_csv, written_csv};
+use crate::experiment::output::written_csv;
 use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::rows::{read_rows, TableRow};
 use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::median_interval_with_infinities;
 use crate::experiment::Error;
@@ -30,18 +32,22 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     let f = &runs.f;
     let (rival_sim, verdict) = (main.rival_sim, main.verdict);
     let (lines, text) = (&main.lines, &main.text);
-    let (k_bptt, notes) = (f.k_to[mom], runs.own_notes("emulator"));
+    let (k_bptt, notes) = (f.rows[mom].iterations_to_bptt, runs.own_notes("emulator"));
     let sim_notes = f.sim_notes();
     // How the momentum iterate's J moved (a monotone descent never rises).
     let t = &runs.traces;
-    let mom_j: Vec<f64> = (0..t.bm.len())
-        .filter(|&r| t.bm[r] == "bptt_momentum" && t.bs[r] == "emulator")
-        .map(|r| t.cur[r])
+    let mom_j: Vec<f64> = t
+        .rows
+        .iter()
+        .filter(|r| r.method == "bptt_momentum" && r.substrate == "emulator")
+        .map(|r| r.current)
         .collect();
     let rises = mom_j.windows(2).filter(|w| w[1] > w[0]).count();
-    let sim_target = (0..f.meth.len())
-        .find(|&r| f.sub[r] == "simulator")
-        .map_or(f64::NAN, |r| f.target[r]);
+    let sim_target = f
+        .rows
+        .iter()
+        .find(|r| r.substrate == "simulator")
+        .map_or(f64::NAN, |r| r.target);
     let dagger_line = runs.dagger_line(&bars);
     Ok(Findings {
             ours: md,
@@ -50,47 +56,30 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
             why: format!(
                 "On the emulator, the {}. BPTT with momentum reaches its best emulator J = {} at iteration {} ({} s, the step-scale estimate included; its iterate's J rose in {rises} of {} steps; its knots swim {} m on the simulator vs {} m on the emulator). On the emulator, {}. On the physical simulator (target: BPTT's knots replayed there, J = {}), {}. Replayed on the simulator, BPTT's knots swim {} m, the gradient-free methods' emulator-learned knots at most {} m. Checks on the emulator:{lines} Rule (ours, in the spec's [params.rule], rewritten after results: see the rule history; J* lies target_fraction of the way from the initial J to the best J any method reaches): {text} An iteration is one annealing proposal, one simplex step, one hill-climbing batch (several evaluations) or one gradient step; budgets are far below the paper's hour, so 'never' means 'not within the budget'. Seconds are this machine's wall clock.",
                 main.target_line,
-                sig(f.j_sub[mom]),
+                sig(f.rows[mom].objective_substrate),
                 k_bptt,
-                sig(f.s_to[mom]),
+                sig(f.rows[mom].seconds_to_bptt),
                 mom_j.len().saturating_sub(1),
-                sig(f.d_sim[mom]),
-                sig(f.d_emu[mom]),
+                sig(f.rows[mom].distance_simulator_m),
+                sig(f.rows[mom].distance_emulator_m),
                 notes.join("; "),
                 sig(sim_target),
                 sim_notes.join("; "),
-                sig(f.d_sim[mom]),
+                sig(f.rows[mom].distance_simulator_m),
                 sig(rival_sim)
             ) + &seeds_line
                 + &dagger_line,
         })
 }
 
-/// The columns of `final.csv`: one row per (method, substrate) run.
+/// The rows of `final.csv`: one per (method, substrate) run.
 struct Finals {
-    meth: Vec<String>,
-    sub: Vec<String>,
-    iters: Vec<f64>,
-    evals: Vec<f64>,
-    secs: Vec<f64>,
-    j_sub: Vec<f64>,
-    j_emu: Vec<f64>,
-    j_sim: Vec<f64>,
-    d_emu: Vec<f64>,
-    d_sim: Vec<f64>,
-    target: Vec<f64>,
-    k_to: Vec<f64>,
-    e_to: Vec<f64>,
-    s_to: Vec<f64>,
+    rows: Vec<FinalRow>,
 }
 
 /// Every run's best-so-far J per iteration (`baselines.csv`), for the common target.
 struct Traces {
-    bm: Vec<String>,
-    bs: Vec<String>,
-    bi: Vec<f64>,
-    bo: Vec<f64>,
-    cur: Vec<f64>,
+    rows: Vec<BaselineRow>,
 }
 
 /// Both tables the rule reads.
@@ -102,53 +91,24 @@ struct Runs {
 impl Finals {
     /// `final.csv` of `dir`.
     fn read(dir: &Path) -> Result<Self, Error> {
-        let f = read_csv(&dir.join("final.csv"))?;
-        let (meth, sub) = (df_str(&f, "method")?, df_str(&f, "substrate")?);
-        let col = |name: &str| df_f64(&f, name);
-        let (iters, evals, secs) = (col("iterations")?, col("evaluations")?, col("seconds")?);
-        let (j_sub, j_emu, j_sim) = (
-            col("objective_substrate")?,
-            col("objective_emulator")?,
-            col("objective_simulator")?,
-        );
-        let (d_emu, d_sim) = (col("distance_emulator_m")?, col("distance_simulator_m")?);
-        let (target, k_to, e_to, s_to) = (
-            col("target")?,
-            col("iterations_to_bptt")?,
-            col("evaluations_to_bptt")?,
-            col("seconds_to_bptt")?,
-        );
         Ok(Finals {
-            meth,
-            sub,
-            iters,
-            evals,
-            secs,
-            j_sub,
-            j_emu,
-            j_sim,
-            d_emu,
-            d_sim,
-            target,
-            k_to,
-            e_to,
-            s_to,
+            rows: read_rows(&dir.join("final.csv"))?,
         })
     }
 
     /// The row of method `m` on substrate `s`.
     fn row_of(&self, m: &str, s: &str) -> Option<usize> {
-        (0..self.meth.len()).find(|&r| self.meth[r] == m && self.sub[r] == s)
+        (0..self.rows.len()).find(|&r| self.rows[r].method == m && self.rows[r].substrate == s)
     }
 
     /// Row `r`'s iterations / evaluations / seconds to BPTT's J, or "never".
     fn reach(&self, r: usize) -> String {
-        if self.k_to[r].is_finite() {
+        if self.rows[r].iterations_to_bptt.is_finite() {
             format!(
                 "{} / {} / {}",
-                self.k_to[r],
-                self.e_to[r],
-                sig(self.s_to[r])
+                self.rows[r].iterations_to_bptt,
+                self.rows[r].evaluations_to_bptt,
+                sig(self.rows[r].seconds_to_bptt)
             )
         } else {
             "never".into()
@@ -160,20 +120,20 @@ impl Finals {
         let mut md = String::from(
             "| method | substrate | iterations / evaluations / s run | to BPTT's J: iterations / evaluations / s | J on substrate | J emulator | J simulator | distance emulator (m) | distance simulator (m) |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
         );
-        for r in 0..self.meth.len() {
+        for r in 0..self.rows.len() {
             md.push_str(&format!(
                 "| {} | {} | {} / {} / {} | {} | {} | {} | {} | {} | {} |\n",
-                self.meth[r],
-                self.sub[r],
-                self.iters[r],
-                self.evals[r],
-                sig(self.secs[r]),
+                self.rows[r].method,
+                self.rows[r].substrate,
+                self.rows[r].iterations,
+                self.rows[r].evaluations,
+                sig(self.rows[r].seconds),
                 self.reach(r),
-                sig(self.j_sub[r]),
-                sig(self.j_emu[r]),
-                sig(self.j_sim[r]),
-                sig(self.d_emu[r]),
-                sig(self.d_sim[r])
+                sig(self.rows[r].objective_substrate),
+                sig(self.rows[r].objective_emulator),
+                sig(self.rows[r].objective_simulator),
+                sig(self.rows[r].distance_emulator_m),
+                sig(self.rows[r].distance_simulator_m)
             ));
         }
         md
@@ -186,21 +146,21 @@ impl Finals {
             .iter()
             .filter_map(|m| self.row_of(m, "simulator"))
             .map(|r| {
-                if self.k_to[r].is_finite() {
+                if self.rows[r].iterations_to_bptt.is_finite() {
                     format!(
                         "{} reached it after {} iterations ({} s)",
-                        self.meth[r],
-                        self.k_to[r],
-                        sig(self.s_to[r])
+                        self.rows[r].method,
+                        self.rows[r].iterations_to_bptt,
+                        sig(self.rows[r].seconds_to_bptt)
                     )
                 } else {
                     format!(
                         "{} never did in {} iterations / {} evaluations / {} s (best J {})",
-                        self.meth[r],
-                        self.iters[r],
-                        self.evals[r],
-                        sig(self.secs[r]),
-                        sig(self.j_sub[r])
+                        self.rows[r].method,
+                        self.rows[r].iterations,
+                        self.rows[r].evaluations,
+                        sig(self.rows[r].seconds),
+                        sig(self.rows[r].objective_substrate)
                     )
                 }
             })
@@ -211,28 +171,17 @@ impl Finals {
 impl Traces {
     /// `baselines.csv` of `dir`.
     fn read(dir: &Path) -> Result<Self, Error> {
-        let b = read_csv(&dir.join("baselines.csv"))?;
-        let (bm, bs, bi, bo, cur) = (
-            df_str(&b, "method")?,
-            df_str(&b, "substrate")?,
-            df_f64(&b, "iteration")?,
-            df_f64(&b, "objective")?,
-            df_f64(&b, "current")?,
-        );
         Ok(Traces {
-            bm,
-            bs,
-            bi,
-            bo,
-            cur,
+            rows: read_rows(&dir.join("baselines.csv"))?,
         })
     }
 
     /// The (iterations, best-so-far J) of method `m` on substrate `sub`.
     fn trace(&self, m: &str, sub: &str) -> (Vec<f64>, Vec<f64>) {
-        (0..self.bm.len())
-            .filter(|&r| self.bm[r] == m && self.bs[r] == sub)
-            .map(|r| (self.bi[r], self.bo[r]))
+        self.rows
+            .iter()
+            .filter(|r| r.method == m && r.substrate == sub)
+            .map(|r| (r.iteration as f64, r.objective))
             .unzip()
     }
 }
@@ -247,9 +196,11 @@ impl Runs {
         let mom = f.row_of("bptt_momentum", substrate)?;
         let (mi, mo) = t.trace("bptt_momentum", substrate);
         let j0 = *mo.first()?;
-        let j_best = (0..t.bm.len())
-            .filter(|&r| t.bs[r] == substrate)
-            .map(|r| t.bo[r])
+        let j_best = t
+            .rows
+            .iter()
+            .filter(|r| r.substrate == substrate)
+            .map(|r| r.objective)
             .fold(f64::INFINITY, f64::min);
         let target = common_target(j0, j_best, bars);
         let k_bptt = iterations_to(&mi, &mo, target);
@@ -275,9 +226,15 @@ impl Runs {
         let rival_sim = SEARCHES
             .iter()
             .filter_map(|m| f.row_of(m, substrate))
-            .map(|r| f.d_sim[r])
+            .map(|r| f.rows[r].distance_simulator_m)
             .fold(f64::NEG_INFINITY, f64::max);
-        let rule = swim_rule(k_bptt, &rivals, f.d_sim[mom], rival_sim, bars);
+        let rule = swim_rule(
+            k_bptt,
+            &rivals,
+            f.rows[mom].distance_simulator_m,
+            rival_sim,
+            bars,
+        );
         let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
         let target_line = format!(
             "common target J* = {} (halfway from the initial J = {} to the best any method reaches, {}): BPTT with momentum {}; {}",
@@ -286,7 +243,7 @@ impl Runs {
             sig(j_best),
             match k_bptt {
                 Some(k) => format!("reaches it at iteration {k}"),
-                None => format!("never reaches it in its {} iterations (its best J = {})", mi.last().copied().unwrap_or(0.0), sig(f.j_sub[mom])),
+                None => format!("never reaches it in its {} iterations (its best J = {})", mi.last().copied().unwrap_or(0.0), sig(f.rows[mom].objective_substrate)),
             },
             notes.join("; ")
         );
@@ -307,26 +264,26 @@ impl Runs {
         let Some(mom) = f.row_of("bptt_momentum", substrate) else {
             return vec![];
         };
-        let k_bptt = f.k_to[mom];
+        let k_bptt = f.rows[mom].iterations_to_bptt;
         let mut notes = vec![];
         for m in SEARCHES {
             let Some(r) = f.row_of(m, substrate) else {
                 continue;
             };
-            notes.push(if f.k_to[r].is_finite() {
+            notes.push(if f.rows[r].iterations_to_bptt.is_finite() {
                 format!(
                     "{m} reached it after {} iterations ({}x, {} s vs {} s)",
-                    f.k_to[r],
-                    sig(f.k_to[r] / k_bptt.max(1.0)),
-                    sig(f.s_to[r]),
-                    sig(f.s_to[mom])
+                    f.rows[r].iterations_to_bptt,
+                    sig(f.rows[r].iterations_to_bptt / k_bptt.max(1.0)),
+                    sig(f.rows[r].seconds_to_bptt),
+                    sig(f.rows[mom].seconds_to_bptt)
                 )
             } else {
                 format!(
                     "{m} never did in {} iterations / {} evaluations (best J {})",
-                    f.iters[r],
-                    f.evals[r],
-                    sig(f.j_sub[r])
+                    f.rows[r].iterations,
+                    f.rows[r].evaluations,
+                    sig(f.rows[r].objective_substrate)
                 )
             });
         }
@@ -339,11 +296,11 @@ impl Runs {
         match self.judge(DAGGER_SUBSTRATE, bars) {
             Some(g) => format!(
                 " On the dolphin's last-round DAgger global net (ours, substrate `{DAGGER_SUBSTRATE}`, the same start and budgets): BPTT with momentum reaches its best J = {} at iteration {}; {}. Its {}. Replayed on the simulator, BPTT's knots learned there swim {} m, the gradient-free methods' at most {} m. The same rule on the DAgger net: {}.{}",
-                sig(f.j_sub[g.mom]),
-                f.k_to[g.mom],
+                sig(f.rows[g.mom].objective_substrate),
+                f.rows[g.mom].iterations_to_bptt,
                 self.own_notes(DAGGER_SUBSTRATE).join("; "),
                 g.target_line,
-                sig(f.d_sim[g.mom]),
+                sig(f.rows[g.mom].distance_simulator_m),
                 sig(g.rival_sim),
                 g.verdict.label(),
                 g.lines
@@ -564,34 +521,30 @@ pub fn seed_measures(
     dir: &Path,
     bars: &SwimRule,
 ) -> Result<Option<Vec<(i64, SwimMeasures)>>, Error> {
-    let Some(t) = written_csv(dir, "search_seeds.csv")? else {
+    let Some(df) = written_csv(dir, "search_seeds.csv")? else {
         return Ok(None);
     };
-    let (seed, meth) = (df_f64(&t, "seed")?, df_str(&t, "method")?);
-    let (k, d) = (
-        df_f64(&t, "iterations_to_target")?,
-        df_f64(&t, "distance_simulator_m")?,
-    );
-    let mut seeds: Vec<i64> = seed.iter().map(|&s| s as i64).collect();
+    let rows = SearchSeedRow::from_frame(&df)
+        .map_err(|e| Error::Other(format!("{}: {e}", dir.join("search_seeds.csv").display())))?;
+    let mut seeds: Vec<i64> = rows.iter().map(|r| r.seed).collect();
     seeds.dedup();
     let out = seeds
         .into_iter()
         .map(|s| {
-            let rows: Vec<usize> = (0..seed.len()).filter(|&r| seed[r] as i64 == s).collect();
-            let of = |m: &str| rows.iter().copied().find(|&r| meth[r] == m);
-            let finite = |r: usize| Some(k[r]).filter(|x| x.is_finite());
+            let of = |m: &str| rows.iter().find(|r| r.seed == s && r.method == m);
+            let finite = |r: &SearchSeedRow| Some(r.iterations_to_target).filter(|x| x.is_finite());
             let mom = of("bptt_momentum");
             let rivals: Vec<Option<f64>> =
                 SEARCHES.iter().filter_map(|m| of(m)).map(finite).collect();
             let rival_swim = SEARCHES
                 .iter()
                 .filter_map(|m| of(m))
-                .map(|r| d[r])
+                .map(|r| r.distance_simulator_m)
                 .fold(f64::NEG_INFINITY, f64::max);
             let m = swim_measures(
                 mom.and_then(finite),
                 &rivals,
-                mom.map_or(f64::NAN, |r| d[r]),
+                mom.map_or(f64::NAN, |r| r.distance_simulator_m),
                 rival_swim,
                 bars,
             );

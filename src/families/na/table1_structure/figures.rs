@@ -1,49 +1,41 @@
 //! Figures: each net's training curves (`training`) and its rollout error against the
 //! simulator over 40 super-steps (`rollout`).
 
+use super::rows::{RolloutRow, StructureRow, TrainingRow};
 use crate::experiment::output::{unique, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::rows::TableRow;
 use crate::experiment::rule::rule_setting;
 use crate::experiment::Error;
 use std::path::PathBuf;
 
 /// Draws the `training` and `rollout` figures.
 pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let t = tables.require("training")?;
-    let (net, it, tr, ho) = (
-        t.strs("net"),
-        t.f64s("iteration"),
-        t.f64s("train_error"),
-        t.f64s("heldout_error"),
-    );
-    let names = unique(&net);
+    let training = TrainingRow::from_table(tables.require("training")?);
+    let names = unique(&training.iter().map(|r| r.net.clone()).collect::<Vec<_>>());
     // The table's errors, after the whole training (rollout fine-tuning included).
-    let st = tables.require("structure")?;
-    let (st_net, st_tr, st_ho) = (
-        st.strs("net"),
-        st.f64s("train_error"),
-        st.f64s("heldout_error"),
-    );
+    let structure = StructureRow::from_table(tables.require("structure")?);
     let panels = names
         .iter()
         .map(|name| {
-            let pick = |v: &[f64]| -> Vec<(f64, f64)> {
-                (0..net.len())
-                    .filter(|&r| &net[r] == name)
-                    .map(|r| (it[r], v[r]))
+            let pick = |v: fn(&TrainingRow) -> f64| -> Vec<(f64, f64)> {
+                training
+                    .iter()
+                    .filter(|r| r.net == *name)
+                    .map(|r| (r.iteration as f64, v(r)))
                     .collect()
             };
-            let (train, held) = (pick(&tr), pick(&ho));
+            let (train, held) = (pick(|r| r.train_error), pick(|r| r.heldout_error));
             let x_end = train.iter().map(|p| p.0).fold(0.0, f64::max);
             let mut series = vec![
                 Series::line("train (noisy inputs where set)", train, 0),
                 Series::line("held-out", held, 1).mark(Mark::Dashed),
             ];
-            if let Some(r) = st_net.iter().position(|n| n == name) {
+            if let Some(r) = structure.iter().find(|r| r.net == *name) {
                 for (label, v, c, dash) in [
-                    ("train, final (Table 1)", st_tr[r], 2, 3),
-                    ("held-out, final (Table 1)", st_ho[r], 3, 10),
+                    ("train, final (Table 1)", r.train_error, 2, 3),
+                    ("held-out, final (Table 1)", r.heldout_error, 3, 10),
                 ] {
                     series.push(
                         Series::line(label, vec![(0.0, v), (x_end, v)], c)
@@ -86,15 +78,15 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
         })
         .collect();
     let mut files = fig.draw("training", &Figure::grid(panels, 3))?;
-    let r = tables.require("rollout")?;
-    let (net, step, err) = (r.strs("net"), r.f64s("step"), r.f64s("error"));
-    let series = unique(&net)
+    let rollout = RolloutRow::from_table(tables.require("rollout")?);
+    let series = unique(&rollout.iter().map(|r| r.net.clone()).collect::<Vec<_>>())
         .iter()
         .enumerate()
         .map(|(c, name)| {
-            let pts = (0..net.len())
-                .filter(|&k| &net[k] == name && err[k] > 0.0)
-                .map(|k| (step[k], err[k]))
+            let pts = rollout
+                .iter()
+                .filter(|r| r.net == *name && r.error > 0.0)
+                .map(|r| (r.step as f64, r.error))
                 .collect();
             Series::line(name, pts, c)
         })

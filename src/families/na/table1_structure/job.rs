@@ -2,6 +2,10 @@
 //! simulator and its neutral-control drift from the control tasks' starts, and tabulate it all.
 
 use super::nets::{build_dolphin_emulator, build_emulators, build_spec};
+use super::rows::{
+    DriftRow, GlobalErrorRow, NormalizationRow, RegimeFidelityRow, RolloutRow, RolloutTrainingRow,
+    StructureRow, TrainingRow,
+};
 use super::{position_part, DolphinNets, DriftTask, Params};
 use crate::emulator::catalog::{
     anchor_of, regime_fidelity, regime_share, rollout_error, training_transitions, BuildSpec,
@@ -12,10 +16,10 @@ use crate::emulator::hierarchy::{
 };
 use crate::emulator::mlp::Mlp;
 use crate::emulator::train::TracePoint;
-use crate::experiment::output::{Table, Tables};
+use crate::experiment::output::Tables;
+use crate::experiment::rows::table_of;
 use crate::experiment::rule::rule_table_of;
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::row;
 
 /// Quantity and component of each of a segment's 13 global-state numbers (`global_error.csv`).
 const GLOBAL_OUTPUTS: [(&str, &str); 13] = [
@@ -111,7 +115,7 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut t = StructureTables::new();
+        let mut t = StructureTables::default();
         let pb = ctx.progress(self.nets.len() as u64, "training emulators");
         let mut shares = Shares::default();
         let specs: Vec<BuildSpec> = self
@@ -139,80 +143,33 @@ impl Job for Params {
         }
         pb.finish_and_clear();
         Ok(Tables::from([
-            ("structure", t.structure),
-            ("training", t.training),
-            ("rollout", t.rollout),
-            ("drift", t.drift),
-            ("rollout_training", t.rollout_training),
-            ("global_error", t.global_error),
-            ("normalization", normalization),
-            ("regime_fidelity", regime_fidelity),
+            ("structure", table_of(&t.structure)),
+            ("training", table_of(&t.training)),
+            ("rollout", table_of(&t.rollout)),
+            ("drift", table_of(&t.drift)),
+            ("rollout_training", table_of(&t.rollout_training)),
+            ("global_error", table_of(&t.global_error)),
+            ("normalization", table_of(&normalization)),
+            ("regime_fidelity", table_of(&regime_fidelity)),
             ("rule", rule_table_of(&self.rule)?),
         ]))
     }
 }
 
 /// The tables every net's rows go to (the normalization and regime tables are built apart).
+#[derive(Default)]
 struct StructureTables {
-    structure: Table,
-    training: Table,
-    rollout: Table,
+    structure: Vec<StructureRow>,
+    training: Vec<TrainingRow>,
+    rollout: Vec<RolloutRow>,
     /// The k-step rollout fine-tuning (training.rollout_k): one-step loss + rollout_weight x
     /// k-step rollout loss, on the training and held-out examples and windows.
-    rollout_training: Table,
-    global_error: Table,
-    drift: Table,
+    rollout_training: Vec<RolloutTrainingRow>,
+    global_error: Vec<GlobalErrorRow>,
+    drift: Vec<DriftRow>,
 }
 
 impl StructureTables {
-    /// The empty tables.
-    fn new() -> Self {
-        let structure = Table::new(&[
-            "net",
-            "inputs",
-            "hidden",
-            "outputs",
-            "examples",
-            "train_error",
-            "heldout_error",
-            "train_s",
-            "weights",
-            "examples_per_weight",
-            "stop",
-            "cached",
-            "rollout40_error_mean",
-            "rollout40_error_final",
-            "anchored",
-            "regime_share",
-            "data",
-        ]);
-        let global_error = Table::new(&[
-            "segment",
-            "quantity",
-            "component",
-            "heldout_mse",
-            "target_variance",
-        ]);
-        let drift = Table::new(&[
-            "net",
-            "task",
-            "horizon_s",
-            "emulator_drift",
-            "simulator_drift",
-            "gap",
-            "tolerance",
-            "at_anchor",
-        ]);
-        StructureTables {
-            structure,
-            training: Table::new(&["net", "iteration", "train_error", "heldout_error"]),
-            rollout: Table::new(&["net", "step", "error"]),
-            rollout_training: Table::new(&["net", "iteration", "train_loss", "heldout_loss"]),
-            global_error,
-            drift,
-        }
-    }
-
     /// A drift task's row from its ends (emulated, simulated, start) after `horizon_s`.
     /// at_anchor: the start and control encode to the net's anchor (NetSpec::anchor), so
     /// the emulator's first step is exact by construction, not by fit.
@@ -223,35 +180,35 @@ impl StructureTables {
         [e, s, x0]: [Vec<f64>; 3],
         at_anchor: bool,
     ) {
-        self.drift.push(row![
-            t.net.as_str(),
-            t.task.as_str(),
+        self.drift.push(DriftRow {
+            net: t.net.clone(),
+            task: t.task.clone(),
             horizon_s,
-            dist(&e, &x0),
-            dist(&s, &x0),
-            dist(&e, &s),
-            t.tolerance,
-            i64::from(at_anchor)
-        ]);
+            emulator_drift: dist(&e, &x0),
+            simulator_drift: dist(&s, &x0),
+            gap: dist(&e, &s),
+            tolerance: t.tolerance,
+            at_anchor: i64::from(at_anchor),
+        });
     }
 
     /// A net's training curves: its one-step `training` rows and its rollout fine-tuning's.
     fn push_traces(&mut self, name: &str, trace: &[TracePoint], rollout_trace: &[TracePoint]) {
         for p in trace {
-            self.training.push(row![
-                name,
-                p.iteration as i64,
-                p.train_error,
-                p.held_out_error
-            ]);
+            self.training.push(TrainingRow {
+                net: name.to_string(),
+                iteration: p.iteration as i64,
+                train_error: p.train_error,
+                heldout_error: p.held_out_error,
+            });
         }
         for p in rollout_trace {
-            self.rollout_training.push(row![
-                name,
-                p.iteration as i64,
-                p.train_error,
-                p.held_out_error
-            ]);
+            self.rollout_training.push(RolloutTrainingRow {
+                net: name.to_string(),
+                iteration: p.iteration as i64,
+                train_loss: p.train_error,
+                heldout_loss: p.held_out_error,
+            });
         }
     }
 }
@@ -285,7 +242,11 @@ impl Params {
             rollout_error(&t.emulator, spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other)
         })?;
         for (k, e) in errors.iter().enumerate() {
-            tables.rollout.push(row![name, (k + 1) as i64, *e]);
+            tables.rollout.push(RolloutRow {
+                net: name.to_string(),
+                step: (k + 1) as i64,
+                error: *e,
+            });
         }
         for task in self.drift.iter().filter(|d| d.net == name) {
             let u = if task.control.is_empty() {
@@ -304,25 +265,25 @@ impl Params {
             );
         }
         let mean = errors.iter().sum::<f64>() / errors.len() as f64;
-        tables.structure.push(row![
-            name,
-            n_in as i64,
-            net.hidden as i64,
-            n_out as i64,
-            spec.net.examples as i64,
-            t.train_error,
-            t.heldout_error,
-            t.train_s,
-            w as i64,
-            spec.net.examples as f64 / w as f64,
-            t.stop.as_str(),
-            i64::from(t.from_cache),
-            mean,
-            errors[errors.len() - 1],
-            i64::from(net.anchor),
-            ctx.stage(&format!("regime share {name}"), || shares.get(spec))?,
-            spec.net.data.name()
-        ]);
+        tables.structure.push(StructureRow {
+            net: name.to_string(),
+            inputs: n_in as i64,
+            hidden: net.hidden as i64,
+            outputs: n_out as i64,
+            examples: spec.net.examples as i64,
+            train_error: t.train_error,
+            heldout_error: t.heldout_error,
+            train_s: t.train_s,
+            weights: w as i64,
+            examples_per_weight: spec.net.examples as f64 / w as f64,
+            stop: t.stop.clone(),
+            cached: i64::from(t.from_cache),
+            rollout40_error_mean: mean,
+            rollout40_error_final: errors[errors.len() - 1],
+            anchored: i64::from(net.anchor),
+            regime_share: ctx.stage(&format!("regime share {name}"), || shares.get(spec))?,
+            data: spec.net.data.name().to_string(),
+        });
         tables.push_traces(name, &t.trace, &t.rollout_trace);
         Ok(())
     }
@@ -344,7 +305,11 @@ impl Params {
         })?;
         for (name, errors) in [("dolphin_global", &global_err), ("dolphin", &composed_err)] {
             for (k, e) in errors.iter().enumerate() {
-                tables.rollout.push(row![name, (k + 1) as i64, *e]);
+                tables.rollout.push(RolloutRow {
+                    net: name.to_string(),
+                    step: (k + 1) as i64,
+                    error: *e,
+                });
             }
         }
         let per_output = ctx.stage("dolphin global error by output", || {
@@ -352,9 +317,13 @@ impl Params {
         })?;
         for (j, (e, v)) in per_output.iter().enumerate() {
             let (quantity, component) = GLOBAL_OUTPUTS[j % 13];
-            tables
-                .global_error
-                .push(row![(j / 13) as i64, quantity, component, *e, *v]);
+            tables.global_error.push(GlobalErrorRow {
+                segment: (j / 13) as i64,
+                quantity: quantity.to_string(),
+                component: component.to_string(),
+                heldout_mse: *e,
+                target_variance: *v,
+            });
         }
         for task in self.drift.iter().filter(|d| d.net == "dolphin") {
             let u = if task.control.is_empty() {
@@ -375,25 +344,25 @@ impl Params {
                 summary(&composed_err)
             };
             let w = Mlp::weight_count(n.inputs, n.hidden, n.outputs);
-            tables.structure.push(row![
-                n.name.as_str(),
-                n.inputs as i64,
-                n.hidden as i64,
-                n.outputs as i64,
-                n.examples as i64,
-                n.train_error,
-                n.heldout_error,
-                n.train_s,
-                w as i64,
-                n.examples as f64 / w as f64,
-                n.stop.as_str(),
-                i64::from(n.from_cache),
-                mean,
-                last,
-                0_i64,
-                f64::NAN,
-                "typical"
-            ]);
+            tables.structure.push(StructureRow {
+                net: n.name.clone(),
+                inputs: n.inputs as i64,
+                hidden: n.hidden as i64,
+                outputs: n.outputs as i64,
+                examples: n.examples as i64,
+                train_error: n.train_error,
+                heldout_error: n.heldout_error,
+                train_s: n.train_s,
+                weights: w as i64,
+                examples_per_weight: n.examples as f64 / w as f64,
+                stop: n.stop.clone(),
+                cached: i64::from(n.from_cache),
+                rollout40_error_mean: mean,
+                rollout40_error_final: last,
+                anchored: 0,
+                regime_share: f64::NAN,
+                data: "typical".into(),
+            });
             tables.push_traces(n.name.as_str(), &n.trace, &n.rollout_trace);
         }
         Ok(())
@@ -429,20 +398,8 @@ impl Params {
         ctx: &RunContext,
         specs: &[BuildSpec],
         shares: &mut Shares,
-    ) -> Result<Table, Error> {
-        let mut table = Table::new(&[
-            "net",
-            "quantity",
-            "bias_tol",
-            "rms_tol",
-            "rollout40_tol",
-            "variant",
-            "data",
-            "input_noise",
-            "tolerance",
-            "regime_share",
-            "stop",
-        ]);
+    ) -> Result<Vec<RegimeFidelityRow>, Error> {
+        let mut table = Vec::new();
         let mut lines: Vec<(&str, BuildSpec, &[f64])> = Vec::new();
         for r in &self.regime {
             let Some(spec) = specs.iter().find(|s| s.net.model.name() == r.net) else {
@@ -475,19 +432,19 @@ impl Params {
             let share = shares.get(spec)?;
             let names = model.state_names();
             for f in rows {
-                table.push(row![
-                    model.name(),
-                    names[f.variable].as_str(),
-                    f.bias_tol,
-                    f.rms_tol,
-                    f.rollout_tol,
-                    *variant,
-                    spec.net.data.name(),
-                    spec.effective_settings().input_noise,
-                    f.tolerance,
-                    share,
-                    t.stop.as_str()
-                ]);
+                table.push(RegimeFidelityRow {
+                    net: model.name().to_string(),
+                    quantity: names[f.variable].clone(),
+                    bias_tol: f.bias_tol,
+                    rms_tol: f.rms_tol,
+                    rollout40_tol: f.rollout_tol,
+                    variant: variant.to_string(),
+                    data: spec.net.data.name().to_string(),
+                    input_noise: spec.effective_settings().input_noise,
+                    tolerance: f.tolerance,
+                    regime_share: share,
+                    stop: t.stop.clone(),
+                });
             }
         }
         Ok(table)
@@ -496,17 +453,12 @@ impl Params {
     /// `normalization.csv`: every catalog net of `specs` built under each of
     /// `self.normalizations` (the ones not already built, side by side, cached) and rolled out
     /// beside the simulator as `rollout.csv` is.
-    fn normalization_table(&self, ctx: &RunContext, specs: &[BuildSpec]) -> Result<Table, Error> {
-        let mut table = Table::new(&[
-            "net",
-            "normalization",
-            "in_spec",
-            "rollout1_error",
-            "rollout40_error_mean",
-            "rollout40_error_final",
-            "train_s",
-            "cached",
-        ]);
+    fn normalization_table(
+        &self,
+        ctx: &RunContext,
+        specs: &[BuildSpec],
+    ) -> Result<Vec<NormalizationRow>, Error> {
+        let mut table = Vec::new();
         if self.normalizations.is_empty() {
             return Ok(table);
         }
@@ -533,16 +485,16 @@ impl Params {
                 || rollout_error(&t.emulator, spec, ROLLOUT_EPISODES, ROLLOUT_STEPS).map_err(other),
             )?;
             let in_spec = specs.iter().any(|s| s.net == spec.net);
-            table.push(row![
-                spec.net.model.name(),
-                spec.net.normalization.name(),
-                i64::from(in_spec),
-                errors[0],
-                errors.iter().sum::<f64>() / errors.len() as f64,
-                errors[errors.len() - 1],
-                t.train_s,
-                i64::from(t.from_cache)
-            ]);
+            table.push(NormalizationRow {
+                net: spec.net.model.name().to_string(),
+                normalization: spec.net.normalization.name().to_string(),
+                in_spec: i64::from(in_spec),
+                rollout1_error: errors[0],
+                rollout40_error_mean: errors.iter().sum::<f64>() / errors.len() as f64,
+                rollout40_error_final: errors[errors.len() - 1],
+                train_s: t.train_s,
+                cached: i64::from(t.from_cache),
+            });
         }
         Ok(table)
     }

@@ -32,6 +32,7 @@ mod figures;
 mod job;
 mod nets;
 mod report;
+mod rows;
 
 pub(crate) use job::dolphin_drift;
 pub use job::{ROLLOUT_EPISODES, ROLLOUT_STEPS};

@@ -1,14 +1,25 @@
 //! The report: Table 1 as measured, the drift checks and the dolphin's global-net error by
 //! segment, and the verdict rule (learned, not overfitted, faithful over 40 super-steps).
 
+use super::rows::{DriftRow, GlobalErrorRow, NormalizationRow, RegimeFidelityRow, StructureRow};
 use super::Table1Rule;
 use crate::emulator::catalog::Normalization;
-use crate::experiment::output::{df_f64, df_str, read_csv, written_csv};
+use crate::experiment::output::written_csv;
 use crate::experiment::report::{sig, Findings};
-use crate::experiment::rows::Frame as DataFrame;
+use crate::experiment::rows::{read_rows, TableRow};
 use crate::experiment::rule::{majority, rule_settings, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use std::path::Path;
+
+/// The rows of the optional table `name` in `dir`: `None` when the run did not write it.
+fn written_rows<R: TableRow>(dir: &Path, name: &str) -> Result<Option<Vec<R>>, Error> {
+    let Some(df) = written_csv(dir, name)? else {
+        return Ok(None);
+    };
+    R::from_frame(&df)
+        .map(Some)
+        .map_err(|e| Error::Other(format!("{}: {e}", dir.join(name).display())))
+}
 
 /// The verdict's rule over `passed` of `nets` nets (each passing every condition of the
 /// spec's bars): held when all pass, partly when a strict majority does (a bar one net of
@@ -48,41 +59,30 @@ pub fn table1_rule(passed: usize, nets: usize) -> Option<Rule> {
 /// quantity's median 40-step error is within `max` tolerances, and the report's table of
 /// every row; `None` when the run wrote no such table.
 fn regime_section(dir: &Path, max: f64) -> Result<Option<(Vec<(String, bool)>, String)>, Error> {
-    let Some(df) = written_csv(dir, "regime_fidelity.csv")? else {
+    let Some(rows) = written_rows::<RegimeFidelityRow>(dir, "regime_fidelity.csv")? else {
         return Ok(None);
     };
-    let (net, quantity, variant) = (
-        df_str(&df, "net")?,
-        df_str(&df, "quantity")?,
-        df_str(&df, "variant")?,
-    );
-    let (bias, rms, roll, share) = (
-        df_f64(&df, "bias_tol")?,
-        df_f64(&df, "rms_tol")?,
-        df_f64(&df, "rollout40_tol")?,
-        df_f64(&df, "regime_share")?,
-    );
     let mut passes: Vec<(String, bool)> = Vec::new();
     let mut md = "
 Fidelity on the control tasks' inputs (`regime_fidelity.csv`): one-step bias and RMS error on fresh typical examples and the median open-loop error after 40 super-steps of typical manoeuvres (32 episodes), each over the Fig. 13 task's tolerance; `paper` is each net above, the other variants the same net with one change (`box`: data uniform over the whole control box, our recipe before; `noise`: input noise in training). A catalog net's 40-step errors here are the verdict's fourth condition. Share in regime: the training examples inside the tasks' regime.\n\n| net | variant | quantity | bias (tol) | RMS (tol) | 40-step (tol) | share in regime |\n| --- | --- | --- | --- | --- | --- | --- |\n".to_string();
-    for r in 0..net.len() {
+    for r in &rows {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} |\n",
-            net[r],
-            variant[r],
-            quantity[r],
-            sig(bias[r]),
-            sig(rms[r]),
-            sig(roll[r]),
-            sig(share[r])
+            r.net,
+            r.variant,
+            r.quantity,
+            sig(r.bias_tol),
+            sig(r.rms_tol),
+            sig(r.rollout40_tol),
+            sig(r.regime_share)
         ));
-        if variant[r] != "paper" {
+        if r.variant != "paper" {
             continue;
         }
-        let ok = roll[r] <= max;
-        match passes.iter_mut().find(|p| p.0 == net[r]) {
+        let ok = r.rollout40_tol <= max;
+        match passes.iter_mut().find(|p| p.0 == r.net) {
             Some(p) => p.1 &= ok,
-            None => passes.push((net[r].clone(), ok)),
+            None => passes.push((r.net.clone(), ok)),
         }
     }
     Ok(Some((passes, md)))
@@ -90,23 +90,7 @@ Fidelity on the control tasks' inputs (`regime_fidelity.csv`): one-step bias and
 
 /// The findings from the run folder `dir`.
 pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
-    let df = read_csv(&dir.join("structure.csv"))?;
-    let net = df_str(&df, "net")?;
-    let (inp, hid, out, ex) = (
-        df_f64(&df, "inputs")?,
-        df_f64(&df, "hidden")?,
-        df_f64(&df, "outputs")?,
-        df_f64(&df, "examples")?,
-    );
-    let (tr, ho, secs) = (
-        df_f64(&df, "train_error")?,
-        df_f64(&df, "heldout_error")?,
-        df_f64(&df, "train_s")?,
-    );
-    let (roll, roll_end) = (
-        df_f64(&df, "rollout40_error_mean")?,
-        df_f64(&df, "rollout40_error_final")?,
-    );
+    let nets: Vec<StructureRow> = read_rows(&dir.join("structure.csv"))?;
     let mut md = String::from(
             "| net | inputs | hidden | outputs | examples | train MSE | held-out MSE | train s | 40-step rollout error, mean / final |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
         );
@@ -129,39 +113,39 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     // Nets passing each of the first three conditions alone: learned, not overfitted,
     // faithful (the fourth is counted over the nets it measures, below).
     let mut each = [0usize; 3];
-    let anchored = df_f64(&df, "anchored").unwrap_or_else(|_| vec![0.0; net.len()]);
-    for r in 0..net.len() {
-        let name = if anchored[r] > 0.5 {
-            format!("{} (anchored)", net[r])
+    for r in &nets {
+        let name = if r.anchored != 0 {
+            format!("{} (anchored)", r.net)
         } else {
-            net[r].clone()
+            r.net.clone()
         };
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} | {} | {} / {} |\n",
             name,
-            inp[r],
-            hid[r],
-            out[r],
-            ex[r],
-            sig(tr[r]),
-            sig(ho[r]),
-            sig(secs[r]),
-            sig(roll[r]),
-            sig(roll_end[r])
+            r.inputs,
+            r.hidden,
+            r.outputs,
+            r.examples,
+            sig(r.train_error),
+            sig(r.heldout_error),
+            sig(r.train_s),
+            sig(r.rollout40_error_mean),
+            sig(r.rollout40_error_final)
         ));
         // The conditions (Table1Rule): learned, not overfitted, and where measured faithful
         // over the 40 super-steps control uses, in the whole state and on the tasks' inputs.
-        let rollout_ok = roll[r].is_nan() || roll[r] < bars.rollout_max;
-        rolled += usize::from(!roll[r].is_nan());
+        let roll = r.rollout40_error_mean;
+        let rollout_ok = roll.is_nan() || roll < bars.rollout_max;
+        rolled += usize::from(!roll.is_nan());
         let ok = [
-            ho[r] < bars.heldout_max,
-            ho[r] - tr[r] <= bars.overfit_gap,
+            r.heldout_error < bars.heldout_max,
+            r.heldout_error - r.train_error <= bars.overfit_gap,
             rollout_ok,
         ];
         for (n, o) in each.iter_mut().zip(ok) {
             *n += usize::from(o);
         }
-        good += usize::from(ok.iter().all(|&o| o) && regime_ok(&net[r]));
+        good += usize::from(ok.iter().all(|&o| o) && regime_ok(&r.net));
     }
     md.push_str(&drift_section(dir)?);
     let regime_nets = regime.as_ref().map_or(0, |r| r.0.len());
@@ -171,13 +155,13 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
     if let Some((_, text)) = &regime {
         md.push_str(text);
     }
-    if let Some(df) = written_csv(dir, "normalization.csv")? {
-        md.push_str(&normalization_section(&df)?);
+    if let Some(rows) = written_rows(dir, "normalization.csv")? {
+        md.push_str(&normalization_section(&rows));
     }
     md.push_str(&global_error_section(dir)?);
-    let rule = table1_rule(good, net.len());
+    let rule = table1_rule(good, nets.len());
     let (verdict, lines, text) = shown(rule.as_ref(), " No rule: no nets.");
-    let n = net.len();
+    let n = nets.len();
     Ok(Findings {
             ours: md,
             verdict,
@@ -198,28 +182,19 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
 /// The drift section (`drift.csv`; empty when absent): every neutral-control drift row.
 fn drift_section(dir: &Path) -> Result<String, Error> {
     let mut out = String::new();
-    if let Some(df) = written_csv(dir, "drift.csv")? {
-        let (dn, task) = (df_str(&df, "net")?, df_str(&df, "task")?);
-        let (hz, de, ds, gap, tol) = (
-            df_f64(&df, "horizon_s")?,
-            df_f64(&df, "emulator_drift")?,
-            df_f64(&df, "simulator_drift")?,
-            df_f64(&df, "gap")?,
-            df_f64(&df, "tolerance")?,
-        );
-        let at_anchor = df_f64(&df, "at_anchor").unwrap_or_else(|_| vec![0.0; dn.len()]);
+    if let Some(rows) = written_rows::<DriftRow>(dir, "drift.csv")? {
         out.push_str("\nNeutral-control drift from the Fig. 13 task starts and near them (`drift.csv`; position part, not part of the verdict). *At the anchor*: the start and control are the anchored net's equilibrium (ours, `anchor = true`), so the first step is exact by construction and the drift measures only whether the net is stable there; the rows off the anchor measure the fit near rest:\n\n| net | task | horizon s | emulator moved | simulator moved | end gap | tolerance (ours) | at the anchor |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n");
-        for r in 0..dn.len() {
+        for r in &rows {
             out.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
-                dn[r],
-                task[r],
-                sig(hz[r]),
-                sig(de[r]),
-                sig(ds[r]),
-                sig(gap[r]),
-                sig(tol[r]),
-                if at_anchor[r] > 0.5 { "yes" } else { "no" }
+                r.net,
+                r.task,
+                sig(r.horizon_s),
+                sig(r.emulator_drift),
+                sig(r.simulator_drift),
+                sig(r.gap),
+                sig(r.tolerance),
+                if r.at_anchor != 0 { "yes" } else { "no" }
             ));
         }
     }
@@ -230,16 +205,12 @@ fn drift_section(dir: &Path) -> Result<String, Error> {
 /// absent).
 fn global_error_section(dir: &Path) -> Result<String, Error> {
     let mut out = String::new();
-    if let Some(df) = written_csv(dir, "global_error.csv")? {
-        let (seg, mse, var) = (
-            df_f64(&df, "segment")?,
-            df_f64(&df, "heldout_mse")?,
-            df_f64(&df, "target_variance")?,
-        );
+    if let Some(rows) = written_rows::<GlobalErrorRow>(dir, "global_error.csv")? {
         let (mut by_seg, mut seg_var) = ([0.0; 6], [0.0; 6]);
-        for ((s, e), v) in seg.iter().zip(&mse).zip(&var) {
-            by_seg[(*s as usize).min(5)] += e / 13.0;
-            seg_var[(*s as usize).min(5)] += v / 13.0;
+        for r in &rows {
+            let s = (r.segment.max(0) as usize).min(5);
+            by_seg[s] += r.heldout_mse / 13.0;
+            seg_var[s] += r.target_variance / 13.0;
         }
         let unexplained: Vec<String> = by_seg
             .iter()
@@ -266,17 +237,10 @@ fn global_error_section(dir: &Path) -> Result<String, Error> {
 /// The normalization comparison (`normalization.csv`): every catalog net under each
 /// normalization, and whether the net's own is the one the spec's rule picks
 /// ([`super::normalization_pick`]).
-fn normalization_section(df: &DataFrame) -> Result<String, Error> {
-    let (net, norm) = (df_str(df, "net")?, df_str(df, "normalization")?);
-    if net.is_empty() {
-        return Ok(String::new());
+fn normalization_section(rows: &[NormalizationRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
     }
-    let in_spec = df_f64(df, "in_spec")?;
-    let (one, mean, last) = (
-        df_f64(df, "rollout1_error")?,
-        df_f64(df, "rollout40_error_mean")?,
-        df_f64(df, "rollout40_error_final")?,
-    );
     fn label(n: &str) -> &str {
         match n {
             "variable" => "per variable",
@@ -287,32 +251,34 @@ fn normalization_section(df: &DataFrame) -> Result<String, Error> {
     }
     let mut md = String::from("\nNormalization (Appendix A; `normalization.csv`): every catalog net also built under each normalization, same data, seed and training, and rolled out beside the simulator as above. Rule (ours, in the spec before the comparison's first run): among the normalizations whose mean 40-step rollout error is within 10% of the lowest, the first of by quantity, Appendix A's state/control, per variable.\n\n| net | normalization | used by the nets above | 1-step rollout error | 40-step rollout error, mean / final |\n| --- | --- | --- | --- | --- |\n");
     let mut nets: Vec<&str> = Vec::new();
-    for r in 0..net.len() {
-        if !nets.contains(&net[r].as_str()) {
-            nets.push(&net[r]);
+    for r in rows {
+        if !nets.contains(&r.net.as_str()) {
+            nets.push(&r.net);
         }
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} / {} |\n",
-            net[r],
-            label(&norm[r]),
-            if in_spec[r] > 0.5 { "yes" } else { "no" },
-            sig(one[r]),
-            sig(mean[r]),
-            sig(last[r])
+            r.net,
+            label(&r.normalization),
+            if r.in_spec != 0 { "yes" } else { "no" },
+            sig(r.rollout1_error),
+            sig(r.rollout40_error_mean),
+            sig(r.rollout40_error_final)
         ));
     }
     let parse = |n: &str| Normalization::ALL.into_iter().find(|x| x.name() == n);
     let mut agree = Vec::new();
     let mut disagree = Vec::new();
     for n in nets {
-        let rows: Vec<(Normalization, f64)> = (0..net.len())
-            .filter(|&r| net[r] == n)
-            .filter_map(|r| parse(&norm[r]).map(|x| (x, mean[r])))
+        let of_net: Vec<(Normalization, f64)> = rows
+            .iter()
+            .filter(|r| r.net == n)
+            .filter_map(|r| parse(&r.normalization).map(|x| (x, r.rollout40_error_mean)))
             .collect();
-        let pick = super::normalization_pick(&rows);
-        let used = (0..net.len())
-            .find(|&r| net[r] == n && in_spec[r] > 0.5)
-            .and_then(|r| parse(&norm[r]));
+        let pick = super::normalization_pick(&of_net);
+        let used = rows
+            .iter()
+            .find(|r| r.net == n && r.in_spec != 0)
+            .and_then(|r| parse(&r.normalization));
         let text = format!(
             "{n}: {}",
             pick.map_or("none (no finite error)", |p| label(p.name()))
@@ -343,7 +309,7 @@ fn normalization_section(df: &DataFrame) -> Result<String, Error> {
             disagree.len()
         ));
     }
-    Ok(md)
+    md
 }
 
 #[cfg(test)]

@@ -1,29 +1,25 @@
 //! The figure: wall time of each physical simulator against its emulators, and the speedup at
 //! the training step against the speedup at equal accuracy (`speedup`).
 
+use super::job::{EqualAccuracyRow, SpeedupRow};
 use super::DOLPHIN_IMPLICIT;
 use crate::experiment::output::{unique, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use std::path::PathBuf;
 
 /// Draws the `speedup` figure.
 pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let t = tables.require("speedup")?;
-    let (model, emu, phys, es, integ) = (
-        t.strs("model"),
-        t.strs("emulator"),
-        t.f64s("physical_s"),
-        t.f64s("emulator_s"),
-        t.strs("physical_integrator"),
-    );
+    let rows = SpeedupRow::from_table(tables.require("speedup")?);
     // One group of bars per physical simulator: model and integrator.
-    let group: Vec<String> = (0..model.len())
-        .map(|r| format!("{} ({})", model[r], integ[r]))
+    let group: Vec<String> = rows
+        .iter()
+        .map(|r| format!("{} ({})", r.model, r.physical_integrator))
         .collect();
     let groups = unique(&group);
-    let kinds = unique(&emu);
+    let kinds = unique(&rows.iter().map(|r| r.emulator.clone()).collect::<Vec<_>>());
     // Groups of bars per model: physical, then each emulator kind.
     let slots = kinds.len() + 1;
     let w = 0.8 / slots as f64;
@@ -34,7 +30,7 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
         .enumerate()
         .filter_map(|(mi, g)| {
             let r = group.iter().position(|x| x == g)?;
-            Some((pos(mi, 0), phys[r]))
+            Some((pos(mi, 0), rows[r].physical_s))
         })
         .collect();
     let phys_text = phys_rows
@@ -47,20 +43,20 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
         })
         .labelled(phys_text)];
     for (ki, k) in kinds.iter().enumerate() {
-        let rows: Vec<usize> = groups
+        let of_kind: Vec<usize> = groups
             .iter()
-            .filter_map(|g| (0..model.len()).find(|&r| &group[r] == g && &emu[r] == k))
+            .filter_map(|g| (0..rows.len()).find(|&r| &group[r] == g && rows[r].emulator == *k))
             .collect();
-        let pts = rows
+        let pts = of_kind
             .iter()
             .map(|&r| {
                 let mi = groups.iter().position(|g| *g == group[r]).unwrap_or(0);
-                (pos(mi, ki + 1), es[r])
+                (pos(mi, ki + 1), rows[r].emulator_s)
             })
             .collect();
-        let text = rows
+        let text = of_kind
             .iter()
-            .map(|&r| format!("{:.0}×", phys[r] / es[r]))
+            .map(|&r| format!("{:.0}×", rows[r].physical_s / rows[r].emulator_s))
             .collect();
         series.push(
             Series::line(format!("{k} (×: speedup)"), pts, ki + 1)
@@ -73,7 +69,7 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
     let panel = Panel {
         title: format!(
             "Seconds for the simulated time of {} physical steps (log scale)",
-            t.f64s("physical_steps").first().copied().unwrap_or(0.0)
+            rows.first().map_or(0.0, |r| r.physical_steps as f64)
         ),
         x_label: "physical simulator".into(),
         x_categories: groups,
@@ -85,27 +81,32 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
     let mut panels = vec![panel];
     // Speedup at the training step against speedup at equal accuracy, per emulator.
     if let Ok(eq) = tables.require("equal_accuracy") {
-        let (em, ee, esp, ej) = (
-            eq.strs("model"),
-            eq.strs("emulator"),
-            eq.f64s("speedup"),
-            eq.f64s("substeps"),
-        );
-        let cats: Vec<String> = (0..em.len())
-            .map(|r| format!("{} {}", em[r].trim_start_matches("pendulum_"), ee[r]))
+        let eq = EqualAccuracyRow::from_table(eq);
+        let cats: Vec<String> = eq
+            .iter()
+            .map(|e| format!("{} {}", e.model.trim_start_matches("pendulum_"), e.emulator))
             .collect();
-        let at_dt: Vec<(f64, f64)> = (0..em.len())
-            .filter_map(|r| {
-                let s = (0..model.len()).find(|&q| {
-                    model[q] == em[r] && emu[q] == ee[r] && integ[q] != DOLPHIN_IMPLICIT
+        let at_dt: Vec<(f64, f64)> = eq
+            .iter()
+            .enumerate()
+            .filter_map(|(r, e)| {
+                let s = rows.iter().find(|q| {
+                    q.model == e.model
+                        && q.emulator == e.emulator
+                        && q.physical_integrator != DOLPHIN_IMPLICIT
                 })?;
-                Some((r as f64 - 0.2, phys[s] / es[s]))
+                Some((r as f64 - 0.2, s.physical_s / s.emulator_s))
             })
             .collect();
         let at_dt_text = at_dt.iter().map(|p| format!("{:.0}×", p.1)).collect();
-        let eq_pts: Vec<(f64, f64)> = (0..em.len()).map(|r| (r as f64 + 0.2, esp[r])).collect();
-        let eq_text = (0..em.len())
-            .map(|r| format!("{}× (j={})", sig(esp[r]), ej[r]))
+        let eq_pts: Vec<(f64, f64)> = eq
+            .iter()
+            .enumerate()
+            .map(|(r, e)| (r as f64 + 0.2, e.speedup))
+            .collect();
+        let eq_text = eq
+            .iter()
+            .map(|e| format!("{}× (j={})", sig(e.speedup), e.substeps))
             .collect();
         panels.push(Panel {
                 title: "Speedup over the physical simulator at the training δt and at the largest step Δt/j as accurate as the emulator (log scale)".into(),

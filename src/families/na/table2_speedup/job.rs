@@ -7,7 +7,8 @@ use super::{Params, TimedDolphin, TimedNet, DOLPHIN_EXPLICIT, DOLPHIN_IMPLICIT};
 use crate::emulator::catalog::{NetModel, RolloutReference};
 use crate::emulator::dataset::ControlSignal;
 use crate::emulator::hierarchy;
-use crate::experiment::output::{Table, Tables};
+use crate::experiment::output::Tables;
+use crate::experiment::rows::table_of;
 use crate::experiment::rule::rule_table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::equal_accuracy::match_substeps;
@@ -16,7 +17,70 @@ use crate::families::na::table1_structure::{
 };
 use crate::physics::dolphin::ImplicitDolphin;
 use crate::physics::Dynamics;
-use crate::row;
+
+crate::result_rows! {
+    /// One row of `speedup.csv`: one emulator timed against one physical simulator over the
+    /// same simulated time.
+    pub struct SpeedupRow {
+        /// The model's name (`pendulum_passive`, ..., `dolphin`).
+        model: String = "model",
+        /// The emulator's label (`N25`, `N50`, `N100`, `N50_reg`).
+        emulator: String = "emulator",
+        /// The physical simulator's seconds over the horizon.
+        physical_s: f64 = "physical_s",
+        /// The emulator's seconds over the same simulated time.
+        emulator_s: f64 = "emulator_s",
+        /// physical_s / emulator_s.
+        speedup: f64 = "speedup",
+        /// Physical steps timed.
+        physical_steps: i64 = "physical_steps",
+        /// Emulator (super-)steps timed.
+        emulator_steps: i64 = "emulator_steps",
+        /// Seconds per physical step.
+        physical_step_s: f64 = "physical_step_s",
+        /// Seconds per emulator step.
+        emulator_step_s: f64 = "emulator_step_s",
+        /// Physical steps per emulator step.
+        n: i64 = "n",
+        /// Physical step cost / emulator step cost.
+        step_cost_ratio: f64 = "step_cost_ratio",
+        /// The physical integrator (`RK4`, or the dolphin's explicit or implicit one).
+        physical_integrator: String = "physical_integrator",
+        /// The physical step (s).
+        physical_dt: f64 = "physical_dt",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `equal_accuracy.csv`: an emulator against the largest physical step as
+    /// accurate as it.
+    pub struct EqualAccuracyRow {
+        /// The model's name.
+        model: String = "model",
+        /// The emulator's label.
+        emulator: String = "emulator",
+        /// The emulator's rollout error (Table 1's `rollout40_error_mean`).
+        emulator_error: f64 = "emulator_error",
+        /// j: physical steps per super-step at the matched step Δt/j.
+        substeps: i64 = "substeps",
+        /// The matched physical step Δt/j (s).
+        matched_dt: f64 = "matched_dt",
+        /// The physical error at the matched step.
+        matched_error: f64 = "matched_error",
+        /// The physical error at Δt/(j−1) (NaN when j = 1).
+        coarser_error: f64 = "coarser_error",
+        /// Physical steps timed at the matched step.
+        physical_steps: i64 = "physical_steps",
+        /// Emulator steps timed.
+        emulator_steps: i64 = "emulator_steps",
+        /// The physical simulator's seconds at the matched step.
+        physical_s: f64 = "physical_s",
+        /// The emulator's seconds.
+        emulator_s: f64 = "emulator_s",
+        /// physical_s / emulator_s.
+        speedup: f64 = "speedup",
+    }
+}
 
 /// A row's cost breakdown: speedup = physical_s / emulator_s = n × ratio.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -52,7 +116,7 @@ pub fn breakdown(
 /// One `speedup` row (the timings with their breakdown).
 #[allow(clippy::too_many_arguments)]
 fn push_speedup(
-    table: &mut Table,
+    rows: &mut Vec<SpeedupRow>,
     model: &str,
     emulator: &str,
     integrator: &str,
@@ -61,21 +125,21 @@ fn push_speedup(
     (emulator_s, emulator_steps): (f64, usize),
 ) {
     let b = breakdown(physical_s, physical_steps, emulator_s, emulator_steps);
-    table.push(row![
-        model,
-        emulator,
+    rows.push(SpeedupRow {
+        model: model.to_string(),
+        emulator: emulator.to_string(),
         physical_s,
         emulator_s,
-        physical_s / emulator_s,
-        physical_steps as i64,
-        emulator_steps as i64,
-        b.physical_step_s,
-        b.emulator_step_s,
-        b.n,
-        b.ratio,
-        integrator,
-        dt
-    ]);
+        speedup: physical_s / emulator_s,
+        physical_steps: physical_steps as i64,
+        emulator_steps: emulator_steps as i64,
+        physical_step_s: b.physical_step_s,
+        emulator_step_s: b.emulator_step_s,
+        n: b.n,
+        step_cost_ratio: b.ratio,
+        physical_integrator: integrator.to_string(),
+        physical_dt: dt,
+    });
 }
 
 impl Job for Params {
@@ -84,7 +148,7 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut t = SpeedupTables::new();
+        let mut t = SpeedupTables::default();
         for (i, tm) in self.models.iter().enumerate() {
             self.time_model(ctx, i, tm, &mut t)?;
         }
@@ -92,53 +156,18 @@ impl Job for Params {
             self.time_dolphin_nets(ctx, d, &mut t.speedup)?;
         }
         Ok(Tables::from([
-            ("speedup", t.speedup),
-            ("equal_accuracy", t.equal),
+            ("speedup", table_of(&t.speedup)),
+            ("equal_accuracy", table_of(&t.equal)),
             ("rule", rule_table_of(&self.rule)?),
         ]))
     }
 }
 
-/// The `speedup` and `equal_accuracy` tables.
+/// The `speedup` and `equal_accuracy` rows.
+#[derive(Default)]
 struct SpeedupTables {
-    speedup: Table,
-    equal: Table,
-}
-
-impl SpeedupTables {
-    /// The empty tables.
-    fn new() -> Self {
-        let speedup = Table::new(&[
-            "model",
-            "emulator",
-            "physical_s",
-            "emulator_s",
-            "speedup",
-            "physical_steps",
-            "emulator_steps",
-            "physical_step_s",
-            "emulator_step_s",
-            "n",
-            "step_cost_ratio",
-            "physical_integrator",
-            "physical_dt",
-        ]);
-        let equal = Table::new(&[
-            "model",
-            "emulator",
-            "emulator_error",
-            "substeps",
-            "matched_dt",
-            "matched_error",
-            "coarser_error",
-            "physical_steps",
-            "emulator_steps",
-            "physical_s",
-            "emulator_s",
-            "speedup",
-        ]);
-        SpeedupTables { speedup, equal }
-    }
+    speedup: Vec<SpeedupRow>,
+    equal: Vec<EqualAccuracyRow>,
 }
 
 /// A model's timed horizon: its start, the sampled per-step controls and the physical
@@ -247,20 +276,20 @@ impl Params {
         let matched_s = ctx.stage(&format!("time {} at {matched_dt} s", model.name()), || {
             time_physical(sim, x0, &uj, matched_dt, k_steps * j, self.repeats)
         });
-        t.equal.push(row![
-            model.name(),
-            label.as_str(),
+        t.equal.push(EqualAccuracyRow {
+            model: model.name().to_string(),
+            emulator: label,
             emulator_error,
-            j as i64,
+            substeps: j as i64,
             matched_dt,
-            matched.error,
-            matched.coarser_error,
-            (k_steps * j) as i64,
-            k_steps as i64,
-            matched_s,
+            matched_error: matched.error,
+            coarser_error: matched.coarser_error,
+            physical_steps: (k_steps * j) as i64,
+            emulator_steps: k_steps as i64,
+            physical_s: matched_s,
             emulator_s,
-            matched_s / emulator_s
-        ]);
+            speedup: matched_s / emulator_s,
+        });
         Ok(())
     }
 
@@ -271,7 +300,7 @@ impl Params {
         &self,
         ctx: &RunContext,
         d: &TimedDolphin,
-        table: &mut Table,
+        table: &mut Vec<SpeedupRow>,
     ) -> Result<(), Error> {
         let steps = self.physical_steps;
         let spec = d.nets.spec(ctx.seed, d.steps, self.example_scale);

@@ -1,9 +1,11 @@
 //! The report: Table 2 as measured beside the paper's step cost ratios, the equal-accuracy
 //! comparison, and the verdict rule (N100 at least 50x, every rigid-body N50 at least 10x).
 
+use super::job::{EqualAccuracyRow, SpeedupRow};
 use super::{Table2Rule, DOLPHIN_IMPLICIT};
-use crate::experiment::output::{df_f64, df_str, read_csv, written_csv};
+use crate::experiment::output::written_csv;
 use crate::experiment::report::{sig, Findings};
+use crate::experiment::rows::{read_rows, TableRow};
 use crate::experiment::rule::{rule_settings, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use std::path::Path;
@@ -52,53 +54,37 @@ fn paper_ratio(model: &str, emulator: &str) -> Option<f64> {
 
 /// The findings from the run folder `dir`.
 pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
-    let df = read_csv(&dir.join("speedup.csv"))?;
-    let (model, emu, integ) = (
-        df_str(&df, "model")?,
-        df_str(&df, "emulator")?,
-        df_str(&df, "physical_integrator")?,
-    );
-    let (phys, es, sp) = (
-        df_f64(&df, "physical_s")?,
-        df_f64(&df, "emulator_s")?,
-        df_f64(&df, "speedup")?,
-    );
-    let (ps, esr, n, ratio, pdt) = (
-        df_f64(&df, "physical_step_s")?,
-        df_f64(&df, "emulator_step_s")?,
-        df_f64(&df, "n")?,
-        df_f64(&df, "step_cost_ratio")?,
-        df_f64(&df, "physical_dt")?,
-    );
+    let rows: Vec<SpeedupRow> = read_rows(&dir.join("speedup.csv"))?;
     let mut md = String::from(
             "| model | physical integrator, δt (s) | emulator | physical s | emulator s | speedup | = n | × step cost ratio | paper's ratio | physical step s | emulator step s |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
         );
-    for r in 0..model.len() {
-        let paper = paper_ratio(&model[r], &emu[r]).map_or("—".to_string(), sig);
+    for r in &rows {
+        let paper = paper_ratio(&r.model, &r.emulator).map_or("—".to_string(), sig);
         md.push_str(&format!(
             "| {} | {}, {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
-            model[r],
-            integ[r],
-            pdt[r],
-            emu[r],
-            sig(phys[r]),
-            sig(es[r]),
-            sig(sp[r]),
-            n[r],
-            sig(ratio[r]),
+            r.model,
+            r.physical_integrator,
+            r.physical_dt,
+            r.emulator,
+            sig(r.physical_s),
+            sig(r.emulator_s),
+            sig(r.speedup),
+            r.n,
+            sig(r.step_cost_ratio),
             paper,
-            sig(ps[r]),
-            sig(esr[r])
+            sig(r.physical_step_s),
+            sig(r.emulator_step_s)
         ));
     }
-    let explicit = |r: usize| integ[r] != DOLPHIN_IMPLICIT;
-    let n100: Vec<f64> = (0..model.len())
-        .filter(|&r| emu[r] == "N100")
-        .map(|r| sp[r])
+    let n100: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.emulator == "N100")
+        .map(|r| r.speedup)
         .collect();
-    let n50_min = (0..model.len())
-        .filter(|&r| emu[r] == "N50" && model[r] != "dolphin")
-        .map(|r| sp[r])
+    let n50_min = rows
+        .iter()
+        .filter(|r| r.emulator == "N50" && r.model != "dolphin")
+        .map(|r| r.speedup)
         .fold(f64::INFINITY, f64::min);
     // NaN when no N100 ran: the check then fails.
     let n100_slowest = if n100.is_empty() {
@@ -107,40 +93,45 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
         n100.iter().copied().fold(f64::INFINITY, f64::min)
     };
     let dolphin = |e: &str, implicit: bool| {
-        (0..model.len()).find(|&r| model[r] == "dolphin" && emu[r] == e && explicit(r) != implicit)
+        rows.iter().find(|r| {
+            r.model == "dolphin"
+                && r.emulator == e
+                && (r.physical_integrator == DOLPHIN_IMPLICIT) == implicit
+        })
     };
     let dolphin_text = match (dolphin("N50", false), dolphin("N50_reg", false)) {
             (Some(a), Some(b)) => format!(
                 " Dolphin: N50 {}x, N50 with regularization {}x over our semi-implicit Euler at δt = {} s (paper: 66x and 25x over its [18]).",
-                sig(sp[a]),
-                sig(sp[b]),
-                pdt[a]
+                sig(a.speedup),
+                sig(b.speedup),
+                a.physical_dt
             ),
             _ => " Dolphin rows not built.".into(),
         };
     let implicit_text = match dolphin("N50", true) {
             Some(r) => format!(
                 " Against the implicit (backward Euler) integrator at the paper's δt = {} s, one step costs {} s ({}x an N50 step), n = {}, so N50 is {}x faster (paper: 63.0 s / 0.95 s = 66x).",
-                pdt[r],
-                sig(ps[r]),
-                sig(ratio[r]),
-                n[r],
-                sig(sp[r])
+                r.physical_dt,
+                sig(r.physical_step_s),
+                sig(r.step_cost_ratio),
+                r.n,
+                sig(r.speedup)
             ),
             None => String::new(),
         };
     let (equal_md, equal_text) = equal_accuracy_section(dir)?;
     md.push_str(&equal_md);
-    let pend: Vec<f64> = (0..model.len())
-        .filter(|&r| model[r].starts_with("pendulum"))
-        .map(|r| ratio[r])
+    let pend: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.model.starts_with("pendulum"))
+        .map(|r| r.step_cost_ratio)
         .collect();
     let pend_lo = sig(pend.iter().copied().fold(f64::INFINITY, f64::min));
     let pend_hi = sig(pend.iter().copied().fold(f64::NEG_INFINITY, f64::max));
     let ratio_of = |m: &str| {
-        (0..model.len())
-            .find(|&r| model[r] == m)
-            .map_or("—".to_string(), |r| sig(ratio[r]))
+        rows.iter()
+            .find(|r| r.model == m)
+            .map_or("—".to_string(), |r| sig(r.step_cost_ratio))
     };
     let (truck_ratio, lander_ratio) = (ratio_of("truck"), ratio_of("lander"));
     let settings = rule_settings(dir)?;
@@ -166,44 +157,36 @@ pub(super) fn findings(dir: &Path) -> Result<Findings, Error> {
 /// sentence, both empty when the run wrote no such table.
 fn equal_accuracy_section(dir: &Path) -> Result<(String, String), Error> {
     let (mut md, mut equal_text) = (String::new(), String::new());
-    if let Some(eq) = written_csv(dir, "equal_accuracy.csv")? {
-        let (em, ee) = (df_str(&eq, "model")?, df_str(&eq, "emulator")?);
-        let (err, j, mdt, merr, cerr, eps, ees, esp) = (
-            df_f64(&eq, "emulator_error")?,
-            df_f64(&eq, "substeps")?,
-            df_f64(&eq, "matched_dt")?,
-            df_f64(&eq, "matched_error")?,
-            df_f64(&eq, "coarser_error")?,
-            df_f64(&eq, "physical_s")?,
-            df_f64(&eq, "emulator_s")?,
-            df_f64(&eq, "speedup")?,
-        );
+    if let Some(df) = written_csv(dir, "equal_accuracy.csv")? {
+        let eq = EqualAccuracyRow::from_frame(&df).map_err(|e| {
+            Error::Other(format!("{}: {e}", dir.join("equal_accuracy.csv").display()))
+        })?;
         md.push_str("\n**Equal accuracy** (data, not part of the verdict): error = mean over 40 super-steps of the per-step mean squared state error in units of each variable's spread (Table 1's `rollout40_error_mean`), against the simulator at the training δt; the physical step is the largest Δt/j (j = 1 … n) whose error is at most the emulator's.\n\n| model | emulator | emulator error | j | matched δt (s) | its error | error at Δt/(j−1) | physical s | emulator s | speedup |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
-        for r in 0..em.len() {
+        for r in &eq {
             md.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
-                em[r],
-                ee[r],
-                sig(err[r]),
-                j[r],
-                sig(mdt[r]),
-                sig(merr[r]),
-                if cerr[r].is_nan() {
+                r.model,
+                r.emulator,
+                sig(r.emulator_error),
+                r.substeps,
+                sig(r.matched_dt),
+                sig(r.matched_error),
+                if r.coarser_error.is_nan() {
                     "— (j = 1)".to_string()
                 } else {
-                    sig(cerr[r])
+                    sig(r.coarser_error)
                 },
-                sig(eps[r]),
-                sig(ees[r]),
-                sig(esp[r])
+                sig(r.physical_s),
+                sig(r.emulator_s),
+                sig(r.speedup)
             ));
         }
-        let at_one = (0..em.len()).filter(|&r| j[r] == 1.0).count();
+        let at_one = eq.iter().filter(|r| r.substeps == 1).count();
         equal_text = format!(
                 " At equal accuracy the speedups are {} ({} of {} emulators are matched by one physical step per super-step, so their equal-accuracy speedup is only the step cost ratio, an upper bound on the emulator's advantage).",
-                esp.iter().map(|s| sig(*s)).collect::<Vec<_>>().join(", "),
+                eq.iter().map(|r| sig(r.speedup)).collect::<Vec<_>>().join(", "),
                 at_one,
-                em.len()
+                eq.len()
             );
     }
     Ok((md, equal_text))

@@ -1,9 +1,11 @@
 //! The figures of `na_training_methods`: training curves and the examples-per-weight sweep.
 
+use super::job::{CurveRow, ExamplesRow, MethodRow};
 use super::{median_inf, method_words};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::rows::TableRow;
 use crate::experiment::rule::rule_setting;
 use crate::experiment::Error;
 use std::path::PathBuf;
@@ -19,49 +21,48 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
 /// Per net, its held-out error curves against wall-clock seconds and against data passes,
 /// every init in its method's stroke, with the first init's target dashed.
 fn curve_panels(tables: &Tables) -> Result<Vec<Panel>, Error> {
-    let c = tables.require("curves")?;
-    let (cn, cm, ci) = (c.strs("net"), c.strs("method"), c.f64s("init"));
-    let (cp, cs, ch) = (
-        c.f64s("passes"),
-        c.f64s("seconds"),
-        c.f64s("held_out_error"),
-    );
-    let m = tables.require("methods")?;
-    let (mn, mi, mt) = (m.strs("net"), m.f64s("init"), m.f64s("target"));
+    let curves = CurveRow::from_table(tables.require("curves")?);
+    let methods = MethodRow::from_table(tables.require("methods")?);
     let mut net_names: Vec<String> = Vec::new();
     let mut method_names: Vec<String> = Vec::new();
-    for (n, me) in cn.iter().zip(&cm) {
-        if !net_names.contains(n) {
-            net_names.push(n.clone());
+    for c in &curves {
+        if !net_names.contains(&c.net) {
+            net_names.push(c.net.clone());
         }
-        if !method_names.contains(me) {
-            method_names.push(me.clone());
+        if !method_names.contains(&c.method) {
+            method_names.push(c.method.clone());
         }
     }
+    let seconds = |c: &CurveRow| c.seconds;
+    let passes = |c: &CurveRow| c.passes as f64;
     let mut panels = Vec::new();
     for net in &net_names {
-        let target = (0..mn.len())
-            .find(|&i| &mn[i] == net && mi[i] == 1.0)
-            .map(|i| mt[i]);
-        for (x_label, xs) in [
-            ("wall-clock seconds since training began (s)", &cs),
+        let target = methods
+            .iter()
+            .find(|m| m.net == *net && m.init == 1)
+            .map(|m| m.target);
+        let x_axes: [(&str, &dyn Fn(&CurveRow) -> f64); 2] = [
+            ("wall-clock seconds since training began (s)", &seconds),
             (
                 "data passes (forward + backward sweeps over the training set)",
-                &cp,
+                &passes,
             ),
-        ] {
+        ];
+        for (x_label, x_of) in x_axes {
             let mut series = Vec::new();
             let mut x_max: f64 = 0.0;
             for (k, me) in method_names.iter().enumerate() {
-                let mut inits: Vec<f64> = (0..cn.len())
-                    .filter(|&i| &cn[i] == net && &cm[i] == me)
-                    .map(|i| ci[i])
+                let mine: Vec<&CurveRow> = curves
+                    .iter()
+                    .filter(|c| c.net == *net && c.method == *me)
                     .collect();
+                let mut inits: Vec<i64> = mine.iter().map(|c| c.init).collect();
                 inits.dedup();
                 for (j, init) in inits.iter().enumerate() {
-                    let pts: Vec<(f64, f64)> = (0..cn.len())
-                        .filter(|&i| &cn[i] == net && &cm[i] == me && ci[i] == *init)
-                        .map(|i| (xs[i], ch[i]))
+                    let pts: Vec<(f64, f64)> = mine
+                        .iter()
+                        .filter(|c| c.init == *init)
+                        .map(|c| (x_of(c), c.held_out_error))
                         .filter(|p| p.1 > 0.0 && p.1.is_finite())
                         .collect();
                     x_max = pts.iter().map(|p| p.0).fold(x_max, f64::max);
@@ -95,24 +96,26 @@ fn curve_panels(tables: &Tables) -> Result<Vec<Panel>, Error> {
 /// The examples figure's panels: the training and test errors, and their ratio against the
 /// rule's bars.
 fn example_panels(tables: &Tables) -> Result<Vec<Panel>, Error> {
-    let e = tables.require("examples")?;
-    let (er, ete, etr) = (
-        e.f64s("examples_per_weight"),
-        e.f64s("test_error"),
-        e.f64s("train_error"),
-    );
-    let mut ratios = er.clone();
+    let examples = ExamplesRow::from_table(tables.require("examples")?);
+    let mut ratios: Vec<f64> = examples.iter().map(|e| e.examples_per_weight).collect();
     ratios.sort_by(f64::total_cmp);
     ratios.dedup();
-    let med = |col: &[f64], x: f64| {
-        let v: Vec<f64> = (0..er.len())
-            .filter(|&i| er[i] == x)
-            .map(|i| col[i])
+    let med = |col: fn(&ExamplesRow) -> f64, x: f64| {
+        let v: Vec<f64> = examples
+            .iter()
+            .filter(|e| e.examples_per_weight == x)
+            .map(col)
             .collect();
         median_inf(&v)
     };
-    let test: Vec<(f64, f64)> = ratios.iter().map(|&x| (x, med(&ete, x))).collect();
-    let train: Vec<(f64, f64)> = ratios.iter().map(|&x| (x, med(&etr, x))).collect();
+    let test: Vec<(f64, f64)> = ratios
+        .iter()
+        .map(|&x| (x, med(|e| e.test_error, x)))
+        .collect();
+    let train: Vec<(f64, f64)> = ratios
+        .iter()
+        .map(|&x| (x, med(|e| e.train_error, x)))
+        .collect();
     let ratio: Vec<(f64, f64)> = test
         .iter()
         .zip(&train)

@@ -11,10 +11,10 @@ use crate::emulator::train::{
     minimize_early_stopping, mse, train_momentum_observed, Dataset, FullBatchConfig,
     FullBatchMethod, MomentumConfig, TracePoint, TrainingProblem,
 };
-use crate::experiment::output::{Table, Tables};
+use crate::experiment::output::Tables;
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::build_spec;
-use crate::row;
 use crate::seed::mix_seed;
 use argmin::core::{CostFunction, Gradient};
 use indicatif::ProgressBar;
@@ -24,6 +24,116 @@ use rand_chacha::ChaCha8Rng;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
+
+crate::result_rows! {
+    /// One row of `nets.csv`: a net of the optimizer half (`methods`) or the examples net.
+    pub struct NetsRow {
+        /// Which half: `methods` or `examples`.
+        part: String = "part",
+        /// The net's name.
+        net: String = "net",
+        /// `small` or `large` for the optimizer half's nets, empty for the examples net.
+        size: String = "size",
+        /// The model's name.
+        model: String = "model",
+        /// Net inputs.
+        inputs: i64 = "inputs",
+        /// Hidden units.
+        hidden: i64 = "hidden",
+        /// Net outputs.
+        outputs: i64 = "outputs",
+        /// Weights.
+        weights: i64 = "weights",
+        /// Training examples.
+        examples: i64 = "examples",
+        /// examples / weights.
+        examples_per_weight: f64 = "examples_per_weight",
+        /// The pass budget of each run (0 for the examples net).
+        passes: i64 = "passes",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `curves.csv`: one run's errors after one iteration.
+    pub struct CurveRow {
+        /// The net's name.
+        net: String = "net",
+        /// The method ([`method_name`]).
+        method: String = "method",
+        /// The initial weight set (from 1).
+        init: i64 = "init",
+        /// The iteration.
+        iteration: i64 = "iteration",
+        /// Data passes so far.
+        passes: i64 = "passes",
+        /// Wall-clock seconds since training began.
+        seconds: f64 = "seconds",
+        /// Training error.
+        train_error: f64 = "train_error",
+        /// Held-out error.
+        held_out_error: f64 = "held_out_error",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `methods.csv`: one run (net, method, init) against its init's target.
+    pub struct MethodRow {
+        /// The net's name.
+        net: String = "net",
+        /// The method ([`method_name`]).
+        method: String = "method",
+        /// The initial weight set (from 1).
+        init: i64 = "init",
+        /// The target's factor over the lowest held-out error any method reached.
+        target_factor: f64 = "target_factor",
+        /// The init's target held-out error.
+        target: f64 = "target",
+        /// Data passes to reach the target (NaN: never).
+        passes_to_target: f64 = "passes_to_target",
+        /// Seconds to reach the target (NaN: never).
+        seconds_to_target: f64 = "seconds_to_target",
+        /// The lowest held-out error reached.
+        best_held_out_error: f64 = "best_held_out_error",
+        /// The training error at the end.
+        final_train_error: f64 = "final_train_error",
+        /// Data passes run.
+        passes: i64 = "passes",
+        /// Seconds run.
+        seconds: f64 = "seconds",
+        /// seconds / passes.
+        seconds_per_pass: f64 = "seconds_per_pass",
+        /// Why the run stopped.
+        stop: String = "stop",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `examples.csv`: the examples net of one init trained on one prefix.
+    pub struct ExamplesRow {
+        /// The net's name.
+        net: String = "net",
+        /// The initial weight set (from 1).
+        init: i64 = "init",
+        /// Training examples per weight asked for.
+        examples_per_weight: f64 = "examples_per_weight",
+        /// Training examples used.
+        examples: i64 = "examples",
+        /// Weights.
+        weights: i64 = "weights",
+        /// Training error.
+        train_error: f64 = "train_error",
+        /// Test error (separate episodes).
+        test_error: f64 = "test_error",
+        /// test_error / train_error.
+        test_train_ratio: f64 = "test_train_ratio",
+        /// The rule's examples per weight (the spec's).
+        rule_ratio: f64 = "rule_ratio",
+        /// Optimizer iterations.
+        iterations: i64 = "iterations",
+        /// Why training stopped.
+        stop: String = "stop",
+    }
+}
 
 /// A full-batch training problem that counts its data passes (each distinct point asked for is
 /// one pass) and refuses to evaluate once `budget` passes are spent, which ends the optimizer's
@@ -184,7 +294,7 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut t = MethodTables::new();
+        let mut t = MethodTables::default();
         let s = TrainSettings {
             input_noise: 0.0,
             rollout_k: 0,
@@ -202,69 +312,21 @@ impl Job for Params {
         }
         let examples = self.run_examples(ctx, &s, &pb, &mut t.nets)?;
         Ok(Tables::from([
-            ("nets", t.nets),
-            ("curves", t.curves),
-            ("methods", t.methods),
-            ("examples", examples),
+            ("nets", table_of(&t.nets)),
+            ("curves", table_of(&t.curves)),
+            ("methods", table_of(&t.methods)),
+            ("examples", table_of(&examples)),
             ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
         ]))
     }
 }
 
-/// The optimizer half's tables (`nets` also gets the examples net's row).
+/// The optimizer half's rows (`nets` also gets the examples net's row).
+#[derive(Default)]
 struct MethodTables {
-    nets: Table,
-    curves: Table,
-    methods: Table,
-}
-
-impl MethodTables {
-    /// The empty tables.
-    fn new() -> Self {
-        let nets = Table::new(&[
-            "part",
-            "net",
-            "size",
-            "model",
-            "inputs",
-            "hidden",
-            "outputs",
-            "weights",
-            "examples",
-            "examples_per_weight",
-            "passes",
-        ]);
-        let curves = Table::new(&[
-            "net",
-            "method",
-            "init",
-            "iteration",
-            "passes",
-            "seconds",
-            "train_error",
-            "held_out_error",
-        ]);
-        let methods = Table::new(&[
-            "net",
-            "method",
-            "init",
-            "target_factor",
-            "target",
-            "passes_to_target",
-            "seconds_to_target",
-            "best_held_out_error",
-            "final_train_error",
-            "passes",
-            "seconds",
-            "seconds_per_pass",
-            "stop",
-        ]);
-        MethodTables {
-            nets,
-            curves,
-            methods,
-        }
-    }
+    nets: Vec<NetsRow>,
+    curves: Vec<CurveRow>,
+    methods: Vec<MethodRow>,
 }
 
 /// The examples net's sampled data and the shape its sweep trains.
@@ -295,19 +357,19 @@ impl Params {
         let (train, held) = (&data.clean_ds, &data.held_ds);
         let shape = (train.inputs.ncols(), n.net.hidden, train.targets.ncols());
         let weights = Mlp::weight_count(shape.0, shape.1, shape.2);
-        t.nets.push(row![
-            "methods",
-            n.name.as_str(),
-            n.size.name(),
-            n.net.model.name(),
-            shape.0,
-            shape.1,
-            shape.2,
-            weights,
-            train.len(),
-            train.len() as f64 / weights as f64,
-            n.passes
-        ]);
+        t.nets.push(NetsRow {
+            part: "methods".into(),
+            net: n.name.clone(),
+            size: n.size.name().to_string(),
+            model: n.net.model.name().to_string(),
+            inputs: shape.0 as i64,
+            hidden: shape.1 as i64,
+            outputs: shape.2 as i64,
+            weights: weights as i64,
+            examples: train.len() as i64,
+            examples_per_weight: train.len() as f64 / weights as f64,
+            passes: n.passes as i64,
+        });
         // Every (init, method) run; run one at a time so the seconds are not shared.
         // Init by init, each method in turn: one run at a time, so the seconds are not
         // shared; the target needs every method of the init.
@@ -343,16 +405,16 @@ impl Params {
         let target = self.target_factor * lowest;
         for (m, r) in of_init {
             for (i, p) in r.curve.iter().enumerate() {
-                t.curves.push(row![
-                    n.name.as_str(),
-                    method_name(*m),
-                    k,
-                    i,
-                    p.0,
-                    p.1,
-                    p.2,
-                    p.3
-                ]);
+                t.curves.push(CurveRow {
+                    net: n.name.clone(),
+                    method: method_name(*m).to_string(),
+                    init: k as i64,
+                    iteration: i as i64,
+                    passes: p.0 as i64,
+                    seconds: p.1,
+                    train_error: p.2,
+                    held_out_error: p.3,
+                });
             }
             let pts: Vec<(f64, f64, f64)> =
                 r.curve.iter().map(|p| (p.0 as f64, p.1, p.3)).collect();
@@ -362,21 +424,21 @@ impl Params {
                 .last()
                 .copied()
                 .unwrap_or((0, 0.0, f64::NAN, f64::NAN));
-            t.methods.push(row![
-                n.name.as_str(),
-                method_name(*m),
-                k,
-                self.target_factor,
+            t.methods.push(MethodRow {
+                net: n.name.clone(),
+                method: method_name(*m).to_string(),
+                init: k as i64,
+                target_factor: self.target_factor,
                 target,
-                reach.map_or(f64::NAN, |x| x.0),
-                reach.map_or(f64::NAN, |x| x.1),
-                r.best(),
-                last.2,
-                last.0,
-                last.1,
-                last.1 / (last.0.max(1) as f64),
-                r.stop.as_str()
-            ]);
+                passes_to_target: reach.map_or(f64::NAN, |x| x.0),
+                seconds_to_target: reach.map_or(f64::NAN, |x| x.1),
+                best_held_out_error: r.best(),
+                final_train_error: last.2,
+                passes: last.0 as i64,
+                seconds: last.1,
+                seconds_per_pass: last.1 / (last.0.max(1) as f64),
+                stop: r.stop.clone(),
+            });
         }
     }
 
@@ -387,28 +449,28 @@ impl Params {
         ctx: &RunContext,
         s: &TrainSettings,
         pb: &ProgressBar,
-        nets: &mut Table,
-    ) -> Result<Table, Error> {
+        nets: &mut Vec<NetsRow>,
+    ) -> Result<Vec<ExamplesRow>, Error> {
         let e = &self.examples;
         let d = self.sample_examples(ctx, s)?;
         let all = &d.data.clean_ds;
         ensure_shape(all.inputs.ncols(), d.n_in, "examples.net inputs")?;
-        nets.push(row![
-            "examples",
-            e.name.as_str(),
-            "",
-            e.net.model.name(),
-            d.n_in,
-            e.net.hidden,
-            d.n_out,
-            d.weights,
-            all.len(),
-            all.len() as f64 / d.weights as f64,
-            0_i64
-        ]);
+        nets.push(NetsRow {
+            part: "examples".into(),
+            net: e.name.clone(),
+            size: String::new(),
+            model: e.net.model.name().to_string(),
+            inputs: d.n_in as i64,
+            hidden: e.net.hidden as i64,
+            outputs: d.n_out as i64,
+            weights: d.weights as i64,
+            examples: all.len() as i64,
+            examples_per_weight: all.len() as f64 / d.weights as f64,
+            passes: 0,
+        });
         let rows = self.train_examples(ctx, pb, &d);
         pb.finish_and_clear();
-        self.examples_table(rows, d.weights)
+        self.examples_rows(rows, d.weights)
     }
 
     /// The examples net sized for the largest ratio and its one sampled data set (held-out
@@ -448,7 +510,7 @@ impl Params {
         ctx: &RunContext,
         pb: &ProgressBar,
         d: &ExamplesData,
-    ) -> Vec<Result<ExampleRow, Error>> {
+    ) -> Vec<Result<ExampleRun, Error>> {
         use rayon::prelude::*;
         let jobs: Vec<(usize, f64)> = (1..=self.inits)
             .flat_map(|k| self.examples.ratios.iter().map(move |&r| (k, r)))
@@ -468,7 +530,7 @@ impl Params {
         k: usize,
         ratio: f64,
         pb: &ProgressBar,
-    ) -> Result<ExampleRow, Error> {
+    ) -> Result<ExampleRun, Error> {
         let e = &self.examples;
         let (n_in, n_out, weights) = (d.n_in, d.n_out, d.weights);
         let (all, test) = (&d.data.clean_ds, &d.data.held_ds);
@@ -498,7 +560,7 @@ impl Params {
             a.project(&mut mlp);
         }
         pb.inc(1);
-        Ok(ExampleRow {
+        Ok(ExampleRun {
             init: k,
             ratio,
             examples: count,
@@ -509,48 +571,36 @@ impl Params {
         })
     }
 
-    /// The `examples` table of the sweep's `rows` (the first failed run's error, if any).
-    fn examples_table(
+    /// The `examples` rows of the sweep's `runs` (the first failed run's error, if any).
+    fn examples_rows(
         &self,
-        rows: Vec<Result<ExampleRow, Error>>,
+        runs: Vec<Result<ExampleRun, Error>>,
         weights: usize,
-    ) -> Result<Table, Error> {
+    ) -> Result<Vec<ExamplesRow>, Error> {
         let e = &self.examples;
-        let mut examples = Table::new(&[
-            "net",
-            "init",
-            "examples_per_weight",
-            "examples",
-            "weights",
-            "train_error",
-            "test_error",
-            "test_train_ratio",
-            "rule_ratio",
-            "iterations",
-            "stop",
-        ]);
-        for r in rows {
-            let r = r?;
-            examples.push(row![
-                e.name.as_str(),
-                r.init,
-                r.ratio,
-                r.examples,
-                weights,
-                r.train_error,
-                r.test_error,
-                r.test_error / r.train_error,
-                e.rule_ratio,
-                r.iterations,
-                r.stop.as_str()
-            ]);
-        }
-        Ok(examples)
+        runs.into_iter()
+            .map(|r| {
+                let r = r?;
+                Ok(ExamplesRow {
+                    net: e.name.clone(),
+                    init: r.init as i64,
+                    examples_per_weight: r.ratio,
+                    examples: r.examples as i64,
+                    weights: weights as i64,
+                    train_error: r.train_error,
+                    test_error: r.test_error,
+                    test_train_ratio: r.test_error / r.train_error,
+                    rule_ratio: e.rule_ratio,
+                    iterations: r.iterations as i64,
+                    stop: r.stop,
+                })
+            })
+            .collect()
     }
 }
 
 /// One net trained on a prefix of the examples.
-struct ExampleRow {
+struct ExampleRun {
     init: usize,
     ratio: f64,
     examples: usize,

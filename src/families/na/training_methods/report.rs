@@ -1,9 +1,10 @@
 //! The report of `na_training_methods`: the verdict's rule on the medians over the initial
 //! weight sets, with bootstrap intervals.
 
+use super::job::{ExamplesRow, MethodRow, NetsRow};
 use super::{median_inf, method_words, NetSize, TrainingRule};
-use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::bootstrap_intervals;
 use crate::experiment::Error;
@@ -122,62 +123,51 @@ pub fn training_rule(
     Rule::gated(vec![premise], held, Partly::AtLeast(2))
 }
 
-/// (net size, method, passes to target per init) from `nets.csv` and `methods.csv`.
-fn optimizer_rows(dir: &Path) -> Result<Vec<(NetSize, String, Vec<f64>)>, Error> {
-    let nets = read_csv(&dir.join("nets.csv"))?;
-    let (nn, ns) = (df_str(&nets, "net")?, df_str(&nets, "size")?);
-    let m = read_csv(&dir.join("methods.csv"))?;
-    let (mn, mm, mp) = (
-        df_str(&m, "net")?,
-        df_str(&m, "method")?,
-        df_f64(&m, "passes_to_target")?,
-    );
+/// The size of the net `name` of `nets.csv`'s rows (None: not an optimizer-half net).
+fn size_of(nets: &[NetsRow], name: &str) -> Option<NetSize> {
+    nets.iter()
+        .find(|n| n.net == name)
+        .and_then(|n| match n.size.as_str() {
+            "small" => Some(NetSize::Small),
+            "large" => Some(NetSize::Large),
+            _ => None,
+        })
+}
+
+/// (net size, method, passes to target per init) from `nets.csv`'s and `methods.csv`'s rows.
+fn optimizer_rows(nets: &[NetsRow], methods: &[MethodRow]) -> Vec<(NetSize, String, Vec<f64>)> {
     let mut out: Vec<(NetSize, String, Vec<f64>)> = Vec::new();
-    for i in 0..mn.len() {
-        let Some(size) = nn
-            .iter()
-            .position(|n| n == &mn[i])
-            .and_then(|j| match ns[j].as_str() {
-                "small" => Some(NetSize::Small),
-                "large" => Some(NetSize::Large),
-                _ => None,
-            })
-        else {
+    for m in methods {
+        let Some(size) = size_of(nets, &m.net) else {
             continue;
         };
-        match out.iter_mut().find(|r| r.0 == size && r.1 == mm[i]) {
-            Some(r) => r.2.push(mp[i]),
-            None => out.push((size, mm[i].clone(), vec![mp[i]])),
+        match out.iter_mut().find(|r| r.0 == size && r.1 == m.method) {
+            Some(r) => r.2.push(m.passes_to_target),
+            None => out.push((size, m.method.clone(), vec![m.passes_to_target])),
         }
     }
-    Ok(out)
+    out
 }
 
 /// Per examples-per-weight ratio, increasing: (ratio, per init in row order (test/training
 /// error, test error, training error)) from `examples.csv`.
 pub(super) type InitExamples = Vec<(f64, Vec<(f64, f64, f64)>)>;
 
-/// [`InitExamples`] from `examples.csv`.
-fn example_rows(dir: &Path) -> Result<InitExamples, Error> {
-    let e = read_csv(&dir.join("examples.csv"))?;
-    let (r, q, te, tr) = (
-        df_f64(&e, "examples_per_weight")?,
-        df_f64(&e, "test_train_ratio")?,
-        df_f64(&e, "test_error")?,
-        df_f64(&e, "train_error")?,
-    );
-    let mut ratios: Vec<f64> = r.clone();
+/// [`InitExamples`] from `examples.csv`'s rows.
+fn example_rows(examples: &[ExamplesRow]) -> InitExamples {
+    let mut ratios: Vec<f64> = examples.iter().map(|e| e.examples_per_weight).collect();
     ratios.sort_by(f64::total_cmp);
     ratios.dedup();
-    Ok(ratios
+    ratios
         .into_iter()
         .map(|x| {
-            let rows = (0..r.len())
-                .filter(|&i| r[i] == x)
-                .map(|i| (q[i], te[i], tr[i]));
+            let rows = examples
+                .iter()
+                .filter(|e| e.examples_per_weight == x)
+                .map(|e| (e.test_train_ratio, e.test_error, e.train_error));
             (x, rows.collect())
         })
-        .collect())
+        .collect()
 }
 
 /// Seed of the bootstrap over initial weight sets (fixed, so a report is the same on every
@@ -252,43 +242,30 @@ pub(super) fn rule_over_inits(
 }
 
 /// Per ratio, increasing: (ratio, median test/train ratio, median test error, median train
-/// error) from `examples.csv`, over every init ([`example_rows`]).
-fn example_medians(dir: &Path) -> Result<Vec<(f64, f64, f64, f64)>, Error> {
-    Ok(example_rows(dir)?
-        .into_iter()
+/// error) over every init ([`example_rows`]).
+fn example_medians(per_init: &InitExamples) -> Vec<(f64, f64, f64, f64)> {
+    per_init
+        .iter()
         .map(|(x, rows)| {
             let col = |f: fn(&(f64, f64, f64)) -> f64| {
                 median_inf(&rows.iter().map(f).collect::<Vec<_>>())
             };
-            (x, col(|r| r.0), col(|r| r.1), col(|r| r.2))
+            (*x, col(|r| r.0), col(|r| r.1), col(|r| r.2))
         })
-        .collect())
+        .collect()
 }
 
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
-    let m = read_csv(&dir.join("methods.csv"))?;
-    let (mn, mm) = (df_str(&m, "net")?, df_str(&m, "method")?);
-    let (mp, ms, mb, spp) = (
-        df_f64(&m, "passes_to_target")?,
-        df_f64(&m, "seconds_to_target")?,
-        df_f64(&m, "best_held_out_error")?,
-        df_f64(&m, "seconds_per_pass")?,
-    );
-    let nets = read_csv(&dir.join("nets.csv"))?;
-    let (nn, ns, nw, ne, np) = (
-        df_str(&nets, "net")?,
-        df_str(&nets, "size")?,
-        df_f64(&nets, "weights")?,
-        df_f64(&nets, "examples")?,
-        df_f64(&nets, "passes")?,
-    );
+    let methods: Vec<MethodRow> = read_rows(&dir.join("methods.csv"))?;
+    let nets: Vec<NetsRow> = read_rows(&dir.join("nets.csv"))?;
+    let examples: Vec<ExamplesRow> = read_rows(&dir.join("examples.csv"))?;
     let mut md = String::from(
         "| net | size: weights, examples | method | passes to target (median over inits) | seconds to target | best held-out error | seconds per pass |\n| --- | --- | --- | --- | --- | --- | --- |\n",
     );
     let mut keys: Vec<(String, String)> = Vec::new();
-    for (n, me) in mn.iter().zip(&mm) {
-        if !keys.contains(&(n.clone(), me.clone())) {
-            keys.push((n.clone(), me.clone()));
+    for m in &methods {
+        if !keys.contains(&(m.net.clone(), m.method.clone())) {
+            keys.push((m.net.clone(), m.method.clone()));
         }
     }
     let never = |x: f64| {
@@ -299,27 +276,30 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         }
     };
     for (n, me) in &keys {
-        let idx: Vec<usize> = (0..mn.len())
-            .filter(|&i| &mn[i] == n && &mm[i] == me)
+        let runs: Vec<&MethodRow> = methods
+            .iter()
+            .filter(|m| m.net == *n && m.method == *me)
             .collect();
-        let col = |c: &[f64]| median_inf(&idx.iter().map(|&i| c[i]).collect::<Vec<_>>());
-        let j = nn.iter().position(|x| x == n);
-        let size = j.map_or(String::new(), |j| {
-            format!("{}: {}, {}", ns[j], nw[j], ne[j])
+        let col =
+            |c: fn(&MethodRow) -> f64| median_inf(&runs.iter().map(|m| c(m)).collect::<Vec<_>>());
+        let net = nets.iter().find(|x| x.net == *n);
+        let size = net.map_or(String::new(), |x| {
+            format!("{}: {}, {}", x.size, x.weights, x.examples)
         });
         md.push_str(&format!(
             "| {} | {} | {} | {} of {} | {} | {} | {} |\n",
             n,
             size,
             method_words(me),
-            never(col(&mp)),
-            j.map_or("?".into(), |j| sig(np[j])),
-            never(col(&ms)),
-            sig(col(&mb)),
-            sig(col(&spp))
+            never(col(|m| m.passes_to_target)),
+            net.map_or("?".into(), |x| sig(x.passes as f64)),
+            never(col(|m| m.seconds_to_target)),
+            sig(col(|m| m.best_held_out_error)),
+            sig(col(|m| m.seconds_per_pass))
         ));
     }
-    let med = example_medians(dir)?;
+    let per_init = example_rows(&examples);
+    let med = example_medians(&per_init);
     md.push_str("\n| examples per weight | training error | test error | test / training |\n| --- | --- | --- | --- |\n");
     for r in &med {
         md.push_str(&format!(
@@ -330,13 +310,9 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             sig(r.1)
         ));
     }
-    let first = |file: &str, col: &str| -> Result<f64, Error> {
-        let t = read_csv(&dir.join(file))?;
-        Ok(df_f64(&t, col)?.first().copied().unwrap_or(f64::NAN))
-    };
-    let rule_ratio = first("examples.csv", "rule_ratio")?;
-    let target_factor = first("methods.csv", "target_factor")?;
-    let opt_rows = optimizer_rows(dir)?;
+    let rule_ratio = examples.first().map_or(f64::NAN, |e| e.rule_ratio);
+    let target_factor = methods.first().map_or(f64::NAN, |m| m.target_factor);
+    let opt_rows = optimizer_rows(&nets, &methods);
     let bars: TrainingRule = read_rule(dir)?;
     // The result first: each method's median passes to the target, per net size.
     let passes = |size: NetSize| {
@@ -354,21 +330,21 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             .collect::<Vec<_>>()
             .join(", ")
     };
-    let per_init = example_rows(dir)?;
     let rule = rule_over_inits(&opt_rows, &per_init, rule_ratio, &bars);
     let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
     let at = med.iter().find(|r| r.0 == rule_ratio);
     // The small net's best held-out error of a method, median over inits.
     let best_of = |method: &str| {
-        let v: Vec<f64> = (0..mn.len())
-            .filter(|&i| {
-                mm[i] == method
-                    && nn
+        let v: Vec<f64> = methods
+            .iter()
+            .filter(|m| {
+                m.method == method
+                    && nets
                         .iter()
-                        .position(|x| x == &mn[i])
-                        .is_some_and(|j| ns[j] == "small")
+                        .find(|x| x.net == m.net)
+                        .is_some_and(|x| x.size == "small")
             })
-            .map(|i| mb[i])
+            .map(|m| m.best_held_out_error)
             .collect();
         median_inf(&v)
     };

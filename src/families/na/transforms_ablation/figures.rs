@@ -1,28 +1,23 @@
 //! The figures of `na_transforms_ablation`: rollout errors and the per-variant summary.
 
+use super::job::{ControlRow, ErrorsRow, NetRow, RolloutRow};
 use super::report::words;
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use std::path::PathBuf;
 
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let r = tables.require("rollout")?;
-    let (rt, rv, rk, re) = (
-        r.strs("task"),
-        r.strs("variant"),
-        r.f64s("step"),
-        r.f64s("error"),
-    );
+    let rollout = RolloutRow::from_table(tables.require("rollout")?);
     let mut tasks: Vec<String> = Vec::new();
     let mut variants: Vec<String> = Vec::new();
-    let n = tables.require("nets")?;
-    for (t, v) in n.strs("task").iter().zip(n.strs("variant")) {
-        if !tasks.contains(t) {
-            tasks.push(t.clone());
+    for n in NetRow::from_table(tables.require("nets")?) {
+        if !tasks.contains(&n.task) {
+            tasks.push(n.task);
         }
-        if !variants.contains(&v) {
-            variants.push(v);
+        if !variants.contains(&n.variant) {
+            variants.push(n.variant);
         }
     }
     let panels: Vec<Panel> = tasks
@@ -36,9 +31,10 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                 .iter()
                 .enumerate()
                 .map(|(k, v)| {
-                    let pts = (0..rt.len())
-                        .filter(|&i| &rt[i] == t && &rv[i] == v)
-                        .map(|i| (rk[i], re[i]))
+                    let pts = rollout
+                        .iter()
+                        .filter(|r| r.task == *t && r.variant == *v)
+                        .map(|r| (r.step as f64, r.error))
                         .filter(|p| p.1 > 0.0)
                         .collect();
                     Series::line(words(v), pts, k)
@@ -48,25 +44,19 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         })
         .collect();
     let mut files = fig.draw("rollout", &Figure::grid(panels, 2))?;
-    let e = tables.require("errors")?;
-    let c = tables.require("control")?;
-    let (et, ev) = (e.strs("task"), e.strs("variant"));
-    let (ct, cv) = (c.strs("task"), c.strs("variant"));
+    let e = ErrorsRow::from_table(tables.require("errors")?);
+    let c = ControlRow::from_table(tables.require("control")?);
     let x_of = |v: &str| variants.iter().position(|x| x == v).unwrap_or(0) as f64;
-    let metric = |title: &str,
-                  y: &str,
-                  ts: &[String],
-                  vs: &[String],
-                  col: Vec<f64>,
-                  tol: bool,
-                  floor: f64| {
+    // One panel of a measure: per row its task, variant and value.
+    let metric = |title: &str, y: &str, rows: Vec<(&str, &str, f64)>, tol: bool, floor: f64| {
         let mut series: Vec<Series> = tasks
             .iter()
             .enumerate()
             .map(|(k, t)| {
-                let pts = (0..ts.len())
-                    .filter(|&i| &ts[i] == t)
-                    .map(|i| (x_of(&vs[i]), col[i].max(floor)))
+                let pts = rows
+                    .iter()
+                    .filter(|r| r.0 == t)
+                    .map(|r| (x_of(r.1), r.2.max(floor)))
                     .filter(|p| p.1 > 0.0 && p.1.is_finite())
                     .collect();
                 Series::line(t.clone(), pts, k)
@@ -97,36 +87,36 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         metric(
             "one-step error",
             "squared error (spread² units)",
-            &et,
-            &ev,
-            e.f64s("rollout1_error"),
+            e.iter()
+                .map(|r| (r.task.as_str(), r.variant.as_str(), r.rollout1_error))
+                .collect(),
             false,
             0.0,
         ),
         metric(
             "40-step rollout error (mean)",
             "squared error (spread² units)",
-            &et,
-            &ev,
-            e.f64s("rollout40_error_mean"),
+            e.iter()
+                .map(|r| (r.task.as_str(), r.variant.as_str(), r.rollout40_error_mean))
+                .collect(),
             false,
             0.0,
         ),
         metric(
             "zero-control drift from the Fig. 13 start",
             "emulator - simulator end position (m; below 1 mm drawn at 1 mm)",
-            &et,
-            &ev,
-            e.f64s("drift_gap_m"),
+            e.iter()
+                .map(|r| (r.task.as_str(), r.variant.as_str(), r.drift_gap_m))
+                .collect(),
             false,
             1e-3,
         ),
         metric(
             "Fig. 13 control replayed on the simulator",
             "final error (1 = tolerance; dolphin: half the wave's distance)",
-            &ct,
-            &cv,
-            c.f64s("simulator_error"),
+            c.iter()
+                .map(|r| (r.task.as_str(), r.variant.as_str(), r.simulator_error))
+                .collect(),
             true,
             0.0,
         ),

@@ -8,7 +8,8 @@ use crate::emulator::hierarchy::{
     build_global, hierarchy_rollout_error, BuiltDolphin, HierarchySpec, NetReport, GLOBAL_DIM,
 };
 use crate::emulator::Emulator;
-use crate::experiment::output::{Table, Tables};
+use crate::experiment::output::Tables;
+use crate::experiment::rows::table_of;
 use crate::experiment::rule::rule_table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::fig13_control::{
@@ -18,28 +19,140 @@ use crate::families::na::table1_structure::{
     build_dolphin_emulator, build_emulator, build_spec, dolphin_drift, position_part,
 };
 use crate::physics::dolphin::N_SEGMENTS;
-use crate::row;
+
+crate::result_rows! {
+    /// One row of `nets.csv`: one variant's emulator of one task (the dolphin's: its global net).
+    pub struct NetRow {
+        /// The task (`dolphin` for the hierarchy).
+        task: String = "task",
+        /// The variant ([`TransformSet::name`]).
+        variant: String = "variant",
+        /// Net inputs.
+        inputs: i64 = "inputs",
+        /// Hidden units.
+        hidden: i64 = "hidden",
+        /// Net outputs.
+        outputs: i64 = "outputs",
+        /// Training examples.
+        examples: i64 = "examples",
+        /// Weights.
+        weights: i64 = "weights",
+        /// Training seconds (NaN when training failed).
+        train_s: f64 = "train_s",
+        /// Why training stopped (`failed: ...` with the error when it failed).
+        stop: String = "stop",
+        /// 1 when the net came from the cache.
+        cached: i64 = "cached",
+        /// 1 when training failed.
+        failed: i64 = "failed",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `errors.csv`: one trained variant's rollout errors and zero-control drift.
+    pub struct ErrorsRow {
+        /// The task.
+        task: String = "task",
+        /// The variant.
+        variant: String = "variant",
+        /// One-step error (units of each variable's spread²).
+        rollout1_error: f64 = "rollout1_error",
+        /// 40-step rollout error, mean over the steps.
+        rollout40_error_mean: f64 = "rollout40_error_mean",
+        /// 40-step rollout error at the last step.
+        rollout40_error_final: f64 = "rollout40_error_final",
+        /// The emulator's end position from the start (m).
+        drift_emulator_m: f64 = "drift_emulator_m",
+        /// The simulator's end position from the start (m).
+        drift_simulator_m: f64 = "drift_simulator_m",
+        /// The emulator's and the simulator's end positions apart (m).
+        drift_gap_m: f64 = "drift_gap_m",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `rollout.csv`: one trained variant's rollout error at one super-step.
+    pub struct RolloutRow {
+        /// The task.
+        task: String = "task",
+        /// The variant.
+        variant: String = "variant",
+        /// The super-step (from 1).
+        step: i64 = "step",
+        /// Mean squared error (units of each variable's spread²).
+        error: f64 = "error",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `control.csv`: Fig. 13's control learned through one variant, replayed on the
+    /// simulator.
+    pub struct ControlRow {
+        /// The task.
+        task: String = "task",
+        /// The variant.
+        variant: String = "variant",
+        /// Descent iterations.
+        iterations: i64 = "iterations",
+        /// The descent's best iteration (0: never improved on its start, or nothing learned).
+        best_iteration: i64 = "best_iteration",
+        /// The objective at the start (NaN when nothing was learned).
+        j_start: f64 = "j_start",
+        /// The best objective.
+        j_best: f64 = "j_best",
+        /// Final error through the emulator (1 = tolerance).
+        emulator_error: f64 = "emulator_error",
+        /// Final error replayed on the simulator (1 = tolerance).
+        simulator_error: f64 = "simulator_error",
+        /// 1 when both final errors are within tolerance.
+        at_goal: i64 = "at_goal",
+        /// The start's controls replayed on the simulator: their final error.
+        start_simulator_error: f64 = "start_simulator_error",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `net_seeds.csv`: per net seed, task and variant, the measures the rule reads.
+    pub struct SeedRow {
+        /// The net seed.
+        net_seed: i64 = "net_seed",
+        /// The task.
+        task: String = "task",
+        /// The variant.
+        variant: String = "variant",
+        /// 40-step rollout error, mean (NaN when training failed).
+        rollout40_error_mean: f64 = "rollout40_error_mean",
+        /// The descent's best iteration.
+        best_iteration: i64 = "best_iteration",
+        /// The control's final error on the simulator (NaN when nothing was learned).
+        simulator_error: f64 = "simulator_error",
+        /// The start's controls replayed on the simulator: their final error.
+        start_simulator_error: f64 = "start_simulator_error",
+        /// 1 when training failed.
+        failed: i64 = "failed",
+    }
+}
 
 /// The `control` row of a variant through which nothing was learned (no finite step scale).
 fn push_unlearned(
-    control: &mut Table,
+    control: &mut Vec<ControlRow>,
     task: &str,
     v: TransformSet,
     iterations: usize,
     start_error: f64,
 ) {
-    control.push(row![
-        task,
-        v.name(),
-        iterations,
-        0_i64,
-        f64::NAN,
-        f64::NAN,
-        f64::NAN,
-        f64::NAN,
-        0_i64,
-        start_error
-    ]);
+    control.push(ControlRow {
+        task: task.to_string(),
+        variant: v.name().to_string(),
+        iterations: iterations as i64,
+        best_iteration: 0,
+        j_start: f64::NAN,
+        j_best: f64::NAN,
+        emulator_error: f64::NAN,
+        simulator_error: f64::NAN,
+        at_goal: 0,
+        start_simulator_error: start_error,
+    });
 }
 
 /// One variant's emulator of one task: built, or why not.
@@ -72,60 +185,14 @@ fn drift(e: &Emulator, spec: &BuildSpec, x0: &[f64], u: &[f64], steps: usize) ->
     [d(&xe, x0), d(&xs, x0), d(&xe, &xs)]
 }
 
-/// The tables the job writes.
+/// The rows of the tables the job writes.
+#[derive(Default)]
 struct Outputs {
-    nets: Table,
-    errors: Table,
-    rollout: Table,
-    control: Table,
-    seeds: Table,
-}
-
-/// Columns of `net_seeds.csv`: per net seed, task and variant, the measures the rule reads.
-pub(super) const SEED_COLUMNS: [&str; 8] = [
-    "net_seed",
-    "task",
-    "variant",
-    "rollout40_error_mean",
-    "best_iteration",
-    "simulator_error",
-    "start_simulator_error",
-    "failed",
-];
-
-impl Outputs {
-    fn new() -> Self {
-        Self {
-            nets: Table::new(&[
-                "task", "variant", "inputs", "hidden", "outputs", "examples", "weights", "train_s",
-                "stop", "cached", "failed",
-            ]),
-            errors: Table::new(&[
-                "task",
-                "variant",
-                "rollout1_error",
-                "rollout40_error_mean",
-                "rollout40_error_final",
-                "drift_emulator_m",
-                "drift_simulator_m",
-                "drift_gap_m",
-            ]),
-            rollout: Table::new(&["task", "variant", "step", "error"]),
-            control: Table::new(&[
-                "task",
-                "variant",
-                "iterations",
-                "best_iteration",
-                "j_start",
-                "j_best",
-                "emulator_error",
-                "simulator_error",
-                "at_goal",
-                "start_simulator_error",
-            ]),
-            seeds: Table::new(&SEED_COLUMNS),
-        }
-    }
+    nets: Vec<NetRow>,
+    errors: Vec<ErrorsRow>,
+    rollout: Vec<RolloutRow>,
+    control: Vec<ControlRow>,
+    seeds: Vec<SeedRow>,
 }
 
 impl Job for Params {
@@ -134,7 +201,7 @@ impl Job for Params {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut out = Outputs::new();
+        let mut out = Outputs::default();
         let further = crate::experiment::seeds::further_seeds(&self.net_seeds, ctx.seed);
         let pb = ctx.progress(
             (self.tasks.len() * self.variants.len() * (1 + further.len())) as u64,
@@ -145,29 +212,22 @@ impl Job for Params {
         }
         // The same through the nets of each further seed: only `net_seeds.csv` keeps them.
         for &s in &further {
-            let mut other_seed = Outputs::new();
+            let mut other_seed = Outputs::default();
             for task in &self.tasks {
                 self.run_task(ctx, task, s, &mut other_seed, &pb)?;
             }
-            out.seeds.append(&other_seed.seeds).map_err(other)?;
+            out.seeds.extend(other_seed.seeds);
         }
         pb.finish_and_clear();
         if let Some(d) = &self.dolphin {
-            self.run_dolphin(
-                ctx,
-                d,
-                &mut out.nets,
-                &mut out.errors,
-                &mut out.rollout,
-                &mut out.control,
-            )?;
+            self.run_dolphin(ctx, d, &mut out)?;
         }
         Ok(Tables::from([
-            ("nets", out.nets),
-            ("errors", out.errors),
-            ("rollout", out.rollout),
-            ("control", out.control),
-            ("net_seeds", out.seeds),
+            ("nets", table_of(&out.nets)),
+            ("errors", table_of(&out.errors)),
+            ("rollout", table_of(&out.rollout)),
+            ("control", table_of(&out.control)),
+            ("net_seeds", table_of(&out.seeds)),
             ("rule", rule_table_of(&self.rule)?),
         ]))
     }
@@ -234,30 +294,30 @@ impl Params {
                 Ok(t) => (t.train_s, t.stop.clone(), i64::from(t.from_cache), 0_i64),
                 Err(e) => (f64::NAN, format!("failed: {e}"), 0, 1),
             };
-            out.nets.push(row![
-                name,
-                v.name(),
-                inputs,
-                hidden,
-                n,
-                spec.net.examples,
-                weights,
+            out.nets.push(NetRow {
+                task: name.to_string(),
+                variant: v.name().to_string(),
+                inputs: inputs as i64,
+                hidden: hidden as i64,
+                outputs: n as i64,
+                examples: spec.net.examples as i64,
+                weights: weights as i64,
                 train_s,
-                stop.as_str(),
+                stop,
                 cached,
-                failed
-            ]);
+                failed,
+            });
             let Ok(trained) = b else {
-                out.seeds.push(row![
-                    seed as i64,
-                    name,
-                    v.name(),
-                    f64::NAN,
-                    0_i64,
-                    f64::NAN,
-                    start_error,
-                    1_i64
-                ]);
+                out.seeds.push(SeedRow {
+                    net_seed: seed as i64,
+                    task: name.to_string(),
+                    variant: v.name().to_string(),
+                    rollout40_error_mean: f64::NAN,
+                    best_iteration: 0,
+                    simulator_error: f64::NAN,
+                    start_simulator_error: start_error,
+                    failed: 1,
+                });
                 pb.inc(1);
                 continue;
             };
@@ -268,38 +328,43 @@ impl Params {
                 })
                 .map_err(other)?;
             for (k, x) in errs.iter().enumerate() {
-                out.rollout.push(row![name, v.name(), k + 1, *x]);
+                out.rollout.push(RolloutRow {
+                    task: name.to_string(),
+                    variant: v.name().to_string(),
+                    step: (k + 1) as i64,
+                    error: *x,
+                });
             }
             let rollout40 = errs.iter().sum::<f64>() / errs.len() as f64;
             let [de, ds, gap] = drift(e, spec, &x0, &task.rest_control(), self.rollout_steps);
-            out.errors.push(row![
-                name,
-                v.name(),
-                errs[0],
-                rollout40,
-                errs[errs.len() - 1],
-                de,
-                ds,
-                gap
-            ]);
+            out.errors.push(ErrorsRow {
+                task: name.to_string(),
+                variant: v.name().to_string(),
+                rollout1_error: errs[0],
+                rollout40_error_mean: rollout40,
+                rollout40_error_final: errs[errs.len() - 1],
+                drift_emulator_m: de,
+                drift_simulator_m: ds,
+                drift_gap_m: gap,
+            });
             // Fig. 13's control through this variant, replayed on the simulator.
             let learned = ctx.stage(&format!("learn {at} {}", v.name()), || {
                 learn_and_replay(&cal, e, self.steps, self.curvature_iterations)
             })?;
             let (best_iteration, simulator_error) = match learned {
                 Some((run, r)) => {
-                    out.control.push(row![
-                        name,
-                        v.name(),
-                        task.task.iterations,
-                        run.best_iteration,
-                        r.trace.first().map_or(f64::NAN, |t| t.objective),
-                        r.best_objective(),
-                        run.emulator_error,
-                        run.simulator_error,
-                        i64::from(run.at_goal()),
-                        start_error
-                    ]);
+                    out.control.push(ControlRow {
+                        task: name.to_string(),
+                        variant: v.name().to_string(),
+                        iterations: task.task.iterations as i64,
+                        best_iteration: run.best_iteration as i64,
+                        j_start: r.trace.first().map_or(f64::NAN, |t| t.objective),
+                        j_best: r.best_objective(),
+                        emulator_error: run.emulator_error,
+                        simulator_error: run.simulator_error,
+                        at_goal: i64::from(run.at_goal()),
+                        start_simulator_error: start_error,
+                    });
                     (run.best_iteration as i64, run.simulator_error)
                 }
                 // No finite step scale through this net: nothing learned.
@@ -308,16 +373,16 @@ impl Params {
                     (0, f64::NAN)
                 }
             };
-            out.seeds.push(row![
-                seed as i64,
-                name,
-                v.name(),
-                rollout40,
+            out.seeds.push(SeedRow {
+                net_seed: seed as i64,
+                task: name.to_string(),
+                variant: v.name().to_string(),
+                rollout40_error_mean: rollout40,
                 best_iteration,
                 simulator_error,
-                start_error,
-                0_i64
-            ]);
+                start_simulator_error: start_error,
+                failed: 0,
+            });
             pb.inc(1);
         }
         Ok(())
@@ -336,10 +401,7 @@ impl Params {
         &self,
         ctx: &RunContext,
         d: &DolphinControl,
-        nets: &mut Table,
-        errors: &mut Table,
-        rollout: &mut Table,
-        control: &mut Table,
+        out: &mut Outputs,
     ) -> Result<(), Error> {
         let spec = d.nets.spec(ctx.seed, self.steps, self.example_scale);
         let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;
@@ -372,35 +434,35 @@ impl Params {
             let (global, rep) = match b {
                 Ok(x) => x,
                 Err(e) => {
-                    nets.push(row![
-                        "dolphin",
-                        v.name(),
-                        inputs,
-                        d.nets.global.hidden,
-                        outputs,
-                        spec.global.examples,
-                        weights,
-                        f64::NAN,
-                        format!("failed: {e}").as_str(),
-                        0_i64,
-                        1_i64
-                    ]);
+                    out.nets.push(NetRow {
+                        task: "dolphin".into(),
+                        variant: v.name().to_string(),
+                        inputs: inputs as i64,
+                        hidden: d.nets.global.hidden as i64,
+                        outputs: outputs as i64,
+                        examples: spec.global.examples as i64,
+                        weights: weights as i64,
+                        train_s: f64::NAN,
+                        stop: format!("failed: {e}"),
+                        cached: 0,
+                        failed: 1,
+                    });
                     continue;
                 }
             };
-            nets.push(row![
-                "dolphin",
-                v.name(),
-                inputs,
-                rep.hidden,
-                outputs,
-                rep.examples,
-                weights,
-                rep.train_s,
-                rep.stop.as_str(),
-                i64::from(rep.from_cache),
-                0_i64
-            ]);
+            out.nets.push(NetRow {
+                task: "dolphin".into(),
+                variant: v.name().to_string(),
+                inputs: inputs as i64,
+                hidden: rep.hidden as i64,
+                outputs: outputs as i64,
+                examples: rep.examples as i64,
+                weights: weights as i64,
+                train_s: rep.train_s,
+                stop: rep.stop.clone(),
+                cached: i64::from(rep.from_cache),
+                failed: 0,
+            });
             let composed = built.emulator.with_global(global.clone());
             let (errs, _) = ctx
                 .stage(&format!("rollouts dolphin {}", v.name()), || {
@@ -413,20 +475,25 @@ impl Params {
                 })
                 .map_err(other)?;
             for (k, x) in errs.iter().enumerate() {
-                rollout.push(row!["dolphin", v.name(), k + 1, *x]);
+                out.rollout.push(RolloutRow {
+                    task: "dolphin".into(),
+                    variant: v.name().to_string(),
+                    step: (k + 1) as i64,
+                    error: *x,
+                });
             }
             let [emu, sim, start] =
                 dolphin_drift(&composed, &spec, &[0.0; N_SEGMENTS], self.rollout_steps)?;
-            errors.push(row![
-                "dolphin",
-                v.name(),
-                errs[0],
-                errs.iter().sum::<f64>() / errs.len() as f64,
-                errs[errs.len() - 1],
-                apart(&emu, &start),
-                apart(&sim, &start),
-                apart(&emu, &sim)
-            ]);
+            out.errors.push(ErrorsRow {
+                task: "dolphin".into(),
+                variant: v.name().to_string(),
+                rollout1_error: errs[0],
+                rollout40_error_mean: errs.iter().sum::<f64>() / errs.len() as f64,
+                rollout40_error_final: errs[errs.len() - 1],
+                drift_emulator_m: apart(&emu, &start),
+                drift_simulator_m: apart(&sim, &start),
+                drift_gap_m: apart(&emu, &sim),
+            });
             // Fig. 13's swim through this variant; a net without a finite step scale learns
             // nothing (a result, as for the other tasks: without a table of starts to fill,
             // `learn_swim` fails only there or building the net's BPTT).
@@ -449,20 +516,20 @@ impl Params {
                         short(swim.distance(&best.states)),
                         short(swim.distance(&sim_g)),
                     );
-                    control.push(row![
-                        "dolphin",
-                        v.name(),
-                        d.iterations,
-                        r.best_iteration,
-                        r.trace.first().map_or(f64::NAN, |t| t.objective),
-                        r.best_objective(),
-                        e_emu,
-                        e_sim,
-                        i64::from(e_emu <= WITHIN_TOLERANCE && e_sim <= WITHIN_TOLERANCE),
-                        start_error
-                    ]);
+                    out.control.push(ControlRow {
+                        task: "dolphin".into(),
+                        variant: v.name().to_string(),
+                        iterations: d.iterations as i64,
+                        best_iteration: r.best_iteration as i64,
+                        j_start: r.trace.first().map_or(f64::NAN, |t| t.objective),
+                        j_best: r.best_objective(),
+                        emulator_error: e_emu,
+                        simulator_error: e_sim,
+                        at_goal: i64::from(e_emu <= WITHIN_TOLERANCE && e_sim <= WITHIN_TOLERANCE),
+                        start_simulator_error: start_error,
+                    });
                 }
-                Err(_) => push_unlearned(control, "dolphin", v, d.iterations, start_error),
+                Err(_) => push_unlearned(&mut out.control, "dolphin", v, d.iterations, start_error),
             }
         }
         Ok(())

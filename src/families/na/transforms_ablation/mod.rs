@@ -202,10 +202,12 @@ impl Family for NaTransforms {
 
 #[cfg(test)]
 mod tests {
-    use super::job::SEED_COLUMNS;
+    use super::job::{ControlRow, ErrorsRow, NetRow, SeedRow};
     use super::report::seeded_rows;
     use super::*;
+    use crate::experiment::output::write_table;
     use crate::experiment::report::Verdict;
+    use crate::experiment::rows::table_of;
 
     const RULE: AblationRule = AblationRule {
         operator_ratio: 0.95,
@@ -349,33 +351,71 @@ mod tests {
     #[test]
     fn a_truncated_seed_table_is_an_error_not_a_verdict_on_fewer_variants() {
         let dir = tempfile::tempdir().unwrap();
-        let w = |name: &str, text: &str| std::fs::write(dir.path().join(name), text).unwrap();
+        let write = |name: &str, t| write_table(dir.path(), name, &t).unwrap();
         let variants = ["plain", "delta", "delta_frame", "full"];
-        let mut nets = String::from("task,variant,failed\n");
-        let mut errors = String::from("task,variant,rollout40_error_mean\n");
-        let mut control =
-            String::from("task,variant,simulator_error,best_iteration,start_simulator_error\n");
-        let mut seeds = SEED_COLUMNS.join(",") + "\n";
+        let (mut nets, mut errors, mut control, mut seeds) = (vec![], vec![], vec![], vec![]);
         for (k, v) in variants.iter().enumerate() {
             let e = 1.0 / (k + 1) as f64;
-            nets.push_str(&format!("truck,{v},0\n"));
-            errors.push_str(&format!("truck,{v},{e}\n"));
-            control.push_str(&format!("truck,{v},{},15,40\n", 10.0 * e));
+            let (task, variant) = ("truck".to_string(), v.to_string());
+            nets.push(NetRow {
+                task: task.clone(),
+                variant: variant.clone(),
+                inputs: 8,
+                hidden: 20,
+                outputs: 6,
+                examples: 100,
+                weights: 306,
+                train_s: 0.1,
+                stop: "max_iterations".into(),
+                cached: 0,
+                failed: 0,
+            });
+            errors.push(ErrorsRow {
+                task: task.clone(),
+                variant: variant.clone(),
+                rollout1_error: e,
+                rollout40_error_mean: e,
+                rollout40_error_final: e,
+                drift_emulator_m: 0.0,
+                drift_simulator_m: 0.0,
+                drift_gap_m: 0.0,
+            });
+            control.push(ControlRow {
+                task: task.clone(),
+                variant: variant.clone(),
+                iterations: 20,
+                best_iteration: 15,
+                j_start: 1.0,
+                j_best: 0.5,
+                emulator_error: 10.0 * e,
+                simulator_error: 10.0 * e,
+                at_goal: 0,
+                start_simulator_error: 40.0,
+            });
             for s in [1, 2] {
-                seeds.push_str(&format!("{s},truck,{v},{e},15,{},40,0\n", 10.0 * e));
+                seeds.push(SeedRow {
+                    net_seed: s,
+                    task: task.clone(),
+                    variant: variant.clone(),
+                    rollout40_error_mean: e,
+                    best_iteration: 15,
+                    simulator_error: 10.0 * e,
+                    start_simulator_error: 40.0,
+                    failed: 0,
+                });
             }
         }
-        w("nets.csv", &nets);
-        w("errors.csv", &errors);
-        w("control.csv", &control);
-        w("net_seeds.csv", &seeds);
+        write("nets", table_of(&nets));
+        write("errors", table_of(&errors));
+        write("control", table_of(&control));
+        write("net_seeds", table_of(&seeds));
         let rows = seeded_rows(dir.path()).unwrap();
-        assert_eq!(rows.len(), 1);
-        assert_eq!(rows[0].len(), 2);
-        assert_eq!(rows[0][1].rows[3].rollout40, 0.25);
+        assert_eq!(rows.tasks.len(), 1);
+        assert_eq!(rows.tasks[0].len(), 2);
+        assert_eq!(rows.seeds[0], [1, 2]);
+        assert_eq!(rows.tasks[0][1].rows[3].rollout40, 0.25);
         // Seed 2's last variant cut off.
-        let cut: String = seeds.lines().take(8).map(|l| format!("{l}\n")).collect();
-        w("net_seeds.csv", &cut);
+        write("net_seeds", table_of(&seeds[..seeds.len() - 1]));
         let err = seeded_rows(dir.path()).unwrap_err().to_string();
         assert!(
             err.contains("net_seeds.csv") && err.contains("net seed 2"),

@@ -1,9 +1,10 @@
 //! The report of `na_transforms_ablation`: the verdict's rule over the tasks and net seeds.
 
+use super::job::{ControlRow, ErrorsRow, NetRow, SeedRow};
 use super::{AblationRule, WITHIN_TOLERANCE};
 use crate::emulator::catalog::TransformSet;
-use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{rule_settings, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::{bootstrap_intervals, median_with_infinities};
 use crate::experiment::{other, Error};
@@ -196,51 +197,52 @@ pub fn ablation_rule(tasks: &[Vec<TaskRows>], r: &AblationRule) -> Option<Rule> 
     Rule::gated(vec![], held, Partly::All(training))
 }
 
+/// Each task's rows per net seed ([`seeded_rows`]).
+#[derive(Debug)]
+pub(super) struct Seeded {
+    /// Per task, its rows under each net seed (the run's own first).
+    pub tasks: Vec<Vec<TaskRows>>,
+    /// Per task, the ids of those net seeds (empty for a task of the run's own tables only).
+    pub seeds: Vec<Vec<i64>>,
+}
+
 /// Each task's rows per net seed: the tasks in `net_seeds.csv` from it (every seed, the run's
 /// own first), the others (the dolphin) from the run's own tables ([`task_rows`]), one seed. A
 /// task whose seeds have different variants (a truncated or edited table) is an error naming
 /// the file.
-pub(super) fn seeded_rows(dir: &Path) -> Result<Vec<Vec<TaskRows>>, Error> {
+pub(super) fn seeded_rows(dir: &Path) -> Result<Seeded, Error> {
     let own = task_rows(dir)?;
     let path = dir.join("net_seeds.csv");
-    let df = read_csv(&path)?;
-    let (seed, task, variant) = (
-        df_f64(&df, "net_seed")?,
-        df_str(&df, "task")?,
-        df_str(&df, "variant")?,
-    );
-    let (e40, best, sim, start, failed) = (
-        df_f64(&df, "rollout40_error_mean")?,
-        df_f64(&df, "best_iteration")?,
-        df_f64(&df, "simulator_error")?,
-        df_f64(&df, "start_simulator_error")?,
-        df_f64(&df, "failed")?,
-    );
-    let mut out = Vec::new();
+    let table: Vec<SeedRow> = read_rows(&path)?;
+    let mut out = Seeded {
+        tasks: Vec::new(),
+        seeds: Vec::new(),
+    };
     for t in own {
-        let rows: Vec<usize> = (0..task.len()).filter(|&i| task[i] == t.task).collect();
-        if rows.is_empty() {
-            out.push(vec![t]);
-            continue;
-        }
-        let mut seeds: Vec<f64> = Vec::new();
-        for &i in &rows {
-            if !seeds.contains(&seed[i]) {
-                seeds.push(seed[i]);
+        let rows: Vec<&SeedRow> = table.iter().filter(|r| r.task == t.task).collect();
+        let mut seeds: Vec<i64> = Vec::new();
+        for r in &rows {
+            if !seeds.contains(&r.net_seed) {
+                seeds.push(r.net_seed);
             }
         }
+        if rows.is_empty() {
+            out.tasks.push(vec![t]);
+            out.seeds.push(seeds);
+            continue;
+        }
         let mut per_seed = Vec::new();
-        for s in seeds {
-            let mine: Vec<usize> = rows.iter().copied().filter(|&i| seed[i] == s).collect();
+        for &s in &seeds {
+            let mine: Vec<&SeedRow> = rows.iter().copied().filter(|r| r.net_seed == s).collect();
             let rows_here: Vec<VariantRow> = mine
                 .iter()
-                .map(|&i| {
-                    let measure = |x: f64| if failed[i] != 0.0 { f64::INFINITY } else { x };
+                .map(|r| {
+                    let measure = |x: f64| if r.failed != 0 { f64::INFINITY } else { x };
                     VariantRow {
-                        variant: variant[i].clone(),
-                        rollout40: measure(e40[i]),
-                        simulator: measure(sim[i]),
-                        best_iteration: best[i] as usize,
+                        variant: r.variant.clone(),
+                        rollout40: measure(r.rollout40_error_mean),
+                        simulator: measure(r.simulator_error),
+                        best_iteration: r.best_iteration as usize,
                     }
                 })
                 .collect();
@@ -256,10 +258,11 @@ pub(super) fn seeded_rows(dir: &Path) -> Result<Vec<Vec<TaskRows>>, Error> {
             per_seed.push(TaskRows {
                 task: t.task.clone(),
                 rows: rows_here,
-                start: start[mine[0]],
+                start: mine[0].start_simulator_error,
             });
         }
-        out.push(per_seed);
+        out.tasks.push(per_seed);
+        out.seeds.push(seeds);
     }
     Ok(out)
 }
@@ -267,34 +270,23 @@ pub(super) fn seeded_rows(dir: &Path) -> Result<Vec<Vec<TaskRows>>, Error> {
 /// The rule's rows from the `errors` and `control` tables of a run folder, one per task of
 /// `nets`; a variant missing from a table (its training failed) has infinite errors.
 fn task_rows(dir: &Path) -> Result<Vec<TaskRows>, Error> {
-    let nets = read_csv(&dir.join("nets.csv"))?;
-    let (nt, nv) = (df_str(&nets, "task")?, df_str(&nets, "variant")?);
-    let errors = read_csv(&dir.join("errors.csv"))?;
-    let (et, ev, e40) = (
-        df_str(&errors, "task")?,
-        df_str(&errors, "variant")?,
-        df_f64(&errors, "rollout40_error_mean")?,
-    );
-    let control = read_csv(&dir.join("control.csv"))?;
-    let (ct, cv, cs, cb, c0) = (
-        df_str(&control, "task")?,
-        df_str(&control, "variant")?,
-        df_f64(&control, "simulator_error")?,
-        df_f64(&control, "best_iteration")?,
-        df_f64(&control, "start_simulator_error")?,
-    );
+    let nets: Vec<NetRow> = read_rows(&dir.join("nets.csv"))?;
+    let errors: Vec<ErrorsRow> = read_rows(&dir.join("errors.csv"))?;
+    let control: Vec<ControlRow> = read_rows(&dir.join("control.csv"))?;
     let mut out: Vec<TaskRows> = Vec::new();
-    for (t, v) in nt.iter().zip(&nv) {
-        let at = |ts: &[String], vs: &[String]| (0..ts.len()).find(|&i| &ts[i] == t && &vs[i] == v);
-        let (ei, ci) = (at(&et, &ev), at(&ct, &cv));
-        let start = (0..ct.len())
-            .find(|&i| &ct[i] == t)
-            .map_or(f64::NAN, |i| c0[i]);
+    for n in &nets {
+        let (t, v) = (&n.task, &n.variant);
+        let e = errors.iter().find(|e| e.task == *t && e.variant == *v);
+        let c = control.iter().find(|c| c.task == *t && c.variant == *v);
+        let start = control
+            .iter()
+            .find(|c| c.task == *t)
+            .map_or(f64::NAN, |c| c.start_simulator_error);
         let r = VariantRow {
             variant: v.clone(),
-            rollout40: ei.map_or(f64::INFINITY, |i| e40[i]),
-            simulator: ci.map_or(f64::INFINITY, |i| cs[i]),
-            best_iteration: ci.map_or(0, |i| cb[i] as usize),
+            rollout40: e.map_or(f64::INFINITY, |e| e.rollout40_error_mean),
+            simulator: c.map_or(f64::INFINITY, |c| c.simulator_error),
+            best_iteration: c.map_or(0, |c| c.best_iteration as usize),
         };
         match out.iter_mut().find(|x| &x.task == t) {
             Some(x) => x.rows.push(r),
@@ -320,69 +312,48 @@ pub(super) fn words(v: &str) -> &str {
 
 /// The findings ([`crate::experiment::Family::report`]).
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
-    let e = read_csv(&dir.join("errors.csv"))?;
-    let c = read_csv(&dir.join("control.csv"))?;
-    let nets = read_csv(&dir.join("nets.csv"))?;
-    let (nt, nv, nf) = (
-        df_str(&nets, "task")?,
-        df_str(&nets, "variant")?,
-        df_f64(&nets, "failed")?,
-    );
-    let (et, ev) = (df_str(&e, "task")?, df_str(&e, "variant")?);
-    let (e1, e40, gap) = (
-        df_f64(&e, "rollout1_error")?,
-        df_f64(&e, "rollout40_error_mean")?,
-        df_f64(&e, "drift_gap_m")?,
-    );
-    let (ct, cv) = (df_str(&c, "task")?, df_str(&c, "variant")?);
-    let (ce, cs) = (
-        df_f64(&c, "emulator_error")?,
-        df_f64(&c, "simulator_error")?,
-    );
+    let errors: Vec<ErrorsRow> = read_rows(&dir.join("errors.csv"))?;
+    let control: Vec<ControlRow> = read_rows(&dir.join("control.csv"))?;
+    let nets: Vec<NetRow> = read_rows(&dir.join("nets.csv"))?;
     let mut md = String::from(
         "| task | transforms | one-step error | 40-step error (mean) | zero-control drift gap (m) | Fig. 13 control: final error, emulator | final error, simulator |\n| --- | --- | --- | --- | --- | --- | --- |\n",
     );
-    for i in 0..nt.len() {
-        let (t, v) = (&nt[i], &nv[i]);
-        if nf[i] != 0.0 {
+    for n in &nets {
+        let (t, v) = (&n.task, &n.variant);
+        if n.failed != 0 {
             md.push_str(&format!(
                 "| {t} | {} | training failed | | | | |\n",
                 words(v)
             ));
             continue;
         }
-        let ei = (0..et.len()).find(|&j| &et[j] == t && &ev[j] == v);
-        let ci = (0..ct.len()).find(|&j| &ct[j] == t && &cv[j] == v);
-        let g = |o: Option<usize>, x: &[f64]| o.map_or("–".into(), |j| sig(x[j]));
+        let e = errors.iter().find(|e| e.task == *t && e.variant == *v);
+        let c = control.iter().find(|c| c.task == *t && c.variant == *v);
+        let g = |x: Option<f64>| x.map_or("–".into(), sig);
         md.push_str(&format!(
             "| {t} | {} | {} | {} | {} | {} | {} |\n",
             words(v),
-            g(ei, &e1),
-            g(ei, &e40),
-            g(ei, &gap),
-            g(ci, &ce),
-            g(ci, &cs)
+            g(e.map(|e| e.rollout1_error)),
+            g(e.map(|e| e.rollout40_error_mean)),
+            g(e.map(|e| e.drift_gap_m)),
+            g(c.map(|c| c.emulator_error)),
+            g(c.map(|c| c.simulator_error))
         ));
     }
-    let seeded = seeded_rows(dir)?;
+    let Seeded {
+        tasks: seeded,
+        seeds,
+    } = seeded_rows(dir)?;
     let rows: Vec<TaskRows> = seeded.iter().filter_map(|s| s.first().cloned()).collect();
     if seeded.iter().any(|s| s.len() > 1) {
         md.push_str("\nPer net seed (`net_seeds.csv`; every variant built and measured again through the nets of each seed, the run's own first), the values the checks take the median of:\n\n| task | net seed | full chain's 40-step error / plain's | worst operator ratio | full chain's control, simulator final error | / plain net's control's |\n| --- | --- | --- | --- | --- | --- |\n");
-        let ids = read_csv(&dir.join("net_seeds.csv"))?;
-        let (it, is) = (df_str(&ids, "task")?, df_f64(&ids, "net_seed")?);
-        for per_seed in seeded.iter().filter(|s| s.len() > 1) {
-            let mut seen: Vec<f64> = Vec::new();
-            for i in (0..it.len()).filter(|&i| it[i] == per_seed[0].task) {
-                if !seen.contains(&is[i]) {
-                    seen.push(is[i]);
-                }
-            }
-            for (t, s) in per_seed.iter().zip(seen) {
+        for (per_seed, ids) in seeded.iter().zip(&seeds).filter(|s| s.0.len() > 1) {
+            for (t, s) in per_seed.iter().zip(ids) {
                 let (v, _) = task_values(t);
                 md.push_str(&format!(
                     "| {} | {} | {} | {} | {} | {} |\n",
                     t.task,
-                    s as u64,
+                    s,
                     sig(v[0]),
                     sig(v[1]),
                     sig(v[2]),
