@@ -14,13 +14,13 @@ use crate::bellman::projection::{project, GaussianReward};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map};
-use crate::experiment::output::{df_f64, df_str, read_csv, Table};
+use crate::experiment::output::{read_csv, Table};
 use crate::experiment::plot::{Legend, Panel, Series};
 use crate::experiment::report::sig;
 use crate::experiment::resolve::{ensure, positive, ParamError};
+use crate::experiment::rows::{read_rows, TableRow};
 use crate::experiment::{other, Error};
 use crate::physics::linearize::Linearize;
-use crate::row;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -207,13 +207,34 @@ pub(crate) fn projected_weights(
 
 pub(crate) use crate::experiment::rule::{rule_setting, rule_settings, rule_table};
 
-/// Columns of every LBC family's `entropy.csv`: per main LBC run (`run` names
-/// it: a desired angle, a start, a take-off rate…) and `method` (lbc, and the fixed-weight
-/// blend beside it), at each control step `t` (s): `entropy`, the normalized entropy of the
-/// blend weights α ([`normalized_entropy`](crate::bellman::combine::normalized_entropy): 1 for
-/// uniform α, 0 for one component), and `alpha_deviation`, max_i |α_i − ŵ_i| with ŵ the fixed
-/// weights normalized to sum 1 (what the naive blend uses).
-pub(crate) const ENTROPY_COLUMNS: [&str; 5] = ["run", "method", "t", "entropy", "alpha_deviation"];
+crate::result_rows! {
+    /// One row of every LBC family's `entropy.csv`: one main LBC run and method at one control
+    /// step.
+    pub struct EntropyRow {
+        /// The run's name (a desired angle, a start, a take-off rate…).
+        run: String = "run",
+        /// The method: `lbc`, or the fixed-weight blend beside it.
+        method: String = "method",
+        /// Time of the control step (s).
+        t_s: f64 = "t",
+        /// Normalized entropy of the blend weights α
+        /// ([`normalized_entropy`](crate::bellman::combine::normalized_entropy): 1 for uniform
+        /// α, 0 for one component).
+        entropy: f64 = "entropy",
+        /// max_i |α_i − ŵ_i| with ŵ the fixed weights normalized to sum 1 (what the naive blend
+        /// uses).
+        alpha_deviation: f64 = "alpha_deviation",
+    }
+}
+
+/// Columns of every LBC family's `entropy.csv` ([`EntropyRow`]'s), for the families that build
+/// the table a run at a time with [`push_entropy`]; an array, as those families' `Table::new`
+/// calls take it by reference.
+pub(crate) const ENTROPY_COLUMNS: [&str; 5] = {
+    let c = EntropyRow::COLUMNS;
+    assert!(c.len() == 5, "EntropyRow has five columns");
+    [c[0], c[1], c[2], c[3], c[4]]
+};
 
 /// Ours: α "stays at the fixed weights" in a run when `alpha_deviation` ≤ this at every step;
 /// there LBC's control is the fixed-weight average's (to this precision in α) by construction.
@@ -232,8 +253,29 @@ pub(crate) fn alpha_deviation(alpha: &[f64], weights: &[f64]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Appends one run's per-step entropies and α deviations (step k at t = k·dt) to `table`
-/// (columns [`ENTROPY_COLUMNS`]).
+/// One run's per-step entropies and α deviations (step k at t = k·dt) as `entropy.csv` rows.
+pub(crate) fn entropy_rows(
+    run: &str,
+    method: &str,
+    dt: f64,
+    entropy: &[f64],
+    deviation: &[f64],
+) -> Vec<EntropyRow> {
+    entropy
+        .iter()
+        .zip(deviation)
+        .enumerate()
+        .map(|(k, (h, d))| EntropyRow {
+            run: run.to_string(),
+            method: method.to_string(),
+            t_s: k as f64 * dt,
+            entropy: *h,
+            alpha_deviation: *d,
+        })
+        .collect()
+}
+
+/// Appends one run's [`entropy_rows`] to `table` (columns [`ENTROPY_COLUMNS`]).
 pub(crate) fn push_entropy(
     table: &mut Table,
     run: &str,
@@ -242,9 +284,35 @@ pub(crate) fn push_entropy(
     entropy: &[f64],
     deviation: &[f64],
 ) {
-    for (k, (h, d)) in entropy.iter().zip(deviation).enumerate() {
-        table.push(row![run, method, k as f64 * dt, *h, *d]);
+    for r in entropy_rows(run, method, dt, entropy, deviation) {
+        table.push(r.cells());
     }
+}
+
+/// The rows of a sweep's CSV at `path`, read as [`read_rows`] does, where the sweep may be
+/// empty and older results may lack a column: a file holding only its header gives polars no
+/// values to type its columns by (they read as strings, which an integer column refuses), so
+/// it reads as no rows once its header has every column of `R`; the columns `nan_if_missing`,
+/// absent from older results, read as NaN.
+pub(crate) fn read_sweep_rows<R: TableRow>(
+    path: &Path,
+    nan_if_missing: &[&str],
+) -> Result<Vec<R>, Error> {
+    let mut df = read_csv(path)?;
+    let named = |e: String| Error::Other(format!("{}: {e}", path.display()));
+    for &name in nan_if_missing {
+        if df.column(name).is_err() {
+            let nan = polars::prelude::Column::new(name.into(), vec![f64::NAN; df.height()]);
+            df.with_column(nan).map_err(|e| named(e.to_string()))?;
+        }
+    }
+    if df.height() == 0 {
+        return match R::COLUMNS.iter().find(|c| df.column(c).is_err()) {
+            Some(c) => Err(named(format!("no column {c}"))),
+            None => Ok(Vec::new()),
+        };
+    }
+    R::from_frame(&df).map_err(|e| named(e.to_string()))
 }
 
 /// Whether α stayed at the fixed weights throughout: every deviation finite and at most `tol`
@@ -273,25 +341,21 @@ pub(crate) struct EntropySummary {
 }
 
 /// The (run, method) summaries of the rows of an `entropy.csv`, in order of first appearance.
-pub(crate) fn summarize_entropy(
-    run: &[String],
-    method: &[String],
-    entropy: &[f64],
-    deviation: &[f64],
-) -> Vec<EntropySummary> {
+pub(crate) fn summarize_entropy(rows: &[EntropyRow]) -> Vec<EntropySummary> {
     let mut keys: Vec<(&str, &str)> = Vec::new();
-    for (r, m) in run.iter().zip(method) {
-        if !keys.contains(&(r.as_str(), m.as_str())) {
-            keys.push((r, m));
+    for e in rows {
+        if !keys.contains(&(e.run.as_str(), e.method.as_str())) {
+            keys.push((&e.run, &e.method));
         }
     }
     keys.into_iter()
         .map(|(r, m)| {
-            let rows: Vec<usize> = (0..run.len())
-                .filter(|&i| run[i] == r && method[i] == m)
+            let of: Vec<&EntropyRow> = rows
+                .iter()
+                .filter(|e| e.run == r && e.method == m)
                 .collect();
-            let h: Vec<f64> = rows.iter().map(|&i| entropy[i]).collect();
-            let d: Vec<f64> = rows.iter().map(|&i| deviation[i]).collect();
+            let h: Vec<f64> = of.iter().map(|e| e.entropy).collect();
+            let d: Vec<f64> = of.iter().map(|e| e.alpha_deviation).collect();
             EntropySummary {
                 run: r.to_string(),
                 method: m.to_string(),
@@ -324,13 +388,7 @@ pub(crate) fn entropy_section(
     if !path.exists() {
         return Ok(String::new());
     }
-    let df = read_csv(&path)?;
-    let s = summarize_entropy(
-        &df_str(&df, "run")?,
-        &df_str(&df, "method")?,
-        &df_f64(&df, "entropy")?,
-        &df_f64(&df, "alpha_deviation")?,
-    );
+    let s = summarize_entropy(&read_rows::<EntropyRow>(&path)?);
     let sig = crate::experiment::report::sig;
     let mut md = format!(
         "\nα's normalized entropy over time (`entropy.csv`, every control step; {one_means}). α stays at the fixed weights when max_i |α_i − ŵ_i| ≤ {} at every step (ours; ŵ the fixed weights normalized).\n\n| run | method | entropy min | mean | max | max \\|α − ŵ\\| | α stays at the fixed weights |\n| --- | --- | --- | --- | --- | --- | --- |\n",
@@ -379,16 +437,11 @@ pub(crate) fn entropy_figure(
     let Some(t) = tables.get("entropy") else {
         return Ok(Vec::new());
     };
-    let (run, method, time, h) = (
-        t.strs("run"),
-        t.strs("method"),
-        t.f64s("t"),
-        t.f64s("entropy"),
-    );
+    let rows = EntropyRow::from_table(t);
     let mut runs: Vec<&str> = Vec::new();
-    for (r, m) in run.iter().zip(&method) {
-        if m == "lbc" && !runs.contains(&r.as_str()) {
-            runs.push(r);
+    for e in &rows {
+        if e.method == "lbc" && !runs.contains(&e.run.as_str()) {
+            runs.push(&e.run);
         }
     }
     let marks = [Mark::Line, Mark::Dashed, Mark::LinePoints, Mark::Points];
@@ -396,9 +449,10 @@ pub(crate) fn entropy_figure(
         .iter()
         .enumerate()
         .map(|(c, r)| {
-            let pts = (0..run.len())
-                .filter(|&i| run[i] == *r && method[i] == "lbc")
-                .map(|i| (time[i], h[i]))
+            let pts = rows
+                .iter()
+                .filter(|e| e.run == *r && e.method == "lbc")
+                .map(|e| (e.t_s, e.entropy))
                 .collect();
             Series::line(format!("lbc, {r}"), pts, c).mark(marks[c % marks.len()])
         })
@@ -427,16 +481,69 @@ mod entropy_tests {
         assert!(!stays_fixed(&[0.0, 2e-3], 1e-3));
         assert!(!stays_fixed(&[0.0, f64::NAN], 1e-3));
         assert!(!stays_fixed(&[], 1e-3));
-        let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
-        let sum = summarize_entropy(
-            &s(&["a", "a", "b", "b"]),
-            &s(&["lbc", "lbc", "lbc", "lbc"]),
-            &[1.0, 0.8, 1.0, 1.0],
-            &[0.0, 0.1, 0.0, 1e-4],
-        );
+        let row = |run: &str, entropy: f64, alpha_deviation: f64| EntropyRow {
+            run: run.into(),
+            method: "lbc".into(),
+            t_s: 0.0,
+            entropy,
+            alpha_deviation,
+        };
+        let sum = summarize_entropy(&[
+            row("a", 1.0, 0.0),
+            row("a", 0.8, 0.1),
+            row("b", 1.0, 0.0),
+            row("b", 1.0, 1e-4),
+        ]);
         assert_eq!(sum.len(), 2);
         assert!(!sum[0].fixed && sum[1].fixed);
         assert!((sum[0].mean - 0.9).abs() < 1e-12 && sum[0].min == 0.8);
+    }
+}
+
+#[cfg(test)]
+mod sweep_rows_tests {
+    use super::*;
+    use crate::experiment::output::write_table;
+    use crate::experiment::rows::table_of;
+
+    crate::result_rows! {
+        /// A sweep's row.
+        struct Probe {
+            /// A count.
+            n: i64 = "n",
+            /// A measure.
+            x: f64 = "x",
+        }
+    }
+
+    /// An empty sweep reads back as no rows (its integer column untyped in a file of only a
+    /// header); a column older results lack reads as NaN when allowed, and is an error naming
+    /// the file and the column otherwise.
+    #[test]
+    fn empty_sweeps_and_old_columns_read_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = |name: &str| dir.path().join(format!("{name}.csv"));
+        write_table(dir.path(), "empty", &table_of::<Probe>(&[])).unwrap();
+        assert!(read_sweep_rows::<Probe>(&path("empty"), &[])
+            .unwrap()
+            .is_empty());
+        let mut old = Table::new(&["n"]);
+        old.push(crate::row![2i64]);
+        write_table(dir.path(), "old", &old).unwrap();
+        let rows = read_sweep_rows::<Probe>(&path("old"), &["x"]).unwrap();
+        assert!(rows.len() == 1 && rows[0].n == 2 && rows[0].x.is_nan());
+        let err = read_sweep_rows::<Probe>(&path("old"), &[])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("old.csv") && err.contains("column x"), "{err}");
+        write_table(dir.path(), "old_empty", &Table::new(&["n"])).unwrap();
+        let err = read_sweep_rows::<Probe>(&path("old_empty"), &[])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("old_empty.csv") && err.contains("column x"),
+            "{err}"
+        );
     }
 }
 

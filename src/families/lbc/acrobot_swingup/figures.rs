@@ -1,9 +1,11 @@
 //! The figures: final poses and filmstrip from the test start (Fig. 7), the showcase GIF, the
 //! sweep heat maps and the λ sweep.
 
+use super::rows::{LambdaRow, ShowcaseRow, SweepRow, TrajectoryRow};
 use super::setup::POLICIES;
-use crate::experiment::output::{Table, Tables};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Heatmap, Mark, Panel, Series};
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use crate::families::lbc::film;
 use crate::physics::acrobot::Acrobot;
@@ -11,9 +13,11 @@ use std::path::PathBuf;
 
 /// Fig. 7 as a filmstrip: one row per policy from the test start, the acrobot's pose every
 /// `FRAME_DT` seconds left to right (frames `FRAME_GAP` m apart), the bar marked at each frame.
-fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])) -> Figure {
+fn filmstrip(acro: &Acrobot, traj: &[TrajectoryRow]) -> Figure {
     const FRAME_DT: f64 = 0.5;
     const FRAME_GAP: f64 = 4.5;
+    // Time as one column: film::nearest picks among row indices by it.
+    let t: Vec<f64> = traj.iter().map(|r| r.t_s).collect();
     let t_end = t
         .iter()
         .copied()
@@ -22,7 +26,9 @@ fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])
     let frames = (t_end / FRAME_DT).floor() as usize + 1;
     let mut panels = Vec::new();
     for (c, name) in POLICIES.iter().enumerate() {
-        let rows: Vec<usize> = (0..p.len()).filter(|&r| p[r] == *name).collect();
+        let rows: Vec<usize> = (0..traj.len())
+            .filter(|&r| traj[r].policy == *name)
+            .collect();
         if rows.is_empty() {
             continue;
         }
@@ -31,9 +37,10 @@ fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])
         let mut ticks = Vec::new();
         for k in 0..frames {
             let tk = k as f64 * FRAME_DT;
-            let Some(r) = film::nearest(&rows, t, tk) else {
+            let Some(r) = film::nearest(&rows, &t, tk) else {
                 continue;
             };
+            let r = &traj[r];
             let off = k as f64 * FRAME_GAP;
             let label = if k == 0 {
                 format!(
@@ -44,8 +51,12 @@ fn filmstrip(acro: &Acrobot, (p, t, a1, a2): (&[String], &[f64], &[f64], &[f64])
                 String::new()
             };
             series.push(
-                Series::line(label, film::acrobot_pose(acro, off, a1[r], a2[r]), c)
-                    .mark(Mark::LinePoints),
+                Series::line(
+                    label,
+                    film::acrobot_pose(acro, off, r.theta1_rad, r.theta2_rad),
+                    c,
+                )
+                .mark(Mark::LinePoints),
             );
             bars.push((off, 0.0));
             ticks.push((off, format!("{tk:.1} s")));
@@ -86,28 +97,22 @@ fn words(policy: &str) -> &str {
 
 /// Fig. 7 (final poses, filmstrip, the showcase GIF), the sweep heat maps and the λ sweep.
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let traj = tables.require("trajectories")?;
+    let traj = TrajectoryRow::from_table(tables.require("trajectories")?);
     let acro = Acrobot::default();
-    let mut files = fig.draw("final_pose", &final_pose(&acro, traj))?;
-    let (p, t, a1, a2) = (
-        traj.strs("policy"),
-        traj.f64s("t"),
-        traj.f64s("theta1"),
-        traj.f64s("theta2"),
-    );
-    files.extend(fig.draw("filmstrip", &filmstrip(&acro, (&p, &t, &a1, &a2)))?);
+    let mut files = fig.draw("final_pose", &final_pose(&acro, &traj))?;
+    files.extend(fig.draw("filmstrip", &filmstrip(&acro, &traj))?);
     // The showcase GIF: the trackers and LBC from a start where both trackers fail.
     if let Some(sc) = tables.get("showcase") {
-        if let Some(file) = showcase_gif(fig, &acro, sc)? {
+        if let Some(file) = showcase_gif(fig, &acro, &ShowcaseRow::from_table(sc))? {
             files.push(file);
         }
     }
     // Sweep heat maps.
-    let sw = tables.require("sweep")?;
-    files.extend(fig.draw("sweep", &sweep_maps(sw))?);
+    let sweep = SweepRow::from_table(tables.require("sweep")?);
+    files.extend(fig.draw("sweep", &sweep_maps(&sweep))?);
     // λ sweep.
-    let ls = tables.require("lambda_sweep")?;
-    if let Some(f) = lambda_figure(ls, sw) {
+    let lambdas = LambdaRow::from_table(tables.require("lambda_sweep")?);
+    if let Some(f) = lambda_figure(&lambdas, sweep.len()) {
         files.extend(fig.draw("lambda", &f)?);
     }
     Ok(files)
@@ -115,15 +120,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
 
 /// Fig. 7's final poses from the test start, the shoulder angle over time and LBC's weight
 /// of tracker 1 with α's entropy (from `trajectories`).
-fn final_pose(acro: &Acrobot, traj: &Table) -> Figure {
-    let (p, t, a1, a2, al, ah) = (
-        traj.strs("policy"),
-        traj.f64s("t"),
-        traj.f64s("theta1"),
-        traj.f64s("theta2"),
-        traj.f64s("alpha1"),
-        traj.f64s("alpha_entropy"),
-    );
+fn final_pose(acro: &Acrobot, traj: &[TrajectoryRow]) -> Figure {
     // Final poses.
     let mut series = vec![
         Series::line("handstand", vec![(0.0, 0.0), (0.0, 1.0), (0.0, 2.0)], 7).mark(Mark::Dashed),
@@ -133,9 +130,9 @@ fn final_pose(acro: &Acrobot, traj: &Table) -> Figure {
     // so in its label, since it is drawn exactly over it.
     let mut drawn: Vec<(&str, [f64; 2], [f64; 2])> = Vec::new();
     for (c, name) in POLICIES.iter().enumerate() {
-        let rows: Vec<usize> = (0..p.len()).filter(|&r| p[r] == *name).collect();
-        let Some(&last) = rows.last() else { continue };
-        let [p1, p2] = acro.positions(&[a1[last], a2[last], 0.0, 0.0]);
+        let rows: Vec<&TrajectoryRow> = traj.iter().filter(|r| r.policy == *name).collect();
+        let Some(last) = rows.last() else { continue };
+        let [p1, p2] = acro.positions(&[last.theta1_rad, last.theta2_rad, 0.0, 0.0]);
         let same = drawn.iter().find(|(_, q1, q2)| {
             (0..2).all(|k| (q1[k] - p1[k]).abs() < 1e-3 && (q2[k] - p2[k]).abs() < 1e-3)
         });
@@ -150,7 +147,7 @@ fn final_pose(acro: &Acrobot, traj: &Table) -> Figure {
         );
         angle_series.push(Series::line(
             words(name),
-            rows.iter().map(|&r| (t[r], a1[r])).collect(),
+            rows.iter().map(|r| (r.t_s, r.theta1_rad)).collect(),
             c,
         ));
     }
@@ -168,8 +165,9 @@ fn final_pose(acro: &Acrobot, traj: &Table) -> Figure {
         legend: crate::experiment::plot::Legend::UpperLeft,
         ..Default::default()
     };
-    let lbc_rows: Vec<usize> = (0..p.len())
-        .filter(|&r| p[r] == "lbc" && al[r].is_finite())
+    let lbc_rows: Vec<&TrajectoryRow> = traj
+        .iter()
+        .filter(|r| r.policy == "lbc" && r.alpha1.is_finite())
         .collect();
     let angles = Panel {
         title: "shoulder angle theta1 (handstand: pi/2)".into(),
@@ -185,12 +183,12 @@ fn final_pose(acro: &Acrobot, traj: &Table) -> Figure {
         series: vec![
             Series::line(
                 "alpha_1",
-                lbc_rows.iter().map(|&r| (t[r], al[r])).collect(),
+                lbc_rows.iter().map(|r| (r.t_s, r.alpha1)).collect(),
                 3,
             ),
             Series::line(
                 "entropy",
-                lbc_rows.iter().map(|&r| (t[r], ah[r])).collect(),
+                lbc_rows.iter().map(|r| (r.t_s, r.alpha_entropy)).collect(),
                 5,
             )
             .mark(Mark::Dashed),
@@ -202,19 +200,17 @@ fn final_pose(acro: &Acrobot, traj: &Table) -> Figure {
 }
 
 /// The showcase GIF (from `showcase`), `None` without rows.
-fn showcase_gif(fig: &FigureSink, acro: &Acrobot, sc: &Table) -> Result<Option<PathBuf>, Error> {
-    let (sp, s1, s2, sr, st, sa1, sa2) = (
-        sc.strs("policy"),
-        sc.f64s("theta1_deg"),
-        sc.f64s("theta2_deg"),
-        sc.f64s("rescued"),
-        sc.f64s("t"),
-        sc.f64s("theta1"),
-        sc.f64s("theta2"),
-    );
+fn showcase_gif(
+    fig: &FigureSink,
+    acro: &Acrobot,
+    sc: &[ShowcaseRow],
+) -> Result<Option<PathBuf>, Error> {
+    // film::acrobot_frames reads the motions' rows out of these columns.
+    let col = |f: fn(&ShowcaseRow) -> f64| sc.iter().map(f).collect::<Vec<f64>>();
+    let (st, sa1, sa2) = (col(|r| r.t_s), col(|r| r.theta1_rad), col(|r| r.theta2_rad));
     let rows: Vec<Vec<usize>> = POLICIES
         .iter()
-        .map(|name| (0..sp.len()).filter(|&r| sp[r] == *name).collect())
+        .map(|name| (0..sc.len()).filter(|&r| sc[r].policy == *name).collect())
         .collect();
     let motions: Vec<film::Motion> = POLICIES
         .iter()
@@ -227,13 +223,17 @@ fn showcase_gif(fig: &FigureSink, acro: &Acrobot, sc: &Table) -> Result<Option<P
         })
         .collect();
     if let Some(&r0) = motions.first().and_then(|m| m.rows.first()) {
-        let caption = if sr[r0] == 1.0 {
+        let r0 = &sc[r0];
+        let caption = if r0.rescued == 1 {
             format!(
                 "From ({}, {}) deg at rest: both trackers fail, LBC swings up",
-                s1[r0], s2[r0]
+                r0.theta1_deg, r0.theta2_deg
             )
         } else {
-            format!("From the test start ({}, {}) deg at rest", s1[r0], s2[r0])
+            format!(
+                "From the test start ({}, {}) deg at rest",
+                r0.theta1_deg, r0.theta2_deg
+            )
         };
         let frames = film::acrobot_frames(acro, &motions, (&st, &sa1, &sa2), 4.5, &caption);
         return Ok(Some(fig.gif("swingup", &frames, film::GIF_DELAY_CS)?));
@@ -242,23 +242,17 @@ fn showcase_gif(fig: &FigureSink, acro: &Acrobot, sc: &Table) -> Result<Option<P
 }
 
 /// The sweep heat maps: per policy, the final distance over the start states (from `sweep`).
-fn sweep_maps(sw: &Table) -> Figure {
+fn sweep_maps(sweep: &[SweepRow]) -> Figure {
     const CLAMP: f64 = 3.0;
-    let (s1, s2, sp, sd) = (
-        sw.f64s("theta1_deg"),
-        sw.f64s("theta2_deg"),
-        sw.strs("policy"),
-        sw.f64s("final_distance"),
-    );
     let mut maps = Vec::new();
     for name in POLICIES {
-        let rows: Vec<usize> = (0..sp.len()).filter(|&r| sp[r] == name).collect();
+        let rows: Vec<&SweepRow> = sweep.iter().filter(|r| r.policy == name).collect();
         if rows.is_empty() {
             continue;
         }
         let nx = rows
             .iter()
-            .take_while(|&&r| s2[r] == s2[rows[0]])
+            .take_while(|r| r.theta2_deg == rows[0].theta2_deg)
             .count()
             .max(1);
         let ny = rows.len() / nx;
@@ -269,11 +263,11 @@ fn sweep_maps(sw: &Table) -> Figure {
             ),
             x_label: "start theta1 (deg)".into(),
             y_label: "start theta2 (deg)".into(),
-            x_range: (s1[rows[0]], s1[rows[nx - 1]]),
-            y_range: (s2[rows[0]], s2[rows[rows.len() - 1]]),
+            x_range: (rows[0].theta1_deg, rows[nx - 1].theta1_deg),
+            y_range: (rows[0].theta2_deg, rows[rows.len() - 1].theta2_deg),
             nx,
             ny,
-            values: rows.iter().map(|&r| sd[r].min(CLAMP)).collect(),
+            values: rows.iter().map(|r| r.final_distance.min(CLAMP)).collect(),
             value_label: "distance".into(),
             diverging: false,
             range: Some((0.0, CLAMP)),
@@ -282,23 +276,16 @@ fn sweep_maps(sw: &Table) -> Figure {
     Figure::heatmaps(maps, 3)
 }
 
-/// LBC over λ on the start sweep (from `lambda_sweep`; `sw`, the sweep, counts the starts),
-/// `None` without rows.
-fn lambda_figure(ls: &Table, sw: &Table) -> Option<Figure> {
-    let (l, succ, resc, nf, hs) = (
-        ls.f64s("lambda"),
-        ls.f64s("sweep_successes"),
-        ls.f64s("both_fail_successes"),
-        ls.f64s("both_fail_starts"),
-        ls.f64s("sweep_mean_entropy"),
-    );
-    if l.is_empty() {
+/// LBC over λ on the start sweep (from `lambda_sweep`; `sweep_rows`, the sweep's rows, one per
+/// start and policy, counts the starts), `None` without rows.
+fn lambda_figure(lambdas: &[LambdaRow], sweep_rows: usize) -> Option<Figure> {
+    if lambdas.is_empty() {
         return None;
     }
-    let pts = |v: &[f64]| l.iter().zip(v).map(|(&a, &b)| (a, b)).collect();
-    let frac: Vec<f64> = resc.iter().zip(&nf).map(|(r, n)| r / n.max(1.0)).collect();
-    let starts = sw.len() as f64 / POLICIES.len() as f64;
-    let cover: Vec<f64> = succ.iter().map(|s| s / starts.max(1.0)).collect();
+    let pts = |f: &dyn Fn(&LambdaRow) -> f64| lambdas.iter().map(|r| (r.lambda, f(r))).collect();
+    let starts = sweep_rows as f64 / POLICIES.len() as f64;
+    let frac = |r: &LambdaRow| r.both_fail_successes as f64 / (r.both_fail_starts as f64).max(1.0);
+    let cover = |r: &LambdaRow| r.sweep_successes as f64 / starts.max(1.0);
     let panel = Panel {
         title: "LBC vs temperature lambda over the start sweep".into(),
         x_label: "lambda".into(),
@@ -307,7 +294,8 @@ fn lambda_figure(ls: &Table, sw: &Table) -> Option<Figure> {
         series: vec![
             Series::line("success, all starts", pts(&cover), 0).mark(Mark::LinePoints),
             Series::line("success, both trackers fail", pts(&frac), 1).mark(Mark::LinePoints),
-            Series::line("mean entropy of alpha", pts(&hs), 2).mark(Mark::Dashed),
+            Series::line("mean entropy of alpha", pts(&|r| r.sweep_mean_entropy), 2)
+                .mark(Mark::Dashed),
         ],
         y_range: Some((-0.05, 1.05)),
         ..Default::default()

@@ -1,6 +1,9 @@
 //! The job: swing-ups, trackers, the test start, the start-state and λ sweeps, the value
 //! models compared and the showcase, as tables.
 
+use super::rows::{
+    FinalRow, LambdaRow, ScaleRow, ShowcaseRow, SweepRow, SwingupRow, TrajectoryRow, ValueModelRow,
+};
 use super::setup::{
     cheapest, distance_to_handstand, first_swing_sign, first_torque_sign, mode, mode_index,
     radians, tape_correlation, Candidate, Rollout, POLICIES,
@@ -12,8 +15,9 @@ use crate::control::ddp::DdpSolution;
 use crate::control::lqr::TrackingController;
 use crate::control::Rk4Map;
 use crate::experiment::output::{Table, Tables};
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::families::lbc::{push_entropy, rule_table, ENTROPY_COLUMNS};
+use crate::families::lbc::{entropy_rows, rule_table, EntropyRow};
 use crate::physics::acrobot::Acrobot;
 use crate::row;
 use nalgebra::DVector;
@@ -74,17 +78,17 @@ impl Job for Params {
             ("scale_premise_found", search.pick.is_some() as u8 as f64),
         ]);
         Ok(Tables::from([
-            ("final", fin),
-            ("trajectories", traj),
-            ("swingups", swingups),
+            ("final", table_of(&fin)),
+            ("trajectories", table_of(&traj)),
+            ("swingups", table_of(&swingups)),
             ("swingup_candidates", candidates),
             ("ddp_trace", trace),
-            ("sweep", sweep),
-            ("lambda_sweep", lam),
-            ("value_model", models),
-            ("showcase", showcase),
-            ("tracker_scales", scale_t),
-            ("entropy", entropy_t),
+            ("sweep", table_of(&sweep)),
+            ("lambda_sweep", table_of(&lam)),
+            ("value_model", table_of(&models)),
+            ("showcase", table_of(&showcase)),
+            ("tracker_scales", table_of(&scale_t)),
+            ("entropy", table_of(&entropy_t)),
             ("rule", rule),
         ]))
     }
@@ -111,15 +115,15 @@ struct ClosedLoop<'a> {
 
 /// The kept swing-ups per start and their DDP iterations.
 struct SwingupTables {
-    swingups: Table,
+    swingups: Vec<SwingupRow>,
     trace: Table,
 }
 
 /// The policies from the test start: final states, trajectories and α's entropy.
 struct TestStartTables {
-    fin: Table,
-    traj: Table,
-    entropy: Table,
+    fin: Vec<FinalRow>,
+    traj: Vec<TrajectoryRow>,
+    entropy: Vec<EntropyRow>,
 }
 
 /// Final distance, control cost, largest torque and mean entropy of one rollout.
@@ -127,7 +131,7 @@ type Outcome = (f64, f64, f64, f64);
 
 /// One start of the sweep: every policy at the spec's λ, LBC at each swept λ, and every
 /// policy with the other value model's trackers (empty when those were not built).
-struct SweepRow {
+struct StartOutcomes {
     policies: Vec<Outcome>,
     lambdas: Vec<Outcome>,
     others: Vec<Outcome>,
@@ -135,8 +139,8 @@ struct SweepRow {
 
 /// The start-state sweep per policy, and per value model.
 struct SweepTables {
-    sweep: Table,
-    models: Table,
+    sweep: Vec<SweepRow>,
+    models: Vec<ValueModelRow>,
 }
 
 /// The rollout's summary for the sweep tables.
@@ -229,18 +233,18 @@ impl Params {
     }
 
     /// `tracker_scales`: the scale search's rows.
-    fn scale_table(&self, search: &ScaleSearch) -> Table {
-        let mut scale_t = Table::new(&SCALE_COLUMNS);
+    fn scale_table(&self, search: &ScaleSearch) -> Vec<ScaleRow> {
+        let mut scale_t = Vec::new();
         for (i, (s, d)) in search.rows.iter().enumerate() {
             let fails = !(d[0] < self.success_distance) && !(d[1] < self.success_distance);
             for (name, &di) in POLICIES.iter().zip(d) {
-                scale_t.push(row![
-                    *s,
-                    *name,
-                    di,
-                    fails as i64,
-                    (search.pick == Some(i)) as i64
-                ]);
+                scale_t.push(ScaleRow {
+                    tracker_weight_scale: *s,
+                    policy: name.to_string(),
+                    final_distance: di,
+                    each_tracker_fails: fails as i64,
+                    chosen: (search.pick == Some(i)) as i64,
+                });
             }
         }
         scale_t
@@ -253,23 +257,7 @@ impl Params {
         best: &[usize],
         sols: &[&DdpSolution],
     ) -> SwingupTables {
-        let mut swingups = Table::new(&[
-            "start",
-            "theta1_deg",
-            "theta2_deg",
-            "iterations",
-            "cost",
-            "final_distance",
-            "termination",
-            "guess",
-            "first_swing_sign",
-            "first_torque_sign",
-            "cost_ratio",
-            "tape_correlation",
-            "same_family",
-            "max_abs_torque",
-            "lowest_cost_any_family",
-        ]);
+        let mut swingups = Vec::new();
         let mut trace = Table::new(&[
             "start",
             "iteration",
@@ -292,23 +280,23 @@ impl Params {
                 .iter()
                 .all(|s| s.cost <= self.max_cost_ratio * min_cost);
         for (i, (s, sol)) in self.starts.iter().zip(sols).enumerate() {
-            swingups.push(row![
-                i + 1,
-                s[0],
-                s[1],
-                sol.trace.len(),
-                sol.cost,
-                distance_to_handstand(sol.x[sol.u.len()].as_slice()),
-                format!("{:?}", sol.termination),
-                cands[best[i]].guess.as_str(),
-                swing(sol),
-                first_torque_sign(&sol.u),
-                sol.cost / min_cost,
-                tape_correlation(&sols[0].u, &sol.u),
-                same_family as i64,
-                sol.u.iter().fold(0.0, |m: f64, u| m.max(u[0].abs())),
-                lowest[i]
-            ]);
+            swingups.push(SwingupRow {
+                start: i as i64 + 1,
+                theta1_deg: s[0],
+                theta2_deg: s[1],
+                iterations: sol.trace.len() as i64,
+                cost: sol.cost,
+                final_distance: distance_to_handstand(sol.x[sol.u.len()].as_slice()),
+                termination: format!("{:?}", sol.termination),
+                guess: cands[best[i]].guess.clone(),
+                first_swing_sign: swing(sol),
+                first_torque_sign: first_torque_sign(&sol.u),
+                cost_ratio: sol.cost / min_cost,
+                tape_correlation: tape_correlation(&sols[0].u, &sol.u),
+                same_family: same_family as i64,
+                max_abs_torque_n_m: sol.u.iter().fold(0.0, |m: f64, u| m.max(u[0].abs())),
+                lowest_cost_any_family: lowest[i],
+            });
             for r in &sol.trace {
                 trace.push(row![
                     i + 1,
@@ -331,68 +319,47 @@ impl Params {
         lp: &ClosedLoop,
         x0: &DVector<f64>,
     ) -> Result<TestStartTables, Error> {
-        let mut fin = Table::new(&[
-            "policy",
-            "final_distance",
-            "control_cost",
-            "final_theta1",
-            "final_theta2",
-            "max_abs_torque",
-            "mean_entropy",
-        ]);
-        let mut traj = Table::new(&[
-            "policy",
-            "t",
-            "theta1",
-            "theta2",
-            "omega1",
-            "omega2",
-            "u",
-            "alpha1",
-            "alpha_entropy",
-        ]);
-        let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
+        let (mut fin, mut traj, mut entropy_t) = (Vec::new(), Vec::new(), Vec::new());
         for (i, name) in POLICIES.iter().enumerate() {
             let r = self.run_policy(lp.map, &self.loop_blend(lp, mode(i), lp.lambda), x0)?;
             // α over time of LBC and of the fixed-weight average (the sum's α is the raw
             // weights, not a distribution).
             if matches!(mode(i), BlendMode::Lbc | BlendMode::Naive) {
-                push_entropy(
-                    &mut entropy_t,
+                entropy_t.extend(entropy_rows(
                     "test start",
                     name,
                     self.dt,
                     &r.entropy,
                     &r.alpha_deviation,
-                );
+                ));
             }
             let xn = &r.xs[r.xs.len() - 1];
-            fin.push(row![
-                *name,
-                r.final_distance(),
-                r.control_cost,
-                xn[0],
-                xn[1],
-                r.max_abs_torque(),
-                r.mean_entropy()
-            ]);
+            fin.push(FinalRow {
+                policy: name.to_string(),
+                final_distance: r.final_distance(),
+                control_cost: r.control_cost,
+                final_theta1_rad: xn[0],
+                final_theta2_rad: xn[1],
+                max_abs_torque_n_m: r.max_abs_torque(),
+                mean_entropy: r.mean_entropy(),
+            });
             for (k, x) in r.xs.iter().enumerate() {
                 let (u, a, h) = if k < r.us.len() {
                     (r.us[k], r.alpha1[k], r.entropy[k])
                 } else {
                     (f64::NAN, f64::NAN, f64::NAN)
                 };
-                traj.push(row![
-                    *name,
-                    k as f64 * self.dt,
-                    x[0],
-                    x[1],
-                    x[2],
-                    x[3],
-                    u,
-                    a,
-                    h
-                ]);
+                traj.push(TrajectoryRow {
+                    policy: name.to_string(),
+                    t_s: k as f64 * self.dt,
+                    theta1_rad: x[0],
+                    theta2_rad: x[1],
+                    omega1_rad_s: x[2],
+                    omega2_rad_s: x[3],
+                    u_n_m: u,
+                    alpha1: a,
+                    alpha_entropy: h,
+                });
             }
         }
         Ok(TestStartTables {
@@ -425,9 +392,9 @@ impl Params {
         ctx: &RunContext,
         lp: &ClosedLoop,
         grid: &[(f64, f64)],
-    ) -> Result<Vec<SweepRow>, Error> {
+    ) -> Result<Vec<StartOutcomes>, Error> {
         let pb = ctx.progress(grid.len() as u64, "start-state sweep");
-        let rows: Vec<Result<SweepRow, Error>> = ctx.stage("sweep", || {
+        let rows: Vec<Result<StartOutcomes, Error>> = ctx.stage("sweep", || {
             grid.par_iter()
                 .map(|&(a, b)| {
                     let x0 = radians(&[a, b, 0.0, 0.0]);
@@ -465,7 +432,7 @@ impl Params {
                         None => Vec::new(),
                     };
                     pb.inc(1);
-                    Ok(SweepRow {
+                    Ok(StartOutcomes {
                         policies,
                         lambdas,
                         others,
@@ -478,33 +445,32 @@ impl Params {
     }
 
     /// `sweep` (every policy per start) and `value_model` (both value models per start).
-    fn sweep_tables(&self, grid: &[(f64, f64)], rows: &[SweepRow]) -> SweepTables {
-        let mut sweep = Table::new(&[
-            "theta1_deg",
-            "theta2_deg",
-            "policy",
-            "final_distance",
-            "control_cost",
-            "success",
-            "max_abs_torque",
-            "mean_entropy",
-        ]);
-        let mut models = Table::new(&[
-            "value_model",
-            "theta1_deg",
-            "theta2_deg",
-            "policy",
-            "final_distance",
-            "success",
-        ]);
+    fn sweep_tables(&self, grid: &[(f64, f64)], rows: &[StartOutcomes]) -> SweepTables {
+        let (mut sweep, mut models) = (Vec::new(), Vec::new());
         for (&(a, b), row) in grid.iter().zip(rows) {
             let (r, o) = (&row.policies, &row.others);
             for (name, &(d, c, m, h)) in POLICIES.iter().zip(r) {
-                sweep.push(row![a, b, *name, d, c, self.reaches(d) as i64, m, h]);
+                sweep.push(SweepRow {
+                    theta1_deg: a,
+                    theta2_deg: b,
+                    policy: name.to_string(),
+                    final_distance: d,
+                    control_cost: c,
+                    success: self.reaches(d) as i64,
+                    max_abs_torque_n_m: m,
+                    mean_entropy: h,
+                });
             }
             for (model, outs) in [(self.value_model.as_str(), r), (self.other_model(), o)] {
                 for (name, &(d, ..)) in POLICIES.iter().zip(outs) {
-                    models.push(row![model, a, b, *name, d, self.reaches(d) as i64]);
+                    models.push(ValueModelRow {
+                        value_model: model.to_string(),
+                        theta1_deg: a,
+                        theta2_deg: b,
+                        policy: name.to_string(),
+                        final_distance: d,
+                        success: self.reaches(d) as i64,
+                    });
                 }
             }
         }
@@ -517,23 +483,15 @@ impl Params {
         &self,
         lp: &ClosedLoop,
         grid: &[(f64, f64)],
-        rows: &[SweepRow],
-    ) -> Result<Table, Error> {
+        rows: &[StartOutcomes],
+    ) -> Result<Vec<ShowcaseRow>, Error> {
         let ok = |d: f64| self.reaches(d);
         let rescued = rows.iter().position(|row| {
             let r = &row.policies;
             !ok(r[0].0) && !ok(r[1].0) && ok(r[mode_index(BlendMode::Lbc)].0)
         });
         let show = rescued.map_or(self.test_start, |i| [grid[i].0, grid[i].1, 0.0, 0.0]);
-        let mut showcase = Table::new(&[
-            "policy",
-            "theta1_deg",
-            "theta2_deg",
-            "rescued",
-            "t",
-            "theta1",
-            "theta2",
-        ]);
+        let mut showcase = Vec::new();
         for i in [0, 1, mode_index(BlendMode::Lbc)] {
             let r = self.run_policy(
                 lp.map,
@@ -541,15 +499,15 @@ impl Params {
                 &radians(&show),
             )?;
             for (k, x) in r.xs.iter().enumerate() {
-                showcase.push(row![
-                    POLICIES[i],
-                    show[0],
-                    show[1],
-                    rescued.is_some() as i64,
-                    k as f64 * self.dt,
-                    x[0],
-                    x[1]
-                ]);
+                showcase.push(ShowcaseRow {
+                    policy: POLICIES[i].to_string(),
+                    theta1_deg: show[0],
+                    theta2_deg: show[1],
+                    rescued: rescued.is_some() as i64,
+                    t_s: k as f64 * self.dt,
+                    theta1_rad: x[0],
+                    theta2_rad: x[1],
+                });
             }
         }
         Ok(showcase)
@@ -561,18 +519,10 @@ impl Params {
         &self,
         lp: &ClosedLoop,
         x0: &DVector<f64>,
-        rows: &[SweepRow],
-    ) -> Result<Table, Error> {
+        rows: &[StartOutcomes],
+    ) -> Result<Vec<LambdaRow>, Error> {
         let ok = |d: f64| self.reaches(d);
-        let mut lam = Table::new(&[
-            "lambda",
-            "test_final_distance",
-            "test_mean_entropy",
-            "sweep_successes",
-            "both_fail_successes",
-            "both_fail_starts",
-            "sweep_mean_entropy",
-        ]);
+        let mut lam = Vec::new();
         for (li, &l) in self.lambda_sweep.iter().enumerate() {
             let r = self.run_policy(lp.map, &self.loop_blend(lp, BlendMode::Lbc, l), x0)?;
             let flags: Vec<Vec<bool>> = rows
@@ -584,27 +534,16 @@ impl Params {
                 .collect();
             let c = sweep_counts(&flags);
             let h: f64 = rows.iter().map(|row| row.lambdas[li].3).sum::<f64>() / rows.len() as f64;
-            lam.push(row![
-                l,
-                r.final_distance(),
-                r.mean_entropy(),
-                c.successes[2],
-                c.rescued[2],
-                c.both_fail,
-                h
-            ]);
+            lam.push(LambdaRow {
+                lambda: l,
+                test_final_distance: r.final_distance(),
+                test_mean_entropy: r.mean_entropy(),
+                sweep_successes: c.successes[2] as i64,
+                both_fail_successes: c.rescued[2] as i64,
+                both_fail_starts: c.both_fail as i64,
+                sweep_mean_entropy: h,
+            });
         }
         Ok(lam)
     }
 }
-
-/// Columns of `tracker_scales.csv`: per tracker weight scale tried and policy, the final
-/// distance to the handstand from the test start; `each_tracker_fails` (both trackers' rows
-/// not below the success distance) and `chosen` (the scale the run uses) repeat per scale.
-pub(super) const SCALE_COLUMNS: [&str; 5] = [
-    "tracker_weight_scale",
-    "policy",
-    "final_distance",
-    "each_tracker_fails",
-    "chosen",
-];

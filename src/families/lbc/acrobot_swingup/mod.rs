@@ -31,11 +31,12 @@
 //! theta2: tracker 1, tracker 2 and LBC from the first sweep start LBC rescues, for the GIF).
 //!
 //! Here: the parameters and their validation; `setup` (swing-ups, trackers, rollouts), `job`,
-//! `verdict`, `figures` and `report` hold the rest.
+//! `rows` (the row of each table read back), `verdict`, `figures` and `report` hold the rest.
 
 mod figures;
 mod job;
 mod report;
+mod rows;
 mod setup;
 mod verdict;
 

@@ -1,16 +1,17 @@
 //! The report section, read back from the CSVs: swing-ups, the test start, the sweeps, the
 //! value models and the verdict.
 
+use super::rows::{FinalRow, LambdaRow, ScaleRow, SweepRow, SwingupRow, ValueModelRow};
 use super::setup::POLICIES;
 use super::verdict::{
     premise_checks, start_flags, sweep_checks, sweep_counts, sweep_rule, SweepCounts,
 };
 use super::{CONTROL_WEIGHT, VALUE_MODELS};
-use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings, Verdict};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
-use crate::families::lbc::{entropy_section, rule_settings};
+use crate::families::lbc::{entropy_section, read_sweep_rows, rule_settings};
 use std::path::Path;
 
 /// The report section: swing-ups, test start, sweeps, value models and the verdict.
@@ -101,34 +102,23 @@ fn swingups_section(dir: &Path, setting: &impl Fn(&str) -> f64) -> Result<Swingu
         setting("max_cost_ratio"),
     );
     // Swing-ups and their family.
-    let su = read_csv(&dir.join("swingups.csv"))?;
-    let (s1, s2, sc, sg, ss, st, sr, sx, sf) = (
-        df_f64(&su, "theta1_deg")?,
-        df_f64(&su, "theta2_deg")?,
-        df_f64(&su, "cost")?,
-        df_str(&su, "guess")?,
-        df_f64(&su, "first_swing_sign")?,
-        df_f64(&su, "first_torque_sign")?,
-        df_f64(&su, "cost_ratio")?,
-        df_f64(&su, "tape_correlation")?,
-        df_f64(&su, "same_family")?,
-    );
-    let same_family = sf.iter().all(|&f| f == 1.0);
+    let swingups: Vec<SwingupRow> = read_rows(&dir.join("swingups.csv"))?;
+    let same_family = swingups.iter().all(|r| r.same_family == 1);
     let mut md = format!(
         "Hip torque limit {} N·m (DDP box constraint and every closed loop); λ = σ²R = {} from hip-torque noise σ = {} N·m·√s with R = {CONTROL_WEIGHT}. Success: final distance to the handstand below {}.\n\nSwing-ups (each solved from every initial guess and warm-started from the other; kept: the cheapest pair of one family, same first swing):\n\n| start (deg) | cost | kept run | first swing | first torque lobe | cost ratio | tape correlation with 1 |\n| --- | --- | --- | --- | --- | --- | --- |\n",
         sig(limit), sig(lambda), sig(sigma), sig(success_distance)
     );
-    for i in 0..sc.len() {
+    for r in &swingups {
         md.push_str(&format!(
             "| ({}, {}) | {} | {} | {:+} | {:+} | {} | {} |\n",
-            s1[i],
-            s2[i],
-            sig(sc[i]),
-            sg[i],
-            ss[i],
-            st[i],
-            sig(sr[i]),
-            sig(sx[i])
+            r.theta1_deg,
+            r.theta2_deg,
+            sig(r.cost),
+            r.guess,
+            r.first_swing_sign,
+            r.first_torque_sign,
+            sig(r.cost_ratio),
+            sig(r.tape_correlation)
         ));
     }
     md.push_str(&format!(
@@ -151,30 +141,27 @@ struct TestStartSection {
 fn test_start_section(dir: &Path, success_distance: f64) -> Result<TestStartSection, Error> {
     let mut md = String::new();
     // Test start.
-    let df = read_csv(&dir.join("final.csv"))?;
-    let (p, d, c, mt, me) = (
-        df_str(&df, "policy")?,
-        df_f64(&df, "final_distance")?,
-        df_f64(&df, "control_cost")?,
-        df_f64(&df, "max_abs_torque")?,
-        df_f64(&df, "mean_entropy")?,
-    );
+    let fin: Vec<FinalRow> = read_rows(&dir.join("final.csv"))?;
     md.push_str("\nFrom the test start (-105, -15, 0, 0) degrees:\n\n| policy | final distance to handstand | control cost ½∫u² | max abs torque | mean entropy of alpha |\n| --- | --- | --- | --- | --- |\n");
-    for i in 0..p.len() {
+    for r in &fin {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} |\n",
-            p[i],
-            sig(d[i]),
-            sig(c[i]),
-            sig(mt[i]),
-            if p[i] == "lbc" {
-                sig(me[i])
+            r.policy,
+            sig(r.final_distance),
+            sig(r.control_cost),
+            sig(r.max_abs_torque_n_m),
+            if r.policy == "lbc" {
+                sig(r.mean_entropy)
             } else {
                 "-".into()
             }
         ));
     }
-    let at = |name: &str| p.iter().position(|q| q == name).map_or(f64::NAN, |i| d[i]);
+    let at = |name: &str| {
+        fin.iter()
+            .find(|r| r.policy == name)
+            .map_or(f64::NAN, |r| r.final_distance)
+    };
     let (d1, d2) = (at("tracker1"), at("tracker2"));
     md.push_str(&if d1 >= success_distance && d2 >= success_distance {
         "\nAt the test start both trackers fail, as in the paper.\n".to_string()
@@ -204,14 +191,15 @@ struct SweepSection {
 fn sweep_section(dir: &Path) -> Result<SweepSection, Error> {
     let mut md = String::new();
     // Sweep: per start, success flags in POLICIES order.
-    let sw = read_csv(&dir.join("sweep.csv"))?;
-    let (wa, wb, wp, ws) = (
-        df_f64(&sw, "theta1_deg")?,
-        df_f64(&sw, "theta2_deg")?,
-        df_str(&sw, "policy")?,
-        df_f64(&sw, "success")?,
-    );
-    let counts = sweep_counts(&start_flags(&wa, &wb, &wp, &ws));
+    let sweep: Vec<SweepRow> = read_rows(&dir.join("sweep.csv"))?;
+    let counts = sweep_counts(&start_flags(sweep.iter().map(|r| {
+        (
+            r.theta1_deg,
+            r.theta2_deg,
+            r.policy.as_str(),
+            r.success == 1,
+        )
+    })));
     md.push_str(&format!(
         "\nStart-state sweep ({} starts; both trackers fail on {}):\n\n| policy | successes | successes where both trackers fail |\n| --- | --- | --- |\n",
         counts.starts, counts.both_fail
@@ -222,27 +210,18 @@ fn sweep_section(dir: &Path) -> Result<SweepSection, Error> {
             name, counts.successes[i], counts.rescued[i]
         ));
     }
-    let ls = read_csv(&dir.join("lambda_sweep.csv"))?;
-    let (ll, ld, lh, lsu, lre, lnf, lsh) = (
-        df_f64(&ls, "lambda")?,
-        df_f64(&ls, "test_final_distance")?,
-        df_f64(&ls, "test_mean_entropy")?,
-        df_f64(&ls, "sweep_successes")?,
-        df_f64(&ls, "both_fail_successes")?,
-        df_f64(&ls, "both_fail_starts")?,
-        df_f64(&ls, "sweep_mean_entropy")?,
-    );
+    let lambdas: Vec<LambdaRow> = read_sweep_rows(&dir.join("lambda_sweep.csv"), &[])?;
     md.push_str("\nLBC over λ (entropy of α normalized to [0, 1]; 0 is a switch, 1 the uniform naive average):\n\n| λ | test-start distance | test-start mean entropy | sweep successes | where both trackers fail | sweep mean entropy |\n| --- | --- | --- | --- | --- | --- |\n");
-    for i in 0..ll.len() {
+    for r in &lambdas {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} of {} | {} |\n",
-            sig(ll[i]),
-            sig(ld[i]),
-            sig(lh[i]),
-            lsu[i],
-            lre[i],
-            lnf[i],
-            sig(lsh[i])
+            sig(r.lambda),
+            sig(r.test_final_distance),
+            sig(r.test_mean_entropy),
+            r.sweep_successes,
+            r.both_fail_successes,
+            r.both_fail_starts,
+            sig(r.sweep_mean_entropy)
         ));
     }
     Ok(SweepSection { md, counts })
@@ -258,30 +237,28 @@ fn value_models_section(
     let (held_fraction, partly_fraction) = (setting("held_fraction"), setting("partly_fraction"));
     let mut md = String::new();
     // The value models over the same sweep, judged by the same rule (not the verdict).
-    let vm = read_csv(&dir.join("value_model.csv"))?;
-    let (vn, va, vb, vp, vs) = (
-        df_str(&vm, "value_model")?,
-        df_f64(&vm, "theta1_deg")?,
-        df_f64(&vm, "theta2_deg")?,
-        df_str(&vm, "policy")?,
-        df_f64(&vm, "success")?,
-    );
+    let models: Vec<ValueModelRow> = read_rows(&dir.join("value_model.csv"))?;
     let chosen = VALUE_MODELS[(setting("value_model_ddp") == 1.0) as usize];
     md.push_str(&format!(
         "\nValue models (the verdict uses `{chosen}`; `lqr`: the LQR recursion, first-order dynamics; `ddp`: DDP's backward pass with the second-order dynamics terms, LBC §5.2), the same rule over the same sweep:\n\n| value model | both trackers fail on | LBC succeeds there | naive average / sum there | LBC successes, all starts | better tracker | rule's grade |\n| --- | --- | --- | --- | --- | --- | --- |\n"
     ));
     let mut per_model = Vec::new();
     for name in VALUE_MODELS {
-        let rows: Vec<usize> = (0..vn.len()).filter(|&r| vn[r] == name).collect();
+        let rows: Vec<&ValueModelRow> = models.iter().filter(|r| r.value_model == name).collect();
         if rows.is_empty() {
             md.push_str(&format!(
                 "| {name} | not built (Q_uu not positive definite) | - | - | - | - | - |\n"
             ));
             continue;
         }
-        let pick = |v: &[f64]| rows.iter().map(|&r| v[r]).collect::<Vec<_>>();
-        let names: Vec<String> = rows.iter().map(|&r| vp[r].clone()).collect();
-        let c = sweep_counts(&start_flags(&pick(&va), &pick(&vb), &names, &pick(&vs)));
+        let c = sweep_counts(&start_flags(rows.iter().map(|r| {
+            (
+                r.theta1_deg,
+                r.theta2_deg,
+                r.policy.as_str(),
+                r.success == 1,
+            )
+        })));
         let grade = sweep_rule(&c, same_family, held_fraction, partly_fraction)
             .map_or(Verdict::NotAssessed, |r| r.verdict());
         md.push_str(&format!(
@@ -327,13 +304,7 @@ fn scales_table(dir: &Path, chosen: f64, success: f64) -> Result<String, Error> 
     if !path.exists() {
         return Ok(String::new());
     }
-    let df = read_csv(&path)?;
-    let (sc, p, d, f) = (
-        df_f64(&df, "tracker_weight_scale")?,
-        df_str(&df, "policy")?,
-        df_f64(&df, "final_distance")?,
-        df_f64(&df, "each_tracker_fails")?,
-    );
+    let rows: Vec<ScaleRow> = read_rows(&path)?;
     let mut md = format!(
         "\nTracker setting (rule fixed in the spec before the run: the first scale of the trackers' LQR terminal weights, in the listed order, at which each tracker alone ends at least {} from the handstand from the test start; the swing-ups keep their weights). Final distance from the test start per scale:\n\n| scale | {} | each tracker fails |\n| --- |{} --- |\n",
         sig(success),
@@ -341,21 +312,22 @@ fn scales_table(dir: &Path, chosen: f64, success: f64) -> Result<String, Error> 
         " --- |".repeat(POLICIES.len())
     );
     let mut scales: Vec<f64> = Vec::new();
-    for &x in &sc {
-        if !scales.contains(&x) {
-            scales.push(x);
+    for r in &rows {
+        if !scales.contains(&r.tracker_weight_scale) {
+            scales.push(r.tracker_weight_scale);
         }
     }
     for &x in &scales {
+        let at_x = || rows.iter().filter(move |r| r.tracker_weight_scale == x);
         let cells: Vec<String> = POLICIES
             .iter()
             .map(|name| {
-                (0..sc.len())
-                    .find(|&r| sc[r] == x && p[r] == *name)
-                    .map_or("–".into(), |r| sig(d[r]))
+                at_x()
+                    .find(|r| r.policy == *name)
+                    .map_or("–".into(), |r| sig(r.final_distance))
             })
             .collect();
-        let fails = (0..sc.len()).any(|r| sc[r] == x && f[r] == 1.0);
+        let fails = at_x().any(|r| r.each_tracker_fails == 1);
         md.push_str(&format!(
             "| {} | {} | {} |\n",
             sig(x),
@@ -363,7 +335,7 @@ fn scales_table(dir: &Path, chosen: f64, success: f64) -> Result<String, Error> 
             if fails { "yes" } else { "no" }
         ));
     }
-    let found = (0..sc.len()).any(|r| f[r] == 1.0);
+    let found = rows.iter().any(|r| r.each_tracker_fails == 1);
     md.push_str(&if found {
         format!(
             "\nChosen: scale {} (the tables above and below use it).\n",

@@ -136,11 +136,13 @@ pub fn judge_test_start(lbc: f64, naive: f64, sum: f64, success: f64) -> bool {
 
 /// Per-start success flags (in `POLICIES` order) of a long table's rows `(θ1, θ2, policy,
 /// success)`, starts in order of first appearance.
-pub(super) fn start_flags(a: &[f64], b: &[f64], p: &[String], s: &[f64]) -> Vec<Vec<bool>> {
+pub(super) fn start_flags<'a>(
+    rows: impl IntoIterator<Item = (f64, f64, &'a str, bool)>,
+) -> Vec<Vec<bool>> {
     let mut starts: Vec<(f64, f64)> = Vec::new();
     let mut flags: Vec<Vec<bool>> = Vec::new();
-    for r in 0..a.len() {
-        let key = (a[r], b[r]);
+    for (a, b, p, s) in rows {
+        let key = (a, b);
         let i = match starts.iter().position(|&k| k == key) {
             Some(i) => i,
             None => {
@@ -149,8 +151,8 @@ pub(super) fn start_flags(a: &[f64], b: &[f64], p: &[String], s: &[f64]) -> Vec<
                 starts.len() - 1
             }
         };
-        if let Some(pi) = POLICIES.iter().position(|&q| q == p[r]) {
-            flags[i][pi] = s[r] == 1.0;
+        if let Some(pi) = POLICIES.iter().position(|&q| q == p) {
+            flags[i][pi] = s;
         }
     }
     flags

@@ -1,7 +1,9 @@
 //! The figure: blend weights, tug forces and poses over time (Fig. 9).
 
+use super::job::WeightRow;
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use crate::families::lbc::rule_setting;
 use std::f64::consts::FRAC_PI_2;
@@ -9,27 +11,16 @@ use std::path::PathBuf;
 
 /// Fig. 9: the blend weights under the tugs (scripted, mirrored, none), the forces and the poses.
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let w = tables.require("weights")?;
-    let (t, a, f, hx) = (
-        w.f64s("t"),
-        w.f64s("alpha_forward"),
-        w.f64s("force_x"),
-        w.f64s("hand_x"),
-    );
-    let (am, ab) = (
-        w.f64s("alpha_forward_mirrored"),
-        w.f64s("alpha_forward_baseline"),
-    );
+    let w = WeightRow::from_table(tables.require("weights")?);
+    // One quantity over time.
+    let over_t =
+        |f: fn(&WeightRow) -> f64| -> Vec<(f64, f64)> { w.iter().map(|r| (r.t_s, f(r))).collect() };
     let (t0, t1) = (
-        t.first().copied().unwrap_or(0.0),
-        t.last().copied().unwrap_or(1.0),
+        w.first().map_or(0.0, |r| r.t_s),
+        w.last().map_or(1.0, |r| r.t_s),
     );
     // The walls the reaches end on, in the hand's frame (x = ± the wall distance).
-    let mut hand = vec![Series::line(
-        "hand x",
-        t.iter().zip(&hx).map(|(&x, &y)| (x, y)).collect(),
-        2,
-    )];
+    let mut hand = vec![Series::line("hand x", over_t(|r| r.hand_x_m), 2)];
     if let Some(d) = rule_setting(tables, "walls_distance") {
         for (sgn, label) in [(1.0, "walls (the hand's reach stops there)"), (-1.0, "")] {
             hand.push(
@@ -44,20 +35,16 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             x_label: "time (s)".into(),
             y_label: "weight".into(),
             series: vec![
-                Series::line(
-                    "alpha forward reach",
-                    t.iter().zip(&a).map(|(&x, &y)| (x, y)).collect(),
-                    0,
-                ),
+                Series::line("alpha forward reach", over_t(|r| r.alpha_forward), 0),
                 Series::line(
                     "alpha forward, mirrored tugs",
-                    t.iter().zip(&am).map(|(&x, &y)| (x, y)).collect(),
+                    over_t(|r| r.alpha_forward_mirrored),
                     1,
                 )
                 .mark(Mark::Dashed),
                 Series::line(
                     "alpha forward, no tugs",
-                    t.iter().zip(&ab).map(|(&x, &y)| (x, y)).collect(),
+                    over_t(|r| r.alpha_forward_baseline),
                     7,
                 )
                 .mark(Mark::Dashed),
@@ -71,7 +58,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             y_label: "tug force (N, + pulls forward)".into(),
             series: vec![Series::line(
                 "tug force, as scripted",
-                t.iter().zip(&f).map(|(&x, &y)| (x, y)).collect(),
+                over_t(|r| r.force_x_n),
                 3,
             )],
             ..Default::default()
@@ -85,29 +72,19 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         },
     ];
     // The body's lean (+ forward) with LBC and with no reach, and the fall angle.
-    let lean = |b: &[f64]| -> Vec<(f64, f64)> {
-        t.iter().zip(b).map(|(&x, &y)| (x, FRAC_PI_2 - y)).collect()
+    let lean = |f: fn(&WeightRow) -> f64| -> Vec<(f64, f64)> {
+        w.iter().map(|r| (r.t_s, FRAC_PI_2 - f(r))).collect()
     };
-    let mut series = vec![Series::line(
-        "LBC, tugs as scripted",
-        lean(&w.f64s("body_angle")),
-        0,
-    )];
-    series.push(
+    let mut series = vec![
+        Series::line("LBC, tugs as scripted", lean(|r| r.body_angle_rad), 0),
+        Series::line("LBC, mirrored tugs", lean(|r| r.body_angle_mirrored_rad), 1)
+            .mark(Mark::Dashed),
         Series::line(
-            "LBC, mirrored tugs",
-            lean(&w.f64s("body_angle_mirrored")),
-            1,
-        )
-        .mark(Mark::Dashed),
-    );
-    if w.column("body_angle_no_reach").is_some() {
-        series.push(Series::line(
             "no reach (arm held), tugs as scripted",
-            lean(&w.f64s("body_angle_no_reach")),
+            lean(|r| r.body_angle_no_reach_rad),
             3,
-        ));
-    }
+        ),
+    ];
     if let Some(fall) = rule_setting(tables, "fall_angle") {
         for (sgn, label) in [(1.0, "fall angle"), (-1.0, "")] {
             series.push(

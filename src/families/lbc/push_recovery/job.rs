@@ -7,16 +7,102 @@ use crate::bellman::combine::{normalized_entropy, BlendMode, TrackerBlend};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, Termination};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
-use crate::experiment::output::{Table, Tables};
+use crate::experiment::output::Tables;
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::families::lbc::{alpha_deviation, push_entropy, rule_table, ENTROPY_COLUMNS};
+use crate::families::lbc::{alpha_deviation, entropy_rows, rule_table};
 use crate::physics::integrate::Integrator;
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::push::{push_figure, PushScene};
 use crate::physics::IntegratorKind;
-use crate::row;
 use nalgebra::{DMatrix, DVector};
 use std::f64::consts::{FRAC_PI_2, PI};
+
+crate::result_rows! {
+    /// One row of `weights.csv`: one control step of the closed loops (LBC under the tugs as
+    /// scripted, mirrored and none; the premise's run without a reach). Angles in rad, the
+    /// body's from the floor (π/2 upright), the arm's absolute.
+    pub struct WeightRow {
+        /// Time (s).
+        t_s: f64 = "t",
+        /// LBC's weight of the forward reach under the scripted tugs.
+        alpha_forward: f64 = "alpha_forward",
+        /// Its weight of the backward reach there.
+        alpha_backward: f64 = "alpha_backward",
+        /// The scripted tug force on the hand (N, + pulls forward).
+        force_x_n: f64 = "force_x",
+        /// Body angle under the scripted tugs.
+        body_angle_rad: f64 = "body_angle",
+        /// Absolute arm angle under the scripted tugs.
+        arm_angle_rad: f64 = "arm_angle",
+        /// Hand x under the scripted tugs (m, + forward).
+        hand_x_m: f64 = "hand_x",
+        /// The forward weight under the mirrored tugs.
+        alpha_forward_mirrored: f64 = "alpha_forward_mirrored",
+        /// The forward weight without tugs.
+        alpha_forward_baseline: f64 = "alpha_forward_baseline",
+        /// Body angle under the mirrored tugs.
+        body_angle_mirrored_rad: f64 = "body_angle_mirrored",
+        /// The walls' force on the hand under the scripted tugs (N).
+        wall_force_n: f64 = "wall_force",
+        /// Body angle without a reach (arm held), under the scripted tugs.
+        body_angle_no_reach_rad: f64 = "body_angle_no_reach",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `reaches.csv`: one optimized reach (DDP).
+    pub struct ReachRow {
+        /// `forward` or `backward`.
+        reach: String = "reach",
+        /// DDP iterations.
+        iterations: i64 = "iterations",
+        /// DDP's cost.
+        cost: f64 = "cost",
+        /// Distance of the final state from the hold pose (state-space norm).
+        final_error: f64 = "final_error",
+        /// Why DDP stopped.
+        termination: String = "termination",
+        /// DDP's final gradient norm.
+        gradient_norm: f64 = "gradient_norm",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `reach_scales.csv`: one scale of the reaches' state weights tried.
+    pub struct ReachScaleRow {
+        /// The scale.
+        reach_scale: f64 = "reach_scale",
+        /// Either reach's largest weight under LBC, first tug alone, before the second tug
+        /// (NaN: a reach that did not converge at this scale).
+        max_weight_before_second_tug: f64 = "max_weight_before_second_tug",
+        /// 1 when that weight is not below the commitment threshold, else 0.
+        committed: i64 = "committed",
+        /// 1 for the scale the run uses, else 0.
+        chosen: i64 = "chosen",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `lambda_sweep.csv`: the verdict's measures at one temperature (not judged).
+    pub struct LambdaRow {
+        /// The temperature λ.
+        lambda: f64 = "lambda",
+        /// Side-to-side swings of the forward weight before the settling window.
+        swings: i64 = "swings",
+        /// Largest gap of the tugged forward weight to the no-tug baseline's over the window.
+        settle_gap: f64 = "settle_gap",
+        /// Largest |α_forward(tugs) − α_backward(mirrored tugs)|.
+        mirror_gap: f64 = "mirror_gap",
+        /// Mean normalized entropy of α under the tugs.
+        mean_entropy: f64 = "mean_entropy",
+        /// Largest lean from upright (rad), scripted and mirrored tugs.
+        max_lean_rad: f64 = "max_lean",
+        /// Range of the tugged forward weight over the window (NaN in older results, which
+        /// lack the column).
+        settle_range: f64 = "settle_range",
+    }
+}
 
 impl Params {
     /// These parameters with the reaches' state weights (terminal and hold) × `scale`, and no
@@ -118,19 +204,12 @@ impl Params {
     }
 
     /// The forward and backward reaches (DDP, then LQR), with their table rows.
-    pub(super) fn reaches(&self) -> Result<(Vec<TrackingController>, Table), Error> {
+    pub(super) fn reaches(&self) -> Result<(Vec<TrackingController>, Vec<ReachRow>), Error> {
         let mut torque_only = push_figure();
         torque_only.forces.clear();
         let map = Rk4Map::new(FiniteDifference::new(torque_only), self.dt).map_err(other)?;
         let x0 = self.start();
-        let mut reaches = Table::new(&[
-            "reach",
-            "iterations",
-            "cost",
-            "final_error",
-            "termination",
-            "gradient_norm",
-        ]);
+        let mut reaches = Vec::new();
         let mut trackers = Vec::new();
         for (name, fwd) in [("forward", true), ("backward", false)] {
             let cost = self.cost(fwd);
@@ -147,14 +226,14 @@ impl Params {
                 )));
             }
             let err = (&sol.x[sol.u.len()] - &cost.x_final).norm();
-            reaches.push(row![
-                name,
-                sol.trace.len(),
-                sol.cost,
-                err,
-                format!("{:?}", sol.termination),
-                sol.gradient_norm
-            ]);
+            reaches.push(ReachRow {
+                reach: name.to_string(),
+                iterations: sol.trace.len() as i64,
+                cost: sol.cost,
+                final_error: err,
+                termination: format!("{:?}", sol.termination),
+                gradient_norm: sol.gradient_norm,
+            });
             trackers.push(track(&map, &cost, &sol.x, &sol.u).map_err(other)?);
         }
         Ok((trackers, reaches))
@@ -279,20 +358,16 @@ impl Job for Params {
         // not committed before the second tug; every table below uses it.
         let (trials, pick) = ctx.stage("reach scales", || self.reach_scale_trials())?;
         let scale = trials[pick.unwrap_or(0)].0;
-        let mut scales_t = Table::new(&[
-            "reach_scale",
-            "max_weight_before_second_tug",
-            "committed",
-            "chosen",
-        ]);
-        for (i, &(s, w)) in trials.iter().enumerate() {
-            scales_t.push(row![
-                s,
-                w,
-                !(w < COMMITTED) as i64,
-                (pick == Some(i)) as i64
-            ]);
-        }
+        let scales_t: Vec<ReachScaleRow> = trials
+            .iter()
+            .enumerate()
+            .map(|(i, &(s, w))| ReachScaleRow {
+                reach_scale: s,
+                max_weight_before_second_tug: w,
+                committed: !(w < COMMITTED) as i64,
+                chosen: (pick == Some(i)) as i64,
+            })
+            .collect();
         let scaled = self.scaled(scale);
         scaled.judge(ctx, scales_t, scale, pick.is_some())
     }
@@ -304,7 +379,7 @@ impl Params {
     fn judge(
         &self,
         ctx: &RunContext,
-        scales_t: Table,
+        scales_t: Vec<ReachScaleRow>,
         scale: f64,
         found: bool,
     ) -> Result<Tables, Error> {
@@ -317,7 +392,7 @@ impl Params {
             ))
         })?;
         // α's entropy over time of the three LBC runs (w = (1, 1): ŵ = (1/2, 1/2)).
-        let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
+        let mut entropy_t = Vec::new();
         for (run, r) in [
             ("tugged", &tugged),
             ("mirrored", &mirrored),
@@ -328,52 +403,31 @@ impl Params {
                 .iter()
                 .map(|v| alpha_deviation(&v[..2], &[1.0, 1.0]))
                 .collect();
-            push_entropy(&mut entropy_t, run, "lbc", self.dt, &h, &d);
+            entropy_t.extend(entropy_rows(run, "lbc", self.dt, &h, &d));
         }
-        let mut table = Table::new(&[
-            "t",
-            "alpha_forward",
-            "alpha_backward",
-            "force_x",
-            "body_angle",
-            "arm_angle",
-            "hand_x",
-            "alpha_forward_mirrored",
-            "alpha_forward_baseline",
-            "body_angle_mirrored",
-            "wall_force",
-            "body_angle_no_reach",
-        ]);
+        let mut table = Vec::new();
         // The premise's runs (no reach), as scripted and mirrored.
         let no_reach = ctx.stage("no reach", || -> Result<_, Error> {
             Ok([self.no_reach(1.0)?, self.no_reach(-1.0)?])
         })?;
         for (k, ((a, m), b)) in tugged.iter().zip(&mirrored).zip(&baseline).enumerate() {
-            table.push(row![
-                k as f64 * self.dt,
-                a[0],
-                a[1],
-                a[2],
-                a[3],
-                a[4],
-                a[5],
-                m[0],
-                b[0],
-                m[3],
-                a[6],
-                no_reach[0][k]
-            ]);
+            table.push(WeightRow {
+                t_s: k as f64 * self.dt,
+                alpha_forward: a[0],
+                alpha_backward: a[1],
+                force_x_n: a[2],
+                body_angle_rad: a[3],
+                arm_angle_rad: a[4],
+                hand_x_m: a[5],
+                alpha_forward_mirrored: m[0],
+                alpha_forward_baseline: b[0],
+                body_angle_mirrored_rad: m[3],
+                wall_force_n: a[6],
+                body_angle_no_reach_rad: no_reach[0][k],
+            });
         }
         // The same checks at each swept λ (not judged).
-        let mut lam = Table::new(&[
-            "lambda",
-            "swings",
-            "settle_gap",
-            "mirror_gap",
-            "mean_entropy",
-            "max_lean",
-            "settle_range",
-        ]);
+        let mut lam = Vec::new();
         ctx.stage("lambda sweep", || -> Result<(), Error> {
             for &l in &self.lambda_sweep {
                 let runs = [1.0, -1.0, 0.0]
@@ -392,15 +446,15 @@ impl Params {
                     .iter()
                     .flat_map(|r| r.iter().map(|v| (v[3] - FRAC_PI_2).abs()))
                     .fold(0.0, f64::max);
-                lam.push(row![
-                    l,
-                    swings(&t, &a, self.settle_window[0]) as i64,
-                    window_gap(&t, &a, &col(&runs[2], 0), self.settle_window),
-                    mirror_gap(&a, &col(&runs[1], 0)),
-                    h,
-                    lean,
-                    window_range(&t, &a, self.settle_window)
-                ]);
+                lam.push(LambdaRow {
+                    lambda: l,
+                    swings: swings(&t, &a, self.settle_window[0]) as i64,
+                    settle_gap: window_gap(&t, &a, &col(&runs[2], 0), self.settle_window),
+                    mirror_gap: mirror_gap(&a, &col(&runs[1], 0)),
+                    mean_entropy: h,
+                    max_lean_rad: lean,
+                    settle_range: window_range(&t, &a, self.settle_window),
+                });
             }
             Ok(())
         })?;
@@ -421,11 +475,11 @@ impl Params {
             ("reach_premise_found", found as u8 as f64),
         ]);
         Ok(Tables::from([
-            ("weights", table),
-            ("reaches", reaches),
-            ("lambda_sweep", lam),
-            ("reach_scales", scales_t),
-            ("entropy", entropy_t),
+            ("weights", table_of(&table)),
+            ("reaches", table_of(&reaches)),
+            ("lambda_sweep", table_of(&lam)),
+            ("reach_scales", table_of(&scales_t)),
+            ("entropy", table_of(&entropy_t)),
             ("rule", rule),
         ]))
     }

@@ -26,8 +26,9 @@
 //! temperature of `lambda_sweep`, not judged, with the mean normalized entropy of α under the
 //! tugs, so that no verdict rests on a degenerate α unseen).
 //!
-//! Here: the parameters and their validation; `job` (reaches, trackers, closed loops),
-//! `measures` (what the verdict judges), `figures` and `report` hold the rest.
+//! Here: the parameters and their validation; `job` (reaches, trackers, closed loops, and the
+//! rows of the tables read back), `measures` (what the verdict judges), `figures` and `report`
+//! hold the rest.
 //!
 //! [`PushScene`]: crate::physics::push::PushScene
 

@@ -1,12 +1,13 @@
 //! The report section and verdict, read back from the CSVs.
 
+use super::job::{LambdaRow, ReachRow, ReachScaleRow, WeightRow};
 use super::measures::{mirror_gap, swings, window_gap, window_range};
 use super::COMMITTED;
-use crate::experiment::output::{df_f64, df_str, read_csv};
 use crate::experiment::report::{sig, Findings};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
-use crate::families::lbc::{entropy_section, rule_settings};
+use crate::families::lbc::{entropy_section, read_sweep_rows, rule_settings};
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
@@ -14,17 +15,19 @@ use std::path::Path;
 /// sweep and the verdict.
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let setting = rule_settings(dir)?;
-    let df = read_csv(&dir.join("weights.csv"))?;
+    let weights: Vec<WeightRow> = read_rows(&dir.join("weights.csv"))?;
+    // The measures read whole columns.
+    let col = |f: fn(&WeightRow) -> f64| weights.iter().map(f).collect::<Vec<f64>>();
     let (t, a, f, body) = (
-        df_f64(&df, "t")?,
-        df_f64(&df, "alpha_forward")?,
-        df_f64(&df, "force_x")?,
-        df_f64(&df, "body_angle")?,
+        col(|r| r.t_s),
+        col(|r| r.alpha_forward),
+        col(|r| r.force_x_n),
+        col(|r| r.body_angle_rad),
     );
     let (am, ab, bm) = (
-        df_f64(&df, "alpha_forward_mirrored")?,
-        df_f64(&df, "alpha_forward_baseline")?,
-        df_f64(&df, "body_angle_mirrored")?,
+        col(|r| r.alpha_forward_mirrored),
+        col(|r| r.alpha_forward_baseline),
+        col(|r| r.body_angle_mirrored_rad),
     );
     let (w0, w1) = (setting("settle_start"), setting("settle_end"));
     let last_tug = (0..t.len())
@@ -70,18 +73,14 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         })
         .fold(0.0, f64::max);
     let at_rest = rest_rate.is_nan() || rate < rest_rate;
-    let reaches = read_csv(&dir.join("reaches.csv"))?;
-    let (rn, rc, rt) = (
-        df_str(&reaches, "reach")?,
-        df_f64(&reaches, "cost")?,
-        df_str(&reaches, "termination")?,
-    );
+    let reaches: Vec<ReachRow> = read_rows(&dir.join("reaches.csv"))?;
     let mut md = format!(
         "λ = σ²R = {} from motor noise σ = {} N·m·√s. Reaches (torque-limited DDP, run to convergence): {}.\n\n",
         sig(setting("lambda")),
         sig(setting("torque_noise")),
-        (0..rn.len())
-            .map(|i| format!("{} cost {} ({})", rn[i], sig(rc[i]), rt[i]))
+        reaches
+            .iter()
+            .map(|r| format!("{} cost {} ({})", r.reach, sig(r.cost), r.termination))
             .collect::<Vec<_>>()
             .join(", ")
     );
@@ -96,7 +95,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     ));
     // When the tugged weight first leaves the undecided middle, and for which reach; where
     // the hand is when the first tug ends.
-    let hand_x = df_f64(&df, "hand_x")?;
+    let hand_x = col(|r| r.hand_x_m);
     let walls = setting("walls_distance");
     md.push_str(&commitment_line(&t, &a, &f, &hand_x, tugged_swings, walls));
     let range = |v: &[f64]| window_range(&t, v, [w0, w1]);
@@ -193,29 +192,20 @@ fn commitment_line(
 /// The same checks over λ (from `lambda_sweep.csv`), empty without rows.
 fn lambda_sweep_section(dir: &Path) -> Result<String, Error> {
     let mut md = String::new();
-    let ls = read_csv(&dir.join("lambda_sweep.csv"))?;
-    let (ll, lsw, lse, lmi, lh, lle) = (
-        df_f64(&ls, "lambda")?,
-        df_f64(&ls, "swings")?,
-        df_f64(&ls, "settle_gap")?,
-        df_f64(&ls, "mirror_gap")?,
-        df_f64(&ls, "mean_entropy")?,
-        df_f64(&ls, "max_lean")?,
-    );
-    // Older results have no settle_range column.
-    let lsr = df_f64(&ls, "settle_range").unwrap_or_else(|_| vec![f64::NAN; ll.len()]);
-    if !ll.is_empty() {
+    // Older results have no settle_range column: NaN there.
+    let rows: Vec<LambdaRow> = read_sweep_rows(&dir.join("lambda_sweep.csv"), &["settle_range"])?;
+    if !rows.is_empty() {
         md.push_str("\nThe same checks over λ (not judged; entropy of α normalized to [0, 1], 0 a switch, 1 uniform):\n\n| λ | swings | range over the window | gap to the no-tug baseline | mirror gap | mean entropy of α under the tugs | largest lean (rad) |\n| --- | --- | --- | --- | --- | --- | --- |\n");
-        for i in 0..ll.len() {
+        for r in &rows {
             md.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {} | {} |\n",
-                sig(ll[i]),
-                lsw[i],
-                sig(lsr[i]),
-                sig(lse[i]),
-                sig(lmi[i]),
-                sig(lh[i]),
-                sig(lle[i])
+                sig(r.lambda),
+                r.swings,
+                sig(r.settle_range),
+                sig(r.settle_gap),
+                sig(r.mirror_gap),
+                sig(r.mean_entropy),
+                sig(r.max_lean_rad)
             ));
         }
     }
@@ -338,25 +328,20 @@ fn reach_scales(dir: &Path, chosen: f64) -> Result<(String, bool), Error> {
     if !path.exists() {
         return Ok((String::new(), true));
     }
-    let df = read_csv(&path)?;
-    let (s, w, c) = (
-        df_f64(&df, "reach_scale")?,
-        df_f64(&df, "max_weight_before_second_tug")?,
-        df_f64(&df, "committed")?,
-    );
+    let rows: Vec<ReachScaleRow> = read_rows(&path)?;
     let mut md = format!(
         "\nReach scale (rule fixed in the spec before the run: the reaches' state weights × scale, scales in the listed order; the first at which, with the first tug alone, neither reach's weight exceeds {} before the second tug starts; every table here uses it):\n\n| scale | largest weight before the second tug | committed |\n| --- | --- | --- |\n",
         sig(COMMITTED)
     );
-    for r in 0..s.len() {
+    for r in &rows {
         md.push_str(&format!(
             "| {} | {} | {} |\n",
-            sig(s[r]),
-            sig(w[r]),
-            if c[r] == 1.0 { "yes" } else { "no" }
+            sig(r.reach_scale),
+            sig(r.max_weight_before_second_tug),
+            if r.committed == 1 { "yes" } else { "no" }
         ));
     }
-    let found = c.contains(&0.0);
+    let found = rows.iter().any(|r| r.committed == 0);
     md.push_str(&if found {
         format!("\nChosen: scale {}.\n", sig(chosen))
     } else {
