@@ -15,14 +15,14 @@ use crate::bellman::grid_dp::{
     evaluate_mixture, mean_control, passive_transitions, solve_linear, solve_nonlinear, Grid2,
     GridSystem, Transitions,
 };
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Heatmap};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::families::lbc::rule_settings;
-use crate::row;
 use indicatif::ProgressBar;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -310,8 +310,8 @@ impl Job for Params {
             ("naive_factor", self.rule.naive_factor),
         ]);
         Ok(Tables::from([
-            ("optimality", opt),
-            ("grid", fields),
+            ("optimality", table_of(&opt)),
+            ("grid", table_of(&fields)),
             ("rule", rule),
         ]))
     }
@@ -335,6 +335,93 @@ struct PolicyGaps {
     u_naive0: Vec<f64>,
 }
 
+crate::result_rows! {
+    /// One row of `optimality.csv`: one comparison's largest and mean absolute difference.
+    pub struct OptimalityRow {
+        /// The comparison's name ([`Comparison::name`]).
+        comparison: String = "comparison",
+        /// Largest absolute difference.
+        max_abs_diff: f64 = "max_abs_diff",
+        /// Mean absolute difference.
+        mean_abs_diff: f64 = "mean_abs_diff",
+        /// What is compared, in words ([`Comparison::quantity`]).
+        quantity: String = "quantity",
+    }
+}
+
+/// A comparison of the `optimality` table, in its order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Comparison {
+    /// LBC's value against the direct solution, every grid point and step.
+    LbcValue,
+    /// The naive policy blend's value against the optimal value, t = 0.
+    NaiveValue,
+    /// LBC's mean control against the direct one, every grid point and step.
+    LbcPolicy,
+    /// The naive blend's mean control against the direct one, every grid point and step.
+    NaivePolicy,
+    /// LBC's value on the ordinary Bellman backup against its direct solution, t = 0.
+    Nonlinear,
+}
+
+impl Comparison {
+    /// Every comparison, in the table's order.
+    pub const ALL: [Comparison; 5] = [
+        Comparison::LbcValue,
+        Comparison::NaiveValue,
+        Comparison::LbcPolicy,
+        Comparison::NaivePolicy,
+        Comparison::Nonlinear,
+    ];
+
+    /// Its name in the table.
+    pub fn name(self) -> &'static str {
+        match self {
+            Comparison::LbcValue => "lbc_vs_direct",
+            Comparison::NaiveValue => "naive_vs_direct",
+            Comparison::LbcPolicy => "lbc_policy_vs_direct",
+            Comparison::NaivePolicy => "naive_policy_vs_direct",
+            Comparison::Nonlinear => "nonlinear_lbc_vs_direct",
+        }
+    }
+
+    /// What it compares, as the table's `quantity` says it.
+    pub fn quantity(self) -> &'static str {
+        match self {
+            Comparison::LbcValue => "value v = -lambda log z, every grid point and step",
+            Comparison::NaiveValue => {
+                "value of the naive fixed-weight policy blend vs the optimal value, t = 0"
+            }
+            Comparison::LbcPolicy | Comparison::NaivePolicy => {
+                "mean control (rad/s^2), every grid point and step"
+            }
+            Comparison::Nonlinear => {
+                "ordinary Bellman backup: -lambda log sum w exp(-v_i/lambda) vs direct, t = 0"
+            }
+        }
+    }
+
+    /// Its role in the verdict, as the report's table says it.
+    pub fn role(self) -> &'static str {
+        match self {
+            Comparison::LbcValue | Comparison::LbcPolicy => {
+                "implementation check (exact by construction: the discrete operator is linear)"
+            }
+            Comparison::NaiveValue | Comparison::NaivePolicy => {
+                "reproduction: naive blending is not optimal"
+            }
+            Comparison::Nonlinear => {
+                "reproduction: how far superposition carries to the ordinary Bellman backup"
+            }
+        }
+    }
+
+    /// The comparison named `name` in a table, if any.
+    pub fn named(name: &str) -> Option<Comparison> {
+        Comparison::ALL.into_iter().find(|c| c.name() == name)
+    }
+}
+
 /// The `optimality` table: each comparison's largest and mean gap; `cnt`, the grid points
 /// times steps, averages the policy gaps.
 fn optimality_table(
@@ -343,40 +430,26 @@ fn optimality_table(
     pol: &PolicyGaps,
     cnt: f64,
     (nn_max, nn_mean): (f64, f64),
-) -> Table {
+) -> Vec<OptimalityRow> {
     let (lp_max, lp_sum, np_max, np_sum) = (pol.lp_max, pol.lp_sum, pol.np_max, pol.np_sum);
-    let mut opt = Table::new(&["comparison", "max_abs_diff", "mean_abs_diff", "quantity"]);
-    opt.push(row![
-        "lbc_vs_direct",
-        lbc_max,
-        lbc_mean,
-        "value v = -lambda log z, every grid point and step"
-    ]);
-    opt.push(row![
-        "naive_vs_direct",
-        nv_max,
-        nv_mean,
-        "value of the naive fixed-weight policy blend vs the optimal value, t = 0"
-    ]);
-    opt.push(row![
-        "lbc_policy_vs_direct",
-        lp_max,
-        lp_sum / cnt,
-        "mean control (rad/s^2), every grid point and step"
-    ]);
-    opt.push(row![
-        "naive_policy_vs_direct",
-        np_max,
-        np_sum / cnt,
-        "mean control (rad/s^2), every grid point and step"
-    ]);
-    opt.push(row![
-        "nonlinear_lbc_vs_direct",
-        nn_max,
-        nn_mean,
-        "ordinary Bellman backup: -lambda log sum w exp(-v_i/lambda) vs direct, t = 0"
-    ]);
-    opt
+    Comparison::ALL
+        .into_iter()
+        .map(|c| {
+            let (max, mean) = match c {
+                Comparison::LbcValue => (lbc_max, lbc_mean),
+                Comparison::NaiveValue => (nv_max, nv_mean),
+                Comparison::LbcPolicy => (lp_max, lp_sum / cnt),
+                Comparison::NaivePolicy => (np_max, np_sum / cnt),
+                Comparison::Nonlinear => (nn_max, nn_mean),
+            };
+            OptimalityRow {
+                comparison: c.name().to_string(),
+                max_abs_diff: max,
+                mean_abs_diff: mean,
+                quantity: c.quantity().to_string(),
+            }
+        })
+        .collect()
 }
 
 impl Params {
@@ -540,41 +613,57 @@ impl Params {
         pol: &PolicyGaps,
         nl_direct: &[f64],
         nl_comb: &[f64],
-    ) -> Table {
+    ) -> Vec<GridRow> {
         let (n, k, lam) = (grid.len(), self.targets.len(), self.lambda);
         let v = |zz: f64| value(lam, zz);
-        let (u_direct0, u_lbc0, u_naive0) = (&pol.u_direct0, &pol.u_lbc0, &pol.u_naive0);
-        let mut fields = Table::new(&[
-            "angle",
-            "rate",
-            "v_direct",
-            "v_lbc",
-            "v_naive",
-            "z_direct",
-            "u_direct",
-            "u_lbc",
-            "u_naive",
-            "v_nonlinear_direct",
-            "v_nonlinear_lbc",
-        ]);
-        for s in 0..n {
-            let x = grid.point(s);
-            let comb: f64 = (0..k).map(|i| self.weights[i] * z[i][0][s]).sum();
-            fields.push(row![
-                x[0],
-                x[1],
-                v(z_direct[0][s]),
-                v(comb),
-                v_naive[0][s],
-                z_direct[0][s],
-                u_direct0[s],
-                u_lbc0[s],
-                u_naive0[s],
-                nl_direct[s],
-                nl_comb[s]
-            ]);
-        }
-        fields
+        (0..n)
+            .map(|s| {
+                let x = grid.point(s);
+                let comb: f64 = (0..k).map(|i| self.weights[i] * z[i][0][s]).sum();
+                GridRow {
+                    angle: x[0],
+                    rate: x[1],
+                    v_direct: v(z_direct[0][s]),
+                    v_lbc: v(comb),
+                    v_naive: v_naive[0][s],
+                    z_direct: z_direct[0][s],
+                    u_direct: pol.u_direct0[s],
+                    u_lbc: pol.u_lbc0[s],
+                    u_naive: pol.u_naive0[s],
+                    v_nonlinear_direct: nl_direct[s],
+                    v_nonlinear_lbc: nl_comb[s],
+                }
+            })
+            .collect()
+    }
+}
+
+crate::result_rows! {
+    /// One row of `grid.csv`: the t = 0 fields at one grid point; rows in [`Grid2::point`]'s
+    /// order (the angle varies fastest), which the heatmaps rely on.
+    pub struct GridRow {
+        /// The pendulum's angle θ (rad).
+        angle: f64 = "angle",
+        /// Its rate θ̇ (rad/s).
+        rate: f64 = "rate",
+        /// The optimal value of the directly solved combined problem.
+        v_direct: f64 = "v_direct",
+        /// LBC's value −λ log Σ w_i z_i.
+        v_lbc: f64 = "v_lbc",
+        /// The naive fixed-weight policy blend's value.
+        v_naive: f64 = "v_naive",
+        /// The direct solution's desirability z.
+        z_direct: f64 = "z_direct",
+        /// The direct solution's mean control (rad/s²).
+        u_direct: f64 = "u_direct",
+        /// LBC's mean control (rad/s²).
+        u_lbc: f64 = "u_lbc",
+        /// The naive blend's mean control (rad/s²).
+        u_naive: f64 = "u_naive",
+        /// The ordinary backup's value of the combined problem solved directly.
+        v_nonlinear_direct: f64 = "v_nonlinear_direct",
+        /// The ordinary backup's LBC value −λ log Σ w_i exp(−v_i/λ).
+        v_nonlinear_lbc: f64 = "v_nonlinear_lbc",
     }
 }
 
@@ -596,10 +685,11 @@ impl Family for LbcGrid {
     type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let g = tables.require("grid")?;
-        let (a, r) = (g.f64s("angle"), g.f64s("rate"));
+        let g = GridRow::from_table(tables.require("grid")?);
+        let a: Vec<f64> = g.iter().map(|p| p.angle).collect();
+        let r: Vec<f64> = g.iter().map(|p| p.rate).collect();
         let nx = r.iter().take_while(|&&v| v == r[0]).count();
-        if nx == 0 || a.len() % nx != 0 {
+        if nx == 0 || !a.len().is_multiple_of(nx) {
             return Err(other("grid table is not a regular grid"));
         }
         let ny = a.len() / nx;
@@ -616,9 +706,9 @@ impl Family for LbcGrid {
             diverging,
             range: None,
         };
-        let col = |n: &str| g.f64s(n);
-        let sub = |x: &str, y: &str| -> Vec<f64> {
-            col(x).iter().zip(col(y)).map(|(p, q)| p - q).collect()
+        let col = |f: fn(&GridRow) -> f64| -> Vec<f64> { g.iter().map(f).collect() };
+        let sub = |x: fn(&GridRow) -> f64, y: fn(&GridRow) -> f64| -> Vec<f64> {
+            g.iter().map(|p| x(p) - y(p)).collect()
         };
         let mut files = fig.draw(
             "value",
@@ -626,37 +716,37 @@ impl Family for LbcGrid {
                 vec![
                     map(
                         "optimal value v (direct), t = 0",
-                        col("v_direct"),
+                        col(|p| p.v_direct),
                         "v",
                         false,
                     ),
                     map(
                         "LBC value minus direct",
-                        sub("v_lbc", "v_direct"),
+                        sub(|p| p.v_lbc, |p| p.v_direct),
                         "diff",
                         true,
                     ),
                     map(
                         "naive blend value minus optimal",
-                        sub("v_naive", "v_direct"),
+                        sub(|p| p.v_naive, |p| p.v_direct),
                         "diff",
                         true,
                     ),
                     map(
                         "reward z = exp(-v/lambda), t = 0",
-                        col("z_direct"),
+                        col(|p| p.z_direct),
                         "z",
                         false,
                     ),
                     map(
                         "ordinary backup: optimal value",
-                        col("v_nonlinear_direct"),
+                        col(|p| p.v_nonlinear_direct),
                         "v",
                         false,
                     ),
                     map(
                         "ordinary backup: LBC minus direct",
-                        sub("v_nonlinear_lbc", "v_nonlinear_direct"),
+                        sub(|p| p.v_nonlinear_lbc, |p| p.v_nonlinear_direct),
                         "diff",
                         true,
                     ),
@@ -670,19 +760,19 @@ impl Family for LbcGrid {
                 vec![
                     map(
                         "optimal mean control, t = 0",
-                        col("u_direct"),
+                        col(|p| p.u_direct),
                         "rad/s^2",
                         true,
                     ),
                     map(
                         "LBC control minus optimal",
-                        sub("u_lbc", "u_direct"),
+                        sub(|p| p.u_lbc, |p| p.u_direct),
                         "rad/s^2",
                         true,
                     ),
                     map(
                         "naive blend control minus optimal",
-                        sub("u_naive", "u_direct"),
+                        sub(|p| p.u_naive, |p| p.u_direct),
                         "rad/s^2",
                         true,
                     ),
@@ -694,55 +784,40 @@ impl Family for LbcGrid {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let df = read_csv(&dir.join("optimality.csv"))?;
-        let (c, mx, mn) = (
-            df_str(&df, "comparison")?,
-            df_f64(&df, "max_abs_diff")?,
-            df_f64(&df, "mean_abs_diff")?,
-        );
+        let opt: Vec<OptimalityRow> = read_rows(&dir.join("optimality.csv"))?;
         let setting = rule_settings(dir)?;
         let (tol, range) = (
             setting("nonlinear_tolerance"),
             setting("nonlinear_direct_range"),
         );
-        let get =
-            |name: &str, v: &[f64]| c.iter().position(|q| q == name).map_or(f64::NAN, |i| v[i]);
-        let role = |name: &str| match name {
-            "lbc_vs_direct" | "lbc_policy_vs_direct" => {
-                "implementation check (exact by construction: the discrete operator is linear)"
-            }
-            "naive_vs_direct" | "naive_policy_vs_direct" => {
-                "reproduction: naive blending is not optimal"
-            }
-            "nonlinear_lbc_vs_direct" => {
-                "reproduction: how far superposition carries to the ordinary Bellman backup"
-            }
-            _ => "-",
+        // The comparison's row; NaN values when the table lacks it.
+        let get = |c: Comparison| {
+            opt.iter()
+                .find(|r| r.comparison == c.name())
+                .map_or((f64::NAN, f64::NAN), |r| (r.max_abs_diff, r.mean_abs_diff))
         };
         let mut md = String::from(
             "| comparison | role | max abs diff | mean abs diff |\n| --- | --- | --- | --- |\n",
         );
-        for r in 0..c.len() {
+        for r in &opt {
             md.push_str(&format!(
                 "| {} | {} | {} | {} |\n",
-                c[r],
-                role(&c[r]),
-                sig(mx[r]),
-                sig(mn[r])
+                r.comparison,
+                // A name this program does not write has no role.
+                Comparison::named(&r.comparison).map_or("-", Comparison::role),
+                sig(r.max_abs_diff),
+                sig(r.mean_abs_diff)
             ));
         }
-        let (lbc, lbcp) = (get("lbc_vs_direct", &mx), get("lbc_policy_vs_direct", &mx));
+        let (lbc, lbcp) = (get(Comparison::LbcValue).0, get(Comparison::LbcPolicy).0);
         let (naive, naivep) = (
-            get("naive_vs_direct", &mx),
-            get("naive_policy_vs_direct", &mx),
+            get(Comparison::NaiveValue).0,
+            get(Comparison::NaivePolicy).0,
         );
-        let (nl_max, nl_mean) = (
-            get("nonlinear_lbc_vs_direct", &mx),
-            get("nonlinear_lbc_vs_direct", &mn),
-        );
+        let (nl_max, nl_mean) = get(Comparison::Nonlinear);
         // The null of the ordinary-backup check: a constant at the direct value's mean.
-        let g = read_csv(&dir.join("grid.csv"))?;
-        let direct = df_f64(&g, "v_nonlinear_direct")?;
+        let grid: Vec<GridRow> = read_rows(&dir.join("grid.csv"))?;
+        let direct: Vec<f64> = grid.iter().map(|p| p.v_nonlinear_direct).collect();
         let mean = direct.iter().sum::<f64>() / direct.len().max(1) as f64;
         let constant =
             direct.iter().map(|v| (v - mean).abs()).sum::<f64>() / direct.len().max(1) as f64;

@@ -10,15 +10,15 @@
 //! relative_residual).
 
 use crate::bellman::projection::{combined_reward, project, GaussianReward};
-use crate::experiment::output::{Table, Tables};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{
     all_positive, at_most, distinct, ensure, positive, ParamError, Validate,
 };
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{shown, Check, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
-use crate::row;
 use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -87,37 +87,72 @@ pub fn local_minima(xs: &[f64], ys: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+crate::result_rows! {
+    /// One row of `weights.csv`: one component's projected weight for one spacing and target.
+    pub struct WeightRow {
+        /// Distance between the two component minima (state units).
+        spacing: f64 = "spacing",
+        /// The component, 1 (minimum at 0) or 2 (minimum at the spacing).
+        component: i64 = "component",
+        /// Its projected weight w_i.
+        weight: f64 = "weight",
+        /// The desired minimum as a fraction of the spacing.
+        target: f64 = "target",
+        /// w_1 + w_2 (1 for a perfect basis).
+        weight_sum: f64 = "weight_sum",
+        /// Relative L2 residual of the projection.
+        relative_residual: f64 = "relative_residual",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `cost.csv`: the desired and reconstructed terminal cost and reward at one
+    /// point of the first axis, for one spacing and target.
+    pub struct CostRow {
+        /// Distance between the two component minima (state units).
+        spacing: f64 = "spacing",
+        /// The desired minimum as a fraction of the spacing.
+        target: f64 = "target",
+        /// The point on the first axis (state units).
+        x: f64 = "x",
+        /// The desired cost g(x).
+        desired_cost: f64 = "desired_cost",
+        /// The reconstructed cost −log Σ w_i h_i(x) (infinite where the reward is not positive).
+        reconstructed_cost: f64 = "reconstructed_cost",
+        /// The desired reward exp(−g(x)).
+        desired_reward: f64 = "desired_reward",
+        /// The reconstructed reward Σ w_i h_i(x).
+        reconstructed_reward: f64 = "reconstructed_reward",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `minima.csv`: the reconstructed cost's local minima for one spacing and target.
+    pub struct MinimaRow {
+        /// Distance between the two component minima (state units).
+        spacing: f64 = "spacing",
+        /// The desired minimum as a fraction of the spacing.
+        target: f64 = "target",
+        /// How many local minima the sampled reconstructed cost has.
+        minima: i64 = "minima",
+        /// Their locations on the first axis, four decimals, space-separated.
+        locations: String = "locations",
+        /// w_1 + w_2.
+        weight_sum: f64 = "weight_sum",
+        /// Relative L2 residual of the projection.
+        relative_residual: f64 = "relative_residual",
+    }
+}
+
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).unwrap_or_default()
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut weights = Table::new(&[
-            "spacing",
-            "component",
-            "weight",
-            "target",
-            "weight_sum",
-            "relative_residual",
-        ]);
-        let mut cost = Table::new(&[
-            "spacing",
-            "target",
-            "x",
-            "desired_cost",
-            "reconstructed_cost",
-            "desired_reward",
-            "reconstructed_reward",
-        ]);
-        let mut minima = Table::new(&[
-            "spacing",
-            "target",
-            "minima",
-            "locations",
-            "weight_sum",
-            "relative_residual",
-        ]);
+        let mut weights: Vec<WeightRow> = Vec::new();
+        let mut cost: Vec<CostRow> = Vec::new();
+        let mut minima: Vec<MinimaRow> = Vec::new();
         let width = 1.0 / self.scale.sqrt();
         let pb = ctx.progress(
             (self.spacings.len() * self.targets.len()) as u64,
@@ -135,7 +170,14 @@ impl Job for Params {
                     let p = project(&comps, &desired).map_err(other)?;
                     let sum: f64 = p.weights.iter().sum();
                     for (c, w) in p.weights.iter().enumerate() {
-                        weights.push(row![s, c + 1, *w, f, sum, p.relative_residual]);
+                        weights.push(WeightRow {
+                            spacing: s,
+                            component: c as i64 + 1,
+                            weight: *w,
+                            target: f,
+                            weight_sum: sum,
+                            relative_residual: p.relative_residual,
+                        });
                     }
                     let lo = s.min(f * s).min(0.0) - self.margin * width;
                     let hi = s.max(f * s).max(0.0) + self.margin * width;
@@ -150,20 +192,28 @@ impl Job for Params {
                         } else {
                             f64::INFINITY
                         };
-                        cost.push(row![s, f, x, desired.cost(&pt), g, desired.reward(&pt), r]);
+                        cost.push(CostRow {
+                            spacing: s,
+                            target: f,
+                            x,
+                            desired_cost: desired.cost(&pt),
+                            reconstructed_cost: g,
+                            desired_reward: desired.reward(&pt),
+                            reconstructed_reward: r,
+                        });
                         xs.push(x);
                         ys.push(g);
                     }
                     let mins = local_minima(&xs, &ys);
                     let locs: Vec<String> = mins.iter().map(|m| format!("{m:.4}")).collect();
-                    minima.push(row![
-                        s,
-                        f,
-                        mins.len(),
-                        locs.join(" "),
-                        sum,
-                        p.relative_residual
-                    ]);
+                    minima.push(MinimaRow {
+                        spacing: s,
+                        target: f,
+                        minima: mins.len() as i64,
+                        locations: locs.join(" "),
+                        weight_sum: sum,
+                        relative_residual: p.relative_residual,
+                    });
                     pb.inc(1);
                 }
             }
@@ -171,9 +221,9 @@ impl Job for Params {
         })?;
         pb.finish_and_clear();
         Ok(Tables::from([
-            ("weights", weights),
-            ("cost", cost),
-            ("minima", minima),
+            ("weights", table_of(&weights)),
+            ("cost", table_of(&cost)),
+            ("minima", table_of(&minima)),
         ]))
     }
 }
@@ -194,24 +244,17 @@ impl Family for LbcProjection {
     type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let cost = tables.require("cost")?;
-        let (cs, ct, cx, cd, cr) = (
-            cost.f64s("spacing"),
-            cost.f64s("target"),
-            cost.f64s("x"),
-            cost.f64s("desired_cost"),
-            cost.f64s("reconstructed_cost"),
-        );
+        let cost = CostRow::from_table(tables.require("cost")?);
         let mut spacings: Vec<f64> = Vec::new();
-        for &s in &cs {
-            if !spacings.contains(&s) {
-                spacings.push(s);
+        for r in &cost {
+            if !spacings.contains(&r.spacing) {
+                spacings.push(r.spacing);
             }
         }
         let mut targets: Vec<f64> = Vec::new();
-        for &t in &ct {
-            if !targets.contains(&t) {
-                targets.push(t);
+        for r in &cost {
+            if !targets.contains(&r.target) {
+                targets.push(r.target);
             }
         }
         // Cost curves: one panel per spacing, the midpoint target (or the first one).
@@ -222,12 +265,13 @@ impl Family for LbcProjection {
             .unwrap_or(0.5);
         let mut panels = Vec::new();
         for &s in &spacings {
-            let rows: Vec<usize> = (0..cs.len())
-                .filter(|&r| cs[r] == s && ct[r] == mid)
+            let rows: Vec<&CostRow> = cost
+                .iter()
+                .filter(|r| r.spacing == s && r.target == mid)
                 .collect();
             let ymax = rows
                 .iter()
-                .map(|&r| cd[r])
+                .map(|r| r.desired_cost)
                 .filter(|v| v.is_finite())
                 .fold(0.0f64, f64::max)
                 .min(30.0);
@@ -238,14 +282,14 @@ impl Family for LbcProjection {
                 series: vec![
                     Series::line(
                         "desired cost",
-                        rows.iter().map(|&r| (cx[r], cd[r])).collect(),
+                        rows.iter().map(|r| (r.x, r.desired_cost)).collect(),
                         7,
                     )
                     .mark(Mark::Dashed),
                     Series::line(
                         "reconstructed -log sum w_i h_i",
                         rows.iter()
-                            .map(|&r| (cx[r], cr[r].min(ymax * 1.2 + 1.0)))
+                            .map(|r| (r.x, r.reconstructed_cost.min(ymax * 1.2 + 1.0)))
                             .collect(),
                         0,
                     ),
@@ -257,27 +301,21 @@ impl Family for LbcProjection {
         let cols = spacings.len().min(3);
         let mut files = fig.draw("cost", &Figure::grid(panels, cols))?;
         // Weights vs spacing for each target.
-        let w = tables.require("weights")?;
-        let (ws, wc, ww, wt, wsum) = (
-            w.f64s("spacing"),
-            w.f64s("component"),
-            w.f64s("weight"),
-            w.f64s("target"),
-            w.f64s("weight_sum"),
-        );
+        let weights = WeightRow::from_table(tables.require("weights")?);
         // A target t and its mirror 1 - t swap w1 and w2: drawing both would lay each line
         // exactly on another, so the weights panel draws the targets up to the midpoint.
         let shown: Vec<f64> = targets.iter().copied().filter(|&t| t <= 0.5).collect();
         let mirrored = targets.iter().any(|&t| t > 0.5);
         let mut series = Vec::new();
         for (k, &t) in shown.iter().enumerate() {
-            for c in [1.0, 2.0] {
-                let pts = (0..ws.len())
-                    .filter(|&r| wt[r] == t && wc[r] == c)
-                    .map(|r| (ws[r], ww[r]))
+            for c in [1, 2] {
+                let pts = weights
+                    .iter()
+                    .filter(|r| r.target == t && r.component == c)
+                    .map(|r| (r.spacing, r.weight))
                     .collect();
-                let s = Series::line(format!("w{} (target {t})", c as i32), pts, k);
-                series.push(if c == 1.0 {
+                let s = Series::line(format!("w{c} (target {t})"), pts, k);
+                series.push(if c == 1 {
                     s.mark(Mark::LinePoints)
                 } else {
                     s.mark(Mark::Dashed)
@@ -300,16 +338,23 @@ impl Family for LbcProjection {
             .iter()
             .enumerate()
             .map(|(k, &t)| {
-                let pts = (0..ws.len())
-                    .filter(|&r| wt[r] == t && wc[r] == 1.0)
-                    .map(|r| (ws[r], wsum[r]))
+                let pts = weights
+                    .iter()
+                    .filter(|r| r.target == t && r.component == 1)
+                    .map(|r| (r.spacing, r.weight_sum))
                     .collect();
                 Series::line(format!("w1 + w2 (target {t})"), pts, k).mark(Mark::LinePoints)
             })
             .collect();
         let (lo, hi) = (
-            ws.iter().copied().fold(f64::INFINITY, f64::min),
-            ws.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            weights
+                .iter()
+                .map(|r| r.spacing)
+                .fold(f64::INFINITY, f64::min),
+            weights
+                .iter()
+                .map(|r| r.spacing)
+                .fold(f64::NEG_INFINITY, f64::max),
         );
         if lo.is_finite() {
             sums.push(
@@ -333,78 +378,38 @@ impl Family for LbcProjection {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        use polars::prelude::*;
-        let pe = |e: PolarsError| Error::Polars(e.to_string());
-        let df = crate::experiment::output::read_csv(&dir.join("minima.csv"))?;
-        // The midpoint target per spacing, sorted by spacing.
-        let at_mid = df
-            .column("target")
-            .map_err(pe)?
-            .f64()
-            .map_err(pe)?
-            .equal(0.5);
-        let mid = df
-            .filter(&at_mid)
-            .map_err(pe)?
-            .sort(["spacing"], Default::default())
-            .map_err(pe)?;
-        if mid.height() == 0 {
+        let minima: Vec<MinimaRow> = read_rows(&dir.join("minima.csv"))?;
+        // The midpoint target per spacing, sorted by spacing (distinct: the spec's check).
+        let mut mid: Vec<&MinimaRow> = minima.iter().filter(|r| r.target == 0.5).collect();
+        mid.sort_by(|a, b| a.spacing.total_cmp(&b.spacing));
+        let (Some(first), Some(last)) = (mid.first(), mid.last()) else {
             return Ok(Findings {
                 ours: "No midpoint target (0.5) was run.".into(),
                 verdict: Verdict::NotAssessed,
                 rule: None,
                 why: "the claim concerns the midpoint target.".into(),
             });
-        }
-        let s = mid
-            .column("spacing")
-            .map_err(pe)?
-            .f64()
-            .map_err(pe)?
-            .clone();
-        let n = mid.column("minima").map_err(pe)?.i64().map_err(pe)?.clone();
-        let loc = mid
-            .column("locations")
-            .map_err(pe)?
-            .str()
-            .map_err(pe)?
-            .clone();
-        let ws = mid
-            .column("weight_sum")
-            .map_err(pe)?
-            .f64()
-            .map_err(pe)?
-            .clone();
-        let res = mid
-            .column("relative_residual")
-            .map_err(pe)?
-            .f64()
-            .map_err(pe)?
-            .clone();
+        };
         let mut md = String::from("Desired minimum at the midpoint of the two components:\n\n| spacing | minima of reconstructed cost | at | sum of weights | relative L2 residual |\n| --- | --- | --- | --- | --- |\n");
-        for r in 0..mid.height() {
+        for r in &mid {
             md.push_str(&format!(
                 "| {} | {} | {} | {} | {} |\n",
-                sig(s.get(r).unwrap_or(f64::NAN)),
-                n.get(r).unwrap_or(0),
-                loc.get(r).unwrap_or(""),
-                sig(ws.get(r).unwrap_or(f64::NAN)),
-                sig(res.get(r).unwrap_or(f64::NAN))
+                sig(r.spacing),
+                r.minima,
+                r.locations,
+                sig(r.weight_sum),
+                sig(r.relative_residual)
             ));
         }
-        let first = n.get(0).unwrap_or(0);
-        let last = n.get(mid.height() - 1).unwrap_or(0);
-        let transition = (1..mid.height())
-            .find(|&r| n.get(r) != n.get(r - 1))
-            .map(|r| {
-                format!(
-                    "\nThe number of minima changes between spacing {} and {} (the components' width 1/sqrt(scale) is the unit).",
-                    sig(s.get(r - 1).unwrap_or(f64::NAN)),
-                    sig(s.get(r).unwrap_or(f64::NAN))
-                )
-            });
+        let (first, last, far_sum) = (first.minima, last.minima, last.weight_sum);
+        let transition = mid.windows(2).find(|w| w[1].minima != w[0].minima).map(|w| {
+            format!(
+                "\nThe number of minima changes between spacing {} and {} (the components' width 1/sqrt(scale) is the unit).",
+                sig(w[0].spacing),
+                sig(w[1].spacing)
+            )
+        });
         md.push_str(&transition.unwrap_or_default());
-        let far_sum = ws.get(mid.height() - 1).unwrap_or(f64::NAN);
         md.push_str(&format!(
             " At the farthest spacing the weights sum to {} (paper: weights far from summing to one signal a poor basis).",
             sig(far_sum)

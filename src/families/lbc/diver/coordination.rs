@@ -1,6 +1,9 @@
 //! `lbc_diver_coordination`: its parameters, the objective comparison and the job (three dives
 //! combined with w = 1 vs the single tracker, from take-off rates beyond the components).
 
+use super::rows::{
+    CoordinationRow, CoordinationSweepRow, PoseRow, Tracking, ValueFunction, ValueRow,
+};
 use super::{entry, wrap, DiveRun, DiveSettings, DDP_VALUE_STEP};
 use crate::bellman::combine::{BlendMode, TrackerBlend};
 use crate::control::ddp::DdpSolution;
@@ -10,12 +13,12 @@ use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validate};
+use crate::experiment::rows::table_of;
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{Error, Family, Job, RunContext};
 use crate::families::lbc::{film, push_entropy, rule_table, ENTROPY_COLUMNS};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::planar::PlanarTree;
-use crate::row;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -218,11 +221,11 @@ impl Job for CoordinationParams {
             ("partly_worse_margin", self.rule.partly_worse_margin),
         ]);
         Ok(Tables::from([
-            ("coordination", table),
-            ("dives", examples),
-            ("lambda_sweep", lam),
-            ("value_comparison", values),
-            ("poses", poses_t),
+            ("coordination", table_of(&table)),
+            ("dives", table_of(&examples)),
+            ("lambda_sweep", table_of(&lam)),
+            ("value_comparison", table_of(&values)),
+            ("poses", table_of(&poses_t)),
             ("entropy", entropy_t),
             ("rule", rule),
         ]))
@@ -290,19 +293,20 @@ fn objective(cost: &QuadraticCost, r: &DiveRun) -> f64 {
 /// entropy and largest torque fraction; LBC's per swept λ; both with the DDP-value trackers
 /// (when built); each method's last pose; LBC's entropy and α deviation per step.
 struct TestOut {
-    out: Vec<(&'static str, f64, f64, f64, f64)>,
+    out: Vec<(Tracking, f64, f64, f64, f64)>,
     sweep: Vec<(f64, f64, f64)>,
-    ddp: Vec<(&'static str, f64, f64, f64)>,
+    ddp: Vec<(Tracking, f64, f64, f64)>,
     poses: Vec<Vec<f64>>,
     steps: (Vec<f64>, Vec<f64>),
 }
 
-/// The `coordination`, `lambda_sweep`, `value_comparison`, `poses` and `entropy` tables.
+/// The `coordination`, `lambda_sweep`, `value_comparison` and `poses` tables' rows and the
+/// `entropy` table.
 struct CoordinationTables {
-    table: Table,
-    lam: Table,
-    values: Table,
-    poses: Table,
+    table: Vec<CoordinationRow>,
+    lam: Vec<CoordinationSweepRow>,
+    values: Vec<ValueRow>,
+    poses: Vec<PoseRow>,
     entropy: Table,
 }
 
@@ -325,23 +329,20 @@ impl CoordinationParams {
                 // loop's is NaN.
                 let mut poses = Vec::new();
                 let mut steps = (Vec::new(), Vec::new());
-                for (name, mode) in [
-                    ("lbc", BlendMode::Lbc),
-                    ("single", BlendMode::Single(self.single)),
-                ] {
-                    let r = d.execute(&bl.blend(false, mode, d.lambda()), &x0)?;
+                for m in Tracking::ALL {
+                    let r = d.execute(&bl.blend(false, m.mode(self.single), d.lambda()), &x0)?;
                     poses.push(match &r.final_state {
                         Some(x) => x.iter().take(film::DIVER_COORDS).copied().collect(),
                         None => vec![f64::NAN; film::DIVER_COORDS],
                     });
                     out.push((
-                        name,
+                        m,
                         wrap(entry(&r.final_state)).abs(),
                         objective(&r),
                         r.mean_entropy,
                         r.max_torque_fraction,
                     ));
-                    if name == "lbc" {
+                    if m == Tracking::Lbc {
                         steps = (r.entropy, r.alpha_deviation);
                     }
                 }
@@ -359,16 +360,10 @@ impl CoordinationParams {
                     .collect::<Result<Vec<_>, Error>>()?;
                 let mut ddp = Vec::new();
                 let models = if bl.ddp.is_some() { 2 } else { 0 };
-                for (name, mode) in [
-                    ("lbc", BlendMode::Lbc),
-                    ("single", BlendMode::Single(self.single)),
-                ]
-                .into_iter()
-                .take(models)
-                {
-                    let r = d.execute(&bl.blend(true, mode, d.lambda()), &x0)?;
+                for m in Tracking::ALL.into_iter().take(models) {
+                    let r = d.execute(&bl.blend(true, m.mode(self.single), d.lambda()), &x0)?;
                     ddp.push((
-                        name,
+                        m,
                         wrap(entry(&r.final_state)).abs(),
                         objective(&r),
                         r.mean_entropy,
@@ -391,32 +386,8 @@ impl CoordinationParams {
         d: &DiveSettings,
         rows: Vec<Result<TestOut, Error>>,
     ) -> Result<CoordinationTables, Error> {
-        let mut table = Table::new(&[
-            "initial_omega",
-            "method",
-            "entry_error",
-            "objective",
-            "mean_entropy",
-            "max_torque_fraction",
-            "objective_outcome",
-        ]);
-        let mut lam = Table::new(&[
-            "lambda",
-            "initial_omega",
-            "entry_error",
-            "objective",
-            "mean_entropy",
-            "objective_outcome",
-        ]);
-        let mut values = Table::new(&[
-            "initial_omega",
-            "value_function",
-            "method",
-            "entry_error",
-            "objective",
-            "mean_entropy",
-        ]);
-        let mut poses_t = Table::new(&POSE_COLUMNS);
+        let (mut table, mut lam, mut values, mut poses_t) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
         for (&w, r) in self.tests.iter().zip(rows) {
             let TestOut {
@@ -427,36 +398,52 @@ impl CoordinationParams {
                 steps,
             } = r?;
             let run = format!("omega {w} rad/s");
-            push_entropy(&mut entropy_t, &run, "lbc", d.dt, &steps.0, &steps.1);
+            let lbc = Tracking::Lbc.name();
+            push_entropy(&mut entropy_t, &run, lbc, d.dt, &steps.0, &steps.1);
             for (&(m, e, ..), q) in out.iter().zip(&poses) {
-                let mut cells = row![w, m, e];
-                cells.extend(q.iter().map(|&v| v.into()));
-                poses_t.push(cells);
+                poses_t.push(PoseRow::at(w, m, e, q));
             }
+            let value_row = |f: ValueFunction, m: Tracking, e, j, h| ValueRow {
+                initial_omega: w,
+                value_function: f.name().to_string(),
+                method: m.name().to_string(),
+                entry_error: e,
+                objective: j,
+                mean_entropy: h,
+            };
             for &(m, e, j, h, _) in &out {
-                values.push(row![w, "lqr", m, e, j, h]);
+                values.push(value_row(ValueFunction::Lqr, m, e, j, h));
             }
             for &(m, e, j, h) in &ddp {
-                values.push(row![w, "ddp", m, e, j, h]);
+                values.push(value_row(ValueFunction::Ddp, m, e, j, h));
             }
+            // `out` holds LBC's dive, then the single tracker's (Tracking::ALL's order).
             let (jl, js) = (out[0].2, out[1].2);
             for &(m, e, j, h, t) in &out {
-                let outcome = if m == "lbc" {
-                    compare_objectives(jl, js, self.objective_tolerance)
-                } else {
-                    compare_objectives(js, jl, self.objective_tolerance)
+                let outcome = match m {
+                    Tracking::Lbc => compare_objectives(jl, js, self.objective_tolerance),
+                    Tracking::Single => compare_objectives(js, jl, self.objective_tolerance),
                 };
-                table.push(row![w, m, e, j, h, t, outcome]);
+                table.push(CoordinationRow {
+                    initial_omega: w,
+                    method: m.name().to_string(),
+                    entry_error: e,
+                    objective: j,
+                    mean_entropy: h,
+                    max_torque_fraction: t,
+                    objective_outcome: outcome.to_string(),
+                });
             }
             for (&l, &(e, j, h)) in self.lambda_sweep.iter().zip(&sweep) {
-                lam.push(row![
-                    l,
-                    w,
-                    e,
-                    j,
-                    h,
-                    compare_objectives(j, js, self.objective_tolerance)
-                ]);
+                lam.push(CoordinationSweepRow {
+                    lambda: l,
+                    initial_omega: w,
+                    entry_error: e,
+                    objective: j,
+                    mean_entropy: h,
+                    objective_outcome: compare_objectives(j, js, self.objective_tolerance)
+                        .to_string(),
+                });
             }
         }
         Ok(CoordinationTables {
@@ -468,23 +455,6 @@ impl CoordinationParams {
         })
     }
 }
-
-/// Columns of the coordination's `poses` table: per take-off rate and method, the entry error
-/// and the final pose's generalized coordinates (the interpolation's `motion` columns).
-pub(super) const POSE_COLUMNS: [&str; 3 + film::DIVER_COORDS] = [
-    "initial_omega",
-    "method",
-    "entry_error",
-    "x",
-    "y",
-    "torso",
-    "neck",
-    "shoulder",
-    "elbow",
-    "hip",
-    "knee",
-    "ankle",
-];
 
 impl Family for LbcDiverCoordination {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[

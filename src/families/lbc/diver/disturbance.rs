@@ -29,12 +29,14 @@
 //! from vertical (rad); entry_change = |entry angle − the unpushed dive's| (rad: whether the
 //! outcome is altered). Force scale 0 is each controller's unpushed dive (trial 0).
 
+use super::rows::{DisturbanceRow, FlightRow, PushRow};
 use super::{DiveSettings, TORSO};
 use crate::bellman::combine::{BlendMode, TrackerBlend};
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::bootstrap_intervals;
 use crate::experiment::{other, Error, Family, Job, RunContext};
@@ -42,7 +44,6 @@ use crate::families::lbc::{film, rule_settings, rule_table};
 use crate::physics::diver::{diver, entry_angle};
 use crate::physics::planar::ForcePoint;
 use crate::physics::{Dynamics, IntegratorKind, Simulator};
-use crate::row;
 use nalgebra::DVector;
 use rand::Rng;
 use rayon::prelude::*;
@@ -319,48 +320,36 @@ impl Job for DisturbanceParams {
                 })
                 .collect::<Result<_, _>>()
         })?;
-        let mut table = Table::new(&[
-            "controller",
-            "force_scale",
-            "effort",
-            "deviation",
-            "final_error",
-            "trial",
-            "entry_change",
-            "max_torque_fraction",
-        ]);
+        let mut table: Vec<DisturbanceRow> = Vec::with_capacity(ctls.len() + jobs.len());
         for (c, (name, _)) in ctls.iter().enumerate() {
             let b = &base[c];
-            table.push(row![
-                *name,
-                0.0,
-                b.effort,
-                0.0,
-                entry(b).abs(),
-                0_i64,
-                0.0,
-                b.max_torque_fraction
-            ]);
+            table.push(DisturbanceRow {
+                controller: name.to_string(),
+                force_scale: 0.0,
+                effort: b.effort,
+                deviation: 0.0,
+                final_error: entry(b).abs(),
+                trial: 0,
+                entry_change: 0.0,
+                max_torque_fraction: b.max_torque_fraction,
+            });
         }
         for (&(c, s, t), f) in jobs.iter().zip(&flights) {
             let b = &base[c];
-            table.push(row![
-                ctls[c].0,
-                self.force_scales[s],
-                f.effort,
-                deviation(&f.states, &b.states),
-                entry(f).abs(),
-                t as i64,
-                (entry(f) - entry(b)).abs(),
-                f.max_torque_fraction
-            ]);
+            table.push(DisturbanceRow {
+                controller: ctls[c].0.to_string(),
+                force_scale: self.force_scales[s],
+                effort: f.effort,
+                deviation: deviation(&f.states, &b.states),
+                final_error: entry(f).abs(),
+                trial: t as i64,
+                entry_change: (entry(f) - entry(b)).abs(),
+                max_torque_fraction: f.max_torque_fraction,
+            });
         }
         // Motion of both controllers, unpushed and under trial 0's pushes at every scale, for
         // the figure and the GIF.
-        let mut cols = vec!["controller".to_string(), "force_scale".into(), "t".into()];
-        cols.extend((0..9).map(|i| format!("q{i}")));
-        let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
-        let mut motion = Table::new(&cols);
+        let mut motion: Vec<FlightRow> = Vec::new();
         for (c, (name, _)) in ctls.iter().enumerate() {
             let mut runs: Vec<(f64, &Flight)> = vec![(0.0, &base[c])];
             for (s, &scale) in self.force_scales.iter().enumerate() {
@@ -369,16 +358,20 @@ impl Job for DisturbanceParams {
             }
             for (scale, f) in runs {
                 for (k, x) in f.states.iter().enumerate() {
-                    let mut r = row![*name, scale, k as f64 * d.dt];
-                    r.extend(x[..9].iter().map(|&v| v.into()));
-                    motion.push(r);
+                    motion.push(FlightRow::at(name, scale, k as f64 * d.dt, x));
                 }
             }
         }
-        let mut pushes = Table::new(&["trial", "start_s", "duration_s", "force_x_n", "force_y_n"]);
+        let mut pushes: Vec<PushRow> = Vec::new();
         for t in 0..self.trials {
             for (t0, dur, fx, fy) in pushes_of(ctx, &self.pushes, t) {
-                pushes.push(row![t as i64, t0, dur, fx, fy]);
+                pushes.push(PushRow {
+                    trial: t as i64,
+                    start_s: t0,
+                    duration_s: dur,
+                    force_x_n: fx,
+                    force_y_n: fy,
+                });
             }
         }
         let r = &self.rule;
@@ -394,10 +387,10 @@ impl Job for DisturbanceParams {
             ),
         ]);
         Ok(Tables::from([
-            ("disturbance", table),
-            ("dives", examples),
-            ("motion", motion),
-            ("pushes", pushes),
+            ("disturbance", table_of(&table)),
+            ("dives", table_of(&examples)),
+            ("motion", table_of(&motion)),
+            ("pushes", table_of(&pushes)),
             ("rule", rule),
         ]))
     }
@@ -414,24 +407,14 @@ struct TrialRow {
 
 /// The rows of `disturbance.csv` in `dir`.
 fn trial_rows(dir: &Path) -> Result<Vec<TrialRow>, Error> {
-    let t = read_csv(&dir.join("disturbance.csv"))?;
-    let (c, s, trial) = (
-        df_str(&t, "controller")?,
-        df_f64(&t, "force_scale")?,
-        df_f64(&t, "trial")?,
-    );
-    let cols = [
-        df_f64(&t, "effort")?,
-        df_f64(&t, "deviation")?,
-        df_f64(&t, "final_error")?,
-        df_f64(&t, "entry_change")?,
-    ];
-    Ok((0..c.len())
-        .map(|i| TrialRow {
-            controller: c[i].clone(),
-            scale: s[i],
-            trial: trial[i] as usize,
-            v: std::array::from_fn(|k| cols[k][i]),
+    let rows: Vec<DisturbanceRow> = read_rows(&dir.join("disturbance.csv"))?;
+    Ok(rows
+        .into_iter()
+        .map(|r| TrialRow {
+            v: [r.effort, r.deviation, r.final_error, r.entry_change],
+            controller: r.controller,
+            scale: r.force_scale,
+            trial: r.trial as usize,
         })
         .collect())
 }
@@ -620,25 +603,21 @@ impl Family for LbcDiveDisturbance {
     ];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let t = tables.require("disturbance")?;
-        let mut files = fig.draw("measures", &measures_figure(t))?;
-        let m = tables.require("motion")?;
+        let t = DisturbanceRow::from_table(tables.require("disturbance")?);
+        let mut files = fig.draw("measures", &measures_figure(&t))?;
+        let m = FlightRow::from_table(tables.require("motion")?);
         // Trial 0's pushes, as vertical lines over the torso angles' range.
-        let p = tables.require("pushes")?;
-        files.extend(fig.draw("torso", &torso_figure(m, p))?);
+        let p = PushRow::from_table(tables.require("pushes")?);
+        files.extend(fig.draw("torso", &torso_figure(&m, &p))?);
         // GIF: both controllers under scale 1, each beside its unpushed dive.
         let tree = diver();
-        let (mc, ms, mt) = (m.strs("controller"), m.f64s("force_scale"), m.f64s("t"));
-        let q: Vec<Vec<f64>> = (0..9).map(|i| m.f64s(&format!("q{i}"))).collect();
         let rows = |name: &str, sc: f64| -> Vec<usize> {
-            (0..mc.len())
-                .filter(|&i| mc[i] == name && ms[i] == sc)
+            (0..m.len())
+                .filter(|&i| m[i].controller == name && m[i].force_scale == sc)
                 .collect()
         };
         let mut dives = Vec::new();
-        let qs: Vec<Vec<f64>> = (0..mc.len())
-            .map(|i| (0..9).map(|k| q[k][i]).collect())
-            .collect();
+        let qs: Vec<[f64; film::DIVER_COORDS]> = m.iter().map(FlightRow::coords).collect();
         for (k, (name, label)) in [("lbc", "LBC, pushed ×1"), ("pd", "PD, pushed ×1")]
             .iter()
             .enumerate()
@@ -654,7 +633,7 @@ impl Family for LbcDiveDisturbance {
                 dives.push(film::Dive {
                     label: lab,
                     color,
-                    t: r.iter().map(|&i| mt[i]).collect(),
+                    t: r.iter().map(|&i| m[i].t_s).collect(),
                     q: r.iter().map(|&i| qs[i].as_slice()).collect(),
                 });
             }
@@ -736,14 +715,12 @@ impl Family for LbcDiveDisturbance {
 
 /// The measures per force scale (from `disturbance`): each controller's mean effort,
 /// deviation and entry change.
-fn measures_figure(t: &Table) -> Figure {
-    let (c, s) = (t.strs("controller"), t.f64s("force_scale"));
-    let mut scales: Vec<f64> = s.clone();
+fn measures_figure(t: &[DisturbanceRow]) -> Figure {
+    let mut scales: Vec<f64> = t.iter().map(|r| r.force_scale).collect();
     scales.sort_by(f64::total_cmp);
     scales.dedup();
     let x_of = |v: f64| scales.iter().position(|&x| x == v).unwrap_or(0) as f64;
-    let panel = |col: &str, title: &str, y: &str| {
-        let v = t.f64s(col);
+    let panel = |col: fn(&DisturbanceRow) -> f64, title: &str, y: &str| {
         let series = ["lbc", "pd"]
             .iter()
             .enumerate()
@@ -751,9 +728,10 @@ fn measures_figure(t: &Table) -> Figure {
                 let pts: Vec<(f64, f64)> = scales
                     .iter()
                     .map(|&sc| {
-                        let vals: Vec<f64> = (0..c.len())
-                            .filter(|&i| c[i] == *name && s[i] == sc)
-                            .map(|i| v[i])
+                        let vals: Vec<f64> = t
+                            .iter()
+                            .filter(|r| r.controller == *name && r.force_scale == sc)
+                            .map(col)
                             .collect();
                         (
                             x_of(sc),
@@ -777,14 +755,14 @@ fn measures_figure(t: &Table) -> Figure {
     };
     Figure::grid(
         vec![
-            panel("effort", "control effort", "∫½uᵀRu dt"),
+            panel(|r| r.effort, "control effort", "∫½uᵀRu dt"),
             panel(
-                "deviation",
+                |r| r.deviation,
                 "motion's deviation from the unpushed dive",
                 "RMS angle difference (rad)",
             ),
             panel(
-                "entry_change",
+                |r| r.entry_change,
                 "change of the entry angle",
                 "|Δ entry| (rad)",
             ),
@@ -795,21 +773,14 @@ fn measures_figure(t: &Table) -> Figure {
 
 /// The torso angle over time per controller and force scale (from `motion`), trial 0's
 /// pushes (from `pushes`) as vertical lines.
-fn torso_figure(m: &Table, p: &Table) -> Figure {
-    let (mc, ms, mt, q2) = (
-        m.strs("controller"),
-        m.f64s("force_scale"),
-        m.f64s("t"),
-        m.f64s("q2"),
-    );
-    let mut mscales = ms.clone();
+fn torso_figure(m: &[FlightRow], p: &[PushRow]) -> Figure {
+    let mut mscales: Vec<f64> = m.iter().map(|r| r.force_scale).collect();
     mscales.sort_by(f64::total_cmp);
     mscales.dedup();
-    let (pt, ps) = (p.f64s("trial"), p.f64s("start_s"));
-    let (lo, hi) = q2
+    let (lo, hi) = m
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), r| {
+            (a.min(r.torso_rad), b.max(r.torso_rad))
         });
     let panels: Vec<Panel> = ["lbc", "pd"]
         .iter()
@@ -818,9 +789,10 @@ fn torso_figure(m: &Table, p: &Table) -> Figure {
                 .iter()
                 .enumerate()
                 .map(|(k, &sc)| {
-                    let pts = (0..mc.len())
-                        .filter(|&i| mc[i] == *name && ms[i] == sc)
-                        .map(|i| (mt[i], q2[i]))
+                    let pts = m
+                        .iter()
+                        .filter(|r| r.controller == *name && r.force_scale == sc)
+                        .map(|r| (r.t_s, r.torso_rad))
                         .collect();
                     let label = if sc == 0.0 {
                         "unpushed".to_string()
@@ -830,11 +802,10 @@ fn torso_figure(m: &Table, p: &Table) -> Figure {
                     Series::line(label, pts, k)
                 })
                 .collect();
-            for (n, i) in (0..pt.len()).filter(|&i| pt[i] == 0.0).enumerate() {
+            for (n, push) in p.iter().filter(|r| r.trial == 0).enumerate() {
                 let label = if n == 0 { "a push starts" } else { "" };
-                series.push(
-                    Series::line(label, vec![(ps[i], lo), (ps[i], hi)], 7).mark(Mark::Dashed),
-                );
+                let at = push.start_s;
+                series.push(Series::line(label, vec![(at, lo), (at, hi)], 7).mark(Mark::Dashed));
             }
             Panel {
                 title: format!("{}: torso angle", name.to_uppercase()),

@@ -1,41 +1,54 @@
 //! The figures of both dive families.
 
-use super::coordination::POSE_COLUMNS;
-use super::interpolation::{MOTION_COLUMNS, MOTION_DIVES};
+use super::rows::{
+    CoordinationRow, InterpolationRow, Method, MotionDive, MotionRow, PoseRow, Tracking,
+};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use crate::families::lbc::film;
 use crate::physics::diver::diver;
 use std::path::PathBuf;
 
-/// Per-method column of rows `m == name` as (x, y) points.
-fn method_points(x: &[f64], m: &[String], y: &[f64], name: &str) -> Vec<(f64, f64)> {
-    (0..x.len())
-        .filter(|&r| m[r] == name)
-        .map(|r| (x[r], y[r]))
+/// (x, y) of the interpolation's rows of method `m`.
+fn interpolation_points(
+    rows: &[InterpolationRow],
+    m: Method,
+    xy: impl Fn(&InterpolationRow) -> (f64, f64),
+) -> Vec<(f64, f64)> {
+    rows.iter()
+        .filter(|r| r.method == m.name())
+        .map(xy)
+        .collect()
+}
+
+/// (x, y) of the coordination's rows of dive `m`.
+fn coordination_points(
+    rows: &[CoordinationRow],
+    m: Tracking,
+    xy: impl Fn(&CoordinationRow) -> (f64, f64),
+) -> Vec<(f64, f64)> {
+    rows.iter()
+        .filter(|r| r.method == m.name())
+        .map(xy)
         .collect()
 }
 
 /// The interpolation's figures: entry angles and objectives over the desired entry, the dives.
 pub(super) fn interpolation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let t = tables.require("interpolation")?;
-    let (g, m, a, e) = (
-        t.f64s("desired_angle"),
-        t.strs("method"),
-        t.f64s("reached_angle"),
-        t.f64s("excess_objective"),
-    );
-    let lo = g.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = g.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let rows = InterpolationRow::from_table(tables.require("interpolation")?);
+    let desired = rows.iter().map(|r| r.desired_angle);
+    let lo = desired.clone().fold(f64::INFINITY, f64::min);
+    let hi = desired.fold(f64::NEG_INFINITY, f64::max);
     let mut series = vec![Series::line("desired", vec![(lo, lo), (hi, hi)], 7).mark(Mark::Dashed)];
     let mut excess = Vec::new();
-    for (c, name) in ["lbc", "naive", "direct"].iter().enumerate() {
-        series.push(Series::line(*name, method_points(&g, &m, &a, name), c).mark(Mark::LinePoints));
-        if *name != "direct" {
-            excess.push(
-                Series::line(*name, method_points(&g, &m, &e, name), c).mark(Mark::LinePoints),
-            );
+    for (c, m) in Method::COMPARED.into_iter().enumerate() {
+        let reached = interpolation_points(&rows, m, |r| (r.desired_angle, r.reached_angle));
+        series.push(Series::line(m.name(), reached, c).mark(Mark::LinePoints));
+        if m != Method::Direct {
+            let e = interpolation_points(&rows, m, |r| (r.desired_angle, r.excess_objective));
+            excess.push(Series::line(m.name(), e, c).mark(Mark::LinePoints));
         }
     }
     let panels = vec![
@@ -57,23 +70,19 @@ pub(super) fn interpolation(fig: &FigureSink, tables: &Tables) -> Result<Vec<Pat
     let mut files = fig.draw("entry", &Figure::grid(panels, 2))?;
     // Filmstrip and GIF of the component dives, the naive average and LBC.
     if let Some(mt) = tables.get("motion") {
-        let (names, t) = (mt.strs("dive"), mt.f64s("t"));
-        let cols: Vec<Vec<f64>> = MOTION_COLUMNS[2..].iter().map(|c| mt.f64s(c)).collect();
-        let q: Vec<Vec<f64>> = (0..t.len())
-            .map(|r| cols.iter().map(|c| c[r]).collect())
-            .collect();
-        let dives: Vec<film::Dive> = MOTION_DIVES
-            .iter()
+        let motion = MotionRow::from_table(mt);
+        let q: Vec<[f64; film::DIVER_COORDS]> = motion.iter().map(MotionRow::coords).collect();
+        let dives: Vec<film::Dive> = MotionDive::ALL
+            .into_iter()
             .enumerate()
-            .map(|(c, name)| {
-                let rows: Vec<usize> = (0..names.len()).filter(|&r| names[r] == *name).collect();
+            .map(|(c, dive)| {
+                let rows: Vec<usize> = (0..motion.len())
+                    .filter(|&r| motion[r].dive == dive.name())
+                    .collect();
                 film::Dive {
-                    label: match *name {
-                        "naive" | "lbc" => format!("{name}, weights for vertical"),
-                        other => format!("{other} component"),
-                    },
+                    label: dive.label(),
                     color: c,
-                    t: rows.iter().map(|&r| t[r]).collect(),
+                    t: rows.iter().map(|&r| motion[r].t_s).collect(),
                     q: rows.iter().map(|&r| q[r].as_slice()).collect(),
                 }
             })
@@ -101,22 +110,17 @@ pub(super) fn interpolation(fig: &FigureSink, tables: &Tables) -> Result<Vec<Pat
 
 /// The coordination's figure: entry errors and objectives over the take-off rate.
 pub(super) fn coordination(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let t = tables.require("coordination")?;
-    let (w, m, e, j) = (
-        t.f64s("initial_omega"),
-        t.strs("method"),
-        t.f64s("entry_error"),
-        t.f64s("objective"),
-    );
-    let series = |col: &[f64]| -> Vec<Series> {
+    let rows = CoordinationRow::from_table(tables.require("coordination")?);
+    let series = |y: fn(&CoordinationRow) -> f64| -> Vec<Series> {
         [
-            ("lbc", "LBC of three trackers"),
-            ("single", "single 1 rad/s tracker"),
+            (Tracking::Lbc, "LBC of three trackers"),
+            (Tracking::Single, "single 1 rad/s tracker"),
         ]
-        .iter()
+        .into_iter()
         .enumerate()
-        .map(|(c, (name, words))| {
-            Series::line(*words, method_points(&w, &m, col, name), c).mark(if c == 0 {
+        .map(|(c, (m, words))| {
+            let pts = coordination_points(&rows, m, |r| (r.initial_omega, y(r)));
+            Series::line(words, pts, c).mark(if c == 0 {
                 Mark::LinePoints
             } else {
                 Mark::Dashed
@@ -126,11 +130,11 @@ pub(super) fn coordination(fig: &FigureSink, tables: &Tables) -> Result<Vec<Path
     };
     // The verdict's vertical-entry tolerance, from the run's rule table.
     let tolerance = crate::families::lbc::rule_setting(tables, "entry_tolerance");
-    let mut entry_series = series(&e);
-    let (lo, hi) = w
+    let mut entry_series = series(|r| r.entry_error);
+    let (lo, hi) = rows
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-            (a.min(x), b.max(x))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), r| {
+            (a.min(r.initial_omega), b.max(r.initial_omega))
         });
     if let Some(tol) = tolerance.filter(|_| lo.is_finite()) {
         entry_series.push(
@@ -156,7 +160,7 @@ pub(super) fn coordination(fig: &FigureSink, tables: &Tables) -> Result<Vec<Path
             title: "objective of the executed dive".into(),
             x_label: "initial angular velocity (rad/s)".into(),
             y_label: "objective".into(),
-            series: series(&j),
+            series: series(|r| r.objective),
             log_y: true,
             ..Default::default()
         },
@@ -177,27 +181,22 @@ fn coordination_poses(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     let Some(t) = tables.get("poses").filter(|t| !t.is_empty()) else {
         return Ok(vec![]);
     };
-    let (w, m, e) = (
-        t.f64s("initial_omega"),
-        t.strs("method"),
-        t.f64s("entry_error"),
-    );
-    let cols: Vec<Vec<f64>> = POSE_COLUMNS[3..].iter().map(|c| t.f64s(c)).collect();
-    let q: Vec<Vec<f64>> = (0..w.len())
-        .map(|r| cols.iter().map(|c| c[r]).collect())
-        .collect();
+    let poses = PoseRow::from_table(t);
+    let q: Vec<[f64; film::DIVER_COORDS]> = poses.iter().map(PoseRow::coords).collect();
     let rows: Vec<(String, usize, Vec<film::Pose>)> = [
-        ("lbc", "LBC of the three dive trackers (w = 1)"),
-        ("single", "the single tracker of the 1 rad/s dive"),
+        (Tracking::Lbc, "LBC of the three dive trackers (w = 1)"),
+        (Tracking::Single, "the single tracker of the 1 rad/s dive"),
     ]
-    .iter()
+    .into_iter()
     .enumerate()
-    .map(|(c, (name, title))| {
-        let poses = (0..w.len())
-            .filter(|&r| m[r] == *name)
-            .map(|r| film::Pose {
-                q: &q[r],
-                caption: format!("{} rad/s: {:.2} rad", w[r], e[r]),
+    .map(|(c, (m, title))| {
+        let poses = poses
+            .iter()
+            .zip(&q)
+            .filter(|(p, _)| p.method == m.name())
+            .map(|(p, q)| film::Pose {
+                q,
+                caption: format!("{} rad/s: {:.2} rad", p.initial_omega, p.entry_error),
             })
             .collect();
         (

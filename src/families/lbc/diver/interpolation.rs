@@ -2,6 +2,10 @@
 //! desired entry, and the job (LBC, naive and direct dives per desired entry, the λ sweep, the
 //! dives' motion).
 
+use super::rows::{
+    AverageRow, DiveRow, InterpolationRow, InterpolationSweepRow, Method, MotionDive, MotionRow,
+    OffsetRow, ProjectionRow,
+};
 use super::{angle_deviation, entry, mean_trajectory, DiveSettings, ReconstructedCost};
 use crate::bellman::combine::{BlendMode, TrackerBlend};
 use crate::bellman::projection::{project, GaussianReward};
@@ -11,9 +15,9 @@ use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
 use crate::experiment::resolve::{distinct, ensure, positive, ParamError, Validate};
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Family, Job, RunContext};
-use crate::families::lbc::{film, push_entropy, rule_table, ENTROPY_COLUMNS};
-use crate::row;
+use crate::families::lbc::{push_entropy, rule_table, ENTROPY_COLUMNS};
 use nalgebra::DVector;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -136,7 +140,7 @@ impl Validate for InterpolationParams {
 
 /// One interpolation row before it becomes a table row.
 struct InterpRow {
-    method: &'static str,
+    method: Method,
     reached: f64,
     objective: f64,
     entropy: f64,
@@ -171,21 +175,6 @@ impl InterpolationParams {
     }
 }
 
-/// Columns of `average_term.csv`: per scale of the §6.1 term (0: off), the two component dives
-/// (`method` component, `desired_angle` their target, `mean_entropy` NaN) and LBC and the naive
-/// blend at every desired entry; `angle_deviation` is the RMS over the dive's steps and its
-/// torso and joint angles of the executed dive minus the components' average trajectory (rad),
-/// how far the dive strays from the examples' average.
-pub(super) const AVERAGE_COLUMNS: [&str; 7] = [
-    "average_scale",
-    "desired_angle",
-    "method",
-    "reached_angle",
-    "entry_error",
-    "mean_entropy",
-    "angle_deviation",
-];
-
 impl InterpolationParams {
     /// `average_term.csv`: per (settings, their component dives and trackers) of `runs`, the
     /// components and LBC and the naive blend with the projected weights at every desired
@@ -194,25 +183,25 @@ impl InterpolationParams {
         &self,
         runs: &[(&DiveSettings, &[DdpSolution], &[TrackingController])],
         x_bar: &[DVector<f64>],
-    ) -> Result<Table, Error> {
-        let mut table = Table::new(&AVERAGE_COLUMNS);
+    ) -> Result<Vec<AverageRow>, Error> {
+        let mut table = Vec::new();
         for (d, sols, trackers) in runs {
             for (s, target) in sols.iter().zip([-self.offset, self.offset]) {
                 let reached = component_entry(s);
-                table.push(row![
-                    d.average_scale,
-                    target,
-                    "component",
-                    reached,
-                    (reached - target).abs(),
-                    f64::NAN,
-                    angle_deviation(&s.x, x_bar)
-                ]);
+                table.push(AverageRow {
+                    average_scale: d.average_scale,
+                    desired_angle: target,
+                    method: Method::Component.name().to_string(),
+                    reached_angle: reached,
+                    entry_error: (reached - target).abs(),
+                    mean_entropy: f64::NAN,
+                    angle_deviation: angle_deviation(&s.x, x_bar),
+                });
             }
             let (lambda, x0) = (d.lambda(), d.takeoff(self.omega));
             for &g in &self.desired {
                 let (w, _) = self.weights(g, lambda)?;
-                for (name, mode) in [("lbc", BlendMode::Lbc), ("naive", BlendMode::Naive)] {
+                for (method, mode) in Method::BLENDS {
                     let blend = TrackerBlend {
                         trackers,
                         weights: w.clone(),
@@ -222,15 +211,15 @@ impl InterpolationParams {
                     };
                     let r = d.execute(&blend, &x0)?;
                     let reached = entry(&r.final_state);
-                    table.push(row![
-                        d.average_scale,
-                        g,
-                        name,
-                        reached,
-                        (reached - g).abs(),
-                        r.mean_entropy,
-                        angle_deviation(&r.states, x_bar)
-                    ]);
+                    table.push(AverageRow {
+                        average_scale: d.average_scale,
+                        desired_angle: g,
+                        method: method.name().to_string(),
+                        reached_angle: reached,
+                        entry_error: (reached - g).abs(),
+                        mean_entropy: r.mean_entropy,
+                        angle_deviation: angle_deviation(&r.states, x_bar),
+                    });
                 }
             }
         }
@@ -247,10 +236,10 @@ struct Components {
     sols: Vec<DdpSolution>,
     /// Their trackers.
     trackers: Vec<TrackingController>,
-    /// The `dives` table.
-    examples: Table,
-    /// The `average_term` table.
-    average_t: Table,
+    /// The `dives` table's rows.
+    examples: Vec<DiveRow>,
+    /// The `average_term` table's rows.
+    average_t: Vec<AverageRow>,
 }
 
 /// One offset of the offset search: the components' entry angles and, with the weights
@@ -294,18 +283,6 @@ pub fn choose_offset(trials: &[OffsetTrial], tol: f64) -> Option<usize> {
         .min_by(|a, b| a.1.offset.total_cmp(&b.1.offset))
         .map(|(i, _)| i)
 }
-
-/// Columns of `offsets.csv`: one row per offset tried, in the order tried.
-pub(super) const OFFSET_COLUMNS: [&str; 8] = [
-    "offset",
-    "average_scale",
-    "under_entry",
-    "over_entry",
-    "naive_vertical_entry",
-    "lbc_vertical_entry",
-    "premise_holds",
-    "torso_weight",
-];
 
 impl InterpolationParams {
     /// The offsets the search tries: `offsets`, or `offset` alone when it is empty.
@@ -435,22 +412,22 @@ impl Job for InterpolationParams {
             }
         }
         let (p, c) = built.expect("validation: at least one offset");
-        let mut offsets_t = Table::new(&OFFSET_COLUMNS);
-        for t in &trials {
-            offsets_t.push(row![
-                t.offset,
-                t.average_scale,
-                t.under_entry,
-                t.over_entry,
-                t.naive_entry,
-                t.lbc_entry,
-                t.premise_holds(self.entry_tolerance) as usize,
-                t.torso_weight
-            ]);
-        }
+        let offsets_t: Vec<OffsetRow> = trials
+            .iter()
+            .map(|t| OffsetRow {
+                offset: t.offset,
+                average_scale: t.average_scale,
+                under_entry: t.under_entry,
+                over_entry: t.over_entry,
+                naive_vertical_entry: t.naive_entry,
+                lbc_vertical_entry: t.lbc_entry,
+                premise_holds: i64::from(t.premise_holds(self.entry_tolerance)),
+                torso_weight: t.torso_weight,
+            })
+            .collect();
         let found = choose_offset(&trials, self.entry_tolerance).is_some();
         let mut tables = p.judge(ctx, c, found)?;
-        tables.insert("offsets", offsets_t);
+        tables.insert("offsets", table_of(&offsets_t));
         Ok(tables)
     }
 }
@@ -496,12 +473,12 @@ impl InterpolationParams {
             ),
         ]);
         Ok(Tables::from([
-            ("interpolation", table),
-            ("dives", examples),
-            ("projection", proj),
-            ("lambda_sweep", lam),
-            ("motion", motion),
-            ("average_term", average_t),
+            ("interpolation", table_of(&table)),
+            ("dives", table_of(&examples)),
+            ("projection", table_of(&proj)),
+            ("lambda_sweep", table_of(&lam)),
+            ("motion", table_of(&motion)),
+            ("average_term", table_of(&average_t)),
             ("entropy", entropy_t),
             ("rule", rule),
         ]))
@@ -539,10 +516,10 @@ struct InterpOut {
     start: String,
 }
 
-/// The `interpolation`, `projection` and `entropy` tables.
+/// The `interpolation` and `projection` tables' rows and the `entropy` table.
 struct InterpTables {
-    table: Table,
-    proj: Table,
+    table: Vec<InterpolationRow>,
+    proj: Vec<ProjectionRow>,
     entropy: Table,
 }
 
@@ -577,10 +554,10 @@ impl InterpolationParams {
                     let (w, residual) = self.weights(g, lambda)?;
                     let rec = self.reconstructed(&w, lambda);
                     let mut out = Vec::new();
-                    for (name, mode) in [("lbc", BlendMode::Lbc), ("naive", BlendMode::Naive)] {
+                    for (method, mode) in Method::BLENDS {
                         let r = d.execute(&bl.blend(&w, mode, lambda), x0)?;
                         out.push(InterpRow {
-                            method: name,
+                            method,
                             reached: entry(&r.final_state),
                             objective: d.reconstructed_objective(&rec, r.running, &r.final_state),
                             entropy: r.mean_entropy,
@@ -606,7 +583,7 @@ impl InterpolationParams {
                     }
                     let (j, s, it, label) = best.expect("two guesses");
                     out.push(InterpRow {
-                        method: "direct",
+                        method: Method::Direct,
                         reached: entry(&Some(s.x[s.u.len()].clone())),
                         objective: j,
                         entropy: f64::NAN,
@@ -637,27 +614,8 @@ impl InterpolationParams {
         d: &DiveSettings,
         rows: Vec<Result<InterpOut, Error>>,
     ) -> Result<InterpTables, Error> {
-        let mut table = Table::new(&[
-            "desired_angle",
-            "method",
-            "reached_angle",
-            "weight1",
-            "weight2",
-            "objective",
-            "excess_objective",
-            "mean_entropy",
-            "max_torque_fraction",
-        ]);
-        let mut proj = Table::new(&[
-            "desired_angle",
-            "weight1",
-            "weight2",
-            "weight_sum",
-            "relative_residual",
-            "reconstructed_minimum",
-            "direct_outer_iterations",
-            "direct_start",
-        ]);
+        let mut table = Vec::new();
+        let mut proj = Vec::new();
         let mut entropy_t = Table::new(&ENTROPY_COLUMNS);
         for (&g, r) in self.desired.iter().zip(rows) {
             let InterpOut {
@@ -668,37 +626,38 @@ impl InterpolationParams {
                 iterations: it,
                 start: label,
             } = r?;
-            for r in out.iter().filter(|r| r.method != "direct") {
+            for r in out.iter().filter(|r| r.method != Method::Direct) {
                 let run = format!("desired {g} rad");
-                push_entropy(&mut entropy_t, &run, r.method, d.dt, &r.steps.0, &r.steps.1);
+                let name = r.method.name();
+                push_entropy(&mut entropy_t, &run, name, d.dt, &r.steps.0, &r.steps.1);
             }
             let best = out
                 .iter()
-                .find(|r| r.method == "direct")
+                .find(|r| r.method == Method::Direct)
                 .map_or(f64::NAN, |r| r.objective);
             for r in &out {
-                table.push(row![
-                    g,
-                    r.method,
-                    r.reached,
-                    w[0],
-                    w[1],
-                    r.objective,
-                    (r.objective - best) / best.abs(),
-                    r.entropy,
-                    r.torque
-                ]);
+                table.push(InterpolationRow {
+                    desired_angle: g,
+                    method: r.method.name().to_string(),
+                    reached_angle: r.reached,
+                    weight1: w[0],
+                    weight2: w[1],
+                    objective: r.objective,
+                    excess_objective: (r.objective - best) / best.abs(),
+                    mean_entropy: r.entropy,
+                    max_torque_fraction: r.torque,
+                });
             }
-            proj.push(row![
-                g,
-                w[0],
-                w[1],
-                w[0] + w[1],
-                residual,
-                minimum,
-                it,
-                label
-            ]);
+            proj.push(ProjectionRow {
+                desired_angle: g,
+                weight1: w[0],
+                weight2: w[1],
+                weight_sum: w[0] + w[1],
+                relative_residual: residual,
+                reconstructed_minimum: minimum,
+                direct_outer_iterations: it as i64,
+                direct_start: label,
+            });
         }
         Ok(InterpTables {
             table,
@@ -713,27 +672,20 @@ impl InterpolationParams {
         d: &DiveSettings,
         bl: &Blender,
         x0: &DVector<f64>,
-    ) -> Result<Table, Error> {
-        let mut lam = Table::new(&[
-            "lambda",
-            "desired_angle",
-            "reached_angle",
-            "mean_entropy",
-            "weight1",
-            "weight2",
-        ]);
+    ) -> Result<Vec<InterpolationSweepRow>, Error> {
+        let mut lam = Vec::new();
         for &l in &self.lambda_sweep {
             for &g in &self.desired {
                 let (w, _) = self.weights(g, l)?;
                 let r = d.execute(&bl.blend(&w, BlendMode::Lbc, l), x0)?;
-                lam.push(row![
-                    l,
-                    g,
-                    entry(&r.final_state),
-                    r.mean_entropy,
-                    w[0],
-                    w[1]
-                ]);
+                lam.push(InterpolationSweepRow {
+                    lambda: l,
+                    desired_angle: g,
+                    reached_angle: entry(&r.final_state),
+                    mean_entropy: r.mean_entropy,
+                    weight1: w[0],
+                    weight2: w[1],
+                });
             }
         }
         Ok(lam)
@@ -746,36 +698,19 @@ impl InterpolationParams {
         d: &DiveSettings,
         bl: &Blender,
         x0: &DVector<f64>,
-    ) -> Result<Table, Error> {
+    ) -> Result<Vec<MotionRow>, Error> {
         let lambda = d.lambda();
         let (w0, _) = self.weights(0.0, lambda)?;
-        let mut motion = Table::new(&MOTION_COLUMNS);
-        for (name, mode) in MOTION_DIVES.iter().zip([
-            BlendMode::Single(0),
-            BlendMode::Single(1),
-            BlendMode::Naive,
-            BlendMode::Lbc,
-        ]) {
-            let r = d.execute(&bl.blend(&w0, mode, lambda), x0)?;
+        let mut motion = Vec::new();
+        for dive in MotionDive::ALL {
+            let r = d.execute(&bl.blend(&w0, dive.mode(), lambda), x0)?;
             for (k, x) in r.states.iter().enumerate() {
-                let mut cells = vec![(*name).into(), (k as f64 * d.dt).into()];
-                cells.extend(x.iter().take(film::DIVER_COORDS).map(|&v| v.into()));
-                motion.push(cells);
+                motion.push(MotionRow::at(dive, k as f64 * d.dt, x.as_slice()));
             }
         }
         Ok(motion)
     }
 }
-
-/// Columns of the interpolation's `motion` table: the dive, the time and the diver's
-/// generalized coordinates (hip position, torso angle, joint angles).
-pub(super) const MOTION_COLUMNS: [&str; 2 + film::DIVER_COORDS] = [
-    "dive", "t", "x", "y", "torso", "neck", "shoulder", "elbow", "hip", "knee", "ankle",
-];
-
-/// The dives of the `motion` table: the components, and the naive average and LBC with the
-/// weights projected for the vertical entry.
-pub(super) const MOTION_DIVES: [&str; 4] = ["under-rotating", "over-rotating", "naive", "lbc"];
 
 impl Family for LbcDiverInterpolation {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[

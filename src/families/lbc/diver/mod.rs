@@ -34,6 +34,7 @@ mod disturbance;
 mod figures;
 mod interpolation;
 mod report;
+mod rows;
 
 pub use coordination::{
     compare_objectives, coordination_rule, CoordinationCounts, CoordinationParams,
@@ -46,16 +47,15 @@ use crate::bellman::combine::{blend_weights, normalized_entropy, TrackerBlend};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map, StateCost};
-use crate::experiment::output::Table;
 use crate::experiment::resolve::{ensure, positive, ParamError};
 use crate::experiment::{other, Error, RunContext};
 use crate::families::lbc::alpha_deviation;
 use crate::physics::diver::{diver, entry_angle};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::planar::PlanarTree;
-use crate::row;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
+use rows::DiveRow;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -278,12 +278,12 @@ impl DiveSettings {
     }
 
     /// DDP dives (in parallel) for each `(omega, offset)`, their solutions and LQR trackers,
-    /// and the `dives` table describing them.
+    /// and the rows of the `dives` table describing them.
     fn optimize_all(
         &self,
         ctx: &RunContext,
         cases: &[(f64, f64)],
-    ) -> Result<(Vec<DdpSolution>, Vec<TrackingController>, Table), Error> {
+    ) -> Result<(Vec<DdpSolution>, Vec<TrackingController>, Vec<DiveRow>), Error> {
         let pb = ctx.progress(cases.len() as u64, "DDP dives");
         let dives: Vec<Result<(DdpSolution, TrackingController), Error>> = ctx.stage("ddp", || {
             cases
@@ -296,30 +296,21 @@ impl DiveSettings {
                 .collect()
         });
         pb.finish_and_clear();
-        let mut table = Table::new(&[
-            "dive",
-            "initial_omega",
-            "target_offset",
-            "iterations",
-            "cost",
-            "entry_angle",
-            "termination",
-            "max_torque_fraction",
-        ]);
+        let mut table = Vec::with_capacity(cases.len());
         let (mut sols, mut trackers) = (Vec::new(), Vec::new());
         for (i, (r, &(omega, offset))) in dives.into_iter().zip(cases).enumerate() {
             let (sol, tracker) = r?;
             let xn = Some(sol.x[sol.u.len()].clone());
-            table.push(row![
-                i + 1,
-                omega,
-                offset,
-                sol.trace.len(),
-                sol.cost,
-                entry(&xn),
-                format!("{:?}", sol.termination),
-                self.torque_fraction(&sol.u)
-            ]);
+            table.push(DiveRow {
+                dive: i as i64 + 1,
+                initial_omega: omega,
+                target_offset: offset,
+                iterations: sol.trace.len() as i64,
+                cost: sol.cost,
+                entry_angle: entry(&xn),
+                termination: format!("{:?}", sol.termination),
+                max_torque_fraction: self.torque_fraction(&sol.u),
+            });
             sols.push(sol);
             trackers.push(tracker);
         }

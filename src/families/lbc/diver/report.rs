@@ -1,8 +1,13 @@
 //! The report sections and verdicts of both dive families, read back from the CSVs.
 
+use super::rows::{
+    AverageRow, CoordinationRow, CoordinationSweepRow, DiveRow, InterpolationRow,
+    InterpolationSweepRow, Method, Tracking, ValueFunction, ValueRow,
+};
 use super::{compare_objectives, coordination_rule, CoordinationCounts, CoordinationRule};
-use crate::experiment::output::{df_f64, df_str, read_csv};
+use crate::experiment::output::{df_f64, read_csv};
 use crate::experiment::report::{sig, Findings};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use crate::families::lbc::{entropy_section, rule_settings};
@@ -18,62 +23,69 @@ pub(super) fn interpolation(dir: &Path) -> Result<Findings, Error> {
         setting("objective_tolerance"),
         setting("q_spacing2_over_lambda"),
     );
-    let dives = read_csv(&dir.join("dives.csv"))?;
-    let (de, dc) = (df_f64(&dives, "entry_angle")?, df_f64(&dives, "cost")?);
-    let df = read_csv(&dir.join("interpolation.csv"))?;
-    let (g, m, a, w1, w2, ex, h) = (
-        df_f64(&df, "desired_angle")?,
-        df_str(&df, "method")?,
-        df_f64(&df, "reached_angle")?,
-        df_f64(&df, "weight1")?,
-        df_f64(&df, "weight2")?,
-        df_f64(&df, "excess_objective")?,
-        df_f64(&df, "mean_entropy")?,
-    );
-    let at = |name: &str, gv: f64| (0..g.len()).find(|&r| m[r] == name && g[r] == gv);
+    // The components: the under-rotating dive aims short of vertical (a negative target
+    // offset), the over-rotating one past it.
+    let dives: Vec<DiveRow> = read_rows(&dir.join("dives.csv"))?;
+    let under = dives.iter().find(|r| r.target_offset < 0.0);
+    let over = dives.iter().find(|r| r.target_offset > 0.0);
+    let (Some(under), Some(over)) = (under, over) else {
+        return Err(Error::Other(
+            "dives.csv: no under- and over-rotating component dives".into(),
+        ));
+    };
+    let de = [under.entry_angle, over.entry_angle];
+    let rows: Vec<InterpolationRow> = read_rows(&dir.join("interpolation.csv"))?;
+    let at = |m: Method, gv: f64| {
+        rows.iter()
+            .find(|r| r.method == m.name() && r.desired_angle == gv)
+    };
     let mut md = format!(
         "λ = σ²R = {} from joint-torque noise σ = {} N·m·√s; torque limits in DDP and every closed loop; Q_torso·spacing²/λ = {} (§4.1 asks for about 1). Components: the under-rotating dive enters at {} rad (cost {}), the over-rotating one at {} rad (cost {}).\n\n| desired (rad) | w | LBC reached | naive reached | direct DDP reached | LBC excess objective | naive excess objective | LBC mean entropy of α |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
         sig(lambda),
         sig(sigma),
         sig(scale),
-        sig(de[0]),
-        sig(dc[0]),
-        sig(de[1]),
-        sig(dc[1])
+        sig(under.entry_angle),
+        sig(under.cost),
+        sig(over.entry_angle),
+        sig(over.cost)
     );
     let (mut le, mut ne, mut n) = (0.0, 0.0, 0usize);
     // Mean |reached - desired| over every target, and where LBC lands farther than naive.
     let (mut lbc_miss, mut naive_miss, mut worse) = (0.0, 0.0, 0usize);
-    let mut gs: Vec<f64> = g.clone();
+    let mut gs: Vec<f64> = rows.iter().map(|r| r.desired_angle).collect();
     gs.dedup();
     for &gv in &gs {
-        let (Some(l), Some(v), Some(d)) = (at("lbc", gv), at("naive", gv), at("direct", gv)) else {
+        let (Some(l), Some(v), Some(d)) = (
+            at(Method::Lbc, gv),
+            at(Method::Naive, gv),
+            at(Method::Direct, gv),
+        ) else {
             continue;
         };
         md.push_str(&format!(
             "| {} | ({}, {}) | {} | {} | {} | {} | {} | {} |\n",
             sig(gv),
-            sig(w1[l]),
-            sig(w2[l]),
-            sig(a[l]),
-            sig(a[v]),
-            sig(a[d]),
-            sig(ex[l]),
-            sig(ex[v]),
-            sig(h[l])
+            sig(l.weight1),
+            sig(l.weight2),
+            sig(l.reached_angle),
+            sig(v.reached_angle),
+            sig(d.reached_angle),
+            sig(l.excess_objective),
+            sig(v.excess_objective),
+            sig(l.mean_entropy)
         ));
-        le += ex[l];
-        ne += ex[v];
-        lbc_miss += (a[l] - gv).abs();
-        naive_miss += (a[v] - gv).abs();
-        worse += usize::from((a[l] - gv).abs() > (a[v] - gv).abs());
+        le += l.excess_objective;
+        ne += v.excess_objective;
+        lbc_miss += (l.reached_angle - gv).abs();
+        naive_miss += (v.reached_angle - gv).abs();
+        worse += usize::from((l.reached_angle - gv).abs() > (v.reached_angle - gv).abs());
         n += 1;
     }
     let (le, ne) = (le / n.max(1) as f64, ne / n.max(1) as f64);
     let (lbc_miss, naive_miss) = (lbc_miss / n.max(1) as f64, naive_miss / n.max(1) as f64);
     let (lv, nv) = (
-        at("lbc", 0.0).map_or(f64::NAN, |r| a[r].abs()),
-        at("naive", 0.0).map_or(f64::NAN, |r| a[r].abs()),
+        at(Method::Lbc, 0.0).map_or(f64::NAN, |r| r.reached_angle.abs()),
+        at(Method::Naive, 0.0).map_or(f64::NAN, |r| r.reached_angle.abs()),
     );
     md.push_str(&format!(
         "\nVertical entry (the claim): LBC ends {} rad from vertical, naive {} rad (tolerance {}). Mean excess objective over the direct DDP optimum of the reconstructed cost: LBC {}, naive {} (tolerance {}).\n",
@@ -129,21 +141,15 @@ pub(super) fn interpolation(dir: &Path) -> Result<Findings, Error> {
 /// LBC at the vertical target over λ (from `lambda_sweep.csv`), empty without rows.
 fn lambda_sweep_section(dir: &Path) -> Result<String, Error> {
     let mut md = String::new();
-    let ls = read_csv(&dir.join("lambda_sweep.csv"))?;
-    let (ll, lg, la, lh) = (
-        df_f64(&ls, "lambda")?,
-        df_f64(&ls, "desired_angle")?,
-        df_f64(&ls, "reached_angle")?,
-        df_f64(&ls, "mean_entropy")?,
-    );
-    if !ll.is_empty() {
+    let sweep: Vec<InterpolationSweepRow> = read_rows(&dir.join("lambda_sweep.csv"))?;
+    if !sweep.is_empty() {
         md.push_str("\nLBC at the vertical target over λ (weights re-projected at each λ; entropy 0 is a switch, 1 the naive average):\n\n| λ | reached | mean entropy of α |\n| --- | --- | --- |\n");
-        for r in (0..ll.len()).filter(|&r| lg[r] == 0.0) {
+        for r in sweep.iter().filter(|r| r.desired_angle == 0.0) {
             md.push_str(&format!(
                 "| {} | {} | {} |\n",
-                sig(ll[r]),
-                sig(la[r]),
-                sig(lh[r])
+                sig(r.lambda),
+                sig(r.reached_angle),
+                sig(r.mean_entropy)
             ));
         }
     }
@@ -290,38 +296,29 @@ fn average_term(dir: &Path, chosen: f64, tol_entry: f64) -> Result<String, Error
     if !path.exists() {
         return Ok(String::new());
     }
-    let df = read_csv(&path)?;
-    let (s, g, m, a, e, dev) = (
-        df_f64(&df, "average_scale")?,
-        df_f64(&df, "desired_angle")?,
-        df_str(&df, "method")?,
-        df_f64(&df, "reached_angle")?,
-        df_f64(&df, "entry_error")?,
-        df_f64(&df, "angle_deviation")?,
-    );
+    let rows: Vec<AverageRow> = read_rows(&path)?;
     let mut md = format!(
         "\nThe §6.1 average-trajectory term (each component re-optimized with the running cost scale·(x−x̄)ᵀQ(x−x̄), x̄ the components' mean trajectory without it). Rule (fixed in the spec before the sweep): the tables above use the largest scale at which both components still enter within {} rad of their targets; chosen: {}.\n\n| scale | worst component entry error (rad) | LBC vertical entry (rad) | naive vertical entry (rad) | LBC RMS deviation from x̄ (rad) |\n| --- | --- | --- | --- | --- |\n",
         sig(tol_entry),
         sig(chosen)
     );
-    let mut scales = s.clone();
+    let mut scales: Vec<f64> = rows.iter().map(|r| r.average_scale).collect();
     scales.dedup();
     for &sc in &scales {
-        let s = &s;
-        let rows = || (0..s.len()).filter(move |&r| s[r] == sc);
-        let worst = rows()
-            .filter(|&r| m[r] == "component")
-            .map(|r| e[r])
+        let at = || rows.iter().filter(move |r| r.average_scale == sc);
+        let worst = at()
+            .filter(|r| r.method == Method::Component.name())
+            .map(|r| r.entry_error)
             .fold(f64::NEG_INFINITY, f64::max);
-        let find = |name: &str| rows().find(|&r| m[r] == name && g[r] == 0.0);
-        let (l, v) = (find("lbc"), find("naive"));
+        let find = |m: Method| at().find(|r| r.method == m.name() && r.desired_angle == 0.0);
+        let (l, v) = (find(Method::Lbc), find(Method::Naive));
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} |\n",
             sig(sc),
             sig(worst),
-            l.map_or("–".into(), |r| sig(a[r])),
-            v.map_or("–".into(), |r| sig(a[r])),
-            l.map_or("–".into(), |r| sig(dev[r]))
+            l.map_or("–".into(), |r| sig(r.reached_angle)),
+            v.map_or("–".into(), |r| sig(r.reached_angle)),
+            l.map_or("–".into(), |r| sig(r.angle_deviation))
         ));
     }
     Ok(md)
@@ -340,16 +337,7 @@ pub(super) fn coordination(dir: &Path) -> Result<Findings, Error> {
         better_share: setting("better_share"),
         partly_worse_margin: setting("partly_worse_margin"),
     };
-    let df = read_csv(&dir.join("coordination.csv"))?;
-    let (w, m, e, j, h, t, o) = (
-        df_f64(&df, "initial_omega")?,
-        df_str(&df, "method")?,
-        df_f64(&df, "entry_error")?,
-        df_f64(&df, "objective")?,
-        df_f64(&df, "mean_entropy")?,
-        df_f64(&df, "max_torque_fraction")?,
-        df_str(&df, "objective_outcome")?,
-    );
+    let rows: Vec<CoordinationRow> = read_rows(&dir.join("coordination.csv"))?;
     let mut md = format!(
         "λ = σ²R = {} from joint-torque noise σ = {} N·m·√s; torque limits in DDP and every closed loop. Vertical: |entry| ≤ {} rad; objectives compared with a relative tolerance of {}.\n\n| initial ω (rad/s) | LBC entry error | single entry error | LBC objective | single objective | LBC vs single | LBC mean entropy of α | max torque / limit (LBC, single) |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
         sig(lambda),
@@ -358,52 +346,48 @@ pub(super) fn coordination(dir: &Path) -> Result<Findings, Error> {
         sig(tol_obj)
     );
     let (mut better, mut worse, mut much_worse, mut lv, mut sv, mut n) = (0, 0, 0, 0, 0, 0);
-    for r in 0..w.len() {
-        if m[r] != "lbc" {
-            continue;
-        }
-        let Some(q) = (0..w.len()).find(|&q| m[q] == "single" && w[q] == w[r]) else {
+    let (lbc, single) = (Tracking::Lbc.name(), Tracking::Single.name());
+    for r in rows.iter().filter(|r| r.method == lbc) {
+        let Some(q) = rows
+            .iter()
+            .find(|q| q.method == single && q.initial_omega == r.initial_omega)
+        else {
             continue;
         };
         n += 1;
-        better += (o[r] == "better") as usize;
-        worse += (o[r] == "worse") as usize;
-        much_worse +=
-            (compare_objectives(j[r], j[q], bars.partly_worse_margin) == "worse") as usize;
-        lv += (e[r] <= tol_entry) as usize;
-        sv += (e[q] <= tol_entry) as usize;
+        better += (r.objective_outcome == "better") as usize;
+        worse += (r.objective_outcome == "worse") as usize;
+        much_worse += (compare_objectives(r.objective, q.objective, bars.partly_worse_margin)
+            == "worse") as usize;
+        lv += (r.entry_error <= tol_entry) as usize;
+        sv += (q.entry_error <= tol_entry) as usize;
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} | ({}, {}) |\n",
-            sig(w[r]),
-            sig(e[r]),
-            sig(e[q]),
-            sig(j[r]),
-            sig(j[q]),
-            o[r],
-            sig(h[r]),
-            sig(t[r]),
-            sig(t[q])
+            sig(r.initial_omega),
+            sig(r.entry_error),
+            sig(q.entry_error),
+            sig(r.objective),
+            sig(q.objective),
+            r.objective_outcome,
+            sig(r.mean_entropy),
+            sig(r.max_torque_fraction),
+            sig(q.max_torque_fraction)
         ));
     }
     md.push_str(&format!(
         "\nLBC's objective is better in {better}, worse in {worse} and tied in {} of {n} take-off rates; LBC enters vertically from {lv}, the single tracker from {sv}.\n",
         n - better - worse
     ));
-    let ls = read_csv(&dir.join("lambda_sweep.csv"))?;
-    let (ll, lo, lh) = (
-        df_f64(&ls, "lambda")?,
-        df_str(&ls, "objective_outcome")?,
-        df_f64(&ls, "mean_entropy")?,
-    );
-    let mut lams: Vec<f64> = ll.clone();
+    let sweep: Vec<CoordinationSweepRow> = read_rows(&dir.join("lambda_sweep.csv"))?;
+    let mut lams: Vec<f64> = sweep.iter().map(|r| r.lambda).collect();
     lams.sort_by(f64::total_cmp);
     lams.dedup();
     if !lams.is_empty() {
         md.push_str("\nLBC over λ (vs the single tracker, same tolerance):\n\n| λ | better | worse | tied | mean entropy of α |\n| --- | --- | --- | --- | --- |\n");
         for &l in &lams {
-            let rs: Vec<usize> = (0..ll.len()).filter(|&r| ll[r] == l).collect();
-            let c = |s: &str| rs.iter().filter(|&&r| lo[r] == s).count();
-            let hm = rs.iter().map(|&r| lh[r]).sum::<f64>() / rs.len().max(1) as f64;
+            let rs: Vec<&CoordinationSweepRow> = sweep.iter().filter(|r| r.lambda == l).collect();
+            let c = |s: &str| rs.iter().filter(|r| r.objective_outcome == s).count();
+            let hm = rs.iter().map(|r| r.mean_entropy).sum::<f64>() / rs.len().max(1) as f64;
             md.push_str(&format!(
                 "| {} | {} | {} | {} | {} |\n",
                 sig(l),
@@ -414,40 +398,37 @@ pub(super) fn coordination(dir: &Path) -> Result<Findings, Error> {
             ));
         }
     }
-    let vc = read_csv(&dir.join("value_comparison.csv"))?;
-    let (vw, vf, vm, ve, vj) = (
-        df_f64(&vc, "initial_omega")?,
-        df_str(&vc, "value_function")?,
-        df_str(&vc, "method")?,
-        df_f64(&vc, "entry_error")?,
-        df_f64(&vc, "objective")?,
-    );
-    let find =
-        |w: f64, f: &str, m: &str| (0..vw.len()).find(|&r| vw[r] == w && vf[r] == f && vm[r] == m);
+    let values: Vec<ValueRow> = read_rows(&dir.join("value_comparison.csv"))?;
+    let find = |w: f64, f: ValueFunction, m: Tracking| {
+        values
+            .iter()
+            .find(|r| r.initial_omega == w && r.value_function == f.name() && r.method == m.name())
+    };
     if setting("ddp_value_built") != 1.0 {
         md.push_str("\nThe DDP value function (second-order dynamics terms) could not be built for every dive (Q_uu not positive definite), so its comparison is left out.\n");
     }
     md.push_str("\nTrackers with DDP's value function and gains (second-order dynamics terms, LBC §5.2) beside the LQR ones (not judged):\n\n| initial ω (rad/s) | LBC objective, LQR value | LBC objective, DDP value | single, LQR | single, DDP | LBC entry error, LQR / DDP |\n| --- | --- | --- | --- | --- | --- |\n");
-    let mut ws: Vec<f64> = vw.clone();
+    let mut ws: Vec<f64> = values.iter().map(|r| r.initial_omega).collect();
     ws.dedup();
+    let (lqr, ddp) = (ValueFunction::Lqr, ValueFunction::Ddp);
     for &x in &ws {
         let (Some(a), Some(b), Some(c), Some(e)) = (
-            find(x, "lqr", "lbc"),
-            find(x, "ddp", "lbc"),
-            find(x, "lqr", "single"),
-            find(x, "ddp", "single"),
+            find(x, lqr, Tracking::Lbc),
+            find(x, ddp, Tracking::Lbc),
+            find(x, lqr, Tracking::Single),
+            find(x, ddp, Tracking::Single),
         ) else {
             continue;
         };
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} / {} |\n",
             sig(x),
-            sig(vj[a]),
-            sig(vj[b]),
-            sig(vj[c]),
-            sig(vj[e]),
-            sig(ve[a]),
-            sig(ve[b])
+            sig(a.objective),
+            sig(b.objective),
+            sig(c.objective),
+            sig(e.objective),
+            sig(a.entry_error),
+            sig(b.entry_error)
         ));
     }
     md.push_str(&entropy_section(
