@@ -11,6 +11,7 @@ use crate::experiment::output::{unique, Table, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{all_positive, distinct, ensure, positive, ParamError, Validate};
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{
     rule_settings, rule_table, shown, Check, Cmp, Null, Outcome, Partly, Rule,
 };
@@ -220,6 +221,56 @@ pub fn fitted_order(dts: &[f64], drifts: &[f64], floor: f64) -> (f64, usize) {
     (sxy / sxx, n)
 }
 
+crate::result_rows! {
+    /// One row of `energy_drift.csv`: one integrator at one step on one model.
+    pub struct DriftRow {
+        /// The model's name.
+        model: String = "model",
+        /// The integrator's name ([`IntegratorKind::name`]).
+        integrator: String = "integrator",
+        /// The time step (s).
+        dt: f64 = "dt",
+        /// max |E(t) − E(0)| over the run (J).
+        drift: f64 = "drift",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `orders.csv`: one integrator's drift order on one model.
+    pub struct OrderRow {
+        /// The model's name.
+        model: String = "model",
+        /// The integrator's name.
+        integrator: String = "integrator",
+        /// Its order in theory.
+        theoretical_order: i64 = "theoretical_order",
+        /// The slope of log drift against log dt.
+        measured_order: f64 = "measured_order",
+        /// The points above the fit's floor.
+        points_used: i64 = "points_used",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `adaptive.csv`: adaptive RK45 at one tolerance on one model.
+    pub struct AdaptiveRow {
+        /// The model's name.
+        model: String = "model",
+        /// The relative tolerance.
+        rtol: f64 = "rtol",
+        /// The absolute tolerance.
+        atol: f64 = "atol",
+        /// max |E(t) − E(0)| over the run (J).
+        drift: f64 = "drift",
+        /// Steps accepted.
+        accepted_steps: i64 = "accepted_steps",
+        /// Steps rejected.
+        rejected_steps: i64 = "rejected_steps",
+        /// Right-hand side evaluations.
+        evaluations: i64 = "evaluations",
+    }
+}
+
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).unwrap_or_default()
@@ -253,17 +304,17 @@ impl Job for Params {
                 .collect()
         });
         pb.finish_and_clear();
-        let mut drift_t = Table::new(&["model", "integrator", "dt", "drift"]);
-        for (&(m, k, dt), &d) in items.iter().zip(&drifts) {
-            drift_t.push(row![&self.models[m], k.name(), dt, d]);
-        }
-        let mut orders = Table::new(&[
-            "model",
-            "integrator",
-            "theoretical_order",
-            "measured_order",
-            "points_used",
-        ]);
+        let drift_t: Vec<DriftRow> = items
+            .iter()
+            .zip(&drifts)
+            .map(|(&(m, k, dt), &drift)| DriftRow {
+                model: self.models[m].clone(),
+                integrator: k.name().to_string(),
+                dt,
+                drift,
+            })
+            .collect();
+        let mut orders = Vec::new();
         for (m, name) in self.models.iter().enumerate() {
             for &k in &kinds {
                 let d: Vec<f64> = items
@@ -273,7 +324,13 @@ impl Job for Params {
                     .map(|(_, &d)| d)
                     .collect();
                 let (order, used) = fitted_order(&self.dts, &d, self.fit_floor);
-                orders.push(row![name, k.name(), k.order(), order, used]);
+                orders.push(OrderRow {
+                    model: name.clone(),
+                    integrator: k.name().to_string(),
+                    theoretical_order: i64::from(k.order()),
+                    measured_order: order,
+                    points_used: used as i64,
+                });
             }
         }
         // Adaptive RK45 vs tolerance.
@@ -302,34 +359,27 @@ impl Job for Params {
                 })
                 .collect()
         });
-        let mut ad_t = Table::new(&[
-            "model",
-            "rtol",
-            "atol",
-            "drift",
-            "accepted_steps",
-            "rejected_steps",
-            "evaluations",
-        ]);
-        for (&(m, rtol), (d, s)) in ad_items.iter().zip(&adaptive) {
-            ad_t.push(row![
-                &self.models[m],
+        let ad_t: Vec<AdaptiveRow> = ad_items
+            .iter()
+            .zip(&adaptive)
+            .map(|(&(m, rtol), (d, s))| AdaptiveRow {
+                model: self.models[m].clone(),
                 rtol,
-                rtol * self.atol_ratio,
-                *d,
-                s.accepted as i64,
-                s.rejected as i64,
-                s.evaluations as i64
-            ]);
-        }
+                atol: rtol * self.atol_ratio,
+                drift: *d,
+                accepted_steps: s.accepted as i64,
+                rejected_steps: s.rejected as i64,
+                evaluations: s.evaluations as i64,
+            })
+            .collect();
         let mut tables = Tables::default();
-        tables.insert("energy_drift", drift_t);
-        tables.insert("orders", orders);
+        tables.insert("energy_drift", table_of(&drift_t));
+        tables.insert("orders", table_of(&orders));
         tables.insert(
             "rule",
             rule_table(&[("order_tolerance", self.rule.order_tolerance)]),
         );
-        tables.insert("adaptive", ad_t);
+        tables.insert("adaptive", table_of(&ad_t));
         // Passive motion.
         ctx.stage("passive motion", || -> Result<(), Error> {
             for name in &self.models {
@@ -397,12 +447,12 @@ impl Family for PhysicsValidation {
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let mut files = Vec::new();
-        let drift = tables.require("energy_drift")?;
-        let orders = tables.require("orders")?;
-        let models = unique(&drift.strs("model"));
-        files.extend(fig.draw("energy_drift", &drift_figure(drift, orders, &models))?);
+        let drift = DriftRow::from_table(tables.require("energy_drift")?);
+        let orders = OrderRow::from_table(tables.require("orders")?);
+        let models = unique(&drift.iter().map(|r| r.model.clone()).collect::<Vec<_>>());
+        files.extend(fig.draw("energy_drift", &drift_figure(&drift, &orders, &models))?);
         if let Some(ad) = tables.get("adaptive") {
-            files.extend(fig.draw("adaptive", &adaptive_figure(ad))?);
+            files.extend(fig.draw("adaptive", &adaptive_figure(&AdaptiveRow::from_table(ad)))?);
         }
         for m in &models {
             let Some(t) = tables.get(&format!("passive_{m}")) else {
@@ -465,38 +515,16 @@ impl Family for PhysicsValidation {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        use polars::prelude::*;
-        let df = crate::experiment::output::read_csv(&dir.join("orders.csv"))?;
-        let pe = |e: PolarsError| Error::Polars(e.to_string());
-        let m = df.column("model").map_err(pe)?.str().map_err(pe)?.clone();
-        let i = df
-            .column("integrator")
-            .map_err(pe)?
-            .str()
-            .map_err(pe)?
-            .clone();
-        let th = df
-            .column("theoretical_order")
-            .map_err(pe)?
-            .cast(&DataType::Float64)
-            .map_err(pe)?;
-        let th = th.f64().map_err(pe)?.clone();
-        let me = df
-            .column("measured_order")
-            .map_err(pe)?
-            .cast(&DataType::Float64)
-            .map_err(pe)?;
-        let me = me.f64().map_err(pe)?.clone();
+        let orders: Vec<OrderRow> = read_rows(&dir.join("orders.csv"))?;
         let mut md = String::from("| model | integrator | theoretical order | measured order |\n| --- | --- | --- | --- |\n");
         let tolerance = rule_settings(dir)?("order_tolerance");
         let mut held = Vec::new();
-        for r in 0..df.height() {
-            let (t, v) = (th.get(r).unwrap_or(f64::NAN), me.get(r).unwrap_or(f64::NAN));
+        for o in &orders {
+            let (t, v) = (o.theoretical_order as f64, o.measured_order);
             held.push(Check::new(
                 format!(
                     "{} {}: |measured − theoretical order|",
-                    m.get(r).unwrap_or(""),
-                    i.get(r).unwrap_or("")
+                    o.model, o.integrator
                 ),
                 (t - v).abs(),
                 Cmp::AtMost,
@@ -505,23 +533,20 @@ impl Family for PhysicsValidation {
             ));
             md.push_str(&format!(
                 "| {} | {} | {} | {} |\n",
-                m.get(r).unwrap_or(""),
-                i.get(r).unwrap_or(""),
+                o.model,
+                o.integrator,
                 t,
                 sig(v)
             ));
         }
         // Adaptive: does drift fall as the tolerance tightens?
-        let ad = crate::experiment::output::read_csv(&dir.join("adaptive.csv"))?;
-        use crate::experiment::output as out;
+        let adaptive: Vec<AdaptiveRow> = read_rows(&dir.join("adaptive.csv"))?;
         // Per model (sorted by name): the tightest and loosest tolerance's drift.
         let mut per_model: std::collections::BTreeMap<String, (f64, f64)> = Default::default();
-        for (m, d) in out::df_str(&ad, "model")?
-            .into_iter()
-            .zip(out::df_f64(&ad, "drift")?)
-        {
+        for a in adaptive {
+            let d = a.drift;
             let e = per_model
-                .entry(m)
+                .entry(a.model)
                 .or_insert((f64::INFINITY, f64::NEG_INFINITY));
             *e = (e.0.min(d), e.1.max(d));
         }
@@ -561,30 +586,26 @@ impl Family for PhysicsValidation {
 
 /// Per model, the energy drift against the time step for every integrator (from
 /// `energy_drift`), labelled with its measured order (from `orders`) and the theory's.
-fn drift_figure(drift: &Table, orders: &Table, models: &[String]) -> Figure {
-    let (dm, di, dd, dv) = (
-        drift.strs("model"),
-        drift.strs("integrator"),
-        drift.f64s("dt"),
-        drift.f64s("drift"),
-    );
-    let (om, oi, oo) = (
-        orders.strs("model"),
-        orders.strs("integrator"),
-        orders.f64s("measured_order"),
+fn drift_figure(drift: &[DriftRow], orders: &[OrderRow], models: &[String]) -> Figure {
+    let integrators = unique(
+        &drift
+            .iter()
+            .map(|r| r.integrator.clone())
+            .collect::<Vec<_>>(),
     );
     let mut panels = Vec::new();
     for m in models {
         let mut series = Vec::new();
-        for (c, integ) in unique(&di).iter().enumerate() {
-            let pts: Vec<(f64, f64)> = (0..dm.len())
-                .filter(|&r| dm[r] == *m && di[r] == *integ)
-                .map(|r| (dd[r], dv[r]))
+        for (c, integ) in integrators.iter().enumerate() {
+            let pts: Vec<(f64, f64)> = drift
+                .iter()
+                .filter(|r| r.model == *m && r.integrator == *integ)
+                .map(|r| (r.dt, r.drift))
                 .collect();
-            let order = (0..om.len())
-                .find(|&r| om[r] == *m && oi[r] == *integ)
-                .map(|r| oo[r])
-                .unwrap_or(f64::NAN);
+            let order = orders
+                .iter()
+                .find(|r| r.model == *m && r.integrator == *integ)
+                .map_or(f64::NAN, |r| r.measured_order);
             let theory = IntegratorKind::from_name(integ)
                 .map(|k| k.order())
                 .unwrap_or(0);
@@ -611,28 +632,29 @@ fn drift_figure(drift: &Table, orders: &Table, models: &[String]) -> Figure {
 }
 
 /// Adaptive RK45's energy drift and accepted steps against its tolerance (from `adaptive`).
-fn adaptive_figure(ad: &Table) -> Figure {
-    let (am, ar, adr, aa) = (
-        ad.strs("model"),
-        ad.f64s("rtol"),
-        ad.f64s("drift"),
-        ad.f64s("accepted_steps"),
-    );
+fn adaptive_figure(ad: &[AdaptiveRow]) -> Figure {
+    let models = unique(&ad.iter().map(|r| r.model.clone()).collect::<Vec<_>>());
     let mut drift_series = Vec::new();
     let mut step_series = Vec::new();
-    for (c, m) in unique(&am).iter().enumerate() {
-        let rows: Vec<usize> = (0..am.len()).filter(|&r| am[r] == *m).collect();
+    for (c, m) in models.iter().enumerate() {
+        let rows: Vec<&AdaptiveRow> = ad.iter().filter(|r| r.model == *m).collect();
         drift_series.push(
             Series::line(
                 m.clone(),
-                rows.iter().map(|&r| (ar[r], adr[r])).collect(),
+                rows.iter().map(|r| (r.rtol, r.drift)).collect(),
                 c,
             )
             .mark(Mark::LinePoints),
         );
         step_series.push(
-            Series::line(m.clone(), rows.iter().map(|&r| (ar[r], aa[r])).collect(), c)
-                .mark(Mark::LinePoints),
+            Series::line(
+                m.clone(),
+                rows.iter()
+                    .map(|r| (r.rtol, r.accepted_steps as f64))
+                    .collect(),
+                c,
+            )
+            .mark(Mark::LinePoints),
         );
     }
     let panels = vec![

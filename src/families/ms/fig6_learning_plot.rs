@@ -7,21 +7,42 @@
 //! seconds, best_objective). Figure: `<id>_learning.png/svg`, the scatter of every evaluation
 //! with best-so-far lines.
 
-use super::search::{learning_panel_on, LearningJob, Params};
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use super::rows::{LearningRow, LearningSummaryRow, SearchRow};
+use super::search::{learning_panel_on, LearningJob, Params, Search};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Mark, Series};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{distinct, ensure, ParamError, Validate};
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{read_rule, rule_table_of, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::median_interval;
 use crate::experiment::{Error, Family, Job, RunContext};
-use crate::row;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The learning-plot family.
 pub struct MsLearning;
+
+crate::result_rows! {
+    /// One row of `seed_curves.csv`: one search's curve statistics ([`Curve`]) on one seed.
+    pub struct SeedCurveRow {
+        /// The seed.
+        seed: i64 = "seed",
+        /// The search ([`Search::name`]).
+        method: String = "method",
+        /// The best objective of the initial random controllers.
+        init_best: f64 = "init_best",
+        /// The best by the end of the early iterations.
+        at_early: f64 = "at_early",
+        /// The final best.
+        end_best: f64 = "end_best",
+        /// The share of the late evaluations below `init_best`.
+        poor_late: f64 = "poor_late",
+        /// The search's iterations.
+        iterations: f64 = "iterations",
+    }
+}
 
 /// `ms_learning` parameters: the search and annealing, and the verdict's bars.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -92,34 +113,20 @@ impl Job for LearningSpec {
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
         let job = LearningJob(self.learning.clone());
         let mut tables = job.run(ctx)?;
-        let mut seed_curves = Table::new(&[
-            "seed",
-            "method",
-            "init_best",
-            "at_early",
-            "end_best",
-            "poor_late",
-            "iterations",
-        ]);
+        let mut seed_curves = Vec::new();
         let mut add = |seed: u64, t: &Tables| -> Result<(), Error> {
-            let l = t.require("learning")?;
-            let (m, it, obj, best) = (
-                l.strs("method"),
-                l.f64s("iteration"),
-                l.f64s("objective"),
-                l.f64s("best"),
-            );
-            for method in METHODS {
-                let c = curve(method, &m, &it, &obj, &best, &self.rule);
-                seed_curves.push(row![
-                    seed as i64,
-                    method,
-                    c.init_best,
-                    c.at_early,
-                    c.end_best,
-                    c.poor_late,
-                    c.iterations
-                ]);
+            let learning = LearningRow::from_table(t.require("learning")?);
+            for search in Search::ALL {
+                let c = curve(search, &learning, &self.rule);
+                seed_curves.push(SeedCurveRow {
+                    seed: seed as i64,
+                    method: search.name().to_string(),
+                    init_best: c.init_best,
+                    at_early: c.at_early,
+                    end_best: c.end_best,
+                    poor_late: c.poor_late,
+                    iterations: c.iterations,
+                });
             }
             Ok(())
         };
@@ -134,14 +141,11 @@ impl Job for LearningSpec {
             }
             add(seed, &t)?;
         }
-        tables.insert("seed_curves", seed_curves);
+        tables.insert("seed_curves", table_of(&seed_curves));
         tables.insert("rule", rule_table_of(&self.rule)?);
         Ok(tables)
     }
 }
-
-/// The two searches of a run, as `learning.csv` names them.
-const METHODS: [&str; 2] = ["hill_climbing", "simulated_annealing"];
 
 /// Bootstrap seed of the medians over seeds (fixed, so a report is the same on every machine).
 const BOOTSTRAP_SEED: u64 = 1;
@@ -206,30 +210,26 @@ impl Curve {
     }
 }
 
-/// The curve of `method`, its early and late iterations as `r` says.
-fn curve(
-    method: &str,
-    m: &[String],
-    it: &[f64],
-    obj: &[f64],
-    best: &[f64],
-    r: &LearningRule,
-) -> Curve {
-    let rows: Vec<usize> = (0..m.len()).filter(|&i| m[i] == method).collect();
-    let iterations = rows.iter().map(|&i| it[i]).fold(0.0, f64::max);
+/// The curve of `search` in a run's `learning` rows, its early and late iterations as `r`
+/// says.
+fn curve(search: Search, learning: &[LearningRow], r: &LearningRule) -> Curve {
+    let rows: Vec<&LearningRow> = learning
+        .iter()
+        .filter(|l| l.method == search.name())
+        .collect();
+    let iterations = rows.iter().map(|l| l.iteration as f64).fold(0.0, f64::max);
     let best_at = |limit: f64| {
         rows.iter()
-            .filter(|&&i| it[i] <= limit)
-            .map(|&i| best[i])
+            .filter(|l| l.iteration as f64 <= limit)
+            .map(|l| l.best)
             .fold(f64::NEG_INFINITY, f64::max)
     };
     let init_best = best_at(0.0);
-    let late: Vec<usize> = rows
+    let late: Vec<&&LearningRow> = rows
         .iter()
-        .copied()
-        .filter(|&i| it[i] > (1.0 - r.late_fraction) * iterations)
+        .filter(|l| l.iteration as f64 > (1.0 - r.late_fraction) * iterations)
         .collect();
-    let poor = late.iter().filter(|&&i| obj[i] < init_best).count() as f64;
+    let poor = late.iter().filter(|l| l.objective < init_best).count() as f64;
     Curve {
         init_best,
         at_early: best_at(r.early_fraction * iterations),
@@ -250,23 +250,26 @@ impl Family for MsLearning {
     type Params = LearningSpec;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let t = tables.require("learning")?;
-        let methods = t.strs("method");
-        let split = |name: &str| {
-            let mut out = Table::new(&["iteration", "objective", "best"]);
-            let (it, o, b) = (t.f64s("iteration"), t.f64s("objective"), t.f64s("best"));
-            for i in 0..methods.len() {
-                if methods[i] == name {
-                    out.push(row![it[i], o[i], b[i]]);
-                }
-            }
-            out
+        let learning = LearningRow::from_table(tables.require("learning")?);
+        let split = |search: Search| -> Vec<SearchRow> {
+            learning
+                .iter()
+                .filter(|l| l.method == search.name())
+                .map(|l| SearchRow {
+                    iteration: l.iteration,
+                    objective: l.objective,
+                    best: l.best,
+                })
+                .collect()
         };
-        let (h, s) = (split("hill_climbing"), split("simulated_annealing"));
+        let (h, s) = (
+            split(Search::HillClimbing),
+            split(Search::SimulatedAnnealing),
+        );
         // Hill climbing's scatter alone, as the paper's Fig. 6, with annealing's best so far
         // beside it; annealing's own scatter in a second panel on the same axes.
         let x_label = "iteration (0: initial random controllers)";
-        let both = [("hill climbing", &h), ("simulated annealing", &s)];
+        let both: [(&str, &[SearchRow]); 2] = [("hill climbing", &h), ("simulated annealing", &s)];
         let mut hill = learning_panel_on(
             "hill climbing (the paper's Fig. 6): poodle somersault",
             &both[..1],
@@ -291,37 +294,24 @@ impl Family for MsLearning {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let df = read_csv(&dir.join("learning.csv"))?;
-        let (m, it, obj, best) = (
-            df_str(&df, "method")?,
-            df_f64(&df, "iteration")?,
-            df_f64(&df, "objective")?,
-            df_f64(&df, "best")?,
-        );
-        let s = read_csv(&dir.join("summary.csv"))?;
-        let (sm, secs, evals) = (
-            df_str(&s, "method")?,
-            df_f64(&s, "seconds")?,
-            df_f64(&s, "evaluations")?,
-        );
-        let wall = df_f64(&s, "wall_seconds_both")?
-            .first()
-            .copied()
-            .unwrap_or(f64::NAN);
+        let learning: Vec<LearningRow> = read_rows(&dir.join("learning.csv"))?;
+        let summary: Vec<LearningSummaryRow> = read_rows(&dir.join("summary.csv"))?;
+        let wall = summary.first().map_or(f64::NAN, |s| s.wall_seconds_both);
         let r: LearningRule = read_rule(dir)?;
-        let h = curve("hill_climbing", &m, &it, &obj, &best, &r);
-        let a = curve("simulated_annealing", &m, &it, &obj, &best, &r);
+        let h = curve(Search::HillClimbing, &learning, &r);
+        let a = curve(Search::SimulatedAnnealing, &learning, &r);
         let mut md = format!(
             "| method | evaluations | seconds | best of initial set | best after {}% of the iterations | final best | share of the gain by then | evaluations in the last {}% worse than the initial best |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
             sig(100.0 * r.early_fraction),
             sig(100.0 * r.late_fraction)
         );
-        for (name, c) in [("hill_climbing", &h), ("simulated_annealing", &a)] {
-            let k = sm.iter().position(|x| x == name);
+        for (search, c) in [(Search::HillClimbing, &h), (Search::SimulatedAnnealing, &a)] {
+            let k = summary.iter().find(|s| s.method == search.name());
             md.push_str(&format!(
-                "| {name} | {} | {} | {} | {} | {} | {} | {} |\n",
-                k.map(|k| evals[k]).unwrap_or(f64::NAN),
-                sig(k.map(|k| secs[k]).unwrap_or(f64::NAN)),
+                "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                search.name(),
+                k.map_or(f64::NAN, |k| k.evaluations as f64),
+                sig(k.map_or(f64::NAN, |k| k.seconds)),
                 sig(c.init_best),
                 sig(c.at_early),
                 sig(c.end_best),
@@ -335,37 +325,29 @@ impl Family for MsLearning {
             h.iterations
         ));
         // Every seed's curves (older runs: this run's alone).
-        let (hills, anneals) = match read_csv(&dir.join("seed_curves.csv")) {
-            Ok(sc) => {
-                let (seed, method) = (df_f64(&sc, "seed")?, df_str(&sc, "method")?);
-                let col = |k: &str| df_f64(&sc, k);
-                let (ib, ae, eb, pl, its) = (
-                    col("init_best")?,
-                    col("at_early")?,
-                    col("end_best")?,
-                    col("poor_late")?,
-                    col("iterations")?,
-                );
-                let of = |name: &str| -> Vec<(f64, Curve)> {
-                    (0..method.len())
-                        .filter(|&i| method[i] == name)
-                        .map(|i| {
-                            (
-                                seed[i],
-                                Curve {
-                                    init_best: ib[i],
-                                    at_early: ae[i],
-                                    end_best: eb[i],
-                                    poor_late: pl[i],
-                                    iterations: its[i],
-                                },
-                            )
-                        })
-                        .collect()
-                };
-                (of(METHODS[0]), of(METHODS[1]))
-            }
-            Err(_) => (vec![(f64::NAN, h)], vec![(f64::NAN, a)]),
+        let seed_curves = dir.join("seed_curves.csv");
+        let (hills, anneals) = if seed_curves.exists() {
+            let rows: Vec<SeedCurveRow> = read_rows(&seed_curves)?;
+            let of = |search: Search| -> Vec<(f64, Curve)> {
+                rows.iter()
+                    .filter(|c| c.method == search.name())
+                    .map(|c| {
+                        (
+                            c.seed as f64,
+                            Curve {
+                                init_best: c.init_best,
+                                at_early: c.at_early,
+                                end_best: c.end_best,
+                                poor_late: c.poor_late,
+                                iterations: c.iterations,
+                            },
+                        )
+                    })
+                    .collect()
+            };
+            (of(Search::HillClimbing), of(Search::SimulatedAnnealing))
+        } else {
+            (vec![(f64::NAN, h)], vec![(f64::NAN, a)])
         };
         md.push_str(&format!(
             "\nOver the seeds (`seed_curves.csv`; the table above and the figure are the first seed's):\n\n| seed | hill climbing: share of the gain by {}% | its gain over the initial best | late evaluations worse than it | final best | annealing's final best |\n| --- | --- | --- | --- | --- | --- |\n",
@@ -468,11 +450,24 @@ mod tests {
 
     #[test]
     fn the_curve_reads_the_early_and_late_iterations_of_one_method() {
-        let m: Vec<String> = ["h"; 11].iter().map(|s| s.to_string()).collect();
-        let it: Vec<f64> = (0..11).map(f64::from).collect();
         let best = [0.0, 5.0, 8.0, 9.0, 9.0, 9.0, 9.0, 9.0, 9.0, 9.0, 10.0];
         let obj = [0.0, 5.0, 8.0, 9.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, 10.0];
-        let c = curve("h", &m, &it, &obj, &best, &BARS);
+        let mut rows: Vec<LearningRow> = (0..11)
+            .map(|i| LearningRow {
+                method: Search::HillClimbing.name().to_string(),
+                iteration: i as i64,
+                objective: obj[i],
+                best: best[i],
+            })
+            .collect();
+        // Another search's rows are not read.
+        rows.push(LearningRow {
+            method: Search::SimulatedAnnealing.name().to_string(),
+            iteration: 10,
+            objective: 99.0,
+            best: 99.0,
+        });
+        let c = curve(Search::HillClimbing, &rows, &BARS);
         assert_eq!((c.init_best, c.at_early, c.end_best), (0.0, 8.0, 10.0));
         // The last 20% of 10 iterations: 9 and 10; one of the two is below the start.
         assert_eq!(c.poor_late, 0.5);

@@ -7,20 +7,92 @@
 //! `springs` (lattice, spring, a, b).
 
 use super::lattice_draw::{draw_panels, LatticePanel, Scene};
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::report::Findings;
 use crate::experiment::resolve::{distinct, ensure, ParamError, Validate};
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{read_rule, rule_table_of, shown, Check, Partly, Rule};
 use crate::experiment::{other, Error, Family, Job, RunContext};
 use crate::physics::lattice::Lattice;
 use crate::physics::reflex::{deform, Reflex, ReflexGains};
-use crate::row;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// The family.
 pub struct MsLattices;
+
+crate::result_rows! {
+    /// One row of `lattices.csv`: one lattice's size.
+    pub struct LatticeRow {
+        /// The lattice's name.
+        lattice: String = "lattice",
+        /// Its masses.
+        masses: i64 = "masses",
+        /// Its springs.
+        springs: i64 = "springs",
+        /// Reflexes that change no rest length (at +α).
+        rigid_reflexes: i64 = "rigid_reflexes",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `rest_lengths.csv`: one spring under one reflex at one α.
+    pub struct RestLengthRow {
+        /// The lattice's name.
+        lattice: String = "lattice",
+        /// The reflex's number.
+        reflex: i64 = "reflex",
+        /// The reflex's name.
+        reflex_name: String = "reflex_name",
+        /// The reflex coefficient α.
+        alpha: f64 = "alpha",
+        /// The spring's index.
+        spring: i64 = "spring",
+        /// Its first mass.
+        a: i64 = "a",
+        /// Its second mass.
+        b: i64 = "b",
+        /// Its deformed rest length (m).
+        rest_length: f64 = "rest_length",
+        /// Deformed minus undeformed rest length (m).
+        rest_length_change: f64 = "rest_length_change",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `positions.csv`: one mass of a lattice's shape under one reflex.
+    pub struct PositionRow {
+        /// The lattice's name.
+        lattice: String = "lattice",
+        /// The reflex's number (−1: the rest shape).
+        reflex: i64 = "reflex",
+        /// The reflex coefficient α (0 at rest).
+        alpha: f64 = "alpha",
+        /// The mass's index.
+        mass: i64 = "mass",
+        /// Its x (m).
+        x: f64 = "x",
+        /// Its y (m).
+        y: f64 = "y",
+        /// Its z (m).
+        z: f64 = "z",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `springs.csv`: one spring of a lattice.
+    pub struct LatticeSpringRow {
+        /// The lattice's name.
+        lattice: String = "lattice",
+        /// The spring's index.
+        spring: i64 = "spring",
+        /// Its first mass.
+        a: i64 = "a",
+        /// Its second mass.
+        b: i64 = "b",
+    }
+}
 
 /// Parameters of `ms_lattices`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -132,28 +204,29 @@ impl Job for Params {
     }
 
     fn run(&self, _ctx: &RunContext) -> Result<Tables, Error> {
-        let mut lat = Table::new(&["lattice", "masses", "springs", "rigid_reflexes"]);
-        let mut rl = Table::new(&[
-            "lattice",
-            "reflex",
-            "reflex_name",
-            "alpha",
-            "spring",
-            "a",
-            "b",
-            "rest_length",
-            "rest_length_change",
-        ]);
-        let mut pos = Table::new(&["lattice", "reflex", "alpha", "mass", "x", "y", "z"]);
-        let mut spr = Table::new(&["lattice", "spring", "a", "b"]);
+        let (mut lat, mut rl, mut pos, mut spr) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for name in &self.lattices {
             let l = lattice_by_name(name).ok_or_else(|| other("unknown lattice"))?;
             let rest = l.rest_lengths();
             for (j, s) in l.springs.iter().enumerate() {
-                spr.push(row![name.as_str(), j, s.a, s.b]);
+                spr.push(LatticeSpringRow {
+                    lattice: name.clone(),
+                    spring: j as i64,
+                    a: s.a as i64,
+                    b: s.b as i64,
+                });
             }
+            let position = |reflex: i64, alpha: f64, i: usize, p: &[f64; 3]| PositionRow {
+                lattice: name.clone(),
+                reflex,
+                alpha,
+                mass: i as i64,
+                x: p[0],
+                y: p[1],
+                z: p[2],
+            };
             for (i, p) in l.rest_positions().iter().enumerate() {
-                pos.push(row![name.as_str(), -1i64, 0.0, i, p[0], p[1], p[2]]);
+                pos.push(position(-1, 0.0, i, p));
             }
             let mut rigid = 0usize;
             for r in 0..Reflex::COUNT {
@@ -164,51 +237,50 @@ impl Job for Params {
                     for (j, s) in l.springs.iter().enumerate() {
                         let dl = d.rest_lengths[j] - rest[j];
                         change = change.max(dl.abs());
-                        rl.push(row![
-                            name.as_str(),
-                            r,
-                            rname.as_str(),
+                        rl.push(RestLengthRow {
+                            lattice: name.clone(),
+                            reflex: r as i64,
+                            reflex_name: rname.clone(),
                             alpha,
-                            j,
-                            s.a,
-                            s.b,
-                            d.rest_lengths[j],
-                            dl
-                        ]);
+                            spring: j as i64,
+                            a: s.a as i64,
+                            b: s.b as i64,
+                            rest_length: d.rest_lengths[j],
+                            rest_length_change: dl,
+                        });
                     }
                     if alpha > 0.0 {
                         if change < 1e-9 {
                             rigid += 1;
                         }
                         for (i, p) in d.positions.iter().enumerate() {
-                            pos.push(row![name.as_str(), r, alpha, i, p[0], p[1], p[2]]);
+                            pos.push(position(r as i64, alpha, i, p));
                         }
                     }
                 }
             }
-            lat.push(row![name.as_str(), l.n_masses(), l.springs.len(), rigid]);
+            lat.push(LatticeRow {
+                lattice: name.clone(),
+                masses: l.n_masses() as i64,
+                springs: l.springs.len() as i64,
+                rigid_reflexes: rigid as i64,
+            });
         }
         Ok(Tables::from([
-            ("lattices", lat),
-            ("rest_lengths", rl),
-            ("positions", pos),
-            ("springs", spr),
+            ("lattices", table_of(&lat)),
+            ("rest_lengths", table_of(&rl)),
+            ("positions", table_of(&pos)),
+            ("springs", table_of(&spr)),
             ("rule", rule_table_of(&self.rule)?),
         ]))
     }
 }
 
-/// Springs `(a, b)` of `lattice` from a `springs` table; `None`: every spring of a table of
-/// one lattice's springs (which has no `lattice` column).
-pub fn springs_of(t: &Table, lattice: Option<&str>) -> Vec<(usize, usize)> {
-    let names = lattice.map(|_| t.strs("lattice"));
-    let (a, b) = (t.f64s("a"), t.f64s("b"));
-    (0..a.len())
-        .filter(|&i| match (lattice, &names) {
-            (Some(l), Some(names)) => names[i] == l,
-            _ => true,
-        })
-        .map(|i| (a[i] as usize, b[i] as usize))
+/// Springs `(a, b)` of `lattice` among a `springs` table's rows.
+fn springs_of(rows: &[LatticeSpringRow], lattice: &str) -> Vec<(usize, usize)> {
+    rows.iter()
+        .filter(|s| s.lattice == lattice)
+        .map(|s| (s.a as usize, s.b as usize))
         .collect()
 }
 
@@ -244,25 +316,23 @@ impl Family for MsLattices {
     type Params = Params;
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let pos = tables.require("positions")?;
-        let spr = tables.require("springs")?;
-        let (names, reflex, alpha) = (pos.strs("lattice"), pos.f64s("reflex"), pos.f64s("alpha"));
-        let (x, y, z) = (pos.f64s("x"), pos.f64s("y"), pos.f64s("z"));
+        let pos = PositionRow::from_table(tables.require("positions")?);
+        let spr = LatticeSpringRow::from_table(tables.require("springs")?);
         let shape = |l: &str, r: i64| -> Vec<[f64; 3]> {
-            (0..x.len())
-                .filter(|&i| names[i] == l && reflex[i] as i64 == r)
-                .map(|i| [x[i], y[i], z[i]])
+            pos.iter()
+                .filter(|p| p.lattice == l && p.reflex == r)
+                .map(|p| [p.x, p.y, p.z])
                 .collect()
         };
         let mut lattices: Vec<String> = Vec::new();
-        for n in &names {
-            if !lattices.contains(n) {
-                lattices.push(n.clone());
+        for p in &pos {
+            if !lattices.contains(&p.lattice) {
+                lattices.push(p.lattice.clone());
             }
         }
         let mut files = Vec::new();
         for l in &lattices {
-            let springs = springs_of(spr, Some(l));
+            let springs = springs_of(&spr, l);
             let nm = shape(l, -1).len();
             files.extend(draw_panels(
                 &fig.dir,
@@ -279,12 +349,10 @@ impl Family for MsLattices {
                 false,
                 &Scene::default(),
             )?);
-            let a = alpha
+            let a = pos
                 .iter()
-                .zip(&names)
-                .find(|(a, n)| **a > 0.0 && *n == l)
-                .map(|(a, _)| *a)
-                .unwrap_or(1.0);
+                .find(|p| p.alpha > 0.0 && p.lattice == *l)
+                .map_or(1.0, |p| p.alpha);
             let panels: Vec<LatticePanel> = (0..Reflex::COUNT as i64)
                 .map(|r| LatticePanel {
                     title: format!(
@@ -313,17 +381,11 @@ impl Family for MsLattices {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let df = read_csv(&dir.join("lattices.csv"))?;
-        let names = df_str(&df, "lattice")?;
-        let (m, s, rigid) = (
-            df_f64(&df, "masses")?,
-            df_f64(&df, "springs")?,
-            df_f64(&df, "rigid_reflexes")?,
-        );
-        let rl = read_csv(&dir.join("rest_lengths.csv"))?;
-        let change = df_f64(&rl, "rest_length_change")?;
-        let minlen = df_f64(&rl, "rest_length")?
-            .into_iter()
+        let lattices: Vec<LatticeRow> = read_rows(&dir.join("lattices.csv"))?;
+        let rl: Vec<RestLengthRow> = read_rows(&dir.join("rest_lengths.csv"))?;
+        let minlen = rl
+            .iter()
+            .map(|r| r.rest_length)
             .fold(f64::INFINITY, f64::min);
         let mut md = String::from(
             "| lattice | masses | springs | reflexes that change no rest length |\n| --- | --- | --- | --- |\n",
@@ -332,20 +394,23 @@ impl Family for MsLattices {
         let within = |x: f64, lo: usize, hi: usize| (lo as f64..=hi as f64).contains(&x);
         let mut in_range = true;
         let mut cube_ok = false;
-        for i in 0..names.len() {
+        for l in &lattices {
             md.push_str(&format!(
                 "| {} | {} | {} | {} |\n",
-                names[i], m[i], s[i], rigid[i]
+                l.lattice, l.masses, l.springs, l.rigid_reflexes
             ));
-            in_range &= within(m[i], r.masses_min, r.masses_max)
-                && within(s[i], r.springs_min, r.springs_max);
-            if names[i] == "cube" {
-                cube_ok = m[i] == r.cube_masses as f64
-                    && s[i] == r.cube_springs as f64
-                    && rigid[i] == 0.0;
+            let (m, s) = (l.masses as f64, l.springs as f64);
+            in_range &=
+                within(m, r.masses_min, r.masses_max) && within(s, r.springs_min, r.springs_max);
+            if l.lattice == "cube" {
+                cube_ok = m == r.cube_masses as f64
+                    && s == r.cube_springs as f64
+                    && l.rigid_reflexes == 0;
             }
         }
-        let largest = change.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let largest = rl
+            .iter()
+            .fold(0.0f64, |a, v| a.max(v.rest_length_change.abs()));
         md.push_str(&format!(
             "\nLargest rest-length change of a reflex: {largest:.3} m; shortest deformed rest length: {minlen:.3} m.\n"
         ));

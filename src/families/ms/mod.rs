@@ -6,6 +6,7 @@ pub mod lattices;
 pub mod motion;
 pub mod motion_rule;
 pub mod representation;
+pub mod rows;
 pub mod search;
 pub mod settings;
 

@@ -7,14 +7,17 @@
 //! `<id>_search.png/svg`.
 
 use super::lattice_draw::{draw_panels, front_face, write_gif, LatticePanel, Scene};
-use super::lattices::springs_of;
 use super::motion_rule::{measures, motion_rule, seed_folders, unit, MotionFacts, MotionRule};
+use super::rows::{
+    BestTermRow, ControllerRow, MeasureRow, MotionSummaryRow, SearchRow, SpringRow, TrajectoryRow,
+};
 use super::search::{learning_panel, Motion, MotionJob, Params};
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Mark, Panel, Series};
 use crate::experiment::report::{sig, yes_no, Findings};
 use crate::experiment::resolve::{ParamError, Validate};
+use crate::experiment::rows::{read_rows, TableRow};
 use crate::experiment::rule::{rule_setting, rule_settings, rule_table_of, shown};
 use crate::experiment::seeds::SeedMetric;
 use crate::experiment::{Error, Family, Job, RunContext};
@@ -54,17 +57,16 @@ impl Job for MotionSpec {
     }
 }
 
-/// Frames `(t, regime, positions)` of a `trajectory` table.
-fn frames_of(t: &Table) -> Vec<(f64, usize, Vec<[f64; 3]>)> {
-    let (time, reg, mass) = (t.f64s("t"), t.f64s("regime"), t.f64s("mass"));
-    let (x, y, z) = (t.f64s("x"), t.f64s("y"), t.f64s("z"));
+/// Frames `(t, regime, positions)` of a `trajectory` table's rows (a frame starts at its
+/// mass 0).
+fn frames_of(rows: &[TrajectoryRow]) -> Vec<(f64, usize, Vec<[f64; 3]>)> {
     let mut out: Vec<(f64, usize, Vec<[f64; 3]>)> = Vec::new();
-    for i in 0..time.len() {
-        if mass[i] == 0.0 {
-            out.push((time[i], reg[i] as usize, Vec::new()));
+    for r in rows {
+        if r.mass == 0 {
+            out.push((r.t, r.regime as usize, Vec::new()));
         }
         if let Some(f) = out.last_mut() {
-            f.2.push([x[i], y[i], z[i]]);
+            f.2.push([r.x, r.y, r.z]);
         }
     }
     out
@@ -131,17 +133,19 @@ impl Family for MsMotion {
     ];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let springs = springs_of(tables.require("springs")?, None);
-        let frames = frames_of(tables.require("trajectory")?);
-        let ctl = tables.require("controller")?;
-        let names = ctl.strs("reflex_name");
-        let alphas = ctl.f64s("alpha");
+        let springs: Vec<(usize, usize)> = SpringRow::from_table(tables.require("springs")?)
+            .iter()
+            .map(|s| (s.a as usize, s.b as usize))
+            .collect();
+        let frames = frames_of(&TrajectoryRow::from_table(tables.require("trajectory")?));
+        let ctl = ControllerRow::from_table(tables.require("controller")?);
         let trail: Vec<[f64; 3]> = frames.iter().map(|f| com(&f.2)).collect();
         let label = |reg: usize| {
+            let regime = ctl.iter().find(|c| c.regime == reg as i64);
             format!(
                 "{} {:+.2}",
-                names.get(reg).map(String::as_str).unwrap_or("?"),
-                alphas.get(reg).copied().unwrap_or(f64::NAN)
+                regime.map_or("?", |c| c.reflex_name.as_str()),
+                regime.map_or(f64::NAN, |c| c.alpha)
             )
         };
         let mut files = Vec::new();
@@ -150,10 +154,11 @@ impl Family for MsMotion {
         }
         // The motion's name, a side camera (looking along +y: the floor level, the motion along x
         // across the picture), the front face at t = 0 marked, a 1 m bar.
-        let summary = tables.require("summary")?;
-        let (motion, lattice) = (summary.strs("motion"), summary.strs("lattice"));
-        let name = motion_title(motion.first().map_or("", String::as_str));
-        let lattice = lattice.first().cloned().unwrap_or_default();
+        let summary = MotionSummaryRow::from_table(tables.require("summary")?);
+        let summary = summary.first();
+        let motion_id = summary.map_or("", |s| s.motion.as_str());
+        let name = motion_title(motion_id);
+        let lattice = summary.map(|s| s.lattice.clone()).unwrap_or_default();
         let scene = Scene {
             caption: Some(format!(
                 "{name} ({lattice} lattice): red line = centre-of-mass path, orange = the face in front at t = 0, floor grid 0.5 m, black bar 1 m"
@@ -163,12 +168,8 @@ impl Family for MsMotion {
             marked: front_face(&frames[0].2),
             scale_bar: true,
         };
-        let strip = (tables
-            .require("summary")?
-            .f64s("filmstrip_frames")
-            .first()
-            .copied()
-            .unwrap_or(8.0) as usize)
+        let strip = summary
+            .map_or(8, |s| s.filmstrip_frames as usize)
             .clamp(1, frames.len());
         let picks: Vec<usize> = (0..strip)
             .map(|i| {
@@ -233,7 +234,6 @@ impl Family for MsMotion {
                 ..scene.clone()
             },
         )?);
-        let motion_id = motion.first().map_or("", String::as_str);
         let bars = MotionRule {
             held: rule_setting(tables, "held").unwrap_or(f64::NAN),
             partly: rule_setting(tables, "partly").unwrap_or(f64::NAN),
@@ -242,13 +242,13 @@ impl Family for MsMotion {
             "heading",
             &heading_figure(&frames, &scene.marked, motion_id, &bars),
         )?);
-        let search = tables.require("search")?;
+        let search = SearchRow::from_table(tables.require("search")?);
         files.extend(fig.draw(
             "search",
             &Figure::grid(
                 vec![learning_panel(
                     "hill climbing: objective of every evaluation",
-                    &[("hill climbing", search)],
+                    &[("hill climbing", &search)],
                     "iteration (0: initial random controllers)",
                 )],
                 1,
@@ -262,40 +262,36 @@ impl Family for MsMotion {
         let (first_seed, first) = folders.first().cloned().ok_or_else(|| {
             crate::experiment::other(format!("{}: no seed's results", dir.display()))
         })?;
-        let s = read_csv(&first.join("summary.csv"))?;
-        let name = df_str(&s, "motion")?.first().cloned().unwrap_or_default();
-        let motion = Motion::from_name(&name).ok_or_else(|| {
-            crate::experiment::other(format!("summary.csv: unknown motion `{name}`"))
+        let summary: Vec<MotionSummaryRow> = read_rows(&first.join("summary.csv"))?;
+        let s = summary
+            .first()
+            .ok_or_else(|| crate::experiment::other("summary.csv: no row"))?;
+        let motion = Motion::from_name(&s.motion).ok_or_else(|| {
+            crate::experiment::other(format!("summary.csv: unknown motion `{}`", s.motion))
         })?;
-        let get1 = |c: &str| -> Result<f64, Error> {
-            Ok(df_f64(&s, c)?.first().copied().unwrap_or(f64::NAN))
-        };
         let (evals, secs, best, init) = (
-            get1("evaluations")?,
-            get1("search_seconds")?,
-            get1("best_objective")?,
-            get1("initial_best")?,
+            s.evaluations as f64,
+            s.search_seconds,
+            s.best_objective,
+            s.initial_best,
         );
         let mv = measures(&first)?;
-        let m = read_csv(&first.join("measures.csv"))?;
-        let names = df_str(&m, "measure")?;
-        let b = read_csv(&first.join("best.csv"))?;
-        let (bt, bv, bw) = (
-            df_str(&b, "term")?,
-            df_f64(&b, "value")?,
-            df_f64(&b, "weighted")?,
-        );
+        let names: Vec<String> = read_rows::<MeasureRow>(&first.join("measures.csv"))?
+            .into_iter()
+            .map(|m| m.measure)
+            .collect();
+        let terms: Vec<BestTermRow> = read_rows(&first.join("best.csv"))?;
         let mut md = match first_seed {
             Some(seed) => format!("The best motion of seed {seed} (the figures show it):\n\n"),
             None => String::new(),
         };
         md.push_str("| objective term | value | weighted |\n| --- | --- | --- |\n");
-        for i in 0..bt.len() {
+        for t in &terms {
             md.push_str(&format!(
                 "| {} | {} | {} |\n",
-                bt[i],
-                sig(bv[i]),
-                sig(bw[i])
+                t.term,
+                sig(t.value),
+                sig(t.weighted)
             ));
         }
         md.push_str("\n| measure of the best motion | value |\n| --- | --- |\n");

@@ -15,9 +15,11 @@
 //! bar with its conditions; partly the same at the partly bar. The null of every check is a
 //! body at rest: no travel, no turn, on no seed.
 
+use super::rows::MeasureRow;
 use super::search::Motion;
-use crate::experiment::output::{df_f64, df_str, read_csv};
+use crate::experiment::output::{df_f64, read_csv};
 use crate::experiment::resolve::{ensure, ParamError};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{majority, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::{median, median_interval};
 use crate::experiment::Error;
@@ -184,13 +186,11 @@ pub fn seed_folders(dir: &Path) -> Result<Vec<(Option<u64>, PathBuf)>, Error> {
 
 /// A run folder's measures by name (NaN where missing).
 pub fn measures(dir: &Path) -> Result<impl Fn(&str) -> f64, Error> {
-    let m = read_csv(&dir.join("measures.csv"))?;
-    let (names, vals) = (df_str(&m, "measure")?, df_f64(&m, "value")?);
+    let rows: Vec<MeasureRow> = read_rows(&dir.join("measures.csv"))?;
     Ok(move |n: &str| {
-        names
-            .iter()
-            .position(|x| x == n)
-            .map_or(f64::NAN, |i| vals[i])
+        rows.iter()
+            .find(|r| r.measure == n)
+            .map_or(f64::NAN, |r| r.value)
     })
 }
 

@@ -23,11 +23,12 @@
 //! motions; partly: one; did not hold: none.
 
 use super::search::{measure_values, Params};
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::output::{Table, Tables};
 use crate::experiment::plot::{Figure, Panel, Series};
 use crate::experiment::plot::{FigureSink, Mark};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{
     read_rule, rule_setting, rule_table_of, shown, Check, Cmp, Null, Outcome, Partly, Rule,
 };
@@ -107,6 +108,44 @@ impl Validate for RepresentationParams {
     }
 }
 
+crate::result_rows! {
+    /// One row of `curves.csv`: one search's best so far after some evaluations.
+    pub struct CurvePointRow {
+        /// The motion's name (a key of the spec's `motions`).
+        motion: String = "motion",
+        /// The representation ([`REPRESENTATIONS`]).
+        representation: String = "representation",
+        /// The search's index among the seeds.
+        search: i64 = "search",
+        /// Evaluations so far.
+        evaluations: i64 = "evaluations",
+        /// The best objective after them.
+        best: f64 = "best",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `runs.csv`: one search.
+    pub struct RunRow {
+        /// The motion's name.
+        motion: String = "motion",
+        /// The representation ([`REPRESENTATIONS`]).
+        representation: String = "representation",
+        /// The search's index among the seeds.
+        search: i64 = "search",
+        /// Controllers evaluated.
+        evaluations: i64 = "evaluations",
+        /// Evaluations whose simulation diverged.
+        blowups: i64 = "blowups",
+        /// The best of the initial random set.
+        initial_best: f64 = "initial_best",
+        /// The final best.
+        best_objective: f64 = "best_objective",
+        /// The search's wall time (s).
+        seconds: f64 = "seconds",
+    }
+}
+
 /// `(evaluations, best so far)` of one run at every `every` evaluations and the last.
 fn thin(curve: &[(usize, f64)], every: usize) -> Vec<(usize, f64)> {
     curve
@@ -123,17 +162,7 @@ impl Job for RepresentationParams {
     }
 
     fn run(&self, ctx: &RunContext) -> Result<Tables, Error> {
-        let mut curves = Table::new(&["motion", "representation", "search", "evaluations", "best"]);
-        let mut runs = Table::new(&[
-            "motion",
-            "representation",
-            "search",
-            "evaluations",
-            "blowups",
-            "initial_best",
-            "best_objective",
-            "seconds",
-        ]);
+        let (mut curves, mut runs) = (Vec::new(), Vec::new());
         let mut meas = Table::new(&["motion", "representation", "measure", "value"]);
         let total: usize = self
             .motions
@@ -183,7 +212,13 @@ impl Job for RepresentationParams {
                         .map(|(i, e)| (i + 1, e.best))
                         .collect();
                     for (n, b) in thin(&points, self.curve_every) {
-                        curves.push(row![name.as_str(), rep, k, n, b]);
+                        curves.push(CurvePointRow {
+                            motion: name.clone(),
+                            representation: rep.to_string(),
+                            search: k as i64,
+                            evaluations: n as i64,
+                            best: b,
+                        });
                     }
                     let blowups = curve.iter().filter(|e| e.value == BLOWUP_OBJECTIVE).count();
                     let initial_best = curve
@@ -191,16 +226,16 @@ impl Job for RepresentationParams {
                         .filter(|e| e.iteration == 0)
                         .map(|e| e.value)
                         .fold(f64::NEG_INFINITY, f64::max);
-                    runs.push(row![
-                        name.as_str(),
-                        rep,
-                        k,
-                        curve.len(),
-                        blowups,
+                    runs.push(RunRow {
+                        motion: name.clone(),
+                        representation: rep.to_string(),
+                        search: k as i64,
+                        evaluations: curve.len() as i64,
+                        blowups: blowups as i64,
                         initial_best,
-                        best_value,
-                        seconds
-                    ]);
+                        best_objective: best_value,
+                        seconds,
+                    });
                     if let Some(tr) = traj {
                         if best.as_ref().is_none_or(|(v, _)| best_value > *v) {
                             best = Some((best_value, tr));
@@ -216,8 +251,8 @@ impl Job for RepresentationParams {
         }
         pb.finish_and_clear();
         Ok(Tables::from([
-            ("curves", curves),
-            ("runs", runs),
+            ("curves", table_of(&curves)),
+            ("runs", table_of(&runs)),
             ("measures", meas),
             ("rule", rule_table_of(&self.rule)?),
         ]))
@@ -226,23 +261,14 @@ impl Job for RepresentationParams {
 
 /// The median over seeds of the best-so-far curves of one motion and representation:
 /// `(evaluations, median, lowest, highest)` at every evaluation count all seeds have.
-fn median_curve(
-    motions: &[String],
-    reps: &[String],
-    seeds: &[f64],
-    evals: &[f64],
-    best: &[f64],
-    motion: &str,
-    rep: &str,
-) -> Vec<(f64, f64, f64, f64)> {
+fn median_curve(curves: &[CurvePointRow], motion: &str, rep: &str) -> Vec<(f64, f64, f64, f64)> {
     let mut by_n: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
-    let mut seed_set: Vec<u64> = Vec::new();
-    for i in 0..motions.len() {
-        if motions[i] == motion && reps[i] == rep {
-            by_n.entry(evals[i] as u64).or_default().push(best[i]);
-            let s = seeds[i] as u64;
-            if !seed_set.contains(&s) {
-                seed_set.push(s);
+    let mut seed_set: Vec<i64> = Vec::new();
+    for c in curves {
+        if c.motion == motion && c.representation == rep {
+            by_n.entry(c.evaluations as u64).or_default().push(c.best);
+            if !seed_set.contains(&c.search) {
+                seed_set.push(c.search);
             }
         }
     }
@@ -335,33 +361,27 @@ pub fn representation_rule(
 
 /// The rule's judgement of each motion in a `curves` table.
 pub fn judge(curves: &Table) -> Vec<MotionJudgement> {
-    let (m, r) = (curves.strs("motion"), curves.strs("representation"));
-    let (s, n, b) = (
-        curves.f64s("search"),
-        curves.f64s("evaluations"),
-        curves.f64s("best"),
-    );
-    judge_columns(&m, &r, &s, &n, &b)
+    judge_rows(&CurvePointRow::from_table(curves))
 }
 
-fn judge_columns(
-    m: &[String],
-    r: &[String],
-    s: &[f64],
-    n: &[f64],
-    b: &[f64],
-) -> Vec<MotionJudgement> {
+/// The motions of `curves`, in order of first appearance.
+fn motions_of(curves: &[CurvePointRow]) -> Vec<String> {
     let mut names: Vec<String> = Vec::new();
-    for x in m {
-        if !names.contains(x) {
-            names.push(x.clone());
+    for c in curves {
+        if !names.contains(&c.motion) {
+            names.push(c.motion.clone());
         }
     }
     names
+}
+
+/// The rule's judgement of each motion in `curves.csv`'s rows.
+fn judge_rows(curves: &[CurvePointRow]) -> Vec<MotionJudgement> {
+    motions_of(curves)
         .into_iter()
         .map(|name| {
-            let refl = median_curve(m, r, s, n, b, &name, REPRESENTATIONS[0]);
-            let free = median_curve(m, r, s, n, b, &name, REPRESENTATIONS[1]);
+            let refl = median_curve(curves, &name, REPRESENTATIONS[0]);
+            let free = median_curve(curves, &name, REPRESENTATIONS[1]);
             let last = |c: &[(f64, f64, f64, f64)]| c.last().map_or(f64::NAN, |p| p.1);
             let free_final = last(&free);
             MotionJudgement {
@@ -392,15 +412,8 @@ impl Family for MsRepresentation {
     )];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let c = tables.require("curves")?;
-        let (m, r) = (c.strs("motion"), c.strs("representation"));
-        let (s, n, b) = (c.f64s("search"), c.f64s("evaluations"), c.f64s("best"));
-        let mut names: Vec<String> = Vec::new();
-        for x in &m {
-            if !names.contains(x) {
-                names.push(x.clone());
-            }
-        }
+        let curves = CurvePointRow::from_table(tables.require("curves")?);
+        let names = motions_of(&curves);
         let label = |rep: &str| {
             if rep == REPRESENTATIONS[0] {
                 "12 canonical reflexes"
@@ -413,7 +426,7 @@ impl Family for MsRepresentation {
             .map(|name| {
                 let mut series = Vec::new();
                 for (k, rep) in REPRESENTATIONS.iter().enumerate() {
-                    let mc = median_curve(&m, &r, &s, &n, &b, name, rep);
+                    let mc = median_curve(&curves, name, rep);
                     series.push(Series::line(
                         format!("{}: median over seeds", label(rep)),
                         mc.iter().map(|p| (p.0, p.1)).collect(),
@@ -434,7 +447,7 @@ impl Family for MsRepresentation {
                 }
                 // The rule's bar: free's median final, to be reached by the reflexes' median
                 // within the rule's share of the evaluations.
-                let free = median_curve(&m, &r, &s, &n, &b, name, REPRESENTATIONS[1]);
+                let free = median_curve(&curves, name, REPRESENTATIONS[1]);
                 if let (Some(&(n_end, f_end, _, _)), Some(share)) =
                     (free.last(), rule_setting(tables, "reach_fraction"))
                 {
@@ -463,36 +476,26 @@ impl Family for MsRepresentation {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let c = read_csv(&dir.join("curves.csv"))?;
-        let (m, r) = (df_str(&c, "motion")?, df_str(&c, "representation")?);
-        let (s, n, b) = (
-            df_f64(&c, "search")?,
-            df_f64(&c, "evaluations")?,
-            df_f64(&c, "best")?,
-        );
-        let j = judge_columns(&m, &r, &s, &n, &b);
-        let runs = read_csv(&dir.join("runs.csv"))?;
-        let (rm, rr) = (df_str(&runs, "motion")?, df_str(&runs, "representation")?);
-        let (blow, evals, secs) = (
-            df_f64(&runs, "blowups")?,
-            df_f64(&runs, "evaluations")?,
-            df_f64(&runs, "seconds")?,
-        );
-        let finals = df_f64(&runs, "best_objective")?;
+        let curves: Vec<CurvePointRow> = read_rows(&dir.join("curves.csv"))?;
+        let j = judge_rows(&curves);
+        let runs: Vec<RunRow> = read_rows(&dir.join("runs.csv"))?;
+        let runs_of = |motion: &str, rep: &str| -> Vec<&RunRow> {
+            runs.iter()
+                .filter(|r| r.motion == motion && r.representation == rep)
+                .collect()
+        };
         let mut md = String::from(
             "| motion | representation | median final best | lowest | highest | evaluations per run | blow-ups | seconds per run |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
         );
         for x in &j {
             for rep in REPRESENTATIONS {
-                let idx: Vec<usize> = (0..rm.len())
-                    .filter(|&i| rm[i] == x.motion && rr[i] == rep)
-                    .collect();
-                let f: Vec<f64> = idx.iter().map(|&i| finals[i]).collect();
+                let idx = runs_of(&x.motion, rep);
+                let f: Vec<f64> = idx.iter().map(|r| r.best_objective).collect();
                 let lo = f.iter().copied().fold(f64::INFINITY, f64::min);
                 let hi = f.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                let bl: f64 = idx.iter().map(|&i| blow[i]).sum();
-                let ev: f64 = idx.iter().map(|&i| evals[i]).sum();
-                let sec: f64 = idx.iter().map(|&i| secs[i]).sum::<f64>() / idx.len().max(1) as f64;
+                let bl: f64 = idx.iter().map(|r| r.blowups as f64).sum();
+                let ev: f64 = idx.iter().map(|r| r.evaluations as f64).sum();
+                let sec: f64 = idx.iter().map(|r| r.seconds).sum::<f64>() / idx.len().max(1) as f64;
                 md.push_str(&format!(
                     "| {} | {} | {} | {} | {} | {} | {} of {} | {} |\n",
                     title_of(&x.motion),
@@ -515,9 +518,9 @@ impl Family for MsRepresentation {
             .enumerate()
             .map(|(k, x)| {
                 let of = |rep: &str| -> Vec<f64> {
-                    (0..rm.len())
-                        .filter(|&i| rm[i] == x.motion && rr[i] == rep)
-                        .map(|i| finals[i])
+                    runs_of(&x.motion, rep)
+                        .iter()
+                        .map(|r| r.best_objective)
                         .collect()
                 };
                 let (_, lo, hi) = median_difference_interval(
@@ -530,11 +533,9 @@ impl Family for MsRepresentation {
             .collect();
         let rule = representation_rule(&j, &intervals, &bars);
         let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
-        let seeds = (0..rm.len())
-            .filter(|&i| {
-                rr[i] == REPRESENTATIONS[0] && j.first().is_some_and(|x| x.motion == rm[i])
-            })
-            .count();
+        let seeds = j
+            .first()
+            .map_or(0, |x| runs_of(&x.motion, REPRESENTATIONS[0]).len());
         let mut summary = Vec::new();
         for (k, x) in j.iter().enumerate() {
             let supports = rule.as_ref().is_some_and(|r| {
@@ -585,12 +586,17 @@ mod tests {
     }
 
     fn rows(data: &[(&str, &str, f64, f64, f64)]) -> Vec<MotionJudgement> {
-        let m: Vec<String> = data.iter().map(|d| d.0.to_string()).collect();
-        let r: Vec<String> = data.iter().map(|d| d.1.to_string()).collect();
-        let s: Vec<f64> = data.iter().map(|d| d.2).collect();
-        let n: Vec<f64> = data.iter().map(|d| d.3).collect();
-        let b: Vec<f64> = data.iter().map(|d| d.4).collect();
-        judge_columns(&m, &r, &s, &n, &b)
+        let curves: Vec<CurvePointRow> = data
+            .iter()
+            .map(|d| CurvePointRow {
+                motion: d.0.to_string(),
+                representation: d.1.to_string(),
+                search: d.2 as i64,
+                evaluations: d.3 as i64,
+                best: d.4,
+            })
+            .collect();
+        judge_rows(&curves)
     }
 
     #[test]

@@ -21,14 +21,18 @@
 //! [`super::fig6_learning_plot`] (`ms_learning`), files named after the experiment ids.
 
 use super::lattices::lattice_by_name;
+use super::rows::{
+    BestTermRow, ControllerRow, LearningRow, LearningSummaryRow, MeasureRow, MotionSummaryRow,
+    SearchRow, SpringRow, TrajectoryRow,
+};
 use crate::control::search::SearchResult;
-use crate::experiment::output::{Table, Tables};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::{Mark, Panel, Series};
 use crate::experiment::resolve::{ensure, positive, ParamError, Validate};
+use crate::experiment::rows::table_of;
 use crate::experiment::{Error, Job, RunContext};
 use crate::physics::lattice::{Floor, LatticeModel};
 use crate::physics::reflex::Reflex;
-use crate::row;
 use crate::synthesis::controller::{Controller, SimSetup};
 use crate::synthesis::objective::{Objective, Orientation, Term, Weighted};
 use crate::synthesis::perturb::{MixSpec, PerturbationMix};
@@ -323,12 +327,38 @@ fn progress_fn(pb: &indicatif::ProgressBar) -> impl Fn(usize) + Sync + '_ {
     move |done| pb.set_position(done as u64)
 }
 
-fn search_table(r: &SearchResult<Controller>) -> Table {
-    let mut t = Table::new(&["iteration", "objective", "best"]);
-    for e in learning_curve(r) {
-        t.push(row![e.iteration, e.value, e.best]);
+/// The searches of the learning plot, as `learning.csv` names them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Search {
+    /// Parallel hill climbing (the paper's).
+    HillClimbing,
+    /// Simulated annealing with the same budget.
+    SimulatedAnnealing,
+}
+
+impl Search {
+    /// Both, in table order.
+    pub const ALL: [Search; 2] = [Search::HillClimbing, Search::SimulatedAnnealing];
+
+    /// The name the tables write (`method`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Search::HillClimbing => "hill_climbing",
+            Search::SimulatedAnnealing => "simulated_annealing",
+        }
     }
-    t
+}
+
+/// Every evaluation of search `r`, as `search.csv` writes it.
+fn search_rows(r: &SearchResult<Controller>) -> Vec<SearchRow> {
+    learning_curve(r)
+        .into_iter()
+        .map(|e| SearchRow {
+            iteration: e.iteration as i64,
+            objective: e.value,
+            best: e.best,
+        })
+        .collect()
 }
 
 impl Job for MotionJob {
@@ -353,77 +383,92 @@ impl Job for MotionJob {
         let seconds = t0.elapsed().as_secs_f64();
         pb.finish_and_clear();
         let tr = problem.trajectory(&res.best).map_err(super::other)?;
-        let mut ctl = Table::new(&["regime", "time", "reflex", "reflex_name", "alpha", "period"]);
+        let mut ctl = Vec::new();
         for (i, r) in res.best.regimes.iter().enumerate() {
-            let name = Reflex::from_number(r.reflex).map_err(super::other)?.name();
-            ctl.push(row![i, r.time, r.reflex, name, r.alpha, res.best.period]);
+            ctl.push(ControllerRow {
+                regime: i as i64,
+                time: r.time,
+                reflex: r.reflex as i64,
+                reflex_name: Reflex::from_number(r.reflex).map_err(super::other)?.name(),
+                alpha: r.alpha,
+                period: res.best.period,
+            });
         }
         let values = problem.objective.values(&tr);
-        let mut best = Table::new(&["term", "value", "weighted"]);
+        let mut best = Vec::new();
         let mut total = 0.0;
         for (w, v) in problem.objective.terms.iter().zip(&values) {
-            best.push(row![w.term.name(), *v, w.weight * v]);
+            best.push(BestTermRow {
+                term: w.term.name(),
+                value: *v,
+                weighted: w.weight * v,
+            });
             total += w.weight * v;
         }
-        best.push(row!["total", total, total]);
-        let mut meas = Table::new(&["measure", "value"]);
-        for (name, v) in measure_values(&problem.objective, &tr) {
-            meas.push(row![name, v]);
-        }
+        best.push(BestTermRow {
+            term: "total".into(),
+            value: total,
+            weighted: total,
+        });
+        let meas: Vec<MeasureRow> = measure_values(&problem.objective, &tr)
+            .into_iter()
+            .map(|(name, value)| MeasureRow {
+                measure: name.to_string(),
+                value,
+            })
+            .collect();
         let init_best = learning_curve(&res)
             .iter()
             .filter(|e| e.iteration == 0)
             .map(|e| e.value)
             .fold(f64::NEG_INFINITY, f64::max);
-        let mut summary = Table::new(&[
-            "motion",
-            "lattice",
-            "regimes",
-            "period",
-            "horizon",
-            "gravity",
-            "iterations",
-            "evaluations",
-            "search_seconds",
-            "evals_per_s",
-            "initial_best",
-            "best_objective",
-            "filmstrip_frames",
-        ]);
         let evals = res.evaluations.len();
-        summary.push(row![
-            p.motion.name(),
-            p.lattice.as_str(),
-            p.regimes,
-            p.period(),
-            p.horizon,
-            p.gravity,
-            p.iterations,
-            evals,
-            seconds,
-            evals as f64 / seconds.max(1e-9),
-            init_best,
-            -res.best_value,
-            p.filmstrip_frames
-        ]);
-        let mut traj = Table::new(&["t", "regime", "mass", "x", "y", "z"]);
+        let summary = MotionSummaryRow {
+            motion: p.motion.name().to_string(),
+            lattice: p.lattice.clone(),
+            regimes: p.regimes as i64,
+            period: p.period(),
+            horizon: p.horizon,
+            gravity: p.gravity,
+            iterations: p.iterations as i64,
+            evaluations: evals as i64,
+            search_seconds: seconds,
+            evals_per_s: evals as f64 / seconds.max(1e-9),
+            initial_best: init_best,
+            best_objective: -res.best_value,
+            filmstrip_frames: p.filmstrip_frames as i64,
+        };
+        let mut traj = Vec::new();
         for f in &tr.frames {
             for (i, q) in f.positions.iter().enumerate() {
-                traj.push(row![f.t, f.regime, i, q[0], q[1], q[2]]);
+                traj.push(TrajectoryRow {
+                    t: f.t,
+                    regime: f.regime as i64,
+                    mass: i as i64,
+                    x: q[0],
+                    y: q[1],
+                    z: q[2],
+                });
             }
         }
-        let mut spr = Table::new(&["spring", "a", "b"]);
-        for (j, s) in problem.setup.model.lattice.springs.iter().enumerate() {
-            spr.push(row![j, s.a, s.b]);
-        }
+        let springs = &problem.setup.model.lattice.springs;
+        let spr: Vec<SpringRow> = springs
+            .iter()
+            .enumerate()
+            .map(|(j, s)| SpringRow {
+                spring: j as i64,
+                a: s.a as i64,
+                b: s.b as i64,
+            })
+            .collect();
         Ok(Tables::from([
-            ("controller", ctl),
-            ("best", best),
-            ("measures", meas),
-            ("summary", summary),
-            ("search", search_table(&res)),
-            ("trajectory", traj),
-            ("springs", spr),
+            ("controller", table_of(&ctl)),
+            ("best", table_of(&best)),
+            ("measures", table_of(&meas)),
+            ("summary", table_of(&[summary])),
+            ("search", table_of(&search_rows(&res))),
+            ("trajectory", table_of(&traj)),
+            ("springs", table_of(&spr)),
         ]))
     }
 }
@@ -473,25 +518,32 @@ impl Job for LearningJob {
         let wall = t0.elapsed().as_secs_f64();
         pb_h.finish_and_clear();
         pb_a.finish_and_clear();
-        let mut learning = Table::new(&["method", "iteration", "objective", "best"]);
-        let mut summary = Table::new(&[
-            "method",
-            "evaluations",
-            "seconds",
-            "wall_seconds_both",
-            "best_objective",
-        ]);
-        for (name, r, s) in [
-            ("hill_climbing", &hc, hc_s),
-            ("simulated_annealing", &sa, sa_s),
+        let (mut learning, mut summary) = (Vec::new(), Vec::new());
+        for (search, r, s) in [
+            (Search::HillClimbing, &hc, hc_s),
+            (Search::SimulatedAnnealing, &sa, sa_s),
         ] {
             let r = r.as_ref().map_err(super::other)?;
             for e in learning_curve(r) {
-                learning.push(row![name, e.iteration, e.value, e.best]);
+                learning.push(LearningRow {
+                    method: search.name().to_string(),
+                    iteration: e.iteration as i64,
+                    objective: e.value,
+                    best: e.best,
+                });
             }
-            summary.push(row![name, r.evaluations.len(), s, wall, -r.best_value]);
+            summary.push(LearningSummaryRow {
+                method: search.name().to_string(),
+                evaluations: r.evaluations.len() as i64,
+                seconds: s,
+                wall_seconds_both: wall,
+                best_objective: -r.best_value,
+            });
         }
-        Ok(Tables::from([("learning", learning), ("summary", summary)]))
+        Ok(Tables::from([
+            ("learning", table_of(&learning)),
+            ("summary", table_of(&summary)),
+        ]))
     }
 }
 
@@ -499,7 +551,7 @@ impl Job for LearningJob {
 /// Blow-ups (a diverged simulation scores [`BLOWUP_OBJECTIVE`]) are left out and counted in
 /// the axis label; the y axis starts at the 2nd percentile of the other evaluations, so the
 /// rare very poor ones do not flatten the curves, and the label says how many lie below it.
-pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &str) -> Panel {
+pub(super) fn learning_panel(title: &str, tables: &[(&str, &[SearchRow])], x_label: &str) -> Panel {
     learning_panel_on(title, tables, x_label, tables)
 }
 
@@ -507,13 +559,15 @@ pub(super) fn learning_panel(title: &str, tables: &[(&str, &Table)], x_label: &s
 /// side on one scale).
 pub(super) fn learning_panel_on(
     title: &str,
-    tables: &[(&str, &Table)],
+    tables: &[(&str, &[SearchRow])],
     x_label: &str,
-    axis_from: &[(&str, &Table)],
+    axis_from: &[(&str, &[SearchRow])],
 ) -> Panel {
     let drawn = |v: &f64| v.is_finite() && *v != BLOWUP_OBJECTIVE;
-    let objectives = |ts: &[(&str, &Table)]| -> Vec<f64> {
-        ts.iter().flat_map(|(_, t)| t.f64s("objective")).collect()
+    let objectives = |ts: &[(&str, &[SearchRow])]| -> Vec<f64> {
+        ts.iter()
+            .flat_map(|(_, rows)| rows.iter().map(|r| r.objective))
+            .collect()
     };
     let mut axis: Vec<f64> = objectives(axis_from).into_iter().filter(drawn).collect();
     axis.sort_by(f64::total_cmp);
@@ -540,16 +594,14 @@ pub(super) fn learning_panel_on(
         format!("objective (larger is better; {})", notes.join("; "))
     };
     let mut series = Vec::new();
-    for (k, (name, t)) in tables.iter().enumerate() {
-        let (it, obj, best) = (t.f64s("iteration"), t.f64s("objective"), t.f64s("best"));
+    for (k, (name, rows)) in tables.iter().enumerate() {
         // Rows with iteration 0 are the initial random controllers: drawn at x = 0.
         series.push(
             Series::line(
                 format!("{name}: every evaluation"),
-                it.iter()
-                    .zip(&obj)
-                    .filter(|(_, v)| drawn(v))
-                    .map(|(&a, &b)| (a, b))
+                rows.iter()
+                    .filter(|r| drawn(&r.objective))
+                    .map(|r| (r.iteration as f64, r.objective))
                     .collect(),
                 2 * k + 1,
             )
@@ -557,10 +609,9 @@ pub(super) fn learning_panel_on(
         );
         series.push(Series::line(
             format!("{name}: best so far"),
-            it.iter()
-                .zip(&best)
-                .filter(|(_, v)| drawn(v))
-                .map(|(&a, &b)| (a, b))
+            rows.iter()
+                .filter(|r| drawn(&r.best))
+                .map(|r| (r.iteration as f64, r.best))
                 .collect(),
             2 * k,
         ));

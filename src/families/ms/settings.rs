@@ -26,16 +26,16 @@
 //! the threshold is inconclusive.
 
 use super::search::{MotionJob, Params};
-use crate::experiment::output::{df_f64, df_str, read_csv, Table, Tables};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
+use crate::experiment::rows::{read_rows, table_of, TableRow};
 use crate::experiment::rule::{rule_settings, rule_table, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::seeds::SeedMetric;
 use crate::experiment::stats::median_interval;
 use crate::experiment::{Error, Family, Job, RunContext};
-use crate::row;
 use crate::synthesis::perturb::MixSpec;
 use crate::synthesis::search::{hill_climb, learning_curve};
 use crate::synthesis::BLOWUP_OBJECTIVE;
@@ -91,6 +91,44 @@ impl Validate for SettingsParams {
     }
 }
 
+crate::result_rows! {
+    /// One row of `curve.csv`: hill climbing's best so far at one iteration.
+    pub struct CurveRow {
+        /// The iteration (0: the initial set).
+        iteration: i64 = "iteration",
+        /// The best objective after it.
+        best: f64 = "best",
+    }
+}
+
+crate::result_rows! {
+    /// The row of `summary.csv` of one setting's search.
+    pub struct SettingsSummaryRow {
+        /// Search set size N.
+        set_size: i64 = "set_size",
+        /// The perturbation mix's name.
+        perturbations: String = "perturbations",
+        /// Hill-climbing iterations.
+        iterations: i64 = "iterations",
+        /// Controllers evaluated.
+        evaluations: i64 = "evaluations",
+        /// Evaluations whose simulation diverged.
+        blowups: i64 = "blowups",
+        /// The best of the initial random set.
+        initial_best: f64 = "initial_best",
+        /// The best after an eighth of the iterations.
+        best_at_eighth: f64 = "best_at_eighth",
+        /// The best after a quarter.
+        best_at_quarter: f64 = "best_at_quarter",
+        /// The best after half.
+        best_at_half: f64 = "best_at_half",
+        /// The final best.
+        best_objective: f64 = "best_objective",
+        /// The search's wall time (s).
+        seconds: f64 = "seconds",
+    }
+}
+
 /// The name of a mix as written in the tables (`custom` for explicit probabilities).
 fn mix_name(m: &MixSpec) -> String {
     match m {
@@ -133,43 +171,33 @@ impl Job for SettingsParams {
                 .map(|e| e.best)
                 .fold(f64::NEG_INFINITY, f64::max)
         };
-        let mut curve = Table::new(&["iteration", "best"]);
         let it = p.iterations;
         let every = it.div_ceil(CURVE_POINTS).max(1);
-        for i in (0..=it).filter(|i| i % every == 0 || *i == it) {
-            curve.push(row![i, best_after(i)]);
-        }
+        let curve: Vec<CurveRow> = (0..=it)
+            .filter(|i| i % every == 0 || *i == it)
+            .map(|i| CurveRow {
+                iteration: i as i64,
+                best: best_after(i),
+            })
+            .collect();
         let blowups = lc.iter().filter(|e| e.value == BLOWUP_OBJECTIVE).count();
-        let mut summary = Table::new(&[
-            "set_size",
-            "perturbations",
-            "iterations",
-            "evaluations",
-            "blowups",
-            "initial_best",
-            "best_at_eighth",
-            "best_at_quarter",
-            "best_at_half",
-            "best_objective",
-            "seconds",
-        ]);
-        summary.push(row![
-            p.set_size,
-            mix_name(&p.perturbations).as_str(),
-            it,
-            lc.len(),
-            blowups,
+        let summary = SettingsSummaryRow {
+            set_size: p.set_size as i64,
+            perturbations: mix_name(&p.perturbations),
+            iterations: it as i64,
+            evaluations: lc.len() as i64,
+            blowups: blowups as i64,
             initial_best,
-            best_after(it / 8),
-            best_after(it / 4),
-            best_after(it / 2),
-            -res.best_value,
-            seconds
-        ]);
+            best_at_eighth: best_after(it / 8),
+            best_at_quarter: best_after(it / 4),
+            best_at_half: best_after(it / 2),
+            best_objective: -res.best_value,
+            seconds,
+        };
         let rule = rule_table(&[("gain_fraction", self.rule.gain_fraction)]);
         Ok(Tables::from([
-            ("curve", curve),
-            ("summary", summary),
+            ("curve", table_of(&curve)),
+            ("summary", table_of(&[summary])),
             ("rule", rule),
         ]))
     }
@@ -337,14 +365,20 @@ impl Family for MsSearchSettings {
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let c = tables.require("curve")?;
-        let (it, best) = (c.f64s("iteration"), c.f64s("best"));
-        // The setting of each row: the sweep columns (absent without a sweep: one setting).
+        let curve = CurveRow::from_table(c);
+        let (it, best): (Vec<f64>, Vec<f64>) =
+            curve.iter().map(|r| (r.iteration as f64, r.best)).unzip();
+        // The setting of each row: the sweep's columns, which the harness prepends to the
+        // job's (absent without a sweep: one setting).
         let sizes = c.f64s("set_size");
         let mixes = c.strs("perturbations");
-        let s = tables.require("summary")?;
+        let summary = SettingsSummaryRow::from_table(tables.require("summary")?);
         let (n0, m0) = (
-            s.f64s("set_size").first().copied().unwrap_or(f64::NAN),
-            s.strs("perturbations").first().cloned().unwrap_or_default(),
+            summary.first().map_or(f64::NAN, |s| s.set_size as f64),
+            summary
+                .first()
+                .map(|s| s.perturbations.clone())
+                .unwrap_or_default(),
         );
         let size_at = |i: usize| sizes.get(i).copied().unwrap_or(n0) as usize;
         let mix_at = |i: usize| mixes.get(i).cloned().unwrap_or_else(|| m0.clone());
@@ -400,15 +434,19 @@ impl Family for MsSearchSettings {
     }
 
     fn report(&self, dir: &Path) -> Result<Findings, Error> {
-        let s = read_csv(&dir.join("summary.csv"))?;
-        let (n, mix) = (df_f64(&s, "set_size")?, df_str(&s, "perturbations")?);
-        let (initial, fin, half) = (
-            df_f64(&s, "initial_best")?,
-            df_f64(&s, "best_objective")?,
-            df_f64(&s, "best_at_half")?,
-        );
-        let rows: Vec<SummaryRow> = (0..n.len())
-            .map(|i| (n[i] as usize, mix[i].clone(), initial[i], fin[i], half[i]))
+        let summary: Vec<SettingsSummaryRow> = read_rows(&dir.join("summary.csv"))?;
+        let rows: Vec<SummaryRow> = summary
+            .into_iter()
+            .map(|s| {
+                let n = s.set_size as usize;
+                (
+                    n,
+                    s.perturbations,
+                    s.initial_best,
+                    s.best_objective,
+                    s.best_at_half,
+                )
+            })
             .collect();
         let settings = settings_of(&rows);
         let fraction = rule_settings(dir)?("gain_fraction");

@@ -1,84 +1,73 @@
 //! Figures of `x_lbc_emulator`: `error` (final error per desired target and method, on the
 //! simulator and the emulator) and the animated GIF of LBC's landing.
 
-use super::METHODS;
+use super::job::TargetRow;
+use super::Method;
 use crate::emulator::catalog::NetModel;
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use crate::families::na::fig13_control::anim::{write_animation, Scene, Track, SIMULATOR};
 use plotters::style::RGBColor;
 use std::path::PathBuf;
 
-/// Colours of the methods in the figure (palette indices).
-fn method_color(method: &str) -> usize {
-    METHODS.iter().position(|m| *m == method).unwrap_or(0)
-}
-
 /// A method's name in words, for the legend (the CSVs keep the identifiers).
-fn words(method: &str) -> &str {
+fn words(method: Method) -> &'static str {
     match method {
-        "lbc" => "LBC",
-        "naive" => "naive blend",
-        "tracker1" => "tracker 1 alone",
-        "tracker2" => "tracker 2 alone",
-        "open_loop1" => "tape 1, open loop",
-        "open_loop2" => "tape 2, open loop",
-        "bptt" => "BPTT re-optimized, open loop",
-        "bptt_tracked" => "BPTT re-optimized, tracked",
-        other => other,
+        Method::Lbc => "LBC",
+        Method::Naive => "naive blend",
+        Method::Tracker1 => "tracker 1 alone",
+        Method::Tracker2 => "tracker 2 alone",
+        Method::OpenLoop1 => "tape 1, open loop",
+        Method::OpenLoop2 => "tape 2, open loop",
+        Method::Bptt => "BPTT re-optimized, open loop",
+        Method::BpttTracked => "BPTT re-optimized, tracked",
     }
 }
 
 /// Every figure of the experiment ([`crate::experiment::Family::figures`]).
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let t = tables.require("targets")?;
-    let (d, meth, es, ee, ax) = (
-        t.f64s("desired_target"),
-        t.strs("method"),
-        t.f64s("final_error_simulator"),
-        t.f64s("final_error_emulator"),
-        t.f64s("final_axis_value"),
-    );
-    // The verdict's third measure: how far along x from the desired target the simulator
-    // landing ends (m).
-    let miss: Vec<f64> = (0..d.len()).map(|r| (ax[r] - d[r]).abs()).collect();
-    let (lo, hi) = d
+    let rows = TargetRow::from_table(tables.require("targets")?);
+    let (lo, hi) = rows
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-            (a.min(x), b.max(x))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), r| {
+            (a.min(r.desired_target), b.max(r.desired_target))
         });
     // Every method a plain line: the panel strokes each by its colour (eight strokes for the
     // eight methods), so none hides another by colour alone.
     // The methods' legend once, in the first panel; the others stroke each method the same.
-    let panel = |title: &str, ys: &[f64], y_label: &str, line: (&str, f64), legend: bool| {
-        let mut series: Vec<Series> = METHODS
-            .iter()
-            .map(|&mm| {
-                let pts = (0..d.len())
-                    .filter(|&r| meth[r] == mm)
-                    .map(|r| (d[r], ys[r].max(1e-3)))
-                    .collect();
-                let c = method_color(mm);
-                let label = if legend {
-                    words(mm).to_string()
-                } else {
-                    String::new()
-                };
-                Series::line(label, pts, c).mark(Mark::stroke_of(c))
-            })
-            .collect();
-        series.push(Series::line(line.0, vec![(lo, line.1), (hi, line.1)], 9).mark(Mark::Dashed));
-        Panel {
-            title: title.into(),
-            x_label: "desired landing target x (m)".into(),
-            y_label: y_label.into(),
-            log_y: true,
-            series,
-            ..Panel::default()
-        }
-    };
+    let panel =
+        |title: &str, y: fn(&TargetRow) -> f64, y_label: &str, line: (&str, f64), legend: bool| {
+            let mut series: Vec<Series> = Method::ALL
+                .iter()
+                .enumerate()
+                .map(|(c, &mm)| {
+                    let pts = rows
+                        .iter()
+                        .filter(|r| r.method == mm.name())
+                        .map(|r| (r.desired_target, y(r).max(1e-3)))
+                        .collect();
+                    let label = if legend {
+                        words(mm).to_string()
+                    } else {
+                        String::new()
+                    };
+                    Series::line(label, pts, c).mark(Mark::stroke_of(c))
+                })
+                .collect();
+            series
+                .push(Series::line(line.0, vec![(lo, line.1), (hi, line.1)], 9).mark(Mark::Dashed));
+            Panel {
+                title: title.into(),
+                x_label: "desired landing target x (m)".into(),
+                y_label: y_label.into(),
+                log_y: true,
+                series,
+                ..Panel::default()
+            }
+        };
     let error_label = "final error (RMS of (s - s_d)/tolerance)";
     // Tall panels: the nine-entry legend then fits above the data (the plot raises the
     // top of the y range for it) instead of covering it.
@@ -90,21 +79,23 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
                 vec![
                     panel(
                         "on the physical simulator",
-                        &es,
+                        |r| r.final_error_simulator,
                         error_label,
                         ("tolerance (error 1)", 1.0),
                         true,
                     ),
                     panel(
                         "on the emulator (lines as on the left)",
-                        &ee,
+                        |r| r.final_error_emulator,
                         error_label,
                         ("tolerance (error 1)", 1.0),
                         false,
                     ),
                     panel(
                         "simulator landing: distance from the desired x (lines as on the left)",
-                        &miss,
+                        // The verdict's third measure: how far along x from the desired
+                        // target the simulator landing ends (m).
+                        |r| (r.final_axis_value - r.desired_target).abs(),
                         "|x_final - x_desired| (m)",
                         ("1 m", 1.0),
                         false,

@@ -1,7 +1,7 @@
 //! The job of `x_lbc_emulator`: the two components learned by BPTT through the emulator with
 //! their trackers, and every method run per desired target on the emulator and the simulator.
 
-use super::{Params, METHODS};
+use super::{Method, Params};
 use crate::bellman::combine::{normalized_entropy, BlendMode, CombineError, TrackerBlend};
 use crate::bellman::projection::{project, GaussianReward};
 use crate::control::bptt::{learn_with, Bptt, Descent, Knots, Schedule};
@@ -9,6 +9,7 @@ use crate::control::step_tracker::StepTracker;
 use crate::control::tracker::ValueTracker;
 use crate::emulator::Emulator;
 use crate::experiment::output::{Table, Tables};
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::lbc::{alpha_deviation, push_entropy, rule_table, ENTROPY_COLUMNS};
 use crate::families::na::table1_structure::{build_emulator, build_spec};
@@ -172,28 +173,114 @@ fn blend_policy<'a>(
     }
 }
 
+crate::result_rows! {
+    /// One row of `targets.csv`: one method at one desired target.
+    pub struct TargetRow {
+        /// The desired landing x (m).
+        desired_target: f64 = "desired_target",
+        /// The method's name ([`Method::name`]).
+        method: String = "method",
+        /// Final error on the emulator (RMS of (s − s_d)/tolerance; NaN where the blend was
+        /// undefined along the run).
+        final_error_emulator: f64 = "final_error_emulator",
+        /// Final error on the simulator (likewise).
+        final_error_simulator: f64 = "final_error_simulator",
+        /// ½ Σ_k |v_k|² over the super-steps on the simulator.
+        effort: f64 = "effort",
+        /// Wall time to obtain the controller for this target (s).
+        seconds: f64 = "seconds",
+        /// The projected weight of component 1.
+        weight1: f64 = "weight1",
+        /// The projected weight of component 2.
+        weight2: f64 = "weight2",
+        /// The simulator's final value along the axis (m).
+        final_axis_value: f64 = "final_axis_value",
+        /// Mean normalized entropy of α over the super-steps on the simulator (NaN without a
+        /// blend).
+        mean_entropy: f64 = "mean_entropy",
+    }
+}
+
+crate::result_rows! {
+    /// One row of `net_seeds.csv`: a [`TargetRow`] of the comparison through one net seed's
+    /// lander net.
+    pub struct NetSeedRow {
+        /// The seed of the net the comparison ran through.
+        net_seed: i64 = "net_seed",
+        /// As [`TargetRow::desired_target`].
+        desired_target: f64 = "desired_target",
+        /// As [`TargetRow::method`].
+        method: String = "method",
+        /// As [`TargetRow::final_error_emulator`].
+        final_error_emulator: f64 = "final_error_emulator",
+        /// As [`TargetRow::final_error_simulator`].
+        final_error_simulator: f64 = "final_error_simulator",
+        /// As [`TargetRow::effort`].
+        effort: f64 = "effort",
+        /// As [`TargetRow::seconds`].
+        seconds: f64 = "seconds",
+        /// As [`TargetRow::weight1`].
+        weight1: f64 = "weight1",
+        /// As [`TargetRow::weight2`].
+        weight2: f64 = "weight2",
+        /// As [`TargetRow::final_axis_value`].
+        final_axis_value: f64 = "final_axis_value",
+        /// As [`TargetRow::mean_entropy`].
+        mean_entropy: f64 = "mean_entropy",
+    }
+}
+
+impl NetSeedRow {
+    /// `row` of the comparison through net seed `seed`.
+    fn of(seed: u64, row: TargetRow) -> Self {
+        Self {
+            net_seed: seed as i64,
+            desired_target: row.desired_target,
+            method: row.method,
+            final_error_emulator: row.final_error_emulator,
+            final_error_simulator: row.final_error_simulator,
+            effort: row.effort,
+            seconds: row.seconds,
+            weight1: row.weight1,
+            weight2: row.weight2,
+            final_axis_value: row.final_axis_value,
+            mean_entropy: row.mean_entropy,
+        }
+    }
+}
+
+crate::result_rows! {
+    /// One row of `components.csv`: one learned component.
+    pub struct ComponentRow {
+        /// The component's number (`1`, `2`).
+        component: String = "component",
+        /// Its target along the axis (m).
+        target: f64 = "target",
+        /// BPTT's learning time (s).
+        learn_seconds: f64 = "learn_seconds",
+        /// The tracker's build time (s).
+        tracker_seconds: f64 = "tracker_seconds",
+        /// The iteration of BPTT's best.
+        iterations: i64 = "iterations",
+        /// BPTT's best objective.
+        objective: f64 = "objective",
+        /// Final error of the learned tape on the emulator.
+        emulator_error: f64 = "emulator_error",
+        /// Final error of the tape replayed on the simulator.
+        open_loop_simulator_error: f64 = "open_loop_simulator_error",
+        /// Final error of its tracker in closed loop on the simulator.
+        tracked_simulator_error: f64 = "tracked_simulator_error",
+    }
+}
+
 /// The tables one net's comparison writes.
 struct Outputs {
-    components: Table,
-    targets: Table,
+    components: Vec<ComponentRow>,
+    targets: Vec<TargetRow>,
     trajectory: Table,
     goal: Table,
     entropy: Table,
 }
-
-/// Columns of `targets.csv` (and, after `net_seed`, of `net_seeds.csv`).
-const TARGET_COLUMNS: [&str; 10] = [
-    "desired_target",
-    "method",
-    "final_error_emulator",
-    "final_error_simulator",
-    "effort",
-    "seconds",
-    "weight1",
-    "weight2",
-    "final_axis_value",
-    "mean_entropy",
-];
 
 impl Outputs {
     fn new(params: &Params) -> Self {
@@ -209,18 +296,8 @@ impl Outputs {
         let mut goal_cols = vec!["desired_target"];
         goal_cols.extend_from_slice(&col_refs[4..]);
         Self {
-            components: Table::new(&[
-                "component",
-                "target",
-                "learn_seconds",
-                "tracker_seconds",
-                "iterations",
-                "objective",
-                "emulator_error",
-                "open_loop_simulator_error",
-                "tracked_simulator_error",
-            ]),
-            targets: Table::new(&TARGET_COLUMNS),
+            components: Vec::new(),
+            targets: Vec::new(),
             trajectory: Table::new(&col_refs),
             goal: Table::new(&goal_cols),
             entropy: Table::new(&ENTROPY_COLUMNS),
@@ -258,7 +335,7 @@ impl Params {
             let projection_seconds = t0.elapsed().as_secs_f64();
             let fresh = self.learn(emu, d)?;
             let limits = None;
-            for method in METHODS {
+            for method in Method::ALL {
                 let blend = |mode| TrackerBlend {
                     trackers: &trackers,
                     weights: w.clone(),
@@ -268,11 +345,11 @@ impl Params {
                 };
                 let own = [fresh.tracker.clone()];
                 let (blend, seconds) = match method {
-                    "lbc" => (Some(blend(BlendMode::Lbc)), projection_seconds),
-                    "naive" => (Some(blend(BlendMode::Naive)), projection_seconds),
-                    "tracker1" => (Some(blend(BlendMode::Single(0))), 0.0),
-                    "tracker2" => (Some(blend(BlendMode::Single(1))), 0.0),
-                    "bptt_tracked" => (
+                    Method::Lbc => (Some(blend(BlendMode::Lbc)), projection_seconds),
+                    Method::Naive => (Some(blend(BlendMode::Naive)), projection_seconds),
+                    Method::Tracker1 => (Some(blend(BlendMode::Single(0))), 0.0),
+                    Method::Tracker2 => (Some(blend(BlendMode::Single(1))), 0.0),
+                    Method::BpttTracked => (
                         Some(TrackerBlend {
                             trackers: &own,
                             weights: vec![1.0],
@@ -282,13 +359,19 @@ impl Params {
                         }),
                         fresh.learn_seconds + fresh.tracker_seconds,
                     ),
-                    "bptt" => (None, fresh.learn_seconds),
-                    _ => (None, 0.0),
+                    Method::Bptt => (None, fresh.learn_seconds),
+                    Method::OpenLoop1 | Method::OpenLoop2 => (None, 0.0),
                 };
                 let tape = match method {
-                    "open_loop1" => &comps[0].tape,
-                    "open_loop2" => &comps[1].tape,
-                    _ => &fresh.tape,
+                    Method::OpenLoop1 => &comps[0].tape,
+                    Method::OpenLoop2 => &comps[1].tape,
+                    // The blends run their trackers; `bptt` replays the fresh tape.
+                    Method::Lbc
+                    | Method::Naive
+                    | Method::Tracker1
+                    | Method::Tracker2
+                    | Method::Bptt
+                    | Method::BpttTracked => &fresh.tape,
                 };
                 let mut entropy = Vec::new();
                 let undefined = std::cell::Cell::new(false);
@@ -325,18 +408,18 @@ impl Params {
                     let emu_error = on_emu
                         .as_ref()
                         .map_or(f64::NAN, |o| task.final_error(&o.states[self.task.horizon]));
-                    out.targets.push(row![
-                        d,
-                        method,
-                        emu_error,
-                        f64::NAN,
-                        f64::NAN,
+                    out.targets.push(TargetRow {
+                        desired_target: d,
+                        method: method.name().to_string(),
+                        final_error_emulator: emu_error,
+                        final_error_simulator: f64::NAN,
+                        effort: f64::NAN,
                         seconds,
-                        w[0],
-                        w[1],
-                        f64::NAN,
-                        f64::NAN
-                    ]);
+                        weight1: w[0],
+                        weight2: w[1],
+                        final_axis_value: f64::NAN,
+                        mean_entropy: f64::NAN,
+                    });
                     continue;
                 };
                 let end = &on_sim.states[self.task.horizon];
@@ -345,25 +428,25 @@ impl Params {
                 } else {
                     entropy.iter().map(|e| e.0).sum::<f64>() / entropy.len() as f64
                 };
-                if matches!(method, "lbc" | "naive") {
+                if matches!(method, Method::Lbc | Method::Naive) {
                     let (h, dev): (Vec<f64>, Vec<f64>) = entropy.iter().copied().unzip();
                     let run = format!("desired {d} m");
-                    push_entropy(&mut out.entropy, &run, method, dt, &h, &dev);
+                    push_entropy(&mut out.entropy, &run, method.name(), dt, &h, &dev);
                 }
-                out.targets.push(row![
-                    d,
-                    method,
-                    task.final_error(&on_emu.states[self.task.horizon]),
-                    task.final_error(end),
-                    on_sim.effort,
+                out.targets.push(TargetRow {
+                    desired_target: d,
+                    method: method.name().to_string(),
+                    final_error_emulator: task.final_error(&on_emu.states[self.task.horizon]),
+                    final_error_simulator: task.final_error(end),
+                    effort: on_sim.effort,
                     seconds,
-                    w[0],
-                    w[1],
-                    end[self.axis],
-                    mean_entropy
-                ]);
+                    weight1: w[0],
+                    weight2: w[1],
+                    final_axis_value: end[self.axis],
+                    mean_entropy,
+                });
                 for (k, s) in on_sim.states.iter().enumerate() {
-                    let mut r = row![d, method, k as i64, k as f64 * dt];
+                    let mut r = row![d, method.name(), k as i64, k as f64 * dt];
                     r.extend(s.iter().map(|&v| v.into()));
                     out.trajectory.push(r);
                 }
@@ -390,17 +473,17 @@ impl Params {
                 c.tracker.policy_into(x, k, v);
                 Ok(())
             })?;
-            out.components.push(row![
-                format!("{}", i + 1),
-                value,
-                c.learn_seconds,
-                c.tracker_seconds,
-                c.iterations as i64,
-                c.objective,
-                task.final_error(&c.emulator_final),
-                task.final_error(&open.states[self.task.horizon]),
-                task.final_error(&tracked.states[self.task.horizon])
-            ]);
+            out.components.push(ComponentRow {
+                component: format!("{}", i + 1),
+                target: value,
+                learn_seconds: c.learn_seconds,
+                tracker_seconds: c.tracker_seconds,
+                iterations: c.iterations as i64,
+                objective: c.objective,
+                emulator_error: task.final_error(&c.emulator_final),
+                open_loop_simulator_error: task.final_error(&open.states[self.task.horizon]),
+                tracked_simulator_error: task.final_error(&tracked.states[self.task.horizon]),
+            });
         }
         Ok(())
     }
@@ -453,12 +536,11 @@ impl Job for Params {
         ctx.stage("compare", || self.compare(emu, &comps, &mut out))?;
         // The same comparison through the lander net of each further seed: `net_seeds.csv` is
         // every seed's `targets.csv` rows, the run's own first, under its `net_seed`.
-        let mut seeds_t = Table::new(&[]);
         let own = std::iter::once((ctx.seed, out.targets.clone()));
         let further = ctx.stage("net seeds", || {
             crate::experiment::seeds::further_seeds(&self.net_seeds, ctx.seed)
                 .into_iter()
-                .map(|s| -> Result<(u64, Table), Error> {
+                .map(|s| -> Result<(u64, Vec<TargetRow>), Error> {
                     let net = self.net(s)?;
                     let comps = self.learn_components(&net.emulator)?;
                     let mut o = Outputs::new(self);
@@ -467,14 +549,10 @@ impl Job for Params {
                 })
                 .collect::<Result<Vec<_>, Error>>()
         })?;
-        for (s, t) in own.chain(further) {
-            let t = t.with_prefix(&[("net_seed".to_string(), (s as i64).into())]);
-            if seeds_t.names().is_empty() {
-                seeds_t = t;
-            } else {
-                seeds_t.append(&t).map_err(other)?;
-            }
-        }
+        let seed_rows: Vec<NetSeedRow> = own
+            .chain(further)
+            .flat_map(|(s, rows)| rows.into_iter().map(move |r| NetSeedRow::of(s, r)))
+            .collect();
         let lambda = self.lambda();
         let q = self.terminal_weight(self.axis) / lambda;
         let spacing = self.components[1] - self.components[0];
@@ -490,12 +568,12 @@ impl Job for Params {
             ("super_step_s", self.super_dt()),
         ]);
         Ok(Tables::from([
-            ("targets", out.targets),
-            ("components", out.components),
+            ("targets", table_of(&out.targets)),
+            ("components", table_of(&out.components)),
             ("trajectory", out.trajectory),
             ("goal", out.goal),
             ("entropy", out.entropy),
-            ("net_seeds", seeds_t),
+            ("net_seeds", table_of(&seed_rows)),
             ("rule", rule),
         ]))
     }

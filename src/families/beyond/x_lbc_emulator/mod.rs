@@ -53,17 +53,54 @@ use std::path::{Path, PathBuf};
 /// The family.
 pub struct XLbcEmulator;
 
-/// Names of the compared methods, in table order.
-const METHODS: [&str; 8] = [
-    "lbc",
-    "naive",
-    "tracker1",
-    "tracker2",
-    "open_loop1",
-    "open_loop2",
-    "bptt",
-    "bptt_tracked",
-];
+/// The compared methods ([module docs](self)), in table order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Method {
+    /// LBC's blend of the two trackers.
+    Lbc,
+    /// The blend with the projected weights held fixed.
+    Naive,
+    /// Component 1's tracker alone.
+    Tracker1,
+    /// Component 2's tracker alone.
+    Tracker2,
+    /// Component 1's tape replayed.
+    OpenLoop1,
+    /// Component 2's tape replayed.
+    OpenLoop2,
+    /// BPTT re-optimized for the desired target, its tape replayed.
+    Bptt,
+    /// That tape with its own emulator tracker.
+    BpttTracked,
+}
+
+impl Method {
+    /// Every method, in table order.
+    const ALL: [Method; 8] = [
+        Method::Lbc,
+        Method::Naive,
+        Method::Tracker1,
+        Method::Tracker2,
+        Method::OpenLoop1,
+        Method::OpenLoop2,
+        Method::Bptt,
+        Method::BpttTracked,
+    ];
+
+    /// The name the tables write (`method`).
+    fn name(self) -> &'static str {
+        match self {
+            Method::Lbc => "lbc",
+            Method::Naive => "naive",
+            Method::Tracker1 => "tracker1",
+            Method::Tracker2 => "tracker2",
+            Method::OpenLoop1 => "open_loop1",
+            Method::OpenLoop2 => "open_loop2",
+            Method::Bptt => "bptt",
+            Method::BpttTracked => "bptt_tracked",
+        }
+    }
+}
 
 impl Family for XLbcEmulator {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[

@@ -1,9 +1,10 @@
 //! Report of `x_lbc_emulator`: the verdict rule (LBC within tolerance, against the naive blend,
 //! and along the axis) and the tables of final errors and distances.
 
-use super::METHODS;
-use crate::experiment::output::{df_f64, df_str, read_csv};
+use super::job::{ComponentRow, NetSeedRow, TargetRow};
+use super::Method;
 use crate::experiment::report::{sig, Findings};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::{bootstrap_intervals, median};
 use crate::experiment::Error;
@@ -123,29 +124,56 @@ pub fn rule(r: &RuleInputs) -> Option<Rule> {
     Rule::gated(vec![], held, Partly::All(vec![1, 2]))
 }
 
-/// One net seed's [`Measures`] from its `targets.csv` rows: `d` desired targets, `meth`
-/// methods, `es` simulator final errors, `reached` final axis values, over the rows `rows`.
-fn measures(
-    rows: &[usize],
-    (d, meth, es, reached): (&[f64], &[String], &[f64], &[f64]),
-    between: impl Fn(f64) -> bool,
-) -> Measures {
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    let of = |m: &str| {
-        let picked: Vec<usize> = rows
+/// One method's runs among one net seed's rows, at the desired targets strictly between the
+/// components, in row order.
+struct Runs {
+    /// The simulator final errors.
+    errors: Vec<f64>,
+    /// The distances of the final x from the desired x (m).
+    misses: Vec<f64>,
+}
+
+impl Runs {
+    /// `method`'s rows among `rows` at the desired targets for which `between` holds.
+    fn of(rows: &[&NetSeedRow], method: Method, between: impl Fn(f64) -> bool) -> Self {
+        let picked: Vec<&&NetSeedRow> = rows
             .iter()
-            .copied()
-            .filter(|&r| meth[r] == m && between(d[r]))
+            .filter(|r| r.method == method.name() && between(r.desired_target))
             .collect();
-        let e: Vec<f64> = picked.iter().map(|&r| es[r]).collect();
-        let miss: Vec<f64> = picked.iter().map(|&r| (reached[r] - d[r]).abs()).collect();
-        let share = e.iter().filter(|&&x| x <= 1.0).count() as f64 / e.len().max(1) as f64;
-        (share, mean(&e), mean(&miss))
-    };
-    let (t1, t2) = (of("tracker1"), of("tracker2"));
+        Self {
+            errors: picked.iter().map(|r| r.final_error_simulator).collect(),
+            misses: picked
+                .iter()
+                .map(|r| (r.final_axis_value - r.desired_target).abs())
+                .collect(),
+        }
+    }
+
+    /// How many end within tolerance (error ≤ 1).
+    fn within(&self) -> usize {
+        self.errors.iter().filter(|&&x| x <= 1.0).count()
+    }
+
+    /// (share within tolerance, mean error, mean distance (m)), as [`Measures`] holds them.
+    fn measures(&self) -> (f64, f64, f64) {
+        let share = self.within() as f64 / self.errors.len().max(1) as f64;
+        (share, mean(&self.errors), mean(&self.misses))
+    }
+}
+
+/// The mean of `v` (0 for none).
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// One net seed's [`Measures`] from its `net_seeds.csv` rows, over the desired targets for
+/// which `between` holds.
+fn measures(rows: &[&NetSeedRow], between: impl Fn(f64) -> bool + Copy) -> Measures {
+    let of = |m: Method| Runs::of(rows, m, between).measures();
+    let (t1, t2) = (of(Method::Tracker1), of(Method::Tracker2));
     Measures {
-        lbc: of("lbc"),
-        naive: of("naive"),
+        lbc: of(Method::Lbc),
+        naive: of(Method::Naive),
         example: (t1.0.max(t2.0), t1.1.min(t2.1), t1.2.min(t2.2)),
     }
 }
@@ -162,33 +190,23 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         setting("axis_margin"),
     );
     let between = |x: f64| x > c1 && x < c2;
-    let df = read_csv(&dir.join("targets.csv"))?;
-    let (d, meth, es, ee, secs, reached) = (
-        df_f64(&df, "desired_target")?,
-        df_str(&df, "method")?,
-        df_f64(&df, "final_error_simulator")?,
-        df_f64(&df, "final_error_emulator")?,
-        df_f64(&df, "seconds")?,
-        df_f64(&df, "final_axis_value")?,
-    );
-    let miss = |mm: &str| -> Vec<f64> {
-        (0..d.len())
-            .filter(|&r| meth[r] == mm && between(d[r]))
-            .map(|r| (reached[r] - d[r]).abs())
-            .collect()
-    };
-    let errs = |mm: &str| -> Vec<f64> {
-        (0..d.len())
-            .filter(|&r| meth[r] == mm && between(d[r]))
-            .map(|r| es[r])
-            .collect()
-    };
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    let lbc = errs("lbc");
-    let within = lbc.iter().filter(|&&e| e <= 1.0).count();
-    let (ml, mn) = (mean(&lbc), mean(&errs("naive")));
-    let (xl, xn) = (mean(&miss("lbc")), mean(&miss("naive")));
-    let per_seed = per_seed_measures(dir, between)?;
+    let targets: Vec<TargetRow> = read_rows(&dir.join("targets.csv"))?;
+    let seed_rows: Vec<NetSeedRow> = read_rows(&dir.join("net_seeds.csv"))?;
+    let seeds = by_seed(&seed_rows);
+    let per_seed: Vec<(i64, Measures)> = seeds
+        .iter()
+        .map(|(s, rows)| (*s, measures(rows, between)))
+        .collect();
+    // The run's own net is the first seed of `net_seeds.csv` (its rows are `targets.csv`'s),
+    // so its measures are the first seed's.
+    let own_rows: &[&NetSeedRow] = seeds.first().map_or(&[], |(_, rows)| rows);
+    let own = |m: Method| Runs::of(own_rows, m, between);
+    let own_measures = per_seed
+        .first()
+        .map_or_else(|| measures(&[], between), |p| p.1);
+    let lbc = own(Method::Lbc);
+    let (ml, mn) = (own_measures.lbc.1, own_measures.naive.1);
+    let (xl, xn) = (own_measures.lbc.2, own_measures.naive.2);
     let inputs = RuleInputs {
         seeds: per_seed.iter().map(|p| p.1).collect(),
         within_fraction: frac,
@@ -197,42 +215,47 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     };
     let rule = rule(&inputs);
     let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
-    let mut md = targets_table(&d, &meth, &es, &ee);
-    let bptt_s: Vec<f64> = (0..d.len())
-        .filter(|&r| meth[r] == "bptt")
-        .map(|r| secs[r])
+    let mut md = targets_table(&targets);
+    let bptt_s: Vec<f64> = targets
+        .iter()
+        .filter(|r| r.method == Method::Bptt.name())
+        .map(|r| r.seconds)
         .collect();
-    let comps = read_csv(&dir.join("components.csv"))?;
-    let (cl, co, ct) = (
-        df_f64(&comps, "learn_seconds")?,
-        df_f64(&comps, "open_loop_simulator_error")?,
-        df_f64(&comps, "tracked_simulator_error")?,
-    );
+    let comps: Vec<ComponentRow> = read_rows(&dir.join("components.csv"))?;
+    let comp = |k: &str| {
+        comps
+            .iter()
+            .find(|c| c.component == k)
+            .ok_or_else(|| crate::experiment::other(format!("components.csv: no component {k}")))
+    };
+    let (k1, k2) = (comp("1")?, comp("2")?);
     md.push_str(&format!(
         "\nComponents (targets x = {} and {} m): open-loop replay error on the simulator {} and {}, with the emulator-derived tracker in closed loop {} and {}; learned in {} s and {} s. BPTT re-optimized per desired target: mean {} s. λ = {} (from the stated control noise). Mean simulator error over the in-between targets: LBC {}, naive {}, BPTT open loop {}, BPTT tracked {}.\n",
         sig(c1),
         sig(c2),
-        sig(co[0]),
-        sig(co[1]),
-        sig(ct[0]),
-        sig(ct[1]),
-        sig(cl[0]),
-        sig(cl[1]),
+        sig(k1.open_loop_simulator_error),
+        sig(k2.open_loop_simulator_error),
+        sig(k1.tracked_simulator_error),
+        sig(k2.tracked_simulator_error),
+        sig(k1.learn_seconds),
+        sig(k2.learn_seconds),
         sig(mean(&bptt_s)),
         sig(lambda),
         sig(ml),
         sig(mn),
-        sig(mean(&errs("bptt"))),
-        sig(mean(&errs("bptt_tracked"))),
+        sig(mean(&own(Method::Bptt).errors)),
+        sig(mean(&own(Method::BpttTracked).errors)),
     ));
     md.push_str(
         "\nThe error is an RMS over all 13 state variables, so it dilutes a miss along the axis (a landing 3 m off the desired x alone gives 0.83): the mean distance of the final x from the desired x (m) on the simulator over the in-between targets, per method:\n\n| method | mean distance to the desired x (m) | mean final error |\n| --- | --- | --- |\n",
     );
-    for mm in METHODS {
+    for m in Method::ALL {
+        let runs = own(m);
         md.push_str(&format!(
-            "| {mm} | {} | {} |\n",
-            sig(mean(&miss(mm))),
-            sig(mean(&errs(mm)))
+            "| {} | {} | {} |\n",
+            m.name(),
+            sig(mean(&runs.misses)),
+            sig(mean(&runs.errors))
         ));
     }
     md.push_str(&seeds_table(&per_seed));
@@ -247,8 +270,8 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         rule: rule.clone(),
         why: format!(
             "On the simulator, over the {} targets between the components, through the run's own net LBC ends within tolerance at {}, with mean final error {} against the naive blend's {} and mean distance from the desired x {} m against {} m. The rule reads the median over {} net seeds.{lines} Rule (ours, in the spec; revised after results, see the rule history): {text}",
-            lbc.len(),
-            within,
+            lbc.errors.len(),
+            lbc.within(),
             sig(ml),
             sig(mn),
             sig(xl),
@@ -258,59 +281,47 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     })
 }
 
-/// Per net seed (from `net_seeds.csv`, in the order first listed), the rule's measures over
-/// the targets for which `between` holds.
-fn per_seed_measures(
-    dir: &Path,
-    between: impl Fn(f64) -> bool + Copy,
-) -> Result<Vec<(f64, Measures)>, Error> {
-    let seeds_df = read_csv(&dir.join("net_seeds.csv"))?;
-    let (sd, sm, se, sr, sseed) = (
-        df_f64(&seeds_df, "desired_target")?,
-        df_str(&seeds_df, "method")?,
-        df_f64(&seeds_df, "final_error_simulator")?,
-        df_f64(&seeds_df, "final_axis_value")?,
-        df_f64(&seeds_df, "net_seed")?,
-    );
-    let mut seed_ids: Vec<f64> = Vec::new();
-    for &s in &sseed {
-        if !seed_ids.contains(&s) {
-            seed_ids.push(s);
+/// `net_seeds.csv`'s rows per net seed, the seeds in the order first listed.
+fn by_seed(rows: &[NetSeedRow]) -> Vec<(i64, Vec<&NetSeedRow>)> {
+    let mut seeds: Vec<(i64, Vec<&NetSeedRow>)> = Vec::new();
+    for r in rows {
+        match seeds.iter_mut().find(|(s, _)| *s == r.net_seed) {
+            Some((_, of_seed)) => of_seed.push(r),
+            None => seeds.push((r.net_seed, vec![r])),
         }
     }
-    let per_seed: Vec<(f64, Measures)> = seed_ids
-        .iter()
-        .map(|&s| {
-            let rows: Vec<usize> = (0..sseed.len()).filter(|&r| sseed[r] == s).collect();
-            (s, measures(&rows, (&sd, &sm, &se, &sr), between))
-        })
-        .collect();
-    Ok(per_seed)
+    seeds
 }
 
 /// The final errors on the simulator and the emulator per desired target and method.
-fn targets_table(d: &[f64], meth: &[String], es: &[f64], ee: &[f64]) -> String {
+fn targets_table(rows: &[TargetRow]) -> String {
     let mut md = String::from(
         "Final error (RMS of (s − s_d)/tolerance, ≤ 1 within tolerance) on the simulator / emulator, per desired target and method:\n\n| desired x (m) |",
     );
-    for mm in METHODS {
-        md.push_str(&format!(" {mm} |"));
+    for m in Method::ALL {
+        md.push_str(&format!(" {} |", m.name()));
     }
     md.push_str("\n| --- |");
-    md.push_str(&" --- |".repeat(METHODS.len()));
+    md.push_str(&" --- |".repeat(Method::ALL.len()));
     md.push('\n');
     let mut targets: Vec<f64> = Vec::new();
-    for &x in d {
-        if !targets.contains(&x) {
-            targets.push(x);
+    for r in rows {
+        if !targets.contains(&r.desired_target) {
+            targets.push(r.desired_target);
         }
     }
     for &x in &targets {
         md.push_str(&format!("| {} |", sig(x)));
-        for mm in METHODS {
-            let r = (0..d.len()).find(|&r| d[r] == x && meth[r] == mm);
-            match r {
-                Some(r) => md.push_str(&format!(" {} / {} |", sig(es[r]), sig(ee[r]))),
+        for m in Method::ALL {
+            match rows
+                .iter()
+                .find(|r| r.desired_target == x && r.method == m.name())
+            {
+                Some(r) => md.push_str(&format!(
+                    " {} / {} |",
+                    sig(r.final_error_simulator),
+                    sig(r.final_error_emulator)
+                )),
                 None => md.push_str(" – |"),
             }
         }
@@ -320,14 +331,14 @@ fn targets_table(d: &[f64], meth: &[String], es: &[f64], ee: &[f64]) -> String {
 }
 
 /// The comparison per net seed, as the rule reads it.
-fn seeds_table(per_seed: &[(f64, Measures)]) -> String {
+fn seeds_table(per_seed: &[(i64, Measures)]) -> String {
     let mut md = String::new();
     md.push_str("\nThe same comparison through the lander net of each net seed (`net_seeds.csv`; components, trackers and blends rebuilt through each net), over the in-between targets on the simulator; the rule reads the median over the seeds:\n\n| net seed | LBC within tolerance (share) | LBC's mean error − naive's | LBC's mean distance − naive's (m) | better example alone within tolerance | its mean distance − naive's (m) |\n| --- | --- | --- | --- | --- | --- |\n");
     for (s, m) in per_seed {
         let (v, n) = (m.lbc_values(), m.null_values());
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} |\n",
-            *s as u64,
+            s,
             sig(v[0]),
             sig(v[1]),
             sig(v[2]),
