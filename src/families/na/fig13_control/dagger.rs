@@ -20,11 +20,9 @@ use crate::emulator::dagger::{
 use crate::emulator::dataset::Windows;
 use crate::emulator::train::mse;
 use crate::emulator::Emulator;
-use crate::experiment::output::Table;
 use crate::experiment::resolve::ParamError;
 use crate::experiment::{other, Error};
 use crate::families::na::table1_structure::position_part;
-use crate::row;
 use crate::seed::mix_seed;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -58,25 +56,47 @@ impl DaggerControl {
     }
 }
 
-/// Columns of `dagger.csv`.
-pub const COLUMNS: [&str; 16] = [
-    "task",
-    "round",
-    "optimizer",
-    "final_error_emulator",
-    "final_error_simulator",
-    "iterations",
-    "iterations_to_goal",
-    "best_iteration",
-    "examples",
-    "dagger_examples",
-    "dagger_windows",
-    "fine_tune_iterations",
-    "drift_emulator",
-    "drift_simulator",
-    "drift_gap",
-    "simulator_error_spread",
-];
+crate::result_rows! {
+    /// One task's DAgger round: a row of `dagger.csv` (and of `na_fig14_momentum`'s
+    /// `momentum_dagger_rounds.csv`).
+    pub struct DaggerRoundRow {
+        /// The task.
+        task: String = "task",
+        /// The round (0: the Table 1 net).
+        round: i64 = "round",
+        /// The learner's step rule ([`StepRule::name`]).
+        optimizer: String = "optimizer",
+        /// The learned controls' final error on the round's net (RMS of (s_M − s_d)/σ over
+        /// the weighted state variables; ≤ 1: within tolerance).
+        final_error_emulator: f64 = "final_error_emulator",
+        /// The same replayed on the simulator.
+        final_error_simulator: f64 = "final_error_simulator",
+        /// The iterations the learner ran (the task's own learner: its budget, the paper's
+        /// count).
+        iterations: i64 = "iterations",
+        /// The first iteration at the goal on the net (NaN: never).
+        iterations_to_goal: f64 = "iterations_to_goal",
+        /// The iterate scored (the best so far).
+        best_iteration: i64 = "best_iteration",
+        /// The examples the round's net was trained on, base data included.
+        examples: i64 = "examples",
+        /// Of these, the examples aggregated from visited states.
+        dagger_examples: i64 = "dagger_examples",
+        /// The rollout windows aggregated.
+        dagger_windows: i64 = "dagger_windows",
+        /// The fine-tune's iterations per round.
+        fine_tune_iterations: i64 = "fine_tune_iterations",
+        /// The net's drift from the start under the neutral control over the horizon (m).
+        drift_emulator: f64 = "drift_emulator",
+        /// The simulator's (m).
+        drift_simulator: f64 = "drift_simulator",
+        /// The distance between the two drifted positions (m).
+        drift_gap: f64 = "drift_gap",
+        /// The range of the simulator's final error over [`SPREAD_REPLAYS`] replays of the
+        /// controls perturbed by up to [`SPREAD_FRACTION`] of each channel's half-range.
+        simulator_error_spread: f64 = "simulator_error_spread",
+    }
+}
 
 /// The cache tag of `task`'s DAgger nets.
 fn tag(task: &Task) -> String {
@@ -248,7 +268,7 @@ impl Params {
         spec: &BuildSpec,
         base: &Trained,
         x0: &[f64],
-        table: &mut Table,
+        table: &mut Vec<DaggerRoundRow>,
     ) -> Result<Emulator, Error> {
         self.run_dagger_with(ctx, d, task, spec, base, x0, table, None)
     }
@@ -264,7 +284,7 @@ impl Params {
         spec: &BuildSpec,
         base: &Trained,
         x0: &[f64],
-        table: &mut Table,
+        table: &mut Vec<DaggerRoundRow>,
         mut chain: Option<ChainLearner<'_>>,
     ) -> Result<Emulator, Error> {
         let model = task.net.model;
@@ -321,24 +341,24 @@ impl Params {
             let p = position_part(model);
             let dist =
                 |a: &[f64], b: &[f64]| p.clone().map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
-            table.push(row![
-                task.name.as_str(),
-                round as i64,
-                d.learner.name(),
-                r.emulator_error,
-                r.simulator_error,
-                r.iterations as i64,
-                r.to_goal.map_or(f64::NAN, |i| i as f64),
-                r.best_iteration as i64,
-                (spec.net.examples + train.len()) as i64,
-                train.len() as i64,
-                train.windows.len() as i64,
-                fine_tune_iterations as i64,
-                dist(&xe, x0),
-                dist(xs, x0),
-                dist(&xe, xs),
-                r.simulator_spread
-            ]);
+            table.push(DaggerRoundRow {
+                task: task.name.clone(),
+                round: round as i64,
+                optimizer: d.learner.name().into(),
+                final_error_emulator: r.emulator_error,
+                final_error_simulator: r.simulator_error,
+                iterations: r.iterations as i64,
+                iterations_to_goal: r.to_goal.map_or(f64::NAN, |i| i as f64),
+                best_iteration: r.best_iteration as i64,
+                examples: (spec.net.examples + train.len()) as i64,
+                dagger_examples: train.len() as i64,
+                dagger_windows: train.windows.len() as i64,
+                fine_tune_iterations: fine_tune_iterations as i64,
+                drift_emulator: dist(&xe, x0),
+                drift_simulator: dist(xs, x0),
+                drift_gap: dist(&xe, xs),
+                simulator_error_spread: r.simulator_spread,
+            });
             if round == d.settings.rounds {
                 break;
             }
@@ -444,28 +464,29 @@ pub fn figure(
 ) -> Result<Vec<std::path::PathBuf>, Error> {
     use crate::experiment::output::unique;
     use crate::experiment::plot::{Figure, Mark, Panel, Series};
+    use crate::experiment::rows::TableRow;
     let Some(t) = tables.get("dagger").filter(|t| !t.is_empty()) else {
         return Ok(vec![]);
     };
-    let (task, round) = (t.strs("task"), t.f64s("round"));
-    let (emu, sim) = (
-        t.f64s("final_error_emulator"),
-        t.f64s("final_error_simulator"),
-    );
+    let rows = DaggerRoundRow::from_table(t);
+    let tasks: Vec<String> = rows.iter().map(|r| r.task.clone()).collect();
     let mut series = vec![];
-    let last = round.iter().copied().fold(0.0, f64::max);
-    for (c, name) in unique(&task).into_iter().enumerate() {
-        let pts = |v: &[f64]| -> Vec<(f64, f64)> {
-            (0..task.len())
+    let last = rows.iter().map(|r| r.round as f64).fold(0.0, f64::max);
+    for (c, name) in unique(&tasks).into_iter().enumerate() {
+        let pts = |v: fn(&DaggerRoundRow) -> f64| -> Vec<(f64, f64)> {
+            rows.iter()
                 // Log axis: an exact zero has no place on it and is left out.
-                .filter(|&r| task[r] == name && v[r] > 0.0)
-                .map(|r| (round[r], v[r]))
+                .filter(|r| r.task == name && v(r) > 0.0)
+                .map(|r| (r.round as f64, v(r)))
                 .collect()
         };
+        let (sim, emu) = (
+            pts(|r| r.final_error_simulator),
+            pts(|r| r.final_error_emulator),
+        );
         // Solid with dots on the simulator, dashed on the net, in the task's colour.
-        series
-            .push(Series::line(format!("{name}: simulator"), pts(&sim), c).mark(Mark::LinePoints));
-        series.push(Series::line(format!("{name}: DAgger net"), pts(&emu), c).mark(Mark::Dashed));
+        series.push(Series::line(format!("{name}: simulator"), sim, c).mark(Mark::LinePoints));
+        series.push(Series::line(format!("{name}: DAgger net"), emu, c).mark(Mark::Dashed));
     }
     let dots = (0..=20).map(|i| (last * i as f64 / 20.0, 1.0)).collect();
     series.push(Series::line("tolerance (final error 1)", dots, 7).mark(Mark::Points));
@@ -484,100 +505,90 @@ pub fn figure(
 /// simulator errors, and at the last round whether the goal is reached on the net within the
 /// paper's iteration count and on the simulator. `None` when there is no `dagger.csv`.
 pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error> {
-    use crate::experiment::output::{df_f64, df_str, unique, written_csv};
+    use crate::experiment::output::unique;
     use crate::experiment::report::sig;
     use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
-    let Some(df) = written_csv(dir, "dagger.csv")? else {
+    let Some(rows) = super::rows::written_rows::<DaggerRoundRow>(dir, "dagger.csv")? else {
         return Ok(None);
     };
-    let (task, round) = (df_str(&df, "task")?, df_f64(&df, "round")?);
-    if task.is_empty() {
+    if rows.is_empty() {
         return Ok(None);
     }
-    let (emu, sim, its, to_goal, ex, dg) = (
-        df_f64(&df, "final_error_emulator")?,
-        df_f64(&df, "final_error_simulator")?,
-        df_f64(&df, "iterations")?,
-        df_f64(&df, "iterations_to_goal")?,
-        df_f64(&df, "examples")?,
-        df_f64(&df, "drift_gap")?,
-    );
-    // Older results have no spread column.
-    let spread =
-        df_f64(&df, "simulator_error_spread").unwrap_or_else(|_| vec![f64::NAN; task.len()]);
     let mut md = format!(
         "\nControl through DAgger emulators (ours, `dagger.csv`; Levenberg-Marquardt through each round's net, controls replayed on the simulator; round 0 is the Table 1 net). The last column is the range of the simulator's final error over {SPREAD_REPLAYS} replays of the same controls, each perturbed by up to {}% of its channel's half-range: how far the open-loop outcome moves under control changes far smaller than a net's error (near or above 1, the tolerance, no emulator short of exact can make the learned controls land reliably).\n\n| task | round | examples | iterations to goal (budget) | final error, net | final error, simulator | neutral drift gap (m) | simulator error spread, controls ±{}% |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
         SPREAD_FRACTION * 100.0,
         SPREAD_FRACTION * 100.0
     );
-    for r in 0..task.len() {
+    for r in &rows {
         md.push_str(&format!(
             "| {} | {} | {} | {} ({}) | {} | {} | {} | {} |\n",
-            task[r],
-            round[r],
-            ex[r],
-            if to_goal[r].is_finite() {
-                to_goal[r].to_string()
+            r.task,
+            r.round,
+            r.examples,
+            if r.iterations_to_goal.is_finite() {
+                r.iterations_to_goal.to_string()
             } else {
                 "never".into()
             },
-            its[r],
-            sig(emu[r]),
-            sig(sim[r]),
-            sig(dg[r]),
-            sig(spread[r])
+            r.iterations,
+            sig(r.final_error_emulator),
+            sig(r.final_error_simulator),
+            sig(r.drift_gap),
+            sig(r.simulator_error_spread)
         ));
     }
-    let names = unique(&task);
+    let tasks: Vec<String> = rows.iter().map(|r| r.task.clone()).collect();
+    let names = unique(&tasks);
     let mut ok = 0;
     let mut checks = Vec::new();
     let mut groups = Vec::new();
     let parts: Vec<String> = names
         .iter()
         .map(|name| {
-            let rows: Vec<usize> = (0..task.len()).filter(|&r| &task[r] == name).collect();
-            let last = *rows
+            let of_task: Vec<&DaggerRoundRow> = rows.iter().filter(|r| &r.task == name).collect();
+            let last = *of_task
                 .iter()
-                .max_by(|&&a, &&b| round[a].total_cmp(&round[b]))
+                .max_by_key(|r| r.round)
                 .expect("a task has rows");
-            let on_net = to_goal[last].is_finite() && to_goal[last] <= its[last];
-            let on_sim = sim[last] <= 1.0;
+            let budget = last.iterations as f64;
+            let on_net = last.iterations_to_goal.is_finite() && last.iterations_to_goal <= budget;
+            let on_sim = last.final_error_simulator <= 1.0;
             ok += usize::from(on_net && on_sim);
             // The last round's controls, judged as the headline's: at the goal on the net
             // within the paper's iterations (null: never reaching it) and within tolerance on
             // the simulator (null: round 0, the Table 1 net's controls).
-            let first = *rows
+            let first = *of_task
                 .iter()
-                .min_by(|&&a, &&b| round[a].total_cmp(&round[b]))
+                .min_by_key(|r| r.round)
                 .expect("a task has rows");
             groups.push(vec![checks.len(), checks.len() + 1]);
             checks.push(Check::new(
                 format!("{name}: iterations to the goal on the last round's net"),
-                to_goal[last],
+                last.iterations_to_goal,
                 Cmp::AtMost,
-                its[last],
+                budget,
                 Null::new("never reaching it", f64::INFINITY),
             ));
             checks.push(Check::new(
                 format!("{name}: final error on the simulator, in tolerances"),
-                sim[last],
+                last.final_error_simulator,
                 Cmp::AtMost,
                 1.0,
-                Null::new("round 0, the Table 1 net's controls", sim[first]),
+                Null::new("round 0, the Table 1 net's controls", first.final_error_simulator),
             ));
-            let by_round: Vec<String> = rows.iter().map(|&r| sig(sim[r])).collect();
+            let by_round: Vec<String> = of_task.iter().map(|r| sig(r.final_error_simulator)).collect();
             // The open loop's sensitivity: the spread of the simulator's final error under
             // ±SPREAD_FRACTION control changes, at round 0 (the Table 1 net's controls) and
             // at the last round.
-            let spreads: Vec<String> = rows
+            let spreads: Vec<String> = of_task
                 .iter()
-                .filter(|&&r| spread[r].is_finite())
-                .map(|&r| sig(spread[r]))
+                .filter(|r| r.simulator_error_spread.is_finite())
+                .map(|r| sig(r.simulator_error_spread))
                 .collect();
             let sensitivity = match (spreads.first(), spreads.last()) {
                 (Some(a), Some(b)) => format!(
                     "; the simulator's final error moves over a range of {a} (round 0) and {b} (round {}) under ±{}% control changes",
-                    round[last],
+                    last.round,
                     SPREAD_FRACTION * 100.0
                 ),
                 _ => String::new(),
@@ -585,9 +596,9 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
             format!(
                 "{name}: simulator error by round {} (net {} at round {}; goal on the net within {} iterations: {}; on the simulator: {}{sensitivity})",
                 by_round.join(" -> "),
-                sig(emu[last]),
-                round[last],
-                its[last],
+                sig(last.final_error_emulator),
+                last.round,
+                last.iterations,
                 if on_net { "yes" } else { "no" },
                 if on_sim { "yes" } else { "no" }
             )

@@ -1,6 +1,7 @@
 //! The dolphin swim task of Fig. 13(d) in the job: the swim learned through the global net from
 //! seeded random starts, replayed on the simulator beside a hand-made travelling wave.
 
+use super::rows::{FinalRow, ObjectiveRow, SwimRow};
 use super::{learn_best, BestRollout, DolphinControl, Formulation, Params};
 use crate::control::bptt::{Bptt, Learned};
 use crate::emulator::hierarchy::{FRAME_DIM, GLOBAL_DIM};
@@ -88,10 +89,10 @@ impl Params {
         d: &DolphinControl,
         width: usize,
         restarts_t: &mut Table,
-        objective_t: &mut Table,
-        final_t: &mut Table,
+        objective_t: &mut Vec<ObjectiveRow>,
+        final_t: &mut Vec<FinalRow>,
         trajectory: &mut Table,
-        swim_t: &mut Table,
+        swim_t: &mut Vec<SwimRow>,
         motion_t: &mut Table,
         dagger_t: &mut Table,
     ) -> Result<(), Error> {
@@ -113,7 +114,11 @@ impl Params {
             Some(restarts_t),
         )?;
         for t in &r.trace {
-            objective_t.push(row!["dolphin", t.iteration as i64, t.objective]);
+            objective_t.push(ObjectiveRow {
+                task: "dolphin".into(),
+                iteration: t.iteration as i64,
+                objective: t.objective,
+            });
         }
         let (sim_masses, sim_globals) = swim
             .simulate(&body, &x0, &best.controls, dt, n)
@@ -162,16 +167,22 @@ impl Params {
             ("reference_wave_simulator", ref_d, &ref_u),
         ] {
             let (p, lag) = periodicity(u, knots.m);
-            swim_t.push(row![source, dist, effort(u), p, lag * big_dt]);
+            swim_t.push(SwimRow {
+                source: source.into(),
+                distance_m: dist,
+                effort: effort(u),
+                periodicity: p,
+                period_s: lag * big_dt,
+            });
         }
-        final_t.push(row![
-            "dolphin",
-            (ref_d - emu_d).max(0.0),
-            (ref_d - sim_d).max(0.0),
-            r.best_iteration as i64,
-            Formulation::Paper.name(),
-            f64::NAN
-        ]);
+        final_t.push(FinalRow {
+            task: "dolphin".into(),
+            emulator_error: (ref_d - emu_d).max(0.0),
+            simulator_error: (ref_d - sim_d).max(0.0),
+            best_iteration: r.best_iteration as i64,
+            formulation: Formulation::Paper.name().into(),
+            start_simulator_error: f64::NAN,
+        });
         if let Some(ours) = &d.ours_swim {
             // Our earlier swim (4 s), learned the same way through the same global net, scored
             // against the hand-made wave over its own horizon (ours, not counted).
@@ -192,7 +203,11 @@ impl Params {
                 None,
             )?;
             for t in &r4.trace {
-                objective_t.push(row!["dolphin_4s", t.iteration as i64, t.objective]);
+                objective_t.push(ObjectiveRow {
+                    task: "dolphin_4s".into(),
+                    iteration: t.iteration as i64,
+                    objective: t.objective,
+                });
             }
             let (x4, _) = ours.start(&body);
             let (_, sim4) = ours
@@ -203,14 +218,14 @@ impl Params {
             k4.expand(&ours.reference_knots(dt * n as f64), &mut ref4);
             let (_, ref4_globals) = ours.simulate(&body, &x4, &ref4, dt, n).map_err(other)?;
             let wave = ours.distance(&ref4_globals);
-            final_t.push(row![
-                "dolphin_4s",
-                (wave - ours.distance(&best4.states)).max(0.0),
-                (wave - ours.distance(&sim4)).max(0.0),
-                r4.best_iteration as i64,
-                Formulation::Ours.name(),
-                f64::NAN
-            ]);
+            final_t.push(FinalRow {
+                task: "dolphin_4s".into(),
+                emulator_error: (wave - ours.distance(&best4.states)).max(0.0),
+                simulator_error: (wave - ours.distance(&sim4)).max(0.0),
+                best_iteration: r4.best_iteration as i64,
+                formulation: Formulation::Ours.name().into(),
+                start_simulator_error: f64::NAN,
+            });
         }
         // Trajectory: the mean segment centroid (s0, s1, s2 = x, y, z).
         for (source, globals) in [("emulator", &best.states), ("simulator", &sim_globals)] {

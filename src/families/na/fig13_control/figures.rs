@@ -2,10 +2,12 @@
 //! `spectrum`, and the animated GIFs of every task and of the dolphin.
 
 use super::anim::{write_animation, Scene, Track, EMULATOR, SIMULATOR};
+use super::rows::{FinalRow, ObjectiveRow};
 use super::{dagger, dolphin_dagger};
 use crate::emulator::catalog::NetModel;
 use crate::experiment::output::{unique, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
+use crate::experiment::rows::TableRow;
 use crate::experiment::{other, Error};
 use crate::physics::dolphin::N_POS;
 use rayon::prelude::*;
@@ -17,8 +19,8 @@ const DEVIATION_CLAMP: f64 = 5.0;
 
 /// Every figure of the experiment ([`crate::experiment::Family::figures`]).
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let t = tables.require("objective")?;
-    let (task, it, obj) = (t.strs("task"), t.f64s("iteration"), t.f64s("objective"));
+    let objective = ObjectiveRow::from_table(tables.require("objective")?);
+    let task: Vec<String> = objective.iter().map(|r| r.task.clone()).collect();
     let tr = tables.require("trajectory")?;
     let (ttask, tt, src) = (tr.strs("task"), tr.f64s("t"), tr.strs("source"));
     let goal = tables.require("goal")?;
@@ -32,16 +34,15 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     );
     // The paper's four tasks make the main figure; our second lines (formulation "ours") a
     // figure of their own, so neither is a wall of panels.
-    let fin = tables.require("final")?;
-    let (fin_task, formulation) = (fin.strs("task"), fin.strs("formulation"));
-    let ours =
-        |name: &str| (0..fin_task.len()).any(|r| fin_task[r] == name && formulation[r] == "ours");
+    let finals = FinalRow::from_table(tables.require("final")?);
+    let ours = |name: &str| finals.iter().any(|r| r.task == name && !r.is_paper());
     let (mut panels, mut panels_ours) = (vec![], vec![]);
     for name in unique(&task) {
         let start = panels.len();
-        let pts = (0..task.len())
-            .filter(|&r| task[r] == name)
-            .map(|r| (it[r], obj[r]))
+        let pts = objective
+            .iter()
+            .filter(|r| r.task == name)
+            .map(|r| (r.iteration as f64, r.objective))
             .collect();
         panels.push(Panel {
             title: format!("{name}: objective"),
@@ -275,16 +276,11 @@ fn animations(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> 
         .unzip();
     // A GIF for each task of the paper's formulation (one of ours is a second line in the
     // tables and the control figure, not animated).
-    let ours: Vec<String> = match tables.get("final") {
-        Some(f) if f.column("formulation").is_some() => {
-            let (t, form) = (f.strs("task"), f.strs("formulation"));
-            (0..t.len())
-                .filter(|&r| form[r] == "ours")
-                .map(|r| t[r].clone())
-                .collect()
-        }
-        _ => vec![],
-    };
+    let ours: Vec<String> = FinalRow::from_table(tables.require("final")?)
+        .into_iter()
+        .filter(|r| !r.is_paper())
+        .map(|r| r.task)
+        .collect();
     let jobs: Vec<(usize, NetModel)> = (0..gtask.len())
         .filter(|&r| !ours.contains(&gtask[r]))
         .map(|r| {

@@ -5,8 +5,10 @@ use super::conditioning::{
     ladder, record_ladder, record_spectrum, PhysicsTables, BEST_WEIGHTS_COLUMNS,
     CONDITIONING_COLUMNS, LADDER_COLUMNS,
 };
+use super::dagger::DaggerRoundRow;
+use super::rows::{FinalRow, ObjectiveRow, SwimRow};
 use super::seeds::{HeadlineRun, SEEDS_COLUMNS};
-use super::{dagger, dolphin_dagger, Formulation, Params, Sweep, Task};
+use super::{dolphin_dagger, Formulation, Params, Sweep, Task};
 use crate::control::bptt::{
     learn_with, replay, Bptt, Descent, DifferentiableStep, Knots, Learned, Schedule, StepRule,
 };
@@ -14,6 +16,7 @@ use crate::control::conditioning::{terminal_spectrum, weighting_bound};
 use crate::control::objective::Objective;
 use crate::emulator::catalog::{BuildSpec, NetSpec, Trained};
 use crate::experiment::output::{Table, Tables};
+use crate::experiment::rows::table_of;
 use crate::experiment::rule::{rule_table, rule_table_of};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
@@ -74,8 +77,8 @@ impl Job for Params {
 
 /// The tables the paper's tasks fill, task by task, and the widths of their wide columns.
 struct RunTables {
-    objective: Table,
-    final_: Table,
+    objective: Vec<ObjectiveRow>,
+    final_: Vec<FinalRow>,
     sweep: Table,
     physics: Table,
     /// The headline through the physics under the best-conditioned final-state weights
@@ -87,7 +90,7 @@ struct RunTables {
     /// (src/control/conditioning.rs): why fixed-step descent is slow.
     cond: Table,
     spectrum: Table,
-    dagger: Table,
+    dagger: Vec<DaggerRoundRow>,
     /// Per task, the actuator gains and final-state weights its objective and bounds use
     /// ([`Task::calibrated`]): kind `gain` (index = actuator) or `weight` (index = state
     /// variable).
@@ -111,7 +114,7 @@ struct RunTables {
 
 /// The dolphin's tables (empty without `[params.dolphin]`).
 struct DolphinTables {
-    swim: Table,
+    swim: Vec<SwimRow>,
     motion: Table,
     restarts: Table,
     dagger: Table,
@@ -120,14 +123,6 @@ struct DolphinTables {
 impl RunTables {
     /// The empty tables of `p`'s tasks, `states` already filled.
     fn new(p: &Params) -> Self {
-        let final_ = Table::new(&[
-            "task",
-            "emulator_error",
-            "simulator_error",
-            "best_iteration",
-            "formulation",
-            "start_simulator_error",
-        ]);
         let width = p
             .tasks
             .iter()
@@ -154,8 +149,8 @@ impl RunTables {
             }
         }
         RunTables {
-            objective: Table::new(&["task", "iteration", "objective"]),
-            final_,
+            objective: Vec::new(),
+            final_: Vec::new(),
             sweep: Table::new(&SWEEP_COLUMNS),
             physics: Table::new(&SWEEP_COLUMNS),
             best: Table::new(&SWEEP_COLUMNS),
@@ -163,7 +158,7 @@ impl RunTables {
             best_emulator: Table::new(&SWEEP_COLUMNS),
             cond: Table::new(&CONDITIONING_COLUMNS),
             spectrum: Table::new(&["task", "substrate", "index", "eigenvalue"]),
-            dagger: Table::new(&dagger::COLUMNS),
+            dagger: Vec::new(),
             calibration: Table::new(&["task", "kind", "index", "value"]),
             ladder: Table::new(&LADDER_COLUMNS),
             seeds: Table::new(&SEEDS_COLUMNS),
@@ -190,12 +185,12 @@ impl RunTables {
             ("calibration", self.calibration),
             ("conditioning_ladder", self.ladder),
             ("spectrum", self.spectrum),
-            ("dagger", self.dagger),
+            ("dagger", table_of(&self.dagger)),
             ("dolphin_restarts", d.restarts),
             ("dolphin_dagger", d.dagger),
-            ("swim", d.swim),
-            ("objective", self.objective),
-            ("final", self.final_),
+            ("swim", table_of(&d.swim)),
+            ("objective", table_of(&self.objective)),
+            ("final", table_of(&self.final_)),
             ("net_seeds", self.seeds),
             ("net_lines", lines),
             ("path", self.path),
@@ -273,10 +268,11 @@ impl Params {
             self.steps,
             self.curvature_iterations,
         );
-        for tr in &r.trace {
-            t.objective
-                .push(row![task.name.as_str(), tr.iteration as i64, tr.objective]);
-        }
+        t.objective.extend(r.trace.iter().map(|tr| ObjectiveRow {
+            task: task.name.clone(),
+            iteration: tr.iteration as i64,
+            objective: tr.objective,
+        }));
         let start = Start {
             knots,
             x0: &x0,
@@ -418,14 +414,14 @@ impl Params {
             simulator_error: task.final_error(sim_final),
             best_iteration: r.best_iteration,
         };
-        t.final_.push(row![
-            task.name.as_str(),
-            run.emulator_error,
-            run.simulator_error,
-            r.best_iteration as i64,
-            task.formulation.name(),
-            start_simulator_error(task, &trained.emulator, self.steps)?
-        ]);
+        t.final_.push(FinalRow {
+            task: task.name.clone(),
+            emulator_error: run.emulator_error,
+            simulator_error: run.simulator_error,
+            best_iteration: r.best_iteration as i64,
+            formulation: task.formulation.name().into(),
+            start_simulator_error: start_simulator_error(task, &trained.emulator, self.steps)?,
+        });
         if self.over_net_seeds(task) {
             run.push(&mut t.seeds, task, ctx.seed);
         }
@@ -455,7 +451,7 @@ impl Params {
         ctx: &RunContext,
         t: &mut RunTables,
     ) -> Result<DolphinTables, Error> {
-        let mut swim_t = Table::new(&["source", "distance_m", "effort", "periodicity", "period_s"]);
+        let mut swim_t = Vec::new();
         let mut motion_cols = vec!["source".to_string(), "step".into(), "t".into()];
         motion_cols.extend((0..N_POS).map(|k| format!("p{k}")));
         let motion_refs: Vec<&str> = motion_cols.iter().map(String::as_str).collect();

@@ -48,6 +48,7 @@ pub mod frames;
 mod job;
 mod params;
 mod report;
+pub mod rows;
 pub mod seeds;
 mod task;
 

@@ -1,9 +1,11 @@
 //! Report of `na_fig13_control`: the verdict (tasks at their goal), the table of every task,
 //! and the sentences on the sweeps, the conditioning study and the best weights.
 
+use super::rows::{required_rows, FinalRow, ObjectiveRow, SwimRow};
 use super::{dagger, dolphin_dagger, Fig13Rule};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, written_csv};
 use crate::experiment::report::{sig, Findings};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{
     rule_settings, shown, Check, Cmp, Null, Outcome, Partly, Rule, RuleError,
 };
@@ -110,35 +112,21 @@ pub(super) fn fig13_rule(tasks: &[TaskFacts], r: &Fig13Rule) -> Option<Rule> {
 
 /// The findings ([`crate::experiment::Family::report`]).
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
-    let df = read_csv(&dir.join("objective.csv"))?;
-    let (task, obj) = (df_str(&df, "task")?, df_f64(&df, "objective")?);
-    let fin = read_csv(&dir.join("final.csv"))?;
-    let (ft, ee, se) = (
-        df_str(&fin, "task")?,
-        df_f64(&fin, "emulator_error")?,
-        df_f64(&fin, "simulator_error")?,
-    );
-    let form = df_str(&fin, "formulation")?;
+    let finals = Finals {
+        objective: read_rows(&dir.join("objective.csv"))?,
+        tasks: read_rows(&dir.join("final.csv"))?,
+    };
     let mut md = String::from(
         "| task | formulation | iterations | J start | J end | final error, emulator | final error, simulator |\n| --- | --- | --- | --- | --- | --- | --- |\n",
     );
-    let swim = swim_sentence(dir)?;
-    let goal = swim_goal(dir)?;
+    // The dolphin's swims: no rows without `[params.dolphin]`.
+    let swims: Vec<SwimRow> = required_rows(&dir.join("swim.csv"))?;
+    let swim = swim_sentence(&swims);
+    let goal = swim_goal(&swims);
     let settings = rule_settings(dir)?;
     let bars = Fig13Rule {
         wave_fraction: settings("wave_fraction"),
         periodicity: settings("periodicity"),
-    };
-    // Each task's initial controls replayed on the simulator.
-    let start_error = df_f64(&fin, "start_simulator_error")?;
-    let finals = Finals {
-        task,
-        obj,
-        ft,
-        ee,
-        se,
-        form,
-        start_error,
     };
     // The headline over several Table 1 net seeds: a task of the paper's formulation is judged
     // by its median net seed, with the median's interval; where net_seeds.csv has one seed for a
@@ -191,20 +179,15 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     })
 }
 
-/// The columns of `objective.csv` and `final.csv` the headline reads.
+/// The tables the headline reads.
 struct Finals {
-    /// `objective.csv`: task and objective per iteration.
-    task: Vec<String>,
-    obj: Vec<f64>,
-    /// `final.csv`: task, emulator and simulator errors, formulation and start error per task.
-    ft: Vec<String>,
-    ee: Vec<f64>,
-    se: Vec<f64>,
-    form: Vec<String>,
-    start_error: Vec<f64>,
+    /// `objective.csv`: every task's objective per iteration.
+    objective: Vec<ObjectiveRow>,
+    /// `final.csv`: one row per task.
+    tasks: Vec<FinalRow>,
 }
 
-/// The dolphin's swim distances against the hand-made wave's (NaN without `swim.csv`).
+/// The dolphin's swim distances against the hand-made wave's (NaN without its swims).
 struct SwimGoal {
     wave: f64,
     emu_distance: f64,
@@ -227,71 +210,43 @@ struct Headline {
 }
 
 /// The sentence on the dolphin's swim distances and its controls' periodicity (empty without
-/// `swim.csv`).
-fn swim_sentence(dir: &Path) -> Result<String, Error> {
-    Ok(match read_csv(&dir.join("swim.csv")) {
-        Ok(sw) => {
-            let (src, dist) = (df_str(&sw, "source")?, df_f64(&sw, "distance_m")?);
-            let parts: Vec<String> = (0..src.len())
-                .map(|r| format!("{} {} m", src[r], sig(dist[r])))
-                .collect();
-            // Periodicity of the controls (older runs have no column).
-            let period = match (df_f64(&sw, "periodicity"), df_f64(&sw, "period_s")) {
-                (Ok(p), Ok(t)) => {
-                    let at = |name: &str| (0..src.len()).find(|&r| src[r] == name);
-                    match (at("simulator"), at("reference_wave_simulator")) {
-                        (Some(a), Some(b)) => format!(
-                            " Periodicity of the muscle controls (mean over muscles of the largest autocorrelation at lags of 3 steps to half the horizon; 1: a sinusoid, 0: noise or constant): learned {} (period {} s), hand-made wave {} (period {} s).",
-                            sig(p[a]),
-                            sig(t[a]),
-                            sig(p[b]),
-                            sig(t[b])
-                        ),
-                        _ => String::new(),
-                    }
-                }
-                _ => String::new(),
-            };
-            if parts.is_empty() {
-                String::new()
-            } else {
-                format!(" Dolphin swim distances: {}.{period}", parts.join(", "))
-            }
-        }
-        Err(_) => String::new(),
-    })
+/// its swims, `swim.csv`'s rows).
+fn swim_sentence(swims: &[SwimRow]) -> String {
+    let parts: Vec<String> = swims
+        .iter()
+        .map(|r| format!("{} {} m", r.source, sig(r.distance_m)))
+        .collect();
+    let at = |name: &str| swims.iter().find(|r| r.source == name);
+    let period = match (at("simulator"), at("reference_wave_simulator")) {
+        (Some(a), Some(b)) => format!(
+            " Periodicity of the muscle controls (mean over muscles of the largest autocorrelation at lags of 3 steps to half the horizon; 1: a sinusoid, 0: noise or constant): learned {} (period {} s), hand-made wave {} (period {} s).",
+            sig(a.periodicity),
+            sig(a.period_s),
+            sig(b.periodicity),
+            sig(b.period_s)
+        ),
+        _ => String::new(),
+    };
+    if parts.is_empty() {
+        String::new()
+    } else {
+        format!(" Dolphin swim distances: {}.{period}", parts.join(", "))
+    }
 }
 
 /// The dolphin's goal (the spec's, fixed before the 20 s swim's first run): its learned
 /// knots swim at least half as far as the hand-made wave on the simulator (shortfall <=
 /// half the wave's distance), on the emulator and on the simulator each, with a periodic
 /// muscle pattern (periodicity >= 0.5, ours, as the DAgger line's).
-fn swim_goal(dir: &Path) -> Result<SwimGoal, Error> {
-    let (wave, emu_distance, sim_distance, learned_periodicity) =
-        match read_csv(&dir.join("swim.csv")) {
-            Ok(sw) => {
-                let (src, dist, per) = (
-                    df_str(&sw, "source")?,
-                    df_f64(&sw, "distance_m")?,
-                    df_f64(&sw, "periodicity")?,
-                );
-                let at = |name: &str| (0..src.len()).find(|&r| src[r] == name);
-                let d = |name: &str| at(name).map_or(f64::NAN, |r| dist[r]);
-                (
-                    d("reference_wave_simulator"),
-                    d("emulator"),
-                    d("simulator"),
-                    at("emulator").map_or(f64::NAN, |r| per[r]),
-                )
-            }
-            Err(_) => (f64::NAN, f64::NAN, f64::NAN, f64::NAN),
-        };
-    Ok(SwimGoal {
-        wave,
-        emu_distance,
-        sim_distance,
-        learned_periodicity,
-    })
+fn swim_goal(swims: &[SwimRow]) -> SwimGoal {
+    let at = |name: &str| swims.iter().find(|r| r.source == name);
+    let d = |name: &str| at(name).map_or(f64::NAN, |r| r.distance_m);
+    SwimGoal {
+        wave: d("reference_wave_simulator"),
+        emu_distance: d("emulator"),
+        sim_distance: d("simulator"),
+        learned_periodicity: at("emulator").map_or(f64::NAN, |r| r.periodicity),
+    }
 }
 
 /// Every task of `final.csv` in turn: its row of the table pushed to `md`, and for the paper's
@@ -310,7 +265,6 @@ fn headline(
         sim_distance,
         learned_periodicity,
     } = *goal;
-    let (task, obj, ee, se, form) = (&f.task, &f.obj, &f.ee, &f.se, &f.form);
     let by_seeds = |name: &str| seeds.iter().find(|c| c.task == name && c.seeds > 1);
     let mut h = Headline {
         facts: Vec::new(),
@@ -322,19 +276,23 @@ fn headline(
         ours: Vec::new(),
         net_misses: Vec::new(),
     };
-    for (r, name) in f.ft.iter().enumerate() {
-        let js: Vec<f64> = (0..task.len())
-            .filter(|&i| &task[i] == name)
-            .map(|i| obj[i])
+    for row in &f.tasks {
+        let name = &row.task;
+        let (ee, se) = (row.emulator_error, row.simulator_error);
+        let js: Vec<f64> = f
+            .objective
+            .iter()
+            .filter(|o| &o.task == name)
+            .map(|o| o.objective)
             .collect();
         md.push_str(&format!(
             "| {name} | {} | {} | {} | {} | {} | {} |\n",
-            form[r],
+            row.formulation,
             js.len().saturating_sub(1),
             sig(js.first().copied().unwrap_or(f64::NAN)),
             sig(js.last().copied().unwrap_or(f64::NAN)),
-            sig(ee[r]),
-            sig(se[r])
+            sig(ee),
+            sig(se)
         ));
         // The dolphin's error is its shortfall (m) from the reference wave's distance.
         let ok = |e: f64| {
@@ -344,11 +302,11 @@ fn headline(
                 e <= 1.0
             }
         };
-        if form[r] == "paper" {
+        if row.is_paper() {
             h.headline += 1;
-            h.reached += usize::from(ok(ee[r]));
-            h.reached_sim += usize::from(ok(se[r]));
-            let this_net = ok(ee[r]) && ok(se[r]);
+            h.reached += usize::from(ok(ee));
+            h.reached_sim += usize::from(ok(se));
+            let this_net = ok(ee) && ok(se);
             if name == "dolphin" {
                 h.counts.push(format!(
                     "the dolphin swims {} of the hand-made wave's distance",
@@ -373,17 +331,17 @@ fn headline(
                         ));
                         c.errors.clone()
                     }
-                    None => vec![ee[r].max(se[r])],
+                    None => vec![ee.max(se)],
                 };
                 h.facts.push(TaskFacts::Control {
                     name: name.clone(),
                     errors,
-                    start_error: f.start_error[r],
+                    start_error: row.start_simulator_error,
                 });
             }
-            if ok(ee[r]) && !ok(se[r]) && name != "dolphin" {
+            if ok(ee) && !ok(se) && name != "dolphin" {
                 h.net_misses
-                    .push(format!("{name} ({} vs {})", sig(ee[r]), sig(se[r])));
+                    .push(format!("{name} ({} vs {})", sig(ee), sig(se)));
             }
         } else {
             let over_seeds = by_seeds(name).map_or(String::new(), |c| {
@@ -394,8 +352,8 @@ fn headline(
             });
             h.ours.push(format!(
                 "{name} {} on the emulator, {} on the simulator{over_seeds}",
-                sig(ee[r]),
-                sig(se[r])
+                sig(ee),
+                sig(se)
             ));
         }
     }
@@ -622,16 +580,13 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
         df_f64(&df, "eta")?,
         df_f64(&df, "iterations_per_decade")?,
     );
-    // The weighting bound (absent in the tables of older runs).
-    let any = df_f64(&df, "condition_any_weighting").ok();
-    let (eq, any_pace, paper) = match any {
-        Some(_) => (
-            df_f64(&df, "condition_equilibrated")?,
-            df_f64(&df, "iterations_per_decade_any_weighting")?,
-            df_f64(&df, "paper_iterations")?,
-        ),
-        None => (vec![], vec![], vec![]),
-    };
+    // The weighting bound.
+    let (eq, any, any_pace, paper) = (
+        df_f64(&df, "condition_equilibrated")?,
+        df_f64(&df, "condition_any_weighting")?,
+        df_f64(&df, "iterations_per_decade_any_weighting")?,
+        df_f64(&df, "paper_iterations")?,
+    );
     // Above 1e12 the r-th eigenvalue is rounding: the matrix is singular at the start.
     let show = |k: f64| {
         if k.is_finite() && k < 1e12 {
@@ -654,19 +609,11 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
         } else {
             "no progress".to_string()
         };
-        let (e, a, ap) = if any.is_some() {
-            let ap = if any_pace[r].is_finite() {
-                sig(any_pace[r])
-            } else {
-                "no progress".to_string()
-            };
-            (
-                show(eq[r]),
-                show(any.as_ref().map_or(f64::NAN, |a| a[r])),
-                ap,
-            )
+        let (e, a) = (show(eq[r]), show(any[r]));
+        let ap = if any_pace[r].is_finite() {
+            sig(any_pace[r])
         } else {
-            ("-".to_string(), "-".to_string(), "-".to_string())
+            "no progress".to_string()
         };
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} (eta {}) | {e} | {a} | {ap} |\n",
@@ -678,7 +625,7 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
             p,
             sig(eta[r])
         ));
-        if let (Some(any), "physics") = (&any, sub[r].as_str()) {
+        if sub[r] == "physics" {
             // The spec's reading: the bound against the paper's iteration count.
             weights.push(if !(any_pace[r].is_finite() && any[r] < 1e12) {
                 format!("{}: singular under any weights", task[r])
@@ -703,9 +650,10 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
         if sub[r] == "physics" {
             parts.push(if progress {
                 fewest = fewest.min(pace[r]);
-                match paper.get(r) {
-                    Some(&count) if pace[r] <= count => within.push(task[r].clone()),
-                    _ => beyond.push(task[r].clone()),
+                if pace[r] <= paper[r] {
+                    within.push(task[r].clone());
+                } else {
+                    beyond.push(task[r].clone());
                 }
                 format!(
                     "{} {} ({p} iterations per tenfold reduction)",
@@ -760,32 +708,25 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
 /// best-conditioned weights, the headline's iterations to the goal through the physics with
 /// those weights and with the task's own (`physics_sweep.csv`), beside the paper's count.
 fn best_weights_summary(dir: &Path, cond_task: &[String], paper: &[f64]) -> Result<String, Error> {
-    let (Ok(bw), Ok(bs), Ok(ps)) = (
-        read_csv(&dir.join("best_weights.csv")),
-        read_csv(&dir.join("best_weights_sweep.csv")),
-        read_csv(&dir.join("physics_sweep.csv")),
-    ) else {
-        return Ok(String::new());
-    };
-    // Through the Table 1 net under the same weights (absent in earlier runs).
-    let through_net = read_csv(&dir.join("best_weights_emulator_sweep.csv"))
-        .ok()
-        .map(|e| -> Result<_, Error> {
-            Ok((
-                df_str(&e, "task")?,
-                df_f64(&e, "iterations_to_goal")?,
-                df_f64(&e, "rollout_error")?,
-                df_f64(&e, "simulator_error")?,
-            ))
-        })
-        .transpose()?;
+    let (bw, bs, ps) = (
+        read_csv(&dir.join("best_weights.csv"))?,
+        read_csv(&dir.join("best_weights_sweep.csv"))?,
+        read_csv(&dir.join("physics_sweep.csv"))?,
+    );
+    // Through the Table 1 net under the same weights.
+    let e = read_csv(&dir.join("best_weights_emulator_sweep.csv"))?;
+    let (et, eto, ee, es) = (
+        df_str(&e, "task")?,
+        df_f64(&e, "iterations_to_goal")?,
+        df_f64(&e, "rollout_error")?,
+        df_f64(&e, "simulator_error")?,
+    );
     let (wt, kappa, kappa_best) = (
         df_str(&bw, "task")?,
         df_f64(&bw, "condition")?,
         df_f64(&bw, "condition_best")?,
     );
-    // Absent in runs before the column was added.
-    let pace_best = df_f64(&bw, "iterations_per_decade_best").ok();
+    let pace_best = df_f64(&bw, "iterations_per_decade_best")?;
     let (bt, b_to, b_err) = (
         df_str(&bs, "task")?,
         df_f64(&bs, "iterations_to_goal")?,
@@ -822,27 +763,24 @@ fn best_weights_summary(dir: &Path, cond_task: &[String], paper: &[f64]) -> Resu
         } else {
             "our weights slow it but are not the whole cause"
         };
-        let net = through_net
-            .as_ref()
-            .and_then(|(et, eto, ee, es)| {
-                let i = et.iter().position(|t| *t == bt[r])?;
-                Some(format!(
+        let net = et
+            .iter()
+            .position(|t| *t == bt[r])
+            .map(|i| {
+                format!(
                     "; through the Table 1 net under the same weights it reaches the goal on the net {} (final error {} there, {} on the simulator replay)",
                     to(eto[i]),
                     sig(ee[i]),
                     sig(es[i])
-                ))
+                )
             })
             .unwrap_or_default();
         parts.push(format!(
-            "{}: condition {} with the best weights a search finds (ours: {}){}, the headline reaches the goal through the physics {} with them (final error {}) and {} with ours (paper: {count}): {reading}{net}",
+            "{}: condition {} with the best weights a search finds (ours: {}), at which the headline's step needs {} iterations per tenfold reduction, the headline reaches the goal through the physics {} with them (final error {}) and {} with ours (paper: {count}): {reading}{net}",
             bt[r],
             sig(kappa_best[w]),
             sig(kappa[w]),
-            pace_best.as_ref().map_or(String::new(), |p| format!(
-                ", at which the headline's step needs {} iterations per tenfold reduction",
-                sig(p[w])
-            )),
+            sig(pace_best[w]),
             to(b_to[r]),
             sig(b_err[r]),
             to(ours)

@@ -2,49 +2,43 @@
 //! the DAgger net, and the plain learning-rate sweep) and `net_seeds` (the verdict's ratio per
 //! Table 1 lander net seed).
 
-use crate::experiment::output::{Table, Tables};
+use super::rows::{Method, NetSeedRow, ObjectiveRow, RunRow};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::rows::TableRow;
 use crate::experiment::rule::rule_setting;
 use crate::experiment::Error;
 use std::path::PathBuf;
 
-/// The (iteration, objective) points of descent `method` at rate `eta` in a table with columns
-/// method, eta, iteration, objective (`objective`, `dagger_objective`, `unclipped_objective`).
-fn curve(t: &Table, method: &str, eta: f64) -> Vec<(f64, f64)> {
-    let (m, e, i, o) = (
-        t.strs("method"),
-        t.f64s("eta"),
-        t.f64s("iteration"),
-        t.f64s("objective"),
-    );
-    (0..m.len())
-        .filter(|&r| m[r] == method && e[r] == eta)
-        .map(|r| (i[r], o[r]))
+/// The (iteration, objective) points of descent `method` at rate `eta` among `rows` (of
+/// `objective`, `dagger_objective` or `unclipped_objective`).
+fn curve(rows: &[ObjectiveRow], method: Method, eta: f64) -> Vec<(f64, f64)> {
+    rows.iter()
+        .filter(|r| method.is(&r.method) && r.eta == eta)
+        .map(|r| (r.iteration as f64, r.objective))
         .collect()
 }
 
 /// Every figure of the experiment ([`crate::experiment::Family::figures`]).
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let t = tables.require("objective")?;
-    let runs = tables.require("runs")?;
-    let (meth, eta) = (t.strs("method"), t.f64s("eta"));
+    let objective = ObjectiveRow::from_table(tables.require("objective")?);
+    let runs = RunRow::from_table(tables.require("runs")?);
     let plain_eta = runs
-        .strs("method")
         .iter()
-        .zip(runs.f64s("eta"))
-        .filter(|(m, _)| m.as_str() == "plain")
-        .map(|(_, e)| e)
+        .filter(|r| Method::Plain.is(&r.method))
+        .map(|r| r.eta)
         .collect::<Vec<_>>();
-    let pick = |mm: &str, e: f64| curve(t, mm, e);
-    let mom_eta = (0..meth.len())
-        .find(|&r| meth[r] == "momentum")
-        .map(|r| eta[r]);
+    let pick = |m: Method, e: f64| curve(&objective, m, e);
+    let mom_eta = objective
+        .iter()
+        .find(|r| Method::Momentum.is(&r.method))
+        .map(|r| r.eta);
     let mut main = vec![];
     if let Some(e) = mom_eta {
         main.push(Series::line(
             format!("momentum (eta {e})"),
-            pick("momentum", e),
+            pick(Method::Momentum, e),
             0,
         ));
     }
@@ -53,7 +47,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         .iter()
         .min_by(|a, b| (*a - 1.0).abs().total_cmp(&(*b - 1.0).abs()))
     {
-        let plain = pick("plain", e);
+        let plain = pick(Method::Plain, e);
         // The verdict's bar: momentum must reach plain's final J within half the iterations.
         if let (Some(&(x_end, j_end)), Some(&(x0, _))) = (plain.last(), plain.first()) {
             let hi = main
@@ -77,22 +71,26 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     // curves lie almost on the Table 1 net's), same colours and line styles.
     let mut dagger = vec![];
     if let Some(dt) = tables.get("dagger_objective").filter(|t| !t.is_empty()) {
-        let (dm, de) = (dt.strs("method"), dt.f64s("eta"));
-        for (c, (mm, mark)) in [("momentum", Mark::Line), ("plain", Mark::Dashed)]
-            .into_iter()
-            .enumerate()
+        let rows = ObjectiveRow::from_table(dt);
+        for (c, (m, mark)) in [
+            (Method::Momentum, Mark::Line),
+            (Method::Plain, Mark::Dashed),
+        ]
+        .into_iter()
+        .enumerate()
         {
-            let Some(e) = (0..dm.len()).find(|&r| dm[r] == mm).map(|r| de[r]) else {
+            let Some(e) = rows.iter().find(|r| m.is(&r.method)).map(|r| r.eta) else {
                 continue;
             };
-            let pts = curve(dt, mm, e);
-            dagger.push(Series::line(format!("{mm} (eta {e}), DAgger net"), pts, c).mark(mark));
+            let pts = curve(&rows, m, e);
+            let label = format!("{} (eta {e}), DAgger net", m.name());
+            dagger.push(Series::line(label, pts, c).mark(mark));
         }
     }
     let sweep = plain_eta
         .iter()
         .enumerate()
-        .map(|(i, &e)| Series::line(format!("eta {e}"), pick("plain", e), i))
+        .map(|(i, &e)| Series::line(format!("eta {e}"), pick(Method::Plain, e), i))
         .collect();
     let mut panels = vec![
         Panel {
@@ -128,14 +126,14 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     // The same sweep with the knots free of the actuators' boxes (ours: the boxes
     // can hide divergence above the stability limit), the start's J drawn as the rule's line.
     if let Some(ut) = tables.get("unclipped_objective").filter(|t| !t.is_empty()) {
+        let rows = ObjectiveRow::from_table(ut);
         let mut series: Vec<Series> = plain_eta
             .iter()
             .enumerate()
-            .map(|(i, &e)| Series::line(format!("eta {e}"), curve(ut, "plain", e), i))
+            .map(|(i, &e)| Series::line(format!("eta {e}"), curve(&rows, Method::Plain, e), i))
             .collect();
-        let (ui, uo) = (ut.f64s("iteration"), ut.f64s("objective"));
-        let start = (0..ui.len()).find(|&r| ui[r] == 0.0).map(|r| uo[r]);
-        let last = ui.iter().copied().fold(0.0, f64::max);
+        let start = rows.iter().find(|r| r.iteration == 0).map(|r| r.objective);
+        let last = rows.iter().map(|r| r.iteration as f64).fold(0.0, f64::max);
         if let Some(j0) = start {
             series.push(
                 Series::line(
@@ -169,37 +167,41 @@ fn net_seeds_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, E
     let Some(t) = tables.get("net_seeds").filter(|t| !t.is_empty()) else {
         return Ok(vec![]);
     };
-    let (seed, method, compared) = (t.f64s("net_seed"), t.strs("method"), t.f64s("compared"));
-    let (iters, fin, reach) = (
-        t.f64s("iterations"),
-        t.f64s("final_objective"),
-        t.f64s("iterations_to_plain_final"),
-    );
-    let mut seeds: Vec<f64> = Vec::new();
-    for &s in &seed {
-        if !seeds.contains(&s) {
-            seeds.push(s);
+    let rows = NetSeedRow::from_table(t);
+    let mut seeds: Vec<i64> = Vec::new();
+    for r in &rows {
+        if !seeds.contains(&r.net_seed) {
+            seeds.push(r.net_seed);
         }
     }
     if seeds.len() < 2 {
         return Ok(vec![]);
     }
-    let find = |s: f64, m: &str| {
-        (0..seed.len()).find(|&r| seed[r] == s && method[r] == m && compared[r] == 1.0)
+    let find = |s: i64, m: Method| {
+        rows.iter()
+            .find(|r| r.net_seed == s && m.is(&r.method) && r.compared())
     };
     let points: Vec<(f64, f64)> = seeds
         .iter()
         .filter_map(|&s| {
-            let (rm, rp) = (find(s, "momentum")?, find(s, "plain")?);
-            let k = (reach[rm].is_finite() && reach[rm] >= 0.0).then(|| reach[rm] as usize);
-            let ratio = super::report::seed_ratio(k, (fin[rm], fin[rp]), iters[rp] as usize);
-            Some((s, ratio))
+            let (rm, rp) = (find(s, Method::Momentum)?, find(s, Method::Plain)?);
+            let ends = (rm.final_objective, rp.final_objective);
+            let ratio = super::report::seed_ratio(rm.reach(), ends, rp.iterations as usize);
+            Some((s as f64, ratio))
         })
         .collect();
     let ratios: Vec<f64> = points.iter().map(|p| p.1).collect();
     let (med, lo, hi) = super::report::ratio_median(&ratios);
-    let x0 = seeds.iter().copied().fold(f64::INFINITY, f64::min) - 0.5;
-    let x1 = seeds.iter().copied().fold(f64::NEG_INFINITY, f64::max) + 0.5;
+    let x0 = seeds
+        .iter()
+        .map(|&s| s as f64)
+        .fold(f64::INFINITY, f64::min)
+        - 0.5;
+    let x1 = seeds
+        .iter()
+        .map(|&s| s as f64)
+        .fold(f64::NEG_INFINITY, f64::max)
+        + 0.5;
     // Headroom above the null's line for the legend, where it hides no dot; a seed where
     // momentum never gets there (+∞) sits on the top edge, labelled "never".
     let top = ratios

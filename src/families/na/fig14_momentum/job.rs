@@ -1,6 +1,10 @@
 //! The job of `na_fig14_momentum`: the lander net trained, every descent learned through it and
 //! replayed on the simulator, and the same through the DAgger nets and to convergence.
 
+use super::rows::{
+    ConvergedRow, DaggerRow, GradientRow, Method, NetSeedRow, ObjectiveRow, RunRow, Scores,
+    UnclippedRow,
+};
 use super::{DaggerNet, MomentumDagger, Params};
 use crate::control::bptt::{
     learn_until, replay, Bounds, Bptt, Descent, IterationTrace, Knots, Learned, Replay,
@@ -8,49 +12,18 @@ use crate::control::bptt::{
 use crate::control::objective::Objective;
 use crate::emulator::catalog::{BuildSpec, NetModel, Trained};
 use crate::emulator::Emulator;
-use crate::experiment::output::{Cell, Table, Tables};
+use crate::experiment::output::{Table, Tables};
+use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
-use crate::families::na::fig13_control::dagger::{ChainLearner, Round};
+use crate::families::na::fig13_control::dagger::{ChainLearner, DaggerRoundRow, Round};
 use crate::families::na::table1_structure::{build_emulator, build_emulators, build_spec};
 use crate::physics::lander::{Lander, VEL};
 use crate::physics::Dynamics;
 use crate::row;
 
-/// Columns of `converged.csv`: those of `dagger.csv`, the iterations run and whether J
-/// converged by the rule (1) or the cap ended the run (0).
-pub fn converged_columns() -> Vec<&'static str> {
-    DAGGER_COLUMNS
-        .iter()
-        .copied()
-        .chain(["iterations", "converged"])
-        .collect()
-}
-
-/// Columns of `dagger.csv`.
-pub const DAGGER_COLUMNS: [&str; 16] = [
-    "net",
-    "round",
-    "method",
-    "eta",
-    "alpha",
-    "scale",
-    "initial_objective",
-    "final_objective",
-    "min_objective",
-    "emulator_landing_error",
-    "simulator_landing_error",
-    "emulator_final_speed",
-    "simulator_final_speed",
-    "final_gap",
-    "emulator_final_error",
-    "simulator_final_error",
-];
-
+/// The `method` cell of descent `d`.
 fn method(d: &Descent) -> &'static str {
-    match d {
-        Descent::Plain { .. } => "plain",
-        Descent::Momentum { .. } => "momentum",
-    }
+    Method::of(d).name()
 }
 
 fn distance(a: &[f64], b: &[f64]) -> f64 {
@@ -117,18 +90,18 @@ impl Job for Params {
             self.through_momentum_dagger(ctx, md, &base, sim.as_mut(), &mut t)?;
         }
         Ok(Tables::from([
-            ("objective", t.objective),
-            ("gradient", t.gradient),
-            ("runs", t.runs),
+            ("objective", table_of(&t.objective)),
+            ("gradient", table_of(&t.gradient)),
+            ("runs", table_of(&t.runs)),
             ("trajectory", t.trajectory),
-            ("dagger", t.dagger),
-            ("dagger_objective", t.dagger_objective),
-            ("momentum_dagger_rounds", t.chain_rounds),
-            ("converged", t.converged),
-            ("unclipped", t.unclipped),
+            ("dagger", table_of(&t.dagger)),
+            ("dagger_objective", table_of(&t.dagger_objective)),
+            ("momentum_dagger_rounds", table_of(&t.chain_rounds)),
+            ("converged", table_of(&t.converged)),
+            ("unclipped", table_of(&t.unclipped)),
             ("rule", crate::experiment::rule::rule_table_of(&self.rule)?),
-            ("unclipped_objective", t.unclipped_objective),
-            ("net_seeds", net_seeds_t),
+            ("unclipped_objective", table_of(&t.unclipped_objective)),
+            ("net_seeds", table_of(&net_seeds_t)),
         ]))
     }
 }
@@ -145,42 +118,52 @@ struct Base<'a> {
 
 /// The tables the descents fill (`net_seeds` is built on its own).
 struct MomentumTables {
-    objective: Table,
-    gradient: Table,
-    runs: Table,
+    objective: Vec<ObjectiveRow>,
+    gradient: Vec<GradientRow>,
+    runs: Vec<RunRow>,
     trajectory: Table,
-    dagger: Table,
-    dagger_objective: Table,
-    converged: Table,
+    dagger: Vec<DaggerRow>,
+    dagger_objective: Vec<ObjectiveRow>,
+    converged: Vec<ConvergedRow>,
     /// Every descent of the sweep with the knots clipped to the boxes (as the runs above)
     /// and without (ours): whether plain descent above its stability limit
     /// diverges once the boxes no longer hide it.
-    unclipped: Table,
+    unclipped: Vec<UnclippedRow>,
     /// The unclipped descents' objective per iteration (the figure's unclipped panel).
-    unclipped_objective: Table,
-    chain_rounds: Table,
+    unclipped_objective: Vec<ObjectiveRow>,
+    chain_rounds: Vec<DaggerRoundRow>,
 }
 
 impl MomentumTables {
     /// The empty tables.
     fn new() -> Self {
-        let mut runs_cols = vec!["method", "eta", "alpha"];
-        runs_cols.extend_from_slice(&DAGGER_COLUMNS[5..14]);
         MomentumTables {
-            objective: Table::new(&["method", "eta", "alpha", "iteration", "objective"]),
-            gradient: Table::new(&["method", "eta", "alpha", "iteration", "grad_norm"]),
-            runs: Table::new(&runs_cols),
+            objective: Vec::new(),
+            gradient: Vec::new(),
+            runs: Vec::new(),
             trajectory: Table::new(&[
                 "method", "eta", "step", "t", "source", "x", "y", "z", "vz", "tilt",
             ]),
-            dagger: Table::new(&DAGGER_COLUMNS),
-            dagger_objective: Table::new(&["method", "eta", "alpha", "iteration", "objective"]),
-            converged: Table::new(&converged_columns()),
-            unclipped: Table::new(&UNCLIPPED_COLUMNS),
-            unclipped_objective: Table::new(&["method", "eta", "alpha", "iteration", "objective"]),
-            chain_rounds: Table::new(&crate::families::na::fig13_control::dagger::COLUMNS),
+            dagger: Vec::new(),
+            dagger_objective: Vec::new(),
+            converged: Vec::new(),
+            unclipped: Vec::new(),
+            unclipped_objective: Vec::new(),
+            chain_rounds: Vec::new(),
         }
     }
+}
+
+/// The objective rows of run `r` of descent `d`.
+fn objective_rows<'a>(d: &Descent, r: &'a Learned) -> impl Iterator<Item = ObjectiveRow> + 'a {
+    let (method, eta, alpha) = (method(d), d.eta(), d.alpha());
+    r.trace.iter().map(move |tr| ObjectiveRow {
+        method: method.into(),
+        eta,
+        alpha,
+        iteration: tr.iteration as i64,
+        objective: tr.objective,
+    })
 }
 
 impl Params {
@@ -205,31 +188,21 @@ impl Params {
         for d in descents {
             let (r, rep) = self.descend(ctx, problem, d, sim, x0, "");
             own_curves.push((*d, r.trace.iter().map(|t| t.objective).collect()));
-            for tr in &r.trace {
-                t.objective.push(row![
-                    method(d),
-                    d.eta(),
-                    d.alpha(),
-                    tr.iteration as i64,
-                    tr.objective
-                ]);
-                t.gradient.push(row![
-                    method(d),
-                    d.eta(),
-                    d.alpha(),
-                    tr.iteration as i64,
-                    tr.grad_norm
-                ]);
-            }
+            t.objective.extend(objective_rows(d, &r));
+            t.gradient.extend(r.trace.iter().map(|tr| GradientRow {
+                method: method(d).into(),
+                eta: d.eta(),
+                alpha: d.alpha(),
+                iteration: tr.iteration as i64,
+                grad_norm: tr.grad_norm,
+            }));
             self.push_trajectory(d, &r, &rep, &mut t.trajectory);
             t.unclipped.push(unclipped_row(d, true, &r));
             let scores = self.scores(scale, &r, &rep);
-            let mut run = row![method(d), d.eta(), d.alpha()];
-            run.extend(scores.iter().cloned());
-            t.runs.push(run);
+            t.runs.push(RunRow::new(d, &scores));
             if let (Some(dn), true) = (&self.dagger, compared.contains(d)) {
                 t.dagger
-                    .push(self.dagger_row("table1", 0, d, scores, &r, &rep, dn));
+                    .push(self.dagger_row(("table1", 0), d, &scores, (&r, &rep), dn));
             }
             pb.inc(1);
         }
@@ -281,15 +254,7 @@ impl Params {
         for d in descents {
             let (r, _) = self.descend(ctx, &mut free, d, sim, x0, "unclipped ");
             t.unclipped.push(unclipped_row(d, false, &r));
-            for tr in &r.trace {
-                t.unclipped_objective.push(row![
-                    method(d),
-                    d.eta(),
-                    d.alpha(),
-                    tr.iteration as i64,
-                    tr.objective
-                ]);
-            }
+            t.unclipped_objective.extend(objective_rows(d, &r));
         }
         Ok(())
     }
@@ -306,9 +271,8 @@ impl Params {
         t: &mut MomentumTables,
     ) -> Result<(), Error> {
         let x0 = base.x0;
-        let compared = self.compared();
         let (f13, control) = self.fig13(dn);
-        let mut rounds = Table::new(&crate::families::na::fig13_control::dagger::COLUMNS);
+        let mut rounds = Vec::new();
         let net = f13.run_dagger(
             ctx,
             &control,
@@ -319,24 +283,13 @@ impl Params {
             &mut rounds,
         )?;
         let mut problem = self.problem(ctx, &net, base.objective, x0, base.gains)?;
-        for d in &compared {
-            let (r, rep) = self.descend(ctx, &mut problem, d, sim, x0, "DAgger net ");
-            for tr in &r.trace {
-                t.dagger_objective.push(row![
-                    method(d),
-                    d.eta(),
-                    d.alpha(),
-                    tr.iteration as i64,
-                    tr.objective
-                ]);
-            }
-            let scores = self.scores(problem.scale, &r, &rep);
-            let round = dn.settings.rounds as i64;
-            t.dagger
-                .push(self.dagger_row("dagger", round, d, scores, &r, &rep, dn));
+        let at = ("dagger", dn.settings.rounds as i64);
+        let label = "DAgger net ";
+        let runs = self.compared_through(ctx, &mut problem, (&mut *sim, x0), at, dn, label);
+        for (d, r, row) in runs {
+            t.dagger_objective.extend(objective_rows(&d, &r));
+            t.dagger.push(row);
         }
-        let round = dn.settings.rounds as i64;
-        let at = ("dagger", round);
         self.converged_rows(ctx, &mut problem, sim, x0, at, &mut t.converged);
         Ok(())
     }
@@ -353,21 +306,38 @@ impl Params {
         t: &mut MomentumTables,
     ) -> Result<(), Error> {
         let x0 = base.x0;
-        let compared = self.compared();
         let dn = self.momentum_chain(md);
         let net = self.momentum_chain_net(ctx, &dn, base, &mut t.chain_rounds)?;
         let mut problem = self.problem(ctx, &net, base.objective, x0, base.gains)?;
-        for d in &compared {
-            let label = "momentum-DAgger net ";
-            let (r, rep) = self.descend(ctx, &mut problem, d, sim, x0, label);
-            let scores = self.scores(problem.scale, &r, &rep);
-            let round = md.settings.rounds as i64;
-            t.dagger
-                .push(self.dagger_row("momentum_dagger", round, d, scores, &r, &rep, &dn));
-        }
         let at = ("momentum_dagger", md.settings.rounds as i64);
+        let label = "momentum-DAgger net ";
+        let runs = self.compared_through(ctx, &mut problem, (&mut *sim, x0), at, &dn, label);
+        t.dagger.extend(runs.into_iter().map(|(_, _, row)| row));
         self.converged_rows(ctx, &mut problem, sim, x0, at, &mut t.converged);
         Ok(())
+    }
+
+    /// Each of the compared pair learned through `p` (the net `net` of DAgger round `round`,
+    /// of chain `dn`), replayed on `sim` and scored: the descent, its run and its `dagger.csv`
+    /// row, in [`Self::compared`]'s order.
+    fn compared_through(
+        &self,
+        ctx: &RunContext,
+        p: &mut Problem<'_>,
+        (sim, x0): (&mut dyn Dynamics, &[f64]),
+        at: (&str, i64),
+        dn: &DaggerNet,
+        label: &str,
+    ) -> Vec<(Descent, Learned, DaggerRow)> {
+        self.compared()
+            .into_iter()
+            .map(|d| {
+                let (r, rep) = self.descend(ctx, p, &d, sim, x0, label);
+                let scores = self.scores(p.scale, &r, &rep);
+                let row = self.dagger_row(at, &d, &scores, (&r, &rep), dn);
+                (d, r, row)
+            })
+            .collect()
     }
 
     /// The final net of the DAgger chain `dn` whose rounds learn by momentum descent from
@@ -377,7 +347,7 @@ impl Params {
         ctx: &RunContext,
         dn: &DaggerNet,
         base: &Base<'_>,
-        chain_rounds: &mut Table,
+        chain_rounds: &mut Vec<DaggerRoundRow>,
     ) -> Result<Emulator, Error> {
         let n = NetModel::Lander.state_dim();
         let x0 = base.x0;
@@ -436,27 +406,8 @@ impl Params {
     }
 }
 
-/// Columns of `unclipped.csv` (ours): per descent (method, eta in units of 1/lambda,
-/// alpha) with its knots clipped to the actuators' boxes or not (`clipped`, 1 or 0), the objective at
-/// the start, at the last iteration, its least and its largest over the run, and whether it
-/// diverged (1 or 0): the last objective not finite or above the start's (the rule, ours, fixed before
-/// any run of it). On a quadratic with largest Hessian eigenvalue lambda, plain descent with
-/// step eta/lambda converges iff eta < 2 and the heavy ball with momentum alpha iff
-/// eta < 2 (1 + alpha).
-pub const UNCLIPPED_COLUMNS: [&str; 9] = [
-    "method",
-    "eta",
-    "alpha",
-    "clipped",
-    "initial_objective",
-    "final_objective",
-    "min_objective",
-    "max_objective",
-    "diverged",
-];
-
 /// The `unclipped.csv` row of run `r` of descent `d`.
-fn unclipped_row(d: &Descent, clipped: bool, r: &Learned) -> Vec<Cell> {
+fn unclipped_row(d: &Descent, clipped: bool, r: &Learned) -> UnclippedRow {
     let js: Vec<f64> = r.trace.iter().map(|t| t.objective).collect();
     let first = js.first().copied().unwrap_or(f64::NAN);
     let last = js.last().copied().unwrap_or(f64::NAN);
@@ -474,41 +425,18 @@ fn unclipped_row(d: &Descent, clipped: bool, r: &Learned) -> Vec<Cell> {
         .filter(|x| !x.is_nan())
         .fold(f64::INFINITY, f64::min);
     let diverged = !last.is_finite() || last > first;
-    row![
-        method(d),
-        d.eta(),
-        d.alpha(),
-        i64::from(clipped),
-        first,
-        last,
-        min,
-        max,
-        i64::from(diverged)
-    ]
+    UnclippedRow {
+        method: method(d).into(),
+        eta: d.eta(),
+        alpha: d.alpha(),
+        clipped: i64::from(clipped),
+        initial_objective: first,
+        final_objective: last,
+        min_objective: min,
+        max_objective: max,
+        diverged: i64::from(diverged),
+    }
 }
-
-/// Columns of `net_seeds.csv` (ours): per Table 1 lander net seed (the run's own first, then
-/// the spec's `net_seeds`) and descent of the headline (momentum, then plain descent at every
-/// rate of the sweep): `compared` is 1 for the paper's pair (momentum and plain at
-/// `plain_eta`); `scale` is λ through that seed's net; `iterations` the iterations run;
-/// `converges` (1 or 0) the spec's rule ([`super::Fig14Rule::converges`]) on the run's
-/// objective curve; `iterations_to_plain_final` the first iteration at which its objective is
-/// at or below the final objective of plain descent at `plain_eta` through the same net (NaN
-/// when never).
-pub const NET_SEEDS_COLUMNS: [&str; 12] = [
-    "net_seed",
-    "method",
-    "eta",
-    "alpha",
-    "compared",
-    "scale",
-    "iterations",
-    "initial_objective",
-    "final_objective",
-    "min_objective",
-    "converges",
-    "iterations_to_plain_final",
-];
 
 /// One net's landing problem from hover: BPTT through the net, the hover knots, λ there.
 struct Problem<'a> {
@@ -578,8 +506,8 @@ impl Params {
         own: &[(Descent, Vec<f64>)],
         x0: &[f64],
         sim: &mut dyn Dynamics,
-    ) -> Result<Table, Error> {
-        let mut table = Table::new(&NET_SEEDS_COLUMNS);
+    ) -> Result<Vec<NetSeedRow>, Error> {
+        let mut table = Vec::new();
         self.net_seed_rows(ctx.seed, scale, own, &mut table);
         let seeds = self.further_net_seeds(ctx.seed);
         if seeds.is_empty() {
@@ -618,7 +546,13 @@ impl Params {
     }
 
     /// The `net_seeds.csv` rows of net seed `seed`: each descent's objective curve, λ `scale`.
-    fn net_seed_rows(&self, seed: u64, scale: f64, curves: &[(Descent, Vec<f64>)], t: &mut Table) {
+    fn net_seed_rows(
+        &self,
+        seed: u64,
+        scale: f64,
+        curves: &[(Descent, Vec<f64>)],
+        t: &mut Vec<NetSeedRow>,
+    ) {
         let compared = self.compared();
         let plain_final = curves
             .iter()
@@ -634,20 +568,20 @@ impl Params {
                 .filter(|x| !x.is_nan())
                 .fold(f64::INFINITY, f64::min);
             let reach = super::iterations_to(js, plain_final).map_or(f64::NAN, |k| k as f64);
-            t.push(row![
-                seed as i64,
-                method(d),
-                d.eta(),
-                d.alpha(),
-                i64::from(compared.contains(d)),
+            t.push(NetSeedRow {
+                net_seed: seed as i64,
+                method: method(d).into(),
+                eta: d.eta(),
+                alpha: d.alpha(),
+                compared: i64::from(compared.contains(d)),
                 scale,
-                js.len().saturating_sub(1) as i64,
-                first,
-                last,
-                min,
-                i64::from(!js.is_empty() && self.rule.converges(js)),
-                reach
-            ]);
+                iterations: js.len().saturating_sub(1) as i64,
+                initial_objective: first,
+                final_objective: last,
+                min_objective: min,
+                converges: i64::from(!js.is_empty() && self.rule.converges(js)),
+                iterations_to_plain_final: reach,
+            });
         }
     }
 
@@ -716,22 +650,22 @@ impl Params {
     }
 
     /// The `runs` columns from `scale` to `final_gap` of one descent and its replay.
-    fn scores(&self, scale: f64, r: &Learned, rep: &Replay) -> Vec<Cell> {
+    fn scores(&self, scale: f64, r: &Learned, rep: &Replay) -> Scores {
         let n = NetModel::Lander.state_dim();
         let emu_final = &r.states[self.task.horizon * n..];
         let sim_final = &rep.states[self.task.horizon * n..];
         let objs: Vec<f64> = r.trace.iter().map(|t| t.objective).collect();
-        row![
+        Scores {
             scale,
-            objs[0],
-            r.final_objective(),
-            objs.iter().copied().fold(f64::INFINITY, f64::min),
-            distance(&emu_final[..3], &self.task.target[..3]),
-            distance(&sim_final[..3], &self.task.target[..3]),
-            distance(&emu_final[VEL..VEL + 3], &[0.0; 3]),
-            distance(&sim_final[VEL..VEL + 3], &[0.0; 3]),
-            rep.final_gap
-        ]
+            initial_objective: objs[0],
+            final_objective: r.final_objective(),
+            min_objective: objs.iter().copied().fold(f64::INFINITY, f64::min),
+            emulator_landing_error: distance(&emu_final[..3], &self.task.target[..3]),
+            simulator_landing_error: distance(&sim_final[..3], &self.task.target[..3]),
+            emulator_final_speed: distance(&emu_final[VEL..VEL + 3], &[0.0; 3]),
+            simulator_final_speed: distance(&sim_final[VEL..VEL + 3], &[0.0; 3]),
+            final_gap: rep.final_gap,
+        }
     }
 
     /// `converged.csv` rows of the compared descents through problem `p` (net `net` of
@@ -744,7 +678,7 @@ impl Params {
         sim: &mut dyn Dynamics,
         x0: &[f64],
         (net, round): (&str, i64),
-        table: &mut Table,
+        table: &mut Vec<ConvergedRow>,
     ) {
         let (Some(c), Some(dn)) = (&self.converged, &self.dagger) else {
             return;
@@ -760,35 +694,28 @@ impl Params {
             let (r, rep) =
                 self.descend_until(ctx, p, d, sim, x0, &label, c.max_iterations, &mut stop);
             let scores = self.scores(p.scale, &r, &rep);
-            let mut out = self.dagger_row(net, round, d, scores, &r, &rep, dn);
-            out.extend(row![
-                r.trace.last().map_or(0, |t| t.iteration) as i64,
-                i64::from(converged)
-            ]);
-            table.push(out);
+            let row = self.dagger_row((net, round), d, &scores, (&r, &rep), dn);
+            let iterations = r.trace.last().map_or(0, |t| t.iteration) as i64;
+            table.push(ConvergedRow::new(row, iterations, converged));
         }
     }
 
-    /// A `dagger.csv` row: the net, its round, the descent, its scores and final errors.
-    #[allow(clippy::too_many_arguments)]
+    /// A `dagger.csv` row: the net and its round, the descent, its scores and the final errors
+    /// of its run `r` and replay `rep`.
     fn dagger_row(
         &self,
-        net: &str,
-        round: i64,
+        at: (&str, i64),
         d: &Descent,
-        scores: Vec<Cell>,
-        r: &Learned,
-        rep: &Replay,
+        scores: &Scores,
+        (r, rep): (&Learned, &Replay),
         dn: &DaggerNet,
-    ) -> Vec<Cell> {
+    ) -> DaggerRow {
         let n = NetModel::Lander.state_dim();
         let task = self.dagger_task(dn);
-        let mut out = row![net, round, method(d), d.eta(), d.alpha()];
-        out.extend(scores);
-        out.extend(row![
+        let errors = (
             task.final_error(&r.states[self.task.horizon * n..]),
-            task.final_error(&rep.states[self.task.horizon * n..])
-        ]);
-        out
+            task.final_error(&rep.states[self.task.horizon * n..]),
+        );
+        DaggerRow::new(at, d, scores, errors)
     }
 }

@@ -31,7 +31,7 @@
 //! the physical simulator; the gap is |s_emulated − s_simulated| at the end. `trajectory`
 //! (method, eta, step, t, source, x, y, z, vz, tilt): every run's states at the emulator step
 //! times, emulated and simulated (tilt: angle of the thrust axis from vertical, rad).
-//! `unclipped` (job.rs, `UNCLIPPED_COLUMNS`) and `unclipped_objective` (method, eta, alpha,
+//! `unclipped` ([`UnclippedRow`]) and `unclipped_objective` (method, eta, alpha,
 //! iteration, objective): every descent again with its knots free of the actuators' boxes
 //! (ours), drawn as the figure's last panel.
 //!
@@ -50,7 +50,7 @@
 //! randomness, so the headline's descents (momentum and plain descent at every rate of the
 //! sweep) are learned again through the Table 1 lander net trained under each of
 //! [`Params::net_seeds`] (each calibrated at hover and λ measured there, as a run under that
-//! seed would): `net_seeds` (job.rs, [`NET_SEEDS_COLUMNS`]), the run's own seed included.
+//! seed would): `net_seeds` ([`NetSeedRow`]), the run's own seed included.
 //! The verdict reads the median over the seeds of momentum's iterations to plain's final J
 //! over plain's, with its 95% bootstrap interval, and counts the seeds at which plain's rate
 //! converges and is the limit (report.rs). The other tables are the run's own net's.
@@ -59,10 +59,14 @@ mod figures;
 mod job;
 mod params;
 mod report;
+mod rows;
 
-pub use job::{converged_columns, DAGGER_COLUMNS, NET_SEEDS_COLUMNS};
 pub use params::{Converged, DaggerNet, Fig14Rule, MomentumDagger, Params};
 pub use report::iterations_to;
+pub use rows::{
+    ConvergedRow, DaggerRow, GradientRow, Method, NetSeedRow, ObjectiveRow, RunRow, Scores,
+    UnclippedRow,
+};
 
 use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;

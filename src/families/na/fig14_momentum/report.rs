@@ -2,11 +2,16 @@
 //! the DAgger nets), the tables, and the sentences on the DAgger nets and the run to convergence.
 
 use super::params::Fig14Rule;
-use crate::experiment::output::{df_f64, df_str, read_csv, written_csv};
+use super::rows::{
+    ConvergedRow, DaggerRow, Method, NetSeedRow, ObjectiveRow, RunRow, UnclippedRow,
+};
 use crate::experiment::report::{sig, Findings};
+use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{majority, read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::median_interval_with_infinities;
 use crate::experiment::{other, Error};
+use crate::families::na::fig13_control::dagger::DaggerRoundRow;
+use crate::families::na::fig13_control::rows::written_rows;
 use std::path::Path;
 
 /// The rule of a DAgger line (ours, bars in the spec's `rule`): momentum's controls learned
@@ -133,31 +138,21 @@ pub(super) fn seeds_rule(
 /// file, never a verdict on fewer seeds.
 pub(super) fn seed_facts(dir: &Path) -> Result<Option<(Vec<SeedFacts>, (f64, f64))>, Error> {
     let path = dir.join("net_seeds.csv");
-    let Some(df) = written_csv(dir, "net_seeds.csv")? else {
+    let Some(rows) = written_rows::<NetSeedRow>(dir, "net_seeds.csv")? else {
         return Ok(None);
     };
     let damaged = |why: &str| other(format!("{}: {why}", path.display()));
-    let seed = df_f64(&df, "net_seed")?;
-    let (method, eta) = (df_str(&df, "method")?, df_f64(&df, "eta")?);
-    let col = |c: &str| df_f64(&df, c);
-    let (compared, scale, iters, fin, conv, reach) = (
-        col("compared")?,
-        col("scale")?,
-        col("iterations")?,
-        col("final_objective")?,
-        col("converges")?,
-        col("iterations_to_plain_final")?,
-    );
-    let mut seeds: Vec<f64> = Vec::new();
-    for &s in &seed {
-        if !seeds.contains(&s) {
-            seeds.push(s);
+    let mut seeds: Vec<i64> = Vec::new();
+    for r in &rows {
+        if !seeds.contains(&r.net_seed) {
+            seeds.push(r.net_seed);
         }
     }
     if seeds.len() < 2 {
         return Ok(None);
     }
-    let rows_of = |s: f64| -> Vec<usize> { (0..seed.len()).filter(|&r| seed[r] == s).collect() };
+    let rows_of =
+        |s: i64| -> Vec<&NetSeedRow> { rows.iter().filter(|r| r.net_seed == s).collect() };
     if seeds
         .windows(2)
         .any(|w| rows_of(w[0]).len() != rows_of(w[1]).len())
@@ -170,12 +165,12 @@ pub(super) fn seed_facts(dir: &Path) -> Result<Option<(Vec<SeedFacts>, (f64, f64
     let mut rates = (f64::NAN, f64::NAN);
     for &s in &seeds {
         let rows = rows_of(s);
-        let find = |m: &str| {
+        let find = |m: Method| {
             rows.iter()
                 .copied()
-                .find(|&r| method[r] == m && compared[r] == 1.0)
+                .find(|r| m.is(&r.method) && r.compared())
         };
-        let (Some(rm), Some(rp)) = (find("momentum"), find("plain")) else {
+        let (Some(rm), Some(rp)) = (find(Method::Momentum), find(Method::Plain)) else {
             return Err(damaged(&format!(
                 "net seed {s} lacks momentum or the compared plain rate"
             )));
@@ -183,20 +178,20 @@ pub(super) fn seed_facts(dir: &Path) -> Result<Option<(Vec<SeedFacts>, (f64, f64
         let next = rows
             .iter()
             .copied()
-            .filter(|&r| method[r] == "plain" && eta[r] > eta[rp])
-            .min_by(|&a, &b| eta[a].total_cmp(&eta[b]));
-        let plain_converges = conv[rp] == 1.0;
-        let ends = (fin[rm], fin[rp]);
-        let reached = (reach[rm].is_finite() && reach[rm] >= 0.0).then(|| reach[rm] as usize);
-        rates = (eta[rp], next.map_or(f64::NAN, |r| eta[r]));
+            .filter(|r| Method::Plain.is(&r.method) && r.eta > rp.eta)
+            .min_by(|a, b| a.eta.total_cmp(&b.eta));
+        let plain_converges = rp.converges();
+        let ends = (rm.final_objective, rp.final_objective);
+        let reached = rm.reach();
+        rates = (rp.eta, next.map_or(f64::NAN, |r| r.eta));
         out.push(SeedFacts {
             seed: s as u64,
-            scale: scale[rm],
+            scale: rm.scale,
             ends,
             reach: reached,
-            ratio: seed_ratio(reached, ends, iters[rp] as usize),
+            ratio: seed_ratio(reached, ends, rp.iterations as usize),
             plain_converges,
-            plain_is_limit: plain_converges && next.is_some_and(|r| conv[r] == 0.0),
+            plain_is_limit: plain_converges && next.is_some_and(|r| !r.converges()),
         });
     }
     Ok(Some((out, rates)))
@@ -255,13 +250,13 @@ pub fn iterations_to(trace: &[f64], level: f64) -> Option<usize> {
     trace.iter().position(|&v| v <= level)
 }
 
-/// Traces per (method, eta) in first-seen order.
-fn traces(method: &[String], eta: &[f64], obj: &[f64]) -> Vec<(String, f64, Vec<f64>)> {
+/// Traces (method, eta, objective per iteration) per (method, eta) in first-seen order.
+fn traces(rows: &[ObjectiveRow]) -> Vec<(String, f64, Vec<f64>)> {
     let mut out: Vec<(String, f64, Vec<f64>)> = vec![];
-    for r in 0..method.len() {
-        match out.iter_mut().find(|o| o.0 == method[r] && o.1 == eta[r]) {
-            Some(o) => o.2.push(obj[r]),
-            None => out.push((method[r].clone(), eta[r], vec![obj[r]])),
+    for r in rows {
+        match out.iter_mut().find(|o| o.0 == r.method && o.1 == r.eta) {
+            Some(o) => o.2.push(r.objective),
+            None => out.push((r.method.clone(), r.eta, vec![r.objective])),
         }
     }
     out
@@ -381,25 +376,14 @@ fn single_rule(
 /// The findings ([`crate::experiment::Family::report`]).
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let bars: Fig14Rule = read_rule(dir)?;
-    let df = read_csv(&dir.join("objective.csv"))?;
-    let tr = traces(
-        &df_str(&df, "method")?,
-        &df_f64(&df, "eta")?,
-        &df_f64(&df, "objective")?,
-    );
-    let runs = read_csv(&dir.join("runs.csv"))?;
-    let (rm, re) = (df_str(&runs, "method")?, df_f64(&runs, "eta")?);
-    let (emu_err, sim_err, gap, lam) = (
-        df_f64(&runs, "emulator_landing_error")?,
-        df_f64(&runs, "simulator_landing_error")?,
-        df_f64(&runs, "final_gap")?,
-        df_f64(&runs, "scale")?,
-    );
+    let tr = traces(&read_rows::<ObjectiveRow>(&dir.join("objective.csv"))?);
+    let runs: Vec<RunRow> = read_rows(&dir.join("runs.csv"))?;
     let mom = tr
         .iter()
-        .find(|t| t.0 == "momentum")
+        .find(|t| Method::Momentum.is(&t.0))
         .ok_or_else(|| other("no momentum run"))?;
-    let plain: Vec<&(String, f64, Vec<f64>)> = tr.iter().filter(|t| t.0 == "plain").collect();
+    let plain: Vec<&(String, f64, Vec<f64>)> =
+        tr.iter().filter(|t| Method::Plain.is(&t.0)).collect();
     let base = plain
         .iter()
         .min_by(|a, b| (a.1 - 1.0).abs().total_cmp(&(b.1 - 1.0).abs()))
@@ -407,36 +391,30 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let mut md = String::from(
         "| method | eta | J start | J end | landing error emulator (m) | landing error simulator (m) | final gap |\n| --- | --- | --- | --- | --- | --- | --- |\n",
     );
-    for r in 0..rm.len() {
-        let t = tr.iter().find(|t| t.0 == rm[r] && t.1 == re[r]);
+    for run in &runs {
+        let t = tr.iter().find(|t| t.0 == run.method && t.1 == run.eta);
         let (a, b) = t.map_or((f64::NAN, f64::NAN), |t| (t.2[0], t.2[t.2.len() - 1]));
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} |\n",
-            rm[r],
-            re[r],
+            run.method,
+            run.eta,
             sig(a),
             sig(b),
-            sig(emu_err[r]),
-            sig(sim_err[r]),
-            sig(gap[r])
+            sig(run.emulator_landing_error),
+            sig(run.simulator_landing_error),
+            sig(run.final_gap)
         ));
     }
-    let mom_row = rm.iter().position(|m| m == "momentum");
-    let Comparison {
-        plain_end,
-        mom_end,
-        k_plain,
-        k_mom,
-        converging,
-        largest,
-        diverging,
-        base_converges,
-        base_is_limit,
-        next,
-        ratio,
-    } = compare(mom, &plain, base, &bars);
+    let mom_run = runs.iter().find(|r| Method::Momentum.is(&r.method));
+    let c = compare(mom, &plain, base, &bars);
     let seeds = seed_facts(dir)?;
-    let single = single_rule(ratio, base.1, base_converges, (next, base_is_limit), &bars);
+    let single = single_rule(
+        c.ratio,
+        base.1,
+        c.base_converges,
+        (c.next, c.base_is_limit),
+        &bars,
+    );
     // Over the net seeds where the run has them (net_seeds.csv); else the run's own net alone.
     let (rule, seeds_why, lead) = match &seeds {
         Some((facts, rates)) => {
@@ -461,7 +439,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let (verdict, lines, text) = shown(rule.as_ref(), "");
     // Momentum's J 20 iterations before its end (its pace when it stops).
     let tail_start = mom.2[mom.2.len().saturating_sub(21)];
-    let fall = 100.0 * (1.0 - mom_end / tail_start);
+    let fall = 100.0 * (1.0 - c.mom_end / tail_start);
     let (dagger_md, dagger_why) = dagger_summary(dir, &bars)?.unwrap_or_default();
     md.push_str(&dagger_md);
     Ok(Findings {
@@ -469,25 +447,26 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         verdict,
         rule: rule.clone(),
         why: format!(
-            "{lead} (eta {}) ends at J = {} vs plain (eta {}) J = {} after {k_plain} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2).{seeds_why}{lines} Rule (bars ours, in the spec's `rule`; a plain run converges when it ends below {} of its start without climbing back above {}x its minimum; the next rate above eta {} not converging is the paper's 'largest rate that converges', read as the stability limit, and rates further up that converge again are listed above, not counted): {text} Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim. Over its last 20 iterations momentum's J fell {}% ({} -> {}){}.",
+            "{lead} (eta {}) ends at J = {} vs plain (eta {}) J = {} after {} iterations; momentum reaches plain's final J at iteration {}. Plain descent converges for eta in {:?} and not for {:?} (largest converging: {}); eta in units of 1/lambda, lambda = {} the largest Hessian eigenvalue magnitude of J at hover (a quadratic would allow eta < 2).{seeds_why}{lines} Rule (bars ours, in the spec's `rule`; a plain run converges when it ends below {} of its start without climbing back above {}x its minimum; the next rate above eta {} not converging is the paper's 'largest rate that converges', read as the stability limit, and rates further up that converge again are listed above, not counted): {text} Replayed on the physical simulator, momentum's controls end {} m from the landing target (emulator: {} m; final-state gap {}): the emulator's open-loop drift over 40 steps, not part of the paper's claim. Over its last 20 iterations momentum's J fell {}% ({} -> {}){}.",
             mom.1,
-            sig(mom_end),
+            sig(c.mom_end),
             base.1,
-            sig(plain_end),
-            k_mom.map_or("never".to_string(), |k| k.to_string()),
-            converging,
-            diverging,
-            sig(largest),
-            sig(lam.first().copied().unwrap_or(f64::NAN)),
+            sig(c.plain_end),
+            c.k_plain,
+            c.k_mom.map_or("never".to_string(), |k| k.to_string()),
+            c.converging,
+            c.diverging,
+            sig(c.largest),
+            sig(runs.first().map_or(f64::NAN, |r| r.scale)),
             sig(bars.converge_fraction),
             sig(bars.converge_climb),
             base.1,
-            sig(mom_row.map_or(f64::NAN, |r| sim_err[r])),
-            sig(mom_row.map_or(f64::NAN, |r| emu_err[r])),
-            sig(mom_row.map_or(f64::NAN, |r| gap[r])),
+            sig(mom_run.map_or(f64::NAN, |r| r.simulator_landing_error)),
+            sig(mom_run.map_or(f64::NAN, |r| r.emulator_landing_error)),
+            sig(mom_run.map_or(f64::NAN, |r| r.final_gap)),
             sig(fall),
             sig(tail_start),
-            sig(mom_end),
+            sig(c.mom_end),
             if fall > 1.0 {
                 ": it had not converged when it stopped, the slow pace of fixed-step descent that the task's terminal Gauss-Newton spectrum predicts (na_fig13_control's conditioning.csv and figure spectrum, the same lander task)"
             } else {
@@ -502,33 +481,31 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
 /// The report's sentence on `unclipped.csv` (empty when absent): which plain rates diverge with
 /// and without the boxes clipping the knots, against the quadratic's limit eta < 2.
 fn unclipped_summary(dir: &Path) -> Result<String, Error> {
-    let Some(df) = written_csv(dir, "unclipped.csv")? else {
+    let Some(rows) = written_rows::<UnclippedRow>(dir, "unclipped.csv")? else {
         return Ok(String::new());
     };
-    let (method, eta) = (df_str(&df, "method")?, df_f64(&df, "eta")?);
-    let (clipped, diverged) = (df_f64(&df, "clipped")?, df_f64(&df, "diverged")?);
-    let (first, peak) = (
-        df_f64(&df, "initial_objective")?,
-        df_f64(&df, "max_objective")?,
-    );
+    let plain = |clipped: bool| {
+        rows.iter()
+            .filter(move |r| Method::Plain.is(&r.method) && r.clipped() == clipped)
+    };
     // The largest J over each unclipped plain run, as a multiple of the start's.
-    let peaks: Vec<String> = (0..method.len())
-        .filter(|&r| method[r] == "plain" && clipped[r] == 0.0)
-        .map(|r| format!("eta {}: {}x", sig(eta[r]), sig(peak[r] / first[r])))
+    let peaks: Vec<String> = plain(false)
+        .map(|r| {
+            let peak = r.max_objective / r.initial_objective;
+            format!("eta {}: {}x", sig(r.eta), sig(peak))
+        })
         .collect();
-    let list = |clip: f64, div: f64| -> Vec<String> {
-        (0..method.len())
-            .filter(|&r| method[r] == "plain" && clipped[r] == clip && diverged[r] == div)
-            .map(|r| sig(eta[r]))
+    let list = |clipped: bool, diverged: bool| -> Vec<String> {
+        plain(clipped)
+            .filter(|r| r.diverged() == diverged)
+            .map(|r| sig(r.eta))
             .collect()
     };
-    let (free_div, free_ok) = (list(0.0, 1.0), list(0.0, 0.0));
-    let (box_div, box_ok) = (list(1.0, 1.0), list(1.0, 0.0));
+    let (free_div, free_ok) = (list(false, true), list(false, false));
+    let (box_div, box_ok) = (list(true, true), list(true, false));
     // Does the unclipped sweep show the stability limit: every rate >= 2 diverging and every
     // rate < 2 not?
-    let consistent = (0..method.len())
-        .filter(|&r| method[r] == "plain" && clipped[r] == 0.0)
-        .all(|r| (eta[r] >= 2.0) == (diverged[r] == 1.0));
+    let consistent = plain(false).all(|r| (r.eta >= 2.0) == r.diverged());
     Ok(format!(
         " Step units (ours, `unclipped.csv`): our eta is the step in units of 1/lambda, so on a quadratic plain descent converges iff eta < 2 and the heavy ball iff eta < 2 (1 + alpha); the paper's 'largest learning rate that would converge' is that limit read on its own scale. With the knots clipped to the actuators' boxes (the runs above), plain descent diverges (last J above the start's) at eta {:?} and not at {:?}; unclipped, at eta {:?} and not at {:?}{}. The largest J of each unclipped plain run against its start's ({}): a run may climb far above its start and come back down, the emulator's sigmoid units saturating for controls far outside the boxes it was trained in, so the rule reads the last iterate only.",
         box_div,
@@ -547,37 +524,28 @@ fn unclipped_summary(dir: &Path) -> Result<String, Error> {
 /// The report's sentence on `converged.csv` (empty when absent): per net, where momentum's
 /// and plain descent's controls run to convergence end on the emulator and the simulator.
 fn converged_summary(dir: &Path) -> Result<String, Error> {
-    let Some(df) = written_csv(dir, "converged.csv")? else {
+    let Some(rows) = written_rows::<ConvergedRow>(dir, "converged.csv")? else {
         return Ok(String::new());
     };
-    let (net, method) = (df_str(&df, "net")?, df_str(&df, "method")?);
-    if net.is_empty() {
+    if rows.is_empty() {
         return Ok(String::new());
     }
-    let (iters, conv, emu, sim, land, j) = (
-        df_f64(&df, "iterations")?,
-        df_f64(&df, "converged")?,
-        df_f64(&df, "emulator_final_error")?,
-        df_f64(&df, "simulator_final_error")?,
-        df_f64(&df, "simulator_landing_error")?,
-        df_f64(&df, "final_objective")?,
-    );
     let mut parts = vec![];
     let mut within = vec![];
-    for r in 0..net.len() {
+    for r in &rows {
         parts.push(format!(
             "through the {} net {} runs {} iterations ({}) to J = {}, final error {} on the net and {} on the simulator ({} m from the target)",
-            net[r],
-            method[r],
-            iters[r],
-            if conv[r] > 0.5 { "converged" } else { "the cap" },
-            sig(j[r]),
-            sig(emu[r]),
-            sig(sim[r]),
-            sig(land[r])
+            r.net,
+            r.method,
+            r.iterations,
+            if r.converged() { "converged" } else { "the cap" },
+            sig(r.final_objective),
+            sig(r.emulator_final_error),
+            sig(r.simulator_final_error),
+            sig(r.simulator_landing_error)
         ));
-        if method[r] == "momentum" && sim[r] <= 1.0 {
-            within.push(net[r].clone());
+        if Method::Momentum.is(&r.method) && r.simulator_final_error <= 1.0 {
+            within.push(r.net.clone());
         }
     }
     Ok(format!(
@@ -594,104 +562,90 @@ fn converged_summary(dir: &Path) -> Result<String, Error> {
 /// The report's DAgger paragraph, table and verdict sentence (rule in the spec): `None` when
 /// there is no `dagger.csv` or it is empty.
 fn dagger_summary(dir: &Path, bars: &Fig14Rule) -> Result<Option<(String, String)>, Error> {
-    let Some(df) = written_csv(dir, "dagger.csv")? else {
+    let Some(rows) = written_rows::<DaggerRow>(dir, "dagger.csv")? else {
         return Ok(None);
     };
-    let net = df_str(&df, "net")?;
-    if net.is_empty() {
+    if rows.is_empty() {
         return Ok(None);
     }
-    let (round, meth, eta) = (
-        df_f64(&df, "round")?,
-        df_str(&df, "method")?,
-        df_f64(&df, "eta")?,
-    );
-    let col = |c: &str| df_f64(&df, c);
-    let (j0, j1, emu_d, sim_d, emu_e, sim_e, gap) = (
-        col("initial_objective")?,
-        col("final_objective")?,
-        col("emulator_landing_error")?,
-        col("simulator_landing_error")?,
-        col("emulator_final_error")?,
-        col("simulator_final_error")?,
-        col("final_gap")?,
-    );
     let mut md = String::from(
         "\nThe same comparison through the lander's final-round DAgger net of `na_fig13_control` (ours, `dagger.csv`; aggregated on Fig. 13's lander task, whose start, target and tolerances are this experiment's; lambda re-measured at hover on that net; net `table1`: the Table 1 net's runs, for the before/after; net `momentum_dagger`: the last net of the chain whose learner is the momentum descent itself, `momentum_dagger_rounds.csv`), every run's controls replayed on the simulator. Final error = RMS over the weighted state variables of (s_M - s_d)/tolerance (<= 1: within tolerance); landing distance = |p_M - p_d| (m):\n\n| net | round | method | eta | J start | J end | landing distance, net (m) | landing distance, simulator (m) | final error, net | final error, simulator | final gap |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
-    for r in 0..net.len() {
+    for r in &rows {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
-            net[r],
-            round[r],
-            meth[r],
-            eta[r],
-            sig(j0[r]),
-            sig(j1[r]),
-            sig(emu_d[r]),
-            sig(sim_d[r]),
-            sig(emu_e[r]),
-            sig(sim_e[r]),
-            sig(gap[r])
+            r.net,
+            r.round,
+            r.method,
+            r.eta,
+            sig(r.initial_objective),
+            sig(r.final_objective),
+            sig(r.emulator_landing_error),
+            sig(r.simulator_landing_error),
+            sig(r.emulator_final_error),
+            sig(r.simulator_final_error),
+            sig(r.final_gap)
         ));
     }
-    let find = |n: &str, m: &str| (0..net.len()).find(|&r| net[r] == n && meth[r] == m);
-    let (Some(dm), Some(dp)) = (find("dagger", "momentum"), find("dagger", "plain")) else {
+    let find = |n: &str, m: Method| rows.iter().find(|r| r.net == n && m.is(&r.method));
+    let (Some(dm), Some(dp)) = (
+        find("dagger", Method::Momentum),
+        find("dagger", Method::Plain),
+    ) else {
         return Ok(Some((md, " No DAgger-net runs in dagger.csv.".into())));
     };
-    let before = find("table1", "momentum");
-    let obj = read_csv(&dir.join("dagger_objective.csv"))?;
-    let tr = traces(
-        &df_str(&obj, "method")?,
-        &df_f64(&obj, "eta")?,
-        &df_f64(&obj, "objective")?,
-    );
+    let before = find("table1", Method::Momentum);
+    let tr = traces(&read_rows::<ObjectiveRow>(
+        &dir.join("dagger_objective.csv"),
+    )?);
     let k_mom = tr
         .iter()
-        .find(|t| t.0 == "momentum")
-        .and_then(|t| iterations_to(&t.2, j1[dp]));
-    let before = before.map_or((f64::NAN, f64::NAN), |r| (sim_e[r], sim_d[r]));
-    let line = |r: usize| {
-        let rule = dagger_rule((sim_e[r], sim_d[r]), before, bars);
+        .find(|t| Method::Momentum.is(&t.0))
+        .and_then(|t| iterations_to(&t.2, dp.final_objective));
+    let before = before.map_or((f64::NAN, f64::NAN), |r| {
+        (r.simulator_final_error, r.simulator_landing_error)
+    });
+    let line = |r: &DaggerRow| {
+        let rule = dagger_rule(
+            (r.simulator_final_error, r.simulator_landing_error),
+            before,
+            bars,
+        );
         let (v, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
         format!("{}.{lines} Rule: {text}", v.label())
     };
     // The chain whose learner is the momentum descent itself (rule in the spec).
     let chain = match (
-        find("momentum_dagger", "momentum"),
-        find("momentum_dagger", "plain"),
+        find("momentum_dagger", Method::Momentum),
+        find("momentum_dagger", Method::Plain),
     ) {
         (Some(cm), Some(cp)) => {
-            // The chain's rounds: the learner's final error on its net and on the simulator.
-            let by_round = match read_csv(&dir.join("momentum_dagger_rounds.csv")) {
-                Ok(rd) => {
-                    let (e, s) = (
-                        df_f64(&rd, "final_error_emulator")?,
-                        df_f64(&rd, "final_error_simulator")?,
-                    );
-                    let f = |v: &[f64]| v.iter().map(|&x| sig(x)).collect::<Vec<_>>().join(" -> ");
-                    let short = if e.last().is_some_and(|&x| x > 1.0) {
-                        " (at the last round above 1 on the net itself: the descent stops short of the goal on the substrate it learns through, so no accuracy of the net would bring its controls within tolerance)"
-                    } else {
-                        ""
-                    };
-                    format!(
-                        " By round, the chain's momentum controls end with final error {} on the simulator and {} on the net learned through{short}.",
-                        f(&s),
-                        f(&e)
-                    )
-                }
-                Err(_) => String::new(),
+            // The chain's rounds (written whenever the chain ran): the learner's final error
+            // on its net and on the simulator.
+            let rounds: Vec<DaggerRoundRow> = read_rows(&dir.join("momentum_dagger_rounds.csv"))?;
+            let f = |v: fn(&DaggerRoundRow) -> f64| {
+                let by: Vec<String> = rounds.iter().map(|r| sig(v(r))).collect();
+                by.join(" -> ")
             };
+            let short = if rounds.last().is_some_and(|r| r.final_error_emulator > 1.0) {
+                " (at the last round above 1 on the net itself: the descent stops short of the goal on the substrate it learns through, so no accuracy of the net would bring its controls within tolerance)"
+            } else {
+                ""
+            };
+            let by_round = format!(
+                " By round, the chain's momentum controls end with final error {} on the simulator and {} on the net learned through{short}.",
+                f(|r| r.final_error_simulator),
+                f(|r| r.final_error_emulator)
+            );
             format!(
                 " Through the round-{} net of a DAgger chain whose learner is this momentum descent itself (ours; aggregated on the states its controls visit, from the Table 1 net): momentum ends at J = {} (plain: {}); replayed on the simulator its controls land {} m from the target with final error {} (plain's {} m, {}).{by_round} Fig. 14 through the momentum-DAgger net (ours; the same rule): {}",
-                round[cm],
-                sig(j1[cm]),
-                sig(j1[cp]),
-                sig(sim_d[cm]),
-                sig(sim_e[cm]),
-                sig(sim_d[cp]),
-                sig(sim_e[cp]),
+                cm.round,
+                sig(cm.final_objective),
+                sig(cp.final_objective),
+                sig(cm.simulator_landing_error),
+                sig(cm.simulator_final_error),
+                sig(cp.simulator_landing_error),
+                sig(cp.simulator_final_error),
                 line(cm)
             )
         }
@@ -701,18 +655,18 @@ fn dagger_summary(dir: &Path, bars: &Fig14Rule) -> Result<Option<(String, String
         md,
         format!(
             " Through the lander's round-{} DAgger net (ours; Fig. 13's, aggregated on Fig. 13's lander task, same start and target): momentum (eta {}) ends at J = {} vs plain (eta {}) J = {}, reaching plain's final J at iteration {}; replayed on the simulator, momentum's controls land {} m from the target with final error {} (Table 1 net: {} m, {}), plain's {} m with {}. Fig. 14 through the DAgger net (ours; rule fixed in the spec before its first run): {}",
-            round[dm],
-            eta[dm],
-            sig(j1[dm]),
-            eta[dp],
-            sig(j1[dp]),
+            dm.round,
+            dm.eta,
+            sig(dm.final_objective),
+            dp.eta,
+            sig(dp.final_objective),
             k_mom.map_or("never".to_string(), |k| k.to_string()),
-            sig(sim_d[dm]),
-            sig(sim_e[dm]),
+            sig(dm.simulator_landing_error),
+            sig(dm.simulator_final_error),
             sig(before.1),
             sig(before.0),
-            sig(sim_d[dp]),
-            sig(sim_e[dp]),
+            sig(dp.simulator_landing_error),
+            sig(dp.simulator_final_error),
             line(dm)
         ) + &chain,
     )))
