@@ -88,6 +88,18 @@ pub fn read_rows<R: TableRow>(path: &Path) -> Result<Vec<R>, Error> {
     R::from_frame(&df).map_err(|e| Error::Other(format!("{}: {e}", path.display())))
 }
 
+/// The rows of `dir/name`, a table the run writes only when its spec asks for the study behind
+/// it ([`written_csv`](super::output::written_csv)): `None` when the run did not write it; a
+/// table it wrote that is missing, not whole or lacks a column of `R` is an error naming it.
+pub fn written_rows<R: TableRow>(dir: &Path, name: &str) -> Result<Option<Vec<R>>, Error> {
+    let Some(df) = super::output::written_csv(dir, name)? else {
+        return Ok(None);
+    };
+    R::from_frame(&df)
+        .map(Some)
+        .map_err(|e| Error::Other(format!("{}: {e}", dir.join(name).display())))
+}
+
 /// Declares a result table's row struct, each field with its column's name:
 ///
 /// ```
@@ -173,6 +185,20 @@ mod tests {
             /// A count.
             n: i64 = "n",
         }
+    }
+
+    /// A table of a header and no rows (an empty sweep) reads back as no rows, its integer
+    /// column untyped in the file; without one of the columns it is still an error naming it.
+    #[test]
+    fn an_empty_table_reads_as_no_rows() {
+        let dir = tempfile::tempdir().unwrap();
+        write_table(dir.path(), "empty", &table_of::<Probe>(&[])).unwrap();
+        let rows: Vec<Probe> = read_rows(&dir.path().join("empty.csv")).unwrap();
+        assert!(rows.is_empty());
+        write_table(dir.path(), "short", &Table::new(&["name", "n"])).unwrap();
+        let err = read_rows::<Probe>(&dir.path().join("short.csv")).unwrap_err();
+        assert!(err.to_string().contains("short.csv"), "{err}");
+        assert!(err.to_string().contains("x_m"), "{err}");
     }
 
     /// Rows written through their table and read back from the file and from the table are

@@ -14,11 +14,11 @@ use crate::bellman::projection::{project, GaussianReward};
 use crate::control::ddp::{solve, ControlBounds, DdpOptions, DdpSolution};
 use crate::control::lqr::{track, TrackingController};
 use crate::control::{QuadraticCost, Rk4Map};
-use crate::experiment::output::{read_csv, Table};
+use crate::experiment::output::Table;
 use crate::experiment::plot::{Legend, Panel, Series};
 use crate::experiment::report::sig;
 use crate::experiment::resolve::{ensure, positive, ParamError};
-use crate::experiment::rows::{read_rows, TableRow};
+use crate::experiment::rows::{written_rows, TableRow};
 use crate::experiment::{other, Error};
 use crate::physics::linearize::Linearize;
 use nalgebra::{DMatrix, DVector};
@@ -289,32 +289,6 @@ pub(crate) fn push_entropy(
     }
 }
 
-/// The rows of a sweep's CSV at `path`, read as [`read_rows`] does, where the sweep may be
-/// empty and older results may lack a column: a file holding only its header gives polars no
-/// values to type its columns by (they read as strings, which an integer column refuses), so
-/// it reads as no rows once its header has every column of `R`; the columns `nan_if_missing`,
-/// absent from older results, read as NaN.
-pub(crate) fn read_sweep_rows<R: TableRow>(
-    path: &Path,
-    nan_if_missing: &[&str],
-) -> Result<Vec<R>, Error> {
-    let mut df = read_csv(path)?;
-    let named = |e: String| Error::Other(format!("{}: {e}", path.display()));
-    for &name in nan_if_missing {
-        if df.column(name).is_err() {
-            let nan = polars::prelude::Column::new(name.into(), vec![f64::NAN; df.height()]);
-            df.with_column(nan).map_err(|e| named(e.to_string()))?;
-        }
-    }
-    if df.height() == 0 {
-        return match R::COLUMNS.iter().find(|c| df.column(c).is_err()) {
-            Some(c) => Err(named(format!("no column {c}"))),
-            None => Ok(Vec::new()),
-        };
-    }
-    R::from_frame(&df).map_err(|e| named(e.to_string()))
-}
-
 /// Whether α stayed at the fixed weights throughout: every deviation finite and at most `tol`
 /// (an empty run never did).
 pub(crate) fn stays_fixed(deviations: &[f64], tol: f64) -> bool {
@@ -384,11 +358,10 @@ pub(crate) fn entropy_section(
     one_means: &str,
     fixed_blend: &str,
 ) -> Result<String, Error> {
-    let path = dir.join("entropy.csv");
-    if !path.exists() {
+    let Some(rows) = written_rows::<EntropyRow>(dir, "entropy.csv")? else {
         return Ok(String::new());
-    }
-    let s = summarize_entropy(&read_rows::<EntropyRow>(&path)?);
+    };
+    let s = summarize_entropy(&rows);
     let sig = crate::experiment::report::sig;
     let mut md = format!(
         "\nα's normalized entropy over time (`entropy.csv`, every control step; {one_means}). α stays at the fixed weights when max_i |α_i − ŵ_i| ≤ {} at every step (ours; ŵ the fixed weights normalized).\n\n| run | method | entropy min | mean | max | max \\|α − ŵ\\| | α stays at the fixed weights |\n| --- | --- | --- | --- | --- | --- | --- |\n",
@@ -497,53 +470,6 @@ mod entropy_tests {
         assert_eq!(sum.len(), 2);
         assert!(!sum[0].fixed && sum[1].fixed);
         assert!((sum[0].mean - 0.9).abs() < 1e-12 && sum[0].min == 0.8);
-    }
-}
-
-#[cfg(test)]
-mod sweep_rows_tests {
-    use super::*;
-    use crate::experiment::output::write_table;
-    use crate::experiment::rows::table_of;
-
-    crate::result_rows! {
-        /// A sweep's row.
-        struct Probe {
-            /// A count.
-            n: i64 = "n",
-            /// A measure.
-            x: f64 = "x",
-        }
-    }
-
-    /// An empty sweep reads back as no rows (its integer column untyped in a file of only a
-    /// header); a column older results lack reads as NaN when allowed, and is an error naming
-    /// the file and the column otherwise.
-    #[test]
-    fn empty_sweeps_and_old_columns_read_back() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = |name: &str| dir.path().join(format!("{name}.csv"));
-        write_table(dir.path(), "empty", &table_of::<Probe>(&[])).unwrap();
-        assert!(read_sweep_rows::<Probe>(&path("empty"), &[])
-            .unwrap()
-            .is_empty());
-        let mut old = Table::new(&["n"]);
-        old.push(crate::row![2i64]);
-        write_table(dir.path(), "old", &old).unwrap();
-        let rows = read_sweep_rows::<Probe>(&path("old"), &["x"]).unwrap();
-        assert!(rows.len() == 1 && rows[0].n == 2 && rows[0].x.is_nan());
-        let err = read_sweep_rows::<Probe>(&path("old"), &[])
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("old.csv") && err.contains("column x"), "{err}");
-        write_table(dir.path(), "old_empty", &Table::new(&["n"])).unwrap();
-        let err = read_sweep_rows::<Probe>(&path("old_empty"), &[])
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("old_empty.csv") && err.contains("column x"),
-            "{err}"
-        );
     }
 }
 

@@ -324,10 +324,9 @@ impl Family for MsLearning {
             sig(wall),
             h.iterations
         ));
-        // Every seed's curves (older runs: this run's alone).
-        let seed_curves = dir.join("seed_curves.csv");
-        let (hills, anneals) = if seed_curves.exists() {
-            let rows: Vec<SeedCurveRow> = read_rows(&seed_curves)?;
+        // Every seed's curves.
+        let (hills, anneals) = {
+            let rows: Vec<SeedCurveRow> = read_rows(&dir.join("seed_curves.csv"))?;
             let of = |search: Search| -> Vec<(f64, Curve)> {
                 rows.iter()
                     .filter(|c| c.method == search.name())
@@ -346,8 +345,6 @@ impl Family for MsLearning {
                     .collect()
             };
             (of(Search::HillClimbing), of(Search::SimulatedAnnealing))
-        } else {
-            (vec![(f64::NAN, h)], vec![(f64::NAN, a)])
         };
         md.push_str(&format!(
             "\nOver the seeds (`seed_curves.csv`; the table above and the figure are the first seed's):\n\n| seed | hill climbing: share of the gain by {}% | its gain over the initial best | late evaluations worse than it | final best | annealing's final best |\n| --- | --- | --- | --- | --- | --- |\n",

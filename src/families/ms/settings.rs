@@ -370,8 +370,17 @@ impl Family for MsSearchSettings {
             curve.iter().map(|r| (r.iteration as f64, r.best)).unzip();
         // The setting of each row: the sweep's columns, which the harness prepends to the
         // job's (absent without a sweep: one setting).
-        let sizes = c.f64s("set_size");
-        let mixes = c.strs("perturbations");
+        let swept = |col: &str| c.names().iter().any(|n| n == col);
+        let sizes = if swept("set_size") {
+            c.f64s("set_size")
+        } else {
+            Vec::new()
+        };
+        let mixes = if swept("perturbations") {
+            c.strs("perturbations")
+        } else {
+            Vec::new()
+        };
         let summary = SettingsSummaryRow::from_table(tables.require("summary")?);
         let (n0, m0) = (
             summary.first().map_or(f64::NAN, |s| s.set_size as f64),

@@ -8,10 +8,10 @@ use super::verdict::{
 };
 use super::{CONTROL_WEIGHT, VALUE_MODELS};
 use crate::experiment::report::{sig, Findings, Verdict};
-use crate::experiment::rows::read_rows;
+use crate::experiment::rows::{read_rows, written_rows};
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
-use crate::families::lbc::{entropy_section, read_sweep_rows, rule_settings};
+use crate::families::lbc::{entropy_section, rule_settings};
 use std::path::Path;
 
 /// The report section: swing-ups, test start, sweeps, value models and the verdict.
@@ -50,10 +50,9 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         "the fixed weights are w = (1, 1), so their entropy is 1 (uniform α, the naive average; the paper's naive sum adds the two controls instead)",
         "the naive average of the two trackers (half the paper's naive sum)",
     )?);
-    // Whether each tracker alone fails from the test start at the chosen setting (old
-    // results without the selection: not asked): reported, no longer a premise.
-    let found = setting("scale_premise_found");
-    let found = found.is_nan() || found == 1.0;
+    // Whether each tracker alone fails from the test start at the chosen setting: reported,
+    // no longer a premise.
+    let found = setting("scale_premise_found") == 1.0;
     let mut held = vec![Check::new(
         "LBC's distance from the handstand at the test start over the closer naive blend's",
         dl / dn.min(ds),
@@ -210,7 +209,7 @@ fn sweep_section(dir: &Path) -> Result<SweepSection, Error> {
             name, counts.successes[i], counts.rescued[i]
         ));
     }
-    let lambdas: Vec<LambdaRow> = read_sweep_rows(&dir.join("lambda_sweep.csv"), &[])?;
+    let lambdas: Vec<LambdaRow> = read_rows(&dir.join("lambda_sweep.csv"))?;
     md.push_str("\nLBC over λ (entropy of α normalized to [0, 1]; 0 is a switch, 1 the uniform naive average):\n\n| λ | test-start distance | test-start mean entropy | sweep successes | where both trackers fail | sweep mean entropy |\n| --- | --- | --- | --- | --- | --- |\n");
     for r in &lambdas {
         md.push_str(&format!(
@@ -297,14 +296,12 @@ fn value_models_section(
     Ok(md)
 }
 
-/// The tracker-setting table (from `tracker_scales.csv`, absent in old results): per scale of
+/// The tracker-setting table (from `tracker_scales.csv`, when the spec lists scales): per scale of
 /// the trackers' LQR terminal weights, every policy's final distance from the test start.
 fn scales_table(dir: &Path, chosen: f64, success: f64) -> Result<String, Error> {
-    let path = dir.join("tracker_scales.csv");
-    if !path.exists() {
+    let Some(rows) = written_rows::<ScaleRow>(dir, "tracker_scales.csv")? else {
         return Ok(String::new());
-    }
-    let rows: Vec<ScaleRow> = read_rows(&path)?;
+    };
     let mut md = format!(
         "\nTracker setting (rule fixed in the spec before the run: the first scale of the trackers' LQR terminal weights, in the listed order, at which each tracker alone ends at least {} from the handstand from the test start; the swing-ups keep their weights). Final distance from the test start per scale:\n\n| scale | {} | each tracker fails |\n| --- |{} --- |\n",
         sig(success),

@@ -2,10 +2,9 @@
 
 use super::rows::{
     AverageRow, CoordinationRow, CoordinationSweepRow, DiveRow, InterpolationRow,
-    InterpolationSweepRow, Method, Tracking, ValueFunction, ValueRow,
+    InterpolationSweepRow, Method, OffsetRow, Tracking, ValueFunction, ValueRow,
 };
 use super::{compare_objectives, coordination_rule, CoordinationCounts, CoordinationRule};
-use crate::experiment::output::{df_f64, read_csv};
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
@@ -105,10 +104,8 @@ pub(super) fn interpolation(dir: &Path) -> Result<Findings, Error> {
         "1 = uniform α; the fixed weights are uniform only at the vertical target, so at the other targets the naive blend's constant entropy is below 1",
         "the naive blend with the same projected weights",
     )?);
-    // The search found an offset where the naive blend misses vertical (old results without
-    // the search: not asked).
-    let found = setting("offset_premise_found");
-    let found = found.is_nan() || found == 1.0;
+    // The search found an offset where the naive blend misses vertical.
+    let found = setting("offset_premise_found") == 1.0;
     let miss = Misses {
         lbc_vertical: lv,
         naive_vertical: nv,
@@ -235,52 +232,39 @@ fn interpolation_rule(
     })
 }
 
-/// The offset search's table (from `offsets.csv`, absent in old results) and a phrase on its
+/// The offset search's table (from `offsets.csv`) and a phrase on its
 /// outcome for the verdict's reason.
 fn offsets(dir: &Path, chosen: f64, tol: f64) -> Result<(String, String), Error> {
-    let path = dir.join("offsets.csv");
-    if !path.exists() {
-        return Ok((String::new(), "no search in these results".into()));
-    }
-    let df = read_csv(&path)?;
-    let (o, sc, u, v, n, l, p) = (
-        df_f64(&df, "offset")?,
-        df_f64(&df, "average_scale")?,
-        df_f64(&df, "under_entry")?,
-        df_f64(&df, "over_entry")?,
-        df_f64(&df, "naive_vertical_entry")?,
-        df_f64(&df, "lbc_vertical_entry")?,
-        df_f64(&df, "premise_holds")?,
-    );
-    // The torso terminal weight at each offset (results before the column: not shown).
-    let weight = df_f64(&df, "torso_weight").ok();
+    let rows: Vec<OffsetRow> = read_rows(&dir.join("offsets.csv"))?;
     let mut md = format!(
         "\nThe offset search (rule fixed in the spec before the run: components at ±δ for δ in ascending order, each built as a run at δ builds them, §6.1 scale chosen by its rule; the first δ where the components straddle vertical by more than {t} rad each and the naive blend with the weights projected for vertical misses vertical by more than {t} rad is judged, and the search stops there):\n\n| δ (rad) | §6.1 scale | under-rotating entry | over-rotating entry | naive vertical entry | LBC vertical entry | premise holds | torso terminal weight (1/rad²) |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
         t = sig(tol)
     );
-    for r in 0..o.len() {
+    for r in &rows {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
-            sig(o[r]),
-            sig(sc[r]),
-            sig(u[r]),
-            sig(v[r]),
-            sig(n[r]),
-            sig(l[r]),
-            if p[r] == 1.0 { "yes" } else { "no" },
-            weight.as_ref().map_or("–".into(), |w| sig(w[r]))
+            sig(r.offset),
+            sig(r.average_scale),
+            sig(r.under_entry),
+            sig(r.over_entry),
+            sig(r.naive_vertical_entry),
+            sig(r.lbc_vertical_entry),
+            if r.premise_holds == 1 { "yes" } else { "no" },
+            sig(r.torso_weight)
         ));
     }
-    let hit = (0..o.len()).find(|&r| p[r] == 1.0);
-    let outcome = match hit {
+    let outcome = match rows.iter().find(|r| r.premise_holds == 1) {
         Some(r) => format!(
             "δ = {} rad, where the naive blend enters {} rad from vertical",
-            sig(o[r]),
-            sig(n[r])
+            sig(r.offset),
+            sig(r.naive_vertical_entry)
         ),
         None => format!(
             "none of δ = {} did; the tables above use the largest, {} rad",
-            o.iter().map(|x| sig(*x)).collect::<Vec<_>>().join(", "),
+            rows.iter()
+                .map(|r| sig(r.offset))
+                .collect::<Vec<_>>()
+                .join(", "),
             sig(chosen)
         ),
     };
@@ -292,11 +276,7 @@ fn offsets(dir: &Path, chosen: f64, tol: f64) -> Result<(String, String), Error>
 /// components' worst entry error and, at the vertical target, where LBC and the naive blend
 /// enter and how far LBC's dive strays from the components' average trajectory.
 fn average_term(dir: &Path, chosen: f64, tol_entry: f64) -> Result<String, Error> {
-    let path = dir.join("average_term.csv");
-    if !path.exists() {
-        return Ok(String::new());
-    }
-    let rows: Vec<AverageRow> = read_rows(&path)?;
+    let rows: Vec<AverageRow> = read_rows(&dir.join("average_term.csv"))?;
     let mut md = format!(
         "\nThe §6.1 average-trajectory term (each component re-optimized with the running cost scale·(x−x̄)ᵀQ(x−x̄), x̄ the components' mean trajectory without it). Rule (fixed in the spec before the sweep): the tables above use the largest scale at which both components still enter within {} rad of their targets; chosen: {}.\n\n| scale | worst component entry error (rad) | LBC vertical entry (rad) | naive vertical entry (rad) | LBC RMS deviation from x̄ (rad) |\n| --- | --- | --- | --- | --- |\n",
         sig(tol_entry),

@@ -4,10 +4,10 @@ use super::job::{LambdaRow, ReachRow, ReachScaleRow, WeightRow};
 use super::measures::{mirror_gap, swings, window_gap, window_range};
 use super::COMMITTED;
 use crate::experiment::report::{sig, Findings};
-use crate::experiment::rows::read_rows;
+use crate::experiment::rows::{read_rows, written_rows};
 use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
-use crate::families::lbc::{entropy_section, read_sweep_rows, rule_settings};
+use crate::families::lbc::{entropy_section, rule_settings};
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
@@ -61,7 +61,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         settle_range
     };
     // At rest over the window: the body's largest angular rate (finite differences of the
-    // body angle, tugged and mirrored runs). Older results have no rest_rate: not judged.
+    // body angle, tugged and mirrored runs).
     let rest_rate = setting("rest_rate");
     let rate = window
         .windows(2)
@@ -72,7 +72,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
                 .max(((bm[k[1]] - bm[k[0]]) / dt).abs())
         })
         .fold(0.0, f64::max);
-    let at_rest = rest_rate.is_nan() || rate < rest_rate;
+    let at_rest = rate < rest_rate;
     let reaches: Vec<ReachRow> = read_rows(&dir.join("reaches.csv"))?;
     let mut md = format!(
         "λ = σ²R = {} from motor noise σ = {} N·m·√s. Reaches (torque-limited DDP, run to convergence): {}.\n\n",
@@ -111,12 +111,10 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     ));
     md.push_str(&lambda_sweep_section(dir)?);
     // The premise: without a reach the tugs topple the body (a fall is what the reaches
-    // prevent). Older results have no such row: the premise is then untested, not failed.
+    // prevent).
     let no_reach = setting("no_reach_lean");
-    let premise = no_reach.is_nan() || no_reach > fall;
-    if !no_reach.is_nan() {
-        md.push_str(&no_reach_line(no_reach, premise, fall));
-    }
+    let premise = no_reach > fall;
+    md.push_str(&no_reach_line(no_reach, premise, fall));
     let (scales_md, found) = reach_scales(dir, setting("reach_scale"))?;
     md.push_str(&scales_md);
     md.push_str(&entropy_section(
@@ -152,7 +150,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             sig(settle_range),
             sig(mirror_gap),
             sig(lean),
-            if no_reach.is_nan() { "not measured".to_string() } else { sig(no_reach) },
+            sig(no_reach),
             sig(COMMITTED),
         ),
     })
@@ -192,8 +190,7 @@ fn commitment_line(
 /// The same checks over λ (from `lambda_sweep.csv`), empty without rows.
 fn lambda_sweep_section(dir: &Path) -> Result<String, Error> {
     let mut md = String::new();
-    // Older results have no settle_range column: NaN there.
-    let rows: Vec<LambdaRow> = read_sweep_rows(&dir.join("lambda_sweep.csv"), &["settle_range"])?;
+    let rows: Vec<LambdaRow> = read_rows(&dir.join("lambda_sweep.csv"))?;
     if !rows.is_empty() {
         md.push_str("\nThe same checks over λ (not judged; entropy of α normalized to [0, 1], 0 a switch, 1 uniform):\n\n| λ | swings | range over the window | gap to the no-tug baseline | mirror gap | mean entropy of α under the tugs | largest lean (rad) |\n| --- | --- | --- | --- | --- | --- | --- |\n");
         for r in &rows {
@@ -321,14 +318,12 @@ pub fn push_rule(f: &PushFacts, b: &PushBars) -> Option<Rule> {
     Rule::gated(premise, held, Partly::All(vec![0, 3]))
 }
 
-/// The reach-scale search's table (from `reach_scales.csv`, absent in old results) and whether
-/// the rule found a scale (old results: not asked, true).
+/// The reach-scale search's table (from `reach_scales.csv`, when the spec lists scales) and
+/// whether the rule found a scale (true when no search was asked for).
 fn reach_scales(dir: &Path, chosen: f64) -> Result<(String, bool), Error> {
-    let path = dir.join("reach_scales.csv");
-    if !path.exists() {
+    let Some(rows) = written_rows::<ReachScaleRow>(dir, "reach_scales.csv")? else {
         return Ok((String::new(), true));
-    }
-    let rows: Vec<ReachScaleRow> = read_rows(&path)?;
+    };
     let mut md = format!(
         "\nReach scale (rule fixed in the spec before the run: the reaches' state weights × scale, scales in the listed order; the first at which, with the first tug alone, neither reach's weight exceeds {} before the second tug starts; every table here uses it):\n\n| scale | largest weight before the second tug | committed |\n| --- | --- | --- |\n",
         sig(COMMITTED)

@@ -508,7 +508,8 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
     use crate::experiment::output::unique;
     use crate::experiment::report::sig;
     use crate::experiment::rule::{shown, Check, Cmp, Null, Partly, Rule};
-    let Some(rows) = super::rows::written_rows::<DaggerRoundRow>(dir, "dagger.csv")? else {
+    let Some(rows) = crate::experiment::rows::written_rows::<DaggerRoundRow>(dir, "dagger.csv")?
+    else {
         return Ok(None);
     };
     if rows.is_empty() {

@@ -1,7 +1,7 @@
 //! Report of `na_fig13_control`: the verdict (tasks at their goal), the table of every task,
 //! and the sentences on the sweeps, the conditioning study and the best weights.
 
-use super::rows::{required_rows, FinalRow, ObjectiveRow, SwimRow};
+use super::rows::{FinalRow, ObjectiveRow, SwimRow};
 use super::{dagger, dolphin_dagger, Fig13Rule};
 use crate::experiment::output::{df_f64, df_str, read_csv, unique, written_csv};
 use crate::experiment::report::{sig, Findings};
@@ -120,7 +120,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         "| task | formulation | iterations | J start | J end | final error, emulator | final error, simulator |\n| --- | --- | --- | --- | --- | --- | --- |\n",
     );
     // The dolphin's swims: no rows without `[params.dolphin]`.
-    let swims: Vec<SwimRow> = required_rows(&dir.join("swim.csv"))?;
+    let swims: Vec<SwimRow> = read_rows(&dir.join("swim.csv"))?;
     let swim = swim_sentence(&swims);
     let goal = swim_goal(&swims);
     let settings = rule_settings(dir)?;

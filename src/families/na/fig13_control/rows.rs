@@ -1,42 +1,4 @@
-//! The rows of `na_fig13_control`'s headline tables that its figures and report read back, and
-//! the reading of typed rows from a table that a run may not have written (also used by
-//! `na_fig14_momentum`).
-
-use crate::experiment::output::{read_csv, written_csv};
-use crate::experiment::rows::{Frame, TableRow};
-use crate::experiment::Error;
-use std::path::Path;
-
-/// The rows of frame `df`, read from the file at `path` (errors name it). A table without rows
-/// is read as no rows once its header has every column: its CSV holds no value from which
-/// the reader could tell an integer column from a text one.
-fn frame_rows<R: TableRow>(path: &Path, df: &Frame) -> Result<Vec<R>, Error> {
-    let named = |e: &dyn std::fmt::Display| Error::Other(format!("{}: {e}", path.display()));
-    if df.height() == 0 {
-        let names = df.get_column_names();
-        return match R::COLUMNS.iter().find(|c| !names.iter().any(|n| n == *c)) {
-            Some(c) => Err(named(&format!("no column {c}"))),
-            None => Ok(Vec::new()),
-        };
-    }
-    R::from_frame(df).map_err(|e| named(&e))
-}
-
-/// The rows of the CSV file at `path` ([`crate::experiment::rows::read_rows`], a table
-/// without rows included): an error naming the file when it is missing, not whole or lacks a
-/// column.
-pub(crate) fn required_rows<R: TableRow>(path: &Path) -> Result<Vec<R>, Error> {
-    frame_rows(path, &read_csv(path)?)
-}
-
-/// The rows of `dir/name`, a table a run writes only when its spec asks for the study behind
-/// it ([`written_csv`]): `None` when the run did not write it, an error naming the file when it
-/// wrote it and it is now missing, not whole or lacks a column.
-pub(crate) fn written_rows<R: TableRow>(dir: &Path, name: &str) -> Result<Option<Vec<R>>, Error> {
-    written_csv(dir, name)?
-        .map(|df| frame_rows(&dir.join(name), &df))
-        .transpose()
-}
+//! The rows of `na_fig13_control`'s headline tables that its figures and report read back.
 
 crate::result_rows! {
     /// One iteration of one task's descent: a row of `objective.csv`.

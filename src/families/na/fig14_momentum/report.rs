@@ -7,11 +7,11 @@ use super::rows::{
 };
 use crate::experiment::report::{sig, Findings};
 use crate::experiment::rows::read_rows;
+use crate::experiment::rows::written_rows;
 use crate::experiment::rule::{majority, read_rule, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::median_interval_with_infinities;
 use crate::experiment::{other, Error};
 use crate::families::na::fig13_control::dagger::DaggerRoundRow;
-use crate::families::na::fig13_control::rows::written_rows;
 use std::path::Path;
 
 /// The rule of a DAgger line (ours, bars in the spec's `rule`): momentum's controls learned
