@@ -2,7 +2,7 @@
 //! model itself), the terminal Gauss-Newton spectrum of each task, and the best-weights run.
 
 use super::{Params, Sweep, Task};
-use crate::control::bptt::{Bptt, Knots, Substepped};
+use crate::control::bptt::{learn_with, Bptt, Knots, Substepped};
 use crate::control::conditioning::{
     best_weighting, iterations_per_decade, terminal_spectrum, weighting_bound, Spectrum,
     WeightingBound,
@@ -209,6 +209,184 @@ impl Params {
             ))),
         }
     }
+}
+
+/// One iterate of a descent through the physics: its iteration, final error (1 = tolerance),
+/// normalized knots and the gradient of J there.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct PhysicsIterate {
+    pub(super) iteration: usize,
+    pub(super) error: f64,
+    pub(super) knots: Vec<f64>,
+    pub(super) gradient: Vec<f64>,
+}
+
+/// A calibrated `task`'s headline descent (its η, α and step rule, λ measured at the initial
+/// knots) through the physical model itself (its RK4 step with finite-difference Jacobians,
+/// `steps` RK4 steps per emulator step), continued to [`super::job::TO_GOAL_FACTOR`] times the
+/// task's iteration count or until an iterate ends within tolerance (the physics is its own
+/// simulator): what the same descent needs without an emulator. Returns the first iteration
+/// at the goal (`None`: none is) and every iterate up to it. An error for a model without a
+/// physics step here or a λ that is not finite and positive.
+pub(super) fn physics_descent(
+    task: &Task,
+    steps: usize,
+    curvature_iterations: usize,
+) -> Result<(Option<usize>, Vec<PhysicsIterate>), Error> {
+    fn go<M: crate::physics::linearize::Linearize>(
+        model: M,
+        task: &Task,
+        steps: usize,
+        curvature_iterations: usize,
+    ) -> Result<(Option<usize>, Vec<PhysicsIterate>), Error> {
+        let step = Substepped {
+            inner: Rk4Map::new(model, task.net.physical_dt).map_err(other)?,
+            substeps: steps,
+        };
+        let knots = Knots {
+            steps: task.task.horizon,
+            per_actuator: task.task.knots,
+            m: task.net.model.control_dim(),
+        };
+        let objective = task.objective();
+        let x0 = task.start_state();
+        let mut bptt = Bptt::new(&step, &objective, knots, task.bounds(), &x0).map_err(other)?;
+        let v0 = bptt.from_controls(&task.initial_knots());
+        let lambda = bptt.curvature(&v0, curvature_iterations);
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return Err(other(format!(
+                "{} (physics): step scale λ = {lambda}",
+                task.name
+            )));
+        }
+        let schedule = super::job::schedule(
+            task.eta,
+            task.alpha,
+            task.step_rule,
+            lambda,
+            curvature_iterations,
+        );
+        let at = task.task.horizon * task.net.model.state_dim();
+        let mut iterates = Vec::new();
+        let cap = super::job::TO_GOAL_FACTOR * task.task.iterations;
+        learn_with(&mut bptt, &v0, &schedule, cap, &mut |trace, v, states| {
+            let error = task.final_error(&states[at..]);
+            iterates.push(PhysicsIterate {
+                iteration: trace.iteration,
+                error,
+                knots: v.to_vec(),
+                gradient: Vec::new(),
+            });
+            error <= 1.0
+        });
+        for it in &mut iterates {
+            it.gradient = vec![0.0; it.knots.len()];
+            bptt.gradient(&it.knots, &mut it.gradient);
+        }
+        let reached = iterates
+            .last()
+            .filter(|it| it.error <= 1.0)
+            .map(|it| it.iteration);
+        Ok((reached, iterates))
+    }
+    use crate::physics::linearize::FiniteDifference;
+    use crate::physics::pendulum::{Pendulum3, PendulumVariant};
+    use crate::physics::truck::Truck;
+    let (ci, model) = (curvature_iterations, task.net.model);
+    match model {
+        NetModel::Truck => go(FiniteDifference::new(Truck::default()), task, steps, ci),
+        NetModel::Lander => go(FiniteDifference::new(Lander::default()), task, steps, ci),
+        NetModel::PendulumActive => {
+            let pendulum = Pendulum3::new(PendulumVariant::Active);
+            go(FiniteDifference::new(pendulum), task, steps, ci)
+        }
+        _ => Err(other(format!(
+            "{}: no physics step for {}",
+            task.name,
+            model.name()
+        ))),
+    }
+}
+
+/// The report's table and sentence from `physics_path.csv` in `dir` (empty without it): per
+/// paper task, over the net seeds, where the descent through the physics reaches its goal and
+/// how far each net's gradient is from the physics' at its start and at its last iterate.
+pub(super) fn physics_path_md(dir: &std::path::Path) -> Result<(String, String), Error> {
+    use super::rows::PhysicsPathRow;
+    use crate::experiment::output::unique;
+    use crate::experiment::report::sig;
+    use crate::experiment::stats::median;
+    let Some(rows) =
+        crate::experiment::rows::written_rows::<PhysicsPathRow>(dir, "physics_path.csv")?
+    else {
+        return Ok(Default::default());
+    };
+    let tasks = unique(&rows.iter().map(|r| r.task.clone()).collect::<Vec<_>>());
+    if tasks.is_empty() {
+        return Ok(Default::default());
+    }
+    let mut md = String::from("\nThe same descent through the physics (ours; `physics_path.csv`): each paper task's headline through the physical model under each net seed's calibration, to its goal or twice the paper's iterations, with each net's gradient of J at the physics' iterates beside the physics' own (relative error: the norm of the difference over the physics' norm; 1 or more: the net's gradient points as much elsewhere as along the physics').\n\n| task | net seeds | physics at the goal (median over calibrations) | its final error at the last iterate | gradient relative error at the start (median) | at the last iterate | gradient cosine at the last iterate |\n| --- | --- | --- | --- | --- | --- | --- |\n");
+    let mut why = Vec::new();
+    for name in tasks {
+        let of: Vec<&PhysicsPathRow> = rows.iter().filter(|r| r.task == name).collect();
+        let seeds = unique(
+            &of.iter()
+                .map(|r| r.net_seed.to_string())
+                .collect::<Vec<_>>(),
+        );
+        // Per seed: its first and last iterates (rows are in iteration order per seed).
+        let (mut first, mut last) = (Vec::new(), Vec::new());
+        for s in &seeds {
+            let mine: Vec<&&PhysicsPathRow> =
+                of.iter().filter(|r| r.net_seed.to_string() == *s).collect();
+            if let (Some(a), Some(b)) = (mine.first(), mine.last()) {
+                first.push(**a);
+                last.push(**b);
+            }
+        }
+        let med = |f: &dyn Fn(&PhysicsPathRow) -> f64, set: &[&PhysicsPathRow]| {
+            median(&set.iter().map(|r| f(r)).collect::<Vec<_>>())
+        };
+        let at_goal: Vec<f64> = last
+            .iter()
+            .filter(|r| r.physics_error <= 1.0)
+            .map(|r| r.iteration as f64)
+            .collect();
+        let goal_words = if at_goal.len() == last.len() {
+            format!(
+                "at iteration {}",
+                super::seeds::iteration_words(median(&at_goal))
+            )
+        } else {
+            format!(
+                "under {} of {} calibrations within twice the paper's iterations",
+                at_goal.len(),
+                last.len()
+            )
+        };
+        let start_rel = med(&|r| r.gradient_relative_error, &first);
+        let last_rel = med(&|r| r.gradient_relative_error, &last);
+        md.push_str(&format!(
+            "| {name} | {} | {goal_words} | {} | {} | {} | {} |\n",
+            seeds.len(),
+            sig(med(&|r| r.physics_error, &last)),
+            sig(start_rel),
+            sig(last_rel),
+            sig(med(&|r| r.gradient_cosine, &last)),
+        ));
+        why.push(format!(
+            "{name}: through the physics at the goal {goal_words} (median over the seeds' calibrations); the nets' gradient error relative to the physics' {} at the start, {} at the physics' last iterate",
+            sig(start_rel),
+            sig(last_rel)
+        ));
+    }
+    Ok((
+        md,
+        format!(
+            " The same descents through the physics (physics_path.csv): {}.",
+            why.join("; ")
+        ),
+    ))
 }
 
 /// Columns of `conditioning_ladder.csv` (ours): per task of the paper's formulation

@@ -6,8 +6,8 @@ use super::conditioning::{
     CONDITIONING_COLUMNS, LADDER_COLUMNS,
 };
 use super::dagger::DaggerRoundRow;
-use super::rows::{FinalRow, ObjectiveRow, SwimRow};
-use super::seeds::{HeadlineRun, SEEDS_COLUMNS};
+use super::rows::{FinalRow, ObjectiveRow, PhysicsPathRow, SwimRow};
+use super::seeds::{HeadlineRun, ToGoal, SEEDS_COLUMNS};
 use super::{dolphin_dagger, Formulation, Params, Sweep, Task};
 use crate::control::bptt::{
     learn_with, replay, Bptt, Descent, DifferentiableStep, Knots, Learned, Schedule, StepRule,
@@ -68,7 +68,7 @@ impl Job for Params {
         for ((task, spec), trained) in self.tasks.iter().zip(&specs).zip(&built) {
             self.run_task(ctx, task, spec, trained, &built, &mut t)?;
         }
-        self.run_seeds(ctx, &mut t.seeds, &mut t.path)?;
+        self.run_seeds(ctx, &mut t.seeds, &mut t.path, &mut t.physics_path)?;
         let lines_t = self.run_lines(ctx)?;
         let dolphin = self.run_dolphin_tables(ctx, &mut t)?;
         t.into_tables(self, lines_t, dolphin)
@@ -99,6 +99,9 @@ struct RunTables {
     /// The headline of the paper's tasks per Table 1 net seed (seeds.rs), this run's first.
     seeds: Table,
     path: Table,
+    /// The headline's descent through the physics per paper task and net seed, with each
+    /// net's gradient beside the physics' at its iterates (ours).
+    physics_path: Vec<PhysicsPathRow>,
     trajectory: Table,
     /// The learned controls (physical units, one row per emulator step, held over it).
     controls: Table,
@@ -163,6 +166,7 @@ impl RunTables {
             ladder: Table::new(&LADDER_COLUMNS),
             seeds: Table::new(&SEEDS_COLUMNS),
             path: Table::new(&PATH_COLUMNS),
+            physics_path: Vec::new(),
             trajectory: Table::new(&col_refs),
             controls: Table::new(&u_refs),
             goal: Table::new(&goal_cols),
@@ -194,6 +198,7 @@ impl RunTables {
             ("net_seeds", self.seeds),
             ("net_lines", lines),
             ("path", self.path),
+            ("physics_path", table_of(&self.physics_path)),
             ("trajectory", self.trajectory),
             ("controls", self.controls),
             ("goal", self.goal),
@@ -423,7 +428,13 @@ impl Params {
             start_simulator_error: start_simulator_error(task, &trained.emulator, self.steps)?,
         });
         if self.over_net_seeds(task) {
-            run.push(&mut t.seeds, task, ctx.seed);
+            let paper = task.formulation == Formulation::Paper;
+            let path = paper.then_some((&mut t.physics_path, ctx.seed));
+            let to_goal = ctx.stage(&format!("{} to its goal", task.name), || {
+                let ci = self.curvature_iterations;
+                ToGoal::measure(task, &trained.emulator, self.steps, ci, path)
+            })?;
+            run.push(&mut t.seeds, task, ctx.seed, to_goal);
         }
         let mut row = row![task.name.as_str(), model.name()];
         row.extend((0..width).map(|k| task.task.target.get(k).copied().unwrap_or(f64::NAN).into()));
@@ -600,6 +611,73 @@ fn simulator_error(task: &Task, controls: &[f64], emu_final: &[f64], steps: usiz
     task.final_error(&rep.states[task.task.horizon * model.state_dim()..])
 }
 
+/// How many times the paper's iteration count [`iterations_to_goal`] continues a descent
+/// (ours): far enough to tell a descent that is slow from one that never arrives.
+pub const TO_GOAL_FACTOR: usize = 2;
+
+/// The first iteration of a calibrated `task`'s headline descent through `net` (as
+/// [`learn_and_replay`] runs it), continued to [`TO_GOAL_FACTOR`] times the task's iteration
+/// count, whose iterate ends within tolerance on the net and with its controls replayed on the
+/// simulator; `None` when no iterate does (or λ is not finite and positive).
+pub fn iterations_to_goal(
+    task: &Task,
+    net: &crate::emulator::Emulator,
+    steps: usize,
+    curvature_iterations: usize,
+) -> Result<Option<usize>, Error> {
+    with_start(task, net, |bptt, v0| {
+        let lambda = bptt.curvature(&v0, curvature_iterations);
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return None;
+        }
+        let schedule = schedule(
+            task.eta,
+            task.alpha,
+            task.step_rule,
+            lambda,
+            curvature_iterations,
+        );
+        let cap = TO_GOAL_FACTOR * task.task.iterations;
+        let (_, _, iterates) = learn_recording(bptt, &v0, &schedule, cap, true);
+        let at = task.task.horizon * task.net.model.state_dim();
+        iterates.iter().find_map(|(iteration, _, v)| {
+            bptt.rollout(v);
+            let emu_final = bptt.states()[at..].to_vec();
+            let on_net = task.final_error(&emu_final) <= 1.0;
+            (on_net && simulator_error(task, bptt.controls(), &emu_final, steps) <= 1.0)
+                .then_some(*iteration)
+        })
+    })
+}
+
+/// Per iterate of `iterates` (through the physics), the cosine between the gradient of a
+/// calibrated `task`'s J through `net` and the physics' gradient there, and the norm of their
+/// difference over the physics' norm.
+pub(super) fn gradient_fidelity(
+    task: &Task,
+    net: &crate::emulator::Emulator,
+    iterates: &[super::conditioning::PhysicsIterate],
+) -> Result<Vec<(f64, f64)>, Error> {
+    with_start(task, net, |bptt, _| {
+        let mut g = Vec::new();
+        iterates
+            .iter()
+            .map(|it| {
+                g.resize(it.knots.len(), 0.0);
+                bptt.gradient(&it.knots, &mut g);
+                let p = &it.gradient;
+                let dot: f64 = g.iter().zip(p).map(|(a, b)| a * b).sum();
+                let diff: f64 = g.iter().zip(p).map(|(a, b)| (a - b) * (a - b)).sum();
+                let (ng, np) = (
+                    crate::control::bptt::norm(&g),
+                    crate::control::bptt::norm(p),
+                );
+                (dot / (ng * np), diff.sqrt() / np)
+            })
+            .collect()
+    })
+}
+
 /// Columns of `path.csv` (ours): every iterate of the headline's descent of a paper task
 /// through the Table 1 net of `net_seed`: J on the net, the final error of the iterate's
 /// controls on the net and replayed on the simulator, and the largest Hessian eigenvalue of J
@@ -676,20 +754,13 @@ pub(super) fn learn_and_replay_path(
         if !(lambda.is_finite() && lambda > 0.0) {
             return None;
         }
-        let descent = if task.alpha > 0.0 {
-            Descent::Momentum {
-                eta: task.eta,
-                alpha: task.alpha,
-            }
-        } else {
-            Descent::Plain { eta: task.eta }
-        };
-        let schedule = Schedule {
-            descent,
-            rule: task.step_rule,
-            scale: lambda,
+        let schedule = schedule(
+            task.eta,
+            task.alpha,
+            task.step_rule,
+            lambda,
             curvature_iterations,
-        };
+        );
         let (r, best, iterates) =
             learn_recording(bptt, &v0, &schedule, task.task.iterations, path.is_some());
         if let Some((table, seed)) = path {

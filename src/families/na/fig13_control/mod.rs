@@ -31,7 +31,10 @@
 //! simulator_error, best_iteration, formulation): the RMS of (s_M − s_d)/σ over the weighted state variables when the learned
 //! controls drive the emulator and the physical simulator (≤ 1: within tolerance), and
 //! `trajectory` (task, step, t, source, state variables s0 …) for both, and `goal` (task, model,
-//! target state s0 …).
+//! target state s0 …). Over the Table 1 net seeds ([`seeds`]): `net_seeds` and `net_lines`
+//! (each with how many iterations the descent, continued, needs to reach the goal through the
+//! net and through the physics), `path` (the descent through each net, replayed) and
+//! `physics_path` (the descent through the physics, each net's gradient beside the physics').
 //!
 //! Figures: `control` (objectives and two state variables over time) and, per task of the
 //! paper's formulation, an

@@ -322,12 +322,13 @@ fn headline(
                     Some(c) => {
                         h.counts.push(format!("{name} {} of {}", c.both, c.seeds));
                         h.seed_lines.push(format!(
-                            "{name} {} of {} (on the emulator alone {} of {}; this run's net {})",
+                            "{name} {} of {} (on the emulator alone {} of {}; this run's net {}; {})",
                             c.both,
                             c.seeds,
                             c.emulator,
                             c.seeds,
-                            if this_net { "at its goal" } else { "not" }
+                            if this_net { "at its goal" } else { "not" },
+                            c.to_goal_words()
                         ));
                         c.errors.clone()
                     }
@@ -398,8 +399,11 @@ impl Headline {
 fn push_sections(dir: &Path, md: &mut String) -> Result<(String, String, String), Error> {
     md.push_str(&super::seeds::table_md(dir)?);
     md.push_str(&super::seeds::lines_md(dir)?);
-    let (path_md, path_why) = super::seeds::path_md(dir)?;
+    let (path_md, mut path_why) = super::seeds::path_md(dir)?;
     md.push_str(&path_md);
+    let (physics_md, physics_why) = super::conditioning::physics_path_md(dir)?;
+    md.push_str(&physics_md);
+    path_why.push_str(&physics_why);
     let (cond_md, cond_why) = conditioning_summary(dir)?.unwrap_or_default();
     md.push_str(&cond_md);
     let (ladder_md, ladder_why) = ladder_summary(dir)?.unwrap_or_default();

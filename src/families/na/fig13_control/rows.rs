@@ -57,3 +57,26 @@ crate::result_rows! {
         period_s: f64 = "period_s",
     }
 }
+
+crate::result_rows! {
+    /// One iterate of a paper task's headline descent through the physics, under the
+    /// calibration of one net seed's net, with that net's gradient beside the physics' (ours,
+    /// a diagnostic beside the verdict): a row of `physics_path.csv`. While the residual is
+    /// large a net can steer the descent as the physics does; near the goal the physics'
+    /// gradient shrinks with the residual and a net's open-loop bias becomes the larger part
+    /// of its own.
+    pub struct PhysicsPathRow {
+        /// The task.
+        task: String = "task",
+        /// The net seed whose calibration the descent uses and whose net is compared.
+        net_seed: i64 = "net_seed",
+        /// The iteration (0: the start).
+        iteration: i64 = "iteration",
+        /// The iterate's final error through the physics (1 = tolerance).
+        physics_error: f64 = "physics_error",
+        /// Cosine between the net's gradient of J and the physics' at the iterate.
+        gradient_cosine: f64 = "gradient_cosine",
+        /// Norm of the net's gradient minus the physics', over the physics' norm.
+        gradient_relative_error: f64 = "gradient_relative_error",
+    }
+}

@@ -12,6 +12,7 @@
 //! a task reaches its goal when a strict majority of its net seeds reach it on the emulator
 //! and on the simulator.
 
+use super::rows::PhysicsPathRow;
 use super::{Formulation, Params, Task};
 use crate::emulator::catalog::BuildSpec;
 use crate::emulator::Emulator;
@@ -25,8 +26,13 @@ use crate::row;
 use std::path::{Path, PathBuf};
 
 /// Columns of `net_seeds.csv`: `at_goal` is 1 when both final errors are at most 1;
-/// `formulation` is `paper` (counted by the verdict) or `ours` (a second line, never counted).
-pub const SEEDS_COLUMNS: [&str; 7] = [
+/// `formulation` is `paper` (counted by the verdict) or `ours` (a second line, never counted);
+/// `iterations_to_goal` (ours, a diagnostic beside the verdict) is the first iteration of the
+/// same descent continued to twice the paper's count whose iterate is within tolerance on the
+/// net and on the simulator replay (NaN: none is), so a seed that misses the paper's count
+/// shows whether it is slow or never gets there; `physics_iterations_to_goal` the same for the
+/// same descent (this seed's calibration) through the physical model itself.
+pub const SEEDS_COLUMNS: [&str; 9] = [
     "task",
     "net_seed",
     "emulator_error",
@@ -34,6 +40,8 @@ pub const SEEDS_COLUMNS: [&str; 7] = [
     "best_iteration",
     "at_goal",
     "formulation",
+    "iterations_to_goal",
+    "physics_iterations_to_goal",
 ];
 
 /// The most net seeds a run may ask for (each trains one net per task).
@@ -57,8 +65,8 @@ impl HeadlineRun {
         self.emulator_error <= 1.0 && self.simulator_error <= 1.0
     }
 
-    /// The row of `net_seeds.csv` for `task` through the net of `seed`.
-    pub fn push(&self, table: &mut Table, task: &Task, seed: u64) {
+    /// The row of `net_seeds.csv` for `task` through the net of `seed`, with its [`ToGoal`].
+    pub fn push(&self, table: &mut Table, task: &Task, seed: u64, to_goal: ToGoal) {
         table.push(row![
             task.name.as_str(),
             seed as i64,
@@ -66,8 +74,68 @@ impl HeadlineRun {
             self.simulator_error,
             self.best_iteration as i64,
             i64::from(self.at_goal()),
-            task.formulation.name()
+            task.formulation.name(),
+            iteration_or_nan(to_goal.net),
+            iteration_or_nan(to_goal.physics)
         ]);
+    }
+}
+
+/// Where a task's headline descent, continued, first reaches the goal: through the net (within
+/// tolerance on it and on the simulator replay, [`super::job::iterations_to_goal`]) and through
+/// the physics under the same calibration ([`super::conditioning::physics_iterations_to_goal`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ToGoal {
+    /// Through the net.
+    pub net: Option<usize>,
+    /// Through the physics.
+    pub physics: Option<usize>,
+}
+
+impl ToGoal {
+    /// Both measured for the calibrated `task` through `net`; where `path` is given, the
+    /// physics' descent with the net's gradient beside it goes to it (`physics_path.csv`)
+    /// under the given net seed.
+    pub(super) fn measure(
+        task: &Task,
+        net: &Emulator,
+        steps: usize,
+        curvature_iterations: usize,
+        path: Option<(&mut Vec<PhysicsPathRow>, u64)>,
+    ) -> Result<Self, Error> {
+        let (physics, iterates) =
+            super::conditioning::physics_descent(task, steps, curvature_iterations)?;
+        if let Some((table, seed)) = path {
+            let fidelity = super::job::gradient_fidelity(task, net, &iterates)?;
+            for (it, (cosine, relative)) in iterates.iter().zip(fidelity) {
+                table.push(PhysicsPathRow {
+                    task: task.name.clone(),
+                    net_seed: seed as i64,
+                    iteration: it.iteration as i64,
+                    physics_error: it.error,
+                    gradient_cosine: cosine,
+                    gradient_relative_error: relative,
+                });
+            }
+        }
+        Ok(Self {
+            net: super::job::iterations_to_goal(task, net, steps, curvature_iterations)?,
+            physics,
+        })
+    }
+}
+
+/// An iteration count as a table value: NaN for none.
+fn iteration_or_nan(i: Option<usize>) -> f64 {
+    i.map_or(f64::NAN, |i| i as f64)
+}
+
+/// An iteration read back from a table, for the report: the whole number, or "never" for NaN.
+pub(super) fn iteration_words(x: f64) -> String {
+    if x.is_finite() {
+        format!("{}", x.round() as i64)
+    } else {
+        "never".into()
     }
 }
 
@@ -85,20 +153,21 @@ impl Params {
 
     /// The headline of `task` (uncalibrated) through `net`: calibrated there, learned by the
     /// task's own η, α and step rule for its iteration count, scored at the best iterate.
-    /// Where `path` is given, the descent's `path.csv` rows go to its table.
+    /// Where `path` is given, the descent's `path.csv` rows go to its table. Returns the run
+    /// and the calibrated task.
     pub(super) fn headline_run(
         &self,
         task: &Task,
         net: &Emulator,
         path: Option<(&mut Table, u64)>,
-    ) -> Result<HeadlineRun, Error> {
+    ) -> Result<(HeadlineRun, Task), Error> {
         let x0 = task.start_state();
         let task = task.calibrated(net, &x0).map_err(other)?;
         let steps = self.steps;
         let (run, _) =
             super::job::learn_and_replay_path(&task, net, steps, self.curvature_iterations, path)?
                 .ok_or_else(|| other(format!("{}: no finite step scale λ", task.name)))?;
-        Ok(run)
+        Ok((run, task))
     }
 
     /// Every task of the paper's formulation, and those of ours in
@@ -110,6 +179,7 @@ impl Params {
         ctx: &RunContext,
         table: &mut Table,
         path: &mut Table,
+        physics_path: &mut Vec<PhysicsPathRow>,
     ) -> Result<(), Error> {
         let seeds = self.further_net_seeds(ctx.seed);
         let tasks: Vec<&Task> = self
@@ -137,20 +207,31 @@ impl Params {
             || build_emulators(&specs),
         )?;
         for ((task, seed), trained) in runs.iter().zip(&built) {
-            let run = ctx.stage(&format!("learn {} (net seed {seed})", task.name), || {
-                let paper = task.formulation == Formulation::Paper;
-                let path = paper.then_some((&mut *path, *seed));
-                self.headline_run(task, &trained.emulator, path)
-            })?;
-            run.push(table, task, *seed);
+            let net = &trained.emulator;
+            let (run, calibrated) =
+                ctx.stage(&format!("learn {} (net seed {seed})", task.name), || {
+                    let paper = task.formulation == Formulation::Paper;
+                    let path = paper.then_some((&mut *path, *seed));
+                    self.headline_run(task, net, path)
+                })?;
+            let paper = task.formulation == Formulation::Paper;
+            let to_goal = ctx.stage(
+                &format!("{} to its goal (net seed {seed})", task.name),
+                || {
+                    let path = paper.then_some((&mut *physics_path, *seed));
+                    let ci = self.curvature_iterations;
+                    ToGoal::measure(&calibrated, net, self.steps, ci, path)
+                },
+            )?;
+            run.push(table, task, *seed, to_goal);
         }
         Ok(())
     }
 }
 
 /// Columns of `net_lines.csv`: `line` names the net's change (`paper` is the headline's own
-/// nets, as in `net_seeds.csv`).
-pub const LINES_COLUMNS: [&str; 7] = [
+/// nets, as in `net_seeds.csv`); `iterations_to_goal` as in [`SEEDS_COLUMNS`].
+pub const LINES_COLUMNS: [&str; 8] = [
     "task",
     "line",
     "net_seed",
@@ -158,6 +239,7 @@ pub const LINES_COLUMNS: [&str; 7] = [
     "simulator_error",
     "best_iteration",
     "at_goal",
+    "iterations_to_goal",
 ];
 
 impl Params {
@@ -189,9 +271,19 @@ impl Params {
         let specs: Vec<BuildSpec> = runs.iter().map(|r| r.3.clone()).collect();
         let built = ctx.stage("train the second lines' nets", || build_emulators(&specs))?;
         for ((task, line, seed, _), trained) in runs.iter().zip(&built) {
-            let run = ctx.stage(
+            let net = &trained.emulator;
+            let (run, to_goal) = ctx.stage(
                 &format!("learn {} ({line}, net seed {seed})", task.name),
-                || self.headline_run(task, &trained.emulator, None),
+                || -> Result<_, Error> {
+                    let (run, calibrated) = self.headline_run(task, net, None)?;
+                    let to_goal = super::job::iterations_to_goal(
+                        &calibrated,
+                        net,
+                        self.steps,
+                        self.curvature_iterations,
+                    )?;
+                    Ok((run, to_goal))
+                },
             )?;
             table.push(row![
                 task.name.as_str(),
@@ -200,7 +292,8 @@ impl Params {
                 run.emulator_error,
                 run.simulator_error,
                 run.best_iteration as i64,
-                i64::from(run.at_goal())
+                i64::from(run.at_goal()),
+                iteration_or_nan(to_goal)
             ]);
         }
         Ok(table)
@@ -222,29 +315,66 @@ pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
         df_f64(&lines, "at_goal")?,
         df_f64(&lines, "emulator_error")?,
     );
-    let mut counts: Vec<(String, String, usize, usize, usize)> = Vec::new();
+    let to_goal = df_f64(&lines, "iterations_to_goal")?;
+    /// Per task and line: seeds at the goal on both, on the emulator alone, at the goal on
+    /// both when continued, and run.
+    struct Count {
+        task: String,
+        line: String,
+        both: usize,
+        emulator: usize,
+        continued: usize,
+        seeds: usize,
+    }
+    let mut counts: Vec<Count> = Vec::new();
     if let Some(paper) = seed_counts(dir)? {
         let paper_tasks = unique(&task);
         for c in paper.into_iter().filter(|c| paper_tasks.contains(&c.task)) {
-            counts.push((c.task, "paper".into(), c.both, c.emulator, c.seeds));
+            counts.push(Count {
+                continued: c.to_goal.iter().filter(|t| t.0.is_finite()).count(),
+                task: c.task,
+                line: "paper".into(),
+                both: c.both,
+                emulator: c.emulator,
+                seeds: c.seeds,
+            });
         }
     }
     for r in 0..task.len() {
-        let i = match counts.iter().position(|c| c.0 == task[r] && c.1 == line[r]) {
+        let i = match counts
+            .iter()
+            .position(|c| c.task == task[r] && c.line == line[r])
+        {
             Some(i) => i,
             None => {
-                counts.push((task[r].clone(), line[r].clone(), 0, 0, 0));
+                counts.push(Count {
+                    task: task[r].clone(),
+                    line: line[r].clone(),
+                    both: 0,
+                    emulator: 0,
+                    continued: 0,
+                    seeds: 0,
+                });
                 counts.len() - 1
             }
         };
-        counts[i].2 += usize::from(goal[r] == 1.0);
-        counts[i].3 += usize::from(emu[r] <= 1.0);
-        counts[i].4 += 1;
+        counts[i].both += usize::from(goal[r] == 1.0);
+        counts[i].emulator += usize::from(emu[r] <= 1.0);
+        counts[i].continued += usize::from(to_goal[r].is_finite());
+        counts[i].seeds += 1;
     }
-    counts.sort_by(|a, b| a.0.cmp(&b.0).then((a.1 != "paper").cmp(&(b.1 != "paper"))));
-    let mut md = String::from("\nBefore and after (`net_lines.csv`, ours; reported, never counted): each paper task learned the headline's way through its net with one change, over the same net seeds. `paper`: the headline's nets (typical manoeuvres, no input noise); `box`: trained on knots uniform over the whole control box from wide starts (our data before); `noise`: with input noise 0.05 (ours before).\n\n| task | nets | seeds at the goal on both | on the emulator alone |\n| --- | --- | --- | --- |\n");
-    for (t, l, both, emu, n) in counts {
-        md.push_str(&format!("| {t} | {l} | {both} of {n} | {emu} of {n} |\n"));
+    counts.sort_by(|a, b| {
+        a.task
+            .cmp(&b.task)
+            .then((a.line != "paper").cmp(&(b.line != "paper")))
+    });
+    let mut md = format!("\nBefore and after (`net_lines.csv`, ours; reported, never counted): each paper task learned the headline's way through its net with one change, over the same net seeds. `paper`: the headline's nets (typical manoeuvres, no input noise); `box`: trained on knots uniform over the whole control box from wide starts (our data before); `noise`: with input noise 0.05 (ours before). The last column continues each descent to {}x the paper's iterations (ours).\n\n| task | nets | seeds at the goal on both | on the emulator alone | at the goal on both, continued |\n| --- | --- | --- | --- | --- |\n", super::job::TO_GOAL_FACTOR);
+    for c in counts {
+        let n = c.seeds;
+        md.push_str(&format!(
+            "| {} | {} | {} of {n} | {} of {n} | {} of {n} |\n",
+            c.task, c.line, c.both, c.emulator, c.continued
+        ));
     }
     Ok(md)
 }
@@ -343,6 +473,28 @@ pub(super) struct SeedCount {
     /// Per net seed (in the table's order), the larger of its final errors on the emulator
     /// and on the simulator: at most 1 exactly when it is at the goal on both.
     pub errors: Vec<f64>,
+    /// Per net seed, the first iteration of its descent continued at which it is at the goal
+    /// on both (NaN: none), and the same descent's through the physics.
+    pub to_goal: Vec<(f64, f64)>,
+}
+
+impl SeedCount {
+    /// "net seeds continued to the goal at …; through the physics at …" (the iterations per
+    /// seed, "never" for none), for the report.
+    pub fn to_goal_words(&self) -> String {
+        let words = |xs: Vec<f64>| {
+            xs.iter()
+                .map(|x| iteration_words(*x))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        format!(
+            "continued to {}x the paper's iterations, at the goal on both at iteration {} (per seed); the same descents through the physics at {}",
+            super::job::TO_GOAL_FACTOR,
+            words(self.to_goal.iter().map(|t| t.0).collect()),
+            words(self.to_goal.iter().map(|t| t.1).collect())
+        )
+    }
 }
 
 /// Per task of `net_seeds.csv` in `dir` (first-seen order): how many net seeds reach the goal
@@ -359,8 +511,10 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
     let (task, goal) = (df_str(&df, "task")?, df_f64(&df, "at_goal")?);
     let emu = df_f64(&df, "emulator_error")?;
     let sim = df_f64(&df, "simulator_error")?;
+    let to_goal = df_f64(&df, "iterations_to_goal")?;
+    let physics = df_f64(&df, "physics_iterations_to_goal")?;
     let mut out: Vec<SeedCount> = Vec::new();
-    for (((t, g), e), s) in task.iter().zip(&goal).zip(&emu).zip(&sim) {
+    for (r, (((t, g), e), s)) in task.iter().zip(&goal).zip(&emu).zip(&sim).enumerate() {
         let i = match out.iter().position(|c| &c.task == t) {
             Some(i) => i,
             None => {
@@ -370,6 +524,7 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
                     emulator: 0,
                     seeds: 0,
                     errors: Vec::new(),
+                    to_goal: Vec::new(),
                 });
                 out.len() - 1
             }
@@ -378,6 +533,7 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
         out[i].emulator += usize::from(*e <= 1.0);
         out[i].seeds += 1;
         out[i].errors.push(e.max(*s));
+        out[i].to_goal.push((to_goal[r], physics[r]));
     }
     if out.iter().flat_map(|c| &c.errors).any(|e| !e.is_finite()) {
         return Err(damaged("a net seed's final error is not a number"));
@@ -402,18 +558,20 @@ pub(super) fn table_md(dir: &Path) -> Result<String, Error> {
         df_f64(&df, "simulator_error")?,
     );
     let it = df_f64(&df, "best_iteration")?;
+    let to_goal = df_f64(&df, "iterations_to_goal")?;
+    let physics = df_f64(&df, "physics_iterations_to_goal")?;
     if task.is_empty() {
         return Ok(String::new());
     }
     let mut md = String::from(
-        "\nThe headline per Table 1 net seed (ours, `net_seeds.csv`; the same task, optimizer and iteration count through the net trained under each seed, each calibrated through its own net; final error <= 1 is within tolerance):\n\n| task | net seed | best iteration | final error, emulator | final error, simulator | at the goal on both |\n| --- | --- | --- | --- | --- | --- |\n",
+        "\nThe headline per Table 1 net seed (ours, `net_seeds.csv`; the same task, optimizer and iteration count through the net trained under each seed, each calibrated through its own net; final error <= 1 is within tolerance; the last two columns continue the same descent to twice the paper's iterations, ours: the first iteration at the goal on both, and the same descent's, under this seed's calibration, through the physical model itself):\n\n| task | net seed | best iteration | final error, emulator | final error, simulator | at the goal on both | continued: at the goal at iteration | through the physics |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
     let mut order: Vec<usize> = (0..task.len()).collect();
     let first = |r: usize| task.iter().position(|t| *t == task[r]).unwrap_or(r);
     order.sort_by(|&a, &b| first(a).cmp(&first(b)).then(seed[a].total_cmp(&seed[b])));
     for r in order {
         md.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
             task[r],
             seed[r],
             it[r],
@@ -423,7 +581,9 @@ pub(super) fn table_md(dir: &Path) -> Result<String, Error> {
                 "yes"
             } else {
                 "no"
-            }
+            },
+            iteration_words(to_goal[r]),
+            iteration_words(physics[r])
         ));
     }
     Ok(md)
@@ -524,11 +684,11 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         assert_eq!(seed_counts(dir.path()).unwrap(), None);
         let mut csv = String::from(
-            "task,net_seed,emulator_error,simulator_error,best_iteration,at_goal,formulation\n",
+            "task,net_seed,emulator_error,simulator_error,best_iteration,at_goal,formulation,iterations_to_goal,physics_iterations_to_goal\n",
         );
         for seed in 1..=5 {
             for task in ["pendulum", "truck"] {
-                csv.push_str(&format!("{task},{seed},0.5,0.6,20,1,paper\n"));
+                csv.push_str(&format!("{task},{seed},0.5,0.6,20,1,paper,{seed},NaN\n"));
             }
         }
         let path = dir.path().join("net_seeds.csv");
@@ -536,6 +696,13 @@ mod tests {
         let counts = seed_counts(dir.path()).unwrap().unwrap();
         assert_eq!(counts.len(), 2);
         assert_eq!(counts[0].errors, vec![0.6; 5]);
+        assert!(
+            counts[0]
+                .to_goal_words()
+                .contains("at iteration 1, 2, 3, 4, 5 (per seed); the same descents through the physics at never, never"),
+            "{}",
+            counts[0].to_goal_words()
+        );
         // Cut after the last seed's pendulum row, and mid-row.
         let lines: Vec<&str> = csv.lines().collect();
         std::fs::write(&path, lines[..lines.len() - 1].join("\n")).unwrap();
