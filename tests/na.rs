@@ -500,7 +500,7 @@ fn na_fig13_quick_learns_controls_for_every_task() {
     // (seed 1, the same numbers as final.csv) and through the net of quick's further seed 2.
     assert_eq!(
         header(&out.join("net_seeds.csv")),
-        "task,net_seed,emulator_error,simulator_error,best_iteration,at_goal,formulation"
+        "task,net_seed,emulator_error,simulator_error,best_iteration,at_goal,formulation,iterations_to_goal,physics_iterations_to_goal"
     );
     let seeds = rows(&out.join("net_seeds.csv"));
     let fin = rows(&out.join("final.csv"));
@@ -541,6 +541,40 @@ fn na_fig13_quick_learns_controls_for_every_task() {
         !path.iter().any(|c| c[0] == "pendulum_200steps"),
         "ours: no path"
     );
+    // Continued to the goal: a seed at the goal within the paper's iterations got there no
+    // later than its best iterate; the physics' descent under the seed's calibration stops at
+    // its goal, physics_path.csv's last iterate for the seed.
+    assert_eq!(
+        header(&out.join("physics_path.csv")),
+        "task,net_seed,iteration,physics_error,gradient_cosine,gradient_relative_error"
+    );
+    let physics = rows(&out.join("physics_path.csv"));
+    let num = |x: &str| x.parse::<f64>().unwrap();
+    for c in &seeds {
+        let (to_goal, best) = (num(&c[7]), num(&c[4]));
+        if c[5] == "1" {
+            assert!(to_goal <= best, "{c:?}");
+        }
+        if c[6] != "paper" {
+            continue;
+        }
+        let mine: Vec<&Vec<String>> = physics
+            .iter()
+            .filter(|p| p[0] == c[0] && p[1] == c[1])
+            .collect();
+        assert_eq!(mine[0][2], "0", "{c:?}");
+        let last = mine.last().unwrap();
+        let reached = num(&last[3]) <= 1.0;
+        assert_eq!(reached, num(&c[8]).is_finite(), "{c:?} {last:?}");
+        if reached {
+            assert_eq!(num(&last[2]), num(&c[8]), "{c:?}");
+        }
+        for p in mine {
+            let cosine = num(&p[4]);
+            assert!((-1.0 - 1e-9..=1.0 + 1e-9).contains(&cosine), "{p:?}");
+            assert!(num(&p[5]) >= 0.0, "{p:?}");
+        }
+    }
     for task in ["pendulum", "truck", "lander", "pendulum_200steps"] {
         let of = |seed: &str| seeds.iter().find(|c| c[0] == task && c[1] == seed).unwrap();
         let own = fin.iter().find(|c| c[0] == task).unwrap();
