@@ -21,6 +21,7 @@
 
 pub mod acrobot;
 pub mod biped;
+pub mod body3d;
 pub mod differentiable;
 pub mod diver;
 pub mod dolphin;
