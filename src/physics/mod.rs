@@ -19,7 +19,7 @@
 //! ([`planar::PlanarTree`]) with two instances: the seven-link [`diver::diver`] and the
 //! [`push::push_figure`] of the push-recovery experiment; 3-D articulated trees with a floating
 //! base ([`body3d::Tree3d`]: ball and revolute joints, Featherstone's algorithms) with the
-//! [`body3d::chain3d`] instance checked against MuJoCo.
+//! [`body3d::chain3d()`] instance checked against MuJoCo.
 
 pub mod acrobot;
 pub mod biped;

@@ -54,7 +54,7 @@
 //! ## Checks
 //! `scripts/mujoco/chain3d.py` builds `chain3d` in MuJoCo from `motionlab describe chain3d` and
 //! stores three 2 s RK4 trajectories (1 ms step) in `tests/data/chain3d/`; the tests in
-//! [`chain3d`] replay them and agree to about 1e-11 rad in every joint angle. MuJoCo's RK4
+//! [`mod@chain3d`] replay them and agree to about 1e-11 rad in every joint angle. MuJoCo's RK4
 //! moves quaternions on the manifold (second order when ω turns), ours steps q̇ in R⁴ (fourth
 //! order); at this step both sit within 3e-11 rad of the converged solution, which the
 //! script measures (`--converge`). The tests in [`dynamics`] check energy conservation and its

@@ -404,3 +404,42 @@ impl Model for Tree3d {
         self.dt
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::body3d::chain3d;
+
+    #[test]
+    fn validate_names_what_is_wrong() {
+        assert!(chain3d().validate().is_ok());
+        let mut t = chain3d();
+        t.bodies[2].inertia = [0.01, 0.01, 0.05, 0.0, 0.0, 0.0];
+        assert!(matches!(
+            t.validate(),
+            Err(TreeError::Value {
+                body: 2,
+                what: "inertia",
+                ..
+            })
+        ));
+        let mut t = chain3d();
+        t.bodies[3].parent = Some(3);
+        assert!(matches!(
+            t.validate(),
+            Err(TreeError::Structure { body: 3, .. })
+        ));
+        let mut t = chain3d();
+        t.bodies[1].joint = Joint3d::Free;
+        assert!(matches!(
+            t.validate(),
+            Err(TreeError::Structure { body: 1, .. })
+        ));
+        let mut t = chain3d();
+        t.bodies[2].joint = Joint3d::Revolute { axis: [0.0; 3] };
+        assert!(matches!(
+            t.validate(),
+            Err(TreeError::Value { what: "axis", .. })
+        ));
+    }
+}
