@@ -17,10 +17,13 @@
 //! muscle-driven mass-spring-damper dolphin), [`acrobot::Acrobot`] (the
 //! two-link gymnast of linear Bellman combination), and general planar articulated trees
 //! ([`planar::PlanarTree`]) with two instances: the seven-link [`diver::diver`] and the
-//! [`push::push_figure`] of the push-recovery experiment.
+//! [`push::push_figure`] of the push-recovery experiment; 3-D articulated trees with a floating
+//! base ([`body3d::Tree3d`]: ball and revolute joints, Featherstone's algorithms) with the
+//! [`body3d::chain3d()`] instance checked against MuJoCo.
 
 pub mod acrobot;
 pub mod biped;
+pub mod body3d;
 pub mod differentiable;
 pub mod diver;
 pub mod dolphin;
@@ -280,6 +283,7 @@ pub const MODEL_NAMES: &[&str] = &[
     "truck",
     "lander",
     "dolphin",
+    "chain3d",
 ];
 
 /// Builds a model by registry name.
@@ -297,6 +301,7 @@ pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
         "truck" => Box::new(truck::Truck::default()),
         "lander" => Box::new(lander::Lander::default()),
         "dolphin" => Box::new(dolphin::Dolphin::default()),
+        "chain3d" => Box::new(body3d::chain3d()),
         _ => return None,
     })
 }
