@@ -46,7 +46,13 @@
 //!     hover), attitude torques within ±400 N·m (a fifth of the jets' limit), piecewise
 //!     constant for 0.5–2 s, with a quarter of the knots' torques idle; episodes of 10 s.
 //!
-//! Both regimes share the control box (the control tasks' limits) and the episode lengths.
+//! - **Regime** (ours, a second line): the typical manoeuvres with each control channel that
+//!   the Fig. 13 tasks' regime bounds ([`NetModel::regime_control_box`]: the truck's drive, the
+//!   lander's thrust and roll and pitch torques) sampled inside that bound instead of the whole
+//!   box, the same amplitudes relative to it; the starts are the typical ones.
+//!
+//! The regimes share the control box of the control tasks' limits (the regime's data lie inside
+//! it) and the episode lengths.
 
 use super::anchor::Anchor;
 use super::dataset::{
@@ -195,7 +201,7 @@ impl NetModel {
     pub fn start_state_in(self, data: DataRegime, rng: &mut ChaCha8Rng) -> Vec<f64> {
         match data {
             DataRegime::Box => self.start_state(rng),
-            DataRegime::Typical => self.typical_start_state(rng),
+            DataRegime::Typical | DataRegime::Regime => self.typical_start_state(rng),
         }
     }
 
@@ -209,12 +215,20 @@ impl NetModel {
         let limits = self.control_limits();
         match data {
             DataRegime::Box => limits,
-            DataRegime::Typical => {
+            DataRegime::Typical | DataRegime::Regime => {
                 let amplitude: Vec<f64> = match self {
                     Self::Truck => vec![TYPICAL_AMPLITUDE_MIN, 1.0],
                     Self::Lander => vec![TYPICAL_AMPLITUDE_MIN; self.control_dim()],
                     _ => vec![1.0; self.control_dim()],
                 };
+                let mut limits = limits;
+                if data == DataRegime::Regime {
+                    for (c, bound) in self.regime_control_box().into_iter().enumerate() {
+                        if let Some((low, high)) = bound {
+                            (limits.low[c], limits.high[c]) = (low, high);
+                        }
+                    }
+                }
                 limits.with_amplitude_min(&amplitude)
             }
         }
@@ -227,7 +241,7 @@ impl NetModel {
     pub fn control_process_in(self, data: DataRegime) -> ControlProcess {
         match data {
             DataRegime::Box => self.control_process(),
-            DataRegime::Typical => ControlProcess::Manoeuvre {
+            DataRegime::Typical | DataRegime::Regime => ControlProcess::Manoeuvre {
                 hold_min: 0.5,
                 hold_max: match self {
                     Self::Truck | Self::Lander => 2.0,
@@ -294,28 +308,48 @@ impl NetModel {
     /// swing-up's states: link 1 within 1 rad of hanging at most 3 rad/s, the elbows within
     /// 0.3 rad.
     pub fn in_task_regime(self, state: &[f64], control: &[f64]) -> bool {
+        let controls_in = self
+            .regime_control_box()
+            .iter()
+            .zip(control)
+            .all(|(bound, u)| bound.is_none_or(|(low, high)| (low..=high).contains(u)));
+        controls_in
+            && match self {
+                Self::PendulumPassive | Self::PendulumActive | Self::PendulumExt => {
+                    state[0].abs() <= 1.0
+                        && state[3].abs() <= 3.0
+                        && state[1].abs() <= 0.3
+                        && state[2].abs() <= 0.3
+                }
+                Self::Truck => (state[3] * state[3] + state[4] * state[4]).sqrt() <= 2.0,
+                Self::Lander => {
+                    // The body z axis's world z component is 1 − 2(x² + y²) for a unit
+                    // quaternion.
+                    let up = 1.0 - 2.0 * (state[4] * state[4] + state[5] * state[5]);
+                    up >= crate::portable::cos(0.2)
+                }
+            }
+    }
+
+    /// Per control channel, the interval the Fig. 13 tasks' regime ([`Self::in_task_regime`])
+    /// keeps it in, `None` where the regime does not bound it: the truck's drive within
+    /// ±0.3 m/s² (its steering free), the lander's thrust within 0.5–1.5 × hover and its roll and
+    /// pitch torques within ±30 N·m (its yaw torque free); the pendulums' channels are free (the
+    /// swing-up uses its whole torque range).
+    pub fn regime_control_box(self) -> Vec<Option<(f64, f64)>> {
         match self {
-            Self::PendulumPassive | Self::PendulumActive | Self::PendulumExt => {
-                state[0].abs() <= 1.0
-                    && state[3].abs() <= 3.0
-                    && state[1].abs() <= 0.3
-                    && state[2].abs() <= 0.3
-            }
-            Self::Truck => {
-                let speed = (state[3] * state[3] + state[4] * state[4]).sqrt();
-                speed <= 2.0 && control[0].abs() <= 0.3
-            }
+            Self::Truck => vec![Some((-0.3, 0.3)), None],
             Self::Lander => {
                 let l = Lander::default();
                 let hover = l.mass * l.gravity;
-                // The body z axis's world z component is 1 − 2(x² + y²) for a unit quaternion.
-                let up = 1.0 - 2.0 * (state[4] * state[4] + state[5] * state[5]);
-                let tilt_ok = up >= crate::portable::cos(0.2);
-                tilt_ok
-                    && (0.5 * hover..=1.5 * hover).contains(&control[0])
-                    && control[1].abs() <= 30.0
-                    && control[2].abs() <= 30.0
+                vec![
+                    Some((0.5 * hover, 1.5 * hover)),
+                    Some((-30.0, 30.0)),
+                    Some((-30.0, 30.0)),
+                    None,
+                ]
             }
+            _ => vec![None; self.control_dim()],
         }
     }
 
@@ -549,6 +583,10 @@ pub enum DataRegime {
     /// Knots uniform over the whole control box from wide starts ([`NetModel::control_process`],
     /// [`NetModel::start_state`]): ours before, kept as a second line.
     Box,
+    /// The typical manoeuvres with each control channel that the Fig. 13 tasks' regime bounds
+    /// kept inside it ([`NetModel::regime_control_box`]): the data concentrated further on the
+    /// tasks' inputs (ours, a second line).
+    Regime,
 }
 
 impl DataRegime {
@@ -557,6 +595,7 @@ impl DataRegime {
         match self {
             Self::Typical => "typical",
             Self::Box => "box",
+            Self::Regime => "regime",
         }
     }
 
@@ -1514,6 +1553,54 @@ mod tests {
         )
         .unwrap()
         .transitions
+    }
+
+    /// The regime's data keep every channel the tasks' regime bounds inside that bound, still
+    /// reach 70 % of the way to both of its ends, leave the other channels as the typical
+    /// data's, and put more of their examples in the tasks' regime than the typical data do.
+    #[test]
+    fn regime_data_stay_in_the_regimes_box_and_concentrate_further() {
+        for model in [NetModel::Truck, NetModel::Lander] {
+            let regime = regime_data(model, DataRegime::Regime);
+            let typical = regime_data(model, DataRegime::Typical);
+            for (c, bound) in model.regime_control_box().into_iter().enumerate() {
+                let (col, typical_col) = (regime.controls.column(c), typical.controls.column(c));
+                let range = |x: ndarray::ArrayView1<f64>| {
+                    x.iter()
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                            (l.min(v), h.max(v))
+                        })
+                };
+                let ((lo, hi), (tlo, thi)) = (range(col), range(typical_col));
+                match bound {
+                    Some((low, high)) => {
+                        let (mid, half) = (0.5 * (low + high), 0.5 * (high - low));
+                        assert!(
+                            lo >= low && hi <= high,
+                            "{} {c}: [{lo}, {hi}]",
+                            model.name()
+                        );
+                        assert!(
+                            lo <= mid - 0.7 * half && hi >= mid + 0.7 * half,
+                            "{} {c}: [{lo}, {hi}]",
+                            model.name()
+                        );
+                    }
+                    // A free channel samples the typical box (the pendulums' all are free).
+                    None => assert!(
+                        lo < 0.5 * tlo && hi > 0.5 * thi,
+                        "{} {c}: [{lo}, {hi}] vs [{tlo}, {thi}]",
+                        model.name()
+                    ),
+                }
+            }
+            let (r, t) = (regime_share(model, &regime), regime_share(model, &typical));
+            assert!(r > t, "{}: regime {r}, typical {t}", model.name());
+        }
+        assert!(NetModel::PendulumActive
+            .regime_control_box()
+            .iter()
+            .all(Option::is_none));
     }
 
     /// §4's typical controls concentrate the data where the control tasks work: for every

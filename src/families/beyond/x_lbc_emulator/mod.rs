@@ -27,12 +27,13 @@
 //! (s_M − s_d)/σ over the state (≤ 1: within tolerance), s_d the desired target.
 //!
 //! Tables: `targets` (desired_target, method, final_error_emulator, final_error_simulator,
-//! effort, seconds, weight1, weight2, final_x, final_axis_offset), `components` (component,
+//! effort, seconds, weight1, weight2, final_axis_value, mean_entropy), `components` (component,
 //! target, learn_seconds, tracker_seconds, iterations, objective, emulator_error,
 //! open_loop_simulator_error, tracked_simulator_error), `trajectory` (desired_target, method,
 //! step, t, s0 … on the simulator), `goal` (desired_target, s0 …: the target state), `rule`. `effort` is ½ Σ_k |v_k|² over the super-steps,
 //! `seconds` the wall time to obtain the controller for that target (BPTT: learning; LBC and
 //! naive: projecting the weights; the components' own costs are in `components`),
+//! `final_axis_value` the simulator's final value along the axis (m),
 //! `mean_entropy` the mean normalized entropy of the blend weights α over the super-steps on the
 //! simulator (0: one component, 1: even; NaN for the open-loop replays and where extrapolation
 //! makes a weight negative).
