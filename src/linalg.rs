@@ -93,6 +93,41 @@ pub fn mul_to<R1, C1, R2, C2, R3, C3, SC, SA, SB>(
     gemm(c, 1.0, a, b, 0.0);
 }
 
+/// Solves the leading `n` × `n` block of the symmetric positive-definite system `a x = b` in
+/// place by Cholesky (`a` becomes its factor L, `b` becomes x), in fixed arrays so a model's
+/// `derivative` never allocates; pivots are floored at 1e-300 before their square root.
+pub fn cholesky_solve_fixed<const N: usize>(a: &mut [[f64; N]; N], b: &mut [f64; N], n: usize) {
+    for j in 0..n {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d -= a[j][k] * a[j][k];
+        }
+        let d = d.max(1e-300).sqrt();
+        a[j][j] = d;
+        for i in j + 1..n {
+            let mut s = a[i][j];
+            for k in 0..j {
+                s -= a[i][k] * a[j][k];
+            }
+            a[i][j] = s / d;
+        }
+    }
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= a[i][k] * b[k];
+        }
+        b[i] = s / a[i][i];
+    }
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for k in i + 1..n {
+            s -= a[k][i] * b[k];
+        }
+        b[i] = s / a[i][i];
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

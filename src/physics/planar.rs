@@ -341,39 +341,6 @@ impl PlanarTree {
     }
 }
 
-/// Cholesky solve of the n×n SPD system `a x = b` in place (b becomes x).
-fn cholesky_solve(a: &mut [[f64; MAX_DOF]; MAX_DOF], b: &mut [f64; MAX_DOF], n: usize) {
-    for j in 0..n {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d -= a[j][k] * a[j][k];
-        }
-        let d = d.max(1e-300).sqrt();
-        a[j][j] = d;
-        for i in j + 1..n {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s -= a[i][k] * a[j][k];
-            }
-            a[i][j] = s / d;
-        }
-    }
-    for i in 0..n {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= a[i][k] * b[k];
-        }
-        b[i] = s / a[i][i];
-    }
-    for i in (0..n).rev() {
-        let mut s = b[i];
-        for k in i + 1..n {
-            s -= a[k][i] * b[k];
-        }
-        b[i] = s / a[i][i];
-    }
-}
-
 impl Model for PlanarTree {
     fn name(&self) -> &str {
         &self.name
@@ -465,7 +432,7 @@ impl Ode for PlanarTree {
                 rhs[c] += jac[0][c] * fx + jac[1][c] * fy;
             }
         }
-        cholesky_solve(&mut m, &mut rhs, n);
+        crate::linalg::cholesky_solve_fixed(&mut m, &mut rhs, n);
         dx[..n].copy_from_slice(qd);
         dx[n..2 * n].copy_from_slice(&rhs[..n]);
     }

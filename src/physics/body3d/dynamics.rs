@@ -248,39 +248,6 @@ impl Tree3d {
     }
 }
 
-/// Cholesky solve of the n × n SPD system `a x = b` in place (b becomes x).
-fn cholesky_solve(a: &mut [[f64; MAX_DOF]; MAX_DOF], b: &mut [f64; MAX_DOF], n: usize) {
-    for j in 0..n {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d -= a[j][k] * a[j][k];
-        }
-        let d = d.max(1e-300).sqrt();
-        a[j][j] = d;
-        for i in j + 1..n {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s -= a[i][k] * a[j][k];
-            }
-            a[i][j] = s / d;
-        }
-    }
-    for i in 0..n {
-        let mut s = b[i];
-        for k in 0..i {
-            s -= a[i][k] * b[k];
-        }
-        b[i] = s / a[i][i];
-    }
-    for i in (0..n).rev() {
-        let mut s = b[i];
-        for k in i + 1..n {
-            s -= a[k][i] * b[k];
-        }
-        b[i] = s / a[i][i];
-    }
-}
-
 impl Ode for Tree3d {
     fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
         let (nq, nv) = (self.nq(), self.nv());
@@ -308,7 +275,7 @@ impl Ode for Tree3d {
             }
             iv += nvi;
         }
-        cholesky_solve(&mut h, &mut rhs, nv);
+        crate::linalg::cholesky_solve_fixed(&mut h, &mut rhs, nv);
         // Position rates.
         let (mut iq, mut iv) = (0, 0);
         for b in &self.bodies {

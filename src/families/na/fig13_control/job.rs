@@ -594,6 +594,31 @@ fn with_start<R>(
     Ok(f(&mut bptt, v0))
 }
 
+/// [`with_start`] with the headline's schedule: λ measured at the initial knots and the task's
+/// η, α and step rule; `None` when λ is not finite and positive (nothing can be learned at a
+/// fixed step then).
+fn with_schedule<R>(
+    task: &Task,
+    net: &crate::emulator::Emulator,
+    curvature_iterations: usize,
+    f: impl FnOnce(&mut Bptt<'_, crate::emulator::Emulator>, Vec<f64>, f64, &Schedule) -> Option<R>,
+) -> Result<Option<R>, Error> {
+    with_start(task, net, |bptt, v0| {
+        let lambda = bptt.curvature(&v0, curvature_iterations);
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return None;
+        }
+        let schedule = schedule(
+            task.eta,
+            task.alpha,
+            task.step_rule,
+            lambda,
+            curvature_iterations,
+        );
+        f(bptt, v0, lambda, &schedule)
+    })
+}
+
 /// The final error of per-step `controls` replayed on `task`'s simulator from its start, each
 /// emulator step `steps` physical steps (`emu_final`, the emulator's final state, is what the
 /// replay is compared with in its record).
@@ -625,20 +650,9 @@ pub fn iterations_to_goal(
     steps: usize,
     curvature_iterations: usize,
 ) -> Result<Option<usize>, Error> {
-    with_start(task, net, |bptt, v0| {
-        let lambda = bptt.curvature(&v0, curvature_iterations);
-        if !(lambda.is_finite() && lambda > 0.0) {
-            return None;
-        }
-        let schedule = schedule(
-            task.eta,
-            task.alpha,
-            task.step_rule,
-            lambda,
-            curvature_iterations,
-        );
+    with_schedule(task, net, curvature_iterations, |bptt, v0, _, schedule| {
         let cap = TO_GOAL_FACTOR * task.task.iterations;
-        let (_, _, iterates) = learn_recording(bptt, &v0, &schedule, cap, true);
+        let (_, _, iterates) = learn_recording(bptt, &v0, schedule, cap, true);
         let at = task.task.horizon * task.net.model.state_dim();
         iterates.iter().find_map(|(iteration, _, v)| {
             bptt.rollout(v);
@@ -749,40 +763,34 @@ pub(super) fn learn_and_replay_path(
     curvature_iterations: usize,
     path: Option<(&mut Table, u64)>,
 ) -> Result<Option<(HeadlineRun, Learned)>, Error> {
-    with_start(task, net, |bptt, v0| {
-        let lambda = bptt.curvature(&v0, curvature_iterations);
-        if !(lambda.is_finite() && lambda > 0.0) {
-            return None;
-        }
-        let schedule = schedule(
-            task.eta,
-            task.alpha,
-            task.step_rule,
-            lambda,
-            curvature_iterations,
-        );
-        let (r, best, iterates) =
-            learn_recording(bptt, &v0, &schedule, task.task.iterations, path.is_some());
-        if let Some((table, seed)) = path {
-            push_path(
-                table,
-                task,
-                seed,
-                bptt,
-                &iterates,
-                lambda,
-                steps,
-                curvature_iterations,
-            );
-        }
-        let emu_final = &best.states[task.task.horizon * task.net.model.state_dim()..];
-        let run = HeadlineRun {
-            emulator_error: task.final_error(emu_final),
-            simulator_error: simulator_error(task, &best.controls, emu_final, steps),
-            best_iteration: r.best_iteration,
-        };
-        Some((run, r))
-    })
+    with_schedule(
+        task,
+        net,
+        curvature_iterations,
+        |bptt, v0, lambda, schedule| {
+            let (r, best, iterates) =
+                learn_recording(bptt, &v0, schedule, task.task.iterations, path.is_some());
+            if let Some((table, seed)) = path {
+                push_path(
+                    table,
+                    task,
+                    seed,
+                    bptt,
+                    &iterates,
+                    lambda,
+                    steps,
+                    curvature_iterations,
+                );
+            }
+            let emu_final = &best.states[task.task.horizon * task.net.model.state_dim()..];
+            let run = HeadlineRun {
+                emulator_error: task.final_error(emu_final),
+                simulator_error: simulator_error(task, &best.controls, emu_final, steps),
+                best_iteration: r.best_iteration,
+            };
+            Some((run, r))
+        },
+    )
 }
 
 /// [`learn_best`] for `iterations`, and where `record`, every iterate (for `path.csv`).
