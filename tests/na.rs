@@ -47,15 +47,32 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
     // Every catalog net with its `paper` line and each variant, a row per toleranced
     // quantity: pendulums 6 each, the lander 7, the truck 3.
     let regime = rows(&out.join("regime_fidelity.csv"));
-    assert_eq!(regime.len(), 3 * (3 * 6 + 7 + 3));
+    assert_eq!(regime.len(), 4 * (3 * 6 + 7 + 3));
     for r in &regime {
         let v: Vec<f64> = r[2..5].iter().map(|x| x.parse().unwrap()).collect();
         assert!(
             v.iter().all(|x| x.is_finite()) && v[1] >= v[0].abs(),
             "{r:?}"
         );
-        assert!(["paper", "box", "noise"].contains(&r[5].as_str()), "{r:?}");
+        assert!(
+            ["paper", "box", "noise", "typical"].contains(&r[5].as_str()),
+            "{r:?}"
+        );
     }
+    // The truck's and the lander's Table 1 nets learn from their tasks' regime, the pendulums'
+    // from the typical manoeuvres; the `typical` variant is each net on the typical ones.
+    for r in regime.iter().filter(|r| r[5] == "paper") {
+        let want = if r[0] == "truck" || r[0] == "lander" {
+            "regime"
+        } else {
+            "typical"
+        };
+        assert_eq!(r[6], want, "{r:?}");
+    }
+    assert!(regime
+        .iter()
+        .filter(|r| r[5] == "typical")
+        .all(|r| r[6] == "typical"));
     assert_eq!(
         header(&out.join("training.csv")),
         "net,iteration,train_error,heldout_error"

@@ -46,10 +46,12 @@
 //!     hover), attitude torques within ±400 N·m (a fifth of the jets' limit), piecewise
 //!     constant for 0.5–2 s, with a quarter of the knots' torques idle; episodes of 10 s.
 //!
-//! - **Regime** (ours, a second line): the typical manoeuvres with each control channel that
-//!   the Fig. 13 tasks' regime bounds ([`NetModel::regime_control_box`]: the truck's drive, the
-//!   lander's thrust and roll and pitch torques) sampled inside that bound instead of the whole
-//!   box, the same amplitudes relative to it; the starts are the typical ones.
+//! - **Regime** (ours; the Table 1 truck's and lander's data, which their experiment files
+//!   name): the typical manoeuvres with each control channel that the Fig. 13 tasks' regime
+//!   bounds ([`NetModel::regime_control_box`]: the truck's drive, the lander's thrust and roll
+//!   and pitch torques) sampled inside that bound instead of the whole box, the same amplitudes
+//!   relative to it; the starts are the typical ones. Table 1's fidelity on the tasks' inputs
+//!   is measured on it ([`regime_fidelity`]).
 //!
 //! The regimes share the control box of the control tasks' limits (the regime's data lie inside
 //! it) and the episode lengths.
@@ -577,7 +579,8 @@ pub const TYPICAL_AMPLITUDE_MIN: f64 = 0.01;
 #[serde(rename_all = "snake_case")]
 pub enum DataRegime {
     /// Each model's typical manoeuvres ([`NetModel::control_process_in`],
-    /// [`NetModel::typical_start_state`]): the paper's reading, the default.
+    /// [`NetModel::typical_start_state`]), every channel over its whole box: the paper's
+    /// reading, the default (the pendulums' Table 1 data).
     #[default]
     Typical,
     /// Knots uniform over the whole control box from wide starts ([`NetModel::control_process`],
@@ -585,7 +588,7 @@ pub enum DataRegime {
     Box,
     /// The typical manoeuvres with each control channel that the Fig. 13 tasks' regime bounds
     /// kept inside it ([`NetModel::regime_control_box`]): the data concentrated further on the
-    /// tasks' inputs (ours, a second line).
+    /// tasks' inputs (ours; the Table 1 truck's and lander's data).
     Regime,
 }
 
@@ -1147,20 +1150,21 @@ pub struct RegimeFidelity {
     pub rollout_tol: f64,
 }
 
-/// The typical-data twin of `spec` ([`DataRegime::Typical`], everything else the same): the
-/// regime every variant of a net is measured in.
-pub fn typical_twin(spec: &BuildSpec) -> BuildSpec {
+/// The task-regime twin of `spec` ([`DataRegime::Regime`], everything else the same): the
+/// data every variant of a net is measured on, the inputs its control tasks use (for the
+/// pendulums the typical manoeuvres: their regime bounds no control).
+pub fn regime_twin(spec: &BuildSpec) -> BuildSpec {
     let mut t = spec.clone();
-    t.net.data = DataRegime::Typical;
+    t.net.data = DataRegime::Regime;
     t
 }
 
 /// [`RegimeFidelity`] of `emulator` (built from `spec`, any data regime) for every variable
-/// whose `tolerance` is positive: one-step errors on a fresh set of `spec.held_out()` typical
-/// examples (stream 21 of the spec's seed, separate from every training and held-out set),
-/// and open-loop errors after `horizon` super-steps on `episodes` typical episodes (the
-/// rollout reference of [`rollout_error`], so every variant of a net is measured on the same
-/// examples and episodes).
+/// whose `tolerance` is positive: one-step errors on a fresh set of `spec.held_out()`
+/// examples of the tasks' regime ([`regime_twin`]; stream 21 of the spec's seed, separate from
+/// every training and held-out set), and open-loop errors after `horizon` super-steps on
+/// `episodes` episodes of it (the rollout reference of [`rollout_error`], so every variant of
+/// a net is measured on the same examples and episodes).
 pub fn regime_fidelity(
     emulator: &Emulator,
     spec: &BuildSpec,
@@ -1168,7 +1172,7 @@ pub fn regime_fidelity(
     episodes: usize,
     horizon: usize,
 ) -> Result<Vec<RegimeFidelity>, BuildError> {
-    let twin = typical_twin(spec);
+    let twin = regime_twin(spec);
     let model = twin.net.model;
     let n = model.state_dim();
     assert_eq!(tolerance.len(), n, "one tolerance per state variable");

@@ -107,7 +107,8 @@ pub struct Table1Rule {
     /// measured.
     pub rollout_max: f64,
     /// Faithful on the tasks' inputs: every toleranced quantity's median 40-step open-loop
-    /// error on typical manoeuvres within this many of its Fig. 13 task's tolerances.
+    /// error on the tasks' regime ([`crate::emulator::catalog::regime_fidelity`]) within this
+    /// many of its Fig. 13 task's tolerances.
     pub regime_rollout_max: f64,
 }
 
