@@ -1,13 +1,11 @@
-//! The same digits on every machine (issue 60): FNV-1a hashes of the bits of short rollouts of
-//! every model that feeds a verdict, of one DDP iteration and one LQR tracker of the diver, of
-//! the Bellman combination and of the portable elementary functions, against constants
-//! recorded on 2026-11-28 (on a Zen 3 with AVX2 + FMA, and the same with glibc forced onto its
-//! generic code and `matrixmultiply` onto its plain kernel: PERFORMANCE.md, 2026-11-28); and of
-//! tiny emulators trained by each method and rolled out (recorded on 2026-11-29 on the same
-//! machine, the same with `MOTIONLAB_SIMD=scalar` and `avx2`). The pendulums' and the tiny
-//! emulators' constants were recorded again on 2026-12-02 for two deliberate changes: the
-//! pendulum's elbow and pivot friction and the emulators' typical training data. The jumper's
-//! crouch was added on 2026-12-03 (portable math since then).
+//! The same digits on every machine: FNV-1a hashes of the bits of short rollouts of every
+//! model that feeds a verdict (the jumper's crouch among them), of one DDP iteration and one
+//! LQR tracker of the diver, of the Bellman combination and of the portable elementary
+//! functions, and of tiny emulators trained by each method and rolled out, against recorded
+//! constants. The constants were recorded on a Zen 3 with AVX2 + FMA and checked there with
+//! glibc forced onto its generic code, `matrixmultiply` onto its plain kernel and
+//! `MOTIONLAB_SIMD=scalar` and `avx2` (PERFORMANCE.md says how); a constant changes only with a
+//! deliberate change of its model, data or solver, which the commit that changes it names.
 //!
 //! A failure on a machine where the rest of the suite passes means some operation on that
 //! path picks its implementation by processor (a libm call, a dispatched matrix kernel):

@@ -67,7 +67,8 @@ fn written_table(dir: &Path) -> String {
     std::fs::read_to_string(dir.join("t.csv")).unwrap()
 }
 
-/// A truncated row, a cut-off last line, a non-numeric or empty cell in a numeric column: each
+/// A truncated row, a cut-off last line, a row cut off or added at a row boundary (against the
+/// Parquet table written beside it), a non-numeric or empty cell in a numeric column: each
 /// is an error naming the file and the line; the table as written reads back, numeric-looking
 /// strings in a string column included.
 #[test]
@@ -99,6 +100,15 @@ fn a_malformed_table_is_an_error_naming_file_and_line() {
         ),
         (good.replacen("7,2,1.25", "7,2,", 1), 3, "empty"),
         (String::new(), 1, "empty"),
+        // Cut at a row boundary: a whole table to look at, one row fewer than was written
+        // (a seed's rows gone would change a median, not fail a parse).
+        (
+            good.lines().take(3).map(|l| format!("{l}\n")).collect(),
+            3,
+            "2 rows where the Parquet table written beside it has 3",
+        ),
+        // A row added.
+        (format!("{good}d,4,1.5\n"), 5, "4 rows where"),
     ];
     for (text, line, what) in cases {
         std::fs::write(&path, &text).unwrap();

@@ -101,19 +101,21 @@ impl Gait {
     }
 }
 
-/// The (hip, knee, ankle) coordinates in q of the leg on `side`.
-fn leg(side: Side) -> (usize, usize, usize) {
-    let Leg { hip, knee, ankle } = Biped::leg(side);
-    (hip, knee, ankle)
-}
-
 /// The SIMBICON angles of a state `x` of the biped: (torso from upright, [left hip, knee,
 /// ankle], [right hip, knee, ankle]) and their rates, in the same layout.
 pub fn simbicon_angles(x: &[f64]) -> ([f64; 7], [f64; 7]) {
     let q = |i: usize| x[i];
     let r = |i: usize| x[DOF + i];
-    let (lh, lk, la) = leg(Side::Left);
-    let (rh, rk, ra) = leg(Side::Right);
+    let Leg {
+        hip: lh,
+        knee: lk,
+        ankle: la,
+    } = Biped::leg(Side::Left);
+    let Leg {
+        hip: rh,
+        knee: rk,
+        ankle: ra,
+    } = Biped::leg(Side::Right);
     let angles = [
         q(2) - FRAC_PI_2,
         q(lh) + PI,
@@ -231,8 +233,16 @@ impl Simbicon {
 /// foot's lowest point touches the ground).
 pub fn applet_start(biped: &Biped, x: f64) -> Vec<f64> {
     let mut s = vec![0.0; 2 * DOF];
-    let (lh, lk, la) = leg(Side::Left);
-    let (rh, rk, ra) = leg(Side::Right);
+    let Leg {
+        hip: lh,
+        knee: lk,
+        ankle: la,
+    } = Biped::leg(Side::Left);
+    let Leg {
+        hip: rh,
+        knee: rk,
+        ankle: ra,
+    } = Biped::leg(Side::Right);
     s[0] = x;
     s[2] = FRAC_PI_2 + 0.051;
     s[lh] = -PI + 0.298;

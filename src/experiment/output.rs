@@ -720,7 +720,21 @@ pub fn read_csv(path: &Path) -> Result<DataFrame, Error> {
         path: path.to_path_buf(),
         source,
     })?;
-    check_csv(path, &text, &numeric_columns(path))?;
+    let twin = parquet_twin(path);
+    check_csv(path, &text, &twin.numeric)?;
+    if let Some(rows) = twin.rows {
+        let have = csv_records(path, &text)?.len().saturating_sub(1);
+        if have != rows {
+            return Err(malformed(
+                path,
+                text.lines().count(),
+                format!(
+                    "{have} rows where the Parquet table written beside it has {rows} \
+                     (rows cut off or added)"
+                ),
+            ));
+        }
+    }
     CsvReadOptions::default()
         .with_has_header(true)
         .try_into_reader_with_file_path(Some(path.to_path_buf()))
@@ -728,18 +742,33 @@ pub fn read_csv(path: &Path) -> Result<DataFrame, Error> {
         .map_err(|e| Error::Polars(format!("{}: {e}", path.display())))
 }
 
-/// Which columns of the CSV at `path` hold numbers, by the Parquet file [`write_table`] wrote
-/// beside it (`name` → whether numeric); empty when there is none to read.
-fn numeric_columns(path: &Path) -> Vec<(String, bool)> {
+/// What the Parquet file [`write_table`] wrote beside a CSV says about the table.
+#[derive(Debug, Default)]
+struct ParquetTwin {
+    /// Each column's name and whether it holds numbers; empty when there is none to read.
+    numeric: Vec<(String, bool)>,
+    /// Its number of rows, when it can be read: a CSV cut at a row boundary still parses as a
+    /// whole table, and only this count tells it from the table the run wrote.
+    rows: Option<usize>,
+}
+
+/// The [`ParquetTwin`] of the CSV at `path` (empty when there is no Parquet file beside it, as
+/// for tables not written by [`write_table`]).
+fn parquet_twin(path: &Path) -> ParquetTwin {
     let Ok(file) = std::fs::File::open(path.with_extension("parquet")) else {
-        return Vec::new();
+        return ParquetTwin::default();
     };
-    match ParquetReader::new(file).schema() {
+    let mut reader = ParquetReader::new(file);
+    let numeric = match reader.schema() {
         Ok(schema) => schema
             .iter()
             .map(|(name, field)| (name.to_string(), field.dtype.is_numeric()))
             .collect(),
         Err(_) => Vec::new(),
+    };
+    ParquetTwin {
+        numeric,
+        rows: reader.num_rows().ok(),
     }
 }
 

@@ -19,6 +19,10 @@
 //! equations of motion through the points' Jacobians ([`PlanarTree`]'s force points), and a
 //! body's controls are its joint torques only.
 //!
+//! The normal law is one function, [`Contact::normal_force`], shared with the 3-D bodies:
+//! [`Contact::force3d`] lifts the ground to 3-D (z up, the height varying along world x) with
+//! friction in the tangent plane, f_t = −μ f_n tanh(|v_t| / v_s) v_t / |v_t|.
+//!
 //! Terrain ([`Terrain`]): flat, a constant incline, or flat then a hill starting at a given x
 //! (the corner rounded over `smoothing_m`, so the height is smooth too).
 //!
@@ -165,6 +169,19 @@ fn sigmoid(a: f64) -> f64 {
     }
 }
 
+/// tanh(s) / s as a function of s² (1 at 0): an even analytic function, so friction
+/// μ f_n (tanh(s)/s) v_t / v_s with s = |v_t| / v_s is infinitely differentiable in v_t, also
+/// at v_t = 0. Below s = 0.01 the series 1 − s²/3 + 2s⁴/15 − 17s⁶/315 (next term under
+/// 3e-18).
+pub fn slip_factor(s2: f64) -> f64 {
+    if s2 < 1e-4 {
+        1.0 - s2 * (1.0 / 3.0 - s2 * (2.0 / 15.0 - s2 * (17.0 / 315.0)))
+    } else {
+        let s = s2.sqrt();
+        tanh(s) / s
+    }
+}
+
 impl Contact {
     /// Checks the constants.
     pub fn validate(&self) -> Result<(), String> {
@@ -229,14 +246,45 @@ impl Contact {
         let n = [-slope / norm, 1.0 / norm];
         let t = [1.0 / norm, slope / norm];
         let d = (p[1] - h) / norm;
-        let pen = softplus(-d, self.smoothing);
-        let gate = sigmoid(-d / self.smoothing);
         let vn = v[0] * n[0] + v[1] * n[1];
         let vt = v[0] * t[0] + v[1] * t[1];
-        let fn_raw = self.stiffness * pen - self.damping * gate * vn;
-        let f_n = softplus(fn_raw, 1.0);
+        let f_n = self.normal_force(d, vn);
         let f_t = -self.friction * f_n * tanh(vt / self.slip_speed);
         [f_n * n[0] + f_t * t[0], f_n * n[1] + f_t * t[1]]
+    }
+
+    /// The normal force f_n ≥ 0 (N) on a point at signed distance `d` (m) from the terrain
+    /// along its normal, moving at `vn` (m/s) along it: F softplus((k pen − c gate vn) / F)
+    /// with pen = ε softplus(−d / ε) and gate = σ(−d / ε) (module docs). The one normal law of
+    /// every body on the ground, planar ([`Contact::force`]) and 3-D ([`Contact::force3d`]).
+    pub fn normal_force(&self, d: f64, vn: f64) -> f64 {
+        let pen = softplus(-d, self.smoothing);
+        let gate = sigmoid(-d / self.smoothing);
+        let fn_raw = self.stiffness * pen - self.damping * gate * vn;
+        softplus(fn_raw, 1.0)
+    }
+
+    /// The ground's force (N, world x, y, z; z up) on a point at `p` moving at `v`, the
+    /// terrain's height h(x) varying along world x alone (the planar terrain extruded along
+    /// y): the normal force of [`Contact::normal_force`] along the unit normal
+    /// n = (−h′, 0, 1) / √(1 + h′²), and friction in the tangent plane,
+    /// f_t = −μ f_n tanh(|v_t| / v_s) v_t / |v_t|, the planar law turned toward the slip
+    /// direction (|f_t| ≤ μ f_n; smooth at v_t = 0, see [`slip_factor`]).
+    pub fn force3d(&self, terrain: &Terrain, p: [f64; 3], v: [f64; 3]) -> [f64; 3] {
+        if !self.enabled {
+            return [0.0; 3];
+        }
+        let (h, slope) = terrain.height_slope(p[0]);
+        let norm = (1.0 + slope * slope).sqrt();
+        let n = [-slope / norm, 0.0, 1.0 / norm];
+        let d = (p[2] - h) / norm;
+        let vn = v[0] * n[0] + v[2] * n[2];
+        let vt = [v[0] - vn * n[0], v[1], v[2] - vn * n[2]];
+        let f_n = self.normal_force(d, vn);
+        let s2 =
+            (vt[0] * vt[0] + vt[1] * vt[1] + vt[2] * vt[2]) / (self.slip_speed * self.slip_speed);
+        let w = self.friction * f_n * slip_factor(s2) / self.slip_speed;
+        [f_n * n[0] - w * vt[0], -w * vt[1], f_n * n[2] - w * vt[2]]
     }
 }
 

@@ -179,10 +179,16 @@ mod tests {
         // Facing +x: the knee ahead of the ankle, the neck ahead of the hip, the hands behind
         // the shoulders.
         let p = |link: usize, r: f64| j.tree.point(&x[..DOF], link, r);
-        assert!(p(5, 0.0)[0] > p(6, 0.0)[0], "knee behind the ankle");
-        assert!(p(0, j.tree.links[0].length)[0] > x[0], "torso tipped back");
         assert!(
-            p(3, j.tree.links[3].length)[0] < p(2, 0.0)[0],
+            p(link::SHANK, 0.0)[0] > p(link::FOOT, 0.0)[0],
+            "knee behind the ankle"
+        );
+        assert!(
+            p(link::TORSO, j.tree.links[link::TORSO].length)[0] > x[0],
+            "torso tipped back"
+        );
+        assert!(
+            p(link::FOREARM, j.tree.links[link::FOREARM].length)[0] < p(link::UPPER_ARM, 0.0)[0],
             "arms forward"
         );
     }

@@ -19,7 +19,6 @@ use crate::experiment::{Error, Family, Job, RunContext};
 use crate::physics::acrobot::Acrobot;
 use crate::physics::pendulum::{Pendulum3, PendulumVariant};
 use crate::physics::{Integrator, IntegratorKind, Model, Ode, Simulator};
-use crate::row;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -271,6 +270,26 @@ crate::result_rows! {
     }
 }
 
+crate::result_rows! {
+    /// The leading columns of a row of `passive_<model>.csv`: one start's passive motion at
+    /// one time; the state follows in one column per state variable (named as `describe`
+    /// names them), then the energy.
+    pub struct PassiveRow {
+        /// The start's index among the spec's `passive_starts`.
+        start: i64 = "start",
+        /// Time (s).
+        t_s: f64 = "t",
+    }
+}
+
+/// The states of a `passive_<model>` table's rows, their variables named `names`.
+fn states_of(t: &Table, names: &[String]) -> Vec<Vec<f64>> {
+    let columns: Vec<Vec<f64>> = names.iter().map(|c| t.f64s(c)).collect();
+    (0..t.len())
+        .map(|r| columns.iter().map(|c| c[r]).collect())
+        .collect()
+}
+
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
         serde_json::to_value(self).unwrap_or_default()
@@ -384,11 +403,11 @@ impl Job for Params {
         ctx.stage("passive motion", || -> Result<(), Error> {
             for name in &self.models {
                 let model = conservative_model(name).expect("validated");
-                let mut cols: Vec<String> = vec!["start".into(), "t".into()];
-                cols.extend(model.state_names());
-                cols.push("energy".into());
-                let col_refs: Vec<&str> = cols.iter().map(|s| s.as_str()).collect();
-                let mut t = Table::new(&col_refs);
+                let names = model.state_names();
+                let mut cols: Vec<&str> = PassiveRow::COLUMNS.to_vec();
+                cols.extend(names.iter().map(String::as_str));
+                cols.push("energy");
+                let mut t = Table::new(&cols);
                 let steps = (self.passive_duration / self.passive_dt).round() as usize;
                 let runs: Vec<Result<Vec<(f64, Vec<f64>)>, Error>> = self.passive_starts[name]
                     .par_iter()
@@ -408,7 +427,11 @@ impl Job for Params {
                     .collect();
                 for (j, run) in runs.into_iter().enumerate() {
                     for (time, x) in run? {
-                        let mut r = row![j, time];
+                        let lead = PassiveRow {
+                            start: j as i64,
+                            t_s: time,
+                        };
+                        let mut r = lead.cells();
                         r.extend(x.iter().map(|&v| v.into()));
                         r.push(model.energy(&x).unwrap_or(f64::NAN).into());
                         t.push(r);
@@ -463,32 +486,28 @@ impl Family for PhysicsValidation {
             };
             let names = model.state_names();
             let nq = model.position_dim().unwrap_or(names.len());
-            let start = t.f64s("start");
-            let time = t.f64s("t");
-            let n_starts = start.iter().fold(0.0f64, |a, &b| a.max(b)) as usize + 1;
+            let lead = PassiveRow::from_table(t);
+            let states = states_of(t, &names);
+            let n_starts = lead.iter().map(|r| r.start).max().unwrap_or(0) as usize + 1;
             let mut panels = Vec::new();
             for s in 0..n_starts {
-                let rows: Vec<usize> = (0..start.len())
-                    .filter(|&r| start[r] as usize == s)
+                let rows: Vec<usize> = (0..lead.len())
+                    .filter(|&r| lead[r].start as usize == s)
                     .collect();
                 let series = names[..nq]
                     .iter()
                     .enumerate()
                     .map(|(c, n)| {
-                        let v = t.f64s(n);
                         Series::line(
                             format!("{n} (rad)"),
-                            rows.iter().map(|&r| (time[r], v[r])).collect(),
+                            rows.iter().map(|&r| (lead[r].t_s, states[r][c])).collect(),
                             c,
                         )
                     })
                     .collect();
                 // The start state, read from the first row of this start (t = 0): its angles,
                 // and its rates where any is not zero.
-                let x0: Vec<f64> = rows
-                    .first()
-                    .map(|&r| names.iter().map(|n| t.f64s(n)[r]).collect())
-                    .unwrap_or_default();
+                let x0: Vec<f64> = rows.first().map(|&r| states[r].clone()).unwrap_or_default();
                 let list = |v: &[f64]| {
                     v.iter()
                         .map(|x| format!("{x:.2}"))

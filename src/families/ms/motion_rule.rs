@@ -17,7 +17,7 @@
 
 use super::rows::MeasureRow;
 use super::search::Motion;
-use crate::experiment::output::{df_f64, read_csv};
+use super::settings::Swept;
 use crate::experiment::resolve::{ensure, ParamError};
 use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{majority, Check, Cmp, Null, Partly, Rule};
@@ -164,15 +164,29 @@ pub fn motion_rule(motion: Motion, facts: &[MotionFacts], r: &MotionRule) -> Opt
     Rule::gated(vec![], held, Partly::All(vec![2, 3]))
 }
 
+crate::result_rows! {
+    /// The seed of a row of the top folder's `measures.csv`, a column the harness adds in a
+    /// run over seeds.
+    struct SeedRow {
+        /// The seed.
+        seed: Swept<f64> = "seed",
+    }
+}
+
 /// The folders holding each seed's tables: `seeds/<seed>/` for every seed of a run over seeds
 /// (the top folder's `measures` table has a `seed` column), else the folder itself.
 pub fn seed_folders(dir: &Path) -> Result<Vec<(Option<u64>, PathBuf)>, Error> {
-    let m = read_csv(&dir.join("measures.csv"))?;
-    if m.column("seed").is_err() {
+    let rows: Vec<SeedRow> = read_rows(&dir.join("measures.csv"))?;
+    let Some(column) = rows
+        .iter()
+        .map(|r| r.seed.0)
+        .collect::<Option<Vec<f64>>>()
+        .filter(|c| !c.is_empty())
+    else {
         return Ok(vec![(None, dir.to_path_buf())]);
-    }
+    };
     let mut seeds: Vec<u64> = Vec::new();
-    for s in df_f64(&m, "seed")? {
+    for s in column {
         let s = s as u64;
         if !seeds.contains(&s) {
             seeds.push(s);

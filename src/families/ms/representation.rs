@@ -46,8 +46,44 @@ use std::time::Instant;
 /// The family.
 pub struct MsRepresentation;
 
+/// A controller representation compared.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Representation {
+    /// The 12 canonical deformation reflexes (the paper's).
+    Reflexes,
+    /// Free rest lengths: each regime an arbitrary vector of spring rest lengths.
+    FreeRestLengths,
+}
+
+impl Representation {
+    /// Both, in table order.
+    pub const ALL: [Representation; 2] =
+        [Representation::Reflexes, Representation::FreeRestLengths];
+
+    /// Its name in the tables.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Representation::Reflexes => "reflexes",
+            Representation::FreeRestLengths => "free_rest_lengths",
+        }
+    }
+
+    /// Its name in figure legends.
+    fn label(self) -> &'static str {
+        match self {
+            Representation::Reflexes => "12 canonical reflexes",
+            Representation::FreeRestLengths => "free rest lengths",
+        }
+    }
+}
+
 /// The representations compared, as written in the tables.
-pub const REPRESENTATIONS: [&str; 2] = ["reflexes", "free_rest_lengths"];
+pub const REPRESENTATIONS: [&str; 2] =
+    [Representation::ALL[0].name(), Representation::ALL[1].name()];
+/// The reflexes' name in the tables.
+const REFLEXES: &str = Representation::Reflexes.name();
+/// Free rest lengths' name in the tables.
+const FREE: &str = Representation::FreeRestLengths.name();
 
 /// Parameters of `ms_representation`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -175,7 +211,8 @@ impl Job for RepresentationParams {
             let problem = p.problem()?;
             let cfg = p.hill_config();
             let springs = problem.setup.model.lattice.springs.len();
-            for rep in REPRESENTATIONS {
+            for representation in Representation::ALL {
+                let rep = representation.name();
                 // The best controller over the seeds: its trajectory gives the measures.
                 let mut best: Option<(f64, crate::synthesis::controller::Trajectory)> = None;
                 for k in 0..self.seeds {
@@ -183,7 +220,7 @@ impl Job for RepresentationParams {
                     let base = done;
                     let progress = |d: usize| pb.set_position((base + p.set_size + d) as u64);
                     let t0 = Instant::now();
-                    let (curve, best_value, traj) = if rep == "reflexes" {
+                    let (curve, best_value, traj) = if representation == Representation::Reflexes {
                         let eval =
                             |c: &crate::synthesis::controller::Controller| problem.evaluate(c);
                         let r = ctx
@@ -380,8 +417,8 @@ fn judge_rows(curves: &[CurvePointRow]) -> Vec<MotionJudgement> {
     motions_of(curves)
         .into_iter()
         .map(|name| {
-            let refl = median_curve(curves, &name, REPRESENTATIONS[0]);
-            let free = median_curve(curves, &name, REPRESENTATIONS[1]);
+            let refl = median_curve(curves, &name, REFLEXES);
+            let free = median_curve(curves, &name, FREE);
             let last = |c: &[(f64, f64, f64, f64)]| c.last().map_or(f64::NAN, |p| p.1);
             let free_final = last(&free);
             MotionJudgement {
@@ -414,21 +451,16 @@ impl Family for MsRepresentation {
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         let curves = CurvePointRow::from_table(tables.require("curves")?);
         let names = motions_of(&curves);
-        let label = |rep: &str| {
-            if rep == REPRESENTATIONS[0] {
-                "12 canonical reflexes"
-            } else {
-                "free rest lengths"
-            }
-        };
+
         let panels: Vec<Panel> = names
             .iter()
             .map(|name| {
                 let mut series = Vec::new();
-                for (k, rep) in REPRESENTATIONS.iter().enumerate() {
+                for (k, representation) in Representation::ALL.iter().enumerate() {
+                    let rep = representation.name();
                     let mc = median_curve(&curves, name, rep);
                     series.push(Series::line(
-                        format!("{}: median over seeds", label(rep)),
+                        format!("{}: median over seeds", representation.label()),
                         mc.iter().map(|p| (p.0, p.1)).collect(),
                         k,
                     ));
@@ -438,7 +470,7 @@ impl Family for MsRepresentation {
                     series.insert(
                         0,
                         Series::band(
-                            format!("{}: lowest to highest seed", label(rep)),
+                            format!("{}: lowest to highest seed", representation.label()),
                             &lower,
                             &upper,
                             k,
@@ -447,7 +479,7 @@ impl Family for MsRepresentation {
                 }
                 // The rule's bar: free's median final, to be reached by the reflexes' median
                 // within the rule's share of the evaluations.
-                let free = median_curve(&curves, name, REPRESENTATIONS[1]);
+                let free = median_curve(&curves, name, FREE);
                 if let (Some(&(n_end, f_end, _, _)), Some(share)) =
                     (free.last(), rule_setting(tables, "reach_fraction"))
                 {
@@ -523,19 +555,13 @@ impl Family for MsRepresentation {
                         .map(|r| r.best_objective)
                         .collect()
                 };
-                let (_, lo, hi) = median_difference_interval(
-                    &of(REPRESENTATIONS[0]),
-                    &of(REPRESENTATIONS[1]),
-                    k as u64,
-                );
+                let (_, lo, hi) = median_difference_interval(&of(REFLEXES), &of(FREE), k as u64);
                 (lo, hi)
             })
             .collect();
         let rule = representation_rule(&j, &intervals, &bars);
         let (verdict, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
-        let seeds = j
-            .first()
-            .map_or(0, |x| runs_of(&x.motion, REPRESENTATIONS[0]).len());
+        let seeds = j.first().map_or(0, |x| runs_of(&x.motion, REFLEXES).len());
         let mut summary = Vec::new();
         for (k, x) in j.iter().enumerate() {
             let supports = rule.as_ref().is_some_and(|r| {

@@ -26,12 +26,12 @@
 //! the threshold is inconclusive.
 
 use super::search::{MotionJob, Params};
-use crate::experiment::output::Tables;
+use crate::experiment::output::{Cell, Table, Tables};
 use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
-use crate::experiment::rows::{read_rows, table_of, TableRow};
+use crate::experiment::rows::{read_rows, table_of, ColumnValue, Frame, TableRow};
 use crate::experiment::rule::{rule_settings, rule_table, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::seeds::SeedMetric;
 use crate::experiment::stats::median_interval;
@@ -94,6 +94,55 @@ impl Validate for SettingsParams {
 crate::result_rows! {
     /// One row of `curve.csv`: hill climbing's best so far at one iteration.
     pub struct CurveRow {
+        /// The iteration (0: the initial set).
+        iteration: i64 = "iteration",
+        /// The best objective after it.
+        best: f64 = "best",
+    }
+}
+
+/// A column the harness prepends to a table when its run sweeps that axis (or runs over
+/// seeds): `None` in every row of a table without it.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Swept<T>(pub(super) Option<T>);
+
+impl<T: ColumnValue + Clone> ColumnValue for Swept<T> {
+    fn frame_column(df: &Frame, name: &str) -> Result<Vec<Self>, Error> {
+        if df.column(name).is_err() {
+            return Ok(vec![Swept(None); df.height()]);
+        }
+        Ok(T::frame_column(df, name)?
+            .into_iter()
+            .map(|v| Swept(Some(v)))
+            .collect())
+    }
+
+    fn table_column(t: &Table, name: &str) -> Vec<Self> {
+        if !t.names().iter().any(|n| n == name) {
+            return vec![Swept(None); t.len()];
+        }
+        T::table_column(t, name)
+            .into_iter()
+            .map(|v| Swept(Some(v)))
+            .collect()
+    }
+
+    fn cell(&self) -> Cell {
+        match &self.0 {
+            Some(v) => v.cell(),
+            None => Cell::S(String::new()),
+        }
+    }
+}
+
+crate::result_rows! {
+    /// A row of `curve` as the figure reads it: the sweep's setting, when swept, before the
+    /// job's [`CurveRow`].
+    struct SweptCurveRow {
+        /// Search set size N (the `set_size` axis).
+        set_size: Swept<f64> = "set_size",
+        /// The perturbation mix's name (the `perturbations` axis).
+        perturbations: Swept<String> = "perturbations",
         /// The iteration (0: the initial set).
         iteration: i64 = "iteration",
         /// The best objective after it.
@@ -364,23 +413,11 @@ impl Family for MsSearchSettings {
     ];
 
     fn figures(&self, fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-        let c = tables.require("curve")?;
-        let curve = CurveRow::from_table(c);
-        let (it, best): (Vec<f64>, Vec<f64>) =
-            curve.iter().map(|r| (r.iteration as f64, r.best)).unzip();
         // The setting of each row: the sweep's columns, which the harness prepends to the
         // job's (absent without a sweep: one setting).
-        let swept = |col: &str| c.names().iter().any(|n| n == col);
-        let sizes = if swept("set_size") {
-            c.f64s("set_size")
-        } else {
-            Vec::new()
-        };
-        let mixes = if swept("perturbations") {
-            c.strs("perturbations")
-        } else {
-            Vec::new()
-        };
+        let curve = SweptCurveRow::from_table(tables.require("curve")?);
+        let (it, best): (Vec<f64>, Vec<f64>) =
+            curve.iter().map(|r| (r.iteration as f64, r.best)).unzip();
         let summary = SettingsSummaryRow::from_table(tables.require("summary")?);
         let (n0, m0) = (
             summary.first().map_or(f64::NAN, |s| s.set_size as f64),
@@ -389,8 +426,14 @@ impl Family for MsSearchSettings {
                 .map(|s| s.perturbations.clone())
                 .unwrap_or_default(),
         );
-        let size_at = |i: usize| sizes.get(i).copied().unwrap_or(n0) as usize;
-        let mix_at = |i: usize| mixes.get(i).cloned().unwrap_or_else(|| m0.clone());
+        let size_at = |i: usize| curve[i].set_size.0.unwrap_or(n0) as usize;
+        let mix_at = |i: usize| {
+            curve[i]
+                .perturbations
+                .0
+                .clone()
+                .unwrap_or_else(|| m0.clone())
+        };
         let mut keys: Vec<(usize, String)> = Vec::new();
         for i in 0..it.len() {
             let k = (size_at(i), mix_at(i));

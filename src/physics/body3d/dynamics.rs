@@ -6,7 +6,7 @@ use super::spatial::{
     axis_angle, bottom, cross_force, cross_motion, join, quat_rate, quat_to_matrix, top, Spatial,
     Xform,
 };
-use super::tree::{Joint3d, Tree3d, MAX_BODIES, MAX_DOF};
+use super::tree::{BodyPoint, Joint3d, Tree3d, MAX_BODIES, MAX_DOF};
 use crate::physics::Ode;
 use nalgebra::{DMatrix, Matrix3, Matrix6, Vector3};
 
@@ -246,17 +246,129 @@ impl Tree3d {
             .map(|(i, b)| 0.5 * p.v[i].dot(&(b.spatial_inertia() * p.v[i])))
             .sum()
     }
+
+    /// World rotation (body to world coordinates) and origin (m) of every body, from a pass's
+    /// transforms, in fixed arrays ([`Tree3d::poses`] without allocation).
+    fn world_poses(&self, p: &Pass) -> [(Matrix3<f64>, Vector3<f64>); MAX_BODIES] {
+        let mut out = [(Matrix3::identity(), Vector3::zeros()); MAX_BODIES];
+        for (i, b) in self.bodies.iter().enumerate() {
+            let x = &p.x[i];
+            out[i] = match b.parent {
+                None => (x.e.transpose(), x.r),
+                Some(j) => {
+                    let (r, o) = out[j];
+                    (r * x.e.transpose(), o + r * x.r)
+                }
+            };
+        }
+        out
+    }
+
+    /// Spatial forces (body coordinates) of world `forces` on `points`, one per body, and the
+    /// points' world positions and velocities: the force on point k is `force(k, position,
+    /// velocity)`.
+    fn point_forces(
+        &self,
+        p: &Pass,
+        points: &[BodyPoint],
+        mut force: impl FnMut(usize, Vector3<f64>, Vector3<f64>) -> Vector3<f64>,
+    ) -> [Spatial; MAX_BODIES] {
+        let world = self.world_poses(p);
+        let mut fext = [Spatial::zeros(); MAX_BODIES];
+        for (k, pt) in points.iter().enumerate() {
+            let (r, o) = world[pt.body];
+            let off = Vector3::from(pt.offset);
+            let v = p.v[pt.body];
+            let vel = r * (bottom(&v) + top(&v).cross(&off));
+            let fb = r.transpose() * force(k, o + r * off, vel);
+            fext[pt.body] += join(off.cross(&fb), fb);
+        }
+        fext
+    }
+
+    /// Generalized forces Sᵢᵀ Σ_{subtree of i} fⱼ of spatial forces `fext` (each body's
+    /// coordinates), accumulated from the leaves as in the second sweep of the RNEA.
+    fn external(&self, p: &Pass, fext: &mut [Spatial; MAX_BODIES], out: &mut [f64; MAX_DOF]) {
+        for i in (0..self.bodies.len()).rev() {
+            let iv = self.v_index(i);
+            for k in iv..iv + self.bodies[i].joint.nv() {
+                out[k] = p.s[k].dot(&fext[i]);
+            }
+            if let Some(j) = self.bodies[i].parent {
+                let fp = p.x[i].force_to_parent(&fext[i]);
+                fext[j] += fp;
+            }
+        }
+    }
+
+    /// ẋ at `x` under motor torques `u` and world forces on `points`: the force on point k
+    /// (N, world) is `force(k, position, velocity)` of the point's world position (m) and
+    /// velocity (m/s) at `x`; they enter as Σₖ Jₖᵀ fₖ. Never allocates; without points this
+    /// is [`Ode::derivative`] (up to the sign of a zero).
+    pub fn derivative_with_point_forces(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        points: &[BodyPoint],
+        force: impl FnMut(usize, Vector3<f64>, Vector3<f64>) -> Vector3<f64>,
+        dx: &mut [f64],
+    ) {
+        let p = self.pass(x);
+        let mut fext = self.point_forces(&p, points, force);
+        let mut q = [0.0; MAX_DOF];
+        self.external(&p, &mut fext, &mut q);
+        self.forward(x, u, &p, Some(&q), dx);
+    }
+
+    /// The generalized force Σₖ Jₖᵀ fₖ (nv entries, N or N·m per velocity coordinate) of world
+    /// forces `forces[k]` (N) on `points[k]` at the configuration of state `x`: its dot
+    /// product with any q̇ is the forces' power Σₖ fₖ · vₖ.
+    pub fn generalized_force(
+        &self,
+        x: &[f64],
+        points: &[BodyPoint],
+        forces: &[Vector3<f64>],
+    ) -> Vec<f64> {
+        let p = self.pass(x);
+        let mut fext = self.point_forces(&p, points, |k, _, _| forces[k]);
+        let mut q = [0.0; MAX_DOF];
+        self.external(&p, &mut fext, &mut q);
+        q[..self.nv()].to_vec()
+    }
+
+    /// World positions (m) and velocities (m/s) of `points` at state `x`.
+    pub fn point_states(
+        &self,
+        x: &[f64],
+        points: &[BodyPoint],
+    ) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+        let p = self.pass(x);
+        let mut out = Vec::with_capacity(points.len());
+        self.point_forces(&p, points, |_, pos, vel| {
+            out.push((pos, vel));
+            Vector3::zeros()
+        });
+        out
+    }
 }
 
-impl Ode for Tree3d {
-    fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+impl Tree3d {
+    /// ẋ at `x` under motor torques `u` and, when given, the generalized forces `ext` of
+    /// external forces (added to the right-hand side after damping and motors).
+    fn forward(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        p: &Pass,
+        ext: Option<&[f64; MAX_DOF]>,
+        dx: &mut [f64],
+    ) {
         let (nq, nv) = (self.nq(), self.nv());
-        let p = self.pass(x);
         let qd = &x[nq..nq + nv];
         let mut h = [[0.0; MAX_DOF]; MAX_DOF];
         let mut rhs = [0.0; MAX_DOF];
-        self.crba(&p, &mut h);
-        self.rnea_bias(&p, &mut rhs);
+        self.crba(p, &mut h);
+        self.rnea_bias(p, &mut rhs);
         for r in rhs[..nv].iter_mut() {
             *r = -*r;
         }
@@ -274,6 +386,11 @@ impl Ode for Tree3d {
                 }
             }
             iv += nvi;
+        }
+        if let Some(q) = ext {
+            for (r, e) in rhs[..nv].iter_mut().zip(q) {
+                *r += e;
+            }
         }
         crate::linalg::cholesky_solve_fixed(&mut h, &mut rhs, nv);
         // Position rates.
@@ -297,6 +414,12 @@ impl Ode for Tree3d {
             iv += b.joint.nv();
         }
         dx[nq..nq + nv].copy_from_slice(&rhs[..nv]);
+    }
+}
+
+impl Ode for Tree3d {
+    fn derivative(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        self.forward(x, u, &self.pass(x), None, dx);
     }
 
     fn energy(&self, x: &[f64]) -> Option<f64> {

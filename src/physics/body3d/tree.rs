@@ -104,6 +104,16 @@ impl Body3d {
     }
 }
 
+/// A point fixed on a body of a tree, where an external force acts (a contact point).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodyPoint {
+    /// Index of the body in [`Tree3d::bodies`].
+    pub body: usize,
+    /// Position in the body's coordinates (m).
+    pub offset: [f64; 3],
+}
+
 /// A 3-D articulated tree with a floating base.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

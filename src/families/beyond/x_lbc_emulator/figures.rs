@@ -1,7 +1,7 @@
 //! Figures of `x_lbc_emulator`: `error` (final error per desired target and method, on the
 //! simulator and the emulator) and the animated GIF of LBC's landing.
 
-use super::job::TargetRow;
+use super::job::{states_of, GoalRow, TargetRow, TrajectoryRow};
 use super::Method;
 use crate::emulator::catalog::NetModel;
 use crate::experiment::output::Tables;
@@ -9,6 +9,7 @@ use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::sig;
 use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
+use crate::families::lbc::rule_setting;
 use crate::families::na::fig13_control::anim::{write_animation, Scene, Track, SIMULATOR};
 use plotters::style::RGBColor;
 use std::path::PathBuf;
@@ -117,51 +118,46 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
 /// GIF of the LBC motion on the simulator at the in-between target nearest the middle, with
 /// BPTT's re-optimized open-loop replay beside it.
 fn animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let (Some(tr), Some(rule)) = (tables.get("trajectory"), tables.get("rule")) else {
+    let (Some(tr), Some(_)) = (tables.get("trajectory"), tables.get("rule")) else {
         return Ok(Vec::new());
     };
-    let (rk, rv) = (rule.strs("setting"), rule.f64s("value"));
-    let get = |k: &str| rk.iter().position(|s| s == k).map_or(f64::NAN, |i| rv[i]);
+    let get = |k: &str| rule_setting(tables, k).unwrap_or(f64::NAN);
     let (c1, c2, dt) = (get("component1"), get("component2"), get("super_step_s"));
-    let (d, meth) = (tr.f64s("desired_target"), tr.strs("method"));
+    let rows = TrajectoryRow::from_table(tr);
     let mid = 0.5 * (c1 + c2);
-    let Some(&pick) = d
+    let Some(pick) = rows
         .iter()
-        .filter(|&&x| x > c1 && x < c2)
+        .map(|r| r.desired_target)
+        .filter(|&x| x > c1 && x < c2)
         .min_by(|a, b| (*a - mid).abs().total_cmp(&(*b - mid).abs()))
     else {
         return Ok(Vec::new());
     };
-    // The model whose state names the table has (results before the names: s0, s1, ...).
+    // The model whose state names the table's columns are.
     let (model, names) = [NetModel::Lander, NetModel::Truck]
         .into_iter()
         .map(|m| (m, m.state_names()))
         .find(|(_, names)| names.iter().all(|c| tr.column(c).is_some()))
-        .unwrap_or_else(|| {
-            let width = (0..)
-                .take_while(|k| tr.column(&format!("s{k}")).is_some())
-                .count();
-            let model = if width == NetModel::Lander.state_dim() {
-                NetModel::Lander
-            } else {
-                NetModel::Truck
-            };
-            (model, (0..width).map(|k| format!("s{k}")).collect())
-        });
-    let cols: Vec<Vec<f64>> = names.iter().map(|c| tr.f64s(c)).collect();
-    let track = |mm: &str| -> Vec<Vec<f64>> {
-        (0..d.len())
-            .filter(|&r| d[r] == pick && meth[r] == mm)
-            .map(|r| cols.iter().map(|c| c[r]).collect())
+        .ok_or_else(|| {
+            crate::experiment::other("trajectory: no model's state variables among its columns")
+        })?;
+    let states = states_of(tr, &names);
+    let track = |method: Method| -> Vec<Vec<f64>> {
+        rows.iter()
+            .zip(&states)
+            .filter(|(r, _)| r.desired_target == pick && r.method == method.name())
+            .map(|(_, x)| x.clone())
             .collect()
     };
-    let lbc = track("lbc");
+    let lbc = track(Method::Lbc);
     let g = tables.require("goal")?;
-    let gd = g.f64s("desired_target");
-    let Some(gr) = gd.iter().position(|&x| x == pick) else {
+    let Some(gr) = GoalRow::from_table(g)
+        .iter()
+        .position(|r| r.desired_target == pick)
+    else {
         return Ok(Vec::new());
     };
-    let goal: Vec<f64> = names.iter().map(|c| g.f64s(c)[gr]).collect();
+    let goal: Vec<f64> = states_of(g, &names).swap_remove(gr);
     let tracks = vec![
         Track {
             label: "LBC of the two emulator-derived trackers".into(),
@@ -171,7 +167,7 @@ fn animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
         Track {
             label: "BPTT re-optimized, open-loop replay".into(),
             color: SIMULATOR,
-            states: track("bptt"),
+            states: track(Method::Bptt),
         },
     ];
     let (p, _) = write_animation(

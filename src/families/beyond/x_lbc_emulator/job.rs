@@ -8,13 +8,12 @@ use crate::control::bptt::{learn_with, Bptt, Descent, Knots, Schedule};
 use crate::control::step_tracker::StepTracker;
 use crate::control::tracker::ValueTracker;
 use crate::emulator::Emulator;
-use crate::experiment::output::{Table, Tables};
-use crate::experiment::rows::table_of;
+use crate::experiment::output::{Cell, Table, Tables};
+use crate::experiment::rows::{table_of, TableRow};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::lbc::{alpha_deviation, push_entropy, rule_table, ENTROPY_COLUMNS};
 use crate::families::na::table1_structure::{build_emulator, build_spec};
 use crate::physics::DifferentiableStep;
-use crate::row;
 use nalgebra::DVector;
 use std::time::Instant;
 
@@ -273,6 +272,53 @@ crate::result_rows! {
     }
 }
 
+crate::result_rows! {
+    /// The leading columns of a row of `trajectory.csv`: one method's state at one
+    /// super-step on the simulator; the state follows in one column per state variable, named
+    /// as `describe` names them ([`states_of`]).
+    pub struct TrajectoryRow {
+        /// The desired landing x (m).
+        desired_target: f64 = "desired_target",
+        /// The method ([`Method::name`]).
+        method: String = "method",
+        /// The super-step.
+        step: i64 = "step",
+        /// Its time (s).
+        t_s: f64 = "t",
+    }
+}
+
+crate::result_rows! {
+    /// The leading column of a row of `goal.csv`: one desired target's goal state, which
+    /// follows as in `trajectory.csv`.
+    pub struct GoalRow {
+        /// The desired landing x (m).
+        desired_target: f64 = "desired_target",
+    }
+}
+
+/// A table of rows `R`, each followed by a state in one column per name of `names`.
+fn with_states<R: TableRow>(names: &[String]) -> Table {
+    let mut cols: Vec<&str> = R::COLUMNS.to_vec();
+    cols.extend(names.iter().map(String::as_str));
+    Table::new(&cols)
+}
+
+/// `row`'s cells followed by the state `x`, a row of a [`with_states`] table.
+fn cells_with_state<R: TableRow>(row: &R, x: &[f64]) -> Vec<Cell> {
+    let mut cells = row.cells();
+    cells.extend(x.iter().map(|&v| Cell::F(v)));
+    cells
+}
+
+/// The states of a [`with_states`] table's rows, their variables named `names`.
+pub(super) fn states_of(t: &Table, names: &[String]) -> Vec<Vec<f64>> {
+    let columns: Vec<Vec<f64>> = names.iter().map(|c| t.f64s(c)).collect();
+    (0..t.len())
+        .map(|r| columns.iter().map(|c| c[r]).collect())
+        .collect()
+}
+
 /// The tables one net's comparison writes.
 struct Outputs {
     components: Vec<ComponentRow>,
@@ -284,22 +330,13 @@ struct Outputs {
 
 impl Outputs {
     fn new(params: &Params) -> Self {
-        let model = params.net.model;
-        let mut cols: Vec<String> = ["desired_target", "method", "step", "t"]
-            .iter()
-            .map(|s| s.to_string())
-            .collect();
         // The state variables by their `describe` names.
-        cols.extend(model.state_names());
-        debug_assert_eq!(cols.len(), 4 + model.state_dim());
-        let col_refs: Vec<&str> = cols.iter().map(String::as_str).collect();
-        let mut goal_cols = vec!["desired_target"];
-        goal_cols.extend_from_slice(&col_refs[4..]);
+        let names = params.net.model.state_names();
         Self {
             components: Vec::new(),
             targets: Vec::new(),
-            trajectory: Table::new(&col_refs),
-            goal: Table::new(&goal_cols),
+            trajectory: with_states::<TrajectoryRow>(&names),
+            goal: with_states::<GoalRow>(&names),
             entropy: Table::new(&ENTROPY_COLUMNS),
         }
     }
@@ -327,9 +364,8 @@ impl Params {
         self.component_rows(emu, comps, out)?;
         for &d in &self.desired {
             let task = self.target_task(d);
-            let mut r = row![d];
-            r.extend(task.task.target.iter().map(|&v| v.into()));
-            out.goal.push(r);
+            let goal = GoalRow { desired_target: d };
+            out.goal.push(cells_with_state(&goal, &task.task.target));
             let t0 = Instant::now();
             let w = self.projected_weights(d, q)?;
             let projection_seconds = t0.elapsed().as_secs_f64();
@@ -446,9 +482,13 @@ impl Params {
                     mean_entropy,
                 });
                 for (k, s) in on_sim.states.iter().enumerate() {
-                    let mut r = row![d, method.name(), k as i64, k as f64 * dt];
-                    r.extend(s.iter().map(|&v| v.into()));
-                    out.trajectory.push(r);
+                    let row = TrajectoryRow {
+                        desired_target: d,
+                        method: method.name().to_string(),
+                        step: k as i64,
+                        t_s: k as f64 * dt,
+                    };
+                    out.trajectory.push(cells_with_state(&row, s));
                 }
             }
         }

@@ -11,17 +11,27 @@ use crate::experiment::Error;
 use crate::families::lbc::{entropy_section, rule_settings};
 use std::path::Path;
 
+/// What one method's runs give over the desired targets strictly between the components.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MethodMeasures {
+    /// The share of the targets it ends within tolerance at on the simulator.
+    pub within: f64,
+    /// Its mean simulator final error.
+    pub error: f64,
+    /// Its mean distance of the final x from the desired x (m).
+    pub distance_m: f64,
+}
+
 /// What one net seed's comparison gives over the desired targets strictly between the
-/// components: per method, (share of targets within tolerance on the simulator, mean simulator
-/// final error, mean distance of the final x from the desired x in m).
+/// components, per method.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Measures {
     /// LBC's.
-    pub lbc: (f64, f64, f64),
+    pub lbc: MethodMeasures,
     /// The naive blend's.
-    pub naive: (f64, f64, f64),
+    pub naive: MethodMeasures,
     /// The better example (tracker) alone's on each measure.
-    pub example: (f64, f64, f64),
+    pub example: MethodMeasures,
 }
 
 impl Measures {
@@ -36,8 +46,12 @@ impl Measures {
         Self::values(self.example, self.naive)
     }
 
-    fn values(m: (f64, f64, f64), naive: (f64, f64, f64)) -> [f64; 3] {
-        [m.0, m.1 - naive.1, m.2 - naive.2]
+    fn values(m: MethodMeasures, naive: MethodMeasures) -> [f64; 3] {
+        [
+            m.within,
+            m.error - naive.error,
+            m.distance_m - naive.distance_m,
+        ]
     }
 }
 
@@ -154,10 +168,14 @@ impl Runs {
         self.errors.iter().filter(|&&x| x <= 1.0).count()
     }
 
-    /// (share within tolerance, mean error, mean distance (m)), as [`Measures`] holds them.
-    fn measures(&self) -> (f64, f64, f64) {
+    /// The runs' measures.
+    fn measures(&self) -> MethodMeasures {
         let share = self.within() as f64 / self.errors.len().max(1) as f64;
-        (share, mean(&self.errors), mean(&self.misses))
+        MethodMeasures {
+            within: share,
+            error: mean(&self.errors),
+            distance_m: mean(&self.misses),
+        }
     }
 }
 
@@ -174,7 +192,11 @@ fn measures(rows: &[&NetSeedRow], between: impl Fn(f64) -> bool + Copy) -> Measu
     Measures {
         lbc: of(Method::Lbc),
         naive: of(Method::Naive),
-        example: (t1.0.max(t2.0), t1.1.min(t2.1), t1.2.min(t2.2)),
+        example: MethodMeasures {
+            within: t1.within.max(t2.within),
+            error: t1.error.min(t2.error),
+            distance_m: t1.distance_m.min(t2.distance_m),
+        },
     }
 }
 
@@ -205,8 +227,8 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
         .first()
         .map_or_else(|| measures(&[], between), |p| p.1);
     let lbc = own(Method::Lbc);
-    let (ml, mn) = (own_measures.lbc.1, own_measures.naive.1);
-    let (xl, xn) = (own_measures.lbc.2, own_measures.naive.2);
+    let (ml, mn) = (own_measures.lbc.error, own_measures.naive.error);
+    let (xl, xn) = (own_measures.lbc.distance_m, own_measures.naive.distance_m);
     let inputs = RuleInputs {
         seeds: per_seed.iter().map(|p| p.1).collect(),
         within_fraction: frac,
@@ -355,12 +377,20 @@ mod tests {
     use crate::experiment::report::Verdict;
     use crate::experiment::rule::Outcome;
 
+    fn mm(within: f64, error: f64, distance_m: f64) -> MethodMeasures {
+        MethodMeasures {
+            within,
+            error,
+            distance_m,
+        }
+    }
+
     /// The run's own net's numbers over the 5 in-between targets (seed 1).
     fn own() -> Measures {
         Measures {
-            lbc: (0.6, 0.607, 0.253),
-            naive: (0.8, 0.629, 0.041),
-            example: (0.6, 0.83, 2.99),
+            lbc: mm(0.6, 0.607, 0.253),
+            naive: mm(0.8, 0.629, 0.041),
+            example: mm(0.6, 0.83, 2.99),
         }
     }
 
@@ -383,14 +413,14 @@ mod tests {
         assert_eq!(verdict(&one(own())), Some(Verdict::NotHeld));
         // Naive better on both measures beyond the margins: not partly.
         let both = Measures {
-            lbc: (1.0, 0.4, 0.18),
-            naive: (1.0, 0.29, 0.0065),
+            lbc: mm(1.0, 0.4, 0.18),
+            naive: mm(1.0, 0.29, 0.0065),
             ..own()
         };
         assert_eq!(verdict(&one(both)), Some(Verdict::NotHeld));
         // LBC within tolerance everywhere but naive nearer along x: still not partly.
         let axis = Measures {
-            lbc: (1.0, 0.5, 0.253),
+            lbc: mm(1.0, 0.5, 0.253),
             ..own()
         };
         assert_eq!(verdict(&one(axis)), Some(Verdict::NotHeld));
@@ -399,12 +429,12 @@ mod tests {
     #[test]
     fn lbc_matching_naive_is_partly_and_within_tolerance_too_held() {
         let matched = Measures {
-            lbc: (0.6, 0.607, 0.1),
+            lbc: mm(0.6, 0.607, 0.1),
             ..own()
         };
         assert_eq!(verdict(&one(matched)), Some(Verdict::Partly));
         let held = Measures {
-            lbc: (0.8, 0.607, 0.1),
+            lbc: mm(0.8, 0.607, 0.1),
             ..matched
         };
         assert_eq!(verdict(&one(held)), Some(Verdict::Held));
@@ -424,13 +454,13 @@ mod tests {
     #[test]
     fn over_seeds_the_rule_reads_medians_with_intervals() {
         let held = Measures {
-            lbc: (1.0, 0.5, 0.0),
+            lbc: mm(1.0, 0.5, 0.0),
             ..own()
         };
         // Four seeds where LBC is as good as naive along x, one where it misses by 0.5 m: the
         // median passes; every check has an interval over the seeds.
         let miss = Measures {
-            lbc: (1.0, 0.5, 0.541),
+            lbc: mm(1.0, 0.5, 0.541),
             ..own()
         };
         let r = RuleInputs {

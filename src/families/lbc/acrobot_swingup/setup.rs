@@ -362,17 +362,66 @@ pub(super) fn cheapest(
 /// A state component beyond this magnitude (rad or rad/s) counts as a diverged closed loop.
 const DIVERGED: f64 = 1e4;
 
-/// The compared policies; `naive` is the average (w_i / Σw), `naive_sum` the paper's sum.
-pub(super) const POLICIES: [&str; 5] = ["tracker1", "tracker2", "naive", "lbc", "naive_sum"];
+/// A compared policy: a tracker alone, or the two combined.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Policy {
+    /// The first tracker alone.
+    Tracker1,
+    /// The second tracker alone.
+    Tracker2,
+    /// The naive blend, the weighted average (w_i / Σw).
+    Naive,
+    /// Linear Bellman combination.
+    Lbc,
+    /// The naive blend as the paper writes it, the weighted sum.
+    NaiveSum,
+}
 
-pub(super) fn mode(i: usize) -> BlendMode {
-    match i {
-        0 => BlendMode::Single(0),
-        1 => BlendMode::Single(1),
-        2 => BlendMode::Naive,
-        3 => BlendMode::Lbc,
-        _ => BlendMode::Sum,
+impl Policy {
+    /// Every policy, in table order.
+    pub(super) const ALL: [Policy; 5] = [
+        Policy::Tracker1,
+        Policy::Tracker2,
+        Policy::Naive,
+        Policy::Lbc,
+        Policy::NaiveSum,
+    ];
+
+    /// Its name in the tables.
+    pub(super) const fn name(self) -> &'static str {
+        match self {
+            Policy::Tracker1 => "tracker1",
+            Policy::Tracker2 => "tracker2",
+            Policy::Naive => "naive",
+            Policy::Lbc => "lbc",
+            Policy::NaiveSum => "naive_sum",
+        }
     }
+
+    /// How it blends the trackers.
+    pub(super) fn mode(self) -> BlendMode {
+        match self {
+            Policy::Tracker1 => BlendMode::Single(0),
+            Policy::Tracker2 => BlendMode::Single(1),
+            Policy::Naive => BlendMode::Naive,
+            Policy::Lbc => BlendMode::Lbc,
+            Policy::NaiveSum => BlendMode::Sum,
+        }
+    }
+}
+
+/// The compared policies' names, in table order ([`Policy::ALL`]).
+pub(super) const POLICIES: [&str; 5] = [
+    Policy::ALL[0].name(),
+    Policy::ALL[1].name(),
+    Policy::ALL[2].name(),
+    Policy::ALL[3].name(),
+    Policy::ALL[4].name(),
+];
+
+/// The blend mode of the `i`-th policy of [`POLICIES`].
+pub(super) fn mode(i: usize) -> BlendMode {
+    Policy::ALL[i].mode()
 }
 
 /// Index in `POLICIES` of the policy of `m` (inverse of [`mode`] on its range).

@@ -289,13 +289,40 @@ fn objective(cost: &QuadraticCost, r: &DiveRun) -> f64 {
     }
 }
 
-/// One test take-off: per method (LBC, the single tracker) its entry error, objective, mean
-/// entropy and largest torque fraction; LBC's per swept λ; both with the DDP-value trackers
-/// (when built); each method's last pose; LBC's entropy and α deviation per step.
+/// One method's dive from a test take-off, as the tables report it.
+#[derive(Debug, Clone, Copy)]
+struct TestDive {
+    method: Tracking,
+    /// |entry angle| (NaN: the closed loop diverged).
+    entry_error: f64,
+    /// Running plus terminal cost (infinite for a diverged dive).
+    objective: f64,
+    /// Mean normalized entropy of α.
+    mean_entropy: f64,
+    /// The largest torque over its limit.
+    max_torque_fraction: f64,
+}
+
+impl TestDive {
+    /// `method`'s dive `r` under the dive's `cost`.
+    fn of(method: Tracking, r: &DiveRun, cost: &QuadraticCost) -> Self {
+        Self {
+            method,
+            entry_error: wrap(entry(&r.final_state)).abs(),
+            objective: objective(cost, r),
+            mean_entropy: r.mean_entropy,
+            max_torque_fraction: r.max_torque_fraction,
+        }
+    }
+}
+
+/// One test take-off: each method's dive (LBC, the single tracker; [`Tracking::ALL`]'s order);
+/// LBC's per swept λ; both with the DDP-value trackers (when built); each method's last pose;
+/// LBC's entropy and α deviation per step.
 struct TestOut {
-    out: Vec<(Tracking, f64, f64, f64, f64)>,
-    sweep: Vec<(f64, f64, f64)>,
-    ddp: Vec<(Tracking, f64, f64, f64)>,
+    out: Vec<TestDive>,
+    sweep: Vec<TestDive>,
+    ddp: Vec<TestDive>,
     poses: Vec<Vec<f64>>,
     steps: (Vec<f64>, Vec<f64>),
 }
@@ -319,7 +346,6 @@ impl CoordinationParams {
         bl: &Blender,
         cost: &QuadraticCost,
     ) -> Vec<Result<TestOut, Error>> {
-        let objective = |r: &DiveRun| objective(cost, r);
         self.tests
             .par_iter()
             .map(|&w| {
@@ -335,13 +361,7 @@ impl CoordinationParams {
                         Some(x) => x.iter().take(film::DIVER_COORDS).copied().collect(),
                         None => vec![f64::NAN; film::DIVER_COORDS],
                     });
-                    out.push((
-                        m,
-                        wrap(entry(&r.final_state)).abs(),
-                        objective(&r),
-                        r.mean_entropy,
-                        r.max_torque_fraction,
-                    ));
+                    out.push(TestDive::of(m, &r, cost));
                     if m == Tracking::Lbc {
                         steps = (r.entropy, r.alpha_deviation);
                     }
@@ -351,23 +371,14 @@ impl CoordinationParams {
                     .iter()
                     .map(|&l| {
                         let r = d.execute(&bl.blend(false, BlendMode::Lbc, l), &x0)?;
-                        Ok((
-                            wrap(entry(&r.final_state)).abs(),
-                            objective(&r),
-                            r.mean_entropy,
-                        ))
+                        Ok(TestDive::of(Tracking::Lbc, &r, cost))
                     })
                     .collect::<Result<Vec<_>, Error>>()?;
                 let mut ddp = Vec::new();
                 let models = if bl.ddp.is_some() { 2 } else { 0 };
                 for m in Tracking::ALL.into_iter().take(models) {
                     let r = d.execute(&bl.blend(true, m.mode(self.single), d.lambda()), &x0)?;
-                    ddp.push((
-                        m,
-                        wrap(entry(&r.final_state)).abs(),
-                        objective(&r),
-                        r.mean_entropy,
-                    ));
+                    ddp.push(TestDive::of(m, &r, cost));
                 }
                 Ok(TestOut {
                     out,
@@ -400,47 +411,53 @@ impl CoordinationParams {
             let run = format!("omega {w} rad/s");
             let lbc = Tracking::Lbc.name();
             push_entropy(&mut entropy_t, &run, lbc, d.dt, &steps.0, &steps.1);
-            for (&(m, e, ..), q) in out.iter().zip(&poses) {
-                poses_t.push(PoseRow::at(w, m, e, q));
+            for (o, q) in out.iter().zip(&poses) {
+                poses_t.push(PoseRow::at(w, o.method, o.entry_error, q));
             }
-            let value_row = |f: ValueFunction, m: Tracking, e, j, h| ValueRow {
+            let value_row = |f: ValueFunction, o: &TestDive| ValueRow {
                 initial_omega: w,
                 value_function: f.name().to_string(),
-                method: m.name().to_string(),
-                entry_error: e,
-                objective: j,
-                mean_entropy: h,
+                method: o.method.name().to_string(),
+                entry_error: o.entry_error,
+                objective: o.objective,
+                mean_entropy: o.mean_entropy,
             };
-            for &(m, e, j, h, _) in &out {
-                values.push(value_row(ValueFunction::Lqr, m, e, j, h));
+            for o in &out {
+                values.push(value_row(ValueFunction::Lqr, o));
             }
-            for &(m, e, j, h) in &ddp {
-                values.push(value_row(ValueFunction::Ddp, m, e, j, h));
+            for o in &ddp {
+                values.push(value_row(ValueFunction::Ddp, o));
             }
-            // `out` holds LBC's dive, then the single tracker's (Tracking::ALL's order).
-            let (jl, js) = (out[0].2, out[1].2);
-            for &(m, e, j, h, t) in &out {
-                let outcome = match m {
+            let objective_of = |m: Tracking| {
+                out.iter()
+                    .find(|o| o.method == m)
+                    .map(|o| o.objective)
+                    .expect("every method dives from every take-off")
+            };
+            let (jl, js) = (objective_of(Tracking::Lbc), objective_of(Tracking::Single));
+            for o in &out {
+                let outcome = match o.method {
                     Tracking::Lbc => compare_objectives(jl, js, self.objective_tolerance),
                     Tracking::Single => compare_objectives(js, jl, self.objective_tolerance),
                 };
                 table.push(CoordinationRow {
                     initial_omega: w,
-                    method: m.name().to_string(),
-                    entry_error: e,
-                    objective: j,
-                    mean_entropy: h,
-                    max_torque_fraction: t,
+                    method: o.method.name().to_string(),
+                    entry_error: o.entry_error,
+                    objective: o.objective,
+                    mean_entropy: o.mean_entropy,
+                    max_torque_fraction: o.max_torque_fraction,
                     objective_outcome: outcome.to_string(),
                 });
             }
-            for (&l, &(e, j, h)) in self.lambda_sweep.iter().zip(&sweep) {
+            for (&l, o) in self.lambda_sweep.iter().zip(&sweep) {
+                let j = o.objective;
                 lam.push(CoordinationSweepRow {
                     lambda: l,
                     initial_omega: w,
-                    entry_error: e,
+                    entry_error: o.entry_error,
                     objective: j,
-                    mean_entropy: h,
+                    mean_entropy: o.mean_entropy,
                     objective_outcome: compare_objectives(j, js, self.objective_tolerance)
                         .to_string(),
                 });

@@ -1,15 +1,16 @@
 //! `lbc_jumping`'s figures and animation.
 
-use super::job::JumpRow;
 use super::job::METHODS;
 use super::report::Jumps;
+use super::rows::{JumpRow, MotionRow, WeightRow};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use crate::families::lbc::film::{diver_body, fitted, to_scale};
 use crate::families::lbc::{alpha_panel, rule_setting};
-use crate::physics::jumper::{Jumper, DOF};
+use crate::physics::jumper::Jumper;
 use std::path::PathBuf;
 
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
@@ -92,8 +93,10 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     // Beside the heights, the take-off error the verdict reads, with its tolerance.
     files.extend(fig.draw("heights", &Figure::grid(vec![panel, takeoff], 2))?);
     // LBC's weights over the take-off.
-    let w = tables.require("weights")?;
-    let (wd, wt, wa) = (w.f64s("desired"), w.f64s("t"), w.f64s("alpha_low"));
+    let w = WeightRow::from_table(tables.require("weights")?);
+    let wd: Vec<f64> = w.iter().map(|r| r.desired_height_m).collect();
+    let wt: Vec<f64> = w.iter().map(|r| r.t_s).collect();
+    let wa: Vec<f64> = w.iter().map(|r| r.alpha_low).collect();
     let panel = alpha_panel(
         "LBC's weight of the low jump's tracker over the take-off",
         "time from the crouch (s)",
@@ -104,13 +107,12 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     );
     files.extend(fig.draw("weights", &Figure::grid(vec![panel], 1))?);
     // The middle desired jump: LBC's and the naive blend's bodies over time.
-    let m = tables.require("motion")?;
-    let (mm, mt, ma) = (m.strs("method"), m.f64s("t"), m.f64s("alpha_low"));
-    let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
-    let state = |i: usize| -> Vec<f64> { (0..DOF).map(|k| q[k][i]).collect() };
+    let m = MotionRow::from_table(tables.require("motion")?);
+    let state = |i: usize| -> Vec<f64> { m[i].q().to_vec() };
     let tree = Jumper::default().tree;
     let middle = rule_setting(tables, "middle_desired").unwrap_or(f64::NAN);
-    let rows_of = |name: &str| -> Vec<usize> { (0..mm.len()).filter(|&i| mm[i] == name).collect() };
+    let rows_of =
+        |name: &str| -> Vec<usize> { (0..m.len()).filter(|&i| m[i].method == name).collect() };
     let (lbc_rows, naive_rows) = (rows_of("lbc"), rows_of("naive"));
     // One panel per controller (each drawn solid): the body every 0.1 s until 1.2 s (take-off,
     // flight and landing; the hold that follows is still).
@@ -122,10 +124,10 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         let mut n = 0usize;
         let mut last = f64::NEG_INFINITY;
         for &i in rows.iter() {
-            if mt[i] - last < 0.1 - 1e-9 || mt[i] > 1.2 + 1e-9 {
+            if m[i].t_s - last < 0.1 - 1e-9 || m[i].t_s > 1.2 + 1e-9 {
                 continue;
             }
-            last = mt[i];
+            last = m[i].t_s;
             let off = (n as f64 * spacing, 0.0);
             let pose = body(&tree, &state(i), off, if n == 0 { name } else { "" }, color);
             // Frames in flight (no point of the body within 1 cm of the ground) are marked
@@ -173,10 +175,10 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             .get(k)
             .copied()
             .or_else(|| naive_rows.last().copied());
-        let mut title = format!("t = {:.2} s   α_low: LBC {:.2}", mt[i], ma[i]);
+        let mut title = format!("t = {:.2} s   α_low: LBC {:.2}", m[i].t_s, m[i].alpha_low);
         if let Some(o) = other {
             series.extend(body(&tree, &state(o), (1.1, 0.0), "naive blend", 1));
-            title.push_str(&format!(", naive {:.2}", ma[o]));
+            title.push_str(&format!(", naive {:.2}", m[o].alpha_low));
         }
         frames.push(to_scale(
             fitted((-0.6, 1.8), (-0.1, 2.1), 300),
@@ -186,7 +188,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     }
     if !frames.is_empty() {
         let dt = if lbc_rows.len() > 1 {
-            mt[lbc_rows[1]] - mt[lbc_rows[0]]
+            m[lbc_rows[1]].t_s - m[lbc_rows[0]].t_s
         } else {
             0.1
         };

@@ -1,6 +1,7 @@
 //! `lbc_jumping`'s job: the PD take-off and landing, the DDP take-off examples and their
 //! trackers, each desired jump's landing tracker, and every controller run on the simulator.
 
+use super::rows::{JumpComponentRow, JumpRow, MotionRow, WeightRow};
 use super::Params;
 use crate::bellman::combine::normalized_entropy;
 use crate::bellman::combine::{BlendMode, TrackerBlend};
@@ -519,37 +520,6 @@ mod push {
     pub const FIRST_DESIRED: usize = 3;
 }
 
-crate::result_rows! {
-    /// One row of `jumps.csv`: one take-off controller at one desired jump, run on the
-    /// simulator through its take-off and the desired jump's landing tracker.
-    pub struct JumpRow {
-        /// The desired jump's height (m; its PD push's strength is `desired_strength`).
-        desired_height_m: f64 = "desired",
-        /// The take-off controller ([`METHODS`]).
-        method: String = "method",
-        /// The take-off state's distance from the desired jump's, in the metric's units.
-        takeoff_error: f64 = "takeoff_error",
-        /// 1 when the body ended standing on its foot, else 0.
-        landed: f64 = "landed",
-        /// The desired jump's PD push strength (the spec's `desired`).
-        desired_strength: f64 = "desired_strength",
-        /// The jump's height (m).
-        height_m: f64 = "height_m",
-        /// 1 when the body fell at any time, else 0.
-        fell: f64 = "fell",
-        /// ½∫uᵀRu dt over the take-off.
-        effort: f64 = "effort",
-        /// The projected weight of the low example.
-        weight_low: f64 = "weight_low",
-        /// The projected weight of the high example.
-        weight_high: f64 = "weight_high",
-        /// The take-off's centre-of-mass velocity error (m/s).
-        speed_error_m_s: f64 = "speed_error_m_s",
-        /// Wall time of the run (s).
-        seconds: f64 = "seconds",
-    }
-}
-
 /// A compared take-off controller.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Takeoff {
@@ -604,9 +574,9 @@ pub(super) const METHODS: [&str; 5] = ["lbc", "naive", "low", "high", "reference
 /// The tables made from the runs on the simulator ([`Params::run_tables`]).
 struct RunTables {
     jumps: Vec<JumpRow>,
-    weights: Table,
+    weights: Vec<WeightRow>,
     entropy: Table,
-    motion: Table,
+    motion: Vec<MotionRow>,
 }
 
 /// A take-off example by DDP or a desired jump's landing tracker, built in one parallel stage.
@@ -683,13 +653,10 @@ impl Params {
     ) -> RunTables {
         let j = &s.body;
         let mut jumps: Vec<JumpRow> = Vec::with_capacity(runs.len());
-        let mut weights = Table::new(&["desired", "t", "alpha_low"]);
+        let mut weights = Vec::new();
         // α's entropy over the take-off (entropy.csv), LBC's and the naive blend's.
         let mut entropy = Table::new(&ENTROPY_COLUMNS);
-        let mut cols = vec!["method".to_string(), "t".into(), "alpha_low".into()];
-        cols.extend((0..DOF).map(|i| format!("q{i}")));
-        let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
-        let mut motion = Table::new(&cols);
+        let mut motion = Vec::new();
         let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
         for (&(d, m), (r, secs)) in cases.iter().zip(runs) {
             let x_d = &targets[push::FIRST_DESIRED + d];
@@ -731,18 +698,21 @@ impl Params {
                 // Every 5 ms (the take-off is short).
                 let every = ((0.005 / self.knot_dt).round() as usize).max(1);
                 for (i, a) in r.alpha_low.iter().enumerate().step_by(every) {
-                    weights.push(row![
-                        heights[push::FIRST_DESIRED + d],
-                        i as f64 * self.knot_dt,
-                        *a
-                    ]);
+                    weights.push(WeightRow {
+                        desired_height_m: heights[push::FIRST_DESIRED + d],
+                        t_s: i as f64 * self.knot_dt,
+                        alpha_low: *a,
+                    });
                 }
             }
             for (i, x) in r.states.iter().enumerate().step_by(frame) {
                 let a = r.alpha_low.get(i).copied().unwrap_or(f64::NAN);
-                let mut row = row![m.name(), i as f64 * self.knot_dt, a];
-                row.extend(x[..DOF].iter().map(|&v| v.into()));
-                motion.push(row);
+                motion.push(MotionRow::at(
+                    m.name(),
+                    i as f64 * self.knot_dt,
+                    a,
+                    &x[..DOF],
+                ));
             }
         }
         RunTables {
@@ -855,16 +825,7 @@ impl Job for Params {
             motion,
         } = self.run_tables(&s, &cases, &runs, &targets, &heights, &projected);
         // The examples alone against their own targets (the premise), on the simulator.
-        let mut components = Table::new(&[
-            "component",
-            "strength",
-            "height_m",
-            "takeoff_error",
-            "iterations",
-            "cost",
-            "termination",
-            "seconds",
-        ]);
+        let mut components = Vec::new();
         for (i, example) in [Takeoff::Low, Takeoff::High].into_iter().enumerate() {
             let (sol, secs) = &examples[i];
             let name = example.name();
@@ -875,16 +836,16 @@ impl Job for Params {
                 .position(|c| c.1 == example)
                 .map(|k| &runs[k].0)
                 .ok_or_else(|| other(format!("no {name} run")))?;
-            components.push(row![
-                name,
-                strengths[i],
-                heights[i],
-                s.error(&r.takeoff, &targets[i]),
-                sol.trace.len(),
-                sol.cost,
-                format!("{:?}", sol.termination),
-                *secs
-            ]);
+            components.push(JumpComponentRow {
+                component: name.to_string(),
+                strength: strengths[i],
+                height_m: heights[i],
+                takeoff_error: s.error(&r.takeoff, &targets[i]),
+                iterations: sol.trace.len() as i64,
+                cost: sol.cost,
+                termination: format!("{:?}", sol.termination),
+                seconds: *secs,
+            });
         }
         let mut landing = Table::new(&["desired", "desired_strength", "seconds"]);
         for d in 0..nd {
@@ -897,11 +858,11 @@ impl Job for Params {
         let rule = self.rule_settings(lambda, &heights, middle);
         Ok(Tables::from([
             ("jumps", table_of(&jumps)),
-            ("components", components),
+            ("components", table_of(&components)),
             ("landing", landing),
-            ("weights", weights),
+            ("weights", table_of(&weights)),
             ("entropy", entropy),
-            ("motion", motion),
+            ("motion", table_of(&motion)),
             ("rule", rule),
         ]))
     }

@@ -37,6 +37,7 @@
 mod figures;
 mod job;
 mod report;
+mod rows;
 
 pub use job::{jump_height, Landing, Push};
 pub use report::{verdict_of, JumpFacts};

@@ -1,7 +1,7 @@
 //! `lbc_jumping`'s verdict and report section.
 
-use super::job::JumpRow;
-use crate::experiment::output::{df_f64, df_str, read_csv, Table};
+use super::rows::{JumpComponentRow, JumpRow};
+use crate::experiment::output::Table;
 use crate::experiment::report::{sig, yes_no, Findings, Verdict};
 use crate::experiment::rows::{read_rows, TableRow};
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
@@ -154,13 +154,10 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let rule = rule_settings(dir)?;
     let tol = rule("takeoff_tolerance");
     let t = Jumps::read(dir)?;
-    let comp = read_csv(&dir.join("components.csv"))?;
-    let own = df_f64(&comp, "takeoff_error")?;
+    let comp: Vec<JumpComponentRow> = read_rows(&dir.join("components.csv"))?;
+    let own = |i: usize| comp.get(i).map_or(f64::INFINITY, |c| c.takeoff_error);
     let facts = JumpFacts {
-        examples: [
-            own.first().copied().unwrap_or(f64::INFINITY),
-            own.get(1).copied().unwrap_or(f64::INFINITY),
-        ],
+        examples: [own(0), own(1)],
         heights: JumpHeights {
             low: rule("low_height_m"),
             high: rule("high_height_m"),
@@ -193,16 +190,14 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             sig(r.effort),
         ));
     }
-    let names = df_str(&comp, "component")?;
-    let (its, hs) = (df_f64(&comp, "iterations")?, df_f64(&comp, "height_m")?);
     md.push_str("\nThe take-off examples (`components.csv`; DDP from the crouch; the take-off error is each tracker alone on the simulator against its own target):\n\n| example | jump height (m) | take-off error | DDP iterations |\n| --- | --- | --- | --- |\n");
-    for i in 0..names.len() {
+    for c in &comp {
         md.push_str(&format!(
             "| {} | {} | {} | {} |\n",
-            names[i],
-            sig(hs[i]),
-            sig(own[i]),
-            its[i]
+            c.component,
+            sig(c.height_m),
+            sig(c.takeoff_error),
+            c.iterations
         ));
     }
     md.push_str(&entropy_section(

@@ -98,8 +98,7 @@ crate::result_rows! {
         mean_entropy: f64 = "mean_entropy",
         /// Largest lean from upright (rad), scripted and mirrored tugs.
         max_lean_rad: f64 = "max_lean",
-        /// Range of the tugged forward weight over the window (NaN in older results, which
-        /// lack the column).
+        /// Range of the tugged forward weight over the window.
         settle_range: f64 = "settle_range",
     }
 }

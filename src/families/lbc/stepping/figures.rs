@@ -1,15 +1,16 @@
 //! `lbc_stepping`'s figures and animation.
 
 use super::job::gaps;
-use super::job::StepRow;
 use super::job::METHODS;
 use super::report::Targets;
+use super::rows::{MotionRow, StepRow, WalkStepRow, WeightRow};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
+use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use crate::families::lbc::film::{biped_body, fitted, to_scale};
 use crate::families::lbc::{alpha_panel, rule_setting};
-use crate::physics::biped::{Biped, DOF};
+use crate::physics::biped::Biped;
 use std::path::PathBuf;
 
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
@@ -84,12 +85,10 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     };
     files.extend(fig.draw("effort", &Figure::grid(vec![effort], 1))?);
     // LBC's weights over the step.
-    let w = tables.require("weights")?;
-    let (wd, wt, wa) = (
-        w.f64s("desired_length_m"),
-        w.f64s("t"),
-        w.f64s("alpha_short"),
-    );
+    let w = WeightRow::from_table(tables.require("weights")?);
+    let wd: Vec<f64> = w.iter().map(|r| r.desired_length_m).collect();
+    let wt: Vec<f64> = w.iter().map(|r| r.t_s).collect();
+    let wa: Vec<f64> = w.iter().map(|r| r.alpha_short).collect();
     let mut weights = alpha_panel(
         "LBC's weight of the short step over the step",
         "time in the step (s)",
@@ -103,13 +102,11 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     weights.legend = Legend::UpperRight;
     files.extend(fig.draw("weights", &Figure::grid(vec![weights], 1))?);
     // The walk: poses at each step's end, the footholds and the gaps.
-    let m = tables.require("motion")?;
-    let wk = tables.require("walk")?;
-    let (step, ft, fa) = (m.f64s("step"), m.f64s("t"), m.f64s("alpha_short"));
-    let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
-    let state = |i: usize| -> Vec<f64> { (0..DOF).map(|k| q[k][i]).collect() };
-    let mut holds = vec![wk.f64s("stance_heel_m").first().copied().unwrap_or(0.0)];
-    holds.extend(wk.f64s("foothold_m"));
+    let motion = MotionRow::from_table(tables.require("motion")?);
+    let walk = WalkStepRow::from_table(tables.require("walk")?);
+    let state = |i: usize| -> Vec<f64> { motion[i].q().to_vec() };
+    let mut holds = vec![walk.first().map_or(0.0, |r| r.stance_heel_m)];
+    holds.extend(walk.iter().map(|r| r.foothold_m));
     let gap = gaps(&holds, tol);
     let b = Biped::default();
     let x_lo = holds[0] - 0.6;
@@ -134,8 +131,8 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         s
     };
     // The last sample of each step, and the first of the walk.
-    let mut ends: Vec<usize> = (0..step.len())
-        .filter(|&i| i + 1 == step.len() || step[i + 1] != step[i])
+    let mut ends: Vec<usize> = (0..motion.len())
+        .filter(|&i| i + 1 == motion.len() || motion[i + 1].step != motion[i].step)
         .collect();
     ends.insert(0, 0);
     let mut poses = Vec::new();
@@ -160,14 +157,14 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     );
     files.extend(fig.draw("walk", &f)?);
     let mut frames = Vec::new();
-    for i in 0..step.len() {
+    for (i, r) in motion.iter().enumerate() {
         let mut body = Vec::new();
         for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
             body.push(Series::line(if k == 0 { "LBC" } else { "" }, seg, 0));
         }
         let title = format!(
             "LBC stepping over gaps   step {}   t = {:.2} s   α_short = {:.2}",
-            step[i], ft[i], fa[i]
+            r.step, r.t_s, r.alpha_short
         );
         frames.push(to_scale(
             fitted((x_lo, x_hi), (-0.1, 1.6), 300),
@@ -176,7 +173,11 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         ));
     }
     if !frames.is_empty() {
-        let dt = if ft.len() > 1 { ft[1] - ft[0] } else { 0.1 };
+        let dt = if motion.len() > 1 {
+            motion[1].t_s - motion[0].t_s
+        } else {
+            0.1
+        };
         files.push(fig.gif("walk_anim", &frames, ((dt * 100.0).round() as u32).max(2))?);
     }
     Ok(files)

@@ -1,6 +1,7 @@
 //! `lbc_stepping`'s job: the start, the step targets, the DDP steps and their trackers, the
 //! controllers run on the simulator, and the walk over gaps.
 
+use super::rows::{AverageRow, ComponentRow, MotionRow, StepRow, WalkStepRow, WeightRow};
 use super::Params;
 use crate::bellman::combine::{BlendMode, TrackerBlend};
 use crate::control::ddp::DdpSolution;
@@ -12,43 +13,15 @@ use crate::experiment::rows::table_of;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::lbc::{optimized_tracker, projected_weights, rule_table, scale_lambda};
 use crate::physics::biped::point::{LEFT_HEEL, RIGHT_HEEL, RIGHT_TOE};
-use crate::physics::biped::{Biped, DOF, FOOT_HEEL, FOOT_TOE, TORQUES};
+use crate::physics::biped::{Biped, Side, DOF, FOOT_HEEL, FOOT_TOE, TORQUES};
 use crate::physics::linearize::FiniteDifference;
 use crate::physics::{check_finite, Dynamics, IntegratorKind, Model, Simulator};
-use crate::row;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use std::time::Instant;
 
 /// DDP's discrete dynamics: one RK4 step of the biped per knot, Jacobians by differences.
 type Map = Rk4Map<FiniteDifference<Biped>>;
-
-crate::result_rows! {
-    /// One row of `targets.csv`: one controller's step toward one desired length, on the
-    /// simulator.
-    pub struct StepRow {
-        /// The desired step length (m).
-        desired_length_m: f64 = "desired_length_m",
-        /// The controller (`lbc`, `naive`, `short`, `long`, `direct`).
-        method: String = "method",
-        /// The step length reached (m).
-        reached_length_m: f64 = "reached_length_m",
-        /// 1 when the body fell, else 0.
-        fell: f64 = "fell",
-        /// The step's control effort.
-        effort: f64 = "effort",
-        /// Wall time of the run (s).
-        seconds: f64 = "seconds",
-        /// 1 when the swing heel landed and the body stood, else 0.
-        landed: f64 = "landed",
-        /// Reached minus desired length (m).
-        length_error_m: f64 = "length_error_m",
-        /// The projected weight of the short example.
-        weight_short: f64 = "weight_short",
-        /// The projected weight of the long example.
-        weight_long: f64 = "weight_long",
-    }
-}
 
 /// Step length (right heel x − left heel x, m) and the right heel's height above the ground
 /// (m) at state `x`.
@@ -76,15 +49,16 @@ pub fn step_target(b: &Biped, end: &[f64], length: f64) -> Result<Vec<f64>, Erro
         ]
     };
     // Unknowns: pelvis x, y, left hip (ankle compensating), right hip (likewise).
+    let (left, right) = (Biped::leg(Side::Left), Biped::leg(Side::Right));
     let nudge = |x: &mut [f64], i: usize, d: f64| match i {
         0 | 1 => x[i] += d,
         2 => {
-            x[3] += d;
-            x[5] -= d;
+            x[left.hip] += d;
+            x[left.ankle] -= d;
         }
         _ => {
-            x[6] += d;
-            x[8] -= d;
+            x[right.hip] += d;
+            x[right.ankle] -= d;
         }
     };
     let mut x = end.to_vec();
@@ -258,13 +232,9 @@ impl Setup {
     }
 
     /// DDP step to `length` and its tracker, with the seconds both took.
-    fn optimize(
-        &self,
-        p: &Params,
-        length: f64,
-    ) -> Result<(DdpSolution, TrackingController, f64), Error> {
+    fn optimize(&self, p: &Params, length: f64) -> Result<Solved, Error> {
         let cost = self.cost(self.target(length)?);
-        optimized_tracker(
+        let (solution, tracker, seconds) = optimized_tracker(
             &self.map,
             &cost,
             &self.x0,
@@ -272,7 +242,12 @@ impl Setup {
             p.torque_limit,
             p.max_iterations,
             p.tol_cost,
-        )
+        )?;
+        Ok(Solved {
+            solution,
+            tracker,
+            seconds,
+        })
     }
 
     /// Runs `blend` on the simulator from `x0` (stance on the left) for the step's knots, the
@@ -437,8 +412,8 @@ impl Job for Params {
         })?;
         let s = &setups[0];
         let Solves {
-            solved,
             examples,
+            direct,
             components,
         } = self.solve_steps(ctx, &setups)?;
         let centers = [s.target(self.short_m)?, s.target(self.long_m)?];
@@ -446,7 +421,7 @@ impl Job for Params {
         let limits = vec![self.torque_limit; TORQUES];
         let pairs: Vec<[TrackingController; 2]> = examples
             .iter()
-            .map(|(_, idx)| [solved[idx[0]].1.clone(), solved[idx[1]].1.clone()])
+            .map(|e| [e.short.tracker.clone(), e.long.tracker.clone()])
             .collect();
         let blend_of = |pair: usize, w: &[f64], mode: BlendMode| TrackerBlend {
             trackers: &pairs[pair][..],
@@ -474,7 +449,7 @@ impl Job for Params {
                     let r = match m.mode() {
                         None => {
                             let b = TrackerBlend {
-                                trackers: std::slice::from_ref(&solved[2 + d].1),
+                                trackers: std::slice::from_ref(&direct[d].tracker),
                                 weights: vec![1.0],
                                 lambda,
                                 mode: BlendMode::Single(0),
@@ -488,7 +463,7 @@ impl Job for Params {
                     };
                     let mut secs = t0.elapsed().as_secs_f64();
                     if m == Stepper::Direct {
-                        secs += solved[2 + d].2;
+                        secs += direct[d].seconds;
                     }
                     pb.inc(1);
                     Ok((r, w, secs))
@@ -503,12 +478,12 @@ impl Job for Params {
         let (walk, motion) = ctx.stage("walk", || self.walk(s, lambda, &centers, &blend))?;
         let rule = self.rule_settings(s, lambda);
         Ok(Tables::from([
-            ("components", components),
+            ("components", table_of(&components)),
             ("targets", table_of(&targets)),
-            ("weights", weights),
-            ("average_effect", average),
-            ("walk", walk),
-            ("motion", motion),
+            ("weights", table_of(&weights)),
+            ("average_effect", table_of(&average)),
+            ("walk", table_of(&walk)),
+            ("motion", table_of(&motion)),
             ("rule", rule),
         ]))
     }
@@ -517,14 +492,26 @@ impl Job for Params {
 /// A case run on the simulator: (setup, desired length's index, desired length, method).
 type Case = (usize, usize, f64, Stepper);
 
-/// The DDP steps: every solve (the two examples and a direct solve per desired length, then the
-/// two examples at each compared scale), where each setup's examples are among them, and the
-/// components table.
+/// A DDP step and its tracker, with the seconds both took.
+struct Solved {
+    solution: DdpSolution,
+    tracker: TrackingController,
+    seconds: f64,
+}
+
+/// The two examples optimized on one setup.
+struct Examples {
+    short: Solved,
+    long: Solved,
+}
+
+/// The DDP steps: each setup's two examples (the run's setup first, then one per compared
+/// scale), the direct solve per desired length on the run's setup, and the components table.
 struct Solves {
-    solved: Vec<(DdpSolution, TrackingController, f64)>,
-    /// (setup, index into `solved`) of the short and the long example.
-    examples: Vec<(usize, [usize; 2])>,
-    components: Table,
+    examples: Vec<Examples>,
+    /// In `desired_m`'s order.
+    direct: Vec<Solved>,
+    components: Vec<ComponentRow>,
 }
 
 impl Params {
@@ -539,52 +526,55 @@ impl Params {
             jobs.extend([(k, self.short_m), (k, self.long_m)]);
         }
         let pb = ctx.progress(jobs.len() as u64, "DDP steps");
-        let solved: Vec<Result<(DdpSolution, TrackingController, f64), Error>> =
-            ctx.stage("ddp", || {
-                jobs.par_iter()
-                    .map(|&(k, l)| {
-                        let r = setups[k].optimize(self, l);
-                        pb.inc(1);
-                        r
-                    })
-                    .collect()
-            });
+        let solved: Vec<Result<Solved, Error>> = ctx.stage("ddp", || {
+            jobs.par_iter()
+                .map(|&(k, l)| {
+                    let r = setups[k].optimize(self, l);
+                    pb.inc(1);
+                    r
+                })
+                .collect()
+        });
         pb.finish_and_clear();
-        let solved = solved.into_iter().collect::<Result<Vec<_>, _>>()?;
-        let mut components = Table::new(&[
-            "component",
-            "target_length_m",
-            "reached_length_m",
-            "iterations",
-            "cost",
-            "termination",
-            "seconds",
-            "average_scale",
-        ]);
-        let mut examples = vec![(0usize, [0usize, 1])];
-        let first_compared = 2 + self.desired_m.len();
-        for k in 1..setups.len() {
-            let i = first_compared + 2 * (k - 1);
-            examples.push((k, [i, i + 1]));
+        // Taken apart in `jobs`' order.
+        let mut solved = solved
+            .into_iter()
+            .collect::<Result<Vec<_>, _>>()?
+            .into_iter();
+        let mut next = || solved.next().expect("one solve per job");
+        let mut examples = vec![Examples {
+            short: next(),
+            long: next(),
+        }];
+        let direct: Vec<Solved> = self.desired_m.iter().map(|_| next()).collect();
+        for _ in 1..setups.len() {
+            examples.push(Examples {
+                short: next(),
+                long: next(),
+            });
         }
-        for &(k, idx) in &examples {
-            for (name, &i) in ["short", "long"].iter().zip(&idx) {
-                let (sol, _, secs) = &solved[i];
-                components.push(row![
-                    *name,
-                    jobs[i].1,
-                    reached_length(&s.body, &s.x0, sol.x[n].as_slice()),
-                    sol.trace.len(),
-                    sol.cost,
-                    format!("{:?}", sol.termination),
-                    *secs,
-                    setups[k].average_scale
-                ]);
+        let mut components = Vec::new();
+        for (e, setup) in examples.iter().zip(setups) {
+            for (name, length, step) in [
+                ("short", self.short_m, &e.short),
+                ("long", self.long_m, &e.long),
+            ] {
+                let sol = &step.solution;
+                components.push(ComponentRow {
+                    component: name.to_string(),
+                    target_length_m: length,
+                    reached_length_m: reached_length(&s.body, &s.x0, sol.x[n].as_slice()),
+                    iterations: sol.trace.len() as i64,
+                    cost: sol.cost,
+                    termination: format!("{:?}", sol.termination),
+                    seconds: step.seconds,
+                    average_scale: setup.average_scale,
+                });
             }
         }
         Ok(Solves {
-            solved,
             examples,
+            direct,
             components,
         })
     }
@@ -615,30 +605,22 @@ impl Params {
         setups: &[Setup],
         cases: &[Case],
         runs: &[(StepRun, Vec<f64>, f64)],
-    ) -> (Vec<StepRow>, Table, Table) {
+    ) -> (Vec<StepRow>, Vec<AverageRow>, Vec<WeightRow>) {
         let mut targets: Vec<StepRow> = Vec::new();
-        let mut average = Table::new(&[
-            "average_scale",
-            "desired_length_m",
-            "method",
-            "reached_length_m",
-            "fell",
-            "effort",
-            "landed",
-        ]);
-        let mut weights = Table::new(&["desired_length_m", "t", "alpha_short"]);
+        let mut average = Vec::new();
+        let mut weights = Vec::new();
         let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
         for (&(k, _, l, m), (r, w, secs)) in cases.iter().zip(runs) {
             if m.blends() {
-                average.push(row![
-                    setups[k].average_scale,
-                    l,
-                    m.name(),
-                    r.reached,
-                    r.fell as u8 as f64,
-                    r.effort,
-                    r.landed as u8 as f64
-                ]);
+                average.push(AverageRow {
+                    average_scale: setups[k].average_scale,
+                    desired_length_m: l,
+                    method: m.name().to_string(),
+                    reached_length_m: r.reached,
+                    fell: r.fell as u8 as f64,
+                    effort: r.effort,
+                    landed: r.landed as u8 as f64,
+                });
             }
             if k > 0 {
                 continue;
@@ -657,7 +639,11 @@ impl Params {
             });
             if m == Stepper::Lbc {
                 for (i, a) in r.alpha_short.iter().enumerate().step_by(frame) {
-                    weights.push(row![l, i as f64 * self.knot_dt, *a]);
+                    weights.push(WeightRow {
+                        desired_length_m: l,
+                        t_s: i as f64 * self.knot_dt,
+                        alpha_short: *a,
+                    });
                 }
             }
         }
@@ -692,7 +678,7 @@ impl Params {
         lambda: f64,
         centers: &[DVector<f64>],
         blend: &dyn Fn(&[f64], BlendMode) -> TrackerBlend<'a>,
-    ) -> Result<(Table, Table), Error> {
+    ) -> Result<(Vec<WalkStepRow>, Vec<MotionRow>), Error> {
         let b = &s.body;
         let home = b.contact_points(&s.x0[..DOF])[LEFT_HEEL][0];
         let mut footholds = vec![home];
@@ -701,24 +687,8 @@ impl Params {
         }
         let margin = self.rule.tolerance_m;
         let gap = gaps(&footholds, margin);
-        let mut walk = Table::new(&[
-            "step",
-            "stance_heel_m",
-            "foothold_m",
-            "desired_length_m",
-            "reached_length_m",
-            "landing_heel_m",
-            "landing_toe_m",
-            "gap_start_m",
-            "gap_end_m",
-            "in_gap",
-            "fell",
-            "weight_short",
-        ]);
-        let mut cols = vec!["step".to_string(), "t".into(), "alpha_short".into()];
-        cols.extend((0..DOF).map(|i| format!("q{i}")));
-        let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
-        let mut motion = Table::new(&cols);
+        let mut walk = Vec::new();
+        let mut motion = Vec::new();
         let frame = ((self.gif_frame_s / self.knot_dt).round() as usize).max(1);
         let mut world = s.x0.clone();
         let step_s = s.horizon() as f64 * self.knot_dt;
@@ -753,28 +723,27 @@ impl Params {
             for (i, x) in r.states.iter().enumerate().step_by(frame) {
                 let y = back(x);
                 let a = r.alpha_short.get(i).copied().unwrap_or(f64::NAN);
-                let mut row = row![k + 1, k as f64 * step_s + i as f64 * self.knot_dt, a];
-                row.extend(y[..DOF].iter().map(|&v| v.into()));
-                motion.push(row);
+                let t = k as f64 * step_s + i as f64 * self.knot_dt;
+                motion.push(MotionRow::at(k as i64 + 1, t, a, &y[..DOF]));
             }
             let end = r.states.last().cloned().unwrap_or_else(|| local.clone());
             let pts = b.contact_points(&end[..DOF]);
             let (heel, toe) = (pts[RIGHT_HEEL][0] - shift, pts[RIGHT_TOE][0] - shift);
             let in_any = in_gap(heel, toe, &gap);
-            walk.push(row![
-                k + 1,
-                stance,
-                footholds[k + 1],
-                desired,
-                r.reached,
-                heel,
-                toe,
-                g.0,
-                g.1,
-                in_any as u8 as f64,
-                r.fell as u8 as f64,
-                w[0] / (w[0] + w[1])
-            ]);
+            walk.push(WalkStepRow {
+                step: k as i64 + 1,
+                stance_heel_m: stance,
+                foothold_m: footholds[k + 1],
+                desired_length_m: desired,
+                reached_length_m: r.reached,
+                landing_heel_m: heel,
+                landing_toe_m: toe,
+                gap_start_m: g.0,
+                gap_end_m: g.1,
+                in_gap: in_any as u8 as f64,
+                fell: r.fell as u8 as f64,
+                weight_short: w[0] / (w[0] + w[1]),
+            });
             if r.fell {
                 break;
             }

@@ -44,9 +44,10 @@
 mod figures;
 mod job;
 mod report;
+mod rows;
 
 pub use job::{step_length, step_target};
-pub use report::{verdict_of, SteppingFacts};
+pub use report::{verdict_of, SteppingFacts, Walk, WalkStep};
 
 use crate::control::simbicon::Gait;
 use crate::experiment::output::Tables;

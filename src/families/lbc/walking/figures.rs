@@ -1,7 +1,7 @@
 //! `lbc_walking`'s figures and animation.
 
-use super::job::{SweepRow, WalkRow};
 use super::report::{track_of, CONTROLLERS, TERRAINS};
+use super::rows::{MotionRow, SearchRow, SweepRow, WalkRow, WeightRow};
 use crate::experiment::output::Tables;
 use crate::experiment::plot::{Figure, FigureSink, Legend, Mark, Panel, Series};
 use crate::experiment::report::sig;
@@ -9,7 +9,7 @@ use crate::experiment::rows::TableRow;
 use crate::experiment::Error;
 use crate::families::lbc::film::{biped_body, fitted, to_scale};
 use crate::families::lbc::rule_setting;
-use crate::physics::biped::{Biped, DOF};
+use crate::physics::biped::Biped;
 use crate::physics::ground::{Contact, Terrain};
 use std::path::PathBuf;
 
@@ -52,8 +52,7 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     };
     files.extend(fig.draw("walks", &Figure::grid(vec![panel], 1))?);
     // Weights against position, with the track's profile.
-    let wt = tables.require("weights")?;
-    let (tt, xx, aa) = (wt.strs("terrain"), wt.f64s("x"), wt.f64s("alpha_hill"));
+    let weights = WeightRow::from_table(tables.require("weights")?);
     let hill = track_of(tables);
     let Terrain::FlatThenHill { start_m: start, .. } = hill else {
         unreachable!("track_of builds a flat-then-hill track")
@@ -62,15 +61,16 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         .iter()
         .enumerate()
         .map(|(k, terrain)| {
-            let pts = (0..tt.len())
-                .filter(|&i| tt[i] == *terrain)
-                .map(|i| (xx[i], aa[i]))
+            let pts = weights
+                .iter()
+                .filter(|r| r.terrain == *terrain)
+                .map(|r| (r.x_m, r.alpha_hill))
                 .collect();
             Series::line(terrain.replace('_', "-"), pts, k)
         })
         .collect();
     s.push(Series::line("hill starts", vec![(start, 0.0), (start, 1.0)], 3).mark(Mark::Dashed));
-    let x_max = xx.iter().cloned().fold(1.0, f64::max);
+    let x_max = weights.iter().map(|r| r.x_m).fold(1.0, f64::max);
     let alpha_panel = Panel {
         title: "LBC's weight of the hill walker".into(),
         x_label: "pelvis x (m)".into(),
@@ -168,15 +168,8 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     ];
     files.extend(fig.draw("lambda", &Figure::grid(panels, 2))?);
     // The search grid.
-    let se = tables.require("search")?;
-    let (to, ho, sdist, sfell, sch) = (
-        se.f64s("torso_offset"),
-        se.f64s("hip_offset"),
-        se.f64s("distance_m"),
-        se.f64s("fell"),
-        se.f64s("chosen"),
-    );
-    let mut torsos = to.clone();
+    let search = SearchRow::from_table(tables.require("search")?);
+    let mut torsos: Vec<f64> = search.iter().map(|r| r.torso_offset).collect();
     torsos.dedup();
     let mut ss: Vec<Series> = torsos
         .iter()
@@ -184,18 +177,20 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         .map(|(k, &tv)| {
             Series::line(
                 format!("torso {tv:+.2} rad"),
-                (0..to.len())
-                    .filter(|&i| to[i] == tv)
-                    .map(|i| (ho[i], sdist[i]))
+                search
+                    .iter()
+                    .filter(|r| r.torso_offset == tv)
+                    .map(|r| (r.hip_offset, r.distance_m))
                     .collect(),
                 k,
             )
             .mark(Mark::LinePoints)
         })
         .collect();
-    let fell: Vec<(f64, f64)> = (0..to.len())
-        .filter(|&i| sfell[i] != 0.0)
-        .map(|i| (ho[i], sdist[i]))
+    let fell: Vec<(f64, f64)> = search
+        .iter()
+        .filter(|r| r.fell != 0)
+        .map(|r| (r.hip_offset, r.distance_m))
         .collect();
     // Written at their points (dots alone hide under the lines' own markers), one label per
     // hip offset at its highest fall, with the count where several walkers fell there (their
@@ -219,9 +214,10 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
         })
         .collect();
     ss.push(fell_s);
-    let chosen: Vec<(f64, f64)> = (0..to.len())
-        .filter(|&i| sch[i] != 0.0)
-        .map(|i| (ho[i], sdist[i]))
+    let chosen: Vec<(f64, f64)> = search
+        .iter()
+        .filter(|r| r.chosen != 0)
+        .map(|r| (r.hip_offset, r.distance_m))
         .collect();
     let mut chosen_s = Series::line("", chosen.clone(), 7).mark(Mark::Points);
     chosen_s.point_labels = vec!["chosen: the hill walker".into(); chosen.len()];
@@ -236,17 +232,17 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
     };
     files.extend(fig.draw("search", &Figure::grid(vec![panel], 1))?);
     if let Some(m) = tables.get("motion") {
-        files.extend(fig.draw("filmstrip", &track_filmstrip(m, hill)?)?);
+        let m = MotionRow::from_table(m);
+        files.extend(fig.draw("filmstrip", &track_filmstrip(&m, hill)?)?);
         // In real time: each frame shows for the simulated time between samples.
-        let t = m.f64s("t");
-        let step = t
+        let step = m
             .windows(2)
-            .map(|w| w[1] - w[0])
+            .map(|w| w[1].t_s - w[0].t_s)
             .find(|d| *d > 0.0)
             .unwrap_or(0.1);
         files.push(fig.gif(
             "track",
-            &track_frames(m, hill)?,
+            &track_frames(&m, hill)?,
             (100.0 * step).round().max(1.0) as u32,
         )?);
     }
@@ -262,30 +258,25 @@ const STRIP_END_S: f64 = 9.0;
 /// LBC's poses (coloured by α_hill: blue flat walker, red hill walker) and the flat walker's
 /// alone (grey, until it falls) every [`STRIP_EVERY_S`] over the first [`STRIP_END_S`] on the
 /// flat-then-hill track, to scale.
-fn track_filmstrip(
-    m: &crate::experiment::output::Table,
-    terrain: Terrain,
-) -> Result<Figure, Error> {
-    let (who, t, a) = (m.strs("controller"), m.f64s("t"), m.f64s("alpha_hill"));
-    let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
+fn track_filmstrip(m: &[MotionRow], terrain: Terrain) -> Result<Figure, Error> {
     let b = Biped::new(terrain, Contact::default());
     let picked = |name: &str| -> Vec<usize> {
-        let rows: Vec<usize> = (0..t.len())
-            .filter(|&i| who[i] == name && t[i] <= STRIP_END_S + 1e-9)
+        let rows: Vec<usize> = (0..m.len())
+            .filter(|&i| m[i].controller == name && m[i].t_s <= STRIP_END_S + 1e-9)
             .collect();
         let mut next = 0.0;
         rows.into_iter()
             .filter(|&i| {
-                let keep = t[i] + 1e-9 >= next;
+                let keep = m[i].t_s + 1e-9 >= next;
                 if keep {
-                    next = t[i] + STRIP_EVERY_S;
+                    next = m[i].t_s + STRIP_EVERY_S;
                 }
                 keep
             })
             .collect()
     };
     let (lbc, flat) = (picked("lbc"), picked("flat"));
-    let xs: Vec<f64> = lbc.iter().chain(&flat).map(|&i| q[0][i]).collect();
+    let xs: Vec<f64> = lbc.iter().chain(&flat).map(|&i| m[i].q0).collect();
     let (x0, x1) = (
         xs.iter().cloned().fold(f64::INFINITY, f64::min) - 0.6,
         xs.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + 0.6,
@@ -298,7 +289,7 @@ fn track_filmstrip(
             (gx, terrain.height_slope(gx).0)
         })
         .collect();
-    let state = |i: usize| -> Vec<f64> { (0..DOF).map(|k| q[k][i]).collect() };
+    let state = |i: usize| -> Vec<f64> { m[i].q().to_vec() };
     let mut flat_series = vec![Series::line("ground", ground.clone(), 2)];
     for (n, &i) in flat.iter().enumerate() {
         for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
@@ -313,9 +304,12 @@ fn track_filmstrip(
     let mut lbc_series = vec![Series::line("ground", ground, 2)];
     for (n, &i) in lbc.iter().enumerate() {
         // Colour 0 (blue) while the flat walker leads, 3 (red) once the hill walker does.
-        let color = if a[i] >= 0.5 { 3 } else { 0 };
+        let color = if m[i].alpha_hill >= 0.5 { 3 } else { 0 };
         for (k, seg) in biped_body(&b, &state(i)).into_iter().enumerate() {
-            let first = k == 0 && lbc[..n].iter().all(|&j| (a[j] >= 0.5) != (a[i] >= 0.5));
+            let first = k == 0
+                && lbc[..n]
+                    .iter()
+                    .all(|&j| (m[j].alpha_hill >= 0.5) != (m[i].alpha_hill >= 0.5));
             let label = match (first, color) {
                 (true, 0) => "LBC, α_hill < 0.5",
                 (true, _) => "LBC, α_hill ≥ 0.5",
@@ -324,7 +318,7 @@ fn track_filmstrip(
             lbc_series.push(Series::line(label, seg, color));
         }
     }
-    let fell = flat.last().map_or(0.0, |&i| t[i]);
+    let fell = flat.last().map_or(0.0, |&i| m[i].t_s);
     Ok(to_scale(
         (size, xr, yr),
         "x (m)",
@@ -347,19 +341,16 @@ fn track_filmstrip(
 
 /// Frames of LBC (colour) and the flat walker alone (grey) on the flat-then-hill track, the view
 /// following LBC's pelvis.
-fn track_frames(
-    m: &crate::experiment::output::Table,
-    terrain: Terrain,
-) -> Result<Vec<Figure>, Error> {
-    let (who, t, a) = (m.strs("controller"), m.f64s("t"), m.f64s("alpha_hill"));
-    let q: Vec<Vec<f64>> = (0..DOF).map(|i| m.f64s(&format!("q{i}"))).collect();
+fn track_frames(m: &[MotionRow], terrain: Terrain) -> Result<Vec<Figure>, Error> {
     let b = Biped::new(terrain, Contact::default());
-    let lbc: Vec<usize> = (0..t.len()).filter(|&i| who[i] == "lbc").collect();
-    let flat: Vec<usize> = (0..t.len()).filter(|&i| who[i] == "flat").collect();
-    let state = |i: usize| -> Vec<f64> { (0..DOF).map(|k| q[k][i]).collect() };
+    let lbc: Vec<usize> = (0..m.len()).filter(|&i| m[i].controller == "lbc").collect();
+    let flat: Vec<usize> = (0..m.len())
+        .filter(|&i| m[i].controller == "flat")
+        .collect();
+    let state = |i: usize| -> Vec<f64> { m[i].q().to_vec() };
     let mut frames = Vec::new();
     for (n, &i) in lbc.iter().enumerate() {
-        let x = q[0][i];
+        let x = m[i].q0;
         let (size, xr, yr) = fitted(
             (x - 2.0, x + 2.0),
             (
@@ -392,7 +383,7 @@ fn track_frames(
         }
         let title = format!(
             "LBC of the flat and hill walkers   t = {:.1} s   α_hill = {:.2}",
-            t[i], a[i]
+            m[i].t_s, m[i].alpha_hill
         );
         frames.push(to_scale((size, xr, yr), "x (m)", vec![(title, series)]));
     }

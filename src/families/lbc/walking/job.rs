@@ -1,6 +1,7 @@
 //! The run of `lbc_walking`: the hill walker's search, the two gaits' value functions, the
 //! walks of every controller on every terrain, the temperature sweep.
 
+use super::rows::{MotionRow, SearchRow, SweepRow, WalkRow, WeightRow};
 use super::Params;
 use crate::bellman::combine::{blend_controls, blend_weights};
 use crate::control::gait_value::GaitCycle;
@@ -14,46 +15,6 @@ use crate::physics::ground::{Contact, Terrain};
 use crate::physics::{Dynamics, IntegratorKind, Model, Simulator};
 use crate::row;
 use rayon::prelude::*;
-
-crate::result_rows! {
-    /// One row of `walks.csv`: one controller's walk on one terrain.
-    pub struct WalkRow {
-        /// The terrain's name (`flat`, `incline`, `flat_then_hill`).
-        terrain: String = "terrain",
-        /// The controller (`flat`, `hill`, `naive`, `lbc`).
-        controller: String = "controller",
-        /// Pelvis x advance (m) up to the end or the fall.
-        distance_m: f64 = "distance_m",
-        /// 1 when it fell, else 0.
-        fell: i64 = "fell",
-        /// Distance over the seconds walked (m/s).
-        mean_speed_m_s: f64 = "mean_speed_m_s",
-        /// Heel strikes of the (first) state machine.
-        steps: i64 = "steps",
-        /// When it fell (s; NaN when it did not).
-        fell_at_s: f64 = "fell_at_s",
-        /// LBC's temperature (NaN for the other controllers).
-        lambda: f64 = "lambda",
-    }
-}
-
-crate::result_rows! {
-    /// One row of `lambda_sweep.csv`: LBC at one temperature on one terrain.
-    pub struct SweepRow {
-        /// LBC's temperature λ.
-        lambda: f64 = "lambda",
-        /// The terrain's name.
-        terrain: String = "terrain",
-        /// Pelvis x advance (m) up to the end or the fall.
-        distance_m: f64 = "distance_m",
-        /// 1 when it fell, else 0.
-        fell: i64 = "fell",
-        /// α_hill's mean on the track's flat part (NaN off the flat-then-hill track).
-        alpha_hill_flat_part: f64 = "alpha_hill_flat_part",
-        /// α_hill's mean on the track's hill part (likewise).
-        alpha_hill_hill_part: f64 = "alpha_hill_hill_part",
-    }
-}
 
 /// Who drives the body.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -270,7 +231,7 @@ struct HillWalker {
     gait: Gait,
     torso_offset: f64,
     hip_offset: f64,
-    search: Table,
+    search: Vec<SearchRow>,
 }
 
 /// The temperature sweep: every λ's walk on every terrain (λ-major) and the chosen λ's index.
@@ -306,11 +267,18 @@ impl Params {
         let chosen = choose_hill(&results).ok_or_else(|| {
             other("lbc_walking: every hill walker of the grid fell on the incline")
         })?;
-        let mut search =
-            Table::new(&["torso_offset", "hip_offset", "distance_m", "fell", "chosen"]);
-        for (i, (&(t, h), &(d, f))) in grid.iter().zip(&results).enumerate() {
-            search.push(row![t, h, d, i64::from(f), i64::from(i == chosen)]);
-        }
+        let search: Vec<SearchRow> = grid
+            .iter()
+            .zip(&results)
+            .enumerate()
+            .map(|(i, (&(t, h), &(d, f)))| SearchRow {
+                torso_offset: t,
+                hip_offset: h,
+                distance_m: d,
+                fell: i64::from(f),
+                chosen: i64::from(i == chosen),
+            })
+            .collect();
         let (torso_offset, hip_offset) = grid[chosen];
         Ok(HillWalker {
             gait: hill_gait(&self.flat_gait, torso_offset, hip_offset),
@@ -507,30 +475,21 @@ fn walks_table(
 
 /// `weights.csv`: LBC's weights and values over time on every terrain (`lbc`, one walk per
 /// terrain) at the chosen λ.
-fn weights_table(terrains: &[(&'static str, Terrain)], lbc: &[Walk]) -> Table {
-    let mut weights = Table::new(&[
-        "terrain",
-        "t",
-        "x",
-        "slope_deg",
-        "alpha_flat",
-        "alpha_hill",
-        "v_flat",
-        "v_hill",
-    ]);
+fn weights_table(terrains: &[(&'static str, Terrain)], lbc: &[Walk]) -> Vec<WeightRow> {
+    let mut weights = Vec::new();
     for (t, (name, terrain)) in terrains.iter().enumerate() {
         for sm in &lbc[t].samples {
             let slope = crate::portable::atan(terrain.height_slope(sm.x[0]).1).to_degrees();
-            weights.push(row![
-                *name,
-                sm.t,
-                sm.x[0],
-                slope,
-                1.0 - sm.alpha_hill,
-                sm.alpha_hill,
-                sm.v_flat,
-                sm.v_hill
-            ]);
+            weights.push(WeightRow {
+                terrain: name.to_string(),
+                t_s: sm.t,
+                x_m: sm.x[0],
+                slope_deg: slope,
+                alpha_flat: 1.0 - sm.alpha_hill,
+                alpha_hill: sm.alpha_hill,
+                v_flat: sm.v_flat,
+                v_hill: sm.v_hill,
+            });
         }
     }
     weights
@@ -538,16 +497,11 @@ fn weights_table(terrains: &[(&'static str, Terrain)], lbc: &[Walk]) -> Table {
 
 /// `motion.csv`: the flat-then-hill walks of LBC and the flat walker, every `frame` samples,
 /// for the animation.
-fn motion_table(lbc: &Walk, flat: &Walk, frame: usize) -> Table {
-    let mut motion_cols = vec!["controller".to_string(), "t".into(), "alpha_hill".into()];
-    motion_cols.extend((0..DOF).map(|i| format!("q{i}")));
-    let cols: Vec<&str> = motion_cols.iter().map(String::as_str).collect();
-    let mut motion = Table::new(&cols);
+fn motion_table(lbc: &Walk, flat: &Walk, frame: usize) -> Vec<MotionRow> {
+    let mut motion = Vec::new();
     for (name, r) in [("lbc", lbc), ("flat", flat)] {
         for sm in r.samples.iter().step_by(frame) {
-            let mut row = row![name, sm.t, sm.alpha_hill];
-            row.extend(sm.x[..DOF].iter().map(|&v| v.into()));
-            motion.push(row);
+            motion.push(MotionRow::at(name, sm.t, sm.alpha_hill, &sm.x[..DOF]));
         }
     }
     motion
@@ -584,12 +538,12 @@ impl Job for Params {
         let motion = motion_table(&lbc[track], &alone[track * DRIVERS_ALONE.len()], frame);
         let rule = self.rule_settings(lambda, &cycles, &hill);
         Ok(Tables::from([
-            ("search", hill.search),
+            ("search", table_of(&hill.search)),
             ("cycles", cyc),
             ("walks", table_of(&walks)),
-            ("weights", weights),
+            ("weights", table_of(&weights)),
             ("lambda_sweep", table_of(&sweep.rows)),
-            ("motion", motion),
+            ("motion", table_of(&motion)),
             ("rule", rule),
         ]))
     }

@@ -29,6 +29,7 @@
 mod figures;
 mod job;
 mod report;
+mod rows;
 
 use crate::control::gait_value::GaitCost;
 use crate::control::simbicon::Gait;

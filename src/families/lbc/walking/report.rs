@@ -1,7 +1,8 @@
 //! `lbc_walking`'s verdict and report section.
 
-use super::job::{part_means, SweepRow, WalkRow};
-use crate::experiment::output::{df_f64, df_str, read_csv, Tables};
+use super::job::part_means;
+use super::rows::{SweepRow, WalkRow, WeightRow};
+use crate::experiment::output::Tables;
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::rows::read_rows;
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
@@ -142,15 +143,11 @@ pub(super) fn track_of(tables: &Tables) -> Terrain {
 
 pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     let rule = rule_settings(dir)?;
-    let w = read_csv(&dir.join("weights.csv"))?;
-    let (wt, wx, wa) = (
-        df_str(&w, "terrain")?,
-        df_f64(&w, "x")?,
-        df_f64(&w, "alpha_hill")?,
-    );
-    let track: Vec<(f64, f64)> = (0..wt.len())
-        .filter(|&i| wt[i] == "flat_then_hill")
-        .map(|i| (wx[i], wa[i]))
+    let weights: Vec<WeightRow> = read_rows(&dir.join("weights.csv"))?;
+    let track: Vec<(f64, f64)> = weights
+        .iter()
+        .filter(|r| r.terrain == "flat_then_hill")
+        .map(|r| (r.x_m, r.alpha_hill))
         .collect();
     let walks: Vec<WalkRow> = read_rows(&dir.join("walks.csv"))?;
     let (start, margin) = (rule("hill_start_m"), rule("margin_m"));

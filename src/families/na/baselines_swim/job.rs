@@ -4,7 +4,7 @@
 
 use super::report::{common_target, iterations_to};
 use super::settings::SearchBudget;
-use super::{Params, DAGGER_SUBSTRATE, SEARCHES};
+use super::{Params, Search, DAGGER_SUBSTRATE};
 use crate::control::bptt::{Bptt, Descent};
 use crate::control::search::{
     anneal, bptt_search, hill_climb, nelder_mead, time_to_target, BpttProblem, Budget, ClimbConfig,
@@ -30,7 +30,7 @@ impl Params {
     /// A gradient-free search on one problem.
     fn search<P: SearchProblem>(
         &self,
-        method: &str,
+        method: Search,
         problem: &P,
         v0: &[f64],
         budget: &SearchBudget,
@@ -38,14 +38,14 @@ impl Params {
     ) -> Result<SearchResult, Error> {
         let b = budget.budget();
         let r = match method {
-            "annealing" => anneal(
+            Search::Annealing => anneal(
                 problem,
                 v0,
                 &self.annealing.config(budget.evaluations),
                 seed,
                 &b,
             ),
-            "simplex" => {
+            Search::Simplex => {
                 let s = &self.simplex;
                 let cfg = SimplexConfig {
                     step: s.step,
@@ -55,7 +55,7 @@ impl Params {
                 };
                 nelder_mead(problem, v0, &cfg, &b)
             }
-            _ => {
+            Search::HillClimbing => {
                 let h = &self.hill_climbing;
                 let cfg = ClimbConfig {
                     batch: h.batch,
@@ -354,11 +354,12 @@ impl Params {
     ) -> Result<Vec<Run>, Error> {
         let mut runs: Vec<Run> = vec![];
         runs.extend(self.bptt_runs(ctx, emulator, v0, "emulator", "")?);
-        let pb = ctx.progress(2 * SEARCHES.len() as u64, "gradient-free searches");
-        for (k, method) in SEARCHES.into_iter().enumerate() {
+        let pb = ctx.progress(2 * Search::ALL.len() as u64, "gradient-free searches");
+        for (k, search) in Search::ALL.into_iter().enumerate() {
+            let method = search.name();
             let seed = search_seed(ctx.seed, k);
             let result = ctx.stage(&format!("{method} emulator"), || {
-                self.search(method, emulator, v0, &self.budget.emulator, seed)
+                self.search(search, emulator, v0, &self.budget.emulator, seed)
             })?;
             runs.push(Run {
                 method,
@@ -367,7 +368,7 @@ impl Params {
             });
             pb.inc(1);
             let result = ctx.stage(&format!("{method} simulator"), || {
-                self.search(method, simulator, v0, &self.budget.simulator, seed)
+                self.search(search, simulator, v0, &self.budget.simulator, seed)
             })?;
             runs.push(Run {
                 method,
@@ -390,10 +391,11 @@ impl Params {
     ) -> Result<Vec<Run>, Error> {
         let problem = BpttProblem::new(b);
         let mut runs = self.bptt_runs(ctx, &problem, v0, DAGGER_SUBSTRATE, "")?;
-        for (k, method) in SEARCHES.into_iter().enumerate() {
+        for (k, search) in Search::ALL.into_iter().enumerate() {
+            let method = search.name();
             let seed = search_seed(ctx.seed, k);
             let result = ctx.stage(&format!("{method} ({DAGGER_SUBSTRATE})"), || {
-                self.search(method, &problem, v0, &self.budget.emulator, seed)
+                self.search(search, &problem, v0, &self.budget.emulator, seed)
             })?;
             runs.push(Run {
                 method,
@@ -460,10 +462,11 @@ impl Params {
             let v0 = self.initial_knots(s, knots_len);
             let mut more =
                 self.bptt_runs(ctx, emulator, &v0, "emulator", &format!(", seed {s}"))?;
-            for (k, method) in SEARCHES.into_iter().enumerate() {
+            for (k, search) in Search::ALL.into_iter().enumerate() {
+                let method = search.name();
                 let result = ctx.stage(&format!("{method} emulator, seed {s}"), || {
                     self.search(
-                        method,
+                        search,
                         emulator,
                         &v0,
                         &self.budget.emulator,
@@ -522,7 +525,10 @@ fn final_table(runs: &[Run], evaluated: &[OnBoth]) -> Vec<FinalRow> {
         let target = match r.substrate {
             "emulator" => targets.0,
             DAGGER_SUBSTRATE => dagger_target,
-            _ => targets.1,
+            "simulator" => targets.1,
+            other => unreachable!(
+                "the runs are on the emulator, the DAgger net or the simulator, not {other}"
+            ),
         };
         let trace = &r.result.trace;
         let last = trace.last().expect("a search has iteration 0");

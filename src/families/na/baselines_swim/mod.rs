@@ -285,8 +285,37 @@ impl Validate for Params {
     }
 }
 
-/// The gradient-free methods, in table order.
-pub const SEARCHES: [&str; 3] = ["annealing", "simplex", "hill_climbing"];
+/// A gradient-free search method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Search {
+    /// Simulated annealing.
+    Annealing,
+    /// Nelder–Mead simplex.
+    Simplex,
+    /// Hill climbing (ours, the mass-spring paper's search).
+    HillClimbing,
+}
+
+impl Search {
+    /// Every search, in table order.
+    pub const ALL: [Search; 3] = [Search::Annealing, Search::Simplex, Search::HillClimbing];
+
+    /// Its name in the tables.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Search::Annealing => "annealing",
+            Search::Simplex => "simplex",
+            Search::HillClimbing => "hill_climbing",
+        }
+    }
+}
+
+/// The gradient-free methods' names, in table order.
+pub const SEARCHES: [&str; 3] = [
+    Search::ALL[0].name(),
+    Search::ALL[1].name(),
+    Search::ALL[2].name(),
+];
 /// Every method, in table order.
 pub const METHODS: [&str; 5] = [
     "bptt_momentum",

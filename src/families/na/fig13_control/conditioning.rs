@@ -1,6 +1,7 @@
 //! The conditioning study beside the headline: the physics sweep (descent through the physical
 //! model itself), the terminal Gauss-Newton spectrum of each task, and the best-weights run.
 
+use super::rows::{BestWeightsRow, ConditioningRow, LadderRow, SpectrumRow, SweepRow};
 use super::{Params, Sweep, Task};
 use crate::control::bptt::{learn_with, Bptt, Knots, Substepped};
 use crate::control::conditioning::{
@@ -10,10 +11,9 @@ use crate::control::conditioning::{
 use crate::control::objective::Objective;
 use crate::control::Rk4Map;
 use crate::emulator::catalog::{NetModel, NetSpec};
-use crate::experiment::output::Table;
+use crate::experiment::rows::TableRow;
 use crate::experiment::{other, Error};
 use crate::physics::lander::Lander;
-use crate::row;
 
 /// Columns of `conditioning.csv`: per task and substrate (emulator, physics), the terminal
 /// Gauss-Newton matrix G = J^T W J over the normalized knots at the start (state terms only):
@@ -26,45 +26,22 @@ use crate::row;
 /// tenfold reduction at that bound (at least this many under any weights, the headline's eta
 /// and alpha, lambda >= mu_1) ([`WeightingBound`]); and the paper's iteration count for the
 /// task, which the spec's reading compares that bound with.
-pub const CONDITIONING_COLUMNS: [&str; 14] = [
-    "task",
-    "substrate",
-    "knots",
-    "dof",
-    "step_scale",
-    "eigen_largest",
-    "eigen_slowest",
-    "condition",
-    "eta",
-    "iterations_per_decade",
-    "condition_equilibrated",
-    "condition_any_weighting",
-    "iterations_per_decade_any_weighting",
-    "paper_iterations",
-];
+pub const CONDITIONING_COLUMNS: &[&str] = ConditioningRow::COLUMNS;
 
 /// Columns of `best_weights.csv` (ours): per task run under the best-conditioned weights and
 /// independent weighted final-state variable (its state index), the task's tolerance, the
 /// tolerance those weights amount to (1/sqrt(w), w scaled so the largest Gauss-Newton
 /// eigenvalue is the task's), the condition of the task's and of the best weights, and the
 /// iterations per tenfold reduction the headline's eta and alpha need at the latter.
-pub const BEST_WEIGHTS_COLUMNS: [&str; 7] = [
-    "task",
-    "variable",
-    "tolerance",
-    "tolerance_best",
-    "condition",
-    "condition_best",
-    "iterations_per_decade_best",
-];
+pub const BEST_WEIGHTS_COLUMNS: &[&str] = BestWeightsRow::COLUMNS;
 
 /// The tables the physics sweep writes to.
 pub(super) struct PhysicsTables<'a> {
-    pub(super) sweep: &'a mut Table,
-    pub(super) conditioning: &'a mut Table,
-    pub(super) spectrum: &'a mut Table,
-    pub(super) best_sweep: &'a mut Table,
-    pub(super) best_weights: &'a mut Table,
+    pub(super) sweep: &'a mut Vec<SweepRow>,
+    pub(super) conditioning: &'a mut Vec<ConditioningRow>,
+    pub(super) spectrum: &'a mut Vec<SpectrumRow>,
+    pub(super) best_sweep: &'a mut Vec<SweepRow>,
+    pub(super) best_weights: &'a mut Vec<BestWeightsRow>,
 }
 
 /// Rows of `conditioning.csv` and `spectrum.csv` for one task on one substrate.
@@ -73,27 +50,35 @@ pub(super) fn record_spectrum(
     substrate: &str,
     (spectrum, bound): (&Spectrum, &WeightingBound),
     lambda: f64,
-    (cond, table): (&mut Table, &mut Table),
+    (cond, table): (&mut Vec<ConditioningRow>, &mut Vec<SpectrumRow>),
 ) {
     let h = task.eta * spectrum.slowest() / lambda;
-    cond.push(row![
-        task.name.as_str(),
-        substrate,
-        spectrum.eigenvalues.len() as i64,
-        spectrum.dof as i64,
-        lambda,
-        spectrum.largest(),
-        spectrum.slowest(),
-        spectrum.condition(),
-        task.eta,
-        iterations_per_decade(h, task.alpha),
-        bound.condition_equilibrated,
-        bound.condition_any_weighting,
-        iterations_per_decade(task.eta / bound.condition_any_weighting, task.alpha),
-        task.task.iterations as i64
-    ]);
+    cond.push(ConditioningRow {
+        task: task.name.clone(),
+        substrate: substrate.into(),
+        knots: spectrum.eigenvalues.len() as i64,
+        dof: spectrum.dof as i64,
+        step_scale: lambda,
+        eigen_largest: spectrum.largest(),
+        eigen_slowest: spectrum.slowest(),
+        condition: spectrum.condition(),
+        eta: task.eta,
+        iterations_per_decade: iterations_per_decade(h, task.alpha),
+        condition_equilibrated: bound.condition_equilibrated,
+        condition_any_weighting: bound.condition_any_weighting,
+        iterations_per_decade_any_weighting: iterations_per_decade(
+            task.eta / bound.condition_any_weighting,
+            task.alpha,
+        ),
+        paper_iterations: task.task.iterations as i64,
+    });
     for (i, e) in spectrum.eigenvalues.iter().enumerate() {
-        table.push(row![task.name.as_str(), substrate, (i + 1) as i64, *e]);
+        table.push(SpectrumRow {
+            task: task.name.clone(),
+            substrate: substrate.into(),
+            index: (i + 1) as i64,
+            eigenvalue: *e,
+        });
     }
 }
 
@@ -157,15 +142,18 @@ impl Params {
                     let mut best = task.clone();
                     for (&k, wk) in vars.iter().zip(&w) {
                         best.task.final_tolerance[k] = 1.0 / (wk * spec.largest()).sqrt();
-                        t.best_weights.push(row![
-                            task.name.as_str(),
-                            k as i64,
-                            task.task.final_tolerance[k],
-                            best.task.final_tolerance[k],
-                            spec.condition(),
-                            kappa,
-                            iterations_per_decade(task.eta / kappa, task.alpha)
-                        ]);
+                        t.best_weights.push(BestWeightsRow {
+                            task: task.name.clone(),
+                            variable: k as i64,
+                            tolerance: task.task.final_tolerance[k],
+                            tolerance_best: best.task.final_tolerance[k],
+                            condition: spec.condition(),
+                            condition_best: kappa,
+                            iterations_per_decade_best: iterations_per_decade(
+                                task.eta / kappa,
+                                task.alpha,
+                            ),
+                        });
                     }
                     let objective = best.objective();
                     let mut b =
@@ -311,7 +299,10 @@ pub(super) fn physics_descent(
 /// The report's table and sentence from `physics_path.csv` in `dir` (empty without it): per
 /// paper task, over the net seeds, where the descent through the physics reaches its goal and
 /// how far each net's gradient is from the physics' at its start and at its last iterate.
-pub(super) fn physics_path_md(dir: &std::path::Path) -> Result<(String, String), Error> {
+pub(super) fn physics_path_md(
+    dir: &std::path::Path,
+    control: &[&str],
+) -> Result<(String, String), Error> {
     use super::rows::PhysicsPathRow;
     use crate::experiment::output::unique;
     use crate::experiment::report::sig;
@@ -321,6 +312,14 @@ pub(super) fn physics_path_md(dir: &std::path::Path) -> Result<(String, String),
     else {
         return Ok(Default::default());
     };
+    // The run measures every control task of the paper's formulation (`control`) through the
+    // physics: a written table without one's rows was cut or edited.
+    if let Some(t) = control.iter().find(|t| !rows.iter().any(|r| r.task == **t)) {
+        return Err(other(format!(
+            "{}: no rows for {t}, of the paper's formulation in final.csv (a truncated or edited table)",
+            dir.join("physics_path.csv").display()
+        )));
+    }
     let tasks = unique(&rows.iter().map(|r| r.task.clone()).collect::<Vec<_>>());
     if tasks.is_empty() {
         return Ok(Default::default());
@@ -388,23 +387,6 @@ pub(super) fn physics_path_md(dir: &std::path::Path) -> Result<(String, String),
         ),
     ))
 }
-
-/// Columns of `conditioning_ladder.csv` (ours): per task of the paper's formulation
-/// that has a formulation of ours on the same net, the terminal Gauss-Newton condition through
-/// that net at the initial knots as the paper's changes are applied to ours one at a time
-/// ([`ladder`]): rung 0 is ours, the last rung the paper's task; `change` names what the rung
-/// changed, `dof` the independent weighted final-state variables, and `iterations_per_decade`
-/// the headline's pace along the slowest direction at that condition (the task's eta and
-/// alpha, lambda at the largest eigenvalue).
-pub const LADDER_COLUMNS: [&str; 7] = [
-    "task",
-    "rung",
-    "change",
-    "dof",
-    "condition",
-    "eta",
-    "iterations_per_decade",
-];
 
 /// The rungs from `ours` to `paper` (the same model): each changes one thing of ours to the
 /// paper's, in a fixed order (horizon and knots, super-step, start, initial controls, target
@@ -476,7 +458,7 @@ pub(super) fn ladder(ours: &Task, paper: &Task) -> Vec<(&'static str, Task)> {
 pub(super) fn record_ladder<'a, D: crate::control::bptt::DifferentiableStep + 'a>(
     net_of: impl Fn(&NetSpec) -> Option<&'a D>,
     rungs: &[(&'static str, Task)],
-    table: &mut Table,
+    table: &mut Vec<LadderRow>,
 ) -> Result<(), Error> {
     for (i, (change, rung)) in rungs.iter().enumerate() {
         let step = net_of(&rung.net)
@@ -496,15 +478,48 @@ pub(super) fn record_ladder<'a, D: crate::control::bptt::DifferentiableStep + 'a
             .gauss_newton()
             .ok_or_else(|| other(format!("{}: objective without curvature", t.name)))?;
         let spec = terminal_spectrum(&mut bptt, &v0, &curvature, t.final_dof());
-        table.push(row![
-            t.name.as_str(),
-            i as i64,
-            *change,
-            spec.dof as i64,
-            spec.condition(),
-            t.eta,
-            iterations_per_decade(t.eta / spec.condition(), t.alpha)
-        ]);
+        table.push(LadderRow {
+            task: t.name.clone(),
+            rung: i as i64,
+            change: change.to_string(),
+            dof: spec.dof as i64,
+            condition: spec.condition(),
+            eta: t.eta,
+            iterations_per_decade: iterations_per_decade(t.eta / spec.condition(), t.alpha),
+        });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::output::write_table;
+    use crate::experiment::rows::table_of;
+    use crate::families::na::fig13_control::rows::PhysicsPathRow;
+
+    /// A `physics_path.csv` without the rows of a paper control task (cut or edited) is an
+    /// error naming it; no file (a run without net seeds' descents) is nothing to say.
+    #[test]
+    fn a_physics_path_without_a_paper_tasks_rows_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(
+            physics_path_md(dir.path(), &["lander"]).unwrap(),
+            (String::new(), String::new())
+        );
+        let row = PhysicsPathRow {
+            task: "lander".into(),
+            net_seed: 1,
+            iteration: 0,
+            physics_error: 3.0,
+            gradient_cosine: 0.9,
+            gradient_relative_error: 0.2,
+        };
+        write_table(dir.path(), "physics_path", &table_of(&[row])).unwrap();
+        physics_path_md(dir.path(), &["lander"]).unwrap();
+        let e = physics_path_md(dir.path(), &["lander", "truck"])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("physics_path.csv") && e.contains("truck"), "{e}");
+    }
 }

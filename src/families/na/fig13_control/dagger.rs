@@ -465,10 +465,14 @@ pub fn figure(
     use crate::experiment::output::unique;
     use crate::experiment::plot::{Figure, Mark, Panel, Series};
     use crate::experiment::rows::TableRow;
-    let Some(t) = tables.get("dagger").filter(|t| !t.is_empty()) else {
+    // Written only where the spec runs DAgger on some task.
+    let Some(t) = tables.get("dagger") else {
         return Ok(vec![]);
     };
     let rows = DaggerRoundRow::from_table(t);
+    if rows.is_empty() {
+        return Err(other("dagger: the DAgger rounds have no rows"));
+    }
     let tasks: Vec<String> = rows.iter().map(|r| r.task.clone()).collect();
     let mut series = vec![];
     let last = rows.iter().map(|r| r.round as f64).fold(0.0, f64::max);
@@ -503,7 +507,9 @@ pub fn figure(
 
 /// The report's DAgger paragraph and its verdict (rule in the spec): per task the rounds'
 /// simulator errors, and at the last round whether the goal is reached on the net within the
-/// paper's iteration count and on the simulator. `None` when there is no `dagger.csv`.
+/// paper's iteration count and on the simulator. `None` when the run wrote no `dagger.csv` (a
+/// spec without DAgger); a written one without rows is an error naming it (every task DAgger
+/// runs on has round 0 at least).
 pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error> {
     use crate::experiment::output::unique;
     use crate::experiment::report::sig;
@@ -513,7 +519,10 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
         return Ok(None);
     };
     if rows.is_empty() {
-        return Ok(None);
+        return Err(other(format!(
+            "{}: the DAgger rounds have no rows",
+            dir.join("dagger.csv").display()
+        )));
     }
     let mut md = format!(
         "\nControl through DAgger emulators (ours, `dagger.csv`; Levenberg-Marquardt through each round's net, controls replayed on the simulator; round 0 is the Table 1 net). The last column is the range of the simulator's final error over {SPREAD_REPLAYS} replays of the same controls, each perturbed by up to {}% of its channel's half-range: how far the open-loop outcome moves under control changes far smaller than a net's error (near or above 1, the tolerance, no emulator short of exact can make the learned controls land reliably).\n\n| task | round | examples | iterations to goal (budget) | final error, net | final error, simulator | neutral drift gap (m) | simulator error spread, controls ±{}% |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
@@ -625,6 +634,22 @@ pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error>
 mod tests {
     use super::*;
     use crate::experiment::spec::SpecFile;
+
+    /// A `dagger.csv` that lost its rows is an error naming it, not a report without the
+    /// DAgger line; no file (a spec without DAgger) is nothing to say.
+    #[test]
+    fn an_emptied_dagger_table_is_an_error() {
+        use crate::experiment::output::write_table;
+        use crate::experiment::rows::table_of;
+        let dir = tempfile::tempdir().unwrap();
+        assert!(summary(dir.path()).unwrap().is_none());
+        write_table(dir.path(), "dagger", &table_of::<DaggerRoundRow>(&[])).unwrap();
+        let e = summary(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("dagger.csv"), "{e}");
+        std::fs::write(dir.path().join("dagger.csv"), "task,round\npendulum,0\n").unwrap();
+        let e = summary(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("dagger.csv"), "{e}");
+    }
 
     #[test]
     fn the_dagger_cache_key_changes_with_every_setting_round_task_and_base_net() {

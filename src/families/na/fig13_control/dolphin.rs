@@ -94,7 +94,7 @@ impl Params {
         trajectory: &mut Table,
         swim_t: &mut Vec<SwimRow>,
         motion_t: &mut Table,
-        dagger_t: &mut Table,
+        dagger_t: &mut Vec<super::rows::DolphinDaggerRow>,
     ) -> Result<(), Error> {
         let spec = d.nets.spec(ctx.seed, self.steps, self.example_scale);
         let built = ctx.stage("train dolphin hierarchy", || build_dolphin_emulator(&spec))?;

@@ -10,6 +10,7 @@
 //! replays. One `dolphin_dagger.csv` row per round; round r's net is cached under the base
 //! net's key plus everything that determines it, so reruns are warm.
 
+use super::rows::DolphinDaggerRow;
 use super::{DolphinControl, Params};
 use crate::emulator::cache::{EmulatorCache, NetRecord};
 use crate::emulator::catalog::{stop_name, TrainSettings, TrainingData};
@@ -23,13 +24,12 @@ use crate::emulator::hierarchy::{
 };
 use crate::emulator::train::mse;
 use crate::emulator::Emulator;
-use crate::experiment::output::Table;
 use crate::experiment::resolve::{ensure, positive, ParamError};
+use crate::experiment::rows::TableRow;
 use crate::experiment::rule::{Check, Cmp, Null, Partly, Rule};
 use crate::experiment::{other, Error, RunContext};
 use crate::families::na::swim::periodicity;
 use crate::physics::dolphin::{Dolphin, N_SEGMENTS};
-use crate::row;
 use crate::seed::mix_seed;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -60,25 +60,8 @@ impl DolphinDagger {
     }
 }
 
-/// Columns of `dolphin_dagger.csv`.
-pub const COLUMNS: [&str; 16] = [
-    "round",
-    "examples",
-    "dagger_examples",
-    "dagger_windows",
-    "fine_tune_iterations",
-    "best_iteration",
-    "best_objective",
-    "distance_emulator_m",
-    "distance_simulator_m",
-    "reference_distance_m",
-    "fraction_of_reference",
-    "periodicity",
-    "period_s",
-    "drift_emulator_m",
-    "drift_simulator_m",
-    "drift_gap_m",
-];
+/// Columns of `dolphin_dagger.csv` ([`DolphinDaggerRow`]).
+pub const COLUMNS: &[&str] = DolphinDaggerRow::COLUMNS;
 
 /// The mean segment centroid of a global state.
 fn centroid(g: &[f64]) -> [f64; 3] {
@@ -108,7 +91,7 @@ impl Params {
         base: &Emulator,
         body: &Dolphin,
         reference_m: f64,
-        table: &mut Table,
+        table: &mut Vec<DolphinDaggerRow>,
     ) -> Result<Emulator, Error> {
         let swim = &d.swim;
         let (x0, g0) = swim.start(body);
@@ -159,24 +142,24 @@ impl Params {
                 g.copy_from_slice(&next);
             }
             let emu_end = centroid(&g);
-            table.push(row![
-                round as i64,
-                (spec.global.examples + train.len()) as i64,
-                train.len() as i64,
-                train.windows.len() as i64,
-                fine_tune_iterations as i64,
-                r.best_iteration as i64,
-                r.best_objective(),
-                emu_d,
-                sim_d,
-                reference_m,
-                sim_d / reference_m,
-                p,
-                lag * dt * n as f64,
-                dist(emu_end, start),
-                dist(sim_end, start),
-                dist(emu_end, sim_end)
-            ]);
+            table.push(DolphinDaggerRow {
+                round: round as i64,
+                examples: (spec.global.examples + train.len()) as i64,
+                dagger_examples: train.len() as i64,
+                dagger_windows: train.windows.len() as i64,
+                fine_tune_iterations: fine_tune_iterations as i64,
+                best_iteration: r.best_iteration as i64,
+                best_objective: r.best_objective(),
+                distance_emulator_m: emu_d,
+                distance_simulator_m: sim_d,
+                reference_distance_m: reference_m,
+                fraction_of_reference: sim_d / reference_m,
+                periodicity: p,
+                period_s: lag * dt * n as f64,
+                drift_emulator_m: dist(emu_end, start),
+                drift_simulator_m: dist(sim_end, start),
+                drift_gap_m: dist(emu_end, sim_end),
+            });
             if round == dd.settings.rounds {
                 break;
             }
@@ -336,7 +319,7 @@ impl Params {
         if let Some((net, _)) = load_derived(&EmulatorCache::from_env(), &spec, &body, &last) {
             return Ok(net);
         }
-        let mut rounds = Table::new(&COLUMNS);
+        let mut rounds = Vec::new();
         self.run_dolphin_dagger(
             ctx,
             d,
@@ -384,14 +367,19 @@ pub fn figure(
     tables: &crate::experiment::output::Tables,
 ) -> Result<Vec<std::path::PathBuf>, Error> {
     use crate::experiment::plot::{Figure, Mark, Panel, Series};
-    let Some(t) = tables.get("dolphin_dagger").filter(|t| !t.is_empty()) else {
+    // Written only where the spec asks for the dolphin's DAgger.
+    let Some(t) = tables.get("dolphin_dagger") else {
         return Ok(vec![]);
     };
-    let round = t.f64s("round");
-    let pts =
-        |v: &[f64]| -> Vec<(f64, f64)> { round.iter().copied().zip(v.iter().copied()).collect() };
-    let reference = t.f64s("reference_distance_m")[0];
-    let last = round.iter().copied().fold(0.0, f64::max);
+    let rounds = DolphinDaggerRow::from_table(t);
+    let Some(first) = rounds.first() else {
+        return Err(other("dolphin_dagger: the DAgger rounds have no rows"));
+    };
+    let pts = |v: fn(&DolphinDaggerRow) -> f64| -> Vec<(f64, f64)> {
+        rounds.iter().map(|r| (r.round as f64, v(r))).collect()
+    };
+    let reference = first.reference_distance_m;
+    let last = rounds.iter().map(|r| r.round as f64).fold(0.0, f64::max);
     let line = |y: f64| {
         (0..=20)
             .map(|i| (last * i as f64 / 20.0, y))
@@ -400,12 +388,12 @@ pub fn figure(
     let mut series = vec![
         Series::line(
             "learned swim: simulator",
-            pts(&t.f64s("distance_simulator_m")),
+            pts(|r| r.distance_simulator_m),
             0,
         ),
         Series::line(
             "learned swim: DAgger net",
-            pts(&t.f64s("distance_emulator_m")),
+            pts(|r| r.distance_emulator_m),
             0,
         )
         .mark(Mark::Dashed),
@@ -427,7 +415,12 @@ pub fn figure(
     // The swim's duration: the last time of the headline swim's motion (the same task).
     let horizon = tables
         .get("dolphin_motion")
-        .map(|m| m.f64s("t").into_iter().fold(0.0, f64::max))
+        .map(|m| {
+            super::rows::DolphinMotionRow::from_table(m)
+                .iter()
+                .map(|r| r.t)
+                .fold(0.0, f64::max)
+        })
         .filter(|h| *h > 0.0);
     let over = horizon.map_or(String::new(), |h| format!(" in {h} s"));
     let panel = Panel {
@@ -441,66 +434,104 @@ pub fn figure(
 }
 
 /// The report's dolphin DAgger paragraph and verdict line (rule in the spec). `None` when
-/// there is no `dolphin_dagger.csv` or it has no rows.
+/// the run wrote no `dolphin_dagger.csv` (a spec without the dolphin's DAgger); a written one
+/// without rows is an error naming it (the run writes round 0 at least).
 pub fn summary(dir: &std::path::Path) -> Result<Option<(String, String)>, Error> {
-    use crate::experiment::output::{df_f64, written_csv};
     use crate::experiment::report::sig;
+    use crate::experiment::rows::written_rows;
     use crate::experiment::rule::{rule_settings, shown};
-    let Some(df) = written_csv(dir, "dolphin_dagger.csv")? else {
+    let Some(rows) = written_rows::<DolphinDaggerRow>(dir, "dolphin_dagger.csv")? else {
         return Ok(None);
     };
-    let round = df_f64(&df, "round")?;
-    if round.is_empty() {
-        return Ok(None);
-    }
-    let col = |c: &str| df_f64(&df, c);
-    let (ex, emu, sim, frac, per, period, gap) = (
-        col("examples")?,
-        col("distance_emulator_m")?,
-        col("distance_simulator_m")?,
-        col("fraction_of_reference")?,
-        col("periodicity")?,
-        col("period_s")?,
-        col("drift_gap_m")?,
-    );
-    let reference = col("reference_distance_m")?[0];
+    let Some(first) = rows.first() else {
+        return Err(other(format!(
+            "{}: the DAgger rounds have no rows",
+            dir.join("dolphin_dagger.csv").display()
+        )));
+    };
+    let reference = first.reference_distance_m;
     let mut md = format!(
         "\nThe dolphin through DAgger global nets (ours, `dolphin_dagger.csv`; the headline learner, momentum with the same restarts, through each round's global net, the knots replayed on the simulator; round 0 is the Table 1 net). The hand-made wave swims {} m on the simulator.\n\n| round | examples | distance, net (m) | distance, simulator (m) | of the wave | periodicity (period s) | zero-control drift gap (m) |\n| --- | --- | --- | --- | --- | --- | --- |\n",
         sig(reference)
     );
-    for r in 0..round.len() {
+    for r in &rows {
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} ({}) | {} |\n",
-            round[r],
-            ex[r],
-            sig(emu[r]),
-            sig(sim[r]),
-            sig(frac[r]),
-            sig(per[r]),
-            sig(period[r]),
-            sig(gap[r])
+            r.round,
+            r.examples,
+            sig(r.distance_emulator_m),
+            sig(r.distance_simulator_m),
+            sig(r.fraction_of_reference),
+            sig(r.periodicity),
+            sig(r.period_s),
+            sig(r.drift_gap_m)
         ));
     }
-    let last = (0..round.len())
-        .max_by(|&a, &b| round[a].total_cmp(&round[b]))
-        .expect("rows");
+    let last = rows.iter().max_by_key(|r| r.round).expect("rows");
     let settings = rule_settings(dir)?;
     let bars = super::Fig13Rule {
         wave_fraction: settings("wave_fraction"),
         periodicity: settings("periodicity"),
     };
-    let rule = dagger_rule(frac[last], per[last], &bars);
+    let rule = dagger_rule(last.fraction_of_reference, last.periodicity, &bars);
     let (v, lines, text) = shown(rule.as_ref(), " No rule: a bar its null meets.");
-    let by_round: Vec<String> = (0..round.len()).map(|r| sig(sim[r])).collect();
+    let by_round: Vec<String> = rows.iter().map(|r| sig(r.distance_simulator_m)).collect();
     Ok(Some((
         md,
         format!(
             " The dolphin through DAgger global nets (ours), judged at the last round (rule fixed in the spec, the headline's bars): {}; the learned swim's simulator distance by round {} m; at round {} it is {} of the wave's with periodicity {}.{lines} Rule: {text}",
             v.label(),
             by_round.join(" -> "),
-            round[last],
-            sig(frac[last]),
-            sig(per[last])
+            last.round,
+            sig(last.fraction_of_reference),
+            sig(last.periodicity)
         ),
     )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::experiment::output::write_table;
+    use crate::experiment::rows::table_of;
+
+    /// A `dolphin_dagger.csv` that lost its rows, or was cut mid-row, is an error naming it;
+    /// no file (a spec without the dolphin's DAgger) is nothing to say.
+    #[test]
+    fn an_emptied_or_cut_dolphin_dagger_table_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(summary(dir.path()).unwrap().is_none());
+        write_table(
+            dir.path(),
+            "dolphin_dagger",
+            &table_of::<DolphinDaggerRow>(&[]),
+        )
+        .unwrap();
+        let e = summary(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("dolphin_dagger.csv"), "{e}");
+        let row = DolphinDaggerRow {
+            round: 0,
+            examples: 100,
+            dagger_examples: 0,
+            dagger_windows: 0,
+            fine_tune_iterations: 0,
+            best_iteration: 3,
+            best_objective: -1.0,
+            distance_emulator_m: 2.0,
+            distance_simulator_m: 1.5,
+            reference_distance_m: 3.0,
+            fraction_of_reference: 0.5,
+            periodicity: 0.6,
+            period_s: 1.0,
+            drift_emulator_m: 0.1,
+            drift_simulator_m: 0.2,
+            drift_gap_m: 0.1,
+        };
+        let path = dir.path().join("dolphin_dagger.csv");
+        write_table(dir.path(), "dolphin_dagger", &table_of(&[row])).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        std::fs::write(&path, &text[..text.len() - 8]).unwrap();
+        let e = summary(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("dolphin_dagger.csv"), "{e}");
+    }
 }

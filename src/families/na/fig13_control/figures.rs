@@ -2,7 +2,9 @@
 //! `spectrum`, and the animated GIFs of every task and of the dolphin.
 
 use super::anim::{write_animation, Scene, Track, EMULATOR, SIMULATOR};
-use super::rows::{FinalRow, ObjectiveRow};
+use super::rows::{
+    DolphinMotionRow, FinalRow, GoalRow, ObjectiveRow, SpectrumRow, StateRow, TrajectoryRow,
+};
 use super::{dagger, dolphin_dagger};
 use crate::emulator::catalog::NetModel;
 use crate::experiment::output::{unique, Tables};
@@ -21,17 +23,9 @@ const DEVIATION_CLAMP: f64 = 5.0;
 pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
     let objective = ObjectiveRow::from_table(tables.require("objective")?);
     let task: Vec<String> = objective.iter().map(|r| r.task.clone()).collect();
-    let tr = tables.require("trajectory")?;
-    let (ttask, tt, src) = (tr.strs("task"), tr.f64s("t"), tr.strs("source"));
-    let goal = tables.require("goal")?;
-    let goal_task = goal.strs("task");
-    let st = tables.require("states")?;
-    let (st_task, st_col, st_name, st_tol) = (
-        st.strs("task"),
-        st.strs("column"),
-        st.strs("name"),
-        st.f64s("tolerance"),
-    );
+    let trajectory = TrajectoryRow::from_table(tables.require("trajectory")?);
+    let goals = GoalRow::from_table(tables.require("goal")?);
+    let states = StateRow::from_table(tables.require("states")?);
     // The paper's four tasks make the main figure; our second lines (formulation "ours") a
     // figure of their own, so neither is a wall of panels.
     let finals = FinalRow::from_table(tables.require("final")?);
@@ -53,25 +47,25 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             series: vec![Series::line("momentum descent", pts, 0)],
             ..Panel::default()
         });
-        let rows_of = |s: &str| -> Vec<usize> {
-            (0..ttask.len())
-                .filter(|&r| ttask[r] == name && src[r] == s)
+        let rows_of = |s: &str| -> Vec<&TrajectoryRow> {
+            trajectory
+                .iter()
+                .filter(|r| r.task == name && r.source == s)
                 .collect()
         };
         if name == "dolphin" || name.starts_with("dolphin_") {
-            // The swim's goal is a distance to beat, not a state: its mean centroid.
-            let (x, y) = (tr.f64s("s0"), tr.f64s("s1"));
+            // The swim's goal is a distance to beat, not a state: its mean centroid (s0, s1).
             // Only the swim whose motion the run keeps (`trajectory` has no rows of the others).
             for s in ["emulator", "simulator"] {
                 let rows = rows_of(s);
                 if rows.is_empty() {
                     continue;
                 }
-                let series = [(&x, "x"), (&y, "y")]
+                let series = ["x", "y"]
                     .into_iter()
                     .enumerate()
-                    .map(|(k, (v, var))| {
-                        let pts = rows.iter().map(|&r| (tt[r], v[r])).collect();
+                    .map(|(k, var)| {
+                        let pts = rows.iter().map(|r| (r.t, r.state[k])).collect();
                         Series::line(format!("centroid {var}"), pts, k)
                     })
                     .collect();
@@ -89,25 +83,30 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
             continue;
         }
         // Every variable of the goal: (s_k - goal_k) / tolerance_k over time.
-        let g = (0..goal_task.len()).find(|&r| goal_task[r] == name);
-        let goal_vars: Vec<(String, String, f64)> = (0..st_task.len())
-            .filter(|&r| st_task[r] == name && st_tol[r] > 0.0)
-            .map(|r| (st_col[r].clone(), st_name[r].clone(), st_tol[r]))
-            .collect();
+        let g = goals.iter().find(|g| g.task == name);
+        // Each goal variable's index in the state (its column `s<index>`).
+        let goal_vars: Vec<(usize, String, f64)> = states
+            .iter()
+            .filter(|r| r.task == name && r.tolerance > 0.0)
+            .map(|r| {
+                let k = r.column.strip_prefix('s').and_then(|k| k.parse().ok());
+                k.map(|k| (k, r.name.clone(), r.tolerance))
+                    .ok_or_else(|| other(format!("states: no state column {}", r.column)))
+            })
+            .collect::<Result<_, _>>()?;
         for (c, s) in ["emulator", "simulator"].iter().enumerate() {
             let rows = rows_of(s);
-            let t_end = rows.iter().map(|&r| tt[r]).fold(0.0, f64::max);
+            let t_end = rows.iter().map(|r| r.t).fold(0.0, f64::max);
             let mut series: Vec<Series> = Vec::new();
             for (k, (col, var, tol)) in goal_vars.iter().enumerate() {
-                let Some(g) = g.filter(|_| tr.column(col).is_some()) else {
+                let Some(target) = g.and_then(|g| g.target.get(*col)) else {
                     continue;
                 };
-                let (target, v) = (goal.f64s(col)[g], tr.f64s(col));
                 let pts = rows
                     .iter()
-                    .map(|&r| {
-                        let d = (v[r] - target) / tol;
-                        (tt[r], d.clamp(-DEVIATION_CLAMP, DEVIATION_CLAMP))
+                    .map(|r| {
+                        let d = (r.state[*col] - target) / tol;
+                        (r.t, d.clamp(-DEVIATION_CLAMP, DEVIATION_CLAMP))
                     })
                     .collect();
                 // One legend per row: the simulator's panel uses the emulator's colours.
@@ -170,25 +169,18 @@ pub(super) fn figures(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>,
 /// through the emulator and through the physics (log y; eigenvalues below 1e-14 of the
 /// largest, the null space and rounding, are left out; the legend says how many are drawn).
 fn spectrum_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let Some(sp) = tables.get("spectrum") else {
-        return Ok(vec![]);
-    };
-    let (st, sub, idx, ev) = (
-        sp.strs("task"),
-        sp.strs("substrate"),
-        sp.f64s("index"),
-        sp.f64s("eigenvalue"),
-    );
+    let spectrum = SpectrumRow::from_table(tables.require("spectrum")?);
     let series_of = |name: &str, c: usize, s: &str| {
-        let rows: Vec<usize> = (0..st.len())
-            .filter(|&r| st[r] == name && sub[r] == s)
+        let rows: Vec<&SpectrumRow> = spectrum
+            .iter()
+            .filter(|r| r.task == name && r.substrate == s)
             .collect();
-        let top = rows.iter().map(|&r| ev[r]).fold(0.0, f64::max);
+        let top = rows.iter().map(|r| r.eigenvalue).fold(0.0, f64::max);
         let total = rows.len();
         let pts: Vec<(f64, f64)> = rows
             .into_iter()
-            .filter(|&r| ev[r] > 1e-14 * top)
-            .map(|r| (idx[r], ev[r]))
+            .filter(|r| r.eigenvalue > 1e-14 * top)
+            .map(|r| (r.index as f64, r.eigenvalue))
             .collect();
         let label = format!(
             "through the {s} ({} of {total} above 1e-14 of the largest)",
@@ -197,7 +189,8 @@ fn spectrum_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
         let mark = if c == 0 { Mark::Line } else { Mark::Dashed };
         Series::line(label, pts, c).mark(mark)
     };
-    let panels: Vec<Panel> = unique(&st)
+    let tasks: Vec<String> = spectrum.iter().map(|r| r.task.clone()).collect();
+    let panels: Vec<Panel> = unique(&tasks)
         .into_iter()
         .map(|name| Panel {
             title: format!("{name}: terminal Gauss-Newton spectrum at the start"),
@@ -222,20 +215,22 @@ fn spectrum_figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
 /// simulator replay, from the `trajectory` table, over the goal from the `goal` table.
 /// `<id>_dolphin.gif` from the `dolphin_motion` table, when it has rows.
 fn dolphin_animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let Some(t) = tables.get("dolphin_motion").filter(|t| !t.is_empty()) else {
+    // No rows without `[params.dolphin]`.
+    let motion = DolphinMotionRow::from_table(tables.require("dolphin_motion")?);
+    if motion.is_empty() {
         return Ok(vec![]);
-    };
-    let (src, tt) = (t.strs("source"), t.f64s("t"));
-    let cols: Vec<Vec<f64>> = (0..N_POS).map(|k| t.f64s(&format!("p{k}"))).collect();
+    }
     let track = |name: &str| -> Vec<Vec<f64>> {
-        (0..src.len())
-            .filter(|&r| src[r] == name)
-            .map(|r| (0..N_POS).map(|k| cols[k][r]).collect())
+        motion
+            .iter()
+            .filter(|r| r.source == name)
+            .map(|r| r.positions[..N_POS].to_vec())
             .collect()
     };
-    let emu_rows: Vec<usize> = (0..src.len()).filter(|&r| src[r] == "emulator").collect();
+    let emu_rows: Vec<&DolphinMotionRow> =
+        motion.iter().filter(|r| r.source == "emulator").collect();
     let step = match emu_rows.as_slice() {
-        [a, b, ..] => tt[*b] - tt[*a],
+        [a, b, ..] => b.t - a.t,
         _ => 1.0,
     };
     let tracks = vec![
@@ -264,16 +259,9 @@ fn dolphin_animation(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
 }
 
 fn animations(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let g = tables.require("goal")?;
-    let tr = tables.require("trajectory")?;
-    let (gtask, gmodel) = (g.strs("task"), g.strs("model"));
-    let (ttask, tt, src) = (tr.strs("task"), tr.f64s("t"), tr.strs("source"));
-    let width = (0..)
-        .take_while(|k| tr.column(&format!("s{k}")).is_some())
-        .count();
-    let (gs, ts): (Vec<Vec<f64>>, Vec<Vec<f64>>) = (0..width)
-        .map(|k| (g.f64s(&format!("s{k}")), tr.f64s(&format!("s{k}"))))
-        .unzip();
+    let goals = GoalRow::from_table(tables.require("goal")?);
+    let trajectory = TrajectoryRow::from_table(tables.require("trajectory")?);
+    let width = trajectory.first().map_or(0, |r| r.state.len());
     // A GIF for each task of the paper's formulation (one of ours is a second line in the
     // tables and the control figure, not animated).
     let ours: Vec<String> = FinalRow::from_table(tables.require("final")?)
@@ -281,29 +269,31 @@ fn animations(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> 
         .filter(|r| !r.is_paper())
         .map(|r| r.task)
         .collect();
-    let jobs: Vec<(usize, NetModel)> = (0..gtask.len())
-        .filter(|&r| !ours.contains(&gtask[r]))
-        .map(|r| {
+    let jobs: Vec<(&GoalRow, NetModel)> = goals
+        .iter()
+        .filter(|g| !ours.contains(&g.task))
+        .map(|g| {
             NetModel::ALL
                 .into_iter()
-                .find(|m| m.name() == gmodel[r])
+                .find(|m| m.name() == g.model)
                 .filter(|m| m.state_dim() <= width)
-                .map(|m| (r, m))
-                .ok_or_else(|| other(format!("goal: unknown model {}", gmodel[r])))
+                .map(|m| (g, m))
+                .ok_or_else(|| other(format!("goal: unknown model {}", g.model)))
         })
         .collect::<Result<_, _>>()?;
     jobs.par_iter()
-        .map(|&(r, model)| {
-            let (name, n) = (&gtask[r], model.state_dim());
-            let goal: Vec<f64> = (0..n).map(|k| gs[k][r]).collect();
-            let rows = |s: &str| -> Vec<usize> {
-                (0..ttask.len())
-                    .filter(|&i| &ttask[i] == name && src[i] == s)
+        .map(|&(g, model)| {
+            let (name, n) = (&g.task, model.state_dim());
+            let goal: Vec<f64> = g.target[..n].to_vec();
+            let rows = |s: &str| -> Vec<&TrajectoryRow> {
+                trajectory
+                    .iter()
+                    .filter(|r| &r.task == name && r.source == s)
                     .collect()
             };
             let emu = rows("emulator");
             let step = match emu.as_slice() {
-                [a, b, ..] => tt[*b] - tt[*a],
+                [a, b, ..] => b.t - a.t,
                 _ => 1.0,
             };
             let tracks: Vec<Track> = [
@@ -314,10 +304,7 @@ fn animations(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> 
             .map(|(label, color, rows)| Track {
                 label: label.into(),
                 color,
-                states: rows
-                    .iter()
-                    .map(|&i| (0..n).map(|k| ts[k][i]).collect())
-                    .collect(),
+                states: rows.iter().map(|r| r.state[..n].to_vec()).collect(),
             })
             .collect();
             write_animation(

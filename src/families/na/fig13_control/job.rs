@@ -1,14 +1,14 @@
 //! The job of `na_fig13_control`: every task's emulator trained, its controls learned and
 //! replayed on the simulator, and the step-size sweep; [`learn_best`] scores a run.
 
-use super::conditioning::{
-    ladder, record_ladder, record_spectrum, PhysicsTables, BEST_WEIGHTS_COLUMNS,
-    CONDITIONING_COLUMNS, LADDER_COLUMNS,
-};
+use super::conditioning::{ladder, record_ladder, record_spectrum, PhysicsTables};
 use super::dagger::DaggerRoundRow;
-use super::rows::{FinalRow, ObjectiveRow, PhysicsPathRow, SwimRow};
-use super::seeds::{HeadlineRun, ToGoal, SEEDS_COLUMNS};
-use super::{dolphin_dagger, Formulation, Params, Sweep, Task};
+use super::rows::{
+    BestWeightsRow, ConditioningRow, DolphinDaggerRow, FinalRow, LadderRow, NetLineRow, NetSeedRow,
+    ObjectiveRow, PathRow, PhysicsPathRow, SpectrumRow, StateRow, SweepRow, SwimRow,
+};
+use super::seeds::{HeadlineRun, ToGoal};
+use super::{Formulation, Params, Sweep, Task};
 use crate::control::bptt::{
     learn_with, replay, Bptt, Descent, DifferentiableStep, Knots, Learned, Schedule, StepRule,
 };
@@ -16,30 +16,12 @@ use crate::control::conditioning::{terminal_spectrum, weighting_bound};
 use crate::control::objective::Objective;
 use crate::emulator::catalog::{BuildSpec, NetSpec, Trained};
 use crate::experiment::output::{Table, Tables};
-use crate::experiment::rows::table_of;
+use crate::experiment::rows::{table_of, TableRow};
 use crate::experiment::rule::{rule_table, rule_table_of};
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
 use crate::physics::dolphin::N_POS;
 use crate::row;
-
-/// Columns of the `sweep` and `physics_sweep` tables: `rollout_error` is the final error on
-/// the substrate learned through (emulator or differentiable physics), `simulator_error` the
-/// same controls replayed on the simulator; both at the run's best-so-far iterate.
-const SWEEP_COLUMNS: [&str; 12] = [
-    "task",
-    "rule",
-    "eta",
-    "alpha",
-    "iterations",
-    "evaluations",
-    "iterations_to_goal",
-    "evaluations_to_goal",
-    "best_iteration",
-    "best_objective",
-    "rollout_error",
-    "simulator_error",
-];
 
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
@@ -79,26 +61,29 @@ impl Job for Params {
 struct RunTables {
     objective: Vec<ObjectiveRow>,
     final_: Vec<FinalRow>,
-    sweep: Table,
-    physics: Table,
+    /// `sweep` and `physics_sweep`: `rollout_error` is the final error on the substrate
+    /// learned through (emulator or differentiable physics), `simulator_error` the same
+    /// controls replayed on the simulator; both at the run's best-so-far iterate.
+    sweep: Vec<SweepRow>,
+    physics: Vec<SweepRow>,
     /// The headline through the physics under the best-conditioned final-state weights
     /// (ours; `best_weights*.csv`), where conditioning.csv does not rule them out.
-    best: Table,
-    best_tol: Table,
-    best_emulator: Table,
+    best: Vec<SweepRow>,
+    best_tol: Vec<BestWeightsRow>,
+    best_emulator: Vec<SweepRow>,
     /// The terminal Gauss-Newton spectrum at the start knots on both substrates
     /// (src/control/conditioning.rs): why fixed-step descent is slow.
-    cond: Table,
-    spectrum: Table,
+    cond: Vec<ConditioningRow>,
+    spectrum: Vec<SpectrumRow>,
     dagger: Vec<DaggerRoundRow>,
     /// Per task, the actuator gains and final-state weights its objective and bounds use
     /// ([`Task::calibrated`]): kind `gain` (index = actuator) or `weight` (index = state
     /// variable).
     calibration: Table,
-    ladder: Table,
+    ladder: Vec<LadderRow>,
     /// The headline of the paper's tasks per Table 1 net seed (seeds.rs), this run's first.
-    seeds: Table,
-    path: Table,
+    seeds: Vec<NetSeedRow>,
+    path: Vec<PathRow>,
     /// The headline's descent through the physics per paper task and net seed, with each
     /// net's gradient beside the physics' at its iterates (ours).
     physics_path: Vec<PhysicsPathRow>,
@@ -108,7 +93,7 @@ struct RunTables {
     goal: Table,
     /// The generic state columns (one table holds tasks of different models) by name.
     /// Each variable's final-state tolerance (0: not part of the goal).
-    states: Table,
+    states: Vec<StateRow>,
     /// The largest state dimension over the tasks (the `s` columns).
     width: usize,
     /// The largest control dimension over the tasks (the `u` columns).
@@ -120,7 +105,7 @@ struct DolphinTables {
     swim: Vec<SwimRow>,
     motion: Table,
     restarts: Table,
-    dagger: Table,
+    dagger: Vec<DolphinDaggerRow>,
 }
 
 impl RunTables {
@@ -144,28 +129,32 @@ impl RunTables {
         let u_refs: Vec<&str> = u_cols.iter().map(String::as_str).collect();
         let mut goal_cols = vec!["task", "model"];
         goal_cols.extend_from_slice(&col_refs[4..]);
-        let mut states = Table::new(&["task", "column", "name", "tolerance"]);
+        let mut states = Vec::new();
         for task in &p.tasks {
             for (k, name) in task.net.model.state_names().into_iter().enumerate() {
-                let tol = task.task.final_tolerance.get(k).copied().unwrap_or(0.0);
-                states.push(row![task.name.as_str(), format!("s{k}"), name, tol]);
+                states.push(StateRow {
+                    task: task.name.clone(),
+                    column: format!("s{k}"),
+                    name: name.to_string(),
+                    tolerance: task.task.final_tolerance.get(k).copied().unwrap_or(0.0),
+                });
             }
         }
         RunTables {
             objective: Vec::new(),
             final_: Vec::new(),
-            sweep: Table::new(&SWEEP_COLUMNS),
-            physics: Table::new(&SWEEP_COLUMNS),
-            best: Table::new(&SWEEP_COLUMNS),
-            best_tol: Table::new(&BEST_WEIGHTS_COLUMNS),
-            best_emulator: Table::new(&SWEEP_COLUMNS),
-            cond: Table::new(&CONDITIONING_COLUMNS),
-            spectrum: Table::new(&["task", "substrate", "index", "eigenvalue"]),
+            sweep: Vec::new(),
+            physics: Vec::new(),
+            best: Vec::new(),
+            best_tol: Vec::new(),
+            best_emulator: Vec::new(),
+            cond: Vec::new(),
+            spectrum: Vec::new(),
             dagger: Vec::new(),
             calibration: Table::new(&["task", "kind", "index", "value"]),
-            ladder: Table::new(&LADDER_COLUMNS),
-            seeds: Table::new(&SEEDS_COLUMNS),
-            path: Table::new(&PATH_COLUMNS),
+            ladder: Vec::new(),
+            seeds: Vec::new(),
+            path: Vec::new(),
             physics_path: Vec::new(),
             trajectory: Table::new(&col_refs),
             controls: Table::new(&u_refs),
@@ -177,32 +166,41 @@ impl RunTables {
     }
 
     /// Every table of the run under its file name, with `net_lines`, the dolphin's and the rule.
-    fn into_tables(self, p: &Params, lines: Table, d: DolphinTables) -> Result<Tables, Error> {
-        Ok(Tables::from([
+    /// The sweeps' and the DAgger lines' tables are written only where the spec asks for them,
+    /// so the report can tell a study not run (no file) from a table that lost its rows (an
+    /// error).
+    fn into_tables(
+        self,
+        p: &Params,
+        lines: Vec<NetLineRow>,
+        d: DolphinTables,
+    ) -> Result<Tables, Error> {
+        let dolphin_dagger = p.dolphin.as_ref().is_some_and(|d| d.dagger.is_some());
+        let mut tables = Tables::from([
             ("dolphin_motion", d.motion),
-            ("sweep", self.sweep),
-            ("physics_sweep", self.physics),
-            ("best_weights", self.best_tol),
-            ("best_weights_sweep", self.best),
-            ("best_weights_emulator_sweep", self.best_emulator),
-            ("conditioning", self.cond),
+            ("sweep", table_of(&self.sweep)),
+            ("physics_sweep", table_of(&self.physics)),
+            ("best_weights", table_of(&self.best_tol)),
+            ("best_weights_sweep", table_of(&self.best)),
+            ("best_weights_emulator_sweep", table_of(&self.best_emulator)),
+            ("conditioning", table_of(&self.cond)),
             ("calibration", self.calibration),
-            ("conditioning_ladder", self.ladder),
-            ("spectrum", self.spectrum),
+            ("conditioning_ladder", table_of(&self.ladder)),
+            ("spectrum", table_of(&self.spectrum)),
             ("dagger", table_of(&self.dagger)),
             ("dolphin_restarts", d.restarts),
-            ("dolphin_dagger", d.dagger),
+            ("dolphin_dagger", table_of(&d.dagger)),
             ("swim", table_of(&d.swim)),
             ("objective", table_of(&self.objective)),
             ("final", table_of(&self.final_)),
-            ("net_seeds", self.seeds),
-            ("net_lines", lines),
-            ("path", self.path),
+            ("net_seeds", table_of(&self.seeds)),
+            ("net_lines", table_of(&lines)),
+            ("path", table_of(&self.path)),
             ("physics_path", table_of(&self.physics_path)),
             ("trajectory", self.trajectory),
             ("controls", self.controls),
             ("goal", self.goal),
-            ("states", self.states),
+            ("states", table_of(&self.states)),
             (
                 "rule",
                 match &p.rule {
@@ -210,7 +208,18 @@ impl RunTables {
                     None => rule_table(&[]),
                 },
             ),
-        ]))
+        ]);
+        tables.0.retain(|(name, _)| match name.as_str() {
+            "sweep" => p.sweep.is_some(),
+            "physics_sweep" => p.physics_sweep.is_some(),
+            "dagger" => {
+                let paper = p.tasks.iter().any(|t| t.formulation == Formulation::Paper);
+                p.dagger.is_some() && paper
+            }
+            "dolphin_dagger" => dolphin_dagger,
+            _ => true,
+        });
+        Ok(tables)
     }
 }
 
@@ -304,7 +313,7 @@ impl Params {
         &self,
         task: &Task,
         built: &[Trained],
-        ladder_t: &mut Table,
+        ladder_t: &mut Vec<LadderRow>,
     ) -> Result<(), Error> {
         let model = task.net.model;
         // The trained emulator of a task's net spec (the conditioning ladder's rungs).
@@ -476,7 +485,7 @@ impl Params {
             "distance_emulator_m",
             "distance_simulator_m",
         ]);
-        let mut dolphin_dagger_t = Table::new(&dolphin_dagger::COLUMNS);
+        let mut dolphin_dagger_t = Vec::new();
         if let Some(d) = &self.dolphin {
             self.run_dolphin(
                 ctx,
@@ -701,16 +710,7 @@ pub(super) fn gradient_fidelity(
 /// iterate where the fixed step overshoots (`stable_ratio`, the task's limit); the two errors
 /// side by side show whether the net follows the physics along the whole descent or only at
 /// its end.
-pub const PATH_COLUMNS: [&str; 8] = [
-    "task",
-    "net_seed",
-    "iteration",
-    "objective",
-    "emulator_error",
-    "simulator_error",
-    "curvature_ratio",
-    "stable_ratio",
-];
+pub const PATH_COLUMNS: &[&str] = PathRow::COLUMNS;
 
 /// The largest curvature over the start's λ at which the heavy-ball step η/λ with momentum α
 /// still contracts along a quadratic direction: 2(1 + α)/η.
@@ -726,7 +726,7 @@ type Iterate = (usize, f64, Vec<f64>);
 /// the simulator, and its curvature measured as λ was.
 #[allow(clippy::too_many_arguments)]
 fn push_path<D: DifferentiableStep>(
-    table: &mut Table,
+    table: &mut Vec<PathRow>,
     task: &Task,
     seed: u64,
     bptt: &mut Bptt<'_, D>,
@@ -741,16 +741,16 @@ fn push_path<D: DifferentiableStep>(
         let emu_final = bptt.states()[at..].to_vec();
         let sim_error = simulator_error(task, bptt.controls(), &emu_final, steps);
         let ratio = bptt.curvature(v, curvature_iterations) / lambda;
-        table.push(row![
-            task.name.as_str(),
-            seed as i64,
-            *iteration as i64,
-            *objective,
-            task.final_error(&emu_final),
-            sim_error,
-            ratio,
-            stable_curvature_ratio(task.eta, task.alpha)
-        ]);
+        table.push(PathRow {
+            task: task.name.clone(),
+            net_seed: seed as i64,
+            iteration: *iteration as i64,
+            objective: *objective,
+            emulator_error: task.final_error(&emu_final),
+            simulator_error: sim_error,
+            curvature_ratio: ratio,
+            stable_ratio: stable_curvature_ratio(task.eta, task.alpha),
+        });
     }
 }
 
@@ -761,7 +761,7 @@ pub(super) fn learn_and_replay_path(
     net: &crate::emulator::Emulator,
     steps: usize,
     curvature_iterations: usize,
-    path: Option<(&mut Table, u64)>,
+    path: Option<(&mut Vec<PathRow>, u64)>,
 ) -> Result<Option<(HeadlineRun, Learned)>, Error> {
     with_schedule(
         task,
@@ -850,7 +850,7 @@ impl Params {
         v0: &[f64],
         lambda: f64,
         x0: &[f64],
-        table: &mut Table,
+        table: &mut Vec<SweepRow>,
     ) {
         let n = task.net.model.state_dim();
         let mut sim = task.net.model.simulator();
@@ -884,20 +884,20 @@ impl Params {
                     end,
                 );
                 let to = |k: Option<usize>| k.map_or(f64::NAN, |k| k as f64);
-                table.push(row![
-                    task.name.as_str(),
-                    rule.name(),
+                table.push(SweepRow {
+                    task: task.name.clone(),
+                    rule: rule.name().into(),
                     eta,
                     alpha,
-                    last.iteration as i64,
-                    last.evaluations as i64,
-                    to(hit.map(|h| h.0)),
-                    to(hit.map(|h| h.1)),
-                    run.best_iteration as i64,
-                    run.best_objective(),
-                    task.final_error(end),
-                    task.final_error(&rep.states[task.task.horizon * n..])
-                ]);
+                    iterations: last.iteration as i64,
+                    evaluations: last.evaluations as i64,
+                    iterations_to_goal: to(hit.map(|h| h.0)),
+                    evaluations_to_goal: to(hit.map(|h| h.1)),
+                    best_iteration: run.best_iteration as i64,
+                    best_objective: run.best_objective(),
+                    rollout_error: task.final_error(end),
+                    simulator_error: task.final_error(&rep.states[task.task.horizon * n..]),
+                });
             }
         }
     }

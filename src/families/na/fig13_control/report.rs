@@ -1,11 +1,13 @@
 //! Report of `na_fig13_control`: the verdict (tasks at their goal), the table of every task,
 //! and the sentences on the sweeps, the conditioning study and the best weights.
 
-use super::rows::{FinalRow, ObjectiveRow, SwimRow};
+use super::rows::{
+    BestWeightsRow, ConditioningRow, FinalRow, LadderRow, ObjectiveRow, SweepRow, SwimRow,
+};
 use super::{dagger, dolphin_dagger, Fig13Rule};
-use crate::experiment::output::{df_f64, df_str, read_csv, unique, written_csv};
+use crate::experiment::output::unique;
 use crate::experiment::report::{sig, Findings};
-use crate::experiment::rows::read_rows;
+use crate::experiment::rows::{read_rows, written_rows};
 use crate::experiment::rule::{
     rule_settings, shown, Check, Cmp, Null, Outcome, Partly, Rule, RuleError,
 };
@@ -131,7 +133,11 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     // The headline over several Table 1 net seeds: a task of the paper's formulation is judged
     // by its median net seed, with the median's interval; where net_seeds.csv has one seed for a
     // task (or none: the dolphin), final.csv's row decides.
-    let seeds = super::seeds::seed_counts(dir)?.unwrap_or_default();
+    let seeds = super::seeds::seed_counts(dir)?;
+    if let Some(seeds) = &seeds {
+        every_control_task_over_seeds(dir, &finals.tasks, seeds)?;
+    }
+    let seeds = seeds.unwrap_or_default();
     let h = headline(&finals, &seeds, &goal, &bars, &mut md);
     let (net_misses, seed_lines, ours) = h.sentences();
     let sweeps: String = [
@@ -152,7 +158,13 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
     );
     // Tasks at their goal: those whose checks all pass.
     let both = rule.as_ref().map_or(0, Rule::groups_passing);
-    let (path_why, study_why, dagger_why) = push_sections(dir, &mut md)?;
+    let control: Vec<&str> = finals
+        .tasks
+        .iter()
+        .filter(|t| t.is_paper_control())
+        .map(|t| t.task.as_str())
+        .collect();
+    let (path_why, study_why, dagger_why) = push_sections(dir, &control, &mut md)?;
     let sweeps = format!("{sweeps}{study_why}");
     let Headline {
         counts,
@@ -177,6 +189,32 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             sig(goal.learned_periodicity)
         ),
     })
+}
+
+/// Every control task of the paper's formulation in `final.csv` has its rows in
+/// `net_seeds.csv` (the run writes this run's own net seed at least for each): a table that
+/// lost a task's rows would otherwise judge it by the single-seed rule, so it is an error
+/// naming the file.
+fn every_control_task_over_seeds(
+    dir: &Path,
+    tasks: &[FinalRow],
+    seeds: &[super::seeds::SeedCount],
+) -> Result<(), Error> {
+    let missing: Vec<&str> = tasks
+        .iter()
+        .filter(|t| t.is_paper_control())
+        .filter(|t| !seeds.iter().any(|c| c.task == t.task))
+        .map(|t| t.task.as_str())
+        .collect();
+    if missing.is_empty() {
+        Ok(())
+    } else {
+        Err(crate::experiment::other(format!(
+            "{}: no rows for {}, of the paper's formulation in final.csv (a truncated or edited table)",
+            dir.join("net_seeds.csv").display(),
+            missing.join(", ")
+        )))
+    }
 }
 
 /// The tables the headline reads.
@@ -396,12 +434,17 @@ impl Headline {
 /// The report's further sections pushed to `md` (net seeds, net lines, path, conditioning,
 /// ladder, DAgger, dolphin DAgger); returns their sentences: the path's, the conditioning
 /// study's (conditioning and ladder) and the DAgger lines' (the lander's and the dolphin's).
-fn push_sections(dir: &Path, md: &mut String) -> Result<(String, String, String), Error> {
+/// `control`: the control tasks of the paper's formulation, whose descents `path.csv` holds.
+fn push_sections(
+    dir: &Path,
+    control: &[&str],
+    md: &mut String,
+) -> Result<(String, String, String), Error> {
     md.push_str(&super::seeds::table_md(dir)?);
     md.push_str(&super::seeds::lines_md(dir)?);
-    let (path_md, mut path_why) = super::seeds::path_md(dir)?;
+    let (path_md, mut path_why) = super::seeds::path_md(dir, control)?;
     md.push_str(&path_md);
-    let (physics_md, physics_why) = super::conditioning::physics_path_md(dir)?;
+    let (physics_md, physics_why) = super::conditioning::physics_path_md(dir, control)?;
     md.push_str(&physics_md);
     path_why.push_str(&physics_why);
     let (cond_md, cond_why) = conditioning_summary(dir)?.unwrap_or_default();
@@ -418,66 +461,65 @@ fn push_sections(dir: &Path, md: &mut String) -> Result<(String, String, String)
 
 /// One sentence per task of a sweep table: the fewest iterations to the goal over its rules and
 /// rates (and the simulator error of those controls), or the lowest final error reached.
+/// `None` when the run wrote no such table (a spec without the sweep); a written one without
+/// rows is an error naming it.
 fn sweep_summary(dir: &Path, file: &str, title: &str) -> Result<Option<String>, Error> {
-    let Some(df) = written_csv(dir, file)? else {
+    // Written where the spec asks for the sweep, with a row per task at least.
+    let Some(runs) = written_rows::<SweepRow>(dir, file)? else {
         return Ok(None);
     };
-    let (task, rule) = (df_str(&df, "task")?, df_str(&df, "rule")?);
-    let (eta, its) = (df_f64(&df, "eta")?, df_f64(&df, "iterations")?);
-    let (to_goal, rollout, sim) = (
-        df_f64(&df, "iterations_to_goal")?,
-        df_f64(&df, "rollout_error")?,
-        df_f64(&df, "simulator_error")?,
-    );
-    if task.is_empty() {
-        return Ok(None);
+    if runs.is_empty() {
+        return Err(crate::experiment::other(format!(
+            "{}: the sweep has no rows",
+            dir.join(file).display()
+        )));
     }
     // One clause for a group of runs: the fewest iterations to the goal, or the lowest error.
-    let clause = |rows: &[usize]| -> String {
-        let budget = rows.iter().map(|&r| its[r]).fold(0.0, f64::max);
-        let setting = |r: usize| {
-            if eta[r].is_finite() {
-                format!("{} rule, eta {}", rule[r], eta[r])
+    let clause = |rows: &[&SweepRow]| -> String {
+        let budget = rows.iter().map(|r| r.iterations as f64).fold(0.0, f64::max);
+        let setting = |r: &SweepRow| {
+            if r.eta.is_finite() {
+                format!("{} rule, eta {}", r.rule, r.eta)
             } else {
-                format!("{} rule", rule[r])
+                format!("{} rule", r.rule)
             }
         };
         let fastest = rows
             .iter()
-            .copied()
-            .filter(|&r| to_goal[r].is_finite())
-            .min_by(|&a, &b| to_goal[a].total_cmp(&to_goal[b]));
+            .filter(|r| r.reached())
+            .min_by(|a, b| a.iterations_to_goal.total_cmp(&b.iterations_to_goal));
         match fastest {
             Some(r) => format!(
                 "reaches its goal in {} iterations at best ({}; simulator error {}; {} of {} runs reach it)",
-                to_goal[r],
+                r.iterations_to_goal,
                 setting(r),
-                sig(sim[r]),
-                rows.iter().filter(|&&r| to_goal[r].is_finite()).count(),
+                sig(r.simulator_error),
+                rows.iter().filter(|r| r.reached()).count(),
                 rows.len()
             ),
             None => {
                 let r = rows
                     .iter()
-                    .copied()
-                    .min_by(|&a, &b| rollout[a].total_cmp(&rollout[b]))
+                    .min_by(|a, b| a.rollout_error.total_cmp(&b.rollout_error))
                     .expect("a group has rows");
                 format!(
                     "never does in {budget} iterations (lowest final error {} with the {}; simulator {})",
-                    sig(rollout[r]),
+                    sig(r.rollout_error),
                     setting(r),
-                    sig(sim[r])
+                    sig(r.simulator_error)
                 )
             }
         }
     };
     let lm = "levenberg_marquardt";
+    let task: Vec<String> = runs.iter().map(|r| r.task.clone()).collect();
     let parts: Vec<String> = unique(&task)
         .into_iter()
         .map(|name| {
-            let rows: Vec<usize> = (0..task.len()).filter(|&r| task[r] == name).collect();
-            let (second, first): (Vec<usize>, Vec<usize>) =
-                rows.iter().partition(|&&r| rule[r] == lm);
+            let (second, first): (Vec<&SweepRow>, Vec<&SweepRow>) = runs
+                .iter()
+                .filter(|r| r.task == name)
+                .partition(|r| r.rule == lm);
             let mut out = name.clone();
             if !first.is_empty() {
                 out += &format!(" {}", clause(&first));
@@ -495,18 +537,18 @@ fn sweep_summary(dir: &Path, file: &str, title: &str) -> Result<Option<String>, 
 /// The report's table and sentence from `conditioning_ladder.csv` (written when the spec asks for the study): which
 /// of the paper's changes to our earlier formulations moved the conditioning.
 fn ladder_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
-    let Some(df) = written_csv(dir, "conditioning_ladder.csv")? else {
+    // A spec without a formulation of ours beside a paper one writes no rungs.
+    let Some(rungs) = written_rows::<LadderRow>(dir, "conditioning_ladder.csv")? else {
         return Ok(None);
     };
-    let (task, change) = (df_str(&df, "task")?, df_str(&df, "change")?);
-    let (dof, kappa, pace) = (
-        df_f64(&df, "dof")?,
-        df_f64(&df, "condition")?,
-        df_f64(&df, "iterations_per_decade")?,
-    );
-    if task.is_empty() {
+    if rungs.is_empty() {
         return Ok(None);
     }
+    let task: Vec<String> = rungs.iter().map(|r| r.task.clone()).collect();
+    let change: Vec<&str> = rungs.iter().map(|r| r.change.as_str()).collect();
+    let dof: Vec<i64> = rungs.iter().map(|r| r.dof).collect();
+    let kappa: Vec<f64> = rungs.iter().map(|r| r.condition).collect();
+    let pace: Vec<f64> = rungs.iter().map(|r| r.iterations_per_decade).collect();
     let show = |k: f64| {
         if k.is_finite() && k < 1e12 {
             sig(k)
@@ -573,24 +615,9 @@ fn ladder_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
 
 /// The report's conditioning table and sentence from `conditioning.csv` (written when the spec asks for the study).
 fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
-    let Some(df) = written_csv(dir, "conditioning.csv")? else {
+    let Some(rows) = written_rows::<ConditioningRow>(dir, "conditioning.csv")? else {
         return Ok(None);
     };
-    let (task, sub) = (df_str(&df, "task")?, df_str(&df, "substrate")?);
-    let (knots, dof, kappa, eta, pace) = (
-        df_f64(&df, "knots")?,
-        df_f64(&df, "dof")?,
-        df_f64(&df, "condition")?,
-        df_f64(&df, "eta")?,
-        df_f64(&df, "iterations_per_decade")?,
-    );
-    // The weighting bound.
-    let (eq, any, any_pace, paper) = (
-        df_f64(&df, "condition_equilibrated")?,
-        df_f64(&df, "condition_any_weighting")?,
-        df_f64(&df, "iterations_per_decade_any_weighting")?,
-        df_f64(&df, "paper_iterations")?,
-    );
     // Above 1e12 the r-th eigenvalue is rounding: the matrix is singular at the start.
     let show = |k: f64| {
         if k.is_finite() && k < 1e12 {
@@ -606,35 +633,38 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
     let mut fewest = f64::INFINITY;
     let (mut singular, mut within, mut beyond) = (vec![], vec![], vec![]);
     let mut weights = vec![];
-    for r in 0..task.len() {
-        let progress = pace[r].is_finite() && kappa[r] < 1e12;
+    for c in &rows {
+        let progress = c.iterations_per_decade.is_finite() && c.condition < 1e12;
         let p = if progress {
-            sig(pace[r])
+            sig(c.iterations_per_decade)
         } else {
             "no progress".to_string()
         };
-        let (e, a) = (show(eq[r]), show(any[r]));
-        let ap = if any_pace[r].is_finite() {
-            sig(any_pace[r])
+        let (e, a) = (
+            show(c.condition_equilibrated),
+            show(c.condition_any_weighting),
+        );
+        let ap = if c.iterations_per_decade_any_weighting.is_finite() {
+            sig(c.iterations_per_decade_any_weighting)
         } else {
             "no progress".to_string()
         };
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} (eta {}) | {e} | {a} | {ap} |\n",
-            task[r],
-            sub[r],
-            knots[r],
-            dof[r],
-            show(kappa[r]),
+            c.task,
+            c.substrate,
+            c.knots,
+            c.dof,
+            show(c.condition),
             p,
-            sig(eta[r])
+            sig(c.eta)
         ));
-        if sub[r] == "physics" {
+        if c.is_physics() {
             // The spec's reading: the bound against the paper's iteration count.
-            weights.push(if !(any_pace[r].is_finite() && any[r] < 1e12) {
-                format!("{}: singular under any weights", task[r])
+            weights.push(if !(c.iterations_per_decade_any_weighting.is_finite() && c.condition_any_weighting < 1e12) {
+                format!("{}: singular under any weights", c.task)
             } else {
-                let (link, reading) = if any_pace[r] > paper[r] {
+                let (link, reading) = if c.iterations_per_decade_any_weighting > (c.paper_iterations as f64) {
                     (
                         " against",
                         "the cause is the task's dynamics over its knots and horizon, not our weights",
@@ -644,29 +674,29 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
                 };
                 format!(
                     "{}: condition at least {}, at least {} iterations per tenfold reduction under any weights{link} the paper's {}, so {reading}",
-                    task[r],
-                    sig(any[r]),
-                    sig(any_pace[r]),
-                    paper[r]
+                    c.task,
+                    sig(c.condition_any_weighting),
+                    sig(c.iterations_per_decade_any_weighting),
+                    c.paper_iterations
                 )
             });
         }
-        if sub[r] == "physics" {
+        if c.is_physics() {
             parts.push(if progress {
-                fewest = fewest.min(pace[r]);
-                if pace[r] <= paper[r] {
-                    within.push(task[r].clone());
+                fewest = fewest.min(c.iterations_per_decade);
+                if c.iterations_per_decade <= (c.paper_iterations as f64) {
+                    within.push(c.task.clone());
                 } else {
-                    beyond.push(task[r].clone());
+                    beyond.push(c.task.clone());
                 }
                 format!(
                     "{} {} ({p} iterations per tenfold reduction)",
-                    task[r],
-                    show(kappa[r])
+                    c.task,
+                    show(c.condition)
                 )
             } else {
-                singular.push(task[r].clone());
-                format!("{} {} (no progress)", task[r], show(kappa[r]))
+                singular.push(c.task.clone());
+                format!("{} {} (no progress)", c.task, show(c.condition))
             });
         }
     }
@@ -700,7 +730,7 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
                 format!(
                     " Could other final-state weights help (ours; the reading fixed in the spec, through the physics; no diagonal weighting beats kappa(equilibrated)/r)? {}.{}",
                     weights.join("; "),
-                    best_weights_summary(dir, &task, &paper)?
+                    best_weights_summary(dir, &rows)?
                 )
             }
         )
@@ -711,38 +741,12 @@ fn conditioning_summary(dir: &Path) -> Result<Option<(String, String)>, Error> {
 /// The sentence on `best_weights*.csv` (empty when absent or empty): per task run under the
 /// best-conditioned weights, the headline's iterations to the goal through the physics with
 /// those weights and with the task's own (`physics_sweep.csv`), beside the paper's count.
-fn best_weights_summary(dir: &Path, cond_task: &[String], paper: &[f64]) -> Result<String, Error> {
-    let (bw, bs, ps) = (
-        read_csv(&dir.join("best_weights.csv"))?,
-        read_csv(&dir.join("best_weights_sweep.csv"))?,
-        read_csv(&dir.join("physics_sweep.csv"))?,
-    );
+fn best_weights_summary(dir: &Path, cond: &[ConditioningRow]) -> Result<String, Error> {
+    let weights: Vec<BestWeightsRow> = read_rows(&dir.join("best_weights.csv"))?;
+    let best: Vec<SweepRow> = read_rows(&dir.join("best_weights_sweep.csv"))?;
+    let physics: Vec<SweepRow> = read_rows(&dir.join("physics_sweep.csv"))?;
     // Through the Table 1 net under the same weights.
-    let e = read_csv(&dir.join("best_weights_emulator_sweep.csv"))?;
-    let (et, eto, ee, es) = (
-        df_str(&e, "task")?,
-        df_f64(&e, "iterations_to_goal")?,
-        df_f64(&e, "rollout_error")?,
-        df_f64(&e, "simulator_error")?,
-    );
-    let (wt, kappa, kappa_best) = (
-        df_str(&bw, "task")?,
-        df_f64(&bw, "condition")?,
-        df_f64(&bw, "condition_best")?,
-    );
-    let pace_best = df_f64(&bw, "iterations_per_decade_best")?;
-    let (bt, b_to, b_err) = (
-        df_str(&bs, "task")?,
-        df_f64(&bs, "iterations_to_goal")?,
-        df_f64(&bs, "rollout_error")?,
-    );
-    let (pt, pr, pe, p_to) = (
-        df_str(&ps, "task")?,
-        df_str(&ps, "rule")?,
-        df_f64(&ps, "eta")?,
-        df_f64(&ps, "iterations_to_goal")?,
-    );
-    let b_eta = df_f64(&bs, "eta")?;
+    let emulator: Vec<SweepRow> = read_rows(&dir.join("best_weights_emulator_sweep.csv"))?;
     let to = |k: f64| {
         if k.is_finite() {
             format!("in {k} iterations")
@@ -751,42 +755,43 @@ fn best_weights_summary(dir: &Path, cond_task: &[String], paper: &[f64]) -> Resu
         }
     };
     let mut parts = vec![];
-    for r in 0..bt.len() {
-        let Some(w) = wt.iter().position(|t| *t == bt[r]) else {
+    for b in &best {
+        let Some(w) = weights.iter().find(|w| w.task == b.task) else {
             continue;
         };
-        let ours = (0..pt.len())
-            .find(|&i| pt[i] == bt[r] && pr[i] == "fixed" && pe[i] == b_eta[r])
-            .map_or(f64::NAN, |i| p_to[i]);
-        let count = cond_task
+        let ours = physics
             .iter()
-            .position(|t| *t == bt[r])
-            .map_or(f64::NAN, |i| paper[i]);
-        let reading = if b_to[r] <= count {
+            .find(|p| p.task == b.task && p.rule == "fixed" && p.eta == b.eta)
+            .map_or(f64::NAN, |p| p.iterations_to_goal);
+        let count = cond
+            .iter()
+            .find(|c| c.task == b.task)
+            .map_or(f64::NAN, |c| c.paper_iterations as f64);
+        let reading = if b.iterations_to_goal <= count {
             "our weights were to blame"
         } else {
             "our weights slow it but are not the whole cause"
         };
-        let net = et
+        let net = emulator
             .iter()
-            .position(|t| *t == bt[r])
-            .map(|i| {
+            .find(|e| e.task == b.task)
+            .map(|e| {
                 format!(
                     "; through the Table 1 net under the same weights it reaches the goal on the net {} (final error {} there, {} on the simulator replay)",
-                    to(eto[i]),
-                    sig(ee[i]),
-                    sig(es[i])
+                    to(e.iterations_to_goal),
+                    sig(e.rollout_error),
+                    sig(e.simulator_error)
                 )
             })
             .unwrap_or_default();
         parts.push(format!(
             "{}: condition {} with the best weights a search finds (ours: {}), at which the headline's step needs {} iterations per tenfold reduction, the headline reaches the goal through the physics {} with them (final error {}) and {} with ours (paper: {count}): {reading}{net}",
-            bt[r],
-            sig(kappa_best[w]),
-            sig(kappa[w]),
-            sig(pace_best[w]),
-            to(b_to[r]),
-            sig(b_err[r]),
+            b.task,
+            sig(w.condition_best),
+            sig(w.condition),
+            sig(w.iterations_per_decade_best),
+            to(b.iterations_to_goal),
+            sig(b.rollout_error),
             to(ours)
         ));
     }
@@ -812,6 +817,7 @@ pub(super) fn dolphin_at_goal(shortfall: f64, wave: f64, periodicity: f64, r: &F
 mod tests {
     use super::*;
     use crate::experiment::report::Verdict;
+    use crate::families::na::fig13_control::Formulation;
 
     const BARS: Fig13Rule = Fig13Rule {
         wave_fraction: 0.5,
@@ -828,6 +834,59 @@ mod tests {
         assert!(!at(1.0, 6.0, 0.49));
         assert!(!at(1.0, f64::NAN, 0.9));
         assert!(!at(1.0, 6.0, f64::NAN));
+    }
+
+    /// A paper control task of `final.csv` without rows in `net_seeds.csv` (a table cut or
+    /// edited) is an error naming the file, not a verdict by the single-seed rule; the
+    /// dolphin and our formulations need none.
+    #[test]
+    fn a_paper_task_missing_from_the_seed_table_is_an_error() {
+        let row = |task: &str, formulation: Formulation| FinalRow {
+            task: task.into(),
+            emulator_error: 0.5,
+            simulator_error: 0.6,
+            best_iteration: 3,
+            formulation: formulation.name().into(),
+            start_simulator_error: 4.0,
+        };
+        let tasks = [
+            row("pendulum", Formulation::Paper),
+            row("truck", Formulation::Paper),
+            row("pendulum_200steps", Formulation::Ours),
+            row("dolphin", Formulation::Paper),
+        ];
+        let count = |task: &str| super::super::seeds::SeedCount {
+            task: task.into(),
+            both: 1,
+            emulator: 1,
+            seeds: 1,
+            errors: vec![0.6],
+            to_goal: vec![(3.0, f64::NAN)],
+        };
+        let dir = Path::new("results/x");
+        every_control_task_over_seeds(dir, &tasks, &[count("pendulum"), count("truck")]).unwrap();
+        let e = every_control_task_over_seeds(dir, &tasks, &[count("pendulum")])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("net_seeds.csv") && e.contains("truck"), "{e}");
+    }
+
+    /// A sweep table the run wrote that lost its rows is an error naming it; no table (a spec
+    /// without the sweep) is nothing to say.
+    #[test]
+    fn an_emptied_sweep_table_is_an_error() {
+        use crate::experiment::output::write_table;
+        use crate::experiment::rows::table_of;
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(
+            sweep_summary(dir.path(), "sweep.csv", "Sweep").unwrap(),
+            None
+        );
+        write_table(dir.path(), "sweep", &table_of::<SweepRow>(&[])).unwrap();
+        let e = sweep_summary(dir.path(), "sweep.csv", "Sweep")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sweep.csv"), "{e}");
     }
 
     /// A control task whose 5 net seeds end at `errors` (tolerances).

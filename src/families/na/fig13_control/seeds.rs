@@ -12,37 +12,27 @@
 //! a task reaches its goal when a strict majority of its net seeds reach it on the emulator
 //! and on the simulator.
 
-use super::rows::PhysicsPathRow;
+use super::rows::{NetLineRow, NetSeedRow, PathRow, PhysicsPathRow};
 use super::{Formulation, Params, Task};
 use crate::emulator::catalog::BuildSpec;
 use crate::emulator::Emulator;
-use crate::experiment::output::{df_f64, df_str, unique, written_csv, Table, Tables};
+use crate::experiment::output::{unique, Tables};
 use crate::experiment::plot::{Figure, FigureSink, Mark, Panel, Series};
 use crate::experiment::report::sig;
+use crate::experiment::rows::{written_rows, TableRow};
 use crate::experiment::stats::median;
 use crate::experiment::{other, Error, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
-use crate::row;
 use std::path::{Path, PathBuf};
 
-/// Columns of `net_seeds.csv`: `at_goal` is 1 when both final errors are at most 1;
-/// `formulation` is `paper` (counted by the verdict) or `ours` (a second line, never counted);
-/// `iterations_to_goal` (ours, a diagnostic beside the verdict) is the first iteration of the
-/// same descent continued to twice the paper's count whose iterate is within tolerance on the
-/// net and on the simulator replay (NaN: none is), so a seed that misses the paper's count
-/// shows whether it is slow or never gets there; `physics_iterations_to_goal` the same for the
-/// same descent (this seed's calibration) through the physical model itself.
-pub const SEEDS_COLUMNS: [&str; 9] = [
-    "task",
-    "net_seed",
-    "emulator_error",
-    "simulator_error",
-    "best_iteration",
-    "at_goal",
-    "formulation",
-    "iterations_to_goal",
-    "physics_iterations_to_goal",
-];
+/// Columns of `net_seeds.csv` ([`NetSeedRow`]): `at_goal` is 1 when both final errors are at
+/// most 1; `formulation` is `paper` (counted by the verdict) or `ours` (a second line, never
+/// counted); `iterations_to_goal` (ours, a diagnostic beside the verdict) is the first
+/// iteration of the same descent continued to twice the paper's count whose iterate is within
+/// tolerance on the net and on the simulator replay (NaN: none is), so a seed that misses the
+/// paper's count shows whether it is slow or never gets there; `physics_iterations_to_goal`
+/// the same for the same descent (this seed's calibration) through the physical model itself.
+pub const SEEDS_COLUMNS: &[&str] = NetSeedRow::COLUMNS;
 
 /// The most net seeds a run may ask for (each trains one net per task).
 pub const MAX_NET_SEEDS: usize = 16;
@@ -66,18 +56,18 @@ impl HeadlineRun {
     }
 
     /// The row of `net_seeds.csv` for `task` through the net of `seed`, with its [`ToGoal`].
-    pub fn push(&self, table: &mut Table, task: &Task, seed: u64, to_goal: ToGoal) {
-        table.push(row![
-            task.name.as_str(),
-            seed as i64,
-            self.emulator_error,
-            self.simulator_error,
-            self.best_iteration as i64,
-            i64::from(self.at_goal()),
-            task.formulation.name(),
-            iteration_or_nan(to_goal.net),
-            iteration_or_nan(to_goal.physics)
-        ]);
+    pub fn push(&self, table: &mut Vec<NetSeedRow>, task: &Task, seed: u64, to_goal: ToGoal) {
+        table.push(NetSeedRow {
+            task: task.name.clone(),
+            net_seed: seed as i64,
+            emulator_error: self.emulator_error,
+            simulator_error: self.simulator_error,
+            best_iteration: self.best_iteration as i64,
+            at_goal: i64::from(self.at_goal()),
+            formulation: task.formulation.name().into(),
+            iterations_to_goal: iteration_or_nan(to_goal.net),
+            physics_iterations_to_goal: iteration_or_nan(to_goal.physics),
+        });
     }
 }
 
@@ -159,7 +149,7 @@ impl Params {
         &self,
         task: &Task,
         net: &Emulator,
-        path: Option<(&mut Table, u64)>,
+        path: Option<(&mut Vec<PathRow>, u64)>,
     ) -> Result<(HeadlineRun, Task), Error> {
         let x0 = task.start_state();
         let task = task.calibrated(net, &x0).map_err(other)?;
@@ -177,8 +167,8 @@ impl Params {
     pub(super) fn run_seeds(
         &self,
         ctx: &RunContext,
-        table: &mut Table,
-        path: &mut Table,
+        table: &mut Vec<NetSeedRow>,
+        path: &mut Vec<PathRow>,
         physics_path: &mut Vec<PhysicsPathRow>,
     ) -> Result<(), Error> {
         let seeds = self.further_net_seeds(ctx.seed);
@@ -229,25 +219,16 @@ impl Params {
     }
 }
 
-/// Columns of `net_lines.csv`: `line` names the net's change (`paper` is the headline's own
-/// nets, as in `net_seeds.csv`); `iterations_to_goal` as in [`SEEDS_COLUMNS`].
-pub const LINES_COLUMNS: [&str; 8] = [
-    "task",
-    "line",
-    "net_seed",
-    "emulator_error",
-    "simulator_error",
-    "best_iteration",
-    "at_goal",
-    "iterations_to_goal",
-];
+/// Columns of `net_lines.csv` ([`NetLineRow`]): `line` names the net's change (`paper` is the
+/// headline's own nets, as in `net_seeds.csv`); `iterations_to_goal` as in [`SEEDS_COLUMNS`].
+pub const LINES_COLUMNS: &[&str] = NetLineRow::COLUMNS;
 
 impl Params {
     /// `net_lines.csv`: every task of the paper's formulation (the dolphin aside) learned
     /// through each of [`Params::net_lines`]' nets under the run's own and the further net
     /// seeds (trained side by side, or from the cache), as the headline is.
-    pub(super) fn run_lines(&self, ctx: &RunContext) -> Result<Table, Error> {
-        let mut table = Table::new(&LINES_COLUMNS);
+    pub(super) fn run_lines(&self, ctx: &RunContext) -> Result<Vec<NetLineRow>, Error> {
+        let mut table = Vec::new();
         let mut seeds = vec![ctx.seed];
         seeds.extend(self.further_net_seeds(ctx.seed));
         let tasks: Vec<&Task> = self
@@ -285,16 +266,16 @@ impl Params {
                     Ok((run, to_goal))
                 },
             )?;
-            table.push(row![
-                task.name.as_str(),
-                *line,
-                *seed as i64,
-                run.emulator_error,
-                run.simulator_error,
-                run.best_iteration as i64,
-                i64::from(run.at_goal()),
-                iteration_or_nan(to_goal)
-            ]);
+            table.push(NetLineRow {
+                task: task.name.clone(),
+                line: line.to_string(),
+                net_seed: *seed as i64,
+                emulator_error: run.emulator_error,
+                simulator_error: run.simulator_error,
+                best_iteration: run.best_iteration as i64,
+                at_goal: i64::from(run.at_goal()),
+                iterations_to_goal: iteration_or_nan(to_goal),
+            });
         }
         Ok(table)
     }
@@ -304,18 +285,13 @@ impl Params {
 /// paper task, how many net seeds reach the goal on both and on the emulator alone through
 /// the headline's nets (`paper`) and through each second line's. Empty without `net_lines.csv`.
 pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
-    let Some(lines) = written_csv(dir, "net_lines.csv")? else {
+    // A spec without second lines writes the table without rows.
+    let Some(lines) = written_rows::<NetLineRow>(dir, "net_lines.csv")? else {
         return Ok(String::new());
     };
-    let (task, line) = (df_str(&lines, "task")?, df_str(&lines, "line")?);
-    if task.is_empty() {
+    if lines.is_empty() {
         return Ok(String::new());
     }
-    let (goal, emu) = (
-        df_f64(&lines, "at_goal")?,
-        df_f64(&lines, "emulator_error")?,
-    );
-    let to_goal = df_f64(&lines, "iterations_to_goal")?;
     /// Per task and line: seeds at the goal on both, on the emulator alone, at the goal on
     /// both when continued, and run.
     struct Count {
@@ -328,7 +304,7 @@ pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
     }
     let mut counts: Vec<Count> = Vec::new();
     if let Some(paper) = seed_counts(dir)? {
-        let paper_tasks = unique(&task);
+        let paper_tasks = unique(&lines.iter().map(|r| r.task.clone()).collect::<Vec<_>>());
         for c in paper.into_iter().filter(|c| paper_tasks.contains(&c.task)) {
             counts.push(Count {
                 continued: c.to_goal.iter().filter(|t| t.0.is_finite()).count(),
@@ -340,16 +316,16 @@ pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
             });
         }
     }
-    for r in 0..task.len() {
+    for r in &lines {
         let i = match counts
             .iter()
-            .position(|c| c.task == task[r] && c.line == line[r])
+            .position(|c| c.task == r.task && c.line == r.line)
         {
             Some(i) => i,
             None => {
                 counts.push(Count {
-                    task: task[r].clone(),
-                    line: line[r].clone(),
+                    task: r.task.clone(),
+                    line: r.line.clone(),
                     both: 0,
                     emulator: 0,
                     continued: 0,
@@ -358,9 +334,9 @@ pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
                 counts.len() - 1
             }
         };
-        counts[i].both += usize::from(goal[r] == 1.0);
-        counts[i].emulator += usize::from(emu[r] <= 1.0);
-        counts[i].continued += usize::from(to_goal[r].is_finite());
+        counts[i].both += usize::from(r.at_goal == 1);
+        counts[i].emulator += usize::from(r.emulator_error <= 1.0);
+        counts[i].continued += usize::from(r.iterations_to_goal.is_finite());
         counts[i].seeds += 1;
     }
     counts.sort_by(|a, b| {
@@ -382,48 +358,51 @@ pub(super) fn lines_md(dir: &Path) -> Result<String, Error> {
 /// The report's table and sentence from `path.csv` in `dir` (empty without it): per paper
 /// task, over the net seeds, how far the curvature along the headline's descent rises above
 /// the start's λ against momentum's stable limit, and how the simulator's final error follows
-/// the net's at every iterate.
-pub(super) fn path_md(dir: &Path) -> Result<(String, String), Error> {
-    let Some(df) = written_csv(dir, "path.csv")? else {
+/// the net's at every iterate. The run records the descent of every control task of the
+/// paper's formulation (`tasks`), so a written table without a task's rows is an error naming
+/// it.
+pub(super) fn path_md(dir: &Path, tasks: &[&str]) -> Result<(String, String), Error> {
+    let Some(path) = written_rows::<PathRow>(dir, "path.csv")? else {
         return Ok(Default::default());
     };
-    let (task, seed) = (df_str(&df, "task")?, df_f64(&df, "net_seed")?);
-    if task.is_empty() {
+    if let Some(t) = tasks.iter().find(|t| !path.iter().any(|r| r.task == **t)) {
+        return Err(other(format!(
+            "{}: no rows for {t}, of the paper's formulation in final.csv (a truncated or edited table)",
+            dir.join("path.csv").display()
+        )));
+    }
+    if path.is_empty() {
         return Ok(Default::default());
     }
-    let (emu, sim) = (
-        df_f64(&df, "emulator_error")?,
-        df_f64(&df, "simulator_error")?,
-    );
-    let (ratio, limit) = (
-        df_f64(&df, "curvature_ratio")?,
-        df_f64(&df, "stable_ratio")?,
-    );
+    let task: Vec<String> = path.iter().map(|r| r.task.clone()).collect();
     let mut md = String::from("
 Along the descent (ours; `path.csv`): every iterate of the headline through each net seed's Table 1 net, rolled out on the net and replayed on the simulator, and the largest Hessian eigenvalue of J through the net there over the one at the start (lambda, the fixed step's scale). The heavy-ball step eta/lambda contracts along a direction of curvature mu only while mu/lambda < 2(1 + alpha)/eta (the limit); a net that follows the physics along the whole descent has simulator errors near its own at every iterate, not only at the end.\n\n| task | net seeds | iterates | largest curvature ratio, median over seeds (range) | limit | iterates above the limit | simulator / emulator final error, median over iterates | iterates within tolerance on the net | of them within tolerance on the simulator |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
     let mut why = Vec::new();
     for name in unique(&task) {
-        let rows: Vec<usize> = (0..task.len()).filter(|&r| task[r] == name).collect();
+        let rows: Vec<&PathRow> = path.iter().filter(|r| r.task == name).collect();
         let seeds = unique(
             &rows
                 .iter()
-                .map(|&r| seed[r].to_string())
+                .map(|r| r.net_seed.to_string())
                 .collect::<Vec<_>>(),
         );
         let peaks: Vec<f64> = seeds
             .iter()
             .map(|s| {
                 rows.iter()
-                    .filter(|&&r| seed[r].to_string() == *s)
-                    .map(|&r| ratio[r])
+                    .filter(|r| r.net_seed.to_string() == *s)
+                    .map(|r| r.curvature_ratio)
                     .fold(f64::NAN, f64::max)
             })
             .collect();
-        let lim = limit[rows[0]];
-        let above = rows.iter().filter(|&&r| ratio[r] > lim).count();
-        let gap: Vec<f64> = rows.iter().map(|&r| sim[r] / emu[r]).collect();
-        let on_net: Vec<usize> = rows.iter().copied().filter(|&r| emu[r] <= 1.0).collect();
-        let both = on_net.iter().filter(|&&r| sim[r] <= 1.0).count();
+        let lim = rows[0].stable_ratio;
+        let above = rows.iter().filter(|r| r.curvature_ratio > lim).count();
+        let gap: Vec<f64> = rows
+            .iter()
+            .map(|r| r.simulator_error / r.emulator_error)
+            .collect();
+        let on_net: Vec<&&PathRow> = rows.iter().filter(|r| r.emulator_error <= 1.0).collect();
+        let both = on_net.iter().filter(|r| r.simulator_error <= 1.0).count();
         let (lo, hi) = peaks
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
@@ -504,22 +483,17 @@ impl SeedCount {
 /// verdict on fewer seeds.
 pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
     let path = dir.join("net_seeds.csv");
-    let Some(df) = written_csv(dir, "net_seeds.csv")? else {
+    let Some(rows) = written_rows::<NetSeedRow>(dir, "net_seeds.csv")? else {
         return Ok(None);
     };
     let damaged = |why: &str| crate::experiment::other(format!("{}: {why}", path.display()));
-    let (task, goal) = (df_str(&df, "task")?, df_f64(&df, "at_goal")?);
-    let emu = df_f64(&df, "emulator_error")?;
-    let sim = df_f64(&df, "simulator_error")?;
-    let to_goal = df_f64(&df, "iterations_to_goal")?;
-    let physics = df_f64(&df, "physics_iterations_to_goal")?;
     let mut out: Vec<SeedCount> = Vec::new();
-    for (r, (((t, g), e), s)) in task.iter().zip(&goal).zip(&emu).zip(&sim).enumerate() {
-        let i = match out.iter().position(|c| &c.task == t) {
+    for r in &rows {
+        let i = match out.iter().position(|c| c.task == r.task) {
             Some(i) => i,
             None => {
                 out.push(SeedCount {
-                    task: t.clone(),
+                    task: r.task.clone(),
                     both: 0,
                     emulator: 0,
                     seeds: 0,
@@ -529,11 +503,13 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
                 out.len() - 1
             }
         };
-        out[i].both += usize::from(*g == 1.0);
-        out[i].emulator += usize::from(*e <= 1.0);
+        out[i].both += usize::from(r.at_goal == 1);
+        out[i].emulator += usize::from(r.emulator_error <= 1.0);
         out[i].seeds += 1;
-        out[i].errors.push(e.max(*s));
-        out[i].to_goal.push((to_goal[r], physics[r]));
+        out[i].errors.push(r.emulator_error.max(r.simulator_error));
+        out[i]
+            .to_goal
+            .push((r.iterations_to_goal, r.physics_iterations_to_goal));
     }
     if out.iter().flat_map(|c| &c.errors).any(|e| !e.is_finite()) {
         return Err(damaged("a net seed's final error is not a number"));
@@ -549,41 +525,42 @@ pub(super) fn seed_counts(dir: &Path) -> Result<Option<Vec<SeedCount>>, Error> {
 /// The report's table of `net_seeds.csv` in `dir` (empty when the run has none): every task and
 /// net seed with both final errors and whether it reached the goal.
 pub(super) fn table_md(dir: &Path) -> Result<String, Error> {
-    let Some(df) = written_csv(dir, "net_seeds.csv")? else {
+    let Some(rows) = written_rows::<NetSeedRow>(dir, "net_seeds.csv")? else {
         return Ok(String::new());
     };
-    let (task, seed) = (df_str(&df, "task")?, df_f64(&df, "net_seed")?);
-    let (emu, sim) = (
-        df_f64(&df, "emulator_error")?,
-        df_f64(&df, "simulator_error")?,
-    );
-    let it = df_f64(&df, "best_iteration")?;
-    let to_goal = df_f64(&df, "iterations_to_goal")?;
-    let physics = df_f64(&df, "physics_iterations_to_goal")?;
-    if task.is_empty() {
+    if rows.is_empty() {
         return Ok(String::new());
     }
     let mut md = String::from(
         "\nThe headline per Table 1 net seed (ours, `net_seeds.csv`; the same task, optimizer and iteration count through the net trained under each seed, each calibrated through its own net; final error <= 1 is within tolerance; the last two columns continue the same descent to twice the paper's iterations, ours: the first iteration at the goal on both, and the same descent's, under this seed's calibration, through the physical model itself):\n\n| task | net seed | best iteration | final error, emulator | final error, simulator | at the goal on both | continued: at the goal at iteration | through the physics |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
-    let mut order: Vec<usize> = (0..task.len()).collect();
-    let first = |r: usize| task.iter().position(|t| *t == task[r]).unwrap_or(r);
-    order.sort_by(|&a, &b| first(a).cmp(&first(b)).then(seed[a].total_cmp(&seed[b])));
-    for r in order {
+    let mut order: Vec<usize> = (0..rows.len()).collect();
+    let first = |r: usize| {
+        rows.iter()
+            .position(|o| o.task == rows[r].task)
+            .unwrap_or(r)
+    };
+    order.sort_by(|&a, &b| {
+        first(a)
+            .cmp(&first(b))
+            .then(rows[a].net_seed.cmp(&rows[b].net_seed))
+    });
+    for r in order.into_iter().map(|r| &rows[r]) {
+        let (emu, sim) = (r.emulator_error, r.simulator_error);
         md.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
-            task[r],
-            seed[r],
-            it[r],
-            sig(emu[r]),
-            sig(sim[r]),
-            if emu[r] <= 1.0 && sim[r] <= 1.0 {
+            r.task,
+            r.net_seed,
+            r.best_iteration,
+            sig(emu),
+            sig(sim),
+            if emu <= 1.0 && sim <= 1.0 {
                 "yes"
             } else {
                 "no"
             },
-            iteration_words(to_goal[r]),
-            iteration_words(physics[r])
+            iteration_words(r.iterations_to_goal),
+            iteration_words(r.physics_iterations_to_goal)
         ));
     }
     Ok(md)
@@ -594,29 +571,28 @@ pub(super) fn table_md(dir: &Path) -> Result<String, Error> {
 /// seed; dashed lines at 1 bound the goal (lower left: within tolerance on both). Each panel is
 /// scaled to its own dots (and the tolerance), so a task's seeds do not crowd one corner.
 pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Error> {
-    let Some(t) = tables.get("net_seeds").filter(|t| !t.is_empty()) else {
+    let seeds = NetSeedRow::from_table(tables.require("net_seeds")?);
+    if seeds.is_empty() {
         return Ok(vec![]);
-    };
-    let (task, seed) = (t.strs("task"), t.f64s("net_seed"));
-    let (emu, sim) = (t.f64s("emulator_error"), t.f64s("simulator_error"));
-    let formulation = t.strs("formulation");
+    }
+    let task: Vec<String> = seeds.iter().map(|r| r.task.clone()).collect();
     let panels: Vec<Panel> = unique(&task)
         .into_iter()
         .enumerate()
         .map(|(c, name)| {
-            let rows: Vec<usize> = (0..task.len()).filter(|&r| task[r] == name).collect();
+            let rows: Vec<&NetSeedRow> = seeds.iter().filter(|r| r.task == name).collect();
             let at = rows
                 .iter()
-                .filter(|&&r| emu[r] <= 1.0 && sim[r] <= 1.0)
+                .filter(|r| r.emulator_error <= 1.0 && r.simulator_error <= 1.0)
                 .count();
-            let ours = if formulation.get(rows[0]).is_some_and(|f| f == "ours") {
+            let ours = if rows[0].formulation == "ours" {
                 " (ours, not counted)"
             } else {
                 ""
             };
             let (lo, hi) = rows
                 .iter()
-                .flat_map(|&r| [emu[r], sim[r]])
+                .flat_map(|r| [r.emulator_error, r.simulator_error])
                 .filter(|x| x.is_finite() && *x > 0.0)
                 .fold((1.0f64, 1.0f64), |(a, b), x| (a.min(x), b.max(x)));
             let (lo, hi) = (lo / 1.5, hi * 1.5);
@@ -625,11 +601,13 @@ pub(super) fn figure(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, 
             let series = vec![
                 Series::line(
                     format!("{} net seeds", rows.len()),
-                    rows.iter().map(|&r| (emu[r], sim[r])).collect(),
+                    rows.iter()
+                        .map(|r| (r.emulator_error, r.simulator_error))
+                        .collect(),
                     c,
                 )
                 .mark(Mark::Points)
-                .labelled(rows.iter().map(|&r| format!("{}", seed[r])).collect()),
+                .labelled(rows.iter().map(|r| format!("{}", r.net_seed)).collect()),
                 Series::line("tolerance (final error 1)", vec![(1.0, lo), (1.0, top)], 7)
                     .mark(Mark::Dashed),
                 Series::line("", vec![(lo, 1.0), (hi, 1.0)], 7).mark(Mark::Dashed),
@@ -663,16 +641,27 @@ mod tests {
                    lander,2,0,9,4,4,1,2\n\
                    lander,2,1,2,0.5,0.5,1.5,2\n";
         std::fs::write(dir.path().join("path.csv"), csv).unwrap();
-        let (md, why) = path_md(dir.path()).unwrap();
+        let (md, why) = path_md(dir.path(), &["lander"]).unwrap();
         // Peaks 3 and 1.5 (median 2.25); one iterate above 2; sim/emu ratios 1, 4, 1, 1.
         assert!(
             md.contains("| lander | 2 | 4 | 2.25 (1.50-3.00) | 2.00 | 1 | 1.00 | 2 | 1 |"),
             "{md}"
         );
         assert!(why.contains("1 of 4 iterates above the limit"), "{why}");
+        // A paper task without rows: the table was cut or edited.
+        let e = path_md(dir.path(), &["lander", "truck"])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("path.csv") && e.contains("truck"), "{e}");
+        std::fs::write(
+            dir.path().join("path.csv"),
+            &csv[..csv.find('\n').unwrap() + 1],
+        )
+        .unwrap();
+        assert!(path_md(dir.path(), &["lander"]).is_err());
         let empty = tempfile::tempdir().unwrap();
         assert_eq!(
-            path_md(empty.path()).unwrap(),
+            path_md(empty.path(), &["lander"]).unwrap(),
             (String::new(), String::new())
         );
     }

@@ -66,7 +66,7 @@ fn curve_panels(tables: &Tables) -> Result<Vec<Panel>, Error> {
                         .filter(|p| p.1 > 0.0 && p.1.is_finite())
                         .collect();
                     x_max = pts.iter().map(|p| p.0).fold(x_max, f64::max);
-                    let label = if j == 0 { method_words(me) } else { "" };
+                    let label = if j == 0 { method_words(me)? } else { "" };
                     series.push(Series::line(label, pts, k).mark(Mark::stroke_of(k)));
                 }
             }

@@ -274,14 +274,18 @@ pub fn method_name(m: TrainMethod) -> &'static str {
     }
 }
 
-/// A method's name in words.
-pub(super) fn method_words(m: &str) -> &str {
-    match m {
-        "cg" => "conjugate gradient (batch)",
-        "lbfgs" => "L-BFGS (batch, ours)",
-        "momentum" => "momentum, mini-batches of 30",
-        other => other,
-    }
+/// A method's name in words, from its name in the tables; a name no method has is an error
+/// (a table edited or from another experiment), never a label made up from it.
+pub(super) fn method_words(name: &str) -> Result<&'static str, Error> {
+    let method = [TrainMethod::Cg, TrainMethod::Lbfgs, TrainMethod::Momentum]
+        .into_iter()
+        .find(|&m| method_name(m) == name)
+        .ok_or_else(|| crate::experiment::other(format!("unknown training method `{name}`")))?;
+    Ok(match method {
+        TrainMethod::Cg => "conjugate gradient (batch)",
+        TrainMethod::Lbfgs => "L-BFGS (batch, ours)",
+        TrainMethod::Momentum => "momentum, mini-batches of 30",
+    })
 }
 
 impl Family for NaTrainingMethods {

@@ -290,7 +290,7 @@ pub(super) fn report(dir: &Path) -> Result<Findings, Error> {
             "| {} | {} | {} | {} of {} | {} | {} | {} |\n",
             n,
             size,
-            method_words(me),
+            method_words(me)?,
             never(col(|m| m.passes_to_target)),
             net.map_or("?".into(), |x| sig(x.passes as f64)),
             never(col(|m| m.seconds_to_target)),
