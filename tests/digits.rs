@@ -286,11 +286,24 @@ fn bellman_combination_and_portable_functions_keep_their_bits() {
         ]);
         h.all(&[portable::hypot(x, 2.0), portable::powf(x.abs(), 1.7)]);
     }
+    // The local frame's heading norm on quaternion-like pairs (the correction changes the
+    // naive square root's last bit on 661 of these 4000).
+    let mut g = Fnv::new();
+    for i in 0..4000 {
+        let w = ((i * 7919) % 4001) as f64 / 2000.5 - 1.0;
+        let z = ((i * 104_729) % 3989) as f64 / 1994.5 - 1.0;
+        g.add(portable::hypot_corrected(w, z));
+    }
     check(
-        &[("bellman".into(), bellman), ("portable".into(), h.0)],
+        &[
+            ("bellman".into(), bellman),
+            ("portable".into(), h.0),
+            ("hypot_corrected".into(), g.0),
+        ],
         &[
             ("bellman", 0xc847e1b27af1a25a),
             ("portable", 0x36d05a7346521db0),
+            ("hypot_corrected", 0x7c21d96d16f408fc),
         ],
     );
 }
@@ -311,6 +324,46 @@ fn the_jumpers_crouch_keeps_its_bits() {
         h.all(&j.crouch(0.2 * k as f64, lean, shin, arm));
     }
     check(&[("crouch".into(), h.0)], &[("crouch", 0xa0c7ec33f18649d9)]);
+}
+
+/// The jumper's standing test (the `landed` of every jump: not fallen, a foot point on the
+/// ground, the centre of mass over the sole and slow, its speed through the portable
+/// `hypot`) over crouches at several heights above the ground and centre-of-mass velocities
+/// around its 0.5 m/s bar: the speed's bits and each decision.
+#[test]
+fn the_jumpers_standing_test_keeps_its_bits() {
+    use motionlab::families::lbc::jumping::standing;
+    let j = motionlab::physics::jumper::Jumper::default();
+    let dof = motionlab::physics::jumper::DOF;
+    let mut h = Fnv::new();
+    let mut stood = 0;
+    for k in 0..12 {
+        let mut x = j.crouch(0.0, 0.1 + 0.02 * k as f64, 0.3, 0.2);
+        x[1] += [0.0, 0.004, 0.02][k % 3];
+        for m in 0..12 {
+            // Base velocities whose speed crosses 0.5 m/s (the joints still).
+            let a = 0.3 * m as f64;
+            let (vx, vy) = (
+                0.12 * m as f64 * motionlab::portable::cos(a),
+                0.05 * motionlab::portable::sin(a),
+            );
+            x[dof] = vx;
+            x[dof + 1] = vy;
+            let v = j.com_velocity(&x);
+            h.add(motionlab::portable::hypot(v[0], v[1]));
+            let ok = standing(&j, &x);
+            stood += ok as usize;
+            h.add(if ok { 1.0 } else { 0.0 });
+        }
+    }
+    assert!(
+        stood > 0 && stood < 144,
+        "the grid must cross the bar: {stood} of 144 stand"
+    );
+    check(
+        &[("standing".into(), h.0)],
+        &[("standing", 0xd6aa2c28ce3531dd)],
+    );
 }
 
 /// A tiny emulator of `model` trained by `method` (a few iterations on a few hundred

@@ -18,7 +18,7 @@
 //! flat-ground walk (its published controller source: kp = 300, kd = 30 for every joint, torques
 //! within ±1000 N·m, swing-hip targets within [−0.4, 1.6] rad, and the targets below).
 
-use crate::physics::biped::{point, Biped, Leg, Side, DOF, TORQUES};
+use crate::physics::biped::{point, Biped, Side, DOF, TORQUES};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -106,16 +106,8 @@ impl Gait {
 pub fn simbicon_angles(x: &[f64]) -> ([f64; 7], [f64; 7]) {
     let q = |i: usize| x[i];
     let r = |i: usize| x[DOF + i];
-    let Leg {
-        hip: lh,
-        knee: lk,
-        ankle: la,
-    } = Biped::leg(Side::Left);
-    let Leg {
-        hip: rh,
-        knee: rk,
-        ankle: ra,
-    } = Biped::leg(Side::Right);
+    let [lh, lk, la] = Biped::leg(Side::Left).joints();
+    let [rh, rk, ra] = Biped::leg(Side::Right).joints();
     let angles = [
         q(2) - FRAC_PI_2,
         q(lh) + PI,
@@ -233,16 +225,8 @@ impl Simbicon {
 /// foot's lowest point touches the ground).
 pub fn applet_start(biped: &Biped, x: f64) -> Vec<f64> {
     let mut s = vec![0.0; 2 * DOF];
-    let Leg {
-        hip: lh,
-        knee: lk,
-        ankle: la,
-    } = Biped::leg(Side::Left);
-    let Leg {
-        hip: rh,
-        knee: rk,
-        ankle: ra,
-    } = Biped::leg(Side::Right);
+    let [lh, lk, la] = Biped::leg(Side::Left).joints();
+    let [rh, rk, ra] = Biped::leg(Side::Right).joints();
     s[0] = x;
     s[2] = FRAC_PI_2 + 0.051;
     s[lh] = -PI + 0.298;

@@ -119,9 +119,8 @@ struct Stored {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     rollout_trace: Vec<(usize, u64, u64)>,
     /// FNV-1a of the file's text before this field, the last one ([`with_checksum`]): a file
-    /// whose text no longer matches it (a flipped bit, an edit) is rebuilt. Absent in entries
-    /// written before it existed, which are checked for parse and finiteness only and then
-    /// stamped.
+    /// whose text no longer matches it (a flipped bit, an edit), or that lacks it, is rebuilt.
+    /// `None` only while an entry is being written (the writer appends it to the text).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     checksum: Option<u64>,
 }
@@ -169,7 +168,8 @@ enum Damage {
 }
 
 /// Reads and checks the entry at `path`: parsed, stored under `key` with `shape`, finite, and
-/// (where it has one) matching its checksum.
+/// carrying a checksum that matches its text (without one, nothing vouches for its numbers: a
+/// flipped bit in a weight would be used silently).
 fn checked_entry(path: &Path, key: &str, shape: [usize; 3]) -> Result<Stored, Damage> {
     let Ok(text) = std::fs::read_to_string(path) else {
         return Err(Damage::Missing);
@@ -187,8 +187,10 @@ fn checked_entry(path: &Path, key: &str, shape: [usize; 3]) -> Result<Stored, Da
     {
         return Err(Damage::Damaged("has the wrong number of weights"));
     }
-    if s.checksum.is_some() && checksum_matches(&text) != Some(true) {
-        return Err(Damage::Damaged("does not match its checksum"));
+    match checksum_matches(&text) {
+        None => return Err(Damage::Damaged("has no checksum")),
+        Some(false) => return Err(Damage::Damaged("does not match its checksum")),
+        Some(true) => {}
     }
     if !s.finite() {
         return Err(Damage::Damaged("holds a non-finite weight"));
@@ -223,9 +225,9 @@ pub struct NetRecord {
 
 /// Reads the record at `path` if it exists, was stored under `key` and has `shape`
 /// (inputs, hidden, outputs); `None` otherwise (a stale or foreign file is a cache miss). A
-/// damaged entry (unparsable, a wrong weight count, non-finite numbers, or a checksum that no
-/// longer matches its content) is a miss too, so the net is rebuilt, with a line on stderr
-/// naming the file. An entry from before checksums is stamped with one once it passes.
+/// damaged entry (unparsable, a wrong weight count, non-finite numbers, or a checksum that is
+/// missing or no longer matches its content) is a miss too, so the net is rebuilt, with a line
+/// on stderr naming the file.
 pub fn read_record(path: &Path, key: &str, shape: [usize; 3]) -> Option<NetRecord> {
     let s = match checked_entry(path, key, shape) {
         Ok(s) => s,
@@ -257,10 +259,6 @@ pub fn read_record(path: &Path, key: &str, shape: [usize; 3]) -> Option<NetRecor
         trace: trace_from_bits(&s.trace),
         rollout_trace: trace_from_bits(&s.rollout_trace),
     };
-    if s.checksum.is_none() {
-        // Best effort: an entry that cannot be stamped is still used as read.
-        let _ = write_record_quiet(path, key, &rec);
-    }
     note_use(path, false, rec.train_s);
     Some(rec)
 }
@@ -290,13 +288,6 @@ fn trace_bits(t: &[TracePoint]) -> Vec<(usize, u64, u64)> {
 /// Writes `rec` under `key` to `path` atomically (temporary file, then rename), creating the
 /// folder, with the checksum of its content.
 pub fn write_record(path: &Path, key: &str, rec: &NetRecord) -> Result<(), BuildError> {
-    write_record_quiet(path, key, rec)?;
-    note_use(path, true, rec.train_s);
-    Ok(())
-}
-
-/// [`write_record`] without counting the write as a training.
-fn write_record_quiet(path: &Path, key: &str, rec: &NetRecord) -> Result<(), BuildError> {
     let mlp = &rec.mlp;
     let stored = Stored {
         key: key.to_string(),
@@ -331,6 +322,7 @@ fn write_record_quiet(path: &Path, key: &str, rec: &NetRecord) -> Result<(), Bui
     let tmp = path.with_extension(format!("json.tmp{}-{n}", std::process::id()));
     std::fs::write(&tmp, text).map_err(|e| fail(e.to_string()))?;
     std::fs::rename(&tmp, path).map_err(|e| fail(e.to_string()))?;
+    note_use(path, true, rec.train_s);
     Ok(())
 }
 
@@ -672,9 +664,10 @@ mod tests {
     }
 
     /// A non-finite number refused even under a checksum that matches it (written through
-    /// the cache's own writer), and an entry written before checksums is used and stamped.
+    /// the cache's own writer), and an entry without its checksum refused: a flipped bit in
+    /// a weight there would otherwise be used silently.
     #[test]
-    fn non_finite_entries_are_refused_and_old_entries_are_stamped() {
+    fn non_finite_entries_and_entries_without_a_checksum_are_refused() {
         let dir = tempfile::tempdir().unwrap();
         let cache = EmulatorCache::new(dir.path());
         let s = spec();
@@ -687,15 +680,24 @@ mod tests {
         rec.output_norm.std[0] = f64::INFINITY;
         write_record(&path, &key, &rec).unwrap();
         assert!(read_record(&path, &key, shape).is_none());
-        // Without its checksum field: used as before, and stamped with one.
         write_record(&path, &key, &good).unwrap();
-        let mut v: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-        v.as_object_mut().unwrap().remove("checksum");
-        std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
         assert_eq!(read_record(&path, &key, shape).unwrap(), good);
-        let stamped: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-        assert!(stamped["checksum"].is_u64());
+        // The same entry without its checksum field, then with a flipped bit in a weight too.
+        let text = std::fs::read_to_string(&path).unwrap();
+        let at = text.rfind(CHECKSUM_KEY).unwrap();
+        let bare = format!("{}}}", &text[..at]);
+        std::fs::write(&path, &bare).unwrap();
+        assert!(read_record(&path, &key, shape).is_none());
+        let mut v: serde_json::Value = serde_json::from_str(&bare).unwrap();
+        let w = v["weights"][0].as_u64().unwrap();
+        v["weights"][0] = serde_json::json!(w ^ (1 << 40));
+        std::fs::write(&path, serde_json::to_string(&v).unwrap()).unwrap();
+        assert!(read_record(&path, &key, shape).is_none());
+        // Rebuilt and stored with a checksum again.
+        assert_eq!(
+            cache.get_or_train(&s).unwrap().emulator.mlp(),
+            clean.emulator.mlp()
+        );
+        assert!(checksum_matches(&std::fs::read_to_string(&path).unwrap()) == Some(true));
     }
 }

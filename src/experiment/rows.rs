@@ -100,6 +100,40 @@ pub fn written_rows<R: TableRow>(dir: &Path, name: &str) -> Result<Option<Vec<R>
         .map_err(|e| Error::Other(format!("{}: {e}", dir.join(name).display())))
 }
 
+/// A column the harness prepends to a table when its run sweeps that axis (or runs over
+/// seeds): `None` in every row of a table without it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Swept<T>(pub Option<T>);
+
+impl<T: ColumnValue + Clone> ColumnValue for Swept<T> {
+    fn frame_column(df: &Frame, name: &str) -> Result<Vec<Self>, Error> {
+        if df.column(name).is_err() {
+            return Ok(vec![Swept(None); df.height()]);
+        }
+        Ok(T::frame_column(df, name)?
+            .into_iter()
+            .map(|v| Swept(Some(v)))
+            .collect())
+    }
+
+    fn table_column(t: &Table, name: &str) -> Vec<Self> {
+        if !t.names().iter().any(|n| n == name) {
+            return vec![Swept(None); t.len()];
+        }
+        T::table_column(t, name)
+            .into_iter()
+            .map(|v| Swept(Some(v)))
+            .collect()
+    }
+
+    fn cell(&self) -> Cell {
+        match &self.0 {
+            Some(v) => v.cell(),
+            None => Cell::S(String::new()),
+        }
+    }
+}
+
 /// Declares a result table's row struct, each field with its column's name:
 ///
 /// ```

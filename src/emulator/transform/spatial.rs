@@ -263,12 +263,11 @@ impl SpatialFrame {
     /// The frame's heading quaternion read from a state: (w, z)/√(w² + z²) of the orientation
     /// quaternion, as the unit pair and its norm.
     #[inline(always)]
-    // Every cached lander and dolphin net was trained through the platform's `hypot` here;
-    // it moves to `crate::portable` with their next retraining.
-    #[allow(clippy::disallowed_methods)]
     fn heading(&self, s: &[f64]) -> ([f64; 2], f64) {
         let (w, z) = (s[self.orientation[0]], s[self.orientation[3]]);
-        let n = w.hypot(z);
+        // Borges's corrected hypot, as glibc's: the bits every cached lander and dolphin net
+        // was trained through.
+        let n = crate::portable::hypot_corrected(w, z);
         ([w / n, z / n], n)
     }
 

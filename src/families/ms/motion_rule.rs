@@ -17,9 +17,9 @@
 
 use super::rows::MeasureRow;
 use super::search::Motion;
-use super::settings::Swept;
 use crate::experiment::resolve::{ensure, ParamError};
 use crate::experiment::rows::read_rows;
+use crate::experiment::rows::Swept;
 use crate::experiment::rule::{majority, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::stats::{median, median_interval};
 use crate::experiment::Error;

@@ -26,12 +26,12 @@
 //! the threshold is inconclusive.
 
 use super::search::{MotionJob, Params};
-use crate::experiment::output::{Cell, Table, Tables};
+use crate::experiment::output::Tables;
 use crate::experiment::plot::FigureSink;
 use crate::experiment::plot::{Figure, Panel, Series};
 use crate::experiment::report::{sig, Findings, Verdict};
 use crate::experiment::resolve::{ensure, ParamError, Validate};
-use crate::experiment::rows::{read_rows, table_of, ColumnValue, Frame, TableRow};
+use crate::experiment::rows::{read_rows, table_of, Swept, TableRow};
 use crate::experiment::rule::{rule_settings, rule_table, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::seeds::SeedMetric;
 use crate::experiment::stats::median_interval;
@@ -98,40 +98,6 @@ crate::result_rows! {
         iteration: i64 = "iteration",
         /// The best objective after it.
         best: f64 = "best",
-    }
-}
-
-/// A column the harness prepends to a table when its run sweeps that axis (or runs over
-/// seeds): `None` in every row of a table without it.
-#[derive(Debug, Clone, PartialEq)]
-pub(super) struct Swept<T>(pub(super) Option<T>);
-
-impl<T: ColumnValue + Clone> ColumnValue for Swept<T> {
-    fn frame_column(df: &Frame, name: &str) -> Result<Vec<Self>, Error> {
-        if df.column(name).is_err() {
-            return Ok(vec![Swept(None); df.height()]);
-        }
-        Ok(T::frame_column(df, name)?
-            .into_iter()
-            .map(|v| Swept(Some(v)))
-            .collect())
-    }
-
-    fn table_column(t: &Table, name: &str) -> Vec<Self> {
-        if !t.names().iter().any(|n| n == name) {
-            return vec![Swept(None); t.len()];
-        }
-        T::table_column(t, name)
-            .into_iter()
-            .map(|v| Swept(Some(v)))
-            .collect()
-    }
-
-    fn cell(&self) -> Cell {
-        match &self.0 {
-            Some(v) => v.cell(),
-            None => Cell::S(String::new()),
-        }
     }
 }
 

@@ -39,7 +39,7 @@ mod job;
 mod report;
 mod rows;
 
-pub use job::{jump_height, Landing, Push};
+pub use job::{jump_height, standing, Landing, Push};
 pub use report::{verdict_of, JumpFacts};
 
 use crate::experiment::output::Tables;

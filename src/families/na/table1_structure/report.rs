@@ -4,22 +4,11 @@
 use super::rows::{DriftRow, GlobalErrorRow, NormalizationRow, RegimeFidelityRow, StructureRow};
 use super::Table1Rule;
 use crate::emulator::catalog::Normalization;
-use crate::experiment::output::written_csv;
 use crate::experiment::report::{sig, Findings};
-use crate::experiment::rows::{read_rows, TableRow};
+use crate::experiment::rows::{read_rows, written_rows};
 use crate::experiment::rule::{majority, rule_settings, shown, Check, Cmp, Null, Partly, Rule};
 use crate::experiment::Error;
 use std::path::Path;
-
-/// The rows of the optional table `name` in `dir`: `None` when the run did not write it.
-fn written_rows<R: TableRow>(dir: &Path, name: &str) -> Result<Option<Vec<R>>, Error> {
-    let Some(df) = written_csv(dir, name)? else {
-        return Ok(None);
-    };
-    R::from_frame(&df)
-        .map(Some)
-        .map_err(|e| Error::Other(format!("{}: {e}", dir.join(name).display())))
-}
 
 /// The verdict's rule over `passed` of `nets` nets (each passing every condition of the
 /// spec's bars): held when all pass, partly when a strict majority does (a bar one net of
