@@ -98,6 +98,7 @@
 //! | `dolphin` | [`physics::dolphin`] | 23-mass dolphin, 6 muscles, hydrodynamic drag |
 //! | `diver`, `push_recovery` | [`physics::diver`], [`physics::push`] | planar articulated trees ([`physics::planar`]) |
 //! | `chain3d` | [`physics::body3d`] | 3-D articulated tree (floating base, ball and revolute joints), checked against MuJoCo |
+//! | `leaper3d` | [`physics::body3d`] | 3-D human-like biped on the ground (de Leva 1996 segments; stand-in for Laszlo et al. 1996) |
 //! | `euler`, `semi_implicit_euler`, `rk4`, `dopri5`, `rk45` | [`physics::integrate`] | time integrators |
 //! | DDP / iLQR, LQR tracking | [`control::ddp`], [`control::lqr`] | trajectory optimization, eq. 12 value functions |
 //! | LQR trackers of emulator tapes | [`control::step_tracker`], [`control::tracker`] | LBC §5.2 on NeuroAnimator BPTT tapes |

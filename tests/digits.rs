@@ -195,6 +195,7 @@ fn rollouts_of_every_model_keep_their_bits() {
             ("lander", 0x4df91033582ba475),
             ("dolphin", 0x561a5055fe66c535),
             ("chain3d", 0xec2bdfb1cdb8b32a),
+            ("leaper3d", 0x95bb4ebefe15f654),
             ("pendulum3_passive_rk45", 0x075cff40cfa12027),
             ("lattice_cube", 0xbc6c1aea5f810db9),
         ],

@@ -284,6 +284,7 @@ pub const MODEL_NAMES: &[&str] = &[
     "lander",
     "dolphin",
     "chain3d",
+    "leaper3d",
 ];
 
 /// Builds a model by registry name.
@@ -302,6 +303,7 @@ pub fn model_by_name(name: &str) -> Option<Box<dyn Ode>> {
         "lander" => Box::new(lander::Lander::default()),
         "dolphin" => Box::new(dolphin::Dolphin::default()),
         "chain3d" => Box::new(body3d::chain3d()),
+        "leaper3d" => Box::new(body3d::leaper3d()),
         _ => return None,
     })
 }

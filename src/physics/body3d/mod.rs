@@ -118,9 +118,11 @@
 pub mod chain3d;
 pub mod contact;
 pub mod dynamics;
+pub mod leaper3d;
 pub mod spatial;
 pub mod tree;
 
 pub use chain3d::chain3d;
 pub use contact::OnGround3d;
+pub use leaper3d::leaper3d;
 pub use tree::{Body3d, BodyPoint, Joint3d, Tree3d, TreeError};
