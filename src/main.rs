@@ -7,7 +7,7 @@ use motionlab::experiment::folder::check_complete;
 use motionlab::experiment::output::remove_stale_temps;
 use motionlab::experiment::report::write_report;
 use motionlab::experiment::resolve::{resolve, ResolveOptions, Resolved};
-use motionlab::experiment::runner::{merge, run, RunOptions, MAX_JOBS};
+use motionlab::experiment::runner::{merge, run, Clock, RunOptions, MAX_JOBS};
 use motionlab::experiment::shard::Shard;
 use motionlab::experiment::spec::SpecFile;
 use motionlab::families;
@@ -674,13 +674,37 @@ fn reproduce_command(
     refuse_incomplete(&opts.out, kept)?;
     let ids: Vec<String> = all.iter().map(|r| r.id.clone()).collect();
     remove_leftovers(&opts, &ids)?;
-    for r in all
+    let chosen: Vec<&Resolved> = all
         .iter()
         .filter(|r| only.is_empty() || only.contains(&r.id))
-    {
+        .collect();
+    // What each took in the last run here (its run.json, before this run replaces it): the
+    // estimate of what is left.
+    let last: Vec<Option<f64>> = chosen
+        .iter()
+        .map(|r| last_seconds(&opts.out.join(&r.id)))
+        .collect();
+    for (k, r) in chosen.iter().enumerate() {
+        eprintln!(
+            "[{}/{}] {}{}",
+            k + 1,
+            chosen.len(),
+            r.id,
+            time_left(&last[k..], t0.elapsed().as_secs_f64())
+        );
+        let clock = Clock::start();
         let s = run(r, &opts).with_context(|| format!("experiment {}", r.id))?;
         say_notes(&s.notes);
-        eprintln!("{:<26} {:>8.2} s  {} files", s.id, s.seconds, s.files.len());
+        let cpu = clock
+            .cpu_seconds()
+            .map(|c| format!(" ({:.0}% of a core)", 100.0 * c / s.seconds.max(1e-9)))
+            .unwrap_or_default();
+        eprintln!(
+            "{:<26} {:>8.2} s{cpu}  {} files",
+            s.id,
+            s.seconds,
+            s.files.len()
+        );
     }
     let report = write_report(&opts.out, &opts.figures, &all)?;
     eprintln!(
@@ -689,6 +713,37 @@ fn reproduce_command(
         t0.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// `seconds_total` of the run.json in `dir`, if there is a readable one.
+fn last_seconds(dir: &Path) -> Option<f64> {
+    let text = std::fs::read_to_string(dir.join("run.json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v.get("seconds_total")?.as_f64()
+}
+
+/// The progress line's estimate: the last run's times of the experiments still to run (`left`,
+/// this one first), or which have none; `elapsed` seconds so far.
+fn time_left(left: &[Option<f64>], elapsed: f64) -> String {
+    let minutes = |s: f64| format!("{:.1} min", s / 60.0);
+    let known: f64 = left.iter().flatten().sum();
+    let unknown = left.iter().filter(|s| s.is_none()).count();
+    let this = match left.first() {
+        Some(Some(s)) => format!("took {s:.0} s last time; "),
+        _ => String::new(),
+    };
+    let rest = if unknown == 0 {
+        format!("about {} left in all", minutes(known))
+    } else if unknown == left.len() {
+        "no past run here to estimate from".to_string()
+    } else {
+        format!(
+            "about {} left for the {} with a past run here, and {unknown} more",
+            minutes(known),
+            left.len() - unknown
+        )
+    };
+    format!(" ({this}{rest}; {} so far)", minutes(elapsed))
 }
 
 fn emulate(

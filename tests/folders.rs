@@ -300,3 +300,37 @@ fn the_report_shows_a_specs_rule_history_and_flags_it_in_the_summary() {
     assert!(e.contains("proj_a.toml") && e.contains("history[0]"), "{e}");
     assert!(!dir.join("figs2").exists(), "work done before refusing");
 }
+
+/// `reproduce` says before each experiment where it is (k of n) and, from the last run's
+/// `run.json` in the output folder, what that experiment took and about how long is left;
+/// each `run.json` records the CPU time beside the wall time, and the details show it.
+#[test]
+fn reproduce_says_where_it_is_and_what_is_left_from_the_last_run() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let exp = two_experiments(dir);
+    let first = cli(dir, Some(&exp), &["reproduce"], "figs");
+    ok(&first);
+    let e = stderr(&first);
+    assert!(
+        e.contains("[1/2] proj_a") && e.contains("[2/2] proj_b"),
+        "{e}"
+    );
+    assert!(e.contains("no past run here"), "no past time yet: {e}");
+    let run: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/proj_a/run.json")).unwrap())
+            .unwrap();
+    if std::path::Path::new("/proc/self/stat").exists() {
+        let cpu = run["cpu_seconds"].as_f64().expect("cpu_seconds");
+        assert!(cpu >= 0.0, "{run}");
+        let details = std::fs::read_to_string(dir.join("out/proj_a/DETAILS.md")).unwrap();
+        assert!(details.contains("s of CPU time)"), "{details}");
+    }
+    let second = cli(dir, Some(&exp), &["reproduce"], "figs");
+    ok(&second);
+    let e = stderr(&second);
+    assert!(
+        e.contains("[1/2] proj_a (took") && e.contains("left in all"),
+        "{e}"
+    );
+}

@@ -69,6 +69,16 @@ pub fn take_usage() -> NetUsage {
     u
 }
 
+/// `train()`, announced on stderr before and after: a cold run trains for minutes at a time,
+/// and this says what and how long (the cache's file names which net, for its key).
+pub fn training<T, E>(what: &str, train: impl FnOnce() -> Result<T, E>) -> Result<T, E> {
+    eprintln!("  training {what}: not in the emulator cache…");
+    let t0 = std::time::Instant::now();
+    let out = train()?;
+    eprintln!("  trained {what} in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(out)
+}
+
 /// Bumped whenever the meaning of a stored file changes (transforms, sampling, training code,
 /// the network's arithmetic, the simulators' arithmetic: the key fingerprints the sampling
 /// recipe, not the simulated transitions). 2: the network's σ and sums became fused
@@ -477,7 +487,17 @@ impl EmulatorCache {
         if let Some(t) = self.load(spec) {
             return Ok(t);
         }
-        let t = train_emulator(spec)?;
+        let what = format!(
+            "the {} N{} emulator ({} hidden units, {} examples, {})",
+            spec.net.model.name(),
+            spec.steps,
+            spec.net.hidden,
+            spec.net.examples,
+            self.path(spec)
+                .file_name()
+                .map_or(String::new(), |f| f.to_string_lossy().into_owned())
+        );
+        let t = training(&what, || train_emulator(spec))?;
         self.store(spec, &t)?;
         Ok(t)
     }
@@ -490,18 +510,7 @@ mod tests {
 
     fn spec() -> BuildSpec {
         BuildSpec {
-            net: NetSpec {
-                model: NetModel::PendulumPassive,
-                hidden: 6,
-                examples: 120,
-                method: TrainMethod::Cg,
-                physical_dt: 0.01,
-                input_noise: None,
-                anchor: false,
-                normalization: Default::default(),
-                transforms: Default::default(),
-                data: Default::default(),
-            },
+            net: NetSpec::for_tests(NetModel::PendulumPassive, 6, 120, TrainMethod::Cg),
             steps: 10,
             settings: TrainSettings::for_tests(20, 10, 5),
             seed: 7,

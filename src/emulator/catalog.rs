@@ -674,6 +674,31 @@ impl TrainSettings {
     }
 }
 
+#[cfg(test)]
+impl NetSpec {
+    /// A test net of `model`: the physical step 0.01 s, no input noise, no anchor, the default
+    /// normalization, transforms and data.
+    pub(crate) fn for_tests(
+        model: NetModel,
+        hidden: usize,
+        examples: usize,
+        method: TrainMethod,
+    ) -> Self {
+        Self {
+            model,
+            hidden,
+            examples,
+            method,
+            physical_dt: 0.01,
+            input_noise: None,
+            anchor: false,
+            normalization: Default::default(),
+            transforms: Default::default(),
+            data: Default::default(),
+        }
+    }
+}
+
 /// One emulator network to build: model, super timestep, size, data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -1494,18 +1519,7 @@ mod tests {
     /// A small net of `model` trained by L-BFGS with early stopping, δt = 0.01 s.
     fn small(model: NetModel, hidden: usize, examples: usize, steps: usize) -> BuildSpec {
         BuildSpec {
-            net: NetSpec {
-                model,
-                hidden,
-                examples,
-                method: TrainMethod::Lbfgs,
-                physical_dt: 0.01,
-                input_noise: None,
-                anchor: false,
-                normalization: Default::default(),
-                transforms: Default::default(),
-                data: Default::default(),
-            },
+            net: NetSpec::for_tests(model, hidden, examples, TrainMethod::Lbfgs),
             steps,
             settings: TrainSettings {
                 held_out_fraction: 0.2,

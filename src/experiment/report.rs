@@ -849,11 +849,15 @@ fn read_run_json(dir: &Path) -> Option<String> {
         .and_then(|q| q.as_u64())
         .unwrap_or(0);
     Some(format!(
-        "seed {seed}, {}, {secs:.2} s wall time{}{}.",
+        "seed {seed}, {}, {secs:.2} s wall time{}{}{}.",
         if quick { "quick mode" } else { "full scale" },
         v.get("threads")
             .and_then(|t| t.as_u64())
             .map(|t| format!(" on {t} threads"))
+            .unwrap_or_default(),
+        v.get("cpu_seconds")
+            .and_then(|c| c.as_f64())
+            .map(|c| format!(" ({c:.1} s of CPU time)"))
             .unwrap_or_default(),
         v.get("emulator_nets").map(nets_text).unwrap_or_default()
     ))

@@ -57,6 +57,94 @@ pub struct RunSummary {
     pub notes: Vec<String>,
 }
 
+/// When a run started: on the wall clock, and in the CPU time the process had used.
+#[derive(Debug, Clone, Copy)]
+pub struct Clock {
+    wall: Instant,
+    cpu: Option<f64>,
+}
+
+impl Clock {
+    /// Now.
+    pub fn start() -> Self {
+        Clock {
+            wall: Instant::now(),
+            cpu: process_cpu_seconds(),
+        }
+    }
+
+    /// Wall-clock seconds since the start.
+    pub fn wall_seconds(&self) -> f64 {
+        self.wall.elapsed().as_secs_f64()
+    }
+
+    /// CPU seconds the whole process (every thread) has used since the start, where the
+    /// platform tells ([`process_cpu_seconds`]). Over the wall seconds it says how many cores
+    /// the run kept busy; a run alone in its process is the only user.
+    pub fn cpu_seconds(&self) -> Option<f64> {
+        Some(process_cpu_seconds()? - self.cpu?)
+    }
+}
+
+/// User plus system CPU time of this process, all its threads, in seconds: fields 14 and 15 of
+/// Linux's `/proc/self/stat`, in clock ticks of USER_HZ, which the kernel fixes at 100 a second
+/// for user space. `None` where there is no such file (other systems).
+pub fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The command name (field 2) is in parentheses and may hold spaces: count after it.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| fields.get(i)?.parse::<u64>().ok();
+    // `rest` starts at field 3.
+    Some((ticks(14 - 3)? + ticks(15 - 3)?) as f64 / 100.0)
+}
+
+/// `f` of every item, in order, run as many at a time as the current rayon pool has threads
+/// (the run's `--jobs`), each on one thread of its own: for work that reports its own seconds,
+/// which are then those of one core, whatever the thread count. (A rayon job that enters a
+/// one-thread pool keeps stealing its own pool's jobs while it waits, so a `par_iter` over
+/// such runs would start all of them at once, each with a share of a core.)
+pub fn one_core_each<T: Sync, R: Send>(
+    items: &[T],
+    f: impl Fn(&T) -> R + Sync,
+) -> Result<Vec<R>, Error> {
+    let lanes = rayon::current_num_threads().clamp(1, items.len().max(1));
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let done: std::sync::Mutex<Vec<Option<R>>> =
+        std::sync::Mutex::new(items.iter().map(|_| None).collect());
+    std::thread::scope(|scope| -> Result<(), Error> {
+        let workers: Vec<_> = (0..lanes)
+            .map(|_| {
+                scope.spawn(|| -> Result<(), Error> {
+                    let one = rayon::ThreadPoolBuilder::new()
+                        .num_threads(1)
+                        .build()
+                        .map_err(|e| Error::Other(format!("thread pool: {e}")))?;
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(item) = items.get(i) else {
+                            return Ok(());
+                        };
+                        let r = one.install(|| f(item));
+                        done.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
+                    }
+                })
+            })
+            .collect();
+        for w in workers {
+            w.join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic))?;
+        }
+        Ok(())
+    })?;
+    Ok(done
+        .into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .map(|r| r.expect("every item ran"))
+        .collect())
+}
+
 /// The most worker threads a run may use (`--jobs`): more than any machine's cores, and few
 /// enough that creating them takes no time.
 pub const MAX_JOBS: usize = 1024;
@@ -92,7 +180,7 @@ pub fn git_dirty() -> Option<bool> {
 /// [`super::shard`]). Holds the lock of the folder it writes (`<out>/<id>/`, a shard's own
 /// folder) throughout, and refuses when another run holds it ([`super::folder`]).
 pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
-    let t0 = Instant::now();
+    let t0 = Clock::start();
     check_jobs(opts.jobs)?;
     let dir = opts.out.join(&res.id);
     let (_lock, lock_note) = FolderLock::acquire(&match opts.shard {
@@ -177,7 +265,7 @@ pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
                 })
                 .collect(),
             threads: opts.jobs.max(1),
-            seconds_total: t0.elapsed().as_secs_f64(),
+            seconds_total: t0.wall_seconds(),
         };
         let path = shard_dir.join(SHARD_RECORD);
         let text =
@@ -192,7 +280,7 @@ pub fn run(res: &Resolved, opts: &RunOptions) -> Result<RunSummary, Error> {
             id: res.id.clone(),
             dir: shard_dir,
             files,
-            seconds: t0.elapsed().as_secs_f64(),
+            seconds: t0.wall_seconds(),
             computed,
             reused,
             notes: lock_note.into_iter().collect(),
@@ -221,7 +309,7 @@ pub fn merge(
     opts: &RunOptions,
     registry: &Registry,
 ) -> Result<(RunSummary, Resolved), Error> {
-    let t0 = Instant::now();
+    let t0 = Clock::start();
     check_jobs(opts.jobs)?;
     let m = read_shards(file, &opts.out, registry)?;
     let (_lock, lock_note) = FolderLock::acquire(&opts.out.join(&m.resolved.id))?;
@@ -322,7 +410,7 @@ fn finish(
     ctx: &RunContext,
     provenance: Provenance,
     pool: &rayon::ThreadPool,
-    t0: Instant,
+    t0: Clock,
 ) -> Result<RunSummary, Error> {
     let mut merged: Vec<(String, Table)> = Vec::new();
     for tables in units {
@@ -409,7 +497,7 @@ fn finish(
             super::report::checks_figure(&sink, &rule)
         })?);
     }
-    let seconds = t0.elapsed().as_secs_f64();
+    let seconds = t0.wall_seconds();
     let stages: serde_json::Map<String, serde_json::Value> = ctx
         .stages()
         .into_iter()
@@ -425,6 +513,7 @@ fn finish(
         "threads": opts.jobs.max(1),
         "seconds_per_stage": stages,
         "seconds_total": seconds,
+        "cpu_seconds": t0.cpu_seconds(),
         "emulator_nets": net_usage_json(crate::emulator::cache::take_usage()),
         "files": files.iter().map(|f| rel_name(&opts.out, &opts.figures, f)).collect::<Vec<_>>(),
     });
@@ -455,4 +544,57 @@ fn rel_name(out: &Path, figures: &Path, f: &Path) -> String {
         .unwrap_or(f)
         .display()
         .to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    #[test]
+    fn one_core_each_runs_every_item_once_in_order_on_one_thread_and_no_more_at_once() {
+        for lanes in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(lanes)
+                .build()
+                .unwrap();
+            let (running, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
+            let items: Vec<u64> = (0..12).collect();
+            let out = pool
+                .install(|| {
+                    one_core_each(&items, |&i| {
+                        let now = running.fetch_add(1, Ordering::SeqCst) + 1;
+                        most.fetch_max(now, Ordering::SeqCst);
+                        // Inside, rayon sees one thread: a par_iter stays on this core.
+                        let threads = rayon::current_num_threads();
+                        std::thread::sleep(std::time::Duration::from_millis(5));
+                        running.fetch_sub(1, Ordering::SeqCst);
+                        (i * i, threads)
+                    })
+                })
+                .unwrap();
+            let squares: Vec<u64> = out.iter().map(|o| o.0).collect();
+            assert_eq!(squares, items.iter().map(|i| i * i).collect::<Vec<_>>());
+            assert!(out.iter().all(|o| o.1 == 1), "one thread each");
+            assert!(most.into_inner() <= lanes, "at most {lanes} at once");
+        }
+    }
+
+    #[test]
+    fn the_process_cpu_clock_advances_while_busy() {
+        if process_cpu_seconds().is_none() {
+            return; // no /proc here: nothing to read (the run.json field is null)
+        }
+        let clock = Clock::start();
+        let mut x = 1.0f64;
+        // Busy until the clock (10 ms ticks) has moved by 50 ms; a clock that never moves
+        // fails after a minute of wall time.
+        while clock.cpu_seconds().unwrap() < 0.05 {
+            assert!(clock.wall_seconds() < 60.0, "CPU clock stuck");
+            for _ in 0..10_000 {
+                x = std::hint::black_box(x.sqrt() + 1.0);
+            }
+        }
+        assert!(clock.cpu_seconds().unwrap() >= 0.05);
+    }
 }

@@ -278,7 +278,9 @@ where
         }
         let dash = |d: u32| (d as f64 * scale).round().max(1.0) as u32;
         let anno = match mark {
-            Mark::Line | Mark::LinePoints => chart.draw_series(LineSeries::new(pts, style))?,
+            Mark::Line | Mark::Solid | Mark::LinePoints => {
+                chart.draw_series(LineSeries::new(pts, style))?
+            }
             Mark::Dashed => {
                 chart.draw_series(DashedLineSeries::new(pts, dash(8), dash(5), style))?
             }

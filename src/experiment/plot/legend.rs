@@ -103,7 +103,7 @@ impl LegendSample {
     pub fn of(mark: Mark) -> Self {
         let line = |a: i32, b: i32| vec![(a, 0), (b, 0)];
         let (pieces, dot, bar) = match mark {
-            Mark::Line => (vec![line(0, 18)], None, None),
+            Mark::Line | Mark::Solid => (vec![line(0, 18)], None, None),
             Mark::Dashed => (vec![line(0, 6), line(12, 18)], None, None),
             Mark::Pattern { dash, gap } => {
                 // The pattern over 24 pixels (strokes shortened to at most 8 so it shows).

@@ -32,6 +32,10 @@ pub use style::{diverging, ensure_fonts, viridis, PALETTE};
 pub enum Mark {
     /// A polyline.
     Line,
+    /// A polyline that stays solid beside others (where the panel's line styles carry a
+    /// meaning of their own, e.g. solid for one substrate and dashed for another; a plain
+    /// [`Mark::Line`] takes its colour's dash pattern instead).
+    Solid,
     /// A dashed polyline.
     Dashed,
     /// A polyline dashed in `dash`-pixel strokes with `gap`-pixel gaps (what a plain line

@@ -9,6 +9,10 @@ use crate::experiment::output::{rename_into_place, temp_path};
 use crate::experiment::Error;
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters_backend::{
+    BackendColor, BackendCoord, BackendStyle, BackendTextStyle, DrawingErrorKind,
+};
+use plotters_bitmap::BitMapBackendError;
 use std::path::{Path, PathBuf};
 
 /// Where an experiment's figures go: `<dir>/<id>_<name>.png` and `.svg`.
@@ -52,11 +56,16 @@ impl FigureSink {
 /// temporary file beside it, renamed when complete; its folder is created): `draw` draws each
 /// frame on the root area and calls `present()` after each. The one GIF path every animation
 /// uses ([`FigureSink::gif`], the mass-spring films, NeuroAnimator's task animations).
+///
+/// The frames are drawn by plotters' bitmap backend (the pixels a PNG of them would have) and
+/// encoded with one palette of 256 colours for the whole animation, learned by NeuQuant from a
+/// sample of every frame's pixels: plotters' own GIF backend learns a palette for each frame,
+/// which took most of the time of every experiment that animates.
 pub fn write_gif_atomically(
     gif: &Path,
     size: (u32, u32),
     delay_ms: u32,
-    draw: impl FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> Result<(), String>,
+    draw: impl FnOnce(&DrawingArea<FrameRecorder, Shift>) -> Result<(), String>,
 ) -> Result<(), Error> {
     if let Some(dir) = gif.parent() {
         std::fs::create_dir_all(dir).map_err(|e| Error::Io {
@@ -64,14 +73,168 @@ pub fn write_gif_atomically(
             source: e,
         })?;
     }
+    let frames = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
+    let root = FrameRecorder::new(size, frames.clone()).into_drawing_area();
+    draw(&root).map_err(|m| perr(gif, m))?;
+    drop(root);
+    let frames = std::mem::take(&mut *frames.borrow_mut());
     let tmp = temp_path(gif);
     let made = (|| {
-        let root = BitMapBackend::gif(&tmp, size, delay_ms)
-            .map_err(|x| perr(gif, x.to_string()))?
-            .into_drawing_area();
-        draw(&root).map_err(|m| perr(gif, m))
+        let file = std::fs::File::create(&tmp).map_err(|e| perr(gif, e.to_string()))?;
+        encode_gif(std::io::BufWriter::new(file), size, delay_ms, &frames).map_err(|m| perr(gif, m))
     })();
     rename_into_place(&tmp, gif, made)
+}
+
+/// A drawing backend that keeps every presented frame: each drawing call goes to plotters'
+/// [`BitMapBackend`] on one RGB buffer, and `present()` appends a copy of the buffer to the
+/// frames.
+pub struct FrameRecorder {
+    size: (u32, u32),
+    buffer: Vec<u8>,
+    frames: std::rc::Rc<std::cell::RefCell<Vec<Vec<u8>>>>,
+}
+
+impl FrameRecorder {
+    fn new(size: (u32, u32), frames: std::rc::Rc<std::cell::RefCell<Vec<Vec<u8>>>>) -> Self {
+        FrameRecorder {
+            size,
+            buffer: vec![255; size.0 as usize * size.1 as usize * 3],
+            frames,
+        }
+    }
+
+    fn bitmap(&mut self) -> BitMapBackend<'_> {
+        BitMapBackend::with_buffer(&mut self.buffer, self.size)
+    }
+}
+
+type Drawn = Result<(), DrawingErrorKind<BitMapBackendError>>;
+
+impl DrawingBackend for FrameRecorder {
+    type ErrorType = BitMapBackendError;
+
+    fn get_size(&self) -> (u32, u32) {
+        self.size
+    }
+
+    fn ensure_prepared(&mut self) -> Drawn {
+        Ok(())
+    }
+
+    fn present(&mut self) -> Drawn {
+        self.frames.borrow_mut().push(self.buffer.clone());
+        Ok(())
+    }
+
+    fn draw_pixel(&mut self, point: BackendCoord, color: BackendColor) -> Drawn {
+        self.bitmap().draw_pixel(point, color)
+    }
+
+    fn draw_line<S: BackendStyle>(
+        &mut self,
+        from: BackendCoord,
+        to: BackendCoord,
+        style: &S,
+    ) -> Drawn {
+        self.bitmap().draw_line(from, to, style)
+    }
+
+    fn draw_rect<S: BackendStyle>(
+        &mut self,
+        upper_left: BackendCoord,
+        bottom_right: BackendCoord,
+        style: &S,
+        fill: bool,
+    ) -> Drawn {
+        self.bitmap()
+            .draw_rect(upper_left, bottom_right, style, fill)
+    }
+
+    fn draw_path<S: BackendStyle, I: IntoIterator<Item = BackendCoord>>(
+        &mut self,
+        path: I,
+        style: &S,
+    ) -> Drawn {
+        self.bitmap().draw_path(path, style)
+    }
+
+    fn draw_circle<S: BackendStyle>(
+        &mut self,
+        center: BackendCoord,
+        radius: u32,
+        style: &S,
+        fill: bool,
+    ) -> Drawn {
+        self.bitmap().draw_circle(center, radius, style, fill)
+    }
+
+    fn fill_polygon<S: BackendStyle, I: IntoIterator<Item = BackendCoord>>(
+        &mut self,
+        vert: I,
+        style: &S,
+    ) -> Drawn {
+        self.bitmap().fill_polygon(vert, style)
+    }
+
+    fn draw_text<T: BackendTextStyle>(
+        &mut self,
+        text: &str,
+        style: &T,
+        pos: BackendCoord,
+    ) -> Drawn {
+        self.bitmap().draw_text(text, style, pos)
+    }
+
+    fn blit_bitmap(&mut self, pos: BackendCoord, size: (u32, u32), src: &[u8]) -> Drawn {
+        self.bitmap().blit_bitmap(pos, size, src)
+    }
+}
+
+/// Encodes RGB `frames` of `size` pixels as a looping GIF with one global palette: NeuQuant
+/// (sampling factor 10, as plotters' GIF backend) trained once on about a million pixels
+/// taken evenly from all the frames, every pixel then mapped to its nearest palette entry.
+fn encode_gif(
+    out: impl std::io::Write,
+    (w, h): (u32, u32),
+    delay_ms: u32,
+    frames: &[Vec<u8>],
+) -> Result<(), String> {
+    let pixels = frames.len() * w as usize * h as usize;
+    let every = pixels.div_ceil(1 << 20).max(1);
+    let sample: Vec<u8> = frames
+        .iter()
+        .flat_map(|f| f.chunks_exact(3))
+        .step_by(every)
+        .flat_map(|p| [p[0], p[1], p[2], 255])
+        .collect();
+    let quant = color_quant::NeuQuant::new(10, 256, &sample);
+    let e = |x: gif::EncodingError| x.to_string();
+    let mut enc = gif::Encoder::new(out, w as u16, h as u16, &quant.color_map_rgb()).map_err(e)?;
+    enc.set_repeat(gif::Repeat::Infinite).map_err(e)?;
+    // Plot frames hold few colours in long runs: remember every colour's index.
+    let mut index: std::collections::HashMap<[u8; 3], u8> = std::collections::HashMap::new();
+    for f in frames {
+        let buffer: Vec<u8> = f
+            .chunks_exact(3)
+            .map(|p| {
+                let rgb = [p[0], p[1], p[2]];
+                *index
+                    .entry(rgb)
+                    .or_insert_with(|| quant.index_of(&[p[0], p[1], p[2], 255]) as u8)
+            })
+            .collect();
+        let frame = gif::Frame {
+            width: w as u16,
+            height: h as u16,
+            // Hundredths of a second, rounded as plotters' backend does.
+            delay: (delay_ms.saturating_add(5) / 10) as u16,
+            buffer: std::borrow::Cow::Owned(buffer),
+            ..gif::Frame::default()
+        };
+        enc.write_frame(&frame).map_err(e)?;
+    }
+    Ok(())
 }
 
 /// A plotters error on the figure `path` as an [`Error::Plot`].
@@ -177,6 +340,49 @@ mod tests {
         assert!(err.to_string().contains("g.gif"), "{err}");
         let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert!(left.is_empty(), "{left:?}");
+    }
+
+    #[test]
+    fn every_frame_is_kept_and_its_colours_come_back_from_the_one_palette() {
+        let d = tempfile::tempdir().unwrap();
+        let gif = d.path().join("c.gif");
+        let colours = [WHITE, RGBColor(214, 39, 40), RGBColor(31, 119, 180), BLACK];
+        write_gif_atomically(&gif, (40, 30), 70, |root| {
+            for c in &colours {
+                root.fill(c).map_err(|e| e.to_string())?;
+                // A second colour in a corner: frames are not one flat colour.
+                root.draw(&Rectangle::new([(0, 0), (9, 9)], GREEN.filled()))
+                    .map_err(|e| e.to_string())?;
+                root.present().map_err(|e| e.to_string())?;
+            }
+            Ok(())
+        })
+        .unwrap();
+        let mut options = gif::DecodeOptions::new();
+        options.set_color_output(gif::ColorOutput::RGBA);
+        let mut dec = options
+            .read_info(std::fs::File::open(&gif).unwrap())
+            .unwrap();
+        let mut seen = Vec::new();
+        while let Some(f) = dec.read_next_frame().unwrap() {
+            assert_eq!((f.width, f.height, f.delay), (40, 30, 7));
+            let px = |x: usize, y: usize| {
+                let i = 4 * (y * 40 + x);
+                [f.buffer[i], f.buffer[i + 1], f.buffer[i + 2]]
+            };
+            seen.push((px(30, 20), px(2, 2)));
+        }
+        assert_eq!(seen.len(), colours.len(), "one GIF frame per present()");
+        let close = |a: [u8; 3], b: &RGBColor| {
+            let b = [b.0, b.1, b.2];
+            a.iter()
+                .zip(b)
+                .all(|(x, y)| (*x as i32 - y as i32).abs() <= 8)
+        };
+        for ((body, corner), c) in seen.iter().zip(&colours) {
+            assert!(close(*body, c), "{body:?} for {c:?}");
+            assert!(close(*corner, &GREEN), "{corner:?}");
+        }
     }
 
     #[test]

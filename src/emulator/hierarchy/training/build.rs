@@ -8,7 +8,9 @@ use super::super::{
 use super::nets::{train_global_only, train_hierarchy};
 use super::sampling::{control_process, start_state, CHUNK, EPISODE_S};
 use super::HierarchySpec;
-use crate::emulator::cache::{fnv1a, read_record, write_record, EmulatorCache, NetRecord};
+use crate::emulator::cache::{
+    fnv1a, read_record, training, write_record, EmulatorCache, NetRecord,
+};
 use crate::emulator::catalog::BuildError;
 use crate::emulator::train::TracePoint;
 use crate::emulator::{Emulator, Transforms};
@@ -195,7 +197,10 @@ pub fn build_dolphin(
             nets,
         });
     }
-    let recs = train_hierarchy(&d, spec)?;
+    let recs = training(
+        "the dolphin's hierarchy (a global and six local nets)",
+        || train_hierarchy(&d, spec),
+    )?;
     for (k, r) in recs.iter().enumerate() {
         write_record(&cache_path(cache, spec, &keys[k], k), &keys[k], r)?;
     }
@@ -223,7 +228,7 @@ pub fn build_global(
     let (rec, from_cache) = match read_record(&path, &key, shape(spec, 0)) {
         Some(r) => (r, true),
         None => {
-            let r = train_global_only(&d, spec)?;
+            let r = training("the dolphin's global net", || train_global_only(&d, spec))?;
             write_record(&path, &key, &r)?;
             (r, false)
         }

@@ -37,23 +37,25 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
                     .filter(|p| p.0 > 0.0)
                     .collect();
                 let color = METHODS.iter().position(|x| x == m).unwrap_or(0);
-                let line = Series::line(format!("{m} ({s})"), pts, color);
+                // The key names each method once (its colour); the line says the substrate
+                // (dashed: the simulator), so the key stays small enough to find a free
+                // corner.
                 if s == "simulator" {
-                    line.mark(Mark::Dashed)
+                    Series::line(String::new(), pts, color).mark(Mark::Dashed)
                 } else {
-                    line
+                    Series::line(m.clone(), pts, color).mark(Mark::Solid)
                 }
             })
             .collect()
     };
-    // The first two panels draw the same series in the same colours, so the key is drawn
-    // once, in the wall-clock panel: in the iteration panel every corner's key box hid part
-    // of a curve (hill_climbing (simulator) around iterations 10-40).
+    // Every panel draws the methods in the same colours, so the key is drawn once, in the
+    // wall-clock panel: in the iteration panel every corner's key box hid part of a curve
+    // (hill_climbing on the simulator around iterations 10-40).
     let mut by_iteration = series(&|r| r.iteration as f64 + 1.0, false);
     by_iteration.iter_mut().for_each(|s| s.label.clear());
     let mut panels = vec![
         Panel {
-            title: "dolphin swim: objective vs iterations (key: next panel)".into(),
+            title: "dolphin swim: J vs iterations (dashed: simulator)".into(),
             x_label: "iteration + 1 (log)".into(),
             y_label: "best objective J (effort - distance in m)".into(),
             log_x: true,
@@ -61,7 +63,7 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
             ..Panel::default()
         },
         Panel {
-            title: "dolphin swim: objective vs wall-clock time".into(),
+            title: "J vs wall-clock seconds (dashed: simulator)".into(),
             x_label: "wall-clock seconds (log)".into(),
             y_label: "best objective J (effort - distance in m)".into(),
             log_x: true,
@@ -69,10 +71,11 @@ pub(super) fn draw(fig: &FigureSink, tables: &Tables) -> Result<Vec<PathBuf>, Er
             ..Panel::default()
         },
     ];
-    let on_dagger = series(&|r| r.iteration as f64 + 1.0, true);
+    let mut on_dagger = series(&|r| r.iteration as f64 + 1.0, true);
+    on_dagger.iter_mut().for_each(|s| s.label.clear());
     if !on_dagger.is_empty() {
         panels.push(Panel {
-            title: "the same on the DAgger global net (ours)".into(),
+            title: "on the DAgger global net (ours; key: middle panel)".into(),
             x_label: "iteration + 1 (log)".into(),
             y_label: "best objective J on the DAgger net".into(),
             log_x: true,

@@ -13,6 +13,7 @@ use crate::control::search::{
 use crate::emulator::hierarchy::{self, global_state};
 use crate::experiment::output::Tables;
 use crate::experiment::rows::table_of;
+use crate::experiment::runner::one_core_each;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::build_dolphin_emulator;
 use crate::seed::mix_seed;
@@ -355,27 +356,31 @@ impl Params {
         let mut runs: Vec<Run> = vec![];
         runs.extend(self.bptt_runs(ctx, emulator, v0, "emulator", "")?);
         let pb = ctx.progress(2 * Search::ALL.len() as u64, "gradient-free searches");
-        for (k, search) in Search::ALL.into_iter().enumerate() {
-            let method = search.name();
+        // Every search on both substrates, each on a core of its own (their seconds are
+        // reported), side by side.
+        let jobs: Vec<(usize, Search, &'static str)> = Search::ALL
+            .into_iter()
+            .enumerate()
+            .flat_map(|(k, search)| ["emulator", "simulator"].map(|on| (k, search, on)))
+            .collect();
+        let results = one_core_each(&jobs, |&(k, search, substrate)| {
             let seed = search_seed(ctx.seed, k);
-            let result = ctx.stage(&format!("{method} emulator"), || {
-                self.search(search, emulator, v0, &self.budget.emulator, seed)
-            })?;
-            runs.push(Run {
-                method,
-                substrate: "emulator",
-                result,
+            let result = ctx.stage(&format!("{} {substrate}", search.name()), || {
+                if substrate == "emulator" {
+                    self.search(search, emulator, v0, &self.budget.emulator, seed)
+                } else {
+                    self.search(search, simulator, v0, &self.budget.simulator, seed)
+                }
             });
             pb.inc(1);
-            let result = ctx.stage(&format!("{method} simulator"), || {
-                self.search(search, simulator, v0, &self.budget.simulator, seed)
-            })?;
+            result
+        })?;
+        for ((_, search, substrate), result) in jobs.into_iter().zip(results) {
             runs.push(Run {
-                method,
-                substrate: "simulator",
-                result,
+                method: search.name(),
+                substrate,
+                result: result?,
             });
-            pb.inc(1);
         }
         pb.finish_and_clear();
         Ok(runs)

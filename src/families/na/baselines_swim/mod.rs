@@ -329,7 +329,7 @@ impl Family for NaBaselines {
     const CAPTIONS: &'static [(&'static str, &'static str)] = &[
         (
             "objective",
-            "the dolphin swim's objective J (best so far) vs iteration and vs seconds: BPTT with momentum beside simulated annealing and the simplex method, on the emulator and (where run) the DAgger net.",
+            "the dolphin swim's objective J (best so far) vs iteration and vs wall-clock seconds (each run on one core): BPTT beside simulated annealing, the simplex method and hill climbing, solid on the emulator and dashed on the simulator, and (right) on the DAgger net; one key, in the middle panel, serves all.",
         ),
     ];
     const KIND: &'static str = "na_baselines_swim";

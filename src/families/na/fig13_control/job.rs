@@ -22,6 +22,7 @@ use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
 use crate::physics::dolphin::N_POS;
 use crate::row;
+use rayon::prelude::*;
 
 impl Job for Params {
     fn params_json(&self) -> serde_json::Value {
@@ -47,10 +48,31 @@ impl Job for Params {
             &format!("train N{} emulators (side by side)", self.steps),
             || build_emulators(&specs),
         )?;
-        for ((task, spec), trained) in self.tasks.iter().zip(&specs).zip(&built) {
-            self.run_task(ctx, task, spec, trained, &built, &mut t)?;
+        // Tasks are independent (each seeds its own randomness from its spec), so they and the
+        // further net seeds run side by side, each into tables of its own, appended in the
+        // spec's order: the same rows as one after another.
+        let (tasks, seeds) = rayon::join(
+            || {
+                (0..self.tasks.len())
+                    .into_par_iter()
+                    .map(|i| {
+                        let mut own = RunTables::new(self);
+                        let (task, spec) = (&self.tasks[i], &specs[i]);
+                        self.run_task(ctx, task, spec, &built[i], &built, &mut own)?;
+                        Ok(own)
+                    })
+                    .collect::<Result<Vec<RunTables>, Error>>()
+            },
+            || {
+                let mut own = RunTables::new(self);
+                self.run_seeds(ctx, &mut own.seeds, &mut own.path, &mut own.physics_path)?;
+                Ok::<_, Error>(own)
+            },
+        );
+        for own in tasks? {
+            t.append(own)?;
         }
-        self.run_seeds(ctx, &mut t.seeds, &mut t.path, &mut t.physics_path)?;
+        t.append(seeds?)?;
         let lines_t = self.run_lines(ctx)?;
         let dolphin = self.run_dolphin_tables(ctx, &mut t)?;
         t.into_tables(self, lines_t, dolphin)
@@ -163,6 +185,34 @@ impl RunTables {
             width,
             u_width,
         }
+    }
+
+    /// Appends the rows of `more` (tables of the same run, from [`RunTables::new`]) after this
+    /// one's; `states` and the widths are the run's, the same in both.
+    fn append(&mut self, more: RunTables) -> Result<(), Error> {
+        self.objective.extend(more.objective);
+        self.final_.extend(more.final_);
+        self.sweep.extend(more.sweep);
+        self.physics.extend(more.physics);
+        self.best.extend(more.best);
+        self.best_tol.extend(more.best_tol);
+        self.best_emulator.extend(more.best_emulator);
+        self.cond.extend(more.cond);
+        self.spectrum.extend(more.spectrum);
+        self.dagger.extend(more.dagger);
+        self.ladder.extend(more.ladder);
+        self.seeds.extend(more.seeds);
+        self.path.extend(more.path);
+        self.physics_path.extend(more.physics_path);
+        for (mine, theirs) in [
+            (&mut self.calibration, &more.calibration),
+            (&mut self.trajectory, &more.trajectory),
+            (&mut self.controls, &more.controls),
+            (&mut self.goal, &more.goal),
+        ] {
+            mine.append(theirs).map_err(other)?;
+        }
+        Ok(())
     }
 
     /// Every table of the run under its file name, with `net_lines`, the dolphin's and the rule.

@@ -23,6 +23,7 @@ use crate::experiment::rows::{written_rows, TableRow};
 use crate::experiment::stats::median;
 use crate::experiment::{other, Error, RunContext};
 use crate::families::na::table1_structure::{build_emulators, build_spec};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// Columns of `net_seeds.csv` ([`NetSeedRow`]): `at_goal` is 1 when both final errors are at
@@ -196,24 +197,35 @@ impl Params {
             ),
             || build_emulators(&specs),
         )?;
-        for ((task, seed), trained) in runs.iter().zip(&built) {
-            let net = &trained.emulator;
-            let (run, calibrated) =
-                ctx.stage(&format!("learn {} (net seed {seed})", task.name), || {
-                    let paper = task.formulation == Formulation::Paper;
-                    let path = paper.then_some((&mut *path, *seed));
-                    self.headline_run(task, net, path)
-                })?;
-            let paper = task.formulation == Formulation::Paper;
-            let to_goal = ctx.stage(
-                &format!("{} to its goal (net seed {seed})", task.name),
-                || {
-                    let path = paper.then_some((&mut *physics_path, *seed));
-                    let ci = self.curvature_iterations;
-                    ToGoal::measure(&calibrated, net, self.steps, ci, path)
-                },
-            )?;
-            run.push(table, task, *seed, to_goal);
+        // Each (task, seed) run is independent: side by side, each into rows of its own,
+        // appended in the runs' order.
+        let rows = (0..runs.len())
+            .into_par_iter()
+            .map(|i| -> Result<_, Error> {
+                let ((task, seed), net) = (runs[i], &built[i].emulator);
+                let paper = task.formulation == Formulation::Paper;
+                let (mut own_path, mut own_physics, mut own_seeds) = (vec![], vec![], vec![]);
+                let (run, calibrated) =
+                    ctx.stage(&format!("learn {} (net seed {seed})", task.name), || {
+                        let path = paper.then_some((&mut own_path, seed));
+                        self.headline_run(task, net, path)
+                    })?;
+                let to_goal = ctx.stage(
+                    &format!("{} to its goal (net seed {seed})", task.name),
+                    || {
+                        let path = paper.then_some((&mut own_physics, seed));
+                        let ci = self.curvature_iterations;
+                        ToGoal::measure(&calibrated, net, self.steps, ci, path)
+                    },
+                )?;
+                run.push(&mut own_seeds, task, seed, to_goal);
+                Ok((own_path, own_physics, own_seeds))
+            })
+            .collect::<Result<Vec<_>, Error>>()?;
+        for (own_path, own_physics, own_seeds) in rows {
+            path.extend(own_path);
+            physics_path.extend(own_physics);
+            table.extend(own_seeds);
         }
         Ok(())
     }

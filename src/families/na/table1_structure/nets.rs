@@ -46,9 +46,35 @@ pub fn build_emulator(spec: &BuildSpec) -> Result<Trained, Error> {
 /// cache trained side by side (rayon): nets are independent and each is seeded by its spec, so
 /// the nets, and everything made from them, are the same as built one by one. A cold run
 /// otherwise trains its nets serially on one core.
+/// A spec listed more than once (tasks that share a net) is built once and copied: two copies
+/// trained side by side would cost a core and race to store the same cache file.
 pub fn build_emulators(specs: &[BuildSpec]) -> Result<Vec<Trained>, Error> {
+    build_each_once(specs, build_emulator)
+}
+
+/// `build` of every distinct spec of `specs` side by side (rayon), copied to each place it is
+/// listed, in order.
+fn build_each_once(
+    specs: &[BuildSpec],
+    build: impl Fn(&BuildSpec) -> Result<Trained, Error> + Sync,
+) -> Result<Vec<Trained>, Error> {
     use rayon::prelude::*;
-    specs.par_iter().map(build_emulator).collect()
+    let mut unique: Vec<&BuildSpec> = Vec::new();
+    let slot: Vec<usize> = specs
+        .iter()
+        .map(|s| match unique.iter().position(|u| *u == s) {
+            Some(i) => i,
+            None => {
+                unique.push(s);
+                unique.len() - 1
+            }
+        })
+        .collect();
+    let built: Vec<Trained> = unique
+        .par_iter()
+        .map(|s| build(s))
+        .collect::<Result<_, _>>()?;
+    Ok(slot.into_iter().map(|i| built[i].clone()).collect())
 }
 
 /// A Table 1 emulator ready to step, catalog net or dolphin hierarchy (`motionlab emulate`).
@@ -176,6 +202,35 @@ mod tests {
             merge(&mut p, spec["quick"].as_table().unwrap());
         }
         toml::Value::Table(p)
+    }
+
+    #[test]
+    fn a_net_listed_twice_is_trained_once_and_every_place_gets_its_own() {
+        let spec = |seed: u64| BuildSpec {
+            net: NetSpec::for_tests(
+                NetModel::PendulumPassive,
+                4,
+                60,
+                crate::emulator::catalog::TrainMethod::Cg,
+            ),
+            steps: 5,
+            settings: TrainSettings::for_tests(5, 5, 2),
+            seed,
+        };
+        let (a, b) = (spec(1), spec(2));
+        let calls = std::sync::atomic::AtomicUsize::new(0);
+        let built = build_each_once(&[a.clone(), b.clone(), a.clone()], |s| {
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            crate::emulator::catalog::train_emulator(s).map_err(other)
+        })
+        .unwrap();
+        assert_eq!(calls.into_inner(), 2, "two distinct specs, two trainings");
+        assert_eq!(built.len(), 3);
+        let direct = |s: &BuildSpec| crate::emulator::catalog::train_emulator(s).unwrap();
+        for (got, s) in built.iter().zip([&a, &b, &a]) {
+            assert_eq!(got.emulator.mlp(), direct(s).emulator.mlp());
+        }
+        assert_ne!(built[0].emulator.mlp(), built[1].emulator.mlp());
     }
 
     #[test]

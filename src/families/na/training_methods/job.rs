@@ -13,6 +13,7 @@ use crate::emulator::train::{
 };
 use crate::experiment::output::Tables;
 use crate::experiment::rows::table_of;
+use crate::experiment::runner::one_core_each;
 use crate::experiment::{other, Error, Job, RunContext};
 use crate::families::na::table1_structure::build_spec;
 use crate::seed::mix_seed;
@@ -21,6 +22,7 @@ use indicatif::ProgressBar;
 use ndarray::Array1;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -370,20 +372,28 @@ impl Params {
             examples_per_weight: train.len() as f64 / weights as f64,
             passes: n.passes as i64,
         });
-        // Every (init, method) run; run one at a time so the seconds are not shared.
-        // Init by init, each method in turn: one run at a time, so the seconds are not
-        // shared; the target needs every method of the init.
+        // Every (init, method) run on one thread of its own, as many side by side as the run
+        // has threads: each run has a core to itself, so the seconds compare the methods on
+        // equal terms (a batch method's gradient gets no more cores than momentum's serial
+        // steps) and no core idles. The target needs every method of the init.
+        let pairs: Vec<(usize, TrainMethod)> = (1..=self.inits)
+            .flat_map(|k| self.methods.iter().map(move |&m| (k, m)))
+            .collect();
+        let runs = one_core_each(&pairs, |&(k, m)| -> Result<MethodRun, Error> {
+            let mlp = initial_net(spec.seed, k, shape);
+            let shuffle = mix_seed(spec.seed, 2000 + k as u64);
+            let r = ctx.stage(&format!("{} {} init {k}", n.name, method_name(m)), || {
+                run_method(mlp, train, held, m, s, n.passes, shuffle)
+            })?;
+            pb.inc(1);
+            Ok(r)
+        })?
+        .into_iter()
+        .collect::<Result<Vec<_>, Error>>()?;
+        let mut runs = pairs.iter().map(|p| p.1).zip(runs);
         for k in 1..=self.inits {
-            let mut of_init = Vec::with_capacity(self.methods.len());
-            for &m in &self.methods {
-                let mlp = initial_net(spec.seed, k, shape);
-                let shuffle = mix_seed(spec.seed, 2000 + k as u64);
-                let r = ctx.stage(&format!("{} {} init {k}", n.name, method_name(m)), || {
-                    run_method(mlp, train, held, m, s, n.passes, shuffle)
-                })?;
-                pb.inc(1);
-                of_init.push((m, r));
-            }
+            let of_init: Vec<(TrainMethod, MethodRun)> =
+                runs.by_ref().take(self.methods.len()).collect();
             self.push_init(n, k, &of_init, t);
         }
         Ok(())
@@ -511,7 +521,6 @@ impl Params {
         pb: &ProgressBar,
         d: &ExamplesData,
     ) -> Vec<Result<ExampleRun, Error>> {
-        use rayon::prelude::*;
         let jobs: Vec<(usize, f64)> = (1..=self.inits)
             .flat_map(|k| self.examples.ratios.iter().map(move |&r| (k, r)))
             .collect();
