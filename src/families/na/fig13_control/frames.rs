@@ -507,7 +507,50 @@ fn lander_view<DB: DrawingBackend>(
             .map_err(es)?;
         lander_pose(&mut c, lander, plane, s, b.color, 0.5, b.label)?;
     }
-    legend(&mut c, SeriesLabelPosition::UpperRight)
+    // The key goes in the corner farthest from where the tracks start and from the goal: the
+    // lander starts high and to one side, where a fixed corner hid it for seconds.
+    let marks: Vec<(f64, f64)> = bodies
+        .iter()
+        .filter_map(|b| b.history.first())
+        .map(|s| plane.project(Vector3::new(s[0], s[1], s[2])))
+        .chain(once(plane.project(Vector3::new(goal[0], goal[1], goal[2]))))
+        .collect();
+    legend(&mut c, free_corner(axes, &marks))
+}
+
+/// Of the four corners of `axes`, the one farthest from the nearest of `marks`, in units of
+/// each axis's span; a lower corner must be a tenth clearer than an upper one to be taken
+/// (the ground and the pad lie low).
+fn free_corner(axes: &Axes, marks: &[(f64, f64)]) -> SeriesLabelPosition {
+    let unit = |(x, y): (f64, f64)| {
+        (
+            (x - axes.x.0) / (axes.x.1 - axes.x.0),
+            (y - axes.y.0) / (axes.y.1 - axes.y.0),
+        )
+    };
+    let corners = [
+        (SeriesLabelPosition::UpperRight, (1.0, 1.0)),
+        (SeriesLabelPosition::UpperLeft, (0.0, 1.0)),
+        (SeriesLabelPosition::LowerRight, (1.0, 0.0)),
+        (SeriesLabelPosition::LowerLeft, (0.0, 0.0)),
+    ];
+    let clearance = |c: (f64, f64)| {
+        marks
+            .iter()
+            .map(|&m| {
+                let (dx, dy) = (unit(m).0 - c.0, unit(m).1 - c.1);
+                (dx * dx + dy * dy).sqrt()
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut best = (SeriesLabelPosition::UpperRight, f64::NEG_INFINITY);
+    for (at, c) in corners {
+        let d = clearance(c) * if c.1 > 0.5 { 1.0 } else { 0.9 };
+        if d > best.1 + 1e-9 {
+            best = (at, d);
+        }
+    }
+    best.0
 }
 
 /// Draws one frame of the lander: a side view (x, z) with the ground and the target pad on
@@ -637,6 +680,26 @@ pub(super) mod tests {
     use crate::experiment::plot::ensure_fonts;
 
     pub(in super::super) const SIZE: (u32, u32) = (320, 240);
+
+    #[test]
+    fn the_key_takes_the_corner_farthest_from_the_start_and_the_goal() {
+        let axes = Axes {
+            x: (-25.0, 37.0),
+            y: (-5.0, 65.0),
+            x_label: String::new(),
+            y_label: String::new(),
+        };
+        // The lander's side view: it starts high on the right, its goal is on the ground.
+        let at = free_corner(&axes, &[(12.0, 60.0), (0.0, 0.0)]);
+        assert!(matches!(at, SeriesLabelPosition::UpperLeft), "{at:?}");
+        // Nothing to avoid: the upper right, as before.
+        let at = free_corner(&axes, &[]);
+        assert!(matches!(at, SeriesLabelPosition::UpperRight), "{at:?}");
+        // A start in the upper left and a goal in the lower right leave the other two
+        // corners equally free: the upper one.
+        let at = free_corner(&axes, &[(-25.0, 65.0), (37.0, -5.0)]);
+        assert!(matches!(at, SeriesLabelPosition::UpperRight), "{at:?}");
+    }
 
     /// Renders `draw` into an in-memory bitmap; returns how many pixels are not white.
     pub(in super::super) fn render(
