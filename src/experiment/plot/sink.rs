@@ -86,17 +86,34 @@ pub fn write_gif_atomically(
     rename_into_place(&tmp, gif, made)
 }
 
+/// One frame as runs of one colour, row after row: a plot frame is mostly long runs, so an
+/// animation of a few hundred frames is held in tens of megabytes, not a megabyte (RGB) a frame.
+type Runs = Vec<([u8; 3], u32)>;
+
+/// The runs of the RGB pixels `rgb`.
+fn runs_of(rgb: &[u8]) -> Runs {
+    let mut runs: Runs = Vec::new();
+    for p in rgb.chunks_exact(3) {
+        let c = [p[0], p[1], p[2]];
+        match runs.last_mut() {
+            Some((last, n)) if *last == c => *n += 1,
+            _ => runs.push((c, 1)),
+        }
+    }
+    runs
+}
+
 /// A drawing backend that keeps every presented frame: each drawing call goes to plotters'
-/// [`BitMapBackend`] on one RGB buffer, and `present()` appends a copy of the buffer to the
+/// [`BitMapBackend`] on one RGB buffer, and `present()` appends the buffer's runs to the
 /// frames.
 pub struct FrameRecorder {
     size: (u32, u32),
     buffer: Vec<u8>,
-    frames: std::rc::Rc<std::cell::RefCell<Vec<Vec<u8>>>>,
+    frames: std::rc::Rc<std::cell::RefCell<Vec<Runs>>>,
 }
 
 impl FrameRecorder {
-    fn new(size: (u32, u32), frames: std::rc::Rc<std::cell::RefCell<Vec<Vec<u8>>>>) -> Self {
+    fn new(size: (u32, u32), frames: std::rc::Rc<std::cell::RefCell<Vec<Runs>>>) -> Self {
         FrameRecorder {
             size,
             buffer: vec![255; size.0 as usize * size.1 as usize * 3],
@@ -123,7 +140,7 @@ impl DrawingBackend for FrameRecorder {
     }
 
     fn present(&mut self) -> Drawn {
-        self.frames.borrow_mut().push(self.buffer.clone());
+        self.frames.borrow_mut().push(runs_of(&self.buffer));
         Ok(())
     }
 
@@ -191,45 +208,50 @@ impl DrawingBackend for FrameRecorder {
     }
 }
 
-/// Encodes RGB `frames` of `size` pixels as a looping GIF with one global palette: NeuQuant
+/// Encodes `frames` (runs) of `size` pixels as a looping GIF with one global palette: NeuQuant
 /// (sampling factor 10, as plotters' GIF backend) trained once on about a million pixels
-/// taken evenly from all the frames, every pixel then mapped to its nearest palette entry.
+/// taken evenly from all the frames (every `every`-th pixel of the whole animation), every
+/// colour then mapped to its nearest palette entry.
 fn encode_gif(
     out: impl std::io::Write,
     (w, h): (u32, u32),
     delay_ms: u32,
-    frames: &[Vec<u8>],
+    frames: &[Runs],
 ) -> Result<(), String> {
     let pixels = frames.len() * w as usize * h as usize;
     let every = pixels.div_ceil(1 << 20).max(1);
-    let sample: Vec<u8> = frames
-        .iter()
-        .flat_map(|f| f.chunks_exact(3))
-        .step_by(every)
-        .flat_map(|p| [p[0], p[1], p[2], 255])
-        .collect();
+    let mut sample: Vec<u8> = Vec::new();
+    let mut at = 0usize;
+    for &(c, n) in frames.iter().flatten() {
+        // The pixels of the run whose index is a multiple of `every`.
+        let next = at + n as usize;
+        let picked = next.div_ceil(every) - at.div_ceil(every);
+        for _ in 0..picked {
+            sample.extend_from_slice(&[c[0], c[1], c[2], 255]);
+        }
+        at = next;
+    }
     let quant = color_quant::NeuQuant::new(10, 256, &sample);
     let e = |x: gif::EncodingError| x.to_string();
     let mut enc = gif::Encoder::new(out, w as u16, h as u16, &quant.color_map_rgb()).map_err(e)?;
     enc.set_repeat(gif::Repeat::Infinite).map_err(e)?;
-    // Plot frames hold few colours in long runs: remember every colour's index.
+    // Plot frames hold few colours: remember every colour's index.
     let mut index: std::collections::HashMap<[u8; 3], u8> = std::collections::HashMap::new();
+    let mut buffer: Vec<u8> = Vec::with_capacity(w as usize * h as usize);
     for f in frames {
-        let buffer: Vec<u8> = f
-            .chunks_exact(3)
-            .map(|p| {
-                let rgb = [p[0], p[1], p[2]];
-                *index
-                    .entry(rgb)
-                    .or_insert_with(|| quant.index_of(&[p[0], p[1], p[2], 255]) as u8)
-            })
-            .collect();
+        buffer.clear();
+        for &(c, n) in f {
+            let i = *index
+                .entry(c)
+                .or_insert_with(|| quant.index_of(&[c[0], c[1], c[2], 255]) as u8);
+            buffer.extend(std::iter::repeat_n(i, n as usize));
+        }
         let frame = gif::Frame {
             width: w as u16,
             height: h as u16,
             // Hundredths of a second, rounded as plotters' backend does.
             delay: (delay_ms.saturating_add(5) / 10) as u16,
-            buffer: std::borrow::Cow::Owned(buffer),
+            buffer: std::borrow::Cow::Borrowed(&buffer),
             ..gif::Frame::default()
         };
         enc.write_frame(&frame).map_err(e)?;
@@ -340,6 +362,18 @@ mod tests {
         assert!(err.to_string().contains("g.gif"), "{err}");
         let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert!(left.is_empty(), "{left:?}");
+    }
+
+    #[test]
+    fn runs_hold_every_pixel_in_order() {
+        let rgb = [1, 2, 3, 1, 2, 3, 9, 9, 9, 1, 2, 3];
+        let runs = runs_of(&rgb);
+        assert_eq!(runs, vec![([1, 2, 3], 2), ([9, 9, 9], 1), ([1, 2, 3], 1)]);
+        let back: Vec<u8> = runs
+            .iter()
+            .flat_map(|&(c, n)| std::iter::repeat_n(c, n as usize).flatten())
+            .collect();
+        assert_eq!(back, rgb);
     }
 
     #[test]
