@@ -58,8 +58,8 @@
 
 use super::anchor::Anchor;
 use super::dataset::{
-    sample_transitions, sample_windows, ControlLimits, ControlProcess, ControlSignal,
-    SamplingConfig, Windows,
+    draw_lag, run_signal, sample_transitions, sample_windows, ControlLimits, ControlProcess,
+    ControlSignal, SamplingConfig, Windows,
 };
 use super::mlp::{Mlp, WeightInit};
 use super::rollout::{change_spread, fine_tune, FineTune};
@@ -1049,37 +1049,44 @@ pub struct RolloutReference {
 }
 
 impl RolloutReference {
-    /// Simulates the true rollouts of `spec`'s model: `episodes` start states drawn as for
-    /// training (a stream of its own), each run `horizon` super-steps under the training control
-    /// process, read at each super-step's start and held over it.
+    /// Simulates the true rollouts of `spec`'s model: `episodes` start states drawn as the
+    /// training examples' states are (a stream of its own): an episode start, then one lag
+    /// ([`draw_lag`]) under the episode's control signal, so a rollout starts where examples do
+    /// and not at a start state no example holds (an episode start's fast modes, e.g. the
+    /// pendulum elbows' velocities, which friction damps within the first super-step); each
+    /// then runs `horizon` super-steps under the same signal, read at each super-step's start
+    /// and held over it.
     pub fn sample(spec: &BuildSpec, episodes: usize, horizon: usize) -> Result<Self, BuildError> {
         let model = spec.net.model;
         let (n, m) = (model.state_dim(), model.control_dim());
         let limits = spec.sampling_limits();
         let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 3));
-        let big_dt = spec.super_dt();
         let mut sim = model.simulator();
         let mut u = vec![0.0; m];
         let mut starts = Vec::with_capacity(episodes * n);
         let mut controls = Vec::with_capacity(episodes * horizon * m);
         let mut truth = Vec::with_capacity(episodes * horizon * n);
+        let dt = spec.net.physical_dt;
         for _ in 0..episodes {
             let mut xs = spec.start_state(&mut rng);
-            starts.extend_from_slice(&xs);
+            let lag = draw_lag(spec.steps, &mut rng);
             let signal = ControlSignal::sample(
                 spec.control_process(),
                 &limits,
-                horizon as f64 * big_dt,
+                (lag + horizon * spec.steps) as f64 * dt,
                 &mut rng,
             );
+            run_signal(sim.as_mut(), &mut xs, &signal, &mut u, 0..lag, dt);
+            crate::physics::check_finite(model.name(), lag, lag as f64 * dt, &xs)?;
+            starts.extend_from_slice(&xs);
             for k in 0..horizon {
-                signal.at(k as f64 * big_dt, &mut u);
+                let at = lag + k * spec.steps;
+                signal.at(at as f64 * dt, &mut u);
                 controls.extend_from_slice(&u);
                 for i in 0..spec.steps {
-                    sim.step(&mut xs, &u, spec.net.physical_dt);
-                    let step = k * spec.steps + i + 1;
-                    let t = step as f64 * spec.net.physical_dt;
-                    crate::physics::check_finite(model.name(), step, t, &xs)?;
+                    sim.step(&mut xs, &u, dt);
+                    let step = at + i + 1;
+                    crate::physics::check_finite(model.name(), step, step as f64 * dt, &xs)?;
                 }
                 truth.extend_from_slice(&xs);
             }
@@ -1721,6 +1728,62 @@ mod tests {
         assert_eq!(
             same, rows,
             "measured on the typical test whatever the net's data"
+        );
+    }
+
+    /// A rollout reference starts where the examples do, one lag into an episode, not at an
+    /// episode's start: the passive pendulum's starts lie about as near the training examples'
+    /// states as held-out examples do (median distance to the nearest example, in units of
+    /// each variable's spread; a start is always an episode's first example, where the swing
+    /// is largest and the examples sparsest, so a little farther), while the episodes' raw
+    /// starts (the null), whose elbow velocities friction damps within the first super-step,
+    /// lie more than ten times farther still.
+    #[test]
+    fn rollout_references_start_where_the_examples_do() {
+        let spec = small(NetModel::PendulumPassive, 4, 800, 50);
+        let examples = training_transitions(&spec).unwrap();
+        let rows = |t: &Transitions| -> Vec<Vec<f64>> {
+            t.states.rows().into_iter().map(|r| r.to_vec()).collect()
+        };
+        let data = rows(&examples);
+        let spread: Vec<f64> = (0..6)
+            .map(|v| {
+                let mean = data.iter().map(|x| x[v]).sum::<f64>() / data.len() as f64;
+                (data.iter().map(|x| (x[v] - mean).powi(2)).sum::<f64>() / data.len() as f64).sqrt()
+            })
+            .collect();
+        let median_nearest = |points: &[Vec<f64>]| {
+            let mut d: Vec<f64> = points
+                .iter()
+                .map(|p| {
+                    data.iter()
+                        .map(|x| {
+                            (0..6)
+                                .map(|v| ((p[v] - x[v]) / spread[v]).powi(2))
+                                .sum::<f64>()
+                        })
+                        .fold(f64::INFINITY, f64::min)
+                        .sqrt()
+                })
+                .collect();
+            d.sort_by(f64::total_cmp);
+            d[d.len() / 2]
+        };
+        let held = median_nearest(&rows(&sampled(&spec, 200, 2).unwrap()));
+        let reference = RolloutReference::sample(&spec, 200, 1).unwrap();
+        let starts: Vec<Vec<f64>> = reference.starts.chunks(6).map(<[f64]>::to_vec).collect();
+        let ours = median_nearest(&starts);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let raw: Vec<Vec<f64>> = (0..200).map(|_| spec.start_state(&mut rng)).collect();
+        let null = median_nearest(&raw);
+        eprintln!("median distance to the nearest example: held-out {held:.4}, reference starts {ours:.4}, raw starts {null:.4}");
+        assert!(
+            ours < 4.0 * held,
+            "reference starts {ours} against held-out {held}"
+        );
+        assert!(
+            null > 10.0 * ours,
+            "the null: raw starts {null} against ours {ours}"
         );
     }
 

@@ -524,6 +524,28 @@ impl Windows {
     }
 }
 
+/// One lag between an episode's examples (§4: uniform in [Δt, 5Δt]), in physical steps, for
+/// super-steps of `n` physical steps.
+pub fn draw_lag(n: usize, rng: &mut ChaCha8Rng) -> usize {
+    rng.random_range(n..=5 * n)
+}
+
+/// Advances `x` over the physical steps `steps` (indices from the episode's start) of `dt`,
+/// each under `signal` read at its own start (`u` is scratch for the control).
+pub fn run_signal<D: Dynamics + ?Sized>(
+    sim: &mut D,
+    x: &mut [f64],
+    signal: &ControlSignal,
+    u: &mut [f64],
+    steps: std::ops::Range<usize>,
+    dt: f64,
+) {
+    for s in steps {
+        signal.at(s as f64 * dt, u);
+        sim.step(x, u, dt);
+    }
+}
+
 /// Samples `cfg.examples` windows of `k` super-steps exactly as [`sample_transitions`] samples
 /// its examples (which are the windows of k = 1, drawn from the same random stream): episodes
 /// from `start`, window starts one lag U[n, 5n] physical steps after the previous one (a
@@ -564,14 +586,11 @@ pub fn sample_windows<D: Dynamics + ?Sized>(
         let signal = ControlSignal::sample(cfg.control, limits, cfg.episode_duration, rng);
         let mut step = 0usize;
         while episode.len() < rows {
-            let lag = rng.random_range(n..=5 * n);
+            let lag = draw_lag(n, rng);
             if step + lag + k * n > episode_steps {
                 break;
             }
-            for s in step..step + lag {
-                signal.at(s as f64 * cfg.dt, &mut u);
-                sim.step(&mut x, &u, cfg.dt);
-            }
+            run_signal(sim, &mut x, &signal, &mut u, step..step + lag, cfg.dt);
             step += lag;
             check_finite("sampling", step, step as f64 * cfg.dt, &x)?;
             states.extend_from_slice(&x);

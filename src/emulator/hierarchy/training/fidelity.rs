@@ -7,15 +7,16 @@ use super::sampling::{
 };
 use super::HierarchySpec;
 use crate::emulator::catalog::{rollout_errors, BuildError};
-use crate::emulator::dataset::ControlSignal;
+use crate::emulator::dataset::{draw_lag, run_signal, ControlSignal};
 use crate::physics::dolphin::N_SEGMENTS;
 use crate::physics::Dynamics;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 /// Multi-step fidelity of the trained hierarchy (as [`crate::emulator::catalog::rollout_error`]
-/// for the catalog nets): from `episodes` start states drawn as for training (a stream of its
-/// own), the simulator, the global net alone (fed its own outputs) and the composed hierarchy
+/// for the catalog nets): from `episodes` start states drawn as the training examples' states
+/// are (a stream of its own: an episode start, then one lag under the episode's signal), the
+/// simulator, the global net alone (fed its own outputs) and the composed hierarchy
 /// run `horizon` super-steps side by side under the training control process, read at each
 /// super-step's start and held over it. Returns per step k the mean squared error over
 /// episodes and variables, each variable divided by its spread over the simulated states: of
@@ -31,30 +32,34 @@ pub fn hierarchy_rollout_error(
 ) -> Result<(Vec<f64>, Vec<f64>), BuildError> {
     let d = emulator.dolphin();
     let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::mix_seed(spec.seed, 3));
-    let big_dt = spec.super_dt();
     let mut sim = simulator(d);
     let mut hsc = emulator.scratch();
     let mut u = vec![0.0; N_SEGMENTS];
     let (mut gt, mut ge, mut mt, mut me) = (vec![], vec![], vec![], vec![]);
     let (mut g_sim, mut g_emu) = (vec![0.0; GLOBAL_DIM], vec![0.0; GLOBAL_DIM]);
     let (mut g_next, mut x_next) = (vec![0.0; GLOBAL_DIM], vec![0.0; MASS_DIM]);
+    let dt = spec.physical_dt;
     for _ in 0..episodes {
-        let x0 = start_state(d, &mut rng);
+        let mut x0 = start_state(d, &mut rng);
+        let lag = draw_lag(spec.steps, &mut rng);
         let signal = ControlSignal::sample(
             control_process(),
             &control_limits(),
-            horizon as f64 * big_dt,
+            (lag + horizon * spec.steps) as f64 * dt,
             &mut rng,
         );
+        run_signal(&mut sim, &mut x0, &signal, &mut u, 0..lag, dt);
+        crate::physics::check_finite("dolphin", lag, lag as f64 * dt, &x0)?;
         let (mut xs, mut xe) = (x0.clone(), x0);
         global_state(d, &xs, &mut g_sim);
         g_emu.copy_from_slice(&g_sim);
         for k in 0..horizon {
-            signal.at(k as f64 * big_dt, &mut u);
+            let at = lag + k * spec.steps;
+            signal.at(at as f64 * dt, &mut u);
             for i in 0..spec.steps {
-                sim.step(&mut xs, &u, spec.physical_dt);
-                let step = k * spec.steps + i + 1;
-                crate::physics::check_finite("dolphin", step, step as f64 * spec.physical_dt, &xs)?;
+                sim.step(&mut xs, &u, dt);
+                let step = at + i + 1;
+                crate::physics::check_finite("dolphin", step, step as f64 * dt, &xs)?;
             }
             global_state_after(d, &xs, &g_sim, &mut g_next);
             g_sim.copy_from_slice(&g_next);
