@@ -375,17 +375,25 @@ impl Params {
             let next = match cache.load_derived(spec, &tag(task), &key) {
                 Some(t) => t,
                 None => {
-                    let trained = fine_tune_round(
-                        ctx,
-                        d,
-                        task,
-                        spec,
-                        &net,
-                        &mut base_data,
-                        (&train, &held),
-                        &settings,
-                        (stream, round),
-                    )?;
+                    let what = format!(
+                        "the {} DAgger round {} net (net seed {})",
+                        spec.net.model.name(),
+                        round + 1,
+                        spec.seed
+                    );
+                    let trained = crate::emulator::cache::training(&what, || {
+                        fine_tune_round(
+                            ctx,
+                            d,
+                            task,
+                            spec,
+                            &net,
+                            &mut base_data,
+                            (&train, &held),
+                            &settings,
+                            (stream, round),
+                        )
+                    })?;
                     cache
                         .store_derived(spec, &tag(task), &key, &trained)
                         .map_err(other)?;

@@ -184,17 +184,24 @@ impl Params {
             let (next_net, rec) = match load_derived(&cache, spec, body, &key) {
                 Some(found) => found,
                 None => {
-                    let (emulator, rec) = self.fine_tune_round(
-                        ctx,
-                        dd,
-                        spec,
-                        body,
-                        &net,
-                        &mut base_data,
-                        (&train, &held),
-                        &settings,
-                        (stream, round),
-                    )?;
+                    let what = format!(
+                        "the dolphin's DAgger round {} global net (net seed {})",
+                        round + 1,
+                        spec.seed
+                    );
+                    let (emulator, rec) = crate::emulator::cache::training(&what, || {
+                        self.fine_tune_round(
+                            ctx,
+                            dd,
+                            spec,
+                            body,
+                            &net,
+                            &mut base_data,
+                            (&train, &held),
+                            &settings,
+                            (stream, round),
+                        )
+                    })?;
                     store_derived(&cache, spec, body, &key, &rec).map_err(other)?;
                     (emulator, rec)
                 }
