@@ -680,9 +680,9 @@ fn reproduce_command(
         .collect();
     // What each took in the last run here (its run.json, before this run replaces it): the
     // estimate of what is left.
-    let last: Vec<Option<f64>> = chosen
+    let last: Vec<Option<LastRun>> = chosen
         .iter()
-        .map(|r| last_seconds(&opts.out.join(&r.id)))
+        .map(|r| last_run(&opts.out.join(&r.id)))
         .collect();
     for (k, r) in chosen.iter().enumerate() {
         eprintln!(
@@ -715,30 +715,55 @@ fn reproduce_command(
     Ok(())
 }
 
-/// `seconds_total` of the run.json in `dir`, if there is a readable one.
-fn last_seconds(dir: &Path) -> Option<f64> {
+/// What an experiment's last run here took, from its run.json: the wall seconds, and how many
+/// emulator nets it trained itself because the cache lacked them (its time includes theirs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LastRun {
+    seconds: f64,
+    trained: u64,
+}
+
+/// The [`LastRun`] of the run.json in `dir`, if there is a readable one.
+fn last_run(dir: &Path) -> Option<LastRun> {
     let text = std::fs::read_to_string(dir.join("run.json")).ok()?;
     let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    v.get("seconds_total")?.as_f64()
+    Some(LastRun {
+        seconds: v.get("seconds_total")?.as_f64()?,
+        trained: v
+            .pointer("/emulator_nets/trained")
+            .and_then(serde_json::Value::as_u64)
+            .unwrap_or(0),
+    })
 }
 
 /// The progress line's estimate: the last run's times of the experiments still to run (`left`,
-/// this one first), or which have none; `elapsed` seconds so far.
-fn time_left(left: &[Option<f64>], elapsed: f64) -> String {
+/// this one first), or which have none; `elapsed` seconds so far. Where those runs trained
+/// nets, the line says so: a run that finds them cached takes less.
+fn time_left(left: &[Option<LastRun>], elapsed: f64) -> String {
     let minutes = |s: f64| format!("{:.1} min", s / 60.0);
-    let known: f64 = left.iter().flatten().sum();
+    let known: f64 = left.iter().flatten().map(|r| r.seconds).sum();
     let unknown = left.iter().filter(|s| s.is_none()).count();
+    let trained: u64 = left.iter().flatten().map(|r| r.trained).sum();
     let this = match left.first() {
-        Some(Some(s)) => format!("took {s:.0} s last time; "),
+        Some(Some(r)) if r.trained > 0 => format!(
+            "took {:.0} s last time, training {} emulator nets; ",
+            r.seconds, r.trained
+        ),
+        Some(Some(r)) => format!("took {:.0} s last time; ", r.seconds),
         _ => String::new(),
     };
+    let trained = if trained > 0 {
+        format!(" (the last runs trained {trained} nets: less where they are cached now)")
+    } else {
+        String::new()
+    };
     let rest = if unknown == 0 {
-        format!("about {} left in all", minutes(known))
+        format!("about {} left in all{trained}", minutes(known))
     } else if unknown == left.len() {
         "no past run here to estimate from".to_string()
     } else {
         format!(
-            "about {} left for the {} with a past run here, and {unknown} more",
+            "about {} left for the {} with a past run here{trained}, and {unknown} more",
             minutes(known),
             left.len() - unknown
         )
@@ -853,4 +878,58 @@ fn simulate(
         verbs::simulate_rows(&mut sim, state, dt, steps, schedule.as_ref(), rows)
     })?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_estimate_sums_the_last_runs_and_says_which_trained_nets() {
+        let warm = |seconds| {
+            Some(LastRun {
+                seconds,
+                trained: 0,
+            })
+        };
+        assert_eq!(
+            time_left(&[warm(60.0), warm(120.0)], 30.0),
+            " (took 60 s last time; about 3.0 min left in all; 0.5 min so far)"
+        );
+        let cold = Some(LastRun {
+            seconds: 600.0,
+            trained: 12,
+        });
+        assert_eq!(
+            time_left(&[cold, warm(60.0), None], 0.0),
+            " (took 600 s last time, training 12 emulator nets; about 11.0 min left for the 2 \
+             with a past run here (the last runs trained 12 nets: less where they are cached \
+             now), and 1 more; 0.0 min so far)"
+        );
+        assert_eq!(
+            time_left(&[None], 6.0),
+            " (no past run here to estimate from; 0.1 min so far)"
+        );
+    }
+
+    #[test]
+    fn a_run_json_without_nets_trained_none() {
+        let dir = std::env::temp_dir().join(format!("motionlab-last-run-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("run.json"), r#"{"seconds_total": 4.5}"#).unwrap();
+        assert_eq!(
+            last_run(&dir),
+            Some(LastRun {
+                seconds: 4.5,
+                trained: 0
+            })
+        );
+        std::fs::write(
+            dir.join("run.json"),
+            r#"{"seconds_total": 9.0, "emulator_nets": {"trained": 3}}"#,
+        )
+        .unwrap();
+        assert_eq!(last_run(&dir).map(|r| r.trained), Some(3));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
