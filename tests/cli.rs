@@ -711,6 +711,7 @@ fn bench_json_is_one_object_of_named_numbers() {
     let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     let obj = v.as_object().unwrap();
     assert!(obj.contains_key("sim.pendulum3.steps_per_s"));
+    assert!(obj.contains_key("linearize.leaper3d.fd_jacobians_per_s"));
     assert!(obj.values().all(|x| x.as_f64().is_some_and(|f| f > 0.0)));
     // The derived per-knot / per-step metrics are the reciprocals of their rates (400 knots).
     let f = |k: &str| obj[k].as_f64().unwrap();

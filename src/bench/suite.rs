@@ -246,6 +246,7 @@ fn truck_lander_dolphin_sims(min_seconds: f64, push: Push) {
             sim_steps(&mut l, &l0, &[4000.0, 10.0, -20.0, 5.0], 0.01, steps)
         }),
     );
+    leaper3d_metrics(min_seconds, push);
     let dolphin = crate::physics::dolphin::Dolphin::default();
     let d0 = dolphin.rest_state();
     let mut d = Simulator::new(dolphin, IntegratorKind::SemiImplicitEuler);
@@ -253,6 +254,51 @@ fn truck_lander_dolphin_sims(min_seconds: f64, push: Push) {
         "sim.dolphin.steps_per_s",
         throughput(min_seconds, steps as u64, || {
             sim_steps(&mut d, &d0, &[0.5, -0.3, 0.2, 0.8, -0.6, 0.1], 0.002, steps)
+        }),
+    );
+}
+
+/// The 3-D leaper standing on the penalty ground: its right-hand side, RK4 steps at its
+/// default step, and the central-difference Jacobians (A and B, 2(d + m) right-hand sides) a
+/// trajectory optimizer would take through [`crate::physics::linearize::FiniteDifference`].
+fn leaper3d_metrics(min_seconds: f64, push: Push) {
+    use crate::physics::body3d::leaper3d::{leaper3d, standing};
+    use crate::physics::linearize::{FiniteDifference, Linearize};
+    use crate::physics::{Model, Ode};
+    let model = leaper3d();
+    let x0 = standing(&model.tree);
+    let (d, m) = (model.state_dim(), model.control_dim());
+    let u = vec![0.0; m];
+    let mut dx = vec![0.0; d];
+    let calls = 1000;
+    push(
+        "sim.leaper3d.derivatives_per_s",
+        throughput(min_seconds, calls as u64, || {
+            for _ in 0..calls {
+                model.derivative(black_box(&x0), &u, &mut dx);
+            }
+            black_box(&dx);
+        }),
+    );
+    let dt = model.default_dt();
+    let mut sim = Simulator::new(model.clone(), IntegratorKind::Rk4);
+    let steps = 100;
+    push(
+        "sim.leaper3d.steps_per_s",
+        throughput(min_seconds, steps as u64, || {
+            sim_steps(&mut sim, &x0, &u, dt, steps)
+        }),
+    );
+    let fd = FiniteDifference::new(model);
+    let (mut a, mut b) = (
+        nalgebra::DMatrix::zeros(d, d),
+        nalgebra::DMatrix::zeros(d, m),
+    );
+    push(
+        "linearize.leaper3d.fd_jacobians_per_s",
+        throughput(min_seconds, 1, || {
+            fd.jacobians(black_box(&x0), &u, &mut a, &mut b);
+            black_box(&a);
         }),
     );
 }
