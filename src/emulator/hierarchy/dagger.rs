@@ -85,6 +85,19 @@ fn derived_path(cache: &EmulatorCache, spec: &HierarchySpec, key: &str) -> PathB
     ))
 }
 
+/// The name of the file that holds (or would hold) the global net derived from `spec`'s
+/// under `derived`.
+pub fn derived_file_name(
+    cache: &EmulatorCache,
+    spec: &HierarchySpec,
+    d: &Dolphin,
+    derived: &serde_json::Value,
+) -> String {
+    let path = derived_path(cache, spec, &derived_key(spec, d, derived));
+    path.file_name()
+        .map_or(String::new(), |f| f.to_string_lossy().into_owned())
+}
+
 /// The cached global net derived from `spec`'s under `derived`, with its record.
 pub fn load_derived(
     cache: &EmulatorCache,

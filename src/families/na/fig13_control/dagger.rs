@@ -375,11 +375,13 @@ impl Params {
             let next = match cache.load_derived(spec, &tag(task), &key) {
                 Some(t) => t,
                 None => {
+                    let file = cache.derived_path(spec, &tag(task), &key);
                     let what = format!(
-                        "the {} DAgger round {} net (net seed {})",
+                        "the {} DAgger round {} net ({})",
                         spec.net.model.name(),
                         round + 1,
-                        spec.seed
+                        file.file_name()
+                            .map_or(String::new(), |f| f.to_string_lossy().into_owned())
                     );
                     let trained = crate::emulator::cache::training(&what, || {
                         fine_tune_round(

@@ -18,7 +18,9 @@ use crate::emulator::dagger::{
     aggregate, collect, fine_tune_aggregated, DaggerSettings, Plan, Visits,
 };
 use crate::emulator::dataset::Windows;
-use crate::emulator::hierarchy::dagger::{global_visits, load_derived, store_derived};
+use crate::emulator::hierarchy::dagger::{
+    derived_file_name, global_visits, load_derived, store_derived,
+};
 use crate::emulator::hierarchy::{
     control_limits, global_training_data, simulator, HierarchySpec, FRAME_DIM, GLOBAL_DIM,
 };
@@ -185,9 +187,9 @@ impl Params {
                 Some(found) => found,
                 None => {
                     let what = format!(
-                        "the dolphin's DAgger round {} global net (net seed {})",
+                        "the dolphin's DAgger round {} global net ({})",
                         round + 1,
-                        spec.seed
+                        derived_file_name(&cache, spec, body, &key)
                     );
                     let (emulator, rec) = crate::emulator::cache::training(&what, || {
                         self.fine_tune_round(
