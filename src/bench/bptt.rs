@@ -105,7 +105,7 @@ pub(super) fn bptt_dolphin(min_seconds: f64) -> f64 {
         regularization: Regularizer {
             dt: 0.005,
             stiffness_scale: 0.1,
-            damping_scale: 1.5,
+            damping_scale: 0.2,
         },
         regularization_steps: 5,
     };

@@ -50,7 +50,8 @@ impl Link {
     }
 }
 
-/// A mode of the pendulum's motion linearized about rest ([`Pendulum3::modes`]).
+/// A mode of a body's motion linearized about rest ([`Pendulum3::modes`],
+/// [`super::dolphin::Dolphin::modes`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Mode {
     /// Period of the oscillation (s); infinite for an overdamped (real) mode.
@@ -60,6 +61,12 @@ pub struct Mode {
 }
 
 impl Mode {
+    /// |λ| (1/s), the mode's overall rate: what orders modes slowest first.
+    pub fn rate(&self) -> f64 {
+        let w = std::f64::consts::TAU / self.period_s;
+        self.decay_per_s.hypot(w)
+    }
+
     /// Damping ratio ζ = decay / |λ| (1 for an overdamped mode).
     pub fn damping_ratio(&self) -> f64 {
         let w = std::f64::consts::TAU / self.period_s;
@@ -158,13 +165,7 @@ impl Pendulum3 {
                 decay_per_s: -l.re,
             })
             .collect();
-        modes.sort_by(|x, y| {
-            let rate = |m: &Mode| {
-                let w = std::f64::consts::TAU / m.period_s;
-                m.decay_per_s * m.decay_per_s + w * w
-            };
-            rate(x).total_cmp(&rate(y))
-        });
+        modes.sort_by(|x, y| x.rate().total_cmp(&y.rate()));
         modes
     }
 

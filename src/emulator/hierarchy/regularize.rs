@@ -129,7 +129,7 @@ mod tests {
         let mut reg = Regularizer {
             dt: 0.005,
             stiffness_scale: 0.1,
-            damping_scale: 1.5,
+            damping_scale: 0.2,
         }
         .bind(&d)
         .unwrap();

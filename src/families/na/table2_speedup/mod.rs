@@ -178,7 +178,8 @@ const DOLPHIN_EXPLICIT: &str = "semi-implicit Euler";
 const DOLPHIN_IMPLICIT: &str = "backward Euler";
 
 /// Checks a regularizer: positive step and scales, and a step the explicit scheme survives
-/// (the softened body's fastest spring mode ω = 330 √scale rad/s must keep ω δt < 1).
+/// (the softened body's fastest spring mode ω = 330 √scale rad/s must keep ω δt < 1, and its
+/// damping D × scale, D the dolphin's, δt D scale ≤ 0.5).
 pub fn validate_regularizer(key: &str, r: &Regularizer) -> Result<(), ParamError> {
     positive(&format!("{key}.dt"), r.dt)?;
     positive(&format!("{key}.stiffness_scale"), r.stiffness_scale)?;
@@ -191,10 +192,14 @@ pub fn validate_regularizer(key: &str, r: &Regularizer) -> Result<(), ParamError
             330.0 * r.stiffness_scale.sqrt() * r.dt
         ),
     )?;
+    let damping = crate::physics::dolphin::DolphinParams::default().damping;
     ensure(
-        r.dt * r.damping_scale * 20.0 <= 0.5,
+        r.dt * r.damping_scale * damping <= 0.5,
         &format!("{key}.damping_scale"),
-        "explicit regularization steps are unstable: dt x 20 N s/m x damping_scale must be <= 0.5",
+        format!(
+            "explicit regularization steps are unstable: dt x {damping} N s/m x damping_scale = {:.2} must be <= 0.5",
+            r.dt * r.damping_scale * damping
+        ),
     )
 }
 
