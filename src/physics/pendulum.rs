@@ -64,7 +64,7 @@ impl Mode {
     /// |λ| (1/s), the mode's overall rate: what orders modes slowest first.
     pub fn rate(&self) -> f64 {
         let w = std::f64::consts::TAU / self.period_s;
-        self.decay_per_s.hypot(w)
+        crate::portable::hypot(self.decay_per_s, w)
     }
 
     /// Damping ratio ζ = decay / |λ| (1 for an overdamped mode).

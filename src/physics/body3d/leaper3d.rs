@@ -550,6 +550,62 @@ mod tests {
         assert!(x[2] > HIP_HEIGHT - 0.02, "pelvis at {}", x[2]);
     }
 
+    /// A survey, not a check (`cargo test --release --lib -- --ignored step_survey
+    /// --nocapture`): which RK4 steps the leaper survives, in the air with and without the PD
+    /// hold and dropped 2 cm onto contacts of several static penetrations without torques.
+    /// It prints the pelvis height after each run or `X` where the run blew up; what it found
+    /// is in docs/body3d.md.
+    #[test]
+    #[ignore]
+    fn leaper3d_step_survey() {
+        let steps = [1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2];
+        let run = |m: &OnGround3d, x0: &[f64], dt: f64, secs: f64, hold: bool| {
+            let mut sim = Simulator::new(m.clone(), IntegratorKind::Rk4);
+            let tree = m.tree.clone();
+            let n = (secs / dt).round() as usize;
+            match sim.rollout(
+                x0,
+                dt,
+                n,
+                |_, _, x, u| {
+                    if hold {
+                        pd(&tree, x, u)
+                    } else {
+                        u.fill(0.0)
+                    }
+                },
+                |_, _, _| {},
+            ) {
+                Ok(x) => format!("{:.2}", x[2]),
+                Err(_) => "X".into(),
+            }
+        };
+        for hold in [false, true] {
+            let m = leaper3d();
+            let mut x0 = standing(&m.tree);
+            x0[2] += 2.0;
+            let nq = m.tree.nq();
+            for k in 0..m.tree.nv() {
+                x0[nq + k] = 0.3 * sin(1.7 * k as f64);
+            }
+            let cells: Vec<String> = steps
+                .iter()
+                .map(|&dt| run(&m, &x0, dt, 0.5, hold))
+                .collect();
+            eprintln!("air, PD hold {hold}: {cells:?} at {steps:?} s");
+        }
+        for pen in [0.001, 0.005, 0.01, 0.02] {
+            let m = leaper3d_on(pen);
+            let mut x0 = standing(&m.tree);
+            x0[2] += 0.02;
+            let cells: Vec<String> = steps
+                .iter()
+                .map(|&dt| run(&m, &x0, dt, 0.6, false))
+                .collect();
+            eprintln!("ground, penetration {pen} m, no torques: {cells:?} at {steps:?} s");
+        }
+    }
+
     #[test]
     fn leaper3d_mirrored_start_stays_mirrored() {
         let m = leaper3d();
