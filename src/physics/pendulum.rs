@@ -61,6 +61,28 @@ pub struct Mode {
 }
 
 impl Mode {
+    /// The modes of a first-order linear system's eigenvalues λ, slowest first: one per
+    /// complex-conjugate pair (the one with Im λ ≥ 0) and one per real eigenvalue, an
+    /// eigenvalue whose imaginary part is at most `real_below` counting as real.
+    pub fn of_eigenvalues<'a>(
+        eigenvalues: impl Iterator<Item = &'a nalgebra::Complex<f64>>,
+        real_below: f64,
+    ) -> Vec<Mode> {
+        let mut modes: Vec<Mode> = eigenvalues
+            .filter(|l| l.im >= 0.0)
+            .map(|l| Mode {
+                period_s: if l.im > real_below {
+                    std::f64::consts::TAU / l.im
+                } else {
+                    f64::INFINITY
+                },
+                decay_per_s: -l.re,
+            })
+            .collect();
+        modes.sort_by(|x, y| x.rate().total_cmp(&y.rate()));
+        modes
+    }
+
     /// |λ| (1/s), the mode's overall rate: what orders modes slowest first.
     pub fn rate(&self) -> f64 {
         let w = std::f64::consts::TAU / self.period_s;
@@ -152,21 +174,7 @@ impl Pendulum3 {
             .copy_from(&Matrix3::identity());
         a.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-m_inv * k));
         a.fixed_view_mut::<3, 3>(3, 3).copy_from(&(-m_inv * b));
-        let mut modes: Vec<Mode> = a
-            .complex_eigenvalues()
-            .iter()
-            .filter(|l| l.im >= 0.0)
-            .map(|l| Mode {
-                period_s: if l.im > 1e-12 {
-                    std::f64::consts::TAU / l.im
-                } else {
-                    f64::INFINITY
-                },
-                decay_per_s: -l.re,
-            })
-            .collect();
-        modes.sort_by(|x, y| x.rate().total_cmp(&y.rate()));
-        modes
+        Mode::of_eigenvalues(a.complex_eigenvalues().iter(), 1e-12)
     }
 
     /// The same pendulum without joint friction.

@@ -442,21 +442,8 @@ impl Dolphin {
         let mut a = nalgebra::DMatrix::zeros(n, n);
         let mut b = nalgebra::DMatrix::zeros(n, N_SEGMENTS);
         finite_difference_jacobians(self, &x, &u, DEFAULT_FD_STEP, &mut a, &mut b);
-        let mut modes: Vec<Mode> = a
-            .complex_eigenvalues()
-            .iter()
-            .filter(|l| l.im >= 0.0)
-            .map(|l| Mode {
-                period_s: if l.im > 1e-9 {
-                    std::f64::consts::TAU / l.im
-                } else {
-                    f64::INFINITY
-                },
-                decay_per_s: -l.re,
-            })
-            .collect();
-        modes.sort_by(|x, y| x.rate().total_cmp(&y.rate()));
-        modes
+        // Central differences leave the rigid motions' zero eigenvalues slightly off zero.
+        Mode::of_eigenvalues(a.complex_eigenvalues().iter(), 1e-9)
     }
 
     /// Rest length of spring `s` under muscle activations `act` (already clamped to [−1, 1]).
