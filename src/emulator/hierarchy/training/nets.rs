@@ -378,9 +378,11 @@ mod tests {
             &mut rng,
         );
         let mut st = spec(examples).settings;
-        st.cg_max_iters = 300;
+        // Until the held-out error stops improving (about 700 iterations), not a cap.
+        st.cg_max_iters = 3000;
         st.patience = 30;
-        train_mlp(&mut mlp, &tr, &ho, TrainMethod::Lbfgs, &st, 24, None).unwrap();
+        let r = train_mlp(&mut mlp, &tr, &ho, TrainMethod::Lbfgs, &st, 24, None).unwrap();
+        assert_eq!(r.stop, crate::emulator::train::StopReason::NoImprovement);
         let e = Emulator::new(tf, mlp, 0.1).unwrap();
         let mut g = vec![0.0; GLOBAL_DIM];
         global_state(&d, &d.rest_state(), &mut g);
@@ -401,9 +403,10 @@ mod tests {
 
     /// With all controls zero, the global net does not swim. From the
     /// swim start (the rest shape at rest) the simulator stays exactly put; the emulator's
-    /// mean segment centroid must stay within 0.1 m over the swim's 40 steps (ours: a tenth of
-    /// the ≈ 1 m the reference travelling wave swims on the simulator in those 4 s). With
-    /// per-variable normalization this small net drifts about 1.1 m, with groups 0.03 m.
+    /// mean segment centroid must stay within 0.078 m over the swim's 40 steps (ours: a tenth
+    /// of the 0.78 m a 1 Hz travelling wave, 30° a segment, swims on the simulator in those
+    /// 4 s). This small net, trained until its held-out error stops improving, drifts about
+    /// 0.056 m; stopped at 300 iterations it drifted 0.10 m.
     #[test]
     fn a_global_net_with_zero_controls_does_not_swim() {
         let d = Dolphin::default();
@@ -415,7 +418,7 @@ mod tests {
         let sim_drift = (d.centre_of_mass(&x) - d.centre_of_mass(&d.rest_state())).norm();
         let emu_drift = global_zero_control_drift(&global_transforms(), 2000, 20);
         assert!(sim_drift < 1e-9, "simulator drift {sim_drift}");
-        assert!(emu_drift < 0.1, "emulator drift {emu_drift} m");
+        assert!(emu_drift < 0.078, "emulator drift {emu_drift} m");
     }
 
     /// With `rollout_k` set, the global net is fine-tuned on its k-step rollouts: the record
