@@ -193,7 +193,7 @@ fn rollouts_of_every_model_keep_their_bits() {
             ("push_recovery", 0xb2d6bc1ce7f73cce),
             ("truck", 0x4a85f3df3a90e50d),
             ("lander", 0x4df91033582ba475),
-            ("dolphin", 0x561a5055fe66c535),
+            ("dolphin", 0xd09f9220c00e3aa0),
             ("chain3d", 0xec2bdfb1cdb8b32a),
             ("leaper3d", 0x95bb4ebefe15f654),
             ("pendulum3_passive_rk45", 0x075cff40cfa12027),
